@@ -1,0 +1,32 @@
+# The README's two commands, and the steps they are made of.
+#   make demo   install what is missing, build, render the default scene's two DRRs
+#   make check  install what is missing, build, run every test
+BUILD_DIR ?= build
+BUILD_TYPE ?= Release
+JOBS ?= $(shell nproc)
+LFTRACK := $(BUILD_DIR)/bin/lftrack
+
+.PHONY: all setup configure build demo check bench clean
+
+all: build
+
+setup:
+	@bash scripts/setup.sh
+
+configure: setup
+	@cmake -S . -B $(BUILD_DIR) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DLFTRACK_WERROR=ON >/dev/null
+
+build: configure
+	@cmake --build $(BUILD_DIR) -j $(JOBS)
+
+demo: build
+	@$(LFTRACK) drr --scene builtin:phantom -o out/demo
+
+check: build
+	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
+
+bench: build
+	@$(LFTRACK) bench drr --size 256
+
+clean:
+	rm -rf $(BUILD_DIR) out

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Installs every build, test and peer dependency of lftrack from Debian's packages.
+# Non-interactive and idempotent: it asks apt only for what is missing, so a second run takes
+# well under a second. Nothing is downloaded from anywhere but the Debian archive.
+set -euo pipefail
+
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev libceres-dev            # geometry, least squares
+  libgdcm-dev                           # DICOM series
+  libnifti2-dev                         # NIfTI-1/2 (nifti_clib)
+  libyaml-cpp-dev libcli11-dev libspdlog-dev
+  libpng-dev libtiff-dev zlib1g-dev     # image output
+  libmodbus-dev                         # couch driver (Modbus TCP/RTU)
+  libgtest-dev libgmock-dev libbenchmark-dev
+  plastimatch                           # independent reference DRR generator
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "setup: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+echo "setup: installing ${missing[*]}"
+sudo_cmd=()
+if [ "$(id -u)" -ne 0 ]; then
+  command -v sudo >/dev/null || { echo "setup: not root and no sudo; install: ${missing[*]}" >&2; exit 1; }
+  sudo_cmd=(sudo)
+fi
+export DEBIAN_FRONTEND=noninteractive
+"${sudo_cmd[@]}" apt-get update -qq
+"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "setup: done"

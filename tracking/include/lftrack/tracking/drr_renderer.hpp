@@ -1,0 +1,57 @@
+#pragma once
+// DRR renderers: every implementation computes, for each detector pixel in a window, the line
+// integral of mu from the X-ray source to the pixel centre, through the CT placed in the room by
+// T_room_from_ct. Renderers are chosen by name through make_renderer(); one parameterised test
+// runs them all against the exact (Siddon) renderer.
+//
+// Contract of render():
+// - `out` has exactly window.rows x window.cols pixels; out(r, c) is detector pixel
+//   (window.row0 + r, window.col0 + c).
+// - Values are mu * mm (unitless line integrals), >= 0; rays that miss the volume give 0.
+// - It allocates nothing, does not throw, and is safe to call from several threads at once.
+// - A non-finite pose, an invalid view, a window outside the detector or a wrongly sized `out`
+//   return an error Status and leave `out` untouched.
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/status.hpp"
+#include "lftrack/tracking/volume.hpp"
+#include "lftrack/tracking/xray_view.hpp"
+
+namespace lftrack::tracking {
+
+class ThreadPool;
+
+class DrrRenderer {
+ public:
+  virtual ~DrrRenderer() = default;
+  virtual std::string_view name() const = 0;
+  virtual Status render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                        ImageView<float> out) const = 0;
+};
+
+struct RendererOptions {
+  // Rows are spread over this pool; null renders on the calling thread.
+  ThreadPool* pool = nullptr;
+  // Trilinear renderer: sampling step as a fraction of the smallest voxel spacing.
+  double trilinear_step_fraction = 0.5;
+};
+
+// Names accepted by make_renderer, in a stable order.
+std::vector<std::string> renderer_names();
+
+// Builds the renderer called `name` over `volume` (shared, so the caller may drop its copy).
+Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
+                                                   std::shared_ptr<const MuVolume> volume,
+                                                   const RendererOptions& options = {});
+
+// Checks render()'s preconditions; renderers call it first.
+Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view,
+                              const PixelWindow& window, const ImageView<float>& out);
+
+}  // namespace lftrack::tracking

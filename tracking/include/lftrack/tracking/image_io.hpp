@@ -1,0 +1,40 @@
+#pragma once
+// Writing and reading DRRs and frames.
+//
+// - .png  : 16-bit greyscale, windowed: [window.low, window.high] -> [0, 65535], clamped.
+// - .tif  : 16-bit greyscale windowed like PNG, or float32 data when `float_data` is set.
+// - .pfm  : float32 data (Portable Float Map; rows stored bottom-up as the format says).
+// Windowed writes map larger line integrals (bone) to brighter pixels.
+
+#include <filesystem>
+
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::tracking {
+
+struct DisplayWindow {
+  double low = 0;
+  double high = 1;
+};
+
+// A window from the `low_percentile` and `high_percentile` (0..100) of the image's values.
+DisplayWindow percentile_window(const ImageView<const float>& image, double low_percentile = 0.5,
+                                double high_percentile = 99.5);
+
+struct ImageWriteOptions {
+  DisplayWindow window;     // for 16-bit outputs
+  bool float_data = false;  // .tif: write float32 instead of windowed 16-bit
+};
+
+// Writes by extension (.png, .tif/.tiff, .pfm); any other extension is an error.
+Status write_image(const std::filesystem::path& file, const ImageView<const float>& image,
+                   const ImageWriteOptions& options);
+
+Result<Image<float>> read_pfm(const std::filesystem::path& file);
+// Reads a greyscale TIFF (8/16-bit unsigned or 32-bit float, one sample per pixel) as float.
+Result<Image<float>> read_tiff(const std::filesystem::path& file);
+// Reads a greyscale 16-bit PNG as float (8-bit files are decoded from sRGB by libpng).
+Result<Image<float>> read_png(const std::filesystem::path& file);
+
+}  // namespace lftrack::tracking

@@ -1,0 +1,138 @@
+#include "lftrack/tracking/ray_integrals.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "cpu_dispatch.hpp"
+
+namespace lftrack::tracking {
+
+GridRayCaster::GridRayCaster(const MuVolume& volume) : volume_(volume) {
+  lower_mm_ = -0.5 * volume.geometry.spacing_mm;
+  upper_mm_ = (volume.geometry.size.cast<double>() - Eigen::Vector3d::Constant(0.5))
+                  .cwiseProduct(volume.geometry.spacing_mm);
+}
+
+bool GridRayCaster::clip(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, double* a_enter,
+                         double* a_exit) const {
+  const Eigen::Vector3d d = p1 - p0;
+  double amin = 0.0, amax = 1.0;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0.0) {
+      if (p0[a] < lower_mm_[a] || p0[a] >= upper_mm_[a]) return false;
+      continue;
+    }
+    const double t0 = (lower_mm_[a] - p0[a]) / d[a];
+    const double t1 = (upper_mm_[a] - p0[a]) / d[a];
+    amin = std::max(amin, std::min(t0, t1));
+    amax = std::min(amax, std::max(t0, t1));
+  }
+  if (!(amax > amin)) return false;  // also false for NaN input
+  *a_enter = amin;
+  *a_exit = amax;
+  return true;
+}
+
+double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) const {
+  double a = 0, a_end = 0;
+  if (!clip(p0, p1, &a, &a_end)) return 0.0;
+  const Eigen::Vector3d d = p1 - p0;
+  const VolumeGeometry& g = volume_.geometry;
+  const Eigen::Vector3d entry = p0 + a * d;
+
+  int index[3];
+  int step[3];
+  double next[3];       // ray parameter of the next plane crossing along each axis
+  double inv_d[3];
+  for (int ax = 0; ax < 3; ++ax) {
+    const double s = g.spacing_mm[ax];
+    const int n = g.size[ax];
+    const double u = (entry[ax] - lower_mm_[ax]) / s;  // position in voxel units from the box
+    if (d[ax] > 0) {
+      index[ax] = std::clamp(static_cast<int>(std::floor(u)), 0, n - 1);
+      step[ax] = 1;
+    } else if (d[ax] < 0) {
+      index[ax] = std::clamp(static_cast<int>(std::ceil(u)) - 1, 0, n - 1);
+      step[ax] = -1;
+    } else {
+      index[ax] = std::clamp(static_cast<int>(std::floor(u)), 0, n - 1);
+      step[ax] = 0;
+    }
+    inv_d[ax] = d[ax] != 0.0 ? 1.0 / d[ax] : 0.0;
+    next[ax] = step[ax] == 0 ? std::numeric_limits<double>::infinity()
+                             : (lower_mm_[ax] + (index[ax] + (step[ax] > 0 ? 1 : 0)) * s - p0[ax]) * inv_d[ax];
+  }
+
+  const float* mu = volume_.values.data();
+  const std::ptrdiff_t stride[3] = {1, g.size.x(), std::ptrdiff_t{g.size.x()} * g.size.y()};
+  std::ptrdiff_t offset = index[0] + stride[1] * index[1] + stride[2] * index[2];
+  double sum = 0.0;
+  while (a < a_end) {
+    const double a_next = std::min({next[0], next[1], next[2], a_end});
+    sum += static_cast<double>(mu[offset]) * (a_next - a);
+    a = a_next;
+    if (a >= a_end) break;
+    for (int ax = 0; ax < 3; ++ax) {
+      if (next[ax] != a_next) continue;
+      index[ax] += step[ax];
+      if (index[ax] < 0 || index[ax] >= g.size[ax]) return sum * d.norm();
+      offset += step[ax] * stride[ax];
+      next[ax] = (lower_mm_[ax] + (index[ax] + (step[ax] > 0 ? 1 : 0)) * g.spacing_mm[ax] - p0[ax]) * inv_d[ax];
+    }
+  }
+  return sum * d.norm();
+}
+
+namespace {
+
+// Sum of trilinear samples along a clipped ray, in voxel-index coordinates.
+LFTRACK_HOT_CLONES
+double trilinear_sum(const float* mu, int nx, int ny, int nz, double x, double y, double z,
+                     double dx, double dy, double dz, int samples) {
+  const std::ptrdiff_t sy = nx, sz = std::ptrdiff_t{nx} * ny;
+  const double max_x = nx - 1, max_y = ny - 1, max_z = nz - 1;
+  double sum = 0.0;
+  for (int k = 0; k < samples; ++k) {
+    const double px = std::clamp(x + k * dx, 0.0, max_x);
+    const double py = std::clamp(y + k * dy, 0.0, max_y);
+    const double pz = std::clamp(z + k * dz, 0.0, max_z);
+    const int ix = std::min(static_cast<int>(px), std::max(nx - 2, 0));
+    const int iy = std::min(static_cast<int>(py), std::max(ny - 2, 0));
+    const int iz = std::min(static_cast<int>(pz), std::max(nz - 2, 0));
+    const double fx = px - ix, fy = py - iy, fz = pz - iz;
+    const int ox = nx > 1 ? 1 : 0;
+    const std::ptrdiff_t oy = ny > 1 ? sy : 0, oz = nz > 1 ? sz : 0;
+    const float* c = mu + ix + sy * iy + sz * iz;
+    const double c00 = c[0] + fx * (c[ox] - c[0]);
+    const double c10 = c[oy] + fx * (c[oy + ox] - c[oy]);
+    const double c01 = c[oz] + fx * (c[oz + ox] - c[oz]);
+    const double c11 = c[oz + oy] + fx * (c[oz + oy + ox] - c[oz + oy]);
+    const double c0 = c00 + fy * (c10 - c00);
+    const double c1 = c01 + fy * (c11 - c01);
+    sum += c0 + fz * (c1 - c0);
+  }
+  return sum;
+}
+
+}  // namespace
+
+double GridRayCaster::trilinear(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
+                                double step_mm) const {
+  double a0 = 0, a1 = 0;
+  if (!clip(p0, p1, &a0, &a1)) return 0.0;
+  const Eigen::Vector3d d = p1 - p0;
+  const double length_mm = (a1 - a0) * d.norm();
+  const int samples = std::max(1, static_cast<int>(std::ceil(length_mm / step_mm - 1e-9)));
+  const double da = (a1 - a0) / samples;
+  const VolumeGeometry& g = volume_.geometry;
+  const Eigen::Vector3d inv_s = g.spacing_mm.cwiseInverse();
+  const Eigen::Vector3d start = (p0 + (a0 + 0.5 * da) * d).cwiseProduct(inv_s);
+  const Eigen::Vector3d inc = (da * d).cwiseProduct(inv_s);
+  const double sum = trilinear_sum(volume_.values.data(), g.size.x(), g.size.y(), g.size.z(),
+                                   start.x(), start.y(), start.z(), inc.x(), inc.y(), inc.z(),
+                                   samples);
+  return sum * (length_mm / samples);
+}
+
+}  // namespace lftrack::tracking
