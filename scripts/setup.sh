@@ -9,7 +9,7 @@ packages=(
   libeigen3-dev libceres-dev            # geometry, least squares
   libgdcm-dev                           # DICOM series
   libnifti2-dev                         # NIfTI-1/2 (nifti_clib)
-  libyaml-cpp-dev libcli11-dev libspdlog-dev
+  libyaml-cpp-dev libcli11-dev libspdlog-dev nlohmann-json3-dev
   libpng-dev libtiff-dev zlib1g-dev     # image output
   libmodbus-dev                         # couch driver (Modbus TCP/RTU)
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -61,6 +61,19 @@ XrayView XrayView::transformed(const Eigen::Isometry3d& T_new_from_old) const {
   return v;
 }
 
+XrayView XrayView::resampled(int window_row0, int window_col0, int window_rows, int window_cols,
+                             int new_rows, int new_cols) const {
+  XrayView v = *this;
+  v.rows = new_rows;
+  v.cols = new_cols;
+  v.pitch_row_mm = pitch_row_mm * window_rows / new_rows;
+  v.pitch_col_mm = pitch_col_mm * window_cols / new_cols;
+  // The window's outer corner (edge of its first pixel), then half a new pixel inwards.
+  const Eigen::Vector3d corner = pixel_centre_mm(window_row0 - 0.5, window_col0 - 0.5);
+  v.pixel00_mm = corner + 0.5 * v.pitch_row_mm * row_axis + 0.5 * v.pitch_col_mm * col_axis;
+  return v;
+}
+
 Status XrayView::validate() const {
   const std::string who = "view '" + name + "': ";
   if (!source_mm.allFinite() || !pixel00_mm.allFinite() || !col_axis.allFinite() ||

@@ -3,12 +3,21 @@
 // Row-major, row 0 at the top; `stride` is in elements between row starts.
 
 #include <cstddef>
+#include <type_traits>
 #include <vector>
 
 namespace lftrack::tracking {
 
 template <class T>
 struct ImageView {
+  ImageView() = default;
+  ImageView(T* data_, int rows_, int cols_, std::ptrdiff_t stride_)
+      : data(data_), rows(rows_), cols(cols_), stride(stride_) {}
+  // A view of mutable pixels is also a view of const pixels.
+  template <class U, class = std::enable_if_t<std::is_same_v<const U, T>>>
+  ImageView(const ImageView<U>& other)  // NOLINT(google-explicit-constructor)
+      : data(other.data), rows(other.rows), cols(other.cols), stride(other.stride) {}
+
   T* data = nullptr;
   int rows = 0;
   int cols = 0;

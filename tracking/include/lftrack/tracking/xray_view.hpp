@@ -47,6 +47,11 @@ struct XrayView {
   // The same view expressed in another frame: every point and axis mapped by `T_new_from_old`.
   XrayView transformed(const Eigen::Isometry3d& T_new_from_old) const;
 
+  // The part of this detector under `window`, resampled to rows x cols pixels that cover the
+  // same area (pitch scaled accordingly): a cropped, binned or super-sampled detector.
+  XrayView resampled(int window_row0, int window_col0, int window_rows, int window_cols,
+                     int rows, int cols) const;
+
   // Finite values, positive pitch, 1..16384 rows and cols, orthonormal axes, source off the
   // detector plane on the side the normal points to.
   Status validate() const;

@@ -1,0 +1,68 @@
+#pragma once
+// `lftrack bench drr`: every renderer, and plastimatch where installed, on the same poses and
+// the same ROI-cropped detectors, in one run. Speeds are medians of single renders on the
+// shared pool; fidelity is measured against the Siddon renderer at the same pose.
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+
+struct DrrBenchOptions {
+  int size = 256;              // DRR rows = cols; each detector's ROI window resampled to this
+  int poses = 8;               // drawn uniformly across the scene's pose envelope
+  int repeats = 3;             // timed renders per pose and view
+  std::uint64_t seed = 7;      // pose sampling
+  bool peers = true;           // run plastimatch if it is installed
+  std::filesystem::path work_dir;  // for the peer's files; empty: a fresh temporary folder
+};
+
+struct RendererFigures {
+  std::string name;
+  double ms_median = 0;
+  double ncc_vs_siddon = 0;      // mean over poses and views
+  double ncc_min_vs_siddon = 0;  // worst pose and view
+  double psnr_db_vs_siddon = 0;  // mean over poses and views (inf for Siddon itself)
+};
+
+struct PeerFigures {
+  std::string name;
+  double ms_median = 0;       // the peer's own render time (no volume loading)
+  double ms_wall_median = 0;  // whole process, volume loading included
+  double ncc_vs_siddon = 0;
+  double ncc_min_vs_siddon = 0;
+  double max_abs_diff_rel = 0;  // max |peer - siddon| / max(siddon), worst image
+};
+
+struct DrrBenchReport {
+  std::string ct;
+  int rows = 0, cols = 0;
+  int threads = 1;
+  int poses = 0;
+  std::vector<std::string> views;
+  std::vector<RendererFigures> renderers;
+  std::vector<PeerFigures> peers;
+  std::string peer_note;  // why there are no peers, if there are none
+};
+
+// `count` poses T_room_from_ct = apply_delta(nominal, delta) with delta uniform in the
+// envelope (each translation component in +-translation_mm, each rotation-vector component in
+// +-rotation_deg), about the registration origin. The first pose is the nominal one.
+std::vector<tracking::Pose> sample_envelope_poses(const PreparedScene& scene, int count,
+                                                  std::uint64_t seed);
+
+// Each detector's ROI window resampled to size x size pixels (room frame).
+std::vector<tracking::XrayView> roi_views(const PreparedScene& scene, int size);
+
+Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBenchOptions& options,
+                                         tracking::ThreadPool* pool);
+
+nlohmann::json to_json(const DrrBenchReport& report);
+
+}  // namespace lftrack::host

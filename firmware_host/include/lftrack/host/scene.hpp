@@ -1,0 +1,99 @@
+#pragma once
+// A scene declares exactly what exists in one treatment set-up (DESIGN.md, "Scene files"):
+// the CT and its ROI, the registration origin, the nominal pose, the detectors and the pose
+// envelope. Only what a scene names is built.
+//
+// Loading is two steps: load_scene() parses and validates the YAML (fails with file:line:col and
+// a reason); prepare_scene() then reads the CT and resolves everything that depends on it.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/status.hpp"
+#include "lftrack/tracking/volume.hpp"
+#include "lftrack/tracking/xray_view.hpp"
+
+namespace lftrack::tracking {
+class ThreadPool;
+}
+
+namespace lftrack::host {
+
+inline constexpr const char* kBuiltinPhantom = "builtin:phantom";
+
+struct CtSpec {
+  std::string path;              // "builtin:phantom", or a DICOM folder / NIfTI file (absolute)
+  std::uint64_t phantom_seed = 1;
+  double mu_water_per_mm = tracking::kDefaultMuWaterPerMm;
+  bool is_builtin_phantom() const { return path == kBuiltinPhantom; }
+};
+
+struct RoiSpec {
+  std::optional<Eigen::Vector3d> centre_ct_mm;  // unset: the phantom's target vertebra
+  Eigen::Vector3d size_mm{64, 64, 40};
+};
+
+struct DetectorSpec {
+  tracking::XrayView view;    // room frame
+  std::string frames = "sim";  // where frames come from: sim, v4l2, replay
+  int bits = 12;               // detector bit depth
+};
+
+struct PoseEnvelope {
+  double translation_mm = 10;  // per axis, +-
+  double rotation_deg = 5;     // per axis of the rotation vector, +-
+};
+
+struct Scene {
+  std::string source;  // the scene file, or "builtin:phantom"
+  std::string name;
+  CtSpec ct;
+  RoiSpec roi;
+  std::optional<Eigen::Vector3d> registration_origin_ct_mm;  // unset: ROI centre (phantom: body centre)
+  std::optional<tracking::Pose> nominal_T_room_from_ct;      // unset: origin onto the isocentre
+  std::vector<DetectorSpec> detectors;
+  PoseEnvelope envelope;
+  std::string renderer = "siddon";
+};
+
+// Parses a scene from YAML text; `source_name` is used in messages ("file.yaml:12:5: ...") and
+// `base_dir` resolves relative CT paths.
+Result<Scene> parse_scene(const std::string& yaml_text, const std::string& source_name,
+                          const std::filesystem::path& base_dir);
+// Loads "builtin:phantom" or a scene file.
+Result<Scene> load_scene(const std::string& file_or_builtin);
+// The YAML text of a built-in scene, or nothing.
+std::optional<std::string> builtin_scene_text(const std::string& name);
+
+// A scene with its CT read and everything that depends on the CT resolved.
+struct PreparedScene {
+  Scene scene;
+  std::shared_ptr<const tracking::CtVolume> ct;
+  std::shared_ptr<const tracking::MuVolume> mu;
+  Eigen::Vector3d registration_origin_ct_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
+  tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
+  std::vector<tracking::PixelWindow> roi_windows;  // per detector: the ROI's projection
+
+  Eigen::Vector3d registration_origin_room_mm() const {
+    return nominal_T_room_from_ct * registration_origin_ct_mm;
+  }
+  // Index of the detector called `name`, or -1.
+  int detector_index(const std::string& name) const;
+};
+
+// Reads the CT (or generates the phantom), converts it to attenuation, and resolves the ROI,
+// the registration origin, the nominal pose and each detector's ROI window. `ct_override`
+// replaces the scene's CT path when non-empty.
+Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_override,
+                                    tracking::ThreadPool* pool);
+
+}  // namespace lftrack::host

@@ -1,0 +1,26 @@
+#pragma once
+// The lftrack program's subcommands. Each registers its options on a CLI11 app and returns a
+// callback that runs it; the callbacks report errors as a Status (main prints and exits 1).
+
+#include <CLI/CLI.hpp>
+#include <functional>
+
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::host::cli {
+
+using Command = std::function<Status()>;
+
+// Options every command that needs a scene shares.
+struct SceneOptions {
+  std::string scene = "builtin:phantom";
+  std::string ct;     // overrides the scene's CT
+  int threads = 0;    // 0: all cores
+};
+void add_scene_options(CLI::App* app, SceneOptions* options);
+
+Command add_info_command(CLI::App* parent);
+Command add_drr_command(CLI::App* parent);
+Command add_bench_drr_command(CLI::App* parent);
+
+}  // namespace lftrack::host::cli

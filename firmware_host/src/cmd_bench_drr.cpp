@@ -1,0 +1,60 @@
+// `lftrack bench drr`: renderer speed and fidelity side by side, plastimatch as the peer.
+
+#include <cstdio>
+
+#include "cli_commands.hpp"
+#include "lftrack/host/drr_benchmark.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+struct BenchDrrOptions {
+  SceneOptions scene;
+  DrrBenchOptions bench;
+  bool json = false;
+  bool no_peers = false;
+};
+
+}  // namespace
+
+Command add_bench_drr_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand("drr", "Time every DRR renderer (and plastimatch) on the same poses");
+  auto o = std::make_shared<BenchDrrOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--size", o->bench.size, "DRR rows = cols (the ROI window resampled)")->capture_default_str();
+  app->add_option("--poses", o->bench.poses, "Poses drawn across the envelope")->capture_default_str();
+  app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")->capture_default_str();
+  app->add_option("--seed", o->bench.seed, "Pose sampling seed")->capture_default_str();
+  app->add_flag("--no-peers", o->no_peers, "Skip plastimatch");
+  app->add_flag("--json", o->json, "Print the report as JSON on stdout");
+  return [o]() -> Status {
+    auto scene = load_scene(o->scene.scene);
+    if (!scene.ok()) return scene.status();
+    tracking::ThreadPool pool(o->scene.threads);
+    auto prepared = prepare_scene(*scene, o->scene.ct, &pool);
+    if (!prepared.ok()) return prepared.status();
+    DrrBenchOptions bench = o->bench;
+    bench.peers = !o->no_peers;
+    auto report = run_drr_benchmark(*prepared, bench, &pool);
+    if (!report.ok()) return report.status();
+    if (o->json) {
+      std::printf("%s\n", to_json(*report).dump(2).c_str());
+      return {};
+    }
+    std::printf("CT %s, %d x %d DRRs, %d poses x %zu views, %d threads\n", report->ct.c_str(), report->rows,
+                report->cols, report->poses, report->views.size(), report->threads);
+    std::printf("%-12s %12s %14s %14s %12s\n", "renderer", "ms median", "NCC vs Siddon", "NCC min", "PSNR dB");
+    for (const auto& r : report->renderers)
+      std::printf("%-12s %12.2f %14.6f %14.6f %12.1f\n", r.name.c_str(), r.ms_median, r.ncc_vs_siddon,
+                  r.ncc_min_vs_siddon, r.psnr_db_vs_siddon);
+    for (const auto& p : report->peers)
+      std::printf("%-12s %12.2f %14.6f %14.6f   (%.0f ms with volume loading; max |diff| %.2e of peak)\n",
+                  p.name.c_str(), p.ms_median, p.ncc_vs_siddon, p.ncc_min_vs_siddon, p.ms_wall_median,
+                  p.max_abs_diff_rel);
+    if (!report->peer_note.empty()) std::printf("peers: %s\n", report->peer_note.c_str());
+    return {};
+  };
+}
+
+}  // namespace lftrack::host::cli

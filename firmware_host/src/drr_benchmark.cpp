@@ -1,0 +1,185 @@
+#include "lftrack/host/drr_benchmark.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+
+#include "lftrack/host/plastimatch_peer.hpp"
+#include "lftrack/tracking/image_metrics.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "lftrack/tracking/volume_io.hpp"
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+using tracking::Image;
+using Clock = std::chrono::steady_clock;
+
+double median(std::vector<double> v) {
+  if (v.empty()) return std::nan("");
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? std::nan("") : s / double(v.size());
+}
+
+double max_abs_diff_rel(const Image<float>& ref, const Image<float>& test) {
+  double peak = 0, worst = 0;
+  for (std::size_t i = 0; i < ref.pixels().size(); ++i) {
+    peak = std::max(peak, double(std::abs(ref.pixels()[i])));
+    worst = std::max(worst, double(std::abs(test.pixels()[i] - ref.pixels()[i])));
+  }
+  return peak > 0 ? worst / peak : worst;
+}
+
+}  // namespace
+
+std::vector<tracking::Pose> sample_envelope_poses(const PreparedScene& scene, int count, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double t = scene.scene.envelope.translation_mm;
+  const double r = tracking::deg_to_rad(scene.scene.envelope.rotation_deg);
+  std::vector<tracking::Pose> poses;
+  for (int i = 0; i < count; ++i) {
+    tracking::PoseDelta d;
+    if (i > 0) {
+      d.translation_mm = {t * u(rng), t * u(rng), t * u(rng)};
+      d.rotation_rad = {r * u(rng), r * u(rng), r * u(rng)};
+    }
+    poses.push_back(tracking::apply_delta(scene.nominal_T_room_from_ct, d, scene.registration_origin_room_mm()));
+  }
+  return poses;
+}
+
+std::vector<tracking::XrayView> roi_views(const PreparedScene& scene, int size) {
+  std::vector<tracking::XrayView> views;
+  for (std::size_t i = 0; i < scene.scene.detectors.size(); ++i) {
+    const auto& w = scene.roi_windows[i];
+    views.push_back(scene.scene.detectors[i].view.resampled(w.row0, w.col0, w.rows, w.cols, size, size));
+  }
+  return views;
+}
+
+Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBenchOptions& o,
+                                         tracking::ThreadPool* pool) {
+  if (o.size < 8 || o.size > 4096) return out_of_range("--size must be in 8..4096");
+  if (o.poses < 1 || o.repeats < 1) return out_of_range("--poses and --repeats must be at least 1");
+  DrrBenchReport report;
+  report.ct = scene.scene.ct.path;
+  report.rows = report.cols = o.size;
+  report.threads = pool ? pool->size() : 1;
+  report.poses = o.poses;
+  const auto views = roi_views(scene, o.size);
+  for (const auto& v : views) report.views.push_back(v.name);
+  const auto poses = sample_envelope_poses(scene, o.poses, o.seed);
+  const tracking::PixelWindow window = tracking::PixelWindow::full(o.size, o.size);
+
+  // Reference images: Siddon at every pose and view.
+  tracking::RendererOptions ropts;
+  ropts.pool = pool;
+  std::vector<Image<float>> reference;
+  for (const std::string& name : tracking::renderer_names()) {
+    auto renderer = make_renderer(name, scene.mu, ropts);
+    if (!renderer.ok()) return renderer.status();
+    RendererFigures fig;
+    fig.name = name;
+    std::vector<double> ms, ncc, psnr;
+    Image<float> image(o.size, o.size);
+    std::size_t k = 0;
+    for (const auto& pose : poses) {
+      for (const auto& view : views) {
+        for (int rep = 0; rep < o.repeats; ++rep) {
+          const auto t0 = Clock::now();
+          LFTRACK_RETURN_IF_ERROR((*renderer)->render(pose, view, window, image.view()));
+          ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+        }
+        if (name == "siddon") reference.push_back(image);
+        ncc.push_back(tracking::normalized_cross_correlation(reference[k].view(), image.view()));
+        psnr.push_back(tracking::psnr_db(reference[k].view(), image.view()));
+        ++k;
+      }
+    }
+    fig.ms_median = median(ms);
+    fig.ncc_vs_siddon = mean(ncc);
+    fig.ncc_min_vs_siddon = *std::min_element(ncc.begin(), ncc.end());
+    fig.psnr_db_vs_siddon = mean(psnr);
+    spdlog::info("bench drr: {:10s} {:9.2f} ms median, NCC {:.6f} (min {:.6f}), PSNR {:.1f} dB", name,
+                 fig.ms_median, fig.ncc_vs_siddon, fig.ncc_min_vs_siddon, fig.psnr_db_vs_siddon);
+    report.renderers.push_back(fig);
+  }
+
+  if (!o.peers) {
+    report.peer_note = "peers disabled (--no-peers)";
+    return report;
+  }
+  if (!plastimatch_available()) {
+    report.peer_note = "plastimatch is not installed";
+    spdlog::warn("bench drr: {}; no peer figures", report.peer_note);
+    return report;
+  }
+  std::error_code ec;
+  fs::path work = o.work_dir;
+  if (work.empty()) work = fs::temp_directory_path() / ("lftrack-bench-" + std::to_string(::getpid()));
+  fs::create_directories(work, ec);
+  const fs::path mha = work / "mu.mha";
+  LFTRACK_RETURN_IF_ERROR(tracking::write_metaimage(*scene.mu, mha));
+  PeerFigures peer;
+  peer.name = "plastimatch";
+  std::vector<double> ms, wall, ncc, diff;
+  std::size_t k = 0;
+  for (const auto& pose : poses) {
+    for (const auto& view : views) {
+      auto drr = run_plastimatch_drr(view.transformed(pose.inverse()), mha, work / "out");
+      if (!drr.ok()) return drr.status();
+      ms.push_back(1000.0 * drr->reported_render_s);
+      wall.push_back(1000.0 * drr->wall_s);
+      ncc.push_back(tracking::normalized_cross_correlation(reference[k].view(), drr->line_integrals.view()));
+      diff.push_back(max_abs_diff_rel(reference[k], drr->line_integrals));
+      ++k;
+    }
+  }
+  fs::remove_all(work, ec);
+  peer.ms_median = median(ms);
+  peer.ms_wall_median = median(wall);
+  peer.ncc_vs_siddon = mean(ncc);
+  peer.ncc_min_vs_siddon = *std::min_element(ncc.begin(), ncc.end());
+  peer.max_abs_diff_rel = *std::max_element(diff.begin(), diff.end());
+  spdlog::info("bench drr: plastimatch {:9.2f} ms median ({:.0f} ms with loading), NCC {:.6f} (min {:.6f})",
+               peer.ms_median, peer.ms_wall_median, peer.ncc_vs_siddon, peer.ncc_min_vs_siddon);
+  report.peers.push_back(peer);
+  return report;
+}
+
+nlohmann::json to_json(const DrrBenchReport& r) {
+  auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  nlohmann::json j;
+  j["ct"] = r.ct;
+  j["size"] = {r.rows, r.cols};
+  j["threads"] = r.threads;
+  j["poses"] = r.poses;
+  j["views"] = r.views;
+  j["renderers"] = nlohmann::json::array();
+  for (const auto& f : r.renderers) {
+    j["renderers"].push_back({{"name", f.name}, {"ms_median", f.ms_median},
+                              {"ncc_vs_siddon", f.ncc_vs_siddon}, {"ncc_min_vs_siddon", f.ncc_min_vs_siddon},
+                              {"psnr_db_vs_siddon", finite_or_null(f.psnr_db_vs_siddon)}});
+  }
+  j["peers"] = nlohmann::json::array();
+  for (const auto& p : r.peers) {
+    j["peers"].push_back({{"name", p.name}, {"ms_median", p.ms_median}, {"ms_wall_median", p.ms_wall_median},
+                          {"ncc_vs_siddon", p.ncc_vs_siddon}, {"ncc_min_vs_siddon", p.ncc_min_vs_siddon},
+                          {"max_abs_diff_rel", p.max_abs_diff_rel}});
+  }
+  if (!r.peer_note.empty()) j["peer_note"] = r.peer_note;
+  return j;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,51 @@
+// lftrack: the program. Exceptions stop here; commands report failures as a Status.
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <exception>
+
+#include "cli_commands.hpp"
+
+int main(int argc, char** argv) {
+  auto logger = spdlog::stderr_color_mt("lftrack");
+  spdlog::set_default_logger(logger);
+  spdlog::set_pattern("[%H:%M:%S.%e] %^%l%$: %v");
+
+  CLI::App app{"lftrack: real-time patient tracking for image-guided radiosurgery"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "lftrack 0.1.0");
+  bool verbose = false, quiet = false;
+  app.add_flag("-v,--verbose", verbose, "More log output");
+  app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
+
+  using namespace lftrack::host::cli;
+  const Command info = add_info_command(&app);
+  const Command drr = add_drr_command(&app);
+  CLI::App* bench = app.add_subcommand("bench", "Benchmarks measured side by side in one run");
+  bench->require_subcommand(1);
+  const Command bench_drr = add_bench_drr_command(bench);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  spdlog::set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);
+
+  try {
+    lftrack::Status status;
+    if (app.got_subcommand("info")) status = info();
+    else if (app.got_subcommand("drr")) status = drr();
+    else if (bench->got_subcommand("drr")) status = bench_drr();
+    if (!status.ok()) {
+      spdlog::error("{}", status.message());
+      return 1;
+    }
+  } catch (const std::exception& e) {
+    spdlog::critical("unexpected error: {}", e.what());
+    return 3;
+  }
+  return 0;
+}

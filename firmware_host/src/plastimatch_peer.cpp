@@ -1,0 +1,145 @@
+#include "lftrack/host/plastimatch_peer.hpp"
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+extern char** environ;
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string triple(const Eigen::Vector3d& v) {
+  std::ostringstream s;
+  s.precision(12);
+  s << v.x() << ' ' << v.y() << ' ' << v.z();
+  return s.str();
+}
+
+std::string number(double a) {
+  std::ostringstream s;
+  s.precision(12);
+  s << a;
+  return s.str();
+}
+
+std::string pair(double a, double b) { return number(a) + ' ' + number(b); }
+
+// plastimatch writes "Pf\n<cols> <rows>\n-1\n" and then row 0 first.
+Result<tracking::Image<float>> read_plastimatch_pfm(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return not_found(file.string() + ": plastimatch wrote no output");
+  std::string magic;
+  int cols = 0, rows = 0;
+  double scale = 0;
+  in >> magic >> cols >> rows >> scale;
+  if (magic != "Pf" || cols < 1 || rows < 1 || scale >= 0) {
+    return corrupt_data(file.string() + ": unexpected PFM header from plastimatch");
+  }
+  in.get();
+  tracking::Image<float> image(rows, cols);
+  in.read(reinterpret_cast<char*>(image.pixels().data()),
+          static_cast<std::streamsize>(image.pixels().size() * sizeof(float)));
+  if (!in) return corrupt_data(file.string() + ": truncated PFM from plastimatch");
+  for (float& v : image.pixels()) v *= 10.0f;  // cm -> mm
+  return image;
+}
+
+}  // namespace
+
+Status run_process(const std::vector<std::string>& argv, std::string* output) {
+  char log_template[] = "/tmp/lftrack-process-XXXXXX";
+  const int log_fd = mkstemp(log_template);
+  if (log_fd < 0) return io_error("cannot create a temporary file for process output");
+  unlink(log_template);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_adddup2(&actions, log_fd, STDOUT_FILENO);
+  posix_spawn_file_actions_adddup2(&actions, log_fd, STDERR_FILENO);
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  pid_t pid = 0;
+  const int spawn_error = posix_spawnp(&pid, args[0], &actions, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawn_error != 0) {
+    close(log_fd);
+    return not_found(argv[0] + ": cannot start (" + std::strerror(spawn_error) + ")");
+  }
+  int wstatus = 0;
+  while (waitpid(pid, &wstatus, 0) < 0 && errno == EINTR) {
+  }
+  if (output) {
+    output->clear();
+    lseek(log_fd, 0, SEEK_SET);
+    char buffer[4096];
+    ssize_t n;
+    while ((n = read(log_fd, buffer, sizeof buffer)) > 0) output->append(buffer, static_cast<std::size_t>(n));
+  }
+  close(log_fd);
+  if (!WIFEXITED(wstatus) || WEXITSTATUS(wstatus) != 0) {
+    return internal_error(argv[0] + " failed (status " + std::to_string(wstatus) + ")");
+  }
+  return {};
+}
+
+bool plastimatch_available() {
+  std::string out;
+  return run_process({"plastimatch", "--version"}, &out).ok();
+}
+
+Result<std::vector<std::string>> plastimatch_drr_arguments(const tracking::XrayView& v,
+                                                           const fs::path& volume_mha,
+                                                           const std::string& output_prefix) {
+  LFTRACK_RETURN_IF_ERROR(v.validate());
+  const Eigen::Vector3d nrm = v.detector_normal();
+  if (v.col_axis.cross(v.row_axis).dot(nrm) > 0) {
+    return unsupported("view '" + v.name + "' is mirrored relative to plastimatch's detector (col x row points at the source)");
+  }
+  const double sid = v.source_to_detector_mm();
+  const double sad = 0.5 * sid;
+  const Eigen::Vector3d isocentre = v.source_mm - sad * nrm;
+  const auto principal = v.project(v.principal_point_mm());
+  if (!principal) return internal_error("principal point does not project");
+  return std::vector<std::string>{
+      "plastimatch", "drr", "-P", "none", "-i", "exact", "-t", "pfm",
+      "--nrm", triple(nrm), "--vup", triple(-v.row_axis),
+      "--sad", number(sad), "--sid", number(sid),
+      "-o", triple(isocentre),
+      "-r", std::to_string(v.cols) + " " + std::to_string(v.rows),
+      "-z", pair(v.cols * v.pitch_col_mm, v.rows * v.pitch_row_mm),
+      "-c", pair(principal->x(), principal->y()),
+      "-O", output_prefix, volume_mha.string()};
+}
+
+Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct, const fs::path& volume_mha,
+                                    const fs::path& work_dir) {
+  std::error_code ec;
+  fs::create_directories(work_dir, ec);
+  const std::string prefix = (work_dir / "drr_").string();
+  auto args = plastimatch_drr_arguments(view_ct, volume_mha, prefix);
+  if (!args.ok()) return args.status();
+  std::string log;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (Status s = run_process(*args, &log); !s.ok()) return s.with_context(log.substr(0, 400));
+  PeerDrr out;
+  out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  auto image = read_plastimatch_pfm(prefix + "0000.pfm");
+  if (!image.ok()) return image.status();
+  out.line_integrals = std::move(image).value();
+  if (const auto at = log.find("Total time:"); at != std::string::npos) {
+    out.reported_render_s = std::atof(log.c_str() + at + std::strlen("Total time:"));
+  }
+  return out;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,336 @@
+// Scene YAML -> Scene, with every error located at file:line:col (yaml-cpp marks, 1-based here).
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+using Eigen::Vector3d;
+
+class SceneParser {
+ public:
+  SceneParser(std::string source, fs::path base_dir)
+      : source_(std::move(source)), base_dir_(std::move(base_dir)) {}
+
+  Status error_at(const YAML::Mark& mark, const std::string& message) const {
+    std::ostringstream s;
+    s << source_;
+    if (!mark.is_null()) s << ':' << mark.line + 1 << ':' << mark.column + 1;
+    s << ": " << message;
+    return invalid_argument(s.str());
+  }
+  Status error(const YAML::Node& node, const std::string& message) const {
+    return error_at(node.Mark(), message);
+  }
+
+  // Rejects keys of `map` that are not in `allowed` (typos must not pass silently).
+  Status check_keys(const YAML::Node& map, const std::string& what,
+                    const std::set<std::string>& allowed) const {
+    if (!map.IsMap()) return error(map, what + " must be a mapping");
+    for (const auto& kv : map) {
+      const std::string key = kv.first.as<std::string>();
+      if (!allowed.count(key)) {
+        std::string known;
+        for (const auto& k : allowed) known += (known.empty() ? "" : ", ") + k;
+        return error(kv.first, "unknown key '" + key + "' in " + what + " (allowed: " + known + ")");
+      }
+    }
+    return {};
+  }
+
+  Status number(const YAML::Node& n, const std::string& what, double* out) const {
+    if (!n.IsScalar()) return error(n, what + " must be a number");
+    try {
+      *out = n.as<double>();
+    } catch (const YAML::Exception&) {
+      return error(n, what + " must be a number, got '" + n.Scalar() + "'");
+    }
+    if (!std::isfinite(*out)) return error(n, what + " must be finite");
+    return {};
+  }
+
+  Status positive(const YAML::Node& n, const std::string& what, double* out) const {
+    LFTRACK_RETURN_IF_ERROR(number(n, what, out));
+    if (!(*out > 0)) return error(n, what + " must be positive, got " + n.Scalar());
+    return {};
+  }
+
+  Status integer(const YAML::Node& n, const std::string& what, long lo, long hi, long* out) const {
+    if (!n.IsScalar()) return error(n, what + " must be an integer");
+    try {
+      *out = n.as<long>();
+    } catch (const YAML::Exception&) {
+      return error(n, what + " must be an integer, got '" + n.Scalar() + "'");
+    }
+    if (*out < lo || *out > hi) {
+      return error(n, what + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
+                          ", got " + n.Scalar());
+    }
+    return {};
+  }
+
+  Status text(const YAML::Node& n, const std::string& what, std::string* out) const {
+    if (!n.IsScalar() || n.Scalar().empty()) return error(n, what + " must be a non-empty string");
+    *out = n.Scalar();
+    return {};
+  }
+
+  Status vec3(const YAML::Node& n, const std::string& what, Vector3d* out) const {
+    if (!n.IsSequence() || n.size() != 3) return error(n, what + " must be a list of 3 numbers [x, y, z]");
+    for (int a = 0; a < 3; ++a) LFTRACK_RETURN_IF_ERROR(number(n[a], what, &(*out)[a]));
+    return {};
+  }
+
+  Status unit_vec3(const YAML::Node& n, const std::string& what, Vector3d* out) const {
+    LFTRACK_RETURN_IF_ERROR(vec3(n, what, out));
+    if (!(out->norm() > 1e-9)) return error(n, what + " must not be the zero vector");
+    out->normalize();
+    return {};
+  }
+
+  const YAML::Node required(const YAML::Node& map, const std::string& key, const std::string& what,
+                            Status* status) const {
+    const YAML::Node n = map[key];
+    if (!n && status->ok()) *status = error(map, what + " needs '" + key + "'");
+    return n;
+  }
+
+  Status parse_ct(const YAML::Node& n, CtSpec* ct) const {
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, "ct", {"path", "seed", "mu_water_per_mm"}));
+    Status st;
+    const YAML::Node path = required(n, "path", "ct", &st);
+    LFTRACK_RETURN_IF_ERROR(st);
+    LFTRACK_RETURN_IF_ERROR(text(path, "ct.path", &ct->path));
+    if (!ct->is_builtin_phantom()) {
+      if (ct->path.rfind("builtin:", 0) == 0) return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
+      const fs::path p(ct->path);
+      ct->path = (p.is_absolute() ? p : base_dir_ / p).lexically_normal().string();
+    }
+    if (n["seed"]) {
+      long seed = 0;
+      LFTRACK_RETURN_IF_ERROR(integer(n["seed"], "ct.seed", 0, 2147483647L, &seed));
+      if (!ct->is_builtin_phantom()) return error(n["seed"], "ct.seed applies only to builtin:phantom");
+      ct->phantom_seed = static_cast<std::uint64_t>(seed);
+    }
+    if (n["mu_water_per_mm"]) {
+      LFTRACK_RETURN_IF_ERROR(positive(n["mu_water_per_mm"], "ct.mu_water_per_mm", &ct->mu_water_per_mm));
+      if (ct->mu_water_per_mm > 1.0) return error(n["mu_water_per_mm"], "ct.mu_water_per_mm is in 1/mm; water is about 0.02");
+    }
+    return {};
+  }
+
+  Status parse_roi(const YAML::Node& n, bool builtin, RoiSpec* roi) const {
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, "roi", {"centre_mm", "size_mm"}));
+    if (n["centre_mm"]) {
+      Vector3d c;
+      LFTRACK_RETURN_IF_ERROR(vec3(n["centre_mm"], "roi.centre_mm", &c));
+      roi->centre_ct_mm = c;
+    } else if (!builtin) {
+      return error(n, "roi needs 'centre_mm' (only builtin:phantom has a default target)");
+    }
+    if (n["size_mm"]) {
+      LFTRACK_RETURN_IF_ERROR(vec3(n["size_mm"], "roi.size_mm", &roi->size_mm));
+      if (!(roi->size_mm.minCoeff() > 0)) return error(n["size_mm"], "roi.size_mm must be positive");
+    }
+    return {};
+  }
+
+  Status parse_pose(const YAML::Node& n, tracking::Pose* pose) const {
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, "nominal_pose", {"translation_mm", "rotation_deg"}));
+    Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
+    if (n["translation_mm"]) LFTRACK_RETURN_IF_ERROR(vec3(n["translation_mm"], "nominal_pose.translation_mm", &t));
+    if (n["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(vec3(n["rotation_deg"], "nominal_pose.rotation_deg [roll, pitch, yaw]", &r));
+    *pose = tracking::Pose::Identity();
+    pose->linear() = tracking::rotation_from_euler(
+        {tracking::deg_to_rad(r.x()), tracking::deg_to_rad(r.y()), tracking::deg_to_rad(r.z())});
+    pose->translation() = t;
+    return {};
+  }
+
+  Status parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const {
+    const std::string what = "detectors[" + std::to_string(index) + "]";
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
+                                                 "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
+    Status st;
+    std::string name;
+    LFTRACK_RETURN_IF_ERROR(text(required(n, "name", what, &st), what + ".name", &name));
+    LFTRACK_RETURN_IF_ERROR(st);
+    if (n["frames"]) {
+      LFTRACK_RETURN_IF_ERROR(text(n["frames"], what + ".frames", &d->frames));
+      if (d->frames != "sim" && d->frames != "v4l2" && d->frames != "replay") {
+        return error(n["frames"], what + ".frames must be one of sim, v4l2, replay; got '" + d->frames + "'");
+      }
+    }
+    long bits = 12, rows = 0, cols = 0;
+    if (n["bits"]) LFTRACK_RETURN_IF_ERROR(integer(n["bits"], what + ".bits", 8, 16, &bits));
+    const YAML::Node rows_node = required(n, "rows", what, &st);
+    const YAML::Node cols_node = required(n, "cols", what, &st);
+    const YAML::Node pitch_node = required(n, "pitch_mm", what, &st);
+    LFTRACK_RETURN_IF_ERROR(st);
+    LFTRACK_RETURN_IF_ERROR(integer(rows_node, what + ".rows", 1, 16384, &rows));
+    LFTRACK_RETURN_IF_ERROR(integer(cols_node, what + ".cols", 1, 16384, &cols));
+    double pitch_row = 0, pitch_col = 0;
+    if (pitch_node.IsSequence() && pitch_node.size() == 2) {
+      LFTRACK_RETURN_IF_ERROR(positive(pitch_node[0], what + ".pitch_mm[row]", &pitch_row));
+      LFTRACK_RETURN_IF_ERROR(positive(pitch_node[1], what + ".pitch_mm[col]", &pitch_col));
+    } else {
+      LFTRACK_RETURN_IF_ERROR(positive(pitch_node, what + ".pitch_mm", &pitch_row));
+      pitch_col = pitch_row;
+    }
+    d->bits = static_cast<int>(bits);
+
+    const bool explicit_form = n["source_mm"] || n["pixel00_mm"] || n["col_axis"] || n["row_axis"];
+    if (n["isocentric"] && explicit_form) {
+      return error(n, what + " gives both 'isocentric' and explicit geometry; use one");
+    }
+    if (n["isocentric"]) {
+      const YAML::Node iso = n["isocentric"];
+      const std::string w = what + ".isocentric";
+      LFTRACK_RETURN_IF_ERROR(check_keys(iso, w, {"isocentre_mm", "source_direction", "up", "source_to_isocentre_mm", "source_to_detector_mm"}));
+      Vector3d centre = Vector3d::Zero(), dir, up;
+      double sad = 0, sid = 0;
+      if (iso["isocentre_mm"]) LFTRACK_RETURN_IF_ERROR(vec3(iso["isocentre_mm"], w + ".isocentre_mm", &centre));
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(iso, "source_direction", w, &st), w + ".source_direction", &dir));
+      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(iso, "up", w, &st), w + ".up", &up));
+      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(positive(required(iso, "source_to_isocentre_mm", w, &st), w + ".source_to_isocentre_mm", &sad));
+      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(positive(required(iso, "source_to_detector_mm", w, &st), w + ".source_to_detector_mm", &sid));
+      LFTRACK_RETURN_IF_ERROR(st);
+      auto view = tracking::XrayView::isocentric(name, centre, dir, up, sad, sid, static_cast<int>(rows), static_cast<int>(cols), pitch_row);
+      if (!view.ok()) return error(iso, view.status().message());
+      d->view = *view;
+      d->view.pitch_col_mm = pitch_col;
+      d->view.pitch_row_mm = pitch_row;
+      if (pitch_col != pitch_row) {  // keep the detector centred on the axis
+        const double mid_row = 0.5 * static_cast<double>(rows - 1), mid_col = 0.5 * static_cast<double>(cols - 1);
+        d->view.pixel00_mm += view->pixel_centre_mm(mid_row, mid_col) - d->view.pixel_centre_mm(mid_row, mid_col);
+      }
+    } else if (explicit_form) {
+      tracking::XrayView& v = d->view;
+      LFTRACK_RETURN_IF_ERROR(vec3(required(n, "source_mm", what, &st), what + ".source_mm", &v.source_mm));
+      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(vec3(required(n, "pixel00_mm", what, &st), what + ".pixel00_mm", &v.pixel00_mm));
+      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(n, "col_axis", what, &st), what + ".col_axis", &v.col_axis));
+      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(n, "row_axis", what, &st), what + ".row_axis", &v.row_axis));
+      LFTRACK_RETURN_IF_ERROR(st);
+      v.name = name;
+      v.rows = int(rows);
+      v.cols = int(cols);
+      v.pitch_row_mm = pitch_row;
+      v.pitch_col_mm = pitch_col;
+    } else {
+      return error(n, what + " needs its geometry: either 'isocentric' or source_mm, pixel00_mm, col_axis, row_axis");
+    }
+    if (Status s = d->view.validate(); !s.ok()) return error(n, s.message());
+    return {};
+  }
+
+  Result<Scene> parse(const std::string& yaml_text) const {
+    YAML::Node root;
+    try {
+      root = YAML::Load(yaml_text);
+    } catch (const YAML::ParserException& e) {
+      return error_at(e.mark, "YAML syntax error: " + e.msg);
+    }
+    if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
+    LFTRACK_RETURN_IF_ERROR(check_keys(root, "the scene", {"version", "name", "ct", "roi", "registration_origin_mm",
+                                                           "nominal_pose", "detectors", "envelope", "tracking"}));
+    Scene scene;
+    scene.source = source_;
+    Status st;
+    long version = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(required(root, "version", "the scene", &st), "version", 1, 1, &version));
+    LFTRACK_RETURN_IF_ERROR(st);
+    if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
+    LFTRACK_RETURN_IF_ERROR(parse_ct(required(root, "ct", "the scene", &st), &scene.ct));
+    LFTRACK_RETURN_IF_ERROR(st);
+    if (root["roi"]) {
+      LFTRACK_RETURN_IF_ERROR(parse_roi(root["roi"], scene.ct.is_builtin_phantom(), &scene.roi));
+    } else if (!scene.ct.is_builtin_phantom()) {
+      return error(root, "the scene needs 'roi' (centre_mm, size_mm) for a CT read from a file");
+    }
+    if (root["registration_origin_mm"]) {
+      Vector3d c;
+      LFTRACK_RETURN_IF_ERROR(vec3(root["registration_origin_mm"], "registration_origin_mm", &c));
+      scene.registration_origin_ct_mm = c;
+    }
+    if (root["nominal_pose"]) {
+      tracking::Pose pose;
+      LFTRACK_RETURN_IF_ERROR(parse_pose(root["nominal_pose"], &pose));
+      scene.nominal_T_room_from_ct = pose;
+    }
+    const YAML::Node detectors = required(root, "detectors", "the scene", &st);
+    LFTRACK_RETURN_IF_ERROR(st);
+    if (!detectors.IsSequence() || detectors.size() == 0 || detectors.size() > 4) {
+      return error(detectors, "detectors must be a list of 1 to 4 detectors");
+    }
+    std::set<std::string> names;
+    for (std::size_t i = 0; i < detectors.size(); ++i) {
+      DetectorSpec d;
+      LFTRACK_RETURN_IF_ERROR(parse_detector(detectors[i], int(i), &d));
+      if (!names.insert(d.view.name).second) return error(detectors[i], "duplicate detector name '" + d.view.name + "'");
+      scene.detectors.push_back(d);
+    }
+    if (root["envelope"]) {
+      const YAML::Node e = root["envelope"];
+      LFTRACK_RETURN_IF_ERROR(check_keys(e, "envelope", {"translation_mm", "rotation_deg"}));
+      if (e["translation_mm"]) LFTRACK_RETURN_IF_ERROR(positive(e["translation_mm"], "envelope.translation_mm", &scene.envelope.translation_mm));
+      if (e["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(positive(e["rotation_deg"], "envelope.rotation_deg", &scene.envelope.rotation_deg));
+      if (scene.envelope.rotation_deg > 45) return error(e["rotation_deg"], "envelope.rotation_deg must be at most 45");
+    }
+    if (root["tracking"]) {
+      const YAML::Node t = root["tracking"];
+      LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking", {"renderer"}));
+      if (t["renderer"]) {
+        LFTRACK_RETURN_IF_ERROR(text(t["renderer"], "tracking.renderer", &scene.renderer));
+        const auto known = tracking::renderer_names();
+        if (std::find(known.begin(), known.end(), scene.renderer) == known.end()) {
+          std::string list;
+          for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+          return error(t["renderer"], "unknown renderer '" + scene.renderer + "' (known: " + list + ")");
+        }
+      }
+    }
+    return scene;
+  }
+
+ private:
+  std::string source_;
+  fs::path base_dir_;
+};
+
+}  // namespace
+
+Result<Scene> parse_scene(const std::string& yaml_text, const std::string& source_name,
+                          const std::filesystem::path& base_dir) {
+  return SceneParser(source_name, base_dir).parse(yaml_text);
+}
+
+Result<Scene> load_scene(const std::string& file_or_builtin) {
+  if (auto text = builtin_scene_text(file_or_builtin)) {
+    return parse_scene(*text, file_or_builtin, std::filesystem::current_path());
+  }
+  if (file_or_builtin.rfind("builtin:", 0) == 0) {
+    return not_found("unknown built-in scene '" + file_or_builtin + "' (known: builtin:phantom)");
+  }
+  std::ifstream in(file_or_builtin);
+  if (!in) return not_found(file_or_builtin + ": cannot open scene file");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const fs::path base = fs::absolute(fs::path(file_or_builtin)).parent_path();
+  return parse_scene(buffer.str(), file_or_builtin, base);
+}
+
+}  // namespace lftrack::host
