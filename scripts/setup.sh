@@ -7,7 +7,8 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libceres-dev            # geometry, least squares
-  libgdcm-dev                           # DICOM series
+  libdcmtk-dev                          # DICOM series (reader)
+  libgdcm-dev                           # DICOM writing in tests
   libnifti2-dev                         # NIfTI-1/2 (nifti_clib)
   libyaml-cpp-dev libcli11-dev libspdlog-dev nlohmann-json3-dev
   libpng-dev libtiff-dev zlib1g-dev     # image output

@@ -96,18 +96,18 @@ class SceneParser {
     return {};
   }
 
-  const YAML::Node required(const YAML::Node& map, const std::string& key, const std::string& what,
-                            Status* status) const {
+  // The value under `key` of `map`, or an error located at the map if it is absent.
+  Status need(const YAML::Node& map, const std::string& key, const std::string& what, YAML::Node* out) const {
     const YAML::Node n = map[key];
-    if (!n && status->ok()) *status = error(map, what + " needs '" + key + "'");
-    return n;
+    if (!n) return error(map, what + " needs '" + key + "'");
+    out->reset(n);  // rebind; operator= would write into the referenced node
+    return {};
   }
 
   Status parse_ct(const YAML::Node& n, CtSpec* ct) const {
     LFTRACK_RETURN_IF_ERROR(check_keys(n, "ct", {"path", "seed", "mu_water_per_mm"}));
-    Status st;
-    const YAML::Node path = required(n, "path", "ct", &st);
-    LFTRACK_RETURN_IF_ERROR(st);
+    YAML::Node path;
+    LFTRACK_RETURN_IF_ERROR(need(n, "path", "ct", &path));
     LFTRACK_RETURN_IF_ERROR(text(path, "ct.path", &ct->path));
     if (!ct->is_builtin_phantom()) {
       if (ct->path.rfind("builtin:", 0) == 0) return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
@@ -159,10 +159,10 @@ class SceneParser {
     const std::string what = "detectors[" + std::to_string(index) + "]";
     LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
                                                  "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
-    Status st;
+    YAML::Node node;
     std::string name;
-    LFTRACK_RETURN_IF_ERROR(text(required(n, "name", what, &st), what + ".name", &name));
-    LFTRACK_RETURN_IF_ERROR(st);
+    LFTRACK_RETURN_IF_ERROR(need(n, "name", what, &node));
+      LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
     if (n["frames"]) {
       LFTRACK_RETURN_IF_ERROR(text(n["frames"], what + ".frames", &d->frames));
       if (d->frames != "sim" && d->frames != "v4l2" && d->frames != "replay") {
@@ -171,12 +171,12 @@ class SceneParser {
     }
     long bits = 12, rows = 0, cols = 0;
     if (n["bits"]) LFTRACK_RETURN_IF_ERROR(integer(n["bits"], what + ".bits", 8, 16, &bits));
-    const YAML::Node rows_node = required(n, "rows", what, &st);
-    const YAML::Node cols_node = required(n, "cols", what, &st);
-    const YAML::Node pitch_node = required(n, "pitch_mm", what, &st);
-    LFTRACK_RETURN_IF_ERROR(st);
-    LFTRACK_RETURN_IF_ERROR(integer(rows_node, what + ".rows", 1, 16384, &rows));
-    LFTRACK_RETURN_IF_ERROR(integer(cols_node, what + ".cols", 1, 16384, &cols));
+    LFTRACK_RETURN_IF_ERROR(need(n, "rows", what, &node));
+    LFTRACK_RETURN_IF_ERROR(integer(node, what + ".rows", 1, 16384, &rows));
+    LFTRACK_RETURN_IF_ERROR(need(n, "cols", what, &node));
+    LFTRACK_RETURN_IF_ERROR(integer(node, what + ".cols", 1, 16384, &cols));
+    YAML::Node pitch_node;
+    LFTRACK_RETURN_IF_ERROR(need(n, "pitch_mm", what, &pitch_node));
     double pitch_row = 0, pitch_col = 0;
     if (pitch_node.IsSequence() && pitch_node.size() == 2) {
       LFTRACK_RETURN_IF_ERROR(positive(pitch_node[0], what + ".pitch_mm[row]", &pitch_row));
@@ -198,14 +198,14 @@ class SceneParser {
       Vector3d centre = Vector3d::Zero(), dir, up;
       double sad = 0, sid = 0;
       if (iso["isocentre_mm"]) LFTRACK_RETURN_IF_ERROR(vec3(iso["isocentre_mm"], w + ".isocentre_mm", &centre));
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(iso, "source_direction", w, &st), w + ".source_direction", &dir));
-      LFTRACK_RETURN_IF_ERROR(st);
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(iso, "up", w, &st), w + ".up", &up));
-      LFTRACK_RETURN_IF_ERROR(st);
-      LFTRACK_RETURN_IF_ERROR(positive(required(iso, "source_to_isocentre_mm", w, &st), w + ".source_to_isocentre_mm", &sad));
-      LFTRACK_RETURN_IF_ERROR(st);
-      LFTRACK_RETURN_IF_ERROR(positive(required(iso, "source_to_detector_mm", w, &st), w + ".source_to_detector_mm", &sid));
-      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(need(iso, "source_direction", w, &node));
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".source_direction", &dir));
+      LFTRACK_RETURN_IF_ERROR(need(iso, "up", w, &node));
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".up", &up));
+      LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_isocentre_mm", w, &node));
+      LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_isocentre_mm", &sad));
+      LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_detector_mm", w, &node));
+      LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_detector_mm", &sid));
       auto view = tracking::XrayView::isocentric(name, centre, dir, up, sad, sid, static_cast<int>(rows), static_cast<int>(cols), pitch_row);
       if (!view.ok()) return error(iso, view.status().message());
       d->view = *view;
@@ -217,14 +217,14 @@ class SceneParser {
       }
     } else if (explicit_form) {
       tracking::XrayView& v = d->view;
-      LFTRACK_RETURN_IF_ERROR(vec3(required(n, "source_mm", what, &st), what + ".source_mm", &v.source_mm));
-      LFTRACK_RETURN_IF_ERROR(st);
-      LFTRACK_RETURN_IF_ERROR(vec3(required(n, "pixel00_mm", what, &st), what + ".pixel00_mm", &v.pixel00_mm));
-      LFTRACK_RETURN_IF_ERROR(st);
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(n, "col_axis", what, &st), what + ".col_axis", &v.col_axis));
-      LFTRACK_RETURN_IF_ERROR(st);
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(required(n, "row_axis", what, &st), what + ".row_axis", &v.row_axis));
-      LFTRACK_RETURN_IF_ERROR(st);
+      LFTRACK_RETURN_IF_ERROR(need(n, "source_mm", what, &node));
+      LFTRACK_RETURN_IF_ERROR(vec3(node, what + ".source_mm", &v.source_mm));
+      LFTRACK_RETURN_IF_ERROR(need(n, "pixel00_mm", what, &node));
+      LFTRACK_RETURN_IF_ERROR(vec3(node, what + ".pixel00_mm", &v.pixel00_mm));
+      LFTRACK_RETURN_IF_ERROR(need(n, "col_axis", what, &node));
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, what + ".col_axis", &v.col_axis));
+      LFTRACK_RETURN_IF_ERROR(need(n, "row_axis", what, &node));
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, what + ".row_axis", &v.row_axis));
       v.name = name;
       v.rows = int(rows);
       v.cols = int(cols);
@@ -249,13 +249,13 @@ class SceneParser {
                                                            "nominal_pose", "detectors", "envelope", "tracking"}));
     Scene scene;
     scene.source = source_;
-    Status st;
+    YAML::Node node;
     long version = 0;
-    LFTRACK_RETURN_IF_ERROR(integer(required(root, "version", "the scene", &st), "version", 1, 1, &version));
-    LFTRACK_RETURN_IF_ERROR(st);
+    LFTRACK_RETURN_IF_ERROR(need(root, "version", "the scene", &node));
+      LFTRACK_RETURN_IF_ERROR(integer(node, "version", 1, 1, &version));
     if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
-    LFTRACK_RETURN_IF_ERROR(parse_ct(required(root, "ct", "the scene", &st), &scene.ct));
-    LFTRACK_RETURN_IF_ERROR(st);
+    LFTRACK_RETURN_IF_ERROR(need(root, "ct", "the scene", &node));
+      LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
     if (root["roi"]) {
       LFTRACK_RETURN_IF_ERROR(parse_roi(root["roi"], scene.ct.is_builtin_phantom(), &scene.roi));
     } else if (!scene.ct.is_builtin_phantom()) {
@@ -271,8 +271,8 @@ class SceneParser {
       LFTRACK_RETURN_IF_ERROR(parse_pose(root["nominal_pose"], &pose));
       scene.nominal_T_room_from_ct = pose;
     }
-    const YAML::Node detectors = required(root, "detectors", "the scene", &st);
-    LFTRACK_RETURN_IF_ERROR(st);
+    YAML::Node detectors;
+    LFTRACK_RETURN_IF_ERROR(need(root, "detectors", "the scene", &detectors));
     if (!detectors.IsSequence() || detectors.size() == 0 || detectors.size() > 4) {
       return error(detectors, "detectors must be a list of 1 to 4 detectors");
     }

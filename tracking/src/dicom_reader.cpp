@@ -1,15 +1,22 @@
-// DICOM CT series reader on GDCM. GDCM parses files and decodes pixel data (including the
-// compressed transfer syntaxes it has codecs for); this file checks that the slices form one
-// regular volume and places it in the CT frame.
+// DICOM CT series reader on DCMTK (dcmdata, with the JPEG, JPEG-LS and RLE decoders registered).
+// DCMTK parses and decodes; this file checks that the slices form one regular volume and places
+// it in the CT frame. DCMTK rather than GDCM: Debian's GDCM aborts (assert) on a file truncated
+// inside its meta header and reads a file truncated inside its pixel data with only a warning;
+// DCMTK reports both as errors.
 
-#include <gdcmImage.h>
-#include <gdcmImageReader.h>
-#include <gdcmTag.h>
+#include <dcmtk/config/osconfig.h>  // must come first
+#include <dcmtk/dcmdata/dcfilefo.h>
+#include <dcmtk/dcmdata/dcdeftag.h>
+#include <dcmtk/dcmdata/dcrledrg.h>
+#include <dcmtk/dcmdata/dcxfer.h>
+#include <dcmtk/dcmjpeg/djdecode.h>
+#include <dcmtk/dcmjpls/djdecode.h>
+#include <dcmtk/oflog/oflog.h>
 
 #include <algorithm>
-#include <charconv>
-#include <cstring>
 #include <cmath>
+#include <cstring>
+#include <mutex>
 #include <sstream>
 #include <string_view>
 
@@ -35,142 +42,152 @@ struct Slice {
   std::vector<float> hu;  // rows * cols, row-major
 };
 
-std::string element_string(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
-  const gdcm::Tag tag(group, element);
-  if (!ds.FindDataElement(tag)) return {};
-  const gdcm::DataElement& de = ds.GetDataElement(tag);
-  const gdcm::ByteValue* bv = de.GetByteValue();
-  if (!bv) return {};
-  std::string s(bv->GetPointer(), bv->GetLength());
-  const auto first = s.find_first_not_of(" \t\r\n\0");
-  const auto last = s.find_last_not_of(std::string(" \t\r\n\0", 5));
-  if (first == std::string::npos) return {};
-  return s.substr(first, last - first + 1);
+void register_decoders_once() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    // DCMTK logs parse problems itself; ours carry the file name, so keep its logger quiet.
+    OFLog::configure(OFLogger::FATAL_LOG_LEVEL);
+    DJDecoderRegistration::registerCodecs();
+    DJLSDecoderRegistration::registerCodecs();
+    DcmRLEDecoderRegistration::registerCodecs();
+  });
 }
 
-// Parses a backslash-separated decimal string (DICOM DS) into exactly `n` numbers.
-bool parse_decimals(const std::string& text, std::size_t n, std::vector<double>* out) {
-  out->clear();
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    std::size_t end = text.find('\\', start);
-    if (end == std::string::npos) end = text.size();
-    std::string_view part(text.data() + start, end - start);
-    while (!part.empty() && part.front() == ' ') part.remove_prefix(1);
-    while (!part.empty() && (part.back() == ' ' || part.back() == '\0')) part.remove_suffix(1);
-    if (!part.empty() && part.front() == '+') part.remove_prefix(1);
-    double v = 0;
-    const auto [ptr, ec] = std::from_chars(part.data(), part.data() + part.size(), v);
-    if (ec != std::errc() || ptr != part.data() + part.size() || !std::isfinite(v)) return false;
-    out->push_back(v);
-    start = end + 1;
+std::string get_string(DcmDataset& ds, const DcmTagKey& tag) {
+  OFString value;
+  if (ds.findAndGetOFStringArray(tag, value).bad()) return {};
+  std::string s(value.c_str());
+  const auto first = s.find_first_not_of(' ');
+  const auto last = s.find_last_not_of(' ');
+  return first == std::string::npos ? std::string() : s.substr(first, last - first + 1);
+}
+
+Status required_decimals(DcmDataset& ds, const DcmTagKey& tag, unsigned long n, const char* name,
+                         std::vector<double>* out) {
+  out->assign(n, 0.0);
+  if (!ds.tagExistsWithValue(tag)) return corrupt_data(std::string("missing ") + name);
+  DcmElement* element = nullptr;
+  if (ds.findAndGetElement(tag, element).bad() || element->getVM() != n) {
+    return corrupt_data(std::string(name) + " is not " + std::to_string(n) + " numbers: '" +
+                        get_string(ds, tag) + "'");
   }
-  return out->size() == n;
-}
-
-Status required_decimals(const gdcm::DataSet& ds, uint16_t g, uint16_t e, std::size_t n,
-                         const char* name, std::vector<double>* out) {
-  const std::string s = element_string(ds, g, e);
-  if (s.empty()) return corrupt_data(std::string("missing ") + name);
-  if (!parse_decimals(s, n, out)) {
-    return corrupt_data(std::string(name) + " is not " + std::to_string(n) +
-                        " finite numbers: '" + s + "'");
+  for (unsigned long i = 0; i < n; ++i) {
+    Float64 v = 0;
+    if (ds.findAndGetFloat64(tag, v, i).bad() || !std::isfinite(v)) {
+      return corrupt_data(std::string(name) + " is not " + std::to_string(n) + " finite numbers: '" +
+                          get_string(ds, tag) + "'");
+    }
+    (*out)[i] = v;
   }
   return {};
 }
 
 template <class T>
-void convert_pixels(const char* buffer, std::size_t count, double slope, double intercept,
+void convert_pixels(const T* raw, std::size_t count, double slope, double intercept,
                     std::vector<float>* hu) {
   hu->resize(count);
   for (std::size_t i = 0; i < count; ++i) {
-    T raw;
-    std::memcpy(&raw, buffer + i * sizeof(T), sizeof(T));
-    (*hu)[i] = static_cast<float>(slope * static_cast<double>(raw) + intercept);
+    (*hu)[i] = static_cast<float>(slope * static_cast<double>(raw[i]) + intercept);
   }
 }
 
+Status read_pixels(DcmDataset& ds, Slice* slice) {
+  Uint16 samples = 1, bits_allocated = 0, representation = 0;
+  ds.findAndGetUint16(DCM_SamplesPerPixel, samples);
+  ds.findAndGetUint16(DCM_BitsAllocated, bits_allocated);
+  ds.findAndGetUint16(DCM_PixelRepresentation, representation);
+  if (samples != 1) {
+    return unsupported("samples per pixel is " + std::to_string(samples) + ", expected 1 (greyscale)");
+  }
+  const DcmXfer original(ds.getOriginalXfer());
+  if (original.isEncapsulated()) {
+    if (ds.chooseRepresentation(EXS_LittleEndianExplicit, nullptr).bad() ||
+        !ds.canWriteXfer(EXS_LittleEndianExplicit)) {
+      return unsupported(std::string("pixel data cannot be decoded (transfer syntax ") + original.getXferName() +
+                         ", " + original.getXferID() + ", has no decoder in this DCMTK build)");
+    }
+  }
+  const std::size_t count = std::size_t(slice->rows) * std::size_t(slice->cols);
+  unsigned long got = 0;
+  if (bits_allocated == 16) {
+    const Uint16* raw = nullptr;
+    if (ds.findAndGetUint16Array(DCM_PixelData, raw, &got).bad() || raw == nullptr) {
+      return corrupt_data("no readable pixel data");
+    }
+    if (got < count) {
+      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " + std::to_string(count));
+    }
+    if (representation == 1) {
+      convert_pixels(reinterpret_cast<const int16_t*>(raw), count, slice->slope, slice->intercept, &slice->hu);
+    } else {
+      convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
+    }
+  } else if (bits_allocated == 8) {
+    const Uint8* raw = nullptr;
+    if (ds.findAndGetUint8Array(DCM_PixelData, raw, &got).bad() || raw == nullptr) {
+      return corrupt_data("no readable pixel data");
+    }
+    if (got < count) {
+      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " + std::to_string(count));
+    }
+    convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
+  } else {
+    return unsupported("BitsAllocated " + std::to_string(bits_allocated) + " is not 8 or 16");
+  }
+  return {};
+}
+
 Status read_slice(const fs::path& file, Slice* slice) {
-  gdcm::ImageReader reader;
-  reader.SetFileName(file.c_str());
-  if (!reader.Read()) return corrupt_data("not a readable DICOM image (truncated or not DICOM)");
-  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  register_decoders_once();
+  DcmFileFormat format;
+  const OFCondition loaded = format.loadFile(file.c_str());
+  if (loaded.bad()) {
+    return corrupt_data(std::string("not a readable DICOM file (") + loaded.text() + ")");
+  }
+  DcmDataset& ds = *format.getDataset();
   slice->file = file;
 
-  const std::string modality = element_string(ds, 0x0008, 0x0060);
+  const std::string modality = get_string(ds, DCM_Modality);
   if (modality != "CT") {
-    return unsupported("modality is '" + (modality.empty() ? std::string("none") : modality) +
-                       "', expected CT");
+    return unsupported("modality is '" + (modality.empty() ? std::string("none") : modality) + "', expected CT");
   }
-  slice->series_uid = element_string(ds, 0x0020, 0x000E);
+  slice->series_uid = get_string(ds, DCM_SeriesInstanceUID);
   if (slice->series_uid.empty()) return corrupt_data("missing SeriesInstanceUID");
-  const std::string frames = element_string(ds, 0x0028, 0x0008);
+  const std::string frames = get_string(ds, DCM_NumberOfFrames);
   if (!frames.empty() && frames != "1") {
     return unsupported("multi-frame object (" + frames + " frames); expected one slice per file");
   }
 
   std::vector<double> v;
-  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, 0x0020, 0x0032, 3, "ImagePositionPatient", &v));
+  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_ImagePositionPatient, 3, "ImagePositionPatient", &v));
   slice->position = {v[0], v[1], v[2]};
-  LFTRACK_RETURN_IF_ERROR(
-      required_decimals(ds, 0x0020, 0x0037, 6, "ImageOrientationPatient", &v));
+  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_ImageOrientationPatient, 6, "ImageOrientationPatient", &v));
   slice->row_cosine = {v[0], v[1], v[2]};
   slice->col_cosine = {v[3], v[4], v[5]};
-  if (std::abs(slice->row_cosine.norm() - 1.0) > 1e-3 ||
-      std::abs(slice->col_cosine.norm() - 1.0) > 1e-3 ||
+  if (std::abs(slice->row_cosine.norm() - 1.0) > 1e-3 || std::abs(slice->col_cosine.norm() - 1.0) > 1e-3 ||
       std::abs(slice->row_cosine.dot(slice->col_cosine)) > 1e-3) {
     return corrupt_data("ImageOrientationPatient is not two orthonormal vectors");
   }
   slice->row_cosine.normalize();
   slice->col_cosine.normalize();
-  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, 0x0028, 0x0030, 2, "PixelSpacing", &v));
+  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_PixelSpacing, 2, "PixelSpacing", &v));
   slice->pixel_spacing = {v[0], v[1]};
   if (!(v[0] > 0) || !(v[1] > 0)) return corrupt_data("PixelSpacing is not positive");
-  if (!element_string(ds, 0x0028, 0x1053).empty()) {
-    LFTRACK_RETURN_IF_ERROR(required_decimals(ds, 0x0028, 0x1053, 1, "RescaleSlope", &v));
+  if (ds.tagExistsWithValue(DCM_RescaleSlope)) {
+    LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleSlope, 1, "RescaleSlope", &v));
     slice->slope = v[0];
   }
-  if (!element_string(ds, 0x0028, 0x1052).empty()) {
-    LFTRACK_RETURN_IF_ERROR(required_decimals(ds, 0x0028, 0x1052, 1, "RescaleIntercept", &v));
+  if (ds.tagExistsWithValue(DCM_RescaleIntercept)) {
+    LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleIntercept, 1, "RescaleIntercept", &v));
     slice->intercept = v[0];
   }
-
-  const gdcm::Image& image = reader.GetImage();
-  const unsigned int* dims = image.GetDimensions();
-  if (image.GetNumberOfDimensions() < 2 || dims[0] == 0 || dims[1] == 0) {
-    return corrupt_data("image has no rows or columns");
-  }
-  slice->cols = static_cast<int>(dims[0]);
-  slice->rows = static_cast<int>(dims[1]);
-  const gdcm::PixelFormat& pf = image.GetPixelFormat();
-  if (pf.GetSamplesPerPixel() != 1) {
-    return unsupported("samples per pixel is " + std::to_string(pf.GetSamplesPerPixel()) +
-                       ", expected 1 (greyscale)");
-  }
-  const std::size_t count = std::size_t(slice->rows) * std::size_t(slice->cols);
-  const unsigned long length = image.GetBufferLength();
-  if (length != count * pf.GetPixelSize()) {
-    return corrupt_data("pixel data holds " + std::to_string(length) + " bytes, expected " +
-                        std::to_string(count * pf.GetPixelSize()));
-  }
-  std::vector<char> buffer(length);
-  if (!image.GetBuffer(buffer.data())) {
-    return unsupported("pixel data cannot be decoded (transfer syntax " +
-                       std::string(gdcm::TransferSyntax::GetTSString(image.GetTransferSyntax())) +
-                       " is compressed and not supported by this GDCM build)");
-  }
-  switch (pf.GetScalarType()) {
-    case gdcm::PixelFormat::UINT8: convert_pixels<uint8_t>(buffer.data(), count, slice->slope, slice->intercept, &slice->hu); break;
-    case gdcm::PixelFormat::INT8: convert_pixels<int8_t>(buffer.data(), count, slice->slope, slice->intercept, &slice->hu); break;
-    case gdcm::PixelFormat::UINT16: convert_pixels<uint16_t>(buffer.data(), count, slice->slope, slice->intercept, &slice->hu); break;
-    case gdcm::PixelFormat::INT16: convert_pixels<int16_t>(buffer.data(), count, slice->slope, slice->intercept, &slice->hu); break;
-    case gdcm::PixelFormat::UINT32: convert_pixels<uint32_t>(buffer.data(), count, slice->slope, slice->intercept, &slice->hu); break;
-    case gdcm::PixelFormat::INT32: convert_pixels<int32_t>(buffer.data(), count, slice->slope, slice->intercept, &slice->hu); break;
-    default:
-      return unsupported(std::string("pixel type ") + pf.GetScalarTypeAsString() +
-                         " is not supported");
-  }
-  return {};
+  Uint16 rows = 0, cols = 0;
+  ds.findAndGetUint16(DCM_Rows, rows);
+  ds.findAndGetUint16(DCM_Columns, cols);
+  if (rows == 0 || cols == 0) return corrupt_data("image has no rows or columns");
+  slice->rows = rows;
+  slice->cols = cols;
+  return read_pixels(ds, slice);
 }
 
 // Checks that slice `s` matches the reference slice in everything but position.

@@ -4,6 +4,7 @@
 #include <nifti2_io.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <sstream>
@@ -47,6 +48,30 @@ Status check_header(const nifti_image& nim) {
   return {};
 }
 
+// nifti_clib replaces a zero or non-finite pixdim by 1 mm without a word; a header like that is
+// corrupt, so the raw header's voxel sizes are checked here. They scale the qform and the
+// pixdim-only fallback; the sform does not use them.
+Status check_raw_pixdim(const std::string& name, const nifti_image& nim) {
+  int version = 0;
+  void* raw = nifti_read_header(name.c_str(), &version, 0);
+  if (!raw) return corrupt_data("header cannot be read");
+  double pixdim[4] = {0, 0, 0, 0};
+  for (int i = 1; i <= 3; ++i) {
+    pixdim[i] = version == 2 ? static_cast<nifti_2_header*>(raw)->pixdim[i]
+                             : static_cast<double>(static_cast<nifti_1_header*>(raw)->pixdim[i]);
+  }
+  std::free(raw);
+  for (int i = 1; i <= 3; ++i) {
+    if (!std::isfinite(pixdim[i])) {
+      return corrupt_data("voxel size pixdim[" + std::to_string(i) + "] is not finite");
+    }
+    if (nim.sform_code <= 0 && !(pixdim[i] > 0)) {
+      return corrupt_data("voxel size pixdim[" + std::to_string(i) + "] is not positive");
+    }
+  }
+  return {};
+}
+
 // The 4x4 voxel-index -> RAS (mm) affine the file declares, and which form it came from.
 Eigen::Matrix4d ras_from_index(const nifti_image& nim, std::string* form) {
   Eigen::Matrix4d a = Eigen::Matrix4d::Identity();
@@ -79,6 +104,7 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   NiftiPtr nim(nifti_image_read(name.c_str(), /*read_data=*/0));
   if (!nim) return corrupt_data(name + ": not a readable NIfTI-1/2 file (bad magic, size or header)");
   if (Status s = check_header(*nim); !s.ok()) return s.with_context(name);
+  if (Status s = check_raw_pixdim(name, *nim); !s.ok()) return s.with_context(name);
 
   std::string form;
   const Eigen::Matrix4d ras = ras_from_index(*nim, &form);

@@ -16,6 +16,7 @@ GridRayCaster::GridRayCaster(const MuVolume& volume) : volume_(volume) {
 
 bool GridRayCaster::clip(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, double* a_enter,
                          double* a_exit) const {
+  if (!p0.allFinite() || !p1.allFinite()) return false;
   const Eigen::Vector3d d = p1 - p0;
   double amin = 0.0, amax = 1.0;
   for (int a = 0; a < 3; ++a) {

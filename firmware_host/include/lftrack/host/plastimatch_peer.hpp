@@ -16,6 +16,11 @@
 // right-handed detector (col_axis x row_axis = -nrm); views with the other handedness are
 // refused. Its PFM output stores row 0 first (not bottom-up as PFM specifies), and its values
 // are line integrals in cm (mu[1/mm] * mm / 10): the reader here undoes both.
+//
+// Known difference: plastimatch clips rays to the box spanned by the outermost voxel centres,
+// lftrack to the voxels' full extent (half a voxel further on every side). The two agree exactly
+// where the volume's boundary voxels are air, which is the usual case for a CT; a body cut off
+// at the first or last slice makes plastimatch's line integral shorter by half a slice there.
 
 #include <filesystem>
 #include <string>

@@ -1,0 +1,160 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "lftrack/host/scene.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::host {
+namespace {
+
+TEST(Scene, BuiltinPhantomParses) {
+  auto scene = load_scene("builtin:phantom");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_TRUE(scene->ct.is_builtin_phantom());
+  ASSERT_EQ(scene->detectors.size(), 2u);
+  const auto& a = scene->detectors[0].view;
+  const auto& b = scene->detectors[1].view;
+  EXPECT_EQ(a.rows, 512);
+  EXPECT_EQ(a.cols, 512);
+  EXPECT_DOUBLE_EQ(a.pitch_row_mm, 0.4);
+  EXPECT_EQ(scene->detectors[0].bits, 12);
+  // Orthogonal views.
+  EXPECT_NEAR(a.detector_normal().dot(b.detector_normal()), 0.0, 1e-6);
+}
+
+const char* kValidScene = R"(version: 1
+ct:
+  path: ct_folder
+roi:
+  centre_mm: [0, 0, 0]
+  size_mm: [40, 40, 40]
+detectors:
+  - name: A
+    rows: 64
+    cols: 64
+    pitch_mm: 0.4
+    isocentric:
+      source_direction: [0, -1, 0]
+      up: [0, 0, 1]
+      source_to_isocentre_mm: 1000
+      source_to_detector_mm: 1500
+)";
+
+TEST(Scene, RelativeCtPathIsResolvedAgainstTheSceneFolder) {
+  auto scene = parse_scene(kValidScene, "room.yaml", "/data/scenes");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->ct.path, "/data/scenes/ct_folder");
+}
+
+TEST(Scene, ExplicitGeometryForm) {
+  const std::string text = R"(version: 1
+ct: {path: /ct}
+roi: {centre_mm: [0, 0, 0]}
+detectors:
+  - name: A
+    rows: 10
+    cols: 20
+    pitch_mm: [0.5, 0.25]
+    source_mm: [0, -1000, 0]
+    pixel00_mm: [-2.5, 500, 2.25]
+    col_axis: [1, 0, 0]
+    row_axis: [0, 0, -1]
+)";
+  auto scene = parse_scene(text, "s.yaml", "/");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  const auto& v = scene->detectors[0].view;
+  EXPECT_DOUBLE_EQ(v.pitch_row_mm, 0.5);
+  EXPECT_DOUBLE_EQ(v.pitch_col_mm, 0.25);
+  EXPECT_NEAR(v.source_to_detector_mm(), 1500, 1e-9);
+}
+
+// Each class of scene error: where it is reported (file:line) and why.
+struct BadScene {
+  const char* name;
+  const char* find;     // text in kValidScene to replace
+  const char* replace;  // with this
+  const char* location; // expected "file:line" prefix
+  const char* reason;   // expected text in the message
+};
+
+const BadScene kBadScenes[] = {
+    {"YamlSyntax", "  size_mm: [40, 40, 40]", "  size_mm: [40, 40", "bad.yaml:", "YAML syntax error"},
+    {"UnknownTopLevelKey", "detectors:", "detector:", "bad.yaml:7:", "unknown key 'detector'"},
+    {"UnknownNestedKey", "    rows: 64", "    rowz: 64", "bad.yaml:9:", "unknown key 'rowz'"},
+    {"MissingVersion", "version: 1\n", "", "bad.yaml:1:", "needs 'version'"},
+    {"WrongVersion", "version: 1", "version: 7", "bad.yaml:1:", "version must be in 1..1"},
+    {"MissingCtPath", "  path: ct_folder", "  seed: 3", "bad.yaml:", "needs 'path'"},
+    {"NegativePitch", "pitch_mm: 0.4", "pitch_mm: -0.4", "bad.yaml:11:", "must be positive"},
+    {"NotANumber", "source_to_isocentre_mm: 1000", "source_to_isocentre_mm: far", "bad.yaml:15:", "must be a number"},
+    {"RowsNotInteger", "rows: 64", "rows: 6.5", "bad.yaml:9:", "must be an integer"},
+    {"RowsOutOfRange", "rows: 64", "rows: 0", "bad.yaml:9:", "must be in 1..16384"},
+    {"SourceBeyondDetector", "source_to_detector_mm: 1500", "source_to_detector_mm: 900", "bad.yaml:13:", "source-to-isocentre"},
+    {"UpAlongBeam", "up: [0, 0, 1]", "up: [0, 1, 0]", "bad.yaml:13:", "parallel to the beam"},
+    {"ZeroVector", "source_direction: [0, -1, 0]", "source_direction: [0, 0, 0]", "bad.yaml:13:", "zero vector"},
+    {"VectorOfTwo", "source_direction: [0, -1, 0]", "source_direction: [0, -1]", "bad.yaml:13:", "list of 3 numbers"},
+    {"MissingGeometry", "    isocentric:", "    isocentricx:", "bad.yaml:12:", "unknown key 'isocentricx'"},
+    {"FileCtWithoutRoi", "roi:\n  centre_mm: [0, 0, 0]\n  size_mm: [40, 40, 40]\n", "", "bad.yaml:1:", "needs 'roi'"},
+    {"UnknownFrames", "    rows: 64", "    frames: camera\n    rows: 64", "bad.yaml:9:", "must be one of sim, v4l2, replay"},
+    {"UnknownBuiltin", "  path: ct_folder", "  path: builtin:knee", "bad.yaml:3:", "unknown built-in CT"},
+    {"NegativeRoiSize", "size_mm: [40, 40, 40]", "size_mm: [40, -4, 40]", "bad.yaml:6:", "must be positive"},
+};
+
+class BadScenes : public ::testing::TestWithParam<BadScene> {};
+
+TEST_P(BadScenes, FailAtLoadWithLineAndReason) {
+  std::string text = kValidScene;
+  const auto at = text.find(GetParam().find);
+  ASSERT_NE(at, std::string::npos) << GetParam().find;
+  text.replace(at, std::string(GetParam().find).size(), GetParam().replace);
+  auto scene = parse_scene(text, "bad.yaml", "/");
+  ASSERT_FALSE(scene.ok());
+  const std::string& m = scene.status().message();
+  EXPECT_EQ(m.rfind(GetParam().location, 0), 0u) << m;
+  EXPECT_NE(m.find(GetParam().reason), std::string::npos) << m;
+}
+
+INSTANTIATE_TEST_SUITE_P(EveryClass, BadScenes, ::testing::ValuesIn(kBadScenes),
+                         [](const auto& p) { return std::string(p.param.name); });
+
+TEST(Scene, DuplicateDetectorNames) {
+  std::string text = kValidScene;
+  const std::string detector = text.substr(text.find("  - name: A"));
+  text += detector;
+  auto scene = parse_scene(text, "dup.yaml", "/");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("duplicate detector name 'A'"), std::string::npos);
+}
+
+TEST(Scene, BothGeometryFormsIsAnError) {
+  std::string text = kValidScene;
+  text += "    source_mm: [0, -1000, 0]\n";
+  auto scene = parse_scene(text, "both.yaml", "/");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("use one"), std::string::npos);
+}
+
+TEST(Scene, EmptyAndMissingFiles) {
+  auto empty = parse_scene("", "empty.yaml", "/");
+  ASSERT_FALSE(empty.ok());
+  EXPECT_NE(empty.status().message().find("empty"), std::string::npos);
+  auto missing = load_scene("/nonexistent/scene.yaml");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  EXPECT_FALSE(load_scene("builtin:knee").ok());
+}
+
+TEST(Scene, ShippedExampleScenesParse) {
+  const auto dir = std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes";
+  int count = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.path().extension() != ".yaml") continue;
+    auto scene = load_scene(entry.path().string());
+    EXPECT_TRUE(scene.ok()) << scene.status().message();
+    ++count;
+  }
+  EXPECT_GE(count, 1);
+}
+
+}  // namespace
+}  // namespace lftrack::host

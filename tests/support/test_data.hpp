@@ -1,0 +1,59 @@
+#pragma once
+// Locating the shared CT data (../shared/data next to the repository) from tests.
+//
+// Tests that need the data call LFTRACK_REQUIRE_SHARED_DATA(path): when the folder is missing
+// they skip with a message, unless LFTRACK_REQUIRE_DATA=1 (CI), where a missing folder fails.
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+namespace lftrack::test {
+
+inline std::filesystem::path shared_data_dir() {
+  if (const char* env = std::getenv("LFTRACK_DATA_DIR")) return env;
+  return std::filesystem::path(LFTRACK_SOURCE_DIR) / ".." / "shared" / "data";
+}
+
+inline std::filesystem::path pancreas_dicom() { return shared_data_dir() / "ct/pancreas-ct-cb001/dicom"; }
+inline std::filesystem::path totalseg_example() { return shared_data_dir() / "ct/totalseg/example_ct.nii.gz"; }
+inline std::filesystem::path totalseg_aorta() { return shared_data_dir() / "ct/totalseg/aorta_ct_cropped.nii.gz"; }
+
+inline bool data_required() {
+  const char* env = std::getenv("LFTRACK_REQUIRE_DATA");
+  return env && std::string(env) == "1";
+}
+
+// A fresh, empty temporary folder named after the running test; removed by the destructor.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+}  // namespace lftrack::test
+
+#define LFTRACK_REQUIRE_SHARED_DATA(path)                                                   \
+  do {                                                                                      \
+    if (!std::filesystem::exists(path)) {                                                   \
+      if (::lftrack::test::data_required()) {                                               \
+        FAIL() << "shared CT data missing at " << (path) << " (LFTRACK_REQUIRE_DATA=1)";    \
+      }                                                                                     \
+      GTEST_SKIP() << "shared CT data not found at " << (path)                              \
+                   << "; clone next to ../shared to run this test";                         \
+    }                                                                                       \
+  } while (false)
+
+#define LFTRACK_REQUIRE_PLASTIMATCH()                                                       \
+  do {                                                                                      \
+    if (!::lftrack::host::plastimatch_available()) {                                        \
+      if (::lftrack::test::data_required()) FAIL() << "plastimatch is not installed";       \
+      GTEST_SKIP() << "plastimatch is not installed (scripts/setup.sh installs it)";        \
+    }                                                                                       \
+  } while (false)

@@ -1,0 +1,189 @@
+// Every renderer, through the factory, on the same fixtures (DESIGN.md test level 2).
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <new>
+
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/image_metrics.hpp"
+#include "lftrack/tracking/ray_integrals.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+// Counts heap allocations in this test binary, to prove render() allocates nothing.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+namespace {
+std::atomic<long> g_allocations{0};
+}
+void* operator new(std::size_t n) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop
+
+namespace lftrack::tracking {
+namespace {
+
+using Eigen::Vector3d;
+
+// A small textured volume: a soft-tissue cylinder with a dense off-centre block, so that DRRs
+// have edges and gradients in both directions.
+std::shared_ptr<const MuVolume> fixture_volume() {
+  auto v = std::make_shared<MuVolume>();
+  v->geometry.size = {48, 40, 36};
+  v->geometry.spacing_mm = {1.0, 1.2, 1.5};
+  v->geometry.origin_mm = {-23.5, -23.4, -26.25};
+  v->values.resize(static_cast<std::size_t>(v->geometry.voxel_count()));
+  for (int k = 0; k < 36; ++k)
+    for (int j = 0; j < 40; ++j)
+      for (int i = 0; i < 48; ++i) {
+        const Vector3d p = v->geometry.ct_from_index() * Vector3d(i, j, k);
+        float mu = p.head<2>().norm() < 20 ? 0.02f : 0.0f;
+        if (std::abs(p.x() - 5) < 6 && std::abs(p.y() + 3) < 4 && std::abs(p.z()) < 9) mu = 0.05f;
+        mu += 0.004f * static_cast<float>(std::sin(0.7 * i) * std::cos(0.5 * j + 0.3 * k));
+        v->at(i, j, k) = std::max(mu, 0.0f);
+      }
+  return v;
+}
+
+XrayView fixture_view() {
+  auto v = XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.6, -0.8, 0.0), Vector3d(0, 0, 1), 400, 600, 48, 40, 1.0);
+  return *v;
+}
+
+class EveryRenderer : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    volume_ = fixture_volume();
+    auto r = make_renderer(GetParam(), volume_);
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    renderer_ = std::move(r).value();
+    view_ = fixture_view();
+    pose_ = Pose::Identity();
+    pose_.linear() = rotation_exp(Vector3d(0.05, -0.1, 0.2));
+    pose_.translation() = Vector3d(1.5, -2.0, 0.7);
+  }
+  Image<float> render(const Pose& pose, const XrayView& view, PixelWindow w, const DrrRenderer& r) {
+    Image<float> out(w.rows, w.cols, -1.0f);
+    const Status s = r.render(pose, view, w, out.view());
+    EXPECT_TRUE(s.ok()) << s.message();
+    return out;
+  }
+  std::shared_ptr<const MuVolume> volume_;
+  std::unique_ptr<DrrRenderer> renderer_;
+  XrayView view_;
+  Pose pose_;
+};
+
+TEST_P(EveryRenderer, AgreesWithSiddon) {
+  auto siddon = make_renderer("siddon", volume_);
+  ASSERT_TRUE(siddon.ok());
+  const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
+  const Image<float> ours = render(pose_, view_, full, *renderer_);
+  const Image<float> ref = render(pose_, view_, full, **siddon);
+  // The fixture has sharp steps that interpolating renderers smooth; their fidelity on real CT is
+  // measured by `lftrack bench drr` (BENCHMARKS.md). Siddon against itself is exact.
+  const double ncc = normalized_cross_correlation(ref.view(), ours.view());
+  if (GetParam() == "siddon") {
+    EXPECT_EQ(ncc, 1.0);
+  } else {
+    EXPECT_GT(ncc, 0.99);
+    EXPECT_GT(psnr_db(ref.view(), ours.view()), 30.0);
+  }
+  for (float p : ours.pixels()) ASSERT_TRUE(std::isfinite(p) && p >= 0);
+}
+
+TEST_P(EveryRenderer, EachPixelIsTheRayFromSourceToPixelCentre) {
+  const Image<float> drr = render(pose_, view_, PixelWindow::full(view_.rows, view_.cols), *renderer_);
+  const GridRayCaster caster(*volume_);
+  const Eigen::Isometry3d T_grid_from_room = volume_->geometry.grid_from_ct() * pose_.inverse();
+  for (auto [r, c] : {std::pair{0, 0}, {20, 17}, {47, 39}, {31, 5}}) {
+    const Vector3d s = T_grid_from_room * view_.source_mm;
+    const Vector3d p = T_grid_from_room * view_.pixel_centre_mm(r, c);
+    const double expected = GetParam() == "siddon" ? caster.siddon(s, p) : caster.trilinear(s, p, 0.5);
+    EXPECT_NEAR(drr.at(r, c), expected, 1e-5 * std::max(1.0, expected)) << r << "," << c;
+  }
+}
+
+TEST_P(EveryRenderer, WindowIsACropOfTheFullDetector) {
+  const Image<float> full = render(pose_, view_, PixelWindow::full(view_.rows, view_.cols), *renderer_);
+  const PixelWindow w{7, 11, 20, 13};
+  const Image<float> part = render(pose_, view_, w, *renderer_);
+  for (int r = 0; r < w.rows; ++r)
+    for (int c = 0; c < w.cols; ++c) ASSERT_EQ(part.at(r, c), full.at(w.row0 + r, w.col0 + c));
+}
+
+TEST_P(EveryRenderer, ThreadedRenderEqualsSingleThreaded) {
+  ThreadPool pool(3);
+  RendererOptions options;
+  options.pool = &pool;
+  auto threaded = make_renderer(GetParam(), volume_, options);
+  ASSERT_TRUE(threaded.ok());
+  const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
+  EXPECT_EQ(render(pose_, view_, full, **threaded).pixels(), render(pose_, view_, full, *renderer_).pixels());
+}
+
+TEST_P(EveryRenderer, MovingTheCtEqualsMovingTheViewTheOtherWay) {
+  const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
+  const Image<float> a = render(pose_, view_, full, *renderer_);
+  const Image<float> b = render(Pose::Identity(), view_.transformed(pose_.inverse()), full, *renderer_);
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) ASSERT_NEAR(a.pixels()[i], b.pixels()[i], 1e-4);
+}
+
+TEST_P(EveryRenderer, RaysThatMissGiveZero) {
+  Pose far = Pose::Identity();
+  far.translation() = Vector3d(0, 0, 500);  // CT moved out of every ray
+  const Image<float> drr = render(far, view_, PixelWindow::full(view_.rows, view_.cols), *renderer_);
+  for (float p : drr.pixels()) ASSERT_EQ(p, 0.0f);
+}
+
+TEST_P(EveryRenderer, RejectsBadArgumentsAndLeavesOutputUntouched) {
+  Image<float> out(view_.rows, view_.cols, -7.0f);
+  Pose nan_pose = pose_;
+  nan_pose.translation().x() = std::nan("");
+  EXPECT_FALSE(renderer_->render(nan_pose, view_, PixelWindow::full(view_.rows, view_.cols), out.view()).ok());
+  EXPECT_FALSE(renderer_->render(pose_, view_, PixelWindow{40, 0, 10, 10}, out.view()).ok());  // outside
+  EXPECT_FALSE(renderer_->render(pose_, view_, PixelWindow{0, 0, 10, 10}, out.view()).ok());   // size
+  XrayView bad = view_;
+  bad.pitch_col_mm = -1;
+  EXPECT_FALSE(renderer_->render(pose_, bad, PixelWindow::full(view_.rows, view_.cols), out.view()).ok());
+  for (float p : out.pixels()) ASSERT_EQ(p, -7.0f);
+}
+
+TEST_P(EveryRenderer, RenderAllocatesNothing) {
+  ThreadPool pool(2);
+  RendererOptions options;
+  options.pool = &pool;
+  auto threaded = make_renderer(GetParam(), volume_, options);
+  ASSERT_TRUE(threaded.ok());
+  Image<float> out(view_.rows, view_.cols);
+  const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
+  ASSERT_TRUE((*threaded)->render(pose_, view_, full, out.view()).ok());  // warm-up
+  const long before = g_allocations.load();
+  for (int n = 0; n < 5; ++n) ASSERT_TRUE((*threaded)->render(pose_, view_, full, out.view()).ok());
+  EXPECT_EQ(g_allocations.load() - before, 0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Factory, EveryRenderer, ::testing::ValuesIn(renderer_names()),
+                         [](const auto& p) { return p.param; });
+
+TEST(RendererFactory, UnknownNameListsTheKnownOnes) {
+  auto r = make_renderer("raymarch", fixture_volume());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("siddon"), std::string::npos);
+}
+
+TEST(RendererFactory, RejectsAVolumeWhoseDataDoesNotMatch) {
+  auto v = std::make_shared<MuVolume>(*fixture_volume());
+  v->values.pop_back();
+  EXPECT_FALSE(make_renderer("siddon", v).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::tracking

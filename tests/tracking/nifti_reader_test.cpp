@@ -1,0 +1,167 @@
+#include <gtest/gtest.h>
+#include <nifti2_io.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+
+#include "lftrack/host/plastimatch_peer.hpp"
+#include "lftrack/tracking/volume_io.hpp"
+#include "metaimage_reader.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::tracking {
+namespace {
+
+namespace fs = std::filesystem;
+using test::TempDir;
+
+// Writes an 8 x 6 x 4 int16 NIfTI-1 volume with voxel value 10 i + 100 j + 1000 k and the given
+// RAS affine as both sform and qform.
+fs::path write_small_nifti(const fs::path& file, const Eigen::Matrix4d& ras_from_index) {
+  const int64_t dims[8] = {3, 8, 6, 4, 1, 1, 1, 1};
+  nifti_image* nim = nifti_make_new_nim(dims, DT_INT16, 1);
+  auto* data = static_cast<int16_t*>(nim->data);
+  for (int k = 0; k < 4; ++k)
+    for (int j = 0; j < 6; ++j)
+      for (int i = 0; i < 8; ++i) data[i + 8 * (j + 6 * k)] = static_cast<int16_t>(10 * i + 100 * j + 1000 * k);
+  nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = ras_from_index(r, c);
+  nim->nifti_type = NIFTI_FTYPE_NIFTI1_1;
+  nifti_set_filenames(nim, file.c_str(), 0, 1);
+  nifti_image_write(nim);
+  nifti_image_free(nim);
+  return file;
+}
+
+void poke(const fs::path& file, std::streamoff offset, const void* bytes, std::size_t n) {
+  std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+  f.seekp(offset);
+  f.write(static_cast<const char*>(bytes), static_cast<std::streamsize>(n));
+}
+
+TEST(NiftiReader, ConvertsRasAffineToLps) {
+  TempDir dir;
+  Eigen::Matrix4d ras = Eigen::Matrix4d::Identity();
+  ras.diagonal().head<3>() = Eigen::Vector3d(-2.0, 1.5, 3.0);  // i runs towards R (-x in RAS)
+  ras.col(3).head<3>() = Eigen::Vector3d(40, -30, 12);
+  const fs::path file = write_small_nifti(dir.path() / "v.nii", ras);
+  auto ct = read_nifti(file);
+  ASSERT_TRUE(ct.ok()) << ct.status().message();
+  const VolumeGeometry& g = ct->geometry;
+  EXPECT_EQ(g.size, Eigen::Vector3i(8, 6, 4));
+  EXPECT_TRUE(g.spacing_mm.isApprox(Eigen::Vector3d(2.0, 1.5, 3.0)));
+  // LPS = (-x, -y, z) of RAS.
+  EXPECT_TRUE(g.origin_mm.isApprox(Eigen::Vector3d(-40, 30, 12)));
+  const Eigen::Vector3d p_lps = g.ct_from_index() * Eigen::Vector3d(1, 2, 3);
+  const Eigen::Vector4d p_ras = ras * Eigen::Vector4d(1, 2, 3, 1);
+  EXPECT_TRUE(p_lps.isApprox(Eigen::Vector3d(-p_ras.x(), -p_ras.y(), p_ras.z())));
+  EXPECT_FLOAT_EQ(ct->at(3, 2, 1), 10 * 3 + 100 * 2 + 1000 * 1);
+}
+
+TEST(NiftiReader, ReadsGzippedFiles) {
+  TempDir dir;
+  const fs::path file = write_small_nifti(dir.path() / "v.nii.gz", Eigen::Matrix4d::Identity());
+  auto ct = read_ct(file);
+  ASSERT_TRUE(ct.ok()) << ct.status().message();
+  EXPECT_FLOAT_EQ(ct->at(7, 5, 3), 70 + 500 + 3000);
+}
+
+struct BadNiftiCase {
+  const char* name;
+  const char* expected_message;
+  void (*corrupt)(const fs::path& file);  // edits a valid .nii in place
+};
+
+const BadNiftiCase kBadNifti[] = {
+    {"WrongMagic", "not a readable NIfTI",
+     [](const fs::path& f) { poke(f, 344, "xx1\0", 4); poke(f, 0, "\0\0\0\0", 4); }},
+    {"Truncated", "truncated", [](const fs::path& f) { fs::resize_file(f, 352 + 100); }},
+    {"ZeroDimension", "NIfTI",
+     [](const fs::path& f) { const int16_t zero = 0; poke(f, 42, &zero, 2); }},
+    {"AbsurdDimension", "outside 1..",
+     [](const fs::path& f) { const int16_t big = 30000; poke(f, 42, &big, 2); }},
+    {"MoreDataClaimedThanPresent", "truncated",
+     [](const fs::path& f) { const int16_t n = 600; poke(f, 46, &n, 2); }},
+    {"NanSpacing", "not finite",
+     [](const fs::path& f) {
+       const float nan = std::nanf("");
+       const int16_t zero = 0;
+       poke(f, 80, &nan, 4);    // pixdim[1]
+       poke(f, 252, &zero, 2);  // qform_code
+       poke(f, 254, &zero, 2);  // sform_code
+     }},
+    {"NanAffine", "not finite",
+     [](const fs::path& f) { const float nan = std::nanf(""); poke(f, 280, &nan, 4); }},  // srow_x[0]
+    {"EmptyFile", "not a readable NIfTI", [](const fs::path& f) { fs::resize_file(f, 0); }},
+};
+
+class BadNifti : public ::testing::TestWithParam<BadNiftiCase> {};
+
+TEST_P(BadNifti, FailsWithAClearMessage) {
+  TempDir dir;
+  const fs::path file = write_small_nifti(dir.path() / "bad.nii", Eigen::Matrix4d::Identity());
+  GetParam().corrupt(file);
+  auto ct = read_nifti(file);
+  ASSERT_FALSE(ct.ok());
+  EXPECT_NE(ct.status().message().find(GetParam().expected_message), std::string::npos) << ct.status().message();
+  EXPECT_NE(ct.status().message().find(file.string()), std::string::npos) << ct.status().message();
+}
+
+INSTANTIATE_TEST_SUITE_P(EveryClass, BadNifti, ::testing::ValuesIn(kBadNifti),
+                         [](const auto& p) { return std::string(p.param.name); });
+
+TEST(NiftiReader, TruncatedGzipFails) {
+  TempDir dir;
+  const fs::path file = write_small_nifti(dir.path() / "v.nii.gz", Eigen::Matrix4d::Identity());
+  fs::resize_file(file, fs::file_size(file) * 2 / 3);
+  auto ct = read_nifti(file);
+  ASSERT_FALSE(ct.ok());
+  EXPECT_NE(ct.status().message().find(file.string()), std::string::npos);
+}
+
+TEST(NiftiReader, UnknownExtensionIsRejected) {
+  TempDir dir;
+  std::ofstream(dir.path() / "volume.raw") << "x";
+  auto ct = read_ct(dir.path() / "volume.raw");
+  ASSERT_FALSE(ct.ok());
+  EXPECT_NE(ct.status().message().find("unknown CT format"), std::string::npos);
+}
+
+// Both TotalSegmentator files, whose affines differ (one flips x and y), must land in LPS exactly
+// where ITK (through plastimatch) puts them: same geometry, same voxels.
+class NiftiRealData : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(NiftiRealData, AgreesWithPlastimatchConvert) {
+  const fs::path file = test::shared_data_dir() / "ct/totalseg" / GetParam();
+  LFTRACK_REQUIRE_SHARED_DATA(file);
+  LFTRACK_REQUIRE_PLASTIMATCH();
+  auto ours = read_nifti(file);
+  ASSERT_TRUE(ours.ok()) << ours.status().message();
+  TempDir dir;
+  const fs::path mha = dir.path() / "peer.mha";
+  std::string log;
+  ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", file.string(), "--output-img", mha.string(),
+                                 "--output-type", "float"}, &log).ok()) << log;
+  auto peer = test::read_metaimage_for_test(mha);
+  ASSERT_TRUE(peer.ok()) << peer.status().message();
+  ASSERT_EQ(peer->geometry.size, ours->geometry.size);
+  // Compare where each voxel centre lies (the grids may be described with different axis signs
+  // only if the voxel order matches, so compare corner voxels' positions and all values).
+  for (const Eigen::Vector3d& idx : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(ours->geometry.size.cast<double>() - Eigen::Vector3d::Ones())}) {
+    const Eigen::Vector3d a = ours->geometry.ct_from_index() * idx;
+    const Eigen::Vector3d b = peer->geometry.ct_from_index() * idx;
+    EXPECT_LT((a - b).norm(), 1e-3) << "voxel " << idx.transpose() << ": ours " << a.transpose() << ", plastimatch " << b.transpose();
+  }
+  double max_diff = 0;
+  for (std::size_t i = 0; i < ours->values.size(); ++i)
+    max_diff = std::max(max_diff, double(std::abs(ours->values[i] - peer->values[i])));
+  EXPECT_LT(max_diff, 0.01);
+}
+
+INSTANTIATE_TEST_SUITE_P(TotalSegmentator, NiftiRealData, ::testing::Values("example_ct.nii.gz", "aorta_ct_cropped.nii.gz"),
+                         [](const auto& p) { return std::string(p.param).substr(0, std::string(p.param).find('.')); });
+
+}  // namespace
+}  // namespace lftrack::tracking
