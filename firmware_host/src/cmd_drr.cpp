@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -23,12 +24,23 @@ struct DrrOptions {
   std::string image = "png";            // png | tif | none
   std::string data = "pfm";             // pfm | tif | none
   bool roi_only = false;
+  int binning = 1;                      // detector binning: K x K pixels become one
   std::vector<double> window;           // display window lo, hi (line integral)
 };
 
 Status run(const DrrOptions& o) {
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
+  // Names are checked before the (slow) CT load.
+  for (const auto& name : o.views) {
+    const bool known = std::any_of(scene->detectors.begin(), scene->detectors.end(),
+                                   [&](const DetectorSpec& d) { return d.view.name == name; });
+    if (!known) return not_found("the scene has no view '" + name + "'");
+  }
+  const auto names = tracking::renderer_names();
+  if (!o.renderer.empty() && std::find(names.begin(), names.end(), o.renderer) == names.end()) {
+    return not_found("unknown renderer '" + o.renderer + "'");
+  }
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
@@ -62,8 +74,12 @@ Status run(const DrrOptions& o) {
   if (ec) return io_error(o.out_dir + ": cannot create folder: " + ec.message());
 
   for (int i : selected) {
-    const auto& view = p.scene.detectors[std::size_t(i)].view;
-    const tracking::PixelWindow window = o.roi_only ? p.roi_windows[std::size_t(i)] : tracking::PixelWindow::full(view.rows, view.cols);
+    const auto& detector = p.scene.detectors[std::size_t(i)].view;
+    const tracking::PixelWindow area = o.roi_only ? p.roi_windows[std::size_t(i)] : tracking::PixelWindow::full(detector.rows, detector.cols);
+    // The rendered view: the chosen area of the detector, binned.
+    const tracking::XrayView view = detector.resampled(area.row0, area.col0, area.rows, area.cols,
+                                                       std::max(1, area.rows / o.binning), std::max(1, area.cols / o.binning));
+    const tracking::PixelWindow window = tracking::PixelWindow::full(view.rows, view.cols);
     tracking::Image<float> drr(window.rows, window.cols);
     const auto t0 = std::chrono::steady_clock::now();
     LFTRACK_RETURN_IF_ERROR((*renderer)->render(T_room_from_ct, view, window, drr.view()));
@@ -107,6 +123,7 @@ Command add_drr_command(CLI::App* parent) {
   app->add_option("--data", o->data, "Float line integrals (mu * mm): pfm, tif or none")
       ->check(CLI::IsMember({"pfm", "tif", "none"}))->capture_default_str();
   app->add_flag("--roi", o->roi_only, "Render only each view's ROI window");
+  app->add_option("--bin", o->binning, "Detector binning: K x K pixels become one")->check(CLI::Range(1, 64))->capture_default_str();
   app->add_option("--window", o->window, "Display window low,high in mu*mm (default: 0.5-99.8 percentiles)")
       ->expected(2)->delimiter(',');
   return [o] { return run(*o); };

@@ -88,8 +88,11 @@ double vertebra_hu(const Anatomy& an, const Vertebra& v, const Vector3d& p, doub
   if (std::abs(d.z()) > v.half_height + 2 * vox + 2 || std::abs(d.x()) > 60 || d.y() < -v.body_b - 3 || d.y() > 70) {
     return hu;
   }
-  // Vertebral body: cortical shell then cancellous interior.
-  const double radial = ellipse_sd(d.x(), d.y(), v.body_a, v.body_b);
+  // Vertebral body: cortical shell then cancellous interior; the body is waisted (narrower at
+  // mid-height than at its end plates), as lumbar bodies are.
+  const double t = std::min(1.0, std::abs(d.z()) / v.half_height);
+  const double waist = 0.88 + 0.12 * t * t;
+  const double radial = ellipse_sd(d.x(), d.y(), waist * v.body_a, waist * v.body_b);
   const double axial = std::abs(d.z()) - v.half_height;
   const double body_sd = std::max(radial, axial);
   const double w_body = coverage(body_sd, vox);

@@ -100,6 +100,8 @@ const BadScene kBadScenes[] = {
     {"NegativeRoiSize", "size_mm: [40, 40, 40]", "size_mm: [40, -4, 40]", "bad.yaml:6:", "must be positive"},
 };
 
+void PrintTo(const BadScene& c, std::ostream* os) { *os << c.name; }
+
 class BadScenes : public ::testing::TestWithParam<BadScene> {};
 
 TEST_P(BadScenes, FailAtLoadWithLineAndReason) {

@@ -164,6 +164,8 @@ const BadSeriesCase kBadSeries[] = {
      }},
 };
 
+void PrintTo(const BadSeriesCase& c, std::ostream* os) { *os << c.name; }
+
 class BadDicomSeries : public ::testing::TestWithParam<BadSeriesCase> {};
 
 TEST_P(BadDicomSeries, FailsWithAClearMessage) {

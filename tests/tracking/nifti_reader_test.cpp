@@ -97,6 +97,8 @@ const BadNiftiCase kBadNifti[] = {
     {"EmptyFile", "not a readable NIfTI", [](const fs::path& f) { fs::resize_file(f, 0); }},
 };
 
+void PrintTo(const BadNiftiCase& c, std::ostream* os) { *os << c.name; }
+
 class BadNifti : public ::testing::TestWithParam<BadNiftiCase> {};
 
 TEST_P(BadNifti, FailsWithAClearMessage) {

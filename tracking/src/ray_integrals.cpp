@@ -44,8 +44,10 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
 
   int index[3];
   int step[3];
-  double next[3];       // ray parameter of the next plane crossing along each axis
-  double inv_d[3];
+  double next[3];   // ray parameter of the next plane crossing along each axis
+  double delta[3];  // ray parameter between two crossings along each axis
+  const std::ptrdiff_t stride[3] = {1, g.size.x(), std::ptrdiff_t{g.size.x()} * g.size.y()};
+  std::ptrdiff_t offset_step[3];
   for (int ax = 0; ax < 3; ++ax) {
     const double s = g.spacing_mm[ax];
     const int n = g.size[ax];
@@ -53,34 +55,40 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
     if (d[ax] > 0) {
       index[ax] = std::clamp(static_cast<int>(std::floor(u)), 0, n - 1);
       step[ax] = 1;
+      next[ax] = (lower_mm_[ax] + (index[ax] + 1) * s - p0[ax]) / d[ax];
+      delta[ax] = s / d[ax];
     } else if (d[ax] < 0) {
       index[ax] = std::clamp(static_cast<int>(std::ceil(u)) - 1, 0, n - 1);
       step[ax] = -1;
+      next[ax] = (lower_mm_[ax] + index[ax] * s - p0[ax]) / d[ax];
+      delta[ax] = -s / d[ax];
     } else {
       index[ax] = std::clamp(static_cast<int>(std::floor(u)), 0, n - 1);
       step[ax] = 0;
+      next[ax] = std::numeric_limits<double>::infinity();
+      delta[ax] = 0;
     }
-    inv_d[ax] = d[ax] != 0.0 ? 1.0 / d[ax] : 0.0;
-    next[ax] = step[ax] == 0 ? std::numeric_limits<double>::infinity()
-                             : (lower_mm_[ax] + (index[ax] + (step[ax] > 0 ? 1 : 0)) * s - p0[ax]) * inv_d[ax];
+    offset_step[ax] = step[ax] * stride[ax];
   }
 
+  // Walk voxel by voxel: each step ends at the nearest plane crossing. Where two crossings
+  // coincide (the ray passes through an edge) the second step has zero length.
   const float* mu = volume_.values.data();
-  const std::ptrdiff_t stride[3] = {1, g.size.x(), std::ptrdiff_t{g.size.x()} * g.size.y()};
   std::ptrdiff_t offset = index[0] + stride[1] * index[1] + stride[2] * index[2];
   double sum = 0.0;
-  while (a < a_end) {
-    const double a_next = std::min({next[0], next[1], next[2], a_end});
+  for (;;) {
+    const int ax = next[0] < next[1] ? (next[0] < next[2] ? 0 : 2) : (next[1] < next[2] ? 1 : 2);
+    const double a_next = next[ax];
+    if (a_next >= a_end) {
+      sum += static_cast<double>(mu[offset]) * (a_end - a);
+      break;
+    }
     sum += static_cast<double>(mu[offset]) * (a_next - a);
     a = a_next;
-    if (a >= a_end) break;
-    for (int ax = 0; ax < 3; ++ax) {
-      if (next[ax] != a_next) continue;
-      index[ax] += step[ax];
-      if (index[ax] < 0 || index[ax] >= g.size[ax]) return sum * d.norm();
-      offset += step[ax] * stride[ax];
-      next[ax] = (lower_mm_[ax] + (index[ax] + (step[ax] > 0 ? 1 : 0)) * g.spacing_mm[ax] - p0[ax]) * inv_d[ax];
-    }
+    index[ax] += step[ax];
+    if (static_cast<unsigned>(index[ax]) >= static_cast<unsigned>(g.size[ax])) break;
+    offset += offset_step[ax];
+    next[ax] += delta[ax];
   }
   return sum * d.norm();
 }
