@@ -2,6 +2,7 @@
 #include <nifti2_io.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 
@@ -18,7 +19,7 @@ using test::TempDir;
 
 // Writes an 8 x 6 x 4 int16 NIfTI-1 volume with voxel value 10 i + 100 j + 1000 k and the given
 // RAS affine as both sform and qform.
-fs::path write_small_nifti(const fs::path& file, const Eigen::Matrix4d& ras_from_index) {
+fs::path write_small_nifti(const fs::path& file, const Eigen::Matrix4d& ras_from_index, int nifti_type = NIFTI_FTYPE_NIFTI1_1) {
   const int64_t dims[8] = {3, 8, 6, 4, 1, 1, 1, 1};
   nifti_image* nim = nifti_make_new_nim(dims, DT_INT16, 1);
   auto* data = static_cast<int16_t*>(nim->data);
@@ -28,9 +29,19 @@ fs::path write_small_nifti(const fs::path& file, const Eigen::Matrix4d& ras_from
   nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = ras_from_index(r, c);
-  nim->nifti_type = NIFTI_FTYPE_NIFTI1_1;
-  nifti_set_filenames(nim, file.c_str(), 0, 1);
-  nifti_image_write(nim);
+  if (nifti_type == NIFTI_FTYPE_NIFTI2_1) {
+    // nifti_image_write leaves a NIfTI-2 header empty here; write header, extender and data.
+    nifti_2_header header;
+    nifti_convert_nim2n2hdr(nim, &header);
+    header.vox_offset = sizeof(nifti_2_header) + 4;
+    std::ofstream out(file, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(&header), sizeof header);
+    out.write("\0\0\0\0", 4);
+    out.write(static_cast<const char*>(nim->data), static_cast<std::streamsize>(nim->nvox * nim->nbyper));
+  } else {
+    nifti_set_filenames(nim, file.c_str(), 0, 1);
+    nifti_image_write(nim);
+  }
   nifti_image_free(nim);
   return file;
 }
@@ -66,6 +77,22 @@ TEST(NiftiReader, ReadsGzippedFiles) {
   auto ct = read_ct(file);
   ASSERT_TRUE(ct.ok()) << ct.status().message();
   EXPECT_FLOAT_EQ(ct->at(7, 5, 3), 70 + 500 + 3000);
+}
+
+TEST(NiftiReader, ReadsNifti2) {
+  TempDir dir;
+  Eigen::Matrix4d ras = Eigen::Matrix4d::Identity();
+  ras.diagonal().head<3>() = Eigen::Vector3d(0.8, 0.8, 2.5);
+  const fs::path file = write_small_nifti(dir.path() / "v2.nii", ras, NIFTI_FTYPE_NIFTI2_1);
+  int version = 0;
+  void* header = nifti_read_header(file.c_str(), &version, 0);
+  ASSERT_NE(header, nullptr);
+  std::free(header);
+  ASSERT_EQ(version, 2) << "the fixture must really be NIfTI-2";
+  auto ct = read_nifti(file);
+  ASSERT_TRUE(ct.ok()) << ct.status().message();
+  EXPECT_TRUE(ct->geometry.spacing_mm.isApprox(Eigen::Vector3d(0.8, 0.8, 2.5)));
+  EXPECT_FLOAT_EQ(ct->at(1, 1, 1), 1110);
 }
 
 struct BadNiftiCase {
