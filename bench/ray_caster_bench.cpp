@@ -26,8 +26,8 @@ std::shared_ptr<const tracking::MuVolume> phantom() {
 
 tracking::XrayView view256() {
   // The default scene's view A, binned to 256 x 256 over the whole detector.
-  auto v = tracking::XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(1, -1, 0), Eigen::Vector3d(0, 0, 1),
-                                          1500, 2100, 512, 512, 0.4);
+  auto v = tracking::XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(1, -1, 0),
+                                          Eigen::Vector3d(0, 0, 1), 1500, 2100, 512, 512, 0.4);
   return v->resampled(0, 0, 512, 512, 256, 256);
 }
 
@@ -54,7 +54,11 @@ void BM_Drr256(benchmark::State& state, const char* renderer_name) {
   state.counters["threads"] = static_cast<double>(state.range(0));
 }
 BENCHMARK_CAPTURE(BM_Drr256, siddon, "siddon")->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(BM_Drr256, trilinear, "trilinear")->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Drr256, trilinear, "trilinear")
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_SiddonRay(benchmark::State& state) {
   const tracking::GridRayCaster caster(*phantom());

@@ -25,8 +25,7 @@ Result<Triangulated> triangulate(const tracking::XrayView& view_a, const Eigen::
   return Triangulated{0.5 * (on_a + on_b), (on_a - on_b).norm()};
 }
 
-Result<RigidFit> fit_rigid(const std::vector<Eigen::Vector3d>& from,
-                           const std::vector<Eigen::Vector3d>& to) {
+Result<RigidFit> fit_rigid(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to) {
   if (from.size() != to.size()) return invalid_argument("point sets differ in size");
   if (from.size() < 3) return invalid_argument("a rigid fit needs at least 3 point pairs");
   const double n = static_cast<double>(from.size());

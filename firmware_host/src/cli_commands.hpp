@@ -14,8 +14,8 @@ using Command = std::function<Status()>;
 // Options every command that needs a scene shares.
 struct SceneOptions {
   std::string scene = "builtin:phantom";
-  std::string ct;     // overrides the scene's CT
-  int threads = 0;    // 0: all cores
+  std::string ct;   // overrides the scene's CT
+  int threads = 0;  // 0: all cores
 };
 void add_scene_options(CLI::App* app, SceneOptions* options);
 

@@ -22,7 +22,8 @@ Command add_bench_drr_command(CLI::App* parent) {
   auto* app = parent->add_subcommand("drr", "Time every DRR renderer (and plastimatch) on the same poses");
   auto o = std::make_shared<BenchDrrOptions>();
   add_scene_options(app, &o->scene);
-  app->add_option("--size", o->bench.size, "DRR rows = cols (the ROI window resampled)")->capture_default_str();
+  app->add_option("--size", o->bench.size, "DRR rows = cols (the ROI window resampled)")
+      ->capture_default_str();
   app->add_option("--poses", o->bench.poses, "Poses drawn across the envelope")->capture_default_str();
   app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")->capture_default_str();
   app->add_option("--seed", o->bench.seed, "Pose sampling seed")->capture_default_str();
@@ -44,7 +45,8 @@ Command add_bench_drr_command(CLI::App* parent) {
     }
     std::printf("CT %s, %d x %d DRRs, %d poses x %zu views, %d threads\n", report->ct.c_str(), report->rows,
                 report->cols, report->poses, report->views.size(), report->threads);
-    std::printf("%-12s %12s %14s %14s %12s\n", "renderer", "ms median", "NCC vs Siddon", "NCC min", "PSNR dB");
+    std::printf("%-12s %12s %14s %14s %12s\n", "renderer", "ms median", "NCC vs Siddon", "NCC min",
+                "PSNR dB");
     for (const auto& r : report->renderers)
       std::printf("%-12s %12.2f %14.6f %14.6f %12.1f\n", r.name.c_str(), r.ms_median, r.ncc_vs_siddon,
                   r.ncc_min_vs_siddon, r.psnr_db_vs_siddon);

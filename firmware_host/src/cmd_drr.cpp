@@ -17,15 +17,15 @@ namespace {
 
 struct DrrOptions {
   SceneOptions scene;
-  std::vector<std::string> views;       // empty: all
-  std::vector<double> pose;             // tx ty tz [mm] rx ry rz [deg], rotation vector
-  std::string renderer;                 // empty: the scene's
+  std::vector<std::string> views;  // empty: all
+  std::vector<double> pose;        // tx ty tz [mm] rx ry rz [deg], rotation vector
+  std::string renderer;            // empty: the scene's
   std::string out_dir = "out/drr";
-  std::string image = "png";            // png | tif | none
-  std::string data = "pfm";             // pfm | tif | none
+  std::string image = "png";  // png | tif | none
+  std::string data = "pfm";   // pfm | tif | none
   bool roi_only = false;
-  int binning = 1;                      // detector binning: K x K pixels become one
-  std::vector<double> window;           // display window lo, hi (line integral)
+  int binning = 1;             // detector binning: K x K pixels become one
+  std::vector<double> window;  // display window lo, hi (line integral)
 };
 
 Status run(const DrrOptions& o) {
@@ -49,9 +49,11 @@ Status run(const DrrOptions& o) {
   tracking::PoseDelta delta;
   if (!o.pose.empty()) {
     delta.translation_mm = {o.pose[0], o.pose[1], o.pose[2]};
-    delta.rotation_rad = {tracking::deg_to_rad(o.pose[3]), tracking::deg_to_rad(o.pose[4]), tracking::deg_to_rad(o.pose[5])};
+    delta.rotation_rad = {tracking::deg_to_rad(o.pose[3]), tracking::deg_to_rad(o.pose[4]),
+                          tracking::deg_to_rad(o.pose[5])};
   }
-  const tracking::Pose T_room_from_ct = apply_delta(p.nominal_T_room_from_ct, delta, p.registration_origin_room_mm());
+  const tracking::Pose T_room_from_ct =
+      apply_delta(p.nominal_T_room_from_ct, delta, p.registration_origin_room_mm());
 
   tracking::RendererOptions ropts;
   ropts.pool = &pool;
@@ -75,16 +77,20 @@ Status run(const DrrOptions& o) {
 
   for (int i : selected) {
     const auto& detector = p.scene.detectors[std::size_t(i)].view;
-    const tracking::PixelWindow area = o.roi_only ? p.roi_windows[std::size_t(i)] : tracking::PixelWindow::full(detector.rows, detector.cols);
+    const tracking::PixelWindow area = o.roi_only ? p.roi_windows[std::size_t(i)]
+                                                  : tracking::PixelWindow::full(detector.rows, detector.cols);
     // The rendered view: the chosen area of the detector, binned.
-    const tracking::XrayView view = detector.resampled(area.row0, area.col0, area.rows, area.cols,
-                                                       std::max(1, area.rows / o.binning), std::max(1, area.cols / o.binning));
+    const tracking::XrayView view =
+        detector.resampled(area.row0, area.col0, area.rows, area.cols, std::max(1, area.rows / o.binning),
+                           std::max(1, area.cols / o.binning));
     const tracking::PixelWindow window = tracking::PixelWindow::full(view.rows, view.cols);
     tracking::Image<float> drr(window.rows, window.cols);
     const auto t0 = std::chrono::steady_clock::now();
     LFTRACK_RETURN_IF_ERROR((*renderer)->render(T_room_from_ct, view, window, drr.view()));
-    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    spdlog::info("view {}: {} x {} {} DRR in {:.1f} ms", view.name, window.rows, window.cols, renderer_name, ms);
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    spdlog::info("view {}: {} x {} {} DRR in {:.1f} ms", view.name, window.rows, window.cols, renderer_name,
+                 ms);
 
     tracking::ImageWriteOptions wo;
     wo.window = o.window.size() == 2 ? tracking::DisplayWindow{o.window[0], o.window[1]}
@@ -115,17 +121,23 @@ Command add_drr_command(CLI::App* parent) {
   app->add_option("--pose", o->pose,
                   "Pose change about the registration origin: tx,ty,tz (mm, room) and rx,ry,rz "
                   "(rotation vector, degrees); default 0,0,0,0,0,0")
-      ->expected(6)->delimiter(',');
+      ->expected(6)
+      ->delimiter(',');
   app->add_option("--renderer", o->renderer, "Renderer (siddon, trilinear; default: the scene's)");
   app->add_option("-o,--out", o->out_dir, "Output folder")->capture_default_str();
   app->add_option("--image", o->image, "Windowed 16-bit image: png, tif or none")
-      ->check(CLI::IsMember({"png", "tif", "none"}))->capture_default_str();
+      ->check(CLI::IsMember({"png", "tif", "none"}))
+      ->capture_default_str();
   app->add_option("--data", o->data, "Float line integrals (mu * mm): pfm, tif or none")
-      ->check(CLI::IsMember({"pfm", "tif", "none"}))->capture_default_str();
+      ->check(CLI::IsMember({"pfm", "tif", "none"}))
+      ->capture_default_str();
   app->add_flag("--roi", o->roi_only, "Render only each view's ROI window");
-  app->add_option("--bin", o->binning, "Detector binning: K x K pixels become one")->check(CLI::Range(1, 64))->capture_default_str();
+  app->add_option("--bin", o->binning, "Detector binning: K x K pixels become one")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
   app->add_option("--window", o->window, "Display window low,high in mu*mm (default: 0.5-99.8 percentiles)")
-      ->expected(2)->delimiter(',');
+      ->expected(2)
+      ->delimiter(',');
   return [o] { return run(*o); };
 }
 

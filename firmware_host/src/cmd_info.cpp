@@ -26,29 +26,38 @@ Command add_info_command(CLI::App* parent) {
       return std::string(b);
     };
     float lo = 1e30f, hi = -1e30f;
-    for (float v : p.ct->values) { lo = std::min(lo, v); hi = std::max(hi, v); }
+    for (float v : p.ct->values) {
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
     std::printf("scene           %s (%s)\n", p.scene.source.c_str(), p.scene.name.c_str());
     std::printf("ct              %s\n", p.scene.ct.path.c_str());
     std::printf("  voxels        %d x %d x %d\n", g.size.x(), g.size.y(), g.size.z());
     std::printf("  spacing mm    %s\n", v3(g.spacing_mm).c_str());
     std::printf("  origin mm     %s (CT frame, LPS)\n", v3(g.origin_mm).c_str());
-    std::printf("  axes i j k    %s %s %s\n", v3(g.direction.col(0)).c_str(), v3(g.direction.col(1)).c_str(), v3(g.direction.col(2)).c_str());
+    std::printf("  axes i j k    %s %s %s\n", v3(g.direction.col(0)).c_str(), v3(g.direction.col(1)).c_str(),
+                v3(g.direction.col(2)).c_str());
     std::printf("  extent mm     %s\n", v3(g.extent_mm()).c_str());
     std::printf("  HU range      %.0f .. %.0f\n", double(lo), double(hi));
     std::printf("  mu_water      %.4f /mm\n", p.scene.ct.mu_water_per_mm);
-    std::printf("roi             centre %s mm, size %s mm (CT frame)\n", v3(p.roi_centre_ct_mm).c_str(), v3(p.scene.roi.size_mm).c_str());
-    std::printf("registration    origin %s mm (CT) = %s mm (room)\n", v3(p.registration_origin_ct_mm).c_str(), v3(p.registration_origin_room_mm()).c_str());
-    std::printf("envelope        +-%.1f mm, +-%.1f deg\n", p.scene.envelope.translation_mm, p.scene.envelope.rotation_deg);
+    std::printf("roi             centre %s mm, size %s mm (CT frame)\n", v3(p.roi_centre_ct_mm).c_str(),
+                v3(p.scene.roi.size_mm).c_str());
+    std::printf("registration    origin %s mm (CT) = %s mm (room)\n", v3(p.registration_origin_ct_mm).c_str(),
+                v3(p.registration_origin_room_mm()).c_str());
+    std::printf("envelope        +-%.1f mm, +-%.1f deg\n", p.scene.envelope.translation_mm,
+                p.scene.envelope.rotation_deg);
     for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
       const auto& d = p.scene.detectors[i];
       const auto& v = d.view;
       const auto& w = p.roi_windows[i];
-      std::printf("view %-10s %d x %d pixels of %.3f x %.3f mm, %d-bit, frames from %s\n", v.name.c_str(), v.rows, v.cols,
-                  v.pitch_row_mm, v.pitch_col_mm, d.bits, d.frames.c_str());
+      std::printf("view %-10s %d x %d pixels of %.3f x %.3f mm, %d-bit, frames from %s\n", v.name.c_str(),
+                  v.rows, v.cols, v.pitch_row_mm, v.pitch_col_mm, d.bits, d.frames.c_str());
       std::printf("  source mm     %s (room)\n", v3(v.source_mm).c_str());
-      std::printf("  pixel(0,0) mm %s, col axis %s, row axis %s\n", v3(v.pixel00_mm).c_str(), v3(v.col_axis).c_str(), v3(v.row_axis).c_str());
+      std::printf("  pixel(0,0) mm %s, col axis %s, row axis %s\n", v3(v.pixel00_mm).c_str(),
+                  v3(v.col_axis).c_str(), v3(v.row_axis).c_str());
       std::printf("  SID mm        %.1f\n", v.source_to_detector_mm());
-      std::printf("  ROI window    rows %d..%d, cols %d..%d\n", w.row0, w.row0 + w.rows - 1, w.col0, w.col0 + w.cols - 1);
+      std::printf("  ROI window    rows %d..%d, cols %d..%d\n", w.row0, w.row0 + w.rows - 1, w.col0,
+                  w.col0 + w.cols - 1);
     }
     return {};
   };

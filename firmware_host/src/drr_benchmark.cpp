@@ -54,7 +54,8 @@ std::vector<tracking::Pose> sample_envelope_poses(const PreparedScene& scene, in
       d.translation_mm = {t * u(rng), t * u(rng), t * u(rng)};
       d.rotation_rad = {r * u(rng), r * u(rng), r * u(rng)};
     }
-    poses.push_back(tracking::apply_delta(scene.nominal_T_room_from_ct, d, scene.registration_origin_room_mm()));
+    poses.push_back(
+        tracking::apply_delta(scene.nominal_T_room_from_ct, d, scene.registration_origin_room_mm()));
   }
   return poses;
 }
@@ -159,7 +160,9 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
 }
 
 nlohmann::json to_json(const DrrBenchReport& r) {
-  auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  auto finite_or_null = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
   nlohmann::json j;
   j["ct"] = r.ct;
   j["size"] = {r.rows, r.cols};
@@ -168,14 +171,19 @@ nlohmann::json to_json(const DrrBenchReport& r) {
   j["views"] = r.views;
   j["renderers"] = nlohmann::json::array();
   for (const auto& f : r.renderers) {
-    j["renderers"].push_back({{"name", f.name}, {"ms_median", f.ms_median},
-                              {"ncc_vs_siddon", f.ncc_vs_siddon}, {"ncc_min_vs_siddon", f.ncc_min_vs_siddon},
+    j["renderers"].push_back({{"name", f.name},
+                              {"ms_median", f.ms_median},
+                              {"ncc_vs_siddon", f.ncc_vs_siddon},
+                              {"ncc_min_vs_siddon", f.ncc_min_vs_siddon},
                               {"psnr_db_vs_siddon", finite_or_null(f.psnr_db_vs_siddon)}});
   }
   j["peers"] = nlohmann::json::array();
   for (const auto& p : r.peers) {
-    j["peers"].push_back({{"name", p.name}, {"ms_median", p.ms_median}, {"ms_wall_median", p.ms_wall_median},
-                          {"ncc_vs_siddon", p.ncc_vs_siddon}, {"ncc_min_vs_siddon", p.ncc_min_vs_siddon},
+    j["peers"].push_back({{"name", p.name},
+                          {"ms_median", p.ms_median},
+                          {"ms_wall_median", p.ms_wall_median},
+                          {"ncc_vs_siddon", p.ncc_vs_siddon},
+                          {"ncc_min_vs_siddon", p.ncc_min_vs_siddon},
                           {"max_abs_diff_rel", p.max_abs_diff_rel}});
   }
   if (!r.peer_note.empty()) j["peer_note"] = r.peer_note;

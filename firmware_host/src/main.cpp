@@ -36,9 +36,12 @@ int main(int argc, char** argv) {
 
   try {
     lftrack::Status status;
-    if (app.got_subcommand("info")) status = info();
-    else if (app.got_subcommand("drr")) status = drr();
-    else if (bench->got_subcommand("drr")) status = bench_drr();
+    if (app.got_subcommand("info"))
+      status = info();
+    else if (app.got_subcommand("drr"))
+      status = drr();
+    else if (bench->got_subcommand("drr"))
+      status = bench_drr();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

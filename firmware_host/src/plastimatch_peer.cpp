@@ -1,5 +1,7 @@
 #include "lftrack/host/plastimatch_peer.hpp"
 
+#include "lftrack/tracking/image_io.hpp"
+
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -32,25 +34,19 @@ std::string number(double a) {
   return s.str();
 }
 
-std::string pair(double a, double b) { return number(a) + ' ' + number(b); }
+std::string pair(double a, double b) {
+  return number(a) + ' ' + number(b);
+}
 
-// plastimatch writes "Pf\n<cols> <rows>\n-1\n" and then row 0 first.
+// plastimatch writes PFM with row 0 first, where the format stores the bottom row first: read
+// it as a standard PFM, then flip it back and convert cm to mm.
 Result<tracking::Image<float>> read_plastimatch_pfm(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return not_found(file.string() + ": plastimatch wrote no output");
-  std::string magic;
-  int cols = 0, rows = 0;
-  double scale = 0;
-  in >> magic >> cols >> rows >> scale;
-  if (magic != "Pf" || cols < 1 || rows < 1 || scale >= 0) {
-    return corrupt_data(file.string() + ": unexpected PFM header from plastimatch");
-  }
-  in.get();
-  tracking::Image<float> image(rows, cols);
-  in.read(reinterpret_cast<char*>(image.pixels().data()),
-          static_cast<std::streamsize>(image.pixels().size() * sizeof(float)));
-  if (!in) return corrupt_data(file.string() + ": truncated PFM from plastimatch");
-  for (float& v : image.pixels()) v *= 10.0f;  // cm -> mm
+  auto pfm = tracking::read_pfm(file);
+  if (!pfm.ok()) return pfm.status().with_context("plastimatch output");
+  const tracking::Image<float>& bottom_up = *pfm;
+  tracking::Image<float> image(bottom_up.rows(), bottom_up.cols());
+  for (int r = 0; r < image.rows(); ++r)
+    for (int c = 0; c < image.cols(); ++c) image.at(r, c) = 10.0f * bottom_up.at(image.rows() - 1 - r, c);
   return image;
 }
 
@@ -103,22 +99,41 @@ Result<std::vector<std::string>> plastimatch_drr_arguments(const tracking::XrayV
   LFTRACK_RETURN_IF_ERROR(v.validate());
   const Eigen::Vector3d nrm = v.detector_normal();
   if (v.col_axis.cross(v.row_axis).dot(nrm) > 0) {
-    return unsupported("view '" + v.name + "' is mirrored relative to plastimatch's detector (col x row points at the source)");
+    return unsupported("view '" + v.name +
+                       "' is mirrored relative to plastimatch's detector (col x row points at the source)");
   }
   const double sid = v.source_to_detector_mm();
   const double sad = 0.5 * sid;
   const Eigen::Vector3d isocentre = v.source_mm - sad * nrm;
   const auto principal = v.project(v.principal_point_mm());
   if (!principal) return internal_error("principal point does not project");
-  return std::vector<std::string>{
-      "plastimatch", "drr", "-P", "none", "-i", "exact", "-t", "pfm",
-      "--nrm", triple(nrm), "--vup", triple(-v.row_axis),
-      "--sad", number(sad), "--sid", number(sid),
-      "-o", triple(isocentre),
-      "-r", std::to_string(v.cols) + " " + std::to_string(v.rows),
-      "-z", pair(v.cols * v.pitch_col_mm, v.rows * v.pitch_row_mm),
-      "-c", pair(principal->x(), principal->y()),
-      "-O", output_prefix, volume_mha.string()};
+  return std::vector<std::string>{"plastimatch",
+                                  "drr",
+                                  "-P",
+                                  "none",
+                                  "-i",
+                                  "exact",
+                                  "-t",
+                                  "pfm",
+                                  "--nrm",
+                                  triple(nrm),
+                                  "--vup",
+                                  triple(-v.row_axis),
+                                  "--sad",
+                                  number(sad),
+                                  "--sid",
+                                  number(sid),
+                                  "-o",
+                                  triple(isocentre),
+                                  "-r",
+                                  std::to_string(v.cols) + " " + std::to_string(v.rows),
+                                  "-z",
+                                  pair(v.cols * v.pitch_col_mm, v.rows * v.pitch_row_mm),
+                                  "-c",
+                                  pair(principal->x(), principal->y()),
+                                  "-O",
+                                  output_prefix,
+                                  volume_mha.string()};
 }
 
 Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct, const fs::path& volume_mha,

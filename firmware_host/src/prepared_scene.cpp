@@ -14,8 +14,8 @@ using Eigen::Vector3d;
 
 // The detector pixels covered by the projection of the ROI box, clipped to the detector.
 Result<tracking::PixelWindow> roi_window(const tracking::XrayView& view_room,
-                                         const tracking::Pose& T_room_from_ct,
-                                         const Vector3d& centre_ct, const Vector3d& size_mm) {
+                                         const tracking::Pose& T_room_from_ct, const Vector3d& centre_ct,
+                                         const Vector3d& size_mm) {
   double c_lo = 1e300, c_hi = -1e300, r_lo = 1e300, r_hi = -1e300;
   for (int corner = 0; corner < 8; ++corner) {
     const Vector3d sign((corner & 1) ? 0.5 : -0.5, (corner & 2) ? 0.5 : -0.5, (corner & 4) ? 0.5 : -0.5);
@@ -66,7 +66,8 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   }
   spdlog::info("CT {}: {} ({:.1f} s)", out.scene.ct.path, tracking::describe(out.ct->geometry),
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-  out.mu = std::make_shared<const tracking::MuVolume>(tracking::to_attenuation(*out.ct, out.scene.ct.mu_water_per_mm));
+  out.mu = std::make_shared<const tracking::MuVolume>(
+      tracking::to_attenuation(*out.ct, out.scene.ct.mu_water_per_mm));
 
   // ROI centre: the scene's, else the phantom's target (posterior elements included), else the
   // volume centre (only reachable through --ct on a phantom scene).
@@ -81,7 +82,8 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   if (out.scene.registration_origin_ct_mm) {
     out.registration_origin_ct_mm = *out.scene.registration_origin_ct_mm;
   } else {
-    out.registration_origin_ct_mm = phantom_target && !out.scene.roi.centre_ct_mm ? *phantom_target : out.roi_centre_ct_mm;
+    out.registration_origin_ct_mm =
+        phantom_target && !out.scene.roi.centre_ct_mm ? *phantom_target : out.roi_centre_ct_mm;
   }
   if (out.scene.nominal_T_room_from_ct) {
     out.nominal_T_room_from_ct = *out.scene.nominal_T_room_from_ct;

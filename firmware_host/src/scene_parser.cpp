@@ -71,8 +71,8 @@ class SceneParser {
       return error(n, what + " must be an integer, got '" + n.Scalar() + "'");
     }
     if (*out < lo || *out > hi) {
-      return error(n, what + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
-                          ", got " + n.Scalar());
+      return error(
+          n, what + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) + ", got " + n.Scalar());
     }
     return {};
   }
@@ -110,7 +110,8 @@ class SceneParser {
     LFTRACK_RETURN_IF_ERROR(need(n, "path", "ct", &path));
     LFTRACK_RETURN_IF_ERROR(text(path, "ct.path", &ct->path));
     if (!ct->is_builtin_phantom()) {
-      if (ct->path.rfind("builtin:", 0) == 0) return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
+      if (ct->path.rfind("builtin:", 0) == 0)
+        return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
       const fs::path p(ct->path);
       ct->path = (p.is_absolute() ? p : base_dir_ / p).lexically_normal().string();
     }
@@ -122,7 +123,8 @@ class SceneParser {
     }
     if (n["mu_water_per_mm"]) {
       LFTRACK_RETURN_IF_ERROR(positive(n["mu_water_per_mm"], "ct.mu_water_per_mm", &ct->mu_water_per_mm));
-      if (ct->mu_water_per_mm > 1.0) return error(n["mu_water_per_mm"], "ct.mu_water_per_mm is in 1/mm; water is about 0.02");
+      if (ct->mu_water_per_mm > 1.0)
+        return error(n["mu_water_per_mm"], "ct.mu_water_per_mm is in 1/mm; water is about 0.02");
     }
     return {};
   }
@@ -146,8 +148,10 @@ class SceneParser {
   Status parse_pose(const YAML::Node& n, tracking::Pose* pose) const {
     LFTRACK_RETURN_IF_ERROR(check_keys(n, "nominal_pose", {"translation_mm", "rotation_deg"}));
     Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
-    if (n["translation_mm"]) LFTRACK_RETURN_IF_ERROR(vec3(n["translation_mm"], "nominal_pose.translation_mm", &t));
-    if (n["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(vec3(n["rotation_deg"], "nominal_pose.rotation_deg [roll, pitch, yaw]", &r));
+    if (n["translation_mm"])
+      LFTRACK_RETURN_IF_ERROR(vec3(n["translation_mm"], "nominal_pose.translation_mm", &t));
+    if (n["rotation_deg"])
+      LFTRACK_RETURN_IF_ERROR(vec3(n["rotation_deg"], "nominal_pose.rotation_deg [roll, pitch, yaw]", &r));
     *pose = tracking::Pose::Identity();
     pose->linear() = tracking::rotation_from_euler(
         {tracking::deg_to_rad(r.x()), tracking::deg_to_rad(r.y()), tracking::deg_to_rad(r.z())});
@@ -157,12 +161,13 @@ class SceneParser {
 
   Status parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const {
     const std::string what = "detectors[" + std::to_string(index) + "]";
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
-                                                 "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, what,
+                                       {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
+                                        "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
     YAML::Node node;
     std::string name;
     LFTRACK_RETURN_IF_ERROR(need(n, "name", what, &node));
-      LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
+    LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
     if (n["frames"]) {
       LFTRACK_RETURN_IF_ERROR(text(n["frames"], what + ".frames", &d->frames));
       if (d->frames != "sim" && d->frames != "v4l2" && d->frames != "replay") {
@@ -194,10 +199,13 @@ class SceneParser {
     if (n["isocentric"]) {
       const YAML::Node iso = n["isocentric"];
       const std::string w = what + ".isocentric";
-      LFTRACK_RETURN_IF_ERROR(check_keys(iso, w, {"isocentre_mm", "source_direction", "up", "source_to_isocentre_mm", "source_to_detector_mm"}));
+      LFTRACK_RETURN_IF_ERROR(check_keys(
+          iso, w,
+          {"isocentre_mm", "source_direction", "up", "source_to_isocentre_mm", "source_to_detector_mm"}));
       Vector3d centre = Vector3d::Zero(), dir, up;
       double sad = 0, sid = 0;
-      if (iso["isocentre_mm"]) LFTRACK_RETURN_IF_ERROR(vec3(iso["isocentre_mm"], w + ".isocentre_mm", &centre));
+      if (iso["isocentre_mm"])
+        LFTRACK_RETURN_IF_ERROR(vec3(iso["isocentre_mm"], w + ".isocentre_mm", &centre));
       LFTRACK_RETURN_IF_ERROR(need(iso, "source_direction", w, &node));
       LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".source_direction", &dir));
       LFTRACK_RETURN_IF_ERROR(need(iso, "up", w, &node));
@@ -206,14 +214,17 @@ class SceneParser {
       LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_isocentre_mm", &sad));
       LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_detector_mm", w, &node));
       LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_detector_mm", &sid));
-      auto view = tracking::XrayView::isocentric(name, centre, dir, up, sad, sid, static_cast<int>(rows), static_cast<int>(cols), pitch_row);
+      auto view = tracking::XrayView::isocentric(name, centre, dir, up, sad, sid, static_cast<int>(rows),
+                                                 static_cast<int>(cols), pitch_row);
       if (!view.ok()) return error(iso, view.status().message());
       d->view = *view;
       d->view.pitch_col_mm = pitch_col;
       d->view.pitch_row_mm = pitch_row;
       if (pitch_col != pitch_row) {  // keep the detector centred on the axis
-        const double mid_row = 0.5 * static_cast<double>(rows - 1), mid_col = 0.5 * static_cast<double>(cols - 1);
-        d->view.pixel00_mm += view->pixel_centre_mm(mid_row, mid_col) - d->view.pixel_centre_mm(mid_row, mid_col);
+        const double mid_row = 0.5 * static_cast<double>(rows - 1),
+                     mid_col = 0.5 * static_cast<double>(cols - 1);
+        d->view.pixel00_mm +=
+            view->pixel_centre_mm(mid_row, mid_col) - d->view.pixel_centre_mm(mid_row, mid_col);
       }
     } else if (explicit_form) {
       tracking::XrayView& v = d->view;
@@ -231,7 +242,8 @@ class SceneParser {
       v.pitch_row_mm = pitch_row;
       v.pitch_col_mm = pitch_col;
     } else {
-      return error(n, what + " needs its geometry: either 'isocentric' or source_mm, pixel00_mm, col_axis, row_axis");
+      return error(
+          n, what + " needs its geometry: either 'isocentric' or source_mm, pixel00_mm, col_axis, row_axis");
     }
     if (Status s = d->view.validate(); !s.ok()) return error(n, s.message());
     return {};
@@ -245,17 +257,18 @@ class SceneParser {
       return error_at(e.mark, "YAML syntax error: " + e.msg);
     }
     if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
-    LFTRACK_RETURN_IF_ERROR(check_keys(root, "the scene", {"version", "name", "ct", "roi", "registration_origin_mm",
-                                                           "nominal_pose", "detectors", "envelope", "tracking"}));
+    LFTRACK_RETURN_IF_ERROR(check_keys(root, "the scene",
+                                       {"version", "name", "ct", "roi", "registration_origin_mm",
+                                        "nominal_pose", "detectors", "envelope", "tracking"}));
     Scene scene;
     scene.source = source_;
     YAML::Node node;
     long version = 0;
     LFTRACK_RETURN_IF_ERROR(need(root, "version", "the scene", &node));
-      LFTRACK_RETURN_IF_ERROR(integer(node, "version", 1, 1, &version));
+    LFTRACK_RETURN_IF_ERROR(integer(node, "version", 1, 1, &version));
     if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
     LFTRACK_RETURN_IF_ERROR(need(root, "ct", "the scene", &node));
-      LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
+    LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
     if (root["roi"]) {
       LFTRACK_RETURN_IF_ERROR(parse_roi(root["roi"], scene.ct.is_builtin_phantom(), &scene.roi));
     } else if (!scene.ct.is_builtin_phantom()) {
@@ -280,15 +293,21 @@ class SceneParser {
     for (std::size_t i = 0; i < detectors.size(); ++i) {
       DetectorSpec d;
       LFTRACK_RETURN_IF_ERROR(parse_detector(detectors[i], int(i), &d));
-      if (!names.insert(d.view.name).second) return error(detectors[i], "duplicate detector name '" + d.view.name + "'");
+      if (!names.insert(d.view.name).second)
+        return error(detectors[i], "duplicate detector name '" + d.view.name + "'");
       scene.detectors.push_back(d);
     }
     if (root["envelope"]) {
       const YAML::Node e = root["envelope"];
       LFTRACK_RETURN_IF_ERROR(check_keys(e, "envelope", {"translation_mm", "rotation_deg"}));
-      if (e["translation_mm"]) LFTRACK_RETURN_IF_ERROR(positive(e["translation_mm"], "envelope.translation_mm", &scene.envelope.translation_mm));
-      if (e["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(positive(e["rotation_deg"], "envelope.rotation_deg", &scene.envelope.rotation_deg));
-      if (scene.envelope.rotation_deg > 45) return error(e["rotation_deg"], "envelope.rotation_deg must be at most 45");
+      if (e["translation_mm"])
+        LFTRACK_RETURN_IF_ERROR(
+            positive(e["translation_mm"], "envelope.translation_mm", &scene.envelope.translation_mm));
+      if (e["rotation_deg"])
+        LFTRACK_RETURN_IF_ERROR(
+            positive(e["rotation_deg"], "envelope.rotation_deg", &scene.envelope.rotation_deg));
+      if (scene.envelope.rotation_deg > 45)
+        return error(e["rotation_deg"], "envelope.rotation_deg must be at most 45");
     }
     if (root["tracking"]) {
       const YAML::Node t = root["tracking"];

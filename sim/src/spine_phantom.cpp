@@ -33,10 +33,9 @@ double value_noise(std::uint64_t seed, const Vector3d& p, double cell_mm) {
   double v = 0;
   for (int corner = 0; corner < 8; ++corner) {
     const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
-    const auto key = static_cast<std::uint64_t>(
-        (static_cast<std::int64_t>(f.x()) + dx) * 73856093 ^
-        (static_cast<std::int64_t>(f.y()) + dy) * 19349663 ^
-        (static_cast<std::int64_t>(f.z()) + dz) * 83492791);
+    const auto key = static_cast<std::uint64_t>((static_cast<std::int64_t>(f.x()) + dx) * 73856093 ^
+                                                (static_cast<std::int64_t>(f.y()) + dy) * 19349663 ^
+                                                (static_cast<std::int64_t>(f.z()) + dz) * 83492791);
     const double w = (dx ? s.x() : 1 - s.x()) * (dy ? s.y() : 1 - s.y()) * (dz ? s.z() : 1 - s.z());
     v += w * (2.0 * hash_unit(seed, key) - 1.0);
   }
@@ -59,7 +58,9 @@ double ellipsoid_sd(const Vector3d& p, const Vector3d& semi) {
   return (p.cwiseQuotient(semi).norm() - 1.0) * semi.minCoeff();
 }
 
-void paint(double* hu, double value, double weight) { *hu += weight * (value - *hu); }
+void paint(double* hu, double value, double weight) {
+  *hu += weight * (value - *hu);
+}
 
 struct Vertebra {
   Vector3d body_centre;   // mm, CT frame
@@ -85,7 +86,8 @@ struct Anatomy {
 
 double vertebra_hu(const Anatomy& an, const Vertebra& v, const Vector3d& p, double hu, double vox) {
   const Vector3d d = p - v.body_centre;  // x lateral, y posterior, z superior
-  if (std::abs(d.z()) > v.half_height + 2 * vox + 2 || std::abs(d.x()) > 60 || d.y() < -v.body_b - 3 || d.y() > 70) {
+  if (std::abs(d.z()) > v.half_height + 2 * vox + 2 || std::abs(d.x()) > 60 || d.y() < -v.body_b - 3 ||
+      d.y() > 70) {
     return hu;
   }
   // Vertebral body: cortical shell then cancellous interior; the body is waisted (narrower at
@@ -155,7 +157,10 @@ double voxel_hu(const Anatomy& an, const Vector3d& p, double vox) {
   // Psoas, kidneys, aorta.
   for (double side : {-1.0, 1.0}) {
     paint(&hu, kMuscle, coverage(ellipse_sd(sx - side * 38.0, sy + 2.0, 16.0, 20.0), vox));
-    paint(&hu, kKidney, coverage(ellipsoid_sd({sx - side * 75.0, sy + 5.0, p.z() - v0.body_centre.z() - 70.0}, {28, 22, 55}), vox));
+    paint(
+        &hu, kKidney,
+        coverage(ellipsoid_sd({sx - side * 75.0, sy + 5.0, p.z() - v0.body_centre.z() - 70.0}, {28, 22, 55}),
+                 vox));
   }
   paint(&hu, kAorta, coverage(std::hypot(sx - 15.0, sy + 32.0) - 11.0, vox));
   for (const Gas& g : an.gas) paint(&hu, kGas, coverage(ellipsoid_sd(p - g.centre, g.semi), vox));
@@ -192,7 +197,8 @@ Anatomy make_anatomy(const SpinePhantomOptions& o, const tracking::VolumeGeometr
   for (int n = 0; n < count; ++n) {
     Vertebra v;
     const double z = first + n * level + 1.0 * u(rng);
-    v.body_centre = {o.centre_mm.x() + 0.8 * u(rng), spine_y + 4.0 * std::cos(0.6 * (n - count / 2)) + 0.8 * u(rng), z};
+    v.body_centre = {o.centre_mm.x() + 0.8 * u(rng),
+                     spine_y + 4.0 * std::cos(0.6 * (n - count / 2)) + 0.8 * u(rng), z};
     v.half_height = 13.0 + 0.8 * u(rng);
     v.body_a = 24.0 + 1.5 * u(rng);
     v.body_b = 17.0 + 1.0 * u(rng);
@@ -241,7 +247,8 @@ Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& o, tracking::
       for (int j = 0; j < g.size.y(); ++j)
         for (int i = 0; i < g.size.x(); ++i) {
           const Vector3d p = g.origin_mm + Vector3d(i, j, k).cwiseProduct(g.spacing_mm);
-          const auto key = static_cast<std::uint64_t>(i + std::int64_t{g.size.x()} * (j + std::int64_t{g.size.y()} * k));
+          const auto key =
+              static_cast<std::uint64_t>(i + std::int64_t{g.size.x()} * (j + std::int64_t{g.size.y()} * k));
           const double noise = o.noise_hu > 0 ? o.noise_hu * hashed_gaussian(o.seed ^ 0xA5A5ull, key) : 0.0;
           phantom.ct.at(i, j, k) = static_cast<float>(voxel_hu(anatomy, p, vox) + noise);
         }

@@ -13,8 +13,10 @@ using Eigen::Vector3d;
 using tracking::XrayView;
 
 TEST(Triangulate, RecoversAPointSeenByTwoViews) {
-  const XrayView a = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(1, -1, 0), Vector3d(0, 0, 1), 1500, 2100, 512, 512, 0.4);
-  const XrayView b = *XrayView::isocentric("B", Vector3d::Zero(), Vector3d(-1, -1, 0), Vector3d(0, 0, 1), 1500, 2100, 512, 512, 0.4);
+  const XrayView a = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(1, -1, 0), Vector3d(0, 0, 1), 1500,
+                                           2100, 512, 512, 0.4);
+  const XrayView b = *XrayView::isocentric("B", Vector3d::Zero(), Vector3d(-1, -1, 0), Vector3d(0, 0, 1),
+                                           1500, 2100, 512, 512, 0.4);
   const Vector3d p(12.5, -7.25, 30.0);
   auto t = triangulate(a, *a.project(p), b, *b.project(p));
   ASSERT_TRUE(t.ok());

@@ -14,12 +14,15 @@
 namespace lftrack::host {
 namespace {
 
-std::string lftrack_bin() { return LFTRACK_BIN_PATH; }
+std::string lftrack_bin() {
+  return LFTRACK_BIN_PATH;
+}
 
 TEST(Cli, DrrWritesBothViewsOfTheDefaultScene) {
   test::TempDir dir;
   std::string out;
-  const Status s = run_process({lftrack_bin(), "drr", "--scene", "builtin:phantom", "-o", dir.path().string()}, &out);
+  const Status s =
+      run_process({lftrack_bin(), "drr", "--scene", "builtin:phantom", "-o", dir.path().string()}, &out);
   ASSERT_TRUE(s.ok()) << out;
   for (const char* view : {"A", "B"}) {
     const auto png = dir.path() / ("drr_" + std::string(view) + ".png");
@@ -51,18 +54,22 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
   std::string out;
   EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--view", "C", "-o", dir.path().string()}, &out).ok());
   EXPECT_NE(out.find("no view 'C'"), std::string::npos) << out;
-  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--renderer", "magic", "-o", dir.path().string()}, &out).ok());
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "drr", "--renderer", "magic", "-o", dir.path().string()}, &out).ok());
   EXPECT_NE(out.find("unknown renderer 'magic'"), std::string::npos) << out;
 }
 
 TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
   std::string out;
-  const Status s = run_process({lftrack_bin(), "-q", "bench", "drr", "--size", "24", "--poses", "1", "--repeats", "1", "--json"}, &out);
+  const Status s = run_process(
+      {lftrack_bin(), "-q", "bench", "drr", "--size", "24", "--poses", "1", "--repeats", "1", "--json"},
+      &out);
   ASSERT_TRUE(s.ok()) << out;
   const auto json = nlohmann::json::parse(out.substr(out.find('{')));
   for (const char* key : {"ct", "size", "renderers", "peers"}) EXPECT_TRUE(json.contains(key)) << key;
   for (const auto& r : json["renderers"])
-    for (const char* key : {"name", "ms_median", "ncc_vs_siddon", "psnr_db_vs_siddon"}) EXPECT_TRUE(r.contains(key)) << key;
+    for (const char* key : {"name", "ms_median", "ncc_vs_siddon", "psnr_db_vs_siddon"})
+      EXPECT_TRUE(r.contains(key)) << key;
   for (const auto& p : json["peers"])
     for (const char* key : {"name", "ms_median", "ncc_vs_siddon"}) EXPECT_TRUE(p.contains(key)) << key;
 }

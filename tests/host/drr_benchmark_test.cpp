@@ -50,7 +50,8 @@ TEST(DrrBenchmark, EnvelopePosesStayInsideTheEnvelope) {
   for (const auto& pose : poses) {
     const auto d = tracking::delta_between(p.nominal_T_room_from_ct, pose, p.registration_origin_room_mm());
     EXPECT_LE(d.translation_mm.cwiseAbs().maxCoeff(), p.scene.envelope.translation_mm + 1e-9);
-    EXPECT_LE(d.rotation_rad.cwiseAbs().maxCoeff(), tracking::deg_to_rad(p.scene.envelope.rotation_deg) + 1e-9);
+    EXPECT_LE(d.rotation_rad.cwiseAbs().maxCoeff(),
+              tracking::deg_to_rad(p.scene.envelope.rotation_deg) + 1e-9);
   }
 }
 

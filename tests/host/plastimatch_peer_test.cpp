@@ -27,10 +27,14 @@ struct Comparison {
   double max_rel_diff = 0;  // max |peer - ours| / max(ours)
 };
 
-Comparison compare(const tracking::DrrRenderer& renderer, const tracking::MuVolume& mu, const std::filesystem::path& mha,
-                   const Pose& T_room_from_ct, const XrayView& view_room, const std::filesystem::path& work) {
+Comparison compare(const tracking::DrrRenderer& renderer, const tracking::MuVolume& mu,
+                   const std::filesystem::path& mha, const Pose& T_room_from_ct, const XrayView& view_room,
+                   const std::filesystem::path& work) {
   Image<float> ours(view_room.rows, view_room.cols);
-  EXPECT_TRUE(renderer.render(T_room_from_ct, view_room, tracking::PixelWindow::full(view_room.rows, view_room.cols), ours.view()).ok());
+  EXPECT_TRUE(renderer
+                  .render(T_room_from_ct, view_room,
+                          tracking::PixelWindow::full(view_room.rows, view_room.cols), ours.view())
+                  .ok());
   auto peer = run_plastimatch_drr(view_room.transformed(T_room_from_ct.inverse()), mha, work);
   EXPECT_TRUE(peer.ok()) << peer.status().message();
   if (!peer.ok()) return {};
@@ -76,7 +80,8 @@ TEST(PlastimatchPeer, GeometryMappingOnAnAsymmetricPhantom) {
   auto renderer = tracking::make_renderer("siddon", mu);
   ASSERT_TRUE(renderer.ok());
   // Non-square detector, non-square pixels, principal point away from the centre.
-  const XrayView full = *XrayView::isocentric("A", Vector3d(2, 1, -3), Vector3d(0.3, -1, 0.2), Vector3d(0, 0.1, 1), 500, 800, 120, 90, 0.5);
+  const XrayView full = *XrayView::isocentric("A", Vector3d(2, 1, -3), Vector3d(0.3, -1, 0.2),
+                                              Vector3d(0, 0.1, 1), 500, 800, 120, 90, 0.5);
   const XrayView view = full.resampled(10, 5, 100, 80, 70, 40);
   Pose pose = Pose::Identity();
   pose.linear() = tracking::rotation_exp(Vector3d(0.2, -0.1, 0.3));
@@ -89,9 +94,11 @@ TEST(PlastimatchPeer, GeometryMappingOnAnAsymmetricPhantom) {
   ASSERT_TRUE(peer.ok());
   Image<float> mirrored = peer->line_integrals;
   for (int r = 0; r < mirrored.rows(); ++r)
-    for (int col = 0; col < mirrored.cols(); ++col) mirrored.at(r, col) = peer->line_integrals.at(r, mirrored.cols() - 1 - col);
+    for (int col = 0; col < mirrored.cols(); ++col)
+      mirrored.at(r, col) = peer->line_integrals.at(r, mirrored.cols() - 1 - col);
   Image<float> ours(view.rows, view.cols);
-  ASSERT_TRUE((*renderer)->render(pose, view, tracking::PixelWindow::full(view.rows, view.cols), ours.view()).ok());
+  ASSERT_TRUE(
+      (*renderer)->render(pose, view, tracking::PixelWindow::full(view.rows, view.cols), ours.view()).ok());
   EXPECT_LT(tracking::normalized_cross_correlation(ours.view(), mirrored.view()), 0.95);
 }
 
@@ -116,13 +123,14 @@ TEST(PlastimatchPeerRealData, AgreesOnTheRealCtAtTwoViewsAndAnObliquePose) {
   tracking::PoseDelta oblique;
   oblique.translation_mm = Vector3d(5, -4, 4.8);
   oblique.rotation_rad = tracking::deg_to_rad(5.0) * Vector3d(1, 2, -1).normalized();
-  const Pose poses[] = {p->nominal_T_room_from_ct,
-                        tracking::apply_delta(p->nominal_T_room_from_ct, oblique, p->registration_origin_room_mm())};
+  const Pose poses[] = {p->nominal_T_room_from_ct, tracking::apply_delta(p->nominal_T_room_from_ct, oblique,
+                                                                         p->registration_origin_room_mm())};
   for (int pose_index = 0; pose_index < 2; ++pose_index) {
     const Pose& pose = poses[pose_index];
     for (const auto& d : p->scene.detectors) {
       const XrayView view = d.view.resampled(0, 0, d.view.rows, d.view.cols, 256, 256);
-      const Comparison c = compare(**renderer, *p->mu, mha, pose, view, dir.path() / ("out_" + d.view.name + std::to_string(pose_index)));
+      const Comparison c = compare(**renderer, *p->mu, mha, pose, view,
+                                   dir.path() / ("out_" + d.view.name + std::to_string(pose_index)));
       EXPECT_GE(c.ncc, 0.999) << "view " << d.view.name;
       EXPECT_LT(c.max_rel_diff, 0.01) << "view " << d.view.name;
       std::printf("[ figures  ] view %s, %s pose: NCC %.7f, max |diff| %.2e of peak\n", d.view.name.c_str(),
@@ -144,19 +152,22 @@ TEST(PlastimatchPeer, ClipsAtTheOuterVoxelCentres) {
   ones->values.assign(21 * 21 * 21, 1.0f);
   const auto mha = dir.path() / "ones.mha";
   ASSERT_TRUE(tracking::write_metaimage(*ones, mha).ok());
-  const XrayView view = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0, -1, 0), Vector3d(0, 0, 1), 1000, 2000, 3, 3, 1.0);
+  const XrayView view = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0, -1, 0), Vector3d(0, 0, 1),
+                                              1000, 2000, 3, 3, 1.0);
   auto peer = run_plastimatch_drr(view, mha, dir.path() / "out");
   ASSERT_TRUE(peer.ok()) << peer.status().message();
   auto renderer = tracking::make_renderer("siddon", ones);
   ASSERT_TRUE(renderer.ok());
   Image<float> ours(3, 3);
-  ASSERT_TRUE((*renderer)->render(Pose::Identity(), view, tracking::PixelWindow::full(3, 3), ours.view()).ok());
+  ASSERT_TRUE(
+      (*renderer)->render(Pose::Identity(), view, tracking::PixelWindow::full(3, 3), ours.view()).ok());
   EXPECT_NEAR(ours.at(1, 1), 21.0, 1e-4);
   EXPECT_NEAR(peer->line_integrals.at(1, 1), 20.0, 1e-3);
 }
 
 TEST(PlastimatchPeer, MirroredViewsAreRefused) {
-  XrayView v = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0, -1, 0), Vector3d(0, 0, 1), 500, 800, 10, 10, 1);
+  XrayView v = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0, -1, 0), Vector3d(0, 0, 1), 500, 800,
+                                     10, 10, 1);
   v.pixel00_mm += 9 * v.col_axis;
   v.col_axis = -v.col_axis;
   EXPECT_FALSE(plastimatch_drr_arguments(v, "x.mha", "out").ok());

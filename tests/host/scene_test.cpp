@@ -72,10 +72,10 @@ detectors:
 // Each class of scene error: where it is reported (file:line) and why.
 struct BadScene {
   const char* name;
-  const char* find;     // text in kValidScene to replace
-  const char* replace;  // with this
-  const char* location; // expected "file:line" prefix
-  const char* reason;   // expected text in the message
+  const char* find;      // text in kValidScene to replace
+  const char* replace;   // with this
+  const char* location;  // expected "file:line" prefix
+  const char* reason;    // expected text in the message
 };
 
 const BadScene kBadScenes[] = {
@@ -86,21 +86,29 @@ const BadScene kBadScenes[] = {
     {"WrongVersion", "version: 1", "version: 7", "bad.yaml:1:", "version must be in 1..1"},
     {"MissingCtPath", "  path: ct_folder", "  seed: 3", "bad.yaml:", "needs 'path'"},
     {"NegativePitch", "pitch_mm: 0.4", "pitch_mm: -0.4", "bad.yaml:11:", "must be positive"},
-    {"NotANumber", "source_to_isocentre_mm: 1000", "source_to_isocentre_mm: far", "bad.yaml:15:", "must be a number"},
+    {"NotANumber", "source_to_isocentre_mm: 1000", "source_to_isocentre_mm: far",
+     "bad.yaml:15:", "must be a number"},
     {"RowsNotInteger", "rows: 64", "rows: 6.5", "bad.yaml:9:", "must be an integer"},
     {"RowsOutOfRange", "rows: 64", "rows: 0", "bad.yaml:9:", "must be in 1..16384"},
-    {"SourceBeyondDetector", "source_to_detector_mm: 1500", "source_to_detector_mm: 900", "bad.yaml:13:", "source-to-isocentre"},
+    {"SourceBeyondDetector", "source_to_detector_mm: 1500", "source_to_detector_mm: 900",
+     "bad.yaml:13:", "source-to-isocentre"},
     {"UpAlongBeam", "up: [0, 0, 1]", "up: [0, 1, 0]", "bad.yaml:13:", "parallel to the beam"},
-    {"ZeroVector", "source_direction: [0, -1, 0]", "source_direction: [0, 0, 0]", "bad.yaml:13:", "zero vector"},
-    {"VectorOfTwo", "source_direction: [0, -1, 0]", "source_direction: [0, -1]", "bad.yaml:13:", "list of 3 numbers"},
+    {"ZeroVector", "source_direction: [0, -1, 0]", "source_direction: [0, 0, 0]",
+     "bad.yaml:13:", "zero vector"},
+    {"VectorOfTwo", "source_direction: [0, -1, 0]", "source_direction: [0, -1]",
+     "bad.yaml:13:", "list of 3 numbers"},
     {"MissingGeometry", "    isocentric:", "    isocentricx:", "bad.yaml:12:", "unknown key 'isocentricx'"},
-    {"FileCtWithoutRoi", "roi:\n  centre_mm: [0, 0, 0]\n  size_mm: [40, 40, 40]\n", "", "bad.yaml:1:", "needs 'roi'"},
-    {"UnknownFrames", "    rows: 64", "    frames: camera\n    rows: 64", "bad.yaml:9:", "must be one of sim, v4l2, replay"},
+    {"FileCtWithoutRoi", "roi:\n  centre_mm: [0, 0, 0]\n  size_mm: [40, 40, 40]\n", "",
+     "bad.yaml:1:", "needs 'roi'"},
+    {"UnknownFrames", "    rows: 64", "    frames: camera\n    rows: 64",
+     "bad.yaml:9:", "must be one of sim, v4l2, replay"},
     {"UnknownBuiltin", "  path: ct_folder", "  path: builtin:knee", "bad.yaml:3:", "unknown built-in CT"},
     {"NegativeRoiSize", "size_mm: [40, 40, 40]", "size_mm: [40, -4, 40]", "bad.yaml:6:", "must be positive"},
 };
 
-void PrintTo(const BadScene& c, std::ostream* os) { *os << c.name; }
+void PrintTo(const BadScene& c, std::ostream* os) {
+  *os << c.name;
+}
 
 class BadScenes : public ::testing::TestWithParam<BadScene> {};
 

@@ -42,7 +42,8 @@ TEST(SpinePhantom, AnatomyHasRealisticHounsfieldUnits) {
   const Eigen::Vector3d body = p->vertebral_body_centres_mm[std::size_t(p->target_vertebra)];
   EXPECT_NEAR(hu_at(*p, body), 220, 120) << "cancellous bone";
   float end_plate = -1000;  // the densest voxel on the body's axis: the cortical end plate
-  for (double dz = 8; dz < 16; dz += 0.5) end_plate = std::max(end_plate, hu_at(*p, body + Eigen::Vector3d(0, 0, dz)));
+  for (double dz = 8; dz < 16; dz += 0.5)
+    end_plate = std::max(end_plate, hu_at(*p, body + Eigen::Vector3d(0, 0, dz)));
   EXPECT_GT(end_plate, 600) << "cortical end plate";
   EXPECT_LT(hu_at(*p, body + Eigen::Vector3d(0, 0, 17.0)), 200) << "disc";
   EXPECT_NEAR(hu_at(*p, o.centre_mm + Eigen::Vector3d(150, -150, 0)), -1000, 1) << "air outside the body";

@@ -52,9 +52,11 @@ bool write_synthetic_slice(const std::filesystem::path& file, const SyntheticSli
   put_string(0x0008, 0x0060, gdcm::VR::CS, s.modality);
   put_string(0x0020, 0x000D, gdcm::VR::UI, "1.2.826.0.1.3680043.2.1125.9");
   put_string(0x0020, 0x000E, gdcm::VR::UI, s.series_uid);
-  put_string(0x0020, 0x0032, gdcm::VR::DS, decimals({s.position_mm.x(), s.position_mm.y(), s.position_mm.z()}));
+  put_string(0x0020, 0x0032, gdcm::VR::DS,
+             decimals({s.position_mm.x(), s.position_mm.y(), s.position_mm.z()}));
   put_string(0x0020, 0x0037, gdcm::VR::DS,
-             decimals({s.row_cosine.x(), s.row_cosine.y(), s.row_cosine.z(), s.col_cosine.x(), s.col_cosine.y(), s.col_cosine.z()}));
+             decimals({s.row_cosine.x(), s.row_cosine.y(), s.row_cosine.z(), s.col_cosine.x(),
+                       s.col_cosine.y(), s.col_cosine.z()}));
   put_string(0x0028, 0x0030, gdcm::VR::DS, decimals({s.pixel_spacing_mm.x(), s.pixel_spacing_mm.y()}));
   put_string(0x0028, 0x1052, gdcm::VR::DS, decimals({s.intercept}));
   put_string(0x0028, 0x1053, gdcm::VR::DS, decimals({s.slope}));
@@ -76,7 +78,8 @@ bool write_synthetic_slice(const std::filesystem::path& file, const SyntheticSli
   if (s.mpeg2_pixel_data) {
     gdcm::SmartPointer<gdcm::SequenceOfFragments> fragments = new gdcm::SequenceOfFragments;
     gdcm::Fragment fragment;
-    fragment.SetByteValue(reinterpret_cast<const char*>(pixels.data()), static_cast<uint32_t>(pixels.size() * 2));
+    fragment.SetByteValue(reinterpret_cast<const char*>(pixels.data()),
+                          static_cast<uint32_t>(pixels.size() * 2));
     fragments->AddFragment(fragment);
     pixel_data.SetVLToUndefined();  // GDCM asserts unless this comes before the VR is set
     pixel_data.SetValue(*fragments);
@@ -84,7 +87,8 @@ bool write_synthetic_slice(const std::filesystem::path& file, const SyntheticSli
     f.GetHeader().SetDataSetTransferSyntax(gdcm::TransferSyntax::MPEG2MainProfile);
   } else {
     pixel_data.SetVR(gdcm::VR::OW);
-    pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()), static_cast<uint32_t>(pixels.size() * 2));
+    pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()),
+                            static_cast<uint32_t>(pixels.size() * 2));
     f.GetHeader().SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
   }
   ds.Replace(pixel_data);

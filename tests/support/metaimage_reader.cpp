@@ -25,8 +25,10 @@ Result<tracking::CtVolume> read_metaimage_for_test(const std::filesystem::path& 
   }
   tracking::CtVolume v;
   std::istringstream(header["DimSize"]) >> v.geometry.size.x() >> v.geometry.size.y() >> v.geometry.size.z();
-  std::istringstream(header["ElementSpacing"]) >> v.geometry.spacing_mm.x() >> v.geometry.spacing_mm.y() >> v.geometry.spacing_mm.z();
-  std::istringstream(header["Offset"]) >> v.geometry.origin_mm.x() >> v.geometry.origin_mm.y() >> v.geometry.origin_mm.z();
+  std::istringstream(header["ElementSpacing"]) >> v.geometry.spacing_mm.x() >> v.geometry.spacing_mm.y() >>
+      v.geometry.spacing_mm.z();
+  std::istringstream(header["Offset"]) >> v.geometry.origin_mm.x() >> v.geometry.origin_mm.y() >>
+      v.geometry.origin_mm.z();
   std::istringstream tm(header["TransformMatrix"]);
   for (int axis = 0; axis < 3; ++axis)
     for (int c = 0; c < 3; ++c) tm >> v.geometry.direction(c, axis);

@@ -9,8 +9,8 @@ TempDir::TempDir() {
   std::string name = info ? std::string(info->test_suite_name()) + "." + info->name() : "lftrack";
   for (char& c : name)
     if (c == '/') c = '_';
-  path_ = std::filesystem::temp_directory_path() /
-          ("lftrack-test-" + name + "-" + std::to_string(::getpid()));
+  path_ =
+      std::filesystem::temp_directory_path() / ("lftrack-test-" + name + "-" + std::to_string(::getpid()));
   std::filesystem::remove_all(path_);
   std::filesystem::create_directories(path_);
 }

@@ -17,9 +17,15 @@ inline std::filesystem::path shared_data_dir() {
   return std::filesystem::path(LFTRACK_SOURCE_DIR) / ".." / "shared" / "data";
 }
 
-inline std::filesystem::path pancreas_dicom() { return shared_data_dir() / "ct/pancreas-ct-cb001/dicom"; }
-inline std::filesystem::path totalseg_example() { return shared_data_dir() / "ct/totalseg/example_ct.nii.gz"; }
-inline std::filesystem::path totalseg_aorta() { return shared_data_dir() / "ct/totalseg/aorta_ct_cropped.nii.gz"; }
+inline std::filesystem::path pancreas_dicom() {
+  return shared_data_dir() / "ct/pancreas-ct-cb001/dicom";
+}
+inline std::filesystem::path totalseg_example() {
+  return shared_data_dir() / "ct/totalseg/example_ct.nii.gz";
+}
+inline std::filesystem::path totalseg_aorta() {
+  return shared_data_dir() / "ct/totalseg/aorta_ct_cropped.nii.gz";
+}
 
 inline bool data_required() {
   const char* env = std::getenv("LFTRACK_REQUIRE_DATA");
@@ -39,21 +45,21 @@ class TempDir {
 
 }  // namespace lftrack::test
 
-#define LFTRACK_REQUIRE_SHARED_DATA(path)                                                   \
-  do {                                                                                      \
-    if (!std::filesystem::exists(path)) {                                                   \
-      if (::lftrack::test::data_required()) {                                               \
-        FAIL() << "shared CT data missing at " << (path) << " (LFTRACK_REQUIRE_DATA=1)";    \
-      }                                                                                     \
-      GTEST_SKIP() << "shared CT data not found at " << (path)                              \
-                   << "; clone next to ../shared to run this test";                         \
-    }                                                                                       \
+#define LFTRACK_REQUIRE_SHARED_DATA(path)                                                \
+  do {                                                                                   \
+    if (!std::filesystem::exists(path)) {                                                \
+      if (::lftrack::test::data_required()) {                                            \
+        FAIL() << "shared CT data missing at " << (path) << " (LFTRACK_REQUIRE_DATA=1)"; \
+      }                                                                                  \
+      GTEST_SKIP() << "shared CT data not found at " << (path)                           \
+                   << "; clone next to ../shared to run this test";                      \
+    }                                                                                    \
   } while (false)
 
-#define LFTRACK_REQUIRE_PLASTIMATCH()                                                       \
-  do {                                                                                      \
-    if (!::lftrack::host::plastimatch_available()) {                                        \
-      if (::lftrack::test::data_required()) FAIL() << "plastimatch is not installed";       \
-      GTEST_SKIP() << "plastimatch is not installed (scripts/setup.sh installs it)";        \
-    }                                                                                       \
+#define LFTRACK_REQUIRE_PLASTIMATCH()                                                 \
+  do {                                                                                \
+    if (!::lftrack::host::plastimatch_available()) {                                  \
+      if (::lftrack::test::data_required()) FAIL() << "plastimatch is not installed"; \
+      GTEST_SKIP() << "plastimatch is not installed (scripts/setup.sh installs it)";  \
+    }                                                                                 \
   } while (false)

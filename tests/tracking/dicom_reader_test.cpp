@@ -4,9 +4,9 @@
 #include <fstream>
 
 #include "dicom_writer.hpp"
-#include "metaimage_reader.hpp"
 #include "lftrack/host/plastimatch_peer.hpp"
 #include "lftrack/tracking/volume_io.hpp"
+#include "metaimage_reader.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::tracking {
@@ -49,7 +49,8 @@ TEST(DicomReader, PlacesObliqueSeriesInTheCtFrame) {
   EXPECT_TRUE(ct->geometry.direction.col(2).isApprox(normal, 1e-6));
   // Voxel (i, j, k) centre = IPP_k + i * colspacing * row_cosine + j * rowspacing * col_cosine.
   const Eigen::Vector3d p = ct->geometry.ct_from_index() * Eigen::Vector3d(4, 2, 1);
-  const Eigen::Vector3d expected = base.position_mm + 1.25 * normal + 4 * 0.75 * base.row_cosine + 2 * 0.5 * base.col_cosine;
+  const Eigen::Vector3d expected =
+      base.position_mm + 1.25 * normal + 4 * 0.75 * base.row_cosine + 2 * 0.5 * base.col_cosine;
   EXPECT_LT((p - expected).norm(), 1e-5);
 }
 
@@ -164,7 +165,9 @@ const BadSeriesCase kBadSeries[] = {
      }},
 };
 
-void PrintTo(const BadSeriesCase& c, std::ostream* os) { *os << c.name; }
+void PrintTo(const BadSeriesCase& c, std::ostream* os) {
+  *os << c.name;
+}
 
 class BadDicomSeries : public ::testing::TestWithParam<BadSeriesCase> {};
 
@@ -173,7 +176,8 @@ TEST_P(BadDicomSeries, FailsWithAClearMessage) {
   GetParam().make(dir.path());
   auto ct = read_dicom_series(dir.path());
   ASSERT_FALSE(ct.ok());
-  EXPECT_NE(ct.status().message().find(GetParam().expected_message), std::string::npos) << ct.status().message();
+  EXPECT_NE(ct.status().message().find(GetParam().expected_message), std::string::npos)
+      << ct.status().message();
   EXPECT_NE(ct.status().message().find(dir.path().string()), std::string::npos)
       << "the message names the file or folder: " << ct.status().message();
 }
@@ -197,7 +201,10 @@ TEST(DicomReaderRealData, ReadsThePancreasSeries) {
   EXPECT_NEAR(g.spacing_mm.x(), 1.074, 0.001);
   EXPECT_NEAR(g.spacing_mm.z(), 3.0, 1e-3);
   float lo = 1e9f, hi = -1e9f;
-  for (float v : ct->values) { lo = std::min(lo, v); hi = std::max(hi, v); }
+  for (float v : ct->values) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
   EXPECT_LE(lo, -1000.0f);  // air
   EXPECT_GE(hi, 1000.0f);   // bone
 }
@@ -211,7 +218,10 @@ TEST(DicomReaderRealData, AgreesWithPlastimatchConvert) {
   const fs::path mha = dir.path() / "peer.mha";
   std::string log;
   ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", test::pancreas_dicom().string(),
-                                 "--output-img", mha.string(), "--output-type", "float"}, &log).ok()) << log;
+                                 "--output-img", mha.string(), "--output-type", "float"},
+                                &log)
+                  .ok())
+      << log;
   auto ours = read_dicom_series(test::pancreas_dicom());
   ASSERT_TRUE(ours.ok());
   auto peer = test::read_metaimage_for_test(mha);

@@ -23,8 +23,12 @@ void* operator new(std::size_t n) {
   if (void* p = std::malloc(n ? n : 1)) return p;
   throw std::bad_alloc();
 }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p) noexcept {
+  std::free(p);
+}
+void operator delete(void* p, std::size_t) noexcept {
+  std::free(p);
+}
 #pragma GCC diagnostic pop
 
 namespace lftrack::tracking {
@@ -53,7 +57,8 @@ std::shared_ptr<const MuVolume> fixture_volume() {
 }
 
 XrayView fixture_view() {
-  auto v = XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.6, -0.8, 0.0), Vector3d(0, 0, 1), 400, 600, 48, 40, 1.0);
+  auto v = XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.6, -0.8, 0.0), Vector3d(0, 0, 1), 400, 600,
+                                48, 40, 1.0);
   return *v;
 }
 
@@ -147,7 +152,8 @@ TEST_P(EveryRenderer, RejectsBadArgumentsAndLeavesOutputUntouched) {
   Image<float> out(view_.rows, view_.cols, -7.0f);
   Pose nan_pose = pose_;
   nan_pose.translation().x() = std::nan("");
-  EXPECT_FALSE(renderer_->render(nan_pose, view_, PixelWindow::full(view_.rows, view_.cols), out.view()).ok());
+  EXPECT_FALSE(
+      renderer_->render(nan_pose, view_, PixelWindow::full(view_.rows, view_.cols), out.view()).ok());
   EXPECT_FALSE(renderer_->render(pose_, view_, PixelWindow{40, 0, 10, 10}, out.view()).ok());  // outside
   EXPECT_FALSE(renderer_->render(pose_, view_, PixelWindow{0, 0, 10, 10}, out.view()).ok());   // size
   XrayView bad = view_;

@@ -37,8 +37,8 @@ TEST(ImageIo, SixteenBitOutputsAreWindowed) {
   for (const char* name : {"a.png", "a.tif"}) {
     auto back = std::string(name) == "a.png" ? read_png(dir.path() / name) : read_tiff(dir.path() / name);
     ASSERT_TRUE(back.ok()) << name;
-    EXPECT_EQ(back->at(0, 0), 0.0f) << name;           // below the window: black
-    EXPECT_EQ(back->at(8, 4), 65535.0f) << name;       // above: white
+    EXPECT_EQ(back->at(0, 0), 0.0f) << name;                // below the window: black
+    EXPECT_EQ(back->at(8, 4), 65535.0f) << name;            // above: white
     EXPECT_NEAR(back->at(6, 0), 0.5 * 65535, 1.0) << name;  // 0.5 in the window's middle
   }
 }

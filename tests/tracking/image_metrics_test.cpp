@@ -10,7 +10,8 @@ namespace {
 Image<float> pattern(int n, float scale, float offset) {
   Image<float> im(n, n);
   for (int r = 0; r < n; ++r)
-    for (int c = 0; c < n; ++c) im.at(r, c) = scale * std::sin(0.3f * float(r)) * std::cos(0.2f * float(c)) + offset;
+    for (int c = 0; c < n; ++c)
+      im.at(r, c) = scale * std::sin(0.3f * float(r)) * std::cos(0.2f * float(c)) + offset;
   return im;
 }
 
@@ -30,7 +31,8 @@ TEST(Ncc, DefinedOnDegenerateInputs) {
   Image<float> with_nan = pattern(8, 1, 0);
   with_nan.at(3, 3) = std::nanf("");
   EXPECT_TRUE(std::isnan(normalized_cross_correlation(with_nan.view(), pattern(8, 1, 0).view())));
-  EXPECT_TRUE(std::isnan(normalized_cross_correlation(flat.view(), pattern(9, 1, 0).view())));  // size mismatch
+  EXPECT_TRUE(
+      std::isnan(normalized_cross_correlation(flat.view(), pattern(9, 1, 0).view())));  // size mismatch
 }
 
 TEST(Ncc, MaskExcludesPixels) {

@@ -19,13 +19,15 @@ using test::TempDir;
 
 // Writes an 8 x 6 x 4 int16 NIfTI-1 volume with voxel value 10 i + 100 j + 1000 k and the given
 // RAS affine as both sform and qform.
-fs::path write_small_nifti(const fs::path& file, const Eigen::Matrix4d& ras_from_index, int nifti_type = NIFTI_FTYPE_NIFTI1_1) {
+fs::path write_small_nifti(const fs::path& file, const Eigen::Matrix4d& ras_from_index,
+                           int nifti_type = NIFTI_FTYPE_NIFTI1_1) {
   const int64_t dims[8] = {3, 8, 6, 4, 1, 1, 1, 1};
   nifti_image* nim = nifti_make_new_nim(dims, DT_INT16, 1);
   auto* data = static_cast<int16_t*>(nim->data);
   for (int k = 0; k < 4; ++k)
     for (int j = 0; j < 6; ++j)
-      for (int i = 0; i < 8; ++i) data[i + 8 * (j + 6 * k)] = static_cast<int16_t>(10 * i + 100 * j + 1000 * k);
+      for (int i = 0; i < 8; ++i)
+        data[i + 8 * (j + 6 * k)] = static_cast<int16_t>(10 * i + 100 * j + 1000 * k);
   nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = ras_from_index(r, c);
@@ -103,14 +105,26 @@ struct BadNiftiCase {
 
 const BadNiftiCase kBadNifti[] = {
     {"WrongMagic", "not a readable NIfTI",
-     [](const fs::path& f) { poke(f, 344, "xx1\0", 4); poke(f, 0, "\0\0\0\0", 4); }},
+     [](const fs::path& f) {
+       poke(f, 344, "xx1\0", 4);
+       poke(f, 0, "\0\0\0\0", 4);
+     }},
     {"Truncated", "truncated", [](const fs::path& f) { fs::resize_file(f, 352 + 100); }},
     {"ZeroDimension", "NIfTI",
-     [](const fs::path& f) { const int16_t zero = 0; poke(f, 42, &zero, 2); }},
+     [](const fs::path& f) {
+       const int16_t zero = 0;
+       poke(f, 42, &zero, 2);
+     }},
     {"AbsurdDimension", "outside 1..",
-     [](const fs::path& f) { const int16_t big = 30000; poke(f, 42, &big, 2); }},
+     [](const fs::path& f) {
+       const int16_t big = 30000;
+       poke(f, 42, &big, 2);
+     }},
     {"MoreDataClaimedThanPresent", "truncated",
-     [](const fs::path& f) { const int16_t n = 600; poke(f, 46, &n, 2); }},
+     [](const fs::path& f) {
+       const int16_t n = 600;
+       poke(f, 46, &n, 2);
+     }},
     {"NanSpacing", "not finite",
      [](const fs::path& f) {
        const float nan = std::nanf("");
@@ -120,11 +134,16 @@ const BadNiftiCase kBadNifti[] = {
        poke(f, 254, &zero, 2);  // sform_code
      }},
     {"NanAffine", "not finite",
-     [](const fs::path& f) { const float nan = std::nanf(""); poke(f, 280, &nan, 4); }},  // srow_x[0]
+     [](const fs::path& f) {
+       const float nan = std::nanf("");
+       poke(f, 280, &nan, 4);
+     }},  // srow_x[0]
     {"EmptyFile", "not a readable NIfTI", [](const fs::path& f) { fs::resize_file(f, 0); }},
 };
 
-void PrintTo(const BadNiftiCase& c, std::ostream* os) { *os << c.name; }
+void PrintTo(const BadNiftiCase& c, std::ostream* os) {
+  *os << c.name;
+}
 
 class BadNifti : public ::testing::TestWithParam<BadNiftiCase> {};
 
@@ -134,7 +153,8 @@ TEST_P(BadNifti, FailsWithAClearMessage) {
   GetParam().corrupt(file);
   auto ct = read_nifti(file);
   ASSERT_FALSE(ct.ok());
-  EXPECT_NE(ct.status().message().find(GetParam().expected_message), std::string::npos) << ct.status().message();
+  EXPECT_NE(ct.status().message().find(GetParam().expected_message), std::string::npos)
+      << ct.status().message();
   EXPECT_NE(ct.status().message().find(file.string()), std::string::npos) << ct.status().message();
 }
 
@@ -171,17 +191,23 @@ TEST_P(NiftiRealData, AgreesWithPlastimatchConvert) {
   TempDir dir;
   const fs::path mha = dir.path() / "peer.mha";
   std::string log;
-  ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", file.string(), "--output-img", mha.string(),
-                                 "--output-type", "float"}, &log).ok()) << log;
+  ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", file.string(), "--output-img",
+                                 mha.string(), "--output-type", "float"},
+                                &log)
+                  .ok())
+      << log;
   auto peer = test::read_metaimage_for_test(mha);
   ASSERT_TRUE(peer.ok()) << peer.status().message();
   ASSERT_EQ(peer->geometry.size, ours->geometry.size);
   // Compare where each voxel centre lies (the grids may be described with different axis signs
   // only if the voxel order matches, so compare corner voxels' positions and all values).
-  for (const Eigen::Vector3d& idx : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(ours->geometry.size.cast<double>() - Eigen::Vector3d::Ones())}) {
+  for (const Eigen::Vector3d& idx :
+       {Eigen::Vector3d(0, 0, 0),
+        Eigen::Vector3d(ours->geometry.size.cast<double>() - Eigen::Vector3d::Ones())}) {
     const Eigen::Vector3d a = ours->geometry.ct_from_index() * idx;
     const Eigen::Vector3d b = peer->geometry.ct_from_index() * idx;
-    EXPECT_LT((a - b).norm(), 1e-3) << "voxel " << idx.transpose() << ": ours " << a.transpose() << ", plastimatch " << b.transpose();
+    EXPECT_LT((a - b).norm(), 1e-3) << "voxel " << idx.transpose() << ": ours " << a.transpose()
+                                    << ", plastimatch " << b.transpose();
   }
   double max_diff = 0;
   for (std::size_t i = 0; i < ours->values.size(); ++i)
@@ -189,8 +215,11 @@ TEST_P(NiftiRealData, AgreesWithPlastimatchConvert) {
   EXPECT_LT(max_diff, 0.01);
 }
 
-INSTANTIATE_TEST_SUITE_P(TotalSegmentator, NiftiRealData, ::testing::Values("example_ct.nii.gz", "aorta_ct_cropped.nii.gz"),
-                         [](const auto& p) { return std::string(p.param).substr(0, std::string(p.param).find('.')); });
+INSTANTIATE_TEST_SUITE_P(TotalSegmentator, NiftiRealData,
+                         ::testing::Values("example_ct.nii.gz", "aorta_ct_cropped.nii.gz"),
+                         [](const auto& p) {
+                           return std::string(p.param).substr(0, std::string(p.param).find('.'));
+                         });
 
 }  // namespace
 }  // namespace lftrack::tracking

@@ -12,7 +12,8 @@ using Eigen::Vector3d;
 
 TEST(RotationExp, MatchesAngleAxisAndIsExactNearZero) {
   const Vector3d omega(0.3, -0.2, 0.9);
-  EXPECT_TRUE(rotation_exp(omega).isApprox(Eigen::AngleAxisd(omega.norm(), omega.normalized()).toRotationMatrix(), 1e-12));
+  EXPECT_TRUE(rotation_exp(omega).isApprox(
+      Eigen::AngleAxisd(omega.norm(), omega.normalized()).toRotationMatrix(), 1e-12));
   const Vector3d tiny(1e-12, -2e-12, 3e-12);
   const Matrix3d r = rotation_exp(tiny);
   EXPECT_TRUE((r.transpose() * r).isApprox(Matrix3d::Identity(), 1e-15));
@@ -50,7 +51,8 @@ TEST(PoseDelta, RotatesAboutTheRegistrationOrigin) {
   // A translation-only delta moves every point by t.
   PoseDelta shift;
   shift.translation_mm = Vector3d(4, 5, 6);
-  EXPECT_TRUE((apply_delta(t0, shift, c) * Vector3d(7, 8, 9)).isApprox(t0 * Vector3d(7, 8, 9) + Vector3d(4, 5, 6)));
+  EXPECT_TRUE(
+      (apply_delta(t0, shift, c) * Vector3d(7, 8, 9)).isApprox(t0 * Vector3d(7, 8, 9) + Vector3d(4, 5, 6)));
 }
 
 TEST(PoseDelta, DeltaBetweenInvertsApplyDelta) {

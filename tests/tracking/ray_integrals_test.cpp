@@ -103,13 +103,13 @@ TEST(Siddon, RaysOnFacesAndEdgesFollowTheHalfOpenRule) {
 TEST(Siddon, MissingZeroLengthAndInsideRays) {
   const MuVolume box = uniform_box({10, 10, 10}, {1, 1, 1}, 1.0f);
   const GridRayCaster caster(box);
-  EXPECT_EQ(caster.siddon({-20, 20, 3}, {20, 20, 3}), 0.0);                  // misses
-  EXPECT_EQ(caster.siddon({3, 3, 3}, {3, 3, 3}), 0.0);                       // zero length
-  EXPECT_NEAR(caster.siddon({4.5, 2, 2}, {20, 2, 2}), 5.0, 1e-12);           // starts inside
-  EXPECT_NEAR(caster.siddon({1.0, 2, 2}, {3.25, 2, 2}), 2.25, 1e-12);        // wholly inside
-  EXPECT_NEAR(caster.siddon({-20, 2, 2}, {4.5, 2, 2}), 5.0, 1e-12);          // ends inside
+  EXPECT_EQ(caster.siddon({-20, 20, 3}, {20, 20, 3}), 0.0);            // misses
+  EXPECT_EQ(caster.siddon({3, 3, 3}, {3, 3, 3}), 0.0);                 // zero length
+  EXPECT_NEAR(caster.siddon({4.5, 2, 2}, {20, 2, 2}), 5.0, 1e-12);     // starts inside
+  EXPECT_NEAR(caster.siddon({1.0, 2, 2}, {3.25, 2, 2}), 2.25, 1e-12);  // wholly inside
+  EXPECT_NEAR(caster.siddon({-20, 2, 2}, {4.5, 2, 2}), 5.0, 1e-12);    // ends inside
   const double nan = std::nan("");
-  EXPECT_EQ(caster.siddon({nan, 2, 2}, {4.5, 2, 2}), 0.0);                   // NaN: no ray
+  EXPECT_EQ(caster.siddon({nan, 2, 2}, {4.5, 2, 2}), 0.0);  // NaN: no ray
 }
 
 // A voxelised sphere and ellipsoid: Siddon equals the exact sum of per-voxel chords to 1e-5
@@ -199,7 +199,8 @@ TEST(Trilinear, ApproachesSiddonOnSmoothVolumes) {
   MuVolume v = uniform_box({24, 24, 24}, {1, 1, 1}, 0.0f);
   for (int k = 0; k < 24; ++k)
     for (int j = 0; j < 24; ++j)
-      for (int i = 0; i < 24; ++i) v.at(i, j, k) = static_cast<float>(0.02 * (1 + std::sin(0.3 * i) * std::cos(0.2 * j + 0.1 * k)));
+      for (int i = 0; i < 24; ++i)
+        v.at(i, j, k) = static_cast<float>(0.02 * (1 + std::sin(0.3 * i) * std::cos(0.2 * j + 0.1 * k)));
   const GridRayCaster caster(v);
   const Vector3d p0(-30, 5.3, 7.9), p1(60, 17.1, 14.2);
   const double s = caster.siddon(p0, p1);

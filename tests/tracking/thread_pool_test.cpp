@@ -17,7 +17,8 @@ TEST(ThreadPool, CoversEveryIndexExactlyOnce) {
       pool.parallel_for(count, 3, [&](int b, int e) {
         for (int i = b; i < e; ++i) hits[static_cast<std::size_t>(i)].fetch_add(1);
       });
-      for (int i = 0; i < count; ++i) ASSERT_EQ(hits[static_cast<std::size_t>(i)].load(), 1) << threads << " " << count;
+      for (int i = 0; i < count; ++i)
+        ASSERT_EQ(hits[static_cast<std::size_t>(i)].load(), 1) << threads << " " << count;
     }
   }
 }

@@ -23,7 +23,8 @@ TEST(VolumeGeometry, IndexAndCtFrameRoundTrip) {
   EXPECT_TRUE((g.index_from_ct() * p).isApprox(idx, 1e-12));
   // Voxel (0,0,0) is at the origin; one step in i moves spacing_i along direction column 0.
   EXPECT_TRUE((g.ct_from_index() * Eigen::Vector3d::Zero()).isApprox(g.origin_mm));
-  EXPECT_TRUE((g.ct_from_index() * Eigen::Vector3d::UnitX() - g.origin_mm).isApprox(0.5 * g.direction.col(0)));
+  EXPECT_TRUE(
+      (g.ct_from_index() * Eigen::Vector3d::UnitX() - g.origin_mm).isApprox(0.5 * g.direction.col(0)));
 }
 
 TEST(VolumeGeometry, GridFrameIsRigidAndScaledBySpacing) {
@@ -48,14 +49,46 @@ TEST(VolumeGeometry, ValidateRejectsEachBadClass) {
   };
   VolumeGeometry g = oblique_geometry();
   EXPECT_TRUE(g.validate().ok());
-  { auto b = g; b.size.y() = 0; expect_bad(b, "zero size"); }
-  { auto b = g; b.size.x() = 100000; expect_bad(b, "absurd size"); }
-  { auto b = g; b.size = {8192, 8192, 8192}; expect_bad(b, "too many voxels"); }
-  { auto b = g; b.spacing_mm.z() = std::nan(""); expect_bad(b, "NaN spacing"); }
-  { auto b = g; b.spacing_mm.x() = -1; expect_bad(b, "negative spacing"); }
-  { auto b = g; b.spacing_mm.x() = 1e6; expect_bad(b, "absurd spacing"); }
-  { auto b = g; b.origin_mm.y() = INFINITY; expect_bad(b, "infinite origin"); }
-  { auto b = g; b.direction(0, 1) += 0.3; expect_bad(b, "sheared axes"); }
+  {
+    auto b = g;
+    b.size.y() = 0;
+    expect_bad(b, "zero size");
+  }
+  {
+    auto b = g;
+    b.size.x() = 100000;
+    expect_bad(b, "absurd size");
+  }
+  {
+    auto b = g;
+    b.size = {8192, 8192, 8192};
+    expect_bad(b, "too many voxels");
+  }
+  {
+    auto b = g;
+    b.spacing_mm.z() = std::nan("");
+    expect_bad(b, "NaN spacing");
+  }
+  {
+    auto b = g;
+    b.spacing_mm.x() = -1;
+    expect_bad(b, "negative spacing");
+  }
+  {
+    auto b = g;
+    b.spacing_mm.x() = 1e6;
+    expect_bad(b, "absurd spacing");
+  }
+  {
+    auto b = g;
+    b.origin_mm.y() = INFINITY;
+    expect_bad(b, "infinite origin");
+  }
+  {
+    auto b = g;
+    b.direction(0, 1) += 0.3;
+    expect_bad(b, "sheared axes");
+  }
 }
 
 TEST(Attenuation, FollowsTheDesignFormulaAndClampsAtZero) {

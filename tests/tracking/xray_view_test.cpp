@@ -11,7 +11,8 @@ namespace {
 using Eigen::Vector3d;
 
 XrayView oblique_view() {
-  return *XrayView::isocentric("A", Vector3d(3, -2, 5), Vector3d(1, -1, 0.2), Vector3d(0, 0, 1), 1500, 2100, 512, 400, 0.4);
+  return *XrayView::isocentric("A", Vector3d(3, -2, 5), Vector3d(1, -1, 0.2), Vector3d(0, 0, 1), 1500, 2100,
+                               512, 400, 0.4);
 }
 
 TEST(XrayView, IsocentricGeometry) {
@@ -66,13 +67,37 @@ TEST(XrayView, ResampledWindowCoversTheSameArea) {
 
 TEST(XrayView, ValidateRejectsBadGeometry) {
   const XrayView good = oblique_view();
-  { XrayView v = good; v.rows = 0; EXPECT_FALSE(v.validate().ok()); }
-  { XrayView v = good; v.pitch_row_mm = 0; EXPECT_FALSE(v.validate().ok()); }
-  { XrayView v = good; v.col_axis = v.row_axis; EXPECT_FALSE(v.validate().ok()); }
-  { XrayView v = good; v.source_mm.x() = std::nan(""); EXPECT_FALSE(v.validate().ok()); }
-  { XrayView v = good; v.source_mm = v.pixel00_mm; EXPECT_FALSE(v.validate().ok()); }
-  EXPECT_FALSE(XrayView::isocentric("x", Vector3d::Zero(), Vector3d(0, 0, 1), Vector3d(0, 0, 1), 1000, 1500, 10, 10, 1).ok());
-  EXPECT_FALSE(XrayView::isocentric("x", Vector3d::Zero(), Vector3d(1, 0, 0), Vector3d(0, 0, 1), 1500, 1000, 10, 10, 1).ok());
+  {
+    XrayView v = good;
+    v.rows = 0;
+    EXPECT_FALSE(v.validate().ok());
+  }
+  {
+    XrayView v = good;
+    v.pitch_row_mm = 0;
+    EXPECT_FALSE(v.validate().ok());
+  }
+  {
+    XrayView v = good;
+    v.col_axis = v.row_axis;
+    EXPECT_FALSE(v.validate().ok());
+  }
+  {
+    XrayView v = good;
+    v.source_mm.x() = std::nan("");
+    EXPECT_FALSE(v.validate().ok());
+  }
+  {
+    XrayView v = good;
+    v.source_mm = v.pixel00_mm;
+    EXPECT_FALSE(v.validate().ok());
+  }
+  EXPECT_FALSE(
+      XrayView::isocentric("x", Vector3d::Zero(), Vector3d(0, 0, 1), Vector3d(0, 0, 1), 1000, 1500, 10, 10, 1)
+          .ok());
+  EXPECT_FALSE(
+      XrayView::isocentric("x", Vector3d::Zero(), Vector3d(1, 0, 0), Vector3d(0, 0, 1), 1500, 1000, 10, 10, 1)
+          .ok());
 }
 
 }  // namespace

@@ -5,8 +5,8 @@
 // DCMTK reports both as errors.
 
 #include <dcmtk/config/osconfig.h>  // must come first
-#include <dcmtk/dcmdata/dcfilefo.h>
 #include <dcmtk/dcmdata/dcdeftag.h>
+#include <dcmtk/dcmdata/dcfilefo.h>
 #include <dcmtk/dcmdata/dcrledrg.h>
 #include <dcmtk/dcmdata/dcxfer.h>
 #include <dcmtk/dcmjpeg/djdecode.h>
@@ -83,8 +83,7 @@ Status required_decimals(DcmDataset& ds, const DcmTagKey& tag, unsigned long n, 
 }
 
 template <class T>
-void convert_pixels(const T* raw, std::size_t count, double slope, double intercept,
-                    std::vector<float>* hu) {
+void convert_pixels(const T* raw, std::size_t count, double slope, double intercept, std::vector<float>* hu) {
   hu->resize(count);
   for (std::size_t i = 0; i < count; ++i) {
     (*hu)[i] = static_cast<float>(slope * static_cast<double>(raw[i]) + intercept);
@@ -103,8 +102,9 @@ Status read_pixels(DcmDataset& ds, Slice* slice) {
   if (original.isEncapsulated()) {
     if (ds.chooseRepresentation(EXS_LittleEndianExplicit, nullptr).bad() ||
         !ds.canWriteXfer(EXS_LittleEndianExplicit)) {
-      return unsupported(std::string("pixel data cannot be decoded (transfer syntax ") + original.getXferName() +
-                         ", " + original.getXferID() + ", has no decoder in this DCMTK build)");
+      return unsupported(std::string("pixel data cannot be decoded (transfer syntax ") +
+                         original.getXferName() + ", " + original.getXferID() +
+                         ", has no decoder in this DCMTK build)");
     }
   }
   const std::size_t count = std::size_t(slice->rows) * std::size_t(slice->cols);
@@ -115,10 +115,12 @@ Status read_pixels(DcmDataset& ds, Slice* slice) {
       return corrupt_data("no readable pixel data");
     }
     if (got < count) {
-      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " + std::to_string(count));
+      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " +
+                          std::to_string(count));
     }
     if (representation == 1) {
-      convert_pixels(reinterpret_cast<const int16_t*>(raw), count, slice->slope, slice->intercept, &slice->hu);
+      convert_pixels(reinterpret_cast<const int16_t*>(raw), count, slice->slope, slice->intercept,
+                     &slice->hu);
     } else {
       convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
     }
@@ -128,7 +130,8 @@ Status read_pixels(DcmDataset& ds, Slice* slice) {
       return corrupt_data("no readable pixel data");
     }
     if (got < count) {
-      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " + std::to_string(count));
+      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " +
+                          std::to_string(count));
     }
     convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
   } else {
@@ -149,7 +152,8 @@ Status read_slice(const fs::path& file, Slice* slice) {
 
   const std::string modality = get_string(ds, DCM_Modality);
   if (modality != "CT") {
-    return unsupported("modality is '" + (modality.empty() ? std::string("none") : modality) + "', expected CT");
+    return unsupported("modality is '" + (modality.empty() ? std::string("none") : modality) +
+                       "', expected CT");
   }
   slice->series_uid = get_string(ds, DCM_SeriesInstanceUID);
   if (slice->series_uid.empty()) return corrupt_data("missing SeriesInstanceUID");
@@ -161,7 +165,8 @@ Status read_slice(const fs::path& file, Slice* slice) {
   std::vector<double> v;
   LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_ImagePositionPatient, 3, "ImagePositionPatient", &v));
   slice->position = {v[0], v[1], v[2]};
-  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_ImageOrientationPatient, 6, "ImageOrientationPatient", &v));
+  LFTRACK_RETURN_IF_ERROR(
+      required_decimals(ds, DCM_ImageOrientationPatient, 6, "ImageOrientationPatient", &v));
   slice->row_cosine = {v[0], v[1], v[2]};
   slice->col_cosine = {v[3], v[4], v[5]};
   if (std::abs(slice->row_cosine.norm() - 1.0) > 1e-3 || std::abs(slice->col_cosine.norm() - 1.0) > 1e-3 ||
@@ -194,18 +199,14 @@ Status read_slice(const fs::path& file, Slice* slice) {
 Status check_consistent(const Slice& ref, const Slice& s) {
   const std::string vs = " (" + ref.file.filename().string() + " has ";
   if (s.series_uid != ref.series_uid) {
-    return invalid_argument("mixed series: SeriesInstanceUID " + s.series_uid + vs +
-                            ref.series_uid + ")");
+    return invalid_argument("mixed series: SeriesInstanceUID " + s.series_uid + vs + ref.series_uid + ")");
   }
   if (s.rows != ref.rows || s.cols != ref.cols) {
-    return invalid_argument("mixed sizes: " + std::to_string(s.rows) + " x " +
-                            std::to_string(s.cols) + vs + std::to_string(ref.rows) + " x " +
-                            std::to_string(ref.cols) + ")");
+    return invalid_argument("mixed sizes: " + std::to_string(s.rows) + " x " + std::to_string(s.cols) + vs +
+                            std::to_string(ref.rows) + " x " + std::to_string(ref.cols) + ")");
   }
-  if ((s.row_cosine - ref.row_cosine).norm() > 1e-4 ||
-      (s.col_cosine - ref.col_cosine).norm() > 1e-4) {
-    return invalid_argument("mixed orientations: ImageOrientationPatient differs" + vs +
-                            "another)");
+  if ((s.row_cosine - ref.row_cosine).norm() > 1e-4 || (s.col_cosine - ref.col_cosine).norm() > 1e-4) {
+    return invalid_argument("mixed orientations: ImageOrientationPatient differs" + vs + "another)");
   }
   if ((s.pixel_spacing - ref.pixel_spacing).norm() > 1e-4) {
     return invalid_argument("mixed pixel spacings" + vs + "another)");
@@ -215,15 +216,13 @@ Status check_consistent(const Slice& ref, const Slice& s) {
 
 // Checks that sorted slices are evenly spaced along the normal, with no duplicate, gap or tilt.
 // Returns the slice spacing in `spacing_mm`.
-Status check_stack(const std::vector<Slice>& slices, const Eigen::Vector3d& normal,
-                   double* spacing_mm) {
+Status check_stack(const std::vector<Slice>& slices, const Eigen::Vector3d& normal, double* spacing_mm) {
   std::vector<double> gaps;
   for (std::size_t k = 1; k < slices.size(); ++k) {
     gaps.push_back(slices[k].along_normal_mm - slices[k - 1].along_normal_mm);
   }
   std::vector<double> sorted_gaps = gaps;
-  std::nth_element(sorted_gaps.begin(), sorted_gaps.begin() + sorted_gaps.size() / 2,
-                   sorted_gaps.end());
+  std::nth_element(sorted_gaps.begin(), sorted_gaps.begin() + sorted_gaps.size() / 2, sorted_gaps.end());
   const double nominal = sorted_gaps[sorted_gaps.size() / 2];
   auto pair_name = [&](std::size_t k) {
     return slices[k - 1].file.filename().string() + " and " + slices[k].file.filename().string();
@@ -239,9 +238,8 @@ Status check_stack(const std::vector<Slice>& slices, const Eigen::Vector3d& norm
     if (std::abs(gap - nominal) > std::max(1e-2, 1e-2 * nominal)) {
       const double ratio = gap / nominal;
       if (ratio > 1.5 && std::abs(ratio - std::round(ratio)) < 0.05) {
-        m << "missing slice(s): " << static_cast<int>(std::round(ratio)) - 1
-          << " slice(s) absent between " << pair_name(k) << " (gap " << gap
-          << " mm, spacing " << nominal << " mm)";
+        m << "missing slice(s): " << static_cast<int>(std::round(ratio)) - 1 << " slice(s) absent between "
+          << pair_name(k) << " (gap " << gap << " mm, spacing " << nominal << " mm)";
       } else {
         m << "uneven slice spacing: gap of " << gap << " mm between " << pair_name(k)
           << ", the series' spacing is " << nominal << " mm";
@@ -288,9 +286,8 @@ Result<CtVolume> read_dicom_series(const fs::path& folder) {
 
   const Eigen::Vector3d normal = slices[0].row_cosine.cross(slices[0].col_cosine).normalized();
   for (Slice& s : slices) s.along_normal_mm = normal.dot(s.position);
-  std::sort(slices.begin(), slices.end(), [](const Slice& a, const Slice& b) {
-    return a.along_normal_mm < b.along_normal_mm;
-  });
+  std::sort(slices.begin(), slices.end(),
+            [](const Slice& a, const Slice& b) { return a.along_normal_mm < b.along_normal_mm; });
   double slice_spacing_mm = 0;
   if (Status s = check_stack(slices, normal, &slice_spacing_mm); !s.ok()) {
     return s.with_context(folder.string());
@@ -320,7 +317,8 @@ Result<CtVolume> read_ct(const fs::path& path) {
   if (fs::is_directory(path, ec)) return read_dicom_series(path);
   const std::string name = path.filename().string();
   auto ends_with = [&](std::string_view suffix) {
-    return name.size() >= suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+    return name.size() >= suffix.size() &&
+           name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
   };
   if (ends_with(".nii") || ends_with(".nii.gz")) return read_nifti(path);
   return unsupported(path.string() +

@@ -152,7 +152,8 @@ Result<Image<float>> read_pfm(const fs::path& file) {
   in.get();  // the single whitespace after the scale
   Image<float> image(rows, cols);
   for (int r = rows - 1; r >= 0; --r) {
-    in.read(reinterpret_cast<char*>(&image.at(r, 0)), static_cast<std::streamsize>(sizeof(float) * std::size_t(cols)));
+    in.read(reinterpret_cast<char*>(&image.at(r, 0)),
+            static_cast<std::streamsize>(sizeof(float) * std::size_t(cols)));
   }
   if (!in) return corrupt_data(file.string() + ": PFM data is truncated");
   if (scale > 0) {  // big-endian data
@@ -178,9 +179,9 @@ Result<Image<float>> read_tiff(const fs::path& file) {
   TIFFGetField(tif, TIFFTAG_BITSPERSAMPLE, &bits);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &spp);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &fmt);
-  const bool supported = spp == 1 && w >= 1 && h >= 1 && w <= 65536 && h <= 65536 &&
-                         ((fmt == SAMPLEFORMAT_UINT && (bits == 8 || bits == 16)) ||
-                          (fmt == SAMPLEFORMAT_IEEEFP && bits == 32));
+  const bool supported =
+      spp == 1 && w >= 1 && h >= 1 && w <= 65536 && h <= 65536 &&
+      ((fmt == SAMPLEFORMAT_UINT && (bits == 8 || bits == 16)) || (fmt == SAMPLEFORMAT_IEEEFP && bits == 32));
   if (!supported) {
     TIFFClose(tif);
     return unsupported(file.string() + ": TIFF must be one-sample 8/16-bit unsigned or 32-bit float");
@@ -194,9 +195,14 @@ Result<Image<float>> read_tiff(const fs::path& file) {
     }
     for (uint32_t c = 0; c < w; ++c) {
       float v;
-      if (bits == 8) v = line[c];
-      else if (bits == 16) { uint16_t u; std::memcpy(&u, &line[2 * c], 2); v = u; }
-      else std::memcpy(&v, &line[4 * c], 4);
+      if (bits == 8)
+        v = line[c];
+      else if (bits == 16) {
+        uint16_t u;
+        std::memcpy(&u, &line[2 * c], 2);
+        v = u;
+      } else
+        std::memcpy(&v, &line[4 * c], 4);
       image.at(int(r), int(c)) = v;
     }
   }

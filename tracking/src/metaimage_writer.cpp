@@ -25,9 +25,9 @@ Status write_metaimage(const ScalarVolume<Unit>& volume, const std::filesystem::
     for (int c = 0; c < 3; ++c) out << ' ' << g.direction(c, axis);
   out << "\nOffset = " << g.origin_mm.x() << ' ' << g.origin_mm.y() << ' ' << g.origin_mm.z()
       << "\nAnatomicalOrientation = RAI\n"
-      << "ElementSpacing = " << g.spacing_mm.x() << ' ' << g.spacing_mm.y() << ' '
-      << g.spacing_mm.z() << "\nDimSize = " << g.size.x() << ' ' << g.size.y() << ' '
-      << g.size.z() << "\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n";
+      << "ElementSpacing = " << g.spacing_mm.x() << ' ' << g.spacing_mm.y() << ' ' << g.spacing_mm.z()
+      << "\nDimSize = " << g.size.x() << ' ' << g.size.y() << ' ' << g.size.z()
+      << "\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n";
   out.write(reinterpret_cast<const char*>(volume.values.data()),
             static_cast<std::streamsize>(volume.values.size() * sizeof(float)));
   if (!out) return io_error(file.string() + ": write failed");

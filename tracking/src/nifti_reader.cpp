@@ -22,8 +22,7 @@ struct NiftiDeleter {
 using NiftiPtr = std::unique_ptr<nifti_image, NiftiDeleter>;
 
 template <class T>
-void copy_scaled(const void* data, std::size_t count, double slope, double inter,
-                 std::vector<float>* out) {
+void copy_scaled(const void* data, std::size_t count, double slope, double inter, std::vector<float>* out) {
   const T* p = static_cast<const T*>(data);
   out->resize(count);
   for (std::size_t i = 0; i < count; ++i) {
@@ -117,8 +116,8 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   g.size = {int(nim->nx), int(nim->ny), int(nim->nz)};
   for (int c = 0; c < 3; ++c) {
     g.spacing_mm[c] = linear.col(c).norm();
-    g.direction.col(c) = g.spacing_mm[c] > 0 ? Eigen::Vector3d(linear.col(c) / g.spacing_mm[c])
-                                             : Eigen::Vector3d::Zero();
+    g.direction.col(c) =
+        g.spacing_mm[c] > 0 ? Eigen::Vector3d(linear.col(c) / g.spacing_mm[c]) : Eigen::Vector3d::Zero();
   }
   g.origin_mm = lps_from_ras * ras.topRightCorner<3, 1>();
   if (Status s = g.validate(); !s.ok()) return s.with_context(name + " (" + form + ")");
@@ -142,14 +141,30 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   }
   if (!std::isfinite(inter)) inter = 0.0;
   switch (nim->datatype) {
-    case DT_INT8: copy_scaled<int8_t>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_UINT8: copy_scaled<uint8_t>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_INT16: copy_scaled<int16_t>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_UINT16: copy_scaled<uint16_t>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_INT32: copy_scaled<int32_t>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_UINT32: copy_scaled<uint32_t>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_FLOAT32: copy_scaled<float>(nim->data, count, slope, inter, &ct.values); break;
-    case DT_FLOAT64: copy_scaled<double>(nim->data, count, slope, inter, &ct.values); break;
+    case DT_INT8:
+      copy_scaled<int8_t>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_UINT8:
+      copy_scaled<uint8_t>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_INT16:
+      copy_scaled<int16_t>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_UINT16:
+      copy_scaled<uint16_t>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_INT32:
+      copy_scaled<int32_t>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_UINT32:
+      copy_scaled<uint32_t>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_FLOAT32:
+      copy_scaled<float>(nim->data, count, slope, inter, &ct.values);
+      break;
+    case DT_FLOAT64:
+      copy_scaled<double>(nim->data, count, slope, inter, &ct.values);
+      break;
     default:
       return unsupported(name + ": NIfTI datatype " + std::string(nifti_datatype_string(nim->datatype)) +
                          " is not a scalar type lftrack reads");

@@ -26,8 +26,7 @@ class RayCastRenderer final : public DrrRenderer {
                 ImageView<float> out) const override {
     LFTRACK_RETURN_IF_ERROR(check_render_arguments(T_room_from_ct, view, window, out));
     // Everything in the grid frame: pixel centres are affine in (row, col).
-    const Eigen::Isometry3d T_grid_from_room =
-        volume_->geometry.grid_from_ct() * T_room_from_ct.inverse();
+    const Eigen::Isometry3d T_grid_from_room = volume_->geometry.grid_from_ct() * T_room_from_ct.inverse();
     const Eigen::Vector3d source = T_grid_from_room * view.source_mm;
     const Eigen::Vector3d pixel00 = T_grid_from_room * view.pixel00_mm;
     const Eigen::Vector3d per_col = T_grid_from_room.linear() * view.col_axis * view.pitch_col_mm;
@@ -36,8 +35,7 @@ class RayCastRenderer final : public DrrRenderer {
     auto rows_body = [&](int r_begin, int r_end) {
       for (int r = r_begin; r < r_end; ++r) {
         float* dst = out.row_ptr(r);
-        const Eigen::Vector3d row_start =
-            pixel00 + per_row * (window.row0 + r) + per_col * window.col0;
+        const Eigen::Vector3d row_start = pixel00 + per_row * (window.row0 + r) + per_col * window.col0;
         for (int c = 0; c < window.cols; ++c) {
           const Eigen::Vector3d pixel = row_start + per_col * c;
           const double p = rule_ == RayRule::kSiddon ? caster_.siddon(source, pixel)
@@ -64,27 +62,27 @@ class RayCastRenderer final : public DrrRenderer {
 
 }  // namespace
 
-Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view,
-                              const PixelWindow& window, const ImageView<float>& out) {
+Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                              const ImageView<float>& out) {
   if (!T_room_from_ct.matrix().allFinite()) return invalid_argument("pose is not finite");
   LFTRACK_RETURN_IF_ERROR(view.validate());
   if (!window.inside(view.rows, view.cols)) {
     return out_of_range("pixel window rows " + std::to_string(window.row0) + "+" +
-                        std::to_string(window.rows) + ", cols " + std::to_string(window.col0) +
-                        "+" + std::to_string(window.cols) + " is not inside the " +
-                        std::to_string(view.rows) + " x " + std::to_string(view.cols) +
-                        " detector of view '" + view.name + "'");
+                        std::to_string(window.rows) + ", cols " + std::to_string(window.col0) + "+" +
+                        std::to_string(window.cols) + " is not inside the " + std::to_string(view.rows) +
+                        " x " + std::to_string(view.cols) + " detector of view '" + view.name + "'");
   }
-  if (out.data == nullptr || out.rows != window.rows || out.cols != window.cols ||
-      out.stride < out.cols) {
-    return invalid_argument("output image is " + std::to_string(out.rows) + " x " +
-                            std::to_string(out.cols) + ", the window is " +
-                            std::to_string(window.rows) + " x " + std::to_string(window.cols));
+  if (out.data == nullptr || out.rows != window.rows || out.cols != window.cols || out.stride < out.cols) {
+    return invalid_argument("output image is " + std::to_string(out.rows) + " x " + std::to_string(out.cols) +
+                            ", the window is " + std::to_string(window.rows) + " x " +
+                            std::to_string(window.cols));
   }
   return {};
 }
 
-std::vector<std::string> renderer_names() { return {"siddon", "trilinear"}; }
+std::vector<std::string> renderer_names() {
+  return {"siddon", "trilinear"};
+}
 
 Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
@@ -95,13 +93,15 @@ Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
     return invalid_argument("make_renderer: volume data does not match its geometry");
   }
   if (name == "siddon") {
-    return std::unique_ptr<DrrRenderer>(std::make_unique<RayCastRenderer>(RayRule::kSiddon, std::move(volume), options));
+    return std::unique_ptr<DrrRenderer>(
+        std::make_unique<RayCastRenderer>(RayRule::kSiddon, std::move(volume), options));
   }
   if (name == "trilinear") {
     if (!(options.trilinear_step_fraction > 0.01) || !(options.trilinear_step_fraction <= 4.0)) {
       return out_of_range("trilinear step fraction must be in (0.01, 4]");
     }
-    return std::unique_ptr<DrrRenderer>(std::make_unique<RayCastRenderer>(RayRule::kTrilinear, std::move(volume), options));
+    return std::unique_ptr<DrrRenderer>(
+        std::make_unique<RayCastRenderer>(RayRule::kTrilinear, std::move(volume), options));
   }
   std::string known;
   for (const auto& n : renderer_names()) known += (known.empty() ? "" : ", ") + n;

@@ -97,8 +97,8 @@ namespace {
 
 // Sum of trilinear samples along a clipped ray, in voxel-index coordinates.
 LFTRACK_HOT_CLONES
-double trilinear_sum(const float* mu, int nx, int ny, int nz, double x, double y, double z,
-                     double dx, double dy, double dz, int samples) {
+double trilinear_sum(const float* mu, int nx, int ny, int nz, double x, double y, double z, double dx,
+                     double dy, double dz, int samples) {
   const std::ptrdiff_t sy = nx, sz = std::ptrdiff_t{nx} * ny;
   const double max_x = nx - 1, max_y = ny - 1, max_z = nz - 1;
   double sum = 0.0;
@@ -126,8 +126,7 @@ double trilinear_sum(const float* mu, int nx, int ny, int nz, double x, double y
 
 }  // namespace
 
-double GridRayCaster::trilinear(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
-                                double step_mm) const {
+double GridRayCaster::trilinear(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, double step_mm) const {
   double a0 = 0, a1 = 0;
   if (!clip(p0, p1, &a0, &a1)) return 0.0;
   const Eigen::Vector3d d = p1 - p0;
@@ -138,9 +137,8 @@ double GridRayCaster::trilinear(const Eigen::Vector3d& p0, const Eigen::Vector3d
   const Eigen::Vector3d inv_s = g.spacing_mm.cwiseInverse();
   const Eigen::Vector3d start = (p0 + (a0 + 0.5 * da) * d).cwiseProduct(inv_s);
   const Eigen::Vector3d inc = (da * d).cwiseProduct(inv_s);
-  const double sum = trilinear_sum(volume_.values.data(), g.size.x(), g.size.y(), g.size.z(),
-                                   start.x(), start.y(), start.z(), inc.x(), inc.y(), inc.z(),
-                                   samples);
+  const double sum = trilinear_sum(volume_.values.data(), g.size.x(), g.size.y(), g.size.z(), start.x(),
+                                   start.y(), start.z(), inc.x(), inc.y(), inc.z(), samples);
   return sum * (length_mm / samples);
 }
 

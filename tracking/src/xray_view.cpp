@@ -61,8 +61,8 @@ XrayView XrayView::transformed(const Eigen::Isometry3d& T_new_from_old) const {
   return v;
 }
 
-XrayView XrayView::resampled(int window_row0, int window_col0, int window_rows, int window_cols,
-                             int new_rows, int new_cols) const {
+XrayView XrayView::resampled(int window_row0, int window_col0, int window_rows, int window_cols, int new_rows,
+                             int new_cols) const {
   XrayView v = *this;
   v.rows = new_rows;
   v.cols = new_cols;
@@ -76,16 +76,16 @@ XrayView XrayView::resampled(int window_row0, int window_col0, int window_rows, 
 
 Status XrayView::validate() const {
   const std::string who = "view '" + name + "': ";
-  if (!source_mm.allFinite() || !pixel00_mm.allFinite() || !col_axis.allFinite() ||
-      !row_axis.allFinite() || !std::isfinite(pitch_col_mm) || !std::isfinite(pitch_row_mm)) {
+  if (!source_mm.allFinite() || !pixel00_mm.allFinite() || !col_axis.allFinite() || !row_axis.allFinite() ||
+      !std::isfinite(pitch_col_mm) || !std::isfinite(pitch_row_mm)) {
     return invalid_argument(who + "geometry has a non-finite value");
   }
   if (!(pitch_col_mm > 0) || !(pitch_row_mm > 0) || pitch_col_mm > 100 || pitch_row_mm > 100) {
     return out_of_range(who + "pixel pitch must be in (0, 100] mm");
   }
   if (rows < 1 || cols < 1 || rows > 16384 || cols > 16384) {
-    return out_of_range(who + "detector must have 1..16384 rows and columns, has " +
-                        std::to_string(rows) + " x " + std::to_string(cols));
+    return out_of_range(who + "detector must have 1..16384 rows and columns, has " + std::to_string(rows) +
+                        " x " + std::to_string(cols));
   }
   if (std::abs(col_axis.norm() - 1) > 1e-6 || std::abs(row_axis.norm() - 1) > 1e-6 ||
       std::abs(col_axis.dot(row_axis)) > 1e-6) {
@@ -98,10 +98,9 @@ Status XrayView::validate() const {
 }
 
 Result<XrayView> XrayView::isocentric(std::string name, const Eigen::Vector3d& isocentre_mm,
-                                      const Eigen::Vector3d& source_direction,
-                                      const Eigen::Vector3d& up, double source_to_iso_mm,
-                                      double source_to_detector_mm, int rows, int cols,
-                                      double pitch_mm) {
+                                      const Eigen::Vector3d& source_direction, const Eigen::Vector3d& up,
+                                      double source_to_iso_mm, double source_to_detector_mm, int rows,
+                                      int cols, double pitch_mm) {
   if (!(source_direction.norm() > 1e-9) || !source_direction.allFinite()) {
     return invalid_argument("view '" + name + "': source direction is zero or not finite");
   }
@@ -126,8 +125,7 @@ Result<XrayView> XrayView::isocentric(std::string name, const Eigen::Vector3d& i
   v.rows = rows;
   v.cols = cols;
   const Eigen::Vector3d centre = v.source_mm + beam * source_to_detector_mm;
-  v.pixel00_mm = centre - 0.5 * (cols - 1) * pitch_mm * v.col_axis -
-                 0.5 * (rows - 1) * pitch_mm * v.row_axis;
+  v.pixel00_mm = centre - 0.5 * (cols - 1) * pitch_mm * v.col_axis - 0.5 * (rows - 1) * pitch_mm * v.row_axis;
   if (Status s = v.validate(); !s.ok()) return s;
   return v;
 }

@@ -29,7 +29,6 @@ struct RigidFit {
 // Least-squares rigid transform (rotation + translation, no scale) with to ~ T * from
 // (Arun/Umeyama by SVD). A reflection is never returned: if the best orthogonal fit is a
 // reflection, the nearest proper rotation is used. Needs >= 3 non-collinear pairs.
-Result<RigidFit> fit_rigid(const std::vector<Eigen::Vector3d>& from,
-                           const std::vector<Eigen::Vector3d>& to);
+Result<RigidFit> fit_rigid(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to);
 
 }  // namespace lftrack::calib

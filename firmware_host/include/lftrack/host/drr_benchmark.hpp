@@ -15,11 +15,11 @@
 namespace lftrack::host {
 
 struct DrrBenchOptions {
-  int size = 256;              // DRR rows = cols; each detector's ROI window resampled to this
-  int poses = 8;               // drawn uniformly across the scene's pose envelope
-  int repeats = 3;             // timed renders per pose and view
-  std::uint64_t seed = 7;      // pose sampling
-  bool peers = true;           // run plastimatch if it is installed
+  int size = 256;                  // DRR rows = cols; each detector's ROI window resampled to this
+  int poses = 8;                   // drawn uniformly across the scene's pose envelope
+  int repeats = 3;                 // timed renders per pose and view
+  std::uint64_t seed = 7;          // pose sampling
+  bool peers = true;               // run plastimatch if it is installed
   std::filesystem::path work_dir;  // for the peer's files; empty: a fresh temporary folder
 };
 
@@ -54,8 +54,7 @@ struct DrrBenchReport {
 // `count` poses T_room_from_ct = apply_delta(nominal, delta) with delta uniform in the
 // envelope (each translation component in +-translation_mm, each rotation-vector component in
 // +-rotation_deg), about the registration origin. The first pose is the nominal one.
-std::vector<tracking::Pose> sample_envelope_poses(const PreparedScene& scene, int count,
-                                                  std::uint64_t seed);
+std::vector<tracking::Pose> sample_envelope_poses(const PreparedScene& scene, int count, std::uint64_t seed);
 
 // Each detector's ROI window resampled to size x size pixels (room frame).
 std::vector<tracking::XrayView> roi_views(const PreparedScene& scene, int size);

@@ -30,7 +30,7 @@ namespace lftrack::host {
 inline constexpr const char* kBuiltinPhantom = "builtin:phantom";
 
 struct CtSpec {
-  std::string path;              // "builtin:phantom", or a DICOM folder / NIfTI file (absolute)
+  std::string path;  // "builtin:phantom", or a DICOM folder / NIfTI file (absolute)
   std::uint64_t phantom_seed = 1;
   double mu_water_per_mm = tracking::kDefaultMuWaterPerMm;
   bool is_builtin_phantom() const { return path == kBuiltinPhantom; }
@@ -42,7 +42,7 @@ struct RoiSpec {
 };
 
 struct DetectorSpec {
-  tracking::XrayView view;    // room frame
+  tracking::XrayView view;     // room frame
   std::string frames = "sim";  // where frames come from: sim, v4l2, replay
   int bits = 12;               // detector bit depth
 };

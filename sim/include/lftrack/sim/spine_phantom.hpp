@@ -28,10 +28,10 @@ namespace lftrack::sim {
 
 struct SpinePhantomOptions {
   std::uint64_t seed = 1;
-  Eigen::Vector3i size{384, 384, 176};            // voxels (i = L, j = P, k = S)
-  Eigen::Vector3d spacing_mm{0.9, 0.9, 1.0};      // a clinical spine protocol's grid
-  Eigen::Vector3d centre_mm{0.0, 20.0, -350.0};   // volume centre in the CT frame
-  double noise_hu = 12.0;                         // Gaussian image noise, standard deviation
+  Eigen::Vector3i size{384, 384, 176};           // voxels (i = L, j = P, k = S)
+  Eigen::Vector3d spacing_mm{0.9, 0.9, 1.0};     // a clinical spine protocol's grid
+  Eigen::Vector3d centre_mm{0.0, 20.0, -350.0};  // volume centre in the CT frame
+  double noise_hu = 12.0;                        // Gaussian image noise, standard deviation
 };
 
 struct SpinePhantom {

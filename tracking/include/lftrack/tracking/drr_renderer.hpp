@@ -51,7 +51,7 @@ Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    const RendererOptions& options = {});
 
 // Checks render()'s preconditions; renderers call it first.
-Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view,
-                              const PixelWindow& window, const ImageView<float>& out);
+Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                              const ImageView<float>& out);
 
 }  // namespace lftrack::tracking

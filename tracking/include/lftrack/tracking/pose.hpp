@@ -34,8 +34,7 @@ Eigen::Matrix3d rotation_exp(const Eigen::Vector3d& omega_rad);
 Eigen::Vector3d rotation_log(const Eigen::Matrix3d& rotation);
 
 // T = Translation(t + c) * exp(omega) * Translation(-c) * T0, c in the room frame.
-Pose apply_delta(const Pose& T0_room_from_ct, const PoseDelta& delta,
-                 const Eigen::Vector3d& origin_room_mm);
+Pose apply_delta(const Pose& T0_room_from_ct, const PoseDelta& delta, const Eigen::Vector3d& origin_room_mm);
 // The delta that takes T0 to T about c (inverse of apply_delta).
 PoseDelta delta_between(const Pose& T0_room_from_ct, const Pose& T_room_from_ct,
                         const Eigen::Vector3d& origin_room_mm);
@@ -52,7 +51,11 @@ EulerAnglesRad euler_from_rotation(const Eigen::Matrix3d& rotation);
 // Re-orthonormalises the rotation part (nearest rotation by SVD); for long compositions.
 Pose orthonormalized(const Pose& pose);
 
-inline double deg_to_rad(double deg) { return deg * (3.14159265358979323846 / 180.0); }
-inline double rad_to_deg(double rad) { return rad * (180.0 / 3.14159265358979323846); }
+inline double deg_to_rad(double deg) {
+  return deg * (3.14159265358979323846 / 180.0);
+}
+inline double rad_to_deg(double rad) {
+  return rad * (180.0 / 3.14159265358979323846);
+}
 
 }  // namespace lftrack::tracking

@@ -32,8 +32,8 @@ class GridRayCaster {
 
   // Clips the segment from + a (to - from), a in [0,1], to the volume's box. Returns false if
   // it misses (including grazing the upper faces), else the entry and exit parameters.
-  bool clip(const Eigen::Vector3d& from_grid_mm, const Eigen::Vector3d& to_grid_mm,
-            double* a_enter, double* a_exit) const;
+  bool clip(const Eigen::Vector3d& from_grid_mm, const Eigen::Vector3d& to_grid_mm, double* a_enter,
+            double* a_exit) const;
 
   const VolumeGeometry& geometry() const { return volume_.geometry; }
 

@@ -17,14 +17,12 @@
 namespace lftrack::tracking {
 
 struct VolumeGeometry {
-  Eigen::Vector3i size = Eigen::Vector3i::Zero();          // voxels along i, j, k
+  Eigen::Vector3i size = Eigen::Vector3i::Zero();           // voxels along i, j, k
   Eigen::Vector3d spacing_mm = Eigen::Vector3d::Ones();     // voxel pitch along i, j, k
   Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();      // centre of voxel (0,0,0), CT frame
   Eigen::Matrix3d direction = Eigen::Matrix3d::Identity();  // columns: i, j, k axes in CT frame
 
-  std::int64_t voxel_count() const {
-    return std::int64_t{size.x()} * size.y() * size.z();
-  }
+  std::int64_t voxel_count() const { return std::int64_t{size.x()} * size.y() * size.z(); }
   // Continuous voxel index -> CT frame (mm). Integer indices are voxel centres.
   Eigen::Affine3d ct_from_index() const;
   Eigen::Affine3d index_from_ct() const;
@@ -56,12 +54,12 @@ struct ScalarVolume {
   std::vector<float> values;  // geometry.voxel_count() entries, i fastest
 
   float at(int i, int j, int k) const {
-    return values[static_cast<std::size_t>(
-        i + std::int64_t{geometry.size.x()} * (j + std::int64_t{geometry.size.y()} * k))];
+    return values[static_cast<std::size_t>(i + std::int64_t{geometry.size.x()} *
+                                                   (j + std::int64_t{geometry.size.y()} * k))];
   }
   float& at(int i, int j, int k) {
-    return values[static_cast<std::size_t>(
-        i + std::int64_t{geometry.size.x()} * (j + std::int64_t{geometry.size.y()} * k))];
+    return values[static_cast<std::size_t>(i + std::int64_t{geometry.size.x()} *
+                                                   (j + std::int64_t{geometry.size.y()} * k))];
   }
 };
 

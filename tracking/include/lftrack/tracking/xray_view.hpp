@@ -49,8 +49,8 @@ struct XrayView {
 
   // The part of this detector under `window`, resampled to rows x cols pixels that cover the
   // same area (pitch scaled accordingly): a cropped, binned or super-sampled detector.
-  XrayView resampled(int window_row0, int window_col0, int window_rows, int window_cols,
-                     int rows, int cols) const;
+  XrayView resampled(int window_row0, int window_col0, int window_rows, int window_cols, int rows,
+                     int cols) const;
 
   // Finite values, positive pitch, 1..16384 rows and cols, orthonormal axes, source off the
   // detector plane on the side the normal points to.
@@ -61,10 +61,9 @@ struct XrayView {
   // source), the detector perpendicular to that axis at `source_to_detector_mm` from the source
   // and centred on it, with its top edge towards `up` (projected onto the detector plane).
   static Result<XrayView> isocentric(std::string name, const Eigen::Vector3d& isocentre_mm,
-                                     const Eigen::Vector3d& source_direction,
-                                     const Eigen::Vector3d& up, double source_to_iso_mm,
-                                     double source_to_detector_mm, int rows, int cols,
-                                     double pitch_mm);
+                                     const Eigen::Vector3d& source_direction, const Eigen::Vector3d& up,
+                                     double source_to_iso_mm, double source_to_detector_mm, int rows,
+                                     int cols, double pitch_mm);
 };
 
 }  // namespace lftrack::tracking
