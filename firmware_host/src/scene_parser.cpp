@@ -334,7 +334,12 @@ class SceneParser {
 
 Result<Scene> parse_scene(const std::string& yaml_text, const std::string& source_name,
                           const std::filesystem::path& base_dir) {
-  return SceneParser(source_name, base_dir).parse(yaml_text);
+  const SceneParser parser(source_name, base_dir);
+  try {
+    return parser.parse(yaml_text);
+  } catch (const YAML::Exception& e) {  // shapes the checks above did not foresee, e.g. a list as a key
+    return parser.error_at(e.mark, "unexpected YAML structure: " + e.msg);
+  }
 }
 
 Result<Scene> load_scene(const std::string& file_or_builtin) {

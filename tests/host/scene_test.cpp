@@ -144,6 +144,15 @@ TEST(Scene, BothGeometryFormsIsAnError) {
   EXPECT_NE(scene.status().message().find("use one"), std::string::npos);
 }
 
+TEST(Scene, OddYamlShapesAreErrorsNotCrashes) {
+  for (const char* text : {"[1, 2, 3]", "version: 1\n? [a, b]\n: c\n", "version: {a: 1}\n", "42",
+                           "version: 1\nct: [1]\n", "version: 1\nct: {path: x}\nroi: {centre_mm: [0,0,0]}\ndetectors: 3\n"}) {
+    auto scene = parse_scene(text, "odd.yaml", "/");
+    EXPECT_FALSE(scene.ok()) << text;
+    EXPECT_EQ(scene.status().message().rfind("odd.yaml", 0), 0u) << scene.status().message();
+  }
+}
+
 TEST(Scene, EmptyAndMissingFiles) {
   auto empty = parse_scene("", "empty.yaml", "/");
   ASSERT_FALSE(empty.ok());
