@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <new>
 
+#include "fixtures.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
@@ -36,48 +37,64 @@ namespace {
 
 using Eigen::Vector3d;
 
-// A small textured volume: a soft-tissue cylinder with a dense off-centre block, so that DRRs
-// have edges and gradients in both directions.
-std::shared_ptr<const MuVolume> fixture_volume() {
-  auto v = std::make_shared<MuVolume>();
-  v->geometry.size = {48, 40, 36};
-  v->geometry.spacing_mm = {1.0, 1.2, 1.5};
-  v->geometry.origin_mm = {-23.5, -23.4, -26.25};
-  v->values.resize(static_cast<std::size_t>(v->geometry.voxel_count()));
-  for (int k = 0; k < 36; ++k)
-    for (int j = 0; j < 40; ++j)
-      for (int i = 0; i < 48; ++i) {
-        const Vector3d p = v->geometry.ct_from_index() * Vector3d(i, j, k);
-        float mu = p.head<2>().norm() < 20 ? 0.02f : 0.0f;
-        if (std::abs(p.x() - 5) < 6 && std::abs(p.y() + 3) < 4 && std::abs(p.z()) < 9) mu = 0.05f;
-        mu += 0.004f * static_cast<float>(std::sin(0.7 * i) * std::cos(0.5 * j + 0.3 * k));
-        v->at(i, j, k) = std::max(mu, 0.0f);
-      }
-  return v;
+using test::fixture_view;
+using test::fixture_volume;
+
+// Every renderer by name, the light field once per storage mode.
+struct RendererCase {
+  std::string name;
+  LightFieldStorage storage = LightFieldStorage::kFloat32;
+  std::string label() const { return name == "lightfield" ? name + "_" + to_string(storage) : name; }
+};
+
+std::vector<RendererCase> every_renderer() {
+  std::vector<RendererCase> cases;
+  for (const auto& name : renderer_names()) {
+    if (name != "lightfield") {
+      cases.push_back({name});
+      continue;
+    }
+    for (auto storage : {LightFieldStorage::kFloat32, LightFieldStorage::kFixed16, LightFieldStorage::kVq})
+      cases.push_back({name, storage});
+  }
+  return cases;
 }
 
-XrayView fixture_view() {
-  auto v = XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.6, -0.8, 0.0), Vector3d(0, 0, 1), 400, 600,
-                                48, 40, 1.0);
-  return *v;
+void PrintTo(const RendererCase& c, std::ostream* os) { *os << c.label(); }
+
+Result<std::unique_ptr<DrrRenderer>> make(const RendererCase& c, ThreadPool* pool = nullptr) {
+  RendererOptions options;
+  options.pool = pool;
+  if (c.name == "lightfield") options.light_fields = {test::fixture_light_field(c.storage)};
+  return make_renderer(c.name, fixture_volume(), options);
 }
 
-class EveryRenderer : public ::testing::TestWithParam<std::string> {
+
+class EveryRenderer : public ::testing::TestWithParam<RendererCase> {
  protected:
   void SetUp() override {
     volume_ = fixture_volume();
-    auto r = make_renderer(GetParam(), volume_);
+    auto r = make(GetParam());
     ASSERT_TRUE(r.ok()) << r.status().message();
     renderer_ = std::move(r).value();
     view_ = fixture_view();
     pose_ = Pose::Identity();
-    pose_.linear() = rotation_exp(Vector3d(0.05, -0.1, 0.2));
+    pose_.linear() = rotation_exp(Vector3d(0.05, -0.1, 0.15));  // inside the fixture fields' envelope
     pose_.translation() = Vector3d(1.5, -2.0, 0.7);
   }
   Image<float> render(const Pose& pose, const XrayView& view, PixelWindow w, const DrrRenderer& r) {
     Image<float> out(w.rows, w.cols, -1.0f);
-    const Status s = r.render(pose, view, w, out.view());
+    Image<unsigned char> valid(w.rows, w.cols, 7);
+    RenderExtras extras;
+    extras.valid = valid.view();
+    const Status s = r.render(pose, view, w, out.view(), &extras);
     EXPECT_TRUE(s.ok()) << s.message();
+    int zeros = 0;
+    for (unsigned char v : valid.pixels()) {
+      EXPECT_TRUE(v == 0 || v == 1);
+      zeros += v == 0;
+    }
+    EXPECT_EQ(zeros, extras.masked_pixels);
     return out;
   }
   std::shared_ptr<const MuVolume> volume_;
@@ -87,7 +104,7 @@ class EveryRenderer : public ::testing::TestWithParam<std::string> {
 };
 
 TEST_P(EveryRenderer, AgreesWithSiddon) {
-  auto siddon = make_renderer("siddon", volume_);
+  auto siddon = make({"siddon"});
   ASSERT_TRUE(siddon.ok());
   const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
   const Image<float> ours = render(pose_, view_, full, *renderer_);
@@ -95,7 +112,7 @@ TEST_P(EveryRenderer, AgreesWithSiddon) {
   // The fixture has sharp steps that interpolating renderers smooth; their fidelity on real CT is
   // measured by `lftrack bench drr` (BENCHMARKS.md). Siddon against itself is exact.
   const double ncc = normalized_cross_correlation(ref.view(), ours.view());
-  if (GetParam() == "siddon") {
+  if (GetParam().name == "siddon") {
     EXPECT_EQ(ncc, 1.0);
   } else {
     EXPECT_GT(ncc, 0.99);
@@ -104,14 +121,18 @@ TEST_P(EveryRenderer, AgreesWithSiddon) {
   for (float p : ours.pixels()) ASSERT_TRUE(std::isfinite(p) && p >= 0);
 }
 
-TEST_P(EveryRenderer, EachPixelIsTheRayFromSourceToPixelCentre) {
+// Ray casters only: exact per-pixel values, and views moved against the CT (a light field is
+// tied to its view's source position; light_field_test.cpp covers it).
+class EveryRayCaster : public EveryRenderer {};
+
+TEST_P(EveryRayCaster, EachPixelIsTheRayFromSourceToPixelCentre) {
   const Image<float> drr = render(pose_, view_, PixelWindow::full(view_.rows, view_.cols), *renderer_);
   const GridRayCaster caster(*volume_);
   const Eigen::Isometry3d T_grid_from_room = volume_->geometry.grid_from_ct() * pose_.inverse();
   for (auto [r, c] : {std::pair{0, 0}, {20, 17}, {47, 39}, {31, 5}}) {
     const Vector3d s = T_grid_from_room * view_.source_mm;
     const Vector3d p = T_grid_from_room * view_.pixel_centre_mm(r, c);
-    const double expected = GetParam() == "siddon" ? caster.siddon(s, p) : caster.trilinear(s, p, 0.5);
+    const double expected = GetParam().name == "siddon" ? caster.siddon(s, p) : caster.trilinear(s, p, 0.5);
     EXPECT_NEAR(drr.at(r, c), expected, 1e-5 * std::max(1.0, expected)) << r << "," << c;
   }
 }
@@ -121,20 +142,18 @@ TEST_P(EveryRenderer, WindowIsACropOfTheFullDetector) {
   const PixelWindow w{7, 11, 20, 13};
   const Image<float> part = render(pose_, view_, w, *renderer_);
   for (int r = 0; r < w.rows; ++r)
-    for (int c = 0; c < w.cols; ++c) ASSERT_EQ(part.at(r, c), full.at(w.row0 + r, w.col0 + c));
+    for (int c = 0; c < w.cols; ++c) ASSERT_NEAR(part.at(r, c), full.at(w.row0 + r, w.col0 + c), 1e-5);
 }
 
 TEST_P(EveryRenderer, ThreadedRenderEqualsSingleThreaded) {
   ThreadPool pool(3);
-  RendererOptions options;
-  options.pool = &pool;
-  auto threaded = make_renderer(GetParam(), volume_, options);
+  auto threaded = make(GetParam(), &pool);
   ASSERT_TRUE(threaded.ok());
   const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
   EXPECT_EQ(render(pose_, view_, full, **threaded).pixels(), render(pose_, view_, full, *renderer_).pixels());
 }
 
-TEST_P(EveryRenderer, MovingTheCtEqualsMovingTheViewTheOtherWay) {
+TEST_P(EveryRayCaster, MovingTheCtEqualsMovingTheViewTheOtherWay) {
   const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
   const Image<float> a = render(pose_, view_, full, *renderer_);
   const Image<float> b = render(Pose::Identity(), view_.transformed(pose_.inverse()), full, *renderer_);
@@ -164,9 +183,7 @@ TEST_P(EveryRenderer, RejectsBadArgumentsAndLeavesOutputUntouched) {
 
 TEST_P(EveryRenderer, RenderAllocatesNothing) {
   ThreadPool pool(2);
-  RendererOptions options;
-  options.pool = &pool;
-  auto threaded = make_renderer(GetParam(), volume_, options);
+  auto threaded = make(GetParam(), &pool);
   ASSERT_TRUE(threaded.ok());
   Image<float> out(view_.rows, view_.cols);
   const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
@@ -176,11 +193,15 @@ TEST_P(EveryRenderer, RenderAllocatesNothing) {
   EXPECT_EQ(g_allocations.load() - before, 0);
 }
 
-INSTANTIATE_TEST_SUITE_P(Factory, EveryRenderer, ::testing::ValuesIn(renderer_names()),
-                         [](const auto& p) { return p.param; });
+INSTANTIATE_TEST_SUITE_P(Factory, EveryRenderer, ::testing::ValuesIn(every_renderer()),
+                         [](const auto& p) { return p.param.label(); });
+INSTANTIATE_TEST_SUITE_P(Factory, EveryRayCaster,
+                         ::testing::Values(RendererCase{"siddon"}, RendererCase{"trilinear"}),
+                         [](const auto& p) { return p.param.label(); });
 
 TEST(RendererFactory, UnknownNameListsTheKnownOnes) {
   auto r = make_renderer("raymarch", fixture_volume());
+  EXPECT_FALSE(make_renderer("lightfield", fixture_volume()).ok()) << "no fields given";
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("siddon"), std::string::npos);
 }

@@ -22,9 +22,8 @@ class RayCastRenderer final : public DrrRenderer {
 
   std::string_view name() const override { return rule_ == RayRule::kSiddon ? "siddon" : "trilinear"; }
 
-  Status render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
-                ImageView<float> out) const override {
-    LFTRACK_RETURN_IF_ERROR(check_render_arguments(T_room_from_ct, view, window, out));
+  Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                   ImageView<float> out, RenderExtras* extras) const override {
     // Everything in the grid frame: pixel centres are affine in (row, col).
     const Eigen::Isometry3d T_grid_from_room = volume_->geometry.grid_from_ct() * T_room_from_ct.inverse();
     const Eigen::Vector3d source = T_grid_from_room * view.source_mm;
@@ -34,8 +33,12 @@ class RayCastRenderer final : public DrrRenderer {
 
     auto rows_body = [&](int r_begin, int r_end) {
       for (int r = r_begin; r < r_end; ++r) {
+        if (extras->valid.data) {
+          std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
+        }
         float* dst = out.row_ptr(r);
         const Eigen::Vector3d row_start = pixel00 + per_row * (window.row0 + r) + per_col * window.col0;
+        if (extras->valid.data) std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
         for (int c = 0; c < window.cols; ++c) {
           const Eigen::Vector3d pixel = row_start + per_col * c;
           const double p = rule_ == RayRule::kSiddon ? caster_.siddon(source, pixel)
@@ -62,8 +65,18 @@ class RayCastRenderer final : public DrrRenderer {
 
 }  // namespace
 
+Status DrrRenderer::render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                           ImageView<float> out, RenderExtras* extras) const {
+  LFTRACK_RETURN_IF_ERROR(check_render_arguments(T_room_from_ct, view, window, out, extras));
+  RenderExtras ignored;
+  RenderExtras* e = extras ? extras : &ignored;
+  e->masked_pixels = 0;
+  e->pose_outside_envelope = false;
+  return do_render(T_room_from_ct, view, window, out, e);
+}
+
 Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
-                              const ImageView<float>& out) {
+                              const ImageView<float>& out, const RenderExtras* extras) {
   if (!T_room_from_ct.matrix().allFinite()) return invalid_argument("pose is not finite");
   LFTRACK_RETURN_IF_ERROR(view.validate());
   if (!window.inside(view.rows, view.cols)) {
@@ -77,16 +90,28 @@ Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, 
                             ", the window is " + std::to_string(window.rows) + " x " +
                             std::to_string(window.cols));
   }
+  if (extras && extras->valid.data &&
+      (extras->valid.rows != window.rows || extras->valid.cols != window.cols ||
+       extras->valid.stride < extras->valid.cols)) {
+    return invalid_argument("validity mask is " + std::to_string(extras->valid.rows) + " x " +
+                            std::to_string(extras->valid.cols) + ", the window is " + std::to_string(window.rows) +
+                            " x " + std::to_string(window.cols));
+  }
   return {};
 }
 
 std::vector<std::string> renderer_names() {
-  return {"siddon", "trilinear"};
+  return {"siddon", "trilinear", "lightfield"};
 }
+
+// In light_field_renderer.cpp.
+Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
+                                                               ThreadPool* pool);
 
 Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
                                                    const RendererOptions& options) {
+  if (name == "lightfield") return make_light_field_renderer(options.light_fields, options.pool);
   if (!volume) return invalid_argument("make_renderer: no volume");
   LFTRACK_RETURN_IF_ERROR(volume->geometry.validate());
   if (volume->values.size() != static_cast<std::size_t>(volume->geometry.voxel_count())) {

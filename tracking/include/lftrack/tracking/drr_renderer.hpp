@@ -10,7 +10,9 @@
 // - Values are mu * mm (unitless line integrals), >= 0; rays that miss the volume give 0.
 // - It allocates nothing, does not throw, and is safe to call from several threads at once.
 // - A non-finite pose, an invalid view, a window outside the detector or a wrongly sized `out`
-//   return an error Status and leave `out` untouched.
+//   (or mask) return an error Status and leave `out` untouched.
+// - Pixels a renderer cannot compute (a ray outside a light field) are never guessed: they are
+//   set to 0, marked 0 in the optional validity mask and counted in RenderExtras.
 
 #include <memory>
 #include <string>
@@ -26,13 +28,33 @@
 namespace lftrack::tracking {
 
 class ThreadPool;
+class LightField;
+
+// Optional inputs and outputs of render().
+struct RenderExtras {
+  // If set (same size as `out`): written 1 where the pixel is a computed line integral, 0 where
+  // it is masked.
+  ImageView<unsigned char> valid;
+  // Written: how many pixels are masked.
+  int masked_pixels = 0;
+  // Written: true if the pose lies outside the envelope the renderer was built for.
+  bool pose_outside_envelope = false;
+};
 
 class DrrRenderer {
  public:
   virtual ~DrrRenderer() = default;
   virtual std::string_view name() const = 0;
-  virtual Status render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
-                        ImageView<float> out) const = 0;
+  // Bytes of precomputed data the renderer holds beyond the volume it was given (0 for ray casters).
+  virtual std::size_t bytes() const { return 0; }
+
+  Status render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                ImageView<float> out, RenderExtras* extras = nullptr) const;
+
+ protected:
+  // Called by render() after its arguments were checked; `extras` is never null.
+  virtual Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                           ImageView<float> out, RenderExtras* extras) const = 0;
 };
 
 struct RendererOptions {
@@ -40,18 +62,22 @@ struct RendererOptions {
   ThreadPool* pool = nullptr;
   // Trilinear renderer: sampling step as a fraction of the smallest voxel spacing.
   double trilinear_step_fraction = 0.5;
+  // Light-field renderer: one precomputed field per view it will be asked to render (matched by
+  // view name), all of one storage mode.
+  std::vector<std::shared_ptr<const LightField>> light_fields;
 };
 
 // Names accepted by make_renderer, in a stable order.
 std::vector<std::string> renderer_names();
 
 // Builds the renderer called `name` over `volume` (shared, so the caller may drop its copy).
+// "lightfield" renders from options.light_fields and needs no volume (`volume` may be null).
 Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
                                                    const RendererOptions& options = {});
 
-// Checks render()'s preconditions; renderers call it first.
+// Checks render()'s preconditions.
 Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
-                              const ImageView<float>& out);
+                              const ImageView<float>& out, const RenderExtras* extras = nullptr);
 
 }  // namespace lftrack::tracking

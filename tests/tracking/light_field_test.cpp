@@ -1,0 +1,253 @@
+// Light fields: planning, samples, rendering at and beyond the envelope, storage modes, files.
+
+#include "lftrack/tracking/light_field.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <random>
+
+#include "fixtures.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/image_metrics.hpp"
+#include "lftrack/tracking/ray_integrals.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::tracking {
+namespace {
+
+using Eigen::Vector3d;
+using Eigen::Vector4d;
+using test::fixture_light_field;
+using test::fixture_plan;
+
+TEST(LightFieldPlan, PlanesAreOrthonormalAndAimedAtTheRoi) {
+  const LightFieldGeometry g = fixture_light_field(LightFieldStorage::kFloat32)->geometry();
+  EXPECT_NEAR(g.axis.norm(), 1, 1e-12);
+  EXPECT_NEAR(g.e1.dot(g.axis), 0, 1e-12);
+  EXPECT_NEAR(g.e2.dot(g.axis), 0, 1e-12);
+  EXPECT_NEAR(g.e1.dot(g.e2), 0, 1e-12);
+  EXPECT_TRUE(((g.roi_centre_ct_mm - g.source_ct_mm).normalized() - g.axis).norm() < 1e-12);
+  EXPECT_EQ(g.size, (std::array<int, 4>{12, 12, 64, 64}));
+}
+
+TEST(LightFieldPlan, CoordinatesAndRaysRoundTrip) {
+  const LightFieldGeometry g = fixture_light_field(LightFieldStorage::kFloat32)->geometry();
+  const Vector4d uvst(3.5, -2.0, 10.25, -7.5);
+  Vector3d a, b;
+  g.ray(uvst, &a, &b);
+  EXPECT_TRUE(g.coordinates(a, b)->isApprox(uvst, 1e-9));
+  // Any two points of the same line give the same coordinates.
+  EXPECT_TRUE(g.coordinates(a - 50 * (b - a), b + 3 * (b - a))->isApprox(uvst, 1e-9));
+  EXPECT_FALSE(g.coordinates(a, a + g.e1).has_value());  // parallel to the planes
+}
+
+TEST(LightFieldPlan, ExtentsCoverEveryEnvelopePoseAndGrowWithTheEnvelope) {
+  const LightFieldPlanInput in = fixture_plan();
+  LightFieldSpec spec;
+  spec.margin_fraction = 0;
+  auto g = plan_light_field(in, spec);
+  ASSERT_TRUE(g.ok());
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int n = 0; n < 300; ++n) {
+    PoseDelta d;
+    d.translation_mm = in.envelope.translation_mm * Vector3d(u(rng), u(rng), u(rng));
+    d.rotation_rad = deg_to_rad(in.envelope.rotation_deg) * Vector3d(u(rng), u(rng), u(rng));
+    const Pose pose = apply_delta(in.nominal_T_room_from_ct, d, in.registration_origin_room_mm);
+    const Vector3d s = pose.inverse() * in.view_room.source_mm;
+    const Vector3d p = pose.inverse() * in.view_room.pixel_centre_mm(u(rng) * 10 + 24, u(rng) * 10 + 20);
+    const Vector4d c = *g->coordinates(s, p);
+    for (int a = 0; a < 4; ++a) {
+      EXPECT_GE(c[a], g->lo[a] - 1e-6) << a;
+      EXPECT_LE(c[a], g->hi[a] + 1e-6) << a;
+    }
+  }
+  LightFieldPlanInput wider = in;
+  wider.envelope.rotation_deg *= 2;
+  auto g2 = plan_light_field(wider, spec);
+  ASSERT_TRUE(g2.ok());
+  EXPECT_GT(g2->hi[0] - g2->lo[0], 1.5 * (g->hi[0] - g->lo[0]));
+}
+
+TEST(LightFieldBuild, SamplesAreWholeLineIntegrals) {
+  const auto field = fixture_light_field(LightFieldStorage::kFloat32);
+  ASSERT_TRUE(field);
+  const LightFieldGeometry& g = field->geometry();
+  const MuVolume& mu = *test::fixture_volume();
+  const GridRayCaster caster(mu);
+  for (auto idx : {std::array<int, 4>{0, 0, 0, 0}, {5, 7, 31, 40}, {11, 11, 63, 63}, {3, 9, 12, 50}}) {
+    Vector4d uvst;
+    for (int a = 0; a < 4; ++a) uvst[a] = g.lo[a] + idx[a] * g.spacing(a);
+    Vector3d a, b;
+    g.ray(uvst, &a, &b);
+    const Vector3d dir = (b - a).normalized();
+    const double expected = caster.siddon(mu.geometry.grid_from_ct() * (a - 1000 * dir),
+                                          mu.geometry.grid_from_ct() * (b + 1000 * dir));
+    EXPECT_NEAR(field->sample(idx[0], idx[1], idx[2], idx[3]), expected, 1e-5 * std::max(1.0, expected));
+  }
+}
+
+TEST(LightFieldBuild, StorageModesKeepTheSamplesClose) {
+  const auto f = fixture_light_field(LightFieldStorage::kFloat32);
+  const auto q = fixture_light_field(LightFieldStorage::kFixed16);
+  const auto v = fixture_light_field(LightFieldStorage::kVq);
+  ASSERT_TRUE(f && q && v);
+  EXPECT_EQ(q->payload_bytes() * 2, f->payload_bytes());
+  EXPECT_LT(v->payload_bytes(), q->payload_bytes() / 3);
+  double peak = 0, worst_q = 0, rms_v = 0;
+  const auto& s = f->geometry().size;
+  int n = 0;
+  for (int iu = 0; iu < s[0]; iu += 3)
+    for (int iv = 0; iv < s[1]; iv += 3)
+      for (int is = 0; is < s[2]; ++is)
+        for (int it = 0; it < s[3]; ++it) {
+          const double x = f->sample(iu, iv, is, it);
+          peak = std::max(peak, x);
+          worst_q = std::max(worst_q, std::abs(q->sample(iu, iv, is, it) - x));
+          rms_v += std::pow(v->sample(iu, iv, is, it) - x, 2);
+          ++n;
+        }
+  EXPECT_LE(worst_q, 0.51 * q->header().fixed_scale + 1e-6) << "16-bit: half a quantisation step";
+  EXPECT_LT(std::sqrt(rms_v / n), 0.02 * peak) << "VQ with 256 codewords";
+}
+
+// Poses at the envelope's edge render fully; beyond it rays leave the field: they are masked and
+// counted, set to 0, and the pose is reported as outside the envelope.
+TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
+  const auto field = fixture_light_field(LightFieldStorage::kFloat32);
+  RendererOptions options;
+  options.light_fields = {field};
+  auto renderer = make_renderer("lightfield", nullptr, options);
+  ASSERT_TRUE(renderer.ok()) << renderer.status().message();
+  const LightFieldPlanInput in = fixture_plan();
+  const XrayView view = in.view_room;
+  Image<float> out(view.rows, view.cols);
+  Image<unsigned char> valid(view.rows, view.cols);
+  RenderExtras extras;
+  extras.valid = valid.view();
+
+  PoseDelta edge;
+  edge.translation_mm = Vector3d(3, -3, 3);
+  edge.rotation_rad = deg_to_rad(12.0) * Vector3d(1, -1, 1);
+  ASSERT_TRUE((*renderer)->render(apply_delta(Pose::Identity(), edge, Vector3d::Zero()), view,
+                                  PixelWindow::full(view.rows, view.cols), out.view(), &extras).ok());
+  EXPECT_EQ(extras.masked_pixels, 0);
+  EXPECT_FALSE(extras.pose_outside_envelope);
+
+  PoseDelta beyond;
+  beyond.translation_mm = Vector3d(0, 0, 40);
+  beyond.rotation_rad = deg_to_rad(30.0) * Vector3d(1, 0, 0);
+  ASSERT_TRUE((*renderer)->render(apply_delta(Pose::Identity(), beyond, Vector3d::Zero()), view,
+                                  PixelWindow::full(view.rows, view.cols), out.view(), &extras).ok());
+  EXPECT_TRUE(extras.pose_outside_envelope);
+  EXPECT_GT(extras.masked_pixels, 0);
+  int zeros = 0;
+  for (std::size_t i = 0; i < out.pixels().size(); ++i) {
+    ASSERT_TRUE(std::isfinite(out.pixels()[i]));
+    if (valid.pixels()[i] == 0) {
+      EXPECT_EQ(out.pixels()[i], 0.0f);
+      ++zeros;
+    }
+  }
+  EXPECT_EQ(zeros, extras.masked_pixels);
+}
+
+TEST(LightFieldRender, RefusesViewsItWasNotBuiltFor) {
+  RendererOptions options;
+  options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
+  auto renderer = make_renderer("lightfield", nullptr, options);
+  ASSERT_TRUE(renderer.ok());
+  XrayView other = fixture_plan().view_room;
+  Image<float> out(other.rows, other.cols);
+  other.name = "B";
+  EXPECT_EQ((*renderer)->render(Pose::Identity(), other, PixelWindow::full(other.rows, other.cols), out.view()).code(),
+            StatusCode::kNotFound);
+  other.name = "A";
+  other.source_mm.x() += 5;
+  EXPECT_FALSE((*renderer)->render(Pose::Identity(), other, PixelWindow::full(other.rows, other.cols), out.view()).ok());
+}
+
+// File faults, each with its own message.
+class LightFieldFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    field_ = fixture_light_field(LightFieldStorage::kFixed16);
+    file_ = dir_.path() / "A.lf";
+    ASSERT_TRUE(field_->save(file_).ok());
+  }
+  void flip_byte(std::streamoff offset) {
+    std::fstream f(file_, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(offset);
+    char c = 0;
+    f.read(&c, 1);
+    c = static_cast<char>(c ^ 0x5a);
+    f.seekp(offset);
+    f.write(&c, 1);
+  }
+  std::string load_error(std::optional<std::uint64_t> ct = {}, std::optional<std::uint64_t> plan = {}) {
+    auto loaded = LightField::load(file_, ct, plan);
+    return loaded.ok() ? std::string("(loaded)") : loaded.status().message();
+  }
+  test::TempDir dir_;
+  std::shared_ptr<const LightField> field_;
+  std::filesystem::path file_;
+};
+
+TEST_F(LightFieldFile, RoundTripsThroughAMemoryMap) {
+  auto loaded = LightField::load(file_, field_->header().ct_hash, field_->header().plan_hash);
+  ASSERT_TRUE(loaded.ok()) << loaded.status().message();
+  EXPECT_EQ((*loaded)->header().storage, LightFieldStorage::kFixed16);
+  EXPECT_EQ((*loaded)->geometry().size, field_->geometry().size);
+  EXPECT_EQ((*loaded)->sample(3, 4, 20, 33), field_->sample(3, 4, 20, 33));
+  EXPECT_EQ((*loaded)->sample(11, 0, 63, 0), field_->sample(11, 0, 63, 0));
+}
+
+TEST_F(LightFieldFile, FlippedPayloadByte) {
+  flip_byte(1024 + 5000);
+  EXPECT_NE(load_error().find("sample data is corrupted"), std::string::npos) << load_error();
+}
+
+TEST_F(LightFieldFile, FlippedHeaderByte) {
+  flip_byte(50);
+  EXPECT_NE(load_error().find("header is corrupted"), std::string::npos) << load_error();
+}
+
+TEST_F(LightFieldFile, Truncated) {
+  std::filesystem::resize_file(file_, std::filesystem::file_size(file_) - 100);
+  EXPECT_NE(load_error().find("truncated"), std::string::npos) << load_error();
+  std::filesystem::resize_file(file_, 600);
+  EXPECT_NE(load_error().find("truncated"), std::string::npos) << load_error();
+}
+
+TEST_F(LightFieldFile, WrongVersion) {
+  flip_byte(8);
+  EXPECT_NE(load_error().find("unknown light-field file version"), std::string::npos) << load_error();
+}
+
+TEST_F(LightFieldFile, NotALightField) {
+  flip_byte(0);
+  EXPECT_NE(load_error().find("not a light-field file"), std::string::npos) << load_error();
+}
+
+TEST_F(LightFieldFile, WrongCt) {
+  EXPECT_NE(load_error(field_->header().ct_hash ^ 1, field_->header().plan_hash).find("another CT"), std::string::npos);
+}
+
+TEST_F(LightFieldFile, WrongGeometry) {
+  LightFieldPlanInput moved = fixture_plan();
+  moved.view_room.source_mm.x() += 1.0;
+  LightFieldSpec spec;
+  spec.resolution = {12, 12, 64, 64};
+  EXPECT_NE(load_error(field_->header().ct_hash, plan_hash(moved, spec)).find("another geometry"), std::string::npos);
+  EXPECT_EQ(load_error(field_->header().ct_hash, plan_hash(fixture_plan(), spec)), "(loaded)");
+}
+
+TEST_F(LightFieldFile, MissingFile) {
+  auto loaded = LightField::load(dir_.path() / "none.lf");
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("lftrack precompute"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace lftrack::tracking

@@ -1,0 +1,262 @@
+// Light-field files: a fixed 1024-byte little-endian header (magic, version, geometry, storage,
+// hashes, payload size and CRC-32, header CRC-32) followed by the payload, memory-mapped on load.
+//
+// Header layout, version 1 (offsets in bytes):
+//   0 magic "LFTRKLF\0" | 8 u32 version | 12 u32 header bytes (1024) | 16 u32 storage
+//   20 u32 codebook size | 24 i32 size[4] | 40 f64 lo[4] | 72 f64 hi[4] | 104 f64 source[3]
+//   128 f64 roi centre[3] | 152 f64 axis[3] | 176 f64 e1[3] | 200 f64 e2[3]
+//   224 f64 nominal T_room_from_ct[16] (column-major) | 352 f64 registration origin[3]
+//   376 f64 envelope translation mm | 384 f64 envelope rotation deg | 392 f64 fixed scale
+//   400 u64 CT hash | 408 u64 plan hash | 416 u64 payload bytes | 424 u32 payload CRC-32
+//   428 char view name[64] | ... zero ... | 1020 u32 CRC-32 of bytes 0..1019
+// Payload: float32 samples; or uint16 codes; or (VQ) the codebook (K x 16 float32) then one uint16
+// codeword index per tile. Samples are ordered [u][v][s][t], t fastest; tiles likewise.
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "lftrack/tracking/light_field.hpp"
+
+namespace lftrack::tracking {
+namespace {
+
+constexpr char kMagic[8] = {'L', 'F', 'T', 'R', 'K', 'L', 'F', '\0'};
+constexpr std::uint32_t kVersion = 1;
+constexpr std::size_t kHeaderBytes = 1024;
+
+std::uint32_t crc_of(const unsigned char* data, std::size_t bytes) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  while (bytes > 0) {
+    const auto chunk = static_cast<uInt>(std::min<std::size_t>(bytes, 1u << 30));
+    crc = crc32(crc, data, chunk);
+    data += chunk;
+    bytes -= chunk;
+  }
+  return static_cast<std::uint32_t>(crc);
+}
+
+class HeaderWriter {
+ public:
+  explicit HeaderWriter(unsigned char* buffer) : b_(buffer) {}
+  template <class T>
+  void at(std::size_t offset, const T& value) { std::memcpy(b_ + offset, &value, sizeof(T)); }
+  void vec(std::size_t offset, const Eigen::Vector3d& v) { for (int i = 0; i < 3; ++i) at(offset + 8 * i, v[i]); }
+
+ private:
+  unsigned char* b_;
+};
+
+class HeaderReader {
+ public:
+  explicit HeaderReader(const unsigned char* buffer) : b_(buffer) {}
+  template <class T>
+  T at(std::size_t offset) const {
+    T value;
+    std::memcpy(&value, b_ + offset, sizeof(T));
+    return value;
+  }
+  Eigen::Vector3d vec(std::size_t offset) const { return {at<double>(offset), at<double>(offset + 8), at<double>(offset + 16)}; }
+
+ private:
+  const unsigned char* b_;
+};
+
+std::size_t tile_count(const std::array<int, 4>& size) {
+  std::size_t n = 1;
+  for (int s : size) n *= static_cast<std::size_t>((s + 1) / 2);
+  return n;
+}
+
+std::size_t expected_payload(const LightField::Header& h) {
+  const auto samples = static_cast<std::size_t>(h.geometry.sample_count());
+  switch (h.storage) {
+    case LightFieldStorage::kFloat32: return samples * 4;
+    case LightFieldStorage::kFixed16: return samples * 2;
+    case LightFieldStorage::kVq: return std::size_t(h.codebook_size) * 64 + tile_count(h.geometry.size) * 2;
+  }
+  return 0;
+}
+
+std::string hex(std::uint64_t v) {
+  std::ostringstream s;
+  s << std::hex << v;
+  return s.str();
+}
+
+}  // namespace
+
+LightField::~LightField() {
+  if (mapping_) munmap(mapping_, mapping_bytes_);
+}
+
+void LightField::point_at(const unsigned char* payload) {
+  f32_ = nullptr;
+  q16_ = nullptr;
+  codebook_ = nullptr;
+  codes_ = nullptr;
+  switch (header_.storage) {
+    case LightFieldStorage::kFloat32: f32_ = reinterpret_cast<const float*>(payload); break;
+    case LightFieldStorage::kFixed16: q16_ = reinterpret_cast<const std::uint16_t*>(payload); break;
+    case LightFieldStorage::kVq:
+      codebook_ = reinterpret_cast<const float*>(payload);
+      codes_ = reinterpret_cast<const std::uint16_t*>(payload + std::size_t(header_.codebook_size) * 64);
+      break;
+  }
+}
+
+float LightField::sample(int iu, int iv, int is, int it) const {
+  const auto& s = header_.geometry.size;
+  switch (header_.storage) {
+    case LightFieldStorage::kFloat32:
+      return f32_[((std::size_t(iu) * s[1] + iv) * s[2] + is) * s[3] + it];
+    case LightFieldStorage::kFixed16:
+      return static_cast<float>(q16_[((std::size_t(iu) * s[1] + iv) * s[2] + is) * s[3] + it] * header_.fixed_scale);
+    case LightFieldStorage::kVq: {
+      const std::size_t tv = (s[1] + 1) / 2, ts = (s[2] + 1) / 2, tt = (s[3] + 1) / 2;
+      const std::size_t tile = ((std::size_t(iu >> 1) * tv + (iv >> 1)) * ts + (is >> 1)) * tt + (it >> 1);
+      const int element = ((iu & 1) << 3) | ((iv & 1) << 2) | ((is & 1) << 1) | (it & 1);
+      return codebook_[std::size_t(codes_[tile]) * 16 + element];
+    }
+  }
+  return 0.0f;
+}
+
+Status LightField::save(const std::filesystem::path& file) const {
+  unsigned char header[kHeaderBytes] = {};
+  HeaderWriter w(header);
+  const LightFieldGeometry& g = header_.geometry;
+  std::memcpy(header, kMagic, 8);
+  w.at(8, kVersion);
+  w.at(12, static_cast<std::uint32_t>(kHeaderBytes));
+  w.at(16, static_cast<std::uint32_t>(header_.storage));
+  w.at(20, static_cast<std::uint32_t>(header_.codebook_size));
+  for (int a = 0; a < 4; ++a) {
+    w.at(24 + 4 * a, static_cast<std::int32_t>(g.size[a]));
+    w.at(40 + 8 * a, g.lo[a]);
+    w.at(72 + 8 * a, g.hi[a]);
+  }
+  w.vec(104, g.source_ct_mm);
+  w.vec(128, g.roi_centre_ct_mm);
+  w.vec(152, g.axis);
+  w.vec(176, g.e1);
+  w.vec(200, g.e2);
+  for (int i = 0; i < 16; ++i) w.at(224 + 8 * i, header_.nominal_T_room_from_ct.matrix().data()[i]);
+  w.vec(352, header_.registration_origin_room_mm);
+  w.at(376, header_.envelope.translation_mm);
+  w.at(384, header_.envelope.rotation_deg);
+  w.at(392, header_.fixed_scale);
+  w.at(400, header_.ct_hash);
+  w.at(408, header_.plan_hash);
+  w.at(416, static_cast<std::uint64_t>(payload_bytes_));
+  const unsigned char* payload = mapping_ ? static_cast<const unsigned char*>(mapping_) + kHeaderBytes : owned_.data();
+  w.at(424, crc_of(payload, payload_bytes_));
+  std::strncpy(reinterpret_cast<char*>(header + 428), g.view_name.c_str(), 63);
+  w.at(1020, crc_of(header, 1020));
+
+  const std::filesystem::path partial = file.string() + ".partial";
+  {
+    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
+    if (!out) return io_error(file.string() + ": cannot open for writing");
+    out.write(reinterpret_cast<const char*>(header), kHeaderBytes);
+    out.write(reinterpret_cast<const char*>(payload), static_cast<std::streamsize>(payload_bytes_));
+    if (!out) return io_error(file.string() + ": write failed");
+  }
+  std::error_code ec;
+  std::filesystem::rename(partial, file, ec);  // a reader never sees a half-written file
+  if (ec) return io_error(file.string() + ": cannot rename into place: " + ec.message());
+  return {};
+}
+
+Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem::path& file,
+                                                           std::optional<std::uint64_t> expected_ct_hash,
+                                                           std::optional<std::uint64_t> expected_plan_hash) {
+  const std::string name = file.string();
+  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return not_found(name + ": cannot open light-field file (run `lftrack precompute`)");
+  struct stat st {};
+  if (fstat(fd, &st) != 0) {
+    ::close(fd);
+    return io_error(name + ": cannot stat");
+  }
+  const auto bytes = static_cast<std::size_t>(st.st_size);
+  if (bytes < kHeaderBytes) {
+    ::close(fd);
+    return corrupt_data(name + ": truncated light-field file (" + std::to_string(bytes) + " bytes; the header alone is 1024)");
+  }
+  void* map = mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, fd, 0);
+  ::close(fd);
+  if (map == MAP_FAILED) return io_error(name + ": cannot memory-map");
+  std::shared_ptr<LightField> field(new LightField);
+  field->mapping_ = map;
+  field->mapping_bytes_ = bytes;
+  const auto* data = static_cast<const unsigned char*>(map);
+  const HeaderReader r(data);
+
+  if (std::memcmp(data, kMagic, 8) != 0) return corrupt_data(name + ": not a light-field file (bad magic)");
+  const auto version = r.at<std::uint32_t>(8);
+  if (version != kVersion) {
+    return unsupported(name + ": unknown light-field file version " + std::to_string(version) + " (this build reads version " +
+                       std::to_string(kVersion) + "); run `lftrack precompute` again");
+  }
+  if (r.at<std::uint32_t>(1020) != crc_of(data, 1020)) {
+    return corrupt_data(name + ": header is corrupted (checksum mismatch)");
+  }
+  Header& h = field->header_;
+  LightFieldGeometry& g = h.geometry;
+  const auto storage = r.at<std::uint32_t>(16);
+  if (storage > 2) return corrupt_data(name + ": unknown storage mode " + std::to_string(storage));
+  h.storage = static_cast<LightFieldStorage>(storage);
+  h.codebook_size = static_cast<int>(r.at<std::uint32_t>(20));
+  for (int a = 0; a < 4; ++a) {
+    g.size[a] = r.at<std::int32_t>(24 + 4 * a);
+    g.lo[a] = r.at<double>(40 + 8 * a);
+    g.hi[a] = r.at<double>(72 + 8 * a);
+  }
+  g.source_ct_mm = r.vec(104);
+  g.roi_centre_ct_mm = r.vec(128);
+  g.axis = r.vec(152);
+  g.e1 = r.vec(176);
+  g.e2 = r.vec(200);
+  for (int i = 0; i < 16; ++i) h.nominal_T_room_from_ct.matrix().data()[i] = r.at<double>(224 + 8 * i);
+  h.registration_origin_room_mm = r.vec(352);
+  h.envelope.translation_mm = r.at<double>(376);
+  h.envelope.rotation_deg = r.at<double>(384);
+  h.fixed_scale = r.at<double>(392);
+  h.ct_hash = r.at<std::uint64_t>(400);
+  h.plan_hash = r.at<std::uint64_t>(408);
+  char view_name[65] = {};
+  std::memcpy(view_name, data + 428, 64);
+  g.view_name = view_name;
+  if (Status s = g.validate(); !s.ok()) return s.with_context(name);
+  if (h.storage == LightFieldStorage::kVq && (h.codebook_size < 1 || h.codebook_size > 65536)) {
+    return corrupt_data(name + ": bad codebook size");
+  }
+  const std::size_t payload = expected_payload(h);
+  if (r.at<std::uint64_t>(416) != payload || bytes != kHeaderBytes + payload) {
+    return corrupt_data(name + ": truncated or padded: the file has " + std::to_string(bytes) + " bytes, its header says " +
+                        std::to_string(kHeaderBytes + payload));
+  }
+  if (r.at<std::uint32_t>(424) != crc_of(data + kHeaderBytes, payload)) {
+    return corrupt_data(name + ": sample data is corrupted (checksum mismatch)");
+  }
+  if (expected_ct_hash && *expected_ct_hash != h.ct_hash) {
+    return failed_precondition(name + ": built for another CT (CT hash " + hex(h.ct_hash) + ", this CT has " +
+                               hex(*expected_ct_hash) + "); run `lftrack precompute` again");
+  }
+  if (expected_plan_hash && *expected_plan_hash != h.plan_hash) {
+    return failed_precondition(name + ": built for another geometry or light-field settings (view, ROI, pose, envelope or "
+                               "resolution changed); run `lftrack precompute` again");
+  }
+  field->payload_bytes_ = payload;
+  field->point_at(data + kHeaderBytes);
+  return std::shared_ptr<const LightField>(field);
+}
+
+}  // namespace lftrack::tracking

@@ -1,0 +1,236 @@
+// The light-field renderer: for each pixel, the ray from the (moved) source through the pixel is
+// intersected with the two planes and the 16 surrounding samples are blended quadrilinearly.
+//
+// Per render, everything is moved into the CT frame once. A pixel's ray direction d is affine in
+// (row, col); with q1 = d.e1 / d.n and q2 = d.e2 / d.n (one division per pixel) the four ray
+// coordinates are affine in (q1, q2), so the inner loop is a handful of multiply-adds, one
+// division and 16 loads, written as plain loops over a row for the compiler to vectorise.
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+#include "cpu_dispatch.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/light_field.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::tracking {
+namespace {
+
+using Eigen::Vector3d;
+
+// Per-render constants: continuous sample index f_a = base_a + gain_a * q (q = q1 for u, s and
+// q2 for v, t), and the affine ray direction.
+struct RayMap {
+  float base[4], gain[4];
+  float limit[4];  // size - 1 per axis
+  Vector3d d00, d_row, d_col;  // direction of pixel (row0, col0) and its increments, CT frame
+};
+
+struct FloatFetch {
+  const float* f;
+  std::size_t stride_u, stride_v, stride_s;
+  float operator()(std::size_t base, int is, int it) const { return f[base + std::size_t(is) * stride_s + std::size_t(it)]; }
+  std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
+};
+
+struct Fixed16Fetch {
+  const std::uint16_t* q;
+  float scale;
+  std::size_t stride_u, stride_v, stride_s;
+  float operator()(std::size_t base, int is, int it) const {
+    return float(q[base + std::size_t(is) * stride_s + std::size_t(it)]) * scale;
+  }
+  std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
+};
+
+struct VqFetch {
+  const float* codebook;
+  const std::uint16_t* codes;
+  std::size_t tiles_v, tiles_s, tiles_t;
+  // `base` packs the (u, v) tile offset and the (u, v) element bits.
+  float operator()(std::size_t base, int is, int it) const {
+    const std::size_t tile = (base >> 4) + std::size_t(is >> 1) * tiles_t + std::size_t(it >> 1);
+    const std::size_t element = (base & 15u) | (std::size_t(is & 1) << 1) | std::size_t(it & 1);
+    return codebook[std::size_t(codes[tile]) * 16 + element];
+  }
+  std::size_t uv(int iu, int iv) const {
+    const std::size_t tile = (std::size_t(iu >> 1) * tiles_v + std::size_t(iv >> 1)) * tiles_s * tiles_t;
+    return (tile << 4) | (std::size_t(iu & 1) << 3) | (std::size_t(iv & 1) << 2);
+  }
+};
+
+template <class Fetch>
+float bilinear_st(const Fetch& fetch, std::size_t base, int is, int it, float ws, float wt) {
+  const float a = fetch(base, is, it), b = fetch(base, is, it + 1);
+  const float c = fetch(base, is + 1, it), d = fetch(base, is + 1, it + 1);
+  const float top = a + wt * (b - a), bottom = c + wt * (d - c);
+  return top + ws * (bottom - top);
+}
+
+// Renders rows [r_begin, r_end) of the window; returns the number of masked pixels.
+template <class Fetch>
+int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
+                ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+  int masked = 0;
+  const Vector3d& n = g.axis;
+  for (int r = r_begin; r < r_end; ++r) {
+    const Vector3d d_row = m.d00 + m.d_row * r;
+    // d.n, d.e1, d.e2 are affine in the column.
+    const float dn0 = float(d_row.dot(n)), dn1 = float(m.d_col.dot(n));
+    const float de10 = float(d_row.dot(g.e1)), de11 = float(m.d_col.dot(g.e1));
+    const float de20 = float(d_row.dot(g.e2)), de21 = float(m.d_col.dot(g.e2));
+    float* dst = out.row_ptr(r);
+    unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
+    for (int c = 0; c < cols; ++c) {
+      const float dn = dn0 + dn1 * float(c);
+      const float inv = 1.0f / dn;
+      const float q1 = (de10 + de11 * float(c)) * inv, q2 = (de20 + de21 * float(c)) * inv;
+      const float fu = m.base[0] + m.gain[0] * q1, fv = m.base[1] + m.gain[1] * q2;
+      const float fs = m.base[2] + m.gain[2] * q1, ft = m.base[3] + m.gain[3] * q2;
+      const bool inside = dn > 0 && fu >= 0 && fu <= m.limit[0] && fv >= 0 && fv <= m.limit[1] && fs >= 0 &&
+                          fs <= m.limit[2] && ft >= 0 && ft <= m.limit[3];
+      if (!inside) {  // also catches NaN
+        dst[c] = 0.0f;
+        if (ok_row) ok_row[c] = 0;
+        ++masked;
+        continue;
+      }
+      const int iu = std::min(int(fu), int(m.limit[0]) - 1), iv = std::min(int(fv), int(m.limit[1]) - 1);
+      const int is = std::min(int(fs), int(m.limit[2]) - 1), it = std::min(int(ft), int(m.limit[3]) - 1);
+      const float wu = fu - float(iu), wv = fv - float(iv), ws = fs - float(is), wt = ft - float(it);
+      const float s00 = bilinear_st(fetch, fetch.uv(iu, iv), is, it, ws, wt);
+      const float s01 = bilinear_st(fetch, fetch.uv(iu, iv + 1), is, it, ws, wt);
+      const float s10 = bilinear_st(fetch, fetch.uv(iu + 1, iv), is, it, ws, wt);
+      const float s11 = bilinear_st(fetch, fetch.uv(iu + 1, iv + 1), is, it, ws, wt);
+      const float low = s00 + wv * (s01 - s00), high = s10 + wv * (s11 - s10);
+      dst[c] = low + wu * (high - low);
+      if (ok_row) ok_row[c] = 1;
+    }
+  }
+  return masked;
+}
+
+LFTRACK_HOT_CLONES
+int render_float(const FloatFetch& f, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
+                 ImageView<unsigned char> valid, int cols, int r0, int r1) {
+  return render_rows(f, m, g, out, valid, cols, r0, r1);
+}
+LFTRACK_HOT_CLONES
+int render_fixed16(const Fixed16Fetch& f, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
+                   ImageView<unsigned char> valid, int cols, int r0, int r1) {
+  return render_rows(f, m, g, out, valid, cols, r0, r1);
+}
+LFTRACK_HOT_CLONES
+int render_vq(const VqFetch& f, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
+              ImageView<unsigned char> valid, int cols, int r0, int r1) {
+  return render_rows(f, m, g, out, valid, cols, r0, r1);
+}
+
+class LightFieldRenderer final : public DrrRenderer {
+ public:
+  LightFieldRenderer(std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool)
+      : fields_(std::move(fields)), pool_(pool) {
+    name_ = std::string("lightfield-") + to_string(fields_.front()->header().storage);
+    if (fields_.front()->header().storage == LightFieldStorage::kVq) {
+      name_ += std::to_string(fields_.front()->header().codebook_size);
+    }
+  }
+
+  std::string_view name() const override { return name_; }
+  std::size_t bytes() const override {
+    std::size_t total = 0;
+    for (const auto& f : fields_) total += f->payload_bytes();
+    return total;
+  }
+
+ protected:
+  Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window, ImageView<float> out,
+                   RenderExtras* extras) const override {
+    const LightField* field = nullptr;
+    for (const auto& f : fields_)
+      if (f->geometry().view_name == view.name) field = f.get();
+    if (!field) return not_found("no light field for view '" + view.name + "'");
+    const LightField::Header& h = field->header();
+    const LightFieldGeometry& g = h.geometry;
+    if ((h.nominal_T_room_from_ct.inverse() * view.source_mm - g.source_ct_mm).norm() > 1e-3) {
+      return failed_precondition("view '" + view.name + "' has another source position than its light field");
+    }
+    const PoseDelta delta = delta_between(h.nominal_T_room_from_ct, T_room_from_ct, h.registration_origin_room_mm);
+    extras->pose_outside_envelope =
+        delta.translation_mm.cwiseAbs().maxCoeff() > h.envelope.translation_mm * (1 + 1e-9) + 1e-9 ||
+        delta.rotation_rad.cwiseAbs().maxCoeff() > deg_to_rad(h.envelope.rotation_deg) * (1 + 1e-9) + 1e-12;
+
+    // The moved source S' and pixel directions in the CT frame.
+    const Pose ct_from_room = T_room_from_ct.inverse();
+    const Vector3d source = ct_from_room * view.source_mm;
+    RayMap m;
+    m.d00 = ct_from_room * view.pixel_centre_mm(window.row0, window.col0) - source;
+    m.d_row = ct_from_room.linear() * view.row_axis * view.pitch_row_mm;
+    m.d_col = ct_from_room.linear() * view.col_axis * view.pitch_col_mm;
+    // u = (S'-S).e1 + ((S-S').n) q1, s = (S'-C).e1 + ((C-S').n) q1; likewise v, t with e2, q2.
+    const double k_uv = (g.source_ct_mm - source).dot(g.axis), k_st = (g.roi_centre_ct_mm - source).dot(g.axis);
+    const double offset[4] = {(source - g.source_ct_mm).dot(g.e1), (source - g.source_ct_mm).dot(g.e2),
+                              (source - g.roi_centre_ct_mm).dot(g.e1), (source - g.roi_centre_ct_mm).dot(g.e2)};
+    const double gain[4] = {k_uv, k_uv, k_st, k_st};
+    for (int a = 0; a < 4; ++a) {
+      m.base[a] = float((offset[a] - g.lo[a]) / g.spacing(a));
+      m.gain[a] = float(gain[a] / g.spacing(a));
+      m.limit[a] = float(g.size[a] - 1);
+    }
+
+    std::atomic<int> masked{0};
+    const auto& s = g.size;
+    auto rows = [&](int r0, int r1) {
+      int n = 0;
+      switch (h.storage) {
+        case LightFieldStorage::kFloat32: {
+          const FloatFetch f{field->float_samples(), std::size_t(s[1]) * s[2] * s[3], std::size_t(s[2]) * s[3], std::size_t(s[3])};
+          n = render_float(f, m, g, out, extras->valid, window.cols, r0, r1);
+          break;
+        }
+        case LightFieldStorage::kFixed16: {
+          const Fixed16Fetch f{field->fixed_samples(), float(h.fixed_scale), std::size_t(s[1]) * s[2] * s[3],
+                               std::size_t(s[2]) * s[3], std::size_t(s[3])};
+          n = render_fixed16(f, m, g, out, extras->valid, window.cols, r0, r1);
+          break;
+        }
+        case LightFieldStorage::kVq: {
+          const VqFetch f{field->codebook(), field->tile_codes(), std::size_t(s[1] + 1) / 2, std::size_t(s[2] + 1) / 2,
+                          std::size_t(s[3] + 1) / 2};
+          n = render_vq(f, m, g, out, extras->valid, window.cols, r0, r1);
+          break;
+        }
+      }
+      masked.fetch_add(n, std::memory_order_relaxed);
+    };
+    if (pool_) pool_->parallel_for(window.rows, 8, rows);
+    else rows(0, window.rows);
+    extras->masked_pixels = masked.load();
+    return {};
+  }
+
+ private:
+  std::vector<std::shared_ptr<const LightField>> fields_;
+  ThreadPool* pool_;
+  std::string name_;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
+                                                               ThreadPool* pool) {
+  if (fields.empty()) {
+    return failed_precondition("the lightfield renderer needs precomputed light fields (run `lftrack precompute`)");
+  }
+  for (const auto& f : fields) {
+    if (!f) return invalid_argument("null light field");
+    if (f->header().storage != fields.front()->header().storage) {
+      return invalid_argument("light fields of one renderer must share a storage mode");
+    }
+  }
+  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(fields), pool));
+}
+
+}  // namespace lftrack::tracking
