@@ -21,6 +21,7 @@ void add_scene_options(CLI::App* app, SceneOptions* options);
 
 Command add_info_command(CLI::App* parent);
 Command add_drr_command(CLI::App* parent);
+Command add_precompute_command(CLI::App* parent);
 Command add_bench_drr_command(CLI::App* parent);
 
 }  // namespace lftrack::host::cli

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   using namespace lftrack::host::cli;
   const Command info = add_info_command(&app);
   const Command drr = add_drr_command(&app);
+  const Command precompute = add_precompute_command(&app);
   CLI::App* bench = app.add_subcommand("bench", "Benchmarks measured side by side in one run");
   bench->require_subcommand(1);
   const Command bench_drr = add_bench_drr_command(bench);
@@ -40,6 +41,8 @@ int main(int argc, char** argv) {
       status = info();
     else if (app.got_subcommand("drr"))
       status = drr();
+    else if (app.got_subcommand("precompute"))
+      status = precompute();
     else if (bench->got_subcommand("drr"))
       status = bench_drr();
     if (!status.ok()) {

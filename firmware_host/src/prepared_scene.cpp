@@ -39,6 +39,46 @@ Result<tracking::PixelWindow> roi_window(const tracking::XrayView& view_room,
 
 }  // namespace
 
+tracking::LightFieldPlanInput PreparedScene::light_field_plan(int index) const {
+  tracking::LightFieldPlanInput in;
+  in.view_room = scene.detectors[static_cast<std::size_t>(index)].view;
+  in.roi_window = roi_windows[static_cast<std::size_t>(index)];
+  in.nominal_T_room_from_ct = nominal_T_room_from_ct;
+  in.registration_origin_room_mm = registration_origin_room_mm();
+  in.roi_centre_ct_mm = roi_centre_ct_mm;
+  in.envelope = scene.envelope;
+  return in;
+}
+
+std::filesystem::path default_light_field_dir(const Scene& scene) {
+  const std::string stem =
+      scene.source.rfind("builtin:", 0) == 0 ? "builtin-" + scene.source.substr(8) : std::filesystem::path(scene.source).stem().string();
+  return std::filesystem::path("out") / "lightfields" / stem;
+}
+
+std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name) {
+  return dir / (view_name + ".lf");
+}
+
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(const PreparedScene& p,
+                                                                                   const std::filesystem::path& dir) {
+  const std::uint64_t ct_hash = tracking::volume_hash(*p.mu);
+  std::vector<std::shared_ptr<const tracking::LightField>> fields;
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
+    auto field = tracking::LightField::load(file, ct_hash, tracking::plan_hash(p.light_field_plan(int(i)), p.scene.light_field));
+    if (!field.ok()) return field.status();
+    const auto& h = (*field)->header();
+    if (h.storage != p.scene.light_field.storage ||
+        (h.storage == tracking::LightFieldStorage::kVq && h.codebook_size != p.scene.light_field.vq_codebook_size)) {
+      return failed_precondition(file.string() + ": stores " + tracking::to_string(h.storage) + ", the scene asks for " +
+                                 tracking::to_string(p.scene.light_field.storage) + "; run `lftrack precompute` again");
+    }
+    fields.push_back(*field);
+  }
+  return fields;
+}
+
 int PreparedScene::detector_index(const std::string& name) const {
   for (std::size_t i = 0; i < scene.detectors.size(); ++i)
     if (scene.detectors[i].view.name == name) return static_cast<int>(i);

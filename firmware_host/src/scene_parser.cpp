@@ -159,6 +159,39 @@ class SceneParser {
     return {};
   }
 
+  Status parse_light_field(const YAML::Node& n, tracking::LightFieldSpec* spec) const {
+    const std::string what = "tracking.light_field";
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"resolution", "storage", "codebook", "margin"}));
+    if (const YAML::Node r = n["resolution"]) {
+      if (!r.IsSequence() || r.size() != 4) return error(r, what + ".resolution must be [u, v, s, t]");
+      for (std::size_t a = 0; a < 4; ++a) {
+        long value = 0;
+        LFTRACK_RETURN_IF_ERROR(integer(r[a], what + ".resolution", 2, 4096, &value));
+        spec->resolution[a] = static_cast<int>(value);
+      }
+    }
+    if (const YAML::Node s = n["storage"]) {
+      std::string storage;
+      LFTRACK_RETURN_IF_ERROR(text(s, what + ".storage", &storage));
+      if (storage == "float") spec->storage = tracking::LightFieldStorage::kFloat32;
+      else if (storage == "fixed16") spec->storage = tracking::LightFieldStorage::kFixed16;
+      else if (storage == "vq") spec->storage = tracking::LightFieldStorage::kVq;
+      else return error(s, what + ".storage must be one of float, fixed16, vq; got '" + storage + "'");
+    }
+    if (const YAML::Node c = n["codebook"]) {
+      long size = 0;
+      LFTRACK_RETURN_IF_ERROR(integer(c, what + ".codebook", 2, 65536, &size));
+      spec->vq_codebook_size = static_cast<int>(size);
+    }
+    if (const YAML::Node m = n["margin"]) {
+      LFTRACK_RETURN_IF_ERROR(number(m, what + ".margin", &spec->margin_fraction));
+      if (spec->margin_fraction < 0 || spec->margin_fraction > 1) {
+        return error(m, what + ".margin is a fraction of each extent, in [0, 1]");
+      }
+    }
+    return {};
+  }
+
   Status parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const {
     const std::string what = "detectors[" + std::to_string(index) + "]";
     LFTRACK_RETURN_IF_ERROR(check_keys(n, what,
@@ -311,7 +344,8 @@ class SceneParser {
     }
     if (root["tracking"]) {
       const YAML::Node t = root["tracking"];
-      LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking", {"renderer"}));
+      LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking", {"renderer", "light_field"}));
+      if (t["light_field"]) LFTRACK_RETURN_IF_ERROR(parse_light_field(t["light_field"], &scene.light_field));
       if (t["renderer"]) {
         LFTRACK_RETURN_IF_ERROR(text(t["renderer"], "tracking.renderer", &scene.renderer));
         const auto known = tracking::renderer_names();

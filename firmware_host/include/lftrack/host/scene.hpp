@@ -16,6 +16,7 @@
 
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 #include "lftrack/tracking/volume.hpp"
@@ -47,10 +48,7 @@ struct DetectorSpec {
   int bits = 12;               // detector bit depth
 };
 
-struct PoseEnvelope {
-  double translation_mm = 10;  // per axis, +-
-  double rotation_deg = 5;     // per axis of the rotation vector, +-
-};
+using PoseEnvelope = tracking::PoseEnvelope;  // +-translation_mm, +-rotation_deg per axis
 
 struct Scene {
   std::string source;  // the scene file, or "builtin:phantom"
@@ -62,6 +60,7 @@ struct Scene {
   std::vector<DetectorSpec> detectors;
   PoseEnvelope envelope;
   std::string renderer = "siddon";
+  tracking::LightFieldSpec light_field;  // tracking.light_field: resolution, storage, codebook, margin
 };
 
 // Parses a scene from YAML text; `source_name` is used in messages ("file.yaml:12:5: ...") and
@@ -88,7 +87,18 @@ struct PreparedScene {
   }
   // Index of the detector called `name`, or -1.
   int detector_index(const std::string& name) const;
+  // What a light field for detector `index` must cover.
+  tracking::LightFieldPlanInput light_field_plan(int index) const;
 };
+
+// Where light-field files of a scene live by default: out/lightfields/<scene file stem>
+// (out/lightfields/builtin-phantom for the built-in scene), relative to the working folder.
+std::filesystem::path default_light_field_dir(const Scene& scene);
+// The file of one view's field in `dir`.
+std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name);
+// Loads every view's field from `dir`, refusing files built for another CT, geometry or storage.
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(const PreparedScene& scene,
+                                                                                   const std::filesystem::path& dir);
 
 // Reads the CT (or generates the phantom), converts it to attenuation, and resolves the ROI,
 // the registration origin, the nominal pose and each detector's ROI window. `ct_override`

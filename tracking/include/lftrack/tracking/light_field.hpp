@@ -45,7 +45,7 @@ const char* to_string(LightFieldStorage storage);
 
 // The pose envelope a field is built for: delta = (t, omega) about the registration origin,
 // each component of t within +-translation_mm and of omega within +-rotation_deg.
-struct PoseEnvelope4D {
+struct PoseEnvelope {
   double translation_mm = 10;
   double rotation_deg = 5;
 };
@@ -90,7 +90,7 @@ struct LightFieldPlanInput {
   Pose nominal_T_room_from_ct = Pose::Identity();
   Eigen::Vector3d registration_origin_room_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
-  PoseEnvelope4D envelope;
+  PoseEnvelope envelope;
 };
 
 // Plans a field's geometry: the planes from the nominal pose, and extents covering the rays of
@@ -108,7 +108,7 @@ class LightField {
     double fixed_scale = 0;             // fixed16 only: value = code * fixed_scale
     Pose nominal_T_room_from_ct = Pose::Identity();
     Eigen::Vector3d registration_origin_room_mm = Eigen::Vector3d::Zero();
-    PoseEnvelope4D envelope;
+    PoseEnvelope envelope;
     std::uint64_t ct_hash = 0;          // of the attenuation volume it was built from
     std::uint64_t plan_hash = 0;        // of the plan input and spec it was built for
   };
