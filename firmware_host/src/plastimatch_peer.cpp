@@ -52,7 +52,7 @@ Result<tracking::Image<float>> read_plastimatch_pfm(const fs::path& file) {
 
 }  // namespace
 
-Status run_process(const std::vector<std::string>& argv, std::string* output) {
+Status run_process(const std::vector<std::string>& argv, std::string* output, const std::vector<std::string>& extra_env) {
   char log_template[] = "/tmp/lftrack-process-XXXXXX";
   const int log_fd = mkstemp(log_template);
   if (log_fd < 0) return io_error("cannot create a temporary file for process output");
@@ -65,7 +65,11 @@ Status run_process(const std::vector<std::string>& argv, std::string* output) {
   for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
   args.push_back(nullptr);
   pid_t pid = 0;
-  const int spawn_error = posix_spawnp(&pid, args[0], &actions, nullptr, args.data(), environ);
+  std::vector<char*> env;
+  for (char** e = environ; *e; ++e) env.push_back(*e);
+  for (const auto& e : extra_env) env.push_back(const_cast<char*>(e.c_str()));
+  env.push_back(nullptr);
+  const int spawn_error = posix_spawnp(&pid, args[0], &actions, nullptr, args.data(), env.data());
   posix_spawn_file_actions_destroy(&actions);
   if (spawn_error != 0) {
     close(log_fd);
@@ -137,7 +141,7 @@ Result<std::vector<std::string>> plastimatch_drr_arguments(const tracking::XrayV
 }
 
 Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct, const fs::path& volume_mha,
-                                    const fs::path& work_dir) {
+                                    const fs::path& work_dir, int threads) {
   std::error_code ec;
   fs::create_directories(work_dir, ec);
   const std::string prefix = (work_dir / "drr_").string();
@@ -145,7 +149,9 @@ Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct, const fs:
   if (!args.ok()) return args.status();
   std::string log;
   const auto t0 = std::chrono::steady_clock::now();
-  if (Status s = run_process(*args, &log); !s.ok()) return s.with_context(log.substr(0, 400));
+  std::vector<std::string> env;
+  if (threads > 0) env.push_back("OMP_NUM_THREADS=" + std::to_string(threads));
+  if (Status s = run_process(*args, &log, env); !s.ok()) return s.with_context(log.substr(0, 400));
   PeerDrr out;
   out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   auto image = read_plastimatch_pfm(prefix + "0000.pfm");

@@ -20,6 +20,9 @@ namespace {
 
 using Eigen::Vector3d;
 
+// The kernel's helpers must inline into the pixel loop (GCC otherwise keeps calls there).
+#define LFTRACK_INLINE inline __attribute__((always_inline))
+
 // Per-render constants: continuous sample index f_a = base_a + gain_a * q (q = q1 for u, s and
 // q2 for v, t), and the affine ray direction.
 struct RayMap {
@@ -31,18 +34,18 @@ struct RayMap {
 struct FloatFetch {
   const float* f;
   std::size_t stride_u, stride_v, stride_s;
-  float operator()(std::size_t base, int is, int it) const { return f[base + std::size_t(is) * stride_s + std::size_t(it)]; }
-  std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
+  LFTRACK_INLINE float operator()(std::size_t base, int is, int it) const { return f[base + std::size_t(is) * stride_s + std::size_t(it)]; }
+  LFTRACK_INLINE std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
 };
 
 struct Fixed16Fetch {
   const std::uint16_t* q;
   float scale;
   std::size_t stride_u, stride_v, stride_s;
-  float operator()(std::size_t base, int is, int it) const {
+  LFTRACK_INLINE float operator()(std::size_t base, int is, int it) const {
     return float(q[base + std::size_t(is) * stride_s + std::size_t(it)]) * scale;
   }
-  std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
+  LFTRACK_INLINE std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
 };
 
 struct VqFetch {
@@ -50,31 +53,34 @@ struct VqFetch {
   const std::uint16_t* codes;
   std::size_t tiles_v, tiles_s, tiles_t;
   // `base` packs the (u, v) tile offset and the (u, v) element bits.
-  float operator()(std::size_t base, int is, int it) const {
+  LFTRACK_INLINE float operator()(std::size_t base, int is, int it) const {
     const std::size_t tile = (base >> 4) + std::size_t(is >> 1) * tiles_t + std::size_t(it >> 1);
     const std::size_t element = (base & 15u) | (std::size_t(is & 1) << 1) | std::size_t(it & 1);
     return codebook[std::size_t(codes[tile]) * 16 + element];
   }
-  std::size_t uv(int iu, int iv) const {
+  LFTRACK_INLINE std::size_t uv(int iu, int iv) const {
     const std::size_t tile = (std::size_t(iu >> 1) * tiles_v + std::size_t(iv >> 1)) * tiles_s * tiles_t;
     return (tile << 4) | (std::size_t(iu & 1) << 3) | (std::size_t(iv & 1) << 2);
   }
 };
 
 template <class Fetch>
-float bilinear_st(const Fetch& fetch, std::size_t base, int is, int it, float ws, float wt) {
+LFTRACK_INLINE float bilinear_st(const Fetch& fetch, std::size_t base, int is, int it, float ws, float wt) {
   const float a = fetch(base, is, it), b = fetch(base, is, it + 1);
   const float c = fetch(base, is + 1, it), d = fetch(base, is + 1, it + 1);
   const float top = a + wt * (b - a), bottom = c + wt * (d - c);
   return top + ws * (bottom - top);
 }
 
-// Renders rows [r_begin, r_end) of the window; returns the number of masked pixels.
-template <class Fetch>
-int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
-                ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+// Renders rows [r_begin, r_end) of the window; returns the number of masked pixels. The column
+// loop is straight-line code (indices clamped into the field, the out-of-field test applied as
+// a select at the end) so that the compiler can vectorise it with gathers.
+template <bool kWithMask, class Fetch>
+LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
+                     ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
   int masked = 0;
   const Vector3d& n = g.axis;
+  const int top_u = g.size[0] - 2, top_v = g.size[1] - 2, top_s = g.size[2] - 2, top_t = g.size[3] - 2;
   for (int r = r_begin; r < r_end; ++r) {
     const Vector3d d_row = m.d00 + m.d_row * r;
     // d.n, d.e1, d.e2 are affine in the column.
@@ -82,34 +88,46 @@ int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g
     const float de10 = float(d_row.dot(g.e1)), de11 = float(m.d_col.dot(g.e1));
     const float de20 = float(d_row.dot(g.e2)), de21 = float(m.d_col.dot(g.e2));
     float* dst = out.row_ptr(r);
-    unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
+    unsigned char* ok_row = kWithMask ? valid.row_ptr(r) : nullptr;
+    int row_masked = 0;
     for (int c = 0; c < cols; ++c) {
       const float dn = dn0 + dn1 * float(c);
       const float inv = 1.0f / dn;
       const float q1 = (de10 + de11 * float(c)) * inv, q2 = (de20 + de21 * float(c)) * inv;
       const float fu = m.base[0] + m.gain[0] * q1, fv = m.base[1] + m.gain[1] * q2;
       const float fs = m.base[2] + m.gain[2] * q1, ft = m.base[3] + m.gain[3] * q2;
-      const bool inside = dn > 0 && fu >= 0 && fu <= m.limit[0] && fv >= 0 && fv <= m.limit[1] && fs >= 0 &&
-                          fs <= m.limit[2] && ft >= 0 && ft <= m.limit[3];
-      if (!inside) {  // also catches NaN
-        dst[c] = 0.0f;
-        if (ok_row) ok_row[c] = 0;
-        ++masked;
-        continue;
-      }
-      const int iu = std::min(int(fu), int(m.limit[0]) - 1), iv = std::min(int(fv), int(m.limit[1]) - 1);
-      const int is = std::min(int(fs), int(m.limit[2]) - 1), it = std::min(int(ft), int(m.limit[3]) - 1);
-      const float wu = fu - float(iu), wv = fv - float(iv), ws = fs - float(is), wt = ft - float(it);
+      // Written so that NaN lands on the outside.
+      const bool inside = (dn > 0) & (fu >= 0) & (fu <= m.limit[0]) & (fv >= 0) & (fv <= m.limit[1]) & (fs >= 0) &
+                          (fs <= m.limit[2]) & (ft >= 0) & (ft <= m.limit[3]);
+      const float cu = inside ? fu : 0.0f, cv = inside ? fv : 0.0f, cs = inside ? fs : 0.0f, ct = inside ? ft : 0.0f;
+      const int iu = std::min(int(cu), top_u), iv = std::min(int(cv), top_v);
+      const int is = std::min(int(cs), top_s), it = std::min(int(ct), top_t);
+      const float wu = cu - float(iu), wv = cv - float(iv), ws = cs - float(is), wt = ct - float(it);
       const float s00 = bilinear_st(fetch, fetch.uv(iu, iv), is, it, ws, wt);
       const float s01 = bilinear_st(fetch, fetch.uv(iu, iv + 1), is, it, ws, wt);
       const float s10 = bilinear_st(fetch, fetch.uv(iu + 1, iv), is, it, ws, wt);
       const float s11 = bilinear_st(fetch, fetch.uv(iu + 1, iv + 1), is, it, ws, wt);
       const float low = s00 + wv * (s01 - s00), high = s10 + wv * (s11 - s10);
-      dst[c] = low + wu * (high - low);
-      if (ok_row) ok_row[c] = 1;
+      const float value = low + wu * (high - low);
+      // Multiplying (not selecting) keeps the interpolation unconditional, so it is not sunk
+      // into a branch; outside the field the clamped coordinates read finite samples, so the
+      // product is an exact 0.
+      const float keep = inside ? 1.0f : 0.0f;
+      dst[c] = value * keep;
+      row_masked += static_cast<int>(1.0f - keep);
+      if constexpr (kWithMask) ok_row[c] = static_cast<unsigned char>(keep);
     }
+    masked += row_masked;
   }
   return masked;
+}
+
+// The mask store is a template parameter so that neither loop has a branch in it.
+template <class Fetch>
+LFTRACK_INLINE int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
+                ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+  return valid.data ? render_rows_impl<true>(fetch, m, g, out, valid, cols, r_begin, r_end)
+                    : render_rows_impl<false>(fetch, m, g, out, valid, cols, r_begin, r_end);
 }
 
 LFTRACK_HOT_CLONES

@@ -3,6 +3,7 @@
 // the same ROI-cropped detectors, in one run. Speeds are medians of single renders on the
 // shared pool; fidelity is measured against the Siddon renderer at the same pose.
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -20,6 +21,9 @@ struct DrrBenchOptions {
   int repeats = 3;                 // timed renders per pose and view
   std::uint64_t seed = 7;          // pose sampling
   bool peers = true;               // run plastimatch if it is installed
+  int render_threads = 1;          // threads for the timed renders (and plastimatch's OpenMP)
+  bool light_fields = true;        // build the scene's light fields and time every storage mode
+  std::vector<int> vq_codebooks{256, 4096, 65536};
   std::filesystem::path work_dir;  // for the peer's files; empty: a fresh temporary folder
 };
 
@@ -29,6 +33,11 @@ struct RendererFigures {
   double ncc_vs_siddon = 0;      // mean over poses and views
   double ncc_min_vs_siddon = 0;  // worst pose and view
   double psnr_db_vs_siddon = 0;  // mean over poses and views (inf for Siddon itself)
+  double speedup_vs_siddon = 0;  // Siddon's median time / this one's
+  double speedup_vs_plastimatch = 0;
+  std::size_t bytes = 0;             // precomputed data held (light fields, all views)
+  double out_of_field_fraction = 0;  // masked pixels / all pixels
+  double precompute_s = 0;           // light fields: building (all views) and converting
 };
 
 struct PeerFigures {
@@ -44,6 +53,9 @@ struct DrrBenchReport {
   std::string ct;
   int rows = 0, cols = 0;
   int threads = 1;
+  int render_threads = 1;
+  double precompute_s = 0;  // building the float light fields of all views
+  std::array<int, 4> light_field_resolution{};
   int poses = 0;
   std::vector<std::string> views;
   std::vector<RendererFigures> renderers;

@@ -48,12 +48,14 @@ struct PeerDrr {
 };
 
 // Runs plastimatch in `work_dir` and reads its result back.
+// `threads` > 0 limits plastimatch's OpenMP threads (OMP_NUM_THREADS).
 Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct,
                                     const std::filesystem::path& volume_mha,
-                                    const std::filesystem::path& work_dir);
+                                    const std::filesystem::path& work_dir, int threads = 0);
 
-// Runs argv (argv[0] looked up on PATH), captures stdout and stderr into `output`, and returns
+// Runs argv (argv[0] looked up on PATH) with `extra_env` ("NAME=value") added, captures stdout and stderr into `output`, and returns
 // the exit status as a Status.
-Status run_process(const std::vector<std::string>& argv, std::string* output);
+Status run_process(const std::vector<std::string>& argv, std::string* output,
+                   const std::vector<std::string>& extra_env = {});
 
 }  // namespace lftrack::host
