@@ -3,11 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <algorithm>
 #include <fstream>
+#include <iterator>
 
 #include <nlohmann/json.hpp>
 
 #include "lftrack/host/plastimatch_peer.hpp"
+#include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"
 
@@ -59,17 +62,78 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
   EXPECT_NE(out.find("unknown renderer 'magic'"), std::string::npos) << out;
 }
 
-TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
+// The built-in phantom with small light fields, written next to the test's folder.
+std::filesystem::path small_light_field_scene(const std::filesystem::path& dir, const char* extra = "") {
+  auto text = builtin_scene_text("builtin:phantom");
+  std::string scene = *text;
+  scene.replace(scene.find("  renderer: siddon"), std::string("  renderer: siddon").size(),
+                "  renderer: lightfield\n  light_field:\n    resolution: [4, 4, 48, 48]\n    storage: fixed16\n");
+  scene += extra;
+  const auto file = dir / "small_lf.yaml";
+  std::ofstream(file) << scene;
+  return file;
+}
+
+TEST(Cli, PrecomputeThenRenderWithTheLightField) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir.path());
+  const auto lf_dir = dir.path() / "lf";
   std::string out;
-  const Status s = run_process(
-      {lftrack_bin(), "-q", "bench", "drr", "--size", "24", "--poses", "1", "--repeats", "1", "--json"},
-      &out);
+  ASSERT_TRUE(run_process({lftrack_bin(), "precompute", "--scene", scene.string(), "-o", lf_dir.string()}, &out).ok()) << out;
+  EXPECT_TRUE(std::filesystem::exists(lf_dir / "A.lf")) << out;
+  EXPECT_TRUE(std::filesystem::exists(lf_dir / "B.lf")) << out;
+  EXPECT_NE(out.find("100%"), std::string::npos) << "a progress bar: " << out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "drr", "--scene", scene.string(), "--lf-dir", lf_dir.string(), "--roi", "-o",
+                           (dir.path() / "drr").string()}, &out).ok()) << out;
+  auto data = tracking::read_pfm(dir.path() / "drr" / "drr_A_mu_mm.pfm");
+  ASSERT_TRUE(data.ok());
+  float hi = 0;
+  for (float v : data->pixels()) hi = std::max(hi, v);
+  EXPECT_GT(hi, 3.0f);
+}
+
+TEST(Cli, LightFieldsForAnotherSceneAreRefused) {
+  test::TempDir dir;
+  const auto lf_dir = dir.path() / "lf";
+  std::string out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "precompute", "--scene", small_light_field_scene(dir.path()).string(), "-o",
+                           lf_dir.string()}, &out).ok()) << out;
+  // The same scene with a wider envelope: the fields no longer cover it.
+  const auto wider = small_light_field_scene(dir.path());
+  std::string text;
+  {
+    std::ifstream in(wider);
+    text.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  text.replace(text.find("rotation_deg: 5"), std::string("rotation_deg: 5").size(), "rotation_deg: 6");
+  std::ofstream(wider) << text;
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir", lf_dir.string(), "-o",
+                            (dir.path() / "drr").string()}, &out).ok());
+  EXPECT_NE(out.find("another geometry"), std::string::npos) << out;
+  // No fields at all: the message says what to run.
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir", (dir.path() / "none").string(),
+                            "-o", (dir.path() / "drr").string()}, &out).ok());
+  EXPECT_NE(out.find("lftrack precompute"), std::string::npos) << out;
+}
+
+TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
+  test::TempDir dir;
+  std::string out;
+  const Status s = run_process({lftrack_bin(), "-q", "bench", "drr", "--scene", small_light_field_scene(dir.path()).string(),
+                                "--size", "24", "--poses", "1", "--repeats", "1", "--vq-codebooks", "16", "--json"},
+                               &out);
   ASSERT_TRUE(s.ok()) << out;
   const auto json = nlohmann::json::parse(out.substr(out.find('{')));
-  for (const char* key : {"ct", "size", "renderers", "peers"}) EXPECT_TRUE(json.contains(key)) << key;
-  for (const auto& r : json["renderers"])
-    for (const char* key : {"name", "ms_median", "ncc_vs_siddon", "psnr_db_vs_siddon"})
+  for (const char* key : {"ct", "size", "renderers", "peers", "light_field"}) EXPECT_TRUE(json.contains(key)) << key;
+  std::vector<std::string> names;
+  for (const auto& r : json["renderers"]) {
+    names.push_back(r["name"]);
+    for (const char* key : {"name", "ms_median", "speedup_vs_siddon", "ncc_vs_siddon", "psnr_db_vs_siddon", "bytes",
+                            "out_of_field_fraction"})
       EXPECT_TRUE(r.contains(key)) << key;
+  }
+  for (const char* name : {"siddon", "trilinear", "lightfield-float", "lightfield-fixed16", "lightfield-vq16"})
+    EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
   for (const auto& p : json["peers"])
     for (const char* key : {"name", "ms_median", "ncc_vs_siddon"}) EXPECT_TRUE(p.contains(key)) << key;
 }

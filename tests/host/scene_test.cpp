@@ -127,6 +127,26 @@ TEST_P(BadScenes, FailAtLoadWithLineAndReason) {
 INSTANTIATE_TEST_SUITE_P(EveryClass, BadScenes, ::testing::ValuesIn(kBadScenes),
                          [](const auto& p) { return std::string(p.param.name); });
 
+TEST(Scene, LightFieldSettings) {
+  std::string text = kValidScene;
+  text += "tracking:\n  renderer: lightfield\n  light_field:\n    resolution: [8, 8, 64, 32]\n    storage: vq\n"
+          "    codebook: 1024\n    margin: 0.1\n";
+  auto scene = parse_scene(text, "lf.yaml", "/");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->renderer, "lightfield");
+  EXPECT_EQ(scene->light_field.resolution, (std::array<int, 4>{8, 8, 64, 32}));
+  EXPECT_EQ(scene->light_field.storage, tracking::LightFieldStorage::kVq);
+  EXPECT_EQ(scene->light_field.vq_codebook_size, 1024);
+  EXPECT_DOUBLE_EQ(scene->light_field.margin_fraction, 0.1);
+  for (const char* bad : {"    storage: jpeg\n", "    resolution: [8, 8, 64]\n", "    resolution: [8, 8, 64, 1]\n",
+                          "    codebook: 70000\n", "    margin: 2\n", "    colour: red\n"}) {
+    const std::string t = std::string(kValidScene) + "tracking:\n  light_field:\n" + bad;
+    auto s2 = parse_scene(t, "lf.yaml", "/");
+    ASSERT_FALSE(s2.ok()) << bad;
+    EXPECT_EQ(s2.status().message().rfind("lf.yaml:19:", 0), 0u) << s2.status().message();
+  }
+}
+
 TEST(Scene, DuplicateDetectorNames) {
   std::string text = kValidScene;
   const std::string detector = text.substr(text.find("  - name: A"));
