@@ -153,6 +153,34 @@ TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
   EXPECT_EQ(zeros, extras.masked_pixels);
 }
 
+// The vectorised kernel (where the CPU has one) against the portable scalar kernel, with a
+// window whose width is not a multiple of 8 and poses inside and outside the field.
+TEST(LightFieldRender, VectorisedKernelMatchesScalar) {
+  RendererOptions scalar_options, simd_options;
+  scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
+  scalar_options.simd = false;
+  auto scalar = make_renderer("lightfield", nullptr, scalar_options);
+  auto simd = make_renderer("lightfield", nullptr, simd_options);
+  ASSERT_TRUE(scalar.ok() && simd.ok());
+  const XrayView view = fixture_plan().view_room;
+  const PixelWindow w{3, 2, 41, 37};
+  for (double shift : {0.0, 2.0, 30.0}) {
+    Pose pose = Pose::Identity();
+    pose.linear() = rotation_exp(Vector3d(0.05, -0.08, 0.1));
+    pose.translation() = Vector3d(shift, -1, 0.5);
+    Image<float> a(w.rows, w.cols), b(w.rows, w.cols);
+    Image<unsigned char> va(w.rows, w.cols), vb(w.rows, w.cols);
+    RenderExtras ea, eb;
+    ea.valid = va.view();
+    eb.valid = vb.view();
+    ASSERT_TRUE((*scalar)->render(pose, view, w, a.view(), &ea).ok());
+    ASSERT_TRUE((*simd)->render(pose, view, w, b.view(), &eb).ok());
+    EXPECT_EQ(ea.masked_pixels, eb.masked_pixels) << shift;
+    EXPECT_EQ(va.pixels(), vb.pixels()) << shift;
+    for (std::size_t i = 0; i < a.pixels().size(); ++i) ASSERT_NEAR(a.pixels()[i], b.pixels()[i], 1e-4f * (1 + a.pixels()[i]));
+  }
+}
+
 TEST(LightFieldRender, RefusesViewsItWasNotBuiltFor) {
   RendererOptions options;
   options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};

@@ -11,6 +11,7 @@
 #include <cmath>
 
 #include "cpu_dispatch.hpp"
+#include "light_field_kernels.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -23,13 +24,6 @@ using Eigen::Vector3d;
 // The kernel's helpers must inline into the pixel loop (GCC otherwise keeps calls there).
 #define LFTRACK_INLINE inline __attribute__((always_inline))
 
-// Per-render constants: continuous sample index f_a = base_a + gain_a * q (q = q1 for u, s and
-// q2 for v, t), and the affine ray direction.
-struct RayMap {
-  float base[4], gain[4];
-  float limit[4];  // size - 1 per axis
-  Vector3d d00, d_row, d_col;  // direction of pixel (row0, col0) and its increments, CT frame
-};
 
 struct FloatFetch {
   const float* f;
@@ -148,9 +142,11 @@ int render_vq(const VqFetch& f, const RayMap& m, const LightFieldGeometry& g, Im
 
 class LightFieldRenderer final : public DrrRenderer {
  public:
-  LightFieldRenderer(std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool)
+  LightFieldRenderer(std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, bool simd)
       : fields_(std::move(fields)), pool_(pool) {
     name_ = std::string("lightfield-") + to_string(fields_.front()->header().storage);
+    use_avx2_ = simd && light_field_avx2_available();
+    for (const auto& f : fields_) use_avx2_ = use_avx2_ && f->geometry().sample_count() < (std::int64_t{1} << 31);
     if (fields_.front()->header().storage == LightFieldStorage::kVq) {
       name_ += std::to_string(fields_.front()->header().codebook_size);
     }
@@ -204,6 +200,10 @@ class LightFieldRenderer final : public DrrRenderer {
       int n = 0;
       switch (h.storage) {
         case LightFieldStorage::kFloat32: {
+          if (use_avx2_) {
+            n = render_float_avx2(field->float_samples(), g, m, out, extras->valid, window.cols, r0, r1);
+            break;
+          }
           const FloatFetch f{field->float_samples(), std::size_t(s[1]) * s[2] * s[3], std::size_t(s[2]) * s[3], std::size_t(s[3])};
           n = render_float(f, m, g, out, extras->valid, window.cols, r0, r1);
           break;
@@ -233,12 +233,13 @@ class LightFieldRenderer final : public DrrRenderer {
   std::vector<std::shared_ptr<const LightField>> fields_;
   ThreadPool* pool_;
   std::string name_;
+  bool use_avx2_ = false;  // float fields of fewer than 2^31 samples on a CPU with AVX2 + FMA
 };
 
 }  // namespace
 
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
-                                                               ThreadPool* pool) {
+                                                               ThreadPool* pool, bool simd) {
   if (fields.empty()) {
     return failed_precondition("the lightfield renderer needs precomputed light fields (run `lftrack precompute`)");
   }
@@ -248,7 +249,7 @@ Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::
       return invalid_argument("light fields of one renderer must share a storage mode");
     }
   }
-  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(fields), pool));
+  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(fields), pool, simd));
 }
 
 }  // namespace lftrack::tracking

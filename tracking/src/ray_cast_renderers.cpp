@@ -106,12 +106,12 @@ std::vector<std::string> renderer_names() {
 
 // In light_field_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
-                                                               ThreadPool* pool);
+                                                               ThreadPool* pool, bool simd);
 
 Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
                                                    const RendererOptions& options) {
-  if (name == "lightfield") return make_light_field_renderer(options.light_fields, options.pool);
+  if (name == "lightfield") return make_light_field_renderer(options.light_fields, options.pool, options.simd);
   if (!volume) return invalid_argument("make_renderer: no volume");
   LFTRACK_RETURN_IF_ERROR(volume->geometry.validate());
   if (volume->values.size() != static_cast<std::size_t>(volume->geometry.voxel_count())) {

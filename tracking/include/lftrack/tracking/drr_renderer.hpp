@@ -65,6 +65,9 @@ struct RendererOptions {
   // Light-field renderer: one precomputed field per view it will be asked to render (matched by
   // view name), all of one storage mode.
   std::vector<std::shared_ptr<const LightField>> light_fields;
+  // Use vectorised kernels where the CPU has them (false: the portable scalar kernels; tests
+  // compare the two).
+  bool simd = true;
 };
 
 // Names accepted by make_renderer, in a stable order.

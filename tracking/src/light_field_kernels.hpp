@@ -1,0 +1,28 @@
+#pragma once
+// Private to the light-field renderer: the per-render ray map and the vectorised kernel.
+
+#include <Eigen/Core>
+
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/light_field.hpp"
+
+namespace lftrack::tracking {
+
+// Per-render constants: continuous sample index f_a = base_a + gain_a * q (q = q1 for u, s and
+// q2 for v, t), and the affine ray direction.
+struct RayMap {
+  float base[4], gain[4];
+  float limit[4];                     // size - 1 per axis
+  Eigen::Vector3d d00, d_row, d_col;  // direction of pixel (row0, col0) and its increments, CT frame
+};
+
+// True if this CPU runs the AVX2 kernel (AVX2 and FMA).
+bool light_field_avx2_available();
+
+// Float storage, 8 pixels at a time with AVX2 gathers; the same results as the scalar kernel up
+// to float rounding. Needs light_field_avx2_available() and fewer than 2^31 samples. Returns the
+// number of masked pixels.
+int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
+                      ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+
+}  // namespace lftrack::tracking
