@@ -74,35 +74,44 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
   }
 
   // Walk voxel by voxel: each step ends at the nearest plane crossing. Where two crossings
-  // coincide (the ray passes through an edge) the second step has zero length. The loop keeps
-  // its state in scalars and picks the axis with selects rather than branches (which axis comes
-  // next is unpredictable: branching on it cost three times as much); `left_*` counts the
-  // planes still inside the volume, so a crossing that rounding places before a_end can never
-  // step outside it.
+  // coincide (the ray passes through an edge) the next step has zero length. The axes are
+  // ordered so that p and q are crossed most often and r least (for CT rays usually the slice
+  // axis): the common step chooses between p and q with selects, not branches (which of them
+  // comes next is unpredictable: branching on it cost three times as much), and an r crossing
+  // is the rare branch. `left_*` counts the planes still inside the volume, so a crossing that
+  // rounding places before a_end can never step outside it.
+  int order[3] = {0, 1, 2};
+  const Eigen::Vector3d rate = d.cwiseAbs().cwiseQuotient(g.spacing_mm);  // crossings per unit of a
+  std::sort(order, order + 3, [&](int i, int j) { return rate[i] > rate[j]; });
+  const int P = order[0], Q = order[1], R = order[2];
   const float* mu = volume_.values.data();
   std::ptrdiff_t offset = index[0] + stride[1] * index[1] + stride[2] * index[2];
-  double nx = next[0], ny = next[1], nz = next[2];
-  const double dx = delta[0], dy = delta[1], dz = delta[2];
-  const std::ptrdiff_t ox = offset_step[0], oy = offset_step[1], oz = offset_step[2];
-  int left_x = left[0], left_y = left[1], left_z = left[2];
+  double np = next[P], nq = next[Q], nr = next[R];
+  const double dp = delta[P], dq = delta[Q], dr = delta[R];
+  const std::ptrdiff_t op = offset_step[P], oq = offset_step[Q], orr = offset_step[R];
+  int left_p = left[P], left_q = left[Q], left_r = left[R];
   double sum = 0.0;
   for (;;) {
-    const bool x_first = nx <= ny;
-    const double n_xy = x_first ? nx : ny;
-    const bool z_first = nz < n_xy;
-    const double a_next = z_first ? nz : n_xy;
-    if (a_next >= a_end) break;
-    sum += static_cast<double>(mu[offset]) * (a_next - a);
-    a = a_next;
-    const bool take_x = !z_first && x_first, take_y = !z_first && !x_first;
-    offset += take_x ? ox : (take_y ? oy : oz);
-    nx = take_x ? nx + dx : nx;
-    ny = take_y ? ny + dy : ny;
-    nz = z_first ? nz + dz : nz;
-    left_x -= take_x;
-    left_y -= take_y;
-    left_z -= z_first;
-    if ((left_x | left_y | left_z) < 0) return sum * d.norm();
+    const bool p_first = np <= nq;
+    const double n_pq = p_first ? np : nq;
+    if (n_pq <= nr) [[likely]] {
+      if (n_pq >= a_end) break;
+      sum += static_cast<double>(mu[offset]) * (n_pq - a);
+      a = n_pq;
+      offset += p_first ? op : oq;
+      np = p_first ? np + dp : np;
+      nq = p_first ? nq : nq + dq;
+      left_p -= p_first;
+      left_q -= !p_first;
+      if ((left_p | left_q) < 0) return sum * d.norm();
+    } else {
+      if (nr >= a_end) break;
+      sum += static_cast<double>(mu[offset]) * (nr - a);
+      a = nr;
+      offset += orr;
+      nr += dr;
+      if (--left_r < 0) return sum * d.norm();
+    }
   }
   sum += static_cast<double>(mu[offset]) * (a_end - a);
   return sum * d.norm();
