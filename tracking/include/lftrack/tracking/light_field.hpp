@@ -76,7 +76,7 @@ struct LightFieldGeometry {
 
 struct LightFieldSpec {
   std::array<int, 4> resolution{32, 32, 256, 256};
-  double margin_fraction = 0.05;  // each axis' extent grows by this fraction on both sides
+  double margin_fraction = 0.02;  // each axis' extent grows by this fraction on both sides
   LightFieldStorage storage = LightFieldStorage::kFloat32;
   int vq_codebook_size = 4096;    // 2 .. 65536
   int vq_training_tiles = 65536;  // tiles sampled to train the codebook
