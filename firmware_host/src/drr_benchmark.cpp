@@ -105,6 +105,7 @@ Status measure(const tracking::DrrRenderer& renderer, const std::vector<tracking
   }
   fig->name = std::string(renderer.name());
   fig->ms_median = median(ms);
+  fig->ms_min = *std::min_element(ms.begin(), ms.end());
   fig->ncc_vs_siddon = mean(ncc);
   fig->ncc_min_vs_siddon = *std::min_element(ncc.begin(), ncc.end());
   fig->psnr_db_vs_siddon = mean(psnr);
@@ -266,6 +267,7 @@ nlohmann::json to_json(const DrrBenchReport& r) {
   for (const auto& f : r.renderers) {
     nlohmann::json entry = {{"name", f.name},
                             {"ms_median", f.ms_median},
+                            {"ms_min", f.ms_min},
                             {"speedup_vs_siddon", f.speedup_vs_siddon},
                             {"ncc_vs_siddon", f.ncc_vs_siddon},
                             {"ncc_min_vs_siddon", f.ncc_min_vs_siddon},

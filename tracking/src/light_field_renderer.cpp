@@ -4,7 +4,9 @@
 // Per render, everything is moved into the CT frame once. A pixel's ray direction d is affine in
 // (row, col); with q1 = d.e1 / d.n and q2 = d.e2 / d.n (one division per pixel) the four ray
 // coordinates are affine in (q1, q2), so the inner loop is a handful of multiply-adds, one
-// division and 16 loads, written as plain loops over a row for the compiler to vectorise.
+// division and 16 loads. Float fields use the AVX2 kernel (light_field_kernel_avx2.cpp) where the
+// CPU has it; the scalar kernels below serve 16-bit and VQ fields and other CPUs. (GCC 12 does
+// not vectorise the scalar loop itself: it sinks the blend into a branch on the field test.)
 
 #include <algorithm>
 #include <atomic>

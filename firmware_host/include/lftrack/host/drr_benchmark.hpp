@@ -30,6 +30,7 @@ struct DrrBenchOptions {
 struct RendererFigures {
   std::string name;
   double ms_median = 0;
+  double ms_min = 0;             // fastest render: less disturbed by other load on a shared machine
   double ncc_vs_siddon = 0;      // mean over poses and views
   double ncc_min_vs_siddon = 0;  // worst pose and view
   double psnr_db_vs_siddon = 0;  // mean over poses and views (inf for Siddon itself)
