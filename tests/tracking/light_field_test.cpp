@@ -153,11 +153,13 @@ TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
   EXPECT_EQ(zeros, extras.masked_pixels);
 }
 
-// The vectorised kernel (where the CPU has one) against the portable scalar kernel, with a
+// The vectorised kernels (where the CPU has them) against the portable scalar kernels, with a
 // window whose width is not a multiple of 8 and poses inside and outside the field.
-TEST(LightFieldRender, VectorisedKernelMatchesScalar) {
+class VectorisedKernel : public ::testing::TestWithParam<LightFieldStorage> {};
+
+TEST_P(VectorisedKernel, MatchesScalar) {
   RendererOptions scalar_options, simd_options;
-  scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
+  scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(GetParam())};
   scalar_options.simd = false;
   auto scalar = make_renderer("lightfield", nullptr, scalar_options);
   auto simd = make_renderer("lightfield", nullptr, simd_options);
@@ -180,6 +182,11 @@ TEST(LightFieldRender, VectorisedKernelMatchesScalar) {
     for (std::size_t i = 0; i < a.pixels().size(); ++i) ASSERT_NEAR(a.pixels()[i], b.pixels()[i], 1e-4f * (1 + a.pixels()[i]));
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(StorageModes, VectorisedKernel,
+                         ::testing::Values(LightFieldStorage::kFloat32, LightFieldStorage::kFixed16,
+                                           LightFieldStorage::kVq),
+                         [](const auto& p) { return std::string(to_string(p.param)); });
 
 TEST(LightFieldRender, RefusesViewsItWasNotBuiltFor) {
   RendererOptions options;

@@ -24,7 +24,26 @@ namespace {
 // The samples at idx and idx + 1 (adjacent in t) for 8 pixels, fetched as 4-byte pairs: two
 // gathers of four 8-byte elements instead of two of eight 4-byte ones. The indices go in as
 // pixels (0,1,4,5) and (2,3,6,7) so that the unpacking shuffles give pixel order back.
-LFTRACK_AVX2 inline void gather_pairs(const float* f, __m256i idx, __m256* first, __m256* second) {
+struct FloatPairs {
+  const float* f;
+  LFTRACK_AVX2 inline void operator()(__m256i idx, __m256* first, __m256* second) const;
+};
+
+// 16-bit samples: one gather of eight 4-byte words at idx reads both q[idx] and q[idx + 1]
+// (idx + 1 is always inside the field: t is clamped to size - 2).
+struct Fixed16Pairs {
+  const std::uint16_t* q;
+  float scale;
+  LFTRACK_AVX2 inline void operator()(__m256i idx, __m256* first, __m256* second) const {
+    const __m256i words = _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), reinterpret_cast<const int*>(q), idx,
+                                                      _mm256_set1_epi32(-1), 2);
+    const __m256 s = _mm256_set1_ps(scale);
+    *first = _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_and_si256(words, _mm256_set1_epi32(0xffff))), s);
+    *second = _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_srli_epi32(words, 16)), s);
+  }
+};
+
+LFTRACK_AVX2 inline void FloatPairs::operator()(__m256i idx, __m256* first, __m256* second) const {
   const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
   const __m256i p = _mm256_permutevar8x32_epi32(idx, order);
   const double* base = reinterpret_cast<const double*>(f);
@@ -38,20 +57,19 @@ LFTRACK_AVX2 inline void gather_pairs(const float* f, __m256i idx, __m256* first
 }
 
 // Bilinear blend in (s, t) of the 2 x 2 samples at idx, idx + 1, idx + ns_t, idx + ns_t + 1.
-LFTRACK_AVX2 inline __m256 bilinear(const float* f, __m256i idx, __m256i stride_s, __m256 ws, __m256 wt) {
+template <class Pairs>
+LFTRACK_AVX2 inline __m256 bilinear(const Pairs& pairs, __m256i idx, __m256i stride_s, __m256 ws, __m256 wt) {
   __m256 a, b, c, d;
-  gather_pairs(f, idx, &a, &b);
-  gather_pairs(f, _mm256_add_epi32(idx, stride_s), &c, &d);
+  pairs(idx, &a, &b);
+  pairs(_mm256_add_epi32(idx, stride_s), &c, &d);
   const __m256 top = _mm256_fmadd_ps(wt, _mm256_sub_ps(b, a), a);
   const __m256 bottom = _mm256_fmadd_ps(wt, _mm256_sub_ps(d, c), c);
   return _mm256_fmadd_ps(ws, _mm256_sub_ps(bottom, top), top);
 }
 
-}  // namespace
-
-LFTRACK_AVX2
-int render_float_avx2(const float* f, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
-                      ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+template <class Pairs>
+LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
+                             ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
   const int su = g.size[1] * g.size[2] * g.size[3], sv = g.size[2] * g.size[3], ss = g.size[3];
   const __m256i v_su = _mm256_set1_epi32(su), v_sv = _mm256_set1_epi32(sv), v_ss = _mm256_set1_epi32(ss);
   const __m256i top_u = _mm256_set1_epi32(g.size[0] - 2), top_v = _mm256_set1_epi32(g.size[1] - 2);
@@ -124,11 +142,27 @@ int render_float_avx2(const float* f, const LightFieldGeometry& g, const RayMap&
   return masked;
 }
 
+}  // namespace
+
+int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
+                      ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+  return render_avx2(FloatPairs{samples}, g, m, out, valid, cols, r_begin, r_end);
+}
+
+int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+  return render_avx2(Fixed16Pairs{codes, scale}, g, m, out, valid, cols, r_begin, r_end);
+}
+
 #else
 
 bool light_field_avx2_available() { return false; }
 int render_float_avx2(const float*, const LightFieldGeometry&, const RayMap&, ImageView<float>, ImageView<unsigned char>,
                       int, int, int) {
+  return 0;
+}
+int render_fixed16_avx2(const std::uint16_t*, float, const LightFieldGeometry&, const RayMap&, ImageView<float>,
+                        ImageView<unsigned char>, int, int, int) {
   return 0;
 }
 

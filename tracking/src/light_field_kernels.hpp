@@ -2,6 +2,7 @@
 // Private to the light-field renderer: the per-render ray map and the vectorised kernel.
 
 #include <Eigen/Core>
+#include <cstdint>
 
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/light_field.hpp"
@@ -24,5 +25,8 @@ bool light_field_avx2_available();
 // number of masked pixels.
 int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
                       ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+// The same for 16-bit storage (value = code * scale).
+int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
 
 }  // namespace lftrack::tracking

@@ -4,8 +4,8 @@
 // Per render, everything is moved into the CT frame once. A pixel's ray direction d is affine in
 // (row, col); with q1 = d.e1 / d.n and q2 = d.e2 / d.n (one division per pixel) the four ray
 // coordinates are affine in (q1, q2), so the inner loop is a handful of multiply-adds, one
-// division and 16 loads. Float fields use the AVX2 kernel (light_field_kernel_avx2.cpp) where the
-// CPU has it; the scalar kernels below serve 16-bit and VQ fields and other CPUs. (GCC 12 does
+// division and 16 loads. Float and 16-bit fields use the AVX2 kernels (light_field_kernel_avx2.cpp) where the
+// CPU has it; the scalar kernels below serve VQ fields and other CPUs. (GCC 12 does
 // not vectorise the scalar loop itself: it sinks the blend into a branch on the field test.)
 
 #include <algorithm>
@@ -211,6 +211,11 @@ class LightFieldRenderer final : public DrrRenderer {
           break;
         }
         case LightFieldStorage::kFixed16: {
+          if (use_avx2_) {
+            n = render_fixed16_avx2(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid, window.cols,
+                                    r0, r1);
+            break;
+          }
           const Fixed16Fetch f{field->fixed_samples(), float(h.fixed_scale), std::size_t(s[1]) * s[2] * s[3],
                                std::size_t(s[2]) * s[3], std::size_t(s[3])};
           n = render_fixed16(f, m, g, out, extras->valid, window.cols, r0, r1);
@@ -235,7 +240,7 @@ class LightFieldRenderer final : public DrrRenderer {
   std::vector<std::shared_ptr<const LightField>> fields_;
   ThreadPool* pool_;
   std::string name_;
-  bool use_avx2_ = false;  // float fields of fewer than 2^31 samples on a CPU with AVX2 + FMA
+  bool use_avx2_ = false;  // float and 16-bit fields of fewer than 2^31 samples on a CPU with AVX2 + FMA
 };
 
 }  // namespace
