@@ -35,43 +35,53 @@ bool GridRayCaster::clip(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, d
   return true;
 }
 
-double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) const {
-  double a = 0, a_end = 0;
-  if (!clip(p0, p1, &a, &a_end)) return 0.0;
+bool GridRayCaster::start_walk(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, WalkStart* w) const {
+  if (!clip(p0, p1, &w->a, &w->a_end)) return false;
   const Eigen::Vector3d d = p1 - p0;
   const VolumeGeometry& g = volume_.geometry;
-  const Eigen::Vector3d entry = p0 + a * d;
-
-  int index[3];
-  double next[3];   // ray parameter of the next plane crossing along each axis
-  double delta[3];  // ray parameter between two crossings along each axis
-  int left[3];      // planes still inside the volume along each axis
+  const Eigen::Vector3d entry = p0 + w->a * d;
   const std::ptrdiff_t stride[3] = {1, g.size.x(), std::ptrdiff_t{g.size.x()} * g.size.y()};
-  std::ptrdiff_t offset_step[3];
+  int index[3];
   for (int ax = 0; ax < 3; ++ax) {
     const double s = g.spacing_mm[ax];
     const int n = g.size[ax];
     const double u = (entry[ax] - lower_mm_[ax]) / s;  // position in voxel units from the box
     if (d[ax] > 0) {
       index[ax] = std::clamp(static_cast<int>(std::floor(u)), 0, n - 1);
-      next[ax] = (lower_mm_[ax] + (index[ax] + 1) * s - p0[ax]) / d[ax];
-      delta[ax] = s / d[ax];
-      offset_step[ax] = stride[ax];
-      left[ax] = n - 1 - index[ax];
+      w->next[ax] = (lower_mm_[ax] + (index[ax] + 1) * s - p0[ax]) / d[ax];
+      w->delta[ax] = s / d[ax];
+      w->offset_step[ax] = stride[ax];
+      w->left[ax] = n - 1 - index[ax];
     } else if (d[ax] < 0) {
       index[ax] = std::clamp(static_cast<int>(std::ceil(u)) - 1, 0, n - 1);
-      next[ax] = (lower_mm_[ax] + index[ax] * s - p0[ax]) / d[ax];
-      delta[ax] = -s / d[ax];
-      offset_step[ax] = -stride[ax];
-      left[ax] = index[ax];
+      w->next[ax] = (lower_mm_[ax] + index[ax] * s - p0[ax]) / d[ax];
+      w->delta[ax] = -s / d[ax];
+      w->offset_step[ax] = -stride[ax];
+      w->left[ax] = index[ax];
     } else {
       index[ax] = std::clamp(static_cast<int>(std::floor(u)), 0, n - 1);
-      next[ax] = std::numeric_limits<double>::infinity();
-      delta[ax] = 0;
-      offset_step[ax] = 0;
-      left[ax] = 0;
+      w->next[ax] = std::numeric_limits<double>::infinity();
+      w->delta[ax] = 0;
+      w->offset_step[ax] = 0;
+      w->left[ax] = 0;
     }
   }
+  w->offset = index[0] + stride[1] * index[1] + stride[2] * index[2];
+  w->length = d.norm();
+  w->rate = d.cwiseAbs().cwiseQuotient(g.spacing_mm);
+  return true;
+}
+
+double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) const {
+  WalkStart w;
+  if (!start_walk(p0, p1, &w)) return 0.0;
+  double a = w.a;
+  const double a_end = w.a_end;
+  const double* next = w.next;
+  const double* delta = w.delta;
+  const int* left = w.left;
+  const std::ptrdiff_t* offset_step = w.offset_step;
+  const Eigen::Vector3d& d_rate = w.rate;
 
   // Walk voxel by voxel: each step ends at the nearest plane crossing. Where two crossings
   // coincide (the ray passes through an edge) the next step has zero length. The axes are
@@ -80,12 +90,11 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
   // comes next is unpredictable: branching on it cost three times as much), and an r crossing
   // is the rare branch. `left_*` counts the planes still inside the volume, so a crossing that
   // rounding places before a_end can never step outside it.
-  int order[3] = {0, 1, 2};
-  const Eigen::Vector3d rate = d.cwiseAbs().cwiseQuotient(g.spacing_mm);  // crossings per unit of a
-  std::sort(order, order + 3, [&](int i, int j) { return rate[i] > rate[j]; });
+  int order[3] = {0, 1, 2};  // by crossings per unit of a, most first
+  std::sort(order, order + 3, [&](int i, int j) { return d_rate[i] > d_rate[j]; });
   const int P = order[0], Q = order[1], R = order[2];
   const float* mu = volume_.values.data();
-  std::ptrdiff_t offset = index[0] + stride[1] * index[1] + stride[2] * index[2];
+  std::ptrdiff_t offset = w.offset;
   double np = next[P], nq = next[Q], nr = next[R];
   const double dp = delta[P], dq = delta[Q], dr = delta[R];
   const std::ptrdiff_t op = offset_step[P], oq = offset_step[Q], orr = offset_step[R];
@@ -103,18 +112,18 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
       nq = p_first ? nq : nq + dq;
       left_p -= p_first;
       left_q -= !p_first;
-      if ((left_p | left_q) < 0) return sum * d.norm();
+      if ((left_p | left_q) < 0) return sum * w.length;
     } else {
       if (nr >= a_end) break;
       sum += static_cast<double>(mu[offset]) * (nr - a);
       a = nr;
       offset += orr;
       nr += dr;
-      if (--left_r < 0) return sum * d.norm();
+      if (--left_r < 0) return sum * w.length;
     }
   }
   sum += static_cast<double>(mu[offset]) * (a_end - a);
-  return sum * d.norm();
+  return sum * w.length;
 }
 
 namespace {

@@ -38,6 +38,17 @@ class GridRayCaster {
   const VolumeGeometry& geometry() const { return volume_.geometry; }
 
  private:
+  // Where a Siddon walk starts: the clipped parameter range, the first voxel and, per axis, the
+  // next crossing, the step between crossings, the offset step and the planes left.
+  struct WalkStart {
+    double a = 0, a_end = 0, length = 0;
+    double next[3], delta[3];
+    std::ptrdiff_t offset = 0, offset_step[3];
+    int left[3];
+    Eigen::Vector3d rate;  // crossings per unit of the ray parameter, per axis
+  };
+  bool start_walk(const Eigen::Vector3d& from, const Eigen::Vector3d& to, WalkStart* walk) const;
+
   const MuVolume& volume_;
   Eigen::Vector3d lower_mm_;  // lower corner of the box, grid frame
   Eigen::Vector3d upper_mm_;  // upper corner of the box, grid frame
