@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <functional>
 
+#include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::host::cli {
@@ -18,6 +19,8 @@ struct SceneOptions {
   int threads = 0;  // 0: all cores
 };
 void add_scene_options(CLI::App* app, SceneOptions* options);
+// Loads the scene named in `options` and prepares it (CT read, ROI resolved) on `pool`.
+Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool);
 
 Command add_info_command(CLI::App* parent);
 Command add_drr_command(CLI::App* parent);

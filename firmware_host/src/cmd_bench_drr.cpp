@@ -36,10 +36,8 @@ Command add_bench_drr_command(CLI::App* parent) {
       ->delimiter(',');
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o]() -> Status {
-    auto scene = load_scene(o->scene.scene);
-    if (!scene.ok()) return scene.status();
     tracking::ThreadPool pool(o->scene.threads);
-    auto prepared = prepare_scene(*scene, o->scene.ct, &pool);
+    auto prepared = load_prepared_scene(o->scene, &pool);
     if (!prepared.ok()) return prepared.status();
     DrrBenchOptions bench = o->bench;
     bench.peers = !o->no_peers;
@@ -54,19 +52,21 @@ Command add_bench_drr_command(CLI::App* parent) {
                 report->rows, report->cols, report->poses, report->views.size(), report->render_threads);
     if (report->precompute_s > 0) {
       std::printf("light fields %d x %d x %d x %d, all views precomputed in %.1f s on %d threads\n",
-                  report->light_field_resolution[0], report->light_field_resolution[1], report->light_field_resolution[2],
-                  report->light_field_resolution[3], report->precompute_s, report->threads);
+                  report->light_field_resolution[0], report->light_field_resolution[1],
+                  report->light_field_resolution[2], report->light_field_resolution[3], report->precompute_s,
+                  report->threads);
     }
-    std::printf("%-24s %10s %10s %13s %10s %9s %10s %8s\n", "renderer", "ms median", "x Siddon", "NCC vs Siddon",
-                "NCC min", "PSNR dB", "MB", "masked");
+    std::printf("%-24s %10s %10s %13s %10s %9s %10s %8s\n", "renderer", "ms median", "x Siddon",
+                "NCC vs Siddon", "NCC min", "PSNR dB", "MB", "masked");
     for (const auto& r : report->renderers)
       std::printf("%-24s %10.3f %10.1f %13.6f %10.6f %9.1f %10.1f %8.4f\n", r.name.c_str(), r.ms_median,
-                  r.speedup_vs_siddon, r.ncc_vs_siddon, r.ncc_min_vs_siddon, r.psnr_db_vs_siddon, double(r.bytes) / 1e6,
-                  r.out_of_field_fraction);
+                  r.speedup_vs_siddon, r.ncc_vs_siddon, r.ncc_min_vs_siddon, r.psnr_db_vs_siddon,
+                  double(r.bytes) / 1e6, r.out_of_field_fraction);
     for (const auto& p : report->peers)
-      std::printf("%-24s %10.3f %10.1f %13.6f %10.6f   (%.0f ms with volume loading; max |diff| %.2e of peak)\n",
-                  p.name.c_str(), p.ms_median, report->renderers.front().ms_median / p.ms_median, p.ncc_vs_siddon,
-                  p.ncc_min_vs_siddon, p.ms_wall_median, p.max_abs_diff_rel);
+      std::printf(
+          "%-24s %10.3f %10.1f %13.6f %10.6f   (%.0f ms with volume loading; max |diff| %.2e of peak)\n",
+          p.name.c_str(), p.ms_median, report->renderers.front().ms_median / p.ms_median, p.ncc_vs_siddon,
+          p.ncc_min_vs_siddon, p.ms_wall_median, p.max_abs_diff_rel);
     if (!report->peer_note.empty()) std::printf("peers: %s\n", report->peer_note.c_str());
     return {};
   };

@@ -8,4 +8,10 @@ void add_scene_options(CLI::App* app, SceneOptions* o) {
   app->add_option("--threads", o->threads, "Worker threads (0: all cores)")->check(CLI::Range(0, 256));
 }
 
+Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool) {
+  auto scene = load_scene(options.scene);
+  if (!scene.ok()) return scene.status();
+  return prepare_scene(*scene, options.ct, pool);
+}
+
 }  // namespace lftrack::host::cli

@@ -26,7 +26,7 @@ struct DrrOptions {
   bool roi_only = false;
   int binning = 1;             // detector binning: K x K pixels become one
   std::vector<double> window;  // display window lo, hi (line integral)
-  std::string lf_dir;  // light-field folder (default: default_light_field_dir)
+  std::string lf_dir;          // light-field folder (default: default_light_field_dir)
 };
 
 Status run(const DrrOptions& o) {
@@ -60,8 +60,8 @@ Status run(const DrrOptions& o) {
   ropts.pool = &pool;
   const std::string renderer_name = o.renderer.empty() ? p.scene.renderer : o.renderer;
   if (renderer_name == "lightfield") {
-    auto fields =
-        load_light_fields(p, o.lf_dir.empty() ? default_light_field_dir(p.scene) : std::filesystem::path(o.lf_dir));
+    auto fields = load_light_fields(
+        p, o.lf_dir.empty() ? default_light_field_dir(p.scene) : std::filesystem::path(o.lf_dir));
     if (!fields.ok()) return fields.status();
     ropts.light_fields = *fields;
   }
@@ -95,9 +95,11 @@ Status run(const DrrOptions& o) {
     const auto t0 = std::chrono::steady_clock::now();
     tracking::RenderExtras extras;
     LFTRACK_RETURN_IF_ERROR((*renderer)->render(T_room_from_ct, view, window, drr.view(), &extras));
-    if (extras.pose_outside_envelope) spdlog::warn("view {}: the pose is outside the scene's envelope", view.name);
+    if (extras.pose_outside_envelope)
+      spdlog::warn("view {}: the pose is outside the scene's envelope", view.name);
     if (extras.masked_pixels > 0) {
-      spdlog::warn("view {}: {} pixels outside the light field are masked (set to 0)", view.name, extras.masked_pixels);
+      spdlog::warn("view {}: {} pixels outside the light field are masked (set to 0)", view.name,
+                   extras.masked_pixels);
     }
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -135,7 +137,8 @@ Command add_drr_command(CLI::App* parent) {
                   "(rotation vector, degrees); default 0,0,0,0,0,0")
       ->expected(6)
       ->delimiter(',');
-  app->add_option("--renderer", o->renderer, "Renderer (siddon, trilinear, lightfield; default: the scene's)");
+  app->add_option("--renderer", o->renderer,
+                  "Renderer (siddon, trilinear, lightfield; default: the scene's)");
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
   app->add_option("-o,--out", o->out_dir, "Output folder")->capture_default_str();
   app->add_option("--image", o->image, "Windowed 16-bit image: png, tif or none")

@@ -13,10 +13,8 @@ Command add_info_command(CLI::App* parent) {
   auto options = std::make_shared<SceneOptions>();
   add_scene_options(app, options.get());
   return [options]() -> Status {
-    auto scene = load_scene(options->scene);
-    if (!scene.ok()) return scene.status();
     tracking::ThreadPool pool(options->threads);
-    auto prepared = prepare_scene(*scene, options->ct, &pool);
+    auto prepared = load_prepared_scene(*options, &pool);
     if (!prepared.ok()) return prepared.status();
     const PreparedScene& p = *prepared;
     const auto& g = p.ct->geometry;

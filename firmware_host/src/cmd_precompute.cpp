@@ -8,7 +8,6 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
-#include "progress_bar.hpp"
 
 namespace lftrack::host::cli {
 namespace {
@@ -19,33 +18,32 @@ struct PrecomputeOptions {
 };
 
 Status run(const PrecomputeOptions& o) {
-  auto scene = load_scene(o.scene.scene);
-  if (!scene.ok()) return scene.status();
   tracking::ThreadPool pool(o.scene.threads);
-  auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
+  auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
   const PreparedScene& p = *prepared;
-  const std::filesystem::path dir = o.out_dir.empty() ? default_light_field_dir(p.scene) : std::filesystem::path(o.out_dir);
+  const std::filesystem::path dir =
+      o.out_dir.empty() ? default_light_field_dir(p.scene) : std::filesystem::path(o.out_dir);
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
   const auto& spec = p.scene.light_field;
-  spdlog::info("light fields {} x {} x {} x {}, {} storage{}, {} threads", spec.resolution[0], spec.resolution[1],
-               spec.resolution[2], spec.resolution[3], tracking::to_string(spec.storage),
-               spec.storage == tracking::LightFieldStorage::kVq ? " (" + std::to_string(spec.vq_codebook_size) + " codewords)" : "",
+  spdlog::info("light fields {} x {} x {} x {}, {} storage{}, {} threads", spec.resolution[0],
+               spec.resolution[1], spec.resolution[2], spec.resolution[3], tracking::to_string(spec.storage),
+               spec.storage == tracking::LightFieldStorage::kVq
+                   ? " (" + std::to_string(spec.vq_codebook_size) + " codewords)"
+                   : "",
                pool.size());
-  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
-    const std::string& name = p.scene.detectors[i].view.name;
-    ProgressBar bar("view " + name);
-    auto field = tracking::LightField::build(*p.mu, p.light_field_plan(int(i)), spec, &pool,
-                                             [&](double f) { bar.update(f); });
-    if (!field.ok()) return field.status().with_context("view " + name);
-    bar.finish();
-    const auto file = light_field_file(dir, name);
-    LFTRACK_RETURN_IF_ERROR((*field)->save(file));
-    const auto& g = (*field)->geometry();
-    spdlog::info("view {}: u {:.1f}..{:.1f}, v {:.1f}..{:.1f}, s {:.1f}..{:.1f}, t {:.1f}..{:.1f} mm; {:.1f} MB", name, g.lo[0],
-                 g.hi[0], g.lo[1], g.hi[1], g.lo[2], g.hi[2], g.lo[3], g.hi[3], double((*field)->payload_bytes()) / 1e6);
+  auto fields = build_light_fields(p, spec, &pool);
+  if (!fields.ok()) return fields.status();
+  for (const auto& field : *fields) {
+    const auto& g = field->geometry();
+    const auto file = light_field_file(dir, g.view_name);
+    LFTRACK_RETURN_IF_ERROR(field->save(file));
+    spdlog::info(
+        "view {}: u {:.1f}..{:.1f}, v {:.1f}..{:.1f}, s {:.1f}..{:.1f}, t {:.1f}..{:.1f} mm; {:.1f} MB",
+        g.view_name, g.lo[0], g.hi[0], g.lo[1], g.hi[1], g.lo[2], g.hi[2], g.lo[3], g.hi[3],
+        double(field->payload_bytes()) / 1e6);
     std::printf("%s\n", file.string().c_str());
   }
   return {};

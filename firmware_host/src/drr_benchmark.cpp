@@ -11,7 +11,6 @@
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
-#include "progress_bar.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -75,8 +74,8 @@ namespace {
 // Times `renderer` on every pose and view and compares each image with the reference (the first
 // renderer measured supplies the reference images).
 Status measure(const tracking::DrrRenderer& renderer, const std::vector<tracking::Pose>& poses,
-               const std::vector<tracking::XrayView>& views, int size, int repeats, std::vector<Image<float>>* reference,
-               RendererFigures* fig) {
+               const std::vector<tracking::XrayView>& views, int size, int repeats,
+               std::vector<Image<float>>* reference, RendererFigures* fig) {
   const tracking::PixelWindow window = tracking::PixelWindow::full(size, size);
   std::vector<double> ms, ncc, psnr;
   Image<float> image(size, size);
@@ -115,10 +114,11 @@ Status measure(const tracking::DrrRenderer& renderer, const std::vector<tracking
 }
 
 void log_figures(const RendererFigures& f) {
-  spdlog::info("bench drr: {:22s} {:9.3f} ms median, x{:<8.1f} NCC {:.6f} (min {:.6f}), PSNR {:5.1f} dB, {:7.1f} MB, "
-               "{:.4f} out of field",
-               f.name, f.ms_median, f.speedup_vs_siddon, f.ncc_vs_siddon, f.ncc_min_vs_siddon, f.psnr_db_vs_siddon,
-               double(f.bytes) / 1e6, f.out_of_field_fraction);
+  spdlog::info(
+      "bench drr: {:22s} {:9.3f} ms median, x{:<8.1f} NCC {:.6f} (min {:.6f}), PSNR {:5.1f} dB, {:7.1f} MB, "
+      "{:.4f} out of field",
+      f.name, f.ms_median, f.speedup_vs_siddon, f.ncc_vs_siddon, f.ncc_min_vs_siddon, f.psnr_db_vs_siddon,
+      double(f.bytes) / 1e6, f.out_of_field_fraction);
 }
 
 }  // namespace
@@ -160,16 +160,10 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
   if (o.light_fields) {
     tracking::LightFieldSpec spec = scene.scene.light_field;
     spec.storage = tracking::LightFieldStorage::kFloat32;
-    std::vector<std::shared_ptr<const tracking::LightField>> float_fields;
     const auto t0 = Clock::now();
-    for (std::size_t i = 0; i < scene.scene.detectors.size(); ++i) {
-      ProgressBar bar("precompute view " + scene.scene.detectors[i].view.name);
-      auto field = tracking::LightField::build(*scene.mu, scene.light_field_plan(int(i)), spec, pool,
-                                               [&](double f) { bar.update(f); });
-      if (!field.ok()) return field.status();
-      bar.finish();
-      float_fields.push_back(*field);
-    }
+    auto built = build_light_fields(scene, spec, pool);
+    if (!built.ok()) return built.status();
+    const auto& float_fields = *built;
     report.precompute_s = std::chrono::duration<double>(Clock::now() - t0).count();
     report.light_field_resolution = spec.resolution;
     std::vector<tracking::LightFieldSpec> modes;

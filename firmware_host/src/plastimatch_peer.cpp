@@ -52,7 +52,8 @@ Result<tracking::Image<float>> read_plastimatch_pfm(const fs::path& file) {
 
 }  // namespace
 
-Status run_process(const std::vector<std::string>& argv, std::string* output, const std::vector<std::string>& extra_env) {
+Status run_process(const std::vector<std::string>& argv, std::string* output,
+                   const std::vector<std::string>& extra_env) {
   char log_template[] = "/tmp/lftrack-process-XXXXXX";
   const int log_fd = mkstemp(log_template);
   if (log_fd < 0) return io_error("cannot create a temporary file for process output");

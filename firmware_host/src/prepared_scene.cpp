@@ -6,6 +6,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/tracking/volume_io.hpp"
+#include "progress_bar.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -51,8 +52,9 @@ tracking::LightFieldPlanInput PreparedScene::light_field_plan(int index) const {
 }
 
 std::filesystem::path default_light_field_dir(const Scene& scene) {
-  const std::string stem =
-      scene.source.rfind("builtin:", 0) == 0 ? "builtin-" + scene.source.substr(8) : std::filesystem::path(scene.source).stem().string();
+  const std::string stem = scene.source.rfind("builtin:", 0) == 0
+                               ? "builtin-" + scene.source.substr(8)
+                               : std::filesystem::path(scene.source).stem().string();
   return std::filesystem::path("out") / "lightfields" / stem;
 }
 
@@ -60,19 +62,37 @@ std::filesystem::path light_field_file(const std::filesystem::path& dir, const s
   return dir / (view_name + ".lf");
 }
 
-Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(const PreparedScene& p,
-                                                                                   const std::filesystem::path& dir) {
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
+    const PreparedScene& p, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool) {
+  std::vector<std::shared_ptr<const tracking::LightField>> fields;
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    const std::string& name = p.scene.detectors[i].view.name;
+    ProgressBar bar("view " + name);
+    auto field = tracking::LightField::build(*p.mu, p.light_field_plan(int(i)), spec, pool,
+                                             [&](double f) { bar.update(f); });
+    if (!field.ok()) return field.status().with_context("view " + name);
+    bar.finish();
+    fields.push_back(*field);
+  }
+  return fields;
+}
+
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(
+    const PreparedScene& p, const std::filesystem::path& dir) {
   const std::uint64_t ct_hash = tracking::volume_hash(*p.mu);
   std::vector<std::shared_ptr<const tracking::LightField>> fields;
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
     const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
-    auto field = tracking::LightField::load(file, ct_hash, tracking::plan_hash(p.light_field_plan(int(i)), p.scene.light_field));
+    auto field = tracking::LightField::load(
+        file, ct_hash, tracking::plan_hash(p.light_field_plan(int(i)), p.scene.light_field));
     if (!field.ok()) return field.status();
     const auto& h = (*field)->header();
     if (h.storage != p.scene.light_field.storage ||
-        (h.storage == tracking::LightFieldStorage::kVq && h.codebook_size != p.scene.light_field.vq_codebook_size)) {
-      return failed_precondition(file.string() + ": stores " + tracking::to_string(h.storage) + ", the scene asks for " +
-                                 tracking::to_string(p.scene.light_field.storage) + "; run `lftrack precompute` again");
+        (h.storage == tracking::LightFieldStorage::kVq &&
+         h.codebook_size != p.scene.light_field.vq_codebook_size)) {
+      return failed_precondition(file.string() + ": stores " + tracking::to_string(h.storage) +
+                                 ", the scene asks for " + tracking::to_string(p.scene.light_field.storage) +
+                                 "; run `lftrack precompute` again");
     }
     fields.push_back(*field);
   }

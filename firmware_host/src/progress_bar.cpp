@@ -8,7 +8,9 @@
 namespace lftrack::host {
 
 ProgressBar::ProgressBar(std::string label)
-    : label_(std::move(label)), terminal_(isatty(STDERR_FILENO) != 0), start_(std::chrono::steady_clock::now()),
+    : label_(std::move(label)),
+      terminal_(isatty(STDERR_FILENO) != 0),
+      start_(std::chrono::steady_clock::now()),
       last_print_(start_) {}
 
 void ProgressBar::update(double fraction) {
@@ -21,7 +23,8 @@ void ProgressBar::update(double fraction) {
   const double eta = fraction > 0.01 ? elapsed * (1.0 - fraction) / fraction : -1.0;
   constexpr int kWidth = 30;
   const int filled = static_cast<int>(fraction * kWidth);
-  const std::string bar = std::string(std::size_t(filled), '#') + std::string(std::size_t(kWidth - filled), '.');
+  const std::string bar =
+      std::string(std::size_t(filled), '#') + std::string(std::size_t(kWidth - filled), '.');
   char eta_text[32] = "ETA --";
   if (eta >= 0) std::snprintf(eta_text, sizeof eta_text, "ETA %.0f s", eta);
   std::fprintf(stderr, "%s%s [%s] %3.0f%%  %.0f s, %s%s", terminal_ ? "\r" : "", label_.c_str(), bar.c_str(),
@@ -32,8 +35,8 @@ void ProgressBar::update(double fraction) {
 double ProgressBar::finish() {
   std::lock_guard lock(mutex_);
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  std::fprintf(stderr, "%s%s [%s] 100%%  %.1f s%s\n", terminal_ ? "\r" : "", label_.c_str(), std::string(30, '#').c_str(),
-               elapsed, terminal_ ? "          " : "");
+  std::fprintf(stderr, "%s%s [%s] 100%%  %.1f s%s\n", terminal_ ? "\r" : "", label_.c_str(),
+               std::string(30, '#').c_str(), elapsed, terminal_ ? "          " : "");
   return elapsed;
 }
 

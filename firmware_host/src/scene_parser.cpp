@@ -173,10 +173,14 @@ class SceneParser {
     if (const YAML::Node s = n["storage"]) {
       std::string storage;
       LFTRACK_RETURN_IF_ERROR(text(s, what + ".storage", &storage));
-      if (storage == "float") spec->storage = tracking::LightFieldStorage::kFloat32;
-      else if (storage == "fixed16") spec->storage = tracking::LightFieldStorage::kFixed16;
-      else if (storage == "vq") spec->storage = tracking::LightFieldStorage::kVq;
-      else return error(s, what + ".storage must be one of float, fixed16, vq; got '" + storage + "'");
+      if (storage == "float")
+        spec->storage = tracking::LightFieldStorage::kFloat32;
+      else if (storage == "fixed16")
+        spec->storage = tracking::LightFieldStorage::kFixed16;
+      else if (storage == "vq")
+        spec->storage = tracking::LightFieldStorage::kVq;
+      else
+        return error(s, what + ".storage must be one of float, fixed16, vq; got '" + storage + "'");
     }
     if (const YAML::Node c = n["codebook"]) {
       long size = 0;

@@ -108,36 +108,37 @@ Status read_pixels(DcmDataset& ds, Slice* slice) {
     }
   }
   const std::size_t count = std::size_t(slice->rows) * std::size_t(slice->cols);
-  unsigned long got = 0;
-  if (bits_allocated == 16) {
-    const Uint16* raw = nullptr;
-    if (ds.findAndGetUint16Array(DCM_PixelData, raw, &got).bad() || raw == nullptr) {
-      return corrupt_data("no readable pixel data");
-    }
+  // Reads the stored values as T and converts them; `as_signed` reinterprets 16-bit words.
+  auto convert = [&](auto get_array, auto type_tag, bool as_signed) -> Status {
+    using T = decltype(type_tag);
+    const T* raw = nullptr;
+    unsigned long got = 0;
+    if (get_array(&raw, &got).bad() || raw == nullptr) return corrupt_data("no readable pixel data");
     if (got < count) {
       return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " +
                           std::to_string(count));
     }
-    if (representation == 1) {
-      convert_pixels(reinterpret_cast<const int16_t*>(raw), count, slice->slope, slice->intercept,
-                     &slice->hu);
-    } else {
-      convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
-    }
-  } else if (bits_allocated == 8) {
-    const Uint8* raw = nullptr;
-    if (ds.findAndGetUint8Array(DCM_PixelData, raw, &got).bad() || raw == nullptr) {
-      return corrupt_data("no readable pixel data");
-    }
-    if (got < count) {
-      return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " +
-                          std::to_string(count));
+    if constexpr (sizeof(T) == 2) {
+      if (as_signed) {
+        convert_pixels(reinterpret_cast<const int16_t*>(raw), count, slice->slope, slice->intercept,
+                       &slice->hu);
+        return {};
+      }
     }
     convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
-  } else {
-    return unsupported("BitsAllocated " + std::to_string(bits_allocated) + " is not 8 or 16");
+    return {};
+  };
+  if (bits_allocated == 16) {
+    return convert(
+        [&](const Uint16** r, unsigned long* n) { return ds.findAndGetUint16Array(DCM_PixelData, *r, n); },
+        Uint16{}, representation == 1);
   }
-  return {};
+  if (bits_allocated == 8) {
+    return convert(
+        [&](const Uint8** r, unsigned long* n) { return ds.findAndGetUint8Array(DCM_PixelData, *r, n); },
+        Uint8{}, false);
+  }
+  return unsupported("BitsAllocated " + std::to_string(bits_allocated) + " is not 8 or 16");
 }
 
 Status read_slice(const fs::path& file, Slice* slice) {

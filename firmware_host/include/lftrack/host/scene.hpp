@@ -96,6 +96,9 @@ struct PreparedScene {
 std::filesystem::path default_light_field_dir(const Scene& scene);
 // The file of one view's field in `dir`.
 std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name);
+// Builds every view's field as `spec` says, on `pool`, with a progress bar per view on stderr.
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
+    const PreparedScene& scene, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool);
 // Loads every view's field from `dir`, refusing files built for another CT, geometry or storage.
 Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(const PreparedScene& scene,
                                                                                    const std::filesystem::path& dir);
