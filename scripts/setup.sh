@@ -15,6 +15,7 @@ packages=(
   libmodbus-dev                         # couch driver (Modbus TCP/RTU)
   libgtest-dev libgmock-dev libbenchmark-dev
   plastimatch                           # independent reference DRR generator
+  gnuplot-nox                           # plots of studies (PNG)
 )
 
 missing=()

@@ -5,6 +5,7 @@
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 #include "progress_bar.hpp"
 
@@ -126,8 +127,20 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   }
   spdlog::info("CT {}: {} ({:.1f} s)", out.scene.ct.path, tracking::describe(out.ct->geometry),
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  const FiducialSpec& fiducials = out.scene.fiducials;
+  if (fiducials.insert) {
+    auto with_markers = std::make_shared<tracking::CtVolume>(*out.ct);
+    sim::insert_markers(with_markers.get(), fiducials.positions_ct_mm, fiducials.radius_mm, sim::kMarkerHu);
+    out.ct = std::move(with_markers);
+  }
   out.mu = std::make_shared<const tracking::MuVolume>(
       tracking::to_attenuation(*out.ct, out.scene.ct.mu_water_per_mm));
+  out.world_mu = out.mu;
+  if (fiducials.insert) {
+    auto world = std::make_shared<tracking::MuVolume>(*out.mu);
+    sim::insert_markers(world.get(), fiducials.positions_ct_mm, fiducials.radius_mm, sim::kSteelMuPerMm);
+    out.world_mu = std::move(world);
+  }
 
   // ROI centre: the scene's, else the phantom's target (posterior elements included), else the
   // volume centre (only reachable through --ct on a phantom scene).

@@ -8,6 +8,8 @@
 #include <sstream>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/tracking/registration.hpp"
+#include "lftrack/tracking/similarity.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -296,7 +298,7 @@ class SceneParser {
     if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
     LFTRACK_RETURN_IF_ERROR(check_keys(root, "the scene",
                                        {"version", "name", "ct", "roi", "registration_origin_mm",
-                                        "nominal_pose", "detectors", "envelope", "tracking"}));
+                                        "nominal_pose", "detectors", "envelope", "tracking", "fiducials", "sim"}));
     Scene scene;
     scene.source = source_;
     YAML::Node node;
@@ -348,7 +350,10 @@ class SceneParser {
     }
     if (root["tracking"]) {
       const YAML::Node t = root["tracking"];
-      LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking", {"renderer", "light_field"}));
+      LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking",
+                                         {"renderer", "light_field", "similarity", "histogram_bins", "plan",
+                                          "gamma_per_mm", "tre_box_mm"}));
+      LFTRACK_RETURN_IF_ERROR(parse_registration(t, &scene.registration));
       if (t["light_field"]) LFTRACK_RETURN_IF_ERROR(parse_light_field(t["light_field"], &scene.light_field));
       if (t["renderer"]) {
         LFTRACK_RETURN_IF_ERROR(text(t["renderer"], "tracking.renderer", &scene.renderer));
@@ -360,7 +365,69 @@ class SceneParser {
         }
       }
     }
+    if (root["fiducials"]) LFTRACK_RETURN_IF_ERROR(parse_fiducials(root["fiducials"], &scene.fiducials));
+    if (root["sim"]) {
+      const YAML::Node n = root["sim"];
+      LFTRACK_RETURN_IF_ERROR(check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px"}));
+      if (n["photons_per_pixel"])
+        LFTRACK_RETURN_IF_ERROR(positive(n["photons_per_pixel"], "sim.photons_per_pixel", &scene.sim.photons_per_pixel));
+      if (n["detector_blur_px"]) {
+        LFTRACK_RETURN_IF_ERROR(number(n["detector_blur_px"], "sim.detector_blur_px", &scene.sim.detector_blur_px));
+        if (scene.sim.detector_blur_px < 0 || scene.sim.detector_blur_px > 20)
+          return error(n["detector_blur_px"], "sim.detector_blur_px must be in 0..20");
+      }
+    }
     return scene;
+  }
+
+  Status one_of(const YAML::Node& n, const std::string& what, const std::vector<std::string>& known,
+                std::string* out) const {
+    LFTRACK_RETURN_IF_ERROR(text(n, what, out));
+    if (std::find(known.begin(), known.end(), *out) != known.end()) return {};
+    std::string list;
+    for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+    return error(n, "unknown " + what + " '" + *out + "' (known: " + list + ")");
+  }
+
+  Status parse_registration(const YAML::Node& t, RegistrationSpec* r) const {
+    if (t["similarity"])
+      LFTRACK_RETURN_IF_ERROR(one_of(t["similarity"], "tracking.similarity", tracking::similarity_names(), &r->similarity));
+    if (t["plan"])
+      LFTRACK_RETURN_IF_ERROR(one_of(t["plan"], "tracking.plan", tracking::registration_plan_names(), &r->plan));
+    if (t["histogram_bins"]) {
+      long bins = 0;
+      LFTRACK_RETURN_IF_ERROR(integer(t["histogram_bins"], "tracking.histogram_bins", 4, 1024, &bins));
+      r->histogram_bins = static_cast<int>(bins);
+    }
+    if (t["gamma_per_mm"]) {
+      LFTRACK_RETURN_IF_ERROR(number(t["gamma_per_mm"], "tracking.gamma_per_mm", &r->gamma_per_mm));
+      if (r->gamma_per_mm < 0) return error(t["gamma_per_mm"], "tracking.gamma_per_mm must be >= 0");
+    }
+    if (t["tre_box_mm"]) LFTRACK_RETURN_IF_ERROR(positive(t["tre_box_mm"], "tracking.tre_box_mm", &r->tre_box_mm));
+    return {};
+  }
+
+  Status parse_fiducials(const YAML::Node& n, FiducialSpec* f) const {
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, "fiducials", {"positions_mm", "radius_mm", "insert"}));
+    YAML::Node list;
+    LFTRACK_RETURN_IF_ERROR(need(n, "positions_mm", "fiducials", &list));
+    if (!list.IsSequence() || list.size() == 0 || list.size() > 16)
+      return error(list, "fiducials.positions_mm must be a list of 1 to 16 points [x, y, z]");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      Vector3d p;
+      LFTRACK_RETURN_IF_ERROR(vec3(list[i], "fiducials.positions_mm", &p));
+      f->positions_ct_mm.push_back(p);
+    }
+    if (n["radius_mm"]) {
+      LFTRACK_RETURN_IF_ERROR(positive(n["radius_mm"], "fiducials.radius_mm", &f->radius_mm));
+      if (f->radius_mm > 10) return error(n["radius_mm"], "fiducials.radius_mm must be at most 10");
+    }
+    if (n["insert"]) {
+      if (!n["insert"].IsScalar() || (n["insert"].Scalar() != "true" && n["insert"].Scalar() != "false"))
+        return error(n["insert"], "fiducials.insert must be true or false");
+      f->insert = n["insert"].Scalar() == "true";
+    }
+    return {};
   }
 
  private:

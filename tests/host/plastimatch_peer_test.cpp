@@ -107,7 +107,7 @@ TEST(PlastimatchPeer, GeometryMappingOnAnAsymmetricPhantom) {
 TEST(PlastimatchPeerRealData, AgreesOnTheRealCtAtTwoViewsAndAnObliquePose) {
   LFTRACK_REQUIRE_SHARED_DATA(test::pancreas_dicom());
   LFTRACK_REQUIRE_PLASTIMATCH();
-  auto scene = load_scene((std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes/pancreas_ct.yaml").string());
+  auto scene = load_scene((std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes/lumbar-ct.yaml").string());
   ASSERT_TRUE(scene.ok()) << scene.status().message();
   tracking::ThreadPool pool(2);
   auto p = prepare_scene(*scene, "", &pool);

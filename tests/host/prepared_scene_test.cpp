@@ -36,7 +36,7 @@ TEST(PreparedScene, MissingCtFileFailsWithItsPath) {
 }
 
 TEST(PreparedScene, RealCtSceneResolves) {
-  const auto file = std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes/pancreas_ct.yaml";
+  const auto file = std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes/lumbar-ct.yaml";
   LFTRACK_REQUIRE_SHARED_DATA(test::pancreas_dicom());
   auto scene = load_scene(file.string());
   ASSERT_TRUE(scene.ok()) << scene.status().message();

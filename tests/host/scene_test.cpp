@@ -147,6 +147,41 @@ TEST(Scene, LightFieldSettings) {
   }
 }
 
+TEST(Scene, RegistrationFiducialAndSimSettings) {
+  std::string text = kValidScene;
+  text += "tracking:\n  similarity: gc\n  plan: cmaes\n  histogram_bins: 48\n  gamma_per_mm: 0.1\n"
+          "  tre_box_mm: 30\nfiducials:\n  positions_mm: [[1, 2, 3], [4, 5, 6]]\n  radius_mm: 1.5\n"
+          "  insert: true\nsim:\n  photons_per_pixel: 5000\n  detector_blur_px: 1\n";
+  auto scene = parse_scene(text, "reg.yaml", "/");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->registration.similarity, "gc");
+  EXPECT_EQ(scene->registration.plan, "cmaes");
+  EXPECT_EQ(scene->registration.histogram_bins, 48);
+  EXPECT_DOUBLE_EQ(scene->registration.gamma_per_mm, 0.1);
+  EXPECT_DOUBLE_EQ(scene->registration.tre_box_mm, 30);
+  ASSERT_EQ(scene->fiducials.positions_ct_mm.size(), 2u);
+  EXPECT_EQ(scene->fiducials.positions_ct_mm[1], Eigen::Vector3d(4, 5, 6));
+  EXPECT_TRUE(scene->fiducials.insert);
+  EXPECT_DOUBLE_EQ(scene->sim.photons_per_pixel, 5000);
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"tracking:\n  similarity: entropy\n", "unknown tracking.similarity 'entropy'"},
+      {"tracking:\n  plan: fast\n", "unknown tracking.plan 'fast'"},
+      {"tracking:\n  histogram_bins: 2\n", "must be in 4..1024"},
+      {"tracking:\n  gamma_per_mm: -1\n", "must be >= 0"},
+      {"fiducials:\n  radius_mm: 1\n", "needs 'positions_mm'"},
+      {"fiducials:\n  positions_mm: [[1, 2]]\n", "list of 3 numbers"},
+      {"fiducials:\n  positions_mm: [[1, 2, 3]]\n  insert: maybe\n", "true or false"},
+      {"sim:\n  photons_per_pixel: 0\n", "must be positive"},
+      {"sim:\n  dose: 3\n", "unknown key 'dose'"},
+  };
+  for (const auto& [tail, message] : bad) {
+    auto s2 = parse_scene(std::string(kValidScene) + tail, "reg.yaml", "/");
+    ASSERT_FALSE(s2.ok()) << tail;
+    EXPECT_EQ(s2.status().message().rfind("reg.yaml:", 0), 0u) << s2.status().message();
+    EXPECT_NE(s2.status().message().find(message), std::string::npos) << s2.status().message();
+  }
+}
+
 TEST(Scene, DuplicateDetectorNames) {
   std::string text = kValidScene;
   const std::string detector = text.substr(text.find("  - name: A"));

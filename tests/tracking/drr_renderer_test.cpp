@@ -19,6 +19,10 @@
 namespace {
 std::atomic<long> g_allocations{0};
 }
+// Heap allocations so far in this test binary (other test files use it too).
+long lftrack_test_allocations() {
+  return g_allocations.load();
+}
 void* operator new(std::size_t n) {
   g_allocations.fetch_add(1, std::memory_order_relaxed);
   if (void* p = std::malloc(n ? n : 1)) return p;

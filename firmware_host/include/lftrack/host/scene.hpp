@@ -50,6 +50,30 @@ struct DetectorSpec {
 
 using PoseEnvelope = tracking::PoseEnvelope;  // +-translation_mm, +-rotation_deg per axis
 
+// Metal fiducial markers (e.g. implanted steel tacks), CT frame. With `insert` the simulator
+// places them as steel spheres into the CT (clipped at the CT's top HU value, as a scanner
+// would) and into the anatomy that synthetic frames are rendered from.
+struct FiducialSpec {
+  std::vector<Eigen::Vector3d> positions_ct_mm;
+  double radius_mm = 1.0;
+  bool insert = false;
+};
+
+// tracking: how frames are registered.
+struct RegistrationSpec {
+  std::string similarity = "mi";
+  int histogram_bins = 64;
+  std::string plan = "papers";  // registration_plan_names()
+  double gamma_per_mm = 0.05;   // hybrid measure's weight of the fiducial distance (paper 2)
+  double tre_box_mm = 40;       // edge of the TRE cube at the registration origin
+};
+
+// sim: synthetic detector frames.
+struct SimFrameSpec {
+  double photons_per_pixel = 10000;  // open field, per pixel and frame
+  double detector_blur_px = 0.5;
+};  // +-translation_mm, +-rotation_deg per axis
+
 struct Scene {
   std::string source;  // the scene file, or "builtin:phantom"
   std::string name;
@@ -61,6 +85,9 @@ struct Scene {
   PoseEnvelope envelope;
   std::string renderer = "siddon";
   tracking::LightFieldSpec light_field;  // tracking.light_field: resolution, storage, codebook, margin
+  RegistrationSpec registration;         // tracking: similarity, plan, ...
+  FiducialSpec fiducials;
+  SimFrameSpec sim;
 };
 
 // Parses a scene from YAML text; `source_name` is used in messages ("file.yaml:12:5: ...") and
@@ -77,6 +104,9 @@ struct PreparedScene {
   Scene scene;
   std::shared_ptr<const tracking::CtVolume> ct;
   std::shared_ptr<const tracking::MuVolume> mu;
+  // The anatomy synthetic frames are rendered from: `mu`, with steel markers where the scene
+  // inserts fiducials (the CT shows them clipped).
+  std::shared_ptr<const tracking::MuVolume> world_mu;
   Eigen::Vector3d registration_origin_ct_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
   tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();

@@ -1,0 +1,85 @@
+#pragma once
+// The capture-range study (PAPERS.md, papers 1 and 2): start poses in bins of initial TRE
+// (0-2, 2-4, ... mm), the same starts for every method, success when the final TRE is below
+// 2.0 mm (paper 1) and 2.5 mm (paper 2).
+//
+// Gold poses are drawn inside the scene's envelope (one per sample index, with its own noisy
+// synthetic frames); sample k of every bin starts from gold pose k perturbed along a random
+// 6-D direction scaled (by bisection) to an initial mean TRE drawn uniformly in the bin.
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+
+// "PLAN:MEASURE[+fiducial]", e.g. papers:mi, cmaes:mi, papers:mi+fiducial.
+struct RegistrationMethod {
+  std::string label;
+  std::string plan = "papers";
+  std::string similarity = "mi";
+  bool fiducial = false;
+};
+Result<RegistrationMethod> parse_registration_method(const std::string& text);
+
+struct CaptureRangeOptions {
+  std::vector<RegistrationMethod> methods;
+  int per_bin = 30;
+  int bins = 8;
+  double bin_width_mm = 2;
+  double success_mm = 2.0;        // paper 1
+  double success_loose_mm = 2.5;  // paper 2
+  double gold_translation_mm = 3;  // gold poses: uniform within +-these of the nominal pose
+  double gold_rotation_deg = 2;
+  double max_start_rotation_deg = 10;  // start perturbations rotating more are redrawn
+  std::uint64_t seed = 1;
+  std::string renderer = "lightfield";
+  std::filesystem::path light_field_dir;  // empty: the scene's default
+};
+
+struct CaptureRangeRun {
+  std::string method;
+  int bin = 0;
+  int sample = 0;
+  double initial_tre_mm = 0;
+  double tre_mean_mm = 0;
+  double tre_max_mm = 0;
+  bool success = false;        // tre_mean < success_mm
+  bool success_loose = false;  // tre_mean < success_loose_mm
+  int evaluations = 0;
+  double ms = 0;
+};
+
+struct CaptureRangeSummary {
+  std::string name;
+  double success_rate = 0;        // over every run, TRE < success_mm
+  double success_rate_loose = 0;  // TRE < success_loose_mm
+  double mean_tre_mm = 0;         // over successes
+  double max_tre_mm = 0;          // over successes
+  double capture_range_mm = 0;    // upper edge of the last bin of the run of bins from 0 with >= 95 % success
+  double median_ms = 0;
+  double p95_ms = 0;
+  std::vector<double> bin_success_rate;
+};
+
+struct CaptureRangeReport {
+  CaptureRangeOptions options;
+  std::vector<CaptureRangeRun> runs;
+  std::vector<CaptureRangeSummary> summaries;
+};
+
+// Runs every method on every start. `progress` gets the fraction done.
+Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& scene, const CaptureRangeOptions& options,
+                                                   tracking::ThreadPool* pool,
+                                                   const std::function<void(double)>& progress = {});
+// Summaries of a report's runs (also filled in by run_capture_range_study).
+std::vector<CaptureRangeSummary> summarize_capture_range(const CaptureRangeOptions& options,
+                                                         const std::vector<CaptureRangeRun>& runs);
+// runs.csv, summary.json, capture_range.png (+ .dat, .gp) into `dir`.
+Status write_capture_range_outputs(const CaptureRangeReport& report, const std::filesystem::path& dir);
+
+}  // namespace lftrack::host

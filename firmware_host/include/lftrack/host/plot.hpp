@@ -1,0 +1,30 @@
+#pragma once
+// Plots for studies, drawn by gnuplot (Debian's gnuplot-nox, installed by scripts/setup.sh):
+// the data and the script are written next to the PNG, so a plot can be restyled and redrawn
+// by hand. Without gnuplot the PNG is skipped with a warning and the script still written.
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::host {
+
+struct PlotSeries {
+  std::string name;
+  std::vector<double> y;  // one value per x; NaN leaves a gap
+};
+
+struct LinePlot {
+  std::string title, x_label, y_label;
+  std::vector<double> x;
+  std::vector<PlotSeries> series;
+  bool log_x = false;
+  double y_min = 0, y_max = 0;  // equal: automatic
+};
+
+// Writes <png stem>.dat and <png stem>.gp and runs gnuplot; returns whether the PNG was drawn.
+Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& png);
+
+}  // namespace lftrack::host

@@ -1,0 +1,78 @@
+#pragma once
+// Registration of a prepared scene's frames: the scene's renderer (light fields loaded, or built
+// and cached when missing), the registration set-up from its views and ROI windows, synthetic
+// frames at a gold pose, preprocessing, the fiducial term, and TRE in the scene's box.
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lftrack/calib/triangulation.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/registration.hpp"
+#include "lftrack/tracking/target_error.hpp"
+
+namespace lftrack::host {
+
+// The renderer `name` for the scene ("lightfield": the fields in `light_field_dir` (empty: the
+// scene's default folder); a missing or stale file is rebuilt, saved, and said so).
+Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const PreparedScene& scene,
+                                                                         const std::string& name,
+                                                                         const std::filesystem::path& light_field_dir,
+                                                                         tracking::ThreadPool* pool);
+
+// A Registration over the scene's ROI windows with the scene's (or the given) measure.
+Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
+    const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
+    const RegistrationSpec& spec, tracking::ThreadPool* pool);
+
+// One frame per detector, preprocessed to the ROI windows.
+struct SceneFrames {
+  std::vector<tracking::Image<float>> line_integral;
+  std::vector<tracking::Image<unsigned char>> valid;
+  std::vector<tracking::ImageView<const float>> frames() const;
+  std::vector<tracking::ImageView<const unsigned char>> masks() const;
+};
+
+// Raw frames (whole detectors) -> preprocessed ROI windows.
+Result<SceneFrames> preprocess_scene_frames(const PreparedScene& scene,
+                                            const std::vector<tracking::Image<std::uint16_t>>& raw,
+                                            const tracking::DetectorCorrection& correction);
+
+// The detector model of the scene's sim section.
+sim::DetectorModel scene_detector_model(const PreparedScene& scene);
+
+// Synthetic raw frames at `gold`, rendered exactly (Siddon on the scene's world anatomy, markers
+// included) over each ROI window grown by a margin; the rest of each detector is unexposed.
+Result<std::vector<tracking::Image<std::uint16_t>>> synthesize_scene_frames(const PreparedScene& scene,
+                                                                            const tracking::DrrRenderer& exact,
+                                                                            const tracking::Pose& gold_T_room_from_ct,
+                                                                            std::uint64_t seed);
+
+// Finds the scene's first fiducial in every frame near where `start` projects it, triangulates
+// the first two views, and returns the hybrid term (paper 2) with its triangulation gap.
+struct LocatedFiducial {
+  tracking::FiducialTerm term;
+  double gap_mm = 0;
+  std::vector<Eigen::Vector2d> pixels;  // detector (col, row) per view
+};
+Result<LocatedFiducial> locate_fiducial(const PreparedScene& scene, const SceneFrames& frames,
+                                        const tracking::Pose& start_T_room_from_ct, double gamma_per_mm,
+                                        double search_radius_mm = 25);
+
+// A pose given as the delta (tx ty tz [mm], rotation vector [deg]) from the nominal pose about
+// the registration origin, as typed on command lines.
+Result<tracking::Pose> pose_from_nominal_delta(const PreparedScene& scene, const std::vector<double>& delta);
+// The same 6 numbers of a pose.
+std::vector<double> nominal_delta_of(const PreparedScene& scene, const tracking::Pose& T_room_from_ct);
+
+// TRE over the scene's box (a cube of tracking.tre_box_mm at the registration origin).
+tracking::Tre scene_tre(const PreparedScene& scene, const tracking::Pose& T_room_from_ct,
+                        const tracking::Pose& gold_T_room_from_ct);
+
+}  // namespace lftrack::host

@@ -1,0 +1,185 @@
+#include "lftrack/host/scene_registration.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "lftrack/calib/marker_detection.hpp"
+#include "lftrack/tracking/frame_preprocessing.hpp"
+#include "lftrack/tracking/light_field.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host {
+
+using tracking::Image;
+using tracking::ImageView;
+using tracking::Pose;
+
+Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const PreparedScene& p,
+                                                                         const std::string& name,
+                                                                         const std::filesystem::path& lf_dir,
+                                                                         tracking::ThreadPool* pool) {
+  tracking::RendererOptions options;
+  if (name == "lightfield") {
+    const std::filesystem::path dir = lf_dir.empty() ? default_light_field_dir(p.scene) : lf_dir;
+    auto fields = load_light_fields(p, dir);
+    if (!fields.ok()) {
+      spdlog::warn("light fields in {} not usable ({}); building them now", dir.string(), fields.status().message());
+      tracking::LightFieldSpec float_spec = p.scene.light_field;
+      float_spec.storage = tracking::LightFieldStorage::kFloat32;
+      auto built = build_light_fields(p, float_spec, pool);
+      if (!built.ok()) return built.status();
+      std::error_code ec;
+      std::filesystem::create_directories(dir, ec);
+      std::vector<std::shared_ptr<const tracking::LightField>> stored;
+      for (std::size_t i = 0; i < built->size(); ++i) {
+        std::shared_ptr<const tracking::LightField> field = (*built)[i];
+        if (p.scene.light_field.storage != tracking::LightFieldStorage::kFloat32) {
+          auto converted = tracking::LightField::convert(*field, p.scene.light_field, pool);
+          if (!converted.ok()) return converted.status();
+          field = *converted;
+        }
+        const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
+        if (auto s = field->save(file); !s.ok()) spdlog::warn("{}", s.message());
+        stored.push_back(field);
+      }
+      fields = stored;
+    }
+    options.light_fields = *fields;
+  }
+  auto renderer = tracking::make_renderer(name, p.mu, options);
+  if (!renderer.ok()) return renderer.status();
+  return std::shared_ptr<const tracking::DrrRenderer>(std::move(renderer).value());
+}
+
+Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
+    const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> renderer, const RegistrationSpec& spec,
+    tracking::ThreadPool* pool) {
+  tracking::RegistrationSetup setup;
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i)
+    setup.views.push_back({p.scene.detectors[i].view, p.roi_windows[i]});
+  setup.origin_room_mm = p.registration_origin_room_mm();
+  setup.roi_centre_ct_mm = p.roi_centre_ct_mm;
+  setup.roi_size_mm = p.scene.roi.size_mm;
+  setup.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
+  setup.similarity = spec.similarity;
+  setup.similarity_options.histogram_bins = spec.histogram_bins;
+  setup.blur_sigmas_mm = {1.5};
+  return tracking::Registration::create(std::move(renderer), std::move(setup), pool);
+}
+
+std::vector<ImageView<const float>> SceneFrames::frames() const {
+  std::vector<ImageView<const float>> v;
+  for (const auto& im : line_integral) v.push_back(im.view());
+  return v;
+}
+std::vector<ImageView<const unsigned char>> SceneFrames::masks() const {
+  std::vector<ImageView<const unsigned char>> v;
+  for (const auto& im : valid) v.push_back(im.view());
+  return v;
+}
+
+Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p, const std::vector<Image<std::uint16_t>>& raw,
+                                            const tracking::DetectorCorrection& correction) {
+  if (raw.size() != p.scene.detectors.size())
+    return invalid_argument("expected " + std::to_string(p.scene.detectors.size()) + " frames, got " +
+                            std::to_string(raw.size()));
+  SceneFrames out;
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    const auto& view = p.scene.detectors[i].view;
+    if (raw[i].rows() != view.rows || raw[i].cols() != view.cols)
+      return invalid_argument("frame of view " + view.name + " is " + std::to_string(raw[i].rows()) + " x " +
+                              std::to_string(raw[i].cols()) + ", the detector " + std::to_string(view.rows) +
+                              " x " + std::to_string(view.cols));
+    const tracking::PixelWindow& w = p.roi_windows[i];
+    out.line_integral.emplace_back(w.rows, w.cols);
+    out.valid.emplace_back(w.rows, w.cols);
+    LFTRACK_RETURN_IF_ERROR(tracking::preprocess_frame(raw[i].view(), correction, w, out.line_integral.back().view(),
+                                                       out.valid.back().view())
+                                .with_context("view " + view.name));
+  }
+  return out;
+}
+
+sim::DetectorModel scene_detector_model(const PreparedScene& p) {
+  sim::DetectorModel m;
+  m.photons_per_pixel = p.scene.sim.photons_per_pixel;
+  m.blur_sigma_px = p.scene.sim.detector_blur_px;
+  m.bits = p.scene.detectors.empty() ? 12 : p.scene.detectors.front().bits;
+  return m;
+}
+
+Result<std::vector<Image<std::uint16_t>>> synthesize_scene_frames(const PreparedScene& p,
+                                                                  const tracking::DrrRenderer& exact,
+                                                                  const Pose& gold, std::uint64_t seed) {
+  std::vector<Image<std::uint16_t>> frames;
+  const sim::DetectorModel model = scene_detector_model(p);
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    const auto& view = p.scene.detectors[i].view;
+    constexpr int kMargin = 16;
+    const tracking::PixelWindow& w = p.roi_windows[i];
+    tracking::PixelWindow grown{std::max(0, w.row0 - kMargin), std::max(0, w.col0 - kMargin), 0, 0};
+    grown.rows = std::min(view.rows, w.row0 + w.rows + kMargin) - grown.row0;
+    grown.cols = std::min(view.cols, w.col0 + w.cols + kMargin) - grown.col0;
+    auto frame = sim::synthesize_frame(exact, gold, view, grown, model, seed * 7919 + i);
+    if (!frame.ok()) return frame.status().with_context("view " + view.name);
+    frames.push_back(std::move(frame).value());
+  }
+  return frames;
+}
+
+Result<LocatedFiducial> locate_fiducial(const PreparedScene& p, const SceneFrames& frames, const Pose& start,
+                                        double gamma_per_mm, double search_radius_mm) {
+  if (p.scene.fiducials.positions_ct_mm.empty()) return failed_precondition("the scene names no fiducials");
+  if (p.scene.detectors.size() < 2) return failed_precondition("a fiducial needs two views to triangulate");
+  const Eigen::Vector3d marker_ct = p.scene.fiducials.positions_ct_mm.front();
+  LocatedFiducial out;
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto& view = p.scene.detectors[i].view;
+    const tracking::PixelWindow& w = p.roi_windows[i];
+    const auto expected = view.project(start * marker_ct);
+    if (!expected) return invalid_argument("the fiducial projects behind the source of view " + view.name);
+    const double magnification = view.source_to_detector_mm() / (start * marker_ct - view.source_mm).norm();
+    const double pitch = 0.5 * (view.pitch_col_mm + view.pitch_row_mm);
+    calib::MarkerSearch search;
+    search.expected_px = *expected - Eigen::Vector2d(w.col0, w.row0);
+    search.search_radius_px = search_radius_mm * magnification / pitch;
+    search.marker_radius_px = std::max(1.0, p.scene.fiducials.radius_mm * magnification / pitch);
+    auto found = calib::find_marker(frames.line_integral[i].view(), frames.valid[i].view(), search);
+    if (!found.ok()) return found.status().with_context("view " + view.name);
+    out.pixels.push_back(found->pixel + Eigen::Vector2d(w.col0, w.row0));
+  }
+  auto point = calib::triangulate(p.scene.detectors[0].view, out.pixels[0], p.scene.detectors[1].view, out.pixels[1]);
+  if (!point.ok()) return point.status();
+  out.term.marker_ct_mm = marker_ct;
+  out.term.marker_room_mm = point->point_mm;
+  out.term.gamma_per_mm = gamma_per_mm;
+  out.gap_mm = point->gap_mm;
+  return out;
+}
+
+Result<Pose> pose_from_nominal_delta(const PreparedScene& p, const std::vector<double>& d) {
+  if (d.size() != 6) return invalid_argument("a pose is 6 numbers: tx ty tz [mm] rx ry rz [deg]");
+  for (double v : d)
+    if (!std::isfinite(v)) return invalid_argument("a pose must be finite");
+  tracking::PoseDelta delta;
+  delta.translation_mm = {d[0], d[1], d[2]};
+  delta.rotation_rad = {tracking::deg_to_rad(d[3]), tracking::deg_to_rad(d[4]), tracking::deg_to_rad(d[5])};
+  return tracking::apply_delta(p.nominal_T_room_from_ct, delta, p.registration_origin_room_mm());
+}
+
+std::vector<double> nominal_delta_of(const PreparedScene& p, const Pose& T) {
+  const tracking::PoseDelta d = tracking::delta_between(p.nominal_T_room_from_ct, T, p.registration_origin_room_mm());
+  return {d.translation_mm.x(), d.translation_mm.y(), d.translation_mm.z(), tracking::rad_to_deg(d.rotation_rad.x()),
+          tracking::rad_to_deg(d.rotation_rad.y()), tracking::rad_to_deg(d.rotation_rad.z())};
+}
+
+tracking::Tre scene_tre(const PreparedScene& p, const Pose& T, const Pose& gold) {
+  tracking::TreBox box;
+  box.centre_ct_mm = p.registration_origin_ct_mm;
+  box.edge_mm = p.scene.registration.tre_box_mm;
+  return tracking::target_registration_error(T, gold, p.ct->geometry, box);
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,82 @@
+#include "lftrack/tracking/frame_preprocessing.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace lftrack::tracking {
+namespace {
+
+TEST(PreprocessFrame, LogOfOpenFieldOverCorrectedIntensity) {
+  Image<std::uint16_t> raw(4, 6, 1000);
+  raw.at(1, 2) = 4095;  // saturated
+  raw.at(2, 3) = 0;     // photon-starved
+  raw.at(3, 4) = 500;
+  DetectorCorrection c;
+  c.open_field_counts = 3000;
+  c.dark_counts = Image<float>(4, 6, 100.f);
+  c.gain = Image<float>(4, 6, 1.f);
+  c.gain.at(0, 5) = 0.f;  // dead
+  c.gain.at(3, 4) = 2.f;
+  const PixelWindow window{0, 1, 4, 5};
+  Image<float> p(4, 5);
+  Image<unsigned char> valid(4, 5);
+  ASSERT_TRUE(preprocess_frame(raw.view(), c, window, p.view(), valid.view()).ok());
+  EXPECT_NEAR(p.at(0, 0), std::log(3000.0 / 900.0), 1e-6);
+  EXPECT_NEAR(p.at(3, 3), std::log(3000.0 / 200.0), 1e-6);  // (500 - 100) / 2
+  EXPECT_EQ(valid.at(1, 1), 0);
+  EXPECT_EQ(valid.at(2, 2), 0);
+  EXPECT_EQ(valid.at(0, 4), 0);
+  EXPECT_EQ(p.at(1, 1), 0.f);
+  EXPECT_EQ(valid.at(0, 0), 1);
+}
+
+TEST(PreprocessFrame, RefusesBadSizesAndLevels) {
+  Image<std::uint16_t> raw(4, 6, 1000);
+  Image<float> p(4, 5);
+  Image<unsigned char> valid(4, 5);
+  DetectorCorrection c;
+  EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 2, 4, 5}, p.view(), valid.view()).ok());  // outside
+  EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 0, 4, 4}, p.view(), valid.view()).ok());  // output size
+  c.dark_counts = Image<float>(3, 3, 0.f);
+  EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 0, 4, 5}, p.view(), valid.view()).ok());
+  c.dark_counts = {};
+  c.open_field_counts = 0;
+  EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 0, 4, 5}, p.view(), valid.view()).ok());
+}
+
+TEST(GaussianBlur, KeepsConstantsRespectsMasksAndCopiesAtZeroSigma) {
+  Image<float> in(20, 30, 2.f);
+  Image<unsigned char> mask(20, 30, 1);
+  in.at(10, 10) = 1000.f;  // a masked outlier must not leak into its neighbours
+  mask.at(10, 10) = 0;
+  Image<float> out(20, 30);
+  GaussianBlur blur(20, 30, 2.0);
+  ASSERT_TRUE(blur.blur(in.view(), mask.view(), out.view()).ok());
+  EXPECT_NEAR(out.at(10, 11), 2.f, 1e-5);
+  EXPECT_NEAR(out.at(0, 0), 2.f, 1e-5);
+  EXPECT_EQ(out.at(10, 10), 1000.f);  // masked pixels keep their value
+  GaussianBlur none(20, 30, 0.0);
+  ASSERT_TRUE(none.blur(in.view(), {}, out.view()).ok());
+  EXPECT_EQ(out.at(10, 10), 1000.f);
+  Image<float> wrong(5, 5);
+  EXPECT_FALSE(blur.blur(wrong.view(), {}, out.view()).ok());
+}
+
+TEST(GaussianBlur, SpreadsAnImpulseWithTheRequestedSigma) {
+  Image<float> in(41, 41, 0.f), out(41, 41);
+  in.at(20, 20) = 1.f;
+  GaussianBlur blur(41, 41, 3.0);
+  ASSERT_TRUE(blur.blur(in.view(), {}, out.view()).ok());
+  double sum = 0, second_moment = 0;
+  for (int r = 0; r < 41; ++r)
+    for (int c = 0; c < 41; ++c) {
+      sum += out.at(r, c);
+      second_moment += double(out.at(r, c)) * (c - 20) * (c - 20);
+    }
+  EXPECT_NEAR(sum, 1.0, 1e-3);
+  EXPECT_NEAR(std::sqrt(second_moment / sum), 3.0, 0.05);
+}
+
+}  // namespace
+}  // namespace lftrack::tracking

@@ -1,0 +1,127 @@
+// Every optimizer, through the factory, on the same problems (DESIGN.md test level 2).
+
+#include "lftrack/tracking/optimizer.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+namespace lftrack::tracking {
+namespace {
+
+// A smooth, coupled, anisotropic bowl with its minimum at `target` (not on any step grid).
+class Bowl : public CostFunction {
+ public:
+  explicit Bowl(Vector6d target) : target_(std::move(target)) {}
+  double cost(const Vector6d& x) override {
+    ++evaluations;
+    const Vector6d d = x - target_;
+    double c = 0;
+    for (int i = 0; i < 6; ++i) c += (1.0 + 0.5 * i) * d(i) * d(i);
+    c += 0.6 * d(0) * d(4) + 0.4 * d(1) * d(5);  // weak couplings within the decoupled pairs
+    return 1 - std::exp(-0.02 * c);           // saturates far away, like a similarity
+  }
+  int evaluations = 0;
+
+ private:
+  Vector6d target_;
+};
+
+class EveryOptimizer : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(EveryOptimizer, RecoversAKnownOffset) {
+  Vector6d target;
+  target << 3.3, -2.1, 1.7, -2.6, 0.9, 2.2;
+  Bowl bowl(target);
+  OptimizerSettings s;
+  s.initial_step_mm = 2;
+  s.final_step_mm = 0.01;
+  s.record_trace = true;
+  auto optimizer = make_optimizer(GetParam(), s);
+  ASSERT_TRUE(optimizer.ok()) << optimizer.status().message();
+  const OptimizerResult r = (*optimizer)->minimize(bowl, Vector6d::Zero(), {});
+  EXPECT_LT((r.x - target).cwiseAbs().maxCoeff(), 0.05) << GetParam() << ": " << r.x.transpose();
+  EXPECT_EQ(r.evaluations, bowl.evaluations);
+  EXPECT_EQ(r.stop, OptimizerStop::kConverged);
+  ASSERT_FALSE(r.trace.empty());
+  EXPECT_LE(r.trace.back().cost, r.trace.front().cost);
+}
+
+TEST_P(EveryOptimizer, WorksInScaledUnits) {
+  Vector6d target;
+  target << 3, -2, 1, 0.02, -0.01, 0.015;  // mm and radians
+  Vector6d scale;
+  scale << 1, 1, 1, 0.01, 0.01, 0.01;
+  class Scaled : public CostFunction {
+   public:
+    Scaled(Vector6d t, Vector6d s) : bowl_(t.cwiseQuotient(s)), scale_(std::move(s)) {}
+    double cost(const Vector6d& x) override { return bowl_.cost(x.cwiseQuotient(scale_)); }
+    Bowl bowl_;
+    Vector6d scale_;
+  } cost(target, scale);
+  OptimizerSettings s;
+  s.scale = scale;
+  s.final_step_mm = 0.01;
+  const OptimizerResult r = make_optimizer(GetParam(), s).value()->minimize(cost, Vector6d::Zero(), {});
+  EXPECT_LT((r.x - target).cwiseQuotient(scale).cwiseAbs().maxCoeff(), 0.05) << GetParam();
+}
+
+TEST_P(EveryOptimizer, KeepsToItsBudgets) {
+  Bowl bowl(Vector6d::Constant(5));
+  OptimizerSettings s;
+  s.final_step_mm = 1e-6;
+  OptimizerBudget budget;
+  budget.max_evaluations = 40;
+  const OptimizerResult r = make_optimizer(GetParam(), s).value()->minimize(bowl, Vector6d::Zero(), budget);
+  EXPECT_LE(r.evaluations, 40);
+  EXPECT_EQ(r.stop, OptimizerStop::kEvaluationBudget);
+  budget.max_evaluations = 1000000;
+  budget.max_ms = 0;
+  const OptimizerResult t = make_optimizer(GetParam(), s).value()->minimize(bowl, Vector6d::Zero(), budget);
+  EXPECT_EQ(t.stop, OptimizerStop::kTimeBudget);
+}
+
+TEST_P(EveryOptimizer, NonFiniteCostsNeverWin) {
+  class Holey : public CostFunction {
+   public:
+    double cost(const Vector6d& x) override {
+      if (x(0) > 0.5) return std::numeric_limits<double>::quiet_NaN();
+      return (x - Vector6d::Constant(-1)).squaredNorm();
+    }
+  } holey;
+  OptimizerSettings s;
+  s.final_step_mm = 0.01;
+  const OptimizerResult r = make_optimizer(GetParam(), s).value()->minimize(holey, Vector6d::Zero(), {});
+  EXPECT_TRUE(std::isfinite(r.cost));
+  EXPECT_TRUE(r.x.allFinite());
+  EXPECT_LT((r.x - Vector6d::Constant(-1)).norm(), 0.1);
+  class Nothing : public CostFunction {
+   public:
+    double cost(const Vector6d&) override { return std::numeric_limits<double>::infinity(); }
+  } nothing;
+  const OptimizerResult n = make_optimizer(GetParam(), s).value()->minimize(nothing, Vector6d::Zero(), {});
+  EXPECT_EQ(n.stop, OptimizerStop::kNonFinite);
+  EXPECT_TRUE(n.x.allFinite());
+}
+
+INSTANTIATE_TEST_SUITE_P(Optimizer, EveryOptimizer, ::testing::ValuesIn(optimizer_names()),
+                         [](const ::testing::TestParamInfo<std::string>& p) {
+                           std::string n = p.param;
+                           for (char& c : n)
+                             if (c == '-') c = '_';
+                           return n;
+                         });
+
+TEST(Optimizer, RefusesBadSettingsAndNames) {
+  OptimizerSettings s;
+  s.scale(2) = 0;
+  EXPECT_FALSE(make_optimizer("best-neighbour", s).ok());
+  s = {};
+  s.final_step_mm = 3;
+  EXPECT_FALSE(make_optimizer("best-neighbour", s).ok());
+  EXPECT_FALSE(make_optimizer("simplex", {}).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::tracking

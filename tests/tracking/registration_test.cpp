@@ -1,0 +1,201 @@
+// Two-view registration on a coarse spine phantom: frames ray-cast exactly (Siddon) at a gold
+// pose, registered with light-field DRRs, so the registering renderer never made the frames.
+
+#include "lftrack/tracking/registration.hpp"
+
+#include <gtest/gtest.h>
+
+#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/tracking/light_field.hpp"
+#include "lftrack/tracking/target_error.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::tracking {
+namespace {
+
+using Eigen::Vector3d;
+
+// The spine phantom on a coarse 2 mm grid (anatomy, not a periodic texture, so the measures
+// have one clear optimum), its target vertebra at the room origin.
+struct Phantom {
+  std::shared_ptr<const MuVolume> mu;
+  Pose nominal = Pose::Identity();
+};
+const Phantom& phantom() {
+  static const Phantom p = [] {
+    sim::SpinePhantomOptions o;
+    o.size = {96, 96, 64};
+    o.spacing_mm = {2.0, 2.0, 2.0};
+    auto ph = sim::make_spine_phantom(o);
+    EXPECT_TRUE(ph.ok());
+    Phantom out;
+    out.mu = std::make_shared<const MuVolume>(to_attenuation(ph->ct));
+    out.nominal.translation() = -ph->vertebral_body_centres_mm[std::size_t(ph->target_vertebra)];
+    return out;
+  }();
+  return p;
+}
+
+RegistrationSetup two_view_setup(const std::string& similarity) {
+  RegistrationSetup s;
+  // Two oblique views 90 degrees apart, 96 x 80 pixels of 0.8 mm.
+  const XrayView a =
+      *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.7071, -0.7071, 0), Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
+  const XrayView b =
+      *XrayView::isocentric("B", Vector3d::Zero(), Vector3d(-0.7071, -0.7071, 0), Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
+  s.views = {{a, PixelWindow::full(a.rows, a.cols)}, {b, PixelWindow::full(b.rows, b.cols)}};
+  s.roi_size_mm = {40, 40, 30};
+  s.nominal_T_room_from_ct = phantom().nominal;
+  s.similarity = similarity;
+  s.similarity_options.histogram_bins = 16;
+  return s;
+}
+
+// Light fields of the phantom for both views (built once): the registering renderer, while the
+// frames are ray-cast (Siddon).
+std::shared_ptr<const DrrRenderer> light_field_renderer() {
+  static const std::shared_ptr<const DrrRenderer> renderer = [] {
+    const RegistrationSetup s = two_view_setup("mi");
+    ThreadPool pool(0);
+    RendererOptions options;
+    for (const RegistrationView& v : s.views) {
+      LightFieldPlanInput in;
+      in.view_room = v.view;
+      in.roi_window = v.window;
+      in.nominal_T_room_from_ct = phantom().nominal;
+      in.roi_centre_ct_mm = phantom().nominal.inverse() * Vector3d::Zero();
+      in.envelope = {6.0, 4.0};
+      LightFieldSpec spec;
+      spec.resolution = {16, 16, 96, 112};
+      auto field = LightField::build(*phantom().mu, in, spec, &pool);
+      EXPECT_TRUE(field.ok()) << field.status().message();
+      options.light_fields.push_back(*field);
+    }
+    return std::shared_ptr<const DrrRenderer>(std::move(make_renderer("lightfield", nullptr, options)).value());
+  }();
+  return renderer;
+}
+
+struct Frames {
+  std::vector<Image<float>> images;
+  std::vector<ImageView<const float>> views() const {
+    std::vector<ImageView<const float>> v;
+    for (const auto& im : images) v.push_back(im.view());
+    return v;
+  }
+};
+
+Frames frames_at(const RegistrationSetup& s, const Pose& gold) {
+  auto exact = make_renderer("siddon", phantom().mu);
+  Frames f;
+  for (const auto& v : s.views) {
+    f.images.emplace_back(v.window.rows, v.window.cols);
+    EXPECT_TRUE((*exact)->render(gold, v.view, v.window, f.images.back().view()).ok());
+  }
+  return f;
+}
+
+Pose gold_pose() {
+  PoseDelta d;
+  d.translation_mm = {3.0, -2.0, 1.5};
+  d.rotation_rad = {deg_to_rad(2.0), deg_to_rad(-1.0), deg_to_rad(1.5)};
+  return apply_delta(phantom().nominal, d, Vector3d::Zero());
+}
+
+double tre_mm(const Pose& T, const Pose& gold) {
+  TreBox box;
+  box.edge_mm = 20;
+  box.centre_ct_mm = phantom().nominal.inverse() * Vector3d::Zero();
+  return target_registration_error(T, gold, phantom().mu->geometry, box).mean_mm;
+}
+
+class RegistrationByMeasure : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(RegistrationByMeasure, TwoViewsConvergeFromAKnownOffset) {
+  const RegistrationSetup setup = two_view_setup(GetParam());
+  ThreadPool pool(2);
+  auto reg = Registration::create(light_field_renderer(), setup, &pool);
+  ASSERT_TRUE(reg.ok()) << reg.status().message();
+  const Pose gold = gold_pose();
+  const Frames f = frames_at(setup, gold);
+  ASSERT_TRUE((*reg)->set_frames(f.views(), {}).ok());
+  ASSERT_GT(tre_mm(phantom().nominal, gold), 3.0);
+  auto result = (*reg)->run(phantom().nominal, *registration_plan("papers"), true);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  EXPECT_LT(tre_mm(result->T_room_from_ct, gold), 0.5) << GetParam();
+  EXPECT_GT(result->evaluations, 12);
+  EXPECT_EQ(result->view_similarity.size(), 2u);
+  ASSERT_FALSE(result->trace.empty());
+  EXPECT_LE(result->trace.back().evaluations, result->evaluations);
+}
+
+INSTANTIATE_TEST_SUITE_P(Registration, RegistrationByMeasure, ::testing::Values("mi", "ncc", "gc"),
+                         [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
+
+TEST(Registration, ParallelAndSerialEvaluationAgree) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  std::shared_ptr<const DrrRenderer> renderer = light_field_renderer();
+  ThreadPool pool(2);
+  auto parallel = std::move(Registration::create(renderer, setup, &pool)).value();
+  auto serial = std::move(Registration::create(renderer, setup, nullptr)).value();
+  const Frames f = frames_at(setup, gold_pose());
+  ASSERT_TRUE(parallel->set_frames(f.views(), {}).ok());
+  ASSERT_TRUE(serial->set_frames(f.views(), {}).ok());
+  const auto a = *parallel->run(phantom().nominal, *registration_plan("warm"));
+  const auto b = *serial->run(phantom().nominal, *registration_plan("warm"));
+  EXPECT_TRUE(a.T_room_from_ct.isApprox(b.T_room_from_ct, 1e-12));
+  EXPECT_EQ(a.evaluations, b.evaluations);
+}
+
+TEST(Registration, FiducialTermPullsTowardsTheMarker) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  std::shared_ptr<const DrrRenderer> renderer = light_field_renderer();
+  auto reg = std::move(Registration::create(renderer, setup, nullptr)).value();
+  const Pose gold = gold_pose();
+  const Frames f = frames_at(setup, gold);
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  FiducialTerm term;
+  term.marker_ct_mm = phantom().nominal.inverse() * Vector3d(5, -3, 4);
+  term.marker_room_mm = gold * term.marker_ct_mm;
+  term.gamma_per_mm = 0.05;
+  const double without = reg->cost_at(gold);
+  reg->set_fiducial(term);
+  EXPECT_NEAR(reg->cost_at(gold), without, 1e-12);  // d = 0 at gold
+  const double d_nominal = (phantom().nominal * term.marker_ct_mm - term.marker_room_mm).norm();
+  const double with_term = reg->cost_at(phantom().nominal);
+  reg->set_fiducial(std::nullopt);
+  EXPECT_NEAR(with_term - 0.05 * d_nominal, reg->cost_at(phantom().nominal), 1e-9);
+  reg->set_fiducial(term);
+  auto result = reg->run(phantom().nominal, *registration_plan("papers"));
+  ASSERT_TRUE(result.ok());
+  EXPECT_LT(tre_mm(result->T_room_from_ct, gold), 0.5);
+  EXPECT_LT(result->fiducial_distance_mm, 0.5);
+}
+
+TEST(Registration, RefusesMisuse) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  std::shared_ptr<const DrrRenderer> renderer = light_field_renderer();
+  auto reg = std::move(Registration::create(renderer, setup, nullptr)).value();
+  EXPECT_FALSE(reg->run(phantom().nominal, *registration_plan("warm")).ok());  // no frames
+  Image<float> small(5, 5);
+  EXPECT_FALSE(reg->set_frames({small.view(), small.view()}, {}).ok());
+  EXPECT_FALSE(reg->set_frames({small.view()}, {}).ok());
+  const Frames f = frames_at(setup, phantom().nominal);
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  Pose bad = phantom().nominal;
+  bad.translation().x() = std::nan("");
+  EXPECT_FALSE(reg->run(bad, *registration_plan("warm")).ok());
+  RegistrationPlan odd = *registration_plan("warm");
+  odd.passes[0].blur_sigma_mm = 0.7;  // not prepared
+  EXPECT_FALSE(reg->run(phantom().nominal, odd).ok());
+  EXPECT_FALSE(registration_plan("fast").ok());
+  RegistrationSetup no_views = setup;
+  no_views.views.clear();
+  EXPECT_FALSE(Registration::create(renderer, no_views, nullptr).ok());
+  RegistrationSetup bad_measure = setup;
+  bad_measure.similarity = "entropy";
+  EXPECT_FALSE(Registration::create(renderer, bad_measure, nullptr).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::tracking

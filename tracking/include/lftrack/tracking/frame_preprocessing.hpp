@@ -1,0 +1,51 @@
+#pragma once
+// From a raw detector frame to the line-integral image registration compares DRRs with
+// (DESIGN.md, "Attenuation"): dark and gain correction, p = ln(I0 / I), crop to a window, masks,
+// and a Gaussian blur whose sigma is given in millimetres on the detector.
+
+#include <cstdint>
+#include <vector>
+
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::tracking {
+
+// The detector's correction images and levels (counts). Empty images mean "none": no dark
+// offset, unit gain.
+struct DetectorCorrection {
+  Image<float> dark_counts;   // offset per pixel, subtracted first
+  Image<float> gain;          // flat-field gain per pixel (1 = nominal); <= 0 marks a dead pixel
+  double open_field_counts = 4000;  // I0: dark-corrected counts with nothing in the beam
+  int saturation_counts = 4095;     // raw values at or above this are saturated
+};
+
+// Fills `line_integral` (window-sized) with p = ln(I0 / I), I = (raw - dark) / gain, for the
+// pixels of `window`, and `valid` with 1 where p is usable: 0 for saturated raw values, dead
+// pixels (gain <= 0) and photon-starved ones (I <= 0); masked pixels get p = 0. Fails, leaving
+// the outputs untouched, if the window is outside the frame, the outputs or the correction
+// images have the wrong size, or I0 is not positive.
+Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const DetectorCorrection& correction,
+                        const PixelWindow& window, ImageView<float> line_integral,
+                        ImageView<unsigned char> valid);
+
+// Separable Gaussian blur that respects a mask (normalised convolution: masked pixels neither
+// contribute nor receive a guessed value; they keep their input value and stay masked). Sized once
+// for an image shape; blur() allocates nothing.
+class GaussianBlur {
+ public:
+  // sigma in pixels (0: copy). The kernel reaches 3 sigma.
+  GaussianBlur(int rows, int cols, double sigma_px);
+  double sigma_px() const { return sigma_px_; }
+  // in and out have the shape given at construction (they may not alias); `valid` may be empty.
+  Status blur(const ImageView<const float>& in, const ImageView<const unsigned char>& valid,
+              ImageView<float> out);
+
+ private:
+  int rows_, cols_;
+  double sigma_px_;
+  std::vector<double> kernel_;
+  std::vector<double> value_tmp_, weight_tmp_;
+};
+
+}  // namespace lftrack::tracking

@@ -1,0 +1,85 @@
+#pragma once
+// Optimizers over the pose 6-vector delta = (t [mm], omega [rad]) (DESIGN.md, "Frames"). They
+// minimise a cost (registration passes minus the similarity) and never see Euler angles.
+//
+// Every optimizer works in scaled units: parameter i moves by `step * scale[i]`, where `scale[i]`
+// is what moves the projected ROI voxels by 1 mm on average on the detectors (so one step
+// disturbs the images equally for every parameter, PAPERS.md paper 1). Steps are in those
+// "projected millimetres". Chosen by name through make_optimizer(); one test runs them all on the
+// same problems.
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::tracking {
+
+// What an optimizer minimises. cost_batch() may evaluate its points in parallel; both must be
+// deterministic (the same x gives the same cost) and return a finite value or +infinity.
+class CostFunction {
+ public:
+  virtual ~CostFunction() = default;
+  virtual double cost(const Vector6d& x) = 0;
+  // out[i] = cost(xs[i]) for i < n; the default evaluates them one after another.
+  virtual void cost_batch(const Vector6d* xs, int n, double* out) {
+    for (int i = 0; i < n; ++i) out[i] = cost(xs[i]);
+  }
+};
+
+struct OptimizerBudget {
+  int max_evaluations = 5000;
+  double max_ms = 1e12;  // wall time
+};
+
+struct OptimizerSettings {
+  Vector6d scale = Vector6d::Ones();  // parameter units per projected mm
+  double initial_step_mm = 2.0;       // projected mm
+  double final_step_mm = 0.1;
+  // cmaes: population (0: 4 + 3 ln 6 rounded up to even), and the RNG seed.
+  int population = 0;
+  std::uint64_t seed = 1;
+  bool record_trace = false;
+};
+
+struct OptimizerTracePoint {
+  int evaluations = 0;
+  double cost = 0;
+  Vector6d x = Vector6d::Zero();
+};
+
+enum class OptimizerStop { kConverged, kEvaluationBudget, kTimeBudget, kNonFinite };
+const char* to_string(OptimizerStop stop);
+
+struct OptimizerResult {
+  Vector6d x = Vector6d::Zero();  // best point found
+  double cost = 0;
+  int evaluations = 0;
+  double elapsed_ms = 0;
+  OptimizerStop stop = OptimizerStop::kConverged;
+  std::vector<OptimizerTracePoint> trace;  // the best point after each iteration (if asked)
+};
+
+class Optimizer {
+ public:
+  virtual ~Optimizer() = default;
+  virtual std::string_view name() const = 0;
+  virtual OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const = 0;
+};
+
+// Names accepted by make_optimizer, in a stable order:
+//   best-neighbour  Studholme's best-neighbour search: the 12 neighbours x +- step * scale[i],
+//                   move to the best while it improves, then halve the step down to the final one.
+//   decoupled       paper 3: pairs {tx, wy}, {ty, wz}, {tz, wx} (weakly coupled for views about
+//                   the room's z axis), five costs each, a separable quadratic fit, a jump to its
+//                   minimum (at most two steps away); halve the step when no pair improves.
+//   cmaes           CMA-ES (Hansen) from the initial step as sigma, for the wide-range cold start;
+//                   stops when sigma falls below the final step.
+std::vector<std::string> optimizer_names();
+Result<std::unique_ptr<Optimizer>> make_optimizer(std::string_view name, const OptimizerSettings& settings);
+
+}  // namespace lftrack::tracking

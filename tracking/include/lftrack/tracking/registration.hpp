@@ -1,0 +1,134 @@
+#pragma once
+// Intensity-based 2D-3D registration over one or more X-ray views (PAPERS.md, papers 1-3):
+// render DRRs of the ROI windows at a candidate pose, score them against the preprocessed frames
+// (sum over views), and let an optimizer move the pose 6-vector about the registration origin.
+// An optional fiducial term adds paper 2's hybrid measure: cost = -sum(S_k) + gamma * d.
+//
+// Set-up (create, set_frames) allocates; run() allocates only the result's trace (if asked)
+// and the pass list it copies, and evaluates candidates of a batch in parallel on the pool.
+
+#include <Eigen/Core>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/optimizer.hpp"
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/similarity.hpp"
+#include "lftrack/tracking/status.hpp"
+#include "lftrack/tracking/xray_view.hpp"
+
+namespace lftrack::tracking {
+
+class ThreadPool;
+
+struct RegistrationView {
+  XrayView view;       // room frame, the whole detector
+  PixelWindow window;  // the ROI pixels that are registered
+};
+
+struct RegistrationSetup {
+  std::vector<RegistrationView> views;
+  Eigen::Vector3d origin_room_mm = Eigen::Vector3d::Zero();  // registration origin c
+  // The ROI box (CT frame) whose projected voxels set the parameter scales, and the pose at
+  // which they are measured.
+  Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d roi_size_mm{64, 64, 40};
+  Pose nominal_T_room_from_ct = Pose::Identity();
+  std::string similarity = "mi";
+  SimilarityOptions similarity_options;
+  // Blur levels (sigma, mm on the detector) the passes may ask for; 0 is always available.
+  std::vector<double> blur_sigmas_mm{1.5};
+  // A candidate whose DRR has fewer valid pixels than this fraction of a window scores the
+  // measure's worst value in that view (a pose far outside a light field's envelope).
+  double min_valid_fraction = 0.5;
+};
+
+// Paper 2's fiducial term: d = |T * marker_ct - marker_room|.
+struct FiducialTerm {
+  Eigen::Vector3d marker_ct_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d marker_room_mm = Eigen::Vector3d::Zero();  // triangulated from the frames
+  double gamma_per_mm = 0.05;
+};
+
+struct RegistrationPass {
+  std::string optimizer = "best-neighbour";
+  double blur_sigma_mm = 0;  // one of the setup's levels, or 0
+  double initial_step_mm = 2.0;
+  double final_step_mm = 0.1;
+  int max_evaluations = 3000;
+};
+
+struct RegistrationPlan {
+  std::string name;
+  std::vector<RegistrationPass> passes;
+  double max_ms = 1e12;  // wall-time budget of the whole plan
+};
+
+// Named plans, in a stable order:
+//   papers     best-neighbour on references blurred 1.5 mm, steps 5 -> 0.5 mm, then on the
+//              originals, 2 -> 0.1 mm (papers 1 and 2)
+//   decoupled  paper 3's decoupled quadratic-fit optimizer in the same two passes
+//   cmaes      CMA-ES on the blurred references (sigma 6 -> 0.5 mm) for range, then
+//              best-neighbour on the originals 1 -> 0.1 mm
+//   warm       best-neighbour on the originals, 1 -> 0.1 mm: tracking from the last pose
+std::vector<std::string> registration_plan_names();
+Result<RegistrationPlan> registration_plan(const std::string& name);
+
+struct RegistrationResult {
+  Pose T_room_from_ct = Pose::Identity();
+  PoseDelta delta_from_start;          // about the origin
+  double cost = 0;                     // of the last pass (lower is better)
+  std::vector<double> view_similarity; // unblurred, at the result
+  double fiducial_distance_mm = -1;    // with a fiducial term
+  int evaluations = 0;
+  double elapsed_ms = 0;
+  OptimizerStop stop = OptimizerStop::kConverged;
+  std::vector<OptimizerTracePoint> trace;  // x: delta from the start pose
+};
+
+class Registration {
+ public:
+  ~Registration();
+  static Result<std::unique_ptr<Registration>> create(std::shared_ptr<const DrrRenderer> renderer,
+                                                      RegistrationSetup setup, ThreadPool* pool);
+
+  const RegistrationSetup& setup() const { return setup_; }
+  // Parameter scales: the change of each delta component that moves the ROI's projected voxels
+  // by 1 mm on the detectors, averaged over points and views.
+  const Vector6d& parameter_scales() const { return scales_; }
+
+  // The preprocessed frames of the views' windows (line integrals) and their masks (empty:
+  // all valid); blurred copies are made for each blur level.
+  Status set_frames(const std::vector<ImageView<const float>>& frames,
+                    const std::vector<ImageView<const unsigned char>>& valid);
+  void set_fiducial(const std::optional<FiducialTerm>& term) { fiducial_ = term; }
+
+  // Registers from `start`. Fails before set_frames() or for an unknown optimizer or blur level.
+  Result<RegistrationResult> run(const Pose& start_T_room_from_ct, const RegistrationPlan& plan,
+                                 bool record_trace = false);
+
+  // The cost of one pose at a blur level (for tests and plots).
+  double cost_at(const Pose& T_room_from_ct, double blur_sigma_mm = 0);
+
+ private:
+  class Cost;
+  struct Slot;
+  Registration() = default;
+  int blur_level(double sigma_mm) const;
+  double evaluate(int slot, int level, const Pose& T, std::vector<double>* view_scores);
+
+  std::shared_ptr<const DrrRenderer> renderer_;
+  RegistrationSetup setup_;
+  ThreadPool* pool_ = nullptr;
+  Vector6d scales_ = Vector6d::Ones();
+  std::vector<double> levels_mm_;  // blur sigma per level, level 0 = 0
+  std::vector<std::unique_ptr<Slot>> slots_;
+  std::optional<FiducialTerm> fiducial_;
+  bool frames_set_ = false;
+};
+
+}  // namespace lftrack::tracking

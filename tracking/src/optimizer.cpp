@@ -1,0 +1,306 @@
+#include "lftrack/tracking/optimizer.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numeric>
+#include <limits>
+#include <optional>
+#include <random>
+
+namespace lftrack::tracking {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Evaluation bookkeeping shared by the optimizers: scaled coordinates y (x = start + scale .* y),
+// budget, best point, trace.
+class Search {
+ public:
+  Search(CostFunction& cost, const Vector6d& start, const OptimizerSettings& settings, const OptimizerBudget& budget)
+      : cost_(cost), start_(start), settings_(settings), budget_(budget), t0_(Clock::now()) {
+    if (settings.record_trace) result_.trace.reserve(256);
+  }
+
+  Vector6d to_x(const Vector6d& y) const { return start_ + settings_.scale.cwiseProduct(y); }
+  double elapsed_ms() const { return std::chrono::duration<double, std::milli>(Clock::now() - t0_).count(); }
+  // True while another batch of `n` evaluations fits the budget.
+  bool can_evaluate(int n) {
+    if (result_.evaluations + n > budget_.max_evaluations) {
+      stop_ = OptimizerStop::kEvaluationBudget;
+      return false;
+    }
+    if (elapsed_ms() >= budget_.max_ms) {
+      stop_ = OptimizerStop::kTimeBudget;
+      return false;
+    }
+    return true;
+  }
+  // Evaluates points given in scaled coordinates; non-finite costs become +infinity.
+  void evaluate(const Vector6d* ys, int n, double* out) {
+    for (int i = 0; i < n; ++i) xs_[i] = to_x(ys[i]);
+    cost_.cost_batch(xs_.data(), n, out);
+    result_.evaluations += n;
+    for (int i = 0; i < n; ++i) {
+      if (!std::isfinite(out[i])) out[i] = std::numeric_limits<double>::infinity();
+      if (out[i] < best_cost_) {
+        best_cost_ = out[i];
+        best_y_ = ys[i];
+      }
+    }
+  }
+  void checkpoint() {
+    if (settings_.record_trace) result_.trace.push_back({result_.evaluations, best_cost_, to_x(best_y_)});
+  }
+  OptimizerResult finish(OptimizerStop converged_or_not) {
+    result_.x = to_x(best_y_);
+    result_.cost = best_cost_;
+    result_.elapsed_ms = elapsed_ms();
+    result_.stop = stop_.value_or(converged_or_not);
+    if (result_.evaluations > 0 && !std::isfinite(best_cost_)) result_.stop = OptimizerStop::kNonFinite;
+    return std::move(result_);
+  }
+  double best_cost() const { return best_cost_; }
+  const Vector6d& best_y() const { return best_y_; }
+  const OptimizerSettings& settings() const { return settings_; }
+
+  static constexpr int kMaxBatch = 64;
+
+ private:
+  CostFunction& cost_;
+  Vector6d start_;
+  OptimizerSettings settings_;
+  OptimizerBudget budget_;
+  Clock::time_point t0_;
+  OptimizerResult result_;
+  std::optional<OptimizerStop> stop_;
+  double best_cost_ = std::numeric_limits<double>::infinity();
+  Vector6d best_y_ = Vector6d::Zero();
+  std::array<Vector6d, kMaxBatch> xs_;
+};
+
+class BestNeighbour final : public Optimizer {
+ public:
+  explicit BestNeighbour(OptimizerSettings s) : settings_(std::move(s)) {}
+  std::string_view name() const override { return "best-neighbour"; }
+  OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
+    Search search(cost, start, settings_, budget);
+    Vector6d centre = Vector6d::Zero();
+    double centre_cost = 0;
+    if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
+    search.evaluate(&centre, 1, &centre_cost);
+    std::array<Vector6d, 12> neighbours;
+    std::array<double, 12> costs;
+    for (double step = settings_.initial_step_mm; step >= settings_.final_step_mm * (1 - 1e-9); step *= 0.5) {
+      for (;;) {
+        for (int i = 0; i < 6; ++i) {
+          neighbours[2 * i] = centre;
+          neighbours[2 * i](i) += step;
+          neighbours[2 * i + 1] = centre;
+          neighbours[2 * i + 1](i) -= step;
+        }
+        if (!search.can_evaluate(12)) return search.finish(OptimizerStop::kConverged);
+        search.evaluate(neighbours.data(), 12, costs.data());
+        const int best = int(std::min_element(costs.begin(), costs.end()) - costs.begin());
+        search.checkpoint();
+        if (!(costs[best] < centre_cost)) break;
+        centre = neighbours[best];
+        centre_cost = costs[best];
+      }
+    }
+    return search.finish(OptimizerStop::kConverged);
+  }
+
+ private:
+  OptimizerSettings settings_;
+};
+
+class Decoupled final : public Optimizer {
+ public:
+  explicit Decoupled(OptimizerSettings s) : settings_(std::move(s)) {}
+  std::string_view name() const override { return "decoupled"; }
+  OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
+    static constexpr std::array<std::array<int, 2>, 3> kPairs{{{0, 4}, {1, 5}, {2, 3}}};
+    Search search(cost, start, settings_, budget);
+    Vector6d centre = Vector6d::Zero();
+    double centre_cost = 0;
+    if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
+    search.evaluate(&centre, 1, &centre_cost);
+    double step = settings_.initial_step_mm;
+    while (step >= settings_.final_step_mm * (1 - 1e-9)) {
+      bool improved = false;
+      for (const auto& pair : kPairs) {
+        // Five costs: the centre (known) and +-step along each parameter of the pair.
+        std::array<Vector6d, 4> samples;
+        std::array<double, 4> costs;
+        for (int k = 0; k < 2; ++k) {
+          samples[2 * k] = centre;
+          samples[2 * k](pair[k]) += step;
+          samples[2 * k + 1] = centre;
+          samples[2 * k + 1](pair[k]) -= step;
+        }
+        if (!search.can_evaluate(5)) return search.finish(OptimizerStop::kConverged);
+        search.evaluate(samples.data(), 4, costs.data());
+        // Separable quadratic through the five: per axis, slope and curvature; jump to its
+        // minimum, at most two steps away (or one step downhill where it is not convex).
+        Vector6d jump = centre;
+        for (int k = 0; k < 2; ++k) {
+          const double plus = costs[2 * k], minus = costs[2 * k + 1];
+          const double slope = (plus - minus) / (2 * step);
+          const double curvature = (plus + minus - 2 * centre_cost) / (step * step);
+          double move = 0;
+          if (std::isfinite(slope) && curvature > 0) {
+            move = std::clamp(-slope / curvature, -2 * step, 2 * step);
+          } else if (plus < centre_cost || minus < centre_cost) {
+            move = plus < minus ? step : -step;
+          }
+          jump(pair[k]) += move;
+        }
+        double jump_cost = std::numeric_limits<double>::infinity();
+        if (jump != centre) search.evaluate(&jump, 1, &jump_cost);
+        // Move to the best of the jump and the samples.
+        Vector6d best = jump;
+        double best_cost = jump_cost;
+        for (int i = 0; i < 4; ++i) {
+          if (costs[i] < best_cost) {
+            best_cost = costs[i];
+            best = samples[i];
+          }
+        }
+        if (best_cost < centre_cost) {
+          const double moved = (best - centre).cwiseAbs().maxCoeff();
+          centre = best;
+          centre_cost = best_cost;
+          if (moved > 0.25 * step) improved = true;  // a negligible change does not hold the step
+        }
+        search.checkpoint();
+      }
+      if (!improved) step *= 0.5;
+    }
+    return search.finish(OptimizerStop::kConverged);
+  }
+
+ private:
+  OptimizerSettings settings_;
+};
+
+// CMA-ES with rank-one and rank-mu updates (Hansen, "The CMA Evolution Strategy: A Tutorial"),
+// in scaled coordinates, sigma starting at the initial step.
+class Cmaes final : public Optimizer {
+ public:
+  explicit Cmaes(OptimizerSettings s) : settings_(std::move(s)) {}
+  std::string_view name() const override { return "cmaes"; }
+  OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
+    constexpr int n = 6;
+    int lambda = settings_.population > 0 ? settings_.population : 4 + int(std::floor(3 * std::log(double(n))));
+    lambda = std::clamp(lambda + (lambda % 2), 4, Search::kMaxBatch);
+    const int mu = lambda / 2;
+    std::vector<double> w(mu);
+    for (int i = 0; i < mu; ++i) w[i] = std::log(mu + 0.5) - std::log(i + 1.0);
+    const double wsum = std::accumulate(w.begin(), w.end(), 0.0);
+    double w2 = 0;
+    for (double& wi : w) {
+      wi /= wsum;
+      w2 += wi * wi;
+    }
+    const double mueff = 1.0 / w2;
+    const double cc = (4 + mueff / n) / (n + 4 + 2 * mueff / n);
+    const double cs = (mueff + 2) / (n + mueff + 5);
+    const double c1 = 2 / ((n + 1.3) * (n + 1.3) + mueff);
+    const double cmu = std::min(1 - c1, 2 * (mueff - 2 + 1 / mueff) / ((n + 2) * (n + 2) + mueff));
+    const double damps = 1 + 2 * std::max(0.0, std::sqrt((mueff - 1) / (n + 1)) - 1) + cs;
+    const double chi_n = std::sqrt(double(n)) * (1 - 1.0 / (4 * n) + 1.0 / (21.0 * n * n));
+
+    Search search(cost, start, settings_, budget);
+    std::mt19937_64 rng(settings_.seed);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    Vector6d mean = Vector6d::Zero(), ps = Vector6d::Zero(), pc = Vector6d::Zero();
+    Eigen::Matrix<double, 6, 6> C = Eigen::Matrix<double, 6, 6>::Identity();
+    double sigma = settings_.initial_step_mm;
+    {
+      double c0;
+      if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
+      search.evaluate(&mean, 1, &c0);
+    }
+    std::array<Vector6d, Search::kMaxBatch> ys;
+    std::array<double, Search::kMaxBatch> costs;
+    std::array<int, Search::kMaxBatch> order;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig;
+    for (int generation = 0;; ++generation) {
+      eig.compute(C);
+      const Vector6d d = eig.eigenvalues().cwiseMax(1e-20).cwiseSqrt();
+      const Eigen::Matrix<double, 6, 6> B = eig.eigenvectors();
+      if (sigma * d.maxCoeff() < settings_.final_step_mm) break;
+      if (!search.can_evaluate(lambda)) break;
+      for (int k = 0; k < lambda; ++k) {
+        Vector6d z;
+        for (int i = 0; i < n; ++i) z(i) = normal(rng);
+        ys[k] = mean + sigma * (B * d.asDiagonal() * z);
+      }
+      search.evaluate(ys.data(), lambda, costs.data());
+      std::iota(order.begin(), order.begin() + lambda, 0);
+      std::sort(order.begin(), order.begin() + lambda, [&](int a, int b) { return costs[a] < costs[b]; });
+      const Vector6d old_mean = mean;
+      mean.setZero();
+      for (int i = 0; i < mu; ++i) mean += w[i] * ys[order[i]];
+      const Vector6d step = (mean - old_mean) / sigma;
+      const Vector6d c_inv_sqrt_step = B * d.cwiseInverse().asDiagonal() * B.transpose() * step;
+      ps = (1 - cs) * ps + std::sqrt(cs * (2 - cs) * mueff) * c_inv_sqrt_step;
+      const double hsig_threshold = (1.4 + 2.0 / (n + 1)) * chi_n *
+                                    std::sqrt(1 - std::pow(1 - cs, 2.0 * (generation + 1)));
+      const bool hsig = ps.norm() < hsig_threshold;
+      pc = (1 - cc) * pc + (hsig ? std::sqrt(cc * (2 - cc) * mueff) : 0.0) * step;
+      Eigen::Matrix<double, 6, 6> rank_mu = Eigen::Matrix<double, 6, 6>::Zero();
+      for (int i = 0; i < mu; ++i) {
+        const Vector6d dy = (ys[order[i]] - old_mean) / sigma;
+        rank_mu += w[i] * dy * dy.transpose();
+      }
+      C = (1 - c1 - cmu) * C + c1 * (pc * pc.transpose() + (hsig ? 0.0 : cc * (2 - cc)) * C) + cmu * rank_mu;
+      C = 0.5 * (C + C.transpose());
+      sigma *= std::exp((cs / damps) * (ps.norm() / chi_n - 1));
+      if (!std::isfinite(sigma) || sigma > 1e6) break;
+      search.checkpoint();
+    }
+    return search.finish(OptimizerStop::kConverged);
+  }
+
+ private:
+  OptimizerSettings settings_;
+};
+
+}  // namespace
+
+const char* to_string(OptimizerStop stop) {
+  switch (stop) {
+    case OptimizerStop::kConverged:
+      return "converged";
+    case OptimizerStop::kEvaluationBudget:
+      return "evaluation budget";
+    case OptimizerStop::kTimeBudget:
+      return "time budget";
+    case OptimizerStop::kNonFinite:
+      return "no finite cost";
+  }
+  return "?";
+}
+
+std::vector<std::string> optimizer_names() {
+  return {"best-neighbour", "decoupled", "cmaes"};
+}
+
+Result<std::unique_ptr<Optimizer>> make_optimizer(std::string_view name, const OptimizerSettings& settings) {
+  if (!settings.scale.allFinite() || (settings.scale.array() <= 0).any())
+    return invalid_argument("optimizer: every parameter scale must be positive and finite");
+  if (!(settings.final_step_mm > 0) || !(settings.initial_step_mm >= settings.final_step_mm) ||
+      !std::isfinite(settings.initial_step_mm))
+    return invalid_argument("optimizer: steps must satisfy initial >= final > 0");
+  if (name == "best-neighbour") return std::unique_ptr<Optimizer>(new BestNeighbour(settings));
+  if (name == "decoupled") return std::unique_ptr<Optimizer>(new Decoupled(settings));
+  if (name == "cmaes") return std::unique_ptr<Optimizer>(new Cmaes(settings));
+  std::string known;
+  for (const auto& n : optimizer_names()) known += (known.empty() ? "" : ", ") + n;
+  return invalid_argument("unknown optimizer '" + std::string(name) + "' (known: " + known + ")");
+}
+
+}  // namespace lftrack::tracking
