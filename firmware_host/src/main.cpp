@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
   CLI::App* bench = app.add_subcommand("bench", "Benchmarks measured side by side in one run");
   bench->require_subcommand(1);
   const Command bench_drr = add_bench_drr_command(bench);
+  const Command bench_register = add_bench_register_command(bench);
   const Command register_frames = add_register_command(&app);
   CLI::App* study = app.add_subcommand("study", "Studies: many registrations, a CSV, a plot and a summary");
   study->require_subcommand(1);
@@ -49,6 +50,8 @@ int main(int argc, char** argv) {
       status = precompute();
     else if (bench->got_subcommand("drr"))
       status = bench_drr();
+    else if (bench->got_subcommand("register"))
+      status = bench_register();
     else if (app.got_subcommand("register"))
       status = register_frames();
     else if (study->got_subcommand("capture-range"))

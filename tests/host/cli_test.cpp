@@ -140,3 +140,91 @@ TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
 
 }  // namespace
 }  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+// The built-in scene with a coarse light field (built in a moment) for command tests.
+std::filesystem::path small_light_field_scene(const test::TempDir& dir) {
+  const auto file = dir.path() / "phantom-small-lf.yaml";
+  std::ofstream(file) << *builtin_scene_text(kBuiltinPhantom) << "  light_field:\n    resolution: [8, 8, 96, 96]\n";
+  return file;
+}
+
+TEST(Cli, RegisterSimulatedFramesPrintsPoseSimilarityAndTre) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir);
+  std::string out;
+  const Status s = run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--sim", "--gold",
+                                "1,-1,0.5,0.5,0,-0.5", "--init", "-2,2,-1.5,-1,1,1", "--lf-dir",
+                                (dir.path() / "lf").string(), "--save-frames", (dir.path() / "frames").string(),
+                                "--json"},
+                               &out);
+  ASSERT_TRUE(s.ok()) << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["views"].size(), 2u);
+  EXPECT_GT(j["evaluations"].get<int>(), 12);
+  EXPECT_GT(j["initial_tre_mm"]["mean"].get<double>(), 3.0);
+  EXPECT_LT(j["tre_mm"]["mean"].get<double>(), 1.0) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "lf" / "A.lf")) << "a missing field is built and kept";
+
+  // The saved frames register from files the same way.
+  std::string again;
+  const Status f = run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--frames",
+                                (dir.path() / "frames" / "frame_A.tif").string(),
+                                (dir.path() / "frames" / "frame_B.tif").string(), "--gold", "1,-1,0.5,0.5,0,-0.5",
+                                "--init", "-2,2,-1.5,-1,1,1", "--lf-dir", (dir.path() / "lf").string(), "--json"},
+                               &again);
+  ASSERT_TRUE(f.ok()) << again;
+  const auto k = nlohmann::json::parse(again.substr(again.find('{')));
+  EXPECT_NEAR(k["tre_mm"]["mean"].get<double>(), j["tre_mm"]["mean"].get<double>(), 1e-9);
+}
+
+TEST(Cli, RegisterRefusesBadInput) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir);
+  std::string out;
+  EXPECT_FALSE(run_process({lftrack_bin(), "register", "--scene", scene.string()}, &out).ok());
+  EXPECT_NE(out.find("either --frames A B or --sim"), std::string::npos) << out;
+  const auto junk = dir.path() / "junk.tif";
+  std::ofstream(junk) << "not a tiff";
+  EXPECT_FALSE(run_process({lftrack_bin(), "register", "--scene", scene.string(), "--frames", junk.string(),
+                            junk.string()},
+                           &out)
+                   .ok());
+  EXPECT_FALSE(run_process({lftrack_bin(), "register", "--scene", scene.string(), "--sim", "--plan", "fast"}, &out).ok());
+  EXPECT_NE(out.find("unknown registration plan"), std::string::npos) << out;
+}
+
+TEST(Cli, CaptureRangeStudyWritesCsvSummaryAndPlot) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir);
+  std::string out;
+  const auto study = dir.path() / "study";
+  const Status s = run_process({lftrack_bin(), "-q", "study", "capture-range", "--scene", scene.string(), "--out",
+                                study.string(), "--per-bin", "2", "--bins", "2", "--methods", "warm:ncc,papers:mi",
+                                "--lf-dir", (dir.path() / "lf").string()},
+                               &out);
+  ASSERT_TRUE(s.ok()) << out;
+  std::ifstream csv(study / "runs.csv");
+  const long lines = std::count(std::istreambuf_iterator<char>(csv), std::istreambuf_iterator<char>(), '\n');
+  EXPECT_EQ(lines, 1 + 2 * 2 * 2);
+  std::ifstream summary_file(study / "summary.json");
+  const auto summary = nlohmann::json::parse(summary_file);
+  ASSERT_EQ(summary["methods"].size(), 2u);
+  for (const auto& m : summary["methods"])
+    for (const char* key : {"name", "success_rate", "mean_tre_mm", "max_tre_mm", "capture_range_mm", "median_ms"})
+      EXPECT_TRUE(m.contains(key)) << key;
+  EXPECT_TRUE(std::filesystem::exists(study / "capture_range.gp"));
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_GT(std::filesystem::file_size(study / "capture_range.png"), 1000u);
+  }
+  EXPECT_FALSE(run_process({lftrack_bin(), "study", "capture-range", "--scene", scene.string(), "--out",
+                            study.string(), "--methods", "papers:entropy"},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("unknown similarity"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace lftrack::host
