@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/target_error.hpp"
@@ -170,6 +172,24 @@ TEST(Registration, FiducialTermPullsTowardsTheMarker) {
   ASSERT_TRUE(result.ok());
   EXPECT_LT(tre_mm(result->T_room_from_ct, gold), 0.5);
   EXPECT_LT(result->fiducial_distance_mm, 0.5);
+}
+
+TEST(Registration, StaysInsideTheSearchRegion) {
+  RegistrationSetup setup = two_view_setup("mi");
+  setup.search_translation_mm = 4;
+  setup.search_rotation_deg = 3;
+  auto reg = std::move(Registration::create(light_field_renderer(), setup, nullptr)).value();
+  const Frames f = frames_at(setup, gold_pose());  // gold: 3 mm, 2 degrees from nominal
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  PoseDelta far;
+  far.translation_mm = {6, 0, 0};
+  EXPECT_TRUE(std::isinf(reg->cost_at(apply_delta(phantom().nominal, far, Vector3d::Zero()))));
+  EXPECT_TRUE(std::isfinite(reg->cost_at(gold_pose())));
+  auto result = reg->run(phantom().nominal, *registration_plan("papers"));
+  ASSERT_TRUE(result.ok());
+  const Vector6d d = delta_between(phantom().nominal, result->T_room_from_ct, Vector3d::Zero()).as_vector();
+  EXPECT_LE(d.head<3>().cwiseAbs().maxCoeff(), 4 + 1e-9);
+  EXPECT_LT(tre_mm(result->T_room_from_ct, gold_pose()), 0.5);
 }
 
 TEST(Registration, RefusesMisuse) {

@@ -185,6 +185,62 @@ class Decoupled final : public Optimizer {
   OptimizerSettings settings_;
 };
 
+class QuadraticNeighbour final : public Optimizer {
+ public:
+  explicit QuadraticNeighbour(OptimizerSettings s) : settings_(std::move(s)) {}
+  std::string_view name() const override { return "quadratic-neighbour"; }
+  OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
+    Search search(cost, start, settings_, budget);
+    Vector6d centre = Vector6d::Zero();
+    double centre_cost = 0;
+    if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
+    search.evaluate(&centre, 1, &centre_cost);
+    std::array<Vector6d, 12> neighbours;
+    std::array<double, 12> costs;
+    for (double step = settings_.initial_step_mm; step >= settings_.final_step_mm * (1 - 1e-9);) {
+      for (int i = 0; i < 6; ++i) {
+        neighbours[2 * i] = centre;
+        neighbours[2 * i](i) += step;
+        neighbours[2 * i + 1] = centre;
+        neighbours[2 * i + 1](i) -= step;
+      }
+      if (!search.can_evaluate(13)) return search.finish(OptimizerStop::kConverged);
+      search.evaluate(neighbours.data(), 12, costs.data());
+      // Per-axis parabola through (-step, 0, +step): Newton step on the diagonal model.
+      Vector6d jump = centre;
+      for (int i = 0; i < 6; ++i) {
+        const double plus = costs[2 * i], minus = costs[2 * i + 1];
+        const double slope = (plus - minus) / (2 * step);
+        const double curvature = (plus + minus - 2 * centre_cost) / (step * step);
+        double move = 0;
+        if (std::isfinite(slope) && std::isfinite(curvature) && curvature > 0)
+          move = std::clamp(-slope / curvature, -2 * step, 2 * step);
+        else if (plus < centre_cost || minus < centre_cost)
+          move = plus < minus ? step : -step;
+        jump(i) += move;
+      }
+      double jump_cost = std::numeric_limits<double>::infinity();
+      if (jump != centre) search.evaluate(&jump, 1, &jump_cost);
+      const int best = int(std::min_element(costs.begin(), costs.end()) - costs.begin());
+      search.checkpoint();
+      const bool jump_wins = jump_cost <= costs[best];
+      const double candidate_cost = jump_wins ? jump_cost : costs[best];
+      if (candidate_cost < centre_cost) {
+        const Vector6d next = jump_wins ? jump : neighbours[best];
+        const double moved = (next - centre).cwiseAbs().maxCoeff();
+        centre = next;
+        centre_cost = candidate_cost;
+        if (moved > 0.5 * step) continue;  // still travelling at this step
+      }
+      step *= 0.5;  // settled to within half a step: refine
+    }
+    return search.finish(OptimizerStop::kConverged);
+  }
+
+ private:
+  OptimizerSettings settings_;
+};
+
 // CMA-ES with rank-one and rank-mu updates (Hansen, "The CMA Evolution Strategy: A Tutorial"),
 // in scaled coordinates, sigma starting at the initial step.
 class Cmaes final : public Optimizer {
@@ -286,7 +342,7 @@ const char* to_string(OptimizerStop stop) {
 }
 
 std::vector<std::string> optimizer_names() {
-  return {"best-neighbour", "decoupled", "cmaes"};
+  return {"best-neighbour", "quadratic-neighbour", "decoupled", "cmaes"};
 }
 
 Result<std::unique_ptr<Optimizer>> make_optimizer(std::string_view name, const OptimizerSettings& settings) {
@@ -296,6 +352,7 @@ Result<std::unique_ptr<Optimizer>> make_optimizer(std::string_view name, const O
       !std::isfinite(settings.initial_step_mm))
     return invalid_argument("optimizer: steps must satisfy initial >= final > 0");
   if (name == "best-neighbour") return std::unique_ptr<Optimizer>(new BestNeighbour(settings));
+  if (name == "quadratic-neighbour") return std::unique_ptr<Optimizer>(new QuadraticNeighbour(settings));
   if (name == "decoupled") return std::unique_ptr<Optimizer>(new Decoupled(settings));
   if (name == "cmaes") return std::unique_ptr<Optimizer>(new Cmaes(settings));
   std::string known;

@@ -1,6 +1,7 @@
 #include "lftrack/tracking/registration.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -21,33 +22,51 @@ struct Registration::Slot {
 class Registration::Cost final : public CostFunction {
  public:
   Cost(Registration& r, const Pose& start, int level) : r_(r), start_(start), level_(level) {}
-  double cost(const Vector6d& x) override { return r_.evaluate(0, level_, pose(x), nullptr); }
+  double cost(const Vector6d& x) override {
+    double out = 0;
+    cost_batch(&x, 1, &out);
+    return out;
+  }
+  // Spreads (candidate, view) pairs over the pool, so a batch of one still uses two threads.
   void cost_batch(const Vector6d* xs, int n, double* out) override {
+    const int views = static_cast<int>(r_.setup_.views.size());
     const int slots = static_cast<int>(r_.slots_.size());
-    if (r_.pool_ == nullptr || slots < 2 || n < 2) {
-      for (int i = 0; i < n; ++i) out[i] = cost(xs[i]);
+    const int tasks = n * views;
+    if (r_.pool_ == nullptr || slots < 2 || tasks < 2 || n > kMaxBatch) {
+      for (int i = 0; i < n; ++i) out[i] = r_.evaluate(0, level_, pose(xs[i]), nullptr);
       return;
     }
-    const int grain = (n + slots - 1) / slots;
-    r_.pool_->parallel_for(n, grain, [&](int begin, int end) {
+    for (int i = 0; i < n; ++i) inside_[i] = r_.inside_search_region(pose(xs[i]));
+    const int grain = (tasks + slots - 1) / slots;
+    r_.pool_->parallel_for(tasks, grain, [&](int begin, int end) {
       const int slot = begin / grain;
-      for (int i = begin; i < end; ++i) out[i] = r_.evaluate(slot, level_, pose(xs[i]), nullptr);
+      for (int t = begin; t < end; ++t) {
+        const int i = t / views;
+        view_scores_[t] = inside_[i] ? r_.view_score(slot, level_, pose(xs[i]), t % views) : 0.0;
+      }
     });
+    for (int i = 0; i < n; ++i) {
+      out[i] = inside_[i] ? r_.combine(pose(xs[i]), &view_scores_[i * views]) : std::numeric_limits<double>::infinity();
+    }
   }
   Pose pose(const Vector6d& x) const {
     return apply_delta(start_, PoseDelta::from_vector(x), r_.setup_.origin_room_mm);
   }
 
  private:
+  static constexpr int kMaxBatch = 64;
+  static constexpr int kMaxViews = 4;
   Registration& r_;
   Pose start_;
   int level_;
+  std::array<bool, kMaxBatch> inside_{};
+  std::array<double, kMaxBatch * kMaxViews> view_scores_{};
 };
 
 Registration::~Registration() = default;
 
 std::vector<std::string> registration_plan_names() {
-  return {"papers", "decoupled", "cmaes", "warm"};
+  return {"papers", "decoupled", "quadratic", "cmaes", "warm"};
 }
 
 Result<RegistrationPlan> registration_plan(const std::string& name) {
@@ -56,10 +75,12 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
   if (name == "papers" || name == "decoupled") {
     const std::string opt = name == "papers" ? "best-neighbour" : "decoupled";
     plan.passes = {{opt, 1.5, 5.0, 0.5, 3000}, {opt, 0.0, 2.0, 0.1, 3000}};
+  } else if (name == "quadratic") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 5.0, 0.5, 3000}, {"quadratic-neighbour", 0.0, 2.0, 0.1, 3000}};
   } else if (name == "cmaes") {
-    plan.passes = {{"cmaes", 1.5, 6.0, 0.5, 3000}, {"best-neighbour", 0.0, 1.0, 0.1, 3000}};
+    plan.passes = {{"cmaes", 1.5, 2.5, 0.5, 3000}, {"quadratic-neighbour", 0.0, 1.0, 0.1, 3000}};
   } else if (name == "warm") {
-    plan.passes = {{"best-neighbour", 0.0, 1.0, 0.1, 600}};
+    plan.passes = {{"quadratic-neighbour", 0.0, 1.0, 0.1, 600}};
   } else {
     std::string known;
     for (const auto& n : registration_plan_names()) known += (known.empty() ? "" : ", ") + n;
@@ -110,7 +131,7 @@ Vector6d projected_motion_per_unit(const RegistrationSetup& s) {
 Result<std::unique_ptr<Registration>> Registration::create(std::shared_ptr<const DrrRenderer> renderer,
                                                            RegistrationSetup setup, ThreadPool* pool) {
   if (!renderer) return invalid_argument("registration: no renderer");
-  if (setup.views.empty()) return invalid_argument("registration: no views");
+  if (setup.views.empty() || setup.views.size() > 4) return invalid_argument("registration: needs 1 to 4 views");
   for (const RegistrationView& v : setup.views) {
     LFTRACK_RETURN_IF_ERROR(v.view.validate());
     if (!v.window.inside(v.view.rows, v.view.cols))
@@ -185,26 +206,45 @@ int Registration::blur_level(double sigma_mm) const {
   return -1;
 }
 
-double Registration::evaluate(int slot_index, int level, const Pose& T, std::vector<double>* view_scores) {
+bool Registration::inside_search_region(const Pose& T) const {
+  if (setup_.search_translation_mm <= 0 && setup_.search_rotation_deg <= 0) return true;
+  const Vector6d d = delta_between(setup_.nominal_T_room_from_ct, T, setup_.origin_room_mm).as_vector();
+  if (!d.allFinite()) return false;
+  if (setup_.search_translation_mm > 0 && d.head<3>().cwiseAbs().maxCoeff() > setup_.search_translation_mm)
+    return false;
+  if (setup_.search_rotation_deg > 0 && d.tail<3>().cwiseAbs().maxCoeff() > deg_to_rad(setup_.search_rotation_deg))
+    return false;
+  return true;
+}
+
+double Registration::view_score(int slot_index, int level, const Pose& T, int v) {
   Slot& slot = *slots_[static_cast<std::size_t>(slot_index)];
-  double total = 0;
-  for (std::size_t v = 0; v < setup_.views.size(); ++v) {
-    const RegistrationView& rv = setup_.views[v];
-    RenderExtras extras;
-    extras.valid = slot.valid[v].view();
-    Similarity& similarity = *slot.similarity[static_cast<std::size_t>(level)][v];
-    double score = similarity.worst_score();
-    if (renderer_->render(T, rv.view, rv.window, slot.drr[v].view(), &extras).ok()) {
-      const double valid_fraction =
-          1.0 - double(extras.masked_pixels) / (double(rv.window.rows) * rv.window.cols);
-      if (valid_fraction >= setup_.min_valid_fraction) score = similarity.score(slot.drr[v].view(), extras.valid);
-    }
-    if (view_scores != nullptr) (*view_scores)[v] = score;
-    total += score;
-  }
-  double cost = -total;
+  const RegistrationView& rv = setup_.views[static_cast<std::size_t>(v)];
+  RenderExtras extras;
+  extras.valid = slot.valid[std::size_t(v)].view();
+  Similarity& similarity = *slot.similarity[static_cast<std::size_t>(level)][std::size_t(v)];
+  if (!renderer_->render(T, rv.view, rv.window, slot.drr[std::size_t(v)].view(), &extras).ok())
+    return similarity.worst_score();
+  const double valid_fraction = 1.0 - double(extras.masked_pixels) / (double(rv.window.rows) * rv.window.cols);
+  if (valid_fraction < setup_.min_valid_fraction) return similarity.worst_score();
+  return similarity.score(slot.drr[std::size_t(v)].view(), extras.valid);
+}
+
+double Registration::combine(const Pose& T, const double* view_scores) const {
+  double cost = 0;
+  for (std::size_t v = 0; v < setup_.views.size(); ++v) cost -= view_scores[v];
   if (fiducial_) cost += fiducial_->gamma_per_mm * (T * fiducial_->marker_ct_mm - fiducial_->marker_room_mm).norm();
   return std::isfinite(cost) ? cost : std::numeric_limits<double>::infinity();
+}
+
+double Registration::evaluate(int slot_index, int level, const Pose& T, std::vector<double>* view_scores) {
+  if (view_scores == nullptr && !inside_search_region(T)) return std::numeric_limits<double>::infinity();
+  std::array<double, 8> scores{};
+  for (std::size_t v = 0; v < setup_.views.size() && v < scores.size(); ++v) {
+    scores[v] = view_score(slot_index, level, T, int(v));
+    if (view_scores != nullptr) (*view_scores)[v] = scores[v];
+  }
+  return combine(T, scores.data());
 }
 
 double Registration::cost_at(const Pose& T, double blur_sigma_mm) {

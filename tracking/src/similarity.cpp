@@ -149,7 +149,9 @@ class MutualInformation final : public Similarity {
       lo = std::min(lo, fixed_.values[i]);
       hi = std::max(hi, fixed_.values[i]);
     }
-    fixed_bin_.assign(fixed_.values.size(), 0);
+    fixed_bin_.assign(fixed_.values.size(), kUnusable);
+    pair_bin_.assign(fixed_.values.size(), 0);
+    pair_value_.assign(fixed_.values.size(), 0.f);
     const double scale = hi > lo ? (bins_ - 1e-9) / (double(hi) - lo) : 0.0;
     for (std::size_t i = 0; i < fixed_.values.size(); ++i) {
       if (fixed_.usable[i])
@@ -164,31 +166,36 @@ class MutualInformation final : public Similarity {
 
   double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
     if (!fixed_.fits(m, mv)) return worst_score();
-    double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+    // Pass 1: the usable pixels' fixed bins and moving values, compacted, and the moving range.
     int n = 0;
+    float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
     for (int r = 0; r < fixed_.rows; ++r) {
+      const float* moving = m.row_ptr(r);
+      const unsigned char* moving_valid = mv.empty() ? nullptr : mv.row_ptr(r);
+      const std::uint16_t* bins = &fixed_bin_[fixed_.index(r, 0)];
       for (int c = 0; c < fixed_.cols; ++c) {
-        if (!fixed_.both(m, mv, r, c)) continue;
-        lo = std::min(lo, double(m.at(r, c)));
-        hi = std::max(hi, double(m.at(r, c)));
+        const float v = moving[c];
+        if (bins[c] == kUnusable || (moving_valid != nullptr && moving_valid[c] == 0) || !std::isfinite(v)) continue;
+        pair_bin_[std::size_t(n)] = bins[c];
+        pair_value_[std::size_t(n)] = v;
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
         ++n;
       }
     }
     if (n < kMinPixels) return worst_score();
-    if (!(hi - lo > 1e-12 * std::max(1.0, std::abs(hi)))) return worst_score();  // constant: no information
+    if (!(double(hi) - lo > 1e-12 * std::max(1.0, std::abs(double(hi))))) return worst_score();  // constant
+    // Pass 2: the joint histogram, the moving value split between its two nearest bins.
     std::fill(joint_.begin(), joint_.end(), 0.0);
-    const double scale = (bins_ - 1) / (hi - lo);
-    for (int r = 0; r < fixed_.rows; ++r) {
-      for (int c = 0; c < fixed_.cols; ++c) {
-        if (!fixed_.both(m, mv, r, c)) continue;
-        const double x = (m.at(r, c) - lo) * scale;
-        int j = static_cast<int>(x);
-        if (j >= bins_ - 1) j = bins_ - 2;
-        const double w = x - j;
-        double* row = &joint_[static_cast<std::size_t>(fixed_bin_[fixed_.index(r, c)]) * bins_];
-        row[j] += 1.0 - w;
-        row[j + 1] += w;
-      }
+    const double scale = (bins_ - 1) / (double(hi) - lo);
+    for (int i = 0; i < n; ++i) {
+      const double x = (pair_value_[std::size_t(i)] - lo) * scale;
+      int j = static_cast<int>(x);
+      if (j >= bins_ - 1) j = bins_ - 2;
+      const double w = x - j;
+      double* row = &joint_[static_cast<std::size_t>(pair_bin_[std::size_t(i)]) * bins_];
+      row[j] += 1.0 - w;
+      row[j + 1] += w;
     }
     std::fill(fixed_marginal_.begin(), fixed_marginal_.end(), 0.0);
     std::fill(moving_marginal_.begin(), moving_marginal_.end(), 0.0);
@@ -214,10 +221,13 @@ class MutualInformation final : public Similarity {
   std::unique_ptr<Similarity> clone() const override { return std::make_unique<MutualInformation>(*this); }
 
  private:
+  static constexpr std::uint16_t kUnusable = 0xFFFF;
   int bins_;
   bool normalised_;
   FixedImage fixed_;
-  std::vector<std::uint16_t> fixed_bin_;
+  std::vector<std::uint16_t> fixed_bin_;  // kUnusable where the fixed pixel is not usable
+  std::vector<std::uint16_t> pair_bin_;   // scratch: compacted usable pixels
+  std::vector<float> pair_value_;
   std::vector<double> joint_, fixed_marginal_, moving_marginal_;
 };
 

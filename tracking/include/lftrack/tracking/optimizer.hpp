@@ -74,6 +74,10 @@ class Optimizer {
 // Names accepted by make_optimizer, in a stable order:
 //   best-neighbour  Studholme's best-neighbour search: the 12 neighbours x +- step * scale[i],
 //                   move to the best while it improves, then halve the step down to the final one.
+//   quadratic-neighbour  the same 12 neighbours, plus a jump to the minimum of the per-axis
+//                   parabolas through them (at most two steps per axis); moves to the better of
+//                   the jump and the best neighbour; halves the step once a move is shorter than
+//                   half a step. Fewer evaluations than best-neighbour for the same end point.
 //   decoupled       paper 3: pairs {tx, wy}, {ty, wz}, {tz, wx} (weakly coupled for views about
 //                   the room's z axis), five costs each, a separable quadratic fit, a jump to its
 //                   minimum (at most two steps away); halve the step when no pair improves.

@@ -43,8 +43,14 @@ struct RegistrationSetup {
   // Blur levels (sigma, mm on the detector) the passes may ask for; 0 is always available.
   std::vector<double> blur_sigmas_mm{1.5};
   // A candidate whose DRR has fewer valid pixels than this fraction of a window scores the
-  // measure's worst value in that view (a pose far outside a light field's envelope).
-  double min_valid_fraction = 0.5;
+  // measure's worst value in that view (a pose outside a light field's envelope).
+  double min_valid_fraction = 0.9;
+  // The search region: candidates whose delta from the nominal pose (about the origin) exceeds
+  // these per-axis limits cost +infinity, so no optimizer wanders to where the images barely
+  // overlap (where mutual information has spurious maxima) or reports a pose nobody could apply.
+  // Non-positive: unbounded.
+  double search_translation_mm = 0;
+  double search_rotation_deg = 0;
 };
 
 // Paper 2's fiducial term: d = |T * marker_ct - marker_room|.
@@ -72,9 +78,10 @@ struct RegistrationPlan {
 //   papers     best-neighbour on references blurred 1.5 mm, steps 5 -> 0.5 mm, then on the
 //              originals, 2 -> 0.1 mm (papers 1 and 2)
 //   decoupled  paper 3's decoupled quadratic-fit optimizer in the same two passes
-//   cmaes      CMA-ES on the blurred references (sigma 6 -> 0.5 mm) for range, then
-//              best-neighbour on the originals 1 -> 0.1 mm
-//   warm       best-neighbour on the originals, 1 -> 0.1 mm: tracking from the last pose
+//   quadratic  quadratic-neighbour in the papers' two passes (fewer evaluations)
+//   cmaes      CMA-ES on the blurred references (sigma 2.5 -> 0.5 mm) for range, then
+//              quadratic-neighbour on the originals 1 -> 0.1 mm
+//   warm       quadratic-neighbour on the originals, 1 -> 0.1 mm: tracking from the last pose
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
@@ -119,7 +126,12 @@ class Registration {
   struct Slot;
   Registration() = default;
   int blur_level(double sigma_mm) const;
+  bool inside_search_region(const Pose& T) const;
   double evaluate(int slot, int level, const Pose& T, std::vector<double>* view_scores);
+  // Similarity of view v at T (worst score where the DRR fails or is mostly masked).
+  double view_score(int slot, int level, const Pose& T, int v);
+  // Cost from the per-view scores: minus their sum, plus the fiducial term.
+  double combine(const Pose& T, const double* view_scores) const;
 
   std::shared_ptr<const DrrRenderer> renderer_;
   RegistrationSetup setup_;
