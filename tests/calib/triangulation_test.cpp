@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 #include "lftrack/tracking/pose.hpp"
@@ -57,6 +58,47 @@ TEST(FitRigid, RejectsDegenerateInput) {
   const std::vector<Vector3d> line = {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(2, 0, 0)};
   EXPECT_FALSE(fit_rigid(line, line).ok());
   EXPECT_FALSE(fit_rigid(line, {Vector3d::Zero()}).ok());
+  // Repeated points carry no more than one point does.
+  const std::vector<Vector3d> repeated(5, Vector3d(1, 2, 3));
+  auto r = fit_rigid(repeated, repeated);
+  ASSERT_FALSE(r.ok());
+  EXPECT_FALSE(r.status().message().empty());
+  // Non-finite input.
+  EXPECT_FALSE(fit_rigid({Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, NAN, 0)},
+                         {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0)})
+                   .ok());
+}
+
+TEST(FitRigid, FreIsTheRmsResidualOfNoisyPoints) {
+  // Four fiducials (two tacks ~25 mm apart and two more, as in paper 2), moved and perturbed.
+  const std::vector<Vector3d> ct = {Vector3d(0, 0, 0), Vector3d(25, 0, 0), Vector3d(0, 30, 5), Vector3d(10, 10, 40)};
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = tracking::rotation_exp(Vector3d(0.1, -0.2, 0.3));
+  T.translation() = Vector3d(-284.1, -247.0, -226.7);
+  const std::vector<Vector3d> noise = {Vector3d(0.1, 0, 0), Vector3d(0, -0.1, 0), Vector3d(0, 0, 0.1),
+                                       Vector3d(-0.1, 0.1, 0)};
+  std::vector<Vector3d> room;
+  for (std::size_t i = 0; i < ct.size(); ++i) room.push_back(T * ct[i] + noise[i]);
+  auto fit = fit_rigid(ct, room);
+  ASSERT_TRUE(fit.ok());
+  double sum = 0;
+  for (std::size_t i = 0; i < ct.size(); ++i) sum += (fit->T_to_from * ct[i] - room[i]).squaredNorm();
+  EXPECT_NEAR(fit->fre_rms_mm, std::sqrt(sum / 4), 1e-9);
+  EXPECT_LT(fit->fre_rms_mm, 0.15);
+  EXPECT_LT((fit->T_to_from.translation() - T.translation()).norm(), 0.5);
+}
+
+TEST(Triangulate, RefusesNearlyParallelAndNonFiniteInput) {
+  const XrayView a = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(1, -1, 0), Vector3d(0, 0, 1), 1500,
+                                           2100, 512, 512, 0.4);
+  // The same view moved sideways: every pair of rays is parallel.
+  XrayView shifted = a;
+  shifted.source_mm += Vector3d(0, 0, 10);
+  shifted.pixel00_mm += Vector3d(0, 0, 10);
+  auto t = triangulate(a, {100, 100}, shifted, {100, 100});
+  ASSERT_FALSE(t.ok());
+  EXPECT_NE(t.status().message().find("parallel"), std::string::npos) << t.status().message();
+  EXPECT_FALSE(triangulate(a, {NAN, 100}, shifted, {100, 100}).ok());
 }
 
 }  // namespace
