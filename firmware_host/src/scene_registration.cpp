@@ -65,7 +65,6 @@ Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
   setup.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
   setup.similarity = spec.similarity;
   setup.similarity_options.histogram_bins = spec.histogram_bins;
-  setup.blur_sigmas_mm = {1.5};
   // Search within twice the envelope the light fields were planned for.
   setup.search_translation_mm = 2 * p.scene.envelope.translation_mm;
   setup.search_rotation_deg = 2 * p.scene.envelope.rotation_deg;

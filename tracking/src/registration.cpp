@@ -13,8 +13,8 @@ namespace lftrack::tracking {
 // Scratch of one worker: a DRR and its mask per view, and the prepared similarity per blur level
 // and view.
 struct Registration::Slot {
-  std::vector<Image<float>> drr;
-  std::vector<Image<unsigned char>> valid;
+  std::vector<std::vector<Image<float>>> drr;             // [level][view]
+  std::vector<std::vector<Image<unsigned char>>> valid;   // [level][view]
   std::vector<std::vector<std::unique_ptr<Similarity>>> similarity;  // [level][view]
 };
 
@@ -74,13 +74,13 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
   plan.name = name;
   if (name == "papers" || name == "decoupled") {
     const std::string opt = name == "papers" ? "best-neighbour" : "decoupled";
-    plan.passes = {{opt, 1.5, 5.0, 0.5, 3000}, {opt, 0.0, 2.0, 0.1, 3000}};
+    plan.passes = {{opt, 1.5, 1, 5.0, 0.5, 3000}, {opt, 0.0, 1, 2.0, 0.1, 3000}};
   } else if (name == "quadratic") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 5.0, 0.5, 3000}, {"quadratic-neighbour", 0.0, 2.0, 0.1, 3000}};
+    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000}, {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000}};
   } else if (name == "cmaes") {
-    plan.passes = {{"cmaes", 1.5, 2.5, 0.5, 3000}, {"quadratic-neighbour", 0.0, 1.0, 0.1, 3000}};
+    plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000}};
   } else if (name == "warm") {
-    plan.passes = {{"quadratic-neighbour", 0.0, 1.0, 0.1, 600}};
+    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400}, {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200}};
   } else {
     std::string known;
     for (const auto& n : registration_plan_names()) known += (known.empty() ? "" : ", ") + n;
@@ -142,11 +142,28 @@ Result<std::unique_ptr<Registration>> Registration::create(std::shared_ptr<const
   std::unique_ptr<Registration> r(new Registration());
   r->renderer_ = std::move(renderer);
   r->pool_ = pool;
-  r->levels_mm_ = {0.0};
-  for (double s : setup.blur_sigmas_mm) {
-    if (!std::isfinite(s) || s < 0) return invalid_argument("registration: blur sigmas must be >= 0");
-    if (s > 0 && std::find(r->levels_mm_.begin(), r->levels_mm_.end(), s) == r->levels_mm_.end())
-      r->levels_mm_.push_back(s);
+  std::vector<RegistrationSetup::Level> levels{{0.0, 1}};
+  for (const RegistrationSetup::Level& l : setup.levels) {
+    if (!std::isfinite(l.blur_sigma_mm) || l.blur_sigma_mm < 0 || l.bin < 1 || l.bin > 16)
+      return invalid_argument("registration: a level needs a blur >= 0 mm and a binning of 1 to 16");
+    const bool known = std::any_of(levels.begin(), levels.end(), [&](const auto& k) {
+      return k.bin == l.bin && std::abs(k.blur_sigma_mm - l.blur_sigma_mm) < 1e-9;
+    });
+    if (!known) levels.push_back(l);
+  }
+  for (const RegistrationSetup::Level& l : levels) {
+    LevelGeometry g;
+    g.level = l;
+    for (const RegistrationView& v : setup.views) {
+      const int rows = v.window.rows / l.bin, cols = v.window.cols / l.bin;
+      if (rows < 4 || cols < 4)
+        return invalid_argument("registration: binning " + std::to_string(l.bin) + " leaves view '" + v.view.name +
+                                "' fewer than 4 x 4 pixels");
+      g.views.push_back(l.bin == 1 ? v.view
+                                   : v.view.resampled(v.window.row0, v.window.col0, rows * l.bin, cols * l.bin, rows, cols));
+      g.windows.push_back(l.bin == 1 ? v.window : PixelWindow::full(rows, cols));
+    }
+    r->levels_.push_back(std::move(g));
   }
   const Vector6d motion = projected_motion_per_unit(setup);
   if (!(motion.array() > 1e-9).all() || !motion.allFinite())
@@ -156,9 +173,13 @@ Result<std::unique_ptr<Registration>> Registration::create(std::shared_ptr<const
   const int slots = pool != nullptr ? std::max(1, pool->size()) : 1;
   for (int s = 0; s < slots; ++s) {
     auto slot = std::make_unique<Slot>();
-    for (const RegistrationView& v : r->setup_.views) {
-      slot->drr.emplace_back(v.window.rows, v.window.cols, 0.f);
-      slot->valid.emplace_back(v.window.rows, v.window.cols, 0);
+    slot->drr.resize(r->levels_.size());
+    slot->valid.resize(r->levels_.size());
+    for (std::size_t l = 0; l < r->levels_.size(); ++l) {
+      for (const PixelWindow& w : r->levels_[l].windows) {
+        slot->drr[l].emplace_back(w.rows, w.cols, 0.f);
+        slot->valid[l].emplace_back(w.rows, w.cols, 0);
+      }
     }
     r->slots_.push_back(std::move(slot));
   }
@@ -176,22 +197,44 @@ Status Registration::set_frames(const std::vector<ImageView<const float>>& frame
       return invalid_argument("registration: frame " + std::to_string(v) + " is " + std::to_string(frames[v].rows) +
                               " x " + std::to_string(frames[v].cols) + ", its window " + std::to_string(w.rows) +
                               " x " + std::to_string(w.cols));
+    if (!valid.empty() && !valid[v].empty() && (valid[v].rows != w.rows || valid[v].cols != w.cols))
+      return invalid_argument("registration: mask " + std::to_string(v) + " differs in size from its frame");
   }
   for (auto& slot : slots_) {
     slot->similarity.clear();
-    slot->similarity.resize(levels_mm_.size());
+    slot->similarity.resize(levels_.size());
   }
   for (std::size_t v = 0; v < nv; ++v) {
-    const PixelWindow& w = setup_.views[v].window;
     const ImageView<const unsigned char> mask = valid.empty() ? ImageView<const unsigned char>{} : valid[v];
     const double pitch = 0.5 * (setup_.views[v].view.pitch_col_mm + setup_.views[v].view.pitch_row_mm);
-    Image<float> blurred(w.rows, w.cols);
-    for (std::size_t level = 0; level < levels_mm_.size(); ++level) {
-      GaussianBlur blur(w.rows, w.cols, levels_mm_[level] / pitch);
-      LFTRACK_RETURN_IF_ERROR(blur.blur(frames[v], mask, blurred.view()));
+    for (std::size_t level = 0; level < levels_.size(); ++level) {
+      const int bin = levels_[level].level.bin;
+      const PixelWindow& lw = levels_[level].windows[v];
+      // Bin: the mean of the usable pixels of each block; a block is usable if most of it is.
+      Image<float> binned(lw.rows, lw.cols);
+      Image<unsigned char> binned_valid(lw.rows, lw.cols, 1);
+      for (int r = 0; r < lw.rows; ++r) {
+        for (int c = 0; c < lw.cols; ++c) {
+          double sum = 0;
+          int n = 0;
+          for (int dr = 0; dr < bin; ++dr)
+            for (int dc = 0; dc < bin; ++dc) {
+              const int rr = r * bin + dr, cc = c * bin + dc;
+              const float value = frames[v].at(rr, cc);
+              if ((!mask.empty() && mask.at(rr, cc) == 0) || !std::isfinite(value)) continue;
+              sum += value;
+              ++n;
+            }
+          binned_valid.at(r, c) = 2 * n > bin * bin ? 1 : 0;
+          binned.at(r, c) = n > 0 ? static_cast<float>(sum / n) : 0.f;
+        }
+      }
+      Image<float> blurred(lw.rows, lw.cols);
+      GaussianBlur blur(lw.rows, lw.cols, levels_[level].level.blur_sigma_mm / (pitch * bin));
+      LFTRACK_RETURN_IF_ERROR(blur.blur(binned.view(), binned_valid.view(), blurred.view()));
       auto similarity = make_similarity(setup_.similarity, setup_.similarity_options);
       if (!similarity.ok()) return similarity.status();
-      LFTRACK_RETURN_IF_ERROR((*similarity)->prepare(blurred.view(), mask));
+      LFTRACK_RETURN_IF_ERROR((*similarity)->prepare(blurred.view(), binned_valid.view()));
       for (std::size_t s = 1; s < slots_.size(); ++s) slots_[s]->similarity[level].push_back((*similarity)->clone());
       slots_[0]->similarity[level].push_back(std::move(*similarity));
     }
@@ -200,9 +243,10 @@ Status Registration::set_frames(const std::vector<ImageView<const float>>& frame
   return {};
 }
 
-int Registration::blur_level(double sigma_mm) const {
-  for (std::size_t i = 0; i < levels_mm_.size(); ++i)
-    if (std::abs(levels_mm_[i] - sigma_mm) < 1e-9) return static_cast<int>(i);
+int Registration::level_index(double blur_sigma_mm, int bin) const {
+  for (std::size_t i = 0; i < levels_.size(); ++i)
+    if (levels_[i].level.bin == bin && std::abs(levels_[i].level.blur_sigma_mm - blur_sigma_mm) < 1e-9)
+      return static_cast<int>(i);
   return -1;
 }
 
@@ -219,15 +263,16 @@ bool Registration::inside_search_region(const Pose& T) const {
 
 double Registration::view_score(int slot_index, int level, const Pose& T, int v) {
   Slot& slot = *slots_[static_cast<std::size_t>(slot_index)];
-  const RegistrationView& rv = setup_.views[static_cast<std::size_t>(v)];
+  const std::size_t l = static_cast<std::size_t>(level), vi = static_cast<std::size_t>(v);
+  const XrayView& view = levels_[l].views[vi];
+  const PixelWindow& window = levels_[l].windows[vi];
   RenderExtras extras;
-  extras.valid = slot.valid[std::size_t(v)].view();
-  Similarity& similarity = *slot.similarity[static_cast<std::size_t>(level)][std::size_t(v)];
-  if (!renderer_->render(T, rv.view, rv.window, slot.drr[std::size_t(v)].view(), &extras).ok())
-    return similarity.worst_score();
-  const double valid_fraction = 1.0 - double(extras.masked_pixels) / (double(rv.window.rows) * rv.window.cols);
+  extras.valid = slot.valid[l][vi].view();
+  Similarity& similarity = *slot.similarity[l][vi];
+  if (!renderer_->render(T, view, window, slot.drr[l][vi].view(), &extras).ok()) return similarity.worst_score();
+  const double valid_fraction = 1.0 - double(extras.masked_pixels) / (double(window.rows) * window.cols);
   if (valid_fraction < setup_.min_valid_fraction) return similarity.worst_score();
-  return similarity.score(slot.drr[std::size_t(v)].view(), extras.valid);
+  return similarity.score(slot.drr[l][vi].view(), extras.valid);
 }
 
 double Registration::combine(const Pose& T, const double* view_scores) const {
@@ -247,8 +292,8 @@ double Registration::evaluate(int slot_index, int level, const Pose& T, std::vec
   return combine(T, scores.data());
 }
 
-double Registration::cost_at(const Pose& T, double blur_sigma_mm) {
-  const int level = blur_level(blur_sigma_mm);
+double Registration::cost_at(const Pose& T, double blur_sigma_mm, int bin) {
+  const int level = level_index(blur_sigma_mm, bin);
   if (!frames_set_ || level < 0) return std::numeric_limits<double>::infinity();
   return evaluate(0, level, T, nullptr);
 }
@@ -261,10 +306,10 @@ Result<RegistrationResult> Registration::run(const Pose& start, const Registrati
   RegistrationResult result;
   Pose current = start;
   for (const RegistrationPass& pass : plan.passes) {
-    const int level = blur_level(pass.blur_sigma_mm);
+    const int level = level_index(pass.blur_sigma_mm, pass.bin);
     if (level < 0)
-      return invalid_argument("registration: blur " + std::to_string(pass.blur_sigma_mm) +
-                              " mm was not prepared in the set-up");
+      return invalid_argument("registration: blur " + std::to_string(pass.blur_sigma_mm) + " mm at binning " +
+                              std::to_string(pass.bin) + " was not prepared in the set-up");
     OptimizerSettings settings;
     settings.scale = scales_;
     settings.initial_step_mm = pass.initial_step_mm;

@@ -159,6 +159,7 @@ class MutualInformation final : public Similarity {
             std::clamp(static_cast<int>((fixed_.values[i] - lo) * scale), 0, bins_ - 1));
     }
     joint_.assign(static_cast<std::size_t>(bins_) * bins_, 0.0);
+    joint_odd_.assign(joint_.size(), 0.0);
     fixed_marginal_.assign(bins_, 0.0);
     moving_marginal_.assign(bins_, 0.0);
     return {};
@@ -166,7 +167,8 @@ class MutualInformation final : public Similarity {
 
   double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
     if (!fixed_.fits(m, mv)) return worst_score();
-    // Pass 1: the usable pixels' fixed bins and moving values, compacted, and the moving range.
+    // Pass 1: the usable pixels' fixed bins and moving values, compacted without branches, and
+    // the moving range.
     int n = 0;
     float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
     for (int r = 0; r < fixed_.rows; ++r) {
@@ -175,28 +177,39 @@ class MutualInformation final : public Similarity {
       const std::uint16_t* bins = &fixed_bin_[fixed_.index(r, 0)];
       for (int c = 0; c < fixed_.cols; ++c) {
         const float v = moving[c];
-        if (bins[c] == kUnusable || (moving_valid != nullptr && moving_valid[c] == 0) || !std::isfinite(v)) continue;
+        const bool ok = (bins[c] != kUnusable) & (moving_valid == nullptr || moving_valid[c] != 0) &
+                        (std::abs(v) <= std::numeric_limits<float>::max());  // false for NaN and inf
         pair_bin_[std::size_t(n)] = bins[c];
         pair_value_[std::size_t(n)] = v;
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-        ++n;
+        lo = ok && v < lo ? v : lo;
+        hi = ok && v > hi ? v : hi;
+        n += ok ? 1 : 0;
       }
     }
     if (n < kMinPixels) return worst_score();
     if (!(double(hi) - lo > 1e-12 * std::max(1.0, std::abs(double(hi))))) return worst_score();  // constant
-    // Pass 2: the joint histogram, the moving value split between its two nearest bins.
+    // Pass 2: the joint histogram, the moving value split between its two nearest bins. Even
+    // and odd pixels go to two copies, so that neighbours (often in the same bin) do not wait
+    // on each other's update; the copies are summed afterwards.
     std::fill(joint_.begin(), joint_.end(), 0.0);
-    const double scale = (bins_ - 1) / (double(hi) - lo);
-    for (int i = 0; i < n; ++i) {
-      const double x = (pair_value_[std::size_t(i)] - lo) * scale;
-      int j = static_cast<int>(x);
-      if (j >= bins_ - 1) j = bins_ - 2;
-      const double w = x - j;
-      double* row = &joint_[static_cast<std::size_t>(pair_bin_[std::size_t(i)]) * bins_];
-      row[j] += 1.0 - w;
-      row[j + 1] += w;
+    std::fill(joint_odd_.begin(), joint_odd_.end(), 0.0);
+    const float scale = float((bins_ - 1) / (double(hi) - lo));
+    const int last = bins_ - 2;
+    auto add = [&](std::vector<double>& joint, int i) {
+      const float x = (pair_value_[std::size_t(i)] - lo) * scale;
+      const int j = std::min(static_cast<int>(x), last);
+      const double w = double(x) - j;
+      double* row = &joint[static_cast<std::size_t>(pair_bin_[std::size_t(i)]) * bins_ + j];
+      row[0] += 1.0 - w;
+      row[1] += w;
+    };
+    int i = 0;
+    for (; i + 1 < n; i += 2) {
+      add(joint_, i);
+      add(joint_odd_, i + 1);
     }
+    if (i < n) add(joint_, i);
+    for (std::size_t k = 0; k < joint_.size(); ++k) joint_[k] += joint_odd_[k];
     std::fill(fixed_marginal_.begin(), fixed_marginal_.end(), 0.0);
     std::fill(moving_marginal_.begin(), moving_marginal_.end(), 0.0);
     for (int a = 0; a < bins_; ++a) {
@@ -228,7 +241,7 @@ class MutualInformation final : public Similarity {
   std::vector<std::uint16_t> fixed_bin_;  // kUnusable where the fixed pixel is not usable
   std::vector<std::uint16_t> pair_bin_;   // scratch: compacted usable pixels
   std::vector<float> pair_value_;
-  std::vector<double> joint_, fixed_marginal_, moving_marginal_;
+  std::vector<double> joint_, joint_odd_, fixed_marginal_, moving_marginal_;
 };
 
 // Pattern intensity on the difference of the standardised images, over the pixel pairs closer

@@ -40,8 +40,14 @@ struct RegistrationSetup {
   Pose nominal_T_room_from_ct = Pose::Identity();
   std::string similarity = "mi";
   SimilarityOptions similarity_options;
-  // Blur levels (sigma, mm on the detector) the passes may ask for; 0 is always available.
-  std::vector<double> blur_sigmas_mm{1.5};
+  // Image levels the passes may ask for: a blur (sigma, mm on the detector) of the reference
+  // frames and a detector binning (K x K pixels averaged into one, for frames and DRRs alike).
+  // The originals (0 mm, bin 1) are always available.
+  struct Level {
+    double blur_sigma_mm = 0;
+    int bin = 1;
+  };
+  std::vector<Level> levels{{1.5, 1}, {1.5, 2}, {0.0, 2}};
   // A candidate whose DRR has fewer valid pixels than this fraction of a window scores the
   // measure's worst value in that view (a pose outside a light field's envelope).
   double min_valid_fraction = 0.9;
@@ -62,7 +68,8 @@ struct FiducialTerm {
 
 struct RegistrationPass {
   std::string optimizer = "best-neighbour";
-  double blur_sigma_mm = 0;  // one of the setup's levels, or 0
+  double blur_sigma_mm = 0;  // with `bin`, one of the setup's levels (0 and 1: the originals)
+  int bin = 1;
   double initial_step_mm = 2.0;
   double final_step_mm = 0.1;
   int max_evaluations = 3000;
@@ -76,12 +83,14 @@ struct RegistrationPlan {
 
 // Named plans, in a stable order:
 //   papers     best-neighbour on references blurred 1.5 mm, steps 5 -> 0.5 mm, then on the
-//              originals, 2 -> 0.1 mm (papers 1 and 2)
+//              originals, 2 -> 0.1 mm (papers 1 and 2), full resolution throughout
 //   decoupled  paper 3's decoupled quadratic-fit optimizer in the same two passes
-//   quadratic  quadratic-neighbour in the papers' two passes (fewer evaluations)
-//   cmaes      CMA-ES on the blurred references (sigma 2.5 -> 0.5 mm) for range, then
+//   quadratic  quadratic-neighbour in the papers' two passes, the blurred one on 2 x 2 binned
+//              images (a 1.5 mm blur leaves nothing for full resolution to add)
+//   cmaes      CMA-ES on the blurred, binned references (sigma 2.5 -> 0.5 mm) for range, then
 //              quadratic-neighbour on the originals 1 -> 0.1 mm
-//   warm       quadratic-neighbour on the originals, 1 -> 0.1 mm: tracking from the last pose
+//   warm       tracking from the last pose: quadratic-neighbour on 2 x 2 binned originals
+//              1 -> 0.25 mm, then at full resolution 0.25 -> 0.1 mm
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
@@ -118,14 +127,15 @@ class Registration {
   Result<RegistrationResult> run(const Pose& start_T_room_from_ct, const RegistrationPlan& plan,
                                  bool record_trace = false);
 
-  // The cost of one pose at a blur level (for tests and plots).
-  double cost_at(const Pose& T_room_from_ct, double blur_sigma_mm = 0);
+  // The cost of one pose at an image level (for tests and plots); +infinity for a level that
+  // was not prepared.
+  double cost_at(const Pose& T_room_from_ct, double blur_sigma_mm = 0, int bin = 1);
 
  private:
   class Cost;
   struct Slot;
   Registration() = default;
-  int blur_level(double sigma_mm) const;
+  int level_index(double blur_sigma_mm, int bin) const;
   bool inside_search_region(const Pose& T) const;
   double evaluate(int slot, int level, const Pose& T, std::vector<double>* view_scores);
   // Similarity of view v at T (worst score where the DRR fails or is mostly masked).
@@ -137,7 +147,14 @@ class Registration {
   RegistrationSetup setup_;
   ThreadPool* pool_ = nullptr;
   Vector6d scales_ = Vector6d::Ones();
-  std::vector<double> levels_mm_;  // blur sigma per level, level 0 = 0
+  // Per level: its blur and binning, and the views and windows its DRRs are rendered for
+  // (binned views cover the same detector area with fewer, larger pixels). Level 0: originals.
+  struct LevelGeometry {
+    RegistrationSetup::Level level;
+    std::vector<XrayView> views;
+    std::vector<PixelWindow> windows;
+  };
+  std::vector<LevelGeometry> levels_;
   std::vector<std::unique_ptr<Slot>> slots_;
   std::optional<FiducialTerm> fiducial_;
   bool frames_set_ = false;
