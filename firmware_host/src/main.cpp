@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
   CLI::App* study = app.add_subcommand("study", "Studies: many registrations, a CSV, a plot and a summary");
   study->require_subcommand(1);
   const Command capture_range = add_study_capture_range_command(study);
+  const Command journal = add_journal_command(&app);
 
   try {
     app.parse(argc, argv);
@@ -56,6 +57,8 @@ int main(int argc, char** argv) {
       status = register_frames();
     else if (study->got_subcommand("capture-range"))
       status = capture_range();
+    else if (app.got_subcommand("journal"))
+      status = journal();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

@@ -228,3 +228,38 @@ TEST(Cli, CaptureRangeStudyWritesCsvSummaryAndPlot) {
 
 }  // namespace
 }  // namespace lftrack::host
+
+#include "lftrack/host/journal.hpp"
+
+namespace lftrack::host {
+namespace {
+
+TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
+  test::TempDir dir;
+  const auto file = dir.path() / "cycles.journal";
+  {
+    auto w = JournalWriter::open(file);
+    ASSERT_TRUE(w.ok());
+    for (std::uint64_t i = 0; i < 5; ++i) {
+      JournalRecord r;
+      r.cycle = i;
+      r.state = 2;
+      (*w)->append(r);
+    }
+  }
+  std::filesystem::resize_file(file, std::filesystem::file_size(file) - 3);
+  std::string csv, json;
+  ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok()) << csv;
+  EXPECT_NE(csv.find("torn tail"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("\n3,0,0,0,TRACK,IDLE,APPLY"), std::string::npos) << csv;
+  EXPECT_EQ(csv.find("\n4,"), std::string::npos) << "the torn record is not printed";
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "journal", "export", file.string()}, &json).ok()) << json;
+  int objects = 0;
+  for (std::size_t pos = json.find("{\"beam_permit\""); pos != std::string::npos; pos = json.find("{\"beam_permit\"", pos + 1))
+    ++objects;
+  EXPECT_EQ(objects, 4) << json;
+  EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", (dir.path() / "none").string()}, &json).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::host
