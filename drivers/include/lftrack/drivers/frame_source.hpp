@@ -1,0 +1,37 @@
+#pragma once
+// Where frame pairs come from: V4L2 detectors, an archived sequence, or the simulator.
+//
+// The caller owns the FramePair and sizes its images once (open() says the shape); acquire()
+// fills them in place, so a cycle allocates nothing.
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "lftrack/drivers/device.hpp"
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::drivers {
+
+struct Frame {
+  tracking::Image<std::uint16_t> pixels;  // raw counts, the whole detector
+  std::uint32_t sequence = 0;             // the detector's frame counter
+  std::int64_t timestamp_ns = 0;          // CLOCK_MONOTONIC, middle of the exposure
+};
+
+struct FramePair {
+  std::vector<Frame> frames;  // one per detector, in the scene's order
+};
+
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  // Outside the cycle. Sizes `pair` for this source (one frame per detector).
+  virtual Status open(FramePair* pair) = 0;
+  // In the cycle: fills `pair` with the next pair, or says why not by `deadline`.
+  virtual DeviceStatus acquire(FramePair* pair, Deadline deadline) = 0;
+  virtual void close() = 0;
+};
+
+}  // namespace lftrack::drivers
