@@ -11,6 +11,7 @@
 #include "lftrack/host/plot.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
+#include "quantile.hpp"
 
 namespace lftrack::host {
 
@@ -51,29 +52,12 @@ Pose perturbed_start(const PreparedScene& p, const Pose& gold, double target_mm,
     const double share = std::uniform_real_distribution<double>(0.2, 0.8)(rng);
     tracking::Vector6d dir;
     dir << u.normalized() * share, w.normalized() * tracking::deg_to_rad(1.0) * (1 - share);
-    auto tre_at = [&](double s) {
-      return scene_tre(p, tracking::apply_delta(gold, PoseDelta::from_vector(dir * s), origin), gold).mean_mm;
-    };
-    double lo = 0, hi = 1;
-    while (tre_at(hi) < target_mm && hi < 1e4) hi *= 2;
-    for (int i = 0; i < 50; ++i) {
-      const double mid = 0.5 * (lo + hi);
-      (tre_at(mid) < target_mm ? lo : hi) = mid;
-    }
-    const tracking::Vector6d v = dir * 0.5 * (lo + hi);
-    if (tracking::rad_to_deg(v.tail<3>().norm()) <= max_rotation_deg || attempt > 100)
-      return tracking::apply_delta(gold, PoseDelta::from_vector(v), origin);
+    const Pose start = pose_at_tre(p, gold, dir, target_mm);
+    const tracking::Vector6d v = tracking::delta_between(gold, start, origin).as_vector();
+    if (tracking::rad_to_deg(v.tail<3>().norm()) <= max_rotation_deg || attempt > 100) return start;
   }
 }
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const double pos = q * double(v.size() - 1);
-  const std::size_t i = static_cast<std::size_t>(pos);
-  const double f = pos - double(i);
-  return i + 1 < v.size() ? v[i] * (1 - f) + v[i + 1] * f : v[i];
-}
 
 }  // namespace
 
@@ -102,8 +86,8 @@ std::vector<CaptureRangeSummary> summarize_capture_range(const CaptureRangeOptio
     s.success_rate = n ? double(ok) / n : 0;
     s.success_rate_loose = n ? double(ok_loose) / n : 0;
     s.mean_tre_mm = ok ? sum_tre / ok : 0;
-    s.median_ms = percentile(ms, 0.5);
-    s.p95_ms = percentile(ms, 0.95);
+    s.median_ms = quantile(ms, 0.5);
+    s.p95_ms = quantile(ms, 0.95);
     bool run_unbroken = true;
     for (int b = 0; b < o.bins; ++b) {
       const double rate = bin_runs[std::size_t(b)] ? double(bin_ok[std::size_t(b)]) / bin_runs[std::size_t(b)] : 0;

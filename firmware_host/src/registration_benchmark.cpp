@@ -8,6 +8,7 @@
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "progress_bar.hpp"
+#include "quantile.hpp"
 
 namespace lftrack::host {
 
@@ -21,13 +22,6 @@ struct Sample {
   int evaluations = 0;
 };
 
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const double pos = q * double(v.size() - 1);
-  const std::size_t i = static_cast<std::size_t>(pos);
-  return i + 1 < v.size() ? v[i] + (pos - double(i)) * (v[i + 1] - v[i]) : v[i];
-}
 
 TimedRegistrations summarize(const std::vector<Sample>& samples) {
   TimedRegistrations t;
@@ -57,20 +51,6 @@ tracking::Vector6d random_delta(std::mt19937_64& rng, double t_mm, double r_deg)
   for (int i = 0; i < 3; ++i) v(i) = u(rng) * t_mm;
   for (int i = 3; i < 6; ++i) v(i) = tracking::deg_to_rad(u(rng) * r_deg);
   return v;
-}
-
-// A start at initial mean TRE `target_mm` from gold along a random direction (bisection on scale).
-Pose start_at(const PreparedScene& p, const Pose& gold, double target_mm, std::mt19937_64& rng) {
-  const tracking::Vector6d dir = random_delta(rng, 1.0, 1.0);
-  const Eigen::Vector3d c = p.registration_origin_room_mm();
-  auto at = [&](double s) { return tracking::apply_delta(gold, PoseDelta::from_vector(dir * s), c); };
-  double lo = 0, hi = 1;
-  while (scene_tre(p, at(hi), gold).mean_mm < target_mm && hi < 1e4) hi *= 2;
-  for (int i = 0; i < 50; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (scene_tre(p, at(mid), gold).mean_mm < target_mm ? lo : hi) = mid;
-  }
-  return at(0.5 * (lo + hi));
 }
 
 }  // namespace
@@ -117,7 +97,7 @@ Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& 
     const Pose gold = tracking::apply_delta(p.nominal_T_room_from_ct,
                                             PoseDelta::from_vector(random_delta(rng, 3, 2)), origin);
     const double target = std::uniform_real_distribution<double>(0.5, o.cold_max_initial_mm)(rng);
-    const Pose start = start_at(p, gold, target, rng);
+    const Pose start = pose_at_tre(p, gold, random_delta(rng, 1.0, 1.0), target);
     auto frames = frames_at(gold, o.seed * 1000 + std::uint64_t(i));
     if (!frames.ok()) return frames.status();
     LFTRACK_RETURN_IF_ERROR(reg.set_frames(frames->frames(), frames->masks()));

@@ -177,6 +177,20 @@ std::vector<double> nominal_delta_of(const PreparedScene& p, const Pose& T) {
           tracking::rad_to_deg(d.rotation_rad.y()), tracking::rad_to_deg(d.rotation_rad.z())};
 }
 
+Pose pose_at_tre(const PreparedScene& p, const Pose& gold, const tracking::Vector6d& direction, double target_mm) {
+  const Eigen::Vector3d origin = p.registration_origin_room_mm();
+  auto at = [&](double s) {
+    return tracking::apply_delta(gold, tracking::PoseDelta::from_vector(direction * s), origin);
+  };
+  double lo = 0, hi = 1;
+  while (scene_tre(p, at(hi), gold).mean_mm < target_mm && hi < 1e4) hi *= 2;
+  for (int i = 0; i < 50; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (scene_tre(p, at(mid), gold).mean_mm < target_mm ? lo : hi) = mid;
+  }
+  return at(0.5 * (lo + hi));
+}
+
 tracking::Tre scene_tre(const PreparedScene& p, const Pose& T, const Pose& gold) {
   tracking::TreBox box;
   box.centre_ct_mm = p.registration_origin_ct_mm;

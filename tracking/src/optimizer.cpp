@@ -80,26 +80,38 @@ class Search {
   std::array<Vector6d, kMaxBatch> xs_;
 };
 
+// The 12 points centre +- step along each parameter, in the order (+0, -0, +1, -1, ...).
+void make_neighbours(const Vector6d& centre, double step, std::array<Vector6d, 12>* neighbours) {
+  for (int i = 0; i < 6; ++i) {
+    (*neighbours)[std::size_t(2 * i)] = centre;
+    (*neighbours)[std::size_t(2 * i)](i) += step;
+    (*neighbours)[std::size_t(2 * i + 1)] = centre;
+    (*neighbours)[std::size_t(2 * i + 1)](i) -= step;
+  }
+}
+
+// Evaluates the start point; false if the budget allows not even that.
+bool evaluate_start(Search& search, Vector6d* centre, double* centre_cost) {
+  *centre = Vector6d::Zero();
+  if (!search.can_evaluate(1)) return false;
+  search.evaluate(centre, 1, centre_cost);
+  return true;
+}
+
 class BestNeighbour final : public Optimizer {
  public:
   explicit BestNeighbour(OptimizerSettings s) : settings_(std::move(s)) {}
   std::string_view name() const override { return "best-neighbour"; }
   OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
     Search search(cost, start, settings_, budget);
-    Vector6d centre = Vector6d::Zero();
+    Vector6d centre;
     double centre_cost = 0;
-    if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
-    search.evaluate(&centre, 1, &centre_cost);
+    if (!evaluate_start(search, &centre, &centre_cost)) return search.finish(OptimizerStop::kConverged);
     std::array<Vector6d, 12> neighbours;
     std::array<double, 12> costs;
     for (double step = settings_.initial_step_mm; step >= settings_.final_step_mm * (1 - 1e-9); step *= 0.5) {
       for (;;) {
-        for (int i = 0; i < 6; ++i) {
-          neighbours[2 * i] = centre;
-          neighbours[2 * i](i) += step;
-          neighbours[2 * i + 1] = centre;
-          neighbours[2 * i + 1](i) -= step;
-        }
+        make_neighbours(centre, step, &neighbours);
         if (!search.can_evaluate(12)) return search.finish(OptimizerStop::kConverged);
         search.evaluate(neighbours.data(), 12, costs.data());
         const int best = int(std::min_element(costs.begin(), costs.end()) - costs.begin());
@@ -123,10 +135,9 @@ class Decoupled final : public Optimizer {
   OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
     static constexpr std::array<std::array<int, 2>, 3> kPairs{{{0, 4}, {1, 5}, {2, 3}}};
     Search search(cost, start, settings_, budget);
-    Vector6d centre = Vector6d::Zero();
+    Vector6d centre;
     double centre_cost = 0;
-    if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
-    search.evaluate(&centre, 1, &centre_cost);
+    if (!evaluate_start(search, &centre, &centre_cost)) return search.finish(OptimizerStop::kConverged);
     double step = settings_.initial_step_mm;
     while (step >= settings_.final_step_mm * (1 - 1e-9)) {
       bool improved = false;
@@ -191,19 +202,13 @@ class QuadraticNeighbour final : public Optimizer {
   std::string_view name() const override { return "quadratic-neighbour"; }
   OptimizerResult minimize(CostFunction& cost, const Vector6d& start, const OptimizerBudget& budget) const override {
     Search search(cost, start, settings_, budget);
-    Vector6d centre = Vector6d::Zero();
+    Vector6d centre;
     double centre_cost = 0;
-    if (!search.can_evaluate(1)) return search.finish(OptimizerStop::kConverged);
-    search.evaluate(&centre, 1, &centre_cost);
+    if (!evaluate_start(search, &centre, &centre_cost)) return search.finish(OptimizerStop::kConverged);
     std::array<Vector6d, 12> neighbours;
     std::array<double, 12> costs;
     for (double step = settings_.initial_step_mm; step >= settings_.final_step_mm * (1 - 1e-9);) {
-      for (int i = 0; i < 6; ++i) {
-        neighbours[2 * i] = centre;
-        neighbours[2 * i](i) += step;
-        neighbours[2 * i + 1] = centre;
-        neighbours[2 * i + 1](i) -= step;
-      }
+      make_neighbours(centre, step, &neighbours);
       if (!search.can_evaluate(13)) return search.finish(OptimizerStop::kConverged);
       search.evaluate(neighbours.data(), 12, costs.data());
       // Per-axis parabola through (-step, 0, +step): Newton step on the diagonal model.

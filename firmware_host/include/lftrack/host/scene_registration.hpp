@@ -71,6 +71,11 @@ Result<tracking::Pose> pose_from_nominal_delta(const PreparedScene& scene, const
 // The same 6 numbers of a pose.
 std::vector<double> nominal_delta_of(const PreparedScene& scene, const tracking::Pose& T_room_from_ct);
 
+// The pose gold moved along `direction` (a delta 6-vector) by the scale at which its mean TRE
+// against gold is `target_mm` (bisection; TRE grows with the scale).
+tracking::Pose pose_at_tre(const PreparedScene& scene, const tracking::Pose& gold_T_room_from_ct,
+                           const tracking::Vector6d& direction, double target_mm);
+
 // TRE over the scene's box (a cube of tracking.tre_box_mm at the registration origin).
 tracking::Tre scene_tre(const PreparedScene& scene, const tracking::Pose& T_room_from_ct,
                         const tracking::Pose& gold_T_room_from_ct);
