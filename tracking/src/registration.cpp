@@ -36,18 +36,20 @@ class Registration::Cost final : public CostFunction {
       for (int i = 0; i < n; ++i) out[i] = r_.evaluate(0, level_, pose(xs[i]), nullptr);
       return;
     }
-    for (int i = 0; i < n; ++i) inside_[i] = r_.inside_search_region(pose(xs[i]));
+    for (int i = 0; i < n; ++i) {
+      poses_[i] = pose(xs[i]);
+      inside_[i] = r_.inside_search_region(poses_[i]);
+    }
     const int grain = (tasks + slots - 1) / slots;
     r_.pool_->parallel_for(tasks, grain, [&](int begin, int end) {
       const int slot = begin / grain;
       for (int t = begin; t < end; ++t) {
         const int i = t / views;
-        view_scores_[t] = inside_[i] ? r_.view_score(slot, level_, pose(xs[i]), t % views) : 0.0;
+        view_scores_[t] = inside_[i] ? r_.view_score(slot, level_, poses_[i], t % views) : 0.0;
       }
     });
-    for (int i = 0; i < n; ++i) {
-      out[i] = inside_[i] ? r_.combine(pose(xs[i]), &view_scores_[i * views]) : std::numeric_limits<double>::infinity();
-    }
+    for (int i = 0; i < n; ++i)
+      out[i] = inside_[i] ? r_.combine(poses_[i], &view_scores_[i * views]) : std::numeric_limits<double>::infinity();
   }
   Pose pose(const Vector6d& x) const {
     return apply_delta(start_, PoseDelta::from_vector(x), r_.setup_.origin_room_mm);
@@ -59,6 +61,7 @@ class Registration::Cost final : public CostFunction {
   Registration& r_;
   Pose start_;
   int level_;
+  std::array<Pose, kMaxBatch> poses_;
   std::array<bool, kMaxBatch> inside_{};
   std::array<double, kMaxBatch * kMaxViews> view_scores_{};
 };
@@ -96,7 +99,6 @@ namespace {
 Vector6d projected_motion_per_unit(const RegistrationSetup& s) {
   Vector6d motion = Vector6d::Zero();
   const double eps[6] = {0.01, 0.01, 0.01, 1e-5, 1e-5, 1e-5};
-  int samples = 0;
   for (int i = 0; i < 6; ++i) {
     PoseDelta d;
     Vector6d v = Vector6d::Zero();
@@ -120,9 +122,7 @@ Vector6d projected_motion_per_unit(const RegistrationSetup& s) {
           }
     }
     motion(i) = n > 0 ? sum / n : 0.0;
-    samples += n;
   }
-  (void)samples;
   return motion;
 }
 
@@ -322,7 +322,6 @@ Result<RegistrationResult> Registration::run(const Pose& start, const Registrati
     budget.max_ms = plan.max_ms - std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     Cost cost(*this, current, level);
     OptimizerResult r = (*optimizer)->minimize(cost, Vector6d::Zero(), budget);
-    const Pose pass_start = current;
     current = cost.pose(r.x);
     result.evaluations += r.evaluations;
     result.cost = r.cost;
@@ -333,7 +332,6 @@ Result<RegistrationResult> Registration::run(const Pose& start, const Registrati
       q.x = delta_between(start, cost.pose(p.x), setup_.origin_room_mm).as_vector();
       result.trace.push_back(q);
     }
-    (void)pass_start;
     if (r.stop == OptimizerStop::kTimeBudget || r.stop == OptimizerStop::kNonFinite) break;
   }
   result.T_room_from_ct = orthonormalized(current);

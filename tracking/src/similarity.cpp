@@ -85,6 +85,15 @@ struct CorrelationSums {
   }
 };
 
+// Correlation sums of the pixels usable in both images.
+CorrelationSums pixel_sums(const FixedImage& f, const ImageView<const float>& m, const ImageView<const unsigned char>& mv) {
+  CorrelationSums s;
+  for (int r = 0; r < f.rows; ++r)
+    for (int c = 0; c < f.cols; ++c)
+      if (f.both(m, mv, r, c)) s.add(f.values[f.index(r, c)], m.at(r, c));
+  return s;
+}
+
 class Ncc final : public Similarity {
  public:
   std::string_view name() const override { return "ncc"; }
@@ -94,10 +103,7 @@ class Ncc final : public Similarity {
   }
   double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
     if (!fixed_.fits(m, mv)) return worst_score();
-    CorrelationSums s;
-    for (int r = 0; r < fixed_.rows; ++r)
-      for (int c = 0; c < fixed_.cols; ++c)
-        if (fixed_.both(m, mv, r, c)) s.add(fixed_.values[fixed_.index(r, c)], m.at(r, c));
+    const CorrelationSums s = pixel_sums(fixed_, m, mv);
     return s.n < kMinPixels ? worst_score() : s.value();
   }
   std::unique_ptr<Similarity> clone() const override { return std::make_unique<Ncc>(*this); }
@@ -263,10 +269,7 @@ class PatternIntensity final : public Similarity {
   }
   double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
     if (!fixed_.fits(m, mv)) return worst_score();
-    CorrelationSums s;
-    for (int r = 0; r < fixed_.rows; ++r)
-      for (int c = 0; c < fixed_.cols; ++c)
-        if (fixed_.both(m, mv, r, c)) s.add(fixed_.values[fixed_.index(r, c)], m.at(r, c));
+    const CorrelationSums s = pixel_sums(fixed_, m, mv);
     if (s.n < kMinPixels) return worst_score();
     const double mean_f = s.a / s.n, mean_m = s.b / s.n;
     const double sd_f = std::sqrt(std::max(0.0, s.aa / s.n - mean_f * mean_f));
