@@ -1,5 +1,5 @@
 # The README's two commands, and the steps they are made of.
-#   make demo   install what is missing, build, render the default scene's two DRRs
+#   make demo   install what is missing, build, run the closed loop on the default scene
 #   make check  install what is missing, build, run every test
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
@@ -20,7 +20,7 @@ build: configure
 	@cmake --build $(BUILD_DIR) -j $(JOBS)
 
 demo: build
-	@$(LFTRACK) drr --scene builtin:phantom -o out/demo
+	@$(LFTRACK) sim --scene builtin:phantom --cycles 300
 
 check: build
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900

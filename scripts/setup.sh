@@ -16,6 +16,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   plastimatch                           # independent reference DRR generator
   gnuplot-nox                           # plots of studies (PNG)
+  stress-ng                             # a loaded core for the real-time loop benchmark
 )
 
 missing=()

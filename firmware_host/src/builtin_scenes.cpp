@@ -2,6 +2,11 @@
 // like the papers' CyberKnife-style room (ceiling sources at +-45 degrees, floor detectors of
 // 512 x 512 pixels at 0.4 mm, 12-bit). Room frame = patient LPS at the nominal pose; the
 // isocentre (room origin) sits on the target vertebra's body centre.
+//
+// It is also the default closed loop (`lftrack sim`, `make demo`): a patient set up a few mm
+// and a degree off, drifting slowly and moving with a breathing-like 4 s cycle of up to 5 mm, on
+// a virtual couch with 100 ms latency, tracked at 10 Hz. Its light fields are small enough to
+// build in about a minute on two cores the first time (cached in out/lightfields/builtin-phantom).
 
 #include "lftrack/host/scene.hpp"
 
@@ -44,7 +49,39 @@ envelope:
   translation_mm: 10
   rotation_deg: 5
 tracking:
-  renderer: siddon
+  renderer: lightfield    # the loop registers with light-field DRRs
+  light_field:
+    resolution: [16, 16, 128, 128]
+  similarity: mi
+  plan: quadratic
+sim:
+  renderer: lightfield    # frames from a separate, finer field of the anatomy
+  light_field:
+    resolution: [24, 24, 192, 192]
+  photons_per_pixel: 10000
+  detector_blur_px: 0.5
+loop:
+  period_ms: 100
+  registration_budget_ms: 50
+  acquire_timeout_ms: 40
+  align_plan: quadratic
+  track_plan: warm
+  realtime:
+    mode: ignore          # a treatment-room host sets enforce and cpus
+actuator:
+  type: virtual
+  latency_s: 0.1
+  max_speed_mm_s: 40
+  max_speed_deg_s: 10
+safety:
+  max_step_mm: 2
+  max_step_deg: 2
+  max_total_mm: 10
+  max_total_deg: 5
+motion:
+  setup_error: {translation_mm: [3, -2, 2], rotation_deg: [1, -0.5, 1]}
+  drift: {translation_mm_per_s: [0.02, 0.01, -0.02]}
+  breathing: {amplitude_mm: [0.5, 1.5, 4.5], amplitude_deg: [0.2, 0, 0], period_s: 4}
 )yaml");
 }
 

@@ -30,11 +30,13 @@ Command add_journal_command(CLI::App* parent) {
     if (!contents.ok()) return contents.status();
     if (!contents->note.empty()) spdlog::warn("{}: {} ({} bytes)", o->file, contents->note, contents->torn_tail_bytes);
     auto state = [](std::uint8_t s) { return to_string(static_cast<TrackingState>(s)); };
+    // The event that changed the state in a cycle ("" when none).
+    auto event = [](std::uint8_t e) { return e == 0 ? "" : to_string(static_cast<TrackingEvent>(e - 1)); };
     if (o->csv) {
       std::printf(
           "cycle,cycle_start_ns,frame_seq_a,frame_seq_b,state,previous_state,gate,reason,tx_mm,ty_mm,tz_mm,rx_rad,ry_rad,"
           "rz_rad,similarity_a,similarity_b,evaluations,registration_ms,command_sent,cmd_tx_mm,cmd_ty_mm,cmd_tz_mm,"
-          "cmd_rx_rad,cmd_ry_rad,cmd_rz_rad,beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm\n");
+          "cmd_rx_rad,cmd_ry_rad,cmd_rz_rad,beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm,event\n");
       for (const JournalRecord& r : contents->records) {
         std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                     static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1], state(r.state),
@@ -44,8 +46,8 @@ Command add_journal_command(CLI::App* parent) {
         std::printf(",%.6g,%.6g,%u,%.3f,%d", r.similarity[0], r.similarity[1], r.evaluations, r.registration_ms,
                     r.command_sent);
         for (double v : r.command) std::printf(",%.6g", v);
-        std::printf(",%d,%d,%u,%u,%.4f\n", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
-                    r.true_residual_mm);
+        std::printf(",%d,%d,%u,%u,%.4f,\"%s\"\n", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
+                    r.true_residual_mm, event(r.event));
       }
       return {};
     }
@@ -68,7 +70,8 @@ Command add_journal_command(CLI::App* parent) {
                        {"overrun", r.overrun != 0},
                        {"skipped_periods", r.skipped_periods},
                        {"dropped_before", r.dropped_before},
-                       {"true_residual_mm", r.true_residual_mm}};
+                       {"true_residual_mm", r.true_residual_mm},
+                       {"event", event(r.event)}};
       std::printf("%s\n", j.dump().c_str());
     }
     return {};

@@ -33,6 +33,8 @@ int main(int argc, char** argv) {
   study->require_subcommand(1);
   const Command capture_range = add_study_capture_range_command(study);
   const Command journal = add_journal_command(&app);
+  const Command sim = add_sim_command(&app);
+  const Command run_loop = add_run_command(&app);
 
   try {
     app.parse(argc, argv);
@@ -59,6 +61,10 @@ int main(int argc, char** argv) {
       status = capture_range();
     else if (app.got_subcommand("journal"))
       status = journal();
+    else if (app.got_subcommand("sim"))
+      status = sim();
+    else if (app.got_subcommand("run"))
+      status = run_loop();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

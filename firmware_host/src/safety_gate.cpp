@@ -52,7 +52,8 @@ bool finite(const GateInput& in) {
   if (!std::isfinite(in.frame_age_ms) || !std::isfinite(in.pair_skew_ms)) return false;
   if (!std::isfinite(in.readback_error_mm) || !std::isfinite(in.readback_error_deg)) return false;
   for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
-    if (!std::isfinite(in.similarity[std::size_t(v)]) || !std::isfinite(in.reference_similarity[std::size_t(v)]))
+    if (!std::isfinite(in.similarity[std::size_t(v)]) ||
+        !std::isfinite(in.reference_similarity[std::size_t(v)]))
       return false;
   return true;
 }
@@ -68,7 +69,8 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   out.consecutive_failures = in.consecutive_failures + 1;
   auto hold = [&](GateReason reason) {
     out.reason = reason;
-    out.decision = out.consecutive_failures >= limits.fault_after_failures ? GateDecision::kStop : GateDecision::kHold;
+    out.decision =
+        out.consecutive_failures >= limits.fault_after_failures ? GateDecision::kStop : GateDecision::kHold;
     return out;
   };
   auto counted = [&](GateReason reason) {
@@ -84,9 +86,11 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
       in.readback_error_deg > limits.readback_tolerance_deg)
     return hold(GateReason::kReadbackMismatch);
   if (in.registration_ok) {
-    if (in.step.head<3>().cwiseAbs().maxCoeff() > limits.max_step_mm || angle_deg(in.step) > limits.max_step_deg)
+    if (!in.step_approved && (in.step.head<3>().cwiseAbs().maxCoeff() > limits.max_step_mm ||
+                              angle_deg(in.step) > limits.max_step_deg))
       return hold(GateReason::kStepTooLarge);
-    if (in.total.head<3>().cwiseAbs().maxCoeff() > limits.max_total_mm || angle_deg(in.total) > limits.max_total_deg)
+    if (in.total.head<3>().cwiseAbs().maxCoeff() > limits.max_total_mm ||
+        angle_deg(in.total) > limits.max_total_deg)
       return hold(GateReason::kTotalTooLarge);
   }
   // Quality.
@@ -102,7 +106,8 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
     ratio_lo = std::min(ratio_lo, ratio);
     ratio_hi = std::max(ratio_hi, ratio);
   }
-  if (in.views > 1 && ratio_hi - ratio_lo > limits.max_ratio_disagreement) return counted(GateReason::kViewsDisagree);
+  if (in.views > 1 && ratio_hi - ratio_lo > limits.max_ratio_disagreement)
+    return counted(GateReason::kViewsDisagree);
   out.decision = GateDecision::kApply;
   out.reason = GateReason::kOk;
   out.consecutive_failures = 0;

@@ -10,432 +10,332 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/similarity.hpp"
+#include "scene_yaml.hpp"
 
 namespace lftrack::host {
-namespace {
 
-namespace fs = std::filesystem;
-using Eigen::Vector3d;
-
-class SceneParser {
- public:
-  SceneParser(std::string source, fs::path base_dir)
-      : source_(std::move(source)), base_dir_(std::move(base_dir)) {}
-
-  Status error_at(const YAML::Mark& mark, const std::string& message) const {
-    std::ostringstream s;
-    s << source_;
-    if (!mark.is_null()) s << ':' << mark.line + 1 << ':' << mark.column + 1;
-    s << ": " << message;
-    return invalid_argument(s.str());
+Status SceneParser::parse_ct(const YAML::Node& n, CtSpec* ct) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "ct", {"path", "seed", "mu_water_per_mm"}));
+  YAML::Node path;
+  LFTRACK_RETURN_IF_ERROR(need(n, "path", "ct", &path));
+  LFTRACK_RETURN_IF_ERROR(text(path, "ct.path", &ct->path));
+  if (!ct->is_builtin_phantom()) {
+    if (ct->path.rfind("builtin:", 0) == 0)
+      return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
+    const fs::path p(ct->path);
+    ct->path = (p.is_absolute() ? p : base_dir_ / p).lexically_normal().string();
   }
-  Status error(const YAML::Node& node, const std::string& message) const {
-    return error_at(node.Mark(), message);
+  if (n["seed"]) {
+    long seed = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(n["seed"], "ct.seed", 0, 2147483647L, &seed));
+    if (!ct->is_builtin_phantom()) return error(n["seed"], "ct.seed applies only to builtin:phantom");
+    ct->phantom_seed = static_cast<std::uint64_t>(seed);
   }
+  if (n["mu_water_per_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(positive(n["mu_water_per_mm"], "ct.mu_water_per_mm", &ct->mu_water_per_mm));
+    if (ct->mu_water_per_mm > 1.0)
+      return error(n["mu_water_per_mm"], "ct.mu_water_per_mm is in 1/mm; water is about 0.02");
+  }
+  return {};
+}
 
-  // Rejects keys of `map` that are not in `allowed` (typos must not pass silently).
-  Status check_keys(const YAML::Node& map, const std::string& what,
-                    const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) return error(map, what + " must be a mapping");
-    for (const auto& kv : map) {
-      const std::string key = kv.first.as<std::string>();
-      if (!allowed.count(key)) {
-        std::string known;
-        for (const auto& k : allowed) known += (known.empty() ? "" : ", ") + k;
-        return error(kv.first, "unknown key '" + key + "' in " + what + " (allowed: " + known + ")");
+Status SceneParser::parse_roi(const YAML::Node& n, bool builtin, RoiSpec* roi) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "roi", {"centre_mm", "size_mm"}));
+  if (n["centre_mm"]) {
+    Vector3d c;
+    LFTRACK_RETURN_IF_ERROR(vec3(n["centre_mm"], "roi.centre_mm", &c));
+    roi->centre_ct_mm = c;
+  } else if (!builtin) {
+    return error(n, "roi needs 'centre_mm' (only builtin:phantom has a default target)");
+  }
+  if (n["size_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(vec3(n["size_mm"], "roi.size_mm", &roi->size_mm));
+    if (!(roi->size_mm.minCoeff() > 0)) return error(n["size_mm"], "roi.size_mm must be positive");
+  }
+  return {};
+}
+
+Status SceneParser::parse_pose(const YAML::Node& n, tracking::Pose* pose) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "nominal_pose", {"translation_mm", "rotation_deg"}));
+  Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
+  if (n["translation_mm"])
+    LFTRACK_RETURN_IF_ERROR(vec3(n["translation_mm"], "nominal_pose.translation_mm", &t));
+  if (n["rotation_deg"])
+    LFTRACK_RETURN_IF_ERROR(vec3(n["rotation_deg"], "nominal_pose.rotation_deg [roll, pitch, yaw]", &r));
+  *pose = tracking::Pose::Identity();
+  pose->linear() = tracking::rotation_from_euler(
+      {tracking::deg_to_rad(r.x()), tracking::deg_to_rad(r.y()), tracking::deg_to_rad(r.z())});
+  pose->translation() = t;
+  return {};
+}
+
+Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& what,
+                                      tracking::LightFieldSpec* spec) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"resolution", "storage", "codebook", "margin"}));
+  if (const YAML::Node r = n["resolution"]) {
+    if (!r.IsSequence() || r.size() != 4) return error(r, what + ".resolution must be [u, v, s, t]");
+    for (std::size_t a = 0; a < 4; ++a) {
+      long value = 0;
+      LFTRACK_RETURN_IF_ERROR(integer(r[a], what + ".resolution", 2, 4096, &value));
+      spec->resolution[a] = static_cast<int>(value);
+    }
+  }
+  if (const YAML::Node s = n["storage"]) {
+    std::string storage;
+    LFTRACK_RETURN_IF_ERROR(text(s, what + ".storage", &storage));
+    if (storage == "float")
+      spec->storage = tracking::LightFieldStorage::kFloat32;
+    else if (storage == "fixed16")
+      spec->storage = tracking::LightFieldStorage::kFixed16;
+    else if (storage == "vq")
+      spec->storage = tracking::LightFieldStorage::kVq;
+    else
+      return error(s, what + ".storage must be one of float, fixed16, vq; got '" + storage + "'");
+  }
+  if (const YAML::Node c = n["codebook"]) {
+    long size = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(c, what + ".codebook", 2, 65536, &size));
+    spec->vq_codebook_size = static_cast<int>(size);
+  }
+  if (const YAML::Node m = n["margin"]) {
+    LFTRACK_RETURN_IF_ERROR(number(m, what + ".margin", &spec->margin_fraction));
+    if (spec->margin_fraction < 0 || spec->margin_fraction > 1) {
+      return error(m, what + ".margin is a fraction of each extent, in [0, 1]");
+    }
+  }
+  return {};
+}
+
+Status SceneParser::parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const {
+  const std::string what = "detectors[" + std::to_string(index) + "]";
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, what,
+                                     {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
+                                      "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
+  YAML::Node node;
+  std::string name;
+  LFTRACK_RETURN_IF_ERROR(need(n, "name", what, &node));
+  LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
+  if (n["frames"]) {
+    LFTRACK_RETURN_IF_ERROR(text(n["frames"], what + ".frames", &d->frames));
+    if (d->frames != "sim" && d->frames != "v4l2" && d->frames != "replay") {
+      return error(n["frames"], what + ".frames must be one of sim, v4l2, replay; got '" + d->frames + "'");
+    }
+  }
+  long bits = 12, rows = 0, cols = 0;
+  if (n["bits"]) LFTRACK_RETURN_IF_ERROR(integer(n["bits"], what + ".bits", 8, 16, &bits));
+  LFTRACK_RETURN_IF_ERROR(need(n, "rows", what, &node));
+  LFTRACK_RETURN_IF_ERROR(integer(node, what + ".rows", 1, 16384, &rows));
+  LFTRACK_RETURN_IF_ERROR(need(n, "cols", what, &node));
+  LFTRACK_RETURN_IF_ERROR(integer(node, what + ".cols", 1, 16384, &cols));
+  YAML::Node pitch_node;
+  LFTRACK_RETURN_IF_ERROR(need(n, "pitch_mm", what, &pitch_node));
+  double pitch_row = 0, pitch_col = 0;
+  if (pitch_node.IsSequence() && pitch_node.size() == 2) {
+    LFTRACK_RETURN_IF_ERROR(positive(pitch_node[0], what + ".pitch_mm[row]", &pitch_row));
+    LFTRACK_RETURN_IF_ERROR(positive(pitch_node[1], what + ".pitch_mm[col]", &pitch_col));
+  } else {
+    LFTRACK_RETURN_IF_ERROR(positive(pitch_node, what + ".pitch_mm", &pitch_row));
+    pitch_col = pitch_row;
+  }
+  d->bits = static_cast<int>(bits);
+
+  const bool explicit_form = n["source_mm"] || n["pixel00_mm"] || n["col_axis"] || n["row_axis"];
+  if (n["isocentric"] && explicit_form) {
+    return error(n, what + " gives both 'isocentric' and explicit geometry; use one");
+  }
+  if (n["isocentric"]) {
+    const YAML::Node iso = n["isocentric"];
+    const std::string w = what + ".isocentric";
+    LFTRACK_RETURN_IF_ERROR(check_keys(
+        iso, w,
+        {"isocentre_mm", "source_direction", "up", "source_to_isocentre_mm", "source_to_detector_mm"}));
+    Vector3d centre = Vector3d::Zero(), dir, up;
+    double sad = 0, sid = 0;
+    if (iso["isocentre_mm"]) LFTRACK_RETURN_IF_ERROR(vec3(iso["isocentre_mm"], w + ".isocentre_mm", &centre));
+    LFTRACK_RETURN_IF_ERROR(need(iso, "source_direction", w, &node));
+    LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".source_direction", &dir));
+    LFTRACK_RETURN_IF_ERROR(need(iso, "up", w, &node));
+    LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".up", &up));
+    LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_isocentre_mm", w, &node));
+    LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_isocentre_mm", &sad));
+    LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_detector_mm", w, &node));
+    LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_detector_mm", &sid));
+    auto view = tracking::XrayView::isocentric(name, centre, dir, up, sad, sid, static_cast<int>(rows),
+                                               static_cast<int>(cols), pitch_row);
+    if (!view.ok()) return error(iso, view.status().message());
+    d->view = *view;
+    d->view.pitch_col_mm = pitch_col;
+    d->view.pitch_row_mm = pitch_row;
+    if (pitch_col != pitch_row) {  // keep the detector centred on the axis
+      const double mid_row = 0.5 * static_cast<double>(rows - 1),
+                   mid_col = 0.5 * static_cast<double>(cols - 1);
+      d->view.pixel00_mm +=
+          view->pixel_centre_mm(mid_row, mid_col) - d->view.pixel_centre_mm(mid_row, mid_col);
+    }
+  } else if (explicit_form) {
+    tracking::XrayView& v = d->view;
+    LFTRACK_RETURN_IF_ERROR(need(n, "source_mm", what, &node));
+    LFTRACK_RETURN_IF_ERROR(vec3(node, what + ".source_mm", &v.source_mm));
+    LFTRACK_RETURN_IF_ERROR(need(n, "pixel00_mm", what, &node));
+    LFTRACK_RETURN_IF_ERROR(vec3(node, what + ".pixel00_mm", &v.pixel00_mm));
+    LFTRACK_RETURN_IF_ERROR(need(n, "col_axis", what, &node));
+    LFTRACK_RETURN_IF_ERROR(unit_vec3(node, what + ".col_axis", &v.col_axis));
+    LFTRACK_RETURN_IF_ERROR(need(n, "row_axis", what, &node));
+    LFTRACK_RETURN_IF_ERROR(unit_vec3(node, what + ".row_axis", &v.row_axis));
+    v.name = name;
+    v.rows = int(rows);
+    v.cols = int(cols);
+    v.pitch_row_mm = pitch_row;
+    v.pitch_col_mm = pitch_col;
+  } else {
+    return error(
+        n, what + " needs its geometry: either 'isocentric' or source_mm, pixel00_mm, col_axis, row_axis");
+  }
+  if (Status s = d->view.validate(); !s.ok()) return error(n, s.message());
+  return {};
+}
+
+Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    return error_at(e.mark, "YAML syntax error: " + e.msg);
+  }
+  if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
+  LFTRACK_RETURN_IF_ERROR(
+      check_keys(root, "the scene",
+                 {"version", "name", "ct", "roi", "registration_origin_mm", "nominal_pose", "detectors",
+                  "envelope", "tracking", "fiducials", "sim", "loop", "safety", "actuator", "motion"}));
+  Scene scene;
+  scene.source = source_;
+  YAML::Node node;
+  long version = 0;
+  LFTRACK_RETURN_IF_ERROR(need(root, "version", "the scene", &node));
+  LFTRACK_RETURN_IF_ERROR(integer(node, "version", 1, 1, &version));
+  if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
+  LFTRACK_RETURN_IF_ERROR(need(root, "ct", "the scene", &node));
+  LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
+  if (root["roi"]) {
+    LFTRACK_RETURN_IF_ERROR(parse_roi(root["roi"], scene.ct.is_builtin_phantom(), &scene.roi));
+  } else if (!scene.ct.is_builtin_phantom()) {
+    return error(root, "the scene needs 'roi' (centre_mm, size_mm) for a CT read from a file");
+  }
+  if (root["registration_origin_mm"]) {
+    Vector3d c;
+    LFTRACK_RETURN_IF_ERROR(vec3(root["registration_origin_mm"], "registration_origin_mm", &c));
+    scene.registration_origin_ct_mm = c;
+  }
+  if (root["nominal_pose"]) {
+    tracking::Pose pose;
+    LFTRACK_RETURN_IF_ERROR(parse_pose(root["nominal_pose"], &pose));
+    scene.nominal_T_room_from_ct = pose;
+  }
+  YAML::Node detectors;
+  LFTRACK_RETURN_IF_ERROR(need(root, "detectors", "the scene", &detectors));
+  if (!detectors.IsSequence() || detectors.size() == 0 || detectors.size() > 4) {
+    return error(detectors, "detectors must be a list of 1 to 4 detectors");
+  }
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < detectors.size(); ++i) {
+    DetectorSpec d;
+    LFTRACK_RETURN_IF_ERROR(parse_detector(detectors[i], int(i), &d));
+    if (!names.insert(d.view.name).second)
+      return error(detectors[i], "duplicate detector name '" + d.view.name + "'");
+    scene.detectors.push_back(d);
+  }
+  if (root["envelope"]) {
+    const YAML::Node e = root["envelope"];
+    LFTRACK_RETURN_IF_ERROR(check_keys(e, "envelope", {"translation_mm", "rotation_deg"}));
+    if (e["translation_mm"])
+      LFTRACK_RETURN_IF_ERROR(
+          positive(e["translation_mm"], "envelope.translation_mm", &scene.envelope.translation_mm));
+    if (e["rotation_deg"])
+      LFTRACK_RETURN_IF_ERROR(
+          positive(e["rotation_deg"], "envelope.rotation_deg", &scene.envelope.rotation_deg));
+    if (scene.envelope.rotation_deg > 45)
+      return error(e["rotation_deg"], "envelope.rotation_deg must be at most 45");
+  }
+  if (root["tracking"]) {
+    const YAML::Node t = root["tracking"];
+    LFTRACK_RETURN_IF_ERROR(check_keys(
+        t, "tracking",
+        {"renderer", "light_field", "similarity", "histogram_bins", "plan", "gamma_per_mm", "tre_box_mm"}));
+    LFTRACK_RETURN_IF_ERROR(parse_registration(t, &scene.registration));
+    if (t["light_field"])
+      LFTRACK_RETURN_IF_ERROR(
+          parse_light_field(t["light_field"], "tracking.light_field", &scene.light_field));
+    if (t["renderer"]) {
+      LFTRACK_RETURN_IF_ERROR(text(t["renderer"], "tracking.renderer", &scene.renderer));
+      const auto known = tracking::renderer_names();
+      if (std::find(known.begin(), known.end(), scene.renderer) == known.end()) {
+        std::string list;
+        for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+        return error(t["renderer"], "unknown renderer '" + scene.renderer + "' (known: " + list + ")");
       }
     }
-    return {};
   }
+  if (root["fiducials"]) LFTRACK_RETURN_IF_ERROR(parse_fiducials(root["fiducials"], &scene.fiducials));
+  if (root["sim"]) LFTRACK_RETURN_IF_ERROR(parse_sim(root["sim"], &scene.sim));
+  if (root["loop"]) LFTRACK_RETURN_IF_ERROR(parse_loop(root["loop"], &scene.loop));
+  if (root["safety"]) LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
+  if (root["actuator"]) LFTRACK_RETURN_IF_ERROR(parse_actuator(root["actuator"], &scene.actuator));
+  if (root["motion"]) LFTRACK_RETURN_IF_ERROR(parse_motion(root["motion"], &scene.motion));
+  return scene;
+}
 
-  Status number(const YAML::Node& n, const std::string& what, double* out) const {
-    if (!n.IsScalar()) return error(n, what + " must be a number");
-    try {
-      *out = n.as<double>();
-    } catch (const YAML::Exception&) {
-      return error(n, what + " must be a number, got '" + n.Scalar() + "'");
-    }
-    if (!std::isfinite(*out)) return error(n, what + " must be finite");
-    return {};
+Status SceneParser::one_of(const YAML::Node& n, const std::string& what,
+                           const std::vector<std::string>& known, std::string* out) const {
+  LFTRACK_RETURN_IF_ERROR(text(n, what, out));
+  if (std::find(known.begin(), known.end(), *out) != known.end()) return {};
+  std::string list;
+  for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+  return error(n, "unknown " + what + " '" + *out + "' (known: " + list + ")");
+}
+
+Status SceneParser::parse_registration(const YAML::Node& t, RegistrationSpec* r) const {
+  if (t["similarity"])
+    LFTRACK_RETURN_IF_ERROR(
+        one_of(t["similarity"], "tracking.similarity", tracking::similarity_names(), &r->similarity));
+  if (t["plan"])
+    LFTRACK_RETURN_IF_ERROR(
+        one_of(t["plan"], "tracking.plan", tracking::registration_plan_names(), &r->plan));
+  if (t["histogram_bins"]) {
+    long bins = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(t["histogram_bins"], "tracking.histogram_bins", 4, 1024, &bins));
+    r->histogram_bins = static_cast<int>(bins);
   }
-
-  Status positive(const YAML::Node& n, const std::string& what, double* out) const {
-    LFTRACK_RETURN_IF_ERROR(number(n, what, out));
-    if (!(*out > 0)) return error(n, what + " must be positive, got " + n.Scalar());
-    return {};
+  if (t["gamma_per_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(number(t["gamma_per_mm"], "tracking.gamma_per_mm", &r->gamma_per_mm));
+    if (r->gamma_per_mm < 0) return error(t["gamma_per_mm"], "tracking.gamma_per_mm must be >= 0");
   }
+  if (t["tre_box_mm"])
+    LFTRACK_RETURN_IF_ERROR(positive(t["tre_box_mm"], "tracking.tre_box_mm", &r->tre_box_mm));
+  return {};
+}
 
-  Status integer(const YAML::Node& n, const std::string& what, long lo, long hi, long* out) const {
-    if (!n.IsScalar()) return error(n, what + " must be an integer");
-    try {
-      *out = n.as<long>();
-    } catch (const YAML::Exception&) {
-      return error(n, what + " must be an integer, got '" + n.Scalar() + "'");
-    }
-    if (*out < lo || *out > hi) {
-      return error(
-          n, what + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) + ", got " + n.Scalar());
-    }
-    return {};
+Status SceneParser::parse_fiducials(const YAML::Node& n, FiducialSpec* f) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "fiducials", {"positions_mm", "radius_mm", "insert"}));
+  YAML::Node list;
+  LFTRACK_RETURN_IF_ERROR(need(n, "positions_mm", "fiducials", &list));
+  if (!list.IsSequence() || list.size() == 0 || list.size() > 16)
+    return error(list, "fiducials.positions_mm must be a list of 1 to 16 points [x, y, z]");
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    Vector3d p;
+    LFTRACK_RETURN_IF_ERROR(vec3(list[i], "fiducials.positions_mm", &p));
+    f->positions_ct_mm.push_back(p);
   }
-
-  Status text(const YAML::Node& n, const std::string& what, std::string* out) const {
-    if (!n.IsScalar() || n.Scalar().empty()) return error(n, what + " must be a non-empty string");
-    *out = n.Scalar();
-    return {};
+  if (n["radius_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(positive(n["radius_mm"], "fiducials.radius_mm", &f->radius_mm));
+    if (f->radius_mm > 10) return error(n["radius_mm"], "fiducials.radius_mm must be at most 10");
   }
-
-  Status vec3(const YAML::Node& n, const std::string& what, Vector3d* out) const {
-    if (!n.IsSequence() || n.size() != 3) return error(n, what + " must be a list of 3 numbers [x, y, z]");
-    for (int a = 0; a < 3; ++a) LFTRACK_RETURN_IF_ERROR(number(n[a], what, &(*out)[a]));
-    return {};
+  if (n["insert"]) {
+    if (!n["insert"].IsScalar() || (n["insert"].Scalar() != "true" && n["insert"].Scalar() != "false"))
+      return error(n["insert"], "fiducials.insert must be true or false");
+    f->insert = n["insert"].Scalar() == "true";
   }
-
-  Status unit_vec3(const YAML::Node& n, const std::string& what, Vector3d* out) const {
-    LFTRACK_RETURN_IF_ERROR(vec3(n, what, out));
-    if (!(out->norm() > 1e-9)) return error(n, what + " must not be the zero vector");
-    out->normalize();
-    return {};
-  }
-
-  // The value under `key` of `map`, or an error located at the map if it is absent.
-  Status need(const YAML::Node& map, const std::string& key, const std::string& what, YAML::Node* out) const {
-    const YAML::Node n = map[key];
-    if (!n) return error(map, what + " needs '" + key + "'");
-    out->reset(n);  // rebind; operator= would write into the referenced node
-    return {};
-  }
-
-  Status parse_ct(const YAML::Node& n, CtSpec* ct) const {
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, "ct", {"path", "seed", "mu_water_per_mm"}));
-    YAML::Node path;
-    LFTRACK_RETURN_IF_ERROR(need(n, "path", "ct", &path));
-    LFTRACK_RETURN_IF_ERROR(text(path, "ct.path", &ct->path));
-    if (!ct->is_builtin_phantom()) {
-      if (ct->path.rfind("builtin:", 0) == 0)
-        return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
-      const fs::path p(ct->path);
-      ct->path = (p.is_absolute() ? p : base_dir_ / p).lexically_normal().string();
-    }
-    if (n["seed"]) {
-      long seed = 0;
-      LFTRACK_RETURN_IF_ERROR(integer(n["seed"], "ct.seed", 0, 2147483647L, &seed));
-      if (!ct->is_builtin_phantom()) return error(n["seed"], "ct.seed applies only to builtin:phantom");
-      ct->phantom_seed = static_cast<std::uint64_t>(seed);
-    }
-    if (n["mu_water_per_mm"]) {
-      LFTRACK_RETURN_IF_ERROR(positive(n["mu_water_per_mm"], "ct.mu_water_per_mm", &ct->mu_water_per_mm));
-      if (ct->mu_water_per_mm > 1.0)
-        return error(n["mu_water_per_mm"], "ct.mu_water_per_mm is in 1/mm; water is about 0.02");
-    }
-    return {};
-  }
-
-  Status parse_roi(const YAML::Node& n, bool builtin, RoiSpec* roi) const {
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, "roi", {"centre_mm", "size_mm"}));
-    if (n["centre_mm"]) {
-      Vector3d c;
-      LFTRACK_RETURN_IF_ERROR(vec3(n["centre_mm"], "roi.centre_mm", &c));
-      roi->centre_ct_mm = c;
-    } else if (!builtin) {
-      return error(n, "roi needs 'centre_mm' (only builtin:phantom has a default target)");
-    }
-    if (n["size_mm"]) {
-      LFTRACK_RETURN_IF_ERROR(vec3(n["size_mm"], "roi.size_mm", &roi->size_mm));
-      if (!(roi->size_mm.minCoeff() > 0)) return error(n["size_mm"], "roi.size_mm must be positive");
-    }
-    return {};
-  }
-
-  Status parse_pose(const YAML::Node& n, tracking::Pose* pose) const {
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, "nominal_pose", {"translation_mm", "rotation_deg"}));
-    Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
-    if (n["translation_mm"])
-      LFTRACK_RETURN_IF_ERROR(vec3(n["translation_mm"], "nominal_pose.translation_mm", &t));
-    if (n["rotation_deg"])
-      LFTRACK_RETURN_IF_ERROR(vec3(n["rotation_deg"], "nominal_pose.rotation_deg [roll, pitch, yaw]", &r));
-    *pose = tracking::Pose::Identity();
-    pose->linear() = tracking::rotation_from_euler(
-        {tracking::deg_to_rad(r.x()), tracking::deg_to_rad(r.y()), tracking::deg_to_rad(r.z())});
-    pose->translation() = t;
-    return {};
-  }
-
-  Status parse_light_field(const YAML::Node& n, tracking::LightFieldSpec* spec) const {
-    const std::string what = "tracking.light_field";
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"resolution", "storage", "codebook", "margin"}));
-    if (const YAML::Node r = n["resolution"]) {
-      if (!r.IsSequence() || r.size() != 4) return error(r, what + ".resolution must be [u, v, s, t]");
-      for (std::size_t a = 0; a < 4; ++a) {
-        long value = 0;
-        LFTRACK_RETURN_IF_ERROR(integer(r[a], what + ".resolution", 2, 4096, &value));
-        spec->resolution[a] = static_cast<int>(value);
-      }
-    }
-    if (const YAML::Node s = n["storage"]) {
-      std::string storage;
-      LFTRACK_RETURN_IF_ERROR(text(s, what + ".storage", &storage));
-      if (storage == "float")
-        spec->storage = tracking::LightFieldStorage::kFloat32;
-      else if (storage == "fixed16")
-        spec->storage = tracking::LightFieldStorage::kFixed16;
-      else if (storage == "vq")
-        spec->storage = tracking::LightFieldStorage::kVq;
-      else
-        return error(s, what + ".storage must be one of float, fixed16, vq; got '" + storage + "'");
-    }
-    if (const YAML::Node c = n["codebook"]) {
-      long size = 0;
-      LFTRACK_RETURN_IF_ERROR(integer(c, what + ".codebook", 2, 65536, &size));
-      spec->vq_codebook_size = static_cast<int>(size);
-    }
-    if (const YAML::Node m = n["margin"]) {
-      LFTRACK_RETURN_IF_ERROR(number(m, what + ".margin", &spec->margin_fraction));
-      if (spec->margin_fraction < 0 || spec->margin_fraction > 1) {
-        return error(m, what + ".margin is a fraction of each extent, in [0, 1]");
-      }
-    }
-    return {};
-  }
-
-  Status parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const {
-    const std::string what = "detectors[" + std::to_string(index) + "]";
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, what,
-                                       {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
-                                        "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
-    YAML::Node node;
-    std::string name;
-    LFTRACK_RETURN_IF_ERROR(need(n, "name", what, &node));
-    LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
-    if (n["frames"]) {
-      LFTRACK_RETURN_IF_ERROR(text(n["frames"], what + ".frames", &d->frames));
-      if (d->frames != "sim" && d->frames != "v4l2" && d->frames != "replay") {
-        return error(n["frames"], what + ".frames must be one of sim, v4l2, replay; got '" + d->frames + "'");
-      }
-    }
-    long bits = 12, rows = 0, cols = 0;
-    if (n["bits"]) LFTRACK_RETURN_IF_ERROR(integer(n["bits"], what + ".bits", 8, 16, &bits));
-    LFTRACK_RETURN_IF_ERROR(need(n, "rows", what, &node));
-    LFTRACK_RETURN_IF_ERROR(integer(node, what + ".rows", 1, 16384, &rows));
-    LFTRACK_RETURN_IF_ERROR(need(n, "cols", what, &node));
-    LFTRACK_RETURN_IF_ERROR(integer(node, what + ".cols", 1, 16384, &cols));
-    YAML::Node pitch_node;
-    LFTRACK_RETURN_IF_ERROR(need(n, "pitch_mm", what, &pitch_node));
-    double pitch_row = 0, pitch_col = 0;
-    if (pitch_node.IsSequence() && pitch_node.size() == 2) {
-      LFTRACK_RETURN_IF_ERROR(positive(pitch_node[0], what + ".pitch_mm[row]", &pitch_row));
-      LFTRACK_RETURN_IF_ERROR(positive(pitch_node[1], what + ".pitch_mm[col]", &pitch_col));
-    } else {
-      LFTRACK_RETURN_IF_ERROR(positive(pitch_node, what + ".pitch_mm", &pitch_row));
-      pitch_col = pitch_row;
-    }
-    d->bits = static_cast<int>(bits);
-
-    const bool explicit_form = n["source_mm"] || n["pixel00_mm"] || n["col_axis"] || n["row_axis"];
-    if (n["isocentric"] && explicit_form) {
-      return error(n, what + " gives both 'isocentric' and explicit geometry; use one");
-    }
-    if (n["isocentric"]) {
-      const YAML::Node iso = n["isocentric"];
-      const std::string w = what + ".isocentric";
-      LFTRACK_RETURN_IF_ERROR(check_keys(
-          iso, w,
-          {"isocentre_mm", "source_direction", "up", "source_to_isocentre_mm", "source_to_detector_mm"}));
-      Vector3d centre = Vector3d::Zero(), dir, up;
-      double sad = 0, sid = 0;
-      if (iso["isocentre_mm"])
-        LFTRACK_RETURN_IF_ERROR(vec3(iso["isocentre_mm"], w + ".isocentre_mm", &centre));
-      LFTRACK_RETURN_IF_ERROR(need(iso, "source_direction", w, &node));
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".source_direction", &dir));
-      LFTRACK_RETURN_IF_ERROR(need(iso, "up", w, &node));
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, w + ".up", &up));
-      LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_isocentre_mm", w, &node));
-      LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_isocentre_mm", &sad));
-      LFTRACK_RETURN_IF_ERROR(need(iso, "source_to_detector_mm", w, &node));
-      LFTRACK_RETURN_IF_ERROR(positive(node, w + ".source_to_detector_mm", &sid));
-      auto view = tracking::XrayView::isocentric(name, centre, dir, up, sad, sid, static_cast<int>(rows),
-                                                 static_cast<int>(cols), pitch_row);
-      if (!view.ok()) return error(iso, view.status().message());
-      d->view = *view;
-      d->view.pitch_col_mm = pitch_col;
-      d->view.pitch_row_mm = pitch_row;
-      if (pitch_col != pitch_row) {  // keep the detector centred on the axis
-        const double mid_row = 0.5 * static_cast<double>(rows - 1),
-                     mid_col = 0.5 * static_cast<double>(cols - 1);
-        d->view.pixel00_mm +=
-            view->pixel_centre_mm(mid_row, mid_col) - d->view.pixel_centre_mm(mid_row, mid_col);
-      }
-    } else if (explicit_form) {
-      tracking::XrayView& v = d->view;
-      LFTRACK_RETURN_IF_ERROR(need(n, "source_mm", what, &node));
-      LFTRACK_RETURN_IF_ERROR(vec3(node, what + ".source_mm", &v.source_mm));
-      LFTRACK_RETURN_IF_ERROR(need(n, "pixel00_mm", what, &node));
-      LFTRACK_RETURN_IF_ERROR(vec3(node, what + ".pixel00_mm", &v.pixel00_mm));
-      LFTRACK_RETURN_IF_ERROR(need(n, "col_axis", what, &node));
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, what + ".col_axis", &v.col_axis));
-      LFTRACK_RETURN_IF_ERROR(need(n, "row_axis", what, &node));
-      LFTRACK_RETURN_IF_ERROR(unit_vec3(node, what + ".row_axis", &v.row_axis));
-      v.name = name;
-      v.rows = int(rows);
-      v.cols = int(cols);
-      v.pitch_row_mm = pitch_row;
-      v.pitch_col_mm = pitch_col;
-    } else {
-      return error(
-          n, what + " needs its geometry: either 'isocentric' or source_mm, pixel00_mm, col_axis, row_axis");
-    }
-    if (Status s = d->view.validate(); !s.ok()) return error(n, s.message());
-    return {};
-  }
-
-  Result<Scene> parse(const std::string& yaml_text) const {
-    YAML::Node root;
-    try {
-      root = YAML::Load(yaml_text);
-    } catch (const YAML::ParserException& e) {
-      return error_at(e.mark, "YAML syntax error: " + e.msg);
-    }
-    if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
-    LFTRACK_RETURN_IF_ERROR(check_keys(root, "the scene",
-                                       {"version", "name", "ct", "roi", "registration_origin_mm",
-                                        "nominal_pose", "detectors", "envelope", "tracking", "fiducials", "sim"}));
-    Scene scene;
-    scene.source = source_;
-    YAML::Node node;
-    long version = 0;
-    LFTRACK_RETURN_IF_ERROR(need(root, "version", "the scene", &node));
-    LFTRACK_RETURN_IF_ERROR(integer(node, "version", 1, 1, &version));
-    if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
-    LFTRACK_RETURN_IF_ERROR(need(root, "ct", "the scene", &node));
-    LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
-    if (root["roi"]) {
-      LFTRACK_RETURN_IF_ERROR(parse_roi(root["roi"], scene.ct.is_builtin_phantom(), &scene.roi));
-    } else if (!scene.ct.is_builtin_phantom()) {
-      return error(root, "the scene needs 'roi' (centre_mm, size_mm) for a CT read from a file");
-    }
-    if (root["registration_origin_mm"]) {
-      Vector3d c;
-      LFTRACK_RETURN_IF_ERROR(vec3(root["registration_origin_mm"], "registration_origin_mm", &c));
-      scene.registration_origin_ct_mm = c;
-    }
-    if (root["nominal_pose"]) {
-      tracking::Pose pose;
-      LFTRACK_RETURN_IF_ERROR(parse_pose(root["nominal_pose"], &pose));
-      scene.nominal_T_room_from_ct = pose;
-    }
-    YAML::Node detectors;
-    LFTRACK_RETURN_IF_ERROR(need(root, "detectors", "the scene", &detectors));
-    if (!detectors.IsSequence() || detectors.size() == 0 || detectors.size() > 4) {
-      return error(detectors, "detectors must be a list of 1 to 4 detectors");
-    }
-    std::set<std::string> names;
-    for (std::size_t i = 0; i < detectors.size(); ++i) {
-      DetectorSpec d;
-      LFTRACK_RETURN_IF_ERROR(parse_detector(detectors[i], int(i), &d));
-      if (!names.insert(d.view.name).second)
-        return error(detectors[i], "duplicate detector name '" + d.view.name + "'");
-      scene.detectors.push_back(d);
-    }
-    if (root["envelope"]) {
-      const YAML::Node e = root["envelope"];
-      LFTRACK_RETURN_IF_ERROR(check_keys(e, "envelope", {"translation_mm", "rotation_deg"}));
-      if (e["translation_mm"])
-        LFTRACK_RETURN_IF_ERROR(
-            positive(e["translation_mm"], "envelope.translation_mm", &scene.envelope.translation_mm));
-      if (e["rotation_deg"])
-        LFTRACK_RETURN_IF_ERROR(
-            positive(e["rotation_deg"], "envelope.rotation_deg", &scene.envelope.rotation_deg));
-      if (scene.envelope.rotation_deg > 45)
-        return error(e["rotation_deg"], "envelope.rotation_deg must be at most 45");
-    }
-    if (root["tracking"]) {
-      const YAML::Node t = root["tracking"];
-      LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking",
-                                         {"renderer", "light_field", "similarity", "histogram_bins", "plan",
-                                          "gamma_per_mm", "tre_box_mm"}));
-      LFTRACK_RETURN_IF_ERROR(parse_registration(t, &scene.registration));
-      if (t["light_field"]) LFTRACK_RETURN_IF_ERROR(parse_light_field(t["light_field"], &scene.light_field));
-      if (t["renderer"]) {
-        LFTRACK_RETURN_IF_ERROR(text(t["renderer"], "tracking.renderer", &scene.renderer));
-        const auto known = tracking::renderer_names();
-        if (std::find(known.begin(), known.end(), scene.renderer) == known.end()) {
-          std::string list;
-          for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
-          return error(t["renderer"], "unknown renderer '" + scene.renderer + "' (known: " + list + ")");
-        }
-      }
-    }
-    if (root["fiducials"]) LFTRACK_RETURN_IF_ERROR(parse_fiducials(root["fiducials"], &scene.fiducials));
-    if (root["sim"]) {
-      const YAML::Node n = root["sim"];
-      LFTRACK_RETURN_IF_ERROR(check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px"}));
-      if (n["photons_per_pixel"])
-        LFTRACK_RETURN_IF_ERROR(positive(n["photons_per_pixel"], "sim.photons_per_pixel", &scene.sim.photons_per_pixel));
-      if (n["detector_blur_px"]) {
-        LFTRACK_RETURN_IF_ERROR(number(n["detector_blur_px"], "sim.detector_blur_px", &scene.sim.detector_blur_px));
-        if (scene.sim.detector_blur_px < 0 || scene.sim.detector_blur_px > 20)
-          return error(n["detector_blur_px"], "sim.detector_blur_px must be in 0..20");
-      }
-    }
-    return scene;
-  }
-
-  Status one_of(const YAML::Node& n, const std::string& what, const std::vector<std::string>& known,
-                std::string* out) const {
-    LFTRACK_RETURN_IF_ERROR(text(n, what, out));
-    if (std::find(known.begin(), known.end(), *out) != known.end()) return {};
-    std::string list;
-    for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
-    return error(n, "unknown " + what + " '" + *out + "' (known: " + list + ")");
-  }
-
-  Status parse_registration(const YAML::Node& t, RegistrationSpec* r) const {
-    if (t["similarity"])
-      LFTRACK_RETURN_IF_ERROR(one_of(t["similarity"], "tracking.similarity", tracking::similarity_names(), &r->similarity));
-    if (t["plan"])
-      LFTRACK_RETURN_IF_ERROR(one_of(t["plan"], "tracking.plan", tracking::registration_plan_names(), &r->plan));
-    if (t["histogram_bins"]) {
-      long bins = 0;
-      LFTRACK_RETURN_IF_ERROR(integer(t["histogram_bins"], "tracking.histogram_bins", 4, 1024, &bins));
-      r->histogram_bins = static_cast<int>(bins);
-    }
-    if (t["gamma_per_mm"]) {
-      LFTRACK_RETURN_IF_ERROR(number(t["gamma_per_mm"], "tracking.gamma_per_mm", &r->gamma_per_mm));
-      if (r->gamma_per_mm < 0) return error(t["gamma_per_mm"], "tracking.gamma_per_mm must be >= 0");
-    }
-    if (t["tre_box_mm"]) LFTRACK_RETURN_IF_ERROR(positive(t["tre_box_mm"], "tracking.tre_box_mm", &r->tre_box_mm));
-    return {};
-  }
-
-  Status parse_fiducials(const YAML::Node& n, FiducialSpec* f) const {
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, "fiducials", {"positions_mm", "radius_mm", "insert"}));
-    YAML::Node list;
-    LFTRACK_RETURN_IF_ERROR(need(n, "positions_mm", "fiducials", &list));
-    if (!list.IsSequence() || list.size() == 0 || list.size() > 16)
-      return error(list, "fiducials.positions_mm must be a list of 1 to 16 points [x, y, z]");
-    for (std::size_t i = 0; i < list.size(); ++i) {
-      Vector3d p;
-      LFTRACK_RETURN_IF_ERROR(vec3(list[i], "fiducials.positions_mm", &p));
-      f->positions_ct_mm.push_back(p);
-    }
-    if (n["radius_mm"]) {
-      LFTRACK_RETURN_IF_ERROR(positive(n["radius_mm"], "fiducials.radius_mm", &f->radius_mm));
-      if (f->radius_mm > 10) return error(n["radius_mm"], "fiducials.radius_mm must be at most 10");
-    }
-    if (n["insert"]) {
-      if (!n["insert"].IsScalar() || (n["insert"].Scalar() != "true" && n["insert"].Scalar() != "false"))
-        return error(n["insert"], "fiducials.insert must be true or false");
-      f->insert = n["insert"].Scalar() == "true";
-    }
-    return {};
-  }
-
- private:
-  std::string source_;
-  fs::path base_dir_;
-};
-
-}  // namespace
+  return {};
+}
 
 Result<Scene> parse_scene(const std::string& yaml_text, const std::string& source_name,
                           const std::filesystem::path& base_dir) {

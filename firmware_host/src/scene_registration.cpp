@@ -16,6 +16,40 @@ using tracking::Image;
 using tracking::ImageView;
 using tracking::Pose;
 
+namespace {
+
+// The fields of `spec` over `mu` from `dir`; missing or stale ones are built (as float, then
+// converted), saved and said so.
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_or_build_light_fields(
+    const PreparedScene& p, const tracking::MuVolume& mu, const tracking::LightFieldSpec& spec,
+    const std::filesystem::path& dir, tracking::ThreadPool* pool) {
+  auto fields = load_light_fields(p, dir, &mu, &spec);
+  if (fields.ok()) return fields;
+  spdlog::warn("light fields in {} not usable ({}); building them now", dir.string(),
+               fields.status().message());
+  tracking::LightFieldSpec float_spec = spec;
+  float_spec.storage = tracking::LightFieldStorage::kFloat32;
+  auto built = build_light_fields(p, float_spec, pool, &mu);
+  if (!built.ok()) return built.status();
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  std::vector<std::shared_ptr<const tracking::LightField>> stored;
+  for (std::size_t i = 0; i < built->size(); ++i) {
+    std::shared_ptr<const tracking::LightField> field = (*built)[i];
+    if (spec.storage != tracking::LightFieldStorage::kFloat32) {
+      auto converted = tracking::LightField::convert(*field, spec, pool);
+      if (!converted.ok()) return converted.status();
+      field = *converted;
+    }
+    const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
+    if (auto s = field->save(file); !s.ok()) spdlog::warn("{}", s.message());
+    stored.push_back(field);
+  }
+  return stored;
+}
+
+}  // namespace
+
 Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const PreparedScene& p,
                                                                          const std::string& name,
                                                                          const std::filesystem::path& lf_dir,
@@ -23,29 +57,8 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const P
   tracking::RendererOptions options;
   if (name == "lightfield") {
     const std::filesystem::path dir = lf_dir.empty() ? default_light_field_dir(p.scene) : lf_dir;
-    auto fields = load_light_fields(p, dir);
-    if (!fields.ok()) {
-      spdlog::warn("light fields in {} not usable ({}); building them now", dir.string(), fields.status().message());
-      tracking::LightFieldSpec float_spec = p.scene.light_field;
-      float_spec.storage = tracking::LightFieldStorage::kFloat32;
-      auto built = build_light_fields(p, float_spec, pool);
-      if (!built.ok()) return built.status();
-      std::error_code ec;
-      std::filesystem::create_directories(dir, ec);
-      std::vector<std::shared_ptr<const tracking::LightField>> stored;
-      for (std::size_t i = 0; i < built->size(); ++i) {
-        std::shared_ptr<const tracking::LightField> field = (*built)[i];
-        if (p.scene.light_field.storage != tracking::LightFieldStorage::kFloat32) {
-          auto converted = tracking::LightField::convert(*field, p.scene.light_field, pool);
-          if (!converted.ok()) return converted.status();
-          field = *converted;
-        }
-        const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
-        if (auto s = field->save(file); !s.ok()) spdlog::warn("{}", s.message());
-        stored.push_back(field);
-      }
-      fields = stored;
-    }
+    auto fields = load_or_build_light_fields(p, *p.mu, p.scene.light_field, dir, pool);
+    if (!fields.ok()) return fields.status();
     options.light_fields = *fields;
   }
   auto renderer = tracking::make_renderer(name, p.mu, options);
@@ -53,9 +66,24 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const P
   return std::shared_ptr<const tracking::DrrRenderer>(std::move(renderer).value());
 }
 
+Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
+    const PreparedScene& p, const std::filesystem::path& lf_dir, tracking::ThreadPool* pool) {
+  tracking::RendererOptions options;
+  if (p.scene.sim.renderer == "lightfield") {
+    const std::filesystem::path dir =
+        (lf_dir.empty() ? default_light_field_dir(p.scene) : lf_dir) / "sim-frames";
+    auto fields = load_or_build_light_fields(p, *p.world_mu, p.scene.sim.light_field, dir, pool);
+    if (!fields.ok()) return fields.status().with_context("the simulator's frame fields");
+    options.light_fields = *fields;
+  }
+  auto renderer = tracking::make_renderer(p.scene.sim.renderer, p.world_mu, options);
+  if (!renderer.ok()) return renderer.status();
+  return std::shared_ptr<const tracking::DrrRenderer>(std::move(renderer).value());
+}
+
 Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
-    const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> renderer, const RegistrationSpec& spec,
-    tracking::ThreadPool* pool) {
+    const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> renderer,
+    const RegistrationSpec& spec, tracking::ThreadPool* pool) {
   tracking::RegistrationSetup setup;
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i)
     setup.views.push_back({p.scene.detectors[i].view, p.roi_windows[i]});
@@ -82,7 +110,8 @@ std::vector<ImageView<const unsigned char>> SceneFrames::masks() const {
   return v;
 }
 
-Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p, const std::vector<Image<std::uint16_t>>& raw,
+Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p,
+                                            const std::vector<Image<std::uint16_t>>& raw,
                                             const tracking::DetectorCorrection& correction) {
   if (raw.size() != p.scene.detectors.size())
     return invalid_argument("expected " + std::to_string(p.scene.detectors.size()) + " frames, got " +
@@ -97,7 +126,8 @@ Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p, const std::v
     const tracking::PixelWindow& w = p.roi_windows[i];
     out.line_integral.emplace_back(w.rows, w.cols);
     out.valid.emplace_back(w.rows, w.cols);
-    LFTRACK_RETURN_IF_ERROR(tracking::preprocess_frame(raw[i].view(), correction, w, out.line_integral.back().view(),
+    LFTRACK_RETURN_IF_ERROR(tracking::preprocess_frame(raw[i].view(), correction, w,
+                                                       out.line_integral.back().view(),
                                                        out.valid.back().view())
                                 .with_context("view " + view.name));
   }
@@ -112,6 +142,15 @@ sim::DetectorModel scene_detector_model(const PreparedScene& p) {
   return m;
 }
 
+tracking::PixelWindow sim_frame_window(const PreparedScene& p, int detector, int margin_px) {
+  const auto& view = p.scene.detectors[std::size_t(detector)].view;
+  const tracking::PixelWindow& w = p.roi_windows[std::size_t(detector)];
+  tracking::PixelWindow grown{std::max(0, w.row0 - margin_px), std::max(0, w.col0 - margin_px), 0, 0};
+  grown.rows = std::min(view.rows, w.row0 + w.rows + margin_px) - grown.row0;
+  grown.cols = std::min(view.cols, w.col0 + w.cols + margin_px) - grown.col0;
+  return grown;
+}
+
 Result<std::vector<Image<std::uint16_t>>> synthesize_scene_frames(const PreparedScene& p,
                                                                   const tracking::DrrRenderer& exact,
                                                                   const Pose& gold, std::uint64_t seed) {
@@ -119,11 +158,7 @@ Result<std::vector<Image<std::uint16_t>>> synthesize_scene_frames(const Prepared
   const sim::DetectorModel model = scene_detector_model(p);
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
     const auto& view = p.scene.detectors[i].view;
-    constexpr int kMargin = 16;
-    const tracking::PixelWindow& w = p.roi_windows[i];
-    tracking::PixelWindow grown{std::max(0, w.row0 - kMargin), std::max(0, w.col0 - kMargin), 0, 0};
-    grown.rows = std::min(view.rows, w.row0 + w.rows + kMargin) - grown.row0;
-    grown.cols = std::min(view.cols, w.col0 + w.cols + kMargin) - grown.col0;
+    const tracking::PixelWindow grown = sim_frame_window(p, int(i), 16);
     auto frame = sim::synthesize_frame(exact, gold, view, grown, model, seed * 7919 + i);
     if (!frame.ok()) return frame.status().with_context("view " + view.name);
     frames.push_back(std::move(frame).value());
@@ -152,7 +187,8 @@ Result<LocatedFiducial> locate_fiducial(const PreparedScene& p, const SceneFrame
     if (!found.ok()) return found.status().with_context("view " + view.name);
     out.pixels.push_back(found->pixel + Eigen::Vector2d(w.col0, w.row0));
   }
-  auto point = calib::triangulate(p.scene.detectors[0].view, out.pixels[0], p.scene.detectors[1].view, out.pixels[1]);
+  auto point =
+      calib::triangulate(p.scene.detectors[0].view, out.pixels[0], p.scene.detectors[1].view, out.pixels[1]);
   if (!point.ok()) return point.status();
   out.term.marker_ct_mm = marker_ct;
   out.term.marker_room_mm = point->point_mm;
@@ -172,12 +208,18 @@ Result<Pose> pose_from_nominal_delta(const PreparedScene& p, const std::vector<d
 }
 
 std::vector<double> nominal_delta_of(const PreparedScene& p, const Pose& T) {
-  const tracking::PoseDelta d = tracking::delta_between(p.nominal_T_room_from_ct, T, p.registration_origin_room_mm());
-  return {d.translation_mm.x(), d.translation_mm.y(), d.translation_mm.z(), tracking::rad_to_deg(d.rotation_rad.x()),
-          tracking::rad_to_deg(d.rotation_rad.y()), tracking::rad_to_deg(d.rotation_rad.z())};
+  const tracking::PoseDelta d =
+      tracking::delta_between(p.nominal_T_room_from_ct, T, p.registration_origin_room_mm());
+  return {d.translation_mm.x(),
+          d.translation_mm.y(),
+          d.translation_mm.z(),
+          tracking::rad_to_deg(d.rotation_rad.x()),
+          tracking::rad_to_deg(d.rotation_rad.y()),
+          tracking::rad_to_deg(d.rotation_rad.z())};
 }
 
-Pose pose_at_tre(const PreparedScene& p, const Pose& gold, const tracking::Vector6d& direction, double target_mm) {
+Pose pose_at_tre(const PreparedScene& p, const Pose& gold, const tracking::Vector6d& direction,
+                 double target_mm) {
   const Eigen::Vector3d origin = p.registration_origin_room_mm();
   auto at = [&](double s) {
     return tracking::apply_delta(gold, tracking::PoseDelta::from_vector(direction * s), origin);

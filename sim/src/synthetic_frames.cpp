@@ -16,39 +16,62 @@ DetectorCorrection detector_correction(const DetectorModel& model) {
   return c;
 }
 
-Result<Image<std::uint16_t>> synthesize_frame(const DrrRenderer& exact, const Pose& gold, const XrayView& view,
-                                              const PixelWindow& window, const DetectorModel& model,
-                                              std::uint64_t seed) {
+namespace {
+
+Status check_model(const DetectorModel& model) {
   if (!(model.photons_per_pixel > 0) || !(model.open_field_fraction > 0 && model.open_field_fraction <= 1) ||
       model.bits < 8 || model.bits > 16)
     return invalid_argument("synthetic frame: photons > 0, open-field fraction in (0, 1], 8-16 bits");
-  Image<float> line_integral(window.rows, window.cols);
-  LFTRACK_RETURN_IF_ERROR(exact.render(gold, view, window, line_integral.view()));
+  return {};
+}
+
+}  // namespace
+
+FrameSynthesizer::FrameSynthesizer(const PixelWindow& window, const DetectorModel& model)
+    : window_(window),
+      model_(model),
+      line_integral_(window.rows, window.cols),
+      photons_(window.rows, window.cols),
+      blurred_(window.rows, window.cols),
+      blur_(window.rows, window.cols, model.blur_sigma_px) {}
+
+Status FrameSynthesizer::synthesize(const DrrRenderer& renderer, const Pose& gold, const XrayView& view,
+                                    std::uint64_t seed, ImageView<std::uint16_t> frame) {
+  LFTRACK_RETURN_IF_ERROR(check_model(model_));
+  if (frame.rows != view.rows || frame.cols != view.cols || !window_.inside(view.rows, view.cols))
+    return invalid_argument("synthetic frame: the frame must be the whole detector, the window inside it");
+  LFTRACK_RETURN_IF_ERROR(renderer.render(gold, view, window_, line_integral_.view()));
   // Photons, with Poisson noise.
   std::mt19937_64 rng(seed);
-  Image<float> photons(window.rows, window.cols);
-  for (int r = 0; r < window.rows; ++r) {
-    for (int c = 0; c < window.cols; ++c) {
-      const double expected = model.photons_per_pixel * std::exp(-double(line_integral.at(r, c)));
-      if (model.noise) {
+  for (int r = 0; r < window_.rows; ++r) {
+    for (int c = 0; c < window_.cols; ++c) {
+      const double expected = model_.photons_per_pixel * std::exp(-double(line_integral_.at(r, c)));
+      if (model_.noise) {
         std::poisson_distribution<long> poisson(expected);
-        photons.at(r, c) = static_cast<float>(poisson(rng));
+        photons_.at(r, c) = static_cast<float>(poisson(rng));
       } else {
-        photons.at(r, c) = static_cast<float>(expected);
+        photons_.at(r, c) = static_cast<float>(expected);
       }
     }
   }
   // Detector blur, then quantisation.
-  Image<float> blurred(window.rows, window.cols);
-  GaussianBlur blur(window.rows, window.cols, model.blur_sigma_px);
-  LFTRACK_RETURN_IF_ERROR(blur.blur(photons.view(), {}, blurred.view()));
-  const DetectorCorrection correction = detector_correction(model);
-  const double counts_per_photon = correction.open_field_counts / model.photons_per_pixel;
+  LFTRACK_RETURN_IF_ERROR(blur_.blur(photons_.view(), {}, blurred_.view()));
+  const DetectorCorrection correction = detector_correction(model_);
+  const double counts_per_photon = correction.open_field_counts / model_.photons_per_pixel;
+  for (int r = 0; r < window_.rows; ++r)
+    for (int c = 0; c < window_.cols; ++c)
+      frame.at(window_.row0 + r, window_.col0 + c) = static_cast<std::uint16_t>(std::clamp(
+          std::lround(blurred_.at(r, c) * counts_per_photon), 0L, long(correction.saturation_counts)));
+  return {};
+}
+
+Result<Image<std::uint16_t>> synthesize_frame(const DrrRenderer& exact, const Pose& gold,
+                                              const XrayView& view, const PixelWindow& window,
+                                              const DetectorModel& model, std::uint64_t seed) {
+  LFTRACK_RETURN_IF_ERROR(check_model(model));
   Image<std::uint16_t> frame(view.rows, view.cols, 0);
-  for (int r = 0; r < window.rows; ++r)
-    for (int c = 0; c < window.cols; ++c)
-      frame.at(window.row0 + r, window.col0 + c) = static_cast<std::uint16_t>(
-          std::clamp(std::lround(blurred.at(r, c) * counts_per_photon), 0L, long(correction.saturation_counts)));
+  FrameSynthesizer synthesizer(window, model);
+  LFTRACK_RETURN_IF_ERROR(synthesizer.synthesize(exact, gold, view, seed, frame.view()));
   return frame;
 }
 
@@ -61,7 +84,8 @@ void insert_markers(ScalarVolume<Unit>* volume, const std::vector<Eigen::Vector3
   constexpr int kSub = 4;
   for (const Eigen::Vector3d& centre : centres) {
     const Eigen::Vector3d ci = index_from_ct * centre;
-    const Eigen::Vector3d reach = (radius_mm + 1e-9) * g.spacing_mm.cwiseInverse() + Eigen::Vector3d::Constant(1);
+    const Eigen::Vector3d reach =
+        (radius_mm + 1e-9) * g.spacing_mm.cwiseInverse() + Eigen::Vector3d::Constant(1);
     Eigen::Vector3i lo, hi;
     for (int a = 0; a < 3; ++a) {
       lo[a] = std::max(0, int(std::floor(ci[a] - reach[a])));
@@ -86,7 +110,9 @@ void insert_markers(ScalarVolume<Unit>* volume, const std::vector<Eigen::Vector3
   }
 }
 
-template void insert_markers(ScalarVolume<HounsfieldUnits>*, const std::vector<Eigen::Vector3d>&, double, float);
-template void insert_markers(ScalarVolume<AttenuationPerMm>*, const std::vector<Eigen::Vector3d>&, double, float);
+template void insert_markers(ScalarVolume<HounsfieldUnits>*, const std::vector<Eigen::Vector3d>&, double,
+                             float);
+template void insert_markers(ScalarVolume<AttenuationPerMm>*, const std::vector<Eigen::Vector3d>&, double,
+                             float);
 
 }  // namespace lftrack::sim

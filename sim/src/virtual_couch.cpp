@@ -14,7 +14,8 @@ DeviceStatus VirtualCouch::command(const Vector6d& correction, drivers::Deadline
   if (target.head<3>().cwiseAbs().maxCoeff() > spec_.range_mm ||
       tracking::rad_to_deg(target.tail<3>().cwiseAbs().maxCoeff()) > spec_.range_deg)
     return DeviceStatus::kFault;
-  if (pending_count_ == int(pending_.size())) return DeviceStatus::kFault;  // commands faster than it can take
+  if (pending_count_ == int(pending_.size()))
+    return DeviceStatus::kFault;  // commands faster than it can take
   pending_[std::size_t(pending_count_++)] = {now_s_ + spec_.latency_s, target};
   commanded_ = target;
   return DeviceStatus::kOk;
@@ -22,6 +23,7 @@ DeviceStatus VirtualCouch::command(const Vector6d& correction, drivers::Deadline
 
 DeviceStatus VirtualCouch::readback(drivers::ActuatorState* state, drivers::Deadline) {
   state->position = position_;
+  state->target = commanded_;
   state->moving = (active_target_ - position_).cwiseAbs().maxCoeff() > 1e-9 || pending_count_ > 0;
   state->fault = false;
   return DeviceStatus::kOk;
@@ -38,7 +40,8 @@ void VirtualCouch::move_towards(const Vector6d& target, double dt_s) {
   const Vector6d d = target - position_;
   const double dist_mm = d.head<3>().norm(), angle_rad = d.tail<3>().norm();
   // One time scale for both parts, so the couch moves along a straight line in the 6 numbers.
-  const double t_needed = std::max(dist_mm / spec_.max_speed_mm_s, tracking::rad_to_deg(angle_rad) / spec_.max_speed_deg_s);
+  const double t_needed =
+      std::max(dist_mm / spec_.max_speed_mm_s, tracking::rad_to_deg(angle_rad) / spec_.max_speed_deg_s);
   position_ = t_needed <= dt_s ? target : Vector6d(position_ + d * (dt_s / t_needed));
 }
 

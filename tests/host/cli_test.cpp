@@ -2,8 +2,8 @@
 
 #include <gtest/gtest.h>
 
-#include <cstdlib>
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
 #include <iterator>
 
@@ -24,8 +24,9 @@ std::string lftrack_bin() {
 TEST(Cli, DrrWritesBothViewsOfTheDefaultScene) {
   test::TempDir dir;
   std::string out;
-  const Status s =
-      run_process({lftrack_bin(), "drr", "--scene", "builtin:phantom", "-o", dir.path().string()}, &out);
+  const Status s = run_process(
+      {lftrack_bin(), "drr", "--scene", "builtin:phantom", "--renderer", "siddon", "-o", dir.path().string()},
+      &out);
   ASSERT_TRUE(s.ok()) << out;
   for (const char* view : {"A", "B"}) {
     const auto png = dir.path() / ("drr_" + std::string(view) + ".png");
@@ -66,8 +67,8 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
 std::filesystem::path small_light_field_scene(const std::filesystem::path& dir, const char* extra = "") {
   auto text = builtin_scene_text("builtin:phantom");
   std::string scene = *text;
-  scene.replace(scene.find("  renderer: siddon"), std::string("  renderer: siddon").size(),
-                "  renderer: lightfield\n  light_field:\n    resolution: [4, 4, 48, 48]\n    storage: fixed16\n");
+  const std::string field = "    resolution: [16, 16, 128, 128]\n";
+  scene.replace(scene.find(field), field.size(), "    resolution: [4, 4, 48, 48]\n    storage: fixed16\n");
   scene += extra;
   const auto file = dir / "small_lf.yaml";
   std::ofstream(file) << scene;
@@ -79,12 +80,17 @@ TEST(Cli, PrecomputeThenRenderWithTheLightField) {
   const auto scene = small_light_field_scene(dir.path());
   const auto lf_dir = dir.path() / "lf";
   std::string out;
-  ASSERT_TRUE(run_process({lftrack_bin(), "precompute", "--scene", scene.string(), "-o", lf_dir.string()}, &out).ok()) << out;
+  ASSERT_TRUE(
+      run_process({lftrack_bin(), "precompute", "--scene", scene.string(), "-o", lf_dir.string()}, &out).ok())
+      << out;
   EXPECT_TRUE(std::filesystem::exists(lf_dir / "A.lf")) << out;
   EXPECT_TRUE(std::filesystem::exists(lf_dir / "B.lf")) << out;
   EXPECT_NE(out.find("100%"), std::string::npos) << "a progress bar: " << out;
-  ASSERT_TRUE(run_process({lftrack_bin(), "drr", "--scene", scene.string(), "--lf-dir", lf_dir.string(), "--roi", "-o",
-                           (dir.path() / "drr").string()}, &out).ok()) << out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "drr", "--scene", scene.string(), "--lf-dir", lf_dir.string(),
+                           "--roi", "-o", (dir.path() / "drr").string()},
+                          &out)
+                  .ok())
+      << out;
   auto data = tracking::read_pfm(dir.path() / "drr" / "drr_A_mu_mm.pfm");
   ASSERT_TRUE(data.ok());
   float hi = 0;
@@ -96,8 +102,11 @@ TEST(Cli, LightFieldsForAnotherSceneAreRefused) {
   test::TempDir dir;
   const auto lf_dir = dir.path() / "lf";
   std::string out;
-  ASSERT_TRUE(run_process({lftrack_bin(), "precompute", "--scene", small_light_field_scene(dir.path()).string(), "-o",
-                           lf_dir.string()}, &out).ok()) << out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "precompute", "--scene",
+                           small_light_field_scene(dir.path()).string(), "-o", lf_dir.string()},
+                          &out)
+                  .ok())
+      << out;
   // The same scene with a wider envelope: the fields no longer cover it.
   const auto wider = small_light_field_scene(dir.path());
   std::string text;
@@ -107,32 +116,39 @@ TEST(Cli, LightFieldsForAnotherSceneAreRefused) {
   }
   text.replace(text.find("rotation_deg: 5"), std::string("rotation_deg: 5").size(), "rotation_deg: 6");
   std::ofstream(wider) << text;
-  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir", lf_dir.string(), "-o",
-                            (dir.path() / "drr").string()}, &out).ok());
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir", lf_dir.string(),
+                            "-o", (dir.path() / "drr").string()},
+                           &out)
+                   .ok());
   EXPECT_NE(out.find("another geometry"), std::string::npos) << out;
   // No fields at all: the message says what to run.
-  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir", (dir.path() / "none").string(),
-                            "-o", (dir.path() / "drr").string()}, &out).ok());
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir",
+                            (dir.path() / "none").string(), "-o", (dir.path() / "drr").string()},
+                           &out)
+                   .ok());
   EXPECT_NE(out.find("lftrack precompute"), std::string::npos) << out;
 }
 
 TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
   test::TempDir dir;
   std::string out;
-  const Status s = run_process({lftrack_bin(), "-q", "bench", "drr", "--scene", small_light_field_scene(dir.path()).string(),
-                                "--size", "24", "--poses", "1", "--repeats", "1", "--vq-codebooks", "16", "--json"},
-                               &out);
+  const Status s = run_process(
+      {lftrack_bin(), "-q", "bench", "drr", "--scene", small_light_field_scene(dir.path()).string(), "--size",
+       "24", "--poses", "1", "--repeats", "1", "--vq-codebooks", "16", "--json"},
+      &out);
   ASSERT_TRUE(s.ok()) << out;
   const auto json = nlohmann::json::parse(out.substr(out.find('{')));
-  for (const char* key : {"ct", "size", "renderers", "peers", "light_field"}) EXPECT_TRUE(json.contains(key)) << key;
+  for (const char* key : {"ct", "size", "renderers", "peers", "light_field"})
+    EXPECT_TRUE(json.contains(key)) << key;
   std::vector<std::string> names;
   for (const auto& r : json["renderers"]) {
     names.push_back(r["name"]);
-    for (const char* key : {"name", "ms_median", "speedup_vs_siddon", "ncc_vs_siddon", "psnr_db_vs_siddon", "bytes",
-                            "out_of_field_fraction"})
+    for (const char* key : {"name", "ms_median", "speedup_vs_siddon", "ncc_vs_siddon", "psnr_db_vs_siddon",
+                            "bytes", "out_of_field_fraction"})
       EXPECT_TRUE(r.contains(key)) << key;
   }
-  for (const char* name : {"siddon", "trilinear", "lightfield-float", "lightfield-fixed16", "lightfield-vq16"})
+  for (const char* name :
+       {"siddon", "trilinear", "lightfield-float", "lightfield-fixed16", "lightfield-vq16"})
     EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
   for (const auto& p : json["peers"])
     for (const char* key : {"name", "ms_median", "ncc_vs_siddon"}) EXPECT_TRUE(p.contains(key)) << key;
@@ -147,7 +163,10 @@ namespace {
 // The built-in scene with a coarse light field (built in a moment) for command tests.
 std::filesystem::path small_light_field_scene(const test::TempDir& dir) {
   const auto file = dir.path() / "phantom-small-lf.yaml";
-  std::ofstream(file) << *builtin_scene_text(kBuiltinPhantom) << "  light_field:\n    resolution: [8, 8, 96, 96]\n";
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  const std::string field = "    resolution: [16, 16, 128, 128]\n";
+  scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
+  std::ofstream(file) << scene;
   return file;
 }
 
@@ -155,11 +174,11 @@ TEST(Cli, RegisterSimulatedFramesPrintsPoseSimilarityAndTre) {
   test::TempDir dir;
   const auto scene = small_light_field_scene(dir);
   std::string out;
-  const Status s = run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--sim", "--gold",
-                                "1,-1,0.5,0.5,0,-0.5", "--init", "-2,2,-1.5,-1,1,1", "--lf-dir",
-                                (dir.path() / "lf").string(), "--save-frames", (dir.path() / "frames").string(),
-                                "--json"},
-                               &out);
+  const Status s =
+      run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--sim", "--gold",
+                   "1,-1,0.5,0.5,0,-0.5", "--init", "-2,2,-1.5,-1,1,1", "--lf-dir",
+                   (dir.path() / "lf").string(), "--save-frames", (dir.path() / "frames").string(), "--json"},
+                  &out);
   ASSERT_TRUE(s.ok()) << out;
   const auto j = nlohmann::json::parse(out.substr(out.find('{')));
   EXPECT_EQ(j["views"].size(), 2u);
@@ -170,11 +189,12 @@ TEST(Cli, RegisterSimulatedFramesPrintsPoseSimilarityAndTre) {
 
   // The saved frames register from files the same way.
   std::string again;
-  const Status f = run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--frames",
-                                (dir.path() / "frames" / "frame_A.tif").string(),
-                                (dir.path() / "frames" / "frame_B.tif").string(), "--gold", "1,-1,0.5,0.5,0,-0.5",
-                                "--init", "-2,2,-1.5,-1,1,1", "--lf-dir", (dir.path() / "lf").string(), "--json"},
-                               &again);
+  const Status f =
+      run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--frames",
+                   (dir.path() / "frames" / "frame_A.tif").string(),
+                   (dir.path() / "frames" / "frame_B.tif").string(), "--gold", "1,-1,0.5,0.5,0,-0.5",
+                   "--init", "-2,2,-1.5,-1,1,1", "--lf-dir", (dir.path() / "lf").string(), "--json"},
+                  &again);
   ASSERT_TRUE(f.ok()) << again;
   const auto k = nlohmann::json::parse(again.substr(again.find('{')));
   EXPECT_NEAR(k["tre_mm"]["mean"].get<double>(), j["tre_mm"]["mean"].get<double>(), 1e-9);
@@ -192,7 +212,9 @@ TEST(Cli, RegisterRefusesBadInput) {
                             junk.string()},
                            &out)
                    .ok());
-  EXPECT_FALSE(run_process({lftrack_bin(), "register", "--scene", scene.string(), "--sim", "--plan", "fast"}, &out).ok());
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "register", "--scene", scene.string(), "--sim", "--plan", "fast"}, &out)
+          .ok());
   EXPECT_NE(out.find("unknown registration plan"), std::string::npos) << out;
 }
 
@@ -201,9 +223,9 @@ TEST(Cli, CaptureRangeStudyWritesCsvSummaryAndPlot) {
   const auto scene = small_light_field_scene(dir);
   std::string out;
   const auto study = dir.path() / "study";
-  const Status s = run_process({lftrack_bin(), "-q", "study", "capture-range", "--scene", scene.string(), "--out",
-                                study.string(), "--per-bin", "2", "--bins", "2", "--methods", "warm:ncc,papers:mi",
-                                "--lf-dir", (dir.path() / "lf").string()},
+  const Status s = run_process({lftrack_bin(), "-q", "study", "capture-range", "--scene", scene.string(),
+                                "--out", study.string(), "--per-bin", "2", "--bins", "2", "--methods",
+                                "warm:ncc,papers:mi", "--lf-dir", (dir.path() / "lf").string()},
                                &out);
   ASSERT_TRUE(s.ok()) << out;
   std::ifstream csv(study / "runs.csv");
@@ -213,7 +235,8 @@ TEST(Cli, CaptureRangeStudyWritesCsvSummaryAndPlot) {
   const auto summary = nlohmann::json::parse(summary_file);
   ASSERT_EQ(summary["methods"].size(), 2u);
   for (const auto& m : summary["methods"])
-    for (const char* key : {"name", "success_rate", "mean_tre_mm", "max_tre_mm", "capture_range_mm", "median_ms"})
+    for (const char* key :
+         {"name", "success_rate", "mean_tre_mm", "max_tre_mm", "capture_range_mm", "median_ms"})
       EXPECT_TRUE(m.contains(key)) << key;
   EXPECT_TRUE(std::filesystem::exists(study / "capture_range.gp"));
   if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
@@ -255,10 +278,58 @@ TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
   EXPECT_EQ(csv.find("\n4,"), std::string::npos) << "the torn record is not printed";
   ASSERT_TRUE(run_process({lftrack_bin(), "-q", "journal", "export", file.string()}, &json).ok()) << json;
   int objects = 0;
-  for (std::size_t pos = json.find("{\"beam_permit\""); pos != std::string::npos; pos = json.find("{\"beam_permit\"", pos + 1))
+  for (std::size_t pos = json.find("{\"beam_permit\""); pos != std::string::npos;
+       pos = json.find("{\"beam_permit\"", pos + 1))
     ++objects;
   EXPECT_EQ(objects, 4) << json;
   EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", (dir.path() / "none").string()}, &json).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+TEST(Cli, SimPrintsTheJsonSummaryAndWritesTheJournal) {
+  test::TempDir dir;
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  for (const std::string field :
+       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
+    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+  const auto file = dir.path() / "sim.yaml";
+  std::ofstream(file) << scene;
+  const auto journal = dir.path() / "j.lfj";
+  std::string out;
+  const Status s =
+      run_process({lftrack_bin(), "-q", "sim", "--scene", file.string(), "--fast", "--cycles", "20", "--json",
+                   "--journal", journal.string(), "--lf-dir", (dir.path() / "lf").string()},
+                  &out);
+  ASSERT_TRUE(s.ok()) << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["cycles"].get<int>(), 20);
+  for (const char* key : {"mean", "p95", "max"}) EXPECT_TRUE(j["residual_mm"][key].is_number()) << key;
+  for (const char* key : {"p50", "p95", "p99", "max"}) EXPECT_TRUE(j["cycle_ms"][key].is_number()) << key;
+  for (const char* key : {"overruns", "holds", "faults", "allocations_per_cycle"})
+    EXPECT_TRUE(j[key].is_number()) << key;
+  int cycles_in_states = 0;
+  for (const char* state : {"IDLE", "ALIGN", "TRACK", "HOLD", "FAULT"})
+    cycles_in_states += j["states"][state].get<int>();
+  EXPECT_EQ(cycles_in_states, 20);
+  EXPECT_TRUE(j["aligned"].get<bool>());
+  std::string exported;
+  ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", journal.string(), "--csv"}, &exported).ok());
+  EXPECT_EQ(std::count(exported.begin(), exported.end(), '\n'), 21) << "a header and one line per cycle";
+
+  // `run` drives only what exists, and says so.
+  std::string v4l2 = scene;
+  v4l2.replace(v4l2.find("frames: sim"), 11, "frames: v4l2");
+  std::ofstream(dir.path() / "v4l2.yaml") << v4l2;
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "run", "--scene", (dir.path() / "v4l2.yaml").string(), "--rt", "ignore"},
+                  &out)
+          .ok());
+  EXPECT_NE(out.find("frames from 'v4l2'"), std::string::npos) << out;
 }
 
 }  // namespace

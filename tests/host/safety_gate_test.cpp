@@ -38,8 +38,10 @@ const std::vector<GateCase> kCases = {
     {"AllGood", [](GateInput&) {}, GateDecision::kApply, GateReason::kOk},
     {"NanInStep", [](GateInput& in) { in.step(1) = kNan; }, GateDecision::kHold, GateReason::kNonFinite},
     {"InfInTotal", [](GateInput& in) { in.total(4) = kInf; }, GateDecision::kHold, GateReason::kNonFinite},
-    {"NanSimilarity", [](GateInput& in) { in.similarity[1] = kNan; }, GateDecision::kHold, GateReason::kNonFinite},
-    {"NanFrameAge", [](GateInput& in) { in.frame_age_ms = kNan; }, GateDecision::kHold, GateReason::kNonFinite},
+    {"NanSimilarity", [](GateInput& in) { in.similarity[1] = kNan; }, GateDecision::kHold,
+     GateReason::kNonFinite},
+    {"NanFrameAge", [](GateInput& in) { in.frame_age_ms = kNan; }, GateDecision::kHold,
+     GateReason::kNonFinite},
     {"NanEvenWithoutResult",
      [](GateInput& in) {
        in.registration_ok = false;
@@ -49,22 +51,45 @@ const std::vector<GateCase> kCases = {
     {"StepJustInside", [](GateInput& in) { in.step(0) = 2.0; }, GateDecision::kApply, GateReason::kOk},
     {"StepTranslationTooLarge", [](GateInput& in) { in.step(2) = -2.01; }, GateDecision::kHold,
      GateReason::kStepTooLarge},
-    {"StepRotationTooLarge", [](GateInput& in) { in.step(3) = tracking::deg_to_rad(2.1); }, GateDecision::kHold,
-     GateReason::kStepTooLarge},
+    {"StepRotationTooLarge", [](GateInput& in) { in.step(3) = tracking::deg_to_rad(2.1); },
+     GateDecision::kHold, GateReason::kStepTooLarge},
     {"SuddenEightMillimetreShift", [](GateInput& in) { in.step(1) = 8.0; }, GateDecision::kHold,
      GateReason::kStepTooLarge},
-    {"TotalTooLarge", [](GateInput& in) { in.total(0) = 10.5; }, GateDecision::kHold, GateReason::kTotalTooLarge},
-    {"TotalRotationTooLarge", [](GateInput& in) { in.total(5) = tracking::deg_to_rad(5.5); }, GateDecision::kHold,
+    {"ApprovedStepSkipsOnlyTheStepLimit",
+     [](GateInput& in) {
+       in.step(1) = 8.0;
+       in.step_approved = true;
+     },
+     GateDecision::kApply, GateReason::kOk},
+    {"ApprovedStepStillRespectsTheTotal",
+     [](GateInput& in) {
+       in.step(1) = 8.0;
+       in.total(1) = 10.5;
+       in.step_approved = true;
+     },
+     GateDecision::kHold, GateReason::kTotalTooLarge},
+    {"ApprovedStepStillHoldsOnNan",
+     [](GateInput& in) {
+       in.step(1) = kNan;
+       in.step_approved = true;
+     },
+     GateDecision::kHold, GateReason::kNonFinite},
+    {"TotalTooLarge", [](GateInput& in) { in.total(0) = 10.5; }, GateDecision::kHold,
      GateReason::kTotalTooLarge},
+    {"TotalRotationTooLarge", [](GateInput& in) { in.total(5) = tracking::deg_to_rad(5.5); },
+     GateDecision::kHold, GateReason::kTotalTooLarge},
     {"ReadbackOff", [](GateInput& in) { in.readback_error_mm = 0.6; }, GateDecision::kHold,
      GateReason::kReadbackMismatch},
     {"ReadbackRotationOff", [](GateInput& in) { in.readback_error_deg = 0.6; }, GateDecision::kHold,
      GateReason::kReadbackMismatch},
     {"NoReadback", [](GateInput& in) { in.readback_valid = false; }, GateDecision::kHold,
      GateReason::kReadbackMismatch},
-    {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip, GateReason::kNoResult},
-    {"StaleFrame", [](GateInput& in) { in.frame_age_ms = 151; }, GateDecision::kSkip, GateReason::kStaleFrame},
-    {"UnpairedFrames", [](GateInput& in) { in.pair_skew_ms = 25; }, GateDecision::kSkip, GateReason::kUnpairedFrames},
+    {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip,
+     GateReason::kNoResult},
+    {"StaleFrame", [](GateInput& in) { in.frame_age_ms = 151; }, GateDecision::kSkip,
+     GateReason::kStaleFrame},
+    {"UnpairedFrames", [](GateInput& in) { in.pair_skew_ms = 25; }, GateDecision::kSkip,
+     GateReason::kUnpairedFrames},
     {"LowSimilarityRatio", [](GateInput& in) { in.similarity[0] = 0.4; }, GateDecision::kSkip,
      GateReason::kLowSimilarity},
     {"ViewsDisagree",
@@ -115,7 +140,9 @@ TEST_P(GateTable, DecidesAsTheRulesSay) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Rules, GateTable, ::testing::ValuesIn(kCases),
-                         [](const ::testing::TestParamInfo<GateCase>& p) { return std::string(p.param.name); });
+                         [](const ::testing::TestParamInfo<GateCase>& p) {
+                           return std::string(p.param.name);
+                         });
 
 TEST(Gate, ApplyResetsTheFailureCount) {
   GateInput in = good_input();

@@ -12,6 +12,8 @@
 #include "lftrack/tracking/target_error.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
+long lftrack_test_allocations();  // drr_renderer_test.cpp counts every operator new
+
 namespace lftrack::tracking {
 namespace {
 
@@ -41,10 +43,10 @@ const Phantom& phantom() {
 RegistrationSetup two_view_setup(const std::string& similarity) {
   RegistrationSetup s;
   // Two oblique views 90 degrees apart, 96 x 80 pixels of 0.8 mm.
-  const XrayView a =
-      *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.7071, -0.7071, 0), Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
-  const XrayView b =
-      *XrayView::isocentric("B", Vector3d::Zero(), Vector3d(-0.7071, -0.7071, 0), Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
+  const XrayView a = *XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.7071, -0.7071, 0),
+                                           Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
+  const XrayView b = *XrayView::isocentric("B", Vector3d::Zero(), Vector3d(-0.7071, -0.7071, 0),
+                                           Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
   s.views = {{a, PixelWindow::full(a.rows, a.cols)}, {b, PixelWindow::full(b.rows, b.cols)}};
   s.roi_size_mm = {40, 40, 30};
   s.nominal_T_room_from_ct = phantom().nominal;
@@ -73,7 +75,8 @@ std::shared_ptr<const DrrRenderer> light_field_renderer() {
       EXPECT_TRUE(field.ok()) << field.status().message();
       options.light_fields.push_back(*field);
     }
-    return std::shared_ptr<const DrrRenderer>(std::move(make_renderer("lightfield", nullptr, options)).value());
+    return std::shared_ptr<const DrrRenderer>(
+        std::move(make_renderer("lightfield", nullptr, options)).value());
   }();
   return renderer;
 }
@@ -147,6 +150,29 @@ TEST(Registration, ParallelAndSerialEvaluationAgree) {
   const auto b = *serial->run(phantom().nominal, *registration_plan("warm"));
   EXPECT_TRUE(a.T_room_from_ct.isApprox(b.T_room_from_ct, 1e-12));
   EXPECT_EQ(a.evaluations, b.evaluations);
+}
+
+TEST(Registration, SetFramesAndAPreparedRunAllocateNothing) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  ThreadPool pool(2);
+  auto reg = std::move(Registration::create(light_field_renderer(), setup, &pool)).value();
+  const Frames f = frames_at(setup, gold_pose());
+  const auto frames = f.views();
+  const std::vector<ImageView<const unsigned char>> masks;
+  const PreparedPlan plan = std::move(reg->prepare_plan(*registration_plan("warm"))).value();
+  RegistrationResult result;
+  ASSERT_TRUE(reg->set_frames(frames, masks).ok());
+  ASSERT_TRUE(reg->run(phantom().nominal, plan, 1e9, &result).ok());  // sizes the result once
+  const long before = lftrack_test_allocations();
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_TRUE(reg->set_frames(frames, masks).ok());
+    ASSERT_TRUE(reg->run(phantom().nominal, plan, 1e9, &result).ok());
+  }
+  EXPECT_EQ(lftrack_test_allocations() - before, 0);
+  EXPECT_GT(result.evaluations, 12);
+  // The same answer as the allocating entry point.
+  const auto again = *reg->run(phantom().nominal, *registration_plan("warm"));
+  EXPECT_TRUE(again.T_room_from_ct.isApprox(result.T_room_from_ct, 1e-12));
 }
 
 TEST(Registration, FiducialTermPullsTowardsTheMarker) {

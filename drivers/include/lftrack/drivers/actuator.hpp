@@ -13,6 +13,7 @@ namespace lftrack::drivers {
 
 struct ActuatorState {
   tracking::Vector6d position = tracking::Vector6d::Zero();  // total travel (mm, rad)
+  tracking::Vector6d target = tracking::Vector6d::Zero();    // the last command it accepted, as travel
   bool moving = false;
   bool fault = false;
 };

@@ -29,6 +29,10 @@ class FrameSource {
   virtual ~FrameSource() = default;
   // Outside the cycle. Sizes `pair` for this source (one frame per detector).
   virtual Status open(FramePair* pair) = 0;
+  // The loop says when it wants the next pair exposed (CLOCK_MONOTONIC ns, or the loop's
+  // simulated clock): a triggered detector arms its trigger, the simulator starts rendering.
+  // Free-running sources ignore it. Never blocks.
+  virtual void request_exposure(std::int64_t exposure_time_ns) { (void)exposure_time_ns; }
   // In the cycle: fills `pair` with the next pair, or says why not by `deadline`.
   virtual DeviceStatus acquire(FramePair* pair, Deadline deadline) = 0;
   virtual void close() = 0;

@@ -32,20 +32,20 @@ struct JournalRecord {
   std::uint32_t frame_sequence[2] = {0, 0};
   std::uint32_t dropped_before = 0;  // records the queue could not take since the last one
   std::uint32_t evaluations = 0;
-  double pose_delta[6] = {};         // registered pose: delta from nominal (mm, rad)
-  double similarity[4] = {};         // per view
+  double pose_delta[6] = {};  // registered pose: delta from nominal (mm, rad)
+  double similarity[4] = {};  // per view
   double registration_ms = 0;
-  double command[6] = {};            // correction sent this cycle (mm, rad); zero if none
-  double readback[6] = {};           // actuator read-back (mm, rad)
-  double true_residual_mm = -1;      // simulation only: the true patient offset after correction
-  std::uint8_t state = 0;            // TrackingState after this cycle
+  double command[6] = {};        // correction sent this cycle (mm, rad); zero if none
+  double readback[6] = {};       // actuator read-back (mm, rad)
+  double true_residual_mm = -1;  // simulation only: the true patient offset after correction
+  std::uint8_t state = 0;        // TrackingState after this cycle
   std::uint8_t previous_state = 0;
-  std::uint8_t gate_decision = 0;    // GateDecision
-  std::uint8_t gate_reason = 0;      // GateReason
+  std::uint8_t gate_decision = 0;  // GateDecision
+  std::uint8_t gate_reason = 0;    // GateReason
   std::uint8_t command_sent = 0;
   std::uint8_t beam_permit = 0;
-  std::uint8_t overrun = 0;          // this cycle started late (missed periods were skipped)
-  std::uint8_t reserved = 0;
+  std::uint8_t overrun = 0;  // this cycle started late (missed periods were skipped)
+  std::uint8_t event = 0;    // 1 + TrackingEvent that changed the state this cycle; 0: none
   std::uint32_t skipped_periods = 0;
   std::uint32_t reserved2 = 0;
 };
@@ -60,7 +60,8 @@ class JournalWriter {
  public:
   ~JournalWriter();
   // Creates (truncates) the file, writes the header and starts the writer thread.
-  static Result<std::unique_ptr<JournalWriter>> open(const std::filesystem::path& file, const JournalOptions& options = {});
+  static Result<std::unique_ptr<JournalWriter>> open(const std::filesystem::path& file,
+                                                     const JournalOptions& options = {});
   // From the cycle: never blocks, never allocates. Returns false (and counts it) when the queue
   // is full.
   bool append(const JournalRecord& record);

@@ -23,9 +23,9 @@ struct SafetyLimits {
   double max_step_deg = 2.0;   // per-cycle correction, rotation angle
   double max_total_mm = 10.0;  // from the aligned pose
   double max_total_deg = 5.0;
-  double min_similarity = 0.0;     // per view, absolute (the measure's units)
-  double min_similarity_ratio = 0.7;   // per view, against its value at alignment
-  double max_ratio_disagreement = 0.2; // |ratio_A - ratio_B|
+  double min_similarity = 0.0;          // per view, absolute (the measure's units)
+  double min_similarity_ratio = 0.7;    // per view, against its value at alignment
+  double max_ratio_disagreement = 0.2;  // |ratio_A - ratio_B|
   double max_frame_age_ms = 150;
   double max_pair_skew_ms = 20;
   double readback_tolerance_mm = 0.5;
@@ -59,12 +59,15 @@ struct GateInput {
   int views = 0;
   std::array<double, kMaxGateViews> similarity{};            // this cycle, per view
   std::array<double, kMaxGateViews> reference_similarity{};  // at alignment, per view
-  double frame_age_ms = 0;   // of the older frame of the pair, at the decision
-  double pair_skew_ms = 0;   // between the two frames' timestamps
+  double frame_age_ms = 0;  // of the older frame of the pair, at the decision
+  double pair_skew_ms = 0;  // between the two frames' timestamps
   bool readback_valid = true;
-  double readback_error_mm = 0;   // actuator position against the last command
+  double readback_error_mm = 0;  // actuator position against the last command
   double readback_error_deg = 0;
   int consecutive_failures = 0;  // before this cycle
+  // The operator approved this move (the set-up move after alignment, the first move after a
+  // resume): the per-cycle step limit does not apply; every other check does.
+  bool step_approved = false;
 };
 
 struct GateOutput {

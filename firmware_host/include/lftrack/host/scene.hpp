@@ -14,6 +14,9 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/host/safety_gate.hpp"
+#include "lftrack/sim/patient_motion.hpp"
+#include "lftrack/sim/virtual_couch.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/light_field.hpp"
@@ -72,7 +75,49 @@ struct RegistrationSpec {
 struct SimFrameSpec {
   double photons_per_pixel = 10000;  // open field, per pixel and frame
   double detector_blur_px = 0.5;
-};  // +-translation_mm, +-rotation_deg per axis
+  // What renders the simulated loop's frames: "siddon" (exact, about 30 ms per view of a 512 x 512
+  // detector's ROI on one core) or "lightfield" (a separate field of `light_field` resolution,
+  // built from the anatomy with its markers, under 1 ms per view; for real-time runs on few cores).
+  std::string renderer = "siddon";
+  tracking::LightFieldSpec light_field;
+  std::uint64_t seed = 1;  // noise of the simulated loop's frames
+};
+
+// loop: the real-time cycle (DESIGN.md, "One cycle").
+struct RealtimeSpec {
+  bool enforce = false;   // enforce: refuse to start without mlockall, SCHED_FIFO and affinity
+  int priority = 80;      // SCHED_FIFO priority of the cycle's thread (1..99)
+  std::vector<int> cpus;  // the cycle's CPUs; empty: leave the affinity alone
+};
+struct LoopSpec {
+  double period_ms = 100;
+  double registration_budget_ms = 60;    // the warm registration's wall-time budget per cycle
+  double acquire_timeout_ms = 40;        // how long a cycle waits for its frame pair
+  std::string align_plan = "quadratic";  // the cold, wide-range registration before tracking
+  std::string track_plan = "warm";       // each cycle's registration, from the last pose
+  // Prediction of the patient's own motion over the latency from frame to couch motion: a
+  // polynomial of `prediction_order` (1 or 2) fitted to the last `prediction_cycles` estimates,
+  // extrapolated by `lookahead_s` (unset: one period plus the actuator's latency).
+  // prediction_cycles < 2: no prediction.
+  std::optional<double> lookahead_s;
+  int prediction_cycles = 8;
+  int prediction_order = 2;
+  RealtimeSpec realtime;
+};
+
+// actuator: what moves the patient. "none" tracks and reports; "virtual" is the simulator's
+// couch (latency, speed and range limits).
+struct ActuatorSpec {
+  std::string type = "none";
+  sim::VirtualCouchSpec couch;
+};
+
+// motion: the simulated patient (sim only): where they lie at the start (set-up error, delta from
+// the nominal pose) and how they move from there.
+struct MotionSpec {
+  tracking::Vector6d setup_error = tracking::Vector6d::Zero();  // mm, rad
+  sim::PatientMotionSpec motion;
+};
 
 struct Scene {
   std::string source;  // the scene file, or "builtin:phantom"
@@ -88,6 +133,10 @@ struct Scene {
   RegistrationSpec registration;         // tracking: similarity, plan, ...
   FiducialSpec fiducials;
   SimFrameSpec sim;
+  LoopSpec loop;
+  SafetyLimits safety;
+  ActuatorSpec actuator;
+  MotionSpec motion;
 };
 
 // Parses a scene from YAML text; `source_name` is used in messages ("file.yaml:12:5: ...") and
@@ -126,12 +175,16 @@ struct PreparedScene {
 std::filesystem::path default_light_field_dir(const Scene& scene);
 // The file of one view's field in `dir`.
 std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name);
-// Builds every view's field as `spec` says, on `pool`, with a progress bar per view on stderr.
+// Builds every view's field as `spec` says, on `pool`, with a progress bar per view on stderr,
+// from `mu` (null: the scene's CT).
 Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
-    const PreparedScene& scene, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool);
-// Loads every view's field from `dir`, refusing files built for another CT, geometry or storage.
-Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(const PreparedScene& scene,
-                                                                                   const std::filesystem::path& dir);
+    const PreparedScene& scene, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool,
+    const tracking::MuVolume* mu = nullptr);
+// Loads every view's field from `dir`, refusing files built for another volume (null: the
+// scene's CT), geometry or storage than `spec` (null: the scene's tracking.light_field).
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(
+    const PreparedScene& scene, const std::filesystem::path& dir, const tracking::MuVolume* mu = nullptr,
+    const tracking::LightFieldSpec* spec = nullptr);
 
 // Reads the CT (or generates the phantom), converts it to attenuation, and resolves the ROI,
 // the registration origin, the nominal pose and each detector's ROI window. `ct_override`

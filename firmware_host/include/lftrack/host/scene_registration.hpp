@@ -21,10 +21,15 @@ namespace lftrack::host {
 
 // The renderer `name` for the scene ("lightfield": the fields in `light_field_dir` (empty: the
 // scene's default folder); a missing or stale file is rebuilt, saved, and said so).
-Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const PreparedScene& scene,
-                                                                         const std::string& name,
-                                                                         const std::filesystem::path& light_field_dir,
-                                                                         tracking::ThreadPool* pool);
+Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(
+    const PreparedScene& scene, const std::string& name, const std::filesystem::path& light_field_dir,
+    tracking::ThreadPool* pool);
+
+// What renders the simulated loop's frames (sim.renderer): Siddon through the world anatomy
+// (markers included), or a separate light field of sim.light_field's resolution built from it and
+// cached in <light_field_dir>/sim-frames.
+Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
+    const PreparedScene& scene, const std::filesystem::path& light_field_dir, tracking::ThreadPool* pool);
 
 // A Registration over the scene's ROI windows with the scene's (or the given) measure.
 Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
@@ -47,12 +52,15 @@ Result<SceneFrames> preprocess_scene_frames(const PreparedScene& scene,
 // The detector model of the scene's sim section.
 sim::DetectorModel scene_detector_model(const PreparedScene& scene);
 
+// The pixels the simulator exposes on detector `detector`: its ROI window grown by `margin_px`
+// (clipped to the detector).
+tracking::PixelWindow sim_frame_window(const PreparedScene& scene, int detector, int margin_px);
+
 // Synthetic raw frames at `gold`, rendered exactly (Siddon on the scene's world anatomy, markers
 // included) over each ROI window grown by a margin; the rest of each detector is unexposed.
-Result<std::vector<tracking::Image<std::uint16_t>>> synthesize_scene_frames(const PreparedScene& scene,
-                                                                            const tracking::DrrRenderer& exact,
-                                                                            const tracking::Pose& gold_T_room_from_ct,
-                                                                            std::uint64_t seed);
+Result<std::vector<tracking::Image<std::uint16_t>>> synthesize_scene_frames(
+    const PreparedScene& scene, const tracking::DrrRenderer& exact, const tracking::Pose& gold_T_room_from_ct,
+    std::uint64_t seed);
 
 // Finds the scene's first fiducial in every frame near where `start` projects it, triangulates
 // the first two views, and returns the hybrid term (paper 2) with its triangulation gap.

@@ -17,8 +17,8 @@
 namespace lftrack::sim {
 
 struct DetectorModel {
-  double photons_per_pixel = 10000;   // open field, per pixel and frame (the dose)
-  double blur_sigma_px = 0.5;         // detector point-spread (scintillator), Gaussian
+  double photons_per_pixel = 10000;  // open field, per pixel and frame (the dose)
+  double blur_sigma_px = 0.5;        // detector point-spread (scintillator), Gaussian
   int bits = 12;
   double open_field_fraction = 0.85;  // open-field counts as a fraction of full scale
   bool noise = true;                  // false: expected values (no Poisson draw)
@@ -31,10 +31,29 @@ tracking::DetectorCorrection detector_correction(const DetectorModel& model);
 // counts; pixels outside the window are left at 0 (unexposed, which preprocessing masks).
 // Same seed, same frame.
 Result<tracking::Image<std::uint16_t>> synthesize_frame(const tracking::DrrRenderer& exact,
-                                                                  const tracking::Pose& gold_T_room_from_ct,
-                                                                  const tracking::XrayView& view,
-                                                                  const tracking::PixelWindow& window,
-                                                                  const DetectorModel& model, std::uint64_t seed);
+                                                        const tracking::Pose& gold_T_room_from_ct,
+                                                        const tracking::XrayView& view,
+                                                        const tracking::PixelWindow& window,
+                                                        const DetectorModel& model, std::uint64_t seed);
+
+// The same model, sized once for one window and allocation-free per frame, for the simulator's
+// frame source in the real-time loop. synthesize() renders `window` of `view` at `gold`, and
+// writes the window's raw counts into `frame` (a whole detector); pixels outside it are left as
+// they are. Same seed, same counts.
+class FrameSynthesizer {
+ public:
+  FrameSynthesizer(const tracking::PixelWindow& window, const DetectorModel& model);
+  const tracking::PixelWindow& window() const { return window_; }
+  Status synthesize(const tracking::DrrRenderer& renderer, const tracking::Pose& gold_T_room_from_ct,
+                    const tracking::XrayView& view, std::uint64_t seed,
+                    tracking::ImageView<std::uint16_t> frame);
+
+ private:
+  tracking::PixelWindow window_;
+  DetectorModel model_;
+  tracking::Image<float> line_integral_, photons_, blurred_;
+  tracking::GaussianBlur blur_;
+};
 
 // Steel markers (spheres, partial volume from 4^3 sub-samples per voxel) written into a volume:
 // value_at_centre replaces the voxel's value in proportion to the sphere's share of it.

@@ -4,8 +4,9 @@
 // (sum over views), and let an optimizer move the pose 6-vector about the registration origin.
 // An optional fiducial term adds paper 2's hybrid measure: cost = -sum(S_k) + gamma * d.
 //
-// Set-up (create, set_frames) allocates; run() allocates only the result's trace (if asked)
-// and the pass list it copies, and evaluates candidates of a batch in parallel on the pool.
+// create() and prepare_plan() allocate; after them set_frames() and run() with a prepared plan
+// allocate nothing (so the real-time cycle may call them), and candidates of a batch are
+// evaluated in parallel on the pool.
 
 #include <Eigen/Core>
 #include <memory>
@@ -96,14 +97,22 @@ Result<RegistrationPlan> registration_plan(const std::string& name);
 
 struct RegistrationResult {
   Pose T_room_from_ct = Pose::Identity();
-  PoseDelta delta_from_start;          // about the origin
-  double cost = 0;                     // of the last pass (lower is better)
-  std::vector<double> view_similarity; // unblurred, at the result
-  double fiducial_distance_mm = -1;    // with a fiducial term
+  PoseDelta delta_from_start;           // about the origin
+  double cost = 0;                      // of the last pass (lower is better)
+  std::vector<double> view_similarity;  // unblurred, at the result
+  double fiducial_distance_mm = -1;     // with a fiducial term
   int evaluations = 0;
   double elapsed_ms = 0;
   OptimizerStop stop = OptimizerStop::kConverged;
   std::vector<OptimizerTracePoint> trace;  // x: delta from the start pose
+};
+
+// A plan with its optimizers made and its image levels resolved, for one Registration.
+struct PreparedPlan {
+  RegistrationPlan plan;
+  std::vector<std::unique_ptr<Optimizer>> optimizers;  // per pass
+  std::vector<int> levels;                             // per pass
+  bool record_trace = false;
 };
 
 class Registration {
@@ -127,6 +136,14 @@ class Registration {
   Result<RegistrationResult> run(const Pose& start_T_room_from_ct, const RegistrationPlan& plan,
                                  bool record_trace = false);
 
+  // Makes the plan's optimizers and checks its levels, once, outside the cycle.
+  Result<PreparedPlan> prepare_plan(const RegistrationPlan& plan, bool record_trace = false) const;
+  // Registers from `start` within `max_ms` (and the plan's own budget) into `result`. Allocates
+  // nothing when the plan records no trace and `result` has held a result of this registration
+  // before (its per-view vector keeps its capacity).
+  Status run(const Pose& start_T_room_from_ct, const PreparedPlan& plan, double max_ms,
+             RegistrationResult* result);
+
   // The cost of one pose at an image level (for tests and plots); +infinity for a level that
   // was not prepared.
   double cost_at(const Pose& T_room_from_ct, double blur_sigma_mm = 0, int bin = 1);
@@ -134,6 +151,7 @@ class Registration {
  private:
   class Cost;
   struct Slot;
+  struct ReferenceLevel;
   Registration() = default;
   int level_index(double blur_sigma_mm, int bin) const;
   bool inside_search_region(const Pose& T) const;
@@ -156,6 +174,8 @@ class Registration {
   };
   std::vector<LevelGeometry> levels_;
   std::vector<std::unique_ptr<Slot>> slots_;
+  // Per level and view: the reference frame binned and blurred, and the blur that makes it.
+  std::vector<std::vector<std::unique_ptr<ReferenceLevel>>> references_;
   std::optional<FiducialTerm> fiducial_;
   bool frames_set_ = false;
 };

@@ -1,0 +1,27 @@
+#pragma once
+// Real-time set-up of the cycle's thread (DESIGN.md, "One cycle"): lock all memory (mlockall),
+// SCHED_FIFO at a priority, and an affinity to the scene's CPUs. With `enforce` a step that
+// fails refuses the start and says why (a treatment-room host); without it each failure is a
+// warning and the loop runs as an ordinary process (tests, CI, a laptop).
+
+#include <string>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::host {
+
+struct RealtimeReport {
+  bool memory_locked = false;
+  bool fifo = false;
+  bool affinity = false;
+  std::vector<std::string> warnings;  // what failed (ignore mode)
+  std::string summary() const;
+};
+
+// Applies `spec` to the calling thread (and locks the process's memory). Enforce: the first
+// failure is returned as an error with the reason and what to change (capabilities, limits).
+Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec);
+
+}  // namespace lftrack::host

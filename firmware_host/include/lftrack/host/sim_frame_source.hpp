@@ -1,0 +1,79 @@
+#pragma once
+// The simulator's detectors: a FrameSource whose frames show the simulated room's anatomy at the
+// requested exposure time (true pose from the room, rendered by the scene's sim renderer, with
+// photon noise, detector blur and quantisation).
+//
+// Rendering runs on a thread of its own, started by request_exposure() (on the loop's thread,
+// which reads the room's true pose then) and collected by acquire(), so frame k+1 renders while
+// the loop sleeps after cycle k. This is exact, not an approximation: the room's couch state at
+// an exposure time is settled once the previous cycle has commanded (commands take effect a
+// latency after their deadline). Nothing allocates after open().
+//
+// Faults can be injected for tests: a frame that never arrives, and a skew between the views'
+// timestamps.
+
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/sim/simulated_room.hpp"
+#include "lftrack/sim/synthetic_frames.hpp"
+
+namespace lftrack::host {
+
+struct SimFrameSourceOptions {
+  // Wait for each frame however long it takes (a loop on a simulated clock, whose deadlines say
+  // nothing about the wall clock); otherwise acquire() gives up at its deadline.
+  bool wait_for_frames = false;
+  int margin_px = 16;  // exposed border around each ROI window (0 for light-field frames)
+  // Fault injection: exposures whose index is in [drop_from, drop_to) never arrive (kTimeout).
+  std::int64_t drop_from = -1, drop_to = -1;
+  double skew_ms = 0;  // added to the second view's timestamp
+};
+
+class SimFrameSource final : public drivers::FrameSource {
+ public:
+  SimFrameSource(const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
+                 sim::SimulatedRoom* room, const SimFrameSourceOptions& options = {});
+  ~SimFrameSource() override;
+
+  Status open(drivers::FramePair* pair) override;
+  void request_exposure(std::int64_t exposure_time_ns) override;
+  drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override;
+  void close() override;
+
+ private:
+  struct Job {
+    std::int64_t index = -1;
+    std::int64_t exposure_ns = 0;
+    tracking::Pose pose = tracking::Pose::Identity();
+  };
+  void render_loop();
+
+  const PreparedScene& scene_;
+  std::shared_ptr<const tracking::DrrRenderer> renderer_;
+  sim::SimulatedRoom* room_;
+  SimFrameSourceOptions options_;
+  sim::DetectorModel model_;
+  std::vector<std::unique_ptr<sim::FrameSynthesizer>> synthesizers_;  // per view
+  std::vector<tracking::Image<std::uint16_t>> rendered_;              // per view, whole detector
+
+  std::thread thread_;
+  std::mutex mutex_;
+  std::condition_variable wake_, done_;
+  Job pending_;       // requested, not yet started
+  Job rendered_job_;  // what rendered_ holds
+  bool has_pending_ = false;
+  bool rendering_ = false;
+  bool has_rendered_ = false;
+  bool stopping_ = false;
+  Status render_status_;
+  std::int64_t next_index_ = 0;
+};
+
+}  // namespace lftrack::host

@@ -1,0 +1,167 @@
+// `lftrack sim`: the simulated closed loop on a scene (the main job; `make demo` runs it on the
+// built-in scene). `lftrack run`: the same loop on the scene's own devices.
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "cli_commands.hpp"
+#include "lftrack/host/allocation_counter.hpp"
+#include "lftrack/host/realtime_setup.hpp"
+#include "lftrack/host/sim_session.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+struct SimOptions {
+  SceneOptions scene;
+  std::int64_t cycles = 300;
+  bool json = false;
+  bool fast = false;
+  std::string journal = "out/sim/journal.lfj";
+  std::string control;
+  double auto_resume_s = -1;
+  std::string rt;  // enforce / ignore; empty: the scene's
+  std::string lf_dir;
+  bool run_devices = false;  // `lftrack run`
+};
+
+std::atomic<SimSession*> g_session{nullptr};
+
+extern "C" void on_interrupt(int) {
+  if (SimSession* s = g_session.load()) s->request_stop();
+}
+
+void print_summary(const LoopSummary& s) {
+  std::printf("cycles %lld (%s), states: ", static_cast<long long>(s.cycles), s.ended.c_str());
+  for (int i = 0; i < 5; ++i)
+    if (s.states[std::size_t(i)] > 0)
+      std::printf("%s %lld  ", to_string(static_cast<TrackingState>(i)),
+                  static_cast<long long>(s.states[std::size_t(i)]));
+  std::printf("\n");
+  if (s.residual_mean_mm)
+    std::printf("residual (true, TRACK cycles): mean %.3f mm, p95 %.3f mm, max %.3f mm\n",
+                *s.residual_mean_mm, *s.residual_p95_mm, *s.residual_max_mm);
+  std::printf(
+      "cycle work: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms; overruns %lld (periods skipped "
+      "%lld)\n",
+      s.cycle_p50_ms, s.cycle_p95_ms, s.cycle_p99_ms, s.cycle_max_ms, static_cast<long long>(s.overruns),
+      static_cast<long long>(s.skipped_periods));
+  std::printf("registration: p50 %.1f ms, p95 %.1f ms, %.0f evaluations on average; alignment %.0f ms\n",
+              s.registration_p50_ms, s.registration_p95_ms, s.evaluations_mean, s.align_ms);
+  std::printf("holds %lld, faults %lld, corrections sent %lld", static_cast<long long>(s.holds),
+              static_cast<long long>(s.faults), static_cast<long long>(s.commands));
+  if (s.allocations_per_cycle)
+    std::printf(", heap allocations per steady-state cycle %.3f", *s.allocations_per_cycle);
+  std::printf("\n");
+  for (const LoopTransition& t : s.transitions)
+    std::printf("  cycle %6lld  %-5s -> %-5s  %s\n", static_cast<long long>(t.cycle), to_string(t.from),
+                to_string(t.to), t.reason);
+}
+
+Status run(const SimOptions& o) {
+  auto scene = load_scene(o.scene.scene);
+  if (!scene.ok()) return scene.status();
+  if (o.run_devices) {
+    for (const DetectorSpec& d : scene->detectors)
+      if (d.frames != "sim")
+        return failed_precondition(
+            "detector " + d.view.name + " takes frames from '" + d.frames +
+            "': this build drives only simulated detectors (frames: sim); V4L2 and replay "
+            "sources are not built yet");
+  }
+  RealtimeSpec rt = scene->loop.realtime;
+  if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
+  // Real-time set-up first, so every thread made afterwards (registration workers, the frame
+  // renderer, the journal writer) inherits the policy and affinity.
+  auto report = apply_realtime_setup(rt);
+  if (!report.ok()) return report.status();
+  for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);
+  spdlog::info("real-time set-up: {}", report->summary());
+
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
+  if (!prepared.ok()) return prepared.status();
+  SimSessionOptions so;
+  so.cycles = o.cycles;
+  so.simulated_clock = o.fast;
+  so.status_line = !o.json && ::isatty(STDERR_FILENO) == 1;
+  so.terminal_operator = ::isatty(STDIN_FILENO) == 1;
+  if (!o.journal.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(std::filesystem::path(o.journal).parent_path(), ec);
+    so.journal = o.journal;
+  }
+  so.control_socket = o.control;
+  if (o.auto_resume_s >= 0) so.auto_resume_s = o.auto_resume_s;
+  so.light_field_dir = o.lf_dir;
+  so.allocation_count = &process_allocation_count;
+  auto session = SimSession::create(*prepared, so, &pool);
+  if (!session.ok()) return session.status();
+  spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
+               o.fast ? " on a simulated clock" : "",
+               so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
+  g_session.store(session->get());
+  struct sigaction action {};
+  action.sa_handler = on_interrupt;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  auto summary = (*session)->run();
+  g_session.store(nullptr);
+  if (!summary.ok()) return summary.status();
+  if (o.json) {
+    nlohmann::json j = to_json(*summary);
+    j["scene"] = prepared->scene.name;
+    j["period_ms"] = prepared->scene.loop.period_ms;
+    j["simulated_clock"] = o.fast;
+    j["realtime"] = report->summary();
+    if (!o.journal.empty()) j["journal"] = o.journal;
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    print_summary(*summary);
+    if (!o.journal.empty())
+      std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());
+  }
+  return {};
+}
+
+Command add(CLI::App* parent, const char* name, const char* description, bool run_devices) {
+  auto o = std::make_shared<SimOptions>();
+  o->run_devices = run_devices;
+  if (run_devices) o->cycles = 0;
+  CLI::App* app = parent->add_subcommand(name, description);
+  add_scene_options(app, &o->scene);
+  app->add_option("--cycles", o->cycles, "Cycles to run (0: until quit)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app->add_flag("--json", o->json, "Print the summary as JSON");
+  if (!run_devices)
+    app->add_flag("--fast", o->fast,
+                  "As fast as possible on a simulated clock (deterministic; no real-time timing)");
+  app->add_option("--journal", o->journal, "Journal file ('' for none)")->capture_default_str();
+  app->add_option("--control", o->control, "Control socket path (datagrams: resume, stop, reset, quit)");
+  app->add_option("--auto-resume", o->auto_resume_s,
+                  "An unattended operator resumes this many seconds into each HOLD");
+  app->add_option("--rt", o->rt,
+                  "Real-time set-up: enforce or ignore (default: the scene's loop.realtime.mode)")
+      ->check(CLI::IsMember({"enforce", "ignore"}));
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
+  return [o] { return run(*o); };
+}
+
+}  // namespace
+
+Command add_sim_command(CLI::App* parent) {
+  return add(parent, "sim", "The simulated closed loop: patient motion, synthetic frames, a virtual couch",
+             false);
+}
+Command add_run_command(CLI::App* parent) {
+  return add(parent, "run", "The loop on the scene's devices (real-time set-up as the scene says)", true);
+}
+
+}  // namespace lftrack::host::cli

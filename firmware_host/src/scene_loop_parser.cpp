@@ -1,0 +1,210 @@
+// The scene's host-loop sections: sim, loop, safety, actuator, motion.
+
+#include "lftrack/tracking/registration.hpp"
+#include "scene_yaml.hpp"
+
+namespace lftrack::host {
+
+Status SceneParser::vec6(const YAML::Node& n, const std::string& what, const char* translation_key,
+                         const char* rotation_key, tracking::Vector6d* out) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {translation_key, rotation_key}));
+  Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
+  if (n[translation_key]) LFTRACK_RETURN_IF_ERROR(vec3(n[translation_key], what + "." + translation_key, &t));
+  if (n[rotation_key]) LFTRACK_RETURN_IF_ERROR(vec3(n[rotation_key], what + "." + rotation_key, &r));
+  out->head<3>() = t;
+  out->tail<3>() = r * (3.14159265358979323846 / 180.0);
+  return {};
+}
+
+Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
+  LFTRACK_RETURN_IF_ERROR(
+      check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed"}));
+  if (n["photons_per_pixel"])
+    LFTRACK_RETURN_IF_ERROR(
+        positive(n["photons_per_pixel"], "sim.photons_per_pixel", &sim->photons_per_pixel));
+  if (n["detector_blur_px"]) {
+    LFTRACK_RETURN_IF_ERROR(number(n["detector_blur_px"], "sim.detector_blur_px", &sim->detector_blur_px));
+    if (sim->detector_blur_px < 0 || sim->detector_blur_px > 20)
+      return error(n["detector_blur_px"], "sim.detector_blur_px must be in 0..20");
+  }
+  if (n["renderer"])
+    LFTRACK_RETURN_IF_ERROR(one_of(n["renderer"], "sim.renderer", {"siddon", "lightfield"}, &sim->renderer));
+  if (n["light_field"])
+    LFTRACK_RETURN_IF_ERROR(parse_light_field(n["light_field"], "sim.light_field", &sim->light_field));
+  if (n["seed"]) {
+    long seed = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(n["seed"], "sim.seed", 0, 2147483647L, &seed));
+    sim->seed = static_cast<std::uint64_t>(seed);
+  }
+  return {};
+}
+
+Status SceneParser::parse_loop(const YAML::Node& n, LoopSpec* loop) const {
+  LFTRACK_RETURN_IF_ERROR(
+      check_keys(n, "loop",
+                 {"period_ms", "registration_budget_ms", "acquire_timeout_ms", "align_plan", "track_plan",
+                  "lookahead_s", "prediction_cycles", "prediction_order", "realtime"}));
+  if (n["period_ms"]) {
+    LFTRACK_RETURN_IF_ERROR(positive(n["period_ms"], "loop.period_ms", &loop->period_ms));
+    if (loop->period_ms < 1 || loop->period_ms > 10000)
+      return error(n["period_ms"], "loop.period_ms must be in 1..10000");
+  }
+  if (n["registration_budget_ms"])
+    LFTRACK_RETURN_IF_ERROR(
+        positive(n["registration_budget_ms"], "loop.registration_budget_ms", &loop->registration_budget_ms));
+  if (n["acquire_timeout_ms"])
+    LFTRACK_RETURN_IF_ERROR(
+        positive(n["acquire_timeout_ms"], "loop.acquire_timeout_ms", &loop->acquire_timeout_ms));
+  if (loop->registration_budget_ms + loop->acquire_timeout_ms > loop->period_ms)
+    return error(n, "loop: acquire_timeout_ms + registration_budget_ms must fit in period_ms (" +
+                        std::to_string(loop->period_ms) + " ms)");
+  const auto plans = tracking::registration_plan_names();
+  if (n["align_plan"])
+    LFTRACK_RETURN_IF_ERROR(one_of(n["align_plan"], "loop.align_plan", plans, &loop->align_plan));
+  if (n["track_plan"])
+    LFTRACK_RETURN_IF_ERROR(one_of(n["track_plan"], "loop.track_plan", plans, &loop->track_plan));
+  if (n["lookahead_s"]) {
+    double s = 0;
+    LFTRACK_RETURN_IF_ERROR(number(n["lookahead_s"], "loop.lookahead_s", &s));
+    if (s < 0 || s > 2) return error(n["lookahead_s"], "loop.lookahead_s must be in 0..2 s");
+    loop->lookahead_s = s;
+  }
+  if (n["prediction_cycles"]) {
+    long c = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(n["prediction_cycles"], "loop.prediction_cycles", 0, 32, &c));
+    loop->prediction_cycles = static_cast<int>(c);
+  }
+  if (n["prediction_order"]) {
+    long o = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(n["prediction_order"], "loop.prediction_order", 1, 2, &o));
+    loop->prediction_order = static_cast<int>(o);
+  }
+  if (const YAML::Node rt = n["realtime"]) {
+    LFTRACK_RETURN_IF_ERROR(check_keys(rt, "loop.realtime", {"mode", "priority", "cpus"}));
+    if (rt["mode"]) {
+      std::string mode;
+      LFTRACK_RETURN_IF_ERROR(one_of(rt["mode"], "loop.realtime.mode", {"enforce", "ignore"}, &mode));
+      loop->realtime.enforce = mode == "enforce";
+    }
+    if (rt["priority"]) {
+      long p = 0;
+      LFTRACK_RETURN_IF_ERROR(integer(rt["priority"], "loop.realtime.priority", 1, 99, &p));
+      loop->realtime.priority = static_cast<int>(p);
+    }
+    if (const YAML::Node cpus = rt["cpus"]) {
+      if (!cpus.IsSequence() || cpus.size() == 0)
+        return error(cpus, "loop.realtime.cpus must be a list of CPU numbers");
+      for (std::size_t i = 0; i < cpus.size(); ++i) {
+        long c = 0;
+        LFTRACK_RETURN_IF_ERROR(integer(cpus[i], "loop.realtime.cpus", 0, 1023, &c));
+        loop->realtime.cpus.push_back(static_cast<int>(c));
+      }
+    }
+  }
+  return {};
+}
+
+Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(
+      n, "safety",
+      {"max_step_mm", "max_step_deg", "max_total_mm", "max_total_deg", "min_similarity",
+       "min_similarity_ratio", "max_ratio_disagreement", "max_frame_age_ms", "max_pair_skew_ms",
+       "readback_tolerance_mm", "readback_tolerance_deg", "hold_after_failures", "fault_after_failures"}));
+  const std::pair<const char*, double*> positives[] = {
+      {"max_step_mm", &l->max_step_mm},
+      {"max_step_deg", &l->max_step_deg},
+      {"max_total_mm", &l->max_total_mm},
+      {"max_total_deg", &l->max_total_deg},
+      {"max_ratio_disagreement", &l->max_ratio_disagreement},
+      {"max_frame_age_ms", &l->max_frame_age_ms},
+      {"max_pair_skew_ms", &l->max_pair_skew_ms},
+      {"readback_tolerance_mm", &l->readback_tolerance_mm},
+      {"readback_tolerance_deg", &l->readback_tolerance_deg}};
+  for (const auto& [key, out] : positives)
+    if (n[key]) LFTRACK_RETURN_IF_ERROR(positive(n[key], std::string("safety.") + key, out));
+  if (n["min_similarity"])
+    LFTRACK_RETURN_IF_ERROR(number(n["min_similarity"], "safety.min_similarity", &l->min_similarity));
+  if (n["min_similarity_ratio"]) {
+    LFTRACK_RETURN_IF_ERROR(
+        number(n["min_similarity_ratio"], "safety.min_similarity_ratio", &l->min_similarity_ratio));
+    if (l->min_similarity_ratio < 0 || l->min_similarity_ratio > 1)
+      return error(n["min_similarity_ratio"], "safety.min_similarity_ratio must be in 0..1");
+  }
+  long hold = l->hold_after_failures, fault = l->fault_after_failures;
+  if (n["hold_after_failures"])
+    LFTRACK_RETURN_IF_ERROR(integer(n["hold_after_failures"], "safety.hold_after_failures", 1, 1000, &hold));
+  if (n["fault_after_failures"])
+    LFTRACK_RETURN_IF_ERROR(
+        integer(n["fault_after_failures"], "safety.fault_after_failures", 1, 10000, &fault));
+  if (fault < hold) return error(n, "safety.fault_after_failures must be at least hold_after_failures");
+  l->hold_after_failures = static_cast<int>(hold);
+  l->fault_after_failures = static_cast<int>(fault);
+  return {};
+}
+
+Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(
+      n, "actuator", {"type", "latency_s", "max_speed_mm_s", "max_speed_deg_s", "range_mm", "range_deg"}));
+  YAML::Node type;
+  LFTRACK_RETURN_IF_ERROR(need(n, "type", "actuator", &type));
+  LFTRACK_RETURN_IF_ERROR(one_of(type, "actuator.type", {"none", "virtual"}, &a->type));
+  sim::VirtualCouchSpec& c = a->couch;
+  if (n["latency_s"]) {
+    LFTRACK_RETURN_IF_ERROR(number(n["latency_s"], "actuator.latency_s", &c.latency_s));
+    if (c.latency_s < 0 || c.latency_s > 5)
+      return error(n["latency_s"], "actuator.latency_s must be in 0..5 s");
+  }
+  if (n["max_speed_mm_s"])
+    LFTRACK_RETURN_IF_ERROR(positive(n["max_speed_mm_s"], "actuator.max_speed_mm_s", &c.max_speed_mm_s));
+  if (n["max_speed_deg_s"])
+    LFTRACK_RETURN_IF_ERROR(positive(n["max_speed_deg_s"], "actuator.max_speed_deg_s", &c.max_speed_deg_s));
+  if (n["range_mm"]) LFTRACK_RETURN_IF_ERROR(positive(n["range_mm"], "actuator.range_mm", &c.range_mm));
+  if (n["range_deg"]) LFTRACK_RETURN_IF_ERROR(positive(n["range_deg"], "actuator.range_deg", &c.range_deg));
+  return {};
+}
+
+Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "motion", {"setup_error", "drift", "breathing", "shifts"}));
+  if (n["setup_error"])
+    LFTRACK_RETURN_IF_ERROR(
+        vec6(n["setup_error"], "motion.setup_error", "translation_mm", "rotation_deg", &m->setup_error));
+  if (n["drift"])
+    LFTRACK_RETURN_IF_ERROR(vec6(n["drift"], "motion.drift", "translation_mm_per_s", "rotation_deg_per_s",
+                                 &m->motion.drift_per_s));
+  if (const YAML::Node b = n["breathing"]) {
+    LFTRACK_RETURN_IF_ERROR(check_keys(b, "motion.breathing", {"amplitude_mm", "amplitude_deg", "period_s"}));
+    Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
+    if (b["amplitude_mm"])
+      LFTRACK_RETURN_IF_ERROR(vec3(b["amplitude_mm"], "motion.breathing.amplitude_mm", &t));
+    if (b["amplitude_deg"])
+      LFTRACK_RETURN_IF_ERROR(vec3(b["amplitude_deg"], "motion.breathing.amplitude_deg", &r));
+    m->motion.breathing_amplitude.head<3>() = t;
+    m->motion.breathing_amplitude.tail<3>() = r * (3.14159265358979323846 / 180.0);
+    if (b["period_s"])
+      LFTRACK_RETURN_IF_ERROR(
+          positive(b["period_s"], "motion.breathing.period_s", &m->motion.breathing_period_s));
+  }
+  if (const YAML::Node shifts = n["shifts"]) {
+    if (!shifts.IsSequence())
+      return error(shifts, "motion.shifts must be a list of {time_s, translation_mm, rotation_deg}");
+    for (std::size_t i = 0; i < shifts.size(); ++i) {
+      const YAML::Node s = shifts[i];
+      const std::string what = "motion.shifts[" + std::to_string(i) + "]";
+      LFTRACK_RETURN_IF_ERROR(check_keys(s, what, {"time_s", "translation_mm", "rotation_deg"}));
+      sim::MotionStep step;
+      YAML::Node time;
+      LFTRACK_RETURN_IF_ERROR(need(s, "time_s", what, &time));
+      LFTRACK_RETURN_IF_ERROR(number(time, what + ".time_s", &step.time_s));
+      Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
+      if (s["translation_mm"])
+        LFTRACK_RETURN_IF_ERROR(vec3(s["translation_mm"], what + ".translation_mm", &t));
+      if (s["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(vec3(s["rotation_deg"], what + ".rotation_deg", &r));
+      step.delta.head<3>() = t;
+      step.delta.tail<3>() = r * (3.14159265358979323846 / 180.0);
+      m->motion.shifts.push_back(step);
+    }
+  }
+  return {};
+}
+
+}  // namespace lftrack::host

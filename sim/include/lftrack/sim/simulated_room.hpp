@@ -1,0 +1,75 @@
+#pragma once
+// The simulated treatment room of the closed loop: a patient who lies with a set-up error and
+// moves (patient_motion.hpp), on a virtual couch that applies the loop's corrections
+// (virtual_couch.hpp). It knows the truth the loop estimates: where the anatomy is at any time.
+//
+// Time: the room's clock starts (t = 0) at the first loop time it is advanced to; loop times
+// are CLOCK_MONOTONIC nanoseconds (or the loop's simulated clock). Only the loop's thread may
+// touch a room: the frame source reads the true pose on it and hands the pose to its renderer.
+//
+// True pose: T(t) = A(couch(t)) * A(motion(t)) * A(setup_error) * T_nominal, where A(d) is the
+// rigid motion of delta d about the registration origin (pose.hpp). The couch cancels the
+// patient's offset when A(couch) = (A(motion) A(setup_error))^-1.
+
+#include <cstdint>
+
+#include "lftrack/drivers/actuator.hpp"
+#include "lftrack/sim/patient_motion.hpp"
+#include "lftrack/sim/virtual_couch.hpp"
+
+namespace lftrack::sim {
+
+struct SimulatedRoomSpec {
+  tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
+  Eigen::Vector3d origin_room_mm = Eigen::Vector3d::Zero();
+  tracking::Vector6d setup_error = tracking::Vector6d::Zero();  // mm, rad
+  PatientMotionSpec motion;
+  VirtualCouchSpec couch;
+  // The residual is measured over a cube of this edge at the registration origin.
+  double residual_box_mm = 40;
+};
+
+class SimulatedRoom {
+ public:
+  explicit SimulatedRoom(const SimulatedRoomSpec& spec);
+
+  // Moves the room to loop time `t_ns` (never backwards; the first call sets t = 0).
+  void advance_to_ns(std::int64_t t_ns);
+  double time_s() const { return couch_.time_s(); }
+  double time_s_at(std::int64_t t_ns) const;
+
+  // The anatomy's pose now, and the patient's own offset (set-up error and motion) as one delta.
+  tracking::Pose true_T_room_from_ct() const;
+  tracking::Pose patient_T_room_from_ct() const;  // without the couch
+  // The true residual now: mean displacement of the 27 points of a 3 x 3 x 3 grid over the
+  // residual box between where the anatomy is and where the plan has it (mm).
+  double residual_mm() const;
+
+  // The couch as the loop sees it: a command takes effect as if sent at its deadline (the latest
+  // the cycle may send it), so a run is deterministic whatever the host's speed.
+  drivers::Actuator& couch_actuator() { return actuator_; }
+  const VirtualCouch& couch() const { return couch_; }
+  const SimulatedRoomSpec& spec() const { return spec_; }
+
+ private:
+  class CouchActuator final : public drivers::Actuator {
+   public:
+    explicit CouchActuator(SimulatedRoom& room) : room_(room) {}
+    Status open() override { return {}; }
+    drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
+    drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
+    void hold() override { room_.couch_.hold(); }
+    void close() override {}
+
+   private:
+    SimulatedRoom& room_;
+  };
+
+  SimulatedRoomSpec spec_;
+  VirtualCouch couch_;
+  CouchActuator actuator_{*this};
+  bool started_ = false;
+  std::int64_t epoch_ns_ = 0;
+};
+
+}  // namespace lftrack::sim
