@@ -12,7 +12,7 @@ Status SceneParser::vec6(const YAML::Node& n, const std::string& what, const cha
   if (n[translation_key]) LFTRACK_RETURN_IF_ERROR(vec3(n[translation_key], what + "." + translation_key, &t));
   if (n[rotation_key]) LFTRACK_RETURN_IF_ERROR(vec3(n[rotation_key], what + "." + rotation_key, &r));
   out->head<3>() = t;
-  out->tail<3>() = r * (3.14159265358979323846 / 180.0);
+  out->tail<3>() = r * tracking::deg_to_rad(1.0);
   return {};
 }
 
@@ -179,7 +179,7 @@ Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
     if (b["amplitude_deg"])
       LFTRACK_RETURN_IF_ERROR(vec3(b["amplitude_deg"], "motion.breathing.amplitude_deg", &r));
     m->motion.breathing_amplitude.head<3>() = t;
-    m->motion.breathing_amplitude.tail<3>() = r * (3.14159265358979323846 / 180.0);
+    m->motion.breathing_amplitude.tail<3>() = r * tracking::deg_to_rad(1.0);
     if (b["period_s"])
       LFTRACK_RETURN_IF_ERROR(
           positive(b["period_s"], "motion.breathing.period_s", &m->motion.breathing_period_s));
@@ -200,7 +200,7 @@ Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
         LFTRACK_RETURN_IF_ERROR(vec3(s["translation_mm"], what + ".translation_mm", &t));
       if (s["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(vec3(s["rotation_deg"], what + ".rotation_deg", &r));
       step.delta.head<3>() = t;
-      step.delta.tail<3>() = r * (3.14159265358979323846 / 180.0);
+      step.delta.tail<3>() = r * tracking::deg_to_rad(1.0);
       m->motion.shifts.push_back(step);
     }
   }

@@ -173,7 +173,6 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
     impl->mask_views.push_back(impl->valid[v].view());
   }
   impl->result.view_similarity.reserve(views);
-  impl->result.trace.reserve(0);
   impl->summary.transitions.reserve(kMaxTransitions);
   return std::unique_ptr<TrackingLoop>(new TrackingLoop(std::move(impl)));
 }
@@ -333,15 +332,14 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
       r->command_sent = 1;
       ++summary.commands;
       approve_next_step = false;
-    } else {
-      hold_actuator(start_ns + period_ns);
+    } else {  // held below, with every other entry into HOLD or FAULT
       transition(index, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault, r);
     }
   } else if (move) {
     approve_next_step = false;
   }
   if (machine.state() == TrackingState::kHold || machine.state() == TrackingState::kFault) {
-    if (state_before != machine.state() || machine.state() != state) hold_actuator(start_ns + period_ns);
+    if (machine.state() != state) hold_actuator(start_ns + period_ns);  // entered this cycle
     predictor.reset();
   }
   r->beam_permit = machine.beam_permit() ? 1 : 0;
