@@ -32,5 +32,6 @@ Command add_journal_command(CLI::App* parent);
 Command add_study_capture_range_command(CLI::App* parent);
 Command add_sim_command(CLI::App* parent);
 Command add_run_command(CLI::App* parent);
+Command add_replay_command(CLI::App* parent);
 
 }  // namespace lftrack::host::cli

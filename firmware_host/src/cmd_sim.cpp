@@ -1,5 +1,6 @@
 // `lftrack sim`: the simulated closed loop on a scene (the main job; `make demo` runs it on the
-// built-in scene). `lftrack run`: the same loop on the scene's own devices.
+// built-in scene). `lftrack run`: the same loop on the scene's own devices. `lftrack replay`:
+// the same loop on an archived frame sequence (no actuator: track and report).
 
 #include <signal.h>
 #include <unistd.h>
@@ -11,8 +12,8 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/allocation_counter.hpp"
+#include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/realtime_setup.hpp"
-#include "lftrack/host/sim_session.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
@@ -28,13 +29,15 @@ struct SimOptions {
   double auto_resume_s = -1;
   std::string rt;  // enforce / ignore; empty: the scene's
   std::string lf_dir;
-  bool run_devices = false;  // `lftrack run`
+  std::string archive;   // frames archived here
+  std::string sequence;  // `lftrack replay`: the archived sequence
+  enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
 };
 
-std::atomic<SimSession*> g_session{nullptr};
+std::atomic<LoopSession*> g_session{nullptr};
 
 extern "C" void on_interrupt(int) {
-  if (SimSession* s = g_session.load()) s->request_stop();
+  if (LoopSession* s = g_session.load()) s->request_stop();
 }
 
 void print_summary(const LoopSummary& s) {
@@ -67,13 +70,13 @@ void print_summary(const LoopSummary& s) {
 Status run(const SimOptions& o) {
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
-  if (o.run_devices) {
+  if (o.mode == SimOptions::Mode::kRun) {
     for (const DetectorSpec& d : scene->detectors)
       if (d.frames != "sim")
-        return failed_precondition(
-            "detector " + d.view.name + " takes frames from '" + d.frames +
-            "': this build drives only simulated detectors (frames: sim); V4L2 and replay "
-            "sources are not built yet");
+        return failed_precondition("detector " + d.view.name + " takes frames from '" + d.frames +
+                                   "': this build drives only simulated detectors (frames: sim) in `run`; "
+                                   "V4L2 is not built yet, and archived frames replay with `lftrack replay "
+                                   "--sequence DIR`");
   }
   RealtimeSpec rt = scene->loop.realtime;
   if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
@@ -87,7 +90,7 @@ Status run(const SimOptions& o) {
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
-  SimSessionOptions so;
+  LoopSessionOptions so;
   so.cycles = o.cycles;
   so.simulated_clock = o.fast;
   so.status_line = !o.json && ::isatty(STDERR_FILENO) == 1;
@@ -100,12 +103,18 @@ Status run(const SimOptions& o) {
   so.control_socket = o.control;
   if (o.auto_resume_s >= 0) so.auto_resume_s = o.auto_resume_s;
   so.light_field_dir = o.lf_dir;
+  so.archive = o.archive;
+  so.replay_sequence = o.sequence;
   so.allocation_count = &process_allocation_count;
-  auto session = SimSession::create(*prepared, so, &pool);
+  auto session = LoopSession::create(*prepared, so, &pool);
   if (!session.ok()) return session.status();
-  spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
-               o.fast ? " on a simulated clock" : "",
-               so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
+  if (const drivers::ReplayFrameSource* replay = (*session)->replay())
+    spdlog::info("{}: replaying {} pairs from {}{}", prepared->scene.name, replay->pairs(), o.sequence,
+                 o.fast ? " as fast as possible" : " at the recorded pace");
+  else
+    spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
+                 o.fast ? " on a simulated clock" : "",
+                 so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
   g_session.store(session->get());
   struct sigaction action {};
   action.sa_handler = on_interrupt;
@@ -114,6 +123,8 @@ Status run(const SimOptions& o) {
   auto summary = (*session)->run();
   g_session.store(nullptr);
   if (!summary.ok()) return summary.status();
+  const drivers::ReplayFrameSource* replay = (*session)->replay();
+  const FrameArchive* archive = (*session)->archive();
   if (o.json) {
     nlohmann::json j = to_json(*summary);
     j["scene"] = prepared->scene.name;
@@ -121,28 +132,66 @@ Status run(const SimOptions& o) {
     j["simulated_clock"] = o.fast;
     j["realtime"] = report->summary();
     if (!o.journal.empty()) j["journal"] = o.journal;
+    if (replay != nullptr) {
+      const drivers::ReplayCounters& c = replay->counters();
+      j["replay"] = {{"sequence", o.sequence},
+                     {"pairs", replay->pairs()},
+                     {"pairs_delivered", c.pairs_delivered},
+                     {"missing_frames", c.missing},
+                     {"unreadable_frames", c.unreadable},
+                     {"wrong_size_frames", c.wrong_size},
+                     {"late_pairs", c.late}};
+    }
+    if (archive != nullptr)
+      j["archive"] = {{"directory", o.archive},
+                      {"pairs_written", archive->pairs_written()},
+                      {"pairs_dropped", archive->pairs_dropped()}};
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     print_summary(*summary);
+    if (replay != nullptr) {
+      const drivers::ReplayCounters& c = replay->counters();
+      std::printf(
+          "replay: %lld of %zu pairs delivered; frames missing %lld, unreadable %lld, wrong size %lld; "
+          "pairs late %lld\n",
+          static_cast<long long>(c.pairs_delivered), replay->pairs(), static_cast<long long>(c.missing),
+          static_cast<long long>(c.unreadable), static_cast<long long>(c.wrong_size),
+          static_cast<long long>(c.late));
+    }
+    if (archive != nullptr)
+      std::printf("frames archived: %llu pairs in %s (lftrack replay --sequence %s), %llu dropped\n",
+                  static_cast<unsigned long long>(archive->pairs_written()), o.archive.c_str(),
+                  o.archive.c_str(), static_cast<unsigned long long>(archive->pairs_dropped()));
     if (!o.journal.empty())
       std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());
   }
   return {};
 }
 
-Command add(CLI::App* parent, const char* name, const char* description, bool run_devices) {
+Command add(CLI::App* parent, const char* name, const char* description, SimOptions::Mode mode) {
   auto o = std::make_shared<SimOptions>();
-  o->run_devices = run_devices;
-  if (run_devices) o->cycles = 0;
+  o->mode = mode;
+  if (mode != SimOptions::Mode::kSim) o->cycles = 0;
+  if (mode == SimOptions::Mode::kReplay) o->journal = "out/replay/journal.lfj";
   CLI::App* app = parent->add_subcommand(name, description);
   add_scene_options(app, &o->scene);
-  app->add_option("--cycles", o->cycles, "Cycles to run (0: until quit)")
+  if (mode == SimOptions::Mode::kReplay)
+    app->add_option("--sequence", o->sequence, "Archived frame sequence (a directory with index.csv)")
+        ->required();
+  app->add_option("--cycles", o->cycles,
+                  mode == SimOptions::Mode::kReplay ? "Cycles to run (0: to the end of the sequence)"
+                                                    : "Cycles to run (0: until quit)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   app->add_flag("--json", o->json, "Print the summary as JSON");
-  if (!run_devices)
+  if (mode == SimOptions::Mode::kSim)
     app->add_flag("--fast", o->fast,
                   "As fast as possible on a simulated clock (deterministic; no real-time timing)");
+  if (mode == SimOptions::Mode::kReplay)
+    app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
+  if (mode != SimOptions::Mode::kReplay)
+    app->add_option("--archive", o->archive,
+                    "Archive every frame pair in this directory (the format `lftrack replay` reads)");
   app->add_option("--journal", o->journal, "Journal file ('' for none)")->capture_default_str();
   app->add_option("--control", o->control, "Control socket path (datagrams: resume, stop, reset, quit)");
   app->add_option("--auto-resume", o->auto_resume_s,
@@ -158,10 +207,15 @@ Command add(CLI::App* parent, const char* name, const char* description, bool ru
 
 Command add_sim_command(CLI::App* parent) {
   return add(parent, "sim", "The simulated closed loop: patient motion, synthetic frames, a virtual couch",
-             false);
+             SimOptions::Mode::kSim);
 }
 Command add_run_command(CLI::App* parent) {
-  return add(parent, "run", "The loop on the scene's devices (real-time set-up as the scene says)", true);
+  return add(parent, "run", "The loop on the scene's devices (real-time set-up as the scene says)",
+             SimOptions::Mode::kRun);
+}
+Command add_replay_command(CLI::App* parent) {
+  return add(parent, "replay", "The loop on an archived frame sequence: track and report, no actuator",
+             SimOptions::Mode::kReplay);
 }
 
 }  // namespace lftrack::host::cli

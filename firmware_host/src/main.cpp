@@ -35,6 +35,7 @@ int main(int argc, char** argv) {
   const Command journal = add_journal_command(&app);
   const Command sim = add_sim_command(&app);
   const Command run_loop = add_run_command(&app);
+  const Command replay = add_replay_command(&app);
 
   try {
     app.parse(argc, argv);
@@ -65,6 +66,8 @@ int main(int argc, char** argv) {
       status = sim();
     else if (app.got_subcommand("run"))
       status = run_loop();
+    else if (app.got_subcommand("replay"))
+      status = replay();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

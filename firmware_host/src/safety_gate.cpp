@@ -33,6 +33,8 @@ const char* to_string(GateReason r) {
       return "actuator read-back disagrees with command";
     case GateReason::kNoResult:
       return "no registration result";
+    case GateReason::kNoFrames:
+      return "no complete frame pair";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -94,6 +96,7 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
       return hold(GateReason::kTotalTooLarge);
   }
   // Quality.
+  if (!in.frames_ok) return counted(GateReason::kNoFrames);
   if (!in.registration_ok) return counted(GateReason::kNoResult);
   if (in.frame_age_ms > limits.max_frame_age_ms) return counted(GateReason::kStaleFrame);
   if (in.pair_skew_ms > limits.max_pair_skew_ms) return counted(GateReason::kUnpairedFrames);

@@ -66,6 +66,7 @@ struct TrackingLoop::Impl {
   bool approve_next_step = false;
   std::int64_t cycles_in_state = 0;
   const char* ended_by_operator = nullptr;
+  const char* ended_by_source = nullptr;
 
   // Statistics.
   Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
@@ -214,6 +215,10 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   const DeviceStatus acquired = parts.frames->acquire(
       &pair, to_deadline(start_ns + std::int64_t(settings.loop.acquire_timeout_ms * 1e6)));
   bool ok = acquired == DeviceStatus::kOk;
+  if (!ok && parts.frames->exhausted()) {  // an archived sequence has ended
+    ended_by_source = "end of the sequence";
+    return false;
+  }
   // On the simulated clock a frame arrives at its exposure time: waiting for the simulator's
   // renderer is not the loop's time.
   if (settings.simulated_clock) cycle_wall_start_ns = monotonic_now_ns();
@@ -237,6 +242,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   // Actuator read-back (where the couch is at the frame time, and whether it took our command).
   GateInput in;
   in.views = static_cast<int>(views);
+  in.frames_ok = acquired == DeviceStatus::kOk;
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(start_ns + period_ns));
@@ -249,6 +255,8 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
       for (int i = 0; i < 6; ++i) r->readback[i] = a.position(i);
     }
   }
+  if (ok && parts.archive != nullptr)
+    parts.archive->append(index, pair, in.readback_valid ? &couch_position : nullptr);
 
   // Register: cold in ALIGN, warm from the last pose (moved with the couch) otherwise.
   if (ok &&
@@ -323,8 +331,13 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   } else {
     transition(index, machine.on(TrackingEvent::kGate, gate), TrackingEvent::kGate, r);
   }
-  const bool move = gate.apply() && (machine.state() == TrackingState::kTrack) && parts.actuator != nullptr;
-  if (move && (in.step.array().abs() > 1e-9).any()) {
+  const bool move = gate.apply() && (machine.state() == TrackingState::kTrack);
+  if (move && parts.actuator == nullptr) {
+    // Track and report: the correction is reported (the journal's pose), and taken as the new
+    // reference, so the step limit judges the change from cycle to cycle.
+    commanded_total = desired;
+    approve_next_step = false;
+  } else if (move && (in.step.array().abs() > 1e-9).any()) {
     const DeviceStatus sent = parts.actuator->command(in.step, to_deadline(start_ns + period_ns));
     if (sent == DeviceStatus::kOk) {
       commanded_total += in.step;
@@ -391,6 +404,7 @@ Result<LoopSummary> TrackingLoop::run() {
       allocations_at_warmup = m.parts.allocation_count();
     JournalRecord record;
     const bool go_on = m.cycle(index, start_ns, &record);
+    if (m.ended_by_source != nullptr) break;  // no pair: not a cycle
     if (aligned_at < 0 && m.summary.aligned) aligned_at = executed;
     const std::int64_t wall_end = monotonic_now_ns();
     if (simulated) wall_start = m.cycle_wall_start_ns;  // the work after the frames arrived
@@ -422,7 +436,9 @@ Result<LoopSummary> TrackingLoop::run() {
   }
   const std::uint64_t allocations_at_end =
       m.parts.allocation_count != nullptr ? m.parts.allocation_count() : 0;
-  m.summary.ended = m.ended_by_operator != nullptr ? m.ended_by_operator : ended;
+  m.summary.ended = m.ended_by_operator != nullptr ? m.ended_by_operator
+                    : m.ended_by_source != nullptr ? m.ended_by_source
+                                                   : ended;
   m.hold_actuator(monotonic_now_ns() + period);
   if (m.settings.status_line) (void)!::write(STDERR_FILENO, "\n", 1);
 

@@ -291,7 +291,7 @@ TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
 namespace lftrack::host {
 namespace {
 
-TEST(Cli, SimPrintsTheJsonSummaryAndWritesTheJournal) {
+TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
   test::TempDir dir;
   std::string scene = *builtin_scene_text(kBuiltinPhantom);
   for (const std::string field :
@@ -301,10 +301,10 @@ TEST(Cli, SimPrintsTheJsonSummaryAndWritesTheJournal) {
   std::ofstream(file) << scene;
   const auto journal = dir.path() / "j.lfj";
   std::string out;
-  const Status s =
-      run_process({lftrack_bin(), "-q", "sim", "--scene", file.string(), "--fast", "--cycles", "20", "--json",
-                   "--journal", journal.string(), "--lf-dir", (dir.path() / "lf").string()},
-                  &out);
+  const Status s = run_process({lftrack_bin(), "-q", "sim", "--scene", file.string(), "--fast", "--cycles",
+                                "20", "--json", "--journal", journal.string(), "--lf-dir",
+                                (dir.path() / "lf").string(), "--archive", (dir.path() / "seq").string()},
+                               &out);
   ASSERT_TRUE(s.ok()) << out;
   const auto j = nlohmann::json::parse(out.substr(out.find('{')));
   EXPECT_EQ(j["cycles"].get<int>(), 20);
@@ -320,6 +320,28 @@ TEST(Cli, SimPrintsTheJsonSummaryAndWritesTheJournal) {
   std::string exported;
   ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", journal.string(), "--csv"}, &exported).ok());
   EXPECT_EQ(std::count(exported.begin(), exported.end(), '\n'), 21) << "a header and one line per cycle";
+  EXPECT_EQ(j["archive"]["pairs_written"].get<int>(), 20);
+
+  // The archive replays through the same loop, with the same summary plus the replay's counts.
+  std::string replayed;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "replay", "--scene", file.string(), "--sequence",
+                           (dir.path() / "seq").string(), "--fast", "--json", "--journal",
+                           (dir.path() / "r.lfj").string(), "--lf-dir", (dir.path() / "lf").string()},
+                          &replayed)
+                  .ok())
+      << replayed;
+  const auto r = nlohmann::json::parse(replayed.substr(replayed.find('{')));
+  EXPECT_EQ(r["cycles"].get<int>(), 20);
+  EXPECT_EQ(r["ended"].get<std::string>(), "end of the sequence");
+  EXPECT_EQ(r["replay"]["pairs_delivered"].get<int>(), 20);
+  EXPECT_EQ(r["replay"]["missing_frames"].get<int>(), 0);
+  EXPECT_TRUE(r["residual_mm"]["mean"].is_null()) << "no truth in a replay";
+  EXPECT_EQ(r["states"]["TRACK"].get<int>(), 20);
+  EXPECT_FALSE(run_process({lftrack_bin(), "replay", "--scene", file.string(), "--sequence",
+                            (dir.path() / "nothing").string()},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("no such sequence directory"), std::string::npos) << out;
 
   // `run` drives only what exists, and says so.
   std::string v4l2 = scene;

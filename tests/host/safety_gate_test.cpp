@@ -86,6 +86,12 @@ const std::vector<GateCase> kCases = {
      GateReason::kReadbackMismatch},
     {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip,
      GateReason::kNoResult},
+    {"NoFrames",
+     [](GateInput& in) {
+       in.frames_ok = false;
+       in.registration_ok = false;
+     },
+     GateDecision::kSkip, GateReason::kNoFrames},
     {"StaleFrame", [](GateInput& in) { in.frame_age_ms = 151; }, GateDecision::kSkip,
      GateReason::kStaleFrame},
     {"UnpairedFrames", [](GateInput& in) { in.pair_skew_ms = 25; }, GateDecision::kSkip,

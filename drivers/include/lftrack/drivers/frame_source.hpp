@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "lftrack/drivers/device.hpp"
@@ -18,6 +19,12 @@ struct Frame {
   tracking::Image<std::uint16_t> pixels;  // raw counts, the whole detector
   std::uint32_t sequence = 0;             // the detector's frame counter
   std::int64_t timestamp_ns = 0;          // CLOCK_MONOTONIC, middle of the exposure
+};
+
+// A detector as a frame source, archive or replay knows it: its scene name and pixel size.
+struct DetectorShape {
+  std::string name;
+  int rows = 0, cols = 0;
 };
 
 struct FramePair {
@@ -35,6 +42,9 @@ class FrameSource {
   virtual void request_exposure(std::int64_t exposure_time_ns) { (void)exposure_time_ns; }
   // In the cycle: fills `pair` with the next pair, or says why not by `deadline`.
   virtual DeviceStatus acquire(FramePair* pair, Deadline deadline) = 0;
+  // True once a finite source (an archived sequence) has delivered its last pair; the loop
+  // then ends instead of counting the missing frames as faults.
+  virtual bool exhausted() const { return false; }
   virtual void close() = 0;
 };
 

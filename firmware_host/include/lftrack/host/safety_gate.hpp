@@ -46,6 +46,7 @@ enum class GateReason : std::uint8_t {
   kViewsDisagree,
   kStaleFrame,
   kUnpairedFrames,
+  kNoFrames,  // the frame source gave no complete pair (timeout, device fault, bad file)
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -53,6 +54,7 @@ const char* to_string(GateReason reason);
 inline constexpr int kMaxGateViews = 4;
 
 struct GateInput {
+  bool frames_ok = true;  // the source delivered a complete pair this cycle
   bool registration_ok = false;
   tracking::Vector6d step = tracking::Vector6d::Zero();   // this cycle's correction (t mm, omega rad)
   tracking::Vector6d total = tracking::Vector6d::Zero();  // correction from the aligned pose

@@ -10,6 +10,8 @@
 // couch target that cancels the prediction, less the last commanded target, is this cycle's
 // correction, which only an APPLY of the gate sends. HOLD and FAULT hold the actuator and drop
 // the beam; leaving HOLD is an operator resume, whose first move is approved like the set-up move.
+// Without an actuator (replay; track and report) an applied correction is only reported, and
+// becomes the reference the next cycle's step is measured from.
 //
 // Everything is allocated by create(); steady-state cycles allocate nothing (tested), take no
 // lock another thread holds for long, and wait only with a deadline. Overruns are counted and
@@ -28,6 +30,7 @@
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/host/frame_archive.hpp"
 #include "lftrack/host/histogram.hpp"
 #include "lftrack/host/journal.hpp"
 #include "lftrack/host/motion_predictor.hpp"
@@ -42,7 +45,7 @@
 namespace lftrack::host {
 
 // What the loop runs on. Owned by the caller; all must outlive the loop. Optional parts may be
-// null: no actuator (track and report), no journal, no operator, no truth (not a simulation),
+// null: no actuator (track and report), no journal or archive, no operator, no truth (not a simulation),
 // no allocation counter (allocations_per_cycle is then not reported).
 struct LoopParts {
   const PreparedScene* scene = nullptr;
@@ -51,6 +54,7 @@ struct LoopParts {
   std::vector<tracking::DetectorCorrection> corrections;  // per detector
   drivers::Actuator* actuator = nullptr;
   JournalWriter* journal = nullptr;
+  FrameArchive* archive = nullptr;  // every acquired pair, numbered by cycle
   OperatorInput* operator_input = nullptr;
   const sim::SimulatedRoom* truth = nullptr;
   std::uint64_t (*allocation_count)() = nullptr;

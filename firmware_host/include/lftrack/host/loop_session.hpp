@@ -1,0 +1,64 @@
+#pragma once
+// One TrackingLoop assembled from a scene with everything around it: the scene's registration,
+// the journal, the frame archive and the operator inputs, and a frame source that is either
+//  - the simulated room (`lftrack sim`, the closed-loop tests): set-up error, patient motion,
+//    the simulator's detectors and the virtual couch; or
+//  - an archived sequence (`lftrack replay`): frames from disk, no actuator (track and report).
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+
+#include "lftrack/drivers/replay_frame_source.hpp"
+#include "lftrack/host/frame_archive.hpp"
+#include "lftrack/host/operator_input.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/host/sim_frame_source.hpp"
+#include "lftrack/host/tracking_loop.hpp"
+
+namespace lftrack::tracking {
+class ThreadPool;
+}
+
+namespace lftrack::host {
+
+struct LoopSessionOptions {
+  std::int64_t cycles = 300;
+  bool simulated_clock = false;  // true: as fast as possible, deterministic (see tracking_loop.hpp)
+  bool status_line = false;
+  std::filesystem::path journal;          // empty: no journal
+  std::filesystem::path control_socket;   // empty: none
+  bool terminal_operator = false;         // keys on a terminal's standard input
+  std::optional<double> auto_resume_s;    // an unattended operator resumes this long into each HOLD
+  std::filesystem::path light_field_dir;  // empty: the scene's default folder
+  SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
+  std::filesystem::path archive;          // empty: frames not archived
+  // Replay this archived sequence instead of simulating (simulated_clock: as fast as possible;
+  // otherwise at the recorded pace).
+  std::filesystem::path replay_sequence;
+  std::uint64_t (*allocation_count)() = nullptr;
+};
+
+class LoopSession {
+ public:
+  ~LoopSession();
+  // Builds (or loads) the renderers' light fields, the registration on `pool`, the room and its
+  // devices, and the loop. `scene` and `pool` must outlive the session.
+  static Result<std::unique_ptr<LoopSession>> create(const PreparedScene& scene,
+                                                     const LoopSessionOptions& options,
+                                                     tracking::ThreadPool* pool);
+  // Runs the loop; closes the journal and the archive.
+  Result<LoopSummary> run();
+  void request_stop();
+  const sim::SimulatedRoom* room() const;            // null when replaying
+  const drivers::ReplayFrameSource* replay() const;  // null when simulating
+  const FrameArchive* archive() const;               // null without one
+
+ private:
+  struct Parts;
+  explicit LoopSession(std::unique_ptr<Parts> parts);
+  std::unique_ptr<Parts> parts_;
+};
+
+}  // namespace lftrack::host

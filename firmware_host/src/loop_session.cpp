@@ -1,0 +1,149 @@
+#include "lftrack/host/loop_session.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+
+#include "lftrack/drivers/recorded_actuator.hpp"
+#include "lftrack/host/scene_registration.hpp"
+
+namespace lftrack::host {
+
+struct LoopSession::Parts {
+  std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
+  std::unique_ptr<tracking::Registration> registration;
+  std::unique_ptr<sim::SimulatedRoom> room;
+  std::unique_ptr<SimFrameSource> sim_frames;
+  std::unique_ptr<drivers::ReplayFrameSource> replay_frames;
+  std::unique_ptr<drivers::RecordedActuator> recorded_couch;
+  std::unique_ptr<JournalWriter> journal;
+  std::unique_ptr<FrameArchive> archive;
+  OperatorInputs operators;
+  std::unique_ptr<TrackingLoop> loop;
+};
+
+LoopSession::LoopSession(std::unique_ptr<Parts> parts) : parts_(std::move(parts)) {}
+LoopSession::~LoopSession() = default;
+
+Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p, const LoopSessionOptions& o,
+                                                         tracking::ThreadPool* pool) {
+  auto parts = std::make_unique<Parts>();
+  auto renderer = make_scene_renderer(p, p.scene.renderer, o.light_field_dir, pool);
+  if (!renderer.ok()) return renderer.status().with_context("tracking renderer");
+  parts->registration_renderer = *renderer;
+  auto registration = make_scene_registration(p, parts->registration_renderer, p.scene.registration, pool);
+  if (!registration.ok()) return registration.status();
+  parts->registration = std::move(registration).value();
+
+  std::vector<drivers::DetectorShape> shapes;
+  for (const DetectorSpec& d : p.scene.detectors) shapes.push_back({d.view.name, d.view.rows, d.view.cols});
+  const bool replaying = !o.replay_sequence.empty();
+  if (replaying) {
+    auto sequence = drivers::read_frame_sequence(o.replay_sequence);
+    if (!sequence.ok()) return sequence.status();
+    if (!sequence->note.empty()) spdlog::warn("{}: {}", o.replay_sequence.string(), sequence->note);
+    drivers::ReplayOptions replay;
+    replay.realtime = !o.simulated_clock;
+    parts->replay_frames =
+        std::make_unique<drivers::ReplayFrameSource>(std::move(sequence).value(), shapes, replay);
+    if (parts->replay_frames->sequence().has_actuator) {
+      parts->recorded_couch = std::make_unique<drivers::RecordedActuator>(parts->replay_frames.get());
+      LFTRACK_RETURN_IF_ERROR(parts->recorded_couch->open());
+    }
+  } else {
+    auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);
+    if (!frame_renderer.ok()) return frame_renderer.status();
+    parts->frame_renderer = *frame_renderer;
+    sim::SimulatedRoomSpec room;
+    room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
+    room.origin_room_mm = p.registration_origin_room_mm();
+    room.setup_error = p.scene.motion.setup_error;
+    room.motion = p.scene.motion.motion;
+    room.couch = p.scene.actuator.couch;
+    room.residual_box_mm = p.scene.registration.tre_box_mm;
+    parts->room = std::make_unique<sim::SimulatedRoom>(room);
+    SimFrameSourceOptions frame_options = o.frames;
+    frame_options.wait_for_frames = o.simulated_clock;
+    if (p.scene.sim.renderer == "lightfield") frame_options.margin_px = 0;  // the field covers the ROI only
+    parts->sim_frames =
+        std::make_unique<SimFrameSource>(p, parts->frame_renderer, parts->room.get(), frame_options);
+  }
+  const bool has_couch = !replaying && p.scene.actuator.type == "virtual";
+  if (!o.archive.empty()) {
+    FrameArchiveOptions archive_options;
+    archive_options.with_actuator = has_couch;
+    auto archive = FrameArchive::open(o.archive, shapes, archive_options);
+    if (!archive.ok()) return archive.status();
+    parts->archive = std::move(archive).value();
+  }
+
+  if (!o.journal.empty()) {
+    auto journal = JournalWriter::open(o.journal);
+    if (!journal.ok()) return journal.status();
+    parts->journal = std::move(journal).value();
+  }
+  if (o.terminal_operator) {
+    auto terminal = TerminalOperator::open();
+    if (terminal.ok()) parts->operators.add(std::move(terminal).value());
+  }
+  if (!o.control_socket.empty()) {
+    auto socket = ControlSocket::open(o.control_socket);
+    if (!socket.ok()) return socket.status();
+    parts->operators.add(std::move(socket).value());
+  }
+  if (o.auto_resume_s) {
+    const double period_s = 1e-3 * p.scene.loop.period_ms;
+    parts->operators.add(std::make_unique<ScriptedOperator>(
+        static_cast<std::int64_t>(std::ceil(*o.auto_resume_s / period_s))));
+  }
+
+  LoopParts lp;
+  lp.scene = &p;
+  lp.registration = parts->registration.get();
+  lp.frames =
+      replaying ? static_cast<drivers::FrameSource*>(parts->replay_frames.get()) : parts->sim_frames.get();
+  lp.archive = parts->archive.get();
+  lp.corrections.assign(p.scene.detectors.size(), sim::detector_correction(scene_detector_model(p)));
+  lp.actuator = has_couch ? &parts->room->couch_actuator() : parts->recorded_couch.get();
+  lp.journal = parts->journal.get();
+  lp.operator_input = parts->operators.empty() ? nullptr : &parts->operators;
+  lp.truth = parts->room.get();  // null when replaying
+  lp.allocation_count = o.allocation_count;
+  LoopSettings settings;
+  settings.loop = p.scene.loop;
+  settings.limits = p.scene.safety;
+  settings.actuator_latency_s = lp.actuator != nullptr ? p.scene.actuator.couch.latency_s : 0.0;
+  settings.cycles = o.cycles;
+  settings.simulated_clock = o.simulated_clock;
+  settings.status_line = o.status_line;
+  auto loop = TrackingLoop::create(lp, settings);
+  if (!loop.ok()) return loop.status();
+  parts->loop = std::move(loop).value();
+  return std::unique_ptr<LoopSession>(new LoopSession(std::move(parts)));
+}
+
+Result<LoopSummary> LoopSession::run() {
+  auto summary = parts_->loop->run();
+  if (parts_->journal) {
+    if (Status s = parts_->journal->close(); !s.ok() && summary.ok()) return s;
+  }
+  if (parts_->archive) {
+    if (Status s = parts_->archive->close(); !s.ok() && summary.ok()) return s;
+  }
+  return summary;
+}
+
+void LoopSession::request_stop() {
+  parts_->loop->request_stop();
+}
+const sim::SimulatedRoom* LoopSession::room() const {
+  return parts_->room.get();
+}
+const drivers::ReplayFrameSource* LoopSession::replay() const {
+  return parts_->replay_frames.get();
+}
+const FrameArchive* LoopSession::archive() const {
+  return parts_->archive.get();
+}
+
+}  // namespace lftrack::host
