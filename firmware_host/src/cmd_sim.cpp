@@ -80,8 +80,9 @@ Status run(const SimOptions& o) {
   }
   RealtimeSpec rt = scene->loop.realtime;
   if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
-  // Real-time set-up first, so every thread made afterwards (registration workers, the frame
-  // renderer, the journal writer) inherits the policy and affinity.
+  // Real-time set-up first, so every thread made afterwards inherits the policy and affinity:
+  // the registration's workers run at the cycle's priority; the simulated detectors drop one
+  // level below it, the journal and archive writers to SCHED_OTHER (realtime_setup.hpp).
   auto report = apply_realtime_setup(rt);
   if (!report.ok()) return report.status();
   for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "lftrack/drivers/frame_files.hpp"
+#include "lftrack/host/realtime_setup.hpp"
 
 namespace lftrack::host {
 
@@ -91,6 +92,7 @@ Status FrameArchive::write_slot(const Slot& slot) {
 }
 
 void FrameArchive::run() {
+  make_current_thread_best_effort();  // the slots absorb its delays; the cycle must not see them
   for (;;) {
     std::uint32_t s = 0;
     if (filled_.pop(&s)) {

@@ -1,5 +1,7 @@
 #include "lftrack/host/journal.hpp"
 
+#include "lftrack/host/realtime_setup.hpp"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -89,6 +91,7 @@ bool JournalWriter::append(const JournalRecord& record) {
 }
 
 void JournalWriter::run() {
+  make_current_thread_best_effort();  // the queue absorbs its delays; the cycle must not see them
   using Clock = std::chrono::steady_clock;
   auto last_sync = Clock::now();
   // A batch of encoded frames per write().
@@ -130,7 +133,8 @@ Status JournalWriter::close() {
 Result<JournalContents> read_journal(const std::filesystem::path& file) {
   std::ifstream in(file, std::ios::binary);
   if (!in) return not_found(file.string() + ": cannot open journal");
-  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)),
+                                         std::istreambuf_iterator<char>());
   if (bytes.size() < kHeaderBytes || std::memcmp(bytes.data(), kFileMagic, 8) != 0)
     return invalid_argument(file.string() + ": not an lftrack journal");
   std::uint32_t version = 0, record_size = 0;

@@ -56,4 +56,22 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
   return report;
 }
 
+bool lower_current_thread_priority(int below) {
+  int policy = 0;
+  sched_param param{};
+  if (pthread_getschedparam(pthread_self(), &policy, &param) != 0) return false;
+  if (policy != SCHED_FIFO && policy != SCHED_RR) return true;
+  param.sched_priority = std::max(1, param.sched_priority - below);
+  return pthread_setschedparam(pthread_self(), policy, &param) == 0;
+}
+
+bool make_current_thread_best_effort() {
+  int policy = 0;
+  sched_param param{};
+  if (pthread_getschedparam(pthread_self(), &policy, &param) != 0) return false;
+  if (policy == SCHED_OTHER) return true;
+  param.sched_priority = 0;
+  return pthread_setschedparam(pthread_self(), SCHED_OTHER, &param) == 0;
+}
+
 }  // namespace lftrack::host

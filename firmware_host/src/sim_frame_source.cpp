@@ -1,5 +1,7 @@
 #include "lftrack/host/sim_frame_source.hpp"
 
+#include "lftrack/host/realtime_setup.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -67,6 +69,9 @@ void SimFrameSource::request_exposure(std::int64_t exposure_time_ns) {
 }
 
 void SimFrameSource::render_loop() {
+  // The simulated detectors stand for hardware running beside the host: they render while the
+  // cycle sleeps and never preempt it.
+  lower_current_thread_priority();
   for (;;) {
     Job job;
     {

@@ -70,6 +70,7 @@ struct TrackingLoop::Impl {
 
   // Statistics.
   Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
+  Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
   double evaluations_sum = 0;
   LoopSummary summary;
 
@@ -212,6 +213,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   const bool aligning = state == TrackingState::kAlign;
 
   // Acquire and preprocess.
+  const std::int64_t acquire_started_ns = monotonic_now_ns();
   const DeviceStatus acquired = parts.frames->acquire(
       &pair, to_deadline(start_ns + std::int64_t(settings.loop.acquire_timeout_ms * 1e6)));
   bool ok = acquired == DeviceStatus::kOk;
@@ -222,6 +224,8 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   // On the simulated clock a frame arrives at its exposure time: waiting for the simulator's
   // renderer is not the loop's time.
   if (settings.simulated_clock) cycle_wall_start_ns = monotonic_now_ns();
+  const std::int64_t acquired_ns = monotonic_now_ns();
+  if (!aligning) acquire_ms.add(ms_between(acquire_started_ns, acquired_ns));
   std::int64_t oldest_frame_ns = start_ns, newest_frame_ns = start_ns;
   if (ok) {
     oldest_frame_ns = newest_frame_ns = pair.frames[0].timestamp_ns;
@@ -234,6 +238,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
       newest_frame_ns = std::max(newest_frame_ns, f.timestamp_ns);
     }
     ok = preprocess();
+    if (!aligning) preprocess_ms.add(ms_between(acquired_ns, monotonic_now_ns()));
   }
 
   // The truth at the frame time, before this cycle's command moves the simulated room on.
@@ -455,6 +460,10 @@ Result<LoopSummary> TrackingLoop::run() {
   s.registration_p50_ms = m.registration_ms.quantile(0.5);
   s.registration_p95_ms = m.registration_ms.quantile(0.95);
   s.registration_max_ms = m.registration_ms.max();
+  s.acquire_p95_ms = m.acquire_ms.quantile(0.95);
+  s.acquire_max_ms = m.acquire_ms.max();
+  s.preprocess_p95_ms = m.preprocess_ms.quantile(0.95);
+  s.preprocess_max_ms = m.preprocess_ms.max();
   s.evaluations_mean =
       m.registration_ms.count() > 0 ? m.evaluations_sum / double(m.registration_ms.count()) : 0;
   if (m.parts.allocation_count != nullptr && aligned_at >= 0) {
@@ -477,6 +486,8 @@ nlohmann::json to_json(const LoopSummary& s) {
       {"p50", s.cycle_p50_ms}, {"p95", s.cycle_p95_ms}, {"p99", s.cycle_p99_ms}, {"max", s.cycle_max_ms}};
   j["registration_ms"] = {
       {"p50", s.registration_p50_ms}, {"p95", s.registration_p95_ms}, {"max", s.registration_max_ms}};
+  j["acquire_ms"] = {{"p95", s.acquire_p95_ms}, {"max", s.acquire_max_ms}};
+  j["preprocess_ms"] = {{"p95", s.preprocess_p95_ms}, {"max", s.preprocess_max_ms}};
   j["evaluations_mean"] = s.evaluations_mean;
   j["overruns"] = s.overruns;
   j["skipped_periods"] = s.skipped_periods;

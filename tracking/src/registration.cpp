@@ -206,6 +206,11 @@ Result<std::unique_ptr<Registration>> Registration::create(std::shared_ptr<const
     r->slots_.push_back(std::move(slot));
   }
   r->references_.resize(r->levels_.size());
+  r->level_prepared_.assign(r->levels_.size(), 0);
+  for (const auto& view : r->setup_.views) {
+    r->frames_.emplace_back(view.window.rows, view.window.cols);
+    r->frame_masks_.emplace_back(view.window.rows, view.window.cols, 1);
+  }
   for (std::size_t l = 0; l < r->levels_.size(); ++l) {
     for (std::size_t v = 0; v < r->setup_.views.size(); ++v) {
       const XrayView& view = r->setup_.views[v].view;
@@ -235,35 +240,56 @@ Status Registration::set_frames(const std::vector<ImageView<const float>>& frame
   }
   frames_set_ = false;
   for (std::size_t v = 0; v < nv; ++v) {
-    const ImageView<const unsigned char> mask = valid.empty() ? ImageView<const unsigned char>{} : valid[v];
-    for (std::size_t level = 0; level < levels_.size(); ++level) {
-      const int bin = levels_[level].level.bin;
-      const PixelWindow& lw = levels_[level].windows[v];
-      ReferenceLevel& ref = *references_[level][v];
-      // Bin: the mean of the usable pixels of each block; a block is usable if most of it is.
-      for (int r = 0; r < lw.rows; ++r) {
-        for (int c = 0; c < lw.cols; ++c) {
-          double sum = 0;
-          int n = 0;
-          for (int dr = 0; dr < bin; ++dr)
-            for (int dc = 0; dc < bin; ++dc) {
-              const int rr = r * bin + dr, cc = c * bin + dc;
-              const float value = frames[v].at(rr, cc);
-              if ((!mask.empty() && mask.at(rr, cc) == 0) || !std::isfinite(value)) continue;
-              sum += value;
-              ++n;
-            }
-          ref.binned_valid.at(r, c) = 2 * n > bin * bin ? 1 : 0;
-          ref.binned.at(r, c) = n > 0 ? static_cast<float>(sum / n) : 0.f;
-        }
-      }
-      LFTRACK_RETURN_IF_ERROR(ref.blur.blur(ref.binned.view(), ref.binned_valid.view(), ref.blurred.view()));
-      for (auto& slot : slots_)
-        LFTRACK_RETURN_IF_ERROR(
-            slot->similarity[level][v]->prepare(ref.blurred.view(), ref.binned_valid.view()));
+    const PixelWindow& w = setup_.views[v].window;
+    for (int r = 0; r < w.rows; ++r) {
+      std::copy(frames[v].row_ptr(r), frames[v].row_ptr(r) + w.cols, frames_[v].view().row_ptr(r));
+      unsigned char* mask_row = frame_masks_[v].view().row_ptr(r);
+      if (valid.empty() || valid[v].empty())
+        std::fill(mask_row, mask_row + w.cols, static_cast<unsigned char>(1));
+      else
+        std::copy(valid[v].row_ptr(r), valid[v].row_ptr(r) + w.cols, mask_row);
     }
   }
+  std::fill(level_prepared_.begin(), level_prepared_.end(), 0);
   frames_set_ = true;
+  return {};
+}
+
+Status Registration::prepare_level(int level) {
+  if (level_prepared_[std::size_t(level)] != 0) return {};
+  const int bin = levels_[std::size_t(level)].level.bin;
+  const bool blurred = levels_[std::size_t(level)].level.blur_sigma_mm > 0;
+  for (std::size_t v = 0; v < setup_.views.size(); ++v) {
+    const ImageView<const float> frame = frames_[v].view();
+    const ImageView<const unsigned char> mask = frame_masks_[v].view();
+    const PixelWindow& lw = levels_[std::size_t(level)].windows[v];
+    ReferenceLevel& ref = *references_[std::size_t(level)][v];
+    // Bin: the mean of the usable pixels of each block; a block is usable if most of it is.
+    for (int r = 0; r < lw.rows; ++r) {
+      for (int c = 0; c < lw.cols; ++c) {
+        double sum = 0;
+        int n = 0;
+        for (int dr = 0; dr < bin; ++dr)
+          for (int dc = 0; dc < bin; ++dc) {
+            const int rr = r * bin + dr, cc = c * bin + dc;
+            const float value = frame.at(rr, cc);
+            if (mask.at(rr, cc) == 0 || !std::isfinite(value)) continue;
+            sum += value;
+            ++n;
+          }
+        ref.binned_valid.at(r, c) = 2 * n > bin * bin ? 1 : 0;
+        ref.binned.at(r, c) = n > 0 ? static_cast<float>(sum / n) : 0.f;
+      }
+    }
+    if (blurred)
+      LFTRACK_RETURN_IF_ERROR(ref.blur.blur(ref.binned.view(), ref.binned_valid.view(), ref.blurred.view()));
+    else  // a blur of width 0 is the identity
+      ref.blurred.pixels() = ref.binned.pixels();
+    for (auto& slot : slots_)
+      LFTRACK_RETURN_IF_ERROR(
+          slot->similarity[std::size_t(level)][v]->prepare(ref.blurred.view(), ref.binned_valid.view()));
+  }
+  level_prepared_[std::size_t(level)] = 1;
   return {};
 }
 
@@ -321,7 +347,7 @@ double Registration::evaluate(int slot_index, int level, const Pose& T, std::vec
 
 double Registration::cost_at(const Pose& T, double blur_sigma_mm, int bin) {
   const int level = level_index(blur_sigma_mm, bin);
-  if (!frames_set_ || level < 0) return std::numeric_limits<double>::infinity();
+  if (!frames_set_ || level < 0 || !prepare_level(level).ok()) return std::numeric_limits<double>::infinity();
   return evaluate(0, level, T, nullptr);
 }
 
@@ -364,6 +390,10 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   if (prepared.optimizers.empty() || prepared.optimizers.size() != prepared.plan.passes.size())
     return invalid_argument("registration: the plan was not prepared");
   const auto t0 = std::chrono::steady_clock::now();
+  // The references of the levels this plan uses (level 0 scores the result), made once per
+  // set of frames; their time counts against the budget.
+  LFTRACK_RETURN_IF_ERROR(prepare_level(0));
+  for (int level : prepared.levels) LFTRACK_RETURN_IF_ERROR(prepare_level(level));
   const double budget_ms = std::min(max_ms, prepared.plan.max_ms);
   result->evaluations = 0;
   result->cost = 0;

@@ -24,4 +24,13 @@ struct RealtimeReport {
 // failure is returned as an error with the reason and what to change (capabilities, limits).
 Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec);
 
+// For a helper thread made after the set-up (it inherited the cycle's policy) that must never
+// delay the cycle: under SCHED_FIFO/RR it drops to `below` priority levels under the one it
+// inherited (at least 1), so it runs whenever the cycle's threads wait and never preempts
+// them; under SCHED_OTHER nothing changes. Returns false if the change was refused.
+bool lower_current_thread_priority(int below = 1);
+// For a thread whose work may wait (journal and archive writers with deep queues): back to
+// SCHED_OTHER, sharing the CPU with ordinary processes.
+bool make_current_thread_best_effort();
+
 }  // namespace lftrack::host

@@ -91,6 +91,9 @@ struct LoopSummary {
   std::optional<double> residual_mean_mm, residual_p95_mm, residual_max_mm;
   double cycle_p50_ms = 0, cycle_p95_ms = 0, cycle_p99_ms = 0, cycle_max_ms = 0;  // work, not sleep
   double registration_p50_ms = 0, registration_p95_ms = 0, registration_max_ms = 0;
+  // Waiting for the pair (real clock: from the cycle's start; simulated: the copy only), and
+  // preprocessing it; TRACK/HOLD cycles.
+  double acquire_p95_ms = 0, acquire_max_ms = 0, preprocess_p95_ms = 0, preprocess_max_ms = 0;
   double evaluations_mean = 0;
   std::optional<double> allocations_per_cycle;
   std::int64_t allocation_cycles = 0;  // the steady-state cycles they were counted over

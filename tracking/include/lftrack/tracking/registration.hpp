@@ -127,7 +127,8 @@ class Registration {
   const Vector6d& parameter_scales() const { return scales_; }
 
   // The preprocessed frames of the views' windows (line integrals) and their masks (empty:
-  // all valid); blurred copies are made for each blur level.
+  // all valid), copied; the binned and blurred references of a level are made when a run first
+  // needs it (their time is the run's).
   Status set_frames(const std::vector<ImageView<const float>>& frames,
                     const std::vector<ImageView<const unsigned char>>& valid);
   void set_fiducial(const std::optional<FiducialTerm>& term) { fiducial_ = term; }
@@ -176,6 +177,13 @@ class Registration {
   std::vector<std::unique_ptr<Slot>> slots_;
   // Per level and view: the reference frame binned and blurred, and the blur that makes it.
   std::vector<std::vector<std::unique_ptr<ReferenceLevel>>> references_;
+  // The frames of set_frames(), per view, kept until the next call; a level's references are
+  // made from them when a run first needs that level (a tracking plan never pays for the
+  // alignment plan's blurred levels).
+  std::vector<Image<float>> frames_;
+  std::vector<Image<unsigned char>> frame_masks_;
+  std::vector<char> level_prepared_;
+  Status prepare_level(int level);
   std::optional<FiducialTerm> fiducial_;
   bool frames_set_ = false;
 };
