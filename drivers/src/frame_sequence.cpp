@@ -5,7 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
-#include <map>
+#include <functional>
 #include <sstream>
 
 namespace lftrack::drivers {
@@ -32,87 +32,89 @@ bool parse_integer(const std::string& text, T* value) {
   return ec == std::errc() && ptr == end;
 }
 
-// One index row, or why it is not one.
-struct IndexRow {
-  std::int64_t pair = 0, timestamp_ns = 0;
-  std::uint32_t sequence = 0;
-  std::string detector, file;
-};
-
-std::string parse_row(const std::string& line, IndexRow* row) {
-  const std::vector<std::string> f = split_csv(line);
-  if (f.size() != 5) return "5 fields expected, found " + std::to_string(f.size());
-  if (!parse_integer(f[0], &row->pair) || row->pair < 0) return "pair '" + f[0] + "' is not a count";
-  if (f[1].empty()) return "no detector name";
-  if (!parse_integer(f[2], &row->sequence)) return "sequence '" + f[2] + "' is not a 32-bit count";
-  if (!parse_integer(f[3], &row->timestamp_ns)) return "timestamp_ns '" + f[3] + "' is not an integer";
-  if (f[4].empty()) return "no file";
-  row->detector = f[1];
-  row->file = f[4];
-  return {};
-}
-
-// Adds a parsed row to the sequence, or says why it does not fit.
-std::string add_row(const IndexRow& row, const fs::path& directory, FrameSequence* sequence,
-                    std::map<std::int64_t, std::size_t>* pair_slot) {
-  if (!sequence->pairs.empty() && row.pair < sequence->pairs.back().index)
-    return "pair " + std::to_string(row.pair) + " after pair " +
-           std::to_string(sequence->pairs.back().index) + ": pairs must ascend";
-  auto detector = std::find(sequence->detectors.begin(), sequence->detectors.end(), row.detector);
-  if (detector == sequence->detectors.end()) {
-    sequence->detectors.push_back(row.detector);
-    for (SequencePair& p : sequence->pairs) p.frames.emplace_back();
-    detector = sequence->detectors.end() - 1;
-  }
-  const std::size_t d = std::size_t(detector - sequence->detectors.begin());
-  auto [slot, added] = pair_slot->emplace(row.pair, sequence->pairs.size());
-  if (added) sequence->pairs.push_back({row.pair, std::vector<SequenceFrame>(sequence->detectors.size())});
-  SequenceFrame& frame = sequence->pairs[slot->second].frames[d];
-  if (frame.present) return "detector " + row.detector + " appears twice in pair " + std::to_string(row.pair);
-  frame.present = true;
-  frame.sequence = row.sequence;
-  frame.timestamp_ns = row.timestamp_ns;
-  frame.path = (directory / row.file).string();
-  return {};
-}
-
-// Reads actuator.csv into the pairs it names; rows for pairs the index lacks are ignored.
-Status read_actuator_file(const fs::path& file, FrameSequence* sequence) {
+// Reads one of the sequence's CSV files: blank lines and '#' comments are skipped, the first
+// other line must be `header`, and each further line's fields go to `row`, which returns why
+// they are not a row (empty: they are). A last line without its newline is an unfinished write
+// (the archive was killed): it is ignored and `note` says so.
+Status read_csv_rows(const fs::path& file, const char* header,
+                     const std::function<std::string(const std::vector<std::string>&)>& row,
+                     std::string* note) {
   std::ifstream in(file);
   if (!in) return not_found(file.string() + ": cannot open");
-  std::map<std::int64_t, SequencePair*> by_index;
-  for (SequencePair& p : sequence->pairs) by_index[p.index] = &p;
   std::string line;
   bool header_seen = false;
   for (int line_number = 1; std::getline(in, line); ++line_number) {
-    if (in.eof()) break;  // no newline: an unfinished write, ignored like the index's
+    if (in.eof()) {
+      if (!line.empty())
+        *note += (note->empty() ? "" : "; ") + file.filename().string() + ": ignored line " +
+                 std::to_string(line_number) + ": it has no newline (an unfinished write)";
+      break;
+    }
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
-    auto where = [&](const std::string& what) {
-      return corrupt_data(file.string() + ":" + std::to_string(line_number) + ": " + what);
-    };
+    std::string problem;
     if (!header_seen) {
-      if (line != kActuatorHeader) return where(std::string("the header must be '") + kActuatorHeader + "'");
-      header_seen = true;
-      continue;
+      if (line != header) problem = std::string("the header must be '") + header + "'";
+      header_seen = problem.empty();
+    } else {
+      problem = row(split_csv(line));
     }
-    const std::vector<std::string> f = split_csv(line);
-    std::int64_t pair = 0;
-    double travel[6] = {};
-    bool ok = f.size() == 7 && parse_integer(f[0], &pair);
-    for (std::size_t i = 0; ok && i < 6; ++i) {
-      char* end = nullptr;
-      travel[i] = std::strtod(f[i + 1].c_str(), &end);
-      ok = end != f[i + 1].c_str() && *end == '\0' && std::isfinite(travel[i]);
-    }
-    if (!ok) return where("a pair number and 6 finite numbers expected");
-    auto it = by_index.find(pair);
-    if (it == by_index.end()) continue;
-    it->second->has_actuator = true;
-    std::copy(travel, travel + 6, it->second->actuator_travel);
+    if (!problem.empty())
+      return corrupt_data(file.string() + ":" + std::to_string(line_number) + ": " + problem);
   }
-  if (!header_seen) return corrupt_data(file.string() + ": empty");
-  sequence->has_actuator = true;
+  if (!header_seen) return corrupt_data(file.string() + ": empty (no header line)");
+  return {};
+}
+
+// One index row into the sequence, or why it is not one.
+std::string add_index_row(const std::vector<std::string>& f, const fs::path& directory,
+                          FrameSequence* sequence) {
+  std::int64_t pair = 0, timestamp_ns = 0;
+  std::uint32_t counter = 0;
+  if (f.size() != 5) return "5 fields expected, found " + std::to_string(f.size());
+  if (!parse_integer(f[0], &pair) || pair < 0) return "pair '" + f[0] + "' is not a count";
+  if (f[1].empty()) return "no detector name";
+  if (!parse_integer(f[2], &counter)) return "sequence '" + f[2] + "' is not a 32-bit count";
+  if (!parse_integer(f[3], &timestamp_ns)) return "timestamp_ns '" + f[3] + "' is not an integer";
+  if (f[4].empty()) return "no file";
+  std::vector<SequencePair>& pairs = sequence->pairs;
+  if (!pairs.empty() && pair < pairs.back().index)
+    return "pair " + f[0] + " after pair " + std::to_string(pairs.back().index) + ": pairs must ascend";
+  auto detector = std::find(sequence->detectors.begin(), sequence->detectors.end(), f[1]);
+  if (detector == sequence->detectors.end()) {
+    sequence->detectors.push_back(f[1]);
+    for (SequencePair& p : pairs) p.frames.emplace_back();
+    detector = sequence->detectors.end() - 1;
+  }
+  // Pairs ascend, so a row belongs to the last pair or starts the next.
+  if (pairs.empty() || pair > pairs.back().index)
+    pairs.push_back({pair, std::vector<SequenceFrame>(sequence->detectors.size())});
+  SequenceFrame& frame = pairs.back().frames[std::size_t(detector - sequence->detectors.begin())];
+  if (frame.present) return "detector " + f[1] + " appears twice in pair " + f[0];
+  frame.present = true;
+  frame.sequence = counter;
+  frame.timestamp_ns = timestamp_ns;
+  frame.path = (directory / f[4]).string();
+  return {};
+}
+
+// One actuator.csv row into the pair it names (rows for pairs the index lacks are ignored).
+std::string add_actuator_row(const std::vector<std::string>& f, FrameSequence* sequence) {
+  std::int64_t pair = 0;
+  double travel[6] = {};
+  bool ok = f.size() == 7 && parse_integer(f[0], &pair);
+  for (std::size_t i = 0; ok && i < 6; ++i) {
+    char* end = nullptr;
+    travel[i] = std::strtod(f[i + 1].c_str(), &end);
+    ok = end != f[i + 1].c_str() && *end == '\0' && std::isfinite(travel[i]);
+  }
+  if (!ok) return "a pair number and 6 finite numbers expected";
+  auto it = std::lower_bound(sequence->pairs.begin(), sequence->pairs.end(), pair,
+                             [](const SequencePair& p, std::int64_t index) { return p.index < index; });
+  if (it != sequence->pairs.end() && it->index == pair) {
+    it->has_actuator = true;
+    std::copy(travel, travel + 6, it->actuator_travel);
+  }
   return {};
 }
 
@@ -122,39 +124,21 @@ Result<FrameSequence> read_frame_sequence(const fs::path& directory) {
   const fs::path index_path = directory / kSequenceIndexName;
   std::error_code ec;
   if (!fs::is_directory(directory, ec)) return not_found(directory.string() + ": no such sequence directory");
-  std::ifstream in(index_path);
-  if (!in) return not_found(index_path.string() + ": no index (a sequence directory holds index.csv)");
+  if (!fs::exists(index_path, ec))
+    return not_found(index_path.string() + ": no index (a sequence directory holds index.csv)");
   FrameSequence sequence;
   sequence.directory = directory;
-  std::map<std::int64_t, std::size_t> pair_slot;
-  std::string line;
-  bool header_seen = false;
-  for (int line_number = 1; std::getline(in, line); ++line_number) {
-    // A last line without its newline is a write the archive did not finish (a crash): ignored.
-    if (in.eof()) {
-      if (!line.empty())
-        sequence.note =
-            "ignored line " + std::to_string(line_number) + ": it has no newline (an unfinished write)";
-      break;
-    }
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.empty() || line[0] == '#') continue;
-    std::string problem;
-    if (!header_seen) {
-      if (line != kHeader) problem = std::string("the header must be '") + kHeader + "'";
-      header_seen = problem.empty();
-    } else {
-      IndexRow row;
-      problem = parse_row(line, &row);
-      if (problem.empty()) problem = add_row(row, directory, &sequence, &pair_slot);
-    }
-    if (problem.empty()) continue;
-    return corrupt_data(index_path.string() + ":" + std::to_string(line_number) + ": " + problem);
-  }
-  if (!header_seen) return corrupt_data(index_path.string() + ": empty index");
+  LFTRACK_RETURN_IF_ERROR(read_csv_rows(
+      index_path, kHeader, [&](const auto& f) { return add_index_row(f, directory, &sequence); },
+      &sequence.note));
   if (sequence.pairs.empty()) return corrupt_data(index_path.string() + ": the index lists no frames");
-  if (fs::exists(directory / kSequenceActuatorName, ec))
-    LFTRACK_RETURN_IF_ERROR(read_actuator_file(directory / kSequenceActuatorName, &sequence));
+  const fs::path actuator_path = directory / kSequenceActuatorName;
+  if (fs::exists(actuator_path, ec)) {
+    LFTRACK_RETURN_IF_ERROR(read_csv_rows(
+        actuator_path, kActuatorHeader, [&](const auto& f) { return add_actuator_row(f, &sequence); },
+        &sequence.note));
+    sequence.has_actuator = true;
+  }
   return sequence;
 }
 

@@ -16,16 +16,7 @@ ReplayFrameSource::~ReplayFrameSource() {
 }
 
 std::int64_t ReplayFrameSource::offset_ns(std::size_t pair) const {
-  auto earliest = [&](std::size_t p) {
-    std::int64_t t = INT64_MAX;
-    for (std::size_t c : column_) {
-      const SequenceFrame& f = sequence_.pairs[p].frames[c];
-      if (f.present) t = std::min(t, f.timestamp_ns);
-    }
-    return t;
-  };
-  const std::int64_t first = earliest(0), here = earliest(pair);
-  return (first == INT64_MAX || here == INT64_MAX) ? 0 : here - first;
+  return pair_start_ns_[pair] - pair_start_ns_[0];
 }
 
 Status ReplayFrameSource::open(FramePair* pair) {
@@ -42,6 +33,16 @@ Status ReplayFrameSource::open(FramePair* pair) {
     }
     if (d.rows <= 0 || d.cols <= 0) return invalid_argument("replay: detector " + d.name + " has no size");
     column_.push_back(std::size_t(it - sequence_.detectors.begin()));
+  }
+  // Each pair's start: its earliest frame of these detectors; a pair with none listed starts
+  // where the one before it did (its acquire() faults anyway).
+  pair_start_ns_.assign(sequence_.pairs.size(), INT64_MAX);
+  for (std::size_t p = 0; p < sequence_.pairs.size(); ++p) {
+    for (std::size_t c : column_) {
+      const SequenceFrame& f = sequence_.pairs[p].frames[c];
+      if (f.present) pair_start_ns_[p] = std::min(pair_start_ns_[p], f.timestamp_ns);
+    }
+    if (pair_start_ns_[p] == INT64_MAX) pair_start_ns_[p] = p > 0 ? pair_start_ns_[p - 1] : 0;
   }
   pair->frames.assign(detectors_.size(), Frame{});
   loaded_.clear();
@@ -126,9 +127,6 @@ DeviceStatus ReplayFrameSource::acquire(FramePair* pair, Deadline deadline) {
   next_ = job + 1;
   const SequencePair& p = sequence_.pairs[job];
   bool complete = true;
-  std::int64_t earliest = INT64_MAX;
-  for (std::size_t v = 0; v < detectors_.size(); ++v)
-    if (p.frames[column_[v]].present) earliest = std::min(earliest, p.frames[column_[v]].timestamp_ns);
   for (std::size_t v = 0; v < detectors_.size(); ++v) {
     const Status& s = loaded_status_[v];
     if (!s.ok()) {
@@ -146,9 +144,9 @@ DeviceStatus ReplayFrameSource::acquire(FramePair* pair, Deadline deadline) {
     std::memcpy(out.pixels.pixels().data(), loaded_[v].pixels().data(),
                 loaded_[v].pixels().size() * sizeof(std::uint16_t));
     out.sequence = f.sequence;
-    const std::int64_t within_pair = f.timestamp_ns - earliest;
-    out.timestamp_ns = options_.realtime ? first_request_ns_ + offset_ns(job) + within_pair
-                                         : requested_exposure_ns_ + within_pair;
+    const std::int64_t within_pair = f.timestamp_ns - pair_start_ns_[job];
+    out.timestamp_ns =
+        (options_.realtime ? first_request_ns_ + offset_ns(job) : requested_exposure_ns_) + within_pair;
   }
   if (!complete) return DeviceStatus::kFault;
   ++counters_.pairs_delivered;

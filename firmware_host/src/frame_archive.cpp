@@ -11,8 +11,7 @@ namespace lftrack::host {
 
 FrameArchive::FrameArchive(const std::filesystem::path& directory,
                            const std::vector<drivers::DetectorShape>& detectors, const FrameArchiveOptions& o)
-    : directory_(directory),
-      directory_text_(directory.string()),
+    : directory_text_(directory.string()),
       with_actuator_(o.with_actuator),
       slots_(std::size_t(o.slots)),
       filled_(std::size_t(o.slots)),

@@ -216,15 +216,16 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   const std::int64_t acquire_started_ns = monotonic_now_ns();
   const DeviceStatus acquired = parts.frames->acquire(
       &pair, to_deadline(start_ns + std::int64_t(settings.loop.acquire_timeout_ms * 1e6)));
-  bool ok = acquired == DeviceStatus::kOk;
+  const bool frames_ok = acquired == DeviceStatus::kOk;
+  bool ok = frames_ok;
   if (!ok && parts.frames->exhausted()) {  // an archived sequence has ended
     ended_by_source = "end of the sequence";
     return false;
   }
   // On the simulated clock a frame arrives at its exposure time: waiting for the simulator's
   // renderer is not the loop's time.
-  if (settings.simulated_clock) cycle_wall_start_ns = monotonic_now_ns();
   const std::int64_t acquired_ns = monotonic_now_ns();
+  if (settings.simulated_clock) cycle_wall_start_ns = acquired_ns;
   if (!aligning) acquire_ms.add(ms_between(acquire_started_ns, acquired_ns));
   std::int64_t oldest_frame_ns = start_ns, newest_frame_ns = start_ns;
   if (ok) {
@@ -247,7 +248,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   // Actuator read-back (where the couch is at the frame time, and whether it took our command).
   GateInput in;
   in.views = static_cast<int>(views);
-  in.frames_ok = acquired == DeviceStatus::kOk;
+  in.frames_ok = frames_ok;
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(start_ns + period_ns));

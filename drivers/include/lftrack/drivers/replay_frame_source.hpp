@@ -63,11 +63,12 @@ class ReplayFrameSource final : public FrameSource {
  private:
   void read_loop();
   void load(std::size_t job);
-  std::int64_t offset_ns(std::size_t pair) const;  // from the first pair's earliest frame
+  std::int64_t offset_ns(std::size_t pair) const;  // pair's start after the first pair's
 
   FrameSequence sequence_;
   std::vector<DetectorShape> detectors_;
-  std::vector<std::size_t> column_;  // scene detector -> sequence detector
+  std::vector<std::size_t> column_;          // scene detector -> sequence detector
+  std::vector<std::int64_t> pair_start_ns_;  // per pair: its earliest frame's timestamp
   ReplayOptions options_;
   ReplayCounters counters_;
 

@@ -47,7 +47,6 @@ class FrameArchive {
   Status close();
   std::uint64_t pairs_written() const { return written_.load(); }
   std::uint64_t pairs_dropped() const { return dropped_; }
-  const std::filesystem::path& directory() const { return directory_; }
 
  private:
   struct Slot {
@@ -61,7 +60,6 @@ class FrameArchive {
   void run();
   Status write_slot(const Slot& slot);
 
-  std::filesystem::path directory_;
   std::string directory_text_;
   std::vector<std::string> names_;
   bool with_actuator_ = false;
