@@ -31,6 +31,7 @@ struct SimOptions {
   std::string lf_dir;
   std::string archive;   // frames archived here
   std::string sequence;  // `lftrack replay`: the archived sequence
+  std::string hil;       // `lftrack sim --hil modbus`: actuators through their real drivers
   enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
 };
 
@@ -106,6 +107,7 @@ Status run(const SimOptions& o) {
   so.light_field_dir = o.lf_dir;
   so.archive = o.archive;
   so.replay_sequence = o.sequence;
+  if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
   so.allocation_count = &process_allocation_count;
   auto session = LoopSession::create(*prepared, so, &pool);
   if (!session.ok()) return session.status();
@@ -147,6 +149,13 @@ Status run(const SimOptions& o) {
       j["archive"] = {{"directory", o.archive},
                       {"pairs_written", archive->pairs_written()},
                       {"pairs_dropped", archive->pairs_dropped()}};
+    if (const drivers::ModbusCouch* couch = (*session)->modbus_couch()) {
+      const drivers::ModbusCouchCounters c = couch->counters();
+      j["hil"] = {{"protocol", "modbus"},       {"endpoint", couch->endpoint()},
+                  {"requests", c.requests},     {"timeouts", c.timeouts},
+                  {"exceptions", c.exceptions}, {"bad_replies", c.bad_replies},
+                  {"disconnects", c.disconnects}, {"reconnects", c.reconnects}};
+    }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     print_summary(*summary);
@@ -163,6 +172,13 @@ Status run(const SimOptions& o) {
       std::printf("frames archived: %llu pairs in %s (lftrack replay --sequence %s), %llu dropped\n",
                   static_cast<unsigned long long>(archive->pairs_written()), o.archive.c_str(),
                   o.archive.c_str(), static_cast<unsigned long long>(archive->pairs_dropped()));
+    if (const drivers::ModbusCouch* couch = (*session)->modbus_couch()) {
+      const drivers::ModbusCouchCounters c = couch->counters();
+      std::printf("hil: %s, %lld requests; timeouts %lld, exceptions %lld, bad replies %lld, disconnects %lld\n",
+                  couch->endpoint().c_str(), static_cast<long long>(c.requests),
+                  static_cast<long long>(c.timeouts), static_cast<long long>(c.exceptions),
+                  static_cast<long long>(c.bad_replies), static_cast<long long>(c.disconnects));
+    }
     if (!o.journal.empty())
       std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());
   }
@@ -190,6 +206,11 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                   "As fast as possible on a simulated clock (deterministic; no real-time timing)");
   if (mode == SimOptions::Mode::kReplay)
     app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
+  if (mode == SimOptions::Mode::kSim)
+    app->add_option("--hil", o->hil,
+                    "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1, "
+                    "commanded through the real driver")
+        ->check(CLI::IsMember({"modbus"}));
   if (mode != SimOptions::Mode::kReplay)
     app->add_option("--archive", o->archive,
                     "Archive every frame pair in this directory (the format `lftrack replay` reads)");

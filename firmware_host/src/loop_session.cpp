@@ -2,12 +2,46 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include "lftrack/drivers/recorded_actuator.hpp"
 #include "lftrack/host/scene_registration.hpp"
 
 namespace lftrack::host {
+
+namespace {
+
+// A hardware-in-the-loop couch: before each command crosses the protocol, the simulated room is
+// moved on to the cycle's deadline, as the in-process couch does (simulated_room.hpp), so a HIL
+// run follows the same timing. On the loop's simulated clock the deadlines are virtual, and the
+// driver gets a real one instead (protocol requests still time out).
+class RoomClockedActuator final : public drivers::Actuator {
+ public:
+  RoomClockedActuator(sim::SimulatedRoom* room, drivers::Actuator* driver, bool simulated_clock)
+      : room_(room), driver_(driver), simulated_clock_(simulated_clock) {}
+  Status open() override { return driver_->open(); }
+  drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override {
+    room_->advance_for_command(deadline);
+    return driver_->command(correction, real(deadline));
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override {
+    return driver_->readback(state, real(deadline));
+  }
+  void hold() override { driver_->hold(); }
+  void close() override { driver_->close(); }
+
+ private:
+  drivers::Deadline real(drivers::Deadline deadline) const {
+    return simulated_clock_ ? std::chrono::steady_clock::now() + std::chrono::seconds(1) : deadline;
+  }
+  sim::SimulatedRoom* room_;
+  drivers::Actuator* driver_;
+  bool simulated_clock_;
+};
+
+}  // namespace
 
 struct LoopSession::Parts {
   std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
@@ -16,6 +50,9 @@ struct LoopSession::Parts {
   std::unique_ptr<SimFrameSource> sim_frames;
   std::unique_ptr<drivers::ReplayFrameSource> replay_frames;
   std::unique_ptr<drivers::RecordedActuator> recorded_couch;
+  std::unique_ptr<sim::ModbusCouchServer> couch_server;  // HIL: serves the room's couch
+  std::unique_ptr<drivers::ModbusCouch> couch_driver;
+  std::unique_ptr<RoomClockedActuator> hil_couch;
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;
   OperatorInputs operators;
@@ -69,6 +106,21 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
         std::make_unique<SimFrameSource>(p, parts->frame_renderer, parts->room.get(), frame_options);
   }
   const bool has_couch = !replaying && p.scene.actuator.type == "virtual";
+  if (o.hil != HilProtocol::kNone) {
+    if (!has_couch)
+      return invalid_argument("hardware in the loop needs a simulated scene with `actuator: {type: virtual}`");
+    auto server = sim::ModbusCouchServer::start(&parts->room->couch_device());
+    if (!server.ok()) return server.status();
+    parts->couch_server = std::move(server).value();
+    drivers::ModbusCouchOptions couch;
+    couch.port = parts->couch_server->port();
+    couch.response_timeout_s = std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
+    parts->couch_driver = std::make_unique<drivers::ModbusCouch>(couch);
+    parts->hil_couch =
+        std::make_unique<RoomClockedActuator>(parts->room.get(), parts->couch_driver.get(), o.simulated_clock);
+    LFTRACK_RETURN_IF_ERROR(parts->hil_couch->open());
+    spdlog::info("hardware in the loop: the couch is {}", parts->couch_driver->endpoint());
+  }
   if (!o.archive.empty()) {
     FrameArchiveOptions archive_options;
     archive_options.with_actuator = has_couch;
@@ -104,7 +156,9 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
       replaying ? static_cast<drivers::FrameSource*>(parts->replay_frames.get()) : parts->sim_frames.get();
   lp.archive = parts->archive.get();
   lp.corrections.assign(p.scene.detectors.size(), sim::detector_correction(scene_detector_model(p)));
-  lp.actuator = has_couch ? &parts->room->couch_actuator() : parts->recorded_couch.get();
+  lp.actuator = parts->hil_couch  ? static_cast<drivers::Actuator*>(parts->hil_couch.get())
+                : has_couch         ? &parts->room->couch_actuator()
+                                    : parts->recorded_couch.get();
   lp.journal = parts->journal.get();
   lp.operator_input = parts->operators.empty() ? nullptr : &parts->operators;
   lp.truth = parts->room.get();  // null when replaying
@@ -124,6 +178,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
 
 Result<LoopSummary> LoopSession::run() {
   auto summary = parts_->loop->run();
+  if (parts_->hil_couch) parts_->hil_couch->close();
   if (parts_->journal) {
     if (Status s = parts_->journal->close(); !s.ok() && summary.ok()) return s;
   }
@@ -144,6 +199,12 @@ const drivers::ReplayFrameSource* LoopSession::replay() const {
 }
 const FrameArchive* LoopSession::archive() const {
   return parts_->archive.get();
+}
+const drivers::ModbusCouch* LoopSession::modbus_couch() const {
+  return parts_->couch_driver.get();
+}
+sim::ModbusCouchServer* LoopSession::modbus_couch_server() {
+  return parts_->couch_server.get();
 }
 
 }  // namespace lftrack::host

@@ -35,6 +35,8 @@ const char* to_string(GateReason r) {
       return "no registration result";
     case GateReason::kNoFrames:
       return "no complete frame pair";
+    case GateReason::kActuatorFault:
+      return "actuator read-back failed";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -84,7 +86,8 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   };
   // Safety violations first: they hold whatever else is true.
   if (!finite(in) || in.views < 0 || in.views > kMaxGateViews) return hold(GateReason::kNonFinite);
-  if (!in.readback_valid || in.readback_error_mm > limits.readback_tolerance_mm ||
+  if (!in.readback_valid) return hold(GateReason::kActuatorFault);
+  if (in.readback_error_mm > limits.readback_tolerance_mm ||
       in.readback_error_deg > limits.readback_tolerance_deg)
     return hold(GateReason::kReadbackMismatch);
   if (in.registration_ok) {

@@ -9,32 +9,66 @@ using tracking::PoseDelta;
 
 SimulatedRoom::SimulatedRoom(const SimulatedRoomSpec& spec) : spec_(spec), couch_(spec.couch) {}
 
+double SimulatedRoom::time_s() const {
+  std::lock_guard lock(mutex_);
+  return couch_.time_s();
+}
+
 double SimulatedRoom::time_s_at(std::int64_t t_ns) const {
+  std::lock_guard lock(mutex_);
   return started_ ? 1e-9 * static_cast<double>(t_ns - epoch_ns_) : 0.0;
 }
 
+tracking::Vector6d SimulatedRoom::couch_position() const {
+  std::lock_guard lock(mutex_);
+  return couch_.position();
+}
+
 void SimulatedRoom::advance_to_ns(std::int64_t t_ns) {
+  std::lock_guard lock(mutex_);
+  advance_locked(t_ns);
+}
+
+void SimulatedRoom::advance_locked(std::int64_t t_ns) {
   if (!started_) {
     started_ = true;
     epoch_ns_ = t_ns;
   }
-  couch_.advance_to(time_s_at(t_ns));
+  couch_.advance_to(1e-9 * static_cast<double>(t_ns - epoch_ns_));
+}
+
+void SimulatedRoom::advance_for_command(drivers::Deadline deadline) {
+  const std::int64_t deadline_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(deadline.time_since_epoch()).count();
+  std::lock_guard lock(mutex_);
+  if (started_ && deadline_ns > epoch_ns_) advance_locked(deadline_ns);
 }
 
 Pose SimulatedRoom::patient_T_room_from_ct() const {
-  const Pose set_up = tracking::apply_delta(spec_.nominal_T_room_from_ct,
-                                            PoseDelta::from_vector(spec_.setup_error), spec_.origin_room_mm);
-  return tracking::apply_delta(set_up, PoseDelta::from_vector(patient_offset(spec_.motion, time_s())),
-                               spec_.origin_room_mm);
+  std::lock_guard lock(mutex_);
+  return patient_locked();
 }
 
 Pose SimulatedRoom::true_T_room_from_ct() const {
-  return tracking::apply_delta(patient_T_room_from_ct(), PoseDelta::from_vector(couch_.position()),
+  std::lock_guard lock(mutex_);
+  return true_locked();
+}
+
+Pose SimulatedRoom::patient_locked() const {
+  const Pose set_up = tracking::apply_delta(spec_.nominal_T_room_from_ct,
+                                            PoseDelta::from_vector(spec_.setup_error), spec_.origin_room_mm);
+  return tracking::apply_delta(set_up, PoseDelta::from_vector(patient_offset(spec_.motion, couch_.time_s())),
+                               spec_.origin_room_mm);
+}
+
+Pose SimulatedRoom::true_locked() const {
+  return tracking::apply_delta(patient_locked(), PoseDelta::from_vector(couch_.position()),
                                spec_.origin_room_mm);
 }
 
 double SimulatedRoom::residual_mm() const {
-  const Pose truth = true_T_room_from_ct();
+  std::lock_guard lock(mutex_);
+  const Pose truth = true_locked();
   const Pose& plan = spec_.nominal_T_room_from_ct;
   const Eigen::Vector3d centre_ct = plan.inverse() * spec_.origin_room_mm;
   double sum = 0;
@@ -49,15 +83,37 @@ double SimulatedRoom::residual_mm() const {
 
 drivers::DeviceStatus SimulatedRoom::CouchActuator::command(const tracking::Vector6d& correction,
                                                             drivers::Deadline deadline) {
-  const std::int64_t deadline_ns =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(deadline.time_since_epoch()).count();
-  if (room_.started_ && deadline_ns > room_.epoch_ns_) room_.advance_to_ns(deadline_ns);
+  room_.advance_for_command(deadline);
+  std::lock_guard lock(room_.mutex_);
   return room_.couch_.command(correction, deadline);
 }
 
 drivers::DeviceStatus SimulatedRoom::CouchActuator::readback(drivers::ActuatorState* state,
                                                              drivers::Deadline deadline) {
+  std::lock_guard lock(room_.mutex_);
   return room_.couch_.readback(state, deadline);
+}
+
+void SimulatedRoom::CouchActuator::hold() {
+  std::lock_guard lock(room_.mutex_);
+  room_.couch_.hold();
+}
+
+drivers::DeviceStatus SimulatedRoom::CouchDevice::command(const tracking::Vector6d& correction,
+                                                          drivers::Deadline deadline) {
+  std::lock_guard lock(room_.mutex_);
+  return room_.couch_.command(correction, deadline);
+}
+
+drivers::DeviceStatus SimulatedRoom::CouchDevice::readback(drivers::ActuatorState* state,
+                                                           drivers::Deadline deadline) {
+  std::lock_guard lock(room_.mutex_);
+  return room_.couch_.readback(state, deadline);
+}
+
+void SimulatedRoom::CouchDevice::hold() {
+  std::lock_guard lock(room_.mutex_);
+  room_.couch_.hold();
 }
 
 }  // namespace lftrack::sim

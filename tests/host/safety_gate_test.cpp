@@ -83,7 +83,7 @@ const std::vector<GateCase> kCases = {
     {"ReadbackRotationOff", [](GateInput& in) { in.readback_error_deg = 0.6; }, GateDecision::kHold,
      GateReason::kReadbackMismatch},
     {"NoReadback", [](GateInput& in) { in.readback_valid = false; }, GateDecision::kHold,
-     GateReason::kReadbackMismatch},
+     GateReason::kActuatorFault},
     {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip,
      GateReason::kNoResult},
     {"NoFrames",

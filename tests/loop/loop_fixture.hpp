@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <memory>
 #include <string>
+#include <thread>
 
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -53,8 +55,11 @@ class ClosedLoop : public ::testing::Test {
   static void SetUpTestSuite() { pool_ = new tracking::ThreadPool(2); }
   static void TearDownTestSuite() { delete pool_; }
 
+  // `during_run`, if given, starts a thread on the created session (fault injection), joined
+  // when the loop has ended and before the session is destroyed.
   LoopRun run_loop(const std::string& motion_yaml, std::int64_t cycles, LoopSessionOptions options = {},
-                   const std::string& frames_yaml = kLightFieldFrames) {
+                   const std::string& frames_yaml = kLightFieldFrames,
+                   const std::function<std::thread(LoopSession&)>& during_run = {}) {
     auto prepared = prepare_scene(small_scene(motion_yaml, frames_yaml), "", pool_);
     EXPECT_TRUE(prepared.ok()) << prepared.status().message();
     scene_ = std::make_unique<PreparedScene>(std::move(prepared).value());
@@ -66,7 +71,10 @@ class ClosedLoop : public ::testing::Test {
     LoopRun r;
     EXPECT_TRUE(session.ok()) << session.status().message();
     if (!session.ok()) return r;
+    std::thread during;
+    if (during_run) during = during_run(**session);
     auto summary = (*session)->run();
+    if (during.joinable()) during.join();
     EXPECT_TRUE(summary.ok()) << summary.status().message();
     if (!summary.ok()) return r;
     r.summary = *summary;

@@ -4,24 +4,31 @@
 //  - the simulated room (`lftrack sim`, the closed-loop tests): set-up error, patient motion,
 //    the simulator's detectors and the virtual couch; or
 //  - an archived sequence (`lftrack replay`): frames from disk, no actuator (track and report).
+// Hardware in the loop (`lftrack sim --hil modbus`): the simulated room's couch is served by the
+// virtual couch server (a libmodbus TCP server on 127.0.0.1) and the loop commands it through the
+// real Modbus driver, so every command and read-back crosses the protocol.
 
 #include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <optional>
 
+#include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/drivers/replay_frame_source.hpp"
 #include "lftrack/host/frame_archive.hpp"
 #include "lftrack/host/operator_input.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/sim_frame_source.hpp"
 #include "lftrack/host/tracking_loop.hpp"
+#include "lftrack/sim/modbus_couch_server.hpp"
 
 namespace lftrack::tracking {
 class ThreadPool;
 }
 
 namespace lftrack::host {
+
+enum class HilProtocol { kNone, kModbus };
 
 struct LoopSessionOptions {
   std::int64_t cycles = 300;
@@ -37,6 +44,7 @@ struct LoopSessionOptions {
   // Replay this archived sequence instead of simulating (simulated_clock: as fast as possible;
   // otherwise at the recorded pace).
   std::filesystem::path replay_sequence;
+  HilProtocol hil = HilProtocol::kNone;  // simulation only; needs a scene with a virtual couch
   std::uint64_t (*allocation_count)() = nullptr;
 };
 
@@ -54,6 +62,8 @@ class LoopSession {
   const sim::SimulatedRoom* room() const;            // null when replaying
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
   const FrameArchive* archive() const;               // null without one
+  const drivers::ModbusCouch* modbus_couch() const;  // the HIL couch driver; null otherwise
+  sim::ModbusCouchServer* modbus_couch_server();  // HIL: for fault injection
 
  private:
   struct Parts;

@@ -47,6 +47,7 @@ enum class GateReason : std::uint8_t {
   kStaleFrame,
   kUnpairedFrames,
   kNoFrames,  // the frame source gave no complete pair (timeout, device fault, bad file)
+  kActuatorFault,  // no read-back (timeout, exception, disconnected) or the actuator reports a fault
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -63,7 +64,7 @@ struct GateInput {
   std::array<double, kMaxGateViews> reference_similarity{};  // at alignment, per view
   double frame_age_ms = 0;  // of the older frame of the pair, at the decision
   double pair_skew_ms = 0;  // between the two frames' timestamps
-  bool readback_valid = true;
+  bool readback_valid = true;  // the actuator answered the read-back and reports no fault
   double readback_error_mm = 0;  // actuator position against the last command
   double readback_error_deg = 0;
   int consecutive_failures = 0;  // before this cycle

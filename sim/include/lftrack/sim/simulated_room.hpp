@@ -4,14 +4,16 @@
 // (virtual_couch.hpp). It knows the truth the loop estimates: where the anatomy is at any time.
 //
 // Time: the room's clock starts (t = 0) at the first loop time it is advanced to; loop times
-// are CLOCK_MONOTONIC nanoseconds (or the loop's simulated clock). Only the loop's thread may
-// touch a room: the frame source reads the true pose on it and hands the pose to its renderer.
+// are CLOCK_MONOTONIC nanoseconds (or the loop's simulated clock). The loop's thread advances
+// the room and reads the truth; in hardware-in-the-loop runs the virtual couch server's thread
+// drives the couch (couch_device()). Every public member locks the room, so both may.
 //
 // True pose: T(t) = A(couch(t)) * A(motion(t)) * A(setup_error) * T_nominal, where A(d) is the
 // rigid motion of delta d about the registration origin (pose.hpp). The couch cancels the
 // patient's offset when A(couch) = (A(motion) A(setup_error))^-1.
 
 #include <cstdint>
+#include <mutex>
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/sim/patient_motion.hpp"
@@ -35,7 +37,7 @@ class SimulatedRoom {
 
   // Moves the room to loop time `t_ns` (never backwards; the first call sets t = 0).
   void advance_to_ns(std::int64_t t_ns);
-  double time_s() const { return couch_.time_s(); }
+  double time_s() const;
   double time_s_at(std::int64_t t_ns) const;
 
   // The anatomy's pose now, and the patient's own offset (set-up error and motion) as one delta.
@@ -45,10 +47,15 @@ class SimulatedRoom {
   // residual box between where the anatomy is and where the plan has it (mm).
   double residual_mm() const;
 
-  // The couch as the loop sees it: a command takes effect as if sent at its deadline (the latest
-  // the cycle may send it), so a run is deterministic whatever the host's speed.
+  // The couch as the loop sees it in process: a command takes effect as if sent at its deadline
+  // (the latest the cycle may send it), so a run is deterministic whatever the host's speed.
   drivers::Actuator& couch_actuator() { return actuator_; }
-  const VirtualCouch& couch() const { return couch_; }
+  // The couch as a device behind a protocol (the virtual couch server): commands take effect at
+  // the room's current time. A hardware-in-the-loop run calls advance_for_command() with the
+  // cycle's deadline before its driver sends, which gives the same timing as couch_actuator().
+  drivers::Actuator& couch_device() { return device_; }
+  void advance_for_command(drivers::Deadline deadline);
+  tracking::Vector6d couch_position() const;
   const SimulatedRoomSpec& spec() const { return spec_; }
 
  private:
@@ -58,16 +65,34 @@ class SimulatedRoom {
     Status open() override { return {}; }
     drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
     drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
-    void hold() override { room_.couch_.hold(); }
+    void hold() override;
     void close() override {}
 
    private:
     SimulatedRoom& room_;
   };
 
+  class CouchDevice final : public drivers::Actuator {
+   public:
+    explicit CouchDevice(SimulatedRoom& room) : room_(room) {}
+    Status open() override { return {}; }
+    drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
+    drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
+    void hold() override;
+    void close() override {}
+
+   private:
+    SimulatedRoom& room_;
+  };
+  void advance_locked(std::int64_t t_ns);
+  tracking::Pose true_locked() const;
+  tracking::Pose patient_locked() const;
+
+  mutable std::mutex mutex_;
   SimulatedRoomSpec spec_;
   VirtualCouch couch_;
   CouchActuator actuator_{*this};
+  CouchDevice device_{*this};
   bool started_ = false;
   std::int64_t epoch_ns_ = 0;
 };

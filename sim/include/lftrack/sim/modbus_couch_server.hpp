@@ -1,0 +1,85 @@
+#pragma once
+// The virtual couch as a real Modbus TCP server (libmodbus) on 127.0.0.1, for protocol tests and
+// hardware-in-the-loop runs: the couch driver (drivers/modbus_couch.hpp) talks to it exactly as
+// it would to a treatment couch, with the register map of drivers/couch_register_map.hpp.
+//
+// The server fronts a device (an Actuator with the couch's dynamics: VirtualCouch, or the
+// simulated room's couch) and calls it from its own thread; the device must therefore be either
+// used by nobody else or safe to share (SimulatedRoom locks). One client at a time; a client
+// that goes away is replaced by the next to connect.
+//
+// Faults are injected for the next N requests: no reply at all, exception 4 (device failure) or
+// 6 (busy), a reply with the wrong unit id, a dropped connection, a read-back that disagrees
+// with the command (position and accepted target offset by `mismatch_mm` on x).
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+
+#include "lftrack/drivers/actuator.hpp"
+#include "lftrack/tracking/status.hpp"
+
+typedef struct _modbus modbus_t;
+typedef struct _modbus_mapping_t modbus_mapping_t;
+
+namespace lftrack::sim {
+
+enum class CouchServerFault : int {
+  kNone,
+  kNoReply,
+  kException4,
+  kException6,
+  kWrongUnit,
+  kDropConnection,
+  kReadbackMismatch,
+};
+
+// Which requests an injected fault meets.
+enum class CouchRequestKind : int { kAny, kReadback, kCommand };
+
+struct ModbusCouchServerOptions {
+  int port = 0;  // 0: any free port (port() says which)
+  int unit_id = 1;
+  double mismatch_mm = 2.0;
+};
+
+class ModbusCouchServer {
+ public:
+  // `couch` must outlive the server.
+  static Result<std::unique_ptr<ModbusCouchServer>> start(drivers::Actuator* couch,
+                                                          const ModbusCouchServerOptions& options = {});
+  ~ModbusCouchServer();
+  ModbusCouchServer(const ModbusCouchServer&) = delete;
+  ModbusCouchServer& operator=(const ModbusCouchServer&) = delete;
+
+  int port() const { return port_; }
+  // The next `requests` requests of `kind` meet `fault` (replacing any fault still pending).
+  void inject(CouchServerFault fault, int requests = 1, CouchRequestKind kind = CouchRequestKind::kAny);
+  std::int64_t requests() const { return requests_.load(); }
+  std::int64_t connections() const { return connections_.load(); }
+
+ private:
+  ModbusCouchServer(drivers::Actuator* couch, const ModbusCouchServerOptions& options);
+  void serve();
+  void handle(std::uint8_t* query, int length);
+  CouchServerFault take_fault(CouchRequestKind kind);
+  void refresh_inputs(bool mismatch);
+
+  drivers::Actuator* couch_;
+  ModbusCouchServerOptions options_;
+  modbus_t* ctx_ = nullptr;
+  modbus_mapping_t* map_ = nullptr;
+  int listen_fd_ = -1;
+  int port_ = 0;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> fault_{0}, fault_requests_{0}, fault_kind_{0};
+  std::atomic<std::int64_t> requests_{0}, connections_{0};
+  tracking::Vector6d accepted_target_ = tracking::Vector6d::Zero();
+  std::uint16_t acknowledged_ = 0;
+  std::uint16_t fault_word_ = 0;
+  bool holding_ = false;
+};
+
+}  // namespace lftrack::sim

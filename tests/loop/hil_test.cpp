@@ -1,0 +1,125 @@
+// Hardware in the loop: the closed loop with the real Modbus couch driver talking to the virtual
+// couch server on loopback. It tracks as the in-process simulation does, and every Modbus fault
+// of the catalogue (docs/faults.md) holds the couch, drops the beam and is journaled with its
+// reason, with no command outside the limits.
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+#include "loop_fixture.hpp"
+
+namespace lftrack::host {
+namespace {
+
+using sim::CouchServerFault;
+
+TEST_F(ClosedLoop, HardwareInTheLoopTracksAsTheInProcessSimulation) {
+  const LoopRun in_process = run_loop(kBreathing, 120);
+  LoopSessionOptions hil;
+  hil.hil = HilProtocol::kModbus;
+  const LoopRun over_modbus = run_loop(kBreathing, 120, hil);
+  const LoopSummary& a = in_process.summary;
+  const LoopSummary& b = over_modbus.summary;
+  SCOPED_TRACE(to_json(b).dump());
+  EXPECT_EQ(b.states[std::size_t(TrackingState::kTrack)], 120);
+  EXPECT_EQ(b.holds, 0);
+  EXPECT_EQ(b.commands, a.commands);
+  ASSERT_TRUE(a.residual_mean_mm && b.residual_mean_mm);
+  // The same seed and timing; the protocol rounds targets to 1 um and 1 urad.
+  EXPECT_NEAR(*b.residual_mean_mm, *a.residual_mean_mm, 0.02);
+  EXPECT_NEAR(*b.residual_p95_mm, *a.residual_p95_mm, 0.05);
+  ASSERT_EQ(over_modbus.journal.records.size(), 120u);
+  double largest_readback_difference_mm = 0;
+  for (std::size_t i = 0; i < 120; ++i)
+    largest_readback_difference_mm =
+        std::max(largest_readback_difference_mm, std::abs(over_modbus.journal.records[i].readback[0] -
+                                                          in_process.journal.records[i].readback[0]));
+  // The registration's wall-clock budget may end one cycle's search at a different evaluation in
+  // the two runs; the couch then takes a slightly different path for a few cycles.
+  EXPECT_LT(largest_readback_difference_mm, 0.5) << "the couch moved the same way through the protocol";
+}
+
+// A fault on the read-back holds (HOLD, reason in the gate's record); on a command, the couch
+// may or may not have taken it, so the loop stops safely (FAULT, event "device fault").
+struct ModbusFaultCase {
+  const char* name;
+  CouchServerFault fault;
+  sim::CouchRequestKind kind;
+  TrackingState safe_state;
+  GateReason reason;  // for HOLD
+};
+
+class HilModbusFault : public ClosedLoop, public ::testing::WithParamInterface<ModbusFaultCase> {};
+
+TEST_P(HilModbusFault, HoldsTheCouchDropsTheBeamAndJournalsTheReason) {
+  const ModbusFaultCase& c = GetParam();
+  LoopSessionOptions options;
+  options.hil = HilProtocol::kModbus;
+  constexpr std::int64_t kFaultAtRequest = 40;  // about cycle 20: readback and command each cycle
+  const LoopRun r = run_loop(kBreathing, 45, options, kLightFieldFrames, [&](LoopSession& session) {
+    sim::ModbusCouchServer* server = session.modbus_couch_server();
+    return std::thread([server, c] {
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+      while (server->requests() < kFaultAtRequest && std::chrono::steady_clock::now() < until)
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      server->inject(c.fault, 1, c.kind);
+    });
+  });
+  const LoopSummary& s = r.summary;
+  SCOPED_TRACE(to_json(s).dump());
+  EXPECT_EQ(s.holds + s.faults, 1) << "one fault, one safe state; nothing resumes without the operator";
+  ASSERT_EQ(r.journal.records.size(), 45u);
+  std::size_t held_at = 0;
+  for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
+    const JournalRecord& rec = r.journal.records[i];
+    if (held_at == 0 && rec.state != std::uint8_t(TrackingState::kTrack)) held_at = i;
+    // No command beyond the scene's per-cycle limit, ever.
+    const double step_mm = std::max({std::abs(rec.command[0]), std::abs(rec.command[1]), std::abs(rec.command[2])});
+    if (i > 0) {
+      EXPECT_LE(step_mm, scene_->scene.safety.max_step_mm + 1e-9) << "cycle " << i;
+    }
+    for (double v : rec.command) EXPECT_TRUE(std::isfinite(v));
+  }
+  ASSERT_GT(held_at, 15u);
+  const JournalRecord& entry = r.journal.records[held_at];
+  EXPECT_EQ(entry.state, std::uint8_t(c.safe_state));
+  if (c.safe_state == TrackingState::kHold) {
+    EXPECT_EQ(entry.gate_reason, std::uint8_t(c.reason)) << to_string(GateReason(entry.gate_reason));
+  } else {
+    EXPECT_EQ(entry.event, 1 + int(TrackingEvent::kDeviceFault));
+  }
+  for (std::size_t i = held_at; i < r.journal.records.size(); ++i) {
+    EXPECT_EQ(r.journal.records[i].state, std::uint8_t(c.safe_state)) << i;
+    EXPECT_EQ(r.journal.records[i].beam_permit, 0) << i;
+    if (i > held_at) {
+      EXPECT_EQ(r.journal.records[i].command_sent, 0) << "held: nothing sent, cycle " << i;
+    }
+  }
+}
+
+constexpr auto kRead = sim::CouchRequestKind::kReadback;
+constexpr auto kWrite = sim::CouchRequestKind::kCommand;
+constexpr auto kHold = TrackingState::kHold;
+constexpr auto kFault = TrackingState::kFault;
+constexpr auto kNoReadback = GateReason::kActuatorFault;
+
+INSTANTIATE_TEST_SUITE_P(
+    FaultCatalogue, HilModbusFault,
+    ::testing::Values(
+        ModbusFaultCase{"NoReplyToReadback", CouchServerFault::kNoReply, kRead, kHold, kNoReadback},
+        ModbusFaultCase{"NoReplyToCommand", CouchServerFault::kNoReply, kWrite, kFault, GateReason::kOk},
+        ModbusFaultCase{"Exception4OnReadback", CouchServerFault::kException4, kRead, kHold, kNoReadback},
+        ModbusFaultCase{"Exception4OnCommand", CouchServerFault::kException4, kWrite, kFault, GateReason::kOk},
+        ModbusFaultCase{"Exception6OnReadback", CouchServerFault::kException6, kRead, kHold, kNoReadback},
+        ModbusFaultCase{"WrongUnitOnReadback", CouchServerFault::kWrongUnit, kRead, kHold, kNoReadback},
+        ModbusFaultCase{"WrongUnitOnCommand", CouchServerFault::kWrongUnit, kWrite, kFault, GateReason::kOk},
+        ModbusFaultCase{"DroppedConnection", CouchServerFault::kDropConnection, kRead, kHold, kNoReadback},
+        ModbusFaultCase{"ReadbackMismatch", CouchServerFault::kReadbackMismatch, kRead, kHold,
+                        GateReason::kReadbackMismatch}),
+    [](const ::testing::TestParamInfo<ModbusFaultCase>& param) { return std::string(param.param.name); });
+
+}  // namespace
+}  // namespace lftrack::host

@@ -1,0 +1,240 @@
+// The couch driver against the virtual couch served by libmodbus on loopback: the register map,
+// dynamics through the protocol, and every Modbus fault of the catalogue (docs/faults.md).
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <mutex>
+#include <thread>
+
+#include "lftrack/drivers/couch_register_map.hpp"
+#include "lftrack/drivers/modbus_couch.hpp"
+#include "lftrack/sim/modbus_couch_server.hpp"
+#include "lftrack/sim/virtual_couch.hpp"
+
+namespace lftrack {
+namespace {
+
+using drivers::ActuatorState;
+using drivers::DeviceStatus;
+using drivers::ModbusCouch;
+using sim::CouchServerFault;
+using tracking::Vector6d;
+using Clock = std::chrono::steady_clock;
+
+// The virtual couch shared by the server's thread and the test's clock.
+class LockedCouch final : public drivers::Actuator {
+ public:
+  explicit LockedCouch(const sim::VirtualCouchSpec& spec) : couch_(spec) {}
+  Status open() override { return {}; }
+  DeviceStatus command(const Vector6d& c, drivers::Deadline d) override {
+    std::lock_guard lock(mutex_);
+    return couch_.command(c, d);
+  }
+  DeviceStatus readback(ActuatorState* s, drivers::Deadline d) override {
+    std::lock_guard lock(mutex_);
+    return couch_.readback(s, d);
+  }
+  void hold() override {
+    std::lock_guard lock(mutex_);
+    couch_.hold();
+  }
+  void close() override {}
+  void advance_to(double t_s) {
+    std::lock_guard lock(mutex_);
+    couch_.advance_to(t_s);
+  }
+  Vector6d position() {
+    std::lock_guard lock(mutex_);
+    return couch_.position();
+  }
+
+ private:
+  std::mutex mutex_;
+  sim::VirtualCouch couch_;
+};
+
+drivers::Deadline in_ms(double ms) {
+  return Clock::now() + std::chrono::microseconds(static_cast<long long>(ms * 1000));
+}
+
+Vector6d shift(double x_mm, double rz_rad = 0) {
+  Vector6d v = Vector6d::Zero();
+  v(0) = x_mm;
+  v(5) = rz_rad;
+  return v;
+}
+
+class ModbusCouchTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    sim::VirtualCouchSpec spec;
+    spec.latency_s = 0.1;
+    spec.max_speed_mm_s = 10;
+    spec.range_mm = 20;
+    couch = std::make_unique<LockedCouch>(spec);
+    auto s = sim::ModbusCouchServer::start(couch.get());
+    ASSERT_TRUE(s.ok()) << s.status().message();
+    server = std::move(s).value();
+    drivers::ModbusCouchOptions o;
+    o.port = server->port();
+    o.response_timeout_s = 0.05;
+    o.reconnect_interval_s = 0.05;
+    driver = std::make_unique<ModbusCouch>(o);
+    ASSERT_TRUE(driver->open().ok());
+  }
+  void TearDown() override {
+    if (driver) driver->close();
+    server.reset();
+  }
+
+  std::unique_ptr<LockedCouch> couch;
+  std::unique_ptr<sim::ModbusCouchServer> server;
+  std::unique_ptr<ModbusCouch> driver;
+};
+
+TEST(CouchRegisterMap, TravelRoundTripsToTheMicrometreAndRefusesWhatDoesNotFit) {
+  Vector6d travel;
+  travel << 12.3456, -0.0004, 2000.0, 0.0123456, -1e-7, -3.0;
+  std::uint16_t r[12];
+  ASSERT_TRUE(drivers::couch_registers::encode_travel(travel, r));
+  const Vector6d back = drivers::couch_registers::decode_travel(r);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(back(i), travel(i), 0.5e-3);
+  for (int i = 3; i < 6; ++i) EXPECT_NEAR(back(i), travel(i), 0.5e-6);
+  Vector6d bad = travel;
+  bad(1) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(drivers::couch_registers::encode_travel(bad, r));
+  bad = travel;
+  bad(2) = 3e6;  // 3 km does not fit in 32 bits of micrometres
+  EXPECT_FALSE(drivers::couch_registers::encode_travel(bad, r));
+}
+
+TEST_F(ModbusCouchTest, CommandsMoveTheCouchWithItsDynamicsAndTheReadBackReportsThem) {
+  ASSERT_EQ(driver->command(shift(5, 0.01), in_ms(100)), DeviceStatus::kOk);
+  ActuatorState s;
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 5, 1e-3);
+  EXPECT_NEAR(s.target(5), 0.01, 1e-6);
+  EXPECT_NEAR(s.position(0), 0, 1e-3);  // latency not yet over
+  EXPECT_TRUE(s.moving);
+  EXPECT_FALSE(s.fault);
+  couch->advance_to(0.35);  // 0.25 s of motion at 10 mm/s
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.position(0), 2.5, 1e-3);
+  // A second correction is relative to the last target.
+  ASSERT_EQ(driver->command(shift(-1), in_ms(100)), DeviceStatus::kOk);
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 4, 1e-3);
+  // Hold stops where it is; the next correction starts from there.
+  driver->hold();
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 2.5, 1e-3);
+  couch->advance_to(2.0);
+  EXPECT_NEAR(couch->position()(0), 2.5, 1e-6);
+  ASSERT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kOk);
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 3.5, 1e-3);
+}
+
+TEST_F(ModbusCouchTest, ATargetOutsideTheRangeIsRefusedWithExceptionThreeAndChangesNothing) {
+  EXPECT_EQ(driver->command(shift(25), in_ms(100)), DeviceStatus::kFault);
+  EXPECT_EQ(driver->counters().last_exception, 3);
+  ActuatorState s;
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 0, 1e-9);
+  ASSERT_EQ(driver->command(shift(5), in_ms(100)), DeviceStatus::kOk);
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 5, 1e-3);
+}
+
+TEST_F(ModbusCouchTest, NoReplyIsATimeoutWithinTheResponseTimeoutAndTheNextRequestWorks) {
+  server->inject(CouchServerFault::kNoReply);
+  const auto t0 = Clock::now();
+  ActuatorState s;
+  EXPECT_EQ(driver->readback(&s, in_ms(1000)), DeviceStatus::kTimeout);
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.5);
+  EXPECT_EQ(driver->counters().timeouts, 1);
+  EXPECT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+}
+
+TEST_F(ModbusCouchTest, TheCyclesDeadlineCutsTheResponseTimeout) {
+  server->inject(CouchServerFault::kNoReply);
+  const auto t0 = Clock::now();
+  EXPECT_EQ(driver->command(shift(1), in_ms(5)), DeviceStatus::kTimeout);
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.04);
+  // A deadline already past sends nothing.
+  const std::int64_t before = server->requests();
+  EXPECT_EQ(driver->command(shift(1), Clock::now()), DeviceStatus::kTimeout);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_EQ(server->requests(), before);
+}
+
+TEST_F(ModbusCouchTest, ExceptionsFourAndSixAreFaultsWithTheirCodes) {
+  server->inject(CouchServerFault::kException4);
+  EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kFault);
+  EXPECT_EQ(driver->counters().last_exception, 4);
+  server->inject(CouchServerFault::kException6);
+  ActuatorState s;
+  EXPECT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kFault);
+  EXPECT_EQ(driver->counters().last_exception, 6);
+  EXPECT_EQ(driver->counters().exceptions, 2);
+  // The refused command did not move the base.
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 0, 1e-9);
+}
+
+TEST_F(ModbusCouchTest, AReplyFromTheWrongUnitIsAFault) {
+  server->inject(CouchServerFault::kWrongUnit);
+  ActuatorState s;
+  EXPECT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kFault);
+  EXPECT_EQ(driver->counters().bad_replies, 1);
+  EXPECT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+}
+
+TEST_F(ModbusCouchTest, ADroppedConnectionIsReconnectedOutsideTheCycleWithTheCouchHeld) {
+  ASSERT_EQ(driver->command(shift(5), in_ms(100)), DeviceStatus::kOk);
+  couch->advance_to(0.2);  // moving at 10 mm/s
+  server->inject(CouchServerFault::kDropConnection);
+  ActuatorState s;
+  EXPECT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kDisconnected);
+  // Cycle calls now answer at once, without touching the socket.
+  const auto t0 = Clock::now();
+  EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kDisconnected);
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.002);
+  const auto until = Clock::now() + std::chrono::seconds(5);
+  while (!driver->connected() && Clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_TRUE(driver->connected());
+  EXPECT_EQ(driver->counters().reconnects, 1);
+  EXPECT_EQ(server->connections(), 2);
+  // The reconnected couch was held where it was: it does not resume the old target.
+  couch->advance_to(3.0);
+  EXPECT_NEAR(couch->position()(0), 1.0, 1e-6);
+  // No command before a read-back has taken the couch's target as the base.
+  EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kFault);
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 1.0, 1e-3);
+  ASSERT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kOk);
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 2.0, 1e-3);
+}
+
+TEST_F(ModbusCouchTest, AReadBackThatDisagreesWithTheCommandIsReportedAsItIs) {
+  ASSERT_EQ(driver->command(shift(3), in_ms(100)), DeviceStatus::kOk);
+  server->inject(CouchServerFault::kReadbackMismatch);
+  ActuatorState s;
+  ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 5.0, 1e-3);  // the loop's gate compares it with what it commanded
+}
+
+TEST(ModbusCouch, OpeningWithNothingListeningSaysWhere) {
+  drivers::ModbusCouchOptions o;
+  o.port = 1;  // privileged and unused
+  ModbusCouch driver(o);
+  const Status s = driver.open();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("127.0.0.1:1"), std::string::npos) << s.message();
+  EXPECT_EQ(driver.readback(nullptr, in_ms(10)), DeviceStatus::kDisconnected);
+}
+
+}  // namespace
+}  // namespace lftrack
