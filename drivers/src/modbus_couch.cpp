@@ -219,10 +219,10 @@ DeviceStatus ModbusCouch::read_inputs(std::uint16_t* registers) {
 
 DeviceStatus ModbusCouch::command(const tracking::Vector6d& correction, Deadline deadline) {
   if (!connected_.load(std::memory_order_acquire)) return DeviceStatus::kDisconnected;
-  if (resync_.load()) return DeviceStatus::kFault;  // no read-back since hold or reconnection
+  if (resync_.load()) return DeviceStatus::kRefused;  // no read-back since hold or reconnection
   std::uint16_t holding[reg::kHoldingCount];
   const tracking::Vector6d target = commanded_ + correction;
-  if (!correction.allFinite() || !reg::encode_travel(target, holding + reg::kTarget)) return DeviceStatus::kFault;
+  if (!correction.allFinite() || !reg::encode_travel(target, holding + reg::kTarget)) return DeviceStatus::kRefused;
   holding[reg::kCommandSequence] = static_cast<std::uint16_t>(sequence_ + 1);
   holding[reg::kControl] = reg::kEnable;
   if (!set_timeout(deadline)) return DeviceStatus::kTimeout;

@@ -108,6 +108,7 @@ Status run(const SimOptions& o) {
   so.archive = o.archive;
   so.replay_sequence = o.sequence;
   if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
+  if (o.hil == "can") so.hil = HilProtocol::kCan;
   so.allocation_count = &process_allocation_count;
   auto session = LoopSession::create(*prepared, so, &pool);
   if (!session.ok()) return session.status();
@@ -156,6 +157,13 @@ Status run(const SimOptions& o) {
                   {"exceptions", c.exceptions}, {"bad_replies", c.bad_replies},
                   {"disconnects", c.disconnects}, {"reconnects", c.reconnects}};
     }
+    if (const drivers::CanRobot* robot = (*session)->can_robot()) {
+      const drivers::CanRobotCounters& c = robot->counters();
+      j["hil"] = {{"protocol", "can"},           {"frames_out", c.frames_out},
+                  {"frames_in", c.frames_in},    {"heartbeats", c.heartbeats},
+                  {"error_frames", c.error_frames}, {"timeouts", c.timeouts},
+                  {"refused", c.refused},        {"faults", drivers::describe_can_faults(robot->faults())}};
+    }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     print_summary(*summary);
@@ -178,6 +186,15 @@ Status run(const SimOptions& o) {
                   couch->endpoint().c_str(), static_cast<long long>(c.requests),
                   static_cast<long long>(c.timeouts), static_cast<long long>(c.exceptions),
                   static_cast<long long>(c.bad_replies), static_cast<long long>(c.disconnects));
+    }
+    if (const drivers::CanRobot* robot = (*session)->can_robot()) {
+      const drivers::CanRobotCounters& c = robot->counters();
+      std::printf("hil: CAN robot, %lld frames out, %lld in (%lld heartbeats, %lld error frames); timeouts %lld, "
+                  "refused %lld; faults now: %s\n",
+                  static_cast<long long>(c.frames_out), static_cast<long long>(c.frames_in),
+                  static_cast<long long>(c.heartbeats), static_cast<long long>(c.error_frames),
+                  static_cast<long long>(c.timeouts), static_cast<long long>(c.refused),
+                  drivers::describe_can_faults(robot->faults()).c_str());
     }
     if (!o.journal.empty())
       std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());
@@ -208,9 +225,9 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
     app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
   if (mode == SimOptions::Mode::kSim)
     app->add_option("--hil", o->hil,
-                    "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1, "
-                    "commanded through the real driver")
-        ->check(CLI::IsMember({"modbus"}));
+                    "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1 "
+                    "(modbus), or a virtual robot on a CAN link (can), commanded through the real driver")
+        ->check(CLI::IsMember({"modbus", "can"}));
   if (mode != SimOptions::Mode::kReplay)
     app->add_option("--archive", o->archive,
                     "Archive every frame pair in this directory (the format `lftrack replay` reads)");

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <string>
 
 #include "lftrack/drivers/recorded_actuator.hpp"
 #include "lftrack/host/scene_registration.hpp"
@@ -30,6 +31,7 @@ class RoomClockedActuator final : public drivers::Actuator {
     return driver_->readback(state, real(deadline));
   }
   void hold() override { driver_->hold(); }
+  void set_beam_permit(bool permit) override { driver_->set_beam_permit(permit); }
   void close() override { driver_->close(); }
 
  private:
@@ -52,6 +54,8 @@ struct LoopSession::Parts {
   std::unique_ptr<drivers::RecordedActuator> recorded_couch;
   std::unique_ptr<sim::ModbusCouchServer> couch_server;  // HIL: serves the room's couch
   std::unique_ptr<drivers::ModbusCouch> couch_driver;
+  std::unique_ptr<sim::VirtualRobot> robot;  // HIL over CAN: moves the room's couch
+  std::unique_ptr<drivers::CanRobot> robot_driver;
   std::unique_ptr<RoomClockedActuator> hil_couch;
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;
@@ -109,17 +113,31 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   if (o.hil != HilProtocol::kNone) {
     if (!has_couch)
       return invalid_argument("hardware in the loop needs a simulated scene with `actuator: {type: virtual}`");
-    auto server = sim::ModbusCouchServer::start(&parts->room->couch_device());
-    if (!server.ok()) return server.status();
-    parts->couch_server = std::move(server).value();
-    drivers::ModbusCouchOptions couch;
-    couch.port = parts->couch_server->port();
-    couch.response_timeout_s = std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
-    parts->couch_driver = std::make_unique<drivers::ModbusCouch>(couch);
-    parts->hil_couch =
-        std::make_unique<RoomClockedActuator>(parts->room.get(), parts->couch_driver.get(), o.simulated_clock);
+    drivers::Actuator* driver = nullptr;
+    std::string endpoint;
+    if (o.hil == HilProtocol::kModbus) {
+      auto server = sim::ModbusCouchServer::start(&parts->room->couch_device());
+      if (!server.ok()) return server.status();
+      parts->couch_server = std::move(server).value();
+      drivers::ModbusCouchOptions couch;
+      couch.port = parts->couch_server->port();
+      couch.response_timeout_s = std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
+      parts->couch_driver = std::make_unique<drivers::ModbusCouch>(couch);
+      driver = parts->couch_driver.get();
+      endpoint = parts->couch_driver->endpoint();
+    } else {
+      auto link = sim::can_socket_pair();
+      if (!link.ok()) return link.status();
+      auto robot = sim::VirtualRobot::start(&parts->room->couch_device(), (*link)[1]);
+      if (!robot.ok()) return robot.status();
+      parts->robot = std::move(robot).value();
+      parts->robot_driver = std::make_unique<drivers::CanRobot>(drivers::CanRobotOptions{}, (*link)[0]);
+      driver = parts->robot_driver.get();
+      endpoint = "CAN node 1 over a socket pair";
+    }
+    parts->hil_couch = std::make_unique<RoomClockedActuator>(parts->room.get(), driver, o.simulated_clock);
     LFTRACK_RETURN_IF_ERROR(parts->hil_couch->open());
-    spdlog::info("hardware in the loop: the couch is {}", parts->couch_driver->endpoint());
+    spdlog::info("hardware in the loop: the couch is {}", endpoint);
   }
   if (!o.archive.empty()) {
     FrameArchiveOptions archive_options;
@@ -205,6 +223,12 @@ const drivers::ModbusCouch* LoopSession::modbus_couch() const {
 }
 sim::ModbusCouchServer* LoopSession::modbus_couch_server() {
   return parts_->couch_server.get();
+}
+const drivers::CanRobot* LoopSession::can_robot() const {
+  return parts_->robot_driver.get();
+}
+sim::VirtualRobot* LoopSession::virtual_robot() {
+  return parts_->robot.get();
 }
 
 }  // namespace lftrack::host

@@ -351,7 +351,15 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
       r->command_sent = 1;
       ++summary.commands;
       approve_next_step = false;
-    } else {  // held below, with every other entry into HOLD or FAULT
+    } else if (sent == DeviceStatus::kRefused) {
+      // Nothing was sent or moved (the device knows of a fault): HOLD, as a read-back fault does.
+      GateOutput refused;
+      refused.decision = GateDecision::kHold;
+      refused.reason = GateReason::kActuatorFault;
+      r->gate_decision = static_cast<std::uint8_t>(refused.decision);
+      r->gate_reason = static_cast<std::uint8_t>(refused.reason);
+      transition(index, machine.on(TrackingEvent::kGate, refused), TrackingEvent::kGate, r);
+    } else {  // it may have moved: stop safely (held below, with every other entry into HOLD or FAULT)
       transition(index, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault, r);
     }
   } else if (move) {
@@ -362,6 +370,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
     predictor.reset();
   }
   r->beam_permit = machine.beam_permit() ? 1 : 0;
+  if (parts.actuator != nullptr) parts.actuator->set_beam_permit(machine.beam_permit());
   r->state = static_cast<std::uint8_t>(machine.state());
   if (parts.truth != nullptr && machine.state() == TrackingState::kTrack)
     residual_mm.add(r->true_residual_mm);

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <thread>
+#include <vector>
 
 #include "loop_fixture.hpp"
 
@@ -120,6 +121,94 @@ INSTANTIATE_TEST_SUITE_P(
         ModbusFaultCase{"ReadbackMismatch", CouchServerFault::kReadbackMismatch, kRead, kHold,
                         GateReason::kReadbackMismatch}),
     [](const ::testing::TestParamInfo<ModbusFaultCase>& param) { return std::string(param.param.name); });
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+using sim::RobotFault;
+
+TEST_F(ClosedLoop, HardwareInTheLoopOverCanTracksAsTheInProcessSimulation) {
+  const LoopRun in_process = run_loop(kBreathing, 120);
+  LoopSessionOptions hil;
+  hil.hil = HilProtocol::kCan;
+  const LoopRun over_can = run_loop(kBreathing, 120, hil);
+  const LoopSummary& a = in_process.summary;
+  const LoopSummary& b = over_can.summary;
+  SCOPED_TRACE(to_json(b).dump());
+  EXPECT_EQ(b.states[std::size_t(TrackingState::kTrack)], 120);
+  EXPECT_EQ(b.holds, 0);
+  ASSERT_TRUE(a.residual_mean_mm && b.residual_mean_mm);
+  // Corrections cross the link in 1 um and 10 urad steps.
+  EXPECT_NEAR(*b.residual_mean_mm, *a.residual_mean_mm, 0.02);
+  EXPECT_NEAR(*b.residual_p95_mm, *a.residual_p95_mm, 0.05);
+}
+
+struct CanFaultCase {
+  const char* name;
+  std::vector<RobotFault> faults;
+};
+
+class HilCanFault : public ClosedLoop, public ::testing::WithParamInterface<CanFaultCase> {};
+
+TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
+  const CanFaultCase& c = GetParam();
+  LoopSessionOptions options;
+  options.hil = HilProtocol::kCan;
+  bool beam_before = false, beam_after = true;
+  const LoopRun r = run_loop(kBreathing, 80, options, kLightFieldFrames, [&](LoopSession& session) {
+    sim::VirtualRobot* robot = session.virtual_robot();
+    return std::thread([robot, &c, &beam_before, &beam_after] {
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+      while (robot->corrections() < 15 && std::chrono::steady_clock::now() < until)
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      beam_before = robot->beam_permit();
+      for (RobotFault f : c.faults) robot->inject(f);
+      // The loop holds within a cycle or two (a missing heartbeat: after its 0.3 s timeout).
+      const auto hold_until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+      while (robot->beam_permit() && std::chrono::steady_clock::now() < hold_until)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      beam_after = robot->beam_permit();
+    });
+  });
+  const LoopSummary& s = r.summary;
+  SCOPED_TRACE(to_json(s).dump());
+  EXPECT_TRUE(beam_before) << "the robot had the beam permit while tracking";
+  EXPECT_FALSE(beam_after) << "the robot lost it on the fault";
+  EXPECT_EQ(s.holds, 1);
+  EXPECT_LE(s.faults, 1) << "a condition that lasts escalates from HOLD to FAULT (the gate's STOP)";
+  ASSERT_EQ(r.journal.records.size(), 80u);
+  std::size_t held_at = 0;
+  for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
+    const JournalRecord& rec = r.journal.records[i];
+    if (held_at == 0 && rec.state != std::uint8_t(TrackingState::kTrack)) held_at = i;
+    for (double v : rec.command) EXPECT_TRUE(std::isfinite(v));
+  }
+  ASSERT_GT(held_at, 10u);
+  EXPECT_EQ(r.journal.records[held_at].state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(r.journal.records[held_at].gate_reason, std::uint8_t(GateReason::kActuatorFault));
+  for (std::size_t i = held_at; i < r.journal.records.size(); ++i) {
+    EXPECT_TRUE(r.journal.records[i].state == std::uint8_t(TrackingState::kHold) ||
+                r.journal.records[i].state == std::uint8_t(TrackingState::kFault))
+        << "never back to TRACK without the operator, cycle " << i;
+    EXPECT_EQ(r.journal.records[i].beam_permit, 0) << i;
+    if (i > held_at) {
+      EXPECT_EQ(r.journal.records[i].command_sent, 0) << "held: nothing sent, cycle " << i;
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    FaultCatalogue, HilCanFault,
+    ::testing::Values(CanFaultCase{"BusOff", {RobotFault::kBusOff}},
+                      CanFaultCase{"BusOffThenRestart", {RobotFault::kBusOff, RobotFault::kControllerRestarted}},
+                      CanFaultCase{"ErrorPassive", {RobotFault::kErrorPassive}},
+                      CanFaultCase{"RobotRestart", {RobotFault::kRobotRestart}},
+                      CanFaultCase{"MissingHeartbeat", {RobotFault::kStopHeartbeat}},
+                      CanFaultCase{"ErrorFrameFlood", {RobotFault::kErrorFlood}}),
+    [](const ::testing::TestParamInfo<CanFaultCase>& param) { return std::string(param.param.name); });
 
 }  // namespace
 }  // namespace lftrack::host

@@ -210,7 +210,7 @@ TEST_F(ModbusCouchTest, ADroppedConnectionIsReconnectedOutsideTheCycleWithTheCou
   couch->advance_to(3.0);
   EXPECT_NEAR(couch->position()(0), 1.0, 1e-6);
   // No command before a read-back has taken the couch's target as the base.
-  EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kFault);
+  EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kRefused);
   ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
   EXPECT_NEAR(s.target(0), 1.0, 1e-3);
   ASSERT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kOk);

@@ -27,6 +27,9 @@ class Actuator {
   virtual DeviceStatus readback(ActuatorState* state, Deadline deadline) = 0;
   // Stop where it is and refuse motion until the next command after a resume.
   virtual void hold() = 0;
+  // Every cycle, after the state machine: whether the beam may be on (a robot that carries the
+  // beam gates it; a couch ignores it). Never blocks.
+  virtual void set_beam_permit(bool permit) { (void)permit; }
   virtual void close() = 0;
 };
 

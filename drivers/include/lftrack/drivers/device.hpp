@@ -16,6 +16,7 @@ enum class DeviceStatus {
   kTimeout,       // the deadline passed before the device answered
   kFault,         // the device reported an error; the cycle treats the result as invalid
   kDisconnected,  // the device is gone; reopening happens outside the cycle
+  kRefused,       // refused before acting (a fault condition it knows of): nothing was sent or moved
 };
 
 // An absolute point on CLOCK_MONOTONIC by which a cycle call must return.

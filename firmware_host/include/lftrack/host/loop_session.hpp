@@ -4,15 +4,17 @@
 //  - the simulated room (`lftrack sim`, the closed-loop tests): set-up error, patient motion,
 //    the simulator's detectors and the virtual couch; or
 //  - an archived sequence (`lftrack replay`): frames from disk, no actuator (track and report).
-// Hardware in the loop (`lftrack sim --hil modbus`): the simulated room's couch is served by the
-// virtual couch server (a libmodbus TCP server on 127.0.0.1) and the loop commands it through the
-// real Modbus driver, so every command and read-back crosses the protocol.
+// Hardware in the loop (`lftrack sim --hil modbus|can`): the simulated room's couch is served by
+// the virtual couch server (a libmodbus TCP server on 127.0.0.1), or moved by the virtual robot
+// on a CAN link (a socket pair carrying struct can_frame), and the loop commands it through the
+// real Modbus or CAN driver, so every command and read-back crosses the protocol.
 
 #include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <optional>
 
+#include "lftrack/drivers/can_robot.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/drivers/replay_frame_source.hpp"
 #include "lftrack/host/frame_archive.hpp"
@@ -21,6 +23,7 @@
 #include "lftrack/host/sim_frame_source.hpp"
 #include "lftrack/host/tracking_loop.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
+#include "lftrack/sim/virtual_robot.hpp"
 
 namespace lftrack::tracking {
 class ThreadPool;
@@ -28,7 +31,7 @@ class ThreadPool;
 
 namespace lftrack::host {
 
-enum class HilProtocol { kNone, kModbus };
+enum class HilProtocol { kNone, kModbus, kCan };
 
 struct LoopSessionOptions {
   std::int64_t cycles = 300;
@@ -64,6 +67,8 @@ class LoopSession {
   const FrameArchive* archive() const;               // null without one
   const drivers::ModbusCouch* modbus_couch() const;  // the HIL couch driver; null otherwise
   sim::ModbusCouchServer* modbus_couch_server();  // HIL: for fault injection
+  const drivers::CanRobot* can_robot() const;       // the HIL robot driver; null otherwise
+  sim::VirtualRobot* virtual_robot();               // HIL: for fault injection
 
  private:
   struct Parts;

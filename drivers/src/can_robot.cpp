@@ -1,0 +1,276 @@
+#include "lftrack/drivers/can_robot.hpp"
+
+#include <linux/can/error.h>
+#include <linux/can/raw.h>
+#include <net/if.h>
+#include <poll.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <ctime>
+
+#include "lftrack/drivers/can_robot_protocol.hpp"
+
+namespace lftrack::drivers {
+
+namespace can = robot_can;
+namespace {
+constexpr int kMaxFramesPerPump = 256;
+}
+
+std::string describe_can_faults(std::uint32_t f) {
+  std::string s;
+  const auto add = [&](std::uint32_t bit, const char* what) {
+    if ((f & bit) == 0) return;
+    if (!s.empty()) s += ", ";
+    s += what;
+  };
+  add(kCanBusOff, "bus-off");
+  add(kCanErrorPassive, "error-passive");
+  add(kCanControllerRestarted, "CAN controller restarted");
+  add(kCanRobotRestarted, "robot restarted");
+  add(kCanHeartbeatMissing, "heartbeat missing");
+  add(kCanErrorFlood, "error-frame flood");
+  add(kCanRobotFault, "robot reports a fault");
+  return s.empty() ? "none" : s;
+}
+
+CanRobot::CanRobot(CanRobotOptions options) : options_(std::move(options)) {}
+CanRobot::CanRobot(CanRobotOptions options, int socket_fd)
+    : options_(std::move(options)), fd_(socket_fd), given_socket_(true) {}
+CanRobot::~CanRobot() {
+  close();
+}
+
+std::int64_t CanRobot::now_ns() const {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+Status CanRobot::open() {
+  if (options_.node_id < 1 || options_.node_id > 15) return invalid_argument("CAN robot: node id must be in 1..15");
+  const std::string where = given_socket_ ? std::string("CAN robot on a socket")
+                                          : "CAN robot on " + options_.interface;
+  if (!given_socket_) {
+    fd_ = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+    if (fd_ < 0)
+      return io_error(where + ": no CAN_RAW socket (" + std::strerror(errno) +
+                      "); this kernel may have no CAN support (modprobe can_raw; vcan for tests)");
+    ifreq request{};
+    std::strncpy(request.ifr_name, options_.interface.c_str(), IFNAMSIZ - 1);
+    if (::ioctl(fd_, SIOCGIFINDEX, &request) != 0) {
+      close();
+      return not_found(where + ": no such interface (" + std::strerror(errno) + ")");
+    }
+    sockaddr_can address{};
+    address.can_family = AF_CAN;
+    address.can_ifindex = request.ifr_ifindex;
+    can_err_mask_t errors = CAN_ERR_CRTL | CAN_ERR_BUSOFF | CAN_ERR_RESTARTED | CAN_ERR_BUSERROR | CAN_ERR_PROT |
+                            CAN_ERR_TX_TIMEOUT | CAN_ERR_ACK;
+    const canid_t n = static_cast<canid_t>(options_.node_id);
+    can_filter filters[9] = {{can::kAcknowledge + n, CAN_SFF_MASK},
+                             {can::kStatus + n, CAN_SFF_MASK},
+                             {can::kHeartbeat + n, CAN_SFF_MASK}};
+    for (canid_t k = 0; k < 6; ++k) filters[3 + k] = {can::kPositionFirst + n + k, CAN_SFF_MASK};
+    if (::setsockopt(fd_, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &errors, sizeof errors) != 0 ||
+        ::setsockopt(fd_, SOL_CAN_RAW, CAN_RAW_FILTER, filters, sizeof filters) != 0 ||
+        ::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+      const std::string why = std::strerror(errno);
+      close();
+      return io_error(where + ": " + why);
+    }
+  }
+  if (fd_ < 0) return failed_precondition(where + ": no socket");
+  const auto until = std::chrono::steady_clock::now() +
+                     std::chrono::microseconds(static_cast<long long>(options_.open_timeout_s * 1e6));
+  while (last_heartbeat_ns_ == 0 && std::chrono::steady_clock::now() < until) {
+    pollfd p{fd_, POLLIN, 0};
+    ::poll(&p, 1, 10);
+    pump();
+  }
+  if (last_heartbeat_ns_ == 0)
+    return io_error(where + ": no heartbeat from node " + std::to_string(options_.node_id) + " within " +
+                    std::to_string(options_.open_timeout_s) + " s");
+  latched_ &= ~std::uint32_t(kCanRobotRestarted);  // a robot that has just booted is expected
+  return {};
+}
+
+void CanRobot::close() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+DeviceStatus CanRobot::send(const can_frame& frame) {
+  if (::send(fd_, &frame, sizeof frame, MSG_DONTWAIT | MSG_NOSIGNAL) == ssize_t(sizeof frame)) {
+    ++counters_.frames_out;
+    return DeviceStatus::kOk;
+  }
+  if (errno == EAGAIN || errno == ENOBUFS) return DeviceStatus::kTimeout;  // transmit queue full
+  return DeviceStatus::kDisconnected;  // EPIPE, ENETDOWN, ENODEV...
+}
+
+void CanRobot::take(const can_frame& f) {
+  ++counters_.frames_in;
+  if ((f.can_id & CAN_ERR_FLAG) != 0) {
+    ++counters_.error_frames;
+    const canid_t cls = f.can_id & CAN_ERR_MASK;
+    if ((cls & CAN_ERR_BUSOFF) != 0) bus_off_ = true;
+    if ((cls & CAN_ERR_CRTL) != 0 && f.can_dlc >= 2) {
+      if ((f.data[1] & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE)) != 0) error_passive_ = true;
+      if ((f.data[1] & CAN_ERR_CRTL_ACTIVE) != 0) error_passive_ = false;
+    }
+    if ((cls & CAN_ERR_RESTARTED) != 0) {
+      bus_off_ = false;
+      latched_ |= kCanControllerRestarted;
+    }
+    const std::int64_t t = now_ns();
+    if (t - flood_window_start_ns_ > 1'000'000'000) {
+      flood_window_start_ns_ = t;
+      flood_window_count_ = 0;
+    }
+    if (++flood_window_count_ > options_.error_frames_per_s_limit) latched_ |= kCanErrorFlood;
+    return;
+  }
+  if ((f.can_id & CAN_EFF_FLAG) != 0) return;
+  const canid_t id = f.can_id & CAN_SFF_MASK;
+  const canid_t n = static_cast<canid_t>(options_.node_id);
+  if (id == can::kHeartbeat + n && f.can_dlc >= 1) {
+    ++counters_.heartbeats;
+    last_heartbeat_ns_ = now_ns();
+    robot_state_ = f.data[0];
+    if (robot_state_ == can::kStateBootUp) {
+      latched_ |= kCanRobotRestarted;
+      enabled_ = false;
+    }
+  } else if (id == can::kAcknowledge + n && f.can_dlc >= 2) {
+    if (f.data[0] == sequence_) {
+      ack_fresh_ = true;
+      ack_result_ = f.data[1];
+    }
+  } else if (id == can::kStatus + n && f.can_dlc >= 4) {
+    if (f.data[0] == token_) {
+      status_fresh_ = true;
+      travel_frames_ = 0;
+      status_fault_ = f.data[2];
+      status_flags_ = f.data[3];
+    }
+  } else if (id >= can::kPositionFirst + n && id < can::kPositionFirst + n + 6 && f.can_dlc == 8 && status_fresh_) {
+    const int k = static_cast<int>(id - can::kPositionFirst - n);
+    if (k < 3)
+      can::decode_travel_frame(f, k, &position_);
+    else
+      can::decode_travel_frame(f, k - 3, &target_);
+    travel_frames_ |= 1 << k;
+  }
+}
+
+void CanRobot::pump() {
+  can_frame f;
+  for (int i = 0; i < kMaxFramesPerPump; ++i) {
+    const ssize_t n = ::recv(fd_, &f, sizeof f, MSG_DONTWAIT);
+    if (n != ssize_t(sizeof f)) break;
+    take(f);
+  }
+  if (last_heartbeat_ns_ != 0 &&
+      double(now_ns() - last_heartbeat_ns_) > options_.heartbeat_timeout_s * 1e9)
+    latched_ |= kCanHeartbeatMissing;
+}
+
+std::uint32_t CanRobot::conditions() const {
+  return (bus_off_ ? kCanBusOff : 0u) | (error_passive_ ? kCanErrorPassive : 0u);
+}
+
+bool CanRobot::wait(Deadline deadline, bool (CanRobot::*done)() const) {
+  for (;;) {
+    pump();
+    if ((this->*done)()) return true;
+    const auto left = deadline - std::chrono::steady_clock::now();
+    if (left <= Deadline::duration::zero()) return false;
+    const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(left).count();
+    const timespec timeout{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
+    pollfd p{fd_, POLLIN, 0};
+    ::ppoll(&p, 1, &timeout, nullptr);
+  }
+}
+
+DeviceStatus CanRobot::command(const tracking::Vector6d& correction, Deadline deadline) {
+  if (fd_ < 0) return DeviceStatus::kDisconnected;
+  pump();
+  if (faults() != 0) return DeviceStatus::kRefused;
+  can_frame translation, rotation;
+  const auto next = static_cast<std::uint8_t>(sequence_ + 1);
+  if (!can::encode_correction(correction, options_.node_id, next, &translation, &rotation))
+    return DeviceStatus::kRefused;
+  if (!enabled_) {  // after open, hold or a restart: the robot moves only once told to
+    can_frame control = can::make_frame(can::kControl, options_.node_id, 2);
+    control.data[0] = can::kControlEnable;
+    if (const DeviceStatus s = send(control); s != DeviceStatus::kOk) return s;
+    enabled_ = true;
+  }
+  sequence_ = next;
+  ack_fresh_ = false;
+  if (const DeviceStatus s = send(translation); s != DeviceStatus::kOk) return s;
+  if (const DeviceStatus s = send(rotation); s != DeviceStatus::kOk) return s;
+  if (!wait(deadline, &CanRobot::ack_arrived)) {
+    ++counters_.timeouts;
+    return DeviceStatus::kTimeout;
+  }
+  if (ack_result_ != can::kAckAccepted) {
+    ++counters_.refused;
+    return DeviceStatus::kFault;
+  }
+  return DeviceStatus::kOk;
+}
+
+DeviceStatus CanRobot::readback(ActuatorState* state, Deadline deadline) {
+  if (fd_ < 0) return DeviceStatus::kDisconnected;
+  pump();
+  if (faults() != 0) {
+    state->fault = true;
+    return DeviceStatus::kFault;
+  }
+  can_frame request = can::make_frame(can::kReadbackRequest, options_.node_id, 1);
+  request.data[0] = ++token_;
+  status_fresh_ = false;
+  travel_frames_ = 0;
+  if (const DeviceStatus s = send(request); s != DeviceStatus::kOk) return s;
+  if (!wait(deadline, &CanRobot::readback_complete)) {
+    ++counters_.timeouts;
+    return DeviceStatus::kTimeout;
+  }
+  if (status_fault_ != 0) latched_ |= kCanRobotFault;
+  state->position = position_;
+  state->target = target_;
+  state->moving = (status_flags_ & can::kFlagMoving) != 0;
+  state->fault = faults() != 0;
+  return state->fault ? DeviceStatus::kFault : DeviceStatus::kOk;
+}
+
+void CanRobot::hold() {
+  enabled_ = false;
+  if (fd_ < 0) return;
+  can_frame control = can::make_frame(can::kControl, options_.node_id, 2);
+  control.data[0] = can::kControlHold;
+  (void)send(control);
+  pump();
+  // The operator's resume follows; what was an event is acknowledged by this hold.
+  latched_ &= ~std::uint32_t(kCanControllerRestarted | kCanRobotRestarted | kCanRobotFault);
+  if (double(now_ns() - last_heartbeat_ns_) <= options_.heartbeat_timeout_s * 1e9)
+    latched_ &= ~std::uint32_t(kCanHeartbeatMissing);
+  if (flood_window_count_ <= options_.error_frames_per_s_limit) latched_ &= ~std::uint32_t(kCanErrorFlood);
+}
+
+void CanRobot::set_beam_permit(bool permit) {
+  if (fd_ < 0) return;
+  can_frame f = can::make_frame(can::kBeamPermit, options_.node_id, 2);
+  f.data[0] = permit ? 1 : 0;
+  f.data[1] = permit_counter_++;
+  (void)send(f);
+}
+
+}  // namespace lftrack::drivers
