@@ -53,9 +53,10 @@ std::int64_t CanRobot::now_ns() const {
 }
 
 Status CanRobot::open() {
-  if (options_.node_id < 1 || options_.node_id > 15) return invalid_argument("CAN robot: node id must be in 1..15");
-  const std::string where = given_socket_ ? std::string("CAN robot on a socket")
-                                          : "CAN robot on " + options_.interface;
+  if (options_.node_id < 1 || options_.node_id > 15)
+    return invalid_argument("CAN robot: node id must be in 1..15");
+  const std::string where =
+      given_socket_ ? std::string("CAN robot on a socket") : "CAN robot on " + options_.interface;
   if (!given_socket_) {
     fd_ = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
     if (fd_ < 0)
@@ -70,8 +71,8 @@ Status CanRobot::open() {
     sockaddr_can address{};
     address.can_family = AF_CAN;
     address.can_ifindex = request.ifr_ifindex;
-    can_err_mask_t errors = CAN_ERR_CRTL | CAN_ERR_BUSOFF | CAN_ERR_RESTARTED | CAN_ERR_BUSERROR | CAN_ERR_PROT |
-                            CAN_ERR_TX_TIMEOUT | CAN_ERR_ACK;
+    can_err_mask_t errors = CAN_ERR_CRTL | CAN_ERR_BUSOFF | CAN_ERR_RESTARTED | CAN_ERR_BUSERROR |
+                            CAN_ERR_PROT | CAN_ERR_TX_TIMEOUT | CAN_ERR_ACK;
     const canid_t n = static_cast<canid_t>(options_.node_id);
     can_filter filters[9] = {{can::kAcknowledge + n, CAN_SFF_MASK},
                              {can::kStatus + n, CAN_SFF_MASK},
@@ -111,7 +112,7 @@ DeviceStatus CanRobot::send(const can_frame& frame) {
     return DeviceStatus::kOk;
   }
   if (errno == EAGAIN || errno == ENOBUFS) return DeviceStatus::kTimeout;  // transmit queue full
-  return DeviceStatus::kDisconnected;  // EPIPE, ENETDOWN, ENODEV...
+  return DeviceStatus::kDisconnected;                                      // EPIPE, ENETDOWN, ENODEV...
 }
 
 void CanRobot::take(const can_frame& f) {
@@ -159,7 +160,8 @@ void CanRobot::take(const can_frame& f) {
       status_fault_ = f.data[2];
       status_flags_ = f.data[3];
     }
-  } else if (id >= can::kPositionFirst + n && id < can::kPositionFirst + n + 6 && f.can_dlc == 8 && status_fresh_) {
+  } else if (id >= can::kPositionFirst + n && id < can::kPositionFirst + n + 6 && f.can_dlc == 8 &&
+             status_fresh_) {
     const int k = static_cast<int>(id - can::kPositionFirst - n);
     if (k < 3)
       can::decode_travel_frame(f, k, &position_);
@@ -176,8 +178,7 @@ void CanRobot::pump() {
     if (n != ssize_t(sizeof f)) break;
     take(f);
   }
-  if (last_heartbeat_ns_ != 0 &&
-      double(now_ns() - last_heartbeat_ns_) > options_.heartbeat_timeout_s * 1e9)
+  if (last_heartbeat_ns_ != 0 && double(now_ns() - last_heartbeat_ns_) > options_.heartbeat_timeout_s * 1e9)
     latched_ |= kCanHeartbeatMissing;
 }
 

@@ -6,9 +6,11 @@
 namespace lftrack::drivers::couch_registers {
 
 namespace {
-constexpr double kUnitsPerMm = 1000.0;    // micrometres
-constexpr double kUnitsPerRad = 1.0e6;    // microradians
-double scale(int axis) { return axis < 3 ? kUnitsPerMm : kUnitsPerRad; }
+constexpr double kUnitsPerMm = 1000.0;  // micrometres
+constexpr double kUnitsPerRad = 1.0e6;  // microradians
+double scale(int axis) {
+  return axis < 3 ? kUnitsPerMm : kUnitsPerRad;
+}
 }  // namespace
 
 bool encode_travel(const tracking::Vector6d& travel, std::uint16_t* registers) {

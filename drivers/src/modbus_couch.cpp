@@ -158,7 +158,7 @@ DeviceStatus ModbusCouch::tcp_transact(const std::uint8_t* pdu, int pdu_length, 
   if (reply[kMbap] == (pdu[0] | 0x80)) {
     const int code = reply[kMbap + 1];
     return classify_failure(code >= 1 && code <= MODBUS_EXCEPTION_GATEWAY_TARGET ? MODBUS_ENOBASE + code
-                                                                                : EMBBADEXC);
+                                                                                 : EMBBADEXC);
   }
   if (reply[kMbap] != pdu[0] || length != kMbap + expected_pdu_length) return classify_failure(EMBBADDATA);
   std::memcpy(reply_pdu, reply + kMbap, std::size_t(expected_pdu_length));
@@ -186,15 +186,17 @@ DeviceStatus ModbusCouch::write_holding(const std::uint16_t* registers) {
   const DeviceStatus s = tcp_transact(pdu, sizeof pdu, reply, sizeof reply);
   if (s != DeviceStatus::kOk) return s;
   return reply[2] == reg::kTarget && reply[4] == reg::kHoldingCount ? DeviceStatus::kOk
-                                                                     : classify_failure(EMBBADDATA);
+                                                                    : classify_failure(EMBBADDATA);
 }
 
 DeviceStatus ModbusCouch::write_control(std::uint16_t value) {
   ++requests_;
   if (options_.transport == ModbusCouchOptions::Transport::kRtu)
-    return modbus_write_register(ctx_, reg::kControl, value) == 1 ? DeviceStatus::kOk : classify_failure(errno);
+    return modbus_write_register(ctx_, reg::kControl, value) == 1 ? DeviceStatus::kOk
+                                                                  : classify_failure(errno);
   const std::uint8_t pdu[5] = {MODBUS_FC_WRITE_SINGLE_REGISTER, 0, reg::kControl,
-                               static_cast<std::uint8_t>(value >> 8), static_cast<std::uint8_t>(value & 0xFF)};
+                               static_cast<std::uint8_t>(value >> 8),
+                               static_cast<std::uint8_t>(value & 0xFF)};
   std::uint8_t reply[5];  // the request echoed
   const DeviceStatus s = tcp_transact(pdu, sizeof pdu, reply, sizeof reply);
   if (s != DeviceStatus::kOk) return s;
@@ -222,7 +224,8 @@ DeviceStatus ModbusCouch::command(const tracking::Vector6d& correction, Deadline
   if (resync_.load()) return DeviceStatus::kRefused;  // no read-back since hold or reconnection
   std::uint16_t holding[reg::kHoldingCount];
   const tracking::Vector6d target = commanded_ + correction;
-  if (!correction.allFinite() || !reg::encode_travel(target, holding + reg::kTarget)) return DeviceStatus::kRefused;
+  if (!correction.allFinite() || !reg::encode_travel(target, holding + reg::kTarget))
+    return DeviceStatus::kRefused;
   holding[reg::kCommandSequence] = static_cast<std::uint16_t>(sequence_ + 1);
   holding[reg::kControl] = reg::kEnable;
   if (!set_timeout(deadline)) return DeviceStatus::kTimeout;

@@ -34,7 +34,8 @@ class KernelSyscalls final : public V4l2Syscalls {
 };
 
 // Preferred formats, best first: 16-bit, 12- and 10-bit in 16-bit containers, then 8-bit.
-constexpr std::uint32_t kFormats[] = {V4L2_PIX_FMT_Y16, V4L2_PIX_FMT_Y12, V4L2_PIX_FMT_Y10, V4L2_PIX_FMT_GREY};
+constexpr std::uint32_t kFormats[] = {V4L2_PIX_FMT_Y16, V4L2_PIX_FMT_Y12, V4L2_PIX_FMT_Y10,
+                                      V4L2_PIX_FMT_GREY};
 
 std::string fourcc(std::uint32_t f) {
   std::string s(4, ' ');
@@ -70,8 +71,10 @@ Status V4l2Detector::open() {
   if (fd_ < 0) return not_found(options_.device + ": cannot open (" + std::strerror(errno) + ")");
 
   v4l2_capability cap{};
-  if (sys_.ioctl(fd_, VIDIOC_QUERYCAP, &cap) != 0) return fail(std::string("not a V4L2 device (") + std::strerror(errno) + ")");
-  const std::uint32_t caps = (cap.capabilities & V4L2_CAP_DEVICE_CAPS) != 0 ? cap.device_caps : cap.capabilities;
+  if (sys_.ioctl(fd_, VIDIOC_QUERYCAP, &cap) != 0)
+    return fail(std::string("not a V4L2 device (") + std::strerror(errno) + ")");
+  const std::uint32_t caps =
+      (cap.capabilities & V4L2_CAP_DEVICE_CAPS) != 0 ? cap.device_caps : cap.capabilities;
   if ((caps & V4L2_CAP_VIDEO_CAPTURE) == 0) return fail("cannot capture video (no V4L2_CAP_VIDEO_CAPTURE)");
   if ((caps & V4L2_CAP_STREAMING) == 0) return fail("cannot stream (no V4L2_CAP_STREAMING)");
 
@@ -101,12 +104,14 @@ Status V4l2Detector::open() {
   format.fmt.pix.height = static_cast<std::uint32_t>(options_.rows);
   format.fmt.pix.pixelformat = pixel_format_;
   format.fmt.pix.field = V4L2_FIELD_NONE;
-  if (sys_.ioctl(fd_, VIDIOC_S_FMT, &format) != 0) return fail(std::string("VIDIOC_S_FMT: ") + std::strerror(errno));
+  if (sys_.ioctl(fd_, VIDIOC_S_FMT, &format) != 0)
+    return fail(std::string("VIDIOC_S_FMT: ") + std::strerror(errno));
   if (format.fmt.pix.pixelformat != pixel_format_ || int(format.fmt.pix.width) != options_.cols ||
       int(format.fmt.pix.height) != options_.rows)
-    return fail("gives " + std::to_string(format.fmt.pix.width) + " x " + std::to_string(format.fmt.pix.height) +
-                " " + fourcc(format.fmt.pix.pixelformat) + " for the scene's " + std::to_string(options_.cols) +
-                " x " + std::to_string(options_.rows) + " " + fourcc(pixel_format_));
+    return fail("gives " + std::to_string(format.fmt.pix.width) + " x " +
+                std::to_string(format.fmt.pix.height) + " " + fourcc(format.fmt.pix.pixelformat) +
+                " for the scene's " + std::to_string(options_.cols) + " x " + std::to_string(options_.rows) +
+                " " + fourcc(pixel_format_));
   const std::uint32_t bytes_per_pixel = pixel_format_ == V4L2_PIX_FMT_GREY ? 1 : 2;
   bytes_per_line_ = std::max(format.fmt.pix.bytesperline, format.fmt.pix.width * bytes_per_pixel);
 
@@ -123,12 +128,15 @@ Status V4l2Detector::open() {
     b.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     b.memory = V4L2_MEMORY_MMAP;
     b.index = i;
-    if (sys_.ioctl(fd_, VIDIOC_QUERYBUF, &b) != 0) return fail(std::string("VIDIOC_QUERYBUF: ") + std::strerror(errno));
-    if (b.length < std::size_t(bytes_per_line_) * std::size_t(options_.rows)) return fail("buffer smaller than a frame");
+    if (sys_.ioctl(fd_, VIDIOC_QUERYBUF, &b) != 0)
+      return fail(std::string("VIDIOC_QUERYBUF: ") + std::strerror(errno));
+    if (b.length < std::size_t(bytes_per_line_) * std::size_t(options_.rows))
+      return fail("buffer smaller than a frame");
     void* p = sys_.mmap(b.length, fd_, static_cast<off_t>(b.m.offset));
     if (p == MAP_FAILED) return fail(std::string("mmap: ") + std::strerror(errno));
     buffers_[i] = {p, b.length};
-    if (sys_.ioctl(fd_, VIDIOC_QBUF, &b) != 0) return fail(std::string("VIDIOC_QBUF: ") + std::strerror(errno));
+    if (sys_.ioctl(fd_, VIDIOC_QBUF, &b) != 0)
+      return fail(std::string("VIDIOC_QBUF: ") + std::strerror(errno));
   }
   if (options_.trigger_control_id != 0) {
     v4l2_queryctrl query{};
@@ -142,7 +150,8 @@ Status V4l2Detector::open() {
       return fail(std::string("cannot switch the external trigger on: ") + std::strerror(errno));
   }
   int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
-  if (sys_.ioctl(fd_, VIDIOC_STREAMON, &type) != 0) return fail(std::string("VIDIOC_STREAMON: ") + std::strerror(errno));
+  if (sys_.ioctl(fd_, VIDIOC_STREAMON, &type) != 0)
+    return fail(std::string("VIDIOC_STREAMON: ") + std::strerror(errno));
   have_sequence_ = false;
   return {};
 }
@@ -195,7 +204,8 @@ void V4l2Detector::copy_out(const Buffer& buffer, std::size_t bytes_used, Frame*
 
 DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
   if (fd_ < 0) return DeviceStatus::kDisconnected;
-  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+  const auto left =
+      std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
   pollfd p{fd_, POLLIN, 0};
   const int ready = sys_.poll(&p, 1, static_cast<int>(std::max<long long>(0, left.count())));
   if (ready < 0 && errno != EINTR) return disconnected();
@@ -253,7 +263,8 @@ DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
   last_sequence_ = newest.sequence;
   copy_out(buffers_[newest.index], newest.bytesused, frame);
   frame->sequence = newest.sequence;
-  frame->timestamp_ns = std::int64_t(newest.timestamp.tv_sec) * 1'000'000'000 + std::int64_t(newest.timestamp.tv_usec) * 1000;
+  frame->timestamp_ns =
+      std::int64_t(newest.timestamp.tv_sec) * 1'000'000'000 + std::int64_t(newest.timestamp.tv_usec) * 1000;
   requeue(newest.index);
   ++counters_.frames;
   return DeviceStatus::kOk;

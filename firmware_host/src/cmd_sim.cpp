@@ -152,17 +152,21 @@ Status run(const SimOptions& o) {
                       {"pairs_dropped", archive->pairs_dropped()}};
     if (const drivers::ModbusCouch* couch = (*session)->modbus_couch()) {
       const drivers::ModbusCouchCounters c = couch->counters();
-      j["hil"] = {{"protocol", "modbus"},       {"endpoint", couch->endpoint()},
-                  {"requests", c.requests},     {"timeouts", c.timeouts},
-                  {"exceptions", c.exceptions}, {"bad_replies", c.bad_replies},
+      j["hil"] = {{"protocol", "modbus"},         {"endpoint", couch->endpoint()},
+                  {"requests", c.requests},       {"timeouts", c.timeouts},
+                  {"exceptions", c.exceptions},   {"bad_replies", c.bad_replies},
                   {"disconnects", c.disconnects}, {"reconnects", c.reconnects}};
     }
     if (const drivers::CanRobot* robot = (*session)->can_robot()) {
       const drivers::CanRobotCounters& c = robot->counters();
-      j["hil"] = {{"protocol", "can"},           {"frames_out", c.frames_out},
-                  {"frames_in", c.frames_in},    {"heartbeats", c.heartbeats},
-                  {"error_frames", c.error_frames}, {"timeouts", c.timeouts},
-                  {"refused", c.refused},        {"faults", drivers::describe_can_faults(robot->faults())}};
+      j["hil"] = {{"protocol", "can"},
+                  {"frames_out", c.frames_out},
+                  {"frames_in", c.frames_in},
+                  {"heartbeats", c.heartbeats},
+                  {"error_frames", c.error_frames},
+                  {"timeouts", c.timeouts},
+                  {"refused", c.refused},
+                  {"faults", drivers::describe_can_faults(robot->faults())}};
     }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
@@ -182,19 +186,21 @@ Status run(const SimOptions& o) {
                   o.archive.c_str(), static_cast<unsigned long long>(archive->pairs_dropped()));
     if (const drivers::ModbusCouch* couch = (*session)->modbus_couch()) {
       const drivers::ModbusCouchCounters c = couch->counters();
-      std::printf("hil: %s, %lld requests; timeouts %lld, exceptions %lld, bad replies %lld, disconnects %lld\n",
-                  couch->endpoint().c_str(), static_cast<long long>(c.requests),
-                  static_cast<long long>(c.timeouts), static_cast<long long>(c.exceptions),
-                  static_cast<long long>(c.bad_replies), static_cast<long long>(c.disconnects));
+      std::printf(
+          "hil: %s, %lld requests; timeouts %lld, exceptions %lld, bad replies %lld, disconnects %lld\n",
+          couch->endpoint().c_str(), static_cast<long long>(c.requests), static_cast<long long>(c.timeouts),
+          static_cast<long long>(c.exceptions), static_cast<long long>(c.bad_replies),
+          static_cast<long long>(c.disconnects));
     }
     if (const drivers::CanRobot* robot = (*session)->can_robot()) {
       const drivers::CanRobotCounters& c = robot->counters();
-      std::printf("hil: CAN robot, %lld frames out, %lld in (%lld heartbeats, %lld error frames); timeouts %lld, "
-                  "refused %lld; faults now: %s\n",
-                  static_cast<long long>(c.frames_out), static_cast<long long>(c.frames_in),
-                  static_cast<long long>(c.heartbeats), static_cast<long long>(c.error_frames),
-                  static_cast<long long>(c.timeouts), static_cast<long long>(c.refused),
-                  drivers::describe_can_faults(robot->faults()).c_str());
+      std::printf(
+          "hil: CAN robot, %lld frames out, %lld in (%lld heartbeats, %lld error frames); timeouts %lld, "
+          "refused %lld; faults now: %s\n",
+          static_cast<long long>(c.frames_out), static_cast<long long>(c.frames_in),
+          static_cast<long long>(c.heartbeats), static_cast<long long>(c.error_frames),
+          static_cast<long long>(c.timeouts), static_cast<long long>(c.refused),
+          drivers::describe_can_faults(robot->faults()).c_str());
     }
     if (!o.journal.empty())
       std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());

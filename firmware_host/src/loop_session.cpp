@@ -112,7 +112,8 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   const bool has_couch = !replaying && p.scene.actuator.type == "virtual";
   if (o.hil != HilProtocol::kNone) {
     if (!has_couch)
-      return invalid_argument("hardware in the loop needs a simulated scene with `actuator: {type: virtual}`");
+      return invalid_argument(
+          "hardware in the loop needs a simulated scene with `actuator: {type: virtual}`");
     drivers::Actuator* driver = nullptr;
     std::string endpoint;
     if (o.hil == HilProtocol::kModbus) {
@@ -174,9 +175,9 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
       replaying ? static_cast<drivers::FrameSource*>(parts->replay_frames.get()) : parts->sim_frames.get();
   lp.archive = parts->archive.get();
   lp.corrections.assign(p.scene.detectors.size(), sim::detector_correction(scene_detector_model(p)));
-  lp.actuator = parts->hil_couch  ? static_cast<drivers::Actuator*>(parts->hil_couch.get())
-                : has_couch         ? &parts->room->couch_actuator()
-                                    : parts->recorded_couch.get();
+  lp.actuator = parts->hil_couch ? static_cast<drivers::Actuator*>(parts->hil_couch.get())
+                : has_couch      ? &parts->room->couch_actuator()
+                                 : parts->recorded_couch.get();
   lp.journal = parts->journal.get();
   lp.operator_input = parts->operators.empty() ? nullptr : &parts->operators;
   lp.truth = parts->room.get();  // null when replaying

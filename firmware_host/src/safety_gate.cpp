@@ -37,6 +37,8 @@ const char* to_string(GateReason r) {
       return "no complete frame pair";
     case GateReason::kActuatorFault:
       return "actuator read-back failed";
+    case GateReason::kImageQuality:
+      return "image quality";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -100,6 +102,7 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   }
   // Quality.
   if (!in.frames_ok) return counted(GateReason::kNoFrames);
+  if (!in.image_quality_ok) return counted(GateReason::kImageQuality);
   if (!in.registration_ok) return counted(GateReason::kNoResult);
   if (in.frame_age_ms > limits.max_frame_age_ms) return counted(GateReason::kStaleFrame);
   if (in.pair_skew_ms > limits.max_pair_skew_ms) return counted(GateReason::kUnpairedFrames);

@@ -1,5 +1,7 @@
 #include "lftrack/host/tracking_loop.hpp"
 
+#include "lftrack/tracking/frame_quality.hpp"
+
 #include <unistd.h>
 
 #include <algorithm>
@@ -59,8 +61,9 @@ struct TrackingLoop::Impl {
   Vector6d couch_at_last_registration = Vector6d::Zero();
   bool have_registration = false;
   Vector6d commanded_total = Vector6d::Zero();  // what the actuator was last told, as travel
-  Vector6d aligned_couch = Vector6d::Zero();    // couch target after the set-up move
-  Vector6d couch_position = Vector6d::Zero();   // last read-back
+  tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;  // this cycle's
+  Vector6d aligned_couch = Vector6d::Zero();   // couch target after the set-up move
+  Vector6d couch_position = Vector6d::Zero();  // last read-back
   std::array<double, kMaxGateViews> reference_similarity{};
   int consecutive_failures = 0;
   bool approve_next_step = false;
@@ -94,9 +97,14 @@ struct TrackingLoop::Impl {
     }
   }
 
+  // False, with quality_issue set, for a frame the image-quality gate refuses.
   bool preprocess() {
+    quality_issue = tracking::FrameQualityIssue::kOk;
     for (std::size_t v = 0; v < pair.frames.size(); ++v) {
       const tracking::PixelWindow& w = parts.scene->roi_windows[v];
+      quality_issue = tracking::assess_frame_quality(pair.frames[v].pixels.view(), w, parts.corrections[v],
+                                                     settings.image_quality);
+      if (quality_issue != tracking::FrameQualityIssue::kOk) return false;
       if (!tracking::preprocess_frame(pair.frames[v].pixels.view(), parts.corrections[v], w,
                                       line_integral[v].view(), valid[v].view())
                .ok())
@@ -249,6 +257,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   GateInput in;
   in.views = static_cast<int>(views);
   in.frames_ok = frames_ok;
+  in.image_quality_ok = !frames_ok || quality_issue == tracking::FrameQualityIssue::kOk;
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(start_ns + period_ns));

@@ -141,7 +141,8 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       mismatch = true;
       break;
   }
-  if (function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS && address == reg::kTarget && count == reg::kHoldingCount) {
+  if (function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS && address == reg::kTarget &&
+      count == reg::kHoldingCount) {
     std::uint16_t holding[reg::kHoldingCount];
     for (int i = 0; i < reg::kHoldingCount; ++i)
       holding[i] = static_cast<std::uint16_t>((query[h + 6 + 2 * i] << 8) | query[h + 7 + 2 * i]);

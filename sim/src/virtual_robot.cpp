@@ -140,9 +140,9 @@ void VirtualRobot::handle(const can_frame& f) {
     status.data[0] = f.data[0];
     status.data[1] = enabled_ ? can::kStateOperational : can::kStatePreOperational;
     status.data[2] = ok && !state.fault ? 0 : 1;
-    status.data[3] = static_cast<std::uint8_t>((state.moving ? can::kFlagMoving : 0) |
-                                               (enabled_ ? can::kFlagEnabled : 0) |
-                                               (beam_permit_ ? can::kFlagBeamPermit : 0));
+    status.data[3] =
+        static_cast<std::uint8_t>((state.moving ? can::kFlagMoving : 0) | (enabled_ ? can::kFlagEnabled : 0) |
+                                  (beam_permit_ ? can::kFlagBeamPermit : 0));
     send(status);
     can_frame travel[3];
     if (can::encode_travel(state.position, can::kPositionFirst, options_.node_id, travel))

@@ -92,6 +92,12 @@ const std::vector<GateCase> kCases = {
        in.registration_ok = false;
      },
      GateDecision::kSkip, GateReason::kNoFrames},
+    {"ImageQuality",
+     [](GateInput& in) {
+       in.image_quality_ok = false;
+       in.registration_ok = false;
+     },
+     GateDecision::kSkip, GateReason::kImageQuality},
     {"StaleFrame", [](GateInput& in) { in.frame_age_ms = 151; }, GateDecision::kSkip,
      GateReason::kStaleFrame},
     {"UnpairedFrames", [](GateInput& in) { in.pair_skew_ms = 25; }, GateDecision::kSkip,

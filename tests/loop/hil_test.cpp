@@ -35,9 +35,9 @@ TEST_F(ClosedLoop, HardwareInTheLoopTracksAsTheInProcessSimulation) {
   ASSERT_EQ(over_modbus.journal.records.size(), 120u);
   double largest_readback_difference_mm = 0;
   for (std::size_t i = 0; i < 120; ++i)
-    largest_readback_difference_mm =
-        std::max(largest_readback_difference_mm, std::abs(over_modbus.journal.records[i].readback[0] -
-                                                          in_process.journal.records[i].readback[0]));
+    largest_readback_difference_mm = std::max(
+        largest_readback_difference_mm,
+        std::abs(over_modbus.journal.records[i].readback[0] - in_process.journal.records[i].readback[0]));
   // The registration's wall-clock budget may end one cycle's search at a different evaluation in
   // the two runs; the couch then takes a slightly different path for a few cycles.
   EXPECT_LT(largest_readback_difference_mm, 0.5) << "the couch moved the same way through the protocol";
@@ -78,7 +78,8 @@ TEST_P(HilModbusFault, HoldsTheCouchDropsTheBeamAndJournalsTheReason) {
     const JournalRecord& rec = r.journal.records[i];
     if (held_at == 0 && rec.state != std::uint8_t(TrackingState::kTrack)) held_at = i;
     // No command beyond the scene's per-cycle limit, ever.
-    const double step_mm = std::max({std::abs(rec.command[0]), std::abs(rec.command[1]), std::abs(rec.command[2])});
+    const double step_mm =
+        std::max({std::abs(rec.command[0]), std::abs(rec.command[1]), std::abs(rec.command[2])});
     if (i > 0) {
       EXPECT_LE(step_mm, scene_->scene.safety.max_step_mm + 1e-9) << "cycle " << i;
     }
@@ -113,7 +114,8 @@ INSTANTIATE_TEST_SUITE_P(
         ModbusFaultCase{"NoReplyToReadback", CouchServerFault::kNoReply, kRead, kHold, kNoReadback},
         ModbusFaultCase{"NoReplyToCommand", CouchServerFault::kNoReply, kWrite, kFault, GateReason::kOk},
         ModbusFaultCase{"Exception4OnReadback", CouchServerFault::kException4, kRead, kHold, kNoReadback},
-        ModbusFaultCase{"Exception4OnCommand", CouchServerFault::kException4, kWrite, kFault, GateReason::kOk},
+        ModbusFaultCase{"Exception4OnCommand", CouchServerFault::kException4, kWrite, kFault,
+                        GateReason::kOk},
         ModbusFaultCase{"Exception6OnReadback", CouchServerFault::kException6, kRead, kHold, kNoReadback},
         ModbusFaultCase{"WrongUnitOnReadback", CouchServerFault::kWrongUnit, kRead, kHold, kNoReadback},
         ModbusFaultCase{"WrongUnitOnCommand", CouchServerFault::kWrongUnit, kWrite, kFault, GateReason::kOk},
@@ -203,7 +205,8 @@ TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
 INSTANTIATE_TEST_SUITE_P(
     FaultCatalogue, HilCanFault,
     ::testing::Values(CanFaultCase{"BusOff", {RobotFault::kBusOff}},
-                      CanFaultCase{"BusOffThenRestart", {RobotFault::kBusOff, RobotFault::kControllerRestarted}},
+                      CanFaultCase{"BusOffThenRestart",
+                                   {RobotFault::kBusOff, RobotFault::kControllerRestarted}},
                       CanFaultCase{"ErrorPassive", {RobotFault::kErrorPassive}},
                       CanFaultCase{"RobotRestart", {RobotFault::kRobotRestart}},
                       CanFaultCase{"MissingHeartbeat", {RobotFault::kStopHeartbeat}},

@@ -7,6 +7,8 @@
 
 #include <fstream>
 
+#include "lftrack/drivers/frame_files.hpp"
+
 #include "lftrack/host/allocation_counter.hpp"
 #include "loop_fixture.hpp"
 
@@ -83,6 +85,40 @@ TEST_F(ArchiveAndReplay, BadFramesInTheArchiveAreJournaledStatusesNotCrashes) {
     EXPECT_EQ(records[i].beam_permit, 0) << i;
   }
   EXPECT_EQ(r.summary.states[std::size_t(TrackingState::kTrack)], 40) << "single bad pairs skip, never hold";
+}
+
+// The image-quality gate on frames a detector could really deliver: each bad frame's cycle is
+// skipped with reason "image quality"; nothing is registered, sent or beamed from it.
+TEST_F(ArchiveAndReplay, SaturatedBlankUniformAndDeadPixelFramesAreSkippedByTheImageQualityGate) {
+  record();
+  const auto frames = dir_.path() / "sequence" / "frames";
+  tracking::Image<std::uint16_t> image(scene_->scene.detectors[0].view.rows,
+                                       scene_->scene.detectors[0].view.cols);
+  const auto write = [&](const char* name) {
+    ASSERT_TRUE(drivers::write_frame_file((frames / name).c_str(), image.view()).ok());
+  };
+  const int full_scale = (1 << scene_->scene.detectors[0].bits) - 1;
+  std::fill(image.pixels().begin(), image.pixels().end(), static_cast<std::uint16_t>(full_scale));
+  write("000008-A.tif");  // saturated
+  std::fill(image.pixels().begin(), image.pixels().end(), std::uint16_t(0));
+  write("000012-B.tif");  // blank
+  std::fill(image.pixels().begin(), image.pixels().end(), std::uint16_t(2000));
+  write("000016-A.tif");  // uniform
+  ASSERT_TRUE(drivers::read_frame_file((frames / "000020-A.tif").c_str(), image.view()).ok());
+  for (int r = 0; r < image.rows(); ++r)
+    for (int c = 0; c < image.cols(); c += 4) image.at(r, c) = 0;  // a quarter of the panel dead
+  write("000020-A.tif");
+  const LoopRun r = replay();
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 40u);
+  for (std::size_t i : {8u, 12u, 16u, 20u}) {
+    EXPECT_EQ(records[i].gate_decision, std::uint8_t(GateDecision::kSkip)) << i;
+    EXPECT_EQ(records[i].gate_reason, std::uint8_t(GateReason::kImageQuality)) << i;
+    EXPECT_EQ(records[i].command_sent, 0) << i;
+    EXPECT_EQ(records[i].beam_permit, 0) << i;
+    EXPECT_EQ(records[i].evaluations, 0u) << "not registered, cycle " << i;
+  }
+  EXPECT_EQ(r.summary.decisions[std::size_t(GateDecision::kSkip)], 4) << "every other frame passes";
 }
 
 TEST_F(ArchiveAndReplay, AMissingOrBrokenSequenceIsRefusedAtStart) {

@@ -143,7 +143,8 @@ TEST_F(CanRobotTest, CorrectionsMoveTheRobotTheReadBackReportsItAndTheBeamPermit
   EXPECT_FALSE(s.fault);
   driver->set_beam_permit(true);
   const auto until = Clock::now() + std::chrono::seconds(1);
-  while (!robot->beam_permit() && Clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  while (!robot->beam_permit() && Clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
   EXPECT_TRUE(robot->beam_permit());
   // Hold disables the robot; the next command enables it again.
   driver->hold();
@@ -164,7 +165,8 @@ TEST_F(CanRobotTest, BusOffHoldsUntilTheControllerRestartsAndThenUntilHold) {
   std::this_thread::sleep_for(std::chrono::milliseconds(30));
   ActuatorState s;
   EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kFault) << "a restart does not resume by itself";
-  EXPECT_EQ(driver->faults(), drivers::kCanControllerRestarted) << drivers::describe_can_faults(driver->faults());
+  EXPECT_EQ(driver->faults(), drivers::kCanControllerRestarted)
+      << drivers::describe_can_faults(driver->faults());
   driver->hold();  // what the loop does on entering HOLD; the operator's resume follows
   EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kOk);
   EXPECT_EQ(driver->faults(), 0u);

@@ -202,7 +202,8 @@ TEST_F(ModbusCouchTest, ADroppedConnectionIsReconnectedOutsideTheCycleWithTheCou
   EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kDisconnected);
   EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.002);
   const auto until = Clock::now() + std::chrono::seconds(5);
-  while (!driver->connected() && Clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  while (!driver->connected() && Clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   ASSERT_TRUE(driver->connected());
   EXPECT_EQ(driver->counters().reconnects, 1);
   EXPECT_EQ(server->connections(), 2);

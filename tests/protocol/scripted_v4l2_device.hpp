@@ -44,7 +44,8 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
     for (int r = 0; r < height; ++r)
       for (int c = 0; c < width; ++c) {
         const auto v = static_cast<std::uint16_t>(value + c);
-        std::uint8_t* p = memory_[i].data() + std::size_t(r) * bytes_per_line() + std::size_t(c) * (grey ? 1 : 2);
+        std::uint8_t* p =
+            memory_[i].data() + std::size_t(r) * bytes_per_line() + std::size_t(c) * (grey ? 1 : 2);
         p[0] = static_cast<std::uint8_t>(v & 0xFF);
         if (!grey) p[1] = static_cast<std::uint8_t>(v >> 8);
       }

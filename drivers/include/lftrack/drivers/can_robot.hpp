@@ -48,8 +48,7 @@ enum CanRobotFault : std::uint32_t {
 std::string describe_can_faults(std::uint32_t faults);
 
 struct CanRobotCounters {
-  std::int64_t frames_in = 0, frames_out = 0, error_frames = 0, heartbeats = 0, timeouts = 0,
-               refused = 0;
+  std::int64_t frames_in = 0, frames_out = 0, error_frames = 0, heartbeats = 0, timeouts = 0, refused = 0;
 };
 
 class CanRobot final : public Actuator {

@@ -44,9 +44,9 @@ inline constexpr std::uint8_t kAckAccepted = 0, kAckOutOfRange = 1, kAckNotEnabl
 inline constexpr std::uint8_t kStateBootUp = 0x00, kStateOperational = 0x05, kStatePreOperational = 0x7F;
 inline constexpr std::uint8_t kFlagMoving = 1, kFlagEnabled = 2, kFlagBeamPermit = 4;
 
-inline constexpr double kTranslationUnitMm = 1e-3;   // correction frames
+inline constexpr double kTranslationUnitMm = 1e-3;  // correction frames
 inline constexpr double kRotationUnitRad = 1e-5;
-inline constexpr double kReadbackUnitMm = 1e-3;      // read-back frames
+inline constexpr double kReadbackUnitMm = 1e-3;  // read-back frames
 inline constexpr double kReadbackUnitRad = 1e-6;
 
 can_frame make_frame(canid_t id, int node, std::uint8_t dlc);

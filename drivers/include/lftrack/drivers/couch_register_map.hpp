@@ -15,19 +15,19 @@
 namespace lftrack::drivers::couch_registers {
 
 // Holding registers (function 16 writes them all in one request; function 6 the control word).
-inline constexpr int kTarget = 0;           // 12 registers: target travel (um, urad)
-inline constexpr int kCommandSequence = 12; // the couch acts when this changes; echoed in kAcknowledged
-inline constexpr int kControl = 13;         // kEnable or kHold
+inline constexpr int kTarget = 0;            // 12 registers: target travel (um, urad)
+inline constexpr int kCommandSequence = 12;  // the couch acts when this changes; echoed in kAcknowledged
+inline constexpr int kControl = 13;          // kEnable or kHold
 inline constexpr int kHoldingCount = 14;
 inline constexpr std::uint16_t kEnable = 1;  // move to the target
 inline constexpr std::uint16_t kHold = 2;    // stop where it is; refuse targets until kEnable again
 
 // Input registers (function 4 reads them all in one request).
-inline constexpr int kStatus = 0;          // bits below
-inline constexpr int kAcknowledged = 1;    // the last command sequence accepted
-inline constexpr int kFaultWord = 2;       // kNoFault or a code below
-inline constexpr int kPosition = 3;        // 12 registers: read-back travel (um, urad)
-inline constexpr int kAcceptedTarget = 15; // 12 registers: the target in effect (um, urad)
+inline constexpr int kStatus = 0;           // bits below
+inline constexpr int kAcknowledged = 1;     // the last command sequence accepted
+inline constexpr int kFaultWord = 2;        // kNoFault or a code below
+inline constexpr int kPosition = 3;         // 12 registers: read-back travel (um, urad)
+inline constexpr int kAcceptedTarget = 15;  // 12 registers: the target in effect (um, urad)
 inline constexpr int kInputCount = 27;
 inline constexpr std::uint16_t kStatusMoving = 1u << 0;
 inline constexpr std::uint16_t kStatusFault = 1u << 1;

@@ -41,14 +41,13 @@ struct ModbusCouchOptions {
   char parity = 'E';
   int data_bits = 8, stop_bits = 1;
   int unit_id = 1;
-  double response_timeout_s = 0.02;  // per request, at most; the cycle's deadline may cut it
+  double response_timeout_s = 0.02;   // per request, at most; the cycle's deadline may cut it
   double reconnect_interval_s = 0.2;  // between reconnection attempts
 };
 
 // What went wrong so far, for the summary and the tests (read from any thread).
 struct ModbusCouchCounters {
-  std::int64_t requests = 0, timeouts = 0, exceptions = 0, bad_replies = 0, disconnects = 0,
-               reconnects = 0;
+  std::int64_t requests = 0, timeouts = 0, exceptions = 0, bad_replies = 0, disconnects = 0, reconnects = 0;
   int last_exception = 0;  // Modbus exception code of the last exception reply
 };
 
@@ -98,7 +97,7 @@ class ModbusCouch final : public Actuator {
   tracking::Vector6d commanded_ = tracking::Vector6d::Zero();  // last target sent (travel)
   std::atomic<bool> resync_{true};  // take commanded_ from the next read-back's accepted target
   std::uint16_t sequence_ = 0;
-  std::uint16_t transaction_ = 0;  // TCP transaction id of the last request
+  std::uint16_t transaction_ = 0;   // TCP transaction id of the last request
   bool flush_before_next_ = false;  // a late reply may be waiting after a timeout
 
   std::atomic<std::int64_t> requests_{0}, timeouts_{0}, exceptions_{0}, bad_replies_{0}, disconnects_{0},

@@ -38,8 +38,8 @@ struct V4l2DetectorOptions {
 };
 
 struct V4l2Counters {
-  std::int64_t frames = 0, timeouts = 0, error_buffers = 0, io_errors = 0, sequence_gaps = 0,
-               frames_lost = 0, backwards = 0, stale_dropped = 0, disconnects = 0, reopens = 0;
+  std::int64_t frames = 0, timeouts = 0, error_buffers = 0, io_errors = 0, sequence_gaps = 0, frames_lost = 0,
+               backwards = 0, stale_dropped = 0, disconnects = 0, reopens = 0;
 };
 
 class V4l2Detector {

@@ -66,9 +66,9 @@ class LoopSession {
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
   const FrameArchive* archive() const;               // null without one
   const drivers::ModbusCouch* modbus_couch() const;  // the HIL couch driver; null otherwise
-  sim::ModbusCouchServer* modbus_couch_server();  // HIL: for fault injection
-  const drivers::CanRobot* can_robot() const;       // the HIL robot driver; null otherwise
-  sim::VirtualRobot* virtual_robot();               // HIL: for fault injection
+  sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
+  const drivers::CanRobot* can_robot() const;        // the HIL robot driver; null otherwise
+  sim::VirtualRobot* virtual_robot();                // HIL: for fault injection
 
  private:
   struct Parts;

@@ -46,8 +46,9 @@ enum class GateReason : std::uint8_t {
   kViewsDisagree,
   kStaleFrame,
   kUnpairedFrames,
-  kNoFrames,  // the frame source gave no complete pair (timeout, device fault, bad file)
+  kNoFrames,       // the frame source gave no complete pair (timeout, device fault, bad file)
   kActuatorFault,  // no read-back (timeout, exception, disconnected) or the actuator reports a fault
+  kImageQuality,   // a frame is saturated, blank, uniform or has too many dead pixels
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -55,16 +56,17 @@ const char* to_string(GateReason reason);
 inline constexpr int kMaxGateViews = 4;
 
 struct GateInput {
-  bool frames_ok = true;  // the source delivered a complete pair this cycle
+  bool frames_ok = true;         // the source delivered a complete pair this cycle
+  bool image_quality_ok = true;  // every frame passed the image-quality gate (frame_quality.hpp)
   bool registration_ok = false;
   tracking::Vector6d step = tracking::Vector6d::Zero();   // this cycle's correction (t mm, omega rad)
   tracking::Vector6d total = tracking::Vector6d::Zero();  // correction from the aligned pose
   int views = 0;
   std::array<double, kMaxGateViews> similarity{};            // this cycle, per view
   std::array<double, kMaxGateViews> reference_similarity{};  // at alignment, per view
-  double frame_age_ms = 0;  // of the older frame of the pair, at the decision
-  double pair_skew_ms = 0;  // between the two frames' timestamps
-  bool readback_valid = true;  // the actuator answered the read-back and reports no fault
+  double frame_age_ms = 0;       // of the older frame of the pair, at the decision
+  double pair_skew_ms = 0;       // between the two frames' timestamps
+  bool readback_valid = true;    // the actuator answered the read-back and reports no fault
   double readback_error_mm = 0;  // actuator position against the last command
   double readback_error_deg = 0;
   int consecutive_failures = 0;  // before this cycle

@@ -40,6 +40,7 @@
 #include "lftrack/host/tracking_states.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
+#include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/registration.hpp"
 
 namespace lftrack::host {
@@ -66,8 +67,9 @@ struct LoopSettings {
   double actuator_latency_s = 0;  // for the default look-ahead
   std::int64_t cycles = 0;        // cycles to run (0: until quit or stop)
   bool simulated_clock = false;
-  bool status_line = false;  // one line per cycle on stderr (a terminal)
-  int warmup_cycles = 5;     // after ALIGN, before allocations are counted
+  bool status_line = false;                    // one line per cycle on stderr (a terminal)
+  int warmup_cycles = 5;                       // after ALIGN, before allocations are counted
+  tracking::FrameQualityLimits image_quality;  // the image-quality gate's limits
 };
 
 struct LoopTransition {
