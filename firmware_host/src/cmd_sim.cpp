@@ -127,6 +127,7 @@ Status run(const SimOptions& o) {
   auto summary = (*session)->run();
   g_session.store(nullptr);
   if (!summary.ok()) return summary.status();
+  if (!summary->journal_error.empty()) spdlog::error("{}", summary->journal_error);
   const drivers::ReplayFrameSource* replay = (*session)->replay();
   const FrameArchive* archive = (*session)->archive();
   if (o.json) {
@@ -205,6 +206,7 @@ Status run(const SimOptions& o) {
     if (!o.journal.empty())
       std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());
   }
+  if (!summary->journal_error.empty()) return io_error(summary->journal_error);
   return {};
 }
 

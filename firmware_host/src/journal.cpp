@@ -38,9 +38,11 @@ void encode(const JournalRecord& r, unsigned char* out) {
   std::memcpy(out + 8 + sizeof r, &crc, 4);
 }
 
-bool write_all(int fd, const unsigned char* p, std::size_t n) {
+bool write_all(ssize_t (*write_call)(int, const void*, std::size_t), int fd, const unsigned char* p,
+               std::size_t n) {
   while (n > 0) {
-    const ssize_t w = ::write(fd, p, n);
+    const ssize_t w = write_call(fd, p, n);
+    if (w == 0) return false;
     if (w < 0) {
       if (errno == EINTR) continue;
       return false;
@@ -69,11 +71,12 @@ Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem
   const std::uint32_t version = kFormatVersion, record_size = sizeof(JournalRecord);
   std::memcpy(header + 8, &version, 4);
   std::memcpy(header + 12, &record_size, 4);
-  if (!write_all(fd, header, kHeaderBytes) || ::fdatasync(fd) != 0) {
+  if (!write_all(options.write_call, fd, header, kHeaderBytes) || ::fdatasync(fd) != 0) {
     ::close(fd);
     return io_error(file.string() + ": cannot write the journal header: " + std::strerror(errno));
   }
   std::unique_ptr<JournalWriter> w(new JournalWriter(fd, options));
+  w->good_bytes_ = static_cast<off_t>(kHeaderBytes);
   w->thread_ = std::thread([p = w.get()] { p->run(); });
   return w;
 }
@@ -101,10 +104,20 @@ void JournalWriter::run() {
     std::size_t n = 0;
     JournalRecord r;
     while (n < 64 && queue_.pop(&r)) encode(r, batch.data() + kFrameBytes * n++);
-    if (n > 0) {
-      if (!write_all(fd_, batch.data(), kFrameBytes * n)) write_failed_ = true;
-      written_ += n;
-      dirty = true;
+    if (n > 0 && write_failed_.load(std::memory_order_relaxed)) {
+      lost_ += n;  // after a failure nothing more is written: the file stays readable
+    } else if (n > 0) {
+      if (write_all(options_.write_call, fd_, batch.data(), kFrameBytes * n)) {
+        good_bytes_ += static_cast<off_t>(kFrameBytes * n);
+        written_ += n;
+        dirty = true;
+      } else {
+        // Disk full or I/O error: cut the partial batch off, keep what was complete.
+        (void)::ftruncate(fd_, good_bytes_);
+        ::fdatasync(fd_);
+        lost_ += n;
+        write_failed_.store(true, std::memory_order_release);
+      }
     }
     const auto now = Clock::now();
     if (dirty && now - last_sync >= std::chrono::milliseconds(options_.fsync_interval_ms)) {
@@ -127,7 +140,10 @@ Status JournalWriter::close() {
   if (thread_.joinable()) thread_.join();
   const bool ok = ::close(fd_) == 0 && !write_failed_;
   fd_ = -1;
-  return ok ? Status{} : io_error("journal: a write failed; the journal is incomplete");
+  return ok ? Status{}
+            : io_error("journal: a write failed (disk full or I/O error); the " +
+                       std::to_string(written_.load()) + " records before it are intact, " +
+                       std::to_string(lost_.load()) + " were not written");
 }
 
 Result<JournalContents> read_journal(const std::filesystem::path& file) {

@@ -149,7 +149,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   }
 
   if (!o.journal.empty()) {
-    auto journal = JournalWriter::open(o.journal);
+    auto journal = JournalWriter::open(o.journal, o.journal_options);
     if (!journal.ok()) return journal.status();
     parts->journal = std::move(journal).value();
   }
@@ -199,7 +199,7 @@ Result<LoopSummary> LoopSession::run() {
   auto summary = parts_->loop->run();
   if (parts_->hil_couch) parts_->hil_couch->close();
   if (parts_->journal) {
-    if (Status s = parts_->journal->close(); !s.ok() && summary.ok()) return s;
+    if (Status s = parts_->journal->close(); !s.ok() && summary.ok()) summary->journal_error = s.message();
   }
   if (parts_->archive) {
     if (Status s = parts_->archive->close(); !s.ok() && summary.ok()) return s;

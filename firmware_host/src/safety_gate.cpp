@@ -39,6 +39,8 @@ const char* to_string(GateReason r) {
       return "actuator read-back failed";
     case GateReason::kImageQuality:
       return "image quality";
+    case GateReason::kJournalFailed:
+      return "journal write failed";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -89,6 +91,7 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   // Safety violations first: they hold whatever else is true.
   if (!finite(in) || in.views < 0 || in.views > kMaxGateViews) return hold(GateReason::kNonFinite);
   if (!in.readback_valid) return hold(GateReason::kActuatorFault);
+  if (!in.journal_ok) return hold(GateReason::kJournalFailed);
   if (in.readback_error_mm > limits.readback_tolerance_mm ||
       in.readback_error_deg > limits.readback_tolerance_deg)
     return hold(GateReason::kReadbackMismatch);

@@ -258,6 +258,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   in.views = static_cast<int>(views);
   in.frames_ok = frames_ok;
   in.image_quality_ok = !frames_ok || quality_issue == tracking::FrameQualityIssue::kOk;
+  in.journal_ok = parts.journal == nullptr || !parts.journal->failed();
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(start_ns + period_ns));
@@ -530,6 +531,7 @@ nlohmann::json to_json(const LoopSummary& s) {
         {{"cycle", t.cycle}, {"from", to_string(t.from)}, {"to", to_string(t.to)}, {"reason", t.reason}});
   j["transitions"] = transitions;
   j["ended"] = s.ended;
+  if (!s.journal_error.empty()) j["journal_error"] = s.journal_error;
   return j;
 }
 

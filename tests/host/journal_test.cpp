@@ -7,6 +7,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <fstream>
@@ -36,7 +39,8 @@ TEST(Crc32c, StandardCheckValueAndBothImplementationsAgree) {
   std::vector<unsigned char> data(1000);
   std::mt19937 rng(1);
   for (auto& b : data) b = static_cast<unsigned char>(rng());
-  for (std::size_t n : {0u, 1u, 7u, 8u, 9u, 63u, 1000u}) EXPECT_EQ(crc32c(data.data(), n), crc32c_portable(data.data(), n));
+  for (std::size_t n : {0u, 1u, 7u, 8u, 9u, 63u, 1000u})
+    EXPECT_EQ(crc32c(data.data(), n), crc32c_portable(data.data(), n));
   EXPECT_EQ(crc32c(data.data() + 10, 90, crc32c(data.data(), 10)), crc32c(data.data(), 100)) << "continues";
 }
 
@@ -58,6 +62,49 @@ TEST(Journal, RoundTripsEveryRecord) {
     EXPECT_EQ(j->records[i].cycle, i);
     EXPECT_EQ(j->records[i].pose_delta[0], 0.001 * double(i));
   }
+}
+
+// A disk that fills up: write(2) takes bytes until a budget is spent (the last write partly),
+// then fails with ENOSPC, as a real file system does.
+std::atomic<long long> g_disk_bytes_left{0};
+ssize_t filling_disk_write(int fd, const void* data, std::size_t bytes) {
+  const long long left = g_disk_bytes_left.load();
+  if (left <= 0) {
+    errno = ENOSPC;
+    return -1;
+  }
+  const std::size_t n = std::min<std::size_t>(bytes, static_cast<std::size_t>(left));
+  g_disk_bytes_left -= static_cast<long long>(n);
+  return ::write(fd, data, n);
+}
+
+TEST(Journal, ADiskThatFillsUpKeepsEveryRecordWrittenBeforeAndSaysSo) {
+  test::TempDir dir;
+  const auto file = dir.path() / "cycles.journal";
+  constexpr std::size_t kFrame = 8 + sizeof(JournalRecord) + 4;
+  g_disk_bytes_left = 32 + 100 * kFrame + kFrame / 2;  // header, 100 records and half of one
+  JournalOptions options;
+  options.write_call = &filling_disk_write;
+  auto w = JournalWriter::open(file, options);
+  ASSERT_TRUE(w.ok()) << w.status().message();
+  for (std::uint64_t i = 0; i < 100; ++i) ASSERT_TRUE((*w)->append(record(i)));
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while ((*w)->written() < 100 && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_FALSE((*w)->failed());
+  for (std::uint64_t i = 100; i < 300; ++i) ASSERT_TRUE((*w)->append(record(i)));
+  while (!(*w)->failed() && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_TRUE((*w)->failed()) << "the cycle can see it at once";
+  const Status closed = (*w)->close();
+  ASSERT_FALSE(closed.ok());
+  EXPECT_NE(closed.message().find("100 records before it are intact"), std::string::npos) << closed.message();
+  EXPECT_EQ((*w)->lost(), 200u);
+  auto j = read_journal(file);
+  ASSERT_TRUE(j.ok()) << j.status().message();
+  EXPECT_EQ(j->torn_tail_bytes, 0u) << "the half-written record was cut off";
+  ASSERT_EQ(j->records.size(), 100u);
+  for (std::uint64_t i = 0; i < 100; ++i) EXPECT_EQ(j->records[i].cycle, i);
 }
 
 TEST(Journal, TornTailIsIgnoredAndDamageInsideIsAnError) {
@@ -149,7 +196,8 @@ TEST(Journal, SurvivesKillNineAtAnyMoment) {
     auto j = read_journal(file);
     ASSERT_TRUE(j.ok()) << "round " << round << ": " << j.status().message();
     ASSERT_GT(j->records.size(), 0u) << "round " << round;
-    for (std::size_t i = 0; i < j->records.size(); ++i) ASSERT_EQ(j->records[i].cycle, i) << "round " << round;
+    for (std::size_t i = 0; i < j->records.size(); ++i)
+      ASSERT_EQ(j->records[i].cycle, i) << "round " << round;
     torn_tails += j->torn_tail_bytes > 0;
   }
   // Most kills land between writes; record that torn tails were seen and handled when they occur.

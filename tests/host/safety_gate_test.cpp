@@ -92,6 +92,8 @@ const std::vector<GateCase> kCases = {
        in.registration_ok = false;
      },
      GateDecision::kSkip, GateReason::kNoFrames},
+    {"JournalFailed", [](GateInput& in) { in.journal_ok = false; }, GateDecision::kHold,
+     GateReason::kJournalFailed},
     {"ImageQuality",
      [](GateInput& in) {
        in.image_quality_ok = false;

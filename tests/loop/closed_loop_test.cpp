@@ -5,6 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
 #include <string>
 
 #include "lftrack/host/allocation_counter.hpp"
@@ -110,6 +113,57 @@ TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
   }
   EXPECT_EQ(r.summary.holds, 1);
   EXPECT_EQ(r.summary.faults, 1);
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+std::atomic<long long> g_journal_bytes_left{0};
+ssize_t full_after_budget(int fd, const void* data, std::size_t bytes) {
+  const long long left = g_journal_bytes_left.load();
+  if (left <= 0) {
+    errno = ENOSPC;
+    return -1;
+  }
+  const std::size_t n = std::min<std::size_t>(bytes, static_cast<std::size_t>(left));
+  g_journal_bytes_left -= static_cast<long long>(n);
+  return ::write(fd, data, n);
+}
+
+// A treatment is not run unrecorded: when the journal's disk fills up, the loop holds within a
+// cycle or two, and every record written before the failure is still readable.
+TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
+  constexpr std::size_t kFrame = 8 + sizeof(JournalRecord) + 4;
+  g_journal_bytes_left = 32 + 20 * kFrame + 10;  // 20 cycles, then the disk is full
+  LoopSessionOptions options;
+  options.journal = dir_.path() / "journal.lfj";
+  options.journal_options.write_call = &full_after_budget;
+  options.journal_options.fsync_interval_ms = 10;
+  auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
+  ASSERT_TRUE(prepared.ok());
+  options.cycles = 60;
+  options.simulated_clock = true;
+  options.light_field_dir = lf_dir_.path();
+  auto session = LoopSession::create(*prepared, options, pool_);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  auto summary = (*session)->run();
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  SCOPED_TRACE(to_json(*summary).dump());
+  EXPECT_NE(summary->journal_error.find("disk full"), std::string::npos) << summary->journal_error;
+  EXPECT_EQ(summary->holds, 1);
+  ASSERT_FALSE(summary->transitions.empty());
+  const LoopTransition& last = summary->transitions.back();
+  EXPECT_STREQ(last.reason, "journal write failed");
+  EXPECT_GE(last.cycle, 20);
+  EXPECT_LE(summary->states[std::size_t(TrackingState::kTrack)], 40) << "held soon after the failure";
+  auto journal = read_journal(options.journal);
+  ASSERT_TRUE(journal.ok()) << journal.status().message();
+  ASSERT_EQ(journal->records.size(), 20u);
+  EXPECT_EQ(journal->torn_tail_bytes, 0u);
+  for (std::size_t i = 0; i < 20; ++i) EXPECT_EQ(journal->records[i].cycle, i);
 }
 
 }  // namespace

@@ -12,6 +12,8 @@
 // power loss can take. A kill during a write() leaves a torn last frame; the reader detects it
 // (short frame, bad magic or CRC), ignores it and says so.
 
+#include <unistd.h>
+
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
@@ -54,6 +56,9 @@ static_assert(std::is_trivially_copyable_v<JournalRecord>);
 struct JournalOptions {
   std::size_t queue_capacity = 4096;  // records; 6.8 minutes at 10 Hz of a stalled disk
   int fsync_interval_ms = 1000;
+  // The write(2) the writer thread calls: the kernel's, or a fault injector in tests (a disk
+  // that fills up, an I/O error).
+  ssize_t (*write_call)(int fd, const void* data, std::size_t bytes) = &::write;
 };
 
 class JournalWriter {
@@ -68,6 +73,11 @@ class JournalWriter {
   // Drains the queue, syncs and closes. Called by the destructor too.
   Status close();
   std::uint64_t written() const { return written_.load(); }
+  // True once a write has failed (disk full, I/O error). The writer then truncates the file to
+  // its last complete record and writes nothing more, so everything written before stays
+  // readable; the loop holds (safety gate: "journal write failed"). Any thread may ask.
+  bool failed() const { return write_failed_.load(std::memory_order_acquire); }
+  std::uint64_t lost() const { return lost_.load(); }  // records not written after the failure
   std::uint64_t dropped() const { return dropped_total_; }
 
  private:
@@ -81,6 +91,8 @@ class JournalWriter {
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> written_{0};
   std::atomic<bool> write_failed_{false};
+  std::atomic<std::uint64_t> lost_{0};
+  off_t good_bytes_ = 0;  // the file's length up to the last complete write
   std::uint32_t dropped_since_last_ = 0;
   std::uint64_t dropped_total_ = 0;
   bool closed_ = false;

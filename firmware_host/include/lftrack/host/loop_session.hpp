@@ -37,7 +37,8 @@ struct LoopSessionOptions {
   std::int64_t cycles = 300;
   bool simulated_clock = false;  // true: as fast as possible, deterministic (see tracking_loop.hpp)
   bool status_line = false;
-  std::filesystem::path journal;          // empty: no journal
+  std::filesystem::path journal;  // empty: no journal
+  JournalOptions journal_options;
   std::filesystem::path control_socket;   // empty: none
   bool terminal_operator = false;         // keys on a terminal's standard input
   std::optional<double> auto_resume_s;    // an unattended operator resumes this long into each HOLD
@@ -59,7 +60,8 @@ class LoopSession {
   static Result<std::unique_ptr<LoopSession>> create(const PreparedScene& scene,
                                                      const LoopSessionOptions& options,
                                                      tracking::ThreadPool* pool);
-  // Runs the loop; closes the journal and the archive.
+  // Runs the loop; closes the journal and the archive. A journal that failed during the run is
+  // reported in the summary's journal_error (the loop held when it failed).
   Result<LoopSummary> run();
   void request_stop();
   const sim::SimulatedRoom* room() const;            // null when replaying

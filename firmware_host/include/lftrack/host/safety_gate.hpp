@@ -49,6 +49,7 @@ enum class GateReason : std::uint8_t {
   kNoFrames,       // the frame source gave no complete pair (timeout, device fault, bad file)
   kActuatorFault,  // no read-back (timeout, exception, disconnected) or the actuator reports a fault
   kImageQuality,   // a frame is saturated, blank, uniform or has too many dead pixels
+  kJournalFailed,  // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -56,8 +57,10 @@ const char* to_string(GateReason reason);
 inline constexpr int kMaxGateViews = 4;
 
 struct GateInput {
-  bool frames_ok = true;         // the source delivered a complete pair this cycle
-  bool image_quality_ok = true;  // every frame passed the image-quality gate (frame_quality.hpp)
+  bool frames_ok = true;  // the source delivered a complete pair this cycle
+  bool image_quality_ok = true;
+  bool journal_ok = true;  // the journal writes (a treatment is not run unrecorded)  // every frame passed
+                           // the image-quality gate (frame_quality.hpp)
   bool registration_ok = false;
   tracking::Vector6d step = tracking::Vector6d::Zero();   // this cycle's correction (t mm, omega rad)
   tracking::Vector6d total = tracking::Vector6d::Zero();  // correction from the aligned pose

@@ -100,7 +100,8 @@ struct LoopSummary {
   std::optional<double> allocations_per_cycle;
   std::int64_t allocation_cycles = 0;  // the steady-state cycles they were counted over
   std::vector<LoopTransition> transitions;
-  std::string ended;  // why the loop stopped
+  std::string ended;          // why the loop stopped
+  std::string journal_error;  // set by LoopSession::run when the journal could not be written
 };
 nlohmann::json to_json(const LoopSummary& summary);
 
