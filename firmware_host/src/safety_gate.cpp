@@ -41,6 +41,8 @@ const char* to_string(GateReason r) {
       return "image quality";
     case GateReason::kJournalFailed:
       return "journal write failed";
+    case GateReason::kOverruns:
+      return "loop overruns";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -92,6 +94,7 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   if (!finite(in) || in.views < 0 || in.views > kMaxGateViews) return hold(GateReason::kNonFinite);
   if (!in.readback_valid) return hold(GateReason::kActuatorFault);
   if (!in.journal_ok) return hold(GateReason::kJournalFailed);
+  if (in.consecutive_overruns >= limits.hold_after_overruns) return hold(GateReason::kOverruns);
   if (in.readback_error_mm > limits.readback_tolerance_mm ||
       in.readback_error_deg > limits.readback_tolerance_deg)
     return hold(GateReason::kReadbackMismatch);

@@ -3,8 +3,10 @@
 #include "lftrack/host/realtime_setup.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
+#include <thread>
 
 #include "lftrack/host/scene_registration.hpp"
 
@@ -105,6 +107,12 @@ DeviceStatus SimFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline
   const std::int64_t wanted = next_index_ - 1;
   if (wanted < 0) return DeviceStatus::kTimeout;  // nothing was requested
   if (wanted >= options_.drop_from && wanted < options_.drop_to) return DeviceStatus::kTimeout;
+  if (wanted >= options_.stall_from && wanted < options_.stall_to && !options_.wait_for_frames) {
+    lock.unlock();  // fault injection: the host stalls (the renderer keeps going)
+    std::this_thread::sleep_for(std::chrono::microseconds(static_cast<long long>(options_.stall_ms * 1000)));
+    lock.lock();
+    deadline += std::chrono::microseconds(static_cast<long long>(options_.stall_ms * 1000));
+  }
   auto ready = [&] { return !rendering_ && !has_pending_ && has_rendered_ && rendered_job_.index == wanted; };
   if (options_.wait_for_frames) {
     done_.wait(lock, ready);

@@ -62,6 +62,7 @@ struct TrackingLoop::Impl {
   bool have_registration = false;
   Vector6d commanded_total = Vector6d::Zero();  // what the actuator was last told, as travel
   tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;  // this cycle's
+  int consecutive_overruns = 0;                // cycles in a row that overran, up to the last
   Vector6d aligned_couch = Vector6d::Zero();   // couch target after the set-up move
   Vector6d couch_position = Vector6d::Zero();  // last read-back
   std::array<double, kMaxGateViews> reference_similarity{};
@@ -259,6 +260,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   in.frames_ok = frames_ok;
   in.image_quality_ok = !frames_ok || quality_issue == tracking::FrameQualityIssue::kOk;
   in.journal_ok = parts.journal == nullptr || !parts.journal->failed();
+  in.consecutive_overruns = consecutive_overruns;
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(start_ns + period_ns));
@@ -449,6 +451,7 @@ Result<LoopSummary> TrackingLoop::run() {
         m.summary.skipped_periods += next.skipped;
       }
     }
+    m.consecutive_overruns = next.overrun && !was_align ? m.consecutive_overruns + 1 : 0;
     record.overrun = next.overrun ? 1 : 0;
     record.skipped_periods = static_cast<std::uint32_t>(next.skipped);
     if (m.parts.journal != nullptr) m.parts.journal->append(record);

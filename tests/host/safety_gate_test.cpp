@@ -92,6 +92,10 @@ const std::vector<GateCase> kCases = {
        in.registration_ok = false;
      },
      GateDecision::kSkip, GateReason::kNoFrames},
+    {"TwoOverrunsInARowGoOn", [](GateInput& in) { in.consecutive_overruns = 2; }, GateDecision::kApply,
+     GateReason::kOk},
+    {"ThreeOverrunsInARowHold", [](GateInput& in) { in.consecutive_overruns = 3; }, GateDecision::kHold,
+     GateReason::kOverruns},
     {"JournalFailed", [](GateInput& in) { in.journal_ok = false; }, GateDecision::kHold,
      GateReason::kJournalFailed},
     {"ImageQuality",

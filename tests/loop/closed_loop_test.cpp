@@ -166,5 +166,41 @@ TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
   for (std::size_t i = 0; i < 20; ++i) EXPECT_EQ(journal->records[i].cycle, i);
 }
 
+// On the real clock: one overrun is counted and its period skipped; several in a row hold.
+TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
+  LoopSessionOptions options;
+  options.journal = dir_.path() / "journal.lfj";
+  options.frames.stall_ms = 150;  // the period is 100 ms
+  options.frames.stall_from = 20;
+  options.frames.stall_to = 21;
+  auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
+  ASSERT_TRUE(prepared.ok());
+  // A stalled cycle's frame is old at its decision; this test is about the overruns alone.
+  prepared->scene.safety.max_frame_age_ms = 2000;
+  options.cycles = 45;
+  options.simulated_clock = false;
+  options.light_field_dir = lf_dir_.path();
+  // One stall first; then five in a row (exposure requests 35..39), after the first has passed.
+  auto session = LoopSession::create(*prepared, options, pool_);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  auto single = (*session)->run();
+  ASSERT_TRUE(single.ok());
+  EXPECT_GE(single->overruns, 1);
+  EXPECT_EQ(single->holds, 0) << "one overrun is counted, not held";
+
+  options.frames.stall_from = 30;
+  options.frames.stall_to = 35;
+  session = LoopSession::create(*prepared, options, pool_);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  auto several = (*session)->run();
+  ASSERT_TRUE(several.ok());
+  SCOPED_TRACE(to_json(*several).dump());
+  EXPECT_GE(several->overruns, 3);
+  EXPECT_EQ(several->holds, 1);
+  ASSERT_FALSE(several->transitions.empty());
+  EXPECT_STREQ(several->transitions.back().reason, "loop overruns");
+  EXPECT_GE(several->transitions.back().cycle, 30);
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -32,6 +32,9 @@ struct SafetyLimits {
   double readback_tolerance_deg = 0.5;
   int hold_after_failures = 3;
   int fault_after_failures = 10;
+  // Overruns in a row before the loop holds: one is counted and its periods skipped; several
+  // mean the host cannot keep the period, and corrections computed that late are not trusted.
+  int hold_after_overruns = 3;
 };
 
 enum class GateDecision : std::uint8_t { kApply = 0, kSkip = 1, kHold = 2, kStop = 3 };
@@ -50,6 +53,7 @@ enum class GateReason : std::uint8_t {
   kActuatorFault,  // no read-back (timeout, exception, disconnected) or the actuator reports a fault
   kImageQuality,   // a frame is saturated, blank, uniform or has too many dead pixels
   kJournalFailed,  // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
+  kOverruns,       // hold_after_overruns cycles in a row overran their period
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -59,8 +63,9 @@ inline constexpr int kMaxGateViews = 4;
 struct GateInput {
   bool frames_ok = true;  // the source delivered a complete pair this cycle
   bool image_quality_ok = true;
-  bool journal_ok = true;  // the journal writes (a treatment is not run unrecorded)  // every frame passed
-                           // the image-quality gate (frame_quality.hpp)
+  bool journal_ok = true;        // the journal writes (a treatment is not run unrecorded)
+  int consecutive_overruns = 0;  // cycles in a row, up to the last, that overran their period  // every frame
+                                 // passed the image-quality gate (frame_quality.hpp)
   bool registration_ok = false;
   tracking::Vector6d step = tracking::Vector6d::Zero();   // this cycle's correction (t mm, omega rad)
   tracking::Vector6d total = tracking::Vector6d::Zero();  // correction from the aligned pose

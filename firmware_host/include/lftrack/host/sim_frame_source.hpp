@@ -34,6 +34,10 @@ struct SimFrameSourceOptions {
   // Fault injection: exposures whose index is in [drop_from, drop_to) never arrive (kTimeout).
   std::int64_t drop_from = -1, drop_to = -1;
   double skew_ms = 0;  // added to the second view's timestamp
+  // A host that stalls: acquiring exposures in [stall_from, stall_to) takes stall_ms longer
+  // than the frame does (real clock only), so those cycles overrun their period.
+  std::int64_t stall_from = -1, stall_to = -1;
+  double stall_ms = 0;
 };
 
 class SimFrameSource final : public drivers::FrameSource {
