@@ -23,6 +23,22 @@ Result<std::unique_ptr<ModbusCouchServer>> ModbusCouchServer::start(drivers::Act
                                                                     const ModbusCouchServerOptions& options) {
   if (couch == nullptr) return invalid_argument("modbus couch server: no couch");
   std::unique_ptr<ModbusCouchServer> s(new ModbusCouchServer(couch, options));
+  if (!options.rtu_device.empty()) {
+    s->ctx_ = modbus_new_rtu(options.rtu_device.c_str(), 115200, 'E', 8, 1);
+    if (s->ctx_ == nullptr)
+      return io_error("modbus couch server: " + options.rtu_device + ": " + modbus_strerror(errno));
+    modbus_set_slave(s->ctx_, options.unit_id);
+    s->map_ = modbus_mapping_new_start_address(0, 0, 0, 0, 0, reg::kHoldingCount, 0, reg::kInputCount);
+    if (s->map_ == nullptr) return io_error("modbus couch server: no register mapping");
+    if (modbus_connect(s->ctx_) != 0)
+      return io_error("modbus couch server: cannot open " + options.rtu_device + ": " +
+                      modbus_strerror(errno));
+    drivers::ActuatorState state;
+    if (couch->readback(&state, {}) == drivers::DeviceStatus::kOk) s->accepted_target_ = state.target;
+    s->refresh_inputs(false);
+    s->thread_ = std::thread([p = s.get()] { p->serve_rtu(); });
+    return s;
+  }
   s->ctx_ = modbus_new_tcp("127.0.0.1", options.port);
   if (s->ctx_ == nullptr) return io_error(std::string("modbus couch server: ") + modbus_strerror(errno));
   modbus_set_slave(s->ctx_, options.unit_id);
@@ -92,6 +108,18 @@ void ModbusCouchServer::serve() {
       if (modbus_get_socket(ctx_) < 0) break;  // dropped on purpose
     }
     modbus_close(ctx_);
+  }
+}
+
+void ModbusCouchServer::serve_rtu() {
+  std::uint8_t query[MODBUS_RTU_MAX_ADU_LENGTH];
+  while (!stop_) {
+    pollfd line{modbus_get_socket(ctx_), POLLIN, 0};
+    if (poll(&line, 1, 20) <= 0) continue;
+    const int length = modbus_receive(ctx_, query);
+    if (length <= 0) continue;  // another unit's request, or noise on the line
+    ++requests_;
+    handle(query, length);
   }
 }
 

@@ -1,8 +1,13 @@
-// The couch driver against the virtual couch served by libmodbus on loopback: the register map,
-// dynamics through the protocol, and every Modbus fault of the catalogue (docs/faults.md).
+// The couch driver against the virtual couch served by libmodbus on loopback (TCP) and over a
+// pseudo-terminal null modem (RTU): the register map, dynamics through the protocol, and every
+// Modbus fault of the catalogue (docs/faults.md).
 
 #include <gtest/gtest.h>
+#include <poll.h>
+#include <pty.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <mutex>
 #include <thread>
@@ -235,6 +240,85 @@ TEST(ModbusCouch, OpeningWithNothingListeningSaysWhere) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("127.0.0.1:1"), std::string::npos) << s.message();
   EXPECT_EQ(driver.readback(nullptr, in_ms(10)), DeviceStatus::kDisconnected);
+}
+
+}  // namespace
+}  // namespace lftrack
+
+// Modbus RTU: the same driver and server over a serial line. The line is two pseudo-terminals
+// joined by a thread that copies bytes both ways (what a null-modem cable does).
+namespace lftrack {
+namespace {
+
+class NullModem {
+ public:
+  NullModem() {
+    ok_ = openpty(&master_[0], &slave_[0], name_[0], nullptr, nullptr) == 0 &&
+          openpty(&master_[1], &slave_[1], name_[1], nullptr, nullptr) == 0;
+    if (ok_) thread_ = std::thread([this] { copy(); });
+  }
+  ~NullModem() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+    for (int i = 0; i < 2; ++i) {
+      ::close(master_[i]);
+      ::close(slave_[i]);
+    }
+  }
+  bool ok() const { return ok_; }
+  const char* end(int i) const { return name_[i]; }
+
+ private:
+  void copy() {
+    char buffer[512];
+    while (!stop_) {
+      pollfd p[2] = {{master_[0], POLLIN, 0}, {master_[1], POLLIN, 0}};
+      if (::poll(p, 2, 10) <= 0) continue;
+      for (int i = 0; i < 2; ++i)
+        if (p[i].revents & POLLIN) {
+          const ssize_t n = ::read(master_[i], buffer, sizeof buffer);
+          if (n > 0) (void)!::write(master_[1 - i], buffer, std::size_t(n));
+        }
+    }
+  }
+  int master_[2] = {-1, -1}, slave_[2] = {-1, -1};
+  char name_[2][64] = {};
+  bool ok_ = false;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+TEST(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTakenAsTheAnswer) {
+  NullModem line;
+  ASSERT_TRUE(line.ok()) << "no pseudo-terminals";
+  sim::VirtualCouchSpec spec;
+  spec.latency_s = 0;
+  LockedCouch couch(spec);
+  sim::ModbusCouchServerOptions so;
+  so.rtu_device = line.end(1);
+  auto server = sim::ModbusCouchServer::start(&couch, so);
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  drivers::ModbusCouchOptions o;
+  o.transport = drivers::ModbusCouchOptions::Transport::kRtu;
+  o.serial_device = line.end(0);
+  o.response_timeout_s = 0.2;
+  ModbusCouch driver(o);
+  const Status opened = driver.open();
+  ASSERT_TRUE(opened.ok()) << opened.message();
+  ASSERT_EQ(driver.command(shift(4, 0.02), in_ms(500)), DeviceStatus::kOk);
+  couch.advance_to(5.0);
+  ActuatorState s;
+  ASSERT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kOk);
+  EXPECT_NEAR(s.position(0), 4, 1e-3);
+  EXPECT_NEAR(s.target(5), 0.02, 1e-6);
+  // A reply carrying another unit's address is never taken as the couch's answer.
+  (*server)->inject(CouchServerFault::kWrongUnit);
+  EXPECT_NE(driver.readback(&s, in_ms(500)), DeviceStatus::kOk);
+  (*server)->inject(CouchServerFault::kException4);
+  EXPECT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kFault);
+  EXPECT_EQ(driver.counters().last_exception, 4);
+  ASSERT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kOk);
+  driver.close();
 }
 
 }  // namespace

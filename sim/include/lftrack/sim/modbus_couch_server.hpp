@@ -15,6 +15,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <thread>
 
 #include "lftrack/drivers/actuator.hpp"
@@ -40,6 +41,8 @@ enum class CouchRequestKind : int { kAny, kReadback, kCommand };
 
 struct ModbusCouchServerOptions {
   int port = 0;  // 0: any free port (port() says which)
+  // Non-empty: serve Modbus RTU on this serial device (a tty, or a pty in tests) instead of TCP.
+  std::string rtu_device;
   int unit_id = 1;
   double mismatch_mm = 2.0;
 };
@@ -62,6 +65,7 @@ class ModbusCouchServer {
  private:
   ModbusCouchServer(drivers::Actuator* couch, const ModbusCouchServerOptions& options);
   void serve();
+  void serve_rtu();
   void handle(std::uint8_t* query, int length);
   CouchServerFault take_fault(CouchRequestKind kind);
   void refresh_inputs(bool mismatch);
