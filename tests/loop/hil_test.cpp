@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <ostream>
 #include <thread>
 #include <vector>
 
@@ -52,6 +53,10 @@ struct ModbusFaultCase {
   TrackingState safe_state;
   GateReason reason;  // for HOLD
 };
+
+void PrintTo(const ModbusFaultCase& c, std::ostream* os) {
+  *os << c.name;
+}
 
 class HilModbusFault : public ClosedLoop, public ::testing::WithParamInterface<ModbusFaultCase> {};
 
@@ -152,6 +157,10 @@ struct CanFaultCase {
   const char* name;
   std::vector<RobotFault> faults;
 };
+
+void PrintTo(const CanFaultCase& c, std::ostream* os) {
+  *os << c.name;
+}
 
 class HilCanFault : public ClosedLoop, public ::testing::WithParamInterface<CanFaultCase> {};
 
