@@ -254,10 +254,10 @@ DeviceStatus ModbusCouch::readback(ActuatorState* state, Deadline deadline) {
 void ModbusCouch::hold() {
   resync_ = true;
   if (!connected_.load(std::memory_order_acquire)) return;  // the reconnect thread holds first
-  const auto us = static_cast<std::uint32_t>(options_.response_timeout_s * 1e6);
-  modbus_set_response_timeout(ctx_, us / 1000000u, us % 1000000u);
-  if (flush_before_next_) modbus_flush(ctx_);
-  flush_before_next_ = false;
+  // Hold has no cycle deadline: it gets the full response timeout.
+  const auto timeout =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.response_timeout_s));
+  if (!set_timeout(Clock::now() + timeout)) return;
   (void)write_control(reg::kHold);  // a failure is counted; the read-back that follows tells the loop
 }
 

@@ -188,8 +188,7 @@ void V4l2Detector::requeue(std::uint32_t index) {
   (void)sys_.ioctl(fd_, VIDIOC_QBUF, &b);
 }
 
-void V4l2Detector::copy_out(const Buffer& buffer, std::size_t bytes_used, Frame* frame) const {
-  (void)bytes_used;
+void V4l2Detector::copy_out(const Buffer& buffer, Frame* frame) const {
   const auto* bytes = static_cast<const std::uint8_t*>(buffer.data);
   for (int r = 0; r < options_.rows; ++r) {
     const std::uint8_t* line = bytes + std::size_t(r) * bytes_per_line_;
@@ -261,7 +260,7 @@ DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
   }
   have_sequence_ = true;
   last_sequence_ = newest.sequence;
-  copy_out(buffers_[newest.index], newest.bytesused, frame);
+  copy_out(buffers_[newest.index], frame);
   frame->sequence = newest.sequence;
   frame->timestamp_ns =
       std::int64_t(newest.timestamp.tv_sec) * 1'000'000'000 + std::int64_t(newest.timestamp.tv_usec) * 1000;

@@ -1,7 +1,5 @@
 #include "lftrack/host/tracking_loop.hpp"
 
-#include "lftrack/tracking/frame_quality.hpp"
-
 #include <unistd.h>
 
 #include <algorithm>
@@ -61,7 +59,7 @@ struct TrackingLoop::Impl {
   Vector6d couch_at_last_registration = Vector6d::Zero();
   bool have_registration = false;
   Vector6d commanded_total = Vector6d::Zero();  // what the actuator was last told, as travel
-  tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;  // this cycle's
+  tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;  // this cycle's frames
   int consecutive_overruns = 0;                // cycles in a row that overran, up to the last
   Vector6d aligned_couch = Vector6d::Zero();   // couch target after the set-up move
   Vector6d couch_position = Vector6d::Zero();  // last read-back
@@ -100,7 +98,6 @@ struct TrackingLoop::Impl {
 
   // False, with quality_issue set, for a frame the image-quality gate refuses.
   bool preprocess() {
-    quality_issue = tracking::FrameQualityIssue::kOk;
     for (std::size_t v = 0; v < pair.frames.size(); ++v) {
       const tracking::PixelWindow& w = parts.scene->roi_windows[v];
       quality_issue = tracking::assess_frame_quality(pair.frames[v].pixels.view(), w, parts.corrections[v],
@@ -194,6 +191,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   r->cycle_start_ns = start_ns;
   r->previous_state = static_cast<std::uint8_t>(state_before);
   const std::int64_t views = static_cast<std::int64_t>(pair.frames.size());
+  quality_issue = tracking::FrameQualityIssue::kOk;
 
   // Operator first: a resume or stop acts on this cycle.
   if (parts.operator_input != nullptr) {
@@ -258,7 +256,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   GateInput in;
   in.views = static_cast<int>(views);
   in.frames_ok = frames_ok;
-  in.image_quality_ok = !frames_ok || quality_issue == tracking::FrameQualityIssue::kOk;
+  in.image_quality_ok = quality_issue == tracking::FrameQualityIssue::kOk;
   in.journal_ok = parts.journal == nullptr || !parts.journal->failed();
   in.consecutive_overruns = consecutive_overruns;
   if (parts.actuator != nullptr) {

@@ -23,40 +23,31 @@ Result<std::unique_ptr<ModbusCouchServer>> ModbusCouchServer::start(drivers::Act
                                                                     const ModbusCouchServerOptions& options) {
   if (couch == nullptr) return invalid_argument("modbus couch server: no couch");
   std::unique_ptr<ModbusCouchServer> s(new ModbusCouchServer(couch, options));
-  if (!options.rtu_device.empty()) {
-    s->ctx_ = modbus_new_rtu(options.rtu_device.c_str(), 115200, 'E', 8, 1);
-    if (s->ctx_ == nullptr)
-      return io_error("modbus couch server: " + options.rtu_device + ": " + modbus_strerror(errno));
-    modbus_set_slave(s->ctx_, options.unit_id);
-    s->map_ = modbus_mapping_new_start_address(0, 0, 0, 0, 0, reg::kHoldingCount, 0, reg::kInputCount);
-    if (s->map_ == nullptr) return io_error("modbus couch server: no register mapping");
-    if (modbus_connect(s->ctx_) != 0)
-      return io_error("modbus couch server: cannot open " + options.rtu_device + ": " +
-                      modbus_strerror(errno));
-    drivers::ActuatorState state;
-    if (couch->readback(&state, {}) == drivers::DeviceStatus::kOk) s->accepted_target_ = state.target;
-    s->refresh_inputs(false);
-    s->thread_ = std::thread([p = s.get()] { p->serve_rtu(); });
-    return s;
-  }
-  s->ctx_ = modbus_new_tcp("127.0.0.1", options.port);
-  if (s->ctx_ == nullptr) return io_error(std::string("modbus couch server: ") + modbus_strerror(errno));
+  const bool rtu = !options.rtu_device.empty();
+  const std::string where = rtu ? options.rtu_device : "127.0.0.1:" + std::to_string(options.port);
+  s->ctx_ = rtu ? modbus_new_rtu(options.rtu_device.c_str(), 115200, 'E', 8, 1)
+                : modbus_new_tcp("127.0.0.1", options.port);
+  if (s->ctx_ == nullptr) return io_error("modbus couch server: " + where + ": " + modbus_strerror(errno));
   modbus_set_slave(s->ctx_, options.unit_id);
   s->map_ = modbus_mapping_new_start_address(0, 0, 0, 0, 0, reg::kHoldingCount, 0, reg::kInputCount);
   if (s->map_ == nullptr) return io_error("modbus couch server: no register mapping");
-  s->listen_fd_ = modbus_tcp_listen(s->ctx_, 1);
-  if (s->listen_fd_ < 0)
-    return io_error("modbus couch server: cannot listen on 127.0.0.1:" + std::to_string(options.port) + ": " +
-                    modbus_strerror(errno));
-  sockaddr_in address{};
-  socklen_t length = sizeof address;
-  if (getsockname(s->listen_fd_, reinterpret_cast<sockaddr*>(&address), &length) != 0)
-    return io_error(std::string("modbus couch server: getsockname: ") + std::strerror(errno));
-  s->port_ = ntohs(address.sin_port);
+  if (rtu) {
+    if (modbus_connect(s->ctx_) != 0)
+      return io_error("modbus couch server: cannot open " + where + ": " + modbus_strerror(errno));
+  } else {
+    s->listen_fd_ = modbus_tcp_listen(s->ctx_, 1);
+    if (s->listen_fd_ < 0)
+      return io_error("modbus couch server: cannot listen on " + where + ": " + modbus_strerror(errno));
+    sockaddr_in address{};
+    socklen_t length = sizeof address;
+    if (getsockname(s->listen_fd_, reinterpret_cast<sockaddr*>(&address), &length) != 0)
+      return io_error(std::string("modbus couch server: getsockname: ") + std::strerror(errno));
+    s->port_ = ntohs(address.sin_port);
+  }
   drivers::ActuatorState state;
   if (couch->readback(&state, {}) == drivers::DeviceStatus::kOk) s->accepted_target_ = state.target;
   s->refresh_inputs(false);
-  s->thread_ = std::thread([p = s.get()] { p->serve(); });
+  s->thread_ = std::thread([p = s.get(), rtu] { rtu ? p->serve_rtu() : p->serve(); });
   return s;
 }
 

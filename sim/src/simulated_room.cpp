@@ -38,9 +38,13 @@ void SimulatedRoom::advance_locked(std::int64_t t_ns) {
 }
 
 void SimulatedRoom::advance_for_command(drivers::Deadline deadline) {
+  std::lock_guard lock(mutex_);
+  advance_for_command_locked(deadline);
+}
+
+void SimulatedRoom::advance_for_command_locked(drivers::Deadline deadline) {
   const std::int64_t deadline_ns =
       std::chrono::duration_cast<std::chrono::nanoseconds>(deadline.time_since_epoch()).count();
-  std::lock_guard lock(mutex_);
   if (started_ && deadline_ns > epoch_ns_) advance_locked(deadline_ns);
 }
 
@@ -83,8 +87,8 @@ double SimulatedRoom::residual_mm() const {
 
 drivers::DeviceStatus SimulatedRoom::CouchActuator::command(const tracking::Vector6d& correction,
                                                             drivers::Deadline deadline) {
-  room_.advance_for_command(deadline);
   std::lock_guard lock(room_.mutex_);
+  if (clocked_) room_.advance_for_command_locked(deadline);
   return room_.couch_.command(correction, deadline);
 }
 
@@ -95,23 +99,6 @@ drivers::DeviceStatus SimulatedRoom::CouchActuator::readback(drivers::ActuatorSt
 }
 
 void SimulatedRoom::CouchActuator::hold() {
-  std::lock_guard lock(room_.mutex_);
-  room_.couch_.hold();
-}
-
-drivers::DeviceStatus SimulatedRoom::CouchDevice::command(const tracking::Vector6d& correction,
-                                                          drivers::Deadline deadline) {
-  std::lock_guard lock(room_.mutex_);
-  return room_.couch_.command(correction, deadline);
-}
-
-drivers::DeviceStatus SimulatedRoom::CouchDevice::readback(drivers::ActuatorState* state,
-                                                           drivers::Deadline deadline) {
-  std::lock_guard lock(room_.mutex_);
-  return room_.couch_.readback(state, deadline);
-}
-
-void SimulatedRoom::CouchDevice::hold() {
   std::lock_guard lock(room_.mutex_);
   room_.couch_.hold();
 }

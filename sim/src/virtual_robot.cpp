@@ -106,19 +106,16 @@ void VirtualRobot::handle(const can_frame& f) {
   const canid_t id = f.can_id & CAN_SFF_MASK;
   const auto n = static_cast<canid_t>(options_.node_id);
   if (id == can::kCorrectionTranslation + n && f.can_dlc == 8) {
-    std::memcpy(translation_data_.data(), f.data, 8);
-    translation_sequence_ = f.data[6];
+    translation_ = f;
     have_translation_ = true;
   } else if (id == can::kCorrectionRotation + n && f.can_dlc == 8) {
     can_frame ack = can::make_frame(can::kAcknowledge, options_.node_id, 2);
     ack.data[0] = f.data[6];
-    if (!have_translation_ || translation_sequence_ != f.data[6]) return;  // incomplete: no answer
+    if (!have_translation_ || translation_.data[6] != f.data[6]) return;  // incomplete: no answer
     have_translation_ = false;
-    can_frame t = can::make_frame(can::kCorrectionTranslation, options_.node_id, 8);
-    std::memcpy(t.data, translation_data_.data(), 8);
     if (!enabled_) {
       ack.data[1] = can::kAckNotEnabled;
-    } else if (device_->command(can::decode_correction(t, f), {}) != drivers::DeviceStatus::kOk) {
+    } else if (device_->command(can::decode_correction(translation_, f), {}) != drivers::DeviceStatus::kOk) {
       ack.data[1] = can::kAckOutOfRange;
     } else {
       ack.data[1] = can::kAckAccepted;

@@ -1,6 +1,7 @@
 // Hardware in the loop: the closed loop with the real Modbus couch driver talking to the virtual
-// couch server on loopback. It tracks as the in-process simulation does, and every Modbus fault
-// of the catalogue (docs/faults.md) holds the couch, drops the beam and is journaled with its
+// couch server on loopback, and with the real CAN driver talking to the virtual robot over a
+// socket pair. Both track as the in-process simulation does, and every Modbus and CAN fault of
+// the catalogue (docs/faults.md) holds (or stops), drops the beam and is journaled with its
 // reason, with no command outside the limits.
 
 #include <gtest/gtest.h>
@@ -18,21 +19,48 @@ namespace {
 
 using sim::CouchServerFault;
 
+// The same seed and timing as in process: every cycle tracked, the same residual to within the
+// protocol's rounding.
+void expect_tracks_as_in_process(const LoopSummary& in_process, const LoopSummary& hil) {
+  SCOPED_TRACE(to_json(hil).dump());
+  EXPECT_EQ(hil.states[std::size_t(TrackingState::kTrack)], 120);
+  EXPECT_EQ(hil.holds, 0);
+  ASSERT_TRUE(in_process.residual_mean_mm && hil.residual_mean_mm);
+  EXPECT_NEAR(*hil.residual_mean_mm, *in_process.residual_mean_mm, 0.02);
+  EXPECT_NEAR(*hil.residual_p95_mm, *in_process.residual_p95_mm, 0.05);
+}
+
+// The first cycle that left TRACK (0: none); on the way, every command is finite.
+std::size_t first_cycle_out_of_track(const std::vector<JournalRecord>& records) {
+  std::size_t at = 0;
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    if (at == 0 && records[i].state != std::uint8_t(TrackingState::kTrack)) at = i;
+    for (double v : records[i].command) EXPECT_TRUE(std::isfinite(v)) << "cycle " << i;
+  }
+  return at;
+}
+
+// From `from` on: held or stopped, no beam, and nothing sent after the first of those cycles.
+void expect_safe_from(const std::vector<JournalRecord>& records, std::size_t from) {
+  for (std::size_t i = from; i < records.size(); ++i) {
+    EXPECT_TRUE(records[i].state == std::uint8_t(TrackingState::kHold) ||
+                records[i].state == std::uint8_t(TrackingState::kFault))
+        << "never back to TRACK without the operator, cycle " << i;
+    EXPECT_EQ(records[i].beam_permit, 0) << i;
+    if (i > from) {
+      EXPECT_EQ(records[i].command_sent, 0) << "held: nothing sent, cycle " << i;
+    }
+  }
+}
+
 TEST_F(ClosedLoop, HardwareInTheLoopTracksAsTheInProcessSimulation) {
   const LoopRun in_process = run_loop(kBreathing, 120);
   LoopSessionOptions hil;
   hil.hil = HilProtocol::kModbus;
   const LoopRun over_modbus = run_loop(kBreathing, 120, hil);
-  const LoopSummary& a = in_process.summary;
-  const LoopSummary& b = over_modbus.summary;
-  SCOPED_TRACE(to_json(b).dump());
-  EXPECT_EQ(b.states[std::size_t(TrackingState::kTrack)], 120);
-  EXPECT_EQ(b.holds, 0);
-  EXPECT_EQ(b.commands, a.commands);
-  ASSERT_TRUE(a.residual_mean_mm && b.residual_mean_mm);
-  // The same seed and timing; the protocol rounds targets to 1 um and 1 urad.
-  EXPECT_NEAR(*b.residual_mean_mm, *a.residual_mean_mm, 0.02);
-  EXPECT_NEAR(*b.residual_p95_mm, *a.residual_p95_mm, 0.05);
+  // The protocol rounds targets to 1 um and 1 urad.
+  expect_tracks_as_in_process(in_process.summary, over_modbus.summary);
+  EXPECT_EQ(over_modbus.summary.commands, in_process.summary.commands);
   ASSERT_EQ(over_modbus.journal.records.size(), 120u);
   double largest_readback_difference_mm = 0;
   for (std::size_t i = 0; i < 120; ++i)
@@ -78,18 +106,14 @@ TEST_P(HilModbusFault, HoldsTheCouchDropsTheBeamAndJournalsTheReason) {
   SCOPED_TRACE(to_json(s).dump());
   EXPECT_EQ(s.holds + s.faults, 1) << "one fault, one safe state; nothing resumes without the operator";
   ASSERT_EQ(r.journal.records.size(), 45u);
-  std::size_t held_at = 0;
-  for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
-    const JournalRecord& rec = r.journal.records[i];
-    if (held_at == 0 && rec.state != std::uint8_t(TrackingState::kTrack)) held_at = i;
-    // No command beyond the scene's per-cycle limit, ever.
-    const double step_mm =
-        std::max({std::abs(rec.command[0]), std::abs(rec.command[1]), std::abs(rec.command[2])});
-    if (i > 0) {
-      EXPECT_LE(step_mm, scene_->scene.safety.max_step_mm + 1e-9) << "cycle " << i;
-    }
-    for (double v : rec.command) EXPECT_TRUE(std::isfinite(v));
+  // No command beyond the scene's per-cycle limit, ever (the first cycle's is the set-up move).
+  for (std::size_t i = 1; i < r.journal.records.size(); ++i) {
+    const double* command = r.journal.records[i].command;
+    EXPECT_LE(std::max({std::abs(command[0]), std::abs(command[1]), std::abs(command[2])}),
+              scene_->scene.safety.max_step_mm + 1e-9)
+        << "cycle " << i;
   }
+  const std::size_t held_at = first_cycle_out_of_track(r.journal.records);
   ASSERT_GT(held_at, 15u);
   const JournalRecord& entry = r.journal.records[held_at];
   EXPECT_EQ(entry.state, std::uint8_t(c.safe_state));
@@ -98,13 +122,9 @@ TEST_P(HilModbusFault, HoldsTheCouchDropsTheBeamAndJournalsTheReason) {
   } else {
     EXPECT_EQ(entry.event, 1 + int(TrackingEvent::kDeviceFault));
   }
-  for (std::size_t i = held_at; i < r.journal.records.size(); ++i) {
+  for (std::size_t i = held_at; i < r.journal.records.size(); ++i)
     EXPECT_EQ(r.journal.records[i].state, std::uint8_t(c.safe_state)) << i;
-    EXPECT_EQ(r.journal.records[i].beam_permit, 0) << i;
-    if (i > held_at) {
-      EXPECT_EQ(r.journal.records[i].command_sent, 0) << "held: nothing sent, cycle " << i;
-    }
-  }
+  expect_safe_from(r.journal.records, held_at);
 }
 
 constexpr auto kRead = sim::CouchRequestKind::kReadback;
@@ -129,12 +149,6 @@ INSTANTIATE_TEST_SUITE_P(
                         GateReason::kReadbackMismatch}),
     [](const ::testing::TestParamInfo<ModbusFaultCase>& param) { return std::string(param.param.name); });
 
-}  // namespace
-}  // namespace lftrack::host
-
-namespace lftrack::host {
-namespace {
-
 using sim::RobotFault;
 
 TEST_F(ClosedLoop, HardwareInTheLoopOverCanTracksAsTheInProcessSimulation) {
@@ -142,15 +156,8 @@ TEST_F(ClosedLoop, HardwareInTheLoopOverCanTracksAsTheInProcessSimulation) {
   LoopSessionOptions hil;
   hil.hil = HilProtocol::kCan;
   const LoopRun over_can = run_loop(kBreathing, 120, hil);
-  const LoopSummary& a = in_process.summary;
-  const LoopSummary& b = over_can.summary;
-  SCOPED_TRACE(to_json(b).dump());
-  EXPECT_EQ(b.states[std::size_t(TrackingState::kTrack)], 120);
-  EXPECT_EQ(b.holds, 0);
-  ASSERT_TRUE(a.residual_mean_mm && b.residual_mean_mm);
   // Corrections cross the link in 1 um and 10 urad steps.
-  EXPECT_NEAR(*b.residual_mean_mm, *a.residual_mean_mm, 0.02);
-  EXPECT_NEAR(*b.residual_p95_mm, *a.residual_p95_mm, 0.05);
+  expect_tracks_as_in_process(in_process.summary, over_can.summary);
 }
 
 struct CanFaultCase {
@@ -191,24 +198,11 @@ TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
   EXPECT_EQ(s.holds, 1);
   EXPECT_LE(s.faults, 1) << "a condition that lasts escalates from HOLD to FAULT (the gate's STOP)";
   ASSERT_EQ(r.journal.records.size(), 80u);
-  std::size_t held_at = 0;
-  for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
-    const JournalRecord& rec = r.journal.records[i];
-    if (held_at == 0 && rec.state != std::uint8_t(TrackingState::kTrack)) held_at = i;
-    for (double v : rec.command) EXPECT_TRUE(std::isfinite(v));
-  }
+  const std::size_t held_at = first_cycle_out_of_track(r.journal.records);
   ASSERT_GT(held_at, 10u);
   EXPECT_EQ(r.journal.records[held_at].state, std::uint8_t(TrackingState::kHold));
   EXPECT_EQ(r.journal.records[held_at].gate_reason, std::uint8_t(GateReason::kActuatorFault));
-  for (std::size_t i = held_at; i < r.journal.records.size(); ++i) {
-    EXPECT_TRUE(r.journal.records[i].state == std::uint8_t(TrackingState::kHold) ||
-                r.journal.records[i].state == std::uint8_t(TrackingState::kFault))
-        << "never back to TRACK without the operator, cycle " << i;
-    EXPECT_EQ(r.journal.records[i].beam_permit, 0) << i;
-    if (i > held_at) {
-      EXPECT_EQ(r.journal.records[i].command_sent, 0) << "held: nothing sent, cycle " << i;
-    }
-  }
+  expect_safe_from(r.journal.records, held_at);
 }
 
 INSTANTIATE_TEST_SUITE_P(

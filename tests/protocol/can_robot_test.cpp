@@ -13,6 +13,7 @@
 #include "lftrack/drivers/can_robot_protocol.hpp"
 #include "lftrack/sim/virtual_couch.hpp"
 #include "lftrack/sim/virtual_robot.hpp"
+#include "protocol_test_support.hpp"
 
 namespace lftrack {
 namespace {
@@ -24,51 +25,17 @@ using sim::RobotFault;
 using tracking::Vector6d;
 using Clock = std::chrono::steady_clock;
 
-drivers::Deadline in_ms(double ms) {
-  return Clock::now() + std::chrono::microseconds(static_cast<long long>(ms * 1000));
+using test::in_ms;
+using test::shift;
+
+// The robot's dynamics: immediate, fast, within 20 mm.
+sim::VirtualCouchSpec arm_spec() {
+  sim::VirtualCouchSpec s;
+  s.latency_s = 0;
+  s.max_speed_mm_s = 100;
+  s.range_mm = 20;
+  return s;
 }
-
-Vector6d shift(double x_mm, double rz_rad = 0) {
-  Vector6d v = Vector6d::Zero();
-  v(0) = x_mm;
-  v(5) = rz_rad;
-  return v;
-}
-
-// The robot's dynamics, shared by the robot's thread and the test's clock.
-class LockedArm final : public drivers::Actuator {
- public:
-  LockedArm() : arm_(spec()) {}
-  static sim::VirtualCouchSpec spec() {
-    sim::VirtualCouchSpec s;
-    s.latency_s = 0;
-    s.max_speed_mm_s = 100;
-    s.range_mm = 20;
-    return s;
-  }
-  Status open() override { return {}; }
-  DeviceStatus command(const Vector6d& c, drivers::Deadline d) override {
-    std::lock_guard lock(mutex_);
-    return arm_.command(c, d);
-  }
-  DeviceStatus readback(ActuatorState* s, drivers::Deadline d) override {
-    std::lock_guard lock(mutex_);
-    return arm_.readback(s, d);
-  }
-  void hold() override {
-    std::lock_guard lock(mutex_);
-    arm_.hold();
-  }
-  void close() override {}
-  void advance_to(double t) {
-    std::lock_guard lock(mutex_);
-    arm_.advance_to(t);
-  }
-
- private:
-  std::mutex mutex_;
-  sim::VirtualCouch arm_;
-};
 
 class CanRobotTest : public ::testing::Test {
  protected:
@@ -98,7 +65,7 @@ class CanRobotTest : public ::testing::Test {
     return got;
   }
 
-  LockedArm arm;
+  test::LockedCouch arm{arm_spec()};
   std::unique_ptr<sim::VirtualRobot> robot;
   std::unique_ptr<CanRobot> driver;
 };

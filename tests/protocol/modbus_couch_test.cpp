@@ -16,6 +16,7 @@
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/virtual_couch.hpp"
+#include "protocol_test_support.hpp"
 
 namespace lftrack {
 namespace {
@@ -27,48 +28,9 @@ using sim::CouchServerFault;
 using tracking::Vector6d;
 using Clock = std::chrono::steady_clock;
 
-// The virtual couch shared by the server's thread and the test's clock.
-class LockedCouch final : public drivers::Actuator {
- public:
-  explicit LockedCouch(const sim::VirtualCouchSpec& spec) : couch_(spec) {}
-  Status open() override { return {}; }
-  DeviceStatus command(const Vector6d& c, drivers::Deadline d) override {
-    std::lock_guard lock(mutex_);
-    return couch_.command(c, d);
-  }
-  DeviceStatus readback(ActuatorState* s, drivers::Deadline d) override {
-    std::lock_guard lock(mutex_);
-    return couch_.readback(s, d);
-  }
-  void hold() override {
-    std::lock_guard lock(mutex_);
-    couch_.hold();
-  }
-  void close() override {}
-  void advance_to(double t_s) {
-    std::lock_guard lock(mutex_);
-    couch_.advance_to(t_s);
-  }
-  Vector6d position() {
-    std::lock_guard lock(mutex_);
-    return couch_.position();
-  }
-
- private:
-  std::mutex mutex_;
-  sim::VirtualCouch couch_;
-};
-
-drivers::Deadline in_ms(double ms) {
-  return Clock::now() + std::chrono::microseconds(static_cast<long long>(ms * 1000));
-}
-
-Vector6d shift(double x_mm, double rz_rad = 0) {
-  Vector6d v = Vector6d::Zero();
-  v(0) = x_mm;
-  v(5) = rz_rad;
-  return v;
-}
+using test::in_ms;
+using test::LockedCouch;
+using test::shift;
 
 class ModbusCouchTest : public ::testing::Test {
  protected:

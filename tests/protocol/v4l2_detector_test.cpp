@@ -11,6 +11,7 @@
 #include <fstream>
 #include <memory>
 
+#include "protocol_test_support.hpp"
 #include "scripted_v4l2_device.hpp"
 
 namespace lftrack {
@@ -22,9 +23,7 @@ using drivers::V4l2Detector;
 using drivers::V4l2DetectorOptions;
 using test::ScriptedV4l2Device;
 
-drivers::Deadline in_ms(double ms) {
-  return std::chrono::steady_clock::now() + std::chrono::microseconds(static_cast<long long>(ms * 1000));
-}
+using test::in_ms;
 
 V4l2DetectorOptions options(int rows = 48, int cols = 64) {
   V4l2DetectorOptions o;

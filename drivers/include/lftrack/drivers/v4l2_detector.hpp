@@ -67,7 +67,7 @@ class V4l2Detector {
   Status fail(const std::string& what);  // closes, and names the device
   DeviceStatus disconnected();
   void requeue(std::uint32_t index);
-  void copy_out(const Buffer& buffer, std::size_t bytes_used, Frame* frame) const;
+  void copy_out(const Buffer& buffer, Frame* frame) const;
 
   V4l2DetectorOptions options_;
   V4l2Syscalls& sys_;

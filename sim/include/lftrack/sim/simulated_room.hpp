@@ -59,9 +59,11 @@ class SimulatedRoom {
   const SimulatedRoomSpec& spec() const { return spec_; }
 
  private:
+  // The room's couch as an Actuator: `clocked` moves the room on to a command's deadline first
+  // (couch_actuator()); otherwise commands act at the room's current time (couch_device()).
   class CouchActuator final : public drivers::Actuator {
    public:
-    explicit CouchActuator(SimulatedRoom& room) : room_(room) {}
+    CouchActuator(SimulatedRoom& room, bool clocked) : room_(room), clocked_(clocked) {}
     Status open() override { return {}; }
     drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
     drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
@@ -70,29 +72,18 @@ class SimulatedRoom {
 
    private:
     SimulatedRoom& room_;
-  };
-
-  class CouchDevice final : public drivers::Actuator {
-   public:
-    explicit CouchDevice(SimulatedRoom& room) : room_(room) {}
-    Status open() override { return {}; }
-    drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
-    drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
-    void hold() override;
-    void close() override {}
-
-   private:
-    SimulatedRoom& room_;
+    bool clocked_;
   };
   void advance_locked(std::int64_t t_ns);
+  void advance_for_command_locked(drivers::Deadline deadline);
   tracking::Pose true_locked() const;
   tracking::Pose patient_locked() const;
 
   mutable std::mutex mutex_;
   SimulatedRoomSpec spec_;
   VirtualCouch couch_;
-  CouchActuator actuator_{*this};
-  CouchDevice device_{*this};
+  CouchActuator actuator_{*this, true};
+  CouchActuator device_{*this, false};
   bool started_ = false;
   std::int64_t epoch_ns_ = 0;
 };

@@ -79,9 +79,8 @@ class VirtualRobot {
   std::atomic<std::int64_t> corrections_{0};
   bool heartbeat_on_ = true, booting_ = true;
   std::uint8_t heartbeat_counter_ = 0;
-  std::uint8_t translation_sequence_ = 0;
+  can_frame translation_{};  // the first half of the correction being received
   bool have_translation_ = false;
-  std::array<std::uint8_t, 8> translation_data_{};
 };
 
 }  // namespace lftrack::sim
