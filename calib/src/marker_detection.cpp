@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <algorithm>
 #include <sstream>
 
 namespace lftrack::calib {
@@ -138,6 +139,143 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
   d.contrast = best;
   d.pixel = centre;
   return d;
+}
+
+}  // namespace lftrack::calib
+
+namespace lftrack::calib {
+
+namespace {
+
+// Mean of `image` over a (2h+1)^2 box around every pixel (clamped at the edges), from an
+// integral image.
+std::vector<double> box_mean(const ImageView<const float>& im, int h) {
+  const int rows = im.rows, cols = im.cols;
+  std::vector<double> integral(std::size_t(rows + 1) * (cols + 1), 0.0);
+  auto at = [&](int r, int c) -> double& { return integral[std::size_t(r) * (cols + 1) + c]; };
+  for (int r = 0; r < rows; ++r) {
+    double row_sum = 0;
+    for (int c = 0; c < cols; ++c) {
+      const float v = im.at(r, c);
+      row_sum += std::isfinite(v) ? v : 0.0;
+      at(r + 1, c + 1) = at(r, c + 1) + row_sum;
+    }
+  }
+  std::vector<double> mean(std::size_t(rows) * cols);
+  for (int r = 0; r < rows; ++r) {
+    const int r0 = std::max(0, r - h), r1 = std::min(rows, r + h + 1);
+    for (int c = 0; c < cols; ++c) {
+      const int c0 = std::max(0, c - h), c1 = std::min(cols, c + h + 1);
+      const double sum = at(r1, c1) - at(r0, c1) - at(r1, c0) + at(r0, c0);
+      mean[std::size_t(r) * cols + c] = sum / double((r1 - r0) * (c1 - c0));
+    }
+  }
+  return mean;
+}
+
+}  // namespace
+
+Result<MarkerScanResult> scan_markers(const ImageView<const float>& image, const MarkerScan& scan) {
+  if (image.empty()) return invalid_argument("marker scan: empty image");
+  if (!(scan.marker_radius_px >= 1) || !(scan.marker_radius_px <= 100) || !(scan.min_contrast > 0) ||
+      !(scan.noise_sigmas > 0) || scan.border_px < 0) {
+    return invalid_argument("marker scan: radius must be in [1, 100] px, contrast and noise sigmas positive");
+  }
+  const int rows = image.rows, cols = image.cols;
+  const double radius = scan.marker_radius_px;
+  // High-pass: the image minus its mean over a box three marker diameters wide.
+  const std::vector<double> local = box_mean(image, static_cast<int>(std::ceil(3 * radius)));
+  std::vector<float> high(std::size_t(rows) * cols);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const float v = image.at(r, c);
+      high[std::size_t(r) * cols + c] = std::isfinite(v) ? float(v - local[std::size_t(r) * cols + c]) : 0.f;
+    }
+  // Robust noise level: 1.4826 * median absolute deviation of the high-passed image.
+  std::vector<float> sorted = high;
+  const std::size_t mid = sorted.size() / 2;
+  std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(mid), sorted.end());
+  const float median = sorted[mid];
+  for (float& v : sorted) v = std::abs(v - median);
+  std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(mid), sorted.end());
+  const double sigma = 1.4826 * sorted[mid];
+  // A disc of contrast k over the local mean raises the high-passed centre by about k * 0.9;
+  // half of the peak marks the blob.
+  const double threshold = std::max(scan.min_contrast, scan.noise_sigmas * sigma) * 0.5;
+
+  MarkerScanResult out;
+  const double disc_area = 3.14159265358979 * radius * radius;
+  std::vector<unsigned char> seen(high.size(), 0);
+  std::vector<int> stack;
+  for (int r0 = 0; r0 < rows; ++r0) {
+    for (int c0 = 0; c0 < cols; ++c0) {
+      const std::size_t i0 = std::size_t(r0) * cols + c0;
+      if (seen[i0] || high[i0] < threshold) continue;
+      // Flood fill (4-connected) the blob of pixels above threshold.
+      int count = 0, rmin = r0, rmax = r0, cmin = c0, cmax = c0;
+      double sw = 0, sc = 0, sr = 0, scc = 0, srr = 0, scr = 0, peak = 0;
+      stack.assign(1, int(i0));
+      seen[i0] = 1;
+      while (!stack.empty()) {
+        const int i = stack.back();
+        stack.pop_back();
+        const int r = i / cols, c = i % cols;
+        const double w = high[std::size_t(i)];
+        ++count;
+        peak = std::max(peak, w);
+        sw += w;
+        sc += w * c;
+        sr += w * r;
+        scc += w * c * c;
+        srr += w * r * r;
+        scr += w * c * r;
+        rmin = std::min(rmin, r), rmax = std::max(rmax, r), cmin = std::min(cmin, c), cmax = std::max(cmax, c);
+        const int next[4][2] = {{r - 1, c}, {r + 1, c}, {r, c - 1}, {r, c + 1}};
+        for (const auto& n : next) {
+          if (n[0] < 0 || n[0] >= rows || n[1] < 0 || n[1] >= cols) continue;
+          const std::size_t j = std::size_t(n[0]) * cols + n[1];
+          if (seen[j] || high[j] < threshold) continue;
+          seen[j] = 1;
+          stack.push_back(int(j));
+        }
+      }
+      if (peak < 2 * threshold) {
+        ++out.rejected_small;
+        continue;
+      }
+      if (count < 0.2 * disc_area) {
+        ++out.rejected_small;
+        continue;
+      }
+      if (rmin < scan.border_px || cmin < scan.border_px || rmax >= rows - scan.border_px ||
+          cmax >= cols - scan.border_px) {
+        ++out.rejected_border;
+        continue;
+      }
+      // Shape: weighted second moments; a merged pair is large or elongated.
+      const double mc = sc / sw, mr = sr / sw;
+      Eigen::Matrix2d cov;
+      cov << scc / sw - mc * mc, scr / sw - mc * mr, scr / sw - mc * mr, srr / sw - mr * mr;
+      const Eigen::Vector2d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues();
+      const bool elongated = ev(1) > 2.0 * std::max(ev(0), 1e-9);
+      if (count > 2.5 * disc_area || elongated) {
+        ++out.rejected_merged;
+        continue;
+      }
+      MarkerSearch s;
+      s.expected_px = {mc, mr};
+      s.search_radius_px = 1.5;
+      s.marker_radius_px = radius;
+      s.min_contrast = threshold;
+      auto found = find_marker(image, {}, s);
+      if (!found.ok()) {
+        ++out.rejected_small;
+        continue;
+      }
+      out.markers.push_back(*found);
+    }
+  }
+  return out;
 }
 
 }  // namespace lftrack::calib

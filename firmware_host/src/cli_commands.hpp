@@ -33,5 +33,7 @@ Command add_study_capture_range_command(CLI::App* parent);
 Command add_sim_command(CLI::App* parent);
 Command add_run_command(CLI::App* parent);
 Command add_replay_command(CLI::App* parent);
+Command add_calibrate_views_command(CLI::App* parent);
+Command add_calibrate_couch_command(CLI::App* parent);
 
 }  // namespace lftrack::host::cli

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "lftrack/drivers/recorded_actuator.hpp"
+#include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/scene_registration.hpp"
 
 namespace lftrack::host {
@@ -45,6 +46,13 @@ class RoomClockedActuator final : public drivers::Actuator {
 
 }  // namespace
 
+Eigen::Isometry3d couch_mounting(const CouchMountingSpec& m, const PreparedScene& p) {
+  Eigen::Isometry3d x = Eigen::Isometry3d::Identity();
+  x.linear() = tracking::rotation_exp(m.rotation_rad);
+  x.translation() = m.centre_room_mm.value_or(p.registration_origin_room_mm());
+  return x;
+}
+
 struct LoopSession::Parts {
   std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
   std::unique_ptr<tracking::Registration> registration;
@@ -57,6 +65,7 @@ struct LoopSession::Parts {
   std::unique_ptr<sim::VirtualRobot> robot;  // HIL over CAN: moves the room's couch
   std::unique_ptr<drivers::CanRobot> robot_driver;
   std::unique_ptr<RoomClockedActuator> hil_couch;
+  std::unique_ptr<CalibratedCouch> calibrated_couch;  // the couch through its calibration
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;
   OperatorInputs operators;
@@ -101,6 +110,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
     room.setup_error = p.scene.motion.setup_error;
     room.motion = p.scene.motion.motion;
     room.couch = p.scene.actuator.couch;
+    if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
     room.residual_box_mm = p.scene.registration.tre_box_mm;
     parts->room = std::make_unique<sim::SimulatedRoom>(room);
     SimFrameSourceOptions frame_options = o.frames;
@@ -178,6 +188,15 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   lp.actuator = parts->hil_couch ? static_cast<drivers::Actuator*>(parts->hil_couch.get())
                 : has_couch      ? &parts->room->couch_actuator()
                                  : parts->recorded_couch.get();
+  if (has_couch && p.scene.actuator.calibration) {
+    parts->calibrated_couch = std::make_unique<CalibratedCouch>(
+        lp.actuator, couch_mounting(*p.scene.actuator.calibration, p), p.registration_origin_room_mm());
+    lp.actuator = parts->calibrated_couch.get();
+    spdlog::info("couch commands go through the couch calibration {}", p.scene.actuator.calibration_file);
+  } else if (has_couch && p.scene.actuator.mounting) {
+    spdlog::warn("the couch is mounted off the room's axes but the scene names no actuator.calibration: "
+                 "corrections assume the room's axes");
+  }
   lp.journal = parts->journal.get();
   lp.operator_input = parts->operators.empty() ? nullptr : &parts->operators;
   lp.truth = parts->room.get();  // null when replaying

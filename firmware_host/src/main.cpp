@@ -36,6 +36,10 @@ int main(int argc, char** argv) {
   const Command sim = add_sim_command(&app);
   const Command run_loop = add_run_command(&app);
   const Command replay = add_replay_command(&app);
+  CLI::App* calibrate = app.add_subcommand("calibrate", "Calibration: X-ray views from a phantom, the couch's axes");
+  calibrate->require_subcommand(1);
+  const Command calibrate_views = add_calibrate_views_command(calibrate);
+  const Command calibrate_couch = add_calibrate_couch_command(calibrate);
 
   try {
     app.parse(argc, argv);
@@ -68,6 +72,10 @@ int main(int argc, char** argv) {
       status = run_loop();
     else if (app.got_subcommand("replay"))
       status = replay();
+    else if (calibrate->got_subcommand("views"))
+      status = calibrate_views();
+    else if (calibrate->got_subcommand("couch"))
+      status = calibrate_couch();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

@@ -1,6 +1,7 @@
 // The scene's host-loop sections: sim, loop, safety, actuator, motion.
 
 #include "lftrack/tracking/registration.hpp"
+#include "lftrack/host/calibration_files.hpp"
 #include "scene_yaml.hpp"
 
 namespace lftrack::host {
@@ -144,7 +145,8 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
 
 Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
   LFTRACK_RETURN_IF_ERROR(check_keys(
-      n, "actuator", {"type", "latency_s", "max_speed_mm_s", "max_speed_deg_s", "range_mm", "range_deg"}));
+      n, "actuator",
+      {"type", "latency_s", "max_speed_mm_s", "max_speed_deg_s", "range_mm", "range_deg", "mounting", "calibration"}));
   YAML::Node type;
   LFTRACK_RETURN_IF_ERROR(need(n, "type", "actuator", &type));
   LFTRACK_RETURN_IF_ERROR(one_of(type, "actuator.type", {"none", "virtual"}, &a->type));
@@ -160,6 +162,30 @@ Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
     LFTRACK_RETURN_IF_ERROR(positive(n["max_speed_deg_s"], "actuator.max_speed_deg_s", &c.max_speed_deg_s));
   if (n["range_mm"]) LFTRACK_RETURN_IF_ERROR(positive(n["range_mm"], "actuator.range_mm", &c.range_mm));
   if (n["range_deg"]) LFTRACK_RETURN_IF_ERROR(positive(n["range_deg"], "actuator.range_deg", &c.range_deg));
+  if (const YAML::Node m = n["mounting"]) {
+    LFTRACK_RETURN_IF_ERROR(check_keys(m, "actuator.mounting", {"rotation_deg", "centre_mm"}));
+    CouchMountingSpec mounting;
+    if (m["rotation_deg"]) {
+      LFTRACK_RETURN_IF_ERROR(vec3(m["rotation_deg"], "actuator.mounting.rotation_deg", &mounting.rotation_rad));
+      if (mounting.rotation_rad.norm() > 20) return error(m["rotation_deg"], "actuator.mounting.rotation_deg: at most 20 degrees");
+      mounting.rotation_rad *= 3.14159265358979323846 / 180;
+    }
+    if (m["centre_mm"]) {
+      Vector3d centre;
+      LFTRACK_RETURN_IF_ERROR(vec3(m["centre_mm"], "actuator.mounting.centre_mm", &centre));
+      mounting.centre_room_mm = centre;
+    }
+    a->mounting = mounting;
+  }
+  if (const YAML::Node cal = n["calibration"]) {
+    std::string file;
+    LFTRACK_RETURN_IF_ERROR(text(cal, "actuator.calibration", &file));
+    const fs::path path = fs::path(file).is_absolute() ? fs::path(file) : base_dir_ / file;
+    auto read = read_couch_calibration(path.string());
+    if (!read.ok()) return error(cal, "actuator.calibration: " + read.status().message());
+    a->calibration_file = path.string();
+    a->calibration = *read;
+  }
   return {};
 }
 

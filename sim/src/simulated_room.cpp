@@ -2,6 +2,8 @@
 
 #include <chrono>
 
+#include "lftrack/calib/couch_calibration.hpp"
+
 namespace lftrack::sim {
 
 using tracking::Pose;
@@ -65,9 +67,15 @@ Pose SimulatedRoom::patient_locked() const {
                                spec_.origin_room_mm);
 }
 
+Eigen::Isometry3d SimulatedRoom::T_room_from_couch() const {
+  if (spec_.couch_T_room_from_couch) return *spec_.couch_T_room_from_couch;
+  Eigen::Isometry3d ideal = Eigen::Isometry3d::Identity();
+  ideal.translation() = spec_.origin_room_mm;
+  return ideal;
+}
+
 Pose SimulatedRoom::true_locked() const {
-  return tracking::apply_delta(patient_locked(), PoseDelta::from_vector(couch_.position()),
-                               spec_.origin_room_mm);
+  return calib::room_motion_of_couch(T_room_from_couch(), couch_.position()) * patient_locked();
 }
 
 double SimulatedRoom::residual_mm() const {

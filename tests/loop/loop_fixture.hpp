@@ -60,7 +60,9 @@ class ClosedLoop : public ::testing::Test {
   LoopRun run_loop(const std::string& motion_yaml, std::int64_t cycles, LoopSessionOptions options = {},
                    const std::string& frames_yaml = kLightFieldFrames,
                    const std::function<std::thread(LoopSession&)>& during_run = {}) {
-    auto prepared = prepare_scene(small_scene(motion_yaml, frames_yaml), "", pool_);
+    Scene scene = small_scene(motion_yaml, frames_yaml);
+    if (edit_scene_) edit_scene_(scene);
+    auto prepared = prepare_scene(scene, "", pool_);
     EXPECT_TRUE(prepared.ok()) << prepared.status().message();
     scene_ = std::make_unique<PreparedScene>(std::move(prepared).value());
     options.cycles = cycles;
@@ -84,6 +86,7 @@ class ClosedLoop : public ::testing::Test {
     return r;
   }
 
+  std::function<void(Scene&)> edit_scene_;  // applied to the scene before each run, if set
   static inline tracking::ThreadPool* pool_ = nullptr;
   test::TempDir dir_;
   static inline test::TempDir lf_dir_;  // light fields, built once for every test

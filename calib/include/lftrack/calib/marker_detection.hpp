@@ -4,6 +4,7 @@
 // projection, then the background-subtracted intensity centroid around it (sub-pixel).
 
 #include <Eigen/Core>
+#include <vector>
 
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
@@ -28,5 +29,31 @@ struct MarkerDetection {
 Result<MarkerDetection> find_marker(const tracking::ImageView<const float>& image,
                                               const tracking::ImageView<const unsigned char>& valid,
                                               const MarkerSearch& search);
+
+}  // namespace lftrack::calib
+
+namespace lftrack::calib {
+
+struct MarkerScan {
+  double marker_radius_px = 3;  // expected radius of a marker's projection
+  // Least contrast over the local background (line-integral units); the threshold is the larger
+  // of this and `noise_sigmas` times the image's robust noise level.
+  double min_contrast = 0.05;
+  double noise_sigmas = 6;
+  int border_px = 4;  // blobs closer than this to the image edge are dropped (cut off)
+};
+
+struct MarkerScanResult {
+  std::vector<MarkerDetection> markers;  // sub-pixel, in row-major order of their first pixel
+  int rejected_merged = 0;               // blobs too large or elongated: overlapping projections
+  int rejected_small = 0;                // blobs too small for a marker (noise, dust)
+  int rejected_border = 0;               // cut off by the image edge
+};
+
+// Every marker-like blob in a whole image (line integrals, markers bright): threshold the image
+// minus its local mean, group pixels into blobs, drop those of the wrong size or shape, and
+// locate each survivor to sub-pixel precision with find_marker(). Never fails on an image with
+// no markers (returns none); fails on an empty image or a bad option.
+Result<MarkerScanResult> scan_markers(const tracking::ImageView<const float>& image, const MarkerScan& scan);
 
 }  // namespace lftrack::calib

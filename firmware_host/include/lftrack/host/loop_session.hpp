@@ -52,6 +52,10 @@ struct LoopSessionOptions {
   std::uint64_t (*allocation_count)() = nullptr;
 };
 
+// X = T_room_from_couch of a mounting or calibration (its centre defaults to the registration
+// origin).
+Eigen::Isometry3d couch_mounting(const CouchMountingSpec& mounting, const PreparedScene& scene);
+
 class LoopSession {
  public:
   ~LoopSession();

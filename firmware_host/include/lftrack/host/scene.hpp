@@ -105,11 +105,25 @@ struct LoopSpec {
   RealtimeSpec realtime;
 };
 
+// Where a couch is mounted in the room: the rotation vector of its axes (room from couch) and
+// its rotation centre (room frame; unset: the registration origin).
+struct CouchMountingSpec {
+  Eigen::Vector3d rotation_rad = Eigen::Vector3d::Zero();
+  std::optional<Eigen::Vector3d> centre_room_mm;
+};
+
 // actuator: what moves the patient. "none" tracks and reports; "virtual" is the simulator's
 // couch (latency, speed and range limits).
+//   mounting:     (sim) how the virtual couch is really mounted; unset: the ideal couch
+//   calibration:  a couch calibration file (`lftrack calibrate couch`); the loop converts its
+//                 corrections through it. Unset: the couch's axes are assumed to be the room's,
+//                 rotating about the registration origin.
 struct ActuatorSpec {
   std::string type = "none";
   sim::VirtualCouchSpec couch;
+  std::optional<CouchMountingSpec> mounting;
+  std::string calibration_file;  // absolute, or empty
+  std::optional<CouchMountingSpec> calibration;  // read from calibration_file at load
 };
 
 // motion: the simulated patient (sim only): where they lie at the start (set-up error, delta from

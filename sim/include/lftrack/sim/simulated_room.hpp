@@ -8,12 +8,15 @@
 // the room and reads the truth; in hardware-in-the-loop runs the virtual couch server's thread
 // drives the couch (couch_device()). Every public member locks the room, so both may.
 //
-// True pose: T(t) = A(couch(t)) * A(motion(t)) * A(setup_error) * T_nominal, where A(d) is the
-// rigid motion of delta d about the registration origin (pose.hpp). The couch cancels the
-// patient's offset when A(couch) = (A(motion) A(setup_error))^-1.
+// True pose: T(t) = M(couch(t)) * A(motion(t)) * A(setup_error) * T_nominal, where A(d) is the
+// rigid motion of delta d about the registration origin (pose.hpp) and M(q) = X E(q) X^-1 the
+// room motion of couch position q for a couch mounted at X = T_room_from_couch
+// (calib/couch_calibration.hpp). The ideal couch, X = Translation(origin), gives M = A.
+// The couch cancels the patient's offset when M(couch) = (A(motion) A(setup_error))^-1.
 
 #include <cstdint>
 #include <mutex>
+#include <optional>
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/sim/patient_motion.hpp"
@@ -27,6 +30,9 @@ struct SimulatedRoomSpec {
   tracking::Vector6d setup_error = tracking::Vector6d::Zero();  // mm, rad
   PatientMotionSpec motion;
   VirtualCouchSpec couch;
+  // Where the couch is mounted: its rotation centre and translation axes in the room. Unset:
+  // the ideal couch, axes along the room's, rotating about the registration origin.
+  std::optional<Eigen::Isometry3d> couch_T_room_from_couch;
   // The residual is measured over a cube of this edge at the registration origin.
   double residual_box_mm = 40;
 };
@@ -57,6 +63,8 @@ class SimulatedRoom {
   void advance_for_command(drivers::Deadline deadline);
   tracking::Vector6d couch_position() const;
   const SimulatedRoomSpec& spec() const { return spec_; }
+  // The couch's mounting: the spec's, or the ideal couch's.
+  Eigen::Isometry3d T_room_from_couch() const;
 
  private:
   // The room's couch as an Actuator: `clocked` moves the room on to a command's deadline first
