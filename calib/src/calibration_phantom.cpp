@@ -21,7 +21,8 @@ Status CalibrationPhantom::validate() const {
   }
   const bool has_body = (body_size_mm.array() > 0).all();
   for (std::size_t i = 0; i < markers_mm.size(); ++i) {
-    if (!markers_mm[i].allFinite()) return invalid_argument(who + "marker " + std::to_string(i) + " is not finite");
+    if (!markers_mm[i].allFinite())
+      return invalid_argument(who + "marker " + std::to_string(i) + " is not finite");
     if (has_body && ((markers_mm[i].cwiseAbs() * 2).array() > body_size_mm.array()).any()) {
       return invalid_argument(who + "marker " + std::to_string(i) + " lies outside the body");
     }

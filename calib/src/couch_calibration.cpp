@@ -61,7 +61,8 @@ struct BoxPointResidual {
 
 }  // namespace
 
-Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero, const std::vector<CouchObservation>& moves,
+Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero,
+                                                 const std::vector<CouchObservation>& moves,
                                                  const Eigen::Vector3d& box_centre, double box_mm,
                                                  const Eigen::Vector3d& centre_guess) {
   if (moves.size() < 3) {
@@ -93,7 +94,8 @@ Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero, con
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(h, Eigen::ComputeFullU | Eigen::ComputeFullV);
   if (svd.singularValues()(1) < 1e-6 * std::max(svd.singularValues()(0), 1e-12)) {
     return invalid_argument(
-        "couch calibration: the moves span fewer than two directions; move along (or rotate about) at least two "
+        "couch calibration: the moves span fewer than two directions; move along (or rotate about) at least "
+        "two "
         "different axes");
   }
   Eigen::Matrix3d fix = Eigen::Matrix3d::Identity();
@@ -125,7 +127,8 @@ Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero, con
   ceres::Problem problem;
   std::vector<Eigen::Vector3d> box;
   for (int k = 0; k < 8; ++k) {
-    box.push_back(box_centre + 0.5 * box_mm * Eigen::Vector3d(k & 1 ? 1 : -1, k & 2 ? 1 : -1, k & 4 ? 1 : -1));
+    box.push_back(box_centre +
+                  0.5 * box_mm * Eigen::Vector3d(k & 1 ? 1 : -1, k & 2 ? 1 : -1, k & 4 ? 1 : -1));
   }
   for (std::size_t i = 0; i < moves.size(); ++i) {
     for (const Eigen::Vector3d& p : box) {
@@ -171,7 +174,8 @@ Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero, con
     const double variance = dof > 0 ? 2 * summary.final_cost / dof : 0;
     Eigen::Matrix3d cw, cc;
     if (covariance.GetCovarianceBlock(w.data(), w.data(), cw.data())) {
-      out.rotation_sd_deg = (cw.diagonal() * variance).cwiseMax(0).cwiseSqrt() * (180 / 3.14159265358979323846);
+      out.rotation_sd_deg =
+          (cw.diagonal() * variance).cwiseMax(0).cwiseSqrt() * (180 / 3.14159265358979323846);
     }
     if (centre_determined && covariance.GetCovarianceBlock(c.data(), c.data(), cc.data())) {
       out.centre_sd_mm = (cc.diagonal() * variance).cwiseMax(0).cwiseSqrt();

@@ -1,8 +1,8 @@
 #include "lftrack/calib/marker_detection.hpp"
 
 #include <Eigen/Dense>
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 
 namespace lftrack::calib {
@@ -53,8 +53,7 @@ DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const u
 }  // namespace
 
 Result<MarkerDetection> find_marker(const ImageView<const float>& image,
-                                              const ImageView<const unsigned char>& valid,
-                                              const MarkerSearch& s) {
+                                    const ImageView<const unsigned char>& valid, const MarkerSearch& s) {
   if (image.empty()) return invalid_argument("marker search: empty image");
   if (!valid.empty() && (valid.rows != image.rows || valid.cols != image.cols))
     return invalid_argument("marker search: mask size differs from the image's");
@@ -82,11 +81,13 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
     }
   }
   std::ostringstream where;
-  where << "near (" << s.expected_px.x() << ", " << s.expected_px.y() << ") within " << s.search_radius_px << " px";
+  where << "near (" << s.expected_px.x() << ", " << s.expected_px.y() << ") within " << s.search_radius_px
+        << " px";
   if (best_col < 0) return not_found("marker search: no usable pixels " + where.str());
   if (best < s.min_contrast) {
     std::ostringstream m;
-    m << "marker search: no marker " << where.str() << " (best contrast " << best << " < " << s.min_contrast << ")";
+    m << "marker search: no marker " << where.str() << " (best contrast " << best << " < " << s.min_contrast
+      << ")";
     return not_found(m.str());
   }
   // Background under the marker: a plane fitted to the ring (bone edges and gradients would
@@ -229,7 +230,8 @@ Result<MarkerScanResult> scan_markers(const ImageView<const float>& image, const
         scc += w * c * c;
         srr += w * r * r;
         scr += w * c * r;
-        rmin = std::min(rmin, r), rmax = std::max(rmax, r), cmin = std::min(cmin, c), cmax = std::max(cmax, c);
+        rmin = std::min(rmin, r), rmax = std::max(rmax, r), cmin = std::min(cmin, c),
+        cmax = std::max(cmax, c);
         const int next[4][2] = {{r - 1, c}, {r + 1, c}, {r, c - 1}, {r, c + 1}};
         for (const auto& n : next) {
           if (n[0] < 0 || n[0] >= rows || n[1] < 0 || n[1] >= cols) continue;

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 
-
 namespace lftrack::calib {
 
 Result<RoomFrame> room_frame_from_views(const tracking::XrayView& a, const tracking::XrayView& b) {

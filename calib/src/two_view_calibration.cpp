@@ -18,15 +18,16 @@ Result<TwoViewCalibration> calibrate_two_views(const CalibrationPhantom& phantom
     const auto& image = images[std::size_t(k)];
     if (image.rows != nominal.rows || image.cols != nominal.cols) {
       return invalid_argument("view '" + nominal.name + "': image is " + std::to_string(image.rows) + " x " +
-                              std::to_string(image.cols) + " pixels, the detector " + std::to_string(nominal.rows) +
-                              " x " + std::to_string(nominal.cols));
+                              std::to_string(image.cols) + " pixels, the detector " +
+                              std::to_string(nominal.rows) + " x " + std::to_string(nominal.cols));
     }
     // A ball's projected radius at the phantom's centre.
     const Eigen::Vector3d centre_room = T_room_from_phantom_nominal.translation();
     const double depth = nominal.detector_normal().dot(nominal.source_mm - centre_room);
     MarkerScan scan;
-    scan.marker_radius_px = std::max(1.0, 0.5 * phantom.marker_diameter_mm * nominal.source_to_detector_mm() /
-                                              std::max(depth, 1.0) / std::min(nominal.pitch_col_mm, nominal.pitch_row_mm));
+    scan.marker_radius_px =
+        std::max(1.0, 0.5 * phantom.marker_diameter_mm * nominal.source_to_detector_mm() /
+                          std::max(depth, 1.0) / std::min(nominal.pitch_col_mm, nominal.pitch_row_mm));
     auto found = scan_markers(image, scan);
     if (!found.ok()) return found.status().with_context("view '" + nominal.name + "'");
     out.scans[std::size_t(k)] = *found;
@@ -42,7 +43,8 @@ Result<TwoViewCalibration> calibrate_two_views(const CalibrationPhantom& phantom
   if (!room.ok()) return room.status();
   out.room = *room;
   for (int k = 0; k < 2; ++k) {
-    out.views_room[std::size_t(k)] = out.in_phantom[std::size_t(k)].view.transformed(out.room.T_room_from_views);
+    out.views_room[std::size_t(k)] =
+        out.in_phantom[std::size_t(k)].view.transformed(out.room.T_room_from_views);
   }
   return out;
 }

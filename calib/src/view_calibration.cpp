@@ -150,7 +150,8 @@ struct Predicted {
 };
 
 // Projections of the markers that land on the detector and do not overlap another's.
-std::vector<Predicted> predict(const CalibrationPhantom& phantom, const XrayView& view, double min_separation_px) {
+std::vector<Predicted> predict(const CalibrationPhantom& phantom, const XrayView& view,
+                               double min_separation_px) {
   std::vector<Predicted> all;
   for (int i = 0; i < int(phantom.markers_mm.size()); ++i) {
     const auto px = view.project(phantom.markers_mm[std::size_t(i)]);
@@ -161,7 +162,8 @@ std::vector<Predicted> predict(const CalibrationPhantom& phantom, const XrayView
   std::vector<Predicted> kept;
   for (const Predicted& p : all) {
     bool overlaps = false;
-    for (const Predicted& q : all) overlaps |= q.marker != p.marker && (q.px - p.px).norm() < min_separation_px;
+    for (const Predicted& q : all)
+      overlaps |= q.marker != p.marker && (q.px - p.px).norm() < min_separation_px;
     if (!overlaps) kept.push_back(p);
   }
   return kept;
@@ -170,8 +172,9 @@ std::vector<Predicted> predict(const CalibrationPhantom& phantom, const XrayView
 // Mutual nearest neighbours within `gate` after shifting the predictions by `shift`; a pair whose
 // second-nearest detection is within 1.5 times the nearest (and the gate) is ambiguous and
 // skipped.
-std::vector<Pair> pair_up(const std::vector<Predicted>& predicted, const std::vector<MarkerDetection>& detections,
-                          const Eigen::Vector2d& shift, double gate, int* ambiguous) {
+std::vector<Pair> pair_up(const std::vector<Predicted>& predicted,
+                          const std::vector<MarkerDetection>& detections, const Eigen::Vector2d& shift,
+                          double gate, int* ambiguous) {
   std::vector<Pair> pairs;
   *ambiguous = 0;
   for (std::size_t i = 0; i < predicted.size(); ++i) {
@@ -211,8 +214,8 @@ struct ShiftVote {
 
 // The image shift that brings the most predictions within `gate` of a detection: every
 // prediction/detection pair proposes one; each is scored over all predictions.
-ShiftVote vote_for_shift(const std::vector<Predicted>& predicted, const std::vector<MarkerDetection>& detections,
-                         double gate) {
+ShiftVote vote_for_shift(const std::vector<Predicted>& predicted,
+                         const std::vector<MarkerDetection>& detections, double gate) {
   std::vector<std::pair<int, Eigen::Vector2d>> scored;
   for (const Predicted& p : predicted) {
     for (const MarkerDetection& d : detections) {
@@ -252,8 +255,9 @@ struct Fit {
   bool covariance_ok = false;
 };
 
-Result<Fit> refine(const CameraParams& start, const CameraModel& model, const std::vector<Eigen::Vector3d>& points,
-                   const std::vector<Eigen::Vector2d>& pixels, double huber_px, bool want_covariance) {
+Result<Fit> refine(const CameraParams& start, const CameraModel& model,
+                   const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector2d>& pixels,
+                   double huber_px, bool want_covariance) {
   Fit fit;
   fit.params = start;
   ceres::Problem problem;
@@ -327,7 +331,8 @@ Result<Matrix34d> projection_from_dlt(const std::vector<Eigen::Vector3d>& points
                                       const std::vector<Eigen::Vector2d>& pixels) {
   if (points_mm.size() != pixels.size()) return invalid_argument("DLT: point and pixel counts differ");
   if (points_mm.size() < 6) {
-    return invalid_argument("DLT: needs at least 6 point/pixel pairs, has " + std::to_string(points_mm.size()));
+    return invalid_argument("DLT: needs at least 6 point/pixel pairs, has " +
+                            std::to_string(points_mm.size()));
   }
   if (flatness(points_mm) < 0.02) {
     return invalid_argument(
@@ -378,12 +383,14 @@ Result<XrayView> view_from_projection(const Matrix34d& projection, const XrayVie
   v.col_axis = col_axis;
   v.row_axis = row_axis;
   const double sdd = k(0, 0) * spec.pitch_col_mm;
-  v.pixel00_mm = centre + sdd * beam - k(0, 2) * spec.pitch_col_mm * col_axis - k(1, 2) * spec.pitch_row_mm * row_axis;
+  v.pixel00_mm =
+      centre + sdd * beam - k(0, 2) * spec.pitch_col_mm * col_axis - k(1, 2) * spec.pitch_row_mm * row_axis;
   if (Status s = v.validate(); !s.ok()) return s;
   return v;
 }
 
-Result<ViewCalibration> calibrate_view(const CalibrationPhantom& phantom, const std::vector<MarkerDetection>& detections,
+Result<ViewCalibration> calibrate_view(const CalibrationPhantom& phantom,
+                                       const std::vector<MarkerDetection>& detections,
                                        const XrayView& nominal, const ViewCalibrationOptions& options) {
   LFTRACK_RETURN_IF_ERROR(phantom.validate());
   LFTRACK_RETURN_IF_ERROR(nominal.validate());
@@ -392,8 +399,9 @@ Result<ViewCalibration> calibrate_view(const CalibrationPhantom& phantom, const 
   const std::vector<Predicted> predicted = predict(phantom, nominal, options.min_separation_px);
   const auto too_few = [&](int matched, const std::string& stage) {
     std::ostringstream m;
-    m << who << "too few markers found: " << matched << " matched " << stage << " (need " << options.min_markers
-      << "); " << detections.size() << " detected, " << predicted.size() << " of " << phantom.markers_mm.size()
+    m << who << "too few markers found: " << matched << " matched " << stage << " (need "
+      << options.min_markers << "); " << detections.size() << " detected, " << predicted.size() << " of "
+      << phantom.markers_mm.size()
       << " expected on the detector. Check the exposure, the phantom's placement and the nominal geometry";
     return not_found(m.str());
   };
@@ -404,8 +412,9 @@ Result<ViewCalibration> calibrate_view(const CalibrationPhantom& phantom, const 
     std::vector<Eigen::Vector3d> seen;
     for (const Predicted& p : predicted) seen.push_back(phantom.markers_mm[std::size_t(p.marker)]);
     if (flatness(seen) < 0.02) {
-      return invalid_argument(who + "the phantom's markers in view are (nearly) coplanar; one image of a flat "
-                                    "pattern does not determine the view. Use a phantom with markers in depth");
+      return invalid_argument(who +
+                              "the phantom's markers in view are (nearly) coplanar; one image of a flat "
+                              "pattern does not determine the view. Use a phantom with markers in depth");
     }
   }
 
@@ -413,16 +422,19 @@ Result<ViewCalibration> calibrate_view(const CalibrationPhantom& phantom, const 
   const ShiftVote vote = vote_for_shift(predicted, detections, options.match_gate_px);
   if (vote.runner_up_votes >= std::max(options.min_markers, int(std::ceil(0.7 * vote.votes)))) {
     std::ostringstream m;
-    m << who << "ambiguous correspondence: two placements of the phantom's projection explain the image about "
+    m << who
+      << "ambiguous correspondence: two placements of the phantom's projection explain the image about "
       << "equally well (" << vote.votes << " and " << vote.runner_up_votes << " markers). The pattern is too "
-      << "regular for the nominal geometry's uncertainty; use an irregular phantom or a closer nominal geometry";
+      << "regular for the nominal geometry's uncertainty; use an irregular phantom or a closer nominal "
+         "geometry";
     return invalid_argument(m.str());
   }
   int ambiguous = 0;
   std::vector<Pair> pairs = pair_up(predicted, detections, vote.shift, options.match_gate_px, &ambiguous);
   if (ambiguous > int(pairs.size())) {
     std::ostringstream m;
-    m << who << "ambiguous correspondence: " << ambiguous << " markers have two detections about equally near "
+    m << who << "ambiguous correspondence: " << ambiguous
+      << " markers have two detections about equally near "
       << "(only " << pairs.size() << " unambiguous)";
     return invalid_argument(m.str());
   }
@@ -468,14 +480,26 @@ Result<ViewCalibration> calibrate_view(const CalibrationPhantom& phantom, const 
     if (round == 2) break;
     const XrayView v = view_of(fit.params, model, nominal, 0);
     const std::vector<Predicted> again = predict(phantom, v, options.min_separation_px);
-    std::vector<Pair> candidates =
-        pair_up(again, detections, Eigen::Vector2d::Zero(), std::max(4.0, 0.25 * options.match_gate_px), &ambiguous);
-    pairs.clear();
+    std::vector<Pair> candidates = pair_up(again, detections, Eigen::Vector2d::Zero(),
+                                           std::max(4.0, 0.25 * options.match_gate_px), &ambiguous);
+    // Outliers: beyond outlier_px, or beyond 6 times the median residual (a ball whose
+    // centroid a neighbour's shadow pulls; one such ball can move the source's distance by a
+    // millimetre, so a robust loss alone does not suffice).
+    std::vector<double> residuals;
     for (const Pair& p : candidates) {
       const auto at = v.project(phantom.markers_mm[std::size_t(p.marker)]);
-      if (at && (*at - detections[std::size_t(p.detection)].pixel).norm() <= options.outlier_px) pairs.push_back(p);
+      residuals.push_back(at ? (*at - detections[std::size_t(p.detection)].pixel).norm() : 1e300);
     }
-    if (int(pairs.size()) < options.min_markers) return too_few(int(pairs.size()), "within the outlier limit");
+    std::vector<double> sorted = residuals;
+    std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2), sorted.end());
+    const double median = sorted.empty() ? 0.0 : sorted[sorted.size() / 2];
+    const double limit = std::min(options.outlier_px, std::max(6 * median, 1e-3));
+    pairs.clear();
+    for (std::size_t i = 0; i < candidates.size(); ++i) {
+      if (residuals[i] <= limit) pairs.push_back(candidates[i]);
+    }
+    if (int(pairs.size()) < options.min_markers)
+      return too_few(int(pairs.size()), "within the outlier limit");
   }
 
   const double nominal_sdd = nominal.source_to_detector_mm();

@@ -23,22 +23,25 @@ Result<calib::CalibrationPhantom> load_calibration_phantom(const std::string& fi
     return p.error_at(e.mark, "not valid YAML: " + e.msg);
   }
   if (!root.IsMap()) return invalid_argument(file_or_builtin + ": a phantom file is a mapping");
-  LFTRACK_RETURN_IF_ERROR(p.check_keys(root, "the phantom",
-                                       {"name", "marker_diameter_mm", "body_size_mm", "markers_mm",
-                                        "marker_mu_per_mm", "body_mu_per_mm"}));
+  LFTRACK_RETURN_IF_ERROR(p.check_keys(
+      root, "the phantom",
+      {"name", "marker_diameter_mm", "body_size_mm", "markers_mm", "marker_mu_per_mm", "body_mu_per_mm"}));
   calib::CalibrationPhantom phantom;
   phantom.name = fs::path(file_or_builtin).stem().string();
   if (root["name"]) LFTRACK_RETURN_IF_ERROR(p.text(root["name"], "name", &phantom.name));
   if (root["marker_diameter_mm"]) {
-    LFTRACK_RETURN_IF_ERROR(p.positive(root["marker_diameter_mm"], "marker_diameter_mm", &phantom.marker_diameter_mm));
+    LFTRACK_RETURN_IF_ERROR(
+        p.positive(root["marker_diameter_mm"], "marker_diameter_mm", &phantom.marker_diameter_mm));
   }
   if (root["marker_mu_per_mm"]) {
-    LFTRACK_RETURN_IF_ERROR(p.positive(root["marker_mu_per_mm"], "marker_mu_per_mm", &phantom.marker_mu_per_mm));
+    LFTRACK_RETURN_IF_ERROR(
+        p.positive(root["marker_mu_per_mm"], "marker_mu_per_mm", &phantom.marker_mu_per_mm));
   }
   if (root["body_mu_per_mm"]) {
     LFTRACK_RETURN_IF_ERROR(p.number(root["body_mu_per_mm"], "body_mu_per_mm", &phantom.body_mu_per_mm));
   }
-  if (root["body_size_mm"]) LFTRACK_RETURN_IF_ERROR(p.vec3(root["body_size_mm"], "body_size_mm", &phantom.body_size_mm));
+  if (root["body_size_mm"])
+    LFTRACK_RETURN_IF_ERROR(p.vec3(root["body_size_mm"], "body_size_mm", &phantom.body_size_mm));
   YAML::Node markers;
   LFTRACK_RETURN_IF_ERROR(p.need(root, "markers_mm", "the phantom", &markers));
   if (!markers.IsSequence()) return p.error(markers, "markers_mm must be a list of [x, y, z]");
@@ -108,8 +111,9 @@ std::string calibrated_detectors_yaml(const std::vector<DetectorSpec>& specs,
       std::ostringstream line;
       line.setf(std::ios::fixed);
       line.precision(3);
-      line << "        - {marker: " << r.marker << ", detected: [" << r.detected_px.x() << ", " << r.detected_px.y()
-           << "], residual: [" << r.residual_px.x() << ", " << r.residual_px.y() << "]}\n";
+      line << "        - {marker: " << r.marker << ", detected: [" << r.detected_px.x() << ", "
+           << r.detected_px.y() << "], residual: [" << r.residual_px.x() << ", " << r.residual_px.y()
+           << "]}\n";
       y << line.str();
     }
   }
@@ -137,7 +141,8 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
   YAML::Node node;
   LFTRACK_RETURN_IF_ERROR(p.need(c, "rotation_deg", "couch_calibration", &node));
   LFTRACK_RETURN_IF_ERROR(p.vec3(node, "couch_calibration.rotation_deg", &out.rotation_rad));
-  if (out.rotation_rad.norm() > 20) return p.error(node, "couch_calibration.rotation_deg: at most 20 degrees");
+  if (out.rotation_rad.norm() > 20)
+    return p.error(node, "couch_calibration.rotation_deg: at most 20 degrees");
   out.rotation_rad *= 3.14159265358979323846 / 180;
   Eigen::Vector3d centre;
   LFTRACK_RETURN_IF_ERROR(p.need(c, "centre_mm", "couch_calibration", &node));
@@ -167,18 +172,22 @@ Result<std::vector<tracking::Vector6d>> read_couch_moves(const std::string& file
     const std::string what = "moves[" + std::to_string(i) + "]";
     LFTRACK_RETURN_IF_ERROR(p.check_keys(list[i], what, {"translation_mm", "rotation_deg"}));
     Eigen::Vector3d t = Eigen::Vector3d::Zero(), r = Eigen::Vector3d::Zero();
-    if (list[i]["translation_mm"]) LFTRACK_RETURN_IF_ERROR(p.vec3(list[i]["translation_mm"], what + ".translation_mm", &t));
-    if (list[i]["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(p.vec3(list[i]["rotation_deg"], what + ".rotation_deg", &r));
+    if (list[i]["translation_mm"])
+      LFTRACK_RETURN_IF_ERROR(p.vec3(list[i]["translation_mm"], what + ".translation_mm", &t));
+    if (list[i]["rotation_deg"])
+      LFTRACK_RETURN_IF_ERROR(p.vec3(list[i]["rotation_deg"], what + ".rotation_deg", &r));
     tracking::Vector6d q;
     q << t, r * (3.14159265358979323846 / 180);
     moves.push_back(q);
   }
-  if (moves.size() < 3) return invalid_argument(file + ": needs at least 3 moves, has " + std::to_string(moves.size()));
+  if (moves.size() < 3)
+    return invalid_argument(file + ": needs at least 3 moves, has " + std::to_string(moves.size()));
   return moves;
 }
 
 std::string couch_calibration_yaml(const Eigen::Isometry3d& T_room_from_couch, const std::string& report) {
-  const Eigen::Vector3d r = tracking::rotation_log(T_room_from_couch.linear()) * (180 / 3.14159265358979323846);
+  const Eigen::Vector3d r =
+      tracking::rotation_log(T_room_from_couch.linear()) * (180 / 3.14159265358979323846);
   std::ostringstream y;
   y << "# The couch in the room (lftrack calibrate couch): the couch's translation axes and rotation\n"
     << "# centre, room frame. Name this file in a scene as actuator.calibration.\n"

@@ -30,6 +30,7 @@ Command add_register_command(CLI::App* parent);
 Command add_bench_register_command(CLI::App* parent);
 Command add_journal_command(CLI::App* parent);
 Command add_study_capture_range_command(CLI::App* parent);
+Command add_study_sensitivity_command(CLI::App* parent);
 Command add_sim_command(CLI::App* parent);
 Command add_run_command(CLI::App* parent);
 Command add_replay_command(CLI::App* parent);

@@ -32,7 +32,7 @@ struct ViewsOptions {
   bool fit_pitch = false;
   bool sim = false;
   std::uint64_t seed = 1;
-  double photons = 1e6;
+  double photons = 1e7;  // 100 averaged frames of 10^5 quanta
   std::string save_images;
   bool json = false;
 };
@@ -41,11 +41,12 @@ struct ViewsOptions {
 // as the 99.5th percentile of the image (the phantom covers less than half of it).
 Result<Image<float>> read_line_integrals(const std::string& file, bool counts) {
   const std::string ext = std::filesystem::path(file).extension().string();
-  auto image = ext == ".pfm"                    ? tracking::read_pfm(file)
-               : (ext == ".tif" || ext == ".tiff") ? tracking::read_tiff(file)
-               : ext == ".png"                  ? tracking::read_png(file)
-                                                : Result<Image<float>>(invalid_argument(
-                                                      file + ": unknown image type (use .pfm, .tif or .png)"));
+  auto image =
+      ext == ".pfm"                       ? tracking::read_pfm(file)
+      : (ext == ".tif" || ext == ".tiff") ? tracking::read_tiff(file)
+      : ext == ".png"
+          ? tracking::read_png(file)
+          : Result<Image<float>>(invalid_argument(file + ": unknown image type (use .pfm, .tif or .png)"));
   if (!image.ok()) return image.status();
   if (!counts) return image;
   std::vector<float> values;
@@ -118,8 +119,8 @@ Status run(const ViewsOptions& o) {
       sim::PhantomImageSpec spec;
       spec.photons_per_pixel = o.photons;
       spec.seed = o.seed * 1000 + k;
-      spdlog::info("rendering the phantom in view {} ({} x {} pixels)", scene_views[k].name, scene_views[k].rows,
-                   scene_views[k].cols);
+      spdlog::info("rendering the phantom in view {} ({} x {} pixels)", scene_views[k].name,
+                   scene_views[k].rows, scene_views[k].cols);
       auto image = sim::render_phantom_image(*phantom, T_room_from_phantom, scene_views[k], spec);
       if (!image.ok()) return image.status();
       images[k] = std::move(*image);
@@ -145,15 +146,17 @@ Status run(const ViewsOptions& o) {
   if (!cal.ok()) return cal.status();
   for (std::size_t k = 0; k < 2; ++k) {
     const calib::ViewCalibration& c = cal->in_phantom[k];
-    spdlog::info("view {}: {} of {} markers matched ({} blobs found, {} merged), rms {:.3f} px, source sd {:.3f} mm",
-                 c.view.name, c.markers_matched, c.markers_projected, c.detections, cal->scans[k].rejected_merged,
-                 c.rms_px, c.source_sd_mm.norm());
+    spdlog::info(
+        "view {}: {} of {} markers matched ({} blobs found, {} merged), rms {:.3f} px, source sd {:.3f} mm",
+        c.view.name, c.markers_matched, c.markers_projected, c.detections, cal->scans[k].rejected_merged,
+        c.rms_px, c.source_sd_mm.norm());
   }
   if (!o.out.empty()) {
     std::ofstream out(o.out);
-    const std::string provenance =
-        o.sim ? "simulated (seed " + std::to_string(o.seed) + ")" : "images " + o.images[0] + " " + o.images[1];
-    out << calibrated_detectors_yaml(scene->detectors, *cal, "phantom '" + phantom->name + "', " + provenance);
+    const std::string provenance = o.sim ? "simulated (seed " + std::to_string(o.seed) + ")"
+                                         : "images " + o.images[0] + " " + o.images[1];
+    out << calibrated_detectors_yaml(scene->detectors, *cal,
+                                     "phantom '" + phantom->name + "', " + provenance);
     if (!out) return io_error("cannot write '" + o.out + "'");
     spdlog::info("wrote {}", o.out);
   }
@@ -196,9 +199,10 @@ Status run(const ViewsOptions& o) {
   if (o.json) {
     std::printf("%s\n", j.dump(2).c_str());
   } else if (o.sim) {
-    std::printf("recovered the simulated room: source error %.3f mm, detector error %.3f mm, orientation error "
-                "%.4f deg, rms %.3f px (worse of the two views)\n",
-                source_error, detector_error, orientation_error, rms);
+    std::printf(
+        "recovered the simulated room: source error %.3f mm, detector error %.3f mm, orientation error "
+        "%.4f deg, rms %.3f px (worse of the two views)\n",
+        source_error, detector_error, orientation_error, rms);
   }
   return {};
 }
@@ -210,18 +214,23 @@ Command add_calibrate_views_command(CLI::App* parent) {
   CLI::App* app = parent->add_subcommand(
       "views", "X-ray view geometry from one image of a calibration phantom per detector");
   app->add_option("--phantom", o->phantom, "Phantom file (YAML), or 'builtin'")->capture_default_str();
-  app->add_option("--images", o->images, "One phantom image per detector, in the scene's order (.pfm, .tif, .png)")
+  app->add_option("--images", o->images,
+                  "One phantom image per detector, in the scene's order (.pfm, .tif, .png)")
       ->expected(2);
-  app->add_option("--scene", o->scene, "Scene whose detectors are the nominal geometry (with --sim: the truth)")
+  app->add_option("--scene", o->scene,
+                  "Scene whose detectors are the nominal geometry (with --sim: the truth)")
       ->capture_default_str();
   app->add_option("--out", o->out, "Write the calibrated detectors section (YAML) here");
   app->add_flag("--counts", o->counts, "Images are detector counts (the default: line integrals, ln(I0/I))");
   app->add_flag("--fit-pitch", o->fit_pitch,
                 "Solve the pixel pitch, holding the source-to-detector distance at the nominal value");
-  app->add_flag("--sim", o->sim, "Render the phantom at the scene's geometry, calibrate, print recovery errors");
-  app->add_option("--seed", o->seed, "With --sim: placement, drawing errors and noise")->capture_default_str();
+  app->add_flag("--sim", o->sim,
+                "Render the phantom at the scene's geometry, calibrate, print recovery errors");
+  app->add_option("--seed", o->seed, "With --sim: placement, drawing errors and noise")
+      ->capture_default_str();
   app->add_option("--photons", o->photons, "With --sim: open-field quanta per pixel")->capture_default_str();
-  app->add_option("--save-images", o->save_images, "With --sim: write the phantom images (.pfm) to this folder");
+  app->add_option("--save-images", o->save_images,
+                  "With --sim: write the phantom images (.pfm) to this folder");
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o] {
     if (o->sim && !o->images.empty()) return invalid_argument("give either --sim or --images, not both");

@@ -71,7 +71,8 @@ Status run(const CouchOptions& o) {
     spdlog::info("wrote {}", o.out);
   }
   nlohmann::json j;
-  const Eigen::Vector3d r = tracking::rotation_log(c.T_room_from_couch.linear()) * (180 / 3.14159265358979323846);
+  const Eigen::Vector3d r =
+      tracking::rotation_log(c.T_room_from_couch.linear()) * (180 / 3.14159265358979323846);
   j["rotation_deg"] = {r.x(), r.y(), r.z()};
   j["centre_mm"] = {c.T_room_from_couch.translation().x(), c.T_room_from_couch.translation().y(),
                     c.T_room_from_couch.translation().z()};
@@ -85,9 +86,10 @@ Status run(const CouchOptions& o) {
   if (o.json) {
     std::printf("%s\n", j.dump(2).c_str());
   } else {
-    std::printf("couch axes recovered within %.4f deg, rotation centre within %.3f mm of the simulated mounting "
-                "(rms %.4f mm over %zu moves)\n",
-                run->rotation_error_deg, run->centre_error_mm, c.rms_mm, run->observations.size());
+    std::printf(
+        "couch axes recovered within %.4f deg, rotation centre within %.3f mm of the simulated mounting "
+        "(rms %.4f mm over %zu moves)\n",
+        run->rotation_error_deg, run->centre_error_mm, c.rms_mm, run->observations.size());
   }
   return {};
 }
@@ -101,9 +103,12 @@ Command add_calibrate_couch_command(CLI::App* parent) {
   add_scene_options(app, &o->scene);
   app->add_option("--moves", o->moves, "Moves file (YAML), or 'builtin' (+-10 mm, +-2 deg per axis)")
       ->capture_default_str();
-  app->add_option("--phantom", o->phantom, "Phantom on the couch (YAML), or 'builtin'")->capture_default_str();
-  app->add_option("--out", o->out, "Write the couch calibration (YAML) here; a scene names it as actuator.calibration");
-  app->add_option("--photons", o->photons, "Open-field quanta per pixel of the phantom images")->capture_default_str();
+  app->add_option("--phantom", o->phantom, "Phantom on the couch (YAML), or 'builtin'")
+      ->capture_default_str();
+  app->add_option("--out", o->out,
+                  "Write the couch calibration (YAML) here; a scene names it as actuator.calibration");
+  app->add_option("--photons", o->photons, "Open-field quanta per pixel of the phantom images")
+      ->capture_default_str();
   app->add_option("--seed", o->seed, "Noise of the phantom images")->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o] { return run(*o); };

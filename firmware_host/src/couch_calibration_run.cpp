@@ -35,7 +35,8 @@ drivers::Deadline deadline_at(std::int64_t t_ns) {
 
 Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene& p,
                                                             const CouchCalibrationRunOptions& o) {
-  if (p.scene.detectors.size() != 2) return invalid_argument("calibrate couch needs a scene with two detectors");
+  if (p.scene.detectors.size() != 2)
+    return invalid_argument("calibrate couch needs a scene with two detectors");
   if (p.scene.actuator.type != "virtual") {
     return invalid_argument("calibrate couch (simulated) needs a scene with `actuator: {type: virtual}`");
   }
@@ -44,8 +45,9 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
   for (const Vector6d& q : moves) {
     if (!q.allFinite() || q.head<3>().cwiseAbs().maxCoeff() > couch_spec.range_mm ||
         tracking::rad_to_deg(q.tail<3>().cwiseAbs().maxCoeff()) > couch_spec.range_deg) {
-      return out_of_range("a couch move lies outside the couch's range (+-" + std::to_string(couch_spec.range_mm) +
-                          " mm, +-" + std::to_string(couch_spec.range_deg) + " deg)");
+      return out_of_range("a couch move lies outside the couch's range (+-" +
+                          std::to_string(couch_spec.range_mm) + " mm, +-" +
+                          std::to_string(couch_spec.range_deg) + " deg)");
     }
   }
   // The phantom lies on the couch at the isocentre; the room has no patient motion.
@@ -74,7 +76,8 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
     const Vector6d target = i == 0 ? Vector6d::Zero() : moves[i - 1];
     if (i > 0) {
       const drivers::DeviceStatus sent = couch.command(target - commanded, deadline_at(t_ns + 10'000'000));
-      if (sent != drivers::DeviceStatus::kOk) return failed_precondition("the couch refused a calibration move");
+      if (sent != drivers::DeviceStatus::kOk)
+        return failed_precondition("the couch refused a calibration move");
       commanded = target;
       // Let it arrive: 0.1 s steps of the simulated clock, at most 60 s.
       drivers::ActuatorState state;
@@ -86,7 +89,8 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
           return failed_precondition("couch read-back failed during calibration");
         }
       } while ((state.moving || (state.position - target).norm() > 1e-9) && t_ns < give_up);
-      if (t_ns >= give_up) return failed_precondition("the couch did not arrive at a calibration move in 60 s");
+      if (t_ns >= give_up)
+        return failed_precondition("the couch did not arrive at a calibration move in 60 s");
     }
     std::array<tracking::Image<float>, 2> images;
     const tracking::Pose truth = room.true_T_room_from_ct();
@@ -115,9 +119,10 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
                                                p.scene.registration.tre_box_mm, spec.origin_room_mm);
   if (!solved.ok()) return solved.status();
   run.calibration = *solved;
-  run.rotation_error_deg = tracking::rad_to_deg(
-      tracking::rotation_log(run.true_T_room_from_couch.linear().transpose() * solved->T_room_from_couch.linear())
-          .norm());
+  run.rotation_error_deg =
+      tracking::rad_to_deg(tracking::rotation_log(run.true_T_room_from_couch.linear().transpose() *
+                                                  solved->T_room_from_couch.linear())
+                               .norm());
   run.centre_error_mm =
       (run.true_T_room_from_couch.translation() - solved->T_room_from_couch.translation()).norm();
   return run;

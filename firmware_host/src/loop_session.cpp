@@ -110,7 +110,8 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
     room.setup_error = p.scene.motion.setup_error;
     room.motion = p.scene.motion.motion;
     room.couch = p.scene.actuator.couch;
-    if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
+    if (p.scene.actuator.mounting)
+      room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
     room.residual_box_mm = p.scene.registration.tre_box_mm;
     parts->room = std::make_unique<sim::SimulatedRoom>(room);
     SimFrameSourceOptions frame_options = o.frames;
@@ -194,8 +195,9 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
     lp.actuator = parts->calibrated_couch.get();
     spdlog::info("couch commands go through the couch calibration {}", p.scene.actuator.calibration_file);
   } else if (has_couch && p.scene.actuator.mounting) {
-    spdlog::warn("the couch is mounted off the room's axes but the scene names no actuator.calibration: "
-                 "corrections assume the room's axes");
+    spdlog::warn(
+        "the couch is mounted off the room's axes but the scene names no actuator.calibration: "
+        "corrections assume the room's axes");
   }
   lp.journal = parts->journal.get();
   lp.operator_input = parts->operators.empty() ? nullptr : &parts->operators;

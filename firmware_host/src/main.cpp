@@ -32,11 +32,13 @@ int main(int argc, char** argv) {
   CLI::App* study = app.add_subcommand("study", "Studies: many registrations, a CSV, a plot and a summary");
   study->require_subcommand(1);
   const Command capture_range = add_study_capture_range_command(study);
+  const Command sensitivity = add_study_sensitivity_command(study);
   const Command journal = add_journal_command(&app);
   const Command sim = add_sim_command(&app);
   const Command run_loop = add_run_command(&app);
   const Command replay = add_replay_command(&app);
-  CLI::App* calibrate = app.add_subcommand("calibrate", "Calibration: X-ray views from a phantom, the couch's axes");
+  CLI::App* calibrate =
+      app.add_subcommand("calibrate", "Calibration: X-ray views from a phantom, the couch's axes");
   calibrate->require_subcommand(1);
   const Command calibrate_views = add_calibrate_views_command(calibrate);
   const Command calibrate_couch = add_calibrate_couch_command(calibrate);
@@ -64,6 +66,8 @@ int main(int argc, char** argv) {
       status = register_frames();
     else if (study->got_subcommand("capture-range"))
       status = capture_range();
+    else if (study->got_subcommand("sensitivity"))
+      status = sensitivity();
     else if (app.got_subcommand("journal"))
       status = journal();
     else if (app.got_subcommand("sim"))

@@ -1,7 +1,7 @@
 // The scene's host-loop sections: sim, loop, safety, actuator, motion.
 
-#include "lftrack/tracking/registration.hpp"
 #include "lftrack/host/calibration_files.hpp"
+#include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"
 
 namespace lftrack::host {
@@ -144,9 +144,9 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
 }
 
 Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
-  LFTRACK_RETURN_IF_ERROR(check_keys(
-      n, "actuator",
-      {"type", "latency_s", "max_speed_mm_s", "max_speed_deg_s", "range_mm", "range_deg", "mounting", "calibration"}));
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "actuator",
+                                     {"type", "latency_s", "max_speed_mm_s", "max_speed_deg_s", "range_mm",
+                                      "range_deg", "mounting", "calibration"}));
   YAML::Node type;
   LFTRACK_RETURN_IF_ERROR(need(n, "type", "actuator", &type));
   LFTRACK_RETURN_IF_ERROR(one_of(type, "actuator.type", {"none", "virtual"}, &a->type));
@@ -166,8 +166,10 @@ Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
     LFTRACK_RETURN_IF_ERROR(check_keys(m, "actuator.mounting", {"rotation_deg", "centre_mm"}));
     CouchMountingSpec mounting;
     if (m["rotation_deg"]) {
-      LFTRACK_RETURN_IF_ERROR(vec3(m["rotation_deg"], "actuator.mounting.rotation_deg", &mounting.rotation_rad));
-      if (mounting.rotation_rad.norm() > 20) return error(m["rotation_deg"], "actuator.mounting.rotation_deg: at most 20 degrees");
+      LFTRACK_RETURN_IF_ERROR(
+          vec3(m["rotation_deg"], "actuator.mounting.rotation_deg", &mounting.rotation_rad));
+      if (mounting.rotation_rad.norm() > 20)
+        return error(m["rotation_deg"], "actuator.mounting.rotation_deg: at most 20 degrees");
       mounting.rotation_rad *= 3.14159265358979323846 / 180;
     }
     if (m["centre_mm"]) {

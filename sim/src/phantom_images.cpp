@@ -30,10 +30,12 @@ double box_chord(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen
 
 Result<tracking::Image<float>> render_phantom_image(const calib::CalibrationPhantom& phantom,
                                                     const Eigen::Isometry3d& T_view_from_phantom,
-                                                    const tracking::XrayView& view, const PhantomImageSpec& spec) {
+                                                    const tracking::XrayView& view,
+                                                    const PhantomImageSpec& spec) {
   LFTRACK_RETURN_IF_ERROR(phantom.validate());
   LFTRACK_RETURN_IF_ERROR(view.validate());
-  if (spec.supersample < 1 || spec.supersample > 16 || !(spec.photons_per_pixel >= 0) || !(spec.blur_px >= 0)) {
+  if (spec.supersample < 1 || spec.supersample > 16 || !(spec.photons_per_pixel >= 0) ||
+      !(spec.blur_px >= 0)) {
     return invalid_argument("phantom image: supersample 1..16, photons and blur >= 0");
   }
   // Work in the phantom's frame.

@@ -13,10 +13,10 @@ namespace lftrack::calib {
 
 struct CalibrationPhantom {
   std::string name;
-  std::vector<Eigen::Vector3d> markers_mm;     // ball centres, phantom frame
-  double marker_diameter_mm = 2.0;             // steel balls
-  Eigen::Vector3d body_size_mm{0, 0, 0};       // plastic box centred on the phantom origin; 0: none
-  double marker_mu_per_mm = 0.35;              // steel at ~70 keV effective
+  std::vector<Eigen::Vector3d> markers_mm;  // ball centres, phantom frame
+  double marker_diameter_mm = 2.0;          // steel balls
+  Eigen::Vector3d body_size_mm{0, 0, 0};    // plastic box centred on the phantom origin; 0: none
+  double marker_mu_per_mm = 0.35;           // steel at ~70 keV effective
   // The body: a rigid foam block in a thin acrylic skin (about 0.004 / mm on average); a solid
   // PMMA block (0.022 / mm) would let through a tenth of the photons.
   double body_mu_per_mm = 0.004;

@@ -29,10 +29,12 @@ namespace lftrack::calib {
 // E(q): the couch-frame motion of couch position q.
 Eigen::Isometry3d couch_motion(const tracking::Vector6d& q);
 // The room motion of couch position q for a couch mounted at T_room_from_couch.
-Eigen::Isometry3d room_motion_of_couch(const Eigen::Isometry3d& T_room_from_couch, const tracking::Vector6d& q);
+Eigen::Isometry3d room_motion_of_couch(const Eigen::Isometry3d& T_room_from_couch,
+                                       const tracking::Vector6d& q);
 // The couch position change that moves the room by `room_motion` (its inverse map):
 // E(q) = X^-1 M X, q = (translation, rotation_log).
-tracking::Vector6d couch_move_for(const Eigen::Isometry3d& T_room_from_couch, const Eigen::Isometry3d& room_motion);
+tracking::Vector6d couch_move_for(const Eigen::Isometry3d& T_room_from_couch,
+                                  const Eigen::Isometry3d& room_motion);
 
 struct CouchObservation {
   tracking::Vector6d couch_position = tracking::Vector6d::Zero();  // q_i, couch terms (mm, rad), from zero
@@ -41,17 +43,18 @@ struct CouchObservation {
 
 struct CouchCalibration {
   Eigen::Isometry3d T_room_from_couch = Eigen::Isometry3d::Identity();
-  double rms_mm = 0;                 // RMS of the box points' residuals over all moves
-  std::vector<double> move_rms_mm;   // per move
+  double rms_mm = 0;                // RMS of the box points' residuals over all moves
+  std::vector<double> move_rms_mm;  // per move
   Eigen::Vector3d rotation_sd_deg = Eigen::Vector3d::Zero();  // 1 sigma, about room axes
   Eigen::Vector3d centre_sd_mm = Eigen::Vector3d::Zero();     // of the rotation centre
-  bool centre_determined = false;   // false: no rotating moves; the centre was kept at `centre_guess`
+  bool centre_determined = false;  // false: no rotating moves; the centre was kept at `centre_guess`
 };
 
 // `zero`: the object's pose at couch position 0; `moves`: at least 3 observations.
 // `box_centre_room_mm` and `box_mm`: where the residual's 8 points lie (the registration origin
 // and the TRE box). `centre_guess_room_mm`: the rotation centre if no move rotates.
-Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero, const std::vector<CouchObservation>& moves,
+Result<CouchCalibration> solve_couch_calibration(const tracking::Pose& zero,
+                                                 const std::vector<CouchObservation>& moves,
                                                  const Eigen::Vector3d& box_centre_room_mm, double box_mm,
                                                  const Eigen::Vector3d& centre_guess_room_mm);
 

@@ -27,8 +27,8 @@ struct MarkerDetection {
 // Fails with a message when no usable pixel lies in the search area or the best contrast is
 // below min_contrast. `valid` may be empty.
 Result<MarkerDetection> find_marker(const tracking::ImageView<const float>& image,
-                                              const tracking::ImageView<const unsigned char>& valid,
-                                              const MarkerSearch& search);
+                                    const tracking::ImageView<const unsigned char>& valid,
+                                    const MarkerSearch& search);
 
 }  // namespace lftrack::calib
 

@@ -23,7 +23,9 @@ struct PhantomPose {
 };
 
 // `views` in the room frame; `images` line integrals (balls bright); `T_guess` within about
-// 10 mm and 3 degrees. Fails when fewer than 4 balls are found in both views.
+// 5 mm and 2 degrees. A coarse pass pairs balls within a wide gate and drops pairings whose two
+// rays miss each other by more than 1 mm; a fine pass pairs again around the coarse pose.
+// Fails when fewer than 4 balls are found in both views.
 Result<PhantomPose> measure_phantom_pose(const CalibrationPhantom& phantom,
                                          const std::array<tracking::XrayView, 2>& views,
                                          const std::array<tracking::ImageView<const float>, 2>& images,

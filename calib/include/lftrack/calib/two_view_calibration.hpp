@@ -16,10 +16,10 @@
 namespace lftrack::calib {
 
 struct TwoViewCalibration {
-  std::array<ViewCalibration, 2> in_phantom;       // per view, phantom frame, with residuals
-  std::array<MarkerScanResult, 2> scans;           // what the marker scan found and rejected
-  RoomFrame room;                                  // T_room_from_views: phantom -> room
-  std::array<tracking::XrayView, 2> views_room;    // the calibrated views, room frame
+  std::array<ViewCalibration, 2> in_phantom;     // per view, phantom frame, with residuals
+  std::array<MarkerScanResult, 2> scans;         // what the marker scan found and rejected
+  RoomFrame room;                                // T_room_from_views: phantom -> room
+  std::array<tracking::XrayView, 2> views_room;  // the calibrated views, room frame
 };
 
 // `nominal_room` are the views as specified, in the room frame; `T_room_from_phantom_nominal`

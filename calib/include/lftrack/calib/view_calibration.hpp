@@ -32,14 +32,14 @@ struct ViewCalibrationOptions {
   double match_gate_px = 25;  // how far a detection may lie from its shifted nominal projection
   int min_markers = 8;        // fewer matched markers than this is refused
   double huber_px = 1.0;      // robust loss scale
-  double outlier_px = 2.0;    // matches whose final residual exceeds this are dropped
+  double outlier_px = 2.0;    // matches whose residual exceeds this (or 6x the median) are dropped
   // Markers whose nominal projections lie closer than this to each other overlap in the image
   // and are not used.
   double min_separation_px = 12;
 };
 
 struct MarkerResidual {
-  int marker = -1;                                       // index into the phantom's markers
+  int marker = -1;                                        // index into the phantom's markers
   Eigen::Vector2d detected_px = Eigen::Vector2d::Zero();  // (col, row)
   Eigen::Vector2d residual_px = Eigen::Vector2d::Zero();  // predicted - detected
 };
@@ -55,7 +55,7 @@ struct ViewCalibration {
   Eigen::Vector3d source_sd_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d pixel00_sd_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d orientation_sd_deg = Eigen::Vector3d::Zero();  // about the phantom's axes
-  Eigen::Vector2d principal_point_px = Eigen::Vector2d::Zero();   // (col, row) of the foot of the source
+  Eigen::Vector2d principal_point_px = Eigen::Vector2d::Zero();  // (col, row) of the foot of the source
   Eigen::Vector2d principal_point_sd_px = Eigen::Vector2d::Zero();
   double source_to_detector_mm = 0, source_to_detector_sd_mm = 0;
   double pitch_col_mm = 0, pitch_sd_mm = 0;  // pitch_sd_mm is 0 unless fit_pitch

@@ -29,7 +29,8 @@ Result<calib::CalibrationPhantom> load_calibration_phantom(const std::string& fi
 // The calibrated views as a scene's detector section (explicit geometry, room frame; frames,
 // bits from `specs`, which must be in the same order), followed by the report.
 std::string calibrated_detectors_yaml(const std::vector<DetectorSpec>& specs,
-                                      const calib::TwoViewCalibration& calibration, const std::string& provenance);
+                                      const calib::TwoViewCalibration& calibration,
+                                      const std::string& provenance);
 
 // Couch calibration file:
 //   couch_calibration:

@@ -28,7 +28,7 @@ struct CouchCalibrationRun {
   calib::CouchCalibration calibration;
   std::vector<calib::CouchObservation> observations;
   Eigen::Isometry3d true_T_room_from_couch = Eigen::Isometry3d::Identity();  // the simulated mounting
-  double worst_fre_mm = 0;  // the worst phantom-pose fit over all moves
+  double worst_fre_mm = 0;                             // the worst phantom-pose fit over all moves
   double rotation_error_deg = 0, centre_error_mm = 0;  // recovered against the simulated mounting
 };
 

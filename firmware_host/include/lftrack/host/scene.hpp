@@ -122,7 +122,7 @@ struct ActuatorSpec {
   std::string type = "none";
   sim::VirtualCouchSpec couch;
   std::optional<CouchMountingSpec> mounting;
-  std::string calibration_file;  // absolute, or empty
+  std::string calibration_file;                  // absolute, or empty
   std::optional<CouchMountingSpec> calibration;  // read from calibration_file at load
 };
 
