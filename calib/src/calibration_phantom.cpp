@@ -1,5 +1,6 @@
 #include "lftrack/calib/calibration_phantom.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -36,6 +37,14 @@ Status CalibrationPhantom::validate() const {
     }
   }
   return {};
+}
+
+double projected_ball_radius_px(const CalibrationPhantom& phantom, const tracking::XrayView& view,
+                                const Eigen::Vector3d& where_mm) {
+  const double depth = std::max(view.detector_normal().dot(view.source_mm - where_mm), 1.0);
+  const double magnification = view.source_to_detector_mm() / depth;
+  return std::max(
+      1.0, 0.5 * phantom.marker_diameter_mm * magnification / std::min(view.pitch_col_mm, view.pitch_row_mm));
 }
 
 CalibrationPhantom builtin_calibration_phantom() {

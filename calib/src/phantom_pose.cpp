@@ -86,11 +86,8 @@ Result<PhantomPose> measure_phantom_pose(const CalibrationPhantom& phantom,
       return invalid_argument("phantom pose: image " + std::to_string(k) +
                               " differs in size from its detector");
     }
-    const double depth = v.detector_normal().dot(v.source_mm - T_guess.translation());
     MarkerScan scan;
-    scan.marker_radius_px =
-        std::max(1.0, 0.5 * phantom.marker_diameter_mm * v.source_to_detector_mm() / std::max(depth, 1.0) /
-                          std::min(v.pitch_col_mm, v.pitch_row_mm));
+    scan.marker_radius_px = projected_ball_radius_px(phantom, v, T_guess.translation());
     radius_px[k] = scan.marker_radius_px;
     auto found = scan_markers(images[k], scan);
     if (!found.ok()) return found.status();

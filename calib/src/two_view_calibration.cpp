@@ -21,13 +21,9 @@ Result<TwoViewCalibration> calibrate_two_views(const CalibrationPhantom& phantom
                               std::to_string(image.cols) + " pixels, the detector " +
                               std::to_string(nominal.rows) + " x " + std::to_string(nominal.cols));
     }
-    // A ball's projected radius at the phantom's centre.
-    const Eigen::Vector3d centre_room = T_room_from_phantom_nominal.translation();
-    const double depth = nominal.detector_normal().dot(nominal.source_mm - centre_room);
     MarkerScan scan;
     scan.marker_radius_px =
-        std::max(1.0, 0.5 * phantom.marker_diameter_mm * nominal.source_to_detector_mm() /
-                          std::max(depth, 1.0) / std::min(nominal.pitch_col_mm, nominal.pitch_row_mm));
+        projected_ball_radius_px(phantom, nominal, T_room_from_phantom_nominal.translation());
     auto found = scan_markers(image, scan);
     if (!found.ok()) return found.status().with_context("view '" + nominal.name + "'");
     out.scans[std::size_t(k)] = *found;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "lftrack/tracking/status.hpp"
+#include "lftrack/tracking/xray_view.hpp"
 
 namespace lftrack::calib {
 
@@ -30,5 +31,10 @@ struct CalibrationPhantom {
 // six interleaved helices in a 140 mm foam cube, irregular enough that no shift or rotation of
 // a projection looks like another one.
 CalibrationPhantom builtin_calibration_phantom();
+
+// The radius (pixels, at least 1) of a ball's projection in `view` when the ball lies at
+// `where_mm` (the view's frame): what the marker scan looks for.
+double projected_ball_radius_px(const CalibrationPhantom& phantom, const tracking::XrayView& view,
+                                const Eigen::Vector3d& where_mm);
 
 }  // namespace lftrack::calib
