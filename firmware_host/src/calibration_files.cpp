@@ -8,20 +8,30 @@
 
 namespace lftrack::host {
 
+namespace {
+
+// The YAML document in `file`, or a message naming the file (and line, for a syntax error).
+Result<YAML::Node> read_yaml(const std::string& file, const std::string& what) {
+  std::ifstream in(file);
+  if (!in) return not_found("cannot open " + what + " '" + file + "'");
+  std::stringstream text;
+  text << in.rdbuf();
+  try {
+    return YAML::Load(text.str());
+  } catch (const YAML::Exception& e) {
+    return SceneParser(file, fs::path(file).parent_path()).error_at(e.mark, "not valid YAML: " + e.msg);
+  }
+}
+
+}  // namespace
+
 Result<calib::CalibrationPhantom> load_calibration_phantom(const std::string& file_or_builtin) {
   if (file_or_builtin == "builtin") return calib::builtin_calibration_phantom();
   const fs::path path(file_or_builtin);
-  std::ifstream in(path);
-  if (!in) return not_found("cannot open phantom file '" + file_or_builtin + "'");
-  std::stringstream text;
-  text << in.rdbuf();
+  auto document = read_yaml(file_or_builtin, "phantom file");
+  if (!document.ok()) return document.status();
+  const YAML::Node root = *document;
   const SceneParser p(file_or_builtin, path.parent_path());
-  YAML::Node root;
-  try {
-    root = YAML::Load(text.str());
-  } catch (const YAML::Exception& e) {
-    return p.error_at(e.mark, "not valid YAML: " + e.msg);
-  }
   if (!root.IsMap()) return invalid_argument(file_or_builtin + ": a phantom file is a mapping");
   LFTRACK_RETURN_IF_ERROR(p.check_keys(
       root, "the phantom",
@@ -121,17 +131,10 @@ std::string calibrated_detectors_yaml(const std::vector<DetectorSpec>& specs,
 }
 
 Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
-  std::ifstream in(file);
-  if (!in) return not_found("cannot open couch calibration '" + file + "'");
-  std::stringstream text;
-  text << in.rdbuf();
+  auto document = read_yaml(file, "couch calibration");
+  if (!document.ok()) return document.status();
+  const YAML::Node root = *document;
   const SceneParser p(file, fs::path(file).parent_path());
-  YAML::Node root;
-  try {
-    root = YAML::Load(text.str());
-  } catch (const YAML::Exception& e) {
-    return p.error_at(e.mark, "not valid YAML: " + e.msg);
-  }
   if (!root.IsMap() || !root["couch_calibration"]) {
     return invalid_argument(file + ": not a couch calibration (no 'couch_calibration' section)");
   }
@@ -152,17 +155,10 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
 }
 
 Result<std::vector<tracking::Vector6d>> read_couch_moves(const std::string& file) {
-  std::ifstream in(file);
-  if (!in) return not_found("cannot open moves file '" + file + "'");
-  std::stringstream text;
-  text << in.rdbuf();
+  auto document = read_yaml(file, "moves file");
+  if (!document.ok()) return document.status();
+  const YAML::Node root = *document;
   const SceneParser p(file, fs::path(file).parent_path());
-  YAML::Node root;
-  try {
-    root = YAML::Load(text.str());
-  } catch (const YAML::Exception& e) {
-    return p.error_at(e.mark, "not valid YAML: " + e.msg);
-  }
   if (!root.IsMap() || !root["moves"] || !root["moves"].IsSequence()) {
     return invalid_argument(file + ": a moves file has a 'moves' list");
   }

@@ -242,6 +242,17 @@ TEST(ViewCalibration, RefusesTooFewMarkers) {
   EXPECT_FALSE(calibrate_view(phantom, none->markers, nominal).ok());
 }
 
+// The balls the marker scan finds in an image of `phantom` at the isocentre seen by `view`.
+std::vector<MarkerDetection> balls_seen(const CalibrationPhantom& phantom, const XrayView& view) {
+  auto image = sim::render_phantom_image(phantom, Eigen::Isometry3d::Identity(), view, {});
+  EXPECT_TRUE(image.ok());
+  MarkerScan scan;
+  scan.marker_radius_px = projected_ball_radius_px(phantom, view, Eigen::Vector3d::Zero());
+  auto found = scan_markers(image->view(), scan);
+  EXPECT_TRUE(found.ok());
+  return found.ok() ? found->markers : std::vector<MarkerDetection>{};
+}
+
 TEST(ViewCalibration, RefusesACoplanarPhantom) {
   CalibrationPhantom flat;
   flat.name = "flat grid";
@@ -252,15 +263,9 @@ TEST(ViewCalibration, RefusesACoplanarPhantom) {
       flat.markers_mm.emplace_back(u * std::sqrt(0.5), u * std::sqrt(0.5), w);
     }
   const XrayView view = room_views()[0];
-  sim::PhantomImageSpec spec;
-  auto image = sim::render_phantom_image(flat, Eigen::Isometry3d::Identity(), view, spec);
-  ASSERT_TRUE(image.ok());
-  MarkerScan scan;
-  scan.marker_radius_px = 5.25;
-  auto found = scan_markers(image->view(), scan);
-  ASSERT_TRUE(found.ok());
-  ASSERT_GE(found->markers.size(), 20u);
-  auto cal = calibrate_view(flat, found->markers, view);
+  const std::vector<MarkerDetection> found = balls_seen(flat, view);
+  ASSERT_GE(found.size(), 20u);
+  auto cal = calibrate_view(flat, found, view);
   ASSERT_FALSE(cal.ok());
   EXPECT_NE(cal.status().message().find("coplanar"), std::string::npos) << cal.status().message();
 }
@@ -279,18 +284,12 @@ TEST(ViewCalibration, RefusesAnAmbiguousCorrespondence) {
                                         -30 + 20 * j + 5 * k);
       }
   const XrayView view = room_views()[0];
-  sim::PhantomImageSpec spec;
-  auto image = sim::render_phantom_image(lattice, Eigen::Isometry3d::Identity(), view, spec);
-  ASSERT_TRUE(image.ok());
-  MarkerScan scan;
-  scan.marker_radius_px = 5.25;
-  auto found = scan_markers(image->view(), scan);
-  ASSERT_TRUE(found.ok());
+  const std::vector<MarkerDetection> found = balls_seen(lattice, view);
   // Believed 10 mm (half a lattice step) off along z.
   const XrayView nominal = view.transformed(placement({0, 0, 10}, {0, 0, 0}));
   ViewCalibrationOptions options;
   options.match_gate_px = 40;
-  auto cal = calibrate_view(lattice, found->markers, nominal, options);
+  auto cal = calibrate_view(lattice, found, nominal, options);
   ASSERT_FALSE(cal.ok());
   EXPECT_NE(cal.status().message().find("ambiguous"), std::string::npos) << cal.status().message();
 }
