@@ -9,11 +9,8 @@ Result<RoomFrame> room_frame_from_views(const tracking::XrayView& a, const track
   LFTRACK_RETURN_IF_ERROR(a.validate());
   LFTRACK_RETURN_IF_ERROR(b.validate());
   // Central rays: source -> detector centre.
-  const auto centre = [](const tracking::XrayView& v) {
-    return v.pixel_centre_mm(0.5 * (v.rows - 1), 0.5 * (v.cols - 1));
-  };
-  const Eigen::Vector3d da = (centre(a) - a.source_mm).normalized();
-  const Eigen::Vector3d db = (centre(b) - b.source_mm).normalized();
+  const Eigen::Vector3d da = (a.detector_centre_mm() - a.source_mm).normalized();
+  const Eigen::Vector3d db = (b.detector_centre_mm() - b.source_mm).normalized();
   const double angle = std::acos(std::clamp(da.dot(db), -1.0, 1.0));
   const double kDeg = 180.0 / 3.14159265358979323846;
   if (angle * kDeg < 10 || angle * kDeg > 170) {

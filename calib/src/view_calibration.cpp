@@ -93,14 +93,6 @@ struct CameraParams {
   }
 };
 
-Eigen::Matrix3d axes_of(const XrayView& v) {
-  Eigen::Matrix3d r;
-  r.col(0) = v.col_axis;
-  r.col(1) = v.row_axis;
-  r.col(2) = v.col_axis.cross(v.row_axis);
-  return r;
-}
-
 // The view with these parameters. `sdd_fixed_mm` > 0: the distance is fixed and the pitch
 // follows (fit_pitch); otherwise the pitch is spec's and the distance follows.
 XrayView view_of(const CameraParams& p, const CameraModel& m, const XrayView& spec, double sdd_fixed_mm) {
@@ -124,7 +116,7 @@ XrayView view_of(const CameraParams& p, const CameraModel& m, const XrayView& sp
 }
 
 CameraParams params_of(const XrayView& v, CameraModel* model) {
-  model->axes0 = axes_of(v);
+  model->axes0 = v.detector_axes();
   model->aspect = v.pitch_col_mm / v.pitch_row_mm;
   CameraParams p{};
   for (int k = 0; k < 3; ++k) p.s[k] = v.source_mm(k);

@@ -181,7 +181,9 @@ Result<std::vector<tracking::Vector6d>> read_couch_moves(const std::string& file
   return moves;
 }
 
-std::string couch_calibration_yaml(const Eigen::Isometry3d& T_room_from_couch, const std::string& report) {
+std::string couch_calibration_yaml(const calib::CouchCalibration& c, std::size_t moves,
+                                   const std::string& provenance) {
+  const Eigen::Isometry3d& T_room_from_couch = c.T_room_from_couch;
   const Eigen::Vector3d r =
       tracking::rotation_log(T_room_from_couch.linear()) * (180 / 3.14159265358979323846);
   std::ostringstream y;
@@ -190,7 +192,12 @@ std::string couch_calibration_yaml(const Eigen::Isometry3d& T_room_from_couch, c
     << "couch_calibration:\n"
     << "  rotation_deg: " << vec(r, 6) << "   # rotation vector, room from couch\n"
     << "  centre_mm: " << vec(T_room_from_couch.translation(), 4) << "\n"
-    << report;
+    << "  rms_mm: " << c.rms_mm << "\n"
+    << "  rotation_sd_deg: " << vec(c.rotation_sd_deg, 6) << "\n"
+    << "  centre_sd_mm: " << vec(c.centre_sd_mm, 4) << "\n"
+    << "  centre_determined: " << (c.centre_determined ? "true" : "false") << "\n"
+    << "  moves: " << moves << "\n"
+    << "  source: " << provenance << "\n";
   return y.str();
 }
 

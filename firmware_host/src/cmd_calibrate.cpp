@@ -65,10 +65,8 @@ Result<Image<float>> read_line_integrals(const std::string& file, bool counts) {
 }
 
 double orientation_error_deg(const XrayView& a, const XrayView& b) {
-  Eigen::Matrix3d ra, rb;
-  ra << a.col_axis, a.row_axis, a.col_axis.cross(a.row_axis);
-  rb << b.col_axis, b.row_axis, b.col_axis.cross(b.row_axis);
-  return tracking::rad_to_deg(tracking::rotation_log(ra.transpose() * rb).norm());
+  return tracking::rad_to_deg(
+      tracking::rotation_log(a.detector_axes().transpose() * b.detector_axes()).norm());
 }
 
 Eigen::Isometry3d random_placement(std::mt19937_64& rng, double mm, double deg) {
@@ -84,14 +82,12 @@ Eigen::Isometry3d random_placement(std::mt19937_64& rng, double mm, double deg) 
 XrayView nominal_from_truth(const XrayView& truth, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(-1, 1);
   XrayView v = truth;
-  const Eigen::Vector3d centre = v.pixel_centre_mm(0.5 * (v.rows - 1), 0.5 * (v.cols - 1));
+  const Eigen::Vector3d centre = v.detector_centre_mm();
   const Eigen::Matrix3d tilt =
       tracking::rotation_exp(Eigen::Vector3d(u(rng), u(rng), u(rng)) * tracking::deg_to_rad(1.0));
   v.col_axis = tilt * v.col_axis;
   v.row_axis = tilt * v.row_axis;
-  const Eigen::Vector3d new_centre = centre + 3 * Eigen::Vector3d(u(rng), u(rng), u(rng));
-  v.pixel00_mm = new_centre - 0.5 * (v.cols - 1) * v.pitch_col_mm * v.col_axis -
-                 0.5 * (v.rows - 1) * v.pitch_row_mm * v.row_axis;
+  v.set_detector_centre(centre + 3 * Eigen::Vector3d(u(rng), u(rng), u(rng)));
   v.source_mm += 5 * Eigen::Vector3d(u(rng), u(rng), u(rng));
   return v;
 }

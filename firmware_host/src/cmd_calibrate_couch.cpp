@@ -5,7 +5,6 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/calibration_files.hpp"
@@ -25,13 +24,6 @@ struct CouchOptions {
   std::uint64_t seed = 1;
   bool json = false;
 };
-
-std::string vec(const Eigen::Vector3d& v) {
-  std::ostringstream s;
-  s.precision(6);
-  s << "[" << v.x() << ", " << v.y() << ", " << v.z() << "]";
-  return s.str();
-}
 
 Status run(const CouchOptions& o) {
   auto phantom = load_calibration_phantom(o.phantom);
@@ -57,16 +49,10 @@ Status run(const CouchOptions& o) {
   spdlog::info("couch calibration: {} moves, rms {:.4f} mm, rotation sd {:.4f} deg, centre sd {:.3f} mm",
                run->observations.size(), c.rms_mm, c.rotation_sd_deg.norm(), c.centre_sd_mm.norm());
   if (!o.out.empty()) {
-    std::ostringstream report;
-    report << "  rms_mm: " << c.rms_mm << "\n"
-           << "  rotation_sd_deg: " << vec(c.rotation_sd_deg) << "\n"
-           << "  centre_sd_mm: " << vec(c.centre_sd_mm) << "\n"
-           << "  centre_determined: " << (c.centre_determined ? "true" : "false") << "\n"
-           << "  moves: " << run->observations.size() << "\n"
-           << "  source: simulated room of scene " << prepared->scene.source << ", phantom '" << phantom->name
-           << "'\n";
     std::ofstream out(o.out);
-    out << couch_calibration_yaml(c.T_room_from_couch, report.str());
+    out << couch_calibration_yaml(
+        c, run->observations.size(),
+        "simulated room of scene " + prepared->scene.source + ", phantom '" + phantom->name + "'");
     if (!out) return io_error("cannot write '" + o.out + "'");
     spdlog::info("wrote {}", o.out);
   }

@@ -27,19 +27,18 @@ Eigen::Vector3d beam_of(const XrayView& v) {
 
 // Rotates the detector by `angle_rad` about `axis` through its centre.
 void tilt_detector(XrayView& v, const Eigen::Vector3d& axis, double angle_rad) {
-  const Eigen::Vector3d centre = v.pixel_centre_mm(0.5 * (v.rows - 1), 0.5 * (v.cols - 1));
+  const Eigen::Vector3d centre = v.detector_centre_mm();
   const Eigen::Matrix3d r = tracking::rotation_exp(axis.normalized() * angle_rad);
   v.col_axis = r * v.col_axis;
   v.row_axis = r * v.row_axis;
-  v.pixel00_mm = centre + r * (v.pixel00_mm - centre);
+  v.set_detector_centre(centre);
 }
 
 void scale_pitch(XrayView& v, double factor) {
-  const Eigen::Vector3d centre = v.pixel_centre_mm(0.5 * (v.rows - 1), 0.5 * (v.cols - 1));
+  const Eigen::Vector3d centre = v.detector_centre_mm();
   v.pitch_col_mm *= factor;
   v.pitch_row_mm *= factor;
-  v.pixel00_mm = centre - 0.5 * (v.cols - 1) * v.pitch_col_mm * v.col_axis -
-                 0.5 * (v.rows - 1) * v.pitch_row_mm * v.row_axis;
+  v.set_detector_centre(centre);
 }
 
 std::vector<Perturbation> perturbations() {
@@ -68,6 +67,7 @@ std::vector<Perturbation> perturbations() {
 Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& truth, const SensitivityOptions& o,
                                                    tracking::ThreadPool* pool) {
   if (o.runs < 1) return invalid_argument("sensitivity: runs must be at least 1");
+  if (truth.scene.detectors.empty()) return invalid_argument("sensitivity: the scene has no detector");
   auto plan = tracking::registration_plan(o.plan);
   if (!plan.ok()) return plan.status();
   tracking::RendererOptions ray_options;
@@ -114,7 +114,6 @@ Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& truth, c
   int done = 0;
   for (const Perturbation& c : cases) {
     PreparedScene model = truth;
-    if (model.scene.detectors.size() < 1) return invalid_argument("sensitivity: the scene has no detector");
     c.apply(model.scene.detectors);
     auto registration = make_scene_registration(model, inside, model.scene.registration, pool);
     if (!registration.ok()) return registration.status();

@@ -32,22 +32,18 @@ Eigen::Isometry3d placement(const Eigen::Vector3d& t_mm, const Eigen::Vector3d& 
 }
 
 double angle_deg(const XrayView& a, const XrayView& b) {
-  Eigen::Matrix3d ra, rb;
-  ra << a.col_axis, a.row_axis, a.col_axis.cross(a.row_axis);
-  rb << b.col_axis, b.row_axis, b.col_axis.cross(b.row_axis);
-  return tracking::rotation_log(ra.transpose() * rb).norm() * 180 / 3.14159265358979323846;
+  return tracking::rotation_log(a.detector_axes().transpose() * b.detector_axes()).norm() * 180 /
+         3.14159265358979323846;
 }
 
 // A view perturbed the way a real room differs from its drawings.
 XrayView perturbed(XrayView v, const Eigen::Vector3d& source_shift, const Eigen::Vector3d& detector_shift,
                    const Eigen::Vector3d& tilt_deg) {
-  const Eigen::Vector3d centre = v.pixel_centre_mm(0.5 * (v.rows - 1), 0.5 * (v.cols - 1));
+  const Eigen::Vector3d centre = v.detector_centre_mm();
   const Eigen::Matrix3d r = tracking::rotation_exp(tilt_deg * (3.14159265358979323846 / 180));
   v.col_axis = r * v.col_axis;
   v.row_axis = r * v.row_axis;
-  const Eigen::Vector3d new_centre = centre + detector_shift;
-  v.pixel00_mm = new_centre - 0.5 * (v.cols - 1) * v.pitch_col_mm * v.col_axis -
-                 0.5 * (v.rows - 1) * v.pitch_row_mm * v.row_axis;
+  v.set_detector_centre(centre + detector_shift);
   v.source_mm += source_shift;
   return v;
 }

@@ -102,3 +102,25 @@ TEST(XrayView, ValidateRejectsBadGeometry) {
 
 }  // namespace
 }  // namespace lftrack::tracking
+
+namespace lftrack::tracking {
+namespace {
+
+TEST(XrayView, DetectorCentreAndAxes) {
+  auto v =
+      XrayView::isocentric("A", Eigen::Vector3d(1, 2, 3), {0, -1, 0}, {0, 0, 1}, 1000, 1500, 300, 200, 0.5);
+  ASSERT_TRUE(v.ok());
+  // An isocentric detector is centred on the beam through the isocentre.
+  EXPECT_LT((v->detector_centre_mm() - Eigen::Vector3d(1, 2 + 500, 3)).norm(), 1e-9);
+  const Eigen::Matrix3d axes = v->detector_axes();
+  EXPECT_TRUE((axes.transpose() * axes).isIdentity(1e-12));
+  EXPECT_GT(axes.determinant(), 0);
+  EXPECT_TRUE(axes.col(2).isApprox(Eigen::Vector3d(0, 1, 0), 1e-12)) << "col x row points along the beam";
+  XrayView moved = *v;
+  moved.set_detector_centre(Eigen::Vector3d(4, 500, -2));
+  EXPECT_LT((moved.detector_centre_mm() - Eigen::Vector3d(4, 500, -2)).norm(), 1e-9);
+  EXPECT_EQ(moved.col_axis, v->col_axis);
+}
+
+}  // namespace
+}  // namespace lftrack::tracking

@@ -20,6 +20,21 @@ double XrayView::source_to_detector_mm() const {
   return std::abs(detector_normal().dot(source_mm - pixel00_mm));
 }
 
+Eigen::Vector3d XrayView::detector_centre_mm() const {
+  return pixel_centre_mm(0.5 * (rows - 1), 0.5 * (cols - 1));
+}
+
+void XrayView::set_detector_centre(const Eigen::Vector3d& centre_mm) {
+  pixel00_mm =
+      centre_mm - 0.5 * (cols - 1) * pitch_col_mm * col_axis - 0.5 * (rows - 1) * pitch_row_mm * row_axis;
+}
+
+Eigen::Matrix3d XrayView::detector_axes() const {
+  Eigen::Matrix3d axes;
+  axes << col_axis, row_axis, col_axis.cross(row_axis);
+  return axes;
+}
+
 Matrix34d XrayView::projection() const {
   // A point X projects to Q = S + lambda (X - S) on the plane n.(Q - O) = 0, with
   // lambda = n.(O - S) / n.(X - S). Then col = a.(Q - O) / pitch_col, row = b.(Q - O) / pitch_row.

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "lftrack/calib/calibration_phantom.hpp"
+#include "lftrack/calib/couch_calibration.hpp"
 #include "lftrack/calib/two_view_calibration.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
@@ -38,8 +39,10 @@ std::string calibrated_detectors_yaml(const std::vector<DetectorSpec>& specs,
 //     centre_mm: [x, y, z]         # its rotation centre, room frame
 //     ...                          # the solver's report (rms, standard deviations, moves)
 Result<CouchMountingSpec> read_couch_calibration(const std::string& file);
-// `report` lines (already indented YAML "key: value") follow the two values.
-std::string couch_calibration_yaml(const Eigen::Isometry3d& T_room_from_couch, const std::string& report);
+// The file for a solved calibration, with the solver's report (rms, standard deviations, number
+// of moves) and where it came from.
+std::string couch_calibration_yaml(const calib::CouchCalibration& calibration, std::size_t moves,
+                                   const std::string& provenance);
 
 // Couch moves file: absolute couch positions in the couch's own terms, from where it starts:
 //   moves:

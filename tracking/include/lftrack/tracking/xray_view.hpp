@@ -37,6 +37,12 @@ struct XrayView {
   // Foot of the perpendicular from the source onto the detector plane (the principal point).
   Eigen::Vector3d principal_point_mm() const;
   double source_to_detector_mm() const;
+  // Centre of the detector (between its middle pixels), and moving the detector so its centre
+  // lies at `centre_mm` (axes and pitch unchanged).
+  Eigen::Vector3d detector_centre_mm() const;
+  void set_detector_centre(const Eigen::Vector3d& centre_mm);
+  // Columns: col_axis, row_axis, col_axis x row_axis (the detector's orientation).
+  Eigen::Matrix3d detector_axes() const;
 
   // 3x4 matrix P with  w * (col, row, 1)^T = P * (x, y, z, 1)^T  for a point in the frame this
   // view is expressed in; w > 0 for points in front of the source (towards the detector).
