@@ -107,8 +107,13 @@ TEST_F(ClosedLoop, AMisalignedCouchIsRecoveredAndTracksAsWithItsTrueMounting) {
       *with_truth.residual_mean_mm, *with_truth.residual_p95_mm, *with_recovered.residual_mean_mm,
       *with_recovered.residual_p95_mm, *assumed.residual_mean_mm, *assumed.residual_p95_mm);
   EXPECT_EQ(with_recovered.states[std::size_t(TrackingState::kTrack)], 120);
-  EXPECT_NEAR(*with_recovered.residual_mean_mm, *with_truth.residual_mean_mm, 0.02);
-  EXPECT_NEAR(*with_recovered.residual_p95_mm, *with_truth.residual_p95_mm, 0.05);
+  // The registration's wall-clock budget lets a loaded host end some searches earlier, so two
+  // runs of one configuration differ by up to 0.01 mm in mean and 0.05 mm in p95 (measured with
+  // four copies of this test on two cores); the calibrations are compared beyond that spread,
+  // and against the 4 mm of a couch whose axes are only assumed.
+  EXPECT_NEAR(*with_recovered.residual_mean_mm, *with_truth.residual_mean_mm, 0.03);
+  EXPECT_NEAR(*with_recovered.residual_p95_mm, *with_truth.residual_p95_mm, 0.1);
+  EXPECT_GT(*assumed.residual_mean_mm, 1.0) << "the assumed axes hold the loop far from the target";
 }
 
 }  // namespace
