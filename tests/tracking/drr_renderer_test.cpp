@@ -48,12 +48,23 @@ using test::fixture_volume;
 struct RendererCase {
   std::string name;
   LightFieldStorage storage = LightFieldStorage::kFloat32;
-  std::string label() const { return name == "lightfield" ? name + "_" + to_string(storage) : name; }
+  double octree_pivot = 0;  // octree: 0 is lossless
+  std::string label() const {
+    if (name == "lightfield") return name + "_" + to_string(storage);
+    if (name == "octree")
+      return name + "_pivot_permille" + std::to_string(int(std::lround(octree_pivot * 1000)));
+    return name;
+  }
 };
 
 std::vector<RendererCase> every_renderer() {
   std::vector<RendererCase> cases;
   for (const auto& name : renderer_names()) {
+    if (name == "octree") {
+      cases.push_back({name, LightFieldStorage::kFloat32, 0.0});
+      cases.push_back({name, LightFieldStorage::kFloat32, 0.02});
+      continue;
+    }
     if (name != "lightfield") {
       cases.push_back({name});
       continue;
@@ -64,15 +75,17 @@ std::vector<RendererCase> every_renderer() {
   return cases;
 }
 
-void PrintTo(const RendererCase& c, std::ostream* os) { *os << c.label(); }
+void PrintTo(const RendererCase& c, std::ostream* os) {
+  *os << c.label();
+}
 
 Result<std::unique_ptr<DrrRenderer>> make(const RendererCase& c, ThreadPool* pool = nullptr) {
   RendererOptions options;
   options.pool = pool;
+  options.octree_pivot = c.octree_pivot;
   if (c.name == "lightfield") options.light_fields = {test::fixture_light_field(c.storage)};
   return make_renderer(c.name, fixture_volume(), options);
 }
-
 
 class EveryRenderer : public ::testing::TestWithParam<RendererCase> {
  protected:
@@ -118,6 +131,8 @@ TEST_P(EveryRenderer, AgreesWithSiddon) {
   const double ncc = normalized_cross_correlation(ref.view(), ours.view());
   if (GetParam().name == "siddon") {
     EXPECT_EQ(ncc, 1.0);
+  } else if (GetParam().name == "octree" && GetParam().octree_pivot == 0) {
+    EXPECT_GT(ncc, 1.0 - 1e-9) << "a lossless octree is the Siddon renderer";
   } else {
     EXPECT_GT(ncc, 0.99);
     EXPECT_GT(psnr_db(ref.view(), ours.view()), 30.0);
@@ -125,8 +140,8 @@ TEST_P(EveryRenderer, AgreesWithSiddon) {
   for (float p : ours.pixels()) ASSERT_TRUE(std::isfinite(p) && p >= 0);
 }
 
-// Ray casters only: exact per-pixel values, and views moved against the CT (a light field is
-// tied to its view's source position; light_field_test.cpp covers it).
+// Ray casters only (the lossless octree is one): exact per-pixel values, and views moved against
+// the CT (a light field is tied to its view's source position; light_field_test.cpp covers it).
 class EveryRayCaster : public EveryRenderer {};
 
 TEST_P(EveryRayCaster, EachPixelIsTheRayFromSourceToPixelCentre) {
@@ -136,7 +151,8 @@ TEST_P(EveryRayCaster, EachPixelIsTheRayFromSourceToPixelCentre) {
   for (auto [r, c] : {std::pair{0, 0}, {20, 17}, {47, 39}, {31, 5}}) {
     const Vector3d s = T_grid_from_room * view_.source_mm;
     const Vector3d p = T_grid_from_room * view_.pixel_centre_mm(r, c);
-    const double expected = GetParam().name == "siddon" ? caster.siddon(s, p) : caster.trilinear(s, p, 0.5);
+    const double expected =
+        GetParam().name == "trilinear" ? caster.trilinear(s, p, 0.5) : caster.siddon(s, p);
     EXPECT_NEAR(drr.at(r, c), expected, 1e-5 * std::max(1.0, expected)) << r << "," << c;
   }
 }
@@ -200,7 +216,8 @@ TEST_P(EveryRenderer, RenderAllocatesNothing) {
 INSTANTIATE_TEST_SUITE_P(Factory, EveryRenderer, ::testing::ValuesIn(every_renderer()),
                          [](const auto& p) { return p.param.label(); });
 INSTANTIATE_TEST_SUITE_P(Factory, EveryRayCaster,
-                         ::testing::Values(RendererCase{"siddon"}, RendererCase{"trilinear"}),
+                         ::testing::Values(RendererCase{"siddon"}, RendererCase{"trilinear"},
+                                           RendererCase{"octree"}),
                          [](const auto& p) { return p.param.label(); });
 
 TEST(RendererFactory, UnknownNameListsTheKnownOnes) {

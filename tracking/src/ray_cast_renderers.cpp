@@ -101,17 +101,21 @@ Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, 
 }
 
 std::vector<std::string> renderer_names() {
-  return {"siddon", "trilinear", "lightfield"};
+  return {"siddon", "trilinear", "lightfield", "octree"};
 }
 
 // In light_field_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
                                                                ThreadPool* pool, bool simd);
+// In octree_renderer.cpp.
+Result<std::unique_ptr<DrrRenderer>> make_octree_renderer(std::shared_ptr<const MuVolume> volume,
+                                                          const RendererOptions& options);
 
 Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
                                                    const RendererOptions& options) {
   if (name == "lightfield") return make_light_field_renderer(options.light_fields, options.pool, options.simd);
+  if (name == "octree") return make_octree_renderer(std::move(volume), options);
   if (!volume) return invalid_argument("make_renderer: no volume");
   LFTRACK_RETURN_IF_ERROR(volume->geometry.validate());
   if (volume->values.size() != static_cast<std::size_t>(volume->geometry.voxel_count())) {

@@ -29,6 +29,7 @@ namespace lftrack::tracking {
 
 class ThreadPool;
 class LightField;
+class OctreeVolume;
 
 // Optional inputs and outputs of render().
 struct RenderExtras {
@@ -65,6 +66,10 @@ struct RendererOptions {
   // Light-field renderer: one precomputed field per view it will be asked to render (matched by
   // view name), all of one storage mode.
   std::vector<std::shared_ptr<const LightField>> light_fields;
+  // Octree renderer: the compressed volume to render (shared; the volume given to make_renderer
+  // may then be null), or, if null, one compressed from that volume at `octree_pivot` in [0, 1].
+  std::shared_ptr<const OctreeVolume> octree;
+  double octree_pivot = 0.0;
   // Use vectorised kernels where the CPU has them (false: the portable scalar kernels; tests
   // compare the two).
   bool simd = true;
