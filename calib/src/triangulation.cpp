@@ -8,6 +8,8 @@ namespace lftrack::calib {
 Result<Triangulated> triangulate(const tracking::XrayView& view_a, const Eigen::Vector2d& pixel_a,
                                  const tracking::XrayView& view_b, const Eigen::Vector2d& pixel_b) {
   if (!pixel_a.allFinite() || !pixel_b.allFinite()) return invalid_argument("pixel is not finite");
+  LFTRACK_RETURN_IF_ERROR(view_a.validate());
+  LFTRACK_RETURN_IF_ERROR(view_b.validate());
   const Eigen::Vector3d p = view_a.source_mm;
   const Eigen::Vector3d q = view_b.source_mm;
   const Eigen::Vector3d u = (view_a.pixel_centre_mm(pixel_a.y(), pixel_a.x()) - p).normalized();

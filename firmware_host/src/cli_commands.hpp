@@ -32,6 +32,8 @@ Command add_bench_octree_command(CLI::App* parent);
 Command add_journal_command(CLI::App* parent);
 Command add_study_capture_range_command(CLI::App* parent);
 Command add_study_sensitivity_command(CLI::App* parent);
+Command add_study_trade_command(CLI::App* parent);
+Command add_study_merge_command(CLI::App* parent);
 Command add_sim_command(CLI::App* parent);
 Command add_run_command(CLI::App* parent);
 Command add_replay_command(CLI::App* parent);

@@ -58,6 +58,7 @@ Status run(const DrrOptions& o) {
 
   tracking::RendererOptions ropts;
   ropts.pool = &pool;
+  ropts.octree_pivot = p.scene.octree_pivot;
   const std::string renderer_name = o.renderer.empty() ? p.scene.renderer : o.renderer;
   if (renderer_name == "lightfield") {
     auto fields = load_light_fields(

@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   study->require_subcommand(1);
   const Command capture_range = add_study_capture_range_command(study);
   const Command sensitivity = add_study_sensitivity_command(study);
+  const Command trade = add_study_trade_command(study);
+  const Command merge = add_study_merge_command(study);
   const Command journal = add_journal_command(&app);
   const Command sim = add_sim_command(&app);
   const Command run_loop = add_run_command(&app);
@@ -71,6 +73,10 @@ int main(int argc, char** argv) {
       status = capture_range();
     else if (study->got_subcommand("sensitivity"))
       status = sensitivity();
+    else if (study->got_subcommand("trade"))
+      status = trade();
+    else if (study->got_subcommand("merge"))
+      status = merge();
     else if (app.got_subcommand("journal"))
       status = journal();
     else if (app.got_subcommand("sim"))

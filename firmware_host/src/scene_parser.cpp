@@ -258,9 +258,9 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
   }
   if (root["tracking"]) {
     const YAML::Node t = root["tracking"];
-    LFTRACK_RETURN_IF_ERROR(check_keys(
-        t, "tracking",
-        {"renderer", "light_field", "similarity", "histogram_bins", "plan", "gamma_per_mm", "tre_box_mm"}));
+    LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking",
+                                       {"renderer", "octree_pivot", "light_field", "similarity",
+                                        "histogram_bins", "plan", "gamma_per_mm", "tre_box_mm"}));
     LFTRACK_RETURN_IF_ERROR(parse_registration(t, &scene.registration));
     if (t["light_field"])
       LFTRACK_RETURN_IF_ERROR(
@@ -273,6 +273,12 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
         for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
         return error(t["renderer"], "unknown renderer '" + scene.renderer + "' (known: " + list + ")");
       }
+    }
+    if (t["octree_pivot"]) {
+      LFTRACK_RETURN_IF_ERROR(number(t["octree_pivot"], "tracking.octree_pivot", &scene.octree_pivot));
+      if (!(scene.octree_pivot >= 0 && scene.octree_pivot <= 1))
+        return error(t["octree_pivot"],
+                     "tracking.octree_pivot must be in [0, 1], got " + t["octree_pivot"].Scalar());
     }
   }
   if (root["fiducials"]) LFTRACK_RETURN_IF_ERROR(parse_fiducials(root["fiducials"], &scene.fiducials));

@@ -55,6 +55,7 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const P
                                                                          const std::filesystem::path& lf_dir,
                                                                          tracking::ThreadPool* pool) {
   tracking::RendererOptions options;
+  options.octree_pivot = p.scene.octree_pivot;
   if (name == "lightfield") {
     const std::filesystem::path dir = lf_dir.empty() ? default_light_field_dir(p.scene) : lf_dir;
     auto fields = load_or_build_light_fields(p, *p.mu, p.scene.light_field, dir, pool);
@@ -83,8 +84,18 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
 
 Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
     const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> renderer,
-    const RegistrationSpec& spec, tracking::ThreadPool* pool) {
+    const RegistrationSpec& spec, tracking::ThreadPool* pool, int detector_binning) {
+  if (detector_binning < 1 || detector_binning > 16)
+    return out_of_range("detector binning must be in [1, 16]");
   tracking::RegistrationSetup setup;
+  if (detector_binning > 1) {
+    const auto levels = setup.levels;
+    for (auto level : levels) {
+      level.bin *= detector_binning;
+      setup.levels.push_back(level);
+    }
+    setup.levels.push_back({0.0, detector_binning});
+  }
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i)
     setup.views.push_back({p.scene.detectors[i].view, p.roi_windows[i]});
   setup.origin_room_mm = p.registration_origin_room_mm();

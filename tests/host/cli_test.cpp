@@ -11,6 +11,7 @@
 
 #include "lftrack/host/plastimatch_peer.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/trade_study.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"
 
@@ -247,6 +248,72 @@ TEST(Cli, CaptureRangeStudyWritesCsvSummaryAndPlot) {
                            &out)
                    .ok());
   EXPECT_NE(out.find("unknown similarity"), std::string::npos) << out;
+}
+
+// The trade study sharded in two and merged, on the small scene with one problem per point (the
+// octree's registration takes half a minute here): the octree registers on its decompressed
+// volume, the light field at its baseline and binned.
+TEST(Cli, TradeStudyShardsMergeIntoPlotsAndASummary) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir.path());
+  std::string out;
+  const std::vector<std::string> common = {lftrack_bin(),
+                                           "-q",
+                                           "study",
+                                           "trade",
+                                           "--scene",
+                                           scene.string(),
+                                           "--quick",
+                                           "--problems",
+                                           "1",
+                                           "--points",
+                                           "baseline,bin2,octree-P0.02"};
+  for (const char* shard : {"1/2", "2/2"}) {
+    auto args = common;
+    args.insert(args.end(),
+                {"--shard", shard, "--out", (dir.path() / ("shard" + std::string(1, shard[0]))).string()});
+    ASSERT_TRUE(run_process(args, &out).ok()) << out;
+  }
+  const auto merged = dir.path() / "merged";
+  ASSERT_TRUE(run_process({lftrack_bin(), "study", "merge", "--out", merged.string(),
+                           (dir.path() / "shard1").string(), (dir.path() / "shard2").string()},
+                          &out)
+                  .ok())
+      << out;
+  auto study = read_trade_shard(merged);
+  ASSERT_TRUE(study.ok()) << study.status().message();
+  ASSERT_EQ(study->results.size(), 3u);
+  for (const TradeResult& r : study->results) {
+    EXPECT_EQ(r.runs, 1) << r.point.id;
+    EXPECT_GT(r.median_ms, 0) << r.point.id;
+    EXPECT_GT(r.memory_bytes, 0) << r.point.id;
+    EXPECT_LT(r.mean_tre_mm, 1.0) << r.point.id << ": every point registers the small scene's problems";
+    // The small scene's field is 4 x 4 x 48 x 48 in 16 bits; the octree is near exact.
+    EXPECT_GT(r.ncc_vs_siddon, r.point.renderer == "octree" ? 0.999 : 0.95) << r.point.id;
+  }
+  std::ifstream md(merged / "summary.md");
+  const std::string summary((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(summary.find("## Recommended defaults"), std::string::npos);
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_GT(std::filesystem::file_size(merged / "tre_vs_time.png"), 1000u);
+    EXPECT_GT(std::filesystem::file_size(merged / "memory_vs_fidelity.png"), 1000u);
+  }
+  // A missing shard and a bad shard spec are refused.
+  EXPECT_FALSE(
+      run_process(
+          {lftrack_bin(), "study", "merge", "--out", merged.string(), (dir.path() / "shard1").string()}, &out)
+          .ok());
+  EXPECT_NE(out.find("shard 2 of 2 is missing"), std::string::npos) << out;
+  auto bad = common;
+  bad.insert(bad.end(), {"--shard", "3/2", "--out", "x"});
+  EXPECT_FALSE(run_process(bad, &out).ok());
+  EXPECT_NE(out.find("1 <= k <= n"), std::string::npos) << out;
+  auto unknown = common;
+  unknown.back() = "no-such-point";
+  unknown.push_back("--out");
+  unknown.push_back((dir.path() / "x").string());
+  EXPECT_FALSE(run_process(unknown, &out).ok());
+  EXPECT_NE(out.find("no point 'no-such-point'"), std::string::npos) << out;
 }
 
 }  // namespace

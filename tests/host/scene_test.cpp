@@ -129,8 +129,9 @@ INSTANTIATE_TEST_SUITE_P(EveryClass, BadScenes, ::testing::ValuesIn(kBadScenes),
 
 TEST(Scene, LightFieldSettings) {
   std::string text = kValidScene;
-  text += "tracking:\n  renderer: lightfield\n  light_field:\n    resolution: [8, 8, 64, 32]\n    storage: vq\n"
-          "    codebook: 1024\n    margin: 0.1\n";
+  text +=
+      "tracking:\n  renderer: lightfield\n  light_field:\n    resolution: [8, 8, 64, 32]\n    storage: vq\n"
+      "    codebook: 1024\n    margin: 0.1\n";
   auto scene = parse_scene(text, "lf.yaml", "/");
   ASSERT_TRUE(scene.ok()) << scene.status().message();
   EXPECT_EQ(scene->renderer, "lightfield");
@@ -138,8 +139,9 @@ TEST(Scene, LightFieldSettings) {
   EXPECT_EQ(scene->light_field.storage, tracking::LightFieldStorage::kVq);
   EXPECT_EQ(scene->light_field.vq_codebook_size, 1024);
   EXPECT_DOUBLE_EQ(scene->light_field.margin_fraction, 0.1);
-  for (const char* bad : {"    storage: jpeg\n", "    resolution: [8, 8, 64]\n", "    resolution: [8, 8, 64, 1]\n",
-                          "    codebook: 70000\n", "    margin: 2\n", "    colour: red\n"}) {
+  for (const char* bad :
+       {"    storage: jpeg\n", "    resolution: [8, 8, 64]\n", "    resolution: [8, 8, 64, 1]\n",
+        "    codebook: 70000\n", "    margin: 2\n", "    colour: red\n"}) {
     const std::string t = std::string(kValidScene) + "tracking:\n  light_field:\n" + bad;
     auto s2 = parse_scene(t, "lf.yaml", "/");
     ASSERT_FALSE(s2.ok()) << bad;
@@ -149,12 +151,16 @@ TEST(Scene, LightFieldSettings) {
 
 TEST(Scene, RegistrationFiducialAndSimSettings) {
   std::string text = kValidScene;
-  text += "tracking:\n  similarity: gc\n  plan: cmaes\n  histogram_bins: 48\n  gamma_per_mm: 0.1\n"
-          "  tre_box_mm: 30\nfiducials:\n  positions_mm: [[1, 2, 3], [4, 5, 6]]\n  radius_mm: 1.5\n"
-          "  insert: true\nsim:\n  photons_per_pixel: 5000\n  detector_blur_px: 1\n";
+  text +=
+      "tracking:\n  renderer: octree\n  octree_pivot: 0.02\n  similarity: gc\n  plan: cmaes\n"
+      "  histogram_bins: 48\n  gamma_per_mm: 0.1\n  tre_box_mm: 30\nfiducials:\n  positions_mm: [[1, 2, 3], "
+      "[4, 5, 6]]\n  radius_mm: 1.5\n"
+      "  insert: true\nsim:\n  photons_per_pixel: 5000\n  detector_blur_px: 1\n";
   auto scene = parse_scene(text, "reg.yaml", "/");
   ASSERT_TRUE(scene.ok()) << scene.status().message();
   EXPECT_EQ(scene->registration.similarity, "gc");
+  EXPECT_EQ(scene->renderer, "octree");
+  EXPECT_DOUBLE_EQ(scene->octree_pivot, 0.02);
   EXPECT_EQ(scene->registration.plan, "cmaes");
   EXPECT_EQ(scene->registration.histogram_bins, 48);
   EXPECT_DOUBLE_EQ(scene->registration.gamma_per_mm, 0.1);
@@ -168,6 +174,7 @@ TEST(Scene, RegistrationFiducialAndSimSettings) {
       {"tracking:\n  plan: fast\n", "unknown tracking.plan 'fast'"},
       {"tracking:\n  histogram_bins: 2\n", "must be in 4..1024"},
       {"tracking:\n  gamma_per_mm: -1\n", "must be >= 0"},
+      {"tracking:\n  octree_pivot: 1.5\n", "octree_pivot must be in [0, 1]"},
       {"fiducials:\n  radius_mm: 1\n", "needs 'positions_mm'"},
       {"fiducials:\n  positions_mm: [[1, 2]]\n", "list of 3 numbers"},
       {"fiducials:\n  positions_mm: [[1, 2, 3]]\n  insert: maybe\n", "true or false"},
@@ -200,8 +207,9 @@ TEST(Scene, BothGeometryFormsIsAnError) {
 }
 
 TEST(Scene, OddYamlShapesAreErrorsNotCrashes) {
-  for (const char* text : {"[1, 2, 3]", "version: 1\n? [a, b]\n: c\n", "version: {a: 1}\n", "42",
-                           "version: 1\nct: [1]\n", "version: 1\nct: {path: x}\nroi: {centre_mm: [0,0,0]}\ndetectors: 3\n"}) {
+  for (const char* text :
+       {"[1, 2, 3]", "version: 1\n? [a, b]\n: c\n", "version: {a: 1}\n", "42", "version: 1\nct: [1]\n",
+        "version: 1\nct: {path: x}\nroi: {centre_mm: [0,0,0]}\ndetectors: 3\n"}) {
     auto scene = parse_scene(text, "odd.yaml", "/");
     EXPECT_FALSE(scene.ok()) << text;
     EXPECT_EQ(scene.status().message().rfind("odd.yaml", 0), 0u) << scene.status().message();

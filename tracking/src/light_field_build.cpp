@@ -48,10 +48,11 @@ std::array<int, 4> tile_grid(const std::array<int, 4>& size) {
 
 }  // namespace
 
-Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu, const LightFieldPlanInput& input,
+Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu,
+                                                            const LightFieldPlanInput& input,
                                                             const LightFieldSpec& spec, ThreadPool* pool,
                                                             const std::function<void(double)>& progress) {
-  LFTRACK_RETURN_IF_ERROR(mu.geometry.validate());
+  LFTRACK_RETURN_IF_ERROR(check_attenuation_volume(mu));
   auto planned = plan_light_field(input, spec);
   if (!planned.ok()) return planned.status();
   std::shared_ptr<LightField> field(new LightField);
@@ -77,12 +78,14 @@ Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu, 
   auto slices = [&](int begin, int end) {
     for (int slice = begin; slice < end; ++slice) {
       const int iu = slice / nv, iv = slice % nv;
-      const Vector3d on_uv = g.source_ct_mm + (g.lo[0] + iu * g.spacing(0)) * g.e1 + (g.lo[1] + iv * g.spacing(1)) * g.e2;
-      float* out = samples + static_cast<std::size_t>(slice) * static_cast<std::size_t>(ns) * static_cast<std::size_t>(nt);
+      const Vector3d on_uv =
+          g.source_ct_mm + (g.lo[0] + iu * g.spacing(0)) * g.e1 + (g.lo[1] + iv * g.spacing(1)) * g.e2;
+      float* out = samples + static_cast<std::size_t>(slice) * static_cast<std::size_t>(ns) *
+                                 static_cast<std::size_t>(nt);
       for (int is = 0; is < ns; ++is) {
         for (int it = 0; it < nt; ++it) {
-          const Vector3d on_st =
-              g.roi_centre_ct_mm + (g.lo[2] + is * g.spacing(2)) * g.e1 + (g.lo[3] + it * g.spacing(3)) * g.e2;
+          const Vector3d on_st = g.roi_centre_ct_mm + (g.lo[2] + is * g.spacing(2)) * g.e1 +
+                                 (g.lo[3] + it * g.spacing(3)) * g.e2;
           const Vector3d dir = (on_st - on_uv).normalized();
           const Vector3d from = grid_from_ct * (on_uv - reach * dir);
           const Vector3d to = grid_from_ct * (on_st + reach * dir);
@@ -92,16 +95,18 @@ Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu, 
       report.advance();
     }
   };
-  if (pool) pool->parallel_for(nu * nv, 1, slices);
-  else slices(0, nu * nv);
+  if (pool)
+    pool->parallel_for(nu * nv, 1, slices);
+  else
+    slices(0, nu * nv);
   field->payload_bytes_ = field->owned_.size();
   field->point_at(field->owned_.data());
   if (spec.storage == LightFieldStorage::kFloat32) return std::shared_ptr<const LightField>(field);
   return convert(*field, spec, pool);
 }
 
-Result<std::shared_ptr<const LightField>> LightField::convert(const LightField& source, const LightFieldSpec& spec,
-                                                              ThreadPool* pool) {
+Result<std::shared_ptr<const LightField>> LightField::convert(const LightField& source,
+                                                              const LightFieldSpec& spec, ThreadPool* pool) {
   if (source.header_.storage != LightFieldStorage::kFloat32) {
     return invalid_argument("light fields convert from float storage only");
   }
@@ -113,7 +118,8 @@ Result<std::shared_ptr<const LightField>> LightField::convert(const LightField& 
   const float* f = source.float_samples();
 
   if (spec.storage == LightFieldStorage::kFloat32) {
-    field->owned_.assign(reinterpret_cast<const unsigned char*>(f), reinterpret_cast<const unsigned char*>(f + count));
+    field->owned_.assign(reinterpret_cast<const unsigned char*>(f),
+                         reinterpret_cast<const unsigned char*>(f + count));
   } else if (spec.storage == LightFieldStorage::kFixed16) {
     const float peak = *std::max_element(f, f + count);
     const double scale = peak > 0 ? double(peak) / 65535.0 : 1.0;
@@ -157,13 +163,16 @@ Result<std::shared_ptr<const LightField>> LightField::convert(const LightField& 
     const std::size_t codebook_bytes = std::size_t(book.size()) * 16 * sizeof(float);
     field->owned_.resize(codebook_bytes + static_cast<std::size_t>(tile_count) * sizeof(std::uint16_t));
     auto* words = reinterpret_cast<float*>(field->owned_.data());
-    for (int w = 0; w < book.size(); ++w) std::memcpy(words + 16 * w, book.word(w).data(), 16 * sizeof(float));
+    for (int w = 0; w < book.size(); ++w)
+      std::memcpy(words + 16 * w, book.word(w).data(), 16 * sizeof(float));
     auto* codes = reinterpret_cast<std::uint16_t*>(field->owned_.data() + codebook_bytes);
     auto encode = [&](int begin, int end) {
       for (int i = begin; i < end; ++i) codes[i] = static_cast<std::uint16_t>(book.nearest(tile_at(i)));
     };
-    if (pool) pool->parallel_for(static_cast<int>(tile_count), 4096, encode);
-    else encode(0, static_cast<int>(tile_count));
+    if (pool)
+      pool->parallel_for(static_cast<int>(tile_count), 4096, encode);
+    else
+      encode(0, static_cast<int>(tile_count));
   }
   field->payload_bytes_ = field->owned_.size();
   field->point_at(field->owned_.data());

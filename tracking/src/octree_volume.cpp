@@ -68,13 +68,10 @@ Status walk_leaves(const Eigen::Vector3i& size, int depth, const std::vector<std
 }  // namespace
 
 Result<OctreeVolume> OctreeVolume::build(const MuVolume& volume, double pivot) {
-  LFTRACK_RETURN_IF_ERROR(volume.geometry.validate());
-  if (volume.values.size() != static_cast<std::size_t>(volume.geometry.voxel_count()))
-    return invalid_argument("octree: volume data does not match its geometry");
+  if (auto s = check_attenuation_volume(volume); !s.ok()) return s.with_context("octree");
   if (!(pivot >= 0.0 && pivot <= 1.0)) return out_of_range("octree: pivot must be in [0, 1]");
   float vmin = std::numeric_limits<float>::infinity(), vmax = -vmin;
   for (float v : volume.values) {
-    if (!std::isfinite(v)) return invalid_argument("octree: the volume holds a non-finite value");
     vmin = std::min(vmin, v);
     vmax = std::max(vmax, v);
   }

@@ -38,7 +38,8 @@ class RayCastRenderer final : public DrrRenderer {
         }
         float* dst = out.row_ptr(r);
         const Eigen::Vector3d row_start = pixel00 + per_row * (window.row0 + r) + per_col * window.col0;
-        if (extras->valid.data) std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
+        if (extras->valid.data)
+          std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
         for (int c = 0; c < window.cols; ++c) {
           const Eigen::Vector3d pixel = row_start + per_col * c;
           const double p = rule_ == RayRule::kSiddon ? caster_.siddon(source, pixel)
@@ -94,8 +95,8 @@ Status check_render_arguments(const Pose& T_room_from_ct, const XrayView& view, 
       (extras->valid.rows != window.rows || extras->valid.cols != window.cols ||
        extras->valid.stride < extras->valid.cols)) {
     return invalid_argument("validity mask is " + std::to_string(extras->valid.rows) + " x " +
-                            std::to_string(extras->valid.cols) + ", the window is " + std::to_string(window.rows) +
-                            " x " + std::to_string(window.cols));
+                            std::to_string(extras->valid.cols) + ", the window is " +
+                            std::to_string(window.rows) + " x " + std::to_string(window.cols));
   }
   return {};
 }
@@ -105,8 +106,8 @@ std::vector<std::string> renderer_names() {
 }
 
 // In light_field_renderer.cpp.
-Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
-                                                               ThreadPool* pool, bool simd);
+Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
+    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, bool simd);
 // In octree_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_octree_renderer(std::shared_ptr<const MuVolume> volume,
                                                           const RendererOptions& options);
@@ -114,13 +115,11 @@ Result<std::unique_ptr<DrrRenderer>> make_octree_renderer(std::shared_ptr<const 
 Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
                                                    const RendererOptions& options) {
-  if (name == "lightfield") return make_light_field_renderer(options.light_fields, options.pool, options.simd);
+  if (name == "lightfield")
+    return make_light_field_renderer(options.light_fields, options.pool, options.simd);
   if (name == "octree") return make_octree_renderer(std::move(volume), options);
   if (!volume) return invalid_argument("make_renderer: no volume");
-  LFTRACK_RETURN_IF_ERROR(volume->geometry.validate());
-  if (volume->values.size() != static_cast<std::size_t>(volume->geometry.voxel_count())) {
-    return invalid_argument("make_renderer: volume data does not match its geometry");
-  }
+  if (auto s = check_attenuation_volume(*volume); !s.ok()) return s.with_context("make_renderer");
   if (name == "siddon") {
     return std::unique_ptr<DrrRenderer>(
         std::make_unique<RayCastRenderer>(RayRule::kSiddon, std::move(volume), options));

@@ -86,7 +86,8 @@ struct CorrelationSums {
 };
 
 // Correlation sums of the pixels usable in both images.
-CorrelationSums pixel_sums(const FixedImage& f, const ImageView<const float>& m, const ImageView<const unsigned char>& mv) {
+CorrelationSums pixel_sums(const FixedImage& f, const ImageView<const float>& m,
+                           const ImageView<const unsigned char>& mv) {
   CorrelationSums s;
   for (int r = 0; r < f.rows; ++r)
     for (int c = 0; c < f.cols; ++c)
@@ -254,7 +255,8 @@ class MutualInformation final : public Similarity {
 // than the radius (each pair once), averaged.
 class PatternIntensity final : public Similarity {
  public:
-  PatternIntensity(int radius, double sigma) : radius_(std::clamp(radius, 1, 16)), sigma_(sigma > 0 ? sigma : 0.1) {}
+  PatternIntensity(int radius, double sigma)
+      : radius_(std::clamp(radius, 1, 16)), sigma_(sigma > 0 ? sigma : 0.1) {}
   std::string_view name() const override { return "pi"; }
   double worst_score() const override { return 0; }
   Status prepare(const ImageView<const float>& f, const ImageView<const unsigned char>& v) override {
@@ -279,9 +281,10 @@ class PatternIntensity final : public Similarity {
       for (int c = 0; c < fixed_.cols; ++c) {
         const std::size_t i = fixed_.index(r, c);
         usable_[i] = fixed_.both(m, mv, r, c);
-        difference_[i] = usable_[i] ? static_cast<float>((fixed_.values[i] - mean_f) * inv_f -
-                                                         (m.at(r, c) - mean_m) * inv_m)
-                                    : 0.f;
+        difference_[i] =
+            usable_[i]
+                ? static_cast<float>((fixed_.values[i] - mean_f) * inv_f - (m.at(r, c) - mean_m) * inv_m)
+                : 0.f;
       }
     }
     const double s2 = sigma_ * sigma_;
@@ -379,12 +382,16 @@ std::vector<std::string> similarity_names() {
 }
 
 Result<std::unique_ptr<Similarity>> make_similarity(std::string_view name, const SimilarityOptions& options) {
+  if ((name == "mi" || name == "nmi") && (options.histogram_bins < 2 || options.histogram_bins > 1024))
+    return out_of_range(std::string(name) + ": histogram bins must be in 2..1024, not " +
+                        std::to_string(options.histogram_bins));
   if (name == "mi") return std::unique_ptr<Similarity>(new MutualInformation(options.histogram_bins, false));
   if (name == "nmi") return std::unique_ptr<Similarity>(new MutualInformation(options.histogram_bins, true));
   if (name == "ncc") return std::unique_ptr<Similarity>(new Ncc());
   if (name == "gc") return std::unique_ptr<Similarity>(new GradientCorrelation());
   if (name == "pi")
-    return std::unique_ptr<Similarity>(new PatternIntensity(options.pattern_radius_px, options.pattern_sigma));
+    return std::unique_ptr<Similarity>(
+        new PatternIntensity(options.pattern_radius_px, options.pattern_sigma));
   if (name == "gd") return std::unique_ptr<Similarity>(new GradientDifference());
   std::string known;
   for (const auto& n : similarity_names()) known += (known.empty() ? "" : ", ") + n;

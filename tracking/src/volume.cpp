@@ -61,11 +61,32 @@ MuVolume to_attenuation(const CtVolume& ct, double mu_water_per_mm) {
   MuVolume mu;
   mu.geometry = ct.geometry;
   mu.values.resize(ct.values.size());
-  const float scale = static_cast<float>(mu_water_per_mm / 1000.0);
-  const float offset = static_cast<float>(mu_water_per_mm);
-  std::transform(ct.values.begin(), ct.values.end(), mu.values.begin(),
-                 [&](float hu) { return std::max(0.0f, offset + scale * hu); });
+  // In double, so that -1000 HU is exactly 0.
+  std::transform(ct.values.begin(), ct.values.end(), mu.values.begin(), [&](float hu) {
+    return std::isfinite(hu)
+               ? static_cast<float>(std::max(0.0, mu_water_per_mm * (1.0 + double(hu) / 1000.0)))
+               : 0.0f;
+  });
   return mu;
+}
+
+Status check_attenuation_volume(const MuVolume& mu) {
+  LFTRACK_RETURN_IF_ERROR(mu.geometry.validate());
+  if (mu.values.size() != static_cast<std::size_t>(mu.geometry.voxel_count()))
+    return invalid_argument("volume has " + std::to_string(mu.values.size()) + " values for " +
+                            std::to_string(mu.geometry.voxel_count()) + " voxels");
+  std::size_t bad = 0, first = 0;
+  for (std::size_t i = 0; i < mu.values.size(); ++i) {
+    const float v = mu.values[i];
+    if (!(v >= 0.0f) || !std::isfinite(v)) {
+      if (bad++ == 0) first = i;
+    }
+  }
+  if (bad > 0)
+    return invalid_argument("attenuation volume has " + std::to_string(bad) +
+                            " value(s) that are negative, NaN or infinite (first at index " +
+                            std::to_string(first) + ")");
+  return {};
 }
 
 std::string describe(const VolumeGeometry& g) {

@@ -27,4 +27,22 @@ struct LinePlot {
 // Writes <png stem>.dat and <png stem>.gp and runs gnuplot; returns whether the PNG was drawn.
 Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& png);
 
+// Points with labels; the `front` (a subset, e.g. a Pareto front) is joined by a line and
+// labelled, the others are drawn unlabelled.
+struct ScatterPoint {
+  double x = 0, y = 0;
+  std::string label;
+};
+struct ScatterPlot {
+  std::string title, x_label, y_label;
+  std::vector<ScatterPoint> points;
+  std::vector<ScatterPoint> front;  // drawn in the given order
+  std::string front_name = "Pareto front";
+  std::string key_position = "top right";  // gnuplot's `set key` position
+  bool log_x = false, log_y = false;
+};
+
+// Writes <png stem>.dat, <png stem>_front.dat and <png stem>.gp and runs gnuplot.
+Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::path& png);
+
 }  // namespace lftrack::host

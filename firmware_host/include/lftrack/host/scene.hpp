@@ -143,6 +143,7 @@ struct Scene {
   std::vector<DetectorSpec> detectors;
   PoseEnvelope envelope;
   std::string renderer = "siddon";
+  double octree_pivot = 0;               // tracking.octree_pivot: the octree renderer's P in [0, 1]
   tracking::LightFieldSpec light_field;  // tracking.light_field: resolution, storage, codebook, margin
   RegistrationSpec registration;         // tracking: similarity, plan, ...
   FiducialSpec fiducials;

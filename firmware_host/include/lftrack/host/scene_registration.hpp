@@ -31,10 +31,12 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(
 Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
     const PreparedScene& scene, const std::filesystem::path& light_field_dir, tracking::ThreadPool* pool);
 
-// A Registration over the scene's ROI windows with the scene's (or the given) measure.
+// A Registration over the scene's ROI windows with the scene's (or the given) measure. With
+// `detector_binning` b > 1 every image level, the originals included, is also offered binned b
+// times more (a plan whose passes' bins are multiplied by b then registers coarser images).
 Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
     const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
-    const RegistrationSpec& spec, tracking::ThreadPool* pool);
+    const RegistrationSpec& spec, tracking::ThreadPool* pool, int detector_binning = 1);
 
 // One frame per detector, preprocessed to the ROI windows.
 struct SceneFrames {

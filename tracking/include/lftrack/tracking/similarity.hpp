@@ -24,9 +24,9 @@
 namespace lftrack::tracking {
 
 struct SimilarityOptions {
-  int histogram_bins = 64;             // mi, nmi: bins per axis of the joint histogram
-  int pattern_radius_px = 3;           // pi: neighbourhood radius
-  double pattern_sigma = 0.1;          // pi: in units of the difference image's standard deviation
+  int histogram_bins = 64;     // mi, nmi: bins per axis of the joint histogram, 2..1024
+  int pattern_radius_px = 3;   // pi: neighbourhood radius
+  double pattern_sigma = 0.1;  // pi: in units of the difference image's standard deviation
 };
 
 class Similarity {
@@ -40,7 +40,8 @@ class Similarity {
 
   // Fixed image and its mask (an empty mask view means every pixel is valid). Fails for an empty
   // image or a mask of another size.
-  virtual Status prepare(const ImageView<const float>& fixed, const ImageView<const unsigned char>& fixed_valid) = 0;
+  virtual Status prepare(const ImageView<const float>& fixed,
+                         const ImageView<const unsigned char>& fixed_valid) = 0;
   // Moving image of the prepared size (a wrong size gives worst_score()).
   virtual double score(const ImageView<const float>& moving,
                        const ImageView<const unsigned char>& moving_valid = {}) = 0;
@@ -57,6 +58,7 @@ class Similarity {
 //        (1: identical up to a linear intensity map).
 //   gd   gradient difference (Penney) with the least-squares intensity scale, in [0, 2].
 std::vector<std::string> similarity_names();
-Result<std::unique_ptr<Similarity>> make_similarity(std::string_view name, const SimilarityOptions& options = {});
+Result<std::unique_ptr<Similarity>> make_similarity(std::string_view name,
+                                                    const SimilarityOptions& options = {});
 
 }  // namespace lftrack::tracking

@@ -69,8 +69,13 @@ using MuVolume = ScalarVolume<AttenuationPerMm>;  // linear attenuation, 1/mm
 // Attenuation of water at the effective energy of a kV imaging beam (about 70 keV), 1/mm.
 inline constexpr double kDefaultMuWaterPerMm = 0.0193;
 
-// mu = mu_water * (1 + HU / 1000), clamped at 0 (DESIGN.md, "Attenuation").
+// mu = mu_water * (1 + HU / 1000), clamped at 0 (DESIGN.md, "Attenuation"). A non-finite HU (the
+// readers refuse them; this is the last line of defence) gives mu = 0, so no NaN reaches a DRR.
 MuVolume to_attenuation(const CtVolume& ct, double mu_water_per_mm = kDefaultMuWaterPerMm);
+
+// Checks what every renderer and light-field build needs of an attenuation volume: a valid
+// geometry, as many values as voxels, and every value finite and >= 0.
+Status check_attenuation_volume(const MuVolume& mu);
 
 // Summary line for logs: size, spacing, origin, value range.
 std::string describe(const VolumeGeometry& geometry);

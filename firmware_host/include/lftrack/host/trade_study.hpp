@@ -1,0 +1,108 @@
+#pragma once
+// `lftrack study trade`: speed against accuracy, measured end to end on one scene.
+//
+// An operating point is one setting of the knobs users turn (renderer and its storage or pivot,
+// light-field resolution and envelope, detector binning, similarity, plan, final step, time
+// budget). The points are the scene's baseline and, from it, one knob turned at a time, plus the
+// combinations that make sense (a coarse field with coarse binning, a tight budget with a coarse
+// final step). Every point registers the same problems: gold poses drawn within 0.4 x the scene's
+// envelope, each with its own noisy synthetic frames (Siddon on the scene's anatomy), and a start
+// at an initial mean TRE drawn uniformly in [1, 4] mm (a tracking step). A point records the
+// registration time (median, p95), TRE (mean, p95, over all problems), success rate (final
+// mean TRE < 2 mm, paper 1), memory (the renderer's data: fields, tree or volume), precompute
+// time (building the fields or the tree, in this run), and the DRR fidelity against Siddon at
+// the gold poses.
+//
+// The study is sharded for a cluster's job array: shard k of n runs the points whose index is
+// k-1 modulo n (every shard makes the same problems); `lftrack study merge` joins the shards'
+// CSVs and writes the plots and the summary.
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+
+struct TradePoint {
+  std::string id;                       // unique, stable (also the label on plots)
+  std::string renderer = "lightfield";  // siddon, trilinear, lightfield, octree
+  std::string storage = "float";        // lightfield: float, fixed16, vq
+  int vq_codebook = 0;                  // vq only
+  std::array<int, 4> lf_resolution{};   // lightfield: (u, v, s, t)
+  double envelope_scale = 1;            // lightfield: x the scene's envelope
+  double octree_pivot = 0;              // octree only
+  int bin = 1;                          // detector binning factor on top of the plan's levels
+  std::string similarity = "mi";
+  std::string plan = "warm";
+  double final_step_mm = 0.1;  // of the plan's last pass
+  double budget_ms = 0;        // per registration; 0: none
+};
+
+struct TradeOptions {
+  bool quick = false;         // fewer points and problems, a coarser baseline field (minutes, not hours)
+  int problems = 0;           // 0: 6 quick, 24 full
+  int shard = 1, shards = 1;  // run points with index % shards == shard - 1
+  std::uint64_t seed = 1;
+  std::vector<std::string> only;  // non-empty: just these points (by id), in the study's order
+};
+
+struct TradeResult {
+  TradePoint point;
+  int runs = 0;
+  double median_ms = 0, p95_ms = 0;
+  double mean_tre_mm = 0, p95_tre_mm = 0;
+  double success_rate = 0;
+  double memory_bytes = 0;
+  double precompute_s = 0;
+  double ncc_vs_siddon = 0;      // mean over problems and views, at the gold poses
+  double psnr_db_vs_siddon = 0;  // mean (infinite for an exact renderer)
+};
+
+struct TradeStudy {
+  std::string scene;
+  std::uint64_t seed = 1;
+  int problems = 0;
+  bool quick = false;
+  int shard = 1, shards = 1;
+  int points_total = 0;  // in the whole study, over every shard
+  std::vector<TradeResult> results;
+};
+
+// The operating points of the study on `scene`, in a stable order.
+std::vector<TradePoint> trade_points(const PreparedScene& scene, bool quick);
+
+// Runs this shard's points. `progress` gets the fraction done and the point being run.
+Result<TradeStudy> run_trade_study(const PreparedScene& scene, const TradeOptions& options,
+                                   tracking::ThreadPool* pool,
+                                   const std::function<void(double, const std::string&)>& progress = {});
+
+// The Pareto front of mean TRE against median time: points no other point beats on both (ties
+// kept), sorted by time. Points that never succeed are left out.
+std::vector<TradeResult> pareto_front(const std::vector<TradeResult>& results);
+
+// The recommended defaults, each the best point under its condition (empty id if none meets it):
+// fastest median time within mean TRE 1 mm, most accurate within p95 time 100 ms, least memory
+// within mean TRE 0.5 mm; each also needs a success rate of at least 95 %.
+struct TradeRecommendations {
+  TradeResult fastest_within_1mm, most_accurate_within_100ms, least_memory_within_half_mm;
+  bool has_fastest = false, has_accurate = false, has_least_memory = false;
+};
+TradeRecommendations recommend(const std::vector<TradeResult>& results);
+
+// points.csv and study.json (the shard's description) in `dir`.
+Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& dir);
+// Reads what write_trade_shard wrote.
+Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir);
+// Joins shards of one study: refuses shards of another scene, seed or problem count, a shard
+// missing or given twice, and a point measured twice.
+Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards);
+// points.csv, study.json, tre_vs_time.png, memory_vs_fidelity.png (+ their .dat/.gp) and
+// summary.md in `dir`.
+Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir);
+
+}  // namespace lftrack::host
