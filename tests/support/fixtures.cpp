@@ -29,9 +29,17 @@ std::shared_ptr<const tracking::MuVolume> fixture_volume() {
   return volume;
 }
 
+tracking::MuVolume uniform_box(Eigen::Vector3i size, Eigen::Vector3d spacing_mm, float mu) {
+  tracking::MuVolume v;
+  v.geometry.size = size;
+  v.geometry.spacing_mm = spacing_mm;
+  v.values.assign(static_cast<std::size_t>(v.geometry.voxel_count()), mu);
+  return v;
+}
+
 tracking::XrayView fixture_view() {
-  return *tracking::XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.6, -0.8, 0.0), Vector3d(0, 0, 1), 400, 600,
-                                         48, 40, 1.0);
+  return *tracking::XrayView::isocentric("A", Vector3d::Zero(), Vector3d(0.6, -0.8, 0.0), Vector3d(0, 0, 1),
+                                         400, 600, 48, 40, 1.0);
 }
 
 tracking::LightFieldPlanInput fixture_plan() {

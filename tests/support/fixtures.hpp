@@ -12,6 +12,8 @@ namespace lftrack::test {
 
 // 48 x 40 x 36 voxels: a soft-tissue cylinder with a dense off-centre block and a smooth texture.
 std::shared_ptr<const tracking::MuVolume> fixture_volume();
+// A box of `size` voxels of `spacing_mm`, every voxel `mu`, origin at voxel (0,0,0) = (0,0,0).
+tracking::MuVolume uniform_box(Eigen::Vector3i size, Eigen::Vector3d spacing_mm, float mu);
 // An oblique isocentric view of it, 48 x 40 pixels of 1 mm, source 400 mm from the isocentre.
 tracking::XrayView fixture_view();
 // The light-field plan input for fixture_view(): whole detector, nominal identity pose, origin

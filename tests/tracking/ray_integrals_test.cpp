@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 
+#include "fixtures.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
 
 namespace lftrack::tracking {
@@ -13,13 +14,7 @@ namespace {
 
 using Eigen::Vector3d;
 
-MuVolume uniform_box(Eigen::Vector3i size, Vector3d spacing, float mu) {
-  MuVolume v;
-  v.geometry.size = size;
-  v.geometry.spacing_mm = spacing;
-  v.values.assign(static_cast<std::size_t>(v.geometry.voxel_count()), mu);
-  return v;
-}
+using test::uniform_box;
 
 // Exact length of segment [p0, p1] inside the axis-aligned box [lo, hi] (slab method).
 double chord_in_box(const Vector3d& p0, const Vector3d& p1, const Vector3d& lo, const Vector3d& hi) {

@@ -7,6 +7,7 @@
 #include <functional>
 #include <limits>
 
+#include "fixtures.hpp"
 #include "lftrack/tracking/octree_volume.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
 
@@ -15,13 +16,7 @@ namespace {
 
 using Eigen::Vector3d;
 
-MuVolume uniform_box(Eigen::Vector3i size, Vector3d spacing, float mu) {
-  MuVolume v;
-  v.geometry.size = size;
-  v.geometry.spacing_mm = spacing;
-  v.values.assign(std::size_t(v.geometry.voxel_count()), mu);
-  return v;
-}
+using test::uniform_box;
 
 // The three kernels on one volume.
 struct Kernels {

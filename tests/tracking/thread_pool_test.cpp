@@ -32,5 +32,19 @@ TEST(ThreadPool, ManySuccessiveJobs) {
   EXPECT_EQ(sum.load(), 2000L * 64);
 }
 
+// A loop inside a loop on the same pool (a pooled renderer inside a registration's parallel
+// candidates) runs the inner loop inline: every index once, and no deadlock.
+TEST(ThreadPool, NestedLoopsOnTheSamePoolRunInline) {
+  ThreadPool pool(3);
+  std::vector<std::atomic<int>> hits(64 * 50);
+  pool.parallel_for(64, 1, [&](int b, int e) {
+    for (int i = b; i < e; ++i)
+      pool.parallel_for(50, 4, [&](int ib, int ie) {
+        for (int j = ib; j < ie; ++j) hits[static_cast<std::size_t>(i * 50 + j)].fetch_add(1);
+      });
+  });
+  for (const auto& h : hits) ASSERT_EQ(h.load(), 1);
+}
+
 }  // namespace
 }  // namespace lftrack::tracking

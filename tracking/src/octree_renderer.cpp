@@ -4,7 +4,7 @@
 
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/octree_volume.hpp"
-#include "lftrack/tracking/thread_pool.hpp"
+#include "pixel_rays.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -21,26 +21,10 @@ class OctreeRenderer final : public DrrRenderer {
   Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
                    ImageView<float> out, RenderExtras* extras) const override {
     const VolumeGeometry& g = octree_->geometry();
-    const Eigen::Isometry3d T_grid_from_room = g.grid_from_ct() * T_room_from_ct.inverse();
-    const Eigen::Vector3d source = T_grid_from_room * view.source_mm;
-    const Eigen::Vector3d pixel00 = T_grid_from_room * view.pixel00_mm;
-    const Eigen::Vector3d per_col = T_grid_from_room.linear() * view.col_axis * view.pitch_col_mm;
-    const Eigen::Vector3d per_row = T_grid_from_room.linear() * view.row_axis * view.pitch_row_mm;
-    auto rows_body = [&](int r_begin, int r_end) {
-      for (int r = r_begin; r < r_end; ++r) {
-        if (extras->valid.data)
-          std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
-        float* dst = out.row_ptr(r);
-        const Eigen::Vector3d row_start = pixel00 + per_row * (window.row0 + r) + per_col * window.col0;
-        for (int c = 0; c < window.cols; ++c)
-          dst[c] = static_cast<float>(octree_line_integral(nodes_, g, source, row_start + per_col * c));
-      }
-    };
-    if (pool_) {
-      pool_->parallel_for(window.rows, 4, rows_body);
-    } else {
-      rows_body(0, window.rows);
-    }
+    render_pixel_rays(g, T_room_from_ct, view, window, out, extras, pool_,
+                      [&](const Eigen::Vector3d& source, const Eigen::Vector3d& pixel) {
+                        return octree_line_integral(nodes_, g, source, pixel);
+                      });
     return {};
   }
 

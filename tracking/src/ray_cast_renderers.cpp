@@ -6,7 +6,7 @@
 
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
-#include "lftrack/tracking/thread_pool.hpp"
+#include "pixel_rays.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -24,35 +24,11 @@ class RayCastRenderer final : public DrrRenderer {
 
   Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
                    ImageView<float> out, RenderExtras* extras) const override {
-    // Everything in the grid frame: pixel centres are affine in (row, col).
-    const Eigen::Isometry3d T_grid_from_room = volume_->geometry.grid_from_ct() * T_room_from_ct.inverse();
-    const Eigen::Vector3d source = T_grid_from_room * view.source_mm;
-    const Eigen::Vector3d pixel00 = T_grid_from_room * view.pixel00_mm;
-    const Eigen::Vector3d per_col = T_grid_from_room.linear() * view.col_axis * view.pitch_col_mm;
-    const Eigen::Vector3d per_row = T_grid_from_room.linear() * view.row_axis * view.pitch_row_mm;
-
-    auto rows_body = [&](int r_begin, int r_end) {
-      for (int r = r_begin; r < r_end; ++r) {
-        if (extras->valid.data) {
-          std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
-        }
-        float* dst = out.row_ptr(r);
-        const Eigen::Vector3d row_start = pixel00 + per_row * (window.row0 + r) + per_col * window.col0;
-        if (extras->valid.data)
-          std::fill_n(extras->valid.row_ptr(r), window.cols, static_cast<unsigned char>(1));
-        for (int c = 0; c < window.cols; ++c) {
-          const Eigen::Vector3d pixel = row_start + per_col * c;
-          const double p = rule_ == RayRule::kSiddon ? caster_.siddon(source, pixel)
-                                                     : caster_.trilinear(source, pixel, step_mm_);
-          dst[c] = static_cast<float>(p);
-        }
-      }
-    };
-    if (pool_) {
-      pool_->parallel_for(window.rows, 4, rows_body);
-    } else {
-      rows_body(0, window.rows);
-    }
+    render_pixel_rays(volume_->geometry, T_room_from_ct, view, window, out, extras, pool_,
+                      [&](const Eigen::Vector3d& source, const Eigen::Vector3d& pixel) {
+                        return rule_ == RayRule::kSiddon ? caster_.siddon(source, pixel)
+                                                         : caster_.trilinear(source, pixel, step_mm_);
+                      });
     return {};
   }
 

@@ -3,6 +3,11 @@
 #include <algorithm>
 
 namespace lftrack::tracking {
+namespace {
+// The pool whose job this thread is working on, if any: a parallel_for called from inside a job
+// of the same pool runs inline (waiting for the pool from one of its own jobs would deadlock).
+thread_local const ThreadPool* t_working_for = nullptr;
+}  // namespace
 
 ThreadPool::ThreadPool(int threads) {
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
@@ -20,11 +25,14 @@ ThreadPool::~ThreadPool() {
 }
 
 void ThreadPool::work_on_current_job() {
+  const ThreadPool* outer = t_working_for;
+  t_working_for = this;
   for (;;) {
     const int begin = next_.fetch_add(grain_, std::memory_order_relaxed);
-    if (begin >= count_) return;
+    if (begin >= count_) break;
     fn_(body_, begin, std::min(count_, begin + grain_));
   }
+  t_working_for = outer;
 }
 
 void ThreadPool::worker_loop() {
@@ -48,7 +56,7 @@ void ThreadPool::worker_loop() {
 void ThreadPool::run(int count, int grain, Trampoline fn, const void* body) {
   if (count <= 0) return;
   grain = std::max(1, grain);
-  if (workers_.empty() || count <= grain) {
+  if (workers_.empty() || count <= grain || t_working_for == this) {
     fn(body, 0, count);
     return;
   }

@@ -4,7 +4,9 @@
 // Components below firmware_host never start threads of their own; whoever owns the process
 // (the lftrack program, a test, a benchmark) constructs one pool and passes it down.
 // parallel_for allocates nothing, so it may be called from the real-time cycle. One
-// parallel_for runs at a time per pool (calls from several threads are serialised).
+// parallel_for runs at a time per pool (calls from several threads are serialised); a
+// parallel_for called from inside a job of the same pool (a renderer given the pool, called from
+// a registration's parallel candidates) runs inline on the calling thread.
 
 #include <atomic>
 #include <condition_variable>
