@@ -5,6 +5,7 @@
 #include <benchmark/benchmark.h>
 
 #include <memory>
+#include <vector>
 
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
@@ -68,6 +69,31 @@ void BM_SiddonRay(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(caster.siddon(a, b));
 }
 BENCHMARK(BM_SiddonRay);
+
+// A light-field-precompute-like batch: 256 whole lines from one source point through a row of
+// points in the phantom, walked one at a time (Arg 0) or in vector lanes (Arg 1, AVX-512).
+void BM_SiddonBatch(benchmark::State& state) {
+  const bool lanes = state.range(0) != 0;
+  if (lanes && !tracking::GridRayCaster::siddon_lanes_available()) {
+    state.SkipWithError("no AVX-512 on this CPU");
+    return;
+  }
+  const tracking::GridRayCaster caster(*phantom());
+  const Eigen::Vector3d extent = phantom()->geometry.extent_mm();
+  const Eigen::Vector3d source(-1500, 0.5 * extent.y() - 300, 0.5 * extent.z());
+  std::vector<Eigen::Vector3d> from(256, source), to(256);
+  for (int i = 0; i < 256; ++i) {
+    const Eigen::Vector3d target(0.5 * extent.x(), (0.1 + 0.8 * i / 255.0) * extent.y(), 0.45 * extent.z());
+    to[static_cast<std::size_t>(i)] = source + 2.0 * (target - source);
+  }
+  std::vector<double> integrals(256);
+  for (auto _ : state) {
+    caster.siddon_batch(from, to, integrals, lanes);
+    benchmark::DoNotOptimize(integrals.data());
+  }
+  state.SetItemsProcessed(state.iterations() * 256);
+}
+BENCHMARK(BM_SiddonBatch)->Arg(0)->Arg(1)->ArgName("lanes");
 
 }  // namespace
 

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "cpu_dispatch.hpp"
+#include "siddon_walk.hpp"
 
 namespace lftrack::tracking {
 
@@ -35,7 +36,8 @@ bool GridRayCaster::clip(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, d
   return true;
 }
 
-bool GridRayCaster::start_walk(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, WalkStart* w) const {
+bool GridRayCaster::start_walk(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
+                               detail::SiddonWalk* w) const {
   if (!clip(p0, p1, &w->a, &w->a_end)) return false;
   const Eigen::Vector3d d = p1 - p0;
   const VolumeGeometry& g = volume_.geometry;
@@ -68,12 +70,11 @@ bool GridRayCaster::start_walk(const Eigen::Vector3d& p0, const Eigen::Vector3d&
   }
   w->offset = index[0] + stride[1] * index[1] + stride[2] * index[2];
   w->length = d.norm();
-  w->rate = d.cwiseAbs().cwiseQuotient(g.spacing_mm);
   return true;
 }
 
 double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) const {
-  WalkStart w;
+  detail::SiddonWalk w;
   if (!start_walk(p0, p1, &w)) return 0.0;
   double a = w.a;
   const double a_end = w.a_end;
@@ -81,7 +82,7 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
   const double* delta = w.delta;
   const int* left = w.left;
   const std::ptrdiff_t* offset_step = w.offset_step;
-  const Eigen::Vector3d& d_rate = w.rate;
+  const Eigen::Vector3d d_rate = (p1 - p0).cwiseAbs().cwiseQuotient(volume_.geometry.spacing_mm);
 
   // Walk voxel by voxel: each step ends at the nearest plane crossing. Where two crossings
   // coincide (the ray passes through an edge) the next step has zero length. The axes are
@@ -124,6 +125,31 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
   }
   sum += static_cast<double>(mu[offset]) * (a_end - a);
   return sum * w.length;
+}
+
+bool GridRayCaster::siddon_lanes_available() {
+  static const bool available = detail::siddon_avx512_available();
+  return available;
+}
+
+void GridRayCaster::siddon_batch(std::span<const Eigen::Vector3d> from, std::span<const Eigen::Vector3d> to,
+                                 std::span<double> integrals, bool vector_lanes) const {
+  const std::size_t n = std::min({from.size(), to.size(), integrals.size()});
+  std::size_t i = 0;
+  if (vector_lanes && siddon_lanes_available() && !volume_.values.empty()) {
+    constexpr int kLanes = detail::kSiddonLanes;
+    for (; i + kLanes <= n; i += kLanes) {
+      detail::SiddonWalk walks[kLanes];
+      bool hit[kLanes];
+      for (int k = 0; k < kLanes; ++k) hit[k] = start_walk(from[i + k], to[i + k], &walks[k]);
+      // A missed ray keeps the default walk: an empty range at voxel 0, summing nothing.
+      detail::siddon_walk_avx512(volume_.values.data(), walks, &integrals[i]);
+      for (int k = 0; k < kLanes; ++k) {
+        if (!hit[k]) integrals[i + k] = 0.0;
+      }
+    }
+  }
+  for (; i < n; ++i) integrals[i] = siddon(from[i], to[i]);
 }
 
 namespace {

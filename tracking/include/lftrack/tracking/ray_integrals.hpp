@@ -9,10 +9,15 @@
 // All functions are const, thread-safe and allocation-free.
 
 #include <Eigen/Core>
+#include <span>
 
 #include "lftrack/tracking/volume.hpp"
 
 namespace lftrack::tracking {
+
+namespace detail {
+struct SiddonWalk;
+}
 
 class GridRayCaster {
  public:
@@ -22,6 +27,16 @@ class GridRayCaster {
   // Exact radiological path (Siddon-Jacobs): sum of mu times the length of the segment
   // [from, to] inside each voxel. Parts of the segment outside the volume contribute 0.
   double siddon(const Eigen::Vector3d& from_grid_mm, const Eigen::Vector3d& to_grid_mm) const;
+
+  // siddon() for many rays: integrals[i] = siddon(from[i], to[i]), bit for bit for a volume of
+  // finite values. On a CPU with AVX-512 it walks sixteen rays at once (about 2-3x the scalar
+  // rate on the light-field precompute); elsewhere, or with `vector_lanes` false, one at a
+  // time. The spans must have equal sizes.
+  void siddon_batch(std::span<const Eigen::Vector3d> from_grid_mm,
+                    std::span<const Eigen::Vector3d> to_grid_mm, std::span<double> integrals,
+                    bool vector_lanes = true) const;
+  // True if siddon_batch walks vector lanes on this CPU.
+  static bool siddon_lanes_available();
 
   // Fixed-step sampling of the trilinearly interpolated volume along [from, to]: the clipped
   // segment is cut into ceil(length / step_mm) equal parts, each sampled at its midpoint.
@@ -38,16 +53,9 @@ class GridRayCaster {
   const VolumeGeometry& geometry() const { return volume_.geometry; }
 
  private:
-  // Where a Siddon walk starts: the clipped parameter range, the first voxel and, per axis, the
-  // next crossing, the step between crossings, the offset step and the planes left.
-  struct WalkStart {
-    double a = 0, a_end = 0, length = 0;
-    double next[3], delta[3];
-    std::ptrdiff_t offset = 0, offset_step[3];
-    int left[3];
-    Eigen::Vector3d rate;  // crossings per unit of the ray parameter, per axis
-  };
-  bool start_walk(const Eigen::Vector3d& from, const Eigen::Vector3d& to, WalkStart* walk) const;
+  // Where the Siddon walk of [from, to] starts (tracking/src/siddon_walk.hpp); false if the
+  // segment misses the volume.
+  bool start_walk(const Eigen::Vector3d& from, const Eigen::Vector3d& to, detail::SiddonWalk* walk) const;
 
   const MuVolume& volume_;
   Eigen::Vector3d lower_mm_;  // lower corner of the box, grid frame

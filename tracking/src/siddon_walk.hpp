@@ -1,0 +1,33 @@
+#pragma once
+// Private to the ray casters: where one Siddon walk starts, and the AVX-512 kernel that walks
+// sixteen of them at once (siddon_kernel_avx512.cpp).
+
+#include <cstddef>
+
+namespace lftrack::tracking::detail {
+
+// A Siddon walk through a volume, ready to step: the clipped parameter range [a, a_end] of the
+// segment from + a (to - from), the first voxel's offset and, per axis, the parameter of the
+// next plane crossing, the parameter step between crossings, the offset step and the planes
+// still inside the volume. A ray that misses has a == a_end.
+struct SiddonWalk {
+  double a = 0, a_end = 0;
+  double length = 0;  // |to - from|, mm: the walk's sum of mu * parameter times this is mu * mm
+  double next[3] = {0, 0, 0}, delta[3] = {0, 0, 0};
+  std::ptrdiff_t offset = 0, offset_step[3] = {0, 0, 0};
+  int left[3] = {0, 0, 0};
+};
+
+// Sixteen walks at a time (two groups of eight AVX-512 lanes, stepped alternately so that one
+// group's dependency chain hides the other's) need at least this many rays to be worth it.
+inline constexpr int kSiddonLanes = 16;
+
+// True if this CPU runs siddon_walk_avx512 (AVX-512F).
+bool siddon_avx512_available();
+
+// Walks kSiddonLanes walks through `mu` and writes each one's line integral (mu * mm) to
+// `integrals`: bit for bit what GridRayCaster::siddon returns for the same ray. Needs
+// siddon_avx512_available().
+void siddon_walk_avx512(const float* mu, const SiddonWalk* walks, double* integrals);
+
+}  // namespace lftrack::tracking::detail
