@@ -1,6 +1,8 @@
 // `lftrack bench drr`: renderer speed and fidelity side by side, plastimatch as the peer.
 
+#include <cmath>
 #include <cstdio>
+#include <string>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/drr_benchmark.hpp"
@@ -56,12 +58,17 @@ Command add_bench_drr_command(CLI::App* parent) {
                   report->light_field_resolution[2], report->light_field_resolution[3], report->precompute_s,
                   report->threads);
     }
-    std::printf("%-24s %10s %10s %13s %10s %9s %10s %8s\n", "renderer", "ms median", "x Siddon",
-                "NCC vs Siddon", "NCC min", "PSNR dB", "MB", "masked");
-    for (const auto& r : report->renderers)
-      std::printf("%-24s %10.3f %10.1f %13.6f %10.6f %9.1f %10.1f %8.4f\n", r.name.c_str(), r.ms_median,
+    std::printf("%-24s %10s %10s %13s %10s %9s %10s %8s %13s\n", "renderer", "ms median", "x Siddon",
+                "NCC vs Siddon", "NCC min", "PSNR dB", "MB", "masked", "x plastimatch");
+    for (const auto& r : report->renderers) {
+      // Side by side where measured (light fields), else the ratio of medians; blank without a peer.
+      const double x_peer = r.speedup_vs_plastimatch_side_by_side > 0 ? r.speedup_vs_plastimatch_side_by_side
+                                                                      : r.speedup_vs_plastimatch;
+      std::printf("%-24s %10.3f %10.1f %13.6f %10.6f %9.1f %10.1f %8.4f %13s\n", r.name.c_str(), r.ms_median,
                   r.speedup_vs_siddon, r.ncc_vs_siddon, r.ncc_min_vs_siddon, r.psnr_db_vs_siddon,
-                  double(r.bytes) / 1e6, r.out_of_field_fraction);
+                  double(r.bytes) / 1e6, r.out_of_field_fraction,
+                  x_peer > 0 ? std::to_string(static_cast<long>(std::lround(x_peer))).c_str() : "");
+    }
     for (const auto& p : report->peers)
       std::printf(
           "%-24s %10.3f %10.1f %13.6f %10.6f   (%.0f ms with volume loading; max |diff| %.2e of peak)\n",

@@ -157,6 +157,8 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
     log_figures(f);
   }
 
+  // The light-field renderers are timed again beside every plastimatch run (below).
+  std::vector<std::pair<std::size_t, std::unique_ptr<tracking::DrrRenderer>>> beside_peer;
   if (o.light_fields) {
     tracking::LightFieldSpec spec = scene.scene.light_field;
     spec.storage = tracking::LightFieldStorage::kFloat32;
@@ -197,6 +199,7 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
       fig.precompute_s = report.precompute_s + convert_s;
       log_figures(fig);
       report.renderers.push_back(fig);
+      beside_peer.emplace_back(report.renderers.size() - 1, std::move(*renderer));
     }
   }
 
@@ -218,12 +221,24 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
   PeerFigures peer;
   peer.name = "plastimatch";
   std::vector<double> ms, wall, ncc, diff;
+  std::vector<std::vector<double>> ratios(beside_peer.size());
+  const tracking::PixelWindow window = tracking::PixelWindow::full(o.size, o.size);
+  Image<float> image(o.size, o.size);
   std::size_t k = 0;
   for (const auto& pose : poses) {
     for (const auto& view : views) {
       auto drr = run_plastimatch_drr(view.transformed(pose.inverse()), mha, work / "out", o.render_threads);
       if (!drr.ok()) return drr.status();
       ms.push_back(1000.0 * drr->reported_render_s);
+      for (std::size_t i = 0; i < beside_peer.size(); ++i) {
+        std::vector<double> beside_ms;
+        for (int rep = 0; rep < o.repeats; ++rep) {
+          const auto t0 = Clock::now();
+          LFTRACK_RETURN_IF_ERROR(beside_peer[i].second->render(pose, view, window, image.view()));
+          beside_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+        }
+        ratios[i].push_back(ms.back() / median(beside_ms));
+      }
       wall.push_back(1000.0 * drr->wall_s);
       ncc.push_back(tracking::normalized_cross_correlation(reference[k].view(), drr->line_integrals.view()));
       diff.push_back(max_abs_diff_rel(reference[k], drr->line_integrals));
@@ -239,6 +254,14 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
   spdlog::info("bench drr: plastimatch {:9.2f} ms median ({:.0f} ms with loading), NCC {:.6f} (min {:.6f})",
                peer.ms_median, peer.ms_wall_median, peer.ncc_vs_siddon, peer.ncc_min_vs_siddon);
   for (auto& f : report.renderers) f.speedup_vs_plastimatch = peer.ms_median / f.ms_median;
+  for (std::size_t i = 0; i < beside_peer.size(); ++i) {
+    RendererFigures& f = report.renderers[beside_peer[i].first];
+    f.speedup_vs_plastimatch_side_by_side = median(ratios[i]);
+    spdlog::info(
+        "bench drr: {:22s} x{:.0f} plastimatch (median of ratios taken side by side), x{:.0f} (ratio of "
+        "medians)",
+        f.name, f.speedup_vs_plastimatch_side_by_side, f.speedup_vs_plastimatch);
+  }
   report.peers.push_back(peer);
   return report;
 }
@@ -270,6 +293,9 @@ nlohmann::json to_json(const DrrBenchReport& r) {
                             {"out_of_field_fraction", f.out_of_field_fraction}};
     if (f.precompute_s > 0) entry["precompute_s"] = f.precompute_s;
     if (f.speedup_vs_plastimatch > 0) entry["speedup_vs_plastimatch"] = f.speedup_vs_plastimatch;
+    if (f.speedup_vs_plastimatch_side_by_side > 0) {
+      entry["speedup_vs_plastimatch_side_by_side"] = f.speedup_vs_plastimatch_side_by_side;
+    }
     j["renderers"].push_back(entry);
   }
   j["peers"] = nlohmann::json::array();

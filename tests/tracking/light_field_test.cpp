@@ -130,16 +130,20 @@ TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
   PoseDelta edge;
   edge.translation_mm = Vector3d(3, -3, 3);
   edge.rotation_rad = deg_to_rad(12.0) * Vector3d(1, -1, 1);
-  ASSERT_TRUE((*renderer)->render(apply_delta(Pose::Identity(), edge, Vector3d::Zero()), view,
-                                  PixelWindow::full(view.rows, view.cols), out.view(), &extras).ok());
+  ASSERT_TRUE((*renderer)
+                  ->render(apply_delta(Pose::Identity(), edge, Vector3d::Zero()), view,
+                           PixelWindow::full(view.rows, view.cols), out.view(), &extras)
+                  .ok());
   EXPECT_EQ(extras.masked_pixels, 0);
   EXPECT_FALSE(extras.pose_outside_envelope);
 
   PoseDelta beyond;
   beyond.translation_mm = Vector3d(0, 0, 40);
   beyond.rotation_rad = deg_to_rad(30.0) * Vector3d(1, 0, 0);
-  ASSERT_TRUE((*renderer)->render(apply_delta(Pose::Identity(), beyond, Vector3d::Zero()), view,
-                                  PixelWindow::full(view.rows, view.cols), out.view(), &extras).ok());
+  ASSERT_TRUE((*renderer)
+                  ->render(apply_delta(Pose::Identity(), beyond, Vector3d::Zero()), view,
+                           PixelWindow::full(view.rows, view.cols), out.view(), &extras)
+                  .ok());
   EXPECT_TRUE(extras.pose_outside_envelope);
   EXPECT_GT(extras.masked_pixels, 0);
   int zeros = 0;
@@ -153,40 +157,58 @@ TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
   EXPECT_EQ(zeros, extras.masked_pixels);
 }
 
-// The vectorised kernels (where the CPU has them) against the portable scalar kernels, with a
-// window whose width is not a multiple of 8 and poses inside and outside the field.
-class VectorisedKernel : public ::testing::TestWithParam<LightFieldStorage> {};
+// The vectorised kernels (AVX-512 and AVX2, where the CPU has them) against the portable scalar
+// kernels, with a window whose width is a multiple of neither 8 nor 16, and poses inside the
+// field (where the AVX-512 kernel reads runs of samples), at its edge and outside it.
+struct KernelCase {
+  LightFieldStorage storage;
+  SimdLevel simd;
+};
+class VectorisedKernel : public ::testing::TestWithParam<KernelCase> {};
 
 TEST_P(VectorisedKernel, MatchesScalar) {
   RendererOptions scalar_options, simd_options;
-  scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(GetParam())};
-  scalar_options.simd = false;
+  scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(GetParam().storage)};
+  scalar_options.simd = SimdLevel::kScalar;
+  simd_options.simd = GetParam().simd;
   auto scalar = make_renderer("lightfield", nullptr, scalar_options);
   auto simd = make_renderer("lightfield", nullptr, simd_options);
   ASSERT_TRUE(scalar.ok() && simd.ok());
   const XrayView view = fixture_plan().view_room;
-  const PixelWindow w{3, 2, 41, 37};
-  for (double shift : {0.0, 2.0, 30.0}) {
-    Pose pose = Pose::Identity();
-    pose.linear() = rotation_exp(Vector3d(0.05, -0.08, 0.1));
-    pose.translation() = Vector3d(shift, -1, 0.5);
-    Image<float> a(w.rows, w.cols), b(w.rows, w.cols);
-    Image<unsigned char> va(w.rows, w.cols), vb(w.rows, w.cols);
-    RenderExtras ea, eb;
-    ea.valid = va.view();
-    eb.valid = vb.view();
-    ASSERT_TRUE((*scalar)->render(pose, view, w, a.view(), &ea).ok());
-    ASSERT_TRUE((*simd)->render(pose, view, w, b.view(), &eb).ok());
-    EXPECT_EQ(ea.masked_pixels, eb.masked_pixels) << shift;
-    EXPECT_EQ(va.pixels(), vb.pixels()) << shift;
-    for (std::size_t i = 0; i < a.pixels().size(); ++i) ASSERT_NEAR(a.pixels()[i], b.pixels()[i], 1e-4f * (1 + a.pixels()[i]));
+  for (const PixelWindow w : {PixelWindow{3, 2, 41, 37}, PixelWindow::full(view.rows, view.cols)}) {
+    for (double shift : {0.0, 2.0, 30.0}) {
+      for (double turn : {0.0, 1.0}) {
+        Pose pose = Pose::Identity();
+        pose.linear() = rotation_exp(turn * Vector3d(0.05, -0.08, 0.1));
+        pose.translation() = Vector3d(shift, -turn, 0.5 * turn);
+        Image<float> a(w.rows, w.cols), b(w.rows, w.cols);
+        Image<unsigned char> va(w.rows, w.cols), vb(w.rows, w.cols);
+        RenderExtras ea, eb;
+        ea.valid = va.view();
+        eb.valid = vb.view();
+        ASSERT_TRUE((*scalar)->render(pose, view, w, a.view(), &ea).ok());
+        ASSERT_TRUE((*simd)->render(pose, view, w, b.view(), &eb).ok());
+        EXPECT_EQ(ea.masked_pixels, eb.masked_pixels) << shift << " " << turn;
+        EXPECT_EQ(va.pixels(), vb.pixels()) << shift << " " << turn;
+        for (std::size_t i = 0; i < a.pixels().size(); ++i) {
+          ASSERT_NEAR(a.pixels()[i], b.pixels()[i], 1e-4f * (1 + a.pixels()[i]))
+              << shift << " " << turn << " " << i;
+        }
+      }
+    }
   }
 }
 
 INSTANTIATE_TEST_SUITE_P(StorageModes, VectorisedKernel,
-                         ::testing::Values(LightFieldStorage::kFloat32, LightFieldStorage::kFixed16,
-                                           LightFieldStorage::kVq),
-                         [](const auto& p) { return std::string(to_string(p.param)); });
+                         ::testing::Values(KernelCase{LightFieldStorage::kFloat32, SimdLevel::kBest},
+                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kBest},
+                                           KernelCase{LightFieldStorage::kVq, SimdLevel::kBest},
+                                           KernelCase{LightFieldStorage::kFloat32, SimdLevel::kAvx2},
+                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kAvx2}),
+                         [](const auto& p) {
+                           return std::string(to_string(p.param.storage)) +
+                                  (p.param.simd == SimdLevel::kBest ? "_best" : "_avx2");
+                         });
 
 TEST(LightFieldRender, RefusesViewsItWasNotBuiltFor) {
   RendererOptions options;
@@ -196,11 +218,15 @@ TEST(LightFieldRender, RefusesViewsItWasNotBuiltFor) {
   XrayView other = fixture_plan().view_room;
   Image<float> out(other.rows, other.cols);
   other.name = "B";
-  EXPECT_EQ((*renderer)->render(Pose::Identity(), other, PixelWindow::full(other.rows, other.cols), out.view()).code(),
+  EXPECT_EQ((*renderer)
+                ->render(Pose::Identity(), other, PixelWindow::full(other.rows, other.cols), out.view())
+                .code(),
             StatusCode::kNotFound);
   other.name = "A";
   other.source_mm.x() += 5;
-  EXPECT_FALSE((*renderer)->render(Pose::Identity(), other, PixelWindow::full(other.rows, other.cols), out.view()).ok());
+  EXPECT_FALSE((*renderer)
+                   ->render(Pose::Identity(), other, PixelWindow::full(other.rows, other.cols), out.view())
+                   .ok());
 }
 
 // File faults, each with its own message.
@@ -266,7 +292,8 @@ TEST_F(LightFieldFile, NotALightField) {
 }
 
 TEST_F(LightFieldFile, WrongCt) {
-  EXPECT_NE(load_error(field_->header().ct_hash ^ 1, field_->header().plan_hash).find("another CT"), std::string::npos);
+  EXPECT_NE(load_error(field_->header().ct_hash ^ 1, field_->header().plan_hash).find("another CT"),
+            std::string::npos);
 }
 
 TEST_F(LightFieldFile, WrongGeometry) {
@@ -274,7 +301,8 @@ TEST_F(LightFieldFile, WrongGeometry) {
   moved.view_room.source_mm.x() += 1.0;
   LightFieldSpec spec;
   spec.resolution = {12, 12, 64, 64};
-  EXPECT_NE(load_error(field_->header().ct_hash, plan_hash(moved, spec)).find("another geometry"), std::string::npos);
+  EXPECT_NE(load_error(field_->header().ct_hash, plan_hash(moved, spec)).find("another geometry"),
+            std::string::npos);
   EXPECT_EQ(load_error(field_->header().ct_hash, plan_hash(fixture_plan(), spec)), "(loaded)");
 }
 

@@ -23,10 +23,24 @@ bool light_field_avx2_available();
 // Float storage, 8 pixels at a time with AVX2 gathers; the same results as the scalar kernel up
 // to float rounding. Needs light_field_avx2_available() and fewer than 2^31 samples. Returns the
 // number of masked pixels.
-int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
-                      ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m,
+                      ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
 // The same for 16-bit storage (value = code * scale).
 int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
-                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                        int r_end);
+
+// True if this CPU runs the AVX-512 kernels (AVX-512F and BW).
+bool light_field_avx512_available();
+
+// The same on AVX-512: sixteen pixels at a time, and without gathers wherever sixteen pixels
+// read runs of one (u, v) cell (light_field_kernel_avx512.cpp). Needs
+// light_field_avx512_available() and fewer than 2^31 samples.
+int render_float_avx512(const float* samples, const LightFieldGeometry& g, const RayMap& m,
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                        int r_end);
+int render_fixed16_avx512(const std::uint16_t* codes, float scale, const LightFieldGeometry& g,
+                          const RayMap& m, ImageView<float> out, ImageView<unsigned char> valid, int cols,
+                          int r_begin, int r_end);
 
 }  // namespace lftrack::tracking

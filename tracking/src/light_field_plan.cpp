@@ -15,9 +15,12 @@ using Eigen::Vector4d;
 
 const char* to_string(LightFieldStorage storage) {
   switch (storage) {
-    case LightFieldStorage::kFloat32: return "float";
-    case LightFieldStorage::kFixed16: return "fixed16";
-    case LightFieldStorage::kVq: return "vq";
+    case LightFieldStorage::kFloat32:
+      return "float";
+    case LightFieldStorage::kFixed16:
+      return "fixed16";
+    case LightFieldStorage::kVq:
+      return "vq";
   }
   return "unknown";
 }
@@ -48,7 +51,8 @@ Status LightFieldGeometry::validate() const {
       !e2.allFinite()) {
     return invalid_argument("light-field planes are not finite");
   }
-  if ((roi_centre_ct_mm - source_ct_mm).norm() < 1.0) return invalid_argument("ROI centre sits on the source");
+  if ((roi_centre_ct_mm - source_ct_mm).norm() < 1.0)
+    return invalid_argument("ROI centre sits on the source");
   return {};
 }
 
@@ -67,9 +71,11 @@ Result<LightFieldGeometry> plan_light_field(const LightFieldPlanInput& in, const
   g.source_ct_mm = view_ct.source_mm;
   g.roi_centre_ct_mm = in.roi_centre_ct_mm;
   g.axis = (g.roi_centre_ct_mm - g.source_ct_mm).normalized();
-  g.e1 = (view_ct.col_axis - view_ct.col_axis.dot(g.axis) * g.axis).normalized();
+  // e2 (t, the samples' innermost axis) follows the detector's rows, so that neighbouring pixels
+  // of a row read neighbouring samples (the AVX-512 kernel reads them as runs).
+  g.e1 = (view_ct.row_axis - view_ct.row_axis.dot(g.axis) * g.axis).normalized();
   g.e2 = g.axis.cross(g.e1);
-  if (g.e2.dot(view_ct.row_axis) < 0) g.e2 = -g.e2;
+  if (g.e2.dot(view_ct.col_axis) < 0) g.e2 = -g.e2;
 
   // Rays of the ROI window's outline (its outer pixel edges) at the envelope's 3^6 poses.
   std::vector<Eigen::Vector2d> outline;  // (row, col)
@@ -91,15 +97,19 @@ Result<LightFieldGeometry> plan_light_field(const LightFieldPlanInput& in, const
     for (int a = 0; a < 6; ++a) {
       const double level = double(digits % 3 - 1);
       digits /= 3;
-      if (a < 3) delta.translation_mm[a] = level * t;
-      else delta.rotation_rad[a - 3] = level * r;
+      if (a < 3)
+        delta.translation_mm[a] = level * t;
+      else
+        delta.rotation_rad[a - 3] = level * r;
     }
     const Pose pose = apply_delta(in.nominal_T_room_from_ct, delta, in.registration_origin_room_mm);
     const Pose ct_from_room = pose.inverse();
     const Vector3d source = ct_from_room * in.view_room.source_mm;
     for (const auto& rc : outline) {
       const auto uvst = g.coordinates(source, ct_from_room * in.view_room.pixel_centre_mm(rc.x(), rc.y()));
-      if (!uvst) return invalid_argument("a ray of view '" + g.view_name + "' runs parallel to its light-field planes");
+      if (!uvst)
+        return invalid_argument("a ray of view '" + g.view_name +
+                                "' runs parallel to its light-field planes");
       lo = lo.cwiseMin(*uvst);
       hi = hi.cwiseMax(*uvst);
     }
@@ -130,7 +140,9 @@ void feed_vector(uLong* crc, const Vector3d& v) {
   for (int i = 0; i < 3; ++i) feed(crc, v[i]);
 }
 
-std::uint64_t combine(uLong a, uLong b) { return (std::uint64_t{a} << 32) | (std::uint64_t{b} & 0xffffffffu); }
+std::uint64_t combine(uLong a, uLong b) {
+  return (std::uint64_t{a} << 32) | (std::uint64_t{b} & 0xffffffffu);
+}
 
 }  // namespace
 

@@ -4,19 +4,21 @@
 // Per render, everything is moved into the CT frame once. A pixel's ray direction d is affine in
 // (row, col); with q1 = d.e1 / d.n and q2 = d.e2 / d.n (one division per pixel) the four ray
 // coordinates are affine in (q1, q2), so the inner loop is a handful of multiply-adds, one
-// division and 16 loads. Float and 16-bit fields use the AVX2 kernels (light_field_kernel_avx2.cpp) where the
-// CPU has it; the scalar kernels below serve VQ fields and other CPUs. (GCC 12 does
-// not vectorise the scalar loop itself: it sinks the blend into a branch on the field test.)
+// division and 16 loads. Float and 16-bit fields use the AVX-512 kernels
+// (light_field_kernel_avx512.cpp, sixteen pixels at a time and mostly without gathers) or the
+// AVX2 kernels (light_field_kernel_avx2.cpp) where the CPU has them; the scalar kernels below serve VQ fields
+// and other CPUs. (GCC 12 does not vectorise the scalar loop itself: it sinks the blend into a branch on the
+// field test.)
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 
 #include "cpu_dispatch.hpp"
-#include "light_field_kernels.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
+#include "light_field_kernels.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -26,12 +28,15 @@ using Eigen::Vector3d;
 // The kernel's helpers must inline into the pixel loop (GCC otherwise keeps calls there).
 #define LFTRACK_INLINE inline __attribute__((always_inline))
 
-
 struct FloatFetch {
   const float* f;
   std::size_t stride_u, stride_v, stride_s;
-  LFTRACK_INLINE float operator()(std::size_t base, int is, int it) const { return f[base + std::size_t(is) * stride_s + std::size_t(it)]; }
-  LFTRACK_INLINE std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
+  LFTRACK_INLINE float operator()(std::size_t base, int is, int it) const {
+    return f[base + std::size_t(is) * stride_s + std::size_t(it)];
+  }
+  LFTRACK_INLINE std::size_t uv(int iu, int iv) const {
+    return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v;
+  }
 };
 
 struct Fixed16Fetch {
@@ -41,7 +46,9 @@ struct Fixed16Fetch {
   LFTRACK_INLINE float operator()(std::size_t base, int is, int it) const {
     return float(q[base + std::size_t(is) * stride_s + std::size_t(it)]) * scale;
   }
-  LFTRACK_INLINE std::size_t uv(int iu, int iv) const { return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v; }
+  LFTRACK_INLINE std::size_t uv(int iu, int iv) const {
+    return std::size_t(iu) * stride_u + std::size_t(iv) * stride_v;
+  }
 };
 
 struct VqFetch {
@@ -72,8 +79,9 @@ LFTRACK_INLINE float bilinear_st(const Fetch& fetch, std::size_t base, int is, i
 // loop is straight-line code (indices clamped into the field, the out-of-field test applied as
 // a select at the end) so that the compiler can vectorise it with gathers.
 template <bool kWithMask, class Fetch>
-LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
-                     ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g,
+                                    ImageView<float> out, ImageView<unsigned char> valid, int cols,
+                                    int r_begin, int r_end) {
   int masked = 0;
   const Vector3d& n = g.axis;
   const int top_u = g.size[0] - 2, top_v = g.size[1] - 2, top_s = g.size[2] - 2, top_t = g.size[3] - 2;
@@ -93,9 +101,10 @@ LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const L
       const float fu = m.base[0] + m.gain[0] * q1, fv = m.base[1] + m.gain[1] * q2;
       const float fs = m.base[2] + m.gain[2] * q1, ft = m.base[3] + m.gain[3] * q2;
       // Written so that NaN lands on the outside.
-      const bool inside = (dn > 0) & (fu >= 0) & (fu <= m.limit[0]) & (fv >= 0) & (fv <= m.limit[1]) & (fs >= 0) &
-                          (fs <= m.limit[2]) & (ft >= 0) & (ft <= m.limit[3]);
-      const float cu = inside ? fu : 0.0f, cv = inside ? fv : 0.0f, cs = inside ? fs : 0.0f, ct = inside ? ft : 0.0f;
+      const bool inside = (dn > 0) & (fu >= 0) & (fu <= m.limit[0]) & (fv >= 0) & (fv <= m.limit[1]) &
+                          (fs >= 0) & (fs <= m.limit[2]) & (ft >= 0) & (ft <= m.limit[3]);
+      const float cu = inside ? fu : 0.0f, cv = inside ? fv : 0.0f, cs = inside ? fs : 0.0f,
+                  ct = inside ? ft : 0.0f;
       const int iu = std::min(int(cu), top_u), iv = std::min(int(cv), top_v);
       const int is = std::min(int(cs), top_s), it = std::min(int(ct), top_t);
       const float wu = cu - float(iu), wv = cv - float(iv), ws = cs - float(is), wt = ct - float(it);
@@ -120,8 +129,9 @@ LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const L
 
 // The mask store is a template parameter so that neither loop has a branch in it.
 template <class Fetch>
-LFTRACK_INLINE int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
-                ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+LFTRACK_INLINE int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g,
+                               ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                               int r_end) {
   return valid.data ? render_rows_impl<true>(fetch, m, g, out, valid, cols, r_begin, r_end)
                     : render_rows_impl<false>(fetch, m, g, out, valid, cols, r_begin, r_end);
 }
@@ -144,11 +154,14 @@ int render_vq(const VqFetch& f, const RayMap& m, const LightFieldGeometry& g, Im
 
 class LightFieldRenderer final : public DrrRenderer {
  public:
-  LightFieldRenderer(std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, bool simd)
+  LightFieldRenderer(std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd)
       : fields_(std::move(fields)), pool_(pool) {
     name_ = std::string("lightfield-") + to_string(fields_.front()->header().storage);
-    use_avx2_ = simd && light_field_avx2_available();
-    for (const auto& f : fields_) use_avx2_ = use_avx2_ && f->geometry().sample_count() < (std::int64_t{1} << 31);
+    bool indexable = true;  // the kernels index samples with 32-bit lanes
+    for (const auto& f : fields_)
+      indexable = indexable && f->geometry().sample_count() < (std::int64_t{1} << 31);
+    use_avx512_ = indexable && simd == SimdLevel::kBest && light_field_avx512_available();
+    use_avx2_ = indexable && simd != SimdLevel::kScalar && light_field_avx2_available();
     if (fields_.front()->header().storage == LightFieldStorage::kVq) {
       name_ += std::to_string(fields_.front()->header().codebook_size);
     }
@@ -162,8 +175,8 @@ class LightFieldRenderer final : public DrrRenderer {
   }
 
  protected:
-  Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window, ImageView<float> out,
-                   RenderExtras* extras) const override {
+  Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
+                   ImageView<float> out, RenderExtras* extras) const override {
     const LightField* field = nullptr;
     for (const auto& f : fields_)
       if (f->geometry().view_name == view.name) field = f.get();
@@ -173,7 +186,8 @@ class LightFieldRenderer final : public DrrRenderer {
     if ((h.nominal_T_room_from_ct.inverse() * view.source_mm - g.source_ct_mm).norm() > 1e-3) {
       return failed_precondition("view '" + view.name + "' has another source position than its light field");
     }
-    const PoseDelta delta = delta_between(h.nominal_T_room_from_ct, T_room_from_ct, h.registration_origin_room_mm);
+    const PoseDelta delta =
+        delta_between(h.nominal_T_room_from_ct, T_room_from_ct, h.registration_origin_room_mm);
     extras->pose_outside_envelope =
         delta.translation_mm.cwiseAbs().maxCoeff() > h.envelope.translation_mm * (1 + 1e-9) + 1e-9 ||
         delta.rotation_rad.cwiseAbs().maxCoeff() > deg_to_rad(h.envelope.rotation_deg) * (1 + 1e-9) + 1e-12;
@@ -186,9 +200,11 @@ class LightFieldRenderer final : public DrrRenderer {
     m.d_row = ct_from_room.linear() * view.row_axis * view.pitch_row_mm;
     m.d_col = ct_from_room.linear() * view.col_axis * view.pitch_col_mm;
     // u = (S'-S).e1 + ((S-S').n) q1, s = (S'-C).e1 + ((C-S').n) q1; likewise v, t with e2, q2.
-    const double k_uv = (g.source_ct_mm - source).dot(g.axis), k_st = (g.roi_centre_ct_mm - source).dot(g.axis);
+    const double k_uv = (g.source_ct_mm - source).dot(g.axis),
+                 k_st = (g.roi_centre_ct_mm - source).dot(g.axis);
     const double offset[4] = {(source - g.source_ct_mm).dot(g.e1), (source - g.source_ct_mm).dot(g.e2),
-                              (source - g.roi_centre_ct_mm).dot(g.e1), (source - g.roi_centre_ct_mm).dot(g.e2)};
+                              (source - g.roi_centre_ct_mm).dot(g.e1),
+                              (source - g.roi_centre_ct_mm).dot(g.e2)};
     const double gain[4] = {k_uv, k_uv, k_st, k_st};
     for (int a = 0; a < 4; ++a) {
       m.base[a] = float((offset[a] - g.lo[a]) / g.spacing(a));
@@ -202,18 +218,28 @@ class LightFieldRenderer final : public DrrRenderer {
       int n = 0;
       switch (h.storage) {
         case LightFieldStorage::kFloat32: {
+          if (use_avx512_) {
+            n = render_float_avx512(field->float_samples(), g, m, out, extras->valid, window.cols, r0, r1);
+            break;
+          }
           if (use_avx2_) {
             n = render_float_avx2(field->float_samples(), g, m, out, extras->valid, window.cols, r0, r1);
             break;
           }
-          const FloatFetch f{field->float_samples(), std::size_t(s[1]) * s[2] * s[3], std::size_t(s[2]) * s[3], std::size_t(s[3])};
+          const FloatFetch f{field->float_samples(), std::size_t(s[1]) * s[2] * s[3],
+                             std::size_t(s[2]) * s[3], std::size_t(s[3])};
           n = render_float(f, m, g, out, extras->valid, window.cols, r0, r1);
           break;
         }
         case LightFieldStorage::kFixed16: {
+          if (use_avx512_) {
+            n = render_fixed16_avx512(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid,
+                                      window.cols, r0, r1);
+            break;
+          }
           if (use_avx2_) {
-            n = render_fixed16_avx2(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid, window.cols,
-                                    r0, r1);
+            n = render_fixed16_avx2(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid,
+                                    window.cols, r0, r1);
             break;
           }
           const Fixed16Fetch f{field->fixed_samples(), float(h.fixed_scale), std::size_t(s[1]) * s[2] * s[3],
@@ -222,16 +248,18 @@ class LightFieldRenderer final : public DrrRenderer {
           break;
         }
         case LightFieldStorage::kVq: {
-          const VqFetch f{field->codebook(), field->tile_codes(), std::size_t(s[1] + 1) / 2, std::size_t(s[2] + 1) / 2,
-                          std::size_t(s[3] + 1) / 2};
+          const VqFetch f{field->codebook(), field->tile_codes(), std::size_t(s[1] + 1) / 2,
+                          std::size_t(s[2] + 1) / 2, std::size_t(s[3] + 1) / 2};
           n = render_vq(f, m, g, out, extras->valid, window.cols, r0, r1);
           break;
         }
       }
       masked.fetch_add(n, std::memory_order_relaxed);
     };
-    if (pool_) pool_->parallel_for(window.rows, 8, rows);
-    else rows(0, window.rows);
+    if (pool_)
+      pool_->parallel_for(window.rows, 8, rows);
+    else
+      rows(0, window.rows);
     extras->masked_pixels = masked.load();
     return {};
   }
@@ -240,15 +268,19 @@ class LightFieldRenderer final : public DrrRenderer {
   std::vector<std::shared_ptr<const LightField>> fields_;
   ThreadPool* pool_;
   std::string name_;
-  bool use_avx2_ = false;  // float and 16-bit fields of fewer than 2^31 samples on a CPU with AVX2 + FMA
+  // Float and 16-bit fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first
+  // choice) or AVX2 + FMA.
+  bool use_avx512_ = false;
+  bool use_avx2_ = false;
 };
 
 }  // namespace
 
-Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(std::vector<std::shared_ptr<const LightField>> fields,
-                                                               ThreadPool* pool, bool simd) {
+Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
+    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd) {
   if (fields.empty()) {
-    return failed_precondition("the lightfield renderer needs precomputed light fields (run `lftrack precompute`)");
+    return failed_precondition(
+        "the lightfield renderer needs precomputed light fields (run `lftrack precompute`)");
   }
   for (const auto& f : fields) {
     if (!f) return invalid_argument("null light field");

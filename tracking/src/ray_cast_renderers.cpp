@@ -83,7 +83,7 @@ std::vector<std::string> renderer_names() {
 
 // In light_field_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
-    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, bool simd);
+    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd);
 // In octree_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_octree_renderer(std::shared_ptr<const MuVolume> volume,
                                                           const RendererOptions& options);

@@ -16,13 +16,13 @@
 namespace lftrack::host {
 
 struct DrrBenchOptions {
-  int size = 256;                  // DRR rows = cols; each detector's ROI window resampled to this
-  int poses = 8;                   // drawn uniformly across the scene's pose envelope
-  int repeats = 3;                 // timed renders per pose and view
-  std::uint64_t seed = 7;          // pose sampling
-  bool peers = true;               // run plastimatch if it is installed
-  int render_threads = 1;          // threads for the timed renders (and plastimatch's OpenMP)
-  bool light_fields = true;        // build the scene's light fields and time every storage mode
+  int size = 256;            // DRR rows = cols; each detector's ROI window resampled to this
+  int poses = 8;             // drawn uniformly across the scene's pose envelope
+  int repeats = 3;           // timed renders per pose and view
+  std::uint64_t seed = 7;    // pose sampling
+  bool peers = true;         // run plastimatch if it is installed
+  int render_threads = 1;    // threads for the timed renders (and plastimatch's OpenMP)
+  bool light_fields = true;  // build the scene's light fields and time every storage mode
   std::vector<int> vq_codebooks{256, 4096, 65536};
   std::filesystem::path work_dir;  // for the peer's files; empty: a fresh temporary folder
 };
@@ -30,12 +30,15 @@ struct DrrBenchOptions {
 struct RendererFigures {
   std::string name;
   double ms_median = 0;
-  double ms_min = 0;             // fastest render: less disturbed by other load on a shared machine
-  double ncc_vs_siddon = 0;      // mean over poses and views
-  double ncc_min_vs_siddon = 0;  // worst pose and view
-  double psnr_db_vs_siddon = 0;  // mean over poses and views (inf for Siddon itself)
-  double speedup_vs_siddon = 0;  // Siddon's median time / this one's
-  double speedup_vs_plastimatch = 0;
+  double ms_min = 0;                  // fastest render: less disturbed by other load on a shared machine
+  double ncc_vs_siddon = 0;           // mean over poses and views
+  double ncc_min_vs_siddon = 0;       // worst pose and view
+  double psnr_db_vs_siddon = 0;       // mean over poses and views (inf for Siddon itself)
+  double speedup_vs_siddon = 0;       // Siddon's median time / this one's
+  double speedup_vs_plastimatch = 0;  // plastimatch's median time / this one's
+  // Light fields: the median over poses and views of plastimatch's time / this renderer's,
+  // each renderer timed right after each plastimatch run, so both see the same machine load.
+  double speedup_vs_plastimatch_side_by_side = 0;
   std::size_t bytes = 0;             // precomputed data held (light fields, all views)
   double out_of_field_fraction = 0;  // masked pixels / all pixels
   double precompute_s = 0;           // light fields: building (all views) and converting

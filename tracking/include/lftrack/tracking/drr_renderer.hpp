@@ -58,6 +58,8 @@ class DrrRenderer {
                            ImageView<float> out, RenderExtras* extras) const = 0;
 };
 
+enum class SimdLevel { kBest, kAvx2, kScalar };
+
 struct RendererOptions {
   // Rows are spread over this pool; null renders on the calling thread.
   ThreadPool* pool = nullptr;
@@ -70,9 +72,9 @@ struct RendererOptions {
   // may then be null), or, if null, one compressed from that volume at `octree_pivot` in [0, 1].
   std::shared_ptr<const OctreeVolume> octree;
   double octree_pivot = 0.0;
-  // Use vectorised kernels where the CPU has them (false: the portable scalar kernels; tests
-  // compare the two).
-  bool simd = true;
+  // Which vectorised kernels the light-field renderer may use: the best the CPU has, at most
+  // AVX2, or none (the portable scalar kernels). Tests compare them.
+  SimdLevel simd = SimdLevel::kBest;
 };
 
 // Names accepted by make_renderer, in a stable order.

@@ -6,8 +6,10 @@
 // ROI centre C, unit axis n):
 //   (u, v): the plane through S,   point S + u e1 + v e2
 //   (s, t): the plane through C,   point C + s e1 + t e2
-// with e1, e2 unit vectors perpendicular to n (e1 along the detector's columns, e2 along its
-// rows). A sample is the line integral of mu along the whole line through both points, through
+// with e1, e2 unit vectors perpendicular to n: e1 along the detector's row axis (the way the row
+// index grows), e2 along its column axis, so that t, the samples' innermost axis, runs along a
+// detector row (files built before this convention carry their own axes and still render
+// correctly, only without the AVX-512 kernel's gather-free runs). A sample is the line integral of mu along the whole line through both points, through
 // the entire volume (the effective image plane lies beyond the CT), so a DRR pixel whose ray runs
 // from its source through the patient to the detector reads the same value.
 //
