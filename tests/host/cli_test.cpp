@@ -153,6 +153,14 @@ TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
     EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
   for (const auto& p : json["peers"])
     for (const char* key : {"name", "ms_median", "ncc_vs_siddon"}) EXPECT_TRUE(p.contains(key)) << key;
+  // With plastimatch installed, every light field is also timed beside each plastimatch run.
+  if (!json["peers"].empty()) {
+    for (const auto& r : json["renderers"]) {
+      if (r["name"].get<std::string>().rfind("lightfield", 0) != 0) continue;
+      ASSERT_TRUE(r.contains("speedup_vs_plastimatch_side_by_side")) << r["name"];
+      EXPECT_GT(r["speedup_vs_plastimatch_side_by_side"].get<double>(), 0.0) << r["name"];
+    }
+  }
 }
 
 }  // namespace

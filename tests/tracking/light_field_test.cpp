@@ -31,6 +31,25 @@ TEST(LightFieldPlan, PlanesAreOrthonormalAndAimedAtTheRoi) {
   EXPECT_EQ(g.size, (std::array<int, 4>{12, 12, 64, 64}));
 }
 
+TEST(LightFieldPlan, TheNominalSourceIsASample) {
+  for (const double rotation_deg : {0.0, 2.0, 5.0}) {
+    LightFieldPlanInput in = fixture_plan();
+    in.envelope.rotation_deg = rotation_deg;
+    for (const int n : {3, 12, 32, 33}) {
+      LightFieldSpec spec;
+      spec.resolution = {n, n + 1, 64, 64};
+      auto g = plan_light_field(in, spec);
+      ASSERT_TRUE(g.ok()) << g.status().message();
+      for (int a = 0; a < 2; ++a) {
+        const double index = -g->lo[a] / g->spacing(a);  // where u = 0 (v = 0) falls
+        EXPECT_NEAR(index, std::round(index), 1e-9) << "axis " << a << ", " << g->size[a] << " samples";
+        EXPECT_GT(index, 0.5);
+        EXPECT_LT(index, g->size[a] - 1.5);
+      }
+    }
+  }
+}
+
 TEST(LightFieldPlan, CoordinatesAndRaysRoundTrip) {
   const LightFieldGeometry g = fixture_light_field(LightFieldStorage::kFloat32)->geometry();
   const Vector4d uvst(3.5, -2.0, 10.25, -7.5);

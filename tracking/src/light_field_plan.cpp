@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "lftrack/tracking/light_field.hpp"
 
@@ -55,6 +56,28 @@ Status LightFieldGeometry::validate() const {
     return invalid_argument("ROI centre sits on the source");
   return {};
 }
+
+namespace {
+
+// Widens [lo, hi], sampled at n points, as little as possible so that 0 is one of the points.
+// For u and v, 0 is the nominal source: every ray of the nominal pose then has exact (u, v)
+// samples and only the (s, t) interpolation is left. (With the extents symmetric about the
+// source and an even n, the nominal pose fell midway between samples, the worst place: on the
+// lumbar CT it was the least faithful pose, NCC 0.9981 against Siddon.) Unchanged when 0 is
+// outside the range or n < 3.
+void put_sample_at_zero(double* lo, double* hi, int n) {
+  if (n < 3 || !(*lo < 0 && *hi > 0)) return;
+  double best = std::numeric_limits<double>::infinity();
+  int best_k = 0;
+  for (int k = 1; k <= n - 2; ++k) {  // k samples below 0, n - 1 - k above
+    const double spacing = std::max(-*lo / k, *hi / (n - 1 - k));
+    if (spacing < best) best = spacing, best_k = k;
+  }
+  *lo = -best_k * best;
+  *hi = (n - 1 - best_k) * best;
+}
+
+}  // namespace
 
 Result<LightFieldGeometry> plan_light_field(const LightFieldPlanInput& in, const LightFieldSpec& spec) {
   LFTRACK_RETURN_IF_ERROR(in.view_room.validate());
@@ -125,6 +148,7 @@ Result<LightFieldGeometry> plan_light_field(const LightFieldPlanInput& in, const
     g.lo[a] = lo[a] - spec.margin_fraction * extent;
     g.hi[a] = hi[a] + spec.margin_fraction * extent;
   }
+  for (int a = 0; a < 2; ++a) put_sample_at_zero(&g.lo[a], &g.hi[a], g.size[a]);
   LFTRACK_RETURN_IF_ERROR(g.validate());
   return g;
 }

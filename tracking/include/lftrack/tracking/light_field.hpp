@@ -9,9 +9,10 @@
 // with e1, e2 unit vectors perpendicular to n: e1 along the detector's row axis (the way the row
 // index grows), e2 along its column axis, so that t, the samples' innermost axis, runs along a
 // detector row (files built before this convention carry their own axes and still render
-// correctly, only without the AVX-512 kernel's gather-free runs). A sample is the line integral of mu along the whole line through both points, through
-// the entire volume (the effective image plane lies beyond the CT), so a DRR pixel whose ray runs
-// from its source through the patient to the detector reads the same value.
+// correctly, only without the AVX-512 kernel's gather-free runs). A sample is the line integral of mu along
+// the whole line through both points, through the entire volume (the effective image plane lies beyond the
+// CT), so a DRR pixel whose ray runs from its source through the patient to the detector reads the same
+// value.
 //
 // Samples sit on a regular grid: axis a has size[a] samples at lo[a] + i * spacing(a),
 // i = 0..size[a]-1. Rendering interpolates quadrilinearly between the 16 samples around a ray;
@@ -65,9 +66,7 @@ struct LightFieldGeometry {
   std::array<double, 4> hi{};                 // mm
 
   double spacing(int a) const { return size[a] > 1 ? (hi[a] - lo[a]) / (size[a] - 1) : 1.0; }
-  std::int64_t sample_count() const {
-    return std::int64_t{size[0]} * size[1] * size[2] * size[3];
-  }
+  std::int64_t sample_count() const { return std::int64_t{size[0]} * size[1] * size[2] * size[3]; }
   // The (u, v, s, t) of the line through points a and b (CT frame); nothing if the line is
   // (nearly) parallel to the planes.
   std::optional<Eigen::Vector4d> coordinates(const Eigen::Vector3d& a_ct, const Eigen::Vector3d& b_ct) const;
@@ -87,8 +86,8 @@ struct LightFieldSpec {
 
 // The frame of a field: where it sits and what it must cover.
 struct LightFieldPlanInput {
-  XrayView view_room;                       // the detector, room frame
-  PixelWindow roi_window;                   // the detector pixels the field must serve
+  XrayView view_room;      // the detector, room frame
+  PixelWindow roi_window;  // the detector pixels the field must serve
   Pose nominal_T_room_from_ct = Pose::Identity();
   Eigen::Vector3d registration_origin_room_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
@@ -97,7 +96,9 @@ struct LightFieldPlanInput {
 
 // Plans a field's geometry: the planes from the nominal pose, and extents covering the rays of
 // every ROI pixel at every pose of the envelope (its 3^6 corner, edge and centre poses), grown
-// by the spec's margin. Nothing outside that is sampled or stored.
+// by the spec's margin. Nothing outside that is sampled or stored. The (u, v) extents are then
+// widened (by under one spacing) so that the nominal source is a sample: rays of the nominal
+// pose need no (u, v) interpolation.
 Result<LightFieldGeometry> plan_light_field(const LightFieldPlanInput& input, const LightFieldSpec& spec);
 
 // A field with its samples, in memory or memory-mapped from a file. Immutable after building.
@@ -106,13 +107,13 @@ class LightField {
   struct Header {
     LightFieldGeometry geometry;
     LightFieldStorage storage = LightFieldStorage::kFloat32;
-    int codebook_size = 0;              // VQ only
-    double fixed_scale = 0;             // fixed16 only: value = code * fixed_scale
+    int codebook_size = 0;   // VQ only
+    double fixed_scale = 0;  // fixed16 only: value = code * fixed_scale
     Pose nominal_T_room_from_ct = Pose::Identity();
     Eigen::Vector3d registration_origin_room_mm = Eigen::Vector3d::Zero();
     PoseEnvelope envelope;
-    std::uint64_t ct_hash = 0;          // of the attenuation volume it was built from
-    std::uint64_t plan_hash = 0;        // of the plan input and spec it was built for
+    std::uint64_t ct_hash = 0;    // of the attenuation volume it was built from
+    std::uint64_t plan_hash = 0;  // of the plan input and spec it was built for
   };
 
   ~LightField();
@@ -139,8 +140,8 @@ class LightField {
                                                          const LightFieldSpec& spec, ThreadPool* pool,
                                                          const std::function<void(double)>& progress = {});
   // The same samples in another storage mode (VQ trains its codebook here).
-  static Result<std::shared_ptr<const LightField>> convert(const LightField& source, const LightFieldSpec& spec,
-                                                           ThreadPool* pool);
+  static Result<std::shared_ptr<const LightField>> convert(const LightField& source,
+                                                           const LightFieldSpec& spec, ThreadPool* pool);
 
   // Writes a versioned, checksummed file.
   Status save(const std::filesystem::path& file) const;
