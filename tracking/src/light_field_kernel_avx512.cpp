@@ -48,8 +48,31 @@ namespace {
 //   run(offset, dt, dt1):   lane k's pair from the run of 32 samples at offset: dt_k, dt_k + 1
 //   select(mask, x, y):     y in the mask's lanes, x elsewhere
 
+// Sample-index strides of a field's u, v and s axes (t is contiguous), in every lane.
+struct Grid {
+  __m512i su, sv, ss;
+};
+
+template <class Samples>
+LFTRACK_AVX512 inline __m512 blend_st(typename Samples::Pairs top, typename Samples::Pairs bottom, __m512 ws,
+                                      __m512 wt);
+
+// Gather path of the float and 16-bit storages: (u, v) cell k = 2 du + dv of every lane,
+// blended in (s, t).
+template <class Samples>
+LFTRACK_AVX512 inline __m512 indexed_corner(const Samples& f, const Grid& grid, __m512i iu, __m512i iv,
+                                            __m512i is, __m512i it, int k, __m512 ws, __m512 wt) {
+  const __m512i u = _mm512_add_epi32(iu, _mm512_set1_epi32(k >> 1));
+  const __m512i v = _mm512_add_epi32(iv, _mm512_set1_epi32(k & 1));
+  const __m512i idx =
+      _mm512_add_epi32(_mm512_add_epi32(_mm512_mullo_epi32(u, grid.su), _mm512_mullo_epi32(v, grid.sv)),
+                       _mm512_add_epi32(_mm512_mullo_epi32(is, grid.ss), it));
+  return blend_st<Samples>(f.gather(idx), f.gather(_mm512_add_epi32(idx, grid.ss)), ws, wt);
+}
+
 // Float samples.
 struct FloatSamples {
+  static constexpr bool kRuns = true;
   struct Pairs {
     __m512 first, second;
   };
@@ -71,10 +94,15 @@ struct FloatSamples {
     *first = p.first, *second = p.second;
   }
   LFTRACK_AVX512 inline __m512 finish(__m512 value) const { return value; }
+  LFTRACK_AVX512 inline __m512 corner(const Grid& grid, __m512i iu, __m512i iv, __m512i is, __m512i it, int k,
+                                      __m512 ws, __m512 wt) const {
+    return indexed_corner(*this, grid, iu, iv, is, it, k, ws, wt);
+  }
 };
 
 // 16-bit samples (value = code * scale): one 4-byte element holds a sample and its t neighbour.
 struct Fixed16Samples {
+  static constexpr bool kRuns = true;
   using Pairs = __m512i;  // low half: the sample at t, high half: at t + 1
   const std::uint16_t* q;
   float scale;
@@ -96,6 +124,63 @@ struct Fixed16Samples {
   }
   LFTRACK_AVX512 inline __m512 finish(__m512 value) const {
     return _mm512_mul_ps(value, _mm512_set1_ps(scale));
+  }
+  LFTRACK_AVX512 inline __m512 corner(const Grid& grid, __m512i iu, __m512i iv, __m512i is, __m512i it, int k,
+                                      __m512 ws, __m512 wt) const {
+    return indexed_corner(*this, grid, iu, iv, is, it, k, ws, wt);
+  }
+};
+
+// Vector-quantised samples: one 16-bit codeword index per 2 x 2 x 2 x 2 tile, codewords of 16
+// floats (element 8 du + 4 dv + 2 ds + dt). Gathers only: a sample costs a code and a codeword
+// element.
+struct VqSamples {
+  static constexpr bool kRuns = false;
+  using Pairs = FloatSamples::Pairs;
+  const float* codebook;
+  // The codes, read as the 4-byte words that end at each code: the codebook lies before the
+  // codes (at least one 64-byte codeword), so no read leaves the field's payload.
+  const std::uint16_t* codes;
+  int tiles_v, tiles_s, tiles_t;
+  LFTRACK_AVX512 static inline Pairs select(__mmask16 mask, Pairs x, Pairs y) {
+    return FloatSamples::select(mask, x, y);
+  }
+  LFTRACK_AVX512 static inline void split(Pairs p, __m512* first, __m512* second) {
+    FloatSamples::split(p, first, second);
+  }
+  LFTRACK_AVX512 inline __m512 finish(__m512 value) const { return value; }
+  // Samples of one (u, v, s) row at t for every lane, given that row's tile offset and element
+  // bits: tile + (t >> 1), element | (t & 1).
+  LFTRACK_AVX512 inline __m512 at(__m512i row_tile, __m512i row_bits, __m512i t) const {
+    const __mmask16 all = 0xffff;
+    const __m512i tile = _mm512_add_epi32(row_tile, _mm512_srli_epi32(t, 1));
+    const __m512i words = _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), all,
+                                                      _mm512_sub_epi32(tile, _mm512_set1_epi32(1)), codes, 2);
+    const __m512i code = _mm512_srli_epi32(words, 16);
+    const __m512i element = _mm512_or_si512(row_bits, _mm512_and_si512(t, _mm512_set1_epi32(1)));
+    return _mm512_mask_i32gather_ps(_mm512_setzero_ps(), all,
+                                    _mm512_add_epi32(_mm512_slli_epi32(code, 4), element), codebook, 4);
+  }
+  LFTRACK_AVX512 inline __m512 corner(const Grid&, __m512i iu, __m512i iv, __m512i is, __m512i it, int k,
+                                      __m512 ws, __m512 wt) const {
+    const __m512i one = _mm512_set1_epi32(1);
+    const __m512i u = _mm512_add_epi32(iu, _mm512_set1_epi32(k >> 1));
+    const __m512i v = _mm512_add_epi32(iv, _mm512_set1_epi32(k & 1));
+    const __m512i uv_tile = _mm512_mullo_epi32(
+        _mm512_add_epi32(_mm512_mullo_epi32(_mm512_srli_epi32(u, 1), _mm512_set1_epi32(tiles_v)),
+                         _mm512_srli_epi32(v, 1)),
+        _mm512_set1_epi32(tiles_s * tiles_t));
+    const __m512i uv_bits = _mm512_or_si512(_mm512_slli_epi32(_mm512_and_si512(u, one), 3),
+                                            _mm512_slli_epi32(_mm512_and_si512(v, one), 2));
+    Pairs rows[2];
+    for (int ds = 0; ds < 2; ++ds) {
+      const __m512i s = _mm512_add_epi32(is, _mm512_set1_epi32(ds));
+      const __m512i row_tile =
+          _mm512_add_epi32(uv_tile, _mm512_mullo_epi32(_mm512_srli_epi32(s, 1), _mm512_set1_epi32(tiles_t)));
+      const __m512i row_bits = _mm512_or_si512(uv_bits, _mm512_slli_epi32(_mm512_and_si512(s, one), 1));
+      rows[ds] = {at(row_tile, row_bits, it), at(row_tile, row_bits, _mm512_add_epi32(it, one))};
+    }
+    return blend_st<VqSamples>(rows[0], rows[1], ws, wt);
   }
 };
 
@@ -124,8 +209,7 @@ LFTRACK_AVX512 int render_avx512(const Samples& f, const LightFieldGeometry& g, 
   const int nt = g.size[3];
   const std::size_t su = std::size_t(g.size[1]) * g.size[2] * g.size[3],
                     sv = std::size_t(g.size[2]) * g.size[3];
-  const __m512i v_su = _mm512_set1_epi32(int(su)), v_sv = _mm512_set1_epi32(int(sv)),
-                v_ss = _mm512_set1_epi32(nt);
+  const Grid grid{_mm512_set1_epi32(int(su)), _mm512_set1_epi32(int(sv)), _mm512_set1_epi32(nt)};
   const __m512i top_u = _mm512_set1_epi32(g.size[0] - 2), top_v = _mm512_set1_epi32(g.size[1] - 2);
   const __m512i top_s = _mm512_set1_epi32(g.size[2] - 2), top_t = _mm512_set1_epi32(g.size[3] - 2);
   const __m512i one = _mm512_set1_epi32(1);
@@ -181,49 +265,46 @@ LFTRACK_AVX512 int render_avx512(const Samples& f, const LightFieldGeometry& g, 
 
       __m512 corner[4];  // (u, v) cells (0,0), (0,1), (1,0), (1,1), each blended in (s, t)
       bool done = false;
-      if (inside == 0xffff) {
-        // The run test: one (u, v) cell for all lanes, t within 31 samples of the lowest (lanes
-        // 0 and 15 hold the extremes: t and s are monotonic along a row), s within three rows.
-        const int u0 = lane_value(iu, 0), v0 = lane_value(iv, 0);
-        const __mmask16 same_uv = _mm512_cmpeq_epi32_mask(iu, _mm512_set1_epi32(u0)) &
-                                  _mm512_cmpeq_epi32_mask(iv, _mm512_set1_epi32(v0));
-        const int t_first = lane_value(it, 0), t_last = lane_value(it, 15);
-        const int s_first = lane_value(is, 0), s_last = lane_value(is, 15);
-        const int t0 = std::min(t_first, t_last), s0 = std::min(s_first, s_last);
-        const int t_span = std::max(t_first, t_last) - t0, s_span = std::max(s_first, s_last) - s0;
-        if (same_uv == 0xffff && t_span <= 30 && s_span <= 2 && t0 + 32 <= nt) {
-          const __m512i dt = _mm512_sub_epi32(it, _mm512_set1_epi32(t0));
-          const __m512i dt_next = _mm512_add_epi32(dt, one);
-          // Lanes whose top row is below s0 + 1 and s0 + 2.
-          const __mmask16 below1 = _mm512_cmpgt_epi32_mask(is, _mm512_set1_epi32(s0));
-          const __mmask16 below2 = _mm512_cmpgt_epi32_mask(is, _mm512_set1_epi32(s0 + 1));
-          for (int k = 0; k < 4; ++k) {
-            const std::size_t run0 = std::size_t(u0 + (k >> 1)) * su + std::size_t(v0 + (k & 1)) * sv +
-                                     std::size_t(s0) * std::size_t(nt) + std::size_t(t0);
-            // Rows s0 .. s0 + s_span + 1 (s0 + s_span <= size - 2); each lane's top row is
-            // is - s0 of them, its bottom row the next.
-            typename Samples::Pairs rows[4];
-            for (int row = 0; row <= s_span + 1; ++row)
-              rows[row] = f.run(run0 + std::size_t(row) * std::size_t(nt), dt, dt_next);
-            typename Samples::Pairs top = rows[0], bottom = rows[1];
-            if (s_span >= 1)
-              top = Samples::select(below1, top, rows[1]), bottom = Samples::select(below1, bottom, rows[2]);
-            if (s_span == 2)
-              top = Samples::select(below2, top, rows[2]), bottom = Samples::select(below2, bottom, rows[3]);
-            corner[k] = blend_st<Samples>(top, bottom, ws, wt);
+      if constexpr (Samples::kRuns) {
+        if (inside == 0xffff) {
+          // The run test: one (u, v) cell for all lanes, t within 31 samples of the lowest (lanes
+          // 0 and 15 hold the extremes: t and s are monotonic along a row), s within three rows.
+          const int u0 = lane_value(iu, 0), v0 = lane_value(iv, 0);
+          const __mmask16 same_uv = _mm512_cmpeq_epi32_mask(iu, _mm512_set1_epi32(u0)) &
+                                    _mm512_cmpeq_epi32_mask(iv, _mm512_set1_epi32(v0));
+          const int t_first = lane_value(it, 0), t_last = lane_value(it, 15);
+          const int s_first = lane_value(is, 0), s_last = lane_value(is, 15);
+          const int t0 = std::min(t_first, t_last), s0 = std::min(s_first, s_last);
+          const int t_span = std::max(t_first, t_last) - t0, s_span = std::max(s_first, s_last) - s0;
+          if (same_uv == 0xffff && t_span <= 30 && s_span <= 2 && t0 + 32 <= nt) {
+            const __m512i dt = _mm512_sub_epi32(it, _mm512_set1_epi32(t0));
+            const __m512i dt_next = _mm512_add_epi32(dt, one);
+            // Lanes whose top row is below s0 + 1 and s0 + 2.
+            const __mmask16 below1 = _mm512_cmpgt_epi32_mask(is, _mm512_set1_epi32(s0));
+            const __mmask16 below2 = _mm512_cmpgt_epi32_mask(is, _mm512_set1_epi32(s0 + 1));
+            for (int k = 0; k < 4; ++k) {
+              const std::size_t run0 = std::size_t(u0 + (k >> 1)) * su + std::size_t(v0 + (k & 1)) * sv +
+                                       std::size_t(s0) * std::size_t(nt) + std::size_t(t0);
+              // Rows s0 .. s0 + s_span + 1 (s0 + s_span <= size - 2); each lane's top row is
+              // is - s0 of them, its bottom row the next.
+              typename Samples::Pairs rows[4];
+              for (int row = 0; row <= s_span + 1; ++row)
+                rows[row] = f.run(run0 + std::size_t(row) * std::size_t(nt), dt, dt_next);
+              typename Samples::Pairs top = rows[0], bottom = rows[1];
+              if (s_span >= 1)
+                top = Samples::select(below1, top, rows[1]),
+                bottom = Samples::select(below1, bottom, rows[2]);
+              if (s_span == 2)
+                top = Samples::select(below2, top, rows[2]),
+                bottom = Samples::select(below2, bottom, rows[3]);
+              corner[k] = blend_st<Samples>(top, bottom, ws, wt);
+            }
+            done = true;
           }
-          done = true;
         }
       }
       if (!done) {
-        const __m512i st = _mm512_add_epi32(_mm512_mullo_epi32(is, v_ss), it);
-        const __m512i i00 = _mm512_add_epi32(
-            _mm512_add_epi32(_mm512_mullo_epi32(iu, v_su), _mm512_mullo_epi32(iv, v_sv)), st);
-        for (int k = 0; k < 4; ++k) {
-          const __m512i idx = _mm512_add_epi32(i00, _mm512_add_epi32(k >> 1 ? v_su : _mm512_setzero_si512(),
-                                                                     k & 1 ? v_sv : _mm512_setzero_si512()));
-          corner[k] = blend_st<Samples>(f.gather(idx), f.gather(_mm512_add_epi32(idx, v_ss)), ws, wt);
-        }
+        for (int k = 0; k < 4; ++k) corner[k] = f.corner(grid, iu, iv, is, it, k, ws, wt);
       }
       const __m512 low = _mm512_fmadd_ps(wv, _mm512_sub_ps(corner[1], corner[0]), corner[0]);
       const __m512 high = _mm512_fmadd_ps(wv, _mm512_sub_ps(corner[3], corner[2]), corner[2]);
@@ -256,6 +337,13 @@ int render_fixed16_avx512(const std::uint16_t* codes, float scale, const LightFi
   return render_avx512(Fixed16Samples{codes, scale}, g, m, out, valid, cols, r_begin, r_end);
 }
 
+int render_vq_avx512(const float* codebook, const std::uint16_t* codes, const LightFieldGeometry& g,
+                     const RayMap& m, ImageView<float> out, ImageView<unsigned char> valid, int cols,
+                     int r_begin, int r_end) {
+  const VqSamples f{codebook, codes, (g.size[1] + 1) / 2, (g.size[2] + 1) / 2, (g.size[3] + 1) / 2};
+  return render_avx512(f, g, m, out, valid, cols, r_begin, r_end);
+}
+
 #else
 
 bool light_field_avx512_available() {
@@ -267,6 +355,10 @@ int render_float_avx512(const float*, const LightFieldGeometry&, const RayMap&, 
 }
 int render_fixed16_avx512(const std::uint16_t*, float, const LightFieldGeometry&, const RayMap&,
                           ImageView<float>, ImageView<unsigned char>, int, int, int) {
+  return 0;
+}
+int render_vq_avx512(const float*, const std::uint16_t*, const LightFieldGeometry&, const RayMap&,
+                     ImageView<float>, ImageView<unsigned char>, int, int, int) {
   return 0;
 }
 

@@ -42,5 +42,10 @@ int render_float_avx512(const float* samples, const LightFieldGeometry& g, const
 int render_fixed16_avx512(const std::uint16_t* codes, float scale, const LightFieldGeometry& g,
                           const RayMap& m, ImageView<float> out, ImageView<unsigned char> valid, int cols,
                           int r_begin, int r_end);
+// VQ storage, gathers only. The codes must follow the codebook in one buffer (as LightField
+// lays them out): a code is read as the 4-byte word ending at it.
+int render_vq_avx512(const float* codebook, const std::uint16_t* codes, const LightFieldGeometry& g,
+                     const RayMap& m, ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                     int r_end);
 
 }  // namespace lftrack::tracking

@@ -248,6 +248,11 @@ class LightFieldRenderer final : public DrrRenderer {
           break;
         }
         case LightFieldStorage::kVq: {
+          if (use_avx512_) {
+            n = render_vq_avx512(field->codebook(), field->tile_codes(), g, m, out, extras->valid,
+                                 window.cols, r0, r1);
+            break;
+          }
           const VqFetch f{field->codebook(), field->tile_codes(), std::size_t(s[1] + 1) / 2,
                           std::size_t(s[2] + 1) / 2, std::size_t(s[3] + 1) / 2};
           n = render_vq(f, m, g, out, extras->valid, window.cols, r0, r1);
@@ -268,8 +273,8 @@ class LightFieldRenderer final : public DrrRenderer {
   std::vector<std::shared_ptr<const LightField>> fields_;
   ThreadPool* pool_;
   std::string name_;
-  // Float and 16-bit fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first
-  // choice) or AVX2 + FMA.
+  // Fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first choice; every
+  // storage mode) or AVX2 + FMA (float and 16-bit).
   bool use_avx512_ = false;
   bool use_avx2_ = false;
 };
