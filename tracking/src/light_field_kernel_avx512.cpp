@@ -267,16 +267,22 @@ LFTRACK_AVX512 int render_avx512(const Samples& f, const LightFieldGeometry& g, 
       bool done = false;
       if constexpr (Samples::kRuns) {
         if (inside == 0xffff) {
-          // The run test: one (u, v) cell for all lanes, t within 31 samples of the lowest (lanes
-          // 0 and 15 hold the extremes: t and s are monotonic along a row), s within three rows.
+          // The run test: one (u, v) cell for all lanes, t within 31 samples, s within three
+          // rows. Lanes 0 and 15 give the range (t and s are monotonic along a row); every lane
+          // is then checked against it, since rounding may bend monotonicity by a sample where
+          // the coordinates barely change.
           const int u0 = lane_value(iu, 0), v0 = lane_value(iv, 0);
-          const __mmask16 same_uv = _mm512_cmpeq_epi32_mask(iu, _mm512_set1_epi32(u0)) &
-                                    _mm512_cmpeq_epi32_mask(iv, _mm512_set1_epi32(v0));
           const int t_first = lane_value(it, 0), t_last = lane_value(it, 15);
           const int s_first = lane_value(is, 0), s_last = lane_value(is, 15);
           const int t0 = std::min(t_first, t_last), s0 = std::min(s_first, s_last);
           const int t_span = std::max(t_first, t_last) - t0, s_span = std::max(s_first, s_last) - s0;
-          if (same_uv == 0xffff && t_span <= 30 && s_span <= 2 && t0 + 32 <= nt) {
+          const __mmask16 in_runs = _mm512_cmpeq_epi32_mask(iu, _mm512_set1_epi32(u0)) &
+                                    _mm512_cmpeq_epi32_mask(iv, _mm512_set1_epi32(v0)) &
+                                    _mm512_cmpge_epi32_mask(it, _mm512_set1_epi32(t0)) &
+                                    _mm512_cmple_epi32_mask(it, _mm512_set1_epi32(t0 + t_span)) &
+                                    _mm512_cmpge_epi32_mask(is, _mm512_set1_epi32(s0)) &
+                                    _mm512_cmple_epi32_mask(is, _mm512_set1_epi32(s0 + s_span));
+          if (in_runs == 0xffff && t_span <= 30 && s_span <= 2 && t0 + 32 <= nt) {
             const __m512i dt = _mm512_sub_epi32(it, _mm512_set1_epi32(t0));
             const __m512i dt_next = _mm512_add_epi32(dt, one);
             // Lanes whose top row is below s0 + 1 and s0 + 2.
