@@ -1,5 +1,5 @@
-// The AVX-512 light-field kernel: sixteen pixels of a row per iteration, and, where it can, no
-// gathers at all.
+// The AVX-512 light-field kernels: sixteen pixels of a row per iteration and, for float and
+// 16-bit fields, wherever possible no gathers at all.
 //
 // Why that is possible: across a DRR the (u, v) coordinates of the pixels' rays barely move (all
 // rays leave one source, and the (u, v) plane passes through the nominal source), while (s, t)
@@ -8,11 +8,11 @@
 // ray coordinates are a linear-fractional, hence monotonic, function of the column; t runs along
 // the detector's rows, see light_field.hpp) and their s indices span at most three values. Then
 // each (u, v) cell's samples for all sixteen pixels lie in two to four runs of 32 consecutive
-// samples of the field, one per s row: the kernel loads
-// those runs and hands each pixel its pair (t, t + 1) with one in-register permutation (vpermw
-// for 16-bit samples, vpermt2ps for float) instead of the AVX2 kernel's 8 gathers. Chunks that do
-// not qualify (at the field's edges, out-of-field pixels, a row's tail, a (u, v) cell boundary)
-// take a gather path with the same arithmetic.
+// samples of the field, one per s row: the kernel loads those runs and hands each pixel its pair
+// (t, t + 1) with one in-register permutation (vpermw for 16-bit samples, vpermt2ps for float)
+// instead of the AVX2 kernel's 8 gathers. Chunks that do not qualify (at the field's edges,
+// out-of-field pixels, a row's tail, a (u, v) cell boundary) take a gather path with the same
+// arithmetic. VQ fields always gather (a code, then a codeword element, per sample).
 //
 // The results equal the scalar kernel's up to float rounding (fused multiply-adds). Compiled
 // for AVX-512F and BW through function target attributes and chosen at run time, so the binary
@@ -44,7 +44,8 @@ namespace {
 // row, for every lane) stay in the storage's own form (`Pairs`) until they have been selected
 // by s row, then become floats (`split`); the interpolated value is finished once (`finish`:
 // the 16-bit scale, which commutes with the interpolation).
-//   gather(idx):            the pairs at sample index idx (every lane's idx inside the field)
+//   corner(grid, iu, iv, is, it, k, ws, wt): the gather path, (u, v) cell k blended in (s, t)
+//   kRuns:                  whether the storage has the run path:
 //   run(offset, dt, dt1):   lane k's pair from the run of 32 samples at offset: dt_k, dt_k + 1
 //   select(mask, x, y):     y in the mask's lanes, x elsewhere
 
@@ -297,12 +298,14 @@ LFTRACK_AVX512 int render_avx512(const Samples& f, const LightFieldGeometry& g, 
               for (int row = 0; row <= s_span + 1; ++row)
                 rows[row] = f.run(run0 + std::size_t(row) * std::size_t(nt), dt, dt_next);
               typename Samples::Pairs top = rows[0], bottom = rows[1];
-              if (s_span >= 1)
-                top = Samples::select(below1, top, rows[1]),
+              if (s_span >= 1) {
+                top = Samples::select(below1, top, rows[1]);
                 bottom = Samples::select(below1, bottom, rows[2]);
-              if (s_span == 2)
-                top = Samples::select(below2, top, rows[2]),
+              }
+              if (s_span == 2) {
+                top = Samples::select(below2, top, rows[2]);
                 bottom = Samples::select(below2, bottom, rows[3]);
+              }
               corner[k] = blend_st<Samples>(top, bottom, ws, wt);
             }
             done = true;
