@@ -46,8 +46,12 @@ class HeaderWriter {
  public:
   explicit HeaderWriter(unsigned char* buffer) : b_(buffer) {}
   template <class T>
-  void at(std::size_t offset, const T& value) { std::memcpy(b_ + offset, &value, sizeof(T)); }
-  void vec(std::size_t offset, const Eigen::Vector3d& v) { for (int i = 0; i < 3; ++i) at(offset + 8 * i, v[i]); }
+  void at(std::size_t offset, const T& value) {
+    std::memcpy(b_ + offset, &value, sizeof(T));
+  }
+  void vec(std::size_t offset, const Eigen::Vector3d& v) {
+    for (int i = 0; i < 3; ++i) at(offset + 8 * i, v[i]);
+  }
 
  private:
   unsigned char* b_;
@@ -62,7 +66,9 @@ class HeaderReader {
     std::memcpy(&value, b_ + offset, sizeof(T));
     return value;
   }
-  Eigen::Vector3d vec(std::size_t offset) const { return {at<double>(offset), at<double>(offset + 8), at<double>(offset + 16)}; }
+  Eigen::Vector3d vec(std::size_t offset) const {
+    return {at<double>(offset), at<double>(offset + 8), at<double>(offset + 16)};
+  }
 
  private:
   const unsigned char* b_;
@@ -77,9 +83,12 @@ std::size_t tile_count(const std::array<int, 4>& size) {
 std::size_t expected_payload(const LightField::Header& h) {
   const auto samples = static_cast<std::size_t>(h.geometry.sample_count());
   switch (h.storage) {
-    case LightFieldStorage::kFloat32: return samples * 4;
-    case LightFieldStorage::kFixed16: return samples * 2;
-    case LightFieldStorage::kVq: return std::size_t(h.codebook_size) * 64 + tile_count(h.geometry.size) * 2;
+    case LightFieldStorage::kFloat32:
+      return samples * 4;
+    case LightFieldStorage::kFixed16:
+      return samples * 2;
+    case LightFieldStorage::kVq:
+      return std::size_t(h.codebook_size) * 64 + tile_count(h.geometry.size) * 2;
   }
   return 0;
 }
@@ -102,8 +111,12 @@ void LightField::point_at(const unsigned char* payload) {
   codebook_ = nullptr;
   codes_ = nullptr;
   switch (header_.storage) {
-    case LightFieldStorage::kFloat32: f32_ = reinterpret_cast<const float*>(payload); break;
-    case LightFieldStorage::kFixed16: q16_ = reinterpret_cast<const std::uint16_t*>(payload); break;
+    case LightFieldStorage::kFloat32:
+      f32_ = reinterpret_cast<const float*>(payload);
+      break;
+    case LightFieldStorage::kFixed16:
+      q16_ = reinterpret_cast<const std::uint16_t*>(payload);
+      break;
     case LightFieldStorage::kVq:
       codebook_ = reinterpret_cast<const float*>(payload);
       codes_ = reinterpret_cast<const std::uint16_t*>(payload + std::size_t(header_.codebook_size) * 64);
@@ -117,7 +130,8 @@ float LightField::sample(int iu, int iv, int is, int it) const {
     case LightFieldStorage::kFloat32:
       return f32_[((std::size_t(iu) * s[1] + iv) * s[2] + is) * s[3] + it];
     case LightFieldStorage::kFixed16:
-      return static_cast<float>(q16_[((std::size_t(iu) * s[1] + iv) * s[2] + is) * s[3] + it] * header_.fixed_scale);
+      return static_cast<float>(q16_[((std::size_t(iu) * s[1] + iv) * s[2] + is) * s[3] + it] *
+                                header_.fixed_scale);
     case LightFieldStorage::kVq: {
       const std::size_t tv = (s[1] + 1) / 2, ts = (s[2] + 1) / 2, tt = (s[3] + 1) / 2;
       const std::size_t tile = ((std::size_t(iu >> 1) * tv + (iv >> 1)) * ts + (is >> 1)) * tt + (it >> 1);
@@ -155,7 +169,8 @@ Status LightField::save(const std::filesystem::path& file) const {
   w.at(400, header_.ct_hash);
   w.at(408, header_.plan_hash);
   w.at(416, static_cast<std::uint64_t>(payload_bytes_));
-  const unsigned char* payload = mapping_ ? static_cast<const unsigned char*>(mapping_) + kHeaderBytes : owned_.data();
+  const unsigned char* payload =
+      mapping_ ? static_cast<const unsigned char*>(mapping_) + kHeaderBytes : owned_.data();
   w.at(424, crc_of(payload, payload_bytes_));
   std::strncpy(reinterpret_cast<char*>(header + 428), g.view_name.c_str(), 63);
   w.at(1020, crc_of(header, 1020));
@@ -188,7 +203,8 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   const auto bytes = static_cast<std::size_t>(st.st_size);
   if (bytes < kHeaderBytes) {
     ::close(fd);
-    return corrupt_data(name + ": truncated light-field file (" + std::to_string(bytes) + " bytes; the header alone is 1024)");
+    return corrupt_data(name + ": truncated light-field file (" + std::to_string(bytes) +
+                        " bytes; the header alone is 1024)");
   }
   void* map = mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, fd, 0);
   ::close(fd);
@@ -202,8 +218,9 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   if (std::memcmp(data, kMagic, 8) != 0) return corrupt_data(name + ": not a light-field file (bad magic)");
   const auto version = r.at<std::uint32_t>(8);
   if (version != kVersion) {
-    return unsupported(name + ": unknown light-field file version " + std::to_string(version) + " (this build reads version " +
-                       std::to_string(kVersion) + "); run `lftrack precompute` again");
+    return unsupported(name + ": unknown light-field file version " + std::to_string(version) +
+                       " (this build reads version " + std::to_string(kVersion) +
+                       "); run `lftrack precompute` again");
   }
   if (r.at<std::uint32_t>(1020) != crc_of(data, 1020)) {
     return corrupt_data(name + ": header is corrupted (checksum mismatch)");
@@ -240,8 +257,8 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   }
   const std::size_t payload = expected_payload(h);
   if (r.at<std::uint64_t>(416) != payload || bytes != kHeaderBytes + payload) {
-    return corrupt_data(name + ": truncated or padded: the file has " + std::to_string(bytes) + " bytes, its header says " +
-                        std::to_string(kHeaderBytes + payload));
+    return corrupt_data(name + ": truncated or padded: the file has " + std::to_string(bytes) +
+                        " bytes, its header says " + std::to_string(kHeaderBytes + payload));
   }
   if (r.at<std::uint32_t>(424) != crc_of(data + kHeaderBytes, payload)) {
     return corrupt_data(name + ": sample data is corrupted (checksum mismatch)");
@@ -251,8 +268,10 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
                                hex(*expected_ct_hash) + "); run `lftrack precompute` again");
   }
   if (expected_plan_hash && *expected_plan_hash != h.plan_hash) {
-    return failed_precondition(name + ": built for another geometry or light-field settings (view, ROI, pose, envelope or "
-                               "resolution changed); run `lftrack precompute` again");
+    return failed_precondition(
+        name +
+        ": built for another geometry or light-field settings (view, ROI, pose, envelope or "
+        "resolution changed, or an older lftrack planned it); run `lftrack precompute` again");
   }
   field->payload_bytes_ = payload;
   field->point_at(data + kHeaderBytes);

@@ -189,8 +189,13 @@ std::uint64_t volume_hash(const MuVolume& mu) {
   return combine(geometry, data);
 }
 
+// How plan_light_field lays a field out, in the plan hash so that files planned otherwise are
+// rebuilt. 2: t along the detector's rows and a (u, v) sample at the nominal source.
+constexpr std::uint32_t kPlanConvention = 2;
+
 std::uint64_t plan_hash(const LightFieldPlanInput& in, const LightFieldSpec& spec) {
   uLong view = crc32(0L, Z_NULL, 0);
+  feed(&view, kPlanConvention);
   const XrayView& v = in.view_room;
   view = crc32(view, reinterpret_cast<const Bytef*>(v.name.data()), static_cast<uInt>(v.name.size()));
   feed_vector(&view, v.source_mm);

@@ -8,11 +8,9 @@
 //   (s, t): the plane through C,   point C + s e1 + t e2
 // with e1, e2 unit vectors perpendicular to n: e1 along the detector's row axis (the way the row
 // index grows), e2 along its column axis, so that t, the samples' innermost axis, runs along a
-// detector row (files built before this convention carry their own axes and still render
-// correctly, only without the AVX-512 kernel's gather-free runs). A sample is the line integral of mu along
-// the whole line through both points, through the entire volume (the effective image plane lies beyond the
-// CT), so a DRR pixel whose ray runs from its source through the patient to the detector reads the same
-// value.
+// detector row. A sample is the line integral of mu along the whole line through both points,
+// through the entire volume (the effective image plane lies beyond the CT), so a DRR pixel whose
+// ray runs from its source through the patient to the detector reads the same value.
 //
 // Samples sit on a regular grid: axis a has size[a] samples at lo[a] + i * spacing(a),
 // i = 0..size[a]-1. Rendering interpolates quadrilinearly between the 16 samples around a ray;
@@ -169,7 +167,8 @@ class LightField {
 // Identity of an attenuation volume (geometry and every voxel) for light-field files.
 std::uint64_t volume_hash(const MuVolume& mu);
 // Identity of a plan input and spec (view, window, pose, origin, ROI, envelope, resolution and
-// margin; not the storage mode, which a file states on its own) for light-field files.
+// margin; not the storage mode, which a file states on its own) and of the planning convention
+// (a file planned by an older lftrack is stale) for light-field files.
 std::uint64_t plan_hash(const LightFieldPlanInput& input, const LightFieldSpec& spec);
 
 }  // namespace lftrack::tracking
