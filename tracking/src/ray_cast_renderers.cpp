@@ -1,8 +1,9 @@
 // The two ray-casting renderers: exact Siddon-Jacobs and fixed-step trilinear. Both walk one ray
 // per pixel from the source to the pixel centre through GridRayCaster; they differ only in the
-// line-integral rule.
+// line-integral rule (and Siddon hands its rays over a row at a time, for the vector lanes).
 
 #include <algorithm>
+#include <array>
 
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
@@ -24,11 +25,31 @@ class RayCastRenderer final : public DrrRenderer {
 
   Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
                    ImageView<float> out, RenderExtras* extras) const override {
-    render_pixel_rays(volume_->geometry, T_room_from_ct, view, window, out, extras, pool_,
-                      [&](const Eigen::Vector3d& source, const Eigen::Vector3d& pixel) {
-                        return rule_ == RayRule::kSiddon ? caster_.siddon(source, pixel)
-                                                         : caster_.trilinear(source, pixel, step_mm_);
-                      });
+    if (rule_ == RayRule::kTrilinear) {
+      render_pixel_rays(volume_->geometry, T_room_from_ct, view, window, out, extras, pool_,
+                        [&](const Eigen::Vector3d& source, const Eigen::Vector3d& pixel) {
+                          return caster_.trilinear(source, pixel, step_mm_);
+                        });
+      return {};
+    }
+    // Siddon: a row's rays go to siddon_batch in groups (vector lanes where the CPU has them; the
+    // same bits as one ray at a time), with buffers on the stack: nothing is allocated.
+    render_pixel_ray_rows(volume_->geometry, T_room_from_ct, view, window, out, extras, pool_,
+                          [&](const Eigen::Vector3d& source, const Eigen::Vector3d& first_pixel,
+                              const Eigen::Vector3d& per_col, int cols, float* dst) {
+                            constexpr int kGroup = 64;
+                            std::array<Eigen::Vector3d, kGroup> from, to;
+                            std::array<double, kGroup> integrals;
+                            from.fill(source);
+                            for (int c0 = 0; c0 < cols; c0 += kGroup) {
+                              const auto n = static_cast<std::size_t>(std::min(kGroup, cols - c0));
+                              for (std::size_t k = 0; k < n; ++k)
+                                to[k] = first_pixel + per_col * (c0 + static_cast<int>(k));
+                              caster_.siddon_batch({from.data(), n}, {to.data(), n}, {integrals.data(), n});
+                              for (std::size_t k = 0; k < n; ++k)
+                                dst[c0 + static_cast<int>(k)] = static_cast<float>(integrals[k]);
+                            }
+                          });
     return {};
   }
 
