@@ -323,9 +323,13 @@ LFTRACK_AVX512 int render_avx512(const Samples& f, const LightFieldGeometry& g, 
       _mm512_mask_storeu_ps(dst + c, in_row, value);
       if (ok_row) {
         const __m128i flags = _mm512_cvtepi32_epi8(_mm512_maskz_mov_epi32(inside, one));
-        alignas(16) unsigned char bytes[16];
-        _mm_store_si128(reinterpret_cast<__m128i*>(bytes), flags);
-        for (int k = 0; k < lanes; ++k) ok_row[c + k] = bytes[k];
+        if (lanes == 16) {
+          _mm_storeu_si128(reinterpret_cast<__m128i*>(ok_row + c), flags);
+        } else {
+          alignas(16) unsigned char bytes[16];
+          _mm_store_si128(reinterpret_cast<__m128i*>(bytes), flags);
+          for (int k = 0; k < lanes; ++k) ok_row[c + k] = bytes[k];
+        }
       }
     }
   }
