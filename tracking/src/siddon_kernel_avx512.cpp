@@ -67,14 +67,11 @@ LFTRACK_AVX512 Lanes load(const SiddonWalk* w) {
 // One crossing for every lane.
 LFTRACK_AVX512 inline void step(const float* mu, Lanes& l) {
   const __m512i one = _mm512_set1_epi64(1), zero = _mm512_setzero_si512();
-  // The masked forms with explicit zero sources: GCC 12 flags the plain forms' undefined ones.
-  const __mmask8 all = 0xff;
-  const __m512d nearest = _mm512_maskz_min_pd(all, l.next_x, _mm512_maskz_min_pd(all, l.next_y, l.next_z));
+  const __m512d nearest = _mm512_min_pd(l.next_x, _mm512_min_pd(l.next_y, l.next_z));
   const __mmask8 go = _mm512_cmp_pd_mask(nearest, l.a_end, _CMP_LT_OQ);
   // The segment in the current voxel ends at the crossing, or at the ray's end.
   const __m512d end = _mm512_mask_blend_pd(go, l.a_end, nearest);
-  const __m512d mu_here =
-      _mm512_maskz_cvtps_pd(all, _mm512_mask_i64gather_ps(_mm256_setzero_ps(), all, l.offset, mu, 4));
+  const __m512d mu_here = _mm512_cvtps_pd(_mm512_i64gather_ps(l.offset, mu, 4));
   l.sum = _mm512_add_pd(l.sum, _mm512_mul_pd(mu_here, _mm512_sub_pd(end, l.a)));
   l.a = end;
   l.live = go != 0;
