@@ -12,6 +12,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <random>
 #include <thread>
@@ -188,11 +189,23 @@ TEST(Journal, SurvivesKillNineAtAnyMoment) {
         while (!(*w)->append(record(i))) std::this_thread::yield();
       }
     }
-    std::this_thread::sleep_for(std::chrono::microseconds(20000 + rng() % 80000));
+    // The random moment starts once the child has written its header and a first record: on a
+    // loaded host, starting the child can take longer than the shortest sleep, and a kill before
+    // any write would test nothing. The child is killed on every path.
+    const auto started = std::chrono::steady_clock::now();
+    const auto first_record_bytes = static_cast<std::uintmax_t>(32 + 8 + sizeof(JournalRecord) + 4);
+    bool writing = false;
+    while (!writing && std::chrono::steady_clock::now() - started < std::chrono::seconds(10)) {
+      std::error_code ec;
+      writing = std::filesystem::file_size(file, ec) >= first_record_bytes && !ec;
+      if (!writing) std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    if (writing) std::this_thread::sleep_for(std::chrono::microseconds(20000 + rng() % 80000));
     kill(child, SIGKILL);
     int status = 0;
     waitpid(child, &status, 0);
     ASSERT_TRUE(WIFSIGNALED(status));
+    ASSERT_TRUE(writing) << "round " << round << ": the child wrote no record in 10 s";
     auto j = read_journal(file);
     ASSERT_TRUE(j.ok()) << "round " << round << ": " << j.status().message();
     ASSERT_GT(j->records.size(), 0u) << "round " << round;
