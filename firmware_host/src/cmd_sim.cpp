@@ -8,7 +8,10 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <cstdlib>
+#include <ctime>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/allocation_counter.hpp"
@@ -24,9 +27,14 @@ struct SimOptions {
   std::int64_t cycles = 300;
   bool json = false;
   bool fast = false;
-  std::string journal = "out/sim/journal.lfj";
+  // The journal: by default a new time-stamped file in journal_folder; `--journal FILE` names it
+  // (refused when it exists, unless --overwrite); `--journal ''` writes none.
+  std::string journal_folder = "out/sim";
+  std::string journal;
+  bool journal_named = false;
+  bool overwrite = false;
   std::string control;
-  double auto_resume_s = -1;
+  std::optional<double> auto_resume_s;
   std::string rt;  // enforce / ignore; empty: the scene's
   std::string lf_dir;
   std::string archive;   // frames archived here
@@ -39,6 +47,31 @@ std::atomic<LoopSession*> g_session{nullptr};
 
 extern "C" void on_interrupt(int) {
   if (LoopSession* s = g_session.load()) s->request_stop();
+}
+
+// A journal name no earlier run has used: <folder>/journal-YYYYmmdd-HHMMSS.lfj (local time), with
+// -2, -3, ... when a run in the same second wrote one. JournalWriter refuses an existing file
+// anyway; this only spares the user the refusal.
+std::string timestamped_journal(const std::string& folder) {
+  const std::time_t now = std::time(nullptr);
+  std::tm local{};
+  localtime_r(&now, &local);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &local);
+  const std::filesystem::path base = std::filesystem::path(folder) / (std::string("journal-") + stamp);
+  std::string file = base.string() + ".lfj";
+  for (int k = 2; std::filesystem::exists(file) && k < 1000; ++k) file = base.string() + "-" + std::to_string(k) + ".lfj";
+  return file;
+}
+
+// CLI check of --auto-resume at parse time (the text, before it becomes a double).
+std::string check_auto_resume_text(const std::string& text) {
+  char* end = nullptr;
+  const double s = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0') return "'" + text + "' is not a number of seconds";
+  return check_auto_resume_s(s).ok() ? std::string()
+                                      : "'" + text + "' is not from 0 to 3600 seconds (NaN, infinite and "
+                                                     "negative values are refused)";
 }
 
 void print_summary(const LoopSummary& s) {
@@ -63,6 +96,9 @@ void print_summary(const LoopSummary& s) {
   if (s.allocations_per_cycle)
     std::printf(", heap allocations per steady-state cycle %.3f", *s.allocations_per_cycle);
   std::printf("\n");
+  if (s.operator_refused > 0)
+    std::printf("operator commands refused or discarded: %lld (journal: operator_refusal)\n",
+                static_cast<long long>(s.operator_refused));
   for (const LoopTransition& t : s.transitions)
     std::printf("  cycle %6lld  %-5s -> %-5s  %s\n", static_cast<long long>(t.cycle), to_string(t.from),
                 to_string(t.to), t.reason);
@@ -83,8 +119,13 @@ Status run(const SimOptions& o) {
   if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
   // Real-time set-up first, so every thread made afterwards inherits the policy and affinity:
   // the registration's workers run at the cycle's priority; the simulated detectors drop one
-  // level below it, the journal and archive writers to SCHED_OTHER (realtime_setup.hpp).
-  auto report = apply_realtime_setup(rt);
+  // level below it, the journal and archive writers to SCHED_OTHER (realtime_setup.hpp). Only
+  // for runs on the real clock: an offline run (--fast) on SCHED_FIFO would spin every core at
+  // real-time priority and starve the host, for no timing it needs.
+  const bool real_clock = o.mode == SimOptions::Mode::kRun || !o.fast;
+  RealtimeReport offline;
+  offline.offline = true;
+  auto report = real_clock ? apply_realtime_setup(rt) : Result<RealtimeReport>(offline);
   if (!report.ok()) return report.status();
   for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);
   spdlog::info("real-time set-up: {}", report->summary());
@@ -96,14 +137,18 @@ Status run(const SimOptions& o) {
   so.cycles = o.cycles;
   so.simulated_clock = o.fast;
   so.status_line = !o.json && ::isatty(STDERR_FILENO) == 1;
+  so.announce_holds = !so.status_line;
   so.terminal_operator = ::isatty(STDIN_FILENO) == 1;
-  if (!o.journal.empty()) {
+  const std::string journal = o.journal_named ? o.journal : timestamped_journal(o.journal_folder);
+  if (!journal.empty()) {
     std::error_code ec;
-    std::filesystem::create_directories(std::filesystem::path(o.journal).parent_path(), ec);
-    so.journal = o.journal;
+    std::filesystem::create_directories(std::filesystem::path(journal).parent_path(), ec);
+    so.journal = journal;
+    so.journal_options.overwrite = o.overwrite;
   }
+  so.overwrite_archive = o.overwrite;
   so.control_socket = o.control;
-  if (o.auto_resume_s >= 0) so.auto_resume_s = o.auto_resume_s;
+  so.auto_resume_s = o.auto_resume_s;
   so.light_field_dir = o.lf_dir;
   so.archive = o.archive;
   so.replay_sequence = o.sequence;
@@ -136,7 +181,7 @@ Status run(const SimOptions& o) {
     j["period_ms"] = prepared->scene.loop.period_ms;
     j["simulated_clock"] = o.fast;
     j["realtime"] = report->summary();
-    if (!o.journal.empty()) j["journal"] = o.journal;
+    if (!journal.empty()) j["journal"] = journal;
     if (replay != nullptr) {
       const drivers::ReplayCounters& c = replay->counters();
       j["replay"] = {{"sequence", o.sequence},
@@ -203,8 +248,8 @@ Status run(const SimOptions& o) {
           static_cast<long long>(c.timeouts), static_cast<long long>(c.refused),
           drivers::describe_can_faults(robot->faults()).c_str());
     }
-    if (!o.journal.empty())
-      std::printf("journal: %s (lftrack journal export %s)\n", o.journal.c_str(), o.journal.c_str());
+    if (!journal.empty())
+      std::printf("journal: %s (lftrack journal export %s)\n", journal.c_str(), journal.c_str());
   }
   if (!summary->journal_error.empty()) return io_error(summary->journal_error);
   return {};
@@ -214,7 +259,8 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
   auto o = std::make_shared<SimOptions>();
   o->mode = mode;
   if (mode != SimOptions::Mode::kSim) o->cycles = 0;
-  if (mode == SimOptions::Mode::kReplay) o->journal = "out/replay/journal.lfj";
+  if (mode == SimOptions::Mode::kReplay) o->journal_folder = "out/replay";
+  if (mode == SimOptions::Mode::kRun) o->journal_folder = "out/run";
   CLI::App* app = parent->add_subcommand(name, description);
   add_scene_options(app, &o->scene);
   if (mode == SimOptions::Mode::kReplay)
@@ -239,15 +285,24 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
   if (mode != SimOptions::Mode::kReplay)
     app->add_option("--archive", o->archive,
                     "Archive every frame pair in this directory (the format `lftrack replay` reads)");
-  app->add_option("--journal", o->journal, "Journal file ('' for none)")->capture_default_str();
-  app->add_option("--control", o->control, "Control socket path (datagrams: resume, stop, reset, quit)");
+  CLI::Option* journal = app->add_option(
+      "--journal", o->journal,
+      "Journal file ('' for none; default: a new " + o->journal_folder + "/journal-DATE-TIME.lfj); never overwritten");
+  app->add_flag("--overwrite", o->overwrite,
+                "Replace an existing --journal file, or an earlier lftrack archive in the --archive folder");
+  app->add_option("--control", o->control,
+                  "Control socket path, mode 0600 (datagrams: 'resume ID', 'reset ID', stop, quit, status)");
   app->add_option("--auto-resume", o->auto_resume_s,
-                  "An unattended operator resumes this many seconds into each HOLD");
+                  "An unattended operator resumes this many seconds into each HOLD (0 to 3600)")
+      ->check(CLI::Validator(check_auto_resume_text, "SECONDS"));
   app->add_option("--rt", o->rt,
                   "Real-time set-up: enforce or ignore (default: the scene's loop.realtime.mode)")
       ->check(CLI::IsMember({"enforce", "ignore"}));
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
-  return [o] { return run(*o); };
+  return [o, journal] {
+    o->journal_named = journal->count() > 0;
+    return run(*o);
+  };
 }
 
 }  // namespace

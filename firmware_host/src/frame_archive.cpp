@@ -31,6 +31,53 @@ FrameArchive::~FrameArchive() {
   (void)close();
 }
 
+namespace {
+
+// Refuses a directory that holds anything, or with `overwrite` removes an earlier archive's own
+// files (and refuses a directory that holds anything else, which is not ours to remove).
+Status prepare_archive_directory(const std::filesystem::path& directory, bool overwrite) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(directory, ec))) return {};
+  if (!fs::is_directory(directory, ec))
+    return failed_precondition("frame archive " + directory.string() + ": exists and is not a directory");
+  if (fs::is_empty(directory, ec) && !ec) return {};
+  const std::string refuse_hint = ": choose a new folder (lftrack never writes over an archive)";
+  if (!overwrite)
+    return failed_precondition("frame archive " + directory.string() + " is not empty" + refuse_hint +
+                               ", or pass --overwrite to replace an earlier lftrack archive there");
+  std::vector<fs::path> frames;
+  bool has_index = false;
+  for (const fs::directory_entry& e : fs::directory_iterator(directory, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name == "index.csv" && e.is_regular_file()) {
+      has_index = true;
+    } else if (name == "actuator.csv" && e.is_regular_file()) {
+    } else if (name == "frames" && e.is_directory() && !e.is_symlink()) {
+      for (const fs::directory_entry& f : fs::directory_iterator(e.path(), ec)) {
+        if (!f.is_regular_file() || f.is_symlink() || f.path().extension() != ".tif")
+          return failed_precondition("frame archive " + directory.string() + ": " + f.path().string() +
+                                     " is not an archived frame; not removing it" + refuse_hint);
+        frames.push_back(f.path());
+      }
+    } else {
+      return failed_precondition("frame archive " + directory.string() + ": holds " + name +
+                                 ", which is not part of an lftrack archive; not removing it" + refuse_hint);
+    }
+  }
+  if (ec) return io_error("frame archive " + directory.string() + ": " + ec.message());
+  if (!has_index)
+    return failed_precondition("frame archive " + directory.string() +
+                               " holds no index.csv: not an lftrack archive; not removing it" + refuse_hint);
+  for (const fs::path& f : frames) fs::remove(f, ec);
+  fs::remove(directory / "index.csv", ec);
+  fs::remove(directory / "actuator.csv", ec);
+  if (ec) return io_error("frame archive " + directory.string() + ": cannot remove the earlier archive: " + ec.message());
+  return {};
+}
+
+}  // namespace
+
 Result<std::unique_ptr<FrameArchive>> FrameArchive::open(const std::filesystem::path& directory,
                                                          const std::vector<drivers::DetectorShape>& detectors,
                                                          const FrameArchiveOptions& options) {
@@ -40,6 +87,7 @@ Result<std::unique_ptr<FrameArchive>> FrameArchive::open(const std::filesystem::
     if (d.name.empty() || d.name.find_first_of(",\n/") != std::string::npos)
       return invalid_argument("frame archive: detector name '" + d.name +
                               "' cannot name a file or a CSV field");
+  LFTRACK_RETURN_IF_ERROR(prepare_archive_directory(directory, options.overwrite));
   std::unique_ptr<FrameArchive> a(new FrameArchive(directory, detectors, options));
   LFTRACK_RETURN_IF_ERROR(a->index_.open(directory, options.with_actuator).with_context("frame archive"));
   a->thread_ = std::thread([p = a.get()] { p->run(); });

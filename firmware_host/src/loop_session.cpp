@@ -75,8 +75,40 @@ struct LoopSession::Parts {
 LoopSession::LoopSession(std::unique_ptr<Parts> parts) : parts_(std::move(parts)) {}
 LoopSession::~LoopSession() = default;
 
+namespace {
+
+// The journal, the archive and the control socket are three different places: a socket opened
+// over the journal (or the other way round) would lose the record. Checked before anything is
+// created.
+Status check_distinct_paths(const LoopSessionOptions& o) {
+  namespace fs = std::filesystem;
+  const auto same = [](const fs::path& a, const fs::path& b) {
+    return !a.empty() && !b.empty() && fs::weakly_canonical(a) == fs::weakly_canonical(b);
+  };
+  const auto inside = [](const fs::path& file, const fs::path& dir) {
+    if (file.empty() || dir.empty()) return false;
+    const fs::path f = fs::weakly_canonical(file), d = fs::weakly_canonical(dir);
+    const auto mismatch = std::mismatch(d.begin(), d.end(), f.begin(), f.end());
+    return mismatch.first == d.end();
+  };
+  if (same(o.control_socket, o.journal))
+    return invalid_argument("--control and --journal name the same file " + o.journal.string());
+  if (inside(o.control_socket, o.archive) || inside(o.journal, o.archive))
+    return invalid_argument("the journal and the control socket cannot be inside the frame archive " +
+                            o.archive.string());
+  if (inside(o.journal, o.replay_sequence) || inside(o.archive, o.replay_sequence))
+    return invalid_argument("the journal and the archive cannot be inside the replayed sequence " +
+                            o.replay_sequence.string());
+  return {};
+}
+
+}  // namespace
+
 Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p, const LoopSessionOptions& o,
                                                          tracking::ThreadPool* pool) {
+  // Options first: a bad one is refused before minutes of light-field building.
+  if (o.auto_resume_s) LFTRACK_RETURN_IF_ERROR(check_auto_resume_s(*o.auto_resume_s));
+  LFTRACK_RETURN_IF_ERROR(check_distinct_paths(o));
   auto parts = std::make_unique<Parts>();
   auto renderer = make_scene_renderer(p, p.scene.renderer, o.light_field_dir, pool);
   if (!renderer.ok()) return renderer.status().with_context("tracking renderer");
@@ -151,9 +183,17 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
     LFTRACK_RETURN_IF_ERROR(parts->hil_couch->open());
     spdlog::info("hardware in the loop: the couch is {}", endpoint);
   }
+  // The control socket before the records: its path is checked (never another file removed)
+  // before the journal and the archive create anything.
+  if (!o.control_socket.empty()) {
+    auto socket = ControlSocket::open(o.control_socket);
+    if (!socket.ok()) return socket.status();
+    parts->operators.add(std::move(socket).value());
+  }
   if (!o.archive.empty()) {
     FrameArchiveOptions archive_options;
     archive_options.with_actuator = has_couch;
+    archive_options.overwrite = o.overwrite_archive;
     auto archive = FrameArchive::open(o.archive, shapes, archive_options);
     if (!archive.ok()) return archive.status();
     parts->archive = std::move(archive).value();
@@ -167,11 +207,6 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   if (o.terminal_operator) {
     auto terminal = TerminalOperator::open();
     if (terminal.ok()) parts->operators.add(std::move(terminal).value());
-  }
-  if (!o.control_socket.empty()) {
-    auto socket = ControlSocket::open(o.control_socket);
-    if (!socket.ok()) return socket.status();
-    parts->operators.add(std::move(socket).value());
   }
   if (o.auto_resume_s) {
     const double period_s = 1e-3 * p.scene.loop.period_ms;
@@ -210,6 +245,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.cycles = o.cycles;
   settings.simulated_clock = o.simulated_clock;
   settings.status_line = o.status_line;
+  settings.announce_holds = o.announce_holds;
   auto loop = TrackingLoop::create(lp, settings);
   if (!loop.ok()) return loop.status();
   parts->loop = std::move(loop).value();

@@ -10,6 +10,7 @@
 namespace lftrack::host {
 
 std::string RealtimeReport::summary() const {
+  if (offline) return "not applied (offline run on a simulated clock): normal scheduling, memory not locked";
   std::string s = std::string("memory ") + (memory_locked ? "locked" : "not locked") + ", " +
                   (fifo ? "SCHED_FIFO" : "normal scheduling") + ", " + (affinity ? "pinned" : "not pinned");
   return s;

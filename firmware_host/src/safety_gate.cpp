@@ -43,6 +43,8 @@ const char* to_string(GateReason r) {
       return "journal write failed";
     case GateReason::kOverruns:
       return "loop overruns";
+    case GateReason::kOutsideEnvelope:
+      return "registration outside the pose envelope";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -109,7 +111,8 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   // Quality.
   if (!in.frames_ok) return counted(GateReason::kNoFrames);
   if (!in.image_quality_ok) return counted(GateReason::kImageQuality);
-  if (!in.registration_ok) return counted(GateReason::kNoResult);
+  if (!in.registration_ok)
+    return counted(in.registration_failure == GateReason::kOk ? GateReason::kNoResult : in.registration_failure);
   if (in.frame_age_ms > limits.max_frame_age_ms) return counted(GateReason::kStaleFrame);
   if (in.pair_skew_ms > limits.max_pair_skew_ms) return counted(GateReason::kUnpairedFrames);
   double ratio_lo = 1e300, ratio_hi = -1e300;

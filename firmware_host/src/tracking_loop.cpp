@@ -67,6 +67,11 @@ struct TrackingLoop::Impl {
   int consecutive_failures = 0;
   bool approve_next_step = false;
   std::int64_t cycles_in_state = 0;
+  // The HOLD or FAULT the loop is in (0: neither) and the last id given; an operator's resume or
+  // reset must answer the current one (operator_input.hpp).
+  std::uint32_t hold_id = 0, last_hold_id = 0;
+  const char* state_reason = "operator start";  // why the loop entered its state (static text)
+  OperatorCommand stop_sent_before_hold = OperatorCommand::kNone;  // taken by on_hold, acted on next cycle
   const char* ended_by_operator = nullptr;
   const char* ended_by_source = nullptr;
 
@@ -81,6 +86,9 @@ struct TrackingLoop::Impl {
     record->event = static_cast<std::uint8_t>(1 + static_cast<int>(event));
     if (t.to == TrackingState::kHold) ++summary.holds;
     if (t.to == TrackingState::kFault) ++summary.faults;
+    const bool stopped = t.to == TrackingState::kHold || t.to == TrackingState::kFault;
+    hold_id = stopped ? ++last_hold_id : 0;
+    state_reason = t.reason;
     if (summary.transitions.size() < kMaxTransitions)
       summary.transitions.push_back({cycle, t.from, t.to, t.reason});
     cycles_in_state = 0;
@@ -116,6 +124,38 @@ struct TrackingLoop::Impl {
     for (double s : result.view_similarity)
       if (!std::isfinite(s)) return false;
     return result.stop != tracking::OptimizerStop::kNonFinite;
+  }
+
+  OperatorView operator_view(std::int64_t index) const {
+    OperatorView v;
+    v.state = machine.state();
+    v.hold_id = hold_id;
+    v.cycle = index;
+    v.cycles_in_state = cycles_in_state;
+    v.reason = state_reason;
+    return v;
+  }
+
+  // The loop has entered HOLD or FAULT this cycle: discard what the operator sent before it, and
+  // say on stderr which id a resume or reset must name (the status line shows it on a terminal).
+  void entered_hold(std::int64_t index, JournalRecord* r) {
+    if (parts.operator_input != nullptr) {
+      OperatorPoll before;
+      before.refused = r->operator_refused;
+      before.last_refusal = static_cast<OperatorRefusal>(r->operator_refusal);
+      parts.operator_input->on_hold(operator_view(index), &before);
+      if (before.command == OperatorCommand::kStop || before.command == OperatorCommand::kQuit)
+        stop_sent_before_hold = before.command;
+      r->operator_refused = before.refused;
+      r->operator_refusal = static_cast<std::uint8_t>(before.last_refusal);
+    }
+    if (settings.status_line || !settings.announce_holds) return;
+    char line[256];
+    const bool fault = machine.state() == TrackingState::kFault;
+    const int n = std::snprintf(line, sizeof line, "%s %u at cycle %lld: %s; %s with '%s %u'\n",
+                                to_string(machine.state()), hold_id, static_cast<long long>(index), state_reason,
+                                fault ? "reset" : "resume", fault ? "reset" : "resume", hold_id);
+    if (n > 0) (void)!::write(STDERR_FILENO, line, std::min<std::size_t>(std::size_t(n), sizeof line - 1));
   }
 
   // One cycle; returns false when the loop should end (operator quit or stop).
@@ -193,13 +233,23 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   const std::int64_t views = static_cast<std::int64_t>(pair.frames.size());
   quality_issue = tracking::FrameQualityIssue::kOk;
 
-  // Operator first: a resume or stop acts on this cycle.
+  // Operator first: a resume or stop acts on this cycle. Everything waiting is taken now and
+  // judged against the state as it stands: nothing is kept for a later state.
   if (parts.operator_input != nullptr) {
-    const OperatorCommand c = parts.operator_input->poll(state_before, cycles_in_state);
+    OperatorPoll polled;
+    polled.accept(stop_sent_before_hold);
+    stop_sent_before_hold = OperatorCommand::kNone;
+    parts.operator_input->poll(operator_view(index), &polled);
+    r->operator_refused = polled.refused;
+    r->operator_refusal = static_cast<std::uint8_t>(polled.last_refusal);
+    const OperatorCommand c = polled.command;
+    if (c != OperatorCommand::kNone && c != OperatorCommand::kStatus)
+      r->operator_command = static_cast<std::uint8_t>(1 + static_cast<int>(c));
     if (c == OperatorCommand::kQuit || c == OperatorCommand::kStop) {
       hold_actuator(start_ns + period_ns);
       transition(index, machine.on(TrackingEvent::kOperatorStop), TrackingEvent::kOperatorStop, r);
       r->state = static_cast<std::uint8_t>(machine.state());
+      r->hold_id = hold_id;
       ended_by_operator = c == OperatorCommand::kQuit ? "operator quit" : "operator stop";
       return false;
     }
@@ -376,9 +426,13 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
     approve_next_step = false;
   }
   if (machine.state() == TrackingState::kHold || machine.state() == TrackingState::kFault) {
-    if (machine.state() != state) hold_actuator(start_ns + period_ns);  // entered this cycle
+    if (machine.state() != state) {  // entered this cycle
+      hold_actuator(start_ns + period_ns);
+      entered_hold(index, r);
+    }
     predictor.reset();
   }
+  r->hold_id = hold_id;
   r->beam_permit = machine.beam_permit() ? 1 : 0;
   if (parts.actuator != nullptr) parts.actuator->set_beam_permit(machine.beam_permit());
   r->state = static_cast<std::uint8_t>(machine.state());
@@ -400,8 +454,15 @@ void TrackingLoop::Impl::write_status_line(std::int64_t index, const JournalReco
   if (r.true_residual_mm >= 0 && n > 0 && n < int(sizeof line))
     n += std::snprintf(line + n, sizeof line - std::size_t(n), "  residual %5.2f mm", r.true_residual_mm);
   if (n > 0 && n < int(sizeof line))
-    n += std::snprintf(line + n, sizeof line - std::size_t(n), "  overruns %lld  [r]esume [s]top [q]uit ",
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "  overruns %lld  ",
                        static_cast<long long>(summary.overruns));
+  // The HOLD on screen is the one a key answers; keys typed before it appeared are discarded.
+  const TrackingState state = static_cast<TrackingState>(r.state);
+  if (r.hold_id != 0 && n > 0 && n < int(sizeof line))
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "%s %u: %s  %s [s]top [q]uit ", to_string(state),
+                       r.hold_id, state_reason, state == TrackingState::kFault ? "[x] reset" : "[r]esume");
+  else if (n > 0 && n < int(sizeof line))
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "[s]top [q]uit ");
   if (n > 0) (void)!::write(STDERR_FILENO, line, std::min<std::size_t>(std::size_t(n), sizeof line - 1));
 }
 
@@ -436,6 +497,7 @@ Result<LoopSummary> TrackingLoop::run() {
     const bool was_align = record.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign);
     if (!was_align) m.cycle_ms.add(ms_between(wall_start, wall_end));
     ++m.summary.cycles;
+    m.summary.operator_refused += record.operator_refused;
     // The next cycle: on the simulated clock always the next period; on the real one the next
     // period start not yet past (an overrun skips the periods it ran into).
     NextCycle next;
@@ -515,6 +577,7 @@ nlohmann::json to_json(const LoopSummary& s) {
   j["holds"] = s.holds;
   j["faults"] = s.faults;
   j["commands"] = s.commands;
+  j["operator_commands_refused"] = s.operator_refused;
   j["aligned"] = s.aligned;
   j["align_ms"] = s.align_ms;
   j["allocations_per_cycle"] = opt(s.allocations_per_cycle);

@@ -547,3 +547,56 @@ TEST(Cli, CalibrateCouchRecoversAMisalignedCouchAndASceneUsesTheFile) {
 
 }  // namespace
 }  // namespace lftrack::host
+
+#include "lftrack/host/operator_input.hpp"
+
+namespace lftrack::host {
+namespace {
+
+// A flipped bit in the middle: every other record is exported, each problem is warned about, and
+// the exit status says the journal is damaged.
+TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
+  test::TempDir dir;
+  const auto file = dir.path() / "cycles.journal";
+  {
+    auto w = JournalWriter::open(file);
+    ASSERT_TRUE(w.ok());
+    for (std::uint64_t i = 0; i < 20; ++i) {
+      JournalRecord r;
+      r.cycle = i;
+      r.state = 2;
+      r.hold_id = i == 7 ? 3 : 0;
+      r.operator_command = i == 7 ? 1 + static_cast<std::uint8_t>(OperatorCommand::kResume) : 0;
+      (*w)->append(r);
+    }
+  }
+  const std::size_t frame = 8 + sizeof(JournalRecord) + 4;
+  const std::size_t damaged_at = 32 + 10 * frame;
+  {
+    std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(static_cast<std::streamoff>(damaged_at + 30));
+    f.put('\x5a');
+  }
+  std::string csv;
+  EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok())
+      << "damage is an error, for scripts";
+  EXPECT_NE(csv.find(",hold_id,operator_command,operator_refused,operator_refusal\n"), std::string::npos)
+      << csv;
+  EXPECT_NE(csv.find(",3,\"resume\",0,\"\"\n"), std::string::npos) << csv;
+  for (int i = 0; i < 20; ++i) {
+    const std::string row = std::string("\n") + std::to_string(i) + ",0,0,0,TRACK";
+    EXPECT_EQ(csv.find(row) == std::string::npos, i == 10) << i << csv;
+  }
+  const std::string frame_bytes = std::to_string(frame);
+  const std::string span = std::string("bad span at byte ") + std::to_string(damaged_at) + ", " +
+                           frame_bytes + " bytes: checksum mismatch";
+  EXPECT_NE(csv.find(span), std::string::npos) << csv;
+  EXPECT_NE(csv.find("gap: cycle 11 (record 10) follows cycle 9, 1 cycles missing"), std::string::npos)
+      << csv;
+  const std::string summary = std::string("journal damaged: 1 bad spans (") + frame_bytes +
+                              " bytes), 1 gaps (1 cycles missing), 0 repeated cycles; 19 records recovered";
+  EXPECT_NE(csv.find(summary), std::string::npos) << csv;
+}
+
+}  // namespace
+}  // namespace lftrack::host

@@ -86,6 +86,18 @@ const std::vector<GateCase> kCases = {
      GateReason::kActuatorFault},
     {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip,
      GateReason::kNoResult},
+    {"RejectedByTheRegistrationVerdict",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.registration_failure = GateReason::kOutsideEnvelope;
+     },
+     GateDecision::kSkip, GateReason::kOutsideEnvelope},
+    {"NoReasonGivenIsNoResult",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.registration_failure = GateReason::kOk;
+     },
+     GateDecision::kSkip, GateReason::kNoResult},
     {"NoFrames",
      [](GateInput& in) {
        in.frames_ok = false;

@@ -10,6 +10,13 @@
 #include <cerrno>
 #include <string>
 
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <vector>
+
 #include "lftrack/host/allocation_counter.hpp"
 #include "loop_fixture.hpp"
 
@@ -93,6 +100,84 @@ TEST_F(ClosedLoop, SuddenShiftHoldsInOneCycleAndRecoversAfterResume) {
   EXPECT_TRUE(recovered) << "residual back under 0.5 mm within 5 cycles of the resume";
   EXPECT_EQ(r.summary.holds, 1);
   EXPECT_EQ(r.summary.faults, 0);
+}
+
+// Issue 18, item 1: resumes sent while tracking once waited in the socket's queue and approved the
+// next HOLD. Now they are discarded (and journaled) when they arrive; the HOLD is left only by a
+// resume sent after it began that names its id.
+TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
+  const std::string motion =
+      "motion:\n  breathing: {amplitude_mm: [0, 1, 2], period_s: 4}\n"
+      "  shifts: [{time_s: 3.0, translation_mm: [0, 8, 0]}]\n";
+  LoopSessionOptions options;
+  options.control_socket = dir_.path() / "control.sock";
+  const auto me = dir_.path() / "operator.sock";
+  std::vector<std::string> replies;  // what the socket answered, in order
+  const auto operator_thread = [&](LoopSession&) {
+    return std::thread([&] {
+      const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+      sockaddr_un self{}, to{};
+      self.sun_family = to.sun_family = AF_UNIX;
+      std::strncpy(self.sun_path, me.c_str(), sizeof(self.sun_path) - 1);
+      std::strncpy(to.sun_path, options.control_socket.c_str(), sizeof(to.sun_path) - 1);
+      if (::bind(fd, reinterpret_cast<const sockaddr*>(&self), sizeof self) != 0) return;
+      timeval timeout{0, 20000};
+      ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+      timeval send_timeout{10, 0};
+      ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &send_timeout, sizeof send_timeout);
+      const auto send = [&](const char* text) {
+        return ::sendto(fd, text, std::strlen(text), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) > 0;
+      };
+      const auto wait_for = [&](const std::string& prefix) {  // a reply starting with prefix, 60 s at most
+        for (int i = 0; i < 3000; ++i) {
+          char buffer[256];
+          const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+          if (n > 0) {
+            replies.emplace_back(buffer, std::size_t(n));
+            if (replies.back().rfind(prefix, 0) == 0) return true;
+          } else if (prefix.rfind("HOLD", 0) == 0) {
+            send("status");
+          }
+        }
+        return false;
+      };
+      // Forty resumes, naming the HOLD that is to come, sent as fast as the socket takes them
+      // (the kernel queues ten): the old loop took one per cycle, so some were still waiting
+      // at the HOLD of cycle 30.
+      for (int i = 0; i < 40; ++i) send("resume 1");
+      if (!wait_for("HOLD 1 ")) return;
+      send("resume 2");  // another HOLD's id
+      if (!wait_for("refused: names another HOLD")) return;
+      send("resume 1");
+      wait_for("accepted: resume");
+      ::close(fd);
+    });
+  };
+  const LoopRun r = run_loop(motion, 70, options, kRayCastFrames, operator_thread);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 70u);
+  int refused_while_tracking = 0;
+  for (std::size_t i = 0; i < 30; ++i) {
+    EXPECT_NE(records[i].state, std::uint8_t(TrackingState::kHold));
+    refused_while_tracking += records[i].operator_refused;
+  }
+  EXPECT_EQ(refused_while_tracking, 40) << "every stale resume was taken, refused and journaled";
+  EXPECT_EQ(records[30].state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(records[30].hold_id, 1u);
+  std::size_t resumed = 0;
+  bool wrong_id_refused = false;
+  for (std::size_t i = 31; i < records.size() && resumed == 0; ++i) {
+    if (records[i].operator_refusal == std::uint8_t(OperatorRefusal::kWrongHold)) wrong_id_refused = true;
+    if (records[i].state != std::uint8_t(TrackingState::kHold)) resumed = i;
+  }
+  EXPECT_TRUE(wrong_id_refused) << "'resume 2' was refused and journaled";
+  ASSERT_GT(resumed, 31u) << "HOLD 1 lasted until the operator's fresh resume";
+  EXPECT_EQ(records[resumed].operator_command, 1 + int(OperatorCommand::kResume));
+  EXPECT_EQ(records[resumed].event, 1 + int(TrackingEvent::kOperatorResume));
+  EXPECT_EQ(records[resumed].hold_id, 0u);
+  EXPECT_EQ(r.summary.holds, 1);
+  EXPECT_GE(r.summary.operator_refused, 41);
+  EXPECT_FALSE(std::filesystem::exists(options.control_socket)) << "removed at the end";
 }
 
 TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
@@ -190,6 +275,7 @@ TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
 
   options.frames.stall_from = 30;
   options.frames.stall_to = 35;
+  options.journal = dir_.path() / "journal-several.lfj";  // a journal is never overwritten
   session = LoopSession::create(*prepared, options, pool_);
   ASSERT_TRUE(session.ok()) << session.status().message();
   auto several = (*session)->run();

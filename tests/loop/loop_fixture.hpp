@@ -68,7 +68,8 @@ class ClosedLoop : public ::testing::Test {
     options.cycles = cycles;
     options.simulated_clock = true;
     options.light_field_dir = lf_dir_.path();
-    if (options.journal.empty()) options.journal = dir_.path() / "journal.lfj";
+    // A journal of its own per run (journals are never overwritten).
+    if (options.journal.empty()) options.journal = dir_.path() / ("journal-" + std::to_string(++runs_) + ".lfj");
     auto session = LoopSession::create(*scene_, options, pool_);
     LoopRun r;
     EXPECT_TRUE(session.ok()) << session.status().message();
@@ -86,6 +87,7 @@ class ClosedLoop : public ::testing::Test {
     return r;
   }
 
+  int runs_ = 0;                             // loops run by this test
   std::function<void(Scene&)> edit_scene_;  // applied to the scene before each run, if set
   static inline tracking::ThreadPool* pool_ = nullptr;
   test::TempDir dir_;

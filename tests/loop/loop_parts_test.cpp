@@ -78,41 +78,6 @@ TEST(Histogram, QuantilesWithinOneBinMeanAndMax) {
   EXPECT_EQ(h.count(), 1002u);
 }
 
-TEST(OperatorInput, ParsesCommandsAndScriptsAResume) {
-  EXPECT_EQ(parse_operator_command("resume\n", 7), OperatorCommand::kResume);
-  EXPECT_EQ(parse_operator_command("  stop ", 7), OperatorCommand::kStop);
-  EXPECT_EQ(parse_operator_command("reset", 5), OperatorCommand::kReset);
-  EXPECT_EQ(parse_operator_command("resumes", 7), OperatorCommand::kNone);
-  EXPECT_EQ(parse_operator_command("", 0), OperatorCommand::kNone);
-  ScriptedOperator op(10);
-  EXPECT_EQ(op.poll(TrackingState::kHold, 9), OperatorCommand::kNone);
-  EXPECT_EQ(op.poll(TrackingState::kHold, 10), OperatorCommand::kResume);
-  EXPECT_EQ(op.poll(TrackingState::kFault, 100), OperatorCommand::kNone) << "a FAULT needs a person";
-}
-
-TEST(OperatorInput, ControlSocketDeliversDatagrams) {
-  test::TempDir dir;
-  const auto path = dir.path() / "control.sock";
-  auto socket = ControlSocket::open(path);
-  ASSERT_TRUE(socket.ok()) << socket.status().message();
-  EXPECT_EQ((*socket)->poll(TrackingState::kHold, 0), OperatorCommand::kNone)
-      << "nothing waiting, no blocking";
-  const int fd = ::socket(AF_UNIX, SOCK_DGRAM, 0);
-  sockaddr_un to{};
-  to.sun_family = AF_UNIX;
-  std::strncpy(to.sun_path, path.c_str(), sizeof(to.sun_path) - 1);
-  for (const char* message : {"hello", "resume"})
-    ASSERT_GT(
-        ::sendto(fd, message, std::strlen(message), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to), 0);
-  ::close(fd);
-  EXPECT_EQ((*socket)->poll(TrackingState::kHold, 0), OperatorCommand::kResume)
-      << "unknown datagrams are dropped";
-  EXPECT_EQ((*socket)->poll(TrackingState::kHold, 0), OperatorCommand::kNone);
-  socket->reset();
-  EXPECT_FALSE(std::filesystem::exists(path)) << "removed on close";
-  EXPECT_FALSE(ControlSocket::open(std::string(200, 'x')).ok()) << "too long for sun_path";
-}
-
 TEST(RealtimeSetup, IgnoreAlwaysStartsAndEnforceSaysWhy) {
   RealtimeSpec ignore;
   ignore.priority = 1;

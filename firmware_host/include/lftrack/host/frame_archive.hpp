@@ -28,13 +28,17 @@ namespace lftrack::host {
 struct FrameArchiveOptions {
   int slots = 16;              // pairs that may wait for the disk (1.6 s at 10 Hz)
   bool with_actuator = false;  // also write actuator.csv (the read-back at each pair)
+  // An archive is a record: open() refuses a directory that holds anything, unless this is set
+  // and the directory holds an earlier lftrack archive (index.csv, actuator.csv, frames/ of TIFFs
+  // and nothing else), which is then removed first so no stale frame is mixed with the new ones.
+  bool overwrite = false;
 };
 
 class FrameArchive {
  public:
   ~FrameArchive();
-  // Creates `directory` (its index is replaced) and starts the writer. `detectors` names and
-  // sizes the frames, in the pairs' order.
+  // Creates `directory` (absent or empty; see FrameArchiveOptions::overwrite) and starts the
+  // writer. `detectors` names and sizes the frames, in the pairs' order.
   static Result<std::unique_ptr<FrameArchive>> open(const std::filesystem::path& directory,
                                                     const std::vector<drivers::DetectorShape>& detectors,
                                                     const FrameArchiveOptions& options = {});

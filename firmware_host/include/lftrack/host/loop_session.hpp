@@ -37,11 +37,14 @@ struct LoopSessionOptions {
   std::int64_t cycles = 300;
   bool simulated_clock = false;  // true: as fast as possible, deterministic (see tracking_loop.hpp)
   bool status_line = false;
-  std::filesystem::path journal;  // empty: no journal
-  JournalOptions journal_options;
+  bool announce_holds = false;  // without a status line: a line on stderr per HOLD/FAULT with its id
+  std::filesystem::path journal;  // empty: no journal; an existing file is refused unless
+  JournalOptions journal_options;  // journal_options.overwrite
+  bool overwrite_archive = false;  // an earlier archive in `archive` is replaced, not refused
   std::filesystem::path control_socket;   // empty: none
   bool terminal_operator = false;         // keys on a terminal's standard input
   std::optional<double> auto_resume_s;    // an unattended operator resumes this long into each HOLD
+                                          // (check_auto_resume_s: finite, 0 to kMaxAutoResumeS)
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
   SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
   std::filesystem::path archive;          // empty: frames not archived

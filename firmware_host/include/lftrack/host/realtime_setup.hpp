@@ -16,6 +16,7 @@ struct RealtimeReport {
   bool memory_locked = false;
   bool fifo = false;
   bool affinity = false;
+  bool offline = false;  // not applied: a run on a simulated clock takes normal scheduling
   std::vector<std::string> warnings;  // what failed (ignore mode)
   std::string summary() const;
 };

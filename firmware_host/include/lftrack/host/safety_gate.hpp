@@ -54,6 +54,7 @@ enum class GateReason : std::uint8_t {
   kImageQuality,   // a frame is saturated, blank, uniform or has too many dead pixels
   kJournalFailed,  // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
   kOverruns,       // hold_after_overruns cycles in a row overran their period
+  kOutsideEnvelope,  // the registered pose left the scene's pose envelope (registration_verdict.hpp)
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -67,6 +68,9 @@ struct GateInput {
   int consecutive_overruns = 0;  // cycles in a row, up to the last, that overran their period  // every frame
                                  // passed the image-quality gate (frame_quality.hpp)
   bool registration_ok = false;
+  // Why there is no usable result when !registration_ok: kNoResult, or the registration verdict's
+  // reason (low similarity, views disagree, outside the envelope).
+  GateReason registration_failure = GateReason::kNoResult;
   tracking::Vector6d step = tracking::Vector6d::Zero();   // this cycle's correction (t mm, omega rad)
   tracking::Vector6d total = tracking::Vector6d::Zero();  // correction from the aligned pose
   int views = 0;

@@ -68,6 +68,7 @@ struct LoopSettings {
   std::int64_t cycles = 0;        // cycles to run (0: until quit or stop)
   bool simulated_clock = false;
   bool status_line = false;                    // one line per cycle on stderr (a terminal)
+  bool announce_holds = false;                 // without a status line: a line on stderr per HOLD/FAULT
   int warmup_cycles = 5;                       // after ALIGN, before allocations are counted
   tracking::FrameQualityLimits image_quality;  // the image-quality gate's limits
 };
@@ -85,6 +86,7 @@ struct LoopSummary {
   std::int64_t holds = 0;                   // entries into HOLD
   std::int64_t faults = 0;                  // entries into FAULT
   std::int64_t commands = 0;                // corrections sent
+  std::int64_t operator_refused = 0;        // operator commands refused or discarded (journal: per cycle)
   std::array<std::int64_t, 5> states{};     // cycles ending in each TrackingState
   std::array<std::int64_t, 4> decisions{};  // per GateDecision
   bool aligned = false;
