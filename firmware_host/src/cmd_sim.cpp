@@ -49,19 +49,15 @@ extern "C" void on_interrupt(int) {
   if (LoopSession* s = g_session.load()) s->request_stop();
 }
 
-// A journal name no earlier run has used: <folder>/journal-YYYYmmdd-HHMMSS.lfj (local time), with
-// -2, -3, ... when a run in the same second wrote one. JournalWriter refuses an existing file
-// anyway; this only spares the user the refusal.
+// The default journal: <folder>/journal-YYYYmmdd-HHMMSS.lfj (local time); JournalWriter takes
+// -2, -3, ... when a run in the same second has claimed it (add_suffix).
 std::string timestamped_journal(const std::string& folder) {
   const std::time_t now = std::time(nullptr);
   std::tm local{};
   localtime_r(&now, &local);
   char stamp[32];
   std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &local);
-  const std::filesystem::path base = std::filesystem::path(folder) / (std::string("journal-") + stamp);
-  std::string file = base.string() + ".lfj";
-  for (int k = 2; std::filesystem::exists(file) && k < 1000; ++k) file = base.string() + "-" + std::to_string(k) + ".lfj";
-  return file;
+  return (std::filesystem::path(folder) / (std::string("journal-") + stamp + ".lfj")).string();
 }
 
 // CLI check of --auto-resume at parse time (the text, before it becomes a double).
@@ -105,6 +101,32 @@ void print_summary(const LoopSummary& s) {
 }
 
 Status run(const SimOptions& o) {
+  // The options that need no scene first: a bad path or value is refused before the CT is
+  // loaded and the light fields are built (minutes), and before anything is created.
+  LoopSessionOptions so;
+  so.cycles = o.cycles;
+  so.simulated_clock = o.fast;
+  so.status_line = !o.json && ::isatty(STDERR_FILENO) == 1;
+  so.announce_holds = !so.status_line;
+  so.terminal_operator = ::isatty(STDIN_FILENO) == 1;
+  if (o.journal_named) {
+    so.journal = o.journal;  // '' for none
+    so.journal_options.overwrite = o.overwrite;
+  } else {
+    so.journal = timestamped_journal(o.journal_folder);
+    so.journal_options.add_suffix = true;  // a run in the same second takes -2, -3, ...
+  }
+  so.overwrite_archive = o.overwrite;
+  so.control_socket = o.control;
+  so.auto_resume_s = o.auto_resume_s;
+  so.light_field_dir = o.lf_dir;
+  so.archive = o.archive;
+  so.replay_sequence = o.sequence;
+  if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
+  if (o.hil == "can") so.hil = HilProtocol::kCan;
+  so.allocation_count = &process_allocation_count;
+  LFTRACK_RETURN_IF_ERROR(check_session_options(so));
+
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   if (o.mode == SimOptions::Mode::kRun) {
@@ -133,28 +155,10 @@ Status run(const SimOptions& o) {
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
-  LoopSessionOptions so;
-  so.cycles = o.cycles;
-  so.simulated_clock = o.fast;
-  so.status_line = !o.json && ::isatty(STDERR_FILENO) == 1;
-  so.announce_holds = !so.status_line;
-  so.terminal_operator = ::isatty(STDIN_FILENO) == 1;
-  const std::string journal = o.journal_named ? o.journal : timestamped_journal(o.journal_folder);
-  if (!journal.empty()) {
+  if (!so.journal.empty()) {
     std::error_code ec;
-    std::filesystem::create_directories(std::filesystem::path(journal).parent_path(), ec);
-    so.journal = journal;
-    so.journal_options.overwrite = o.overwrite;
+    std::filesystem::create_directories(so.journal.parent_path(), ec);
   }
-  so.overwrite_archive = o.overwrite;
-  so.control_socket = o.control;
-  so.auto_resume_s = o.auto_resume_s;
-  so.light_field_dir = o.lf_dir;
-  so.archive = o.archive;
-  so.replay_sequence = o.sequence;
-  if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
-  if (o.hil == "can") so.hil = HilProtocol::kCan;
-  so.allocation_count = &process_allocation_count;
   auto session = LoopSession::create(*prepared, so, &pool);
   if (!session.ok()) return session.status();
   if (const drivers::ReplayFrameSource* replay = (*session)->replay())
@@ -164,6 +168,7 @@ Status run(const SimOptions& o) {
     spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
                  o.fast ? " on a simulated clock" : "",
                  so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
+  const std::string journal = (*session)->journal_path().string();  // the file written, suffix included
   g_session.store(session->get());
   struct sigaction action {};
   action.sa_handler = on_interrupt;

@@ -33,9 +33,10 @@ FrameArchive::~FrameArchive() {
 
 namespace {
 
-// Refuses a directory that holds anything, or with `overwrite` removes an earlier archive's own
-// files (and refuses a directory that holds anything else, which is not ours to remove).
-Status prepare_archive_directory(const std::filesystem::path& directory, bool overwrite) {
+// Refuses a directory that holds anything, or with `overwrite` accepts (and with `remove`,
+// removes) an earlier archive's own files; a directory that holds anything else is refused, not
+// ours to remove.
+Status prepare_archive_directory(const std::filesystem::path& directory, bool overwrite, bool remove) {
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::exists(fs::symlink_status(directory, ec))) return {};
@@ -69,6 +70,7 @@ Status prepare_archive_directory(const std::filesystem::path& directory, bool ov
   if (!has_index)
     return failed_precondition("frame archive " + directory.string() +
                                " holds no index.csv: not an lftrack archive; not removing it" + refuse_hint);
+  if (!remove) return {};
   for (const fs::path& f : frames) fs::remove(f, ec);
   fs::remove(directory / "index.csv", ec);
   fs::remove(directory / "actuator.csv", ec);
@@ -77,6 +79,10 @@ Status prepare_archive_directory(const std::filesystem::path& directory, bool ov
 }
 
 }  // namespace
+
+Status check_archive_directory(const std::filesystem::path& directory, bool overwrite) {
+  return prepare_archive_directory(directory, overwrite, /*remove=*/false);
+}
 
 Result<std::unique_ptr<FrameArchive>> FrameArchive::open(const std::filesystem::path& directory,
                                                          const std::vector<drivers::DetectorShape>& detectors,
@@ -87,7 +93,7 @@ Result<std::unique_ptr<FrameArchive>> FrameArchive::open(const std::filesystem::
     if (d.name.empty() || d.name.find_first_of(",\n/") != std::string::npos)
       return invalid_argument("frame archive: detector name '" + d.name +
                               "' cannot name a file or a CSV field");
-  LFTRACK_RETURN_IF_ERROR(prepare_archive_directory(directory, options.overwrite));
+  LFTRACK_RETURN_IF_ERROR(prepare_archive_directory(directory, options.overwrite, /*remove=*/true));
   std::unique_ptr<FrameArchive> a(new FrameArchive(directory, detectors, options));
   LFTRACK_RETURN_IF_ERROR(a->index_.open(directory, options.with_actuator).with_context("frame archive"));
   a->thread_ = std::thread([p = a.get()] { p->run(); });

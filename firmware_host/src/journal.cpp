@@ -3,6 +3,7 @@
 #include "lftrack/host/realtime_setup.hpp"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -64,14 +65,42 @@ JournalWriter::~JournalWriter() {
   (void)close();
 }
 
-Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem::path& file,
+Status check_journal_path(const std::filesystem::path& file, bool overwrite) {
+  struct stat st {};
+  if (::lstat(file.c_str(), &st) != 0) return {};  // nothing there (or the open will say why)
+  const std::string refused = file.string() + ": a journal or another file is already there; lftrack never "
+                                              "overwrites a record: choose another --journal";
+  if (!overwrite) return failed_precondition(refused + ", or pass --overwrite to replace an earlier journal");
+  if (!S_ISREG(st.st_mode))
+    return failed_precondition(refused + " (--overwrite replaces only a regular file, never through a link)");
+  if (st.st_size == 0) return {};
+  unsigned char magic[8] = {};
+  const int fd = ::open(file.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+  const bool is_journal = fd >= 0 && ::read(fd, magic, 8) == 8 && std::memcmp(magic, kFileMagic, 8) == 0;
+  if (fd >= 0) ::close(fd);
+  if (!is_journal)
+    return failed_precondition(refused + " (it is not an lftrack journal: --overwrite replaces only a journal)");
+  return {};
+}
+
+Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem::path& requested,
                                                            const JournalOptions& options) {
-  const int create = options.overwrite ? O_TRUNC : O_EXCL;
-  const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | create | O_CLOEXEC, 0644);
-  if (fd < 0 && errno == EEXIST)
-    return failed_precondition(file.string() +
-                               ": a journal (or another file) is already there; lftrack never overwrites a "
-                               "record: choose another --journal, or pass --overwrite");
+  std::filesystem::path file = requested;
+  int fd = -1;
+  if (options.overwrite) {
+    LFTRACK_RETURN_IF_ERROR(check_journal_path(file, true));
+    fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_NOFOLLOW | O_CLOEXEC, 0644);
+  } else {
+    // Created and claimed in one step (O_EXCL), so two runs can never share a file; with
+    // add_suffix, the next free name of -2, -3, ... is taken instead of refusing.
+    const std::string stem = (file.parent_path() / file.stem()).string(), ext = file.extension().string();
+    for (int k = 2;; ++k) {
+      fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+      if (fd >= 0 || errno != EEXIST || !options.add_suffix || k > 999) break;
+      file = stem + "-" + std::to_string(k) + ext;
+    }
+    if (fd < 0 && errno == EEXIST) return check_journal_path(file, false);
+  }
   if (fd < 0) return io_error(file.string() + ": cannot create journal: " + std::strerror(errno));
   unsigned char header[kHeaderBytes] = {};
   std::memcpy(header, kFileMagic, 8);
@@ -83,6 +112,7 @@ Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem
     return io_error(file.string() + ": cannot write the journal header: " + std::strerror(errno));
   }
   std::unique_ptr<JournalWriter> w(new JournalWriter(fd, options));
+  w->path_ = file;
   w->good_bytes_ = static_cast<off_t>(kHeaderBytes);
   w->thread_ = std::thread([p = w.get()] { p->run(); });
   return w;
@@ -347,7 +377,10 @@ void read_frames(ReadWindow* in, std::uint32_t version, std::size_t record_bytes
   const std::size_t frame_bytes = 8 + record_bytes + 4;
   const std::size_t copy_bytes = version == 1 ? kV1FieldBytes : sizeof(JournalRecord);
   std::optional<JournalBadSpan> span;  // the bad span being scanned, from span->offset to here
-  bool zeros_past_first_frame = true;  // every byte of `span` past its first frame_bytes is zero
+  // Where the last non-zero byte of `span` lies, from its start (0: none yet). A write cut short
+  // leaves less than a frame of data, then at most zeros; a full frame of data that fails its
+  // check is damage, however near the end.
+  std::uint64_t span_data_end = 0;
   std::uint64_t bad_bytes = 0;         // in earlier spans
   CycleCheck cycles;
   auto close_span = [&] {
@@ -382,16 +415,15 @@ void read_frames(ReadWindow* in, std::uint32_t version, std::size_t record_bytes
     }
     if (!span) {
       span = JournalBadSpan{in->offset(), 0, to_string(check), true};
-      zeros_past_first_frame = true;
+      span_data_end = 0;
     }
     const std::size_t skip = bytes_to_next_candidate(in->data(), in->available(), in->ended());
     if (span->zeros) span->zeros = all_zero(in->data(), skip);
-    const std::uint64_t first_frame_end = span->offset + frame_bytes;
-    if (zeros_past_first_frame && in->offset() + skip > first_frame_end) {
-      const std::size_t from =
-          static_cast<std::size_t>(std::max(in->offset(), first_frame_end) - in->offset());
-      zeros_past_first_frame = all_zero(in->data() + from, skip - from);
-    }
+    for (std::size_t i = skip; i > 0; --i)
+      if (in->data()[i - 1] != 0) {
+        span_data_end = in->offset() - span->offset + i;
+        break;
+      }
     in->consume(skip);
     if (bad_bytes + (in->offset() - span->offset) > limits.max_bad_bytes) {
       close_span();
@@ -405,7 +437,7 @@ void read_frames(ReadWindow* in, std::uint32_t version, std::size_t record_bytes
   // frame cut short by a kill, then nothing but the zeros of blocks a power loss never wrote.
   if (out->stopped.empty() && !out->bad_spans.empty()) {
     const JournalBadSpan& last = out->bad_spans.back();
-    if (last.offset + last.bytes == in->offset() && zeros_past_first_frame) {
+    if (last.offset + last.bytes == in->offset() && span_data_end < frame_bytes) {
       out->torn_tail_bytes = static_cast<std::size_t>(last.bytes);
       out->note = "ignored a torn tail: " + last.problem + (last.zeros ? " (zeros)" : "");
     }
@@ -422,7 +454,21 @@ bool JournalContents::damaged() const {
 }
 
 Result<JournalContents> read_journal(const std::filesystem::path& file, const JournalReadLimits& limits) {
-  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  // O_NONBLOCK: a FIFO with no writer opens at once (and then reads as empty) instead of
+  // waiting for one; blocking reads from here on.
+  const int fd = ::open(file.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd >= 0) {
+    // A FIFO: wait a bounded time for its writer's first bytes, then read as a file.
+    struct stat st {};
+    if (::fstat(fd, &st) == 0 && S_ISFIFO(st.st_mode)) {
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, 10'000) == 0) {
+        ::close(fd);
+        return io_error(file.string() + ": a FIFO with nothing to read within 10 s");
+      }
+    }
+    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+  }
   if (fd < 0 && errno == ENOENT) return not_found(file.string() + ": cannot open journal: no such file");
   if (fd < 0) return io_error(file.string() + ": cannot open journal: " + std::strerror(errno));
   ReadWindow in(fd);

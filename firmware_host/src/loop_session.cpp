@@ -78,8 +78,7 @@ LoopSession::~LoopSession() = default;
 namespace {
 
 // The journal, the archive and the control socket are three different places: a socket opened
-// over the journal (or the other way round) would lose the record. Checked before anything is
-// created.
+// over the journal (or the other way round) would lose the record.
 Status check_distinct_paths(const LoopSessionOptions& o) {
   namespace fs = std::filesystem;
   const auto same = [](const fs::path& a, const fs::path& b) {
@@ -104,11 +103,21 @@ Status check_distinct_paths(const LoopSessionOptions& o) {
 
 }  // namespace
 
-Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p, const LoopSessionOptions& o,
-                                                         tracking::ThreadPool* pool) {
-  // Options first: a bad one is refused before minutes of light-field building.
+Status check_session_options(const LoopSessionOptions& o) {
   if (o.auto_resume_s) LFTRACK_RETURN_IF_ERROR(check_auto_resume_s(*o.auto_resume_s));
   LFTRACK_RETURN_IF_ERROR(check_distinct_paths(o));
+  if (!o.control_socket.empty()) LFTRACK_RETURN_IF_ERROR(ControlSocket::check_path(o.control_socket));
+  if (!o.journal.empty() && !o.journal_options.add_suffix)
+    LFTRACK_RETURN_IF_ERROR(check_journal_path(o.journal, o.journal_options.overwrite));
+  if (!o.archive.empty()) LFTRACK_RETURN_IF_ERROR(check_archive_directory(o.archive, o.overwrite_archive));
+  return {};
+}
+
+Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p, const LoopSessionOptions& o,
+                                                         tracking::ThreadPool* pool) {
+  // Options first: a bad one is refused before minutes of light-field building, and before the
+  // earlier archive is removed (--overwrite) or anything else is created.
+  LFTRACK_RETURN_IF_ERROR(check_session_options(o));
   auto parts = std::make_unique<Parts>();
   auto renderer = make_scene_renderer(p, p.scene.renderer, o.light_field_dir, pool);
   if (!renderer.ok()) return renderer.status().with_context("tracking renderer");
@@ -281,6 +290,9 @@ const drivers::ModbusCouch* LoopSession::modbus_couch() const {
 }
 sim::ModbusCouchServer* LoopSession::modbus_couch_server() {
   return parts_->couch_server.get();
+}
+std::filesystem::path LoopSession::journal_path() const {
+  return parts_->journal ? parts_->journal->path() : std::filesystem::path();
 }
 const drivers::CanRobot* LoopSession::can_robot() const {
   return parts_->robot_driver.get();

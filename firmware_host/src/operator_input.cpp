@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <termios.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -51,6 +52,10 @@ const char* to_string(OperatorRefusal r) {
       return "sender is another user";
     case OperatorRefusal::kBeforeHold:
       return "sent before the HOLD";
+    case OperatorRefusal::kTooSoon:
+      return "the HOLD has been shown for less than a second";
+    case OperatorRefusal::kKeyHeld:
+      return "key held down (press it again)";
   }
   return "?";
 }
@@ -76,6 +81,7 @@ bool parse_operator_request(const char* text, std::size_t length, OperatorReques
   }
   // " ID": one space, then 1 to 10 digits, nothing else.
   if (text[word_end] != ' ' || length - word_end - 1 < 1 || length - word_end - 1 > 10) return false;
+  if (text[word_end + 1] == '0') return false;  // no leading zero: one spelling per id
   std::uint64_t id = 0;
   for (std::size_t i = word_end + 1; i < length; ++i) {
     if (text[i] < '0' || text[i] > '9') return false;
@@ -105,8 +111,10 @@ OperatorRefusal judge_operator_request(const OperatorRequest& q, const OperatorV
       break;
   }
   if (view.state != answers || view.hold_id == 0) return OperatorRefusal::kNotApplicable;
-  if (!q.names_hold) return id_required ? OperatorRefusal::kNoHoldId : OperatorRefusal::kNone;
-  return q.hold_id == view.hold_id ? OperatorRefusal::kNone : OperatorRefusal::kWrongHold;
+  if (!q.names_hold && id_required) return OperatorRefusal::kNoHoldId;
+  if (q.names_hold && q.hold_id != view.hold_id) return OperatorRefusal::kWrongHold;
+  if (!(view.hold_age_s >= kMinHoldBeforeResumeS)) return OperatorRefusal::kTooSoon;
+  return OperatorRefusal::kNone;
 }
 
 namespace {
@@ -178,48 +186,60 @@ TerminalOperator::~TerminalOperator() {
   ::fcntl(STDIN_FILENO, F_SETFL, saved_flags_);
 }
 
+namespace {
+std::int64_t monotonic_ns() {
+  timespec t{};
+  ::clock_gettime(CLOCK_MONOTONIC, &t);
+  return std::int64_t(t.tv_sec) * 1'000'000'000 + t.tv_nsec;
+}
+}  // namespace
+
+void TerminalOperator::take_key(char key, const OperatorView& view, bool before_hold, std::int64_t now_ns,
+                                OperatorPoll* out) {
+  OperatorRequest q;
+  switch (key) {
+    case 'r':
+      q.command = OperatorCommand::kResume;  // the HOLD on the status line
+      break;
+    case 'x':
+      q.command = OperatorCommand::kReset;
+      break;
+    case 's':
+      out->accept(OperatorCommand::kStop);  // a stop always stops
+      return;
+    case 'q':
+      out->accept(OperatorCommand::kQuit);
+      return;
+    default:
+      return;  // other keys mean nothing
+  }
+  const bool fresh = fresh_.seen(now_ns);
+  OperatorRefusal why = before_hold ? OperatorRefusal::kBeforeHold
+                        : !fresh    ? OperatorRefusal::kKeyHeld
+                                    : judge_operator_request(q, view, /*id_required=*/false);
+  if (why == OperatorRefusal::kNone)
+    out->accept(q.command);
+  else
+    out->refuse(why);
+}
+
 void TerminalOperator::poll(const OperatorView& view, OperatorPoll* out) {
   char keys[64];
   for (;;) {  // every key waiting: none is left for a later state
     const ssize_t n = ::read(STDIN_FILENO, keys, sizeof keys);
     if (n <= 0) return;
-    for (ssize_t i = 0; i < n; ++i) {
-      OperatorRequest q;
-      switch (keys[i]) {
-        case 'r':
-          q.command = OperatorCommand::kResume;  // the HOLD on the status line
-          break;
-        case 's':
-          q.command = OperatorCommand::kStop;
-          break;
-        case 'x':
-          q.command = OperatorCommand::kReset;
-          break;
-        case 'q':
-          q.command = OperatorCommand::kQuit;
-          break;
-        default:
-          continue;  // other keys mean nothing
-      }
-      const OperatorRefusal why = judge_operator_request(q, view, /*id_required=*/false);
-      if (why == OperatorRefusal::kNone)
-        out->accept(q.command);
-      else
-        out->refuse(why);
-    }
+    const std::int64_t now = monotonic_ns();
+    for (ssize_t i = 0; i < n; ++i) take_key(keys[i], view, /*before_hold=*/false, now, out);
   }
 }
 
-void TerminalOperator::on_hold(const OperatorView&, OperatorPoll* out) {
+void TerminalOperator::on_hold(const OperatorView& view, OperatorPoll* out) {
   char keys[64];
   for (;;) {
     const ssize_t n = ::read(STDIN_FILENO, keys, sizeof keys);
     if (n <= 0) return;
-    for (ssize_t i = 0; i < n; ++i) {
-      if (keys[i] == 'r' || keys[i] == 'x') out->refuse(OperatorRefusal::kBeforeHold);
-      if (keys[i] == 's') out->accept(OperatorCommand::kStop);  // a stop still stops
-      if (keys[i] == 'q') out->accept(OperatorCommand::kQuit);
-    }
+    const std::int64_t now = monotonic_ns();
+    for (ssize_t i = 0; i < n; ++i) take_key(keys[i], view, /*before_hold=*/true, now, out);
   }
 }
 
@@ -227,7 +247,8 @@ void TerminalOperator::on_hold(const OperatorView&, OperatorPoll* out) {
 
 namespace {
 
-Status check_path_is_free(const std::string& p) {
+// With `remove_stale`, a stale socket is removed; without, only checked.
+Status check_path_is_free(const std::string& p, bool remove_stale) {
   struct stat st {};
   if (::lstat(p.c_str(), &st) != 0) {
     if (errno == ENOENT) return {};
@@ -252,12 +273,20 @@ Status check_path_is_free(const std::string& p) {
     return failed_precondition("control socket " + p + ": another process is listening on it (another lftrack run?)");
   if (connect_errno != ECONNREFUSED)
     return failed_precondition("control socket " + p + ": " + std::strerror(connect_errno));
-  if (::unlink(p.c_str()) != 0)
+  if (remove_stale && ::unlink(p.c_str()) != 0)
     return failed_precondition("control socket " + p + ": cannot remove the stale socket: " + std::strerror(errno));
   return {};
 }
 
 }  // namespace
+
+Status ControlSocket::check_path(const std::filesystem::path& path) {
+  const std::string p = path.string();
+  if (p.empty() || p.size() >= sizeof(sockaddr_un::sun_path))
+    return invalid_argument("control socket path '" + p + "' is empty or longer than " +
+                            std::to_string(sizeof(sockaddr_un::sun_path) - 1) + " characters");
+  return check_path_is_free(p, /*remove_stale=*/false);
+}
 
 Result<std::unique_ptr<ControlSocket>> ControlSocket::open(const std::filesystem::path& path) {
   sockaddr_un address{};
@@ -265,7 +294,7 @@ Result<std::unique_ptr<ControlSocket>> ControlSocket::open(const std::filesystem
   if (p.empty() || p.size() >= sizeof(address.sun_path))
     return invalid_argument("control socket path '" + p + "' is empty or longer than " +
                             std::to_string(sizeof(address.sun_path) - 1) + " characters");
-  LFTRACK_RETURN_IF_ERROR(check_path_is_free(p));
+  LFTRACK_RETURN_IF_ERROR(check_path_is_free(p, /*remove_stale=*/true));
   std::unique_ptr<ControlSocket> s(new ControlSocket());
   s->fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   if (s->fd_ < 0) return failed_precondition(std::string("control socket: ") + std::strerror(errno));
@@ -380,13 +409,10 @@ void ControlSocket::take_waiting(const OperatorView& view, OperatorPoll* out, bo
 // ---- scripted and several ----
 
 void ScriptedOperator::poll(const OperatorView& view, OperatorPoll* out) {
-  if (view.state == TrackingState::kHold && view.cycles_in_state >= after_cycles_) {
-    OperatorRequest q;
-    q.command = OperatorCommand::kResume;
-    q.names_hold = true;
-    q.hold_id = view.hold_id;
-    if (judge_operator_request(q, view, true) == OperatorRefusal::kNone) out->accept(q.command);
-  }
+  // An unattended operator the user set up at the start (--auto-resume): its own delay, not the
+  // person's minimum, applies.
+  if (view.state == TrackingState::kHold && view.hold_id != 0 && view.cycles_in_state >= after_cycles_)
+    out->accept(OperatorCommand::kResume);
 }
 
 void OperatorInputs::poll(const OperatorView& view, OperatorPoll* out) {

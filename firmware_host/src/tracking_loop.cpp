@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <random>
 
 #include "lftrack/host/cycle_schedule.hpp"
 
@@ -69,7 +70,15 @@ struct TrackingLoop::Impl {
   std::int64_t cycles_in_state = 0;
   // The HOLD or FAULT the loop is in (0: neither) and the last id given; an operator's resume or
   // reset must answer the current one (operator_input.hpp).
-  std::uint32_t hold_id = 0, last_hold_id = 0;
+  std::uint32_t hold_id = 0;
+  std::mt19937 hold_id_random{std::random_device{}()};  // ids no command sent earlier can name
+  std::uint32_t new_hold_id() {
+    std::uniform_int_distribution<std::uint32_t> six_digits(100000, 999999);
+    std::uint32_t id = six_digits(hold_id_random);
+    while (id == last_hold_id) id = six_digits(hold_id_random);
+    return last_hold_id = id;
+  }
+  std::uint32_t last_hold_id = 0;
   const char* state_reason = "operator start";  // why the loop entered its state (static text)
   OperatorCommand stop_sent_before_hold = OperatorCommand::kNone;  // taken by on_hold, acted on next cycle
   const char* ended_by_operator = nullptr;
@@ -87,7 +96,7 @@ struct TrackingLoop::Impl {
     if (t.to == TrackingState::kHold) ++summary.holds;
     if (t.to == TrackingState::kFault) ++summary.faults;
     const bool stopped = t.to == TrackingState::kHold || t.to == TrackingState::kFault;
-    hold_id = stopped ? ++last_hold_id : 0;
+    hold_id = stopped ? new_hold_id() : 0;
     state_reason = t.reason;
     if (summary.transitions.size() < kMaxTransitions)
       summary.transitions.push_back({cycle, t.from, t.to, t.reason});
@@ -132,6 +141,7 @@ struct TrackingLoop::Impl {
     v.hold_id = hold_id;
     v.cycle = index;
     v.cycles_in_state = cycles_in_state;
+    v.hold_age_s = hold_id != 0 ? 1e-9 * double(period_ns) * double(cycles_in_state) : 0.0;
     v.reason = state_reason;
     return v;
   }

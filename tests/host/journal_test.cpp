@@ -475,6 +475,13 @@ TEST(Journal, AnExistingFileIsNeverOverwrittenUnlessAsked) {
             "an earlier treatment");
   JournalOptions overwrite;
   overwrite.overwrite = true;
+  EXPECT_FALSE(JournalWriter::open(file, overwrite).ok()) << "--overwrite replaces only a journal";
+  const auto link = dir.path() / "link.lfj";
+  std::filesystem::remove(file);
+  write_journal(file, 3);
+  std::filesystem::create_symlink(file, link);
+  EXPECT_FALSE(JournalWriter::open(link, overwrite).ok()) << "never through a link";
+  EXPECT_EQ(read_journal(file)->records.size(), 3u);
   auto replaced = JournalWriter::open(file, overwrite);
   ASSERT_TRUE(replaced.ok()) << replaced.status().message();
   ASSERT_TRUE((*replaced)->close().ok());
@@ -489,7 +496,8 @@ TEST(Journal, RefusesWhatIsNotAJournalOfThisVersion) {
   std::ofstream(file) << "hello";
   EXPECT_FALSE(read_journal(file).ok());
   EXPECT_FALSE(read_journal(dir.path() / "missing.journal").ok());
-  write_journal(file, 2);  // over the "hello"
+  std::filesystem::remove(file);
+  write_journal(file, 2);
   {
     std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
     f.seekp(8);

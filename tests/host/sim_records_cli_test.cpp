@@ -67,29 +67,55 @@ TEST_F(SimRecords, AutoResumeRefusesNanInfiniteNegativeAndHugeBeforeRunning) {
 
 TEST_F(SimRecords, AJournalIsNeverOverwrittenUnlessTold) {
   const fs::path journal = dir_.path() / "treatment.lfj";
-  std::ofstream(journal) << "yesterday's treatment";
   std::string out;
+  ASSERT_TRUE(sim({"--journal", journal.string()}, &out, 2).ok()) << out;
+  const std::string first = contents(journal);
   EXPECT_FALSE(sim({"--journal", journal.string()}, &out).ok()) << out;
   EXPECT_NE(out.find("--overwrite"), std::string::npos) << "says how: " << out;
-  EXPECT_EQ(contents(journal), "yesterday's treatment");
-  ASSERT_TRUE(sim({"--journal", journal.string(), "--overwrite"}, &out).ok()) << out;
-  EXPECT_EQ(contents(journal).rfind("LFTJRNL1", 0), 0u) << "replaced by a journal when told";
+  EXPECT_EQ(contents(journal), first);
+  ASSERT_TRUE(sim({"--journal", journal.string(), "--overwrite"}, &out, 3).ok()) << out;
+  EXPECT_GT(contents(journal).size(), first.size()) << "replaced by the new run's journal when told";
+
+  // --overwrite replaces an earlier journal, never another file, nor anything through a link.
+  const fs::path notes = dir_.path() / "notes.txt", link = dir_.path() / "link.lfj";
+  std::ofstream(notes) << "precious";
+  fs::create_symlink(journal, link);
+  const std::string second = contents(journal);
+  for (const fs::path& target : {notes, link}) {
+    EXPECT_FALSE(sim({"--journal", target.string(), "--overwrite"}, &out).ok()) << target << ": " << out;
+    EXPECT_EQ(out.find("cycles"), std::string::npos) << "refused before the run: " << out;
+  }
+  EXPECT_EQ(contents(notes), "precious");
+  EXPECT_EQ(contents(journal), second) << "not written through the link";
+  EXPECT_TRUE(fs::is_symlink(link));
 }
 
 TEST_F(SimRecords, EachRunWritesANewTimeStampedJournalByDefault) {
-  std::string first, second;
+  // Two runs one after the other, then two at once (the same second: one takes the -2 name).
+  std::string first, second, together;
   ASSERT_TRUE(sim({}, &first, 2, dir_.path()).ok()) << first;
   ASSERT_TRUE(sim({}, &second, 2, dir_.path()).ok()) << second;
+  std::string command = "cd '" + dir_.path().string() + "'";
+  std::string one = std::string(" && ('") + LFTRACK_BIN_PATH + "' -q sim --scene '" +
+                    (shared_->path() / "sim.yaml").string() + "' --fast --cycles 5 --lf-dir '" +
+                    (shared_->path() / "lf").string() + "')";
+  ASSERT_TRUE(run_process({"/bin/sh", "-c", command + " && { (true" + one + ") & (true" + one + ") ; wait; }"},
+                          &together)
+                  .ok())
+      << together;
   std::vector<fs::path> journals;
   for (const fs::directory_entry& e : fs::directory_iterator(dir_.path() / "out" / "sim"))
     journals.push_back(e.path());
-  ASSERT_EQ(journals.size(), 2u) << "the second run kept the first one's journal";
+  ASSERT_EQ(journals.size(), 4u) << "every run kept its own journal\n" << together;
   for (const fs::path& j : journals) {
     EXPECT_EQ(j.filename().string().rfind("journal-", 0), 0u) << j;
     EXPECT_EQ(j.extension(), ".lfj");
     EXPECT_TRUE(first.find(j.filename().string()) != std::string::npos ||
-                second.find(j.filename().string()) != std::string::npos)
+                second.find(j.filename().string()) != std::string::npos ||
+                together.find(j.filename().string()) != std::string::npos)
         << "each run says where its journal is";
+    std::string exported;
+    EXPECT_TRUE(run_process({LFTRACK_BIN_PATH, "journal", "export", j.string()}, &exported).ok()) << exported;
   }
 }
 
@@ -114,6 +140,16 @@ TEST_F(SimRecords, AnArchiveNeverMixesWithWhatIsInItsFolder) {
   int frames = 0;
   for ([[maybe_unused]] const fs::directory_entry& e : fs::directory_iterator(archive / "frames")) ++frames;
   EXPECT_EQ(frames, 4) << "two pairs of the new run, none of the five of the old one";
+
+  // A run that is refused for another reason removes nothing of the earlier archive.
+  fs::create_directories(dir_.path() / "a-directory.lfj");
+  EXPECT_FALSE(sim({"--journal", (dir_.path() / "a-directory.lfj").string(), "--archive", archive.string(),
+                    "--overwrite"},
+                   &out, 2)
+                   .ok());
+  frames = 0;
+  for ([[maybe_unused]] const fs::directory_entry& e : fs::directory_iterator(archive / "frames")) ++frames;
+  EXPECT_EQ(frames, 4) << "the earlier archive is still whole";
 
   const fs::path notes = dir_.path() / "notes";
   fs::create_directories(notes);

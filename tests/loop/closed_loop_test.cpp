@@ -14,6 +14,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstring>
 #include <vector>
 
@@ -113,6 +114,7 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
   options.control_socket = dir_.path() / "control.sock";
   const auto me = dir_.path() / "operator.sock";
   std::vector<std::string> replies;  // what the socket answered, in order
+  unsigned hold_id_seen = 0;
   const auto operator_thread = [&](LoopSession&) {
     return std::thread([&] {
       const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
@@ -128,34 +130,47 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
       const auto send = [&](const char* text) {
         return ::sendto(fd, text, std::strlen(text), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) > 0;
       };
-      const auto wait_for = [&](const std::string& prefix) {  // a reply starting with prefix, 60 s at most
-        for (int i = 0; i < 3000; ++i) {
-          char buffer[256];
-          const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
-          if (n > 0) {
-            replies.emplace_back(buffer, std::size_t(n));
-            if (replies.back().rfind(prefix, 0) == 0) return true;
-          } else if (prefix.rfind("HOLD", 0) == 0) {
-            send("status");
-          }
+      // The next reply; empty when none came in 20 ms.
+      const auto next_reply = [&]() -> std::string {
+        char buffer[256];
+        const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+        if (n <= 0) return {};
+        replies.emplace_back(buffer, std::size_t(n));
+        return replies.back();
+      };
+      // Until `done` says so, sending `request` every 100 ms (the loop answers about once a
+      // cycle; the kernel keeps ten replies, so nothing is sent faster than they are read). Gives
+      // up when the loop has ended (its socket is removed) or after ten minutes.
+      const auto until = [&](const char* request, const std::function<bool(const std::string&)>& done) {
+        for (int i = 0; i < 30000 && std::filesystem::exists(options.control_socket); ++i) {
+          if (i % 5 == 0) send(request);
+          const std::string reply = next_reply();
+          if (!reply.empty() && done(reply)) return true;
         }
         return false;
       };
-      // Forty resumes, naming the HOLD that is to come, sent as fast as the socket takes them
-      // (the kernel queues ten): the old loop took one per cycle, so some were still waiting
-      // at the HOLD of cycle 30.
+      // Forty resumes, guessing a HOLD id, sent as fast as the socket takes them (the kernel
+      // queues ten): the old loop took one per cycle, so some were still waiting at the HOLD.
       for (int i = 0; i < 40; ++i) send("resume 1");
-      if (!wait_for("HOLD 1 ")) return;
-      send("resume 2");  // another HOLD's id
-      if (!wait_for("refused: names another HOLD")) return;
-      send("resume 1");
-      wait_for("accepted: resume");
+      // The HOLD's id, as the operator learns it: the status reply "HOLD <id> cycle <n>: ...".
+      if (!until("status", [&](const std::string& reply) {
+            return std::sscanf(reply.c_str(), "HOLD %u", &hold_id_seen) == 1;
+          }))
+        return;
+      const std::string wrong = "resume " + std::to_string(hold_id_seen == 999999 ? 100000 : hold_id_seen + 1);
+      if (!until(wrong.c_str(), [](const std::string& reply) { return reply.rfind("refused: names another HOLD", 0) == 0; }))
+        return;
+      // The right id: refused while the HOLD is younger than a second, then accepted.
+      const std::string right = "resume " + std::to_string(hold_id_seen);
+      if (until(right.c_str(), [](const std::string& reply) { return reply.rfind("accepted: resume", 0) == 0; }))
+        send("quit");  // the loop ends here, not at its cycle cap
       ::close(fd);
     });
   };
-  const LoopRun r = run_loop(motion, 70, options, kRayCastFrames, operator_thread);
+  const LoopRun r = run_loop(motion, 400, options, kRayCastFrames, operator_thread);
   const auto& records = r.journal.records;
-  ASSERT_EQ(records.size(), 70u);
+  EXPECT_EQ(r.summary.ended, "operator quit") << "the operator's thread went through to its end";
+  ASSERT_GT(records.size(), 32u);
   int refused_while_tracking = 0;
   for (std::size_t i = 0; i < 30; ++i) {
     EXPECT_NE(records[i].state, std::uint8_t(TrackingState::kHold));
@@ -163,15 +178,20 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
   }
   EXPECT_EQ(refused_while_tracking, 40) << "every stale resume was taken, refused and journaled";
   EXPECT_EQ(records[30].state, std::uint8_t(TrackingState::kHold));
-  EXPECT_EQ(records[30].hold_id, 1u);
+  EXPECT_EQ(records[30].hold_id, hold_id_seen);
+  EXPECT_GE(hold_id_seen, 100000u) << "a random six-digit id, which no earlier command could name";
   std::size_t resumed = 0;
   bool wrong_id_refused = false;
   for (std::size_t i = 31; i < records.size() && resumed == 0; ++i) {
     if (records[i].operator_refusal == std::uint8_t(OperatorRefusal::kWrongHold)) wrong_id_refused = true;
     if (records[i].state != std::uint8_t(TrackingState::kHold)) resumed = i;
   }
-  EXPECT_TRUE(wrong_id_refused) << "'resume 2' was refused and journaled";
-  ASSERT_GT(resumed, 31u) << "HOLD 1 lasted until the operator's fresh resume";
+  EXPECT_TRUE(wrong_id_refused) << "a resume for another id was refused and journaled";
+  ASSERT_GE(resumed, 40u) << "the HOLD lasted until the operator's fresh resume, a second or more into it";
+  bool too_soon_refused = false;
+  for (std::size_t i = 31; i < resumed; ++i)
+    too_soon_refused = too_soon_refused || records[i].operator_refusal == std::uint8_t(OperatorRefusal::kTooSoon);
+  EXPECT_TRUE(too_soon_refused) << "the right id in the HOLD's first second was refused";
   EXPECT_EQ(records[resumed].operator_command, 1 + int(OperatorCommand::kResume));
   EXPECT_EQ(records[resumed].event, 1 + int(TrackingEvent::kOperatorResume));
   EXPECT_EQ(records[resumed].hold_id, 0u);

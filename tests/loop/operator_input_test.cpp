@@ -38,6 +38,7 @@ OperatorView in_state(TrackingState state, std::uint32_t hold_id = 0, std::int64
   v.state = state;
   v.hold_id = hold_id;
   v.cycles_in_state = cycles_in_state;
+  v.hold_age_s = hold_id != 0 ? 10.0 : 0.0;  // shown long enough for a person to decide
   v.reason = "correction step above limit";
   return v;
 }
@@ -54,7 +55,7 @@ TEST(OperatorRequest, IsExactlyOneCommandWithAnOptionalHoldId) {
   EXPECT_EQ(parsed("reset 4294967295").hold_id, 4294967295u);
   for (const std::string& bad : std::vector<std::string>{"resume ... do NOT resume", "resume 3 do NOT resume", "resume 3 ", " resume 3", "resume  3", "resume 0",
         "resume 4294967296", "resume 12345678901", "resume -1", "resume 3x", "resumes", "RESUME", "resume\n\n",
-        "resume\r\n", "", "\n", std::string("resume\0 3", 9), "stop now"})
+        "resume\r\n", "", "\n", std::string("resume\0 3", 9), "stop now", "resume 01"})
     EXPECT_TRUE(refused_as_malformed(bad)) << "'" << bad << "'";
 }
 
@@ -77,6 +78,27 @@ TEST(OperatorRequest, ActsOnlyOnTheStateAndTheHoldItAnswers) {
   EXPECT_EQ(judge_operator_request(parsed("reset 4"), in_state(TrackingState::kFault, 4), true),
             OperatorRefusal::kNone);
   EXPECT_EQ(judge_operator_request(parsed("stop"), in_state(TrackingState::kTrack), true), OperatorRefusal::kNone);
+}
+
+TEST(OperatorRequest, AResumeCountsOnlyOnceTheHoldHasBeenShownForASecond) {
+  OperatorView hold = in_state(TrackingState::kHold, 123456);
+  const OperatorRequest resume = parsed("resume 123456");
+  for (double age : {0.0, 0.1, 0.99}) {
+    hold.hold_age_s = age;
+    EXPECT_EQ(judge_operator_request(resume, hold, true), OperatorRefusal::kTooSoon) << age;
+  }
+  hold.hold_age_s = std::nan("");
+  EXPECT_EQ(judge_operator_request(resume, hold, true), OperatorRefusal::kTooSoon);
+  hold.hold_age_s = kMinHoldBeforeResumeS;
+  EXPECT_EQ(judge_operator_request(resume, hold, true), OperatorRefusal::kNone);
+}
+
+TEST(FreshKeyPress, AHeldOrRepeatingKeyNeverCountsAFreshPressDoes) {
+  FreshKeyPress key(300'000'000);
+  EXPECT_TRUE(key.seen(0)) << "the first press";
+  for (std::int64_t t = 33'000'000; t < 3'000'000'000; t += 33'000'000)
+    EXPECT_FALSE(key.seen(t)) << "auto-repeat at 30 Hz, at " << t << " ns";
+  EXPECT_TRUE(key.seen(3'500'000'000)) << "released, then pressed again";
 }
 
 TEST(OperatorPoll, AStopWinsOverAResumeInTheSameCycle) {

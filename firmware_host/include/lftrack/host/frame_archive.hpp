@@ -34,6 +34,10 @@ struct FrameArchiveOptions {
   bool overwrite = false;
 };
 
+// Whether FrameArchive::open may write into `directory` (FrameArchiveOptions::overwrite), removing
+// nothing: for checking options before anything is created.
+Status check_archive_directory(const std::filesystem::path& directory, bool overwrite);
+
 class FrameArchive {
  public:
   ~FrameArchive();

@@ -68,18 +68,28 @@ static_assert(std::is_trivially_copyable_v<JournalRecord>);
 struct JournalOptions {
   std::size_t queue_capacity = 4096;  // records; 6.8 minutes at 10 Hz of a stalled disk
   int fsync_interval_ms = 1000;
-  // A journal is a record of treatment: open() refuses a file that exists, unless this is set.
+  // A journal is a record of treatment: open() refuses a file that exists, unless this is set;
+  // even then it replaces only an earlier lftrack journal (a regular file, not through a link).
   bool overwrite = false;
+  // Instead of refusing an existing file, take the next free name: NAME-2.EXT, NAME-3.EXT, ...
+  // (for default, time-stamped names).
+  bool add_suffix = false;
   // The write(2) the writer thread calls: the kernel's, or a fault injector in tests (a disk
   // that fills up, an I/O error).
   ssize_t (*write_call)(int fd, const void* data, std::size_t bytes) = &::write;
 };
 
+// Whether a journal may be created at `file`: nothing there, or (overwrite) an earlier lftrack
+// journal, a regular file not reached through a symbolic link. For checking options early;
+// JournalWriter::open checks again.
+Status check_journal_path(const std::filesystem::path& file, bool overwrite);
+
 class JournalWriter {
  public:
   ~JournalWriter();
-  // Creates the file (refused when it exists, unless options.overwrite: then truncated), writes
-  // the header and starts the writer thread.
+  // Creates the file (refused when anything is there, unless options.overwrite and it is an
+  // earlier journal: then truncated), writes the header and starts the writer thread.
+  // path() says which file it is (add_suffix may have chosen another name).
   static Result<std::unique_ptr<JournalWriter>> open(const std::filesystem::path& file,
                                                      const JournalOptions& options = {});
   // From the cycle: never blocks, never allocates. Returns false (and counts it) when the queue
@@ -88,6 +98,7 @@ class JournalWriter {
   // Drains the queue, syncs and closes. Called by the destructor too.
   Status close();
   std::uint64_t written() const { return written_.load(); }
+  const std::filesystem::path& path() const { return path_; }
   // True once a write has failed (disk full, I/O error). The writer then truncates the file to
   // its last complete record and writes nothing more, so everything written before stays
   // readable; the loop holds (safety gate: "journal write failed"). Any thread may ask.
@@ -100,6 +111,7 @@ class JournalWriter {
   void run();
 
   int fd_ = -1;
+  std::filesystem::path path_;
   JournalOptions options_;
   SpscQueue<JournalRecord> queue_;
   std::thread thread_;

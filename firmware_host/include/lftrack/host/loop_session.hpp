@@ -59,6 +59,11 @@ struct LoopSessionOptions {
 // origin).
 Eigen::Isometry3d couch_mounting(const CouchMountingSpec& mounting, const PreparedScene& scene);
 
+// Checks the options that need no scene (auto-resume, the journal, archive and control-socket
+// paths) without creating or removing anything: `lftrack sim/run/replay` call it before loading
+// the CT, and create() calls it first.
+Status check_session_options(const LoopSessionOptions& options);
+
 class LoopSession {
  public:
   ~LoopSession();
@@ -74,6 +79,7 @@ class LoopSession {
   const sim::SimulatedRoom* room() const;            // null when replaying
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
   const FrameArchive* archive() const;               // null without one
+  std::filesystem::path journal_path() const;        // the journal written (empty: none)
   const drivers::ModbusCouch* modbus_couch() const;  // the HIL couch driver; null otherwise
   sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
   const drivers::CanRobot* can_robot() const;        // the HIL robot driver; null otherwise

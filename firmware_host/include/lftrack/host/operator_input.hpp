@@ -13,12 +13,15 @@
 //   scripted        an unattended operator that resumes a set time after each HOLD (tests and
 //                   benchmark runs; says so in the journal's reason)
 //
-// Staleness: every entry into HOLD or FAULT gets the next hold id (1, 2, ...), shown on the
-// status line, in the journal, on stderr and by "status". A command only acts on the state it
-// was given in: a resume outside HOLD (or a reset outside FAULT) is discarded, never kept for
-// later; a resume or reset over the socket must name the current hold id; and when the loop
-// enters HOLD or FAULT, everything typed or sent before that moment is discarded (on_hold). Every
-// discarded or refused command is counted in the cycle's journal record with the last reason.
+// Staleness: every entry into HOLD or FAULT gets a new random hold id (six digits, so that no
+// command written before the HOLD can name it), shown on the status line, in the journal, on
+// stderr and by "status". A command only acts on the state it was given in: a resume outside HOLD
+// (or a reset outside FAULT) is discarded, never kept for later; a resume or reset over the
+// socket must name the current hold id; when the loop enters HOLD or FAULT, every resume or reset
+// typed or sent before that moment is discarded (on_hold); a resume or reset counts only once the
+// HOLD has been shown for kMinHoldBeforeResumeS; and on the terminal only a fresh key press counts
+// (a held or auto-repeating key never does). Every discarded or refused command is counted in the
+// cycle's journal record with the last reason.
 
 #include <cstdint>
 #include <filesystem>
@@ -44,7 +47,13 @@ enum class OperatorRefusal : std::uint8_t {
   kMalformed,      // not exactly one command (unknown word, trailing text, over-long datagram)
   kSender,         // from another user than the one running lftrack (peer credentials)
   kBeforeHold,     // typed or sent before the loop entered this HOLD or FAULT
+  kTooSoon,        // the HOLD has been shown for less than kMinHoldBeforeResumeS
+  kKeyHeld,        // a key held down or repeating (a fresh press counts)
 };
+
+// How long a HOLD or FAULT must have been shown before a resume or reset counts (seconds on the
+// loop's clock): no person decides faster, so anything earlier is a script or a held key.
+inline constexpr double kMinHoldBeforeResumeS = 1.0;
 const char* to_string(OperatorRefusal refusal);
 
 struct OperatorRequest {
@@ -54,7 +63,8 @@ struct OperatorRequest {
 };
 
 // Exactly "WORD" or "WORD ID" (WORD: resume, stop, reset, quit, status; ID: 1 to 4294967295 in
-// decimal), optionally followed by one "\n"; nothing before, nothing after. False otherwise.
+// decimal, no leading zero), optionally followed by one "\n"; nothing before, nothing after.
+// False otherwise.
 bool parse_operator_request(const char* text, std::size_t length, OperatorRequest* request);
 
 // What the operator is answering: the loop as it stands at the poll.
@@ -63,12 +73,14 @@ struct OperatorView {
   std::uint32_t hold_id = 0;  // the current HOLD or FAULT; 0 in other states
   std::int64_t cycle = 0;
   std::int64_t cycles_in_state = 0;
+  double hold_age_s = 0;    // how long the current HOLD or FAULT has been shown (loop clock)
   const char* reason = "";  // why the loop entered its state (static text)
 };
 
 // kNone when `request` may act on the loop as `view` shows it. A stop, quit or status always
 // may; a resume only in HOLD and a reset only in FAULT, naming that hold id when `id_required`
-// (or, without an id, only where the channel shows exactly one HOLD: a key on the terminal).
+// (or, without an id, only where the channel shows exactly one HOLD: a key on the terminal), and
+// only once the HOLD has been shown for kMinHoldBeforeResumeS.
 OperatorRefusal judge_operator_request(const OperatorRequest& request, const OperatorView& view,
                                        bool id_required);
 
@@ -96,6 +108,26 @@ class OperatorInput {
   }
 };
 
+// Tells a fresh key press from a held or auto-repeating key: a key counts only when the same key
+// was not seen in the `gap_ns` before it (auto-repeat sends one every 30-50 ms, and the loop
+// reads the keys every cycle, so a held key is seen again and again).
+class FreshKeyPress {
+ public:
+  explicit FreshKeyPress(std::int64_t gap_ns = 300'000'000) : gap_ns_(gap_ns) {}
+  // Records the key seen at `now_ns`; true when it is a fresh press.
+  bool seen(std::int64_t now_ns) {
+    const bool fresh = !any_ || now_ns - last_ns_ >= gap_ns_;
+    any_ = true;
+    last_ns_ = now_ns;
+    return fresh;
+  }
+
+ private:
+  std::int64_t gap_ns_;
+  std::int64_t last_ns_ = 0;
+  bool any_ = false;
+};
+
 // Keys on standard input when it is a terminal (raw, non-blocking; restored on destruction).
 class TerminalOperator final : public OperatorInput {
  public:
@@ -107,6 +139,9 @@ class TerminalOperator final : public OperatorInput {
 
  private:
   TerminalOperator() = default;
+  // Judges one key; `now_ns` (CLOCK_MONOTONIC) tells a fresh press from a held one.
+  void take_key(char key, const OperatorView& view, bool before_hold, std::int64_t now_ns, OperatorPoll* out);
+  FreshKeyPress fresh_;
   bool restore_ = false;
   unsigned char saved_[64] = {};  // struct termios, kept opaque here
   int saved_flags_ = 0;
@@ -119,6 +154,8 @@ class TerminalOperator final : public OperatorInput {
 class ControlSocket final : public OperatorInput {
  public:
   static Result<std::unique_ptr<ControlSocket>> open(const std::filesystem::path& path);
+  // What open() would refuse, checked without creating or removing anything.
+  static Status check_path(const std::filesystem::path& path);
   ~ControlSocket() override;
   void poll(const OperatorView& view, OperatorPoll* out) override;
   void on_hold(const OperatorView& view, OperatorPoll* out) override;
