@@ -9,6 +9,7 @@
 
 #include "lftrack/drivers/recorded_actuator.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
+#include "lftrack/host/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
 
 namespace lftrack::host {
@@ -118,6 +119,12 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   // Options first: a bad one is refused before minutes of light-field building, and before the
   // earlier archive is removed (--overwrite) or anything else is created.
   LFTRACK_RETURN_IF_ERROR(check_session_options(o));
+  // One view cannot see depth along its central ray: tracked only when the scene says so.
+  LFTRACK_RETURN_IF_ERROR(check_views_observable(p.scene));
+  if (const auto blind = unobservable_direction_room(p.scene))
+    spdlog::warn("one view: a registration cannot see motion along ({:.3f}, {:.3f}, {:.3f}) in the room; "
+                 "corrections along it are not measured",
+                 blind->x(), blind->y(), blind->z());
   auto parts = std::make_unique<Parts>();
   auto renderer = make_scene_renderer(p, p.scene.renderer, o.light_field_dir, pool);
   if (!renderer.ok()) return renderer.status().with_context("tracking renderer");

@@ -260,7 +260,7 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
     const YAML::Node t = root["tracking"];
     LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking",
                                        {"renderer", "octree_pivot", "light_field", "similarity",
-                                        "histogram_bins", "plan", "gamma_per_mm", "tre_box_mm"}));
+                                        "histogram_bins", "plan", "gamma_per_mm", "tre_box_mm", "single_view"}));
     LFTRACK_RETURN_IF_ERROR(parse_registration(t, &scene.registration));
     if (t["light_field"])
       LFTRACK_RETURN_IF_ERROR(
@@ -284,7 +284,10 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
   if (root["fiducials"]) LFTRACK_RETURN_IF_ERROR(parse_fiducials(root["fiducials"], &scene.fiducials));
   if (root["sim"]) LFTRACK_RETURN_IF_ERROR(parse_sim(root["sim"], &scene.sim));
   if (root["loop"]) LFTRACK_RETURN_IF_ERROR(parse_loop(root["loop"], &scene.loop));
-  if (root["safety"]) LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
+  if (root["safety"]) {
+    LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
+    scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
+  }
   if (root["actuator"]) LFTRACK_RETURN_IF_ERROR(parse_actuator(root["actuator"], &scene.actuator));
   if (root["motion"]) LFTRACK_RETURN_IF_ERROR(parse_motion(root["motion"], &scene.motion));
   return scene;
@@ -317,6 +320,12 @@ Status SceneParser::parse_registration(const YAML::Node& t, RegistrationSpec* r)
   }
   if (t["tre_box_mm"])
     LFTRACK_RETURN_IF_ERROR(positive(t["tre_box_mm"], "tracking.tre_box_mm", &r->tre_box_mm));
+  if (t["single_view"]) {
+    if (!t["single_view"].IsScalar() ||
+        (t["single_view"].Scalar() != "true" && t["single_view"].Scalar() != "false"))
+      return error(t["single_view"], "tracking.single_view must be true or false");
+    r->single_view = t["single_view"].Scalar() == "true";
+  }
   return {};
 }
 

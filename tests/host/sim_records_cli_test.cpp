@@ -158,6 +158,31 @@ TEST_F(SimRecords, AnArchiveNeverMixesWithWhatIsInItsFolder) {
   EXPECT_EQ(contents(notes / "plan.txt"), "not an archive") << "what is not ours is not removed";
 }
 
+// Issue 18, item 5: one detector cannot see depth along its central ray; the loop tracks such a
+// scene only when it says so (tracking.single_view), and then warns of the blind direction.
+TEST_F(SimRecords, AOneViewSceneIsNotTrackedUnlessItSaysSo) {
+  std::string one = contents(shared_->path() / "sim.yaml");
+  const auto b = one.find("  - name: B");
+  one.erase(b, one.find("envelope:") - b);
+  const fs::path refused = dir_.path() / "one.yaml", allowed = dir_.path() / "one-allowed.yaml";
+  std::ofstream(refused) << one;
+  one.replace(one.find("tracking:\n"), 10, "tracking:\n  single_view: true\n");
+  std::ofstream(allowed) << one;
+  std::string out;
+  const std::vector<std::string> argv = {LFTRACK_BIN_PATH, "sim", "--fast", "--cycles", "2", "--journal", "",
+                                         "--lf-dir", (dir_.path() / "lf").string(), "--scene"};
+  auto with = [&](const fs::path& scene) {
+    std::vector<std::string> a = argv;
+    a.push_back(scene.string());
+    return a;
+  };
+  EXPECT_FALSE(run_process(with(refused), &out).ok()) << out;
+  EXPECT_NE(out.find("single_view"), std::string::npos) << "says how to allow it: " << out;
+  EXPECT_EQ(out.find("cycles 2"), std::string::npos) << "nothing ran: " << out;
+  EXPECT_TRUE(run_process(with(allowed), &out).ok()) << out;
+  EXPECT_NE(out.find("cannot see motion along"), std::string::npos) << "names the blind direction: " << out;
+}
+
 TEST_F(SimRecords, AnOfflineRunTakesNoRealtimePriority) {
   std::string out;
   ASSERT_TRUE(sim({"--json", "--journal", ""}, &out).ok()) << out;

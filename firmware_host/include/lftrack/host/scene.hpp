@@ -69,6 +69,9 @@ struct RegistrationSpec {
   std::string plan = "papers";  // registration_plan_names()
   double gamma_per_mm = 0.05;   // hybrid measure's weight of the fiducial distance (paper 2)
   double tre_box_mm = 40;       // edge of the TRE cube at the registration origin
+  // tracking.single_view: a scene with one detector registers only when it says so; depth along
+  // that view's central ray is then unobservable (registration_verdict.hpp).
+  bool single_view = false;
 };
 
 // sim: synthetic detector frames.
@@ -150,6 +153,9 @@ struct Scene {
   SimFrameSpec sim;
   LoopSpec loop;
   SafetyLimits safety;
+  // Whether the scene names safety.min_similarity (in its tracking.similarity's units); without
+  // it the registration verdict takes the measure's default floor (registration_verdict.hpp).
+  bool min_similarity_given = false;
   ActuatorSpec actuator;
   MotionSpec motion;
 };
