@@ -262,6 +262,9 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.simulated_clock = o.simulated_clock;
   settings.status_line = o.status_line;
   settings.announce_holds = o.announce_holds;
+  auto verdict = verdict_limits(p.scene, p.scene.registration.similarity);
+  if (!verdict.ok()) return verdict.status();
+  settings.verdict = *verdict;
   auto loop = TrackingLoop::create(lp, settings);
   if (!loop.ok()) return loop.status();
   parts->loop = std::move(loop).value();

@@ -35,6 +35,22 @@ Pose motion_of(const Vector6d& d, const Eigen::Vector3d& origin) {
   return tracking::apply_delta(Pose::Identity(), PoseDelta::from_vector(d), origin);
 }
 
+// The gate's reason for a registration the verdict rejected.
+GateReason gate_reason_of(VerdictReason r) {
+  switch (r) {
+    case VerdictReason::kLowSimilarity:
+      return GateReason::kLowSimilarity;
+    case VerdictReason::kViewsDisagree:
+      return GateReason::kViewsDisagree;
+    case VerdictReason::kOutsideEnvelope:
+      return GateReason::kOutsideEnvelope;
+    case VerdictReason::kImageQuality:
+      return GateReason::kImageQuality;
+    default:
+      return GateReason::kNoResult;
+  }
+}
+
 }  // namespace
 
 struct TrackingLoop::Impl {
@@ -344,6 +360,20 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
     const double budget_ms = aligning ? 1e12 : settings.loop.registration_budget_ms;
     ok = parts.registration->run(start, aligning ? align_plan : track_plan, budget_ms, &result).ok() &&
          result_is_finite();
+    if (ok && settings.verdict) {
+      VerdictInput judged;
+      judged.views = static_cast<int>(views);
+      judged.stop = result.stop;
+      judged.pose_finite = result.T_room_from_ct.matrix().allFinite();
+      for (std::int64_t v = 0; v < views && v < kMaxVerdictViews; ++v)
+        judged.similarity[std::size_t(v)] = result.view_similarity[std::size_t(v)];
+      judged.delta_from_nominal = tracking::delta_between(nominal, result.T_room_from_ct, origin_room).as_vector();
+      const RegistrationVerdict verdict = judge_registration(*settings.verdict, judged);
+      if (!verdict.ok) {
+        ok = false;
+        in.registration_failure = gate_reason_of(verdict.reason);
+      }
+    }
     r->evaluations = static_cast<std::uint32_t>(result.evaluations);
     r->registration_ms = result.elapsed_ms;
     if (aligning) {

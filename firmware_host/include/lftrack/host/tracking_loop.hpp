@@ -35,6 +35,7 @@
 #include "lftrack/host/journal.hpp"
 #include "lftrack/host/motion_predictor.hpp"
 #include "lftrack/host/operator_input.hpp"
+#include "lftrack/host/registration_verdict.hpp"
 #include "lftrack/host/safety_gate.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/tracking_states.hpp"
@@ -71,6 +72,10 @@ struct LoopSettings {
   bool announce_holds = false;                 // without a status line: a line on stderr per HOLD/FAULT
   int warmup_cycles = 5;                       // after ALIGN, before allocations are counted
   tracking::FrameQualityLimits image_quality;  // the image-quality gate's limits
+  // Every registration result, ALIGN's included, is judged as `lftrack register` judges it
+  // (registration_verdict.hpp: the measure's expected similarity, per-view agreement, the pose
+  // envelope); a rejected result is no result, with the verdict's reason. Unset: not judged.
+  std::optional<VerdictLimits> verdict;
 };
 
 struct LoopTransition {
