@@ -233,6 +233,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   LoopParts lp;
   lp.scene = &p;
   lp.registration = parts->registration.get();
+  lp.check_renderer = parts->registration_renderer.get();
   lp.frames =
       replaying ? static_cast<drivers::FrameSource*>(parts->replay_frames.get()) : parts->sim_frames.get();
   lp.archive = parts->archive.get();

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 
 #include "lftrack/host/cycle_schedule.hpp"
@@ -67,6 +68,8 @@ struct TrackingLoop::Impl {
   std::vector<tracking::Image<unsigned char>> valid;
   std::vector<tracking::ImageView<const float>> frame_views;
   std::vector<tracking::ImageView<const unsigned char>> mask_views;
+  std::vector<tracking::Image<float>> check_drr;             // per view: the DRR at the result
+  std::vector<tracking::Image<unsigned char>> check_valid;   // and its valid pixels
   tracking::RegistrationResult result;
 
   // Control state.
@@ -241,6 +244,8 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
     const tracking::PixelWindow& w = parts.scene->roi_windows[v];
     impl->line_integral.emplace_back(w.rows, w.cols);
     impl->valid.emplace_back(w.rows, w.cols);
+    impl->check_drr.emplace_back(w.rows, w.cols);
+    impl->check_valid.emplace_back(w.rows, w.cols);
   }
   for (std::size_t v = 0; v < views; ++v) {
     impl->frame_views.push_back(impl->line_integral[v].view());
@@ -368,6 +373,25 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
       for (std::int64_t v = 0; v < views && v < kMaxVerdictViews; ++v)
         judged.similarity[std::size_t(v)] = result.view_similarity[std::size_t(v)];
       judged.delta_from_nominal = tracking::delta_between(nominal, result.T_room_from_ct, origin_room).as_vector();
+      // ALIGN: each frame against the DRR at the result (what catches A/B-swapped detectors
+      // before the set-up move). Not yet every cycle: at 0.76 it skipped a few good tracking
+      // cycles right after sudden shifts in the closed-loop tests; the floor needs measuring
+      // on tracking frames first.
+      if (parts.check_renderer != nullptr && aligning) {
+        judged.has_check_ncc = true;
+        for (std::int64_t v = 0; v < views && v < kMaxVerdictViews; ++v) {
+          const std::size_t i = std::size_t(v);
+          tracking::RenderExtras extras;
+          extras.valid = check_valid[i].view();
+          const bool rendered = parts.check_renderer
+                                    ->render(result.T_room_from_ct, parts.scene->scene.detectors[i].view,
+                                             parts.scene->roi_windows[i], check_drr[i].view(), &extras)
+                                    .ok();
+          judged.check_ncc[i] = rendered ? masked_ncc(line_integral[i].view(), valid[i].view(),
+                                                      check_drr[i].view(), check_valid[i].view())
+                                         : std::numeric_limits<double>::quiet_NaN();
+        }
+      }
       const RegistrationVerdict verdict = judge_registration(*settings.verdict, judged);
       if (!verdict.ok) {
         ok = false;

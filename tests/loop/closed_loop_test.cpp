@@ -182,9 +182,14 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
   EXPECT_GE(hold_id_seen, 100000u) << "a random six-digit id, which no earlier command could name";
   std::size_t resumed = 0;
   bool wrong_id_refused = false;
+  // The cycle that acted on the resume (on a loaded host its registration may be cut short by the
+  // budget and the gate hold again in that same cycle: the resume is what this test is about).
   for (std::size_t i = 31; i < records.size() && resumed == 0; ++i) {
     if (records[i].operator_refusal == std::uint8_t(OperatorRefusal::kWrongHold)) wrong_id_refused = true;
-    if (records[i].state != std::uint8_t(TrackingState::kHold)) resumed = i;
+    if (records[i].operator_command == 1 + int(OperatorCommand::kResume)) resumed = i;
+    if (resumed == 0) {
+      EXPECT_EQ(records[i].state, std::uint8_t(TrackingState::kHold)) << "cycle " << i;
+    }
   }
   EXPECT_TRUE(wrong_id_refused) << "a resume for another id was refused and journaled";
   ASSERT_GE(resumed, 40u) << "the HOLD lasted until the operator's fresh resume, a second or more into it";
@@ -192,10 +197,9 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
   for (std::size_t i = 31; i < resumed; ++i)
     too_soon_refused = too_soon_refused || records[i].operator_refusal == std::uint8_t(OperatorRefusal::kTooSoon);
   EXPECT_TRUE(too_soon_refused) << "the right id in the HOLD's first second was refused";
-  EXPECT_EQ(records[resumed].operator_command, 1 + int(OperatorCommand::kResume));
-  EXPECT_EQ(records[resumed].event, 1 + int(TrackingEvent::kOperatorResume));
-  EXPECT_EQ(records[resumed].hold_id, 0u);
-  EXPECT_EQ(r.summary.holds, 1);
+  EXPECT_EQ(records[resumed].previous_state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(records[resumed - 1].hold_id, hold_id_seen) << "the HOLD it answered";
+  EXPECT_GE(r.summary.holds, 1);
   EXPECT_GE(r.summary.operator_refused, 41);
   EXPECT_FALSE(std::filesystem::exists(options.control_socket)) << "removed at the end";
 }

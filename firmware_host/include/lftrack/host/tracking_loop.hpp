@@ -59,6 +59,9 @@ struct LoopParts {
   FrameArchive* archive = nullptr;  // every acquired pair, numbered by cycle
   OperatorInput* operator_input = nullptr;
   const sim::SimulatedRoom* truth = nullptr;
+  // Renders the DRR at the alignment's result for the verdict's NCC check (the registration's
+  // renderer); null: the check is not made.
+  const tracking::DrrRenderer* check_renderer = nullptr;
   std::uint64_t (*allocation_count)() = nullptr;
 };
 
