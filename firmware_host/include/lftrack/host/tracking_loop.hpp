@@ -75,9 +75,10 @@ struct LoopSettings {
   bool announce_holds = false;                 // without a status line: a line on stderr per HOLD/FAULT
   int warmup_cycles = 5;                       // after ALIGN, before allocations are counted
   tracking::FrameQualityLimits image_quality;  // the image-quality gate's limits
-  // Every registration result, ALIGN's included, is judged as `lftrack register` judges it
-  // (registration_verdict.hpp: the measure's expected similarity, per-view agreement, the pose
-  // envelope); a rejected result is no result, with the verdict's reason. Unset: not judged.
+  // The alignment's result is judged as `lftrack register` judges it (registration_verdict.hpp:
+  // the measure's expected similarity, NCC against the DRR, per-view agreement, the pose
+  // envelope); a rejected alignment is no result, with the verdict's reason: HOLD, nothing
+  // moves. Unset: not judged.
   std::optional<VerdictLimits> verdict;
 };
 
