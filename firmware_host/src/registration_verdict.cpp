@@ -3,6 +3,8 @@
 
 #include "lftrack/host/registration_verdict.hpp"
 
+#include "lftrack/tracking/correlation_sums.hpp"
+
 #include <cmath>
 #include <cstdio>
 
@@ -145,23 +147,14 @@ double masked_ncc(const tracking::ImageView<const float>& a, const tracking::Ima
   if ((am && (a_valid.rows != a.rows || a_valid.cols != a.cols)) ||
       (bm && (b_valid.rows != b.rows || b_valid.cols != b.cols)))
     return -2;
-  double n = 0, sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+  tracking::CorrelationSums sums;
   for (int r = 0; r < a.rows; ++r)
     for (int c = 0; c < a.cols; ++c) {
       if ((am && !a_valid.at(r, c)) || (bm && !b_valid.at(r, c))) continue;
       const double x = a.at(r, c), y = b.at(r, c);
-      if (!std::isfinite(x) || !std::isfinite(y)) continue;
-      n += 1;
-      sa += x;
-      sb += y;
-      saa += x * x;
-      sbb += y * y;
-      sab += x * y;
+      if (std::isfinite(x) && std::isfinite(y)) sums.add(x, y);
     }
-  if (n < 16) return 0;
-  const double va = saa - sa * sa / n, vb = sbb - sb * sb / n;
-  if (!(va > 0 && vb > 0)) return 0;
-  return (sab - sa * sb / n) / std::sqrt(va * vb);
+  return sums.n < 16 ? 0 : sums.value();
 }
 
 Result<SimilarityExpectation> similarity_expectation(const std::string& measure) {
