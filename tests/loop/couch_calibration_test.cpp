@@ -106,7 +106,7 @@ TEST_F(ClosedLoop, AMisalignedCouchIsRecoveredAndTracksAsWithItsTrueMounting) {
       "residual mean / p95 mm: true mounting %.4f / %.4f, recovered %.4f / %.4f, assumed axes %.4f / %.4f\n",
       *with_truth.residual_mean_mm, *with_truth.residual_p95_mm, *with_recovered.residual_mean_mm,
       *with_recovered.residual_p95_mm, *assumed.residual_mean_mm, *assumed.residual_p95_mm);
-  EXPECT_EQ(with_recovered.states[std::size_t(TrackingState::kTrack)], 120);
+  expect_tracks_every_cycle(with_recovered, 120);
   // The registration's wall-clock budget lets a loaded host end some searches earlier, so two
   // runs of one configuration differ by up to 0.01 mm in mean and 0.05 mm in p95 (measured with
   // four copies of this test on two cores); the calibrations are compared beyond that spread,
