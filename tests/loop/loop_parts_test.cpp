@@ -1,5 +1,4 @@
-// The loop's small parts: motion prediction, running statistics, operator inputs, real-time
-// set-up, and the scene keys that configure the loop.
+// The loop's small parts: motion prediction, running statistics, real-time set-up.
 
 #include <gtest/gtest.h>
 #include <sys/socket.h>
@@ -9,12 +8,10 @@
 #include <cmath>
 #include <cstring>
 
-#include "lftrack/host/histogram.hpp"
-#include "lftrack/host/motion_predictor.hpp"
-#include "lftrack/host/operator_input.hpp"
-#include "lftrack/host/realtime_setup.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/sim/simulated_room.hpp"
+#include "lftrack/loop/histogram.hpp"
+#include "lftrack/loop/motion_predictor.hpp"
+#include "lftrack/loop/operator_input.hpp"
+#include "lftrack/loop/realtime_setup.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
@@ -92,59 +89,6 @@ TEST(RealtimeSetup, IgnoreAlwaysStartsAndEnforceSaysWhy) {
   // Leave the test process as it was.
   sched_param normal{};
   pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
-}
-
-TEST(SimulatedRoom, CouchThatCancelsTheOffsetLeavesNoResidual) {
-  sim::SimulatedRoomSpec spec;
-  spec.origin_room_mm = {0, 0, 0};
-  spec.setup_error << 2, -1, 3, 0.01, 0.02, -0.01;
-  spec.couch.latency_s = 0.1;
-  spec.couch.max_speed_mm_s = 1000;
-  spec.couch.max_speed_deg_s = 1000;
-  sim::SimulatedRoom room(spec);
-  room.advance_to_ns(1'000'000'000);  // t = 0
-  EXPECT_GT(room.residual_mm(), 3.0);
-  const tracking::Pose offset = room.patient_T_room_from_ct();
-  const Vector6d cancel =
-      tracking::delta_between(offset, spec.nominal_T_room_from_ct, spec.origin_room_mm).as_vector();
-  ASSERT_EQ(room.couch_actuator().command(cancel, drivers::Deadline(std::chrono::nanoseconds(1'100'000'000))),
-            drivers::DeviceStatus::kOk);
-  room.advance_to_ns(1'150'000'000);
-  EXPECT_GT(room.residual_mm(), 3.0)
-      << "the command was sent at its deadline (t = 0.1 s) and waits out the latency";
-  room.advance_to_ns(1'300'000'000);
-  EXPECT_LT(room.residual_mm(), 1e-9);
-}
-
-TEST(SceneLoopKeys, ParseAndRejectWithLocation) {
-  const std::string base = *builtin_scene_text(kBuiltinPhantom);
-  auto scene = parse_scene(base, "b.yaml", ".");
-  ASSERT_TRUE(scene.ok()) << scene.status().message();
-  EXPECT_EQ(scene->loop.period_ms, 100);
-  EXPECT_EQ(scene->actuator.type, "virtual");
-  EXPECT_NEAR(scene->motion.motion.breathing_amplitude(2), 4.5, 1e-12);
-  EXPECT_NEAR(scene->motion.setup_error(3), tracking::deg_to_rad(1.0), 1e-12);
-  EXPECT_EQ(scene->sim.renderer, "lightfield");
-  EXPECT_FALSE(scene->loop.realtime.enforce);
-  const auto fails = [&](const std::string& extra, const std::string& expect) {
-    auto s = parse_scene(base + extra, "b.yaml", ".");
-    ASSERT_FALSE(s.ok()) << extra;
-    EXPECT_NE(s.status().message().find(expect), std::string::npos) << s.status().message();
-  };
-  fails("shifts: []\n", "unknown key 'shifts'");
-  std::string budget = base;
-  budget.replace(budget.find("registration_budget_ms: 50"), 26, "registration_budget_ms: 90");
-  auto s = parse_scene(budget, "b.yaml", ".");
-  ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.status().message().find("must fit in period_ms"), std::string::npos) << s.status().message();
-  std::string mode = base;
-  mode.replace(mode.find("mode: ignore"), 12, "mode: maybe");
-  s = parse_scene(mode, "b.yaml", ".");
-  ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.status().message().find("b.yaml:"), std::string::npos);
-  std::string actuator = base;
-  actuator.replace(actuator.find("type: virtual"), 13, "type: hydraulic");
-  EXPECT_FALSE(parse_scene(actuator, "b.yaml", ".").ok());
 }
 
 }  // namespace

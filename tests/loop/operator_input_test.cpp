@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/operator_input.hpp"
+#include "lftrack/loop/operator_input.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {

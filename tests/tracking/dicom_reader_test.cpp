@@ -4,9 +4,7 @@
 #include <fstream>
 
 #include "dicom_writer.hpp"
-#include "lftrack/host/plastimatch_peer.hpp"
 #include "lftrack/tracking/volume_io.hpp"
-#include "metaimage_reader.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::tracking {
@@ -160,7 +158,11 @@ const BadSeriesCase kBadSeries[] = {
        for (int k = 0; k < 3; ++k) {
          SyntheticSlice s = slice_at(k);
          s.position_mm.y() += 0.5 * k;  // each slice shifted sideways
-         write(d, ("s" + std::to_string(k) + ".dcm").c_str(), s);
+         // (built in two steps: GCC 12's -Wrestrict misfires on "s" + to_string(k) + ".dcm" at -O3)
+         std::string name = "s";
+         name += std::to_string(k);
+         name += ".dcm";
+         write(d, name.c_str(), s);
        }
      }},
 };
@@ -207,33 +209,6 @@ TEST(DicomReaderRealData, ReadsThePancreasSeries) {
   }
   EXPECT_LE(lo, -1000.0f);  // air
   EXPECT_GE(hi, 1000.0f);   // bone
-}
-
-// Cross-implementation: plastimatch (ITK's GDCM-based series reader) converts the same series to
-// MetaImage; geometry and every voxel must agree with ours.
-TEST(DicomReaderRealData, AgreesWithPlastimatchConvert) {
-  LFTRACK_REQUIRE_SHARED_DATA(test::pancreas_dicom());
-  LFTRACK_REQUIRE_PLASTIMATCH();
-  TempDir dir;
-  const fs::path mha = dir.path() / "peer.mha";
-  std::string log;
-  ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", test::pancreas_dicom().string(),
-                                 "--output-img", mha.string(), "--output-type", "float"},
-                                &log)
-                  .ok())
-      << log;
-  auto ours = read_dicom_series(test::pancreas_dicom());
-  ASSERT_TRUE(ours.ok());
-  auto peer = test::read_metaimage_for_test(mha);
-  ASSERT_TRUE(peer.ok()) << peer.status().message();
-  EXPECT_EQ(peer->geometry.size, ours->geometry.size);
-  EXPECT_LT((peer->geometry.origin_mm - ours->geometry.origin_mm).norm(), 1e-3);
-  EXPECT_LT((peer->geometry.spacing_mm - ours->geometry.spacing_mm).norm(), 1e-3);
-  EXPECT_TRUE(peer->geometry.direction.isApprox(ours->geometry.direction, 1e-6));
-  double max_diff = 0;
-  for (std::size_t i = 0; i < ours->values.size(); ++i)
-    max_diff = std::max(max_diff, double(std::abs(ours->values[i] - peer->values[i])));
-  EXPECT_LT(max_diff, 0.01) << "HU differ between lftrack and plastimatch";
 }
 
 }  // namespace

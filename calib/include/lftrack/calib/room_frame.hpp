@@ -1,6 +1,6 @@
 #pragma once
 // The room frame and imaging isocentre from two calibrated views (issue 8), the convention
-// lftrack's scenes use (firmware_host/src/builtin_scenes.cpp):
+// lftrack's scenes use (firmware_host/session/src/builtin_scenes.cpp):
 //   - origin (isocentre): the midpoint of the shortest segment between the two central rays,
 //     each from its source to the centre of its detector (not to the foot of the perpendicular
 //     from the source: with a long focal length the detector's tilt is the least well measured

@@ -1,0 +1,56 @@
+// `lftrack bench register`: cold and warm registration times and TRE, light field against
+// Siddon inside the registration.
+
+#include <cstdio>
+
+#include "cli_commands.hpp"
+#include "lftrack/studies/registration_benchmark.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+
+Command add_bench_register_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand("register", "Cold and warm registration time and TRE on synthetic frames");
+  struct Options {
+    SceneOptions scene;
+    RegistrationBenchOptions bench;
+    bool json = false;
+  };
+  auto o = std::make_shared<Options>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--cold", o->bench.cold_runs, "Cold registrations")->capture_default_str();
+  app->add_option("--warm", o->bench.warm_runs, "Warm (tracking) registrations")->capture_default_str();
+  app->add_option("--siddon-runs", o->bench.renderer_runs,
+                  "Cold problems repeated with Siddon DRRs inside the registration (slow; 0 skips)")
+      ->capture_default_str();
+  app->add_option("--seed", o->bench.seed, "Seed")->capture_default_str();
+  app->add_flag("--json", o->json, "Print the report as JSON on stdout");
+  return [o]() -> Status {
+    tracking::ThreadPool pool(o->scene.threads);
+    auto prepared = load_prepared_scene(o->scene, &pool);
+    if (!prepared.ok()) return prepared.status();
+    auto report = run_registration_benchmark(*prepared, o->bench, &pool);
+    if (!report.ok()) return report.status();
+    if (o->json) {
+      std::printf("%s\n", to_json(*report).dump(2).c_str());
+      return {};
+    }
+    auto line = [](const char* what, const TimedRegistrations& t) {
+      std::printf("%-28s %5d %9.1f %9.1f %9.1f %9.3f %9.3f %7.1f%% %7.0f\n", what, t.runs, t.median_ms, t.p95_ms,
+                  t.max_ms, t.mean_tre_mm, t.max_tre_mm, 100 * t.success_rate, t.median_evaluations);
+    };
+    std::printf("%s, plan %s, %s, %d threads\n", report->scene.c_str(), report->plan.c_str(),
+                report->similarity.c_str(), report->threads);
+    std::printf("%-28s %5s %9s %9s %9s %9s %9s %8s %7s\n", "", "runs", "median ms", "p95 ms", "max ms", "mean TRE",
+                "max TRE", "success", "evals");
+    line("cold", report->cold);
+    line("warm (2 mm / 2 deg moves)", report->warm);
+    if (report->siddon_inside.runs > 0) {
+      line("cold, light field inside", report->lightfield_inside);
+      line("cold, Siddon inside", report->siddon_inside);
+    }
+    return {};
+  };
+}
+
+}  // namespace lftrack::host::cli

@@ -1,0 +1,160 @@
+// `lftrack journal export FILE [--csv]`: every valid record of a journal, in file order, as JSON
+// lines (one object per cycle) or CSV on stdout. The reader resynchronises past damage, so a bad
+// frame loses only itself.
+//
+// On stderr, after the records: one warning per bad span (byte offset, length, what was wrong),
+// per gap in the cycle counter and per repeated cycle, then a summary line when any was found.
+//
+// Exit status: 0 when the journal is intact, or when all it lacks is what a crash or the writer
+// itself explains: a torn tail (a frame cut by a kill -9, zeros a power loss left) or a gap the
+// writer's queue-drop count accounts for (each still warned about). 1 when it is damaged (a bad
+// span elsewhere, an unexplained gap, a repeated cycle, a read stopped at a limit): the summary is
+// the error, printed after every recoverable record, so a script sees the damage.
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "cli_commands.hpp"
+#include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/operator_input.hpp"
+#include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/loop/tracking_states.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+const char* state_name(std::uint8_t s) {
+  return to_string(static_cast<TrackingState>(s));
+}
+// The event that changed the state in a cycle ("" when none).
+const char* event_name(std::uint8_t e) {
+  return e == 0 ? "" : to_string(static_cast<TrackingEvent>(e - 1));
+}
+// The operator command the loop acted on in a cycle ("" when none).
+const char* operator_command_name(std::uint8_t c) {
+  return c == 0 ? "" : to_string(static_cast<OperatorCommand>(c - 1));
+}
+
+void print_csv(const std::vector<JournalRecord>& records) {
+  std::printf(
+      "cycle,cycle_start_ns,frame_seq_a,frame_seq_b,state,previous_state,gate,reason,"
+      "tx_mm,ty_mm,tz_mm,rx_rad,ry_rad,rz_rad,similarity_a,similarity_b,evaluations,registration_ms,"
+      "command_sent,cmd_tx_mm,cmd_ty_mm,cmd_tz_mm,cmd_rx_rad,cmd_ry_rad,cmd_rz_rad,"
+      "beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm,event,"
+      "hold_id,operator_command,operator_refused,operator_refusal\n");
+  for (const JournalRecord& r : records) {
+    std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
+                static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
+                state_name(r.state), state_name(r.previous_state),
+                to_string(static_cast<GateDecision>(r.gate_decision)),
+                to_string(static_cast<GateReason>(r.gate_reason)));
+    for (double v : r.pose_delta) std::printf(",%.6g", v);
+    std::printf(",%.6g,%.6g,%u,%.3f,%d", r.similarity[0], r.similarity[1], r.evaluations, r.registration_ms,
+                r.command_sent);
+    for (double v : r.command) std::printf(",%.6g", v);
+    std::printf(",%d,%d,%u,%u,%.4f,\"%s\"", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
+                r.true_residual_mm, event_name(r.event));
+    std::printf(",%u,\"%s\",%u,\"%s\"\n", r.hold_id, operator_command_name(r.operator_command),
+                unsigned{r.operator_refused}, to_string(static_cast<OperatorRefusal>(r.operator_refusal)));
+  }
+}
+
+void print_json_lines(const std::vector<JournalRecord>& records) {
+  for (const JournalRecord& r : records) {
+    nlohmann::json j{{"cycle", r.cycle},
+                     {"cycle_start_ns", r.cycle_start_ns},
+                     {"frame_sequence", {r.frame_sequence[0], r.frame_sequence[1]}},
+                     {"state", state_name(r.state)},
+                     {"previous_state", state_name(r.previous_state)},
+                     {"gate", to_string(static_cast<GateDecision>(r.gate_decision))},
+                     {"reason", to_string(static_cast<GateReason>(r.gate_reason))},
+                     {"pose_delta", r.pose_delta},
+                     {"similarity", r.similarity},
+                     {"evaluations", r.evaluations},
+                     {"registration_ms", r.registration_ms},
+                     {"command_sent", r.command_sent != 0},
+                     {"command", r.command},
+                     {"readback", r.readback},
+                     {"beam_permit", r.beam_permit != 0},
+                     {"overrun", r.overrun != 0},
+                     {"skipped_periods", r.skipped_periods},
+                     {"dropped_before", r.dropped_before},
+                     {"true_residual_mm", r.true_residual_mm},
+                     {"event", event_name(r.event)},
+                     {"hold_id", r.hold_id},
+                     {"operator_command", operator_command_name(r.operator_command)},
+                     {"operator_refused", r.operator_refused},
+                     {"operator_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))}};
+    std::printf("%s\n", j.dump().c_str());
+  }
+}
+
+// One stderr warning per bad span, gap, repeated cycle, and a read that stopped early.
+void warn_each_problem(const std::string& file, const JournalContents& c) {
+  for (std::size_t i = 0; i < c.bad_spans.size(); ++i) {
+    const JournalBadSpan& s = c.bad_spans[i];
+    const bool torn_tail = c.torn_tail_bytes > 0 && i + 1 == c.bad_spans.size();
+    spdlog::warn("{}: bad span at byte {}, {} bytes: {}{}{}", file, s.offset, s.bytes, s.problem,
+                 s.zeros ? " (all zeros)" : "", torn_tail ? "; a torn tail, ignored" : "");
+  }
+  for (const JournalCycleGap& g : c.gaps) {
+    const std::string why =
+        g.explained_by_drops ? "; the writer dropped " + std::to_string(g.dropped_before) + " records there"
+        : g.after_bad_span   ? "; lost in the bad span before it"
+                             : "";
+    spdlog::warn("{}: gap: cycle {} (record {}) follows cycle {}, {} cycles missing{}", file, g.next_cycle,
+                 g.record_index, g.after_cycle, g.missing_cycles, why);
+  }
+  for (const JournalCycleRepeat& r : c.repeats)
+    spdlog::warn("{}: repeated cycle: cycle {} (record {}) after cycle {}", file, r.cycle, r.record_index,
+                 r.highest_before);
+  if (!c.stopped.empty()) spdlog::warn("{}: {}", file, c.stopped);
+}
+
+// "N bad spans (B bytes), G gaps (M cycles missing), D repeated cycles; R records recovered".
+std::string summary(const JournalContents& c) {
+  std::uint64_t span_bytes = 0, missing = 0;
+  for (const JournalBadSpan& s : c.bad_spans) span_bytes += s.bytes;
+  for (const JournalCycleGap& g : c.gaps) missing += g.missing_cycles;
+  std::string text = std::to_string(c.bad_spans.size()) + " bad spans (" + std::to_string(span_bytes) +
+                     " bytes" + (c.torn_tail_bytes > 0 ? ", the last a torn tail" : "") + "), " +
+                     std::to_string(c.gaps.size()) + " gaps (" + std::to_string(missing) +
+                     " cycles missing), " + std::to_string(c.repeats.size()) + " repeated cycles; " +
+                     std::to_string(c.records.size()) + " records recovered";
+  if (!c.stopped.empty()) text += "; reading stopped early";
+  return text;
+}
+
+}  // namespace
+
+Command add_journal_command(CLI::App* parent) {
+  auto* journal = parent->add_subcommand("journal", "Read cycle journals");
+  journal->require_subcommand(1);
+  auto* app = journal->add_subcommand("export", "Print a journal's records as JSON lines or CSV");
+  struct Options {
+    std::string file;
+    bool csv = false;
+  };
+  auto o = std::make_shared<Options>();
+  app->add_option("file", o->file, "Journal file")->required();
+  app->add_flag("--csv", o->csv, "CSV instead of JSON lines");
+  return [o, app]() -> Status {
+    if (!app->parsed()) return {};
+    auto contents = read_journal(o->file);
+    if (!contents.ok()) return contents.status();
+    if (o->csv)
+      print_csv(contents->records);
+    else
+      print_json_lines(contents->records);
+    std::fflush(stdout);
+    warn_each_problem(o->file, *contents);
+    if (contents->damaged()) return corrupt_data(o->file + ": journal damaged: " + summary(*contents));
+    if (!contents->bad_spans.empty() || !contents->gaps.empty())
+      spdlog::warn("{}: journal incomplete, not damaged: {}", o->file, summary(*contents));
+    return {};
+  };
+}
+
+}  // namespace lftrack::host::cli

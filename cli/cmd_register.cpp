@@ -1,0 +1,319 @@
+// `lftrack register`: one registration of two frames (files, or synthetic with --sim at a gold
+// pose) against the scene's CT; prints the pose, per-view similarity, evaluations, time, TRE and the
+// registration verdict (registration_verdict.hpp), and fails (exit 1) when the verdict rejects it.
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "cli_commands.hpp"
+#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/tracking/frame_quality.hpp"
+#include "lftrack/tracking/image_io.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+using tracking::Image;
+using tracking::Pose;
+
+struct RegisterOptions {
+  SceneOptions scene;
+  std::vector<std::string> frames;
+  bool sim = false;
+  std::vector<double> gold, init;
+  std::string plan, similarity, renderer = "lightfield", lf_dir, save_frames;
+  bool fiducial = false;
+  std::uint64_t seed = 1;
+  double i0_counts = 0;
+  bool json = false;
+};
+
+Result<Image<std::uint16_t>> read_frame(const std::string& file) {
+  const std::string ext = std::filesystem::path(file).extension().string();
+  auto image = (ext == ".png") ? tracking::read_png(file) : tracking::read_tiff(file);
+  if (!image.ok()) return image.status();
+  Image<std::uint16_t> raw(image->rows(), image->cols());
+  for (int r = 0; r < raw.rows(); ++r)
+    for (int c = 0; c < raw.cols(); ++c) {
+      const float v = image->at(r, c);
+      if (!(v >= 0 && v <= 65535)) return invalid_argument(file + ": pixel values must be 16-bit counts");
+      raw.at(r, c) = static_cast<std::uint16_t>(v + 0.5f);
+    }
+  return raw;
+}
+
+std::vector<std::string> view_names(const PreparedScene& p) {
+  std::vector<std::string> names;
+  for (const auto& d : p.scene.detectors) names.push_back(d.view.name);
+  return names;
+}
+
+std::string pose_text(const std::vector<double>& d) {
+  char s[160];
+  std::snprintf(s, sizeof s, "t = (%.3f, %.3f, %.3f) mm, rotation vector (%.3f, %.3f, %.3f) deg", d[0], d[1], d[2], d[3],
+                d[4], d[5]);
+  return s;
+}
+
+nlohmann::json verdict_json(const RegistrationVerdict& v, const PreparedScene& p) {
+  nlohmann::json j = {{"ok", v.ok}, {"reason", to_string(v.reason)}, {"text", verdict_text(v, view_names(p))}};
+  j["view"] = v.view >= 0 && v.view < static_cast<int>(p.scene.detectors.size())
+                  ? nlohmann::json(p.scene.detectors[static_cast<std::size_t>(v.view)].view.name)
+                  : nlohmann::json(nullptr);
+  j["value"] = std::isfinite(v.value) ? nlohmann::json(v.value) : nlohmann::json(nullptr);
+  j["limit"] = std::isfinite(v.limit) ? nlohmann::json(v.limit) : nlohmann::json(nullptr);
+  j["units"] = v.units;
+  if (v.axis >= 0) j["axis"] = v.axis;
+  if (v.reason == VerdictReason::kImageQuality) j["image_quality"] = tracking::to_string(v.quality_issue);
+  return j;
+}
+
+// The verdict as the command's exit: OK when accepted.
+Status verdict_status(const RegistrationVerdict& v, const PreparedScene& p) {
+  if (v.ok) return {};
+  return failed_precondition("registration " + verdict_text(v, view_names(p)));
+}
+
+// Each view's NCC of the preprocessed frame against the DRR at `pose` (the verdict's check).
+Status check_ncc_at(const PreparedScene& p, const tracking::DrrRenderer& renderer, const SceneFrames& frames,
+                    const Pose& pose, VerdictInput* in) {
+  for (std::size_t v = 0; v < p.scene.detectors.size(); ++v) {
+    const tracking::PixelWindow& w = p.roi_windows[v];
+    Image<float> drr(w.rows, w.cols);
+    Image<unsigned char> valid(w.rows, w.cols);
+    tracking::RenderExtras extras;
+    extras.valid = valid.view();
+    LFTRACK_RETURN_IF_ERROR(renderer.render(pose, p.scene.detectors[v].view, w, drr.view(), &extras));
+    in->check_ncc[v] =
+        masked_ncc(frames.line_integral[v].view(), frames.valid[v].view(), drr.view(), valid.view());
+  }
+  in->has_check_ncc = true;
+  return {};
+}
+
+Status run(const RegisterOptions& o) {
+  if (o.sim == !o.frames.empty()) return invalid_argument("give either --frames A B or --sim");
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = load_prepared_scene(o.scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  const PreparedScene& p = *prepared;
+  LFTRACK_RETURN_IF_ERROR(check_views_observable(p.scene));
+  const std::optional<Eigen::Vector3d> unobservable = unobservable_direction_room(p.scene);
+  RegistrationSpec spec = p.scene.registration;
+  if (!o.similarity.empty()) spec.similarity = o.similarity;
+  auto limits = verdict_limits(p.scene, spec.similarity);
+  if (!limits.ok()) return limits.status();
+  if (!o.plan.empty()) spec.plan = o.plan;
+  auto plan = tracking::registration_plan(spec.plan);
+  if (!plan.ok()) return plan.status();
+
+  std::optional<Pose> gold;
+  if (!o.gold.empty()) {
+    auto g = pose_from_nominal_delta(p, o.gold);
+    if (!g.ok()) return g.status().with_context("--gold");
+    gold = *g;
+  }
+  Pose start = p.nominal_T_room_from_ct;
+  if (!o.init.empty()) {
+    auto s = pose_from_nominal_delta(p, o.init);
+    if (!s.ok()) return s.status().with_context("--init");
+    start = *s;
+  }
+
+  std::vector<Image<std::uint16_t>> raw;
+  tracking::DetectorCorrection correction = sim::detector_correction(scene_detector_model(p));
+  if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
+  if (o.sim) {
+    if (!gold) gold = p.nominal_T_room_from_ct;
+    tracking::RendererOptions exact_options;
+    exact_options.pool = &pool;
+    auto exact = tracking::make_renderer("siddon", p.world_mu, exact_options);
+    if (!exact.ok()) return exact.status();
+    auto frames = synthesize_scene_frames(p, **exact, *gold, o.seed);
+    if (!frames.ok()) return frames.status();
+    raw = std::move(frames).value();
+  } else {
+    if (o.frames.size() != p.scene.detectors.size())
+      return invalid_argument("--frames needs one file per detector (" + std::to_string(p.scene.detectors.size()) + ")");
+    for (const auto& f : o.frames) {
+      auto frame = read_frame(f);
+      if (!frame.ok()) return frame.status();
+      raw.push_back(std::move(frame).value());
+    }
+  }
+  if (!o.save_frames.empty()) {
+    std::filesystem::create_directories(o.save_frames);
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      Image<float> as_float(raw[i].rows(), raw[i].cols());
+      for (std::size_t k = 0; k < raw[i].pixels().size(); ++k) as_float.pixels()[k] = raw[i].pixels()[k];
+      tracking::ImageWriteOptions wo;
+      wo.window = {0, 65535};
+      const auto file = std::filesystem::path(o.save_frames) / ("frame_" + p.scene.detectors[i].view.name + ".tif");
+      LFTRACK_RETURN_IF_ERROR(tracking::write_image(file, as_float.view(), wo));
+      spdlog::info("wrote {}", file.string());
+    }
+  }
+  if (static_cast<int>(raw.size()) > kMaxVerdictViews) return invalid_argument("more views than the verdict holds");
+  // The image-quality gate, as the loop runs it: the raw frame over its ROI window.
+  VerdictInput verdict_in;
+  verdict_in.views = static_cast<int>(raw.size());
+  std::vector<tracking::FrameQualityStats> quality(raw.size());
+  bool quality_ok = true;
+  for (std::size_t v = 0; v < raw.size(); ++v) {
+    verdict_in.image_quality[v] = tracking::assess_frame_quality(raw[v].view(), p.roi_windows[v], correction,
+                                                                 tracking::FrameQualityLimits{}, &quality[v]);
+    quality_ok = quality_ok && verdict_in.image_quality[v] == tracking::FrameQualityIssue::kOk;
+  }
+  if (!quality_ok) {  // such frames are not registered (frame_quality.hpp), here as in the loop
+    const RegistrationVerdict verdict = judge_registration(*limits, verdict_in);
+    if (o.json) {
+      nlohmann::json j;
+      j["scene"] = p.scene.source;
+      j["similarity"] = spec.similarity;
+      nlohmann::json views = nlohmann::json::array();
+      for (std::size_t v = 0; v < raw.size(); ++v)
+        views.push_back({{"name", p.scene.detectors[v].view.name},
+                         {"image_quality", tracking::to_string(verdict_in.image_quality[v])},
+                         {"saturated_fraction", quality[v].saturated_fraction},
+                         {"dead_fraction", quality[v].dead_fraction},
+                         {"mean_counts", quality[v].mean_counts},
+                         {"relative_spread", quality[v].relative_spread}});
+      j["views"] = views;
+      j["verdict"] = verdict_json(verdict, p);
+      std::printf("%s\n", j.dump(2).c_str());
+    } else {
+      std::printf("not registered %s: a frame failed the image-quality gate\n", p.scene.source.c_str());
+      for (std::size_t v = 0; v < raw.size(); ++v)
+        std::printf("  view %s: %s (saturated %.1f %%, dead %.1f %%, mean %.1f counts, spread %.3f)\n",
+                    p.scene.detectors[v].view.name.c_str(), tracking::to_string(verdict_in.image_quality[v]),
+                    100 * quality[v].saturated_fraction, 100 * quality[v].dead_fraction, quality[v].mean_counts,
+                    quality[v].relative_spread);
+      std::printf("  verdict: %s\n", verdict_text(verdict, view_names(p)).c_str());
+    }
+    return verdict_status(verdict, p);
+  }
+  auto frames = preprocess_scene_frames(p, raw, correction);
+  if (!frames.ok()) return frames.status();
+
+  auto renderer = make_scene_renderer(p, o.renderer, o.lf_dir, &pool);
+  if (!renderer.ok()) return renderer.status();
+  auto registration = make_scene_registration(p, *renderer, spec, &pool);
+  if (!registration.ok()) return registration.status();
+  LFTRACK_RETURN_IF_ERROR((*registration)->set_frames(frames->frames(), frames->masks()));
+  std::optional<LocatedFiducial> fiducial;
+  if (o.fiducial) {
+    auto located = locate_fiducial(p, *frames, start, spec.gamma_per_mm);
+    if (!located.ok()) return located.status();
+    fiducial = *located;
+    (*registration)->set_fiducial(located->term);
+  }
+  auto result = (*registration)->run(start, *plan);
+  if (!result.ok()) return result.status();
+
+  const std::vector<double> delta = nominal_delta_of(p, result->T_room_from_ct);
+  verdict_in.stop = result->stop;
+  verdict_in.pose_finite = result->T_room_from_ct.matrix().allFinite();
+  for (std::size_t v = 0; v < result->view_similarity.size() && v < verdict_in.similarity.size(); ++v)
+    verdict_in.similarity[v] = result->view_similarity[v];
+  verdict_in.delta_from_nominal =
+      tracking::delta_between(p.nominal_T_room_from_ct, result->T_room_from_ct, p.registration_origin_room_mm())
+          .as_vector();
+  if (verdict_in.pose_finite)
+    LFTRACK_RETURN_IF_ERROR(check_ncc_at(p, **renderer, *frames, result->T_room_from_ct, &verdict_in));
+  const RegistrationVerdict verdict = judge_registration(*limits, verdict_in);
+  const auto euler = tracking::euler_from_rotation(result->T_room_from_ct.linear());
+  const Eigen::Vector3d t = result->T_room_from_ct.translation();
+  std::optional<tracking::Tre> tre, initial_tre;
+  if (gold) {
+    tre = scene_tre(p, result->T_room_from_ct, *gold);
+    initial_tre = scene_tre(p, start, *gold);
+  }
+  if (o.json) {
+    nlohmann::json j;
+    j["scene"] = p.scene.source;
+    j["plan"] = plan->name;
+    j["similarity"] = spec.similarity;
+    j["renderer"] = o.renderer;
+    j["delta_from_nominal"] = delta;
+    j["T_room_from_ct"] = {{"translation_mm", {t.x(), t.y(), t.z()}},
+                           {"euler_deg", {{"roll", tracking::rad_to_deg(euler.roll)},
+                                          {"pitch", tracking::rad_to_deg(euler.pitch)},
+                                          {"yaw", tracking::rad_to_deg(euler.yaw)}}}};
+    nlohmann::json views = nlohmann::json::array();
+    for (std::size_t i = 0; i < result->view_similarity.size(); ++i) {
+      nlohmann::json view = {{"name", p.scene.detectors[i].view.name},
+                             {"similarity", result->view_similarity[i]},
+                             {"image_quality", tracking::to_string(verdict_in.image_quality[i])}};
+      if (verdict_in.has_check_ncc) view["check_ncc"] = verdict_in.check_ncc[i];
+      views.push_back(view);
+    }
+    j["views"] = views;
+    if (unobservable) j["unobservable_direction_room"] = {unobservable->x(), unobservable->y(), unobservable->z()};
+    j["evaluations"] = result->evaluations;
+    j["ms"] = result->elapsed_ms;
+    j["stop"] = tracking::to_string(result->stop);
+    if (fiducial) {
+      j["fiducial"] = {{"distance_mm", result->fiducial_distance_mm}, {"triangulation_gap_mm", fiducial->gap_mm}};
+    }
+    if (tre) {
+      j["initial_tre_mm"] = {{"mean", initial_tre->mean_mm}, {"max", initial_tre->max_mm}};
+      j["tre_mm"] = {{"mean", tre->mean_mm}, {"max", tre->max_mm}, {"points", tre->points}};
+    }
+    j["verdict"] = verdict_json(verdict, p);
+    std::printf("%s\n", j.dump(2).c_str());
+    return verdict_status(verdict, p);
+  }
+  std::printf("registered %s with %s (%s), %s renderer\n", p.scene.source.c_str(), plan->name.c_str(),
+              spec.similarity.c_str(), o.renderer.c_str());
+  std::printf("  delta from nominal: %s\n", pose_text(delta).c_str());
+  std::printf("  T_room_from_ct: t = (%.3f, %.3f, %.3f) mm, Euler Rz*Ry*Rx roll %.3f pitch %.3f yaw %.3f deg\n",
+              t.x(), t.y(), t.z(), tracking::rad_to_deg(euler.roll), tracking::rad_to_deg(euler.pitch),
+              tracking::rad_to_deg(euler.yaw));
+  for (std::size_t i = 0; i < result->view_similarity.size(); ++i)
+    std::printf("  view %s: %s = %.4f, check NCC = %.4f\n", p.scene.detectors[i].view.name.c_str(),
+                spec.similarity.c_str(), result->view_similarity[i], verdict_in.check_ncc[i]);
+  if (unobservable)
+    std::printf("  single view: depth along (%.3f, %.3f, %.3f) (room frame) is unobservable\n", unobservable->x(),
+                unobservable->y(), unobservable->z());
+  if (fiducial)
+    std::printf("  fiducial: distance %.3f mm at the result, triangulation gap %.3f mm\n",
+                result->fiducial_distance_mm, fiducial->gap_mm);
+  std::printf("  %d evaluations in %.1f ms (%s)\n", result->evaluations, result->elapsed_ms,
+              tracking::to_string(result->stop));
+  if (tre)
+    std::printf("  TRE: mean %.3f mm, max %.3f mm (initial mean %.3f mm) over %d points\n", tre->mean_mm, tre->max_mm,
+                initial_tre->mean_mm, tre->points);
+  std::printf("  verdict: %s\n", verdict_text(verdict, view_names(p)).c_str());
+  return verdict_status(verdict, p);
+}
+
+}  // namespace
+
+Command add_register_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand("register", "Register one pair of frames against the scene's CT");
+  auto o = std::make_shared<RegisterOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--frames", o->frames, "Raw 16-bit frames, one per detector (TIFF or PNG)")->expected(1, 4);
+  app->add_flag("--sim", o->sim, "Synthetic frames at --gold (exact ray casting, noise, blur, 12 bits)");
+  const std::string pose_help = "tx,ty,tz (mm) and rx,ry,rz (rotation vector, deg) from the nominal pose";
+  app->add_option("--gold", o->gold, "Gold pose: " + pose_help)->expected(6)->delimiter(',');
+  app->add_option("--init", o->init, "Start pose: " + pose_help + " (default: nominal)")->expected(6)->delimiter(',');
+  app->add_option("--plan", o->plan, "Registration plan: papers, decoupled, cmaes, warm (default: the scene's)");
+  app->add_option("--similarity", o->similarity, "Similarity: mi, nmi, ncc, gc, pi, gd (default: the scene's)");
+  app->add_option("--renderer", o->renderer, "DRR renderer")->capture_default_str();
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
+  app->add_flag("--fiducial", o->fiducial, "Add the scene's first fiducial (hybrid measure, paper 2)");
+  app->add_option("--seed", o->seed, "Noise seed of synthetic frames")->capture_default_str();
+  app->add_option("--i0", o->i0_counts, "Open-field counts of --frames (default: the sim detector's)");
+  app->add_option("--save-frames", o->save_frames, "Write the raw frames as 16-bit TIFF into this folder");
+  app->add_flag("--json", o->json, "Print the result as JSON");
+  return [o] { return run(*o); };
+}
+
+}  // namespace lftrack::host::cli

@@ -1,0 +1,328 @@
+// `lftrack sim`: the simulated closed loop on a scene (the main job; `make demo` runs it on the
+// built-in scene). `lftrack run`: the same loop on the scene's own devices. `lftrack replay`:
+// the same loop on an archived frame sequence (no actuator: track and report).
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "cli_commands.hpp"
+#include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/host/loop_session.hpp"
+#include "lftrack/loop/realtime_setup.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+struct SimOptions {
+  SceneOptions scene;
+  std::int64_t cycles = 300;
+  bool json = false;
+  bool fast = false;
+  // The journal: by default a new time-stamped file in journal_folder; `--journal FILE` names it
+  // (refused when it exists, unless --overwrite); `--journal ''` writes none.
+  std::string journal_folder = "out/sim";
+  std::string journal;
+  bool journal_named = false;
+  bool overwrite = false;
+  std::string control;
+  std::optional<double> auto_resume_s;
+  std::string rt;  // enforce / ignore; empty: the scene's
+  std::string lf_dir;
+  std::string archive;   // frames archived here
+  std::string sequence;  // `lftrack replay`: the archived sequence
+  std::string hil;       // `lftrack sim --hil modbus`: actuators through their real drivers
+  enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
+};
+
+std::atomic<LoopSession*> g_session{nullptr};
+
+extern "C" void on_interrupt(int) {
+  if (LoopSession* s = g_session.load()) s->request_stop();
+}
+
+// The default journal: <folder>/journal-YYYYmmdd-HHMMSS.lfj (local time); JournalWriter takes
+// -2, -3, ... when a run in the same second has claimed it (add_suffix).
+std::string timestamped_journal(const std::string& folder) {
+  const std::time_t now = std::time(nullptr);
+  std::tm local{};
+  localtime_r(&now, &local);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &local);
+  return (std::filesystem::path(folder) / (std::string("journal-") + stamp + ".lfj")).string();
+}
+
+// CLI check of --auto-resume at parse time (the text, before it becomes a double).
+std::string check_auto_resume_text(const std::string& text) {
+  char* end = nullptr;
+  const double s = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0') return "'" + text + "' is not a number of seconds";
+  return check_auto_resume_s(s).ok() ? std::string()
+                                      : "'" + text + "' is not from 0 to 3600 seconds (NaN, infinite and "
+                                                     "negative values are refused)";
+}
+
+void print_summary(const LoopSummary& s) {
+  std::printf("cycles %lld (%s), states: ", static_cast<long long>(s.cycles), s.ended.c_str());
+  for (int i = 0; i < 5; ++i)
+    if (s.states[std::size_t(i)] > 0)
+      std::printf("%s %lld  ", to_string(static_cast<TrackingState>(i)),
+                  static_cast<long long>(s.states[std::size_t(i)]));
+  std::printf("\n");
+  if (s.residual_mean_mm)
+    std::printf("residual (true, TRACK cycles): mean %.3f mm, p95 %.3f mm, max %.3f mm\n",
+                *s.residual_mean_mm, *s.residual_p95_mm, *s.residual_max_mm);
+  std::printf(
+      "cycle work: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms; overruns %lld (periods skipped "
+      "%lld)\n",
+      s.cycle_p50_ms, s.cycle_p95_ms, s.cycle_p99_ms, s.cycle_max_ms, static_cast<long long>(s.overruns),
+      static_cast<long long>(s.skipped_periods));
+  std::printf("registration: p50 %.1f ms, p95 %.1f ms, %.0f evaluations on average; alignment %.0f ms\n",
+              s.registration_p50_ms, s.registration_p95_ms, s.evaluations_mean, s.align_ms);
+  std::printf("holds %lld, faults %lld, corrections sent %lld", static_cast<long long>(s.holds),
+              static_cast<long long>(s.faults), static_cast<long long>(s.commands));
+  if (s.allocations_per_cycle)
+    std::printf(", heap allocations per steady-state cycle %.3f", *s.allocations_per_cycle);
+  std::printf("\n");
+  if (s.operator_refused > 0)
+    std::printf("operator commands refused or discarded: %lld (journal: operator_refusal)\n",
+                static_cast<long long>(s.operator_refused));
+  for (const LoopTransition& t : s.transitions)
+    std::printf("  cycle %6lld  %-5s -> %-5s  %s\n", static_cast<long long>(t.cycle), to_string(t.from),
+                to_string(t.to), t.reason);
+}
+
+Status run(const SimOptions& o) {
+  // The options that need no scene first: a bad path or value is refused before the CT is
+  // loaded and the light fields are built (minutes), and before anything is created.
+  LoopSessionOptions so;
+  so.cycles = o.cycles;
+  so.simulated_clock = o.fast;
+  so.status_line = !o.json && ::isatty(STDERR_FILENO) == 1;
+  so.announce_holds = !so.status_line;
+  so.terminal_operator = ::isatty(STDIN_FILENO) == 1;
+  if (o.journal_named) {
+    so.journal = o.journal;  // '' for none
+    so.journal_options.overwrite = o.overwrite;
+  } else {
+    so.journal = timestamped_journal(o.journal_folder);
+    so.journal_options.add_suffix = true;  // a run in the same second takes -2, -3, ...
+  }
+  so.overwrite_archive = o.overwrite;
+  so.control_socket = o.control;
+  so.auto_resume_s = o.auto_resume_s;
+  so.light_field_dir = o.lf_dir;
+  so.archive = o.archive;
+  so.replay_sequence = o.sequence;
+  if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
+  if (o.hil == "can") so.hil = HilProtocol::kCan;
+  so.allocation_count = &process_allocation_count;
+  LFTRACK_RETURN_IF_ERROR(check_session_options(so));
+
+  auto scene = load_scene(o.scene.scene);
+  if (!scene.ok()) return scene.status();
+  if (o.mode == SimOptions::Mode::kRun) {
+    for (const DetectorSpec& d : scene->detectors)
+      if (d.frames != "sim")
+        return failed_precondition("detector " + d.view.name + " takes frames from '" + d.frames +
+                                   "': this build drives only simulated detectors (frames: sim) in `run`; "
+                                   "V4L2 is not built yet, and archived frames replay with `lftrack replay "
+                                   "--sequence DIR`");
+  }
+  RealtimeSpec rt = scene->loop.realtime;
+  if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
+  // Real-time set-up first, so every thread made afterwards inherits the policy and affinity:
+  // the registration's workers run at the cycle's priority; the simulated detectors drop one
+  // level below it, the journal and archive writers to SCHED_OTHER (realtime_setup.hpp). Only
+  // for runs on the real clock: an offline run (--fast) on SCHED_FIFO would spin every core at
+  // real-time priority and starve the host, for no timing it needs.
+  const bool real_clock = o.mode == SimOptions::Mode::kRun || !o.fast;
+  RealtimeReport offline;
+  offline.offline = true;
+  auto report = real_clock ? apply_realtime_setup(rt) : Result<RealtimeReport>(offline);
+  if (!report.ok()) return report.status();
+  for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);
+  spdlog::info("real-time set-up: {}", report->summary());
+
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
+  if (!prepared.ok()) return prepared.status();
+  if (!so.journal.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(so.journal.parent_path(), ec);
+  }
+  auto session = LoopSession::create(*prepared, so, &pool);
+  if (!session.ok()) return session.status();
+  if (const drivers::ReplayFrameSource* replay = (*session)->replay())
+    spdlog::info("{}: replaying {} pairs from {}{}", prepared->scene.name, replay->pairs(), o.sequence,
+                 o.fast ? " as fast as possible" : " at the recorded pace");
+  else
+    spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
+                 o.fast ? " on a simulated clock" : "",
+                 so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
+  const std::string journal = (*session)->journal_path().string();  // the file written, suffix included
+  g_session.store(session->get());
+  struct sigaction action {};
+  action.sa_handler = on_interrupt;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  auto summary = (*session)->run();
+  g_session.store(nullptr);
+  if (!summary.ok()) return summary.status();
+  if (!summary->journal_error.empty()) spdlog::error("{}", summary->journal_error);
+  const drivers::ReplayFrameSource* replay = (*session)->replay();
+  const FrameArchive* archive = (*session)->archive();
+  if (o.json) {
+    nlohmann::json j = to_json(*summary);
+    j["scene"] = prepared->scene.name;
+    j["period_ms"] = prepared->scene.loop.period_ms;
+    j["simulated_clock"] = o.fast;
+    j["realtime"] = report->summary();
+    if (!journal.empty()) j["journal"] = journal;
+    if (replay != nullptr) {
+      const drivers::ReplayCounters& c = replay->counters();
+      j["replay"] = {{"sequence", o.sequence},
+                     {"pairs", replay->pairs()},
+                     {"pairs_delivered", c.pairs_delivered},
+                     {"missing_frames", c.missing},
+                     {"unreadable_frames", c.unreadable},
+                     {"wrong_size_frames", c.wrong_size},
+                     {"late_pairs", c.late}};
+    }
+    if (archive != nullptr)
+      j["archive"] = {{"directory", o.archive},
+                      {"pairs_written", archive->pairs_written()},
+                      {"pairs_dropped", archive->pairs_dropped()}};
+    if (const drivers::ModbusCouch* couch = (*session)->modbus_couch()) {
+      const drivers::ModbusCouchCounters c = couch->counters();
+      j["hil"] = {{"protocol", "modbus"},         {"endpoint", couch->endpoint()},
+                  {"requests", c.requests},       {"timeouts", c.timeouts},
+                  {"exceptions", c.exceptions},   {"bad_replies", c.bad_replies},
+                  {"disconnects", c.disconnects}, {"reconnects", c.reconnects}};
+    }
+    if (const drivers::CanRobot* robot = (*session)->can_robot()) {
+      const drivers::CanRobotCounters& c = robot->counters();
+      j["hil"] = {{"protocol", "can"},
+                  {"frames_out", c.frames_out},
+                  {"frames_in", c.frames_in},
+                  {"heartbeats", c.heartbeats},
+                  {"error_frames", c.error_frames},
+                  {"timeouts", c.timeouts},
+                  {"refused", c.refused},
+                  {"faults", drivers::describe_can_faults(robot->faults())}};
+    }
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    print_summary(*summary);
+    if (replay != nullptr) {
+      const drivers::ReplayCounters& c = replay->counters();
+      std::printf(
+          "replay: %lld of %zu pairs delivered; frames missing %lld, unreadable %lld, wrong size %lld; "
+          "pairs late %lld\n",
+          static_cast<long long>(c.pairs_delivered), replay->pairs(), static_cast<long long>(c.missing),
+          static_cast<long long>(c.unreadable), static_cast<long long>(c.wrong_size),
+          static_cast<long long>(c.late));
+    }
+    if (archive != nullptr)
+      std::printf("frames archived: %llu pairs in %s (lftrack replay --sequence %s), %llu dropped\n",
+                  static_cast<unsigned long long>(archive->pairs_written()), o.archive.c_str(),
+                  o.archive.c_str(), static_cast<unsigned long long>(archive->pairs_dropped()));
+    if (const drivers::ModbusCouch* couch = (*session)->modbus_couch()) {
+      const drivers::ModbusCouchCounters c = couch->counters();
+      std::printf(
+          "hil: %s, %lld requests; timeouts %lld, exceptions %lld, bad replies %lld, disconnects %lld\n",
+          couch->endpoint().c_str(), static_cast<long long>(c.requests), static_cast<long long>(c.timeouts),
+          static_cast<long long>(c.exceptions), static_cast<long long>(c.bad_replies),
+          static_cast<long long>(c.disconnects));
+    }
+    if (const drivers::CanRobot* robot = (*session)->can_robot()) {
+      const drivers::CanRobotCounters& c = robot->counters();
+      std::printf(
+          "hil: CAN robot, %lld frames out, %lld in (%lld heartbeats, %lld error frames); timeouts %lld, "
+          "refused %lld; faults now: %s\n",
+          static_cast<long long>(c.frames_out), static_cast<long long>(c.frames_in),
+          static_cast<long long>(c.heartbeats), static_cast<long long>(c.error_frames),
+          static_cast<long long>(c.timeouts), static_cast<long long>(c.refused),
+          drivers::describe_can_faults(robot->faults()).c_str());
+    }
+    if (!journal.empty())
+      std::printf("journal: %s (lftrack journal export %s)\n", journal.c_str(), journal.c_str());
+  }
+  if (!summary->journal_error.empty()) return io_error(summary->journal_error);
+  return {};
+}
+
+Command add(CLI::App* parent, const char* name, const char* description, SimOptions::Mode mode) {
+  auto o = std::make_shared<SimOptions>();
+  o->mode = mode;
+  if (mode != SimOptions::Mode::kSim) o->cycles = 0;
+  if (mode == SimOptions::Mode::kReplay) o->journal_folder = "out/replay";
+  if (mode == SimOptions::Mode::kRun) o->journal_folder = "out/run";
+  CLI::App* app = parent->add_subcommand(name, description);
+  add_scene_options(app, &o->scene);
+  if (mode == SimOptions::Mode::kReplay)
+    app->add_option("--sequence", o->sequence, "Archived frame sequence (a directory with index.csv)")
+        ->required();
+  app->add_option("--cycles", o->cycles,
+                  mode == SimOptions::Mode::kReplay ? "Cycles to run (0: to the end of the sequence)"
+                                                    : "Cycles to run (0: until quit)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app->add_flag("--json", o->json, "Print the summary as JSON");
+  if (mode == SimOptions::Mode::kSim)
+    app->add_flag("--fast", o->fast,
+                  "As fast as possible on a simulated clock (deterministic; no real-time timing)");
+  if (mode == SimOptions::Mode::kReplay)
+    app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
+  if (mode == SimOptions::Mode::kSim)
+    app->add_option("--hil", o->hil,
+                    "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1 "
+                    "(modbus), or a virtual robot on a CAN link (can), commanded through the real driver")
+        ->check(CLI::IsMember({"modbus", "can"}));
+  if (mode != SimOptions::Mode::kReplay)
+    app->add_option("--archive", o->archive,
+                    "Archive every frame pair in this directory (the format `lftrack replay` reads)");
+  CLI::Option* journal = app->add_option(
+      "--journal", o->journal,
+      "Journal file ('' for none; default: a new " + o->journal_folder + "/journal-DATE-TIME.lfj); never overwritten");
+  app->add_flag("--overwrite", o->overwrite,
+                "Replace an existing --journal file, or an earlier lftrack archive in the --archive folder");
+  app->add_option("--control", o->control,
+                  "Control socket path, mode 0600 (datagrams: 'resume ID', 'reset ID', stop, quit, status)");
+  app->add_option("--auto-resume", o->auto_resume_s,
+                  "An unattended operator resumes this many seconds into each HOLD (0 to 3600)")
+      ->check(CLI::Validator(check_auto_resume_text, "SECONDS"));
+  app->add_option("--rt", o->rt,
+                  "Real-time set-up: enforce or ignore (default: the scene's loop.realtime.mode)")
+      ->check(CLI::IsMember({"enforce", "ignore"}));
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
+  return [o, journal] {
+    o->journal_named = journal->count() > 0;
+    return run(*o);
+  };
+}
+
+}  // namespace
+
+Command add_sim_command(CLI::App* parent) {
+  return add(parent, "sim", "The simulated closed loop: patient motion, synthetic frames, a virtual couch",
+             SimOptions::Mode::kSim);
+}
+Command add_run_command(CLI::App* parent) {
+  return add(parent, "run", "The loop on the scene's devices (real-time set-up as the scene says)",
+             SimOptions::Mode::kRun);
+}
+Command add_replay_command(CLI::App* parent) {
+  return add(parent, "replay", "The loop on an archived frame sequence: track and report, no actuator",
+             SimOptions::Mode::kReplay);
+}
+
+}  // namespace lftrack::host::cli

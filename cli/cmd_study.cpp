@@ -1,0 +1,120 @@
+// `lftrack study capture-range`: the capture-range study of the papers on a scene.
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+
+#include "cli_commands.hpp"
+#include "lftrack/studies/capture_range_study.hpp"
+#include "lftrack/studies/geometry_sensitivity.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "lftrack/host/progress_bar.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+struct CaptureRangeCliOptions {
+  SceneOptions scene;
+  std::string out_dir;
+  int per_bin = 30;
+  int bins = 8;
+  std::vector<std::string> methods{"papers:mi", "cmaes:mi", "papers:mi+fiducial"};
+  std::string renderer = "lightfield";
+  std::string lf_dir;
+  std::uint64_t seed = 1;
+};
+
+Status run(const CaptureRangeCliOptions& o) {
+  CaptureRangeOptions options;
+  for (const auto& text : o.methods) {
+    auto m = parse_registration_method(text);
+    if (!m.ok()) return m.status();
+    options.methods.push_back(*m);
+  }
+  options.per_bin = o.per_bin;
+  options.bins = o.bins;
+  options.seed = o.seed;
+  options.renderer = o.renderer;
+  options.light_field_dir = o.lf_dir;
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = load_prepared_scene(o.scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  ProgressBar bar("capture range");
+  auto report = run_capture_range_study(*prepared, options, &pool, [&](double f) { bar.update(f); });
+  if (!report.ok()) return report.status();
+  bar.finish();
+  LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(*report, o.out_dir));
+  std::printf("%-24s %8s %8s %9s %9s %9s %9s %9s\n", "method", "success", "<2.5mm", "mean TRE", "max TRE",
+              "capture", "median", "p95");
+  for (const auto& s : report->summaries)
+    std::printf("%-24s %7.1f%% %7.1f%% %6.3f mm %6.3f mm %6.1f mm %6.0f ms %6.0f ms\n", s.name.c_str(),
+                100 * s.success_rate, 100 * s.success_rate_loose, s.mean_tre_mm, s.max_tre_mm,
+                s.capture_range_mm, s.median_ms, s.p95_ms);
+  std::printf("wrote %s/{runs.csv,summary.json,capture_range.png}\n", o.out_dir.c_str());
+  return {};
+}
+
+}  // namespace
+
+Command add_study_capture_range_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand("capture-range", "Success rate against initial TRE, per method");
+  auto o = std::make_shared<CaptureRangeCliOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--out", o->out_dir, "Output folder")->required();
+  app->add_option("--per-bin", o->per_bin, "Starts per bin")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  app->add_option("--bins", o->bins, "Bins of 2 mm initial TRE")
+      ->check(CLI::Range(1, 32))
+      ->capture_default_str();
+  app->add_option("--methods", o->methods, "Methods PLAN:MEASURE[+fiducial]")
+      ->delimiter(',')
+      ->capture_default_str();
+  app->add_option("--renderer", o->renderer, "DRR renderer inside the registration")->capture_default_str();
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
+  app->add_option("--seed", o->seed, "Seed of gold poses, starts and noise")->capture_default_str();
+  return [o] { return run(*o); };
+}
+
+namespace {
+
+struct SensitivityCliOptions {
+  SceneOptions scene;
+  SensitivityOptions study;
+  bool json = false;
+};
+
+}  // namespace
+
+Command add_study_sensitivity_command(CLI::App* parent) {
+  auto* app =
+      parent->add_subcommand("sensitivity", "TRE added by calibration errors (source, detector, pitch)");
+  auto o = std::make_shared<SensitivityCliOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--runs", o->study.runs, "Registrations per case")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  app->add_option("--plan", o->study.plan, "Registration plan")->capture_default_str();
+  app->add_option("--start-tre", o->study.start_tre_mm, "Initial mean TRE of the starts (mm)")
+      ->capture_default_str();
+  app->add_option("--seed", o->study.seed, "Seed of gold poses, starts and noise")->capture_default_str();
+  app->add_flag("--json", o->json, "Print the report as JSON on stdout");
+  return [o]() -> Status {
+    tracking::ThreadPool pool(o->scene.threads);
+    auto prepared = load_prepared_scene(o->scene, &pool);
+    if (!prepared.ok()) return prepared.status();
+    auto report = run_geometry_sensitivity(*prepared, o->study, &pool);
+    if (!report.ok()) return report.status();
+    if (o->json) {
+      std::printf("%s\n", to_json(*report).dump(2).c_str());
+      return {};
+    }
+    std::printf("%-76s %10s %10s %12s\n", "model geometry", "TRE mm", "max mm", "added mm");
+    for (const SensitivityCase& c : report->cases)
+      std::printf("%-76s %10.3f %10.3f %12.3f\n", c.name.c_str(), c.mean_tre_mm, c.max_tre_mm,
+                  c.mean_added_mm);
+    return {};
+  };
+}
+
+}  // namespace lftrack::host::cli

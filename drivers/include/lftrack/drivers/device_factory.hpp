@@ -1,0 +1,64 @@
+#pragma once
+// One factory for every device the drivers implement. A spec says what a device is, with its
+// settings; make_frame_source and make_actuator build it, unopened (the loop opens devices
+// outside the cycle). The spec's type names the kind, so the code that assembles a run holds no
+// chain of if/else over device names: it fills a spec (from a scene, a command line) and calls
+// the factory. Simulated devices belong to the simulator (sim/ builds on drivers/) and are made
+// there.
+//
+// Checks that need no hardware are made here, with messages that name the device: a V4L2
+// detector without a device path or a size, a replayed sequence that cannot be read, a Modbus
+// couch without a host or serial device, a CAN robot with neither an interface nor a link.
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "lftrack/drivers/actuator.hpp"
+#include "lftrack/drivers/can_robot.hpp"
+#include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/drivers/modbus_couch.hpp"
+#include "lftrack/drivers/replay_frame_source.hpp"
+#include "lftrack/drivers/v4l2_detector.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::drivers {
+
+// Frame sources.
+struct V4l2SourceSpec {
+  std::vector<V4l2DetectorOptions> detectors;  // one per detector, in the scene's order
+  double max_skew_ms = 20;                     // a pair's two exposures at most this far apart
+};
+struct ReplaySourceSpec {
+  std::filesystem::path sequence;       // an archived sequence's folder (frame_sequence.hpp)
+  std::vector<DetectorShape> detectors;  // the scene's, in its order
+  ReplayOptions options;
+};
+using FrameSourceSpec = std::variant<V4l2SourceSpec, ReplaySourceSpec>;
+
+// Actuators.
+struct ModbusActuatorSpec {
+  ModbusCouchOptions options;
+};
+struct CanActuatorSpec {
+  CanRobotOptions options;
+  // An open, connected link carrying struct can_frame records (a bridge process's socket, a
+  // socket pair to the virtual robot); the actuator takes it over. -1: options.interface.
+  int link_fd = -1;
+};
+// The couch read-backs recorded beside an archived sequence, in step with its frames.
+struct RecordedActuatorSpec {
+  const ReplayFrameSource* frames = nullptr;
+};
+using ActuatorSpec = std::variant<ModbusActuatorSpec, CanActuatorSpec, RecordedActuatorSpec>;
+
+// The kind's name, as scenes and messages say it: "v4l2", "replay", "modbus", "can", "recorded".
+const char* kind_name(const FrameSourceSpec& spec);
+const char* kind_name(const ActuatorSpec& spec);
+
+Result<std::unique_ptr<FrameSource>> make_frame_source(FrameSourceSpec spec);
+Result<std::unique_ptr<Actuator>> make_actuator(ActuatorSpec spec);
+
+}  // namespace lftrack::drivers

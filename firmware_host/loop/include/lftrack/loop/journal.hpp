@@ -1,0 +1,195 @@
+#pragma once
+// The cycle journal: one fixed-size record per cycle, appended to a file by a writer thread fed
+// through a lock-free single-producer queue, so the cycle never waits on the disk.
+//
+// File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size), then
+// one frame per record: u32 magic 0x4A52464C ("LFRJ"), u32 payload size, the payload (a
+// JournalRecord), u32 CRC-32C of the payload. Version 2 (written now) has 264-byte records;
+// version 1 (still read) had 256, the prefix of JournalRecord up to `hold_id`.
+//
+// Durability: the writer write()s records within a few milliseconds of the push, so they are
+// in the kernel's page cache and survive the process being killed (kill -9) at any moment; it
+// calls fdatasync() every `fsync_interval_ms` (default 1 s) and at close, which bounds what a
+// power loss can take. A kill during a write() leaves a torn last frame; a power loss can leave
+// zero-filled blocks at the end.
+//
+// Reading: a damaged frame (bad magic or size, CRC mismatch, cut short) loses only itself. The
+// reader resynchronises on the next offset where a complete valid frame starts, reports each
+// bad span (offset, length, what was wrong), and checks the cycle counter for gaps and repeats.
+// A torn tail (a bad span at the end that a crash leaves) is reported but is not damage.
+
+#include <unistd.h>
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "lftrack/loop/spsc_queue.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::host {
+
+// One cycle. Plain data; times are CLOCK_MONOTONIC nanoseconds.
+struct JournalRecord {
+  std::uint64_t cycle = 0;
+  std::int64_t cycle_start_ns = 0;
+  std::int64_t frame_time_ns[2] = {0, 0};
+  std::uint32_t frame_sequence[2] = {0, 0};
+  std::uint32_t dropped_before = 0;  // records the queue could not take since the last one
+  std::uint32_t evaluations = 0;
+  double pose_delta[6] = {};  // registered pose: delta from nominal (mm, rad)
+  double similarity[4] = {};  // per view
+  double registration_ms = 0;
+  double command[6] = {};        // correction sent this cycle (mm, rad); zero if none
+  double readback[6] = {};       // actuator read-back (mm, rad)
+  double true_residual_mm = -1;  // simulation only: the true patient offset after correction
+  std::uint8_t state = 0;        // TrackingState after this cycle
+  std::uint8_t previous_state = 0;
+  std::uint8_t gate_decision = 0;  // GateDecision
+  std::uint8_t gate_reason = 0;    // GateReason
+  std::uint8_t command_sent = 0;
+  std::uint8_t beam_permit = 0;
+  std::uint8_t overrun = 0;  // this cycle started late (missed periods were skipped)
+  std::uint8_t event = 0;    // 1 + TrackingEvent that changed the state this cycle; 0: none
+  std::uint32_t skipped_periods = 0;
+  // Format version 2 on. The HOLD or FAULT this cycle ends in (0: neither): every entry into HOLD
+  // or FAULT takes the next id, and an operator's resume or reset must name it.
+  std::uint32_t hold_id = 0;
+  std::uint8_t operator_command = 0;   // 1 + OperatorCommand the loop acted on this cycle; 0: none
+  std::uint8_t operator_refusal = 0;   // OperatorRefusal of the last command refused this cycle; 0: none
+  std::uint16_t operator_refused = 0;  // commands refused or discarded this cycle (stale, wrong id, ...)
+  std::uint32_t reserved = 0;
+};
+static_assert(std::is_trivially_copyable_v<JournalRecord>);
+
+struct JournalOptions {
+  std::size_t queue_capacity = 4096;  // records; 6.8 minutes at 10 Hz of a stalled disk
+  int fsync_interval_ms = 1000;
+  // A journal is a record of treatment: open() refuses a file that exists, unless this is set;
+  // even then it replaces only an earlier lftrack journal (a regular file, not through a link).
+  bool overwrite = false;
+  // Instead of refusing an existing file, take the next free name: NAME-2.EXT, NAME-3.EXT, ...
+  // (for default, time-stamped names).
+  bool add_suffix = false;
+  // The write(2) the writer thread calls: the kernel's, or a fault injector in tests (a disk
+  // that fills up, an I/O error).
+  ssize_t (*write_call)(int fd, const void* data, std::size_t bytes) = &::write;
+};
+
+// Whether a journal may be created at `file`: nothing there, or (overwrite) an earlier lftrack
+// journal, a regular file not reached through a symbolic link. For checking options early;
+// JournalWriter::open checks again.
+Status check_journal_path(const std::filesystem::path& file, bool overwrite);
+
+class JournalWriter {
+ public:
+  ~JournalWriter();
+  // Creates the file (refused when anything is there, unless options.overwrite and it is an
+  // earlier journal: then truncated), writes the header and starts the writer thread.
+  // path() says which file it is (add_suffix may have chosen another name).
+  static Result<std::unique_ptr<JournalWriter>> open(const std::filesystem::path& file,
+                                                     const JournalOptions& options = {});
+  // From the cycle: never blocks, never allocates. Returns false (and counts it) when the queue
+  // is full.
+  bool append(const JournalRecord& record);
+  // Drains the queue, syncs and closes. Called by the destructor too.
+  Status close();
+  std::uint64_t written() const { return written_.load(); }
+  const std::filesystem::path& path() const { return path_; }
+  // True once a write has failed (disk full, I/O error). The writer then truncates the file to
+  // its last complete record and writes nothing more, so everything written before stays
+  // readable; the loop holds (safety gate: "journal write failed"). Any thread may ask.
+  bool failed() const { return write_failed_.load(std::memory_order_acquire); }
+  std::uint64_t lost() const { return lost_.load(); }  // records not written after the failure
+  std::uint64_t dropped() const { return dropped_total_; }
+
+ private:
+  JournalWriter(int fd, const JournalOptions& options);
+  void run();
+
+  int fd_ = -1;
+  std::filesystem::path path_;
+  JournalOptions options_;
+  SpscQueue<JournalRecord> queue_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> written_{0};
+  std::atomic<bool> write_failed_{false};
+  std::atomic<std::uint64_t> lost_{0};
+  off_t good_bytes_ = 0;  // the file's length up to the last complete write
+  std::uint32_t dropped_since_last_ = 0;
+  std::uint64_t dropped_total_ = 0;
+  bool closed_ = false;
+};
+
+// Bytes between frames that are not a valid frame, from `offset` (bytes from the start of the
+// file) for `bytes`.
+struct JournalBadSpan {
+  std::uint64_t offset = 0;
+  std::uint64_t bytes = 0;
+  std::string problem;  // what the frame at `offset` had wrong, e.g. "checksum mismatch"
+  bool zeros = false;   // every byte of the span is zero (as a power loss leaves)
+};
+
+// Cycles missing between two records that follow each other in the file: `next_cycle` came
+// where `after_cycle + 1 + skipped_periods` (of the record of `after_cycle`) was expected.
+struct JournalCycleGap {
+  std::uint64_t after_cycle = 0;
+  std::uint64_t next_cycle = 0;
+  std::uint64_t missing_cycles = 0;  // next_cycle - expected; at least the records missing
+  std::uint32_t dropped_before = 0;  // the writer's count of queue drops, on the next record
+  bool explained_by_drops = false;   // 1 <= dropped_before <= missing_cycles
+  bool after_bad_span = false;       // a bad span lies between the two records
+  std::size_t record_index = 0;      // of the next record in JournalContents::records
+};
+
+// A record whose cycle is not above every earlier record's: a duplicate (equal) or backwards.
+struct JournalCycleRepeat {
+  std::uint64_t cycle = 0;
+  std::uint64_t highest_before = 0;  // the highest cycle of the records before it
+  std::size_t record_index = 0;      // in JournalContents::records
+};
+
+// Limits on what one read takes, so that a stream without end (/dev/zero behind a valid header,
+// a FIFO) stops in bounded time and memory. The defaults are far above any real journal (a
+// treatment hour at 10 Hz is 36,000 records, 10 MB).
+struct JournalReadLimits {
+  std::size_t max_records = 4'000'000;       // about 1 GB in memory; 37 hours of cycles at 30 Hz
+  std::uint64_t max_bad_bytes = 1ull << 30;  // 1 GiB in all not in any valid frame
+};
+
+struct JournalContents {
+  std::uint32_t format_version = 0;
+  std::vector<JournalRecord> records;     // every valid frame, in file order (repeats included)
+  std::vector<JournalBadSpan> bad_spans;  // in file order; a torn tail is the last one
+  std::vector<JournalCycleGap> gaps;
+  std::vector<JournalCycleRepeat> repeats;
+  // The last bad span when it runs to the end of the file and is what a crash leaves: at most
+  // one frame cut short by a kill, then nothing but zeros (blocks a power loss never wrote). Its
+  // records were never durably written; it is not damage.
+  std::size_t torn_tail_bytes = 0;
+  std::string note;  // "ignored a torn tail: ..." when there is one
+  // Why reading stopped before the end of the file (a limit reached, a read error); "" when it did not.
+  std::string stopped;
+
+  // True when records may have been lost or disordered beyond what a crash explains: a bad span
+  // other than a torn tail, a gap the writer's drop counts do not explain, a repeated cycle, or
+  // a read that stopped early.
+  bool damaged() const;
+};
+
+// Reads every valid record, streaming the file (any size; a FIFO or a device too) through a
+// 1 MiB window. Fails only when the file cannot be opened or read, is not a journal (header), is
+// of another version than 1 or 2, or has a record size that does not match its version. Damage
+// inside is reported in the result, never an error: the good records before and after it are all
+// returned. Stops, with `stopped` saying so, before the record past `limits.max_records` or once
+// more than `limits.max_bad_bytes` were not records.
+// Memory: the records (264 bytes each) and the problems found. For a regular file the records'
+// room is reserved from its size; on a stream of unknown length it grows by doubling, so briefly
+// up to twice that (about 2 GB at the default record limit).
+Result<JournalContents> read_journal(const std::filesystem::path& file, const JournalReadLimits& limits = {});
+
+}  // namespace lftrack::host

@@ -1,0 +1,34 @@
+#pragma once
+// The loop's settings as a scene's `loop` section declares them (DESIGN.md, "One cycle"): the
+// period, the budgets, the registration plans, the prediction and the real-time set-up. Parsed
+// by the session (scene_loop_parser.cpp); read by the loop.
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace lftrack::host {
+
+// loop: the real-time cycle (DESIGN.md, "One cycle").
+struct RealtimeSpec {
+  bool enforce = false;   // enforce: refuse to start without mlockall, SCHED_FIFO and affinity
+  int priority = 80;      // SCHED_FIFO priority of the cycle's thread (1..99)
+  std::vector<int> cpus;  // the cycle's CPUs; empty: leave the affinity alone
+};
+struct LoopSpec {
+  double period_ms = 100;
+  double registration_budget_ms = 60;    // the warm registration's wall-time budget per cycle
+  double acquire_timeout_ms = 40;        // how long a cycle waits for its frame pair
+  std::string align_plan = "quadratic";  // the cold, wide-range registration before tracking
+  std::string track_plan = "warm";       // each cycle's registration, from the last pose
+  // Prediction of the patient's own motion over the latency from frame to couch motion: a
+  // polynomial of `prediction_order` (1 or 2) fitted to the last `prediction_cycles` estimates,
+  // extrapolated by `lookahead_s` (unset: one period plus the actuator's latency).
+  // prediction_cycles < 2: no prediction.
+  std::optional<double> lookahead_s;
+  int prediction_cycles = 8;
+  int prediction_order = 2;
+  RealtimeSpec realtime;
+};
+
+}  // namespace lftrack::host

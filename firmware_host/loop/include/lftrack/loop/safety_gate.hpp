@@ -1,0 +1,102 @@
+#pragma once
+// The safety gate (DESIGN.md, "One cycle"): a pure function from one cycle's registration result,
+// frame timing and actuator read-back to a decision. Nothing else may command motion.
+//
+// Two kinds of failure:
+// - safety violations HOLD at once: a non-finite number anywhere, a per-cycle correction above
+//   the step limit, a total correction above the total limit, an actuator read-back that
+//   disagrees with the last command;
+// - quality failures (no registration result, low similarity, views that disagree, a stale
+//   frame, frames too far apart to be a pair) SKIP the cycle (no command, no beam) and are
+//   counted: `hold_after_failures` in a row HOLD, `fault_after_failures` in a row STOP.
+// Only APPLY carries a correction and allows the beam, and only with a fresh valid result.
+
+#include <array>
+#include <cstdint>
+
+#include "lftrack/tracking/pose.hpp"
+
+namespace lftrack::host {
+
+struct SafetyLimits {
+  double max_step_mm = 2.0;    // per-cycle correction, each translation component
+  double max_step_deg = 2.0;   // per-cycle correction, rotation angle
+  double max_total_mm = 10.0;  // from the aligned pose
+  double max_total_deg = 5.0;
+  double min_similarity = 0.0;          // per view, absolute (the measure's units)
+  double min_similarity_ratio = 0.7;    // per view, against its value at alignment
+  double max_ratio_disagreement = 0.2;  // |ratio_A - ratio_B|
+  double max_frame_age_ms = 150;
+  double max_pair_skew_ms = 20;
+  double readback_tolerance_mm = 0.5;
+  double readback_tolerance_deg = 0.5;
+  int hold_after_failures = 3;
+  int fault_after_failures = 10;
+  // Overruns in a row before the loop holds: one is counted and its periods skipped; several
+  // mean the host cannot keep the period, and corrections computed that late are not trusted.
+  int hold_after_overruns = 3;
+};
+
+enum class GateDecision : std::uint8_t { kApply = 0, kSkip = 1, kHold = 2, kStop = 3 };
+enum class GateReason : std::uint8_t {
+  kOk = 0,
+  kNonFinite,
+  kStepTooLarge,
+  kTotalTooLarge,
+  kReadbackMismatch,
+  kNoResult,
+  kLowSimilarity,
+  kViewsDisagree,
+  kStaleFrame,
+  kUnpairedFrames,
+  kNoFrames,       // the frame source gave no complete pair (timeout, device fault, bad file)
+  kActuatorFault,  // no read-back (timeout, exception, disconnected) or the actuator reports a fault
+  kImageQuality,   // a frame is saturated, blank, uniform or has too many dead pixels
+  kJournalFailed,  // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
+  kOverruns,       // hold_after_overruns cycles in a row overran their period
+  kOutsideEnvelope,  // the registered pose left the scene's pose envelope (registration_verdict.hpp)
+};
+const char* to_string(GateDecision decision);
+const char* to_string(GateReason reason);
+
+inline constexpr int kMaxGateViews = 4;
+
+struct GateInput {
+  bool frames_ok = true;  // the source delivered a complete pair this cycle
+  bool image_quality_ok = true;
+  bool journal_ok = true;        // the journal writes (a treatment is not run unrecorded)
+  int consecutive_overruns = 0;  // cycles in a row, up to the last, that overran their period  // every frame
+                                 // passed the image-quality gate (frame_quality.hpp)
+  bool registration_ok = false;
+  // Why there is no usable result when !registration_ok: kNoResult, or the registration verdict's
+  // reason (low similarity, views disagree, outside the envelope).
+  GateReason registration_failure = GateReason::kNoResult;
+  tracking::Vector6d step = tracking::Vector6d::Zero();   // this cycle's correction (t mm, omega rad)
+  tracking::Vector6d total = tracking::Vector6d::Zero();  // correction from the aligned pose
+  int views = 0;
+  std::array<double, kMaxGateViews> similarity{};            // this cycle, per view
+  std::array<double, kMaxGateViews> reference_similarity{};  // at alignment, per view
+  double frame_age_ms = 0;       // of the older frame of the pair, at the decision
+  double pair_skew_ms = 0;       // between the two frames' timestamps
+  bool readback_valid = true;    // the actuator answered the read-back and reports no fault
+  // The actuator refused this cycle's command (it knows of a fault; nothing was sent or moved):
+  // the loop asks the gate again with this set, and it holds.
+  bool command_refused = false;
+  double readback_error_mm = 0;  // actuator position against the last command
+  double readback_error_deg = 0;
+  int consecutive_failures = 0;  // before this cycle
+  // The operator approved this move (the set-up move after alignment, the first move after a
+  // resume): the per-cycle step limit does not apply; every other check does.
+  bool step_approved = false;
+};
+
+struct GateOutput {
+  GateDecision decision = GateDecision::kHold;
+  GateReason reason = GateReason::kOk;
+  int consecutive_failures = 0;  // after this cycle
+  bool apply() const { return decision == GateDecision::kApply; }
+};
+
+GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& input);
+
+}  // namespace lftrack::host

@@ -1,0 +1,154 @@
+// What a cycle leaves behind: its journal record (built from the CycleState alone), the
+// statistics gathered from that record, the state transitions and HOLD ids, and the lines people
+// read (the status line, the HOLD announcement).
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "loop_impl.hpp"
+
+namespace lftrack::host {
+
+namespace {
+constexpr std::size_t kMaxTransitions = 256;
+}  // namespace
+
+JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
+  JournalRecord r;
+  r.cycle = static_cast<std::uint64_t>(c.index);
+  r.cycle_start_ns = c.start_ns;
+  r.previous_state = static_cast<std::uint8_t>(c.state_before);
+  r.operator_refused = c.operator_refused;
+  r.operator_refusal = static_cast<std::uint8_t>(c.operator_refusal);
+  if (c.operator_command != OperatorCommand::kNone)
+    r.operator_command = static_cast<std::uint8_t>(1 + static_cast<int>(c.operator_command));
+  if (c.changed_state) r.event = static_cast<std::uint8_t>(1 + static_cast<int>(c.event));
+  for (int v = 0; v < 2; ++v) {
+    r.frame_time_ns[v] = c.frame_time_ns[v];
+    r.frame_sequence[v] = c.frame_sequence[v];
+  }
+  r.true_residual_mm = c.true_residual_mm;
+  if (c.have_readback)
+    for (int i = 0; i < 6; ++i) r.readback[i] = c.readback(i);
+  if (c.registration_ran) {
+    r.evaluations = c.evaluations;
+    r.registration_ms = c.registration_ms;
+  }
+  if (c.registered) {
+    for (int i = 0; i < 6; ++i) r.pose_delta[i] = c.pose_delta(i);
+    for (int v = 0; v < c.gate_input.views && v < 4; ++v) r.similarity[v] = c.gate_input.similarity[std::size_t(v)];
+  }
+  r.gate_decision = static_cast<std::uint8_t>(c.gate.decision);
+  r.gate_reason = static_cast<std::uint8_t>(c.gate.reason);
+  if (c.command_sent) {
+    for (int i = 0; i < 6; ++i) r.command[i] = c.command(i);
+    r.command_sent = 1;
+  }
+  r.hold_id = c.hold_id;
+  r.beam_permit = c.beam_permit ? 1 : 0;
+  r.state = static_cast<std::uint8_t>(c.state_after);
+  return r;
+}
+
+void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleState& c) {
+  // The cycle's other stages and the registration: tracking cycles only (ALIGN's cold
+  // registration is reported on its own).
+  if (!c.aligning) {
+    acquire_ms.add(ms_between(c.acquire_started_ns, c.acquired_ns));
+    if (c.frames_ok) preprocess_ms.add(ms_between(c.acquired_ns, c.preprocessed_ns));
+  }
+  if (c.registration_ran) {
+    if (c.aligning) {
+      summary.align_ms = r.registration_ms;
+    } else {
+      registration_ms.add(r.registration_ms);
+      evaluations_sum += r.evaluations;
+    }
+  }
+  ++summary.decisions[r.gate_decision];
+  if (r.command_sent) ++summary.commands;
+  const auto state = static_cast<TrackingState>(r.state);
+  if (parts.truth != nullptr && state == TrackingState::kTrack) residual_mm.add(r.true_residual_mm);
+  ++summary.states[r.state];
+}
+
+void TrackingLoop::Impl::transition(CycleState& c, const StateTransition& t, TrackingEvent event) {
+  if (!t.changed()) return;
+  c.event = event;
+  c.changed_state = true;
+  if (t.to == TrackingState::kHold) ++summary.holds;
+  if (t.to == TrackingState::kFault) ++summary.faults;
+  const bool stopped = t.to == TrackingState::kHold || t.to == TrackingState::kFault;
+  hold_id = stopped ? new_hold_id() : 0;
+  state_reason = t.reason;
+  if (summary.transitions.size() < kMaxTransitions) summary.transitions.push_back({c.index, t.from, t.to, t.reason});
+  cycles_in_state = 0;
+}
+
+std::uint32_t TrackingLoop::Impl::new_hold_id() {
+  std::uniform_int_distribution<std::uint32_t> six_digits(100000, 999999);
+  std::uint32_t id = six_digits(hold_id_random);
+  while (id == last_hold_id) id = six_digits(hold_id_random);
+  return last_hold_id = id;
+}
+
+OperatorView TrackingLoop::Impl::operator_view(std::int64_t index) const {
+  OperatorView v;
+  v.state = machine.state();
+  v.hold_id = hold_id;
+  v.cycle = index;
+  v.cycles_in_state = cycles_in_state;
+  v.hold_age_s = hold_id != 0 ? 1e-9 * double(period_ns) * double(cycles_in_state) : 0.0;
+  v.reason = state_reason;
+  return v;
+}
+
+// The loop has entered HOLD or FAULT this cycle: discard what the operator sent before it, and
+// say on stderr which id a resume or reset must name (the status line shows it on a terminal).
+void TrackingLoop::Impl::entered_hold(CycleState& c) {
+  if (parts.operator_input != nullptr) {
+    OperatorPoll before;
+    before.refused = c.operator_refused;
+    before.last_refusal = c.operator_refusal;
+    parts.operator_input->on_hold(operator_view(c.index), &before);
+    if (before.command == OperatorCommand::kStop || before.command == OperatorCommand::kQuit)
+      stop_sent_before_hold = before.command;
+    c.operator_refused = before.refused;
+    c.operator_refusal = before.last_refusal;
+  }
+  if (settings.status_line || !settings.announce_holds) return;
+  char line[256];
+  const bool fault = machine.state() == TrackingState::kFault;
+  const int n = std::snprintf(line, sizeof line, "%s %u at cycle %lld: %s; %s with '%s %u'\n",
+                              to_string(machine.state()), hold_id, static_cast<long long>(c.index), state_reason,
+                              fault ? "reset" : "resume", fault ? "reset" : "resume", hold_id);
+  if (n > 0) (void)!::write(STDERR_FILENO, line, std::min<std::size_t>(std::size_t(n), sizeof line - 1));
+}
+
+void TrackingLoop::Impl::write_status_line(std::int64_t index, const JournalRecord& r) const {
+  char line[256];
+  const double step_mm =
+      std::sqrt(r.command[0] * r.command[0] + r.command[1] * r.command[1] + r.command[2] * r.command[2]);
+  int n = std::snprintf(line, sizeof line, "\r%7lld %-5s %-5s reg %5.1f ms %4u ev  step %5.2f mm",
+                        static_cast<long long>(index), to_string(static_cast<TrackingState>(r.state)),
+                        to_string(static_cast<GateDecision>(r.gate_decision)), r.registration_ms,
+                        r.evaluations, step_mm);
+  if (r.true_residual_mm >= 0 && n > 0 && n < int(sizeof line))
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "  residual %5.2f mm", r.true_residual_mm);
+  if (n > 0 && n < int(sizeof line))
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "  overruns %lld  ",
+                       static_cast<long long>(summary.overruns));
+  // The HOLD on screen is the one a key answers; keys typed before it appeared are discarded.
+  const TrackingState state = static_cast<TrackingState>(r.state);
+  if (r.hold_id != 0 && n > 0 && n < int(sizeof line))
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "%s %u: %s  %s [s]top [q]uit ", to_string(state),
+                       r.hold_id, state_reason, state == TrackingState::kFault ? "[x] reset" : "[r]esume");
+  else if (n > 0 && n < int(sizeof line))
+    n += std::snprintf(line + n, sizeof line - std::size_t(n), "[s]top [q]uit ");
+  if (n > 0) (void)!::write(STDERR_FILENO, line, std::min<std::size_t>(std::size_t(n), sizeof line - 1));
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,303 @@
+// The cycle's stages (loop_impl.hpp), in the order they run:
+//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> settle.
+// Each writes its part of the CycleState; the record and the statistics come after.
+
+#include <cmath>
+#include <limits>
+
+#include "lftrack/loop/cycle_schedule.hpp"
+#include "loop_impl.hpp"
+
+namespace lftrack::host {
+
+using drivers::DeviceStatus;
+using tracking::Pose;
+using tracking::PoseDelta;
+using tracking::Vector6d;
+
+namespace {
+
+// A(d): the rigid motion of delta d about the origin, as a pose.
+Pose motion_of(const Vector6d& d, const Eigen::Vector3d& origin) {
+  return tracking::apply_delta(Pose::Identity(), PoseDelta::from_vector(d), origin);
+}
+
+// The gate's reason for a registration the verdict rejected.
+GateReason gate_reason_of(VerdictReason r) {
+  switch (r) {
+    case VerdictReason::kLowSimilarity:
+      return GateReason::kLowSimilarity;
+    case VerdictReason::kViewsDisagree:
+      return GateReason::kViewsDisagree;
+    case VerdictReason::kOutsideEnvelope:
+      return GateReason::kOutsideEnvelope;
+    case VerdictReason::kImageQuality:
+      return GateReason::kImageQuality;
+    default:
+      return GateReason::kNoResult;
+  }
+}
+
+}  // namespace
+
+// Operator first: a resume or stop acts on this cycle. Everything waiting is taken now and judged
+// against the state as it stands: nothing is kept for a later state.
+bool TrackingLoop::Impl::take_operator_command(CycleState& c) {
+  if (parts.operator_input != nullptr) {
+    OperatorPoll polled;
+    polled.accept(stop_sent_before_hold);
+    stop_sent_before_hold = OperatorCommand::kNone;
+    parts.operator_input->poll(operator_view(c.index), &polled);
+    c.operator_refused = polled.refused;
+    c.operator_refusal = polled.last_refusal;
+    const OperatorCommand command = polled.command;
+    if (command != OperatorCommand::kNone && command != OperatorCommand::kStatus) c.operator_command = command;
+    if (command == OperatorCommand::kQuit || command == OperatorCommand::kStop) {
+      hold_actuator(c.start_ns + period_ns);
+      transition(c, machine.on(TrackingEvent::kOperatorStop), TrackingEvent::kOperatorStop);
+      ended_by_operator = command == OperatorCommand::kQuit ? "operator quit" : "operator stop";
+      return false;
+    }
+    if (command == OperatorCommand::kResume && c.state_before == TrackingState::kHold) {
+      transition(c, machine.on(TrackingEvent::kOperatorResume), TrackingEvent::kOperatorResume);
+      approve_next_step = true;  // the operator has seen the offset and accepts the move
+      consecutive_failures = 0;
+      predictor.reset();
+    }
+    if (command == OperatorCommand::kReset && c.state_before == TrackingState::kFault) {
+      transition(c, machine.on(TrackingEvent::kOperatorReset), TrackingEvent::kOperatorReset);
+      transition(c, machine.on(TrackingEvent::kStart), TrackingEvent::kStart);
+      consecutive_failures = 0;
+      predictor.reset();
+    }
+  }
+  c.state = machine.state();
+  c.aligning = c.state == TrackingState::kAlign;
+  return true;
+}
+
+// The frame pair, and the actuator's read-back at the frame time (where the couch is, and whether
+// it took our command).
+bool TrackingLoop::Impl::acquire(CycleState& c) {
+  c.acquire_started_ns = monotonic_now_ns();
+  const DeviceStatus acquired = parts.frames->acquire(
+      &pair, to_deadline(c.start_ns + std::int64_t(settings.loop.acquire_timeout_ms * 1e6)));
+  c.frames_ok = acquired == DeviceStatus::kOk;
+  if (!c.frames_ok && parts.frames->exhausted()) {  // an archived sequence has ended
+    ended_by_source = "end of the sequence";
+    return false;
+  }
+  // On the simulated clock a frame arrives at its exposure time: waiting for the simulator's
+  // renderer is not the loop's time.
+  c.acquired_ns = monotonic_now_ns();
+  if (settings.simulated_clock) cycle_wall_start_ns = c.acquired_ns;
+  c.oldest_frame_ns = c.newest_frame_ns = c.start_ns;
+  if (c.frames_ok) {
+    c.oldest_frame_ns = c.newest_frame_ns = pair.frames[0].timestamp_ns;
+    for (std::size_t v = 0; v < pair.frames.size() && v < 2; ++v) {
+      c.frame_time_ns[v] = pair.frames[v].timestamp_ns;
+      c.frame_sequence[v] = pair.frames[v].sequence;
+    }
+    for (const drivers::Frame& f : pair.frames) {
+      c.oldest_frame_ns = std::min(c.oldest_frame_ns, f.timestamp_ns);
+      c.newest_frame_ns = std::max(c.newest_frame_ns, f.timestamp_ns);
+    }
+  }
+  // The truth at the frame time, before this cycle's command moves the simulated room on.
+  if (parts.truth != nullptr) c.true_residual_mm = parts.truth->residual_mm();
+
+  GateInput& in = c.gate_input;
+  in.views = static_cast<int>(pair.frames.size());
+  in.frames_ok = c.frames_ok;
+  in.journal_ok = parts.journal == nullptr || !parts.journal->failed();
+  in.consecutive_overruns = consecutive_overruns;
+  if (parts.actuator != nullptr) {
+    drivers::ActuatorState a;
+    const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(c.start_ns + period_ns));
+    in.readback_valid = rb == DeviceStatus::kOk && !a.fault;
+    if (in.readback_valid) {
+      couch_position = a.position;
+      const Vector6d error = a.target - commanded_total;
+      in.readback_error_mm = error.head<3>().cwiseAbs().maxCoeff();
+      in.readback_error_deg = tracking::rad_to_deg(error.tail<3>().cwiseAbs().maxCoeff());
+      c.have_readback = true;
+      c.readback = a.position;
+    }
+  }
+  return true;
+}
+
+// The image-quality gate, then each frame to line integrals in its ROI; the pair is archived
+// when it passed.
+void TrackingLoop::Impl::preprocess(CycleState& c) {
+  quality_issue = tracking::FrameQualityIssue::kOk;
+  c.frames_usable = false;
+  if (c.frames_ok) {
+    c.frames_usable = true;
+    for (std::size_t v = 0; v < pair.frames.size() && c.frames_usable; ++v) {
+      const tracking::PixelWindow& w = parts.geometry.roi_windows[v];
+      quality_issue = tracking::assess_frame_quality(pair.frames[v].pixels.view(), w, parts.corrections[v],
+                                                     settings.image_quality);
+      c.frames_usable = quality_issue == tracking::FrameQualityIssue::kOk &&
+                        tracking::preprocess_frame(pair.frames[v].pixels.view(), parts.corrections[v], w,
+                                                   line_integral[v].view(), valid[v].view())
+                            .ok();
+    }
+    c.frames_usable = c.frames_usable && parts.registration->set_frames(frame_views, mask_views).ok();
+  }
+  c.preprocessed_ns = monotonic_now_ns();
+  c.gate_input.image_quality_ok = quality_issue == tracking::FrameQualityIssue::kOk;
+  if (c.frames_usable && parts.archive != nullptr)
+    parts.archive->append(c.index, pair, c.gate_input.readback_valid ? &couch_position : nullptr);
+}
+
+// Register: cold in ALIGN, warm from the last pose (moved with the couch) otherwise. The verdict
+// judges the alignment, whose result is the set-up move (no step limit). Tracking cycles are
+// judged by the gate's ratios against it: on a loaded host the verdict's absolute floors skipped
+// good time-boxed tracking registrations (closed-loop tests under ctest -j2).
+void TrackingLoop::Impl::register_pair(CycleState& c) {
+  const bool tracked_state =
+      c.state == TrackingState::kAlign || c.state == TrackingState::kTrack || c.state == TrackingState::kHold;
+  if (!c.frames_usable || !tracked_state) return;
+  Pose start = nominal;
+  if (!c.aligning && have_registration)
+    start = tracking::apply_delta(last_registered, PoseDelta::from_vector(couch_position - couch_at_last_registration),
+                                  origin_room);
+  const double budget_ms = c.aligning ? 1e12 : settings.loop.registration_budget_ms;
+  c.registered = parts.registration->run(start, c.aligning ? align_plan : track_plan, budget_ms, &result).ok() &&
+                 result_is_finite();
+  c.registration_ran = true;
+  c.evaluations = static_cast<std::uint32_t>(result.evaluations);
+  c.registration_ms = result.elapsed_ms;
+  if (!c.registered || !settings.verdict || !c.aligning) return;
+  const std::size_t views = pair.frames.size();
+  VerdictInput judged;
+  judged.views = static_cast<int>(views);
+  judged.stop = result.stop;
+  judged.pose_finite = result.T_room_from_ct.matrix().allFinite();
+  for (std::size_t v = 0; v < views && v < std::size_t(kMaxVerdictViews); ++v)
+    judged.similarity[v] = result.view_similarity[v];
+  judged.delta_from_nominal = tracking::delta_between(nominal, result.T_room_from_ct, origin_room).as_vector();
+  // Each frame against the DRR at the result: what catches A/B-swapped detectors.
+  if (parts.check_renderer != nullptr) {
+    judged.has_check_ncc = true;
+    for (std::size_t v = 0; v < views && v < std::size_t(kMaxVerdictViews); ++v) {
+      tracking::RenderExtras extras;
+      extras.valid = check_valid[v].view();
+      const bool rendered = parts.check_renderer
+                                ->render(result.T_room_from_ct, parts.geometry.views[v],
+                                         parts.geometry.roi_windows[v], check_drr[v].view(), &extras)
+                                .ok();
+      judged.check_ncc[v] = rendered ? masked_ncc(line_integral[v].view(), valid[v].view(), check_drr[v].view(),
+                                                  check_valid[v].view())
+                                     : std::numeric_limits<double>::quiet_NaN();
+    }
+  }
+  const RegistrationVerdict verdict = judge_registration(*settings.verdict, judged);
+  if (!verdict.ok) {
+    c.registered = false;
+    c.gate_input.registration_failure = gate_reason_of(verdict.reason);
+  }
+}
+
+// The patient's own offset, its prediction, and the couch move that cancels it; everything the
+// gate judges.
+void TrackingLoop::Impl::control(CycleState& c) {
+  GateInput& in = c.gate_input;
+  in.registration_ok = c.registered;
+  c.desired = commanded_total;
+  if (c.registered) {
+    c.pose_delta = tracking::delta_between(nominal, result.T_room_from_ct, origin_room).as_vector();
+    for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
+      in.similarity[std::size_t(v)] = result.view_similarity[std::size_t(v)];
+    const Pose patient = motion_of(couch_position, origin_room).inverse() * result.T_room_from_ct;
+    const Vector6d patient_offset = tracking::delta_between(nominal, patient, origin_room).as_vector();
+    if (c.aligning) predictor.reset();
+    predictor.add(1e-9 * double(c.newest_frame_ns), patient_offset);
+    const Vector6d predicted = predictor.predict();
+    c.desired = tracking::delta_between(motion_of(predicted, origin_room), Pose::Identity(), origin_room).as_vector();
+    last_registered = result.T_room_from_ct;
+    couch_at_last_registration = couch_position;
+    have_registration = true;
+    if (c.aligning) {
+      reference_similarity = in.similarity;
+      aligned_couch = c.desired;
+    }
+  }
+  in.reference_similarity = reference_similarity;
+  in.step = c.desired - commanded_total;
+  in.total = c.desired - aligned_couch;
+  in.consecutive_failures = consecutive_failures;
+  // Set-up and resumed moves are approved by the operator; in HOLD nothing moves, so only the
+  // quality of the registration is judged (and counted towards FAULT).
+  in.step_approved = c.aligning || approve_next_step || c.state == TrackingState::kHold;
+  const std::int64_t decision_ns = now_ns(c.start_ns);
+  in.frame_age_ms = c.registered ? ms_between(c.oldest_frame_ns, decision_ns) : 0.0;
+  in.pair_skew_ms = c.registered ? ms_between(c.oldest_frame_ns, c.newest_frame_ns) : 0.0;
+}
+
+// The pure gate decides; the state machine follows it.
+void TrackingLoop::Impl::gate(CycleState& c) {
+  c.gate = evaluate_gate(settings.limits, c.gate_input);
+  consecutive_failures = c.gate.consecutive_failures;
+  if (c.aligning) {
+    const TrackingEvent e = c.gate.apply() ? TrackingEvent::kAligned : TrackingEvent::kAlignFailed;
+    transition(c, machine.on(e), e);
+    summary.aligned = summary.aligned || c.gate.apply();
+  } else {
+    transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
+  }
+}
+
+// Only an APPLY in TRACK moves. A command the actuator refuses (it knows of a fault; nothing
+// moved) goes back to the gate as an input, which holds; one that may have moved is a device
+// fault.
+void TrackingLoop::Impl::actuate(CycleState& c) {
+  const bool move = c.gate.apply() && machine.state() == TrackingState::kTrack;
+  if (!move) return;
+  const Vector6d& step = c.gate_input.step;
+  if (parts.actuator == nullptr) {
+    // Track and report: the correction is reported (the journal's pose), and taken as the new
+    // reference, so the step limit judges the change from cycle to cycle.
+    commanded_total = c.desired;
+    approve_next_step = false;
+    return;
+  }
+  if (!(step.array().abs() > 1e-9).any()) {
+    approve_next_step = false;
+    return;
+  }
+  const DeviceStatus sent = parts.actuator->command(step, to_deadline(c.start_ns + period_ns));
+  if (sent == DeviceStatus::kOk) {
+    commanded_total += step;
+    c.command = step;
+    c.command_sent = true;
+    approve_next_step = false;
+  } else if (sent == DeviceStatus::kRefused) {
+    c.gate_input.command_refused = true;
+    c.gate = evaluate_gate(settings.limits, c.gate_input);
+    consecutive_failures = c.gate.consecutive_failures;
+    transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
+  } else {  // it may have moved: stop safely (held in settle, with every other entry into HOLD or FAULT)
+    transition(c, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault);
+  }
+}
+
+// On entry into HOLD or FAULT the actuator is held and earlier operator commands discarded; the
+// beam permit follows the state.
+void TrackingLoop::Impl::settle(CycleState& c) {
+  const TrackingState now = machine.state();
+  if (now == TrackingState::kHold || now == TrackingState::kFault) {
+    if (now != c.state) {  // entered this cycle
+      hold_actuator(c.start_ns + period_ns);
+      entered_hold(c);
+    }
+    predictor.reset();
+  }
+  c.hold_id = hold_id;
+  c.beam_permit = machine.beam_permit();
+  if (parts.actuator != nullptr) parts.actuator->set_beam_permit(c.beam_permit);
+  c.state_after = now;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,25 @@
+#pragma once
+// The journal's file format (journal.hpp), shared by its writer and its reader: a 32-byte header
+// (magic, version), then one frame per record: magic, size, the record, CRC32C.
+
+#include <cstddef>
+#include <cstdint>
+
+#include "lftrack/loop/journal.hpp"
+
+namespace lftrack::host::journal_format {
+
+constexpr char kFileMagic[8] = {'L', 'F', 'T', 'J', 'R', 'N', 'L', '1'};
+constexpr std::uint32_t kFormatVersion = 2;  // 2: hold id and operator commands (8 bytes more)
+constexpr std::uint32_t kFrameMagic = 0x4A52464C;  // "LFRJ"
+constexpr std::size_t kHeaderBytes = 32;
+constexpr std::size_t kFrameBytes = 8 + sizeof(JournalRecord) + 4;
+
+struct Frame {
+  std::uint32_t magic = kFrameMagic;
+  std::uint32_t size = sizeof(JournalRecord);
+  JournalRecord record;
+  std::uint32_t crc = 0;
+};
+
+}  // namespace lftrack::host::journal_format

@@ -1,0 +1,165 @@
+#pragma once
+// The loop's state, private to lftrack::loop. TrackingLoop::Impl holds what lives across cycles
+// (the parts, the buffers create() sized, the control state, the statistics); CycleState holds one
+// cycle, filled stage by stage in the design's order (DESIGN.md, "One cycle"):
+//
+//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> record
+//
+// Each stage reads what the earlier ones left in the CycleState and writes its own part; none
+// reaches back into an earlier stage. record_of() builds the journal record from the CycleState
+// alone, and the statistics are gathered from that record after the cycle.
+
+#include <array>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "lftrack/loop/histogram.hpp"
+#include "lftrack/loop/motion_predictor.hpp"
+#include "lftrack/loop/tracking_loop.hpp"
+
+namespace lftrack::host {
+
+// One cycle. Every field starts at its default; a stage that does not run leaves its fields so.
+struct CycleState {
+  std::int64_t index = 0;
+  std::int64_t start_ns = 0;  // the period's start on the loop's clock
+  TrackingState state_before = TrackingState::kIdle;
+  TrackingState state = TrackingState::kIdle;  // after the operator's command: what the cycle runs in
+  bool aligning = false;
+
+  // operator
+  OperatorCommand operator_command = OperatorCommand::kNone;  // acted on (kNone: none)
+  std::uint16_t operator_refused = 0;
+  OperatorRefusal operator_refusal = OperatorRefusal::kNone;
+  TrackingEvent event{};  // the last transition this cycle
+  bool changed_state = false;
+
+  // acquire (and the actuator's read-back at the frame time)
+  bool frames_ok = false;
+  std::int64_t acquire_started_ns = 0, acquired_ns = 0, preprocessed_ns = 0;  // wall clock
+  std::int64_t oldest_frame_ns = 0, newest_frame_ns = 0;                       // loop clock
+  std::int64_t frame_time_ns[2] = {0, 0};
+  std::uint32_t frame_sequence[2] = {0, 0};
+  double true_residual_mm = -1;
+  bool have_readback = false;
+  tracking::Vector6d readback = tracking::Vector6d::Zero();
+
+  // preprocess
+  bool frames_usable = false;  // every frame passed the image-quality gate and was preprocessed
+
+  // register
+  bool registered = false;  // a finite result the verdict (ALIGN) accepted
+  std::uint32_t evaluations = 0;
+  double registration_ms = 0;
+  bool registration_ran = false;
+
+  // control
+  tracking::Vector6d pose_delta = tracking::Vector6d::Zero();  // registered pose, from nominal
+  tracking::Vector6d desired = tracking::Vector6d::Zero();     // couch target that cancels the prediction
+  GateInput gate_input;
+
+  // gate and actuate
+  GateOutput gate;
+  bool command_sent = false;
+  tracking::Vector6d command = tracking::Vector6d::Zero();
+
+  // after actuation
+  std::uint32_t hold_id = 0;
+  bool beam_permit = false;
+  TrackingState state_after = TrackingState::kIdle;
+};
+
+struct TrackingLoop::Impl {
+  LoopParts parts;
+  LoopSettings settings;
+  tracking::PreparedPlan align_plan, track_plan;
+  std::int64_t period_ns = 0;
+  Eigen::Vector3d origin_room = Eigen::Vector3d::Zero();
+  tracking::Pose nominal = tracking::Pose::Identity();
+
+  // Buffers of the cycle, sized by create().
+  drivers::FramePair pair;
+  std::vector<tracking::Image<float>> line_integral;
+  std::vector<tracking::Image<unsigned char>> valid;
+  std::vector<tracking::ImageView<const float>> frame_views;
+  std::vector<tracking::ImageView<const unsigned char>> mask_views;
+  std::vector<tracking::Image<float>> check_drr;            // per view: the DRR at the result
+  std::vector<tracking::Image<unsigned char>> check_valid;  // and its valid pixels
+  tracking::RegistrationResult result;
+  CycleState cycle_state;
+
+  // Control state.
+  TrackingStateMachine machine;
+  MotionPredictor predictor{0, 1, 0};
+  tracking::Pose last_registered = tracking::Pose::Identity();
+  tracking::Vector6d couch_at_last_registration = tracking::Vector6d::Zero();
+  bool have_registration = false;
+  tracking::Vector6d commanded_total = tracking::Vector6d::Zero();  // what the actuator was last told, as travel
+  tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;  // this cycle's frames
+  int consecutive_overruns = 0;                          // cycles in a row that overran, up to the last
+  tracking::Vector6d aligned_couch = tracking::Vector6d::Zero();   // couch target after the set-up move
+  tracking::Vector6d couch_position = tracking::Vector6d::Zero();  // last read-back
+  std::array<double, kMaxGateViews> reference_similarity{};
+  int consecutive_failures = 0;
+  bool approve_next_step = false;
+  std::int64_t cycles_in_state = 0;
+  // The HOLD or FAULT the loop is in (0: neither) and the last id given; an operator's resume or
+  // reset must answer the current one (operator_input.hpp).
+  std::uint32_t hold_id = 0;
+  std::uint32_t last_hold_id = 0;
+  std::mt19937 hold_id_random{std::random_device{}()};  // ids no command sent earlier can name
+  const char* state_reason = "operator start";           // why the loop entered its state (static text)
+  OperatorCommand stop_sent_before_hold = OperatorCommand::kNone;  // taken by on_hold, acted on next cycle
+  const char* ended_by_operator = nullptr;
+  const char* ended_by_source = nullptr;
+  std::int64_t cycle_wall_start_ns = 0;
+
+  // Statistics.
+  Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
+  Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
+  double evaluations_sum = 0;
+  LoopSummary summary;
+
+  // One cycle, stage by stage; false when the loop should end (operator quit or stop, or the
+  // end of an archived sequence: ended_by_source).
+  bool cycle(std::int64_t index, std::int64_t start_ns, JournalRecord* record);
+
+  // The stages (cycle_stages.cpp), each on cycle_state.
+  bool take_operator_command(CycleState& c);  // false: stop or quit
+  bool acquire(CycleState& c);                // false: an archived sequence has ended
+  void preprocess(CycleState& c);
+  void register_pair(CycleState& c);
+  void control(CycleState& c);
+  void gate(CycleState& c);
+  void actuate(CycleState& c);
+  void settle(CycleState& c);  // holds on entry into HOLD/FAULT, the beam permit, the state
+
+  // The journal record of a cycle, from its state alone (cycle_record.cpp), and the statistics
+  // gathered from that record.
+  JournalRecord record_of(const CycleState& c) const;
+  void gather_statistics(const JournalRecord& record, const CycleState& c);
+
+  // Helpers the stages share.
+  void transition(CycleState& c, const StateTransition& t, TrackingEvent event);
+  void hold_actuator(std::int64_t deadline_ns);
+  // Anything in a cycle threw: the actuator is held and the beam permit dropped, whatever else
+  // fails on the way (noexcept: called in a catch block before the error propagates).
+  void hold_after_exception() noexcept;
+  std::uint32_t new_hold_id();
+  OperatorView operator_view(std::int64_t index) const;
+  void entered_hold(CycleState& c);
+  bool result_is_finite() const;
+  // Now on the loop's clock: the real one, or (simulated) the cycle's start plus the real time
+  // spent in the cycle so far.
+  std::int64_t now_ns(std::int64_t cycle_start_ns) const;
+  void write_status_line(std::int64_t index, const JournalRecord& r) const;
+  void finish_summary(std::int64_t aligned_at, std::uint64_t allocations_at_warmup,
+                      std::uint64_t allocations_at_end);
+};
+
+// Small conversions the loop's files share.
+drivers::Deadline to_deadline(std::int64_t ns);
+double ms_between(std::int64_t a_ns, std::int64_t b_ns);
+
+}  // namespace lftrack::host

@@ -1,0 +1,79 @@
+// The summary of a run: statistics gathered over the cycles, and its JSON form.
+
+#include <nlohmann/json.hpp>
+
+#include "loop_impl.hpp"
+
+namespace lftrack::host {
+
+void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t allocations_at_warmup,
+                                        std::uint64_t allocations_at_end) {
+  LoopSummary& s = summary;
+  if (residual_mm.count() > 0) {
+    s.residual_mean_mm = residual_mm.mean();
+    s.residual_p95_mm = residual_mm.quantile(0.95);
+    s.residual_max_mm = residual_mm.max();
+  }
+  s.cycle_p50_ms = cycle_ms.quantile(0.5);
+  s.cycle_p95_ms = cycle_ms.quantile(0.95);
+  s.cycle_p99_ms = cycle_ms.quantile(0.99);
+  s.cycle_max_ms = cycle_ms.max();
+  s.registration_p50_ms = registration_ms.quantile(0.5);
+  s.registration_p95_ms = registration_ms.quantile(0.95);
+  s.registration_max_ms = registration_ms.max();
+  s.acquire_p95_ms = acquire_ms.quantile(0.95);
+  s.acquire_max_ms = acquire_ms.max();
+  s.preprocess_p95_ms = preprocess_ms.quantile(0.95);
+  s.preprocess_max_ms = preprocess_ms.max();
+  s.evaluations_mean =
+      registration_ms.count() > 0 ? evaluations_sum / double(registration_ms.count()) : 0;
+  if (parts.allocation_count != nullptr && aligned_at >= 0) {
+    const std::int64_t counted = s.cycles - (aligned_at + settings.warmup_cycles);
+    if (counted > 0) {
+      s.allocation_cycles = counted;
+      s.allocations_per_cycle = double(allocations_at_end - allocations_at_warmup) / double(counted);
+    }
+  }
+}
+
+nlohmann::json to_json(const LoopSummary& s) {
+  nlohmann::json j;
+  j["cycles"] = s.cycles;
+  auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
+  j["residual_mm"] = {
+      {"mean", opt(s.residual_mean_mm)}, {"p95", opt(s.residual_p95_mm)}, {"max", opt(s.residual_max_mm)}};
+  j["cycle_ms"] = {
+      {"p50", s.cycle_p50_ms}, {"p95", s.cycle_p95_ms}, {"p99", s.cycle_p99_ms}, {"max", s.cycle_max_ms}};
+  j["registration_ms"] = {
+      {"p50", s.registration_p50_ms}, {"p95", s.registration_p95_ms}, {"max", s.registration_max_ms}};
+  j["acquire_ms"] = {{"p95", s.acquire_p95_ms}, {"max", s.acquire_max_ms}};
+  j["preprocess_ms"] = {{"p95", s.preprocess_p95_ms}, {"max", s.preprocess_max_ms}};
+  j["evaluations_mean"] = s.evaluations_mean;
+  j["overruns"] = s.overruns;
+  j["skipped_periods"] = s.skipped_periods;
+  j["holds"] = s.holds;
+  j["faults"] = s.faults;
+  j["commands"] = s.commands;
+  j["operator_commands_refused"] = s.operator_refused;
+  j["aligned"] = s.aligned;
+  j["align_ms"] = s.align_ms;
+  j["allocations_per_cycle"] = opt(s.allocations_per_cycle);
+  j["allocation_cycles"] = s.allocation_cycles;
+  nlohmann::json states;
+  for (int i = 0; i < 5; ++i) states[to_string(static_cast<TrackingState>(i))] = s.states[std::size_t(i)];
+  j["states"] = states;
+  nlohmann::json decisions;
+  for (int i = 0; i < 4; ++i)
+    decisions[to_string(static_cast<GateDecision>(i))] = s.decisions[std::size_t(i)];
+  j["gate"] = decisions;
+  nlohmann::json transitions = nlohmann::json::array();
+  for (const LoopTransition& t : s.transitions)
+    transitions.push_back(
+        {{"cycle", t.cycle}, {"from", to_string(t.from)}, {"to", to_string(t.to)}, {"reason", t.reason}});
+  j["transitions"] = transitions;
+  j["ended"] = s.ended;
+  if (!s.journal_error.empty()) j["journal_error"] = s.journal_error;
+  return j;
+}
+
+}  // namespace lftrack::host

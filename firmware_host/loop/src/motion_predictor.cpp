@@ -1,0 +1,48 @@
+#include "lftrack/loop/motion_predictor.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+
+namespace lftrack::host {
+
+MotionPredictor::MotionPredictor(int window, int order, double lookahead_s)
+    : window_(std::clamp(window, 0, kCapacity)), order_(std::clamp(order, 1, 2)), lookahead_s_(lookahead_s) {}
+
+void MotionPredictor::add(double t_s, const tracking::Vector6d& offset) {
+  const int keep = std::max(1, window_);
+  if (count_ == keep) {
+    std::move(t_.begin() + 1, t_.begin() + count_, t_.begin());
+    std::move(x_.begin() + 1, x_.begin() + count_, x_.begin());
+    --count_;
+  }
+  t_[std::size_t(count_)] = t_s;
+  x_[std::size_t(count_)] = offset;
+  ++count_;
+}
+
+tracking::Vector6d MotionPredictor::predict() const {
+  if (count_ == 0) return tracking::Vector6d::Zero();
+  const tracking::Vector6d& newest = x_[std::size_t(count_ - 1)];
+  if (window_ < 2 || count_ < 2) return newest;
+  // Times relative to the newest estimate keep the normal equations well conditioned.
+  const int order = count_ >= order_ + 2 ? order_ : 1;
+  const double t0 = t_[std::size_t(count_ - 1)];
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Matrix<double, 3, 6> rhs = Eigen::Matrix<double, 3, 6>::Zero();
+  for (int i = 0; i < count_; ++i) {
+    const double dt = t_[std::size_t(i)] - t0;
+    const Eigen::Vector3d basis(1.0, dt, order == 2 ? dt * dt : 0.0);
+    normal += basis * basis.transpose();
+    rhs += basis * x_[std::size_t(i)].transpose();
+  }
+  if (order == 1) normal(2, 2) = 1.0;  // the unused coefficient solves to zero
+  const Eigen::Matrix3d inverse = normal.inverse();
+  if (!inverse.allFinite()) return newest;
+  const Eigen::Matrix<double, 3, 6> coefficients = inverse * rhs;
+  const double h = lookahead_s_;
+  const Eigen::Vector3d at(1.0, h, h * h);
+  const tracking::Vector6d predicted = (at.transpose() * coefficients).transpose();
+  return predicted.allFinite() ? predicted : newest;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,135 @@
+#include "lftrack/loop/safety_gate.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace lftrack::host {
+
+const char* to_string(GateDecision d) {
+  switch (d) {
+    case GateDecision::kApply:
+      return "APPLY";
+    case GateDecision::kSkip:
+      return "SKIP";
+    case GateDecision::kHold:
+      return "HOLD";
+    case GateDecision::kStop:
+      return "STOP";
+  }
+  return "?";
+}
+
+const char* to_string(GateReason r) {
+  switch (r) {
+    case GateReason::kOk:
+      return "ok";
+    case GateReason::kNonFinite:
+      return "non-finite value";
+    case GateReason::kStepTooLarge:
+      return "correction step above limit";
+    case GateReason::kTotalTooLarge:
+      return "total correction above limit";
+    case GateReason::kReadbackMismatch:
+      return "actuator read-back disagrees with command";
+    case GateReason::kNoResult:
+      return "no registration result";
+    case GateReason::kNoFrames:
+      return "no complete frame pair";
+    case GateReason::kActuatorFault:
+      return "actuator read-back failed";
+    case GateReason::kImageQuality:
+      return "image quality";
+    case GateReason::kJournalFailed:
+      return "journal write failed";
+    case GateReason::kOverruns:
+      return "loop overruns";
+    case GateReason::kOutsideEnvelope:
+      return "registration outside the pose envelope";
+    case GateReason::kLowSimilarity:
+      return "similarity below threshold";
+    case GateReason::kViewsDisagree:
+      return "views disagree";
+    case GateReason::kStaleFrame:
+      return "stale frame";
+    case GateReason::kUnpairedFrames:
+      return "frames too far apart to pair";
+  }
+  return "?";
+}
+
+namespace {
+
+bool finite(const GateInput& in) {
+  if (!in.step.allFinite() || !in.total.allFinite()) return false;
+  if (!std::isfinite(in.frame_age_ms) || !std::isfinite(in.pair_skew_ms)) return false;
+  if (!std::isfinite(in.readback_error_mm) || !std::isfinite(in.readback_error_deg)) return false;
+  for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
+    if (!std::isfinite(in.similarity[std::size_t(v)]) ||
+        !std::isfinite(in.reference_similarity[std::size_t(v)]))
+      return false;
+  return true;
+}
+
+double angle_deg(const tracking::Vector6d& d) {
+  return tracking::rad_to_deg(d.tail<3>().norm());
+}
+
+}  // namespace
+
+GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
+  GateOutput out;
+  out.consecutive_failures = in.consecutive_failures + 1;
+  auto hold = [&](GateReason reason) {
+    out.reason = reason;
+    out.decision =
+        out.consecutive_failures >= limits.fault_after_failures ? GateDecision::kStop : GateDecision::kHold;
+    return out;
+  };
+  auto counted = [&](GateReason reason) {
+    out.reason = reason;
+    out.decision = out.consecutive_failures >= limits.fault_after_failures  ? GateDecision::kStop
+                   : out.consecutive_failures >= limits.hold_after_failures ? GateDecision::kHold
+                                                                            : GateDecision::kSkip;
+    return out;
+  };
+  // Safety violations first: they hold whatever else is true.
+  if (!finite(in) || in.views < 0 || in.views > kMaxGateViews) return hold(GateReason::kNonFinite);
+  if (!in.readback_valid || in.command_refused) return hold(GateReason::kActuatorFault);
+  if (!in.journal_ok) return hold(GateReason::kJournalFailed);
+  if (in.consecutive_overruns >= limits.hold_after_overruns) return hold(GateReason::kOverruns);
+  if (in.readback_error_mm > limits.readback_tolerance_mm ||
+      in.readback_error_deg > limits.readback_tolerance_deg)
+    return hold(GateReason::kReadbackMismatch);
+  if (in.registration_ok) {
+    if (!in.step_approved && (in.step.head<3>().cwiseAbs().maxCoeff() > limits.max_step_mm ||
+                              angle_deg(in.step) > limits.max_step_deg))
+      return hold(GateReason::kStepTooLarge);
+    if (in.total.head<3>().cwiseAbs().maxCoeff() > limits.max_total_mm ||
+        angle_deg(in.total) > limits.max_total_deg)
+      return hold(GateReason::kTotalTooLarge);
+  }
+  // Quality.
+  if (!in.frames_ok) return counted(GateReason::kNoFrames);
+  if (!in.image_quality_ok) return counted(GateReason::kImageQuality);
+  if (!in.registration_ok)
+    return counted(in.registration_failure == GateReason::kOk ? GateReason::kNoResult : in.registration_failure);
+  if (in.frame_age_ms > limits.max_frame_age_ms) return counted(GateReason::kStaleFrame);
+  if (in.pair_skew_ms > limits.max_pair_skew_ms) return counted(GateReason::kUnpairedFrames);
+  double ratio_lo = 1e300, ratio_hi = -1e300;
+  for (int v = 0; v < in.views; ++v) {
+    const double s = in.similarity[std::size_t(v)], ref = in.reference_similarity[std::size_t(v)];
+    if (s < limits.min_similarity) return counted(GateReason::kLowSimilarity);
+    const double ratio = std::abs(ref) > 1e-12 ? s / ref : 1.0;
+    if (ratio < limits.min_similarity_ratio) return counted(GateReason::kLowSimilarity);
+    ratio_lo = std::min(ratio_lo, ratio);
+    ratio_hi = std::max(ratio_hi, ratio);
+  }
+  if (in.views > 1 && ratio_hi - ratio_lo > limits.max_ratio_disagreement)
+    return counted(GateReason::kViewsDisagree);
+  out.decision = GateDecision::kApply;
+  out.reason = GateReason::kOk;
+  out.consecutive_failures = 0;
+  return out;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,228 @@
+// The real-time loop (tracking_loop.hpp): create() sizes everything; run() keeps the period and
+// runs one cycle per period, stage by stage (cycle_stages.cpp), journals each cycle's record
+// (cycle_record.cpp) and gathers the statistics from it.
+
+#include "lftrack/loop/tracking_loop.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "lftrack/loop/cycle_schedule.hpp"
+#include "loop_impl.hpp"
+
+namespace lftrack::host {
+
+using drivers::DeviceStatus;
+
+drivers::Deadline to_deadline(std::int64_t ns) {
+  return drivers::Deadline(
+      std::chrono::duration_cast<drivers::Deadline::duration>(std::chrono::nanoseconds(ns)));
+}
+
+double ms_between(std::int64_t a_ns, std::int64_t b_ns) {
+  return 1e-6 * static_cast<double>(b_ns - a_ns);
+}
+
+TrackingLoop::TrackingLoop(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TrackingLoop::~TrackingLoop() {
+  if (impl_ && impl_->parts.frames != nullptr) impl_->parts.frames->close();
+}
+
+Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& parts,
+                                                           const LoopSettings& settings) {
+  if (parts.registration == nullptr || parts.frames == nullptr)
+    return invalid_argument("tracking loop: needs a registration and a frame source");
+  const std::size_t views = parts.geometry.views.size();
+  if (views == 0 || views > std::size_t(kMaxGateViews))
+    return invalid_argument("tracking loop: 1 to 4 detectors");
+  if (parts.geometry.roi_windows.size() != views)
+    return invalid_argument("tracking loop: one ROI window per detector");
+  if (parts.corrections.size() != views)
+    return invalid_argument("tracking loop: one detector correction per detector");
+  if (!(settings.loop.period_ms > 0)) return invalid_argument("tracking loop: the period must be positive");
+  auto impl = std::make_unique<Impl>();
+  impl->parts = parts;
+  impl->settings = settings;
+  impl->period_ns = static_cast<std::int64_t>(std::llround(settings.loop.period_ms * 1e6));
+  impl->origin_room = parts.geometry.registration_origin_room_mm;
+  impl->nominal = parts.geometry.nominal_T_room_from_ct;
+  auto align = tracking::registration_plan(settings.loop.align_plan);
+  if (!align.ok()) return align.status();
+  auto track = tracking::registration_plan(settings.loop.track_plan);
+  if (!track.ok()) return track.status();
+  auto align_prepared = parts.registration->prepare_plan(*align);
+  if (!align_prepared.ok()) return align_prepared.status().with_context("align plan");
+  auto track_prepared = parts.registration->prepare_plan(*track);
+  if (!track_prepared.ok()) return track_prepared.status().with_context("track plan");
+  impl->align_plan = std::move(align_prepared).value();
+  impl->track_plan = std::move(track_prepared).value();
+  const double lookahead =
+      settings.loop.lookahead_s.value_or(1e-9 * double(impl->period_ns) + settings.actuator_latency_s);
+  impl->predictor =
+      MotionPredictor(settings.loop.prediction_cycles, settings.loop.prediction_order, lookahead);
+
+  LFTRACK_RETURN_IF_ERROR(parts.frames->open(&impl->pair).with_context("frame source"));
+  if (impl->pair.frames.size() != views)
+    return failed_precondition("frame source: wrong number of detectors");
+  for (std::size_t v = 0; v < views; ++v) {
+    const tracking::PixelWindow& w = parts.geometry.roi_windows[v];
+    impl->line_integral.emplace_back(w.rows, w.cols);
+    impl->valid.emplace_back(w.rows, w.cols);
+    impl->check_drr.emplace_back(w.rows, w.cols);
+    impl->check_valid.emplace_back(w.rows, w.cols);
+  }
+  for (std::size_t v = 0; v < views; ++v) {
+    impl->frame_views.push_back(impl->line_integral[v].view());
+    impl->mask_views.push_back(impl->valid[v].view());
+  }
+  impl->result.view_similarity.reserve(views);
+  impl->summary.transitions.reserve(256);
+  return std::unique_ptr<TrackingLoop>(new TrackingLoop(std::move(impl)));
+}
+
+bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, JournalRecord* record) {
+  CycleState& c = cycle_state;
+  c = CycleState{};
+  c.index = index;
+  c.start_ns = start_ns;
+  c.state_before = machine.state();
+  if (!take_operator_command(c)) {  // stop or quit: the actuator is held, nothing else runs
+    c.state_after = machine.state();
+    c.hold_id = hold_id;
+    if (parts.actuator != nullptr) parts.actuator->set_beam_permit(false);
+    *record = record_of(c);
+    return false;
+  }
+  if (!acquire(c)) return false;  // an archived sequence has ended: not a cycle
+  preprocess(c);
+  register_pair(c);
+  control(c);
+  gate(c);
+  actuate(c);
+  settle(c);
+  *record = record_of(c);
+  gather_statistics(*record, c);
+  ++cycles_in_state;
+  return true;
+}
+
+void TrackingLoop::Impl::hold_actuator(std::int64_t deadline_ns) {
+  if (parts.actuator == nullptr) return;
+  parts.actuator->hold();
+  drivers::ActuatorState state;
+  if (parts.actuator->readback(&state, to_deadline(deadline_ns)) == DeviceStatus::kOk) {
+    commanded_total = state.target;
+    couch_position = state.position;
+  }
+}
+
+void TrackingLoop::Impl::hold_after_exception() noexcept {
+  if (parts.actuator == nullptr) return;
+  try {
+    parts.actuator->hold();
+  } catch (...) {  // the beam permit is dropped below whatever hold() did
+  }
+  try {
+    parts.actuator->set_beam_permit(false);
+  } catch (...) {  // nothing more can be done here; the error propagates
+  }
+}
+
+bool TrackingLoop::Impl::result_is_finite() const {
+  if (!result.T_room_from_ct.matrix().allFinite()) return false;
+  for (double s : result.view_similarity)
+    if (!std::isfinite(s)) return false;
+  return result.stop != tracking::OptimizerStop::kNonFinite;
+}
+
+std::int64_t TrackingLoop::Impl::now_ns(std::int64_t cycle_start_ns) const {
+  const std::int64_t wall = monotonic_now_ns();
+  return settings.simulated_clock ? cycle_start_ns + (wall - cycle_wall_start_ns) : wall;
+}
+
+Result<LoopSummary> TrackingLoop::run() {
+  Impl& m = *impl_;
+  try {
+    return run_cycles();
+  } catch (...) {
+    // Like libfranka's control loop: whatever a cycle throws (bad_alloc included), the actuator
+    // is held and the beam permit dropped before the error reaches the caller.
+    m.hold_after_exception();
+    throw;
+  }
+}
+
+Result<LoopSummary> TrackingLoop::run_cycles() {
+
+  Impl& m = *impl_;
+  const bool simulated = m.settings.simulated_clock;
+  const std::int64_t period = m.period_ns;
+  const std::int64_t loop_start_ns = monotonic_now_ns();
+  (void)m.machine.on(TrackingEvent::kStart);  // IDLE -> ALIGN
+  m.summary.transitions.push_back({0, TrackingState::kIdle, TrackingState::kAlign, "operator start"});
+  std::int64_t index = 0, start_ns = loop_start_ns;
+  std::uint64_t allocations_at_warmup = 0;
+  std::int64_t aligned_at = -1;
+  m.parts.frames->request_exposure(start_ns);
+  const char* ended = "cycle count reached";
+  for (std::int64_t executed = 0; m.settings.cycles <= 0 || executed < m.settings.cycles; ++executed) {
+    if (stop_.load(std::memory_order_relaxed)) {
+      ended = "stop requested";
+      break;
+    }
+    std::int64_t wall_start = monotonic_now_ns();
+    m.cycle_wall_start_ns = wall_start;
+    if (aligned_at >= 0 && executed == aligned_at + m.settings.warmup_cycles &&
+        m.parts.allocation_count != nullptr)
+      allocations_at_warmup = m.parts.allocation_count();
+    JournalRecord record;
+    const bool go_on = m.cycle(index, start_ns, &record);
+    if (m.ended_by_source != nullptr) break;  // no pair: not a cycle
+    if (aligned_at < 0 && m.summary.aligned) aligned_at = executed;
+    const std::int64_t wall_end = monotonic_now_ns();
+    if (simulated) wall_start = m.cycle_wall_start_ns;  // the work after the frames arrived
+    const bool was_align = record.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign);
+    if (!was_align) m.cycle_ms.add(ms_between(wall_start, wall_end));
+    ++m.summary.cycles;
+    m.summary.operator_refused += record.operator_refused;
+    // The next cycle: on the simulated clock always the next period; on the real one the next
+    // period start not yet past (an overrun skips the periods it ran into).
+    NextCycle next;
+    if (simulated) {
+      next.index = index + 1;
+      next.start_ns = loop_start_ns + next.index * period;
+    } else {
+      next = next_cycle(loop_start_ns, period, index, wall_end);
+      if (next.overrun && !was_align) {
+        ++m.summary.overruns;
+        m.summary.skipped_periods += next.skipped;
+      }
+    }
+    m.consecutive_overruns = next.overrun && !was_align ? m.consecutive_overruns + 1 : 0;
+    record.overrun = next.overrun ? 1 : 0;
+    record.skipped_periods = static_cast<std::uint32_t>(next.skipped);
+    if (m.parts.journal != nullptr) m.parts.journal->append(record);
+    if (m.settings.status_line) m.write_status_line(index, record);
+    if (!go_on) break;
+    index = next.index;
+    start_ns = next.start_ns;
+    m.parts.frames->request_exposure(start_ns);
+    if (!simulated) sleep_until_ns(start_ns);
+  }
+  const std::uint64_t allocations_at_end =
+      m.parts.allocation_count != nullptr ? m.parts.allocation_count() : 0;
+  m.summary.ended = m.ended_by_operator != nullptr ? m.ended_by_operator
+                    : m.ended_by_source != nullptr ? m.ended_by_source
+                                                   : ended;
+  m.hold_actuator(monotonic_now_ns() + period);
+  if (m.parts.actuator != nullptr) m.parts.actuator->set_beam_permit(false);
+  if (m.settings.status_line) (void)!::write(STDERR_FILENO, "\n", 1);
+
+  m.finish_summary(aligned_at, allocations_at_warmup, allocations_at_end);
+  return m.summary;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,98 @@
+#pragma once
+// One TrackingLoop assembled from a scene with everything around it: the scene's registration,
+// the journal, the frame archive and the operator inputs, and a frame source that is either
+//  - the simulated room (`lftrack sim`, the closed-loop tests): set-up error, patient motion,
+//    the simulator's detectors and the virtual couch; or
+//  - an archived sequence (`lftrack replay`): frames from disk, no actuator (track and report).
+// Hardware in the loop (`lftrack sim --hil modbus|can`): the simulated room's couch is served by
+// the virtual couch server (a libmodbus TCP server on 127.0.0.1), or moved by the virtual robot
+// on a CAN link (a socket pair carrying struct can_frame), and the loop commands it through the
+// real Modbus or CAN driver, so every command and read-back crosses the protocol.
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+
+#include "lftrack/drivers/can_robot.hpp"
+#include "lftrack/drivers/modbus_couch.hpp"
+#include "lftrack/drivers/replay_frame_source.hpp"
+#include "lftrack/loop/frame_archive.hpp"
+#include "lftrack/loop/operator_input.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/host/sim_frame_source.hpp"
+#include "lftrack/loop/tracking_loop.hpp"
+#include "lftrack/sim/modbus_couch_server.hpp"
+#include "lftrack/sim/virtual_robot.hpp"
+
+namespace lftrack::tracking {
+class ThreadPool;
+}
+
+namespace lftrack::host {
+
+enum class HilProtocol { kNone, kModbus, kCan };
+
+struct LoopSessionOptions {
+  std::int64_t cycles = 300;
+  bool simulated_clock = false;  // true: as fast as possible, deterministic (see tracking_loop.hpp)
+  bool status_line = false;
+  bool announce_holds = false;  // without a status line: a line on stderr per HOLD/FAULT with its id
+  std::filesystem::path journal;  // empty: no journal; an existing file is refused unless
+  JournalOptions journal_options;  // journal_options.overwrite
+  bool overwrite_archive = false;  // an earlier archive in `archive` is replaced, not refused
+  std::filesystem::path control_socket;   // empty: none
+  bool terminal_operator = false;         // keys on a terminal's standard input
+  std::optional<double> auto_resume_s;    // an unattended operator resumes this long into each HOLD
+                                          // (check_auto_resume_s: finite, 0 to kMaxAutoResumeS)
+  std::filesystem::path light_field_dir;  // empty: the scene's default folder
+  SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
+  std::filesystem::path archive;          // empty: frames not archived
+  // Replay this archived sequence instead of simulating (simulated_clock: as fast as possible;
+  // otherwise at the recorded pace).
+  std::filesystem::path replay_sequence;
+  HilProtocol hil = HilProtocol::kNone;  // simulation only; needs a scene with a virtual couch
+  std::uint64_t (*allocation_count)() = nullptr;
+};
+
+// The room's geometry as the loop sees it: the scene's detectors, ROI windows, nominal pose and
+// registration origin.
+LoopGeometry loop_geometry(const PreparedScene& scene);
+
+// X = T_room_from_couch of a mounting or calibration (its centre defaults to the registration
+// origin).
+Eigen::Isometry3d couch_mounting(const CouchMountingSpec& mounting, const PreparedScene& scene);
+
+// Checks the options that need no scene (auto-resume, the journal, archive and control-socket
+// paths) without creating or removing anything: `lftrack sim/run/replay` call it before loading
+// the CT, and create() calls it first.
+Status check_session_options(const LoopSessionOptions& options);
+
+class LoopSession {
+ public:
+  ~LoopSession();
+  // Builds (or loads) the renderers' light fields, the registration on `pool`, the room and its
+  // devices, and the loop. `scene` and `pool` must outlive the session.
+  static Result<std::unique_ptr<LoopSession>> create(const PreparedScene& scene,
+                                                     const LoopSessionOptions& options,
+                                                     tracking::ThreadPool* pool);
+  // Runs the loop; closes the journal and the archive. A journal that failed during the run is
+  // reported in the summary's journal_error (the loop held when it failed).
+  Result<LoopSummary> run();
+  void request_stop();
+  const sim::SimulatedRoom* room() const;            // null when replaying
+  const drivers::ReplayFrameSource* replay() const;  // null when simulating
+  const FrameArchive* archive() const;               // null without one
+  std::filesystem::path journal_path() const;        // the journal written (empty: none)
+  const drivers::ModbusCouch* modbus_couch() const;  // the HIL couch driver; null otherwise
+  sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
+  const drivers::CanRobot* can_robot() const;        // the HIL robot driver; null otherwise
+  sim::VirtualRobot* virtual_robot();                // HIL: for fault injection
+
+ private:
+  struct Parts;
+  explicit LoopSession(std::unique_ptr<Parts> parts);
+  std::unique_ptr<Parts> parts_;
+};
+
+}  // namespace lftrack::host

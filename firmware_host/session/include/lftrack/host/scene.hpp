@@ -1,0 +1,195 @@
+#pragma once
+// A scene declares exactly what exists in one treatment set-up (DESIGN.md, "Scene files"):
+// the CT and its ROI, the registration origin, the nominal pose, the detectors and the pose
+// envelope. Only what a scene names is built.
+//
+// Loading is two steps: load_scene() parses and validates the YAML (fails with file:line:col and
+// a reason); prepare_scene() then reads the CT and resolves everything that depends on it.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lftrack/loop/loop_spec.hpp"
+#include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/sim/patient_motion.hpp"
+#include "lftrack/sim/virtual_couch.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/image.hpp"
+#include "lftrack/tracking/light_field.hpp"
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/status.hpp"
+#include "lftrack/tracking/volume.hpp"
+#include "lftrack/tracking/xray_view.hpp"
+
+namespace lftrack::tracking {
+class ThreadPool;
+}
+
+namespace lftrack::host {
+
+inline constexpr const char* kBuiltinPhantom = "builtin:phantom";
+
+struct CtSpec {
+  std::string path;  // "builtin:phantom", or a DICOM folder / NIfTI file (absolute)
+  std::uint64_t phantom_seed = 1;
+  double mu_water_per_mm = tracking::kDefaultMuWaterPerMm;
+  bool is_builtin_phantom() const { return path == kBuiltinPhantom; }
+};
+
+struct RoiSpec {
+  std::optional<Eigen::Vector3d> centre_ct_mm;  // unset: the phantom's target vertebra
+  Eigen::Vector3d size_mm{64, 64, 40};
+};
+
+struct DetectorSpec {
+  tracking::XrayView view;     // room frame
+  std::string frames = "sim";  // where frames come from: sim, v4l2, replay
+  int bits = 12;               // detector bit depth
+};
+
+using PoseEnvelope = tracking::PoseEnvelope;  // +-translation_mm, +-rotation_deg per axis
+
+// Metal fiducial markers (e.g. implanted steel tacks), CT frame. With `insert` the simulator
+// places them as steel spheres into the CT (clipped at the CT's top HU value, as a scanner
+// would) and into the anatomy that synthetic frames are rendered from.
+struct FiducialSpec {
+  std::vector<Eigen::Vector3d> positions_ct_mm;
+  double radius_mm = 1.0;
+  bool insert = false;
+};
+
+// tracking: how frames are registered.
+struct RegistrationSpec {
+  std::string similarity = "mi";
+  int histogram_bins = 64;
+  std::string plan = "papers";  // registration_plan_names()
+  double gamma_per_mm = 0.05;   // hybrid measure's weight of the fiducial distance (paper 2)
+  double tre_box_mm = 40;       // edge of the TRE cube at the registration origin
+  // tracking.single_view: a scene with one detector registers only when it says so; depth along
+  // that view's central ray is then unobservable (registration_verdict.hpp).
+  bool single_view = false;
+};
+
+// sim: synthetic detector frames.
+struct SimFrameSpec {
+  double photons_per_pixel = 10000;  // open field, per pixel and frame
+  double detector_blur_px = 0.5;
+  // What renders the simulated loop's frames: "siddon" (exact, about 30 ms per view of a 512 x 512
+  // detector's ROI on one core) or "lightfield" (a separate field of `light_field` resolution,
+  // built from the anatomy with its markers, under 1 ms per view; for real-time runs on few cores).
+  std::string renderer = "siddon";
+  tracking::LightFieldSpec light_field;
+  std::uint64_t seed = 1;  // noise of the simulated loop's frames
+};
+
+// Where a couch is mounted in the room: the rotation vector of its axes (room from couch) and
+// its rotation centre (room frame; unset: the registration origin).
+struct CouchMountingSpec {
+  Eigen::Vector3d rotation_rad = Eigen::Vector3d::Zero();
+  std::optional<Eigen::Vector3d> centre_room_mm;
+};
+
+// actuator: what moves the patient. "none" tracks and reports; "virtual" is the simulator's
+// couch (latency, speed and range limits).
+//   mounting:     (sim) how the virtual couch is really mounted; unset: the ideal couch
+//   calibration:  a couch calibration file (`lftrack calibrate couch`); the loop converts its
+//                 corrections through it. Unset: the couch's axes are assumed to be the room's,
+//                 rotating about the registration origin.
+struct ActuatorSpec {
+  std::string type = "none";
+  sim::VirtualCouchSpec couch;
+  std::optional<CouchMountingSpec> mounting;
+  std::string calibration_file;                  // absolute, or empty
+  std::optional<CouchMountingSpec> calibration;  // read from calibration_file at load
+};
+
+// motion: the simulated patient (sim only): where they lie at the start (set-up error, delta from
+// the nominal pose) and how they move from there.
+struct MotionSpec {
+  tracking::Vector6d setup_error = tracking::Vector6d::Zero();  // mm, rad
+  sim::PatientMotionSpec motion;
+};
+
+struct Scene {
+  std::string source;  // the scene file, or "builtin:phantom"
+  std::string name;
+  CtSpec ct;
+  RoiSpec roi;
+  std::optional<Eigen::Vector3d> registration_origin_ct_mm;  // unset: ROI centre (phantom: body centre)
+  std::optional<tracking::Pose> nominal_T_room_from_ct;      // unset: origin onto the isocentre
+  std::vector<DetectorSpec> detectors;
+  PoseEnvelope envelope;
+  std::string renderer = "siddon";
+  double octree_pivot = 0;               // tracking.octree_pivot: the octree renderer's P in [0, 1]
+  tracking::LightFieldSpec light_field;  // tracking.light_field: resolution, storage, codebook, margin
+  RegistrationSpec registration;         // tracking: similarity, plan, ...
+  FiducialSpec fiducials;
+  SimFrameSpec sim;
+  LoopSpec loop;
+  SafetyLimits safety;
+  // Whether the scene names safety.min_similarity (in its tracking.similarity's units); without
+  // it the registration verdict takes the measure's default floor (registration_verdict.hpp).
+  bool min_similarity_given = false;
+  ActuatorSpec actuator;
+  MotionSpec motion;
+};
+
+// Parses a scene from YAML text; `source_name` is used in messages ("file.yaml:12:5: ...") and
+// `base_dir` resolves relative CT paths.
+Result<Scene> parse_scene(const std::string& yaml_text, const std::string& source_name,
+                          const std::filesystem::path& base_dir);
+// Loads "builtin:phantom" or a scene file.
+Result<Scene> load_scene(const std::string& file_or_builtin);
+// The YAML text of a built-in scene, or nothing.
+std::optional<std::string> builtin_scene_text(const std::string& name);
+
+// A scene with its CT read and everything that depends on the CT resolved.
+struct PreparedScene {
+  Scene scene;
+  std::shared_ptr<const tracking::CtVolume> ct;
+  std::shared_ptr<const tracking::MuVolume> mu;
+  // The anatomy synthetic frames are rendered from: `mu`, with steel markers where the scene
+  // inserts fiducials (the CT shows them clipped).
+  std::shared_ptr<const tracking::MuVolume> world_mu;
+  Eigen::Vector3d registration_origin_ct_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
+  tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
+  std::vector<tracking::PixelWindow> roi_windows;  // per detector: the ROI's projection
+
+  Eigen::Vector3d registration_origin_room_mm() const {
+    return nominal_T_room_from_ct * registration_origin_ct_mm;
+  }
+  // Index of the detector called `name`, or -1.
+  int detector_index(const std::string& name) const;
+  // What a light field for detector `index` must cover.
+  tracking::LightFieldPlanInput light_field_plan(int index) const;
+};
+
+// Where light-field files of a scene live by default: out/lightfields/<scene file stem>
+// (out/lightfields/builtin-phantom for the built-in scene), relative to the working folder.
+std::filesystem::path default_light_field_dir(const Scene& scene);
+// The file of one view's field in `dir`.
+std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name);
+// Builds every view's field as `spec` says, on `pool`, with a progress bar per view on stderr,
+// from `mu` (null: the scene's CT).
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
+    const PreparedScene& scene, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool,
+    const tracking::MuVolume* mu = nullptr);
+// Loads every view's field from `dir`, refusing files built for another volume (null: the
+// scene's CT), geometry or storage than `spec` (null: the scene's tracking.light_field).
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(
+    const PreparedScene& scene, const std::filesystem::path& dir, const tracking::MuVolume* mu = nullptr,
+    const tracking::LightFieldSpec* spec = nullptr);
+
+// Reads the CT (or generates the phantom), converts it to attenuation, and resolves the ROI,
+// the registration origin, the nominal pose and each detector's ROI window. `ct_override`
+// replaces the scene's CT path when non-empty.
+Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_override,
+                                    tracking::ThreadPool* pool);
+
+}  // namespace lftrack::host

@@ -1,0 +1,31 @@
+#pragma once
+// What a scene expects of a registration (registration_verdict.hpp judges one against it): the
+// verdict's limits resolved from the scene, and whether the scene's views can observe every
+// direction.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::host {
+
+// The scene's limits for registrations with `measure`: the floor is safety.min_similarity when
+// the scene names it and `measure` is the scene's own tracking.similarity (the floor is in that
+// measure's units), else the measure's default; the envelope is the scene's.
+Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& measure);
+
+// Depth along a view's central ray is unobservable from that view alone. The unit vector of
+// detector `index`'s central ray (from the source to the detector's centre), room frame.
+Eigen::Vector3d central_ray_direction_room(const Scene& scene, int index);
+// With one detector: the direction a registration cannot see (its central ray), room frame;
+// nothing with two or more.
+std::optional<Eigen::Vector3d> unobservable_direction_room(const Scene& scene);
+// Refuses a scene whose views cannot observe every direction (one detector) unless it says
+// `tracking.single_view: true`; then (and with two or more detectors) OK.
+Status check_views_observable(const Scene& scene);
+
+}  // namespace lftrack::host

@@ -1,0 +1,178 @@
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/tracking/volume_io.hpp"
+#include "lftrack/host/progress_bar.hpp"
+
+namespace lftrack::host {
+namespace {
+
+using Eigen::Vector3d;
+
+// The detector pixels covered by the projection of the ROI box, clipped to the detector.
+Result<tracking::PixelWindow> roi_window(const tracking::XrayView& view_room,
+                                         const tracking::Pose& T_room_from_ct, const Vector3d& centre_ct,
+                                         const Vector3d& size_mm) {
+  double c_lo = 1e300, c_hi = -1e300, r_lo = 1e300, r_hi = -1e300;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vector3d sign((corner & 1) ? 0.5 : -0.5, (corner & 2) ? 0.5 : -0.5, (corner & 4) ? 0.5 : -0.5);
+    const auto px = view_room.project(T_room_from_ct * (centre_ct + sign.cwiseProduct(size_mm)));
+    if (!px) return invalid_argument("the ROI reaches behind the source of view '" + view_room.name + "'");
+    c_lo = std::min(c_lo, px->x());
+    c_hi = std::max(c_hi, px->x());
+    r_lo = std::min(r_lo, px->y());
+    r_hi = std::max(r_hi, px->y());
+  }
+  const int col0 = std::max(0, static_cast<int>(std::floor(c_lo + 0.5)));
+  const int row0 = std::max(0, static_cast<int>(std::floor(r_lo + 0.5)));
+  const int col1 = std::min(view_room.cols, static_cast<int>(std::ceil(c_hi + 0.5)));
+  const int row1 = std::min(view_room.rows, static_cast<int>(std::ceil(r_hi + 0.5)));
+  if (col1 - col0 < 8 || row1 - row0 < 8) {
+    return invalid_argument("the ROI projects onto fewer than 8 x 8 pixels of view '" + view_room.name +
+                            "' (is it inside the field of view?)");
+  }
+  return tracking::PixelWindow{row0, col0, row1 - row0, col1 - col0};
+}
+
+}  // namespace
+
+tracking::LightFieldPlanInput PreparedScene::light_field_plan(int index) const {
+  tracking::LightFieldPlanInput in;
+  in.view_room = scene.detectors[static_cast<std::size_t>(index)].view;
+  in.roi_window = roi_windows[static_cast<std::size_t>(index)];
+  in.nominal_T_room_from_ct = nominal_T_room_from_ct;
+  in.registration_origin_room_mm = registration_origin_room_mm();
+  in.roi_centre_ct_mm = roi_centre_ct_mm;
+  in.envelope = scene.envelope;
+  return in;
+}
+
+std::filesystem::path default_light_field_dir(const Scene& scene) {
+  const std::string stem = scene.source.rfind("builtin:", 0) == 0
+                               ? "builtin-" + scene.source.substr(8)
+                               : std::filesystem::path(scene.source).stem().string();
+  return std::filesystem::path("out") / "lightfields" / stem;
+}
+
+std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name) {
+  return dir / (view_name + ".lf");
+}
+
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
+    const PreparedScene& p, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool,
+    const tracking::MuVolume* mu) {
+  if (mu == nullptr) mu = p.mu.get();
+  std::vector<std::shared_ptr<const tracking::LightField>> fields;
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    const std::string& name = p.scene.detectors[i].view.name;
+    ProgressBar bar("view " + name);
+    auto field = tracking::LightField::build(*mu, p.light_field_plan(int(i)), spec, pool,
+                                             [&](double f) { bar.update(f); });
+    if (!field.ok()) return field.status().with_context("view " + name);
+    bar.finish();
+    fields.push_back(*field);
+  }
+  return fields;
+}
+
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(
+    const PreparedScene& p, const std::filesystem::path& dir, const tracking::MuVolume* mu,
+    const tracking::LightFieldSpec* spec_or_null) {
+  const tracking::LightFieldSpec& spec = spec_or_null != nullptr ? *spec_or_null : p.scene.light_field;
+  const std::uint64_t ct_hash = tracking::volume_hash(mu != nullptr ? *mu : *p.mu);
+  std::vector<std::shared_ptr<const tracking::LightField>> fields;
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
+    auto field =
+        tracking::LightField::load(file, ct_hash, tracking::plan_hash(p.light_field_plan(int(i)), spec));
+    if (!field.ok()) return field.status();
+    const auto& h = (*field)->header();
+    if (h.storage != spec.storage ||
+        (h.storage == tracking::LightFieldStorage::kVq && h.codebook_size != spec.vq_codebook_size)) {
+      return failed_precondition(file.string() + ": stores " + tracking::to_string(h.storage) +
+                                 ", the scene asks for " + tracking::to_string(spec.storage) +
+                                 "; run `lftrack precompute` again");
+    }
+    fields.push_back(*field);
+  }
+  return fields;
+}
+
+int PreparedScene::detector_index(const std::string& name) const {
+  for (std::size_t i = 0; i < scene.detectors.size(); ++i)
+    if (scene.detectors[i].view.name == name) return static_cast<int>(i);
+  return -1;
+}
+
+Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_override,
+                                    tracking::ThreadPool* pool) {
+  PreparedScene out;
+  out.scene = scene;
+  if (!ct_override.empty()) out.scene.ct.path = ct_override;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::optional<Vector3d> phantom_target;
+  if (out.scene.ct.is_builtin_phantom()) {
+    sim::SpinePhantomOptions options;
+    options.seed = out.scene.ct.phantom_seed;
+    auto phantom = sim::make_spine_phantom(options, pool);
+    if (!phantom.ok()) return phantom.status();
+    phantom_target = phantom->vertebral_body_centres_mm[static_cast<std::size_t>(phantom->target_vertebra)];
+    out.ct = std::make_shared<const tracking::CtVolume>(std::move(phantom->ct));
+  } else {
+    auto ct = tracking::read_ct(out.scene.ct.path);
+    if (!ct.ok()) return ct.status();
+    out.ct = std::make_shared<const tracking::CtVolume>(std::move(ct).value());
+  }
+  spdlog::info("CT {}: {} ({:.1f} s)", out.scene.ct.path, tracking::describe(out.ct->geometry),
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  const FiducialSpec& fiducials = out.scene.fiducials;
+  if (fiducials.insert) {
+    auto with_markers = std::make_shared<tracking::CtVolume>(*out.ct);
+    sim::insert_markers(with_markers.get(), fiducials.positions_ct_mm, fiducials.radius_mm, sim::kMarkerHu);
+    out.ct = std::move(with_markers);
+  }
+  out.mu = std::make_shared<const tracking::MuVolume>(
+      tracking::to_attenuation(*out.ct, out.scene.ct.mu_water_per_mm));
+  out.world_mu = out.mu;
+  if (fiducials.insert) {
+    auto world = std::make_shared<tracking::MuVolume>(*out.mu);
+    sim::insert_markers(world.get(), fiducials.positions_ct_mm, fiducials.radius_mm, sim::kSteelMuPerMm);
+    out.world_mu = std::move(world);
+  }
+
+  // ROI centre: the scene's, else the phantom's target (posterior elements included), else the
+  // volume centre (only reachable through --ct on a phantom scene).
+  if (out.scene.roi.centre_ct_mm) {
+    out.roi_centre_ct_mm = *out.scene.roi.centre_ct_mm;
+  } else if (phantom_target) {
+    out.roi_centre_ct_mm = *phantom_target + Vector3d(0, 12, 0);
+  } else {
+    out.roi_centre_ct_mm = out.ct->geometry.centre_mm();
+    spdlog::warn("no ROI centre for {}; using the volume centre", out.scene.ct.path);
+  }
+  if (out.scene.registration_origin_ct_mm) {
+    out.registration_origin_ct_mm = *out.scene.registration_origin_ct_mm;
+  } else {
+    out.registration_origin_ct_mm =
+        phantom_target && !out.scene.roi.centre_ct_mm ? *phantom_target : out.roi_centre_ct_mm;
+  }
+  if (out.scene.nominal_T_room_from_ct) {
+    out.nominal_T_room_from_ct = *out.scene.nominal_T_room_from_ct;
+  } else {
+    out.nominal_T_room_from_ct = tracking::Pose::Identity();
+    out.nominal_T_room_from_ct.translation() = -out.registration_origin_ct_mm;
+  }
+  for (const DetectorSpec& d : out.scene.detectors) {
+    auto w = roi_window(d.view, out.nominal_T_room_from_ct, out.roi_centre_ct_mm, out.scene.roi.size_mm);
+    if (!w.ok()) return w.status().with_context(out.scene.source);
+    out.roi_windows.push_back(*w);
+  }
+  return out;
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,135 @@
+#pragma once
+// The scene parser's YAML helpers (private to firmware_host/session/src): every value read through them
+// is checked, and every error is located at file:line:col.
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+
+namespace fs = std::filesystem;
+using Eigen::Vector3d;
+
+class SceneParser {
+ public:
+  SceneParser(std::string source, fs::path base_dir)
+      : source_(std::move(source)), base_dir_(std::move(base_dir)) {}
+
+  Status error_at(const YAML::Mark& mark, const std::string& message) const {
+    std::ostringstream s;
+    s << source_;
+    if (!mark.is_null()) s << ':' << mark.line + 1 << ':' << mark.column + 1;
+    s << ": " << message;
+    return invalid_argument(s.str());
+  }
+  Status error(const YAML::Node& node, const std::string& message) const {
+    return error_at(node.Mark(), message);
+  }
+
+  // Rejects keys of `map` that are not in `allowed` (typos must not pass silently).
+  Status check_keys(const YAML::Node& map, const std::string& what,
+                    const std::set<std::string>& allowed) const {
+    if (!map.IsMap()) return error(map, what + " must be a mapping");
+    for (const auto& kv : map) {
+      const std::string key = kv.first.as<std::string>();
+      if (!allowed.count(key)) {
+        std::string known;
+        for (const auto& k : allowed) known += (known.empty() ? "" : ", ") + k;
+        return error(kv.first, "unknown key '" + key + "' in " + what + " (allowed: " + known + ")");
+      }
+    }
+    return {};
+  }
+
+  Status number(const YAML::Node& n, const std::string& what, double* out) const {
+    if (!n.IsScalar()) return error(n, what + " must be a number");
+    try {
+      *out = n.as<double>();
+    } catch (const YAML::Exception&) {
+      return error(n, what + " must be a number, got '" + n.Scalar() + "'");
+    }
+    if (!std::isfinite(*out)) return error(n, what + " must be finite");
+    return {};
+  }
+
+  Status positive(const YAML::Node& n, const std::string& what, double* out) const {
+    LFTRACK_RETURN_IF_ERROR(number(n, what, out));
+    if (!(*out > 0)) return error(n, what + " must be positive, got " + n.Scalar());
+    return {};
+  }
+
+  Status integer(const YAML::Node& n, const std::string& what, long lo, long hi, long* out) const {
+    if (!n.IsScalar()) return error(n, what + " must be an integer");
+    try {
+      *out = n.as<long>();
+    } catch (const YAML::Exception&) {
+      return error(n, what + " must be an integer, got '" + n.Scalar() + "'");
+    }
+    if (*out < lo || *out > hi) {
+      return error(
+          n, what + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) + ", got " + n.Scalar());
+    }
+    return {};
+  }
+
+  Status text(const YAML::Node& n, const std::string& what, std::string* out) const {
+    if (!n.IsScalar() || n.Scalar().empty()) return error(n, what + " must be a non-empty string");
+    *out = n.Scalar();
+    return {};
+  }
+
+  Status vec3(const YAML::Node& n, const std::string& what, Vector3d* out) const {
+    if (!n.IsSequence() || n.size() != 3) return error(n, what + " must be a list of 3 numbers [x, y, z]");
+    for (int a = 0; a < 3; ++a) LFTRACK_RETURN_IF_ERROR(number(n[a], what, &(*out)[a]));
+    return {};
+  }
+
+  Status unit_vec3(const YAML::Node& n, const std::string& what, Vector3d* out) const {
+    LFTRACK_RETURN_IF_ERROR(vec3(n, what, out));
+    if (!(out->norm() > 1e-9)) return error(n, what + " must not be the zero vector");
+    out->normalize();
+    return {};
+  }
+
+  // The value under `key` of `map`, or an error located at the map if it is absent.
+  Status need(const YAML::Node& map, const std::string& key, const std::string& what, YAML::Node* out) const {
+    const YAML::Node n = map[key];
+    if (!n) return error(map, what + " needs '" + key + "'");
+    out->reset(n);  // rebind; operator= would write into the referenced node
+    return {};
+  }
+
+  Status parse_ct(const YAML::Node& n, CtSpec* ct) const;
+  Status parse_roi(const YAML::Node& n, bool builtin, RoiSpec* roi) const;
+  Status parse_pose(const YAML::Node& n, tracking::Pose* pose) const;
+  Status parse_light_field(const YAML::Node& n, const std::string& what,
+                           tracking::LightFieldSpec* spec) const;
+  Status parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const;
+  Status one_of(const YAML::Node& n, const std::string& what, const std::vector<std::string>& known,
+                std::string* out) const;
+  Status parse_registration(const YAML::Node& t, RegistrationSpec* r) const;
+  Status parse_fiducials(const YAML::Node& n, FiducialSpec* f) const;
+  Result<Scene> parse(const std::string& yaml_text) const;
+  // The host-loop sections (scene_loop_parser.cpp).
+  Status parse_sim(const YAML::Node& n, SimFrameSpec* sim) const;
+  Status parse_loop(const YAML::Node& n, LoopSpec* loop) const;
+  Status parse_safety(const YAML::Node& n, SafetyLimits* limits) const;
+  Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;
+  Status parse_motion(const YAML::Node& n, MotionSpec* motion) const;
+  Status vec6(const YAML::Node& n, const std::string& what, const char* translation_key,
+              const char* rotation_key, tracking::Vector6d* out) const;
+
+ private:
+  std::string source_;
+  fs::path base_dir_;
+};
+
+}  // namespace lftrack::host

@@ -1,0 +1,117 @@
+#include "lftrack/studies/plot.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+
+namespace lftrack::host {
+
+namespace {
+std::string quoted(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+std::string gp_string(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) out += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
+  return out + "\"";
+}
+
+// Runs gnuplot on `gp` in its folder; false (with a warning) where gnuplot is not installed.
+Result<bool> run_gnuplot(const std::filesystem::path& gp) {
+  if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) {
+    spdlog::warn("gnuplot not found (scripts/setup.sh installs it); wrote {} without drawing it",
+                 gp.string());
+    return false;
+  }
+  const std::string command = "cd " + quoted(gp.parent_path().empty() ? "." : gp.parent_path().string()) +
+                              " && gnuplot " + quoted(gp.filename().string()) + " 2>&1";
+  if (std::system(command.c_str()) != 0) return io_error("gnuplot failed on " + gp.string());
+  return true;
+}
+
+}  // namespace
+
+Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& png) {
+  const auto dat = std::filesystem::path(png).replace_extension(".dat");
+  const auto gp = std::filesystem::path(png).replace_extension(".gp");
+  {
+    std::ofstream d(dat);
+    if (!d) return io_error(dat.string() + ": cannot write");
+    d << "# x";
+    for (const auto& s : plot.series) d << '\t' << s.name;
+    d << '\n';
+    for (std::size_t i = 0; i < plot.x.size(); ++i) {
+      d << plot.x[i];
+      for (const auto& s : plot.series) {
+        const double y = i < s.y.size() ? s.y[i] : NAN;
+        if (std::isfinite(y))
+          d << '\t' << y;
+        else
+          d << "\tNaN";
+      }
+      d << '\n';
+    }
+  }
+  {
+    std::ofstream g(gp);
+    if (!g) return io_error(gp.string() + ": cannot write");
+    g << "set terminal pngcairo size 900,600 enhanced font 'DejaVu Sans,11'\n"
+      << "set output " << gp_string(png.filename().string()) << "\n"
+      << "set title " << gp_string(plot.title) << "\n"
+      << "set xlabel " << gp_string(plot.x_label) << "\nset ylabel " << gp_string(plot.y_label) << "\n"
+      << "set grid\nset key bottom left box opaque\nset datafile missing 'NaN'\n";
+    if (plot.log_x) g << "set logscale x\n";
+    if (plot.y_max > plot.y_min) g << "set yrange [" << plot.y_min << ":" << plot.y_max << "]\n";
+    g << "plot ";
+    for (std::size_t s = 0; s < plot.series.size(); ++s) {
+      g << (s ? ", \\\n     " : "") << gp_string(dat.filename().string()) << " using 1:" << s + 2
+        << " with linespoints lw 2 pt 7 title " << gp_string(plot.series[s].name);
+    }
+    g << "\n";
+  }
+  return run_gnuplot(gp);
+}
+
+Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::path& png) {
+  const auto dat = std::filesystem::path(png).replace_extension(".dat");
+  const auto front = std::filesystem::path(png).replace_extension("").string() + "_front.dat";
+  const auto gp = std::filesystem::path(png).replace_extension(".gp");
+  auto write_points = [](const std::filesystem::path& file,
+                         const std::vector<ScatterPoint>& points) -> Status {
+    std::ofstream d(file);
+    if (!d) return io_error(file.string() + ": cannot write");
+    d << "# x\ty\tlabel\n";
+    for (const auto& p : points)
+      if (std::isfinite(p.x) && std::isfinite(p.y))
+        d << p.x << '\t' << p.y << '\t' << gp_string(p.label) << '\n';
+    return {};
+  };
+  LFTRACK_RETURN_IF_ERROR(write_points(dat, plot.points));
+  LFTRACK_RETURN_IF_ERROR(write_points(front, plot.front));
+  {
+    std::ofstream g(gp);
+    if (!g) return io_error(gp.string() + ": cannot write");
+    const std::string front_name = std::filesystem::path(front).filename().string();
+    g << "set terminal pngcairo size 1000,700 enhanced font 'DejaVu Sans,11'\n"
+      << "set output " << gp_string(png.filename().string()) << "\n"
+      << "set title " << gp_string(plot.title) << " noenhanced\n"
+      << "set xlabel " << gp_string(plot.x_label) << "\nset ylabel " << gp_string(plot.y_label) << "\n"
+      << "set grid\nset key " << plot.key_position << " box opaque\n";
+    if (plot.log_x) g << "set logscale x\n";
+    if (plot.log_y) g << "set logscale y\n";
+    g << "plot " << gp_string(dat.filename().string())
+      << " using 1:2 with points pt 7 ps 1.2 lc rgb '#8090a0' title 'operating points', \\\n     "
+      << gp_string(front_name) << " using 1:2 with linespoints lw 2 pt 7 ps 1.5 lc rgb '#c03020' title "
+      << gp_string(plot.front_name) << ", \\\n     " << gp_string(front_name)
+      << " every 2 using 1:2:3 with labels left offset 0.8,0.6 font ',9' noenhanced notitle, \\\n     "
+      << gp_string(front_name)  // every other label below its point, so neighbours do not overlap
+      << " every 2::1 using 1:2:3 with labels left offset 0.8,-0.9 font ',9' noenhanced notitle\n";
+  }
+  return run_gnuplot(gp);
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,328 @@
+// The trade study's files: the points CSV and study description of a shard, merging shards, the
+// Pareto front, the recommended defaults, the two plots and summary.md.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "lftrack/studies/plot.hpp"
+#include "lftrack/studies/trade_study.hpp"
+
+namespace lftrack::host {
+namespace {
+
+const char* const kCsvHeader =
+    "id,renderer,storage,vq_codebook,lf_u,lf_v,lf_s,lf_t,envelope_scale,octree_pivot,bin,similarity,plan,"
+    "final_step_mm,budget_ms,runs,median_ms,p95_ms,mean_tre_mm,p95_tre_mm,success_rate,memory_bytes,"
+    "precompute_s,ncc_vs_siddon,psnr_db_vs_siddon";
+
+std::string num(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> cells;
+  std::stringstream in(line);
+  std::string cell;
+  while (std::getline(in, cell, ',')) cells.push_back(cell);
+  if (!line.empty() && line.back() == ',') cells.emplace_back();
+  return cells;
+}
+
+// How a point is set, in words.
+std::string describe(const TradePoint& t) {
+  std::string s = t.renderer;
+  if (t.renderer == "lightfield") {
+    s += " " + t.storage + (t.storage == "vq" ? std::to_string(t.vq_codebook) : "") + " " +
+         std::to_string(t.lf_resolution[0]) + "x" + std::to_string(t.lf_resolution[1]) + "x" +
+         std::to_string(t.lf_resolution[2]) + "x" + std::to_string(t.lf_resolution[3]);
+    if (t.envelope_scale != 1) s += ", envelope x" + num(t.envelope_scale);
+  }
+  if (t.renderer == "octree") s += " P=" + num(t.octree_pivot);
+  s += ", bin " + std::to_string(t.bin) + ", " + t.similarity + ", plan " + t.plan + ", final step " +
+       num(t.final_step_mm) + " mm, " +
+       (t.budget_ms > 0 ? "budget " + num(t.budget_ms) + " ms" : "no budget");
+  return s;
+}
+
+std::string mb(double bytes) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", bytes / 1e6);
+  return buf;
+}
+
+std::string fixed(double v, int decimals) {
+  if (!std::isfinite(v)) return std::isnan(v) ? "n/a" : "exact";
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+  return buf;
+}
+
+std::string table_row(const TradeResult& r) {
+  return "| " + r.point.id + " | " + fixed(r.median_ms, 1) + " | " + fixed(r.p95_ms, 1) + " | " +
+         fixed(r.mean_tre_mm, 3) + " | " + fixed(r.p95_tre_mm, 3) + " | " + fixed(100 * r.success_rate, 0) +
+         "% | " + mb(r.memory_bytes) + " | " + fixed(r.precompute_s, 1) + " | " +
+         fixed(r.psnr_db_vs_siddon, 1) + " | " + describe(r.point) + " |\n";
+}
+
+const char* const kTableHeader =
+    "| point | median ms | p95 ms | mean TRE mm | p95 TRE mm | success | memory MB | precompute s | PSNR dB "
+    "vs "
+    "Siddon | settings |\n|---|---|---|---|---|---|---|---|---|---|\n";
+
+nlohmann::json study_json(const TradeStudy& s) {
+  return {{"scene", s.scene},
+          {"seed", s.seed},
+          {"problems", s.problems},
+          {"quick", s.quick},
+          {"shard", s.shard},
+          {"shards", s.shards},
+          {"points_total", s.points_total},
+          {"points", s.results.size()}};
+}
+
+}  // namespace
+
+std::vector<TradeResult> pareto_front(const std::vector<TradeResult>& results) {
+  std::vector<TradeResult> front;
+  for (const TradeResult& a : results) {
+    if (a.success_rate <= 0 || !std::isfinite(a.median_ms) || !std::isfinite(a.mean_tre_mm)) continue;
+    bool dominated = false;
+    for (const TradeResult& b : results) {
+      if (b.success_rate <= 0) continue;
+      if (b.median_ms <= a.median_ms && b.mean_tre_mm <= a.mean_tre_mm &&
+          (b.median_ms < a.median_ms || b.mean_tre_mm < a.mean_tre_mm)) {
+        dominated = true;
+        break;
+      }
+    }
+    if (!dominated) front.push_back(a);
+  }
+  std::sort(front.begin(), front.end(),
+            [](const TradeResult& x, const TradeResult& y) { return x.median_ms < y.median_ms; });
+  return front;
+}
+
+TradeRecommendations recommend(const std::vector<TradeResult>& results) {
+  TradeRecommendations r;
+  for (const TradeResult& x : results) {
+    if (x.success_rate < 0.95) continue;
+    if (x.mean_tre_mm <= 1.0 && (!r.has_fastest || x.median_ms < r.fastest_within_1mm.median_ms)) {
+      r.fastest_within_1mm = x;
+      r.has_fastest = true;
+    }
+    if (x.p95_ms <= 100.0 && (!r.has_accurate || x.mean_tre_mm < r.most_accurate_within_100ms.mean_tre_mm)) {
+      r.most_accurate_within_100ms = x;
+      r.has_accurate = true;
+    }
+    if (x.mean_tre_mm <= 0.5 &&
+        (!r.has_least_memory || x.memory_bytes < r.least_memory_within_half_mm.memory_bytes)) {
+      r.least_memory_within_half_mm = x;
+      r.has_least_memory = true;
+    }
+  }
+  return r;
+}
+
+Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
+  {
+    std::ofstream csv(dir / "points.csv");
+    if (!csv) return io_error((dir / "points.csv").string() + ": cannot write");
+    csv << kCsvHeader << '\n';
+    for (const TradeResult& r : study.results) {
+      const TradePoint& t = r.point;
+      csv << t.id << ',' << t.renderer << ',' << t.storage << ',' << t.vq_codebook << ','
+          << t.lf_resolution[0] << ',' << t.lf_resolution[1] << ',' << t.lf_resolution[2] << ','
+          << t.lf_resolution[3] << ',' << num(t.envelope_scale) << ',' << num(t.octree_pivot) << ',' << t.bin
+          << ',' << t.similarity << ',' << t.plan << ',' << num(t.final_step_mm) << ',' << num(t.budget_ms)
+          << ',' << r.runs << ',' << num(r.median_ms) << ',' << num(r.p95_ms) << ',' << num(r.mean_tre_mm)
+          << ',' << num(r.p95_tre_mm) << ',' << num(r.success_rate) << ',' << num(r.memory_bytes) << ','
+          << num(r.precompute_s) << ',' << num(r.ncc_vs_siddon) << ',' << num(r.psnr_db_vs_siddon) << '\n';
+    }
+    if (!csv) return io_error((dir / "points.csv").string() + ": write failed");
+  }
+  std::ofstream j(dir / "study.json");
+  j << study_json(study).dump(2) << '\n';
+  if (!j) return io_error((dir / "study.json").string() + ": write failed");
+  return {};
+}
+
+Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
+  TradeStudy s;
+  {
+    std::ifstream in(dir / "study.json");
+    if (!in) return not_found((dir / "study.json").string() + ": no such file (not a trade study folder?)");
+    try {
+      const auto j = nlohmann::json::parse(in);
+      s.scene = j.at("scene").get<std::string>();
+      s.seed = j.at("seed").get<std::uint64_t>();
+      s.problems = j.at("problems").get<int>();
+      s.quick = j.at("quick").get<bool>();
+      s.shard = j.at("shard").get<int>();
+      s.shards = j.at("shards").get<int>();
+      s.points_total = j.at("points_total").get<int>();
+    } catch (const std::exception& e) {
+      return corrupt_data((dir / "study.json").string() + ": " + e.what());
+    }
+  }
+  const auto file = dir / "points.csv";
+  std::ifstream csv(file);
+  if (!csv) return not_found(file.string() + ": no such file");
+  std::string line;
+  if (!std::getline(csv, line) || line != kCsvHeader)
+    return corrupt_data(file.string() + ": line 1 is not the trade study's header");
+  int line_no = 1;
+  while (std::getline(csv, line)) {
+    ++line_no;
+    if (line.empty()) continue;
+    const auto c = split(line);
+    const std::string where = file.string() + ":" + std::to_string(line_no);
+    if (c.size() != 25) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 25");
+    TradeResult r;
+    TradePoint& t = r.point;
+    try {
+      std::size_t k = 0;
+      t.id = c[k++];
+      t.renderer = c[k++];
+      t.storage = c[k++];
+      t.vq_codebook = std::stoi(c[k++]);
+      for (int a = 0; a < 4; ++a) t.lf_resolution[std::size_t(a)] = std::stoi(c[k++]);
+      t.envelope_scale = std::stod(c[k++]);
+      t.octree_pivot = std::stod(c[k++]);
+      t.bin = std::stoi(c[k++]);
+      t.similarity = c[k++];
+      t.plan = c[k++];
+      t.final_step_mm = std::stod(c[k++]);
+      t.budget_ms = std::stod(c[k++]);
+      r.runs = std::stoi(c[k++]);
+      for (double* v : {&r.median_ms, &r.p95_ms, &r.mean_tre_mm, &r.p95_tre_mm, &r.success_rate,
+                        &r.memory_bytes, &r.precompute_s, &r.ncc_vs_siddon, &r.psnr_db_vs_siddon})
+        *v = std::strtod(c[k++].c_str(), nullptr);
+    } catch (const std::exception&) {
+      return corrupt_data(where + ": a number does not parse");
+    }
+    if (t.id.empty()) return corrupt_data(where + ": empty point id");
+    s.results.push_back(r);
+  }
+  return s;
+}
+
+Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards) {
+  if (shards.empty()) return invalid_argument("merge: no shards given");
+  const TradeStudy& first = shards.front();
+  TradeStudy merged = first;
+  merged.results.clear();
+  std::set<int> seen;
+  std::set<std::string> ids;
+  for (const TradeStudy& s : shards) {
+    if (s.scene != first.scene || s.seed != first.seed || s.problems != first.problems ||
+        s.quick != first.quick || s.shards != first.shards || s.points_total != first.points_total)
+      return failed_precondition("merge: shard " + std::to_string(s.shard) + "/" + std::to_string(s.shards) +
+                                 " is of another study (scene '" + s.scene + "', seed " +
+                                 std::to_string(s.seed) + ", " + std::to_string(s.problems) + " problems)");
+    if (!seen.insert(s.shard).second)
+      return failed_precondition("merge: shard " + std::to_string(s.shard) + " given twice");
+    for (const TradeResult& r : s.results) {
+      if (!ids.insert(r.point.id).second)
+        return failed_precondition("merge: point '" + r.point.id + "' measured twice");
+      merged.results.push_back(r);
+    }
+  }
+  for (int k = 1; k <= first.shards; ++k)
+    if (!seen.count(k))
+      return failed_precondition("merge: shard " + std::to_string(k) + " of " + std::to_string(first.shards) +
+                                 " is missing");
+  if (int(merged.results.size()) != first.points_total)
+    return failed_precondition("merge: " + std::to_string(merged.results.size()) + " points, the study has " +
+                               std::to_string(first.points_total));
+  merged.shard = merged.shards = 1;
+  return merged;
+}
+
+Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir) {
+  LFTRACK_RETURN_IF_ERROR(write_trade_shard(study, dir));
+  const std::vector<TradeResult> front = pareto_front(study.results);
+
+  ScatterPlot time_plot;
+  time_plot.title = "Trade study, " + study.scene + ": TRE against registration time (" +
+                    std::to_string(study.problems) + " problems per point)";
+  time_plot.x_label = "median registration time (ms, log scale)";
+  time_plot.y_label = "mean TRE (mm)";
+  time_plot.log_x = true;
+  for (const TradeResult& r : study.results)
+    time_plot.points.push_back({r.median_ms, r.mean_tre_mm, r.point.id});
+  for (const TradeResult& r : front) time_plot.front.push_back({r.median_ms, r.mean_tre_mm, r.point.id});
+  auto drawn = draw_scatter_plot(time_plot, dir / "tre_vs_time.png");
+  if (!drawn.ok()) return drawn.status();
+
+  // Memory against fidelity; exact renderers (infinite PSNR) are listed in summary.md only.
+  ScatterPlot memory_plot;
+  memory_plot.title =
+      "Trade study, " + study.scene + ": memory against DRR fidelity (exact renderers not shown)";
+  memory_plot.x_label = "memory of the renderer's data (MB, log scale)";
+  memory_plot.y_label = "PSNR of DRRs against Siddon (dB)";
+  memory_plot.log_x = true;
+  memory_plot.front_name = "least memory for its fidelity";
+  memory_plot.key_position = "bottom right";
+  std::vector<TradeResult> finite;
+  for (const TradeResult& r : study.results)
+    if (std::isfinite(r.psnr_db_vs_siddon) && r.memory_bytes > 0) finite.push_back(r);
+  std::sort(finite.begin(), finite.end(),
+            [](const TradeResult& a, const TradeResult& b) { return a.memory_bytes < b.memory_bytes; });
+  double best_psnr = -1e300;
+  for (const TradeResult& r : finite) {
+    memory_plot.points.push_back({r.memory_bytes / 1e6, r.psnr_db_vs_siddon, r.point.id});
+    if (r.psnr_db_vs_siddon > best_psnr) {
+      best_psnr = r.psnr_db_vs_siddon;
+      memory_plot.front.push_back({r.memory_bytes / 1e6, r.psnr_db_vs_siddon, r.point.id});
+    }
+  }
+  auto drawn2 = draw_scatter_plot(memory_plot, dir / "memory_vs_fidelity.png");
+  if (!drawn2.ok()) return drawn2.status();
+
+  const TradeRecommendations rec = recommend(study.results);
+  std::ofstream md(dir / "summary.md");
+  md << "# Trade study: " << study.scene << "\n\n"
+     << study.results.size() << " operating points" << (study.quick ? " (quick)" : "")
+     << ", each registering the same " << study.problems << " problems (seed " << study.seed
+     << "): gold poses within 0.4 x the scene's envelope, starts at an initial mean TRE of 1-4 mm, frames "
+        "rendered by Siddon with noise. Success: final mean TRE < 2 mm. Times are wall-clock on this host; "
+        "compare them within one study.\n\n"
+     << "![TRE against time](tre_vs_time.png)\n\n## Pareto front (mean TRE against median time)\n\n"
+     << kTableHeader;
+  for (const TradeResult& r : front) md << table_row(r);
+  md << "\n## Recommended defaults\n\n";
+  auto line = [&](const char* what, bool has, const TradeResult& r) {
+    md << "- **" << what << "**: ";
+    if (!has) {
+      md << "no point qualifies.\n";
+      return;
+    }
+    md << "`" << r.point.id << "` (" << describe(r.point) << "): median " << fixed(r.median_ms, 1)
+       << " ms, p95 " << fixed(r.p95_ms, 1) << " ms, mean TRE " << fixed(r.mean_tre_mm, 3) << " mm, memory "
+       << mb(r.memory_bytes) << " MB.\n";
+  };
+  line("fastest within 1 mm mean TRE", rec.has_fastest, rec.fastest_within_1mm);
+  line("most accurate within 100 ms p95 time", rec.has_accurate, rec.most_accurate_within_100ms);
+  line("least memory within 0.5 mm mean TRE", rec.has_least_memory, rec.least_memory_within_half_mm);
+  md << "\n(Each also needs a success rate of at least 95 %.)\n\n![memory against "
+        "fidelity](memory_vs_fidelity.png)\n\n"
+     << "## Every point\n\n"
+     << kTableHeader;
+  for (const TradeResult& r : study.results) md << table_row(r);
+  if (!md) return io_error((dir / "summary.md").string() + ": write failed");
+  return {};
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,602 @@
+// The lftrack program as a user runs it: exit codes, messages, files written.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
+
+#include <nlohmann/json.hpp>
+
+#include "lftrack/studies/plastimatch_peer.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/studies/trade_study.hpp"
+#include "lftrack/tracking/image_io.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::host {
+namespace {
+
+std::string lftrack_bin() {
+  return LFTRACK_BIN_PATH;
+}
+
+TEST(Cli, DrrWritesBothViewsOfTheDefaultScene) {
+  test::TempDir dir;
+  std::string out;
+  const Status s = run_process(
+      {lftrack_bin(), "drr", "--scene", "builtin:phantom", "--renderer", "siddon", "-o", dir.path().string()},
+      &out);
+  ASSERT_TRUE(s.ok()) << out;
+  for (const char* view : {"A", "B"}) {
+    const auto png = dir.path() / ("drr_" + std::string(view) + ".png");
+    const auto pfm = dir.path() / ("drr_" + std::string(view) + "_mu_mm.pfm");
+    EXPECT_NE(out.find(png.string()), std::string::npos) << "prints where the files are";
+    auto image = tracking::read_png(png);
+    auto data = tracking::read_pfm(pfm);
+    ASSERT_TRUE(image.ok() && data.ok());
+    EXPECT_EQ(image->rows(), 512);
+    EXPECT_EQ(data->cols(), 512);
+    float hi = 0;
+    for (float v : data->pixels()) hi = std::max(hi, v);
+    EXPECT_GT(hi, 3.0f) << "a torso absorbs: line integrals of several mu*mm";
+  }
+}
+
+TEST(Cli, BadSceneFailsWithFileLineAndReason) {
+  test::TempDir dir;
+  const auto file = dir.path() / "bad.yaml";
+  std::ofstream(file) << "version: 1\nct: {path: builtin:phantom}\ndetectors:\n  - name: A\n    rows: -3\n";
+  std::string out;
+  const Status s = run_process({lftrack_bin(), "info", "--scene", file.string()}, &out);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(out.find(file.string() + ":5:"), std::string::npos) << out;
+}
+
+TEST(Cli, UnknownViewAndRendererAreErrors) {
+  test::TempDir dir;
+  std::string out;
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--view", "C", "-o", dir.path().string()}, &out).ok());
+  EXPECT_NE(out.find("no view 'C'"), std::string::npos) << out;
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "drr", "--renderer", "magic", "-o", dir.path().string()}, &out).ok());
+  EXPECT_NE(out.find("unknown renderer 'magic'"), std::string::npos) << out;
+}
+
+// The built-in phantom with small light fields, written next to the test's folder.
+std::filesystem::path small_light_field_scene(const std::filesystem::path& dir, const char* extra = "") {
+  auto text = builtin_scene_text("builtin:phantom");
+  std::string scene = *text;
+  const std::string field = "    resolution: [16, 16, 128, 128]\n";
+  scene.replace(scene.find(field), field.size(), "    resolution: [4, 4, 48, 48]\n    storage: fixed16\n");
+  scene += extra;
+  const auto file = dir / "small_lf.yaml";
+  std::ofstream(file) << scene;
+  return file;
+}
+
+TEST(Cli, PrecomputeThenRenderWithTheLightField) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir.path());
+  const auto lf_dir = dir.path() / "lf";
+  std::string out;
+  ASSERT_TRUE(
+      run_process({lftrack_bin(), "precompute", "--scene", scene.string(), "-o", lf_dir.string()}, &out).ok())
+      << out;
+  EXPECT_TRUE(std::filesystem::exists(lf_dir / "A.lf")) << out;
+  EXPECT_TRUE(std::filesystem::exists(lf_dir / "B.lf")) << out;
+  EXPECT_NE(out.find("100%"), std::string::npos) << "a progress bar: " << out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "drr", "--scene", scene.string(), "--lf-dir", lf_dir.string(),
+                           "--roi", "-o", (dir.path() / "drr").string()},
+                          &out)
+                  .ok())
+      << out;
+  auto data = tracking::read_pfm(dir.path() / "drr" / "drr_A_mu_mm.pfm");
+  ASSERT_TRUE(data.ok());
+  float hi = 0;
+  for (float v : data->pixels()) hi = std::max(hi, v);
+  EXPECT_GT(hi, 3.0f);
+}
+
+TEST(Cli, LightFieldsForAnotherSceneAreRefused) {
+  test::TempDir dir;
+  const auto lf_dir = dir.path() / "lf";
+  std::string out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "precompute", "--scene",
+                           small_light_field_scene(dir.path()).string(), "-o", lf_dir.string()},
+                          &out)
+                  .ok())
+      << out;
+  // The same scene with a wider envelope: the fields no longer cover it.
+  const auto wider = small_light_field_scene(dir.path());
+  std::string text;
+  {
+    std::ifstream in(wider);
+    text.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  text.replace(text.find("rotation_deg: 5"), std::string("rotation_deg: 5").size(), "rotation_deg: 6");
+  std::ofstream(wider) << text;
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir", lf_dir.string(),
+                            "-o", (dir.path() / "drr").string()},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("another geometry"), std::string::npos) << out;
+  // No fields at all: the message says what to run.
+  EXPECT_FALSE(run_process({lftrack_bin(), "drr", "--scene", wider.string(), "--lf-dir",
+                            (dir.path() / "none").string(), "-o", (dir.path() / "drr").string()},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("lftrack precompute"), std::string::npos) << out;
+}
+
+TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
+  test::TempDir dir;
+  std::string out;
+  const Status s = run_process(
+      {lftrack_bin(), "-q", "bench", "drr", "--scene", small_light_field_scene(dir.path()).string(), "--size",
+       "24", "--poses", "1", "--repeats", "1", "--vq-codebooks", "16", "--json"},
+      &out);
+  ASSERT_TRUE(s.ok()) << out;
+  const auto json = nlohmann::json::parse(out.substr(out.find('{')));
+  for (const char* key : {"ct", "size", "renderers", "peers", "light_field"})
+    EXPECT_TRUE(json.contains(key)) << key;
+  std::vector<std::string> names;
+  for (const auto& r : json["renderers"]) {
+    names.push_back(r["name"]);
+    for (const char* key : {"name", "ms_median", "speedup_vs_siddon", "ncc_vs_siddon", "psnr_db_vs_siddon",
+                            "bytes", "out_of_field_fraction"})
+      EXPECT_TRUE(r.contains(key)) << key;
+  }
+  for (const char* name :
+       {"siddon", "trilinear", "lightfield-float", "lightfield-fixed16", "lightfield-vq16"})
+    EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
+  for (const auto& p : json["peers"])
+    for (const char* key : {"name", "ms_median", "ncc_vs_siddon"}) EXPECT_TRUE(p.contains(key)) << key;
+  // With plastimatch installed, every light field is also timed beside each plastimatch run.
+  if (!json["peers"].empty()) {
+    for (const auto& r : json["renderers"]) {
+      if (r["name"].get<std::string>().rfind("lightfield", 0) != 0) continue;
+      ASSERT_TRUE(r.contains("speedup_vs_plastimatch_side_by_side")) << r["name"];
+      EXPECT_GT(r["speedup_vs_plastimatch_side_by_side"].get<double>(), 0.0) << r["name"];
+    }
+  }
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+// The built-in scene with a coarse light field (built in a moment) for command tests.
+std::filesystem::path small_light_field_scene(const test::TempDir& dir) {
+  const auto file = dir.path() / "phantom-small-lf.yaml";
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  const std::string field = "    resolution: [16, 16, 128, 128]\n";
+  scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
+  std::ofstream(file) << scene;
+  return file;
+}
+
+TEST(Cli, RegisterSimulatedFramesPrintsPoseSimilarityAndTre) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir);
+  std::string out;
+  const Status s =
+      run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--sim", "--gold",
+                   "1,-1,0.5,0.5,0,-0.5", "--init", "-2,2,-1.5,-1,1,1", "--lf-dir",
+                   (dir.path() / "lf").string(), "--save-frames", (dir.path() / "frames").string(), "--json"},
+                  &out);
+  ASSERT_TRUE(s.ok()) << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["views"].size(), 2u);
+  EXPECT_GT(j["evaluations"].get<int>(), 12);
+  EXPECT_GT(j["initial_tre_mm"]["mean"].get<double>(), 3.0);
+  EXPECT_LT(j["tre_mm"]["mean"].get<double>(), 1.0) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "lf" / "A.lf")) << "a missing field is built and kept";
+
+  // The saved frames register from files the same way.
+  std::string again;
+  const Status f =
+      run_process({lftrack_bin(), "-q", "register", "--scene", scene.string(), "--frames",
+                   (dir.path() / "frames" / "frame_A.tif").string(),
+                   (dir.path() / "frames" / "frame_B.tif").string(), "--gold", "1,-1,0.5,0.5,0,-0.5",
+                   "--init", "-2,2,-1.5,-1,1,1", "--lf-dir", (dir.path() / "lf").string(), "--json"},
+                  &again);
+  ASSERT_TRUE(f.ok()) << again;
+  const auto k = nlohmann::json::parse(again.substr(again.find('{')));
+  EXPECT_NEAR(k["tre_mm"]["mean"].get<double>(), j["tre_mm"]["mean"].get<double>(), 1e-9);
+}
+
+TEST(Cli, RegisterRefusesBadInput) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir);
+  std::string out;
+  EXPECT_FALSE(run_process({lftrack_bin(), "register", "--scene", scene.string()}, &out).ok());
+  EXPECT_NE(out.find("either --frames A B or --sim"), std::string::npos) << out;
+  const auto junk = dir.path() / "junk.tif";
+  std::ofstream(junk) << "not a tiff";
+  EXPECT_FALSE(run_process({lftrack_bin(), "register", "--scene", scene.string(), "--frames", junk.string(),
+                            junk.string()},
+                           &out)
+                   .ok());
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "register", "--scene", scene.string(), "--sim", "--plan", "fast"}, &out)
+          .ok());
+  EXPECT_NE(out.find("unknown registration plan"), std::string::npos) << out;
+}
+
+TEST(Cli, CaptureRangeStudyWritesCsvSummaryAndPlot) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir);
+  std::string out;
+  const auto study = dir.path() / "study";
+  const Status s = run_process({lftrack_bin(), "-q", "study", "capture-range", "--scene", scene.string(),
+                                "--out", study.string(), "--per-bin", "2", "--bins", "2", "--methods",
+                                "warm:ncc,papers:mi", "--lf-dir", (dir.path() / "lf").string()},
+                               &out);
+  ASSERT_TRUE(s.ok()) << out;
+  std::ifstream csv(study / "runs.csv");
+  const long lines = std::count(std::istreambuf_iterator<char>(csv), std::istreambuf_iterator<char>(), '\n');
+  EXPECT_EQ(lines, 1 + 2 * 2 * 2);
+  std::ifstream summary_file(study / "summary.json");
+  const auto summary = nlohmann::json::parse(summary_file);
+  ASSERT_EQ(summary["methods"].size(), 2u);
+  for (const auto& m : summary["methods"])
+    for (const char* key :
+         {"name", "success_rate", "mean_tre_mm", "max_tre_mm", "capture_range_mm", "median_ms"})
+      EXPECT_TRUE(m.contains(key)) << key;
+  EXPECT_TRUE(std::filesystem::exists(study / "capture_range.gp"));
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_GT(std::filesystem::file_size(study / "capture_range.png"), 1000u);
+  }
+  EXPECT_FALSE(run_process({lftrack_bin(), "study", "capture-range", "--scene", scene.string(), "--out",
+                            study.string(), "--methods", "papers:entropy"},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("unknown similarity"), std::string::npos) << out;
+}
+
+// The trade study sharded in two and merged, on the small scene with one problem per point (the
+// octree's registration takes half a minute here): the octree registers on its decompressed
+// volume, the light field at its baseline and binned.
+TEST(Cli, TradeStudyShardsMergeIntoPlotsAndASummary) {
+  test::TempDir dir;
+  const auto scene = small_light_field_scene(dir.path());
+  std::string out;
+  const std::vector<std::string> common = {lftrack_bin(),
+                                           "-q",
+                                           "study",
+                                           "trade",
+                                           "--scene",
+                                           scene.string(),
+                                           "--quick",
+                                           "--problems",
+                                           "1",
+                                           "--points",
+                                           "baseline,bin2,octree-P0.02"};
+  for (const char* shard : {"1/2", "2/2"}) {
+    auto args = common;
+    args.insert(args.end(),
+                {"--shard", shard, "--out", (dir.path() / ("shard" + std::string(1, shard[0]))).string()});
+    ASSERT_TRUE(run_process(args, &out).ok()) << out;
+  }
+  const auto merged = dir.path() / "merged";
+  ASSERT_TRUE(run_process({lftrack_bin(), "study", "merge", "--out", merged.string(),
+                           (dir.path() / "shard1").string(), (dir.path() / "shard2").string()},
+                          &out)
+                  .ok())
+      << out;
+  auto study = read_trade_shard(merged);
+  ASSERT_TRUE(study.ok()) << study.status().message();
+  ASSERT_EQ(study->results.size(), 3u);
+  for (const TradeResult& r : study->results) {
+    EXPECT_EQ(r.runs, 1) << r.point.id;
+    EXPECT_GT(r.median_ms, 0) << r.point.id;
+    EXPECT_GT(r.memory_bytes, 0) << r.point.id;
+    EXPECT_LT(r.mean_tre_mm, 1.0) << r.point.id << ": every point registers the small scene's problems";
+    // The small scene's field is 4 x 4 x 48 x 48 in 16 bits; the octree is near exact.
+    EXPECT_GT(r.ncc_vs_siddon, r.point.renderer == "octree" ? 0.999 : 0.95) << r.point.id;
+  }
+  std::ifstream md(merged / "summary.md");
+  const std::string summary((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(summary.find("## Recommended defaults"), std::string::npos);
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_GT(std::filesystem::file_size(merged / "tre_vs_time.png"), 1000u);
+    EXPECT_GT(std::filesystem::file_size(merged / "memory_vs_fidelity.png"), 1000u);
+  }
+  // A missing shard and a bad shard spec are refused.
+  EXPECT_FALSE(
+      run_process(
+          {lftrack_bin(), "study", "merge", "--out", merged.string(), (dir.path() / "shard1").string()}, &out)
+          .ok());
+  EXPECT_NE(out.find("shard 2 of 2 is missing"), std::string::npos) << out;
+  auto bad = common;
+  bad.insert(bad.end(), {"--shard", "3/2", "--out", "x"});
+  EXPECT_FALSE(run_process(bad, &out).ok());
+  EXPECT_NE(out.find("1 <= k <= n"), std::string::npos) << out;
+  auto unknown = common;
+  unknown.back() = "no-such-point";
+  unknown.push_back("--out");
+  unknown.push_back((dir.path() / "x").string());
+  EXPECT_FALSE(run_process(unknown, &out).ok());
+  EXPECT_NE(out.find("no point 'no-such-point'"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+#include "lftrack/loop/journal.hpp"
+
+namespace lftrack::host {
+namespace {
+
+TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
+  test::TempDir dir;
+  const auto file = dir.path() / "cycles.journal";
+  {
+    auto w = JournalWriter::open(file);
+    ASSERT_TRUE(w.ok());
+    for (std::uint64_t i = 0; i < 5; ++i) {
+      JournalRecord r;
+      r.cycle = i;
+      r.state = 2;
+      (*w)->append(r);
+    }
+  }
+  std::filesystem::resize_file(file, std::filesystem::file_size(file) - 3);
+  std::string csv, json;
+  ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok()) << csv;
+  EXPECT_NE(csv.find("torn tail"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("\n3,0,0,0,TRACK,IDLE,APPLY"), std::string::npos) << csv;
+  EXPECT_EQ(csv.find("\n4,"), std::string::npos) << "the torn record is not printed";
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "journal", "export", file.string()}, &json).ok()) << json;
+  int objects = 0;
+  for (std::size_t pos = json.find("{\"beam_permit\""); pos != std::string::npos;
+       pos = json.find("{\"beam_permit\"", pos + 1))
+    ++objects;
+  EXPECT_EQ(objects, 4) << json;
+  EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", (dir.path() / "none").string()}, &json).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
+  test::TempDir dir;
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  for (const std::string field :
+       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
+    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+  const auto file = dir.path() / "sim.yaml";
+  std::ofstream(file) << scene;
+  const auto journal = dir.path() / "j.lfj";
+  std::string out;
+  const Status s = run_process({lftrack_bin(), "-q", "sim", "--scene", file.string(), "--fast", "--cycles",
+                                "20", "--json", "--journal", journal.string(), "--lf-dir",
+                                (dir.path() / "lf").string(), "--archive", (dir.path() / "seq").string()},
+                               &out);
+  ASSERT_TRUE(s.ok()) << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["cycles"].get<int>(), 20);
+  for (const char* key : {"mean", "p95", "max"}) EXPECT_TRUE(j["residual_mm"][key].is_number()) << key;
+  for (const char* key : {"p50", "p95", "p99", "max"}) EXPECT_TRUE(j["cycle_ms"][key].is_number()) << key;
+  for (const char* key : {"overruns", "holds", "faults", "allocations_per_cycle"})
+    EXPECT_TRUE(j[key].is_number()) << key;
+  int cycles_in_states = 0;
+  for (const char* state : {"IDLE", "ALIGN", "TRACK", "HOLD", "FAULT"})
+    cycles_in_states += j["states"][state].get<int>();
+  EXPECT_EQ(cycles_in_states, 20);
+  EXPECT_TRUE(j["aligned"].get<bool>());
+  std::string exported;
+  ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", journal.string(), "--csv"}, &exported).ok());
+  EXPECT_EQ(std::count(exported.begin(), exported.end(), '\n'), 21) << "a header and one line per cycle";
+  EXPECT_EQ(j["archive"]["pairs_written"].get<int>(), 20);
+
+  // The archive replays through the same loop, with the same summary plus the replay's counts.
+  std::string replayed;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "replay", "--scene", file.string(), "--sequence",
+                           (dir.path() / "seq").string(), "--fast", "--json", "--journal",
+                           (dir.path() / "r.lfj").string(), "--lf-dir", (dir.path() / "lf").string()},
+                          &replayed)
+                  .ok())
+      << replayed;
+  const auto r = nlohmann::json::parse(replayed.substr(replayed.find('{')));
+  EXPECT_EQ(r["cycles"].get<int>(), 20);
+  EXPECT_EQ(r["ended"].get<std::string>(), "end of the sequence");
+  EXPECT_EQ(r["replay"]["pairs_delivered"].get<int>(), 20);
+  EXPECT_EQ(r["replay"]["missing_frames"].get<int>(), 0);
+  EXPECT_TRUE(r["residual_mm"]["mean"].is_null()) << "no truth in a replay";
+  EXPECT_EQ(r["states"]["TRACK"].get<int>(), 20);
+  EXPECT_FALSE(run_process({lftrack_bin(), "replay", "--scene", file.string(), "--sequence",
+                            (dir.path() / "nothing").string()},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("no such sequence directory"), std::string::npos) << out;
+
+  // `run` drives only what exists, and says so.
+  std::string v4l2 = scene;
+  v4l2.replace(v4l2.find("frames: sim"), 11, "frames: v4l2");
+  std::ofstream(dir.path() / "v4l2.yaml") << v4l2;
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "run", "--scene", (dir.path() / "v4l2.yaml").string(), "--rt", "ignore"},
+                  &out)
+          .ok());
+  EXPECT_NE(out.find("frames from 'v4l2'"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+// The built-in scene with `extra` appended to its actuator section.
+std::string builtin_with_actuator_lines(const std::string& extra) {
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  const std::string anchor = "  max_speed_deg_s: 10\n";
+  text.insert(text.find(anchor) + anchor.size(), extra);
+  return text;
+}
+
+TEST(Cli, CalibrateViewsRecoversTheSimulatedRoomAndWritesADetectorSection) {
+  test::TempDir dir;
+  const auto file = dir.path() / "detectors.yaml";
+  std::string out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "calibrate", "views", "--sim", "--seed", "1", "--json",
+                           "--out", file.string(), "--save-images", dir.path().string()},
+                          &out)
+                  .ok())
+      << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_LT(j["source_error_mm"].get<double>(), 0.1);
+  EXPECT_LT(j["detector_error_mm"].get<double>(), 0.1);
+  EXPECT_LT(j["orientation_error_deg"].get<double>(), 0.02);
+  EXPECT_LT(j["rms_px"].get<double>(), 0.05);
+  // The written section replaces the scene's detectors and parses.
+  std::ifstream in(file);
+  const std::string written((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string section =
+      written.substr(written.find("detectors:"), written.find("calibration:") - written.find("detectors:"));
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  const std::size_t from = text.find("detectors:"), to = text.find("envelope:");
+  text.replace(from, to - from, section);
+  auto scene = parse_scene(text, file.string(), dir.path());
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  ASSERT_EQ(scene->detectors.size(), 2u);
+  auto builtin = load_scene(kBuiltinPhantom);
+  ASSERT_TRUE(builtin.ok());
+  EXPECT_LT((scene->detectors[1].view.source_mm - builtin->detectors[1].view.source_mm).norm(), 0.1);
+  // The saved images calibrate to the same geometry from files.
+  std::string again;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "calibrate", "views", "--images",
+                           (dir.path() / "phantom_A.pfm").string(), (dir.path() / "phantom_B.pfm").string(),
+                           "--json"},
+                          &again)
+                  .ok())
+      << again;
+  const auto k = nlohmann::json::parse(again.substr(again.find('{')));
+  // The files hold float32 line integrals: the same geometry to within their rounding.
+  EXPECT_NEAR(k["views"][0]["source_mm"][0].get<double>(), j["views"][0]["source_mm"][0].get<double>(), 0.02);
+}
+
+TEST(Cli, CalibrateViewsRefusesBadInputWithAReason) {
+  test::TempDir dir;
+  std::string out;
+  EXPECT_FALSE(run_process({lftrack_bin(), "calibrate", "views"}, &out).ok());
+  EXPECT_NE(out.find("--images"), std::string::npos) << out;
+  const auto small = dir.path() / "small.pfm";
+  ASSERT_TRUE(tracking::write_image(small, tracking::Image<float>(64, 64, 0.2f).view(), {}).ok());
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "calibrate", "views", "--images", small.string(), small.string()}, &out)
+          .ok());
+  EXPECT_NE(out.find("64 x 64"), std::string::npos) << out;
+  const auto phantom = dir.path() / "flat.yaml";
+  std::ofstream(phantom) << "markers_mm:\n  - [0, 0, 0]\n  - [10, 0, 0]\n";
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "calibrate", "views", "--sim", "--phantom", phantom.string()}, &out).ok());
+  EXPECT_NE(out.find("at least 6 markers"), std::string::npos) << out;
+}
+
+TEST(Cli, CalibrateCouchRecoversAMisalignedCouchAndASceneUsesTheFile) {
+  test::TempDir dir;
+  const auto scene = dir.path() / "mounted.yaml";
+  std::ofstream(scene) << builtin_with_actuator_lines(
+      "  mounting: {rotation_deg: [1, 1, 1], centre_mm: [5, -30, 200]}\n");
+  const auto calibration = dir.path() / "couch.yaml";
+  std::string out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "calibrate", "couch", "--scene", scene.string(), "--out",
+                           calibration.string(), "--json"},
+                          &out)
+                  .ok())
+      << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_LT(j["rotation_error_deg"].get<double>(), 0.05);
+  EXPECT_LT(j["centre_error_mm"].get<double>(), 0.5);
+  EXPECT_EQ(j["moves"].get<int>(), 12);
+  // A scene names the file; it loads with the recovered mounting.
+  const auto using_it = dir.path() / "calibrated.yaml";
+  std::ofstream(using_it) << builtin_with_actuator_lines("  calibration: couch.yaml\n");
+  auto loaded = load_scene(using_it.string());
+  ASSERT_TRUE(loaded.ok()) << loaded.status().message();
+  ASSERT_TRUE(loaded->actuator.calibration.has_value());
+  EXPECT_NEAR(tracking::rad_to_deg(loaded->actuator.calibration->rotation_rad.x()), 1.0, 0.05);
+  EXPECT_NEAR(loaded->actuator.calibration->centre_room_mm->z(), 200, 0.5);
+  // A missing or malformed calibration file fails at load with the scene's line.
+  std::ofstream(using_it) << builtin_with_actuator_lines("  calibration: nowhere.yaml\n");
+  auto missing = load_scene(using_it.string());
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("nowhere.yaml"), std::string::npos) << missing.status().message();
+  std::ofstream(dir.path() / "bad.yaml") << "couch_calibration: {rotation_deg: [1, 2]}\n";
+  std::ofstream(using_it) << builtin_with_actuator_lines("  calibration: bad.yaml\n");
+  EXPECT_FALSE(load_scene(using_it.string()).ok());
+  // Moves outside the couch's range are refused.
+  const auto moves = dir.path() / "moves.yaml";
+  std::ofstream(moves) << "moves:\n  - {translation_mm: [80, 0, 0]}\n  - {translation_mm: [0, 5, 0]}\n"
+                          "  - {rotation_deg: [0, 0, 1]}\n";
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "calibrate", "couch", "--scene", scene.string(), "--moves", moves.string()},
+                  &out)
+          .ok());
+  EXPECT_NE(out.find("range"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+#include "lftrack/loop/operator_input.hpp"
+
+namespace lftrack::host {
+namespace {
+
+// A flipped bit in the middle: every other record is exported, each problem is warned about, and
+// the exit status says the journal is damaged.
+TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
+  test::TempDir dir;
+  const auto file = dir.path() / "cycles.journal";
+  {
+    auto w = JournalWriter::open(file);
+    ASSERT_TRUE(w.ok());
+    for (std::uint64_t i = 0; i < 20; ++i) {
+      JournalRecord r;
+      r.cycle = i;
+      r.state = 2;
+      r.hold_id = i == 7 ? 3 : 0;
+      r.operator_command = i == 7 ? 1 + static_cast<std::uint8_t>(OperatorCommand::kResume) : 0;
+      (*w)->append(r);
+    }
+  }
+  const std::size_t frame = 8 + sizeof(JournalRecord) + 4;
+  const std::size_t damaged_at = 32 + 10 * frame;
+  {
+    std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(static_cast<std::streamoff>(damaged_at + 30));
+    f.put('\x5a');
+  }
+  std::string csv;
+  EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok())
+      << "damage is an error, for scripts";
+  EXPECT_NE(csv.find(",hold_id,operator_command,operator_refused,operator_refusal\n"), std::string::npos)
+      << csv;
+  EXPECT_NE(csv.find(",3,\"resume\",0,\"\"\n"), std::string::npos) << csv;
+  for (int i = 0; i < 20; ++i) {
+    const std::string row = std::string("\n") + std::to_string(i) + ",0,0,0,TRACK";
+    EXPECT_EQ(csv.find(row) == std::string::npos, i == 10) << i << csv;
+  }
+  const std::string frame_bytes = std::to_string(frame);
+  const std::string span = std::string("bad span at byte ") + std::to_string(damaged_at) + ", " +
+                           frame_bytes + " bytes: checksum mismatch";
+  EXPECT_NE(csv.find(span), std::string::npos) << csv;
+  EXPECT_NE(csv.find("gap: cycle 11 (record 10) follows cycle 9, 1 cycles missing"), std::string::npos)
+      << csv;
+  const std::string summary = std::string("journal damaged: 1 bad spans (") + frame_bytes +
+                              " bytes), 1 gaps (1 cycles missing), 0 repeated cycles; 19 records recovered";
+  EXPECT_NE(csv.find(summary), std::string::npos) << csv;
+}
+
+}  // namespace
+}  // namespace lftrack::host

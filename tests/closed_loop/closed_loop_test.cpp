@@ -1,0 +1,348 @@
+// The simulated closed loop end to end on a small version of the built-in scene (0.8 mm
+// detector pixels, small light fields; frames from a separate finer field, or ray-cast): tracking
+// error, states, the journal's contents, a sudden shift with an operator resume, lost frames,
+// and zero heap allocations in 1,000 steady-state cycles.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <string>
+
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
+#include "lftrack/loop/allocation_counter.hpp"
+#include "loop_fixture.hpp"
+
+namespace lftrack::host {
+namespace {
+
+TEST_F(ClosedLoop, TracksDriftAndBreathingWithoutAllocatingInThousandCycles) {
+  LoopSessionOptions options;
+  options.allocation_count = &process_allocation_count;
+  const LoopRun r = run_loop(kBreathing, 1010, options);
+  const LoopSummary& s = r.summary;
+  SCOPED_TRACE(to_json(s).dump());
+  EXPECT_EQ(s.cycles, 1010);
+  EXPECT_TRUE(s.aligned);
+  EXPECT_EQ(s.states[std::size_t(TrackingState::kTrack)], 1010)
+      << "aligned in the first cycle, tracked throughout";
+  EXPECT_EQ(s.holds, 0);
+  EXPECT_EQ(s.faults, 0);
+  ASSERT_TRUE(s.residual_p95_mm.has_value());
+  EXPECT_LT(*s.residual_p95_mm, 0.5) << "true residual after correction, breathing 4.5 mm";
+  EXPECT_LT(*s.residual_mean_mm, 0.35);
+  ASSERT_TRUE(s.allocations_per_cycle.has_value());
+  EXPECT_GE(s.allocation_cycles, 1000);
+  EXPECT_EQ(*s.allocations_per_cycle, 0.0) << "steady-state cycles allocate nothing";
+
+  // The journal: one record per cycle, the alignment first, then applied corrections with beam.
+  ASSERT_EQ(r.journal.records.size(), 1010u);
+  EXPECT_EQ(r.journal.torn_tail_bytes, 0u);
+  const JournalRecord& first = r.journal.records.front();
+  EXPECT_EQ(first.previous_state, std::uint8_t(TrackingState::kAlign));
+  EXPECT_EQ(first.state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_EQ(first.event, 1 + int(TrackingEvent::kAligned));
+  EXPECT_EQ(first.command_sent, 1) << "the set-up move";
+  EXPECT_NEAR(first.command[0], -3.0, 0.3);
+  EXPECT_NEAR(first.command[2], -2.0, 0.3);
+  int with_beam = 0;
+  for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
+    const JournalRecord& rec = r.journal.records[i];
+    EXPECT_EQ(rec.cycle, i);
+    EXPECT_EQ(rec.frame_sequence[0], i);
+    with_beam += rec.beam_permit;
+    EXPECT_GE(rec.true_residual_mm, 0.0);
+  }
+  EXPECT_GT(with_beam, 1000);
+}
+
+TEST_F(ClosedLoop, SuddenShiftHoldsInOneCycleAndRecoversAfterResume) {
+  const std::string motion =
+      "motion:\n  breathing: {amplitude_mm: [0, 1, 2], period_s: 4}\n"
+      "  shifts: [{time_s: 3.0, translation_mm: [0, 8, 0]}]\n";
+  LoopSessionOptions options;
+  options.auto_resume_s = 1.0;  // the operator looks, then resumes
+  const LoopRun r = run_loop(motion, 80, options, kRayCastFrames);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 80u);
+  // The frame of cycle 30 is the first to show the shift; that cycle holds.
+  const JournalRecord& shifted = records[30];
+  EXPECT_EQ(shifted.previous_state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_EQ(shifted.state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(shifted.gate_reason, std::uint8_t(GateReason::kStepTooLarge));
+  EXPECT_EQ(shifted.command_sent, 0);
+  EXPECT_EQ(shifted.beam_permit, 0);
+  std::size_t resumed = 0;
+  for (std::size_t i = 31; i < records.size(); ++i) {
+    if (records[i].state != std::uint8_t(TrackingState::kHold)) {
+      resumed = i;
+      break;
+    }
+    EXPECT_EQ(records[i].command_sent, 0) << "nothing moves in HOLD";
+    EXPECT_EQ(records[i].beam_permit, 0);
+  }
+  ASSERT_GT(resumed, 0u) << "the operator resumed";
+  EXPECT_EQ(records[resumed].event, 1 + int(TrackingEvent::kOperatorResume));
+  EXPECT_EQ(records[resumed].state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_EQ(records[resumed].command_sent, 1) << "the approved move of about 8 mm";
+  EXPECT_NEAR(records[resumed].command[1], -8.0, 1.0);
+  EXPECT_GT(records[resumed].true_residual_mm, 5.0);
+  bool recovered = false;
+  for (std::size_t i = resumed; i <= resumed + 5 && i < records.size(); ++i)
+    recovered = recovered || records[i].true_residual_mm < 0.5;
+  EXPECT_TRUE(recovered) << "residual back under 0.5 mm within 5 cycles of the resume";
+  EXPECT_EQ(r.summary.holds, 1);
+  EXPECT_EQ(r.summary.faults, 0);
+}
+
+// Issue 18, item 1: resumes sent while tracking once waited in the socket's queue and approved the
+// next HOLD. Now they are discarded (and journaled) when they arrive; the HOLD is left only by a
+// resume sent after it began that names its id.
+TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
+  const std::string motion =
+      "motion:\n  breathing: {amplitude_mm: [0, 1, 2], period_s: 4}\n"
+      "  shifts: [{time_s: 3.0, translation_mm: [0, 8, 0]}]\n";
+  LoopSessionOptions options;
+  options.control_socket = dir_.path() / "control.sock";
+  const auto me = dir_.path() / "operator.sock";
+  std::vector<std::string> replies;  // what the socket answered, in order
+  unsigned hold_id_seen = 0;
+  const auto operator_thread = [&](LoopSession&) {
+    return std::thread([&] {
+      const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+      sockaddr_un self{}, to{};
+      self.sun_family = to.sun_family = AF_UNIX;
+      std::strncpy(self.sun_path, me.c_str(), sizeof(self.sun_path) - 1);
+      std::strncpy(to.sun_path, options.control_socket.c_str(), sizeof(to.sun_path) - 1);
+      if (::bind(fd, reinterpret_cast<const sockaddr*>(&self), sizeof self) != 0) return;
+      timeval timeout{0, 20000};
+      ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+      timeval send_timeout{10, 0};
+      ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &send_timeout, sizeof send_timeout);
+      const auto send = [&](const char* text) {
+        return ::sendto(fd, text, std::strlen(text), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) > 0;
+      };
+      // The next reply; empty when none came in 20 ms.
+      const auto next_reply = [&]() -> std::string {
+        char buffer[256];
+        const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+        if (n <= 0) return {};
+        replies.emplace_back(buffer, std::size_t(n));
+        return replies.back();
+      };
+      // Until `done` says so, sending `request` every 100 ms (the loop answers about once a
+      // cycle; the kernel keeps ten replies, so nothing is sent faster than they are read). Gives
+      // up when the loop has ended (its socket is removed) or after ten minutes.
+      const auto until = [&](const char* request, const std::function<bool(const std::string&)>& done) {
+        for (int i = 0; i < 30000 && std::filesystem::exists(options.control_socket); ++i) {
+          if (i % 5 == 0) send(request);
+          const std::string reply = next_reply();
+          if (!reply.empty() && done(reply)) return true;
+        }
+        return false;
+      };
+      // Forty resumes, guessing a HOLD id, sent as fast as the socket takes them (the kernel
+      // queues ten): the old loop took one per cycle, so some were still waiting at the HOLD.
+      for (int i = 0; i < 40; ++i) send("resume 1");
+      // The HOLD's id, as the operator learns it: the status reply "HOLD <id> cycle <n>: ...".
+      if (!until("status", [&](const std::string& reply) {
+            return std::sscanf(reply.c_str(), "HOLD %u", &hold_id_seen) == 1;
+          }))
+        return;
+      // Waits until the loop has gone on to a later cycle than the one now answering, so that
+      // what was just sent is journaled in a cycle of its own (the journal keeps the last refusal
+      // and the strongest command per cycle): status replies end "cycle <n>: <reason>".
+      const auto next_cycle = [&] {
+        long long first = -1;
+        return until("status", [&](const std::string& reply) {
+          const std::size_t at = reply.find(" cycle ");
+          long long n = -1;
+          if (at == std::string::npos || std::sscanf(reply.c_str() + at, " cycle %lld", &n) != 1) return false;
+          if (first < 0) first = n;
+          return n > first;
+        });
+      };
+      const std::string wrong = "resume " + std::to_string(hold_id_seen == 999999 ? 100000 : hold_id_seen + 1);
+      if (!until(wrong.c_str(), [](const std::string& reply) { return reply.rfind("refused: names another HOLD", 0) == 0; }))
+        return;
+      if (!next_cycle()) return;
+      // The right id: refused while the HOLD is younger than a second, then accepted.
+      const std::string right = "resume " + std::to_string(hold_id_seen);
+      if (until(right.c_str(), [](const std::string& reply) { return reply.rfind("accepted: resume", 0) == 0; }) &&
+          next_cycle())
+        send("quit");  // the loop ends here, not at its cycle cap
+      ::close(fd);
+    });
+  };
+  const LoopRun r = run_loop(motion, 400, options, kRayCastFrames, operator_thread);
+  const auto& records = r.journal.records;
+  EXPECT_EQ(r.summary.ended, "operator quit") << "the operator's thread went through to its end";
+  ASSERT_GT(records.size(), 32u);
+  int refused_while_tracking = 0;
+  for (std::size_t i = 0; i < 30; ++i) {
+    EXPECT_NE(records[i].state, std::uint8_t(TrackingState::kHold));
+    refused_while_tracking += records[i].operator_refused;
+  }
+  EXPECT_EQ(refused_while_tracking, 40) << "every stale resume was taken, refused and journaled";
+  EXPECT_EQ(records[30].state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(records[30].hold_id, hold_id_seen);
+  EXPECT_GE(hold_id_seen, 100000u) << "a random six-digit id, which no earlier command could name";
+  std::size_t resumed = 0;
+  bool wrong_id_refused = false;
+  // The cycle that acted on the resume (on a loaded host its registration may be cut short by the
+  // budget and the gate hold again in that same cycle: the resume is what this test is about).
+  for (std::size_t i = 31; i < records.size() && resumed == 0; ++i) {
+    if (records[i].operator_refusal == std::uint8_t(OperatorRefusal::kWrongHold)) wrong_id_refused = true;
+    if (records[i].operator_command == 1 + int(OperatorCommand::kResume)) resumed = i;
+    if (resumed == 0) {
+      EXPECT_EQ(records[i].state, std::uint8_t(TrackingState::kHold)) << "cycle " << i;
+    }
+  }
+  EXPECT_TRUE(wrong_id_refused) << "a resume for another id was refused and journaled";
+  ASSERT_GE(resumed, 40u) << "the HOLD lasted until the operator's fresh resume, a second or more into it";
+  bool too_soon_refused = false;
+  for (std::size_t i = 31; i < resumed; ++i)
+    too_soon_refused = too_soon_refused || records[i].operator_refusal == std::uint8_t(OperatorRefusal::kTooSoon);
+  EXPECT_TRUE(too_soon_refused) << "the right id in the HOLD's first second was refused";
+  EXPECT_EQ(records[resumed].previous_state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(records[resumed - 1].hold_id, hold_id_seen) << "the HOLD it answered";
+  EXPECT_GE(r.summary.holds, 1);
+  EXPECT_GE(r.summary.operator_refused, 41);
+  EXPECT_FALSE(std::filesystem::exists(options.control_socket)) << "removed at the end";
+}
+
+// Issue 18, item 4: the loop judges every registration as `lftrack register` does. Here the
+// scene's pose envelope is 1 mm while the set-up error is about 4 mm: the alignment lands outside
+// it, is rejected with the verdict's reason (which only the verdict gives), and nothing moves.
+TEST_F(ClosedLoop, ARegistrationTheVerdictRejectsMovesNothing) {
+  edit_scene_ = [](Scene& scene) { scene.envelope.translation_mm = 1.0; };
+  const LoopRun r = run_loop(kBreathing, 4, {}, kLightFieldFrames);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 4u);
+  EXPECT_EQ(records[0].gate_reason, std::uint8_t(GateReason::kOutsideEnvelope));
+  EXPECT_EQ(records[0].state, std::uint8_t(TrackingState::kHold)) << "alignment failed: the operator decides";
+  for (const JournalRecord& rec : records) {
+    EXPECT_EQ(rec.command_sent, 0);
+    EXPECT_EQ(rec.beam_permit, 0);
+  }
+  EXPECT_EQ(r.summary.commands, 0);
+}
+
+TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
+  LoopSessionOptions options;
+  options.frames.drop_from = 10;  // exposures 10.. never arrive
+  options.frames.drop_to = 1000;
+  const LoopRun r = run_loop(kBreathing, 30, options);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 30u);
+  EXPECT_EQ(records[10].gate_decision, std::uint8_t(GateDecision::kSkip));
+  EXPECT_EQ(records[10].gate_reason, std::uint8_t(GateReason::kNoFrames));
+  EXPECT_EQ(records[11].gate_decision, std::uint8_t(GateDecision::kSkip));
+  EXPECT_EQ(records[12].state, std::uint8_t(TrackingState::kHold)) << "the third failure in a row holds";
+  EXPECT_EQ(records[19].state, std::uint8_t(TrackingState::kFault)) << "the tenth stops";
+  for (std::size_t i = 10; i < records.size(); ++i) {
+    EXPECT_EQ(records[i].command_sent, 0);
+    EXPECT_EQ(records[i].beam_permit, 0);
+  }
+  EXPECT_EQ(r.summary.holds, 1);
+  EXPECT_EQ(r.summary.faults, 1);
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+std::atomic<long long> g_journal_bytes_left{0};
+ssize_t full_after_budget(int fd, const void* data, std::size_t bytes) {
+  const long long left = g_journal_bytes_left.load();
+  if (left <= 0) {
+    errno = ENOSPC;
+    return -1;
+  }
+  const std::size_t n = std::min<std::size_t>(bytes, static_cast<std::size_t>(left));
+  g_journal_bytes_left -= static_cast<long long>(n);
+  return ::write(fd, data, n);
+}
+
+// A treatment is not run unrecorded: when the journal's disk fills up, the loop holds within a
+// cycle or two, and every record written before the failure is still readable.
+TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
+  constexpr std::size_t kFrame = 8 + sizeof(JournalRecord) + 4;
+  g_journal_bytes_left = 32 + 20 * kFrame + 10;  // 20 cycles, then the disk is full
+  LoopSessionOptions options;
+  options.journal = dir_.path() / "journal.lfj";
+  options.journal_options.write_call = &full_after_budget;
+  options.journal_options.fsync_interval_ms = 10;
+  auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
+  ASSERT_TRUE(prepared.ok());
+  options.cycles = 60;
+  options.simulated_clock = true;
+  options.light_field_dir = lf_dir_.path();
+  auto session = LoopSession::create(*prepared, options, pool_);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  auto summary = (*session)->run();
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  SCOPED_TRACE(to_json(*summary).dump());
+  EXPECT_NE(summary->journal_error.find("disk full"), std::string::npos) << summary->journal_error;
+  EXPECT_EQ(summary->holds, 1);
+  ASSERT_FALSE(summary->transitions.empty());
+  const LoopTransition& last = summary->transitions.back();
+  EXPECT_STREQ(last.reason, "journal write failed");
+  EXPECT_GE(last.cycle, 20);
+  EXPECT_LE(summary->states[std::size_t(TrackingState::kTrack)], 40) << "held soon after the failure";
+  auto journal = read_journal(options.journal);
+  ASSERT_TRUE(journal.ok()) << journal.status().message();
+  ASSERT_EQ(journal->records.size(), 20u);
+  EXPECT_EQ(journal->torn_tail_bytes, 0u);
+  for (std::size_t i = 0; i < 20; ++i) EXPECT_EQ(journal->records[i].cycle, i);
+}
+
+// On the real clock: one overrun is counted and its period skipped; several in a row hold.
+TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
+  LoopSessionOptions options;
+  options.journal = dir_.path() / "journal.lfj";
+  options.frames.stall_ms = 150;  // the period is 100 ms
+  options.frames.stall_from = 20;
+  options.frames.stall_to = 21;
+  auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
+  ASSERT_TRUE(prepared.ok());
+  // A stalled cycle's frame is old at its decision; this test is about the overruns alone.
+  prepared->scene.safety.max_frame_age_ms = 2000;
+  options.cycles = 45;
+  options.simulated_clock = false;
+  options.light_field_dir = lf_dir_.path();
+  // One stall first; then five in a row (exposure requests 35..39), after the first has passed.
+  auto session = LoopSession::create(*prepared, options, pool_);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  auto single = (*session)->run();
+  ASSERT_TRUE(single.ok());
+  EXPECT_GE(single->overruns, 1);
+  EXPECT_EQ(single->holds, 0) << "one overrun is counted, not held";
+
+  options.frames.stall_from = 30;
+  options.frames.stall_to = 35;
+  options.journal = dir_.path() / "journal-several.lfj";  // a journal is never overwritten
+  session = LoopSession::create(*prepared, options, pool_);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  auto several = (*session)->run();
+  ASSERT_TRUE(several.ok());
+  SCOPED_TRACE(to_json(*several).dump());
+  EXPECT_GE(several->overruns, 3);
+  EXPECT_EQ(several->holds, 1);
+  ASSERT_FALSE(several->transitions.empty());
+  EXPECT_STREQ(several->transitions.back().reason, "loop overruns");
+  EXPECT_GE(several->transitions.back().cycle, 30);
+}
+
+}  // namespace
+}  // namespace lftrack::host

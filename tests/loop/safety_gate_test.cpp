@@ -1,0 +1,191 @@
+// The safety gate, table-tested: every rule, its boundary, and the failure counting.
+
+#include "lftrack/loop/safety_gate.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <limits>
+
+namespace lftrack::host {
+namespace {
+
+GateInput good_input() {
+  GateInput in;
+  in.registration_ok = true;
+  in.step << 0.5, -0.3, 0.2, 0.002, 0.0, -0.001;
+  in.total << 3.0, -1.0, 2.0, 0.02, 0.01, 0.0;
+  in.views = 2;
+  in.similarity = {0.62, 0.75, 0, 0};
+  in.reference_similarity = {0.65, 0.78, 0, 0};
+  in.frame_age_ms = 40;
+  in.pair_skew_ms = 2;
+  return in;
+}
+
+struct GateCase {
+  const char* name;
+  std::function<void(GateInput&)> change;
+  GateDecision decision;
+  GateReason reason;
+};
+
+const double kNan = std::numeric_limits<double>::quiet_NaN();
+const double kInf = std::numeric_limits<double>::infinity();
+
+const std::vector<GateCase> kCases = {
+    {"AllGood", [](GateInput&) {}, GateDecision::kApply, GateReason::kOk},
+    {"NanInStep", [](GateInput& in) { in.step(1) = kNan; }, GateDecision::kHold, GateReason::kNonFinite},
+    {"InfInTotal", [](GateInput& in) { in.total(4) = kInf; }, GateDecision::kHold, GateReason::kNonFinite},
+    {"NanSimilarity", [](GateInput& in) { in.similarity[1] = kNan; }, GateDecision::kHold,
+     GateReason::kNonFinite},
+    {"NanFrameAge", [](GateInput& in) { in.frame_age_ms = kNan; }, GateDecision::kHold,
+     GateReason::kNonFinite},
+    {"NanEvenWithoutResult",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.step(0) = kNan;
+     },
+     GateDecision::kHold, GateReason::kNonFinite},
+    {"StepJustInside", [](GateInput& in) { in.step(0) = 2.0; }, GateDecision::kApply, GateReason::kOk},
+    {"StepTranslationTooLarge", [](GateInput& in) { in.step(2) = -2.01; }, GateDecision::kHold,
+     GateReason::kStepTooLarge},
+    {"StepRotationTooLarge", [](GateInput& in) { in.step(3) = tracking::deg_to_rad(2.1); },
+     GateDecision::kHold, GateReason::kStepTooLarge},
+    {"SuddenEightMillimetreShift", [](GateInput& in) { in.step(1) = 8.0; }, GateDecision::kHold,
+     GateReason::kStepTooLarge},
+    {"ApprovedStepSkipsOnlyTheStepLimit",
+     [](GateInput& in) {
+       in.step(1) = 8.0;
+       in.step_approved = true;
+     },
+     GateDecision::kApply, GateReason::kOk},
+    {"ApprovedStepStillRespectsTheTotal",
+     [](GateInput& in) {
+       in.step(1) = 8.0;
+       in.total(1) = 10.5;
+       in.step_approved = true;
+     },
+     GateDecision::kHold, GateReason::kTotalTooLarge},
+    {"ApprovedStepStillHoldsOnNan",
+     [](GateInput& in) {
+       in.step(1) = kNan;
+       in.step_approved = true;
+     },
+     GateDecision::kHold, GateReason::kNonFinite},
+    {"TotalTooLarge", [](GateInput& in) { in.total(0) = 10.5; }, GateDecision::kHold,
+     GateReason::kTotalTooLarge},
+    {"TotalRotationTooLarge", [](GateInput& in) { in.total(5) = tracking::deg_to_rad(5.5); },
+     GateDecision::kHold, GateReason::kTotalTooLarge},
+    {"ReadbackOff", [](GateInput& in) { in.readback_error_mm = 0.6; }, GateDecision::kHold,
+     GateReason::kReadbackMismatch},
+    {"ReadbackRotationOff", [](GateInput& in) { in.readback_error_deg = 0.6; }, GateDecision::kHold,
+     GateReason::kReadbackMismatch},
+    {"NoReadback", [](GateInput& in) { in.readback_valid = false; }, GateDecision::kHold,
+     GateReason::kActuatorFault},
+    {"CommandRefusedByTheActuator", [](GateInput& in) { in.command_refused = true; }, GateDecision::kHold,
+     GateReason::kActuatorFault},
+    {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip,
+     GateReason::kNoResult},
+    {"RejectedByTheRegistrationVerdict",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.registration_failure = GateReason::kOutsideEnvelope;
+     },
+     GateDecision::kSkip, GateReason::kOutsideEnvelope},
+    {"NoReasonGivenIsNoResult",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.registration_failure = GateReason::kOk;
+     },
+     GateDecision::kSkip, GateReason::kNoResult},
+    {"NoFrames",
+     [](GateInput& in) {
+       in.frames_ok = false;
+       in.registration_ok = false;
+     },
+     GateDecision::kSkip, GateReason::kNoFrames},
+    {"TwoOverrunsInARowGoOn", [](GateInput& in) { in.consecutive_overruns = 2; }, GateDecision::kApply,
+     GateReason::kOk},
+    {"ThreeOverrunsInARowHold", [](GateInput& in) { in.consecutive_overruns = 3; }, GateDecision::kHold,
+     GateReason::kOverruns},
+    {"JournalFailed", [](GateInput& in) { in.journal_ok = false; }, GateDecision::kHold,
+     GateReason::kJournalFailed},
+    {"ImageQuality",
+     [](GateInput& in) {
+       in.image_quality_ok = false;
+       in.registration_ok = false;
+     },
+     GateDecision::kSkip, GateReason::kImageQuality},
+    {"StaleFrame", [](GateInput& in) { in.frame_age_ms = 151; }, GateDecision::kSkip,
+     GateReason::kStaleFrame},
+    {"UnpairedFrames", [](GateInput& in) { in.pair_skew_ms = 25; }, GateDecision::kSkip,
+     GateReason::kUnpairedFrames},
+    {"LowSimilarityRatio", [](GateInput& in) { in.similarity[0] = 0.4; }, GateDecision::kSkip,
+     GateReason::kLowSimilarity},
+    {"ViewsDisagree",
+     [](GateInput& in) {
+       in.similarity[0] = 0.5;  // ratio 0.77
+       in.similarity[1] = 0.8;  // ratio 1.03
+     },
+     GateDecision::kSkip, GateReason::kViewsDisagree},
+    {"SecondFailureStillSkips",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.consecutive_failures = 1;
+     },
+     GateDecision::kSkip, GateReason::kNoResult},
+    {"ThirdFailureHolds",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.consecutive_failures = 2;
+     },
+     GateDecision::kHold, GateReason::kNoResult},
+    {"TenthFailureStops",
+     [](GateInput& in) {
+       in.frame_age_ms = 500;
+       in.consecutive_failures = 9;
+     },
+     GateDecision::kStop, GateReason::kStaleFrame},
+    {"SafetyViolationAfterManyFailuresStops",
+     [](GateInput& in) {
+       in.step(0) = 5;
+       in.consecutive_failures = 12;
+     },
+     GateDecision::kStop, GateReason::kStepTooLarge},
+    {"TooManyViews", [](GateInput& in) { in.views = 5; }, GateDecision::kHold, GateReason::kNonFinite},
+};
+
+class GateTable : public ::testing::TestWithParam<GateCase> {};
+
+TEST_P(GateTable, DecidesAsTheRulesSay) {
+  GateInput in = good_input();
+  GetParam().change(in);
+  const GateOutput out = evaluate_gate(SafetyLimits{}, in);
+  EXPECT_EQ(out.decision, GetParam().decision) << to_string(out.decision);
+  EXPECT_EQ(out.reason, GetParam().reason) << to_string(out.reason);
+  if (out.decision == GateDecision::kApply)
+    EXPECT_EQ(out.consecutive_failures, 0);
+  else
+    EXPECT_EQ(out.consecutive_failures, in.consecutive_failures + 1);
+}
+
+INSTANTIATE_TEST_SUITE_P(Rules, GateTable, ::testing::ValuesIn(kCases),
+                         [](const ::testing::TestParamInfo<GateCase>& p) {
+                           return std::string(p.param.name);
+                         });
+
+TEST(Gate, ApplyResetsTheFailureCount) {
+  GateInput in = good_input();
+  in.consecutive_failures = 2;
+  EXPECT_EQ(evaluate_gate(SafetyLimits{}, in).consecutive_failures, 0);
+}
+
+TEST(Gate, EveryDecisionAndReasonHasAName) {
+  for (int d = 0; d <= 3; ++d) EXPECT_STRNE(to_string(static_cast<GateDecision>(d)), "?");
+  for (int r = 0; r <= 9; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
+}
+
+}  // namespace
+}  // namespace lftrack::host

@@ -1,0 +1,150 @@
+// The loop on its own (lftrack::loop, no scene, no simulator): whatever a cycle throws, the
+// actuator is held and the beam permit dropped before the exception reaches the caller.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <new>
+#include <stdexcept>
+
+#include "lftrack/loop/cycle_schedule.hpp"
+#include "lftrack/loop/tracking_loop.hpp"
+
+namespace lftrack::host {
+namespace {
+
+using tracking::PixelWindow;
+using tracking::XrayView;
+
+// A smooth pattern that moves with the pose: enough for a Registration to be built.
+class PatternRenderer final : public tracking::DrrRenderer {
+ public:
+  std::string_view name() const override { return "pattern"; }
+
+ protected:
+  Status do_render(const tracking::Pose& T, const XrayView&, const PixelWindow& window,
+                   tracking::ImageView<float> out, tracking::RenderExtras* extras) const override {
+    for (int r = 0; r < window.rows; ++r)
+      for (int c = 0; c < window.cols; ++c) {
+        out.at(r, c) = static_cast<float>(1.0 + std::sin(0.2 * c + T.translation().x()) * std::cos(0.15 * r));
+        if (!extras->valid.empty()) extras->valid.at(r, c) = 1;
+      }
+    return {};
+  }
+};
+
+// Frames of constant counts; throws what it is told to on the acquisition numbered `throw_at`.
+class ThrowingFrames final : public drivers::FrameSource {
+ public:
+  explicit ThrowingFrames(int throw_at, bool bad_alloc) : throw_at_(throw_at), bad_alloc_(bad_alloc) {}
+  Status open(drivers::FramePair* pair) override {
+    pair->frames.resize(2);
+    for (auto& f : pair->frames) f.pixels = tracking::Image<std::uint16_t>(48, 40, 2000);
+    return {};
+  }
+  drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline) override {
+    if (acquisitions_++ == throw_at_) {
+      if (bad_alloc_) throw std::bad_alloc();
+      throw std::runtime_error("frame source broke");
+    }
+    for (auto& f : pair->frames) f.timestamp_ns = monotonic_now_ns();
+    return drivers::DeviceStatus::kOk;
+  }
+  void close() override {}
+
+ private:
+  int throw_at_;
+  bool bad_alloc_;
+  int acquisitions_ = 0;
+};
+
+// Records what the loop asked of it; its read-back (and then its hold) can be made to throw.
+class RecordingActuator final : public drivers::Actuator {
+ public:
+  Status open() override { return {}; }
+  drivers::DeviceStatus command(const tracking::Vector6d&, drivers::Deadline) override {
+    ++commands;
+    return drivers::DeviceStatus::kOk;
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline) override {
+    if (readback_throws) throw std::runtime_error("read-back broke");
+    *state = {};
+    return drivers::DeviceStatus::kOk;
+  }
+  void hold() override {
+    ++holds;
+    if (hold_throws) throw std::runtime_error("hold broke too");
+  }
+  void set_beam_permit(bool permit) override { beam_permit = permit; }
+  void close() override {}
+
+  bool readback_throws = false, hold_throws = false;
+  int holds = 0, commands = 0;
+  bool beam_permit = true;  // as if an earlier cycle had allowed the beam
+};
+
+struct LoopUnderTest {
+  std::unique_ptr<tracking::Registration> registration;
+  std::unique_ptr<TrackingLoop> loop;
+};
+
+LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator) {
+  LoopUnderTest t;
+  tracking::RegistrationSetup setup;
+  LoopParts parts;
+  for (const char* name : {"A", "B"}) {
+    const double s = name[0] == 'A' ? 1.0 : -1.0;
+    auto view = XrayView::isocentric(name, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.7071, s * 0.7071, 0),
+                                     Eigen::Vector3d(0, 0, 1), 1000, 1400, 48, 40, 0.8);
+    EXPECT_TRUE(view.ok()) << view.status().message();
+    const PixelWindow window = PixelWindow::full(view->rows, view->cols);
+    setup.views.push_back({*view, window});
+    parts.geometry.views.push_back(*view);
+    parts.geometry.roi_windows.push_back(window);
+    parts.corrections.emplace_back();
+  }
+  auto registration = tracking::Registration::create(std::make_shared<PatternRenderer>(), setup, nullptr);
+  EXPECT_TRUE(registration.ok()) << registration.status().message();
+  if (!registration.ok()) return t;
+  t.registration = std::move(registration).value();
+  parts.registration = t.registration.get();
+  parts.frames = frames;
+  parts.actuator = actuator;
+  LoopSettings settings;
+  settings.cycles = 20;
+  settings.simulated_clock = true;
+  auto loop = TrackingLoop::create(parts, settings);
+  EXPECT_TRUE(loop.ok()) << loop.status().message();
+  if (loop.ok()) t.loop = std::move(loop).value();
+  return t;
+}
+
+TEST(TrackingLoop, AnAllocationFailureInACycleHoldsTheActuatorAndDropsTheBeamBeforeItPropagates) {
+  // The first acquisition throws: no cycle has held anything before it.
+  ThrowingFrames frames(/*throw_at=*/0, /*bad_alloc=*/true);
+  RecordingActuator actuator;
+  LoopUnderTest t = make_loop(&frames, &actuator);
+  ASSERT_TRUE(t.loop);
+  actuator.beam_permit = true;
+  EXPECT_THROW((void)t.loop->run(), std::bad_alloc);
+  EXPECT_EQ(actuator.holds, 1) << "the actuator was held on the way out";
+  EXPECT_FALSE(actuator.beam_permit) << "the beam permit was dropped";
+}
+
+TEST(TrackingLoop, AnActuatorThatThrowsInTheCycleAndOnHoldStillLosesTheBeamPermit) {
+  ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
+  RecordingActuator actuator;
+  actuator.readback_throws = true;
+  actuator.hold_throws = true;
+  LoopUnderTest t = make_loop(&frames, &actuator);
+  ASSERT_TRUE(t.loop);
+  actuator.beam_permit = true;
+  EXPECT_THROW((void)t.loop->run(), std::runtime_error);
+  EXPECT_GE(actuator.holds, 1) << "a hold was attempted";
+  EXPECT_FALSE(actuator.beam_permit) << "a hold that throws does not keep the beam on";
+  EXPECT_EQ(actuator.commands, 0);
+}
+
+}  // namespace
+}  // namespace lftrack::host

@@ -1,0 +1,43 @@
+// The scene keys that configure the loop (loop, actuator, motion). (Moved from the loop's parts
+// test.)
+
+#include <gtest/gtest.h>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+namespace {
+
+TEST(SceneLoopKeys, ParseAndRejectWithLocation) {
+  const std::string base = *builtin_scene_text(kBuiltinPhantom);
+  auto scene = parse_scene(base, "b.yaml", ".");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->loop.period_ms, 100);
+  EXPECT_EQ(scene->actuator.type, "virtual");
+  EXPECT_NEAR(scene->motion.motion.breathing_amplitude(2), 4.5, 1e-12);
+  EXPECT_NEAR(scene->motion.setup_error(3), tracking::deg_to_rad(1.0), 1e-12);
+  EXPECT_EQ(scene->sim.renderer, "lightfield");
+  EXPECT_FALSE(scene->loop.realtime.enforce);
+  const auto fails = [&](const std::string& extra, const std::string& expect) {
+    auto s = parse_scene(base + extra, "b.yaml", ".");
+    ASSERT_FALSE(s.ok()) << extra;
+    EXPECT_NE(s.status().message().find(expect), std::string::npos) << s.status().message();
+  };
+  fails("shifts: []\n", "unknown key 'shifts'");
+  std::string budget = base;
+  budget.replace(budget.find("registration_budget_ms: 50"), 26, "registration_budget_ms: 90");
+  auto s = parse_scene(budget, "b.yaml", ".");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.status().message().find("must fit in period_ms"), std::string::npos) << s.status().message();
+  std::string mode = base;
+  mode.replace(mode.find("mode: ignore"), 12, "mode: maybe");
+  s = parse_scene(mode, "b.yaml", ".");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.status().message().find("b.yaml:"), std::string::npos);
+  std::string actuator = base;
+  actuator.replace(actuator.find("type: virtual"), 13, "type: hydraulic");
+  EXPECT_FALSE(parse_scene(actuator, "b.yaml", ".").ok());
+}
+
+}  // namespace
+}  // namespace lftrack::host

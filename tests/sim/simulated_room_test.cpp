@@ -1,0 +1,38 @@
+// The simulated room: the couch's commands reach the patient after the couch's latency.
+// (Moved from the loop's parts test.)
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+
+#include "lftrack/sim/simulated_room.hpp"
+
+namespace lftrack::sim {
+namespace {
+
+using tracking::Vector6d;
+
+TEST(SimulatedRoom, CouchThatCancelsTheOffsetLeavesNoResidual) {
+  sim::SimulatedRoomSpec spec;
+  spec.origin_room_mm = {0, 0, 0};
+  spec.setup_error << 2, -1, 3, 0.01, 0.02, -0.01;
+  spec.couch.latency_s = 0.1;
+  spec.couch.max_speed_mm_s = 1000;
+  spec.couch.max_speed_deg_s = 1000;
+  sim::SimulatedRoom room(spec);
+  room.advance_to_ns(1'000'000'000);  // t = 0
+  EXPECT_GT(room.residual_mm(), 3.0);
+  const tracking::Pose offset = room.patient_T_room_from_ct();
+  const Vector6d cancel =
+      tracking::delta_between(offset, spec.nominal_T_room_from_ct, spec.origin_room_mm).as_vector();
+  ASSERT_EQ(room.couch_actuator().command(cancel, drivers::Deadline(std::chrono::nanoseconds(1'100'000'000))),
+            drivers::DeviceStatus::kOk);
+  room.advance_to_ns(1'150'000'000);
+  EXPECT_GT(room.residual_mm(), 3.0)
+      << "the command was sent at its deadline (t = 0.1 s) and waits out the latency";
+  room.advance_to_ns(1'300'000'000);
+  EXPECT_LT(room.residual_mm(), 1e-9);
+}
+
+}  // namespace
+}  // namespace lftrack::sim
