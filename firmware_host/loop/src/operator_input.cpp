@@ -1,9 +1,9 @@
+// Operator commands (operator_input.hpp): parsing and judging a request against the loop's state,
+// the terminal's keys, the scripted operator, and several inputs read as one.
+
 #include "lftrack/loop/operator_input.hpp"
 
 #include <fcntl.h>
-#include <sys/socket.h>
-#include <sys/stat.h>
-#include <sys/un.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
