@@ -37,7 +37,11 @@ Command add_study_merge_command(CLI::App* parent);
 Command add_sim_command(CLI::App* parent);
 Command add_run_command(CLI::App* parent);
 Command add_replay_command(CLI::App* parent);
+Command add_serve_couch_command(CLI::App* parent);
+Command add_serve_robot_command(CLI::App* parent);
+Command add_serve_detectors_command(CLI::App* parent);
 Command add_calibrate_views_command(CLI::App* parent);
 Command add_calibrate_couch_command(CLI::App* parent);
+Command add_calibrate_detector_command(CLI::App* parent);
 
 }  // namespace lftrack::host::cli

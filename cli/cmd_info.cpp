@@ -4,6 +4,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
@@ -49,7 +50,7 @@ Command add_info_command(CLI::App* parent) {
       const auto& v = d.view;
       const auto& w = p.roi_windows[i];
       std::printf("view %-10s %d x %d pixels of %.3f x %.3f mm, %d-bit, frames from %s\n", v.name.c_str(),
-                  v.rows, v.cols, v.pitch_row_mm, v.pitch_col_mm, d.bits, d.frames.c_str());
+                  v.rows, v.cols, v.pitch_row_mm, v.pitch_col_mm, d.bits, describe_frames(d.frames).c_str());
       std::printf("  source mm     %s (room)\n", v3(v.source_mm).c_str());
       std::printf("  pixel(0,0) mm %s, col axis %s, row axis %s\n", v3(v.pixel00_mm).c_str(),
                   v3(v.col_axis).c_str(), v3(v.row_axis).c_str());

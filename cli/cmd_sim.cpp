@@ -16,6 +16,8 @@
 #include "cli_commands.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/host/loop_session.hpp"
+#include "lftrack/host/preflight.hpp"
+#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
@@ -40,6 +42,7 @@ struct SimOptions {
   std::string archive;   // frames archived here
   std::string sequence;  // `lftrack replay`: the archived sequence
   std::string hil;       // `lftrack sim --hil modbus`: actuators through their real drivers
+  bool check = false;    // `lftrack run --check`: the start-up checks only
   enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
 };
 
@@ -130,12 +133,10 @@ Status run(const SimOptions& o) {
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   if (o.mode == SimOptions::Mode::kRun) {
-    for (const DetectorSpec& d : scene->detectors)
-      if (d.frames != "sim")
-        return failed_precondition("detector " + d.view.name + " takes frames from '" + d.frames +
-                                   "': this build drives only simulated detectors (frames: sim) in `run`; "
-                                   "V4L2 is not built yet, and archived frames replay with `lftrack replay "
-                                   "--sequence DIR`");
+    so.devices = SessionDevices::kScene;
+    std::string frames = scene->detectors.empty() ? "none" : describe_frames(scene->detectors[0].frames);
+    for (std::size_t i = 1; i < scene->detectors.size(); ++i) frames += ", " + describe_frames(scene->detectors[i].frames);
+    spdlog::info("{}: detectors {}; actuator {}", scene->name, frames, describe_actuator(scene->actuator));
   }
   RealtimeSpec rt = scene->loop.realtime;
   if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
@@ -148,13 +149,25 @@ Status run(const SimOptions& o) {
   RealtimeReport offline;
   offline.offline = true;
   auto report = real_clock ? apply_realtime_setup(rt) : Result<RealtimeReport>(offline);
-  if (!report.ok()) return report.status();
-  for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);
-  spdlog::info("real-time set-up: {}", report->summary());
+  // `run` lists a failed set-up among its start-up checks; the others stop here.
+  if (!report.ok() && o.mode != SimOptions::Mode::kRun) return report.status();
+  if (report.ok()) {
+    for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);
+    spdlog::info("real-time set-up: {}", report->summary());
+  }
 
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
+  if (o.mode == SimOptions::Mode::kRun) {
+    // The start-up checks before the first beam: every reason at once, nothing built or moved.
+    const PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");
+    if (o.check || !checks.passed()) std::printf("pre-treatment checklist, %s:\n%s", prepared->scene.name.c_str(),
+                                                  checks.checklist().c_str());
+    if (!checks.passed())
+      return failed_precondition("lftrack run refuses to start; the start-up checks failed:\n" + checks.failures());
+    if (o.check) return {};
+  }
   if (!so.journal.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(so.journal.parent_path(), ec);
@@ -282,6 +295,10 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                   "As fast as possible on a simulated clock (deterministic; no real-time timing)");
   if (mode == SimOptions::Mode::kReplay)
     app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
+  if (mode == SimOptions::Mode::kRun)
+    app->add_flag("--check", o->check,
+                  "Only the start-up checks: devices, calibrations, light fields, real-time set-up; print the "
+                  "pre-treatment checklist (exit 1 if any fails)");
   if (mode == SimOptions::Mode::kSim)
     app->add_option("--hil", o->hil,
                     "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1 "

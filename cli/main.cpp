@@ -40,11 +40,17 @@ int main(int argc, char** argv) {
   const Command sim = add_sim_command(&app);
   const Command run_loop = add_run_command(&app);
   const Command replay = add_replay_command(&app);
+  CLI::App* serve = app.add_subcommand("serve", "A simulated device as a process of its own, speaking the real protocol");
+  serve->require_subcommand(1);
+  const Command serve_couch = add_serve_couch_command(serve);
+  const Command serve_robot = add_serve_robot_command(serve);
+  const Command serve_detectors = add_serve_detectors_command(serve);
   CLI::App* calibrate =
-      app.add_subcommand("calibrate", "Calibration: X-ray views from a phantom, the couch's axes");
+      app.add_subcommand("calibrate", "Calibration: X-ray views from a phantom, the couch's axes, a detector's maps");
   calibrate->require_subcommand(1);
   const Command calibrate_views = add_calibrate_views_command(calibrate);
   const Command calibrate_couch = add_calibrate_couch_command(calibrate);
+  const Command calibrate_detector = add_calibrate_detector_command(calibrate);
 
   try {
     app.parse(argc, argv);
@@ -85,10 +91,18 @@ int main(int argc, char** argv) {
       status = run_loop();
     else if (app.got_subcommand("replay"))
       status = replay();
+    else if (serve->got_subcommand("couch"))
+      status = serve_couch();
+    else if (serve->got_subcommand("robot"))
+      status = serve_robot();
+    else if (serve->got_subcommand("detectors"))
+      status = serve_detectors();
     else if (calibrate->got_subcommand("views"))
       status = calibrate_views();
     else if (calibrate->got_subcommand("couch"))
       status = calibrate_couch();
+    else if (calibrate->got_subcommand("detector"))
+      status = calibrate_detector();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

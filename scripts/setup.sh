@@ -13,6 +13,8 @@ packages=(
   libyaml-cpp-dev libcli11-dev libspdlog-dev nlohmann-json3-dev
   libpng-dev libtiff-dev zlib1g-dev     # image output
   libmodbus-dev                         # couch driver (Modbus TCP/RTU)
+  libaravis-dev                         # GigE Vision detectors and the fake GigE camera (Aravis 0.8)
+  libusb-1.0-0-dev                      # aravis-0.8.pc requires libusb-1.0, which libaravis-dev does not pull in
   libgtest-dev libgmock-dev libbenchmark-dev
   plastimatch                           # independent reference DRR generator
   gnuplot-nox                           # plots of studies (PNG)

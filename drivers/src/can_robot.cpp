@@ -6,6 +6,7 @@
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -55,9 +56,15 @@ std::int64_t CanRobot::now_ns() const {
 Status CanRobot::open() {
   if (options_.node_id < 1 || options_.node_id > 15)
     return invalid_argument("CAN robot: node id must be in 1..15");
-  const std::string where =
-      given_socket_ ? std::string("CAN robot on a socket") : "CAN robot on " + options_.interface;
-  if (!given_socket_) {
+  const bool bridge = !given_socket_ && !options_.bridge_path.empty();
+  const std::string where = given_socket_ ? std::string("CAN robot on a socket")
+                            : bridge      ? "CAN robot through the bridge " + options_.bridge_path
+                                          : "CAN robot on " + options_.interface;
+  if (bridge) {
+    if (!(options_.reconnect_interval_s > 0) || options_.reconnect_interval_s > 60)
+      return invalid_argument(where + ": reconnect interval must be in (0, 60] s");
+    LFTRACK_RETURN_IF_ERROR(connect_bridge());
+  } else if (!given_socket_) {
     fd_ = ::socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
     if (fd_ < 0)
       return io_error(where + ": no CAN_RAW socket (" + std::strerror(errno) +
@@ -101,6 +108,47 @@ Status CanRobot::open() {
   return {};
 }
 
+Status CanRobot::connect_bridge() {
+  last_connect_attempt_ns_ = now_ns();
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  if (options_.bridge_path.size() >= sizeof address.sun_path)
+    return invalid_argument("CAN bridge path is too long (at most " + std::to_string(sizeof address.sun_path - 1) +
+                            " bytes): " + options_.bridge_path);
+  std::memcpy(address.sun_path, options_.bridge_path.data(), options_.bridge_path.size());
+  const int fd = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+  if (fd < 0) return io_error(std::string("CAN bridge: socket: ") + std::strerror(errno));
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+    const int e = errno;
+    ::close(fd);
+    return io_error("CAN bridge " + options_.bridge_path + ": " + std::strerror(e) +
+                       (e == ENOENT || e == ECONNREFUSED ? " (is `lftrack serve robot` running?)" : ""));
+  }
+  fd_ = fd;
+  return {};
+}
+
+void CanRobot::drop_link() {
+  if (fd_ < 0) return;
+  ::close(fd_);
+  fd_ = -1;
+  ++counters_.disconnects;
+  enabled_ = false;
+}
+
+bool CanRobot::linked() {
+  if (fd_ >= 0) return true;
+  if (options_.bridge_path.empty() || given_socket_) return false;
+  if (double(now_ns() - last_connect_attempt_ns_) < options_.reconnect_interval_s * 1e9) return false;
+  if (!connect_bridge().ok()) return false;
+  ++counters_.reconnects;
+  // Whatever answers now has not seen our commands: treated as a restarted robot.
+  latched_ |= kCanRobotRestarted;
+  enabled_ = false;
+  status_fresh_ = ack_fresh_ = false;
+  return true;
+}
+
 void CanRobot::close() {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
@@ -112,6 +160,7 @@ DeviceStatus CanRobot::send(const can_frame& frame) {
     return DeviceStatus::kOk;
   }
   if (errno == EAGAIN || errno == ENOBUFS) return DeviceStatus::kTimeout;  // transmit queue full
+  if (!options_.bridge_path.empty() && !given_socket_) drop_link();       // the bridge went away
   return DeviceStatus::kDisconnected;                                      // EPIPE, ENETDOWN, ENODEV...
 }
 
@@ -173,8 +222,13 @@ void CanRobot::take(const can_frame& f) {
 
 void CanRobot::pump() {
   can_frame f;
-  for (int i = 0; i < kMaxFramesPerPump; ++i) {
+  for (int i = 0; i < kMaxFramesPerPump && fd_ >= 0; ++i) {
     const ssize_t n = ::recv(fd_, &f, sizeof f, MSG_DONTWAIT);
+    if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
+      // End of file on a bridge's socket: the bridge (or its robot) went away.
+      if (!options_.bridge_path.empty() && !given_socket_) drop_link();
+      break;
+    }
     if (n != ssize_t(sizeof f)) break;
     take(f);
   }
@@ -200,8 +254,9 @@ bool CanRobot::wait(Deadline deadline, bool (CanRobot::*done)() const) {
 }
 
 DeviceStatus CanRobot::command(const tracking::Vector6d& correction, Deadline deadline) {
-  if (fd_ < 0) return DeviceStatus::kDisconnected;
+  if (!linked()) return DeviceStatus::kDisconnected;
   pump();
+  if (fd_ < 0) return DeviceStatus::kDisconnected;
   if (faults() != 0) return DeviceStatus::kRefused;
   can_frame translation, rotation;
   const auto next = static_cast<std::uint8_t>(sequence_ + 1);
@@ -229,8 +284,9 @@ DeviceStatus CanRobot::command(const tracking::Vector6d& correction, Deadline de
 }
 
 DeviceStatus CanRobot::readback(ActuatorState* state, Deadline deadline) {
-  if (fd_ < 0) return DeviceStatus::kDisconnected;
+  if (!linked()) return DeviceStatus::kDisconnected;
   pump();
+  if (fd_ < 0) return DeviceStatus::kDisconnected;
   if (faults() != 0) {
     state->fault = true;
     return DeviceStatus::kFault;

@@ -34,6 +34,33 @@ Result<std::unique_ptr<FrameSource>> make_v4l2(V4l2SourceSpec spec) {
   return std::unique_ptr<FrameSource>(new V4l2FrameSource(std::move(detectors), spec.max_skew_ms));
 }
 
+Result<std::unique_ptr<FrameSource>> make_simulated(const SimulatedSourceSpec& spec) {
+  if (!spec.make) return invalid_argument(spec.description + ": no simulator to make them");
+  auto source = spec.make();
+  if (source.ok() && *source == nullptr) return internal_error(spec.description + ": the simulator made nothing");
+  return source;
+}
+
+Result<std::unique_ptr<Actuator>> make_virtual(const VirtualActuatorSpec& spec) {
+  if (!spec.make) return invalid_argument("virtual actuator: no simulator to make it");
+  auto actuator = spec.make();
+  if (actuator.ok() && *actuator == nullptr) return internal_error("virtual actuator: the simulator made nothing");
+  return actuator;
+}
+
+Result<std::unique_ptr<FrameSource>> make_gige(GigeSourceSpec spec) {
+  if (spec.detectors.empty()) return invalid_argument("gige frame source: no detectors");
+  if (!(spec.max_skew_ms > 0) || spec.max_skew_ms > 1000)
+    return invalid_argument("gige frame source: max_skew_ms must be in (0, 1000]");
+  for (std::size_t i = 0; i < spec.detectors.size(); ++i) {
+    LFTRACK_RETURN_IF_ERROR(validate_gige_options(spec.detectors[i]));
+    for (std::size_t j = 0; j < i; ++j)
+      if (spec.detectors[j].camera == spec.detectors[i].camera)
+        return invalid_argument("gige frame source: two detectors name the camera " + spec.detectors[i].camera);
+  }
+  return std::unique_ptr<FrameSource>(new GigeFrameSource(std::move(spec.detectors), spec.max_skew_ms));
+}
+
 Result<std::unique_ptr<FrameSource>> make_replay(ReplaySourceSpec spec) {
   if (spec.detectors.empty()) return invalid_argument("replay frame source: no detectors");
   auto sequence = read_frame_sequence(spec.sequence);
@@ -60,7 +87,13 @@ Result<std::unique_ptr<Actuator>> make_can(const CanActuatorSpec& spec) {
     return invalid_argument("can robot: node id must be 1 to 15");
   }
   if (spec.link_fd >= 0) return std::unique_ptr<Actuator>(new CanRobot(spec.options, spec.link_fd));
-  if (spec.options.interface.empty()) return invalid_argument("can robot: no interface (e.g. can0) and no link");
+  if (spec.options.interface.empty() && spec.options.bridge_path.empty())
+    return invalid_argument("can robot: no interface (e.g. can0), no bridge socket and no link");
+  if (!spec.options.bridge_path.empty() &&
+      (!(spec.options.reconnect_interval_s > 0) || spec.options.reconnect_interval_s > 60))
+    return invalid_argument("can robot: reconnect interval must be in (0, 60] s");
+  if (!(spec.options.heartbeat_timeout_s > 0) || spec.options.heartbeat_timeout_s > 10)
+    return invalid_argument("can robot: heartbeat timeout must be in (0, 10] s");
   return std::unique_ptr<Actuator>(new CanRobot(spec.options));
 }
 
@@ -74,26 +107,32 @@ Result<std::unique_ptr<Actuator>> make_recorded(const RecordedActuatorSpec& spec
 }  // namespace
 
 const char* kind_name(const FrameSourceSpec& spec) {
-  return std::visit(Overloaded{[](const V4l2SourceSpec&) { return "v4l2"; },
+  return std::visit(Overloaded{[](const SimulatedSourceSpec&) { return "sim"; },
+                               [](const V4l2SourceSpec&) { return "v4l2"; },
+                               [](const GigeSourceSpec&) { return "gige"; },
                                [](const ReplaySourceSpec&) { return "replay"; }},
                     spec);
 }
 
 const char* kind_name(const ActuatorSpec& spec) {
-  return std::visit(Overloaded{[](const ModbusActuatorSpec&) { return "modbus"; },
+  return std::visit(Overloaded{[](const VirtualActuatorSpec&) { return "virtual"; },
+                               [](const ModbusActuatorSpec&) { return "modbus"; },
                                [](const CanActuatorSpec&) { return "can"; },
                                [](const RecordedActuatorSpec&) { return "recorded"; }},
                     spec);
 }
 
 Result<std::unique_ptr<FrameSource>> make_frame_source(FrameSourceSpec spec) {
-  return std::visit(Overloaded{[](V4l2SourceSpec& s) { return make_v4l2(std::move(s)); },
+  return std::visit(Overloaded{[](SimulatedSourceSpec& s) { return make_simulated(s); },
+                               [](V4l2SourceSpec& s) { return make_v4l2(std::move(s)); },
+                               [](GigeSourceSpec& s) { return make_gige(std::move(s)); },
                                [](ReplaySourceSpec& s) { return make_replay(std::move(s)); }},
                     spec);
 }
 
 Result<std::unique_ptr<Actuator>> make_actuator(ActuatorSpec spec) {
-  return std::visit(Overloaded{[](const ModbusActuatorSpec& s) { return make_modbus(s); },
+  return std::visit(Overloaded{[](const VirtualActuatorSpec& s) { return make_virtual(s); },
+                               [](const ModbusActuatorSpec& s) { return make_modbus(s); },
                                [](const CanActuatorSpec& s) { return make_can(s); },
                                [](const RecordedActuatorSpec& s) { return make_recorded(s); }},
                     spec);

@@ -162,6 +162,45 @@ Status read_frame_file(const char* path, tracking::ImageView<std::uint16_t> out)
   return unsupported(std::string(path) + ": a frame file is .tif, .tiff or .png");
 }
 
+Status frame_file_size(const char* path, int* rows, int* cols) {
+  struct stat st {};
+  if (::stat(path, &st) != 0) return not_found(std::string(path) + ": no such frame file");
+  std::uint32_t w = 0, h = 0;
+  if (type_of(path) == FileType::kTiff) {
+    TIFFSetWarningHandler(nullptr);
+    TIFFSetErrorHandler(nullptr);
+    TIFF* tif = TIFFOpen(path, "r");
+    if (tif == nullptr) return corrupt_data(std::string(path) + ": not a readable TIFF file");
+    TIFFGetField(tif, TIFFTAG_IMAGEWIDTH, &w);
+    TIFFGetField(tif, TIFFTAG_IMAGELENGTH, &h);
+    TIFFClose(tif);
+  } else if (type_of(path) == FileType::kPng) {
+    std::FILE* file = std::fopen(path, "rb");
+    if (file == nullptr) return corrupt_data(std::string(path) + ": cannot open");
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, nullptr, png_error_quietly, png_warning_quietly);
+    png_infop info = png != nullptr ? png_create_info_struct(png) : nullptr;
+    volatile bool ok = false;  // set after setjmp: volatile across the longjmp
+    if (info != nullptr && !setjmp(png_jmpbuf(png))) {
+      png_init_io(png, file);
+      png_read_info(png, info);
+      w = png_get_image_width(png, info);
+      h = png_get_image_height(png, info);
+      ok = true;
+    }
+    png_destroy_read_struct(&png, &info, nullptr);
+    std::fclose(file);
+    if (!ok) return corrupt_data(std::string(path) + ": not a readable PNG file");
+  } else {
+    return unsupported(std::string(path) + ": a frame file is .tif, .tiff or .png");
+  }
+  if (w == 0 || h == 0 || w > 16384 || h > 16384)
+    return out_of_range(std::string(path) + ": the header claims " + size_text(w, h) +
+                        " pixels; a frame is 1 to 16384 pixels a side");
+  *rows = static_cast<int>(h);
+  *cols = static_cast<int>(w);
+  return {};
+}
+
 Status write_frame_file(const char* path, tracking::ImageView<const std::uint16_t> frame) {
   if (frame.empty()) return invalid_argument("an empty frame");
   switch (type_of(path)) {

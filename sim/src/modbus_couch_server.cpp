@@ -24,9 +24,9 @@ Result<std::unique_ptr<ModbusCouchServer>> ModbusCouchServer::start(drivers::Act
   if (couch == nullptr) return invalid_argument("modbus couch server: no couch");
   std::unique_ptr<ModbusCouchServer> s(new ModbusCouchServer(couch, options));
   const bool rtu = !options.rtu_device.empty();
-  const std::string where = rtu ? options.rtu_device : "127.0.0.1:" + std::to_string(options.port);
+  const std::string where = rtu ? options.rtu_device : options.address + ":" + std::to_string(options.port);
   s->ctx_ = rtu ? modbus_new_rtu(options.rtu_device.c_str(), 115200, 'E', 8, 1)
-                : modbus_new_tcp("127.0.0.1", options.port);
+                : modbus_new_tcp(options.address.c_str(), options.port);
   if (s->ctx_ == nullptr) return io_error("modbus couch server: " + where + ": " + modbus_strerror(errno));
   modbus_set_slave(s->ctx_, options.unit_id);
   s->map_ = modbus_mapping_new_start_address(0, 0, 0, 0, 0, reg::kHoldingCount, 0, reg::kInputCount);

@@ -23,7 +23,13 @@ double SimulatedRoom::time_s_at(std::int64_t t_ns) const {
 
 tracking::Vector6d SimulatedRoom::couch_position() const {
   std::lock_guard lock(mutex_);
-  return couch_.position();
+  return couch_position_locked();
+}
+
+tracking::Vector6d SimulatedRoom::couch_position_locked() const {
+  if (!spec_.couch_link) return couch_.position();
+  RoomLinkSample sample;
+  return spec_.couch_link->read(&sample) ? sample.couch_position : tracking::Vector6d::Zero();
 }
 
 void SimulatedRoom::advance_to_ns(std::int64_t t_ns) {
@@ -75,7 +81,7 @@ Eigen::Isometry3d SimulatedRoom::T_room_from_couch() const {
 }
 
 Pose SimulatedRoom::true_locked() const {
-  return calib::room_motion_of_couch(T_room_from_couch(), couch_.position()) * patient_locked();
+  return calib::room_motion_of_couch(T_room_from_couch(), couch_position_locked()) * patient_locked();
 }
 
 double SimulatedRoom::residual_mm() const {

@@ -29,6 +29,11 @@ DeviceStatus VirtualCouch::readback(drivers::ActuatorState* state, drivers::Dead
   return DeviceStatus::kOk;
 }
 
+void VirtualCouch::place_at(const Vector6d& position) {
+  position_ = active_target_ = commanded_ = position;
+  pending_count_ = 0;
+}
+
 void VirtualCouch::hold() {
   pending_count_ = 0;
   active_target_ = position_;

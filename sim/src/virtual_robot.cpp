@@ -168,7 +168,10 @@ void VirtualRobot::run() {
     }
     pollfd p{fd_, POLLIN, 0};
     if (::poll(&p, 1, 2) <= 0) continue;
-    if ((p.revents & (POLLHUP | POLLERR)) != 0) break;  // the driver closed its end
+    if ((p.revents & (POLLHUP | POLLERR)) != 0) {  // the driver closed its end
+      link_closed_.store(true);
+      break;
+    }
     can_frame f;
     for (int i = 0; i < 64; ++i) {
       const ssize_t got = ::recv(fd_, &f, sizeof f, MSG_DONTWAIT);

@@ -418,15 +418,26 @@ TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
                    .ok());
   EXPECT_NE(out.find("no such sequence directory"), std::string::npos) << out;
 
-  // `run` drives only what exists, and says so.
+  // `run` on V4L2 detectors that are not there: the start-up checks list every reason (the
+  // device, and the missing detector calibrations), and nothing starts.
   std::string v4l2 = scene;
-  v4l2.replace(v4l2.find("frames: sim"), 11, "frames: v4l2");
+  for (std::size_t at = v4l2.find("frames: sim"); at != std::string::npos; at = v4l2.find("frames: sim"))
+    v4l2.replace(at, 11, "frames: {type: v4l2, device: /dev/v4l/by-path/lftrack-test-absent}");
   std::ofstream(dir.path() / "v4l2.yaml") << v4l2;
   EXPECT_FALSE(
       run_process({lftrack_bin(), "run", "--scene", (dir.path() / "v4l2.yaml").string(), "--rt", "ignore"},
                   &out)
           .ok());
-  EXPECT_NE(out.find("frames from 'v4l2'"), std::string::npos) << out;
+  EXPECT_NE(out.find("refuses to start"), std::string::npos) << out;
+  EXPECT_NE(out.find("lftrack-test-absent"), std::string::npos) << "the device that did not open: " << out;
+  EXPECT_NE(out.find("detector calibration of A: none named"), std::string::npos) << out;
+  EXPECT_NE(out.find("detector calibration of B: none named"), std::string::npos) << out;
+  // The short form names no device: refused at load, with the line.
+  std::string short_form = scene;
+  short_form.replace(short_form.find("frames: sim"), 11, "frames: v4l2");
+  std::ofstream(dir.path() / "v4l2-short.yaml") << short_form;
+  EXPECT_FALSE(run_process({lftrack_bin(), "run", "--scene", (dir.path() / "v4l2-short.yaml").string()}, &out).ok());
+  EXPECT_NE(out.find("v4l2 needs its device"), std::string::npos) << out;
 }
 
 }  // namespace

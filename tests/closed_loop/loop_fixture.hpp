@@ -76,7 +76,7 @@ class ClosedLoop : public ::testing::Test {
     EXPECT_TRUE(prepared.ok()) << prepared.status().message();
     scene_ = std::make_unique<PreparedScene>(std::move(prepared).value());
     options.cycles = cycles;
-    options.simulated_clock = true;
+    options.simulated_clock = !real_clock_;
     options.light_field_dir = lf_dir_.path();
     // A journal of its own per run (journals are never overwritten).
     if (options.journal.empty()) options.journal = dir_.path() / ("journal-" + std::to_string(++runs_) + ".lfj");
@@ -98,6 +98,7 @@ class ClosedLoop : public ::testing::Test {
   }
 
   int runs_ = 0;                             // loops run by this test
+  bool real_clock_ = false;                  // on the real clock (devices in other processes)
   std::function<void(Scene&)> edit_scene_;  // applied to the scene before each run, if set
   static inline tracking::ThreadPool* pool_ = nullptr;
   test::TempDir dir_;

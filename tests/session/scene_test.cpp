@@ -101,7 +101,7 @@ const BadScene kBadScenes[] = {
     {"FileCtWithoutRoi", "roi:\n  centre_mm: [0, 0, 0]\n  size_mm: [40, 40, 40]\n", "",
      "bad.yaml:1:", "needs 'roi'"},
     {"UnknownFrames", "    rows: 64", "    frames: camera\n    rows: 64",
-     "bad.yaml:9:", "must be one of sim, v4l2, replay"},
+     "bad.yaml:9:", "(known: sim, v4l2, gige, replay)"},
     {"UnknownBuiltin", "  path: ct_folder", "  path: builtin:knee", "bad.yaml:3:", "unknown built-in CT"},
     {"NegativeRoiSize", "size_mm: [40, 40, 40]", "size_mm: [40, -4, 40]", "bad.yaml:6:", "must be positive"},
 };

@@ -1,4 +1,5 @@
 #include "lftrack/host/calibration_files.hpp"
+#include "lftrack/host/scene_devices.hpp"
 
 #include <fstream>
 #include <sstream>
@@ -87,7 +88,7 @@ std::string calibrated_detectors_yaml(const std::vector<DetectorSpec>& specs,
   for (std::size_t k = 0; k < 2; ++k) {
     const tracking::XrayView& v = cal.views_room[k];
     y << "  - name: " << v.name << "\n"
-      << "    frames: " << (k < specs.size() ? specs[k].frames : "sim") << "\n"
+      << "    frames: " << (k < specs.size() ? frames_yaml(specs[k].frames) : std::string("sim")) << "\n"
       << "    bits: " << (k < specs.size() ? specs[k].bits : 12) << "\n"
       << "    rows: " << v.rows << "\n"
       << "    cols: " << v.cols << "\n";

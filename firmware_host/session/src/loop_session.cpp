@@ -9,6 +9,8 @@
 
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
+#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
@@ -49,24 +51,210 @@ Eigen::Isometry3d couch_mounting(const CouchMountingSpec& m, const PreparedScene
 struct LoopSession::Parts {
   std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
   std::unique_ptr<tracking::Registration> registration;
-  std::unique_ptr<sim::SimulatedRoom> room;
-  std::unique_ptr<SimFrameSource> sim_frames;
-  // Devices the drivers' factory made (device_factory.hpp), and typed views of them for the
-  // session's accessors.
-  std::unique_ptr<drivers::FrameSource> device_frames;  // replay
-  std::unique_ptr<drivers::Actuator> recorded_couch;    // replay, when the sequence has read-backs
-  std::unique_ptr<drivers::Actuator> hil_driver;        // HIL: the Modbus or CAN driver
-  const drivers::ReplayFrameSource* replay_frames = nullptr;
+  std::unique_ptr<sim::SimulatedRoom> room;  // simulated detectors only
+  // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
+  // through its hooks.
+  std::unique_ptr<drivers::FrameSource> frames;
+  const drivers::ReplayFrameSource* replay_frames = nullptr;  // a view of `frames` when replaying
+  std::unique_ptr<drivers::Actuator> actuator;                // virtual, recorded, Modbus or CAN
+  std::unique_ptr<drivers::Actuator> device_actuator;         // the Modbus or CAN driver (HIL or run)
   std::unique_ptr<sim::ModbusCouchServer> couch_server;  // HIL: serves the room's couch
-  std::unique_ptr<sim::VirtualRobot> robot;  // HIL over CAN: moves the room's couch
-  std::unique_ptr<sim::RoomClockedActuator> hil_couch;
-  std::unique_ptr<RoomTruth> truth;  // simulation only
+  std::unique_ptr<sim::VirtualRobot> robot;              // HIL over CAN: moves the room's couch
+  std::unique_ptr<RoomTruth> truth;                   // simulation only
   std::unique_ptr<CalibratedCouch> calibrated_couch;  // the couch through its calibration
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;
   OperatorInputs operators;
   std::unique_ptr<TrackingLoop> loop;
 };
+
+namespace {
+
+// A device someone else owns (the simulated room's couch) as the session's actuator.
+class BorrowedActuator final : public drivers::Actuator {
+ public:
+  explicit BorrowedActuator(drivers::Actuator* device) : device_(device) {}
+  Status open() override { return device_->open(); }
+  drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
+    return device_->command(c, d);
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* s, drivers::Deadline d) override {
+    return device_->readback(s, d);
+  }
+  void hold() override { device_->hold(); }
+  void set_beam_permit(bool permit) override { device_->set_beam_permit(permit); }
+  void close() override { device_->close(); }
+
+ private:
+  drivers::Actuator* device_;
+};
+
+bool scene_actuator_is_device(const Scene& scene) {
+  return scene.actuator.type == "modbus" || scene.actuator.type == "can";
+}
+
+// The simulated room of a scene: its patient, set-up error and couch; with `couch_link`, the
+// couch is another process's.
+Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, const LoopSessionOptions& o) {
+  sim::SimulatedRoomSpec room;
+  room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
+  room.origin_room_mm = p.registration_origin_room_mm();
+  room.setup_error = p.scene.motion.setup_error;
+  room.motion = p.scene.motion.motion;
+  room.couch = p.scene.actuator.couch;
+  if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
+  room.residual_box_mm = p.scene.registration.tre_box_mm;
+  if (o.devices == SessionDevices::kScene && scene_actuator_is_device(p.scene)) {
+    // Simulated detectors and a real protocol's couch: the patient must move with that couch.
+    if (p.scene.sim.couch_link.empty())
+      return failed_precondition(
+          "simulated detectors with a " + p.scene.actuator.type +
+          " actuator: the simulated patient would never move with it; name the served couch's room link as "
+          "sim.couch_link (lftrack serve couch|robot --room FILE), or use real detectors");
+    auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
+    if (!link.ok()) return link.status().with_context("sim.couch_link");
+    room.couch_link = std::move(link).value();
+  }
+  return std::make_unique<sim::SimulatedRoom>(room);
+}
+
+Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const LoopSessionOptions& o,
+                                                  tracking::ThreadPool* pool, LoopSession::Parts* parts) {
+  std::vector<drivers::DetectorShape> shapes;
+  for (const DetectorSpec& d : p.scene.detectors) shapes.push_back({d.view.name, d.view.rows, d.view.cols});
+  if (!o.replay_sequence.empty()) {  // lftrack replay --sequence DIR
+    drivers::ReplaySourceSpec replay;
+    replay.sequence = o.replay_sequence;
+    replay.detectors = shapes;
+    replay.options.realtime = !o.simulated_clock;
+    return drivers::FrameSourceSpec(std::move(replay));
+  }
+  if (o.devices == SessionDevices::kScene && p.scene.detectors[0].frames.kind != "sim")
+    return device_frame_source_spec(p.scene);
+  drivers::SimulatedSourceSpec simulated;
+  simulated.make = [&p, &o, pool, parts]() -> Result<std::unique_ptr<drivers::FrameSource>> {
+    auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);
+    if (!frame_renderer.ok()) return frame_renderer.status();
+    parts->frame_renderer = *frame_renderer;
+    auto room = make_room(p, o);
+    if (!room.ok()) return room.status();
+    parts->room = std::move(room).value();
+    SimFrameSourceOptions frame_options = o.frames;
+    frame_options.wait_for_frames = o.simulated_clock;
+    if (p.scene.sim.renderer == "lightfield") frame_options.margin_px = 0;  // the field covers the ROI only
+    return std::unique_ptr<drivers::FrameSource>(
+        new SimFrameSource(p, parts->frame_renderer, parts->room.get(), frame_options));
+  };
+  return drivers::FrameSourceSpec(std::move(simulated));
+}
+
+// The simulator's side of a hardware-in-the-loop protocol (the couch's Modbus server, or the
+// robot on a CAN link) and the driver the factory makes for it, clocked by the room.
+Result<drivers::ActuatorSpec> hil_actuator_spec(const PreparedScene& p, const LoopSessionOptions& o,
+                                                LoopSession::Parts* parts) {
+  drivers::ActuatorSpec driver_spec;
+  std::string endpoint;
+  if (o.hil == HilProtocol::kModbus) {
+    auto server = sim::ModbusCouchServer::start(&parts->room->couch_device());
+    if (!server.ok()) return server.status();
+    parts->couch_server = std::move(server).value();
+    drivers::ModbusActuatorSpec couch;
+    couch.options.port = parts->couch_server->port();
+    couch.options.response_timeout_s = std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
+    driver_spec = couch;
+  } else {
+    auto link = sim::can_socket_pair();
+    if (!link.ok()) return link.status();
+    auto robot = sim::VirtualRobot::start(&parts->room->couch_device(), (*link)[1]);
+    if (!robot.ok()) return robot.status();
+    parts->robot = std::move(robot).value();
+    driver_spec = drivers::CanActuatorSpec{drivers::CanRobotOptions{}, (*link)[0]};
+    endpoint = "CAN node 1 over a socket pair";
+  }
+  auto driver = drivers::make_actuator(std::move(driver_spec));
+  if (!driver.ok()) return driver.status();
+  parts->device_actuator = std::move(driver).value();
+  if (const auto* modbus = dynamic_cast<const drivers::ModbusCouch*>(parts->device_actuator.get()))
+    endpoint = modbus->endpoint();
+  spdlog::info("hardware in the loop: the couch is {}", endpoint);
+  drivers::VirtualActuatorSpec clocked;
+  clocked.make = [parts, simulated_clock = o.simulated_clock]() -> Result<std::unique_ptr<drivers::Actuator>> {
+    return std::unique_ptr<drivers::Actuator>(
+        new sim::RoomClockedActuator(parts->room.get(), parts->device_actuator.get(), simulated_clock));
+  };
+  return drivers::ActuatorSpec(std::move(clocked));
+}
+
+// What moves the patient, if anything: the recorded read-backs of a replayed sequence, the
+// scene's Modbus couch or CAN robot (lftrack run), or the simulated room's couch, in process or
+// behind its protocol (--hil).
+Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const PreparedScene& p,
+                                                                   const LoopSessionOptions& o,
+                                                                   LoopSession::Parts* parts) {
+  using Spec = std::optional<drivers::ActuatorSpec>;
+  if (o.hil != HilProtocol::kNone && (o.devices != SessionDevices::kSimulated || !o.replay_sequence.empty()))
+    return invalid_argument("hardware in the loop (--hil) is a simulation: it needs `lftrack sim`");
+  if (parts->replay_frames != nullptr) {
+    if (!parts->replay_frames->sequence().has_actuator) return Spec();
+    return Spec(drivers::RecordedActuatorSpec{parts->replay_frames});
+  }
+  if (o.devices == SessionDevices::kScene && scene_actuator_is_device(p.scene)) {
+    auto spec = device_actuator_spec(p.scene);
+    if (!spec.ok()) return spec.status();
+    spdlog::info("the actuator is {}", describe_actuator(p.scene.actuator));
+    return Spec(std::move(spec).value());
+  }
+  // Simulated: a scene's couch or robot is simulated by the room's couch (its twin).
+  const bool couch =
+      o.devices == SessionDevices::kSimulated ? p.scene.actuator.type != "none" : p.scene.actuator.type == "virtual";
+  if (!couch) {
+    if (o.hil != HilProtocol::kNone)
+      return invalid_argument("hardware in the loop needs a scene with a couch (actuator.type other than none)");
+    return Spec();
+  }
+  if (parts->room == nullptr)
+    return failed_precondition("the virtual couch moves a simulated patient: it needs simulated detectors");
+  if (o.hil != HilProtocol::kNone) {
+    auto spec = hil_actuator_spec(p, o, parts);
+    if (!spec.ok()) return spec.status();
+    return Spec(std::move(spec).value());
+  }
+  if (scene_actuator_is_device(p.scene))
+    spdlog::info("the scene's {} is simulated by its twin, the virtual couch", describe_actuator(p.scene.actuator));
+  drivers::VirtualActuatorSpec simulated;
+  simulated.make = [room = parts->room.get()]() -> Result<std::unique_ptr<drivers::Actuator>> {
+    return std::unique_ptr<drivers::Actuator>(new BorrowedActuator(&room->couch_actuator()));
+  };
+  return Spec(std::move(simulated));
+}
+
+// Per detector, how raw counts become line integrals: the scene's detector calibration file
+// where it names one; otherwise, for frames the simulator made (or archived from it), the
+// simulator's detector model. Device frames without a calibration are refused.
+Result<std::vector<tracking::DetectorCorrection>> detector_corrections(const PreparedScene& p, bool simulated) {
+  std::vector<tracking::DetectorCorrection> corrections;
+  for (const DetectorSpec& d : p.scene.detectors) {
+    if (!d.calibration_file.empty()) {
+      auto calibration = load_detector_calibration(d.calibration_file);
+      if (!calibration.ok()) return calibration.status().with_context("detector " + d.view.name);
+      if (calibration->rows != d.view.rows || calibration->cols != d.view.cols)
+        return failed_precondition("detector " + d.view.name + ": its calibration " + d.calibration_file + " is for " +
+                                   std::to_string(calibration->rows) + " x " + std::to_string(calibration->cols) +
+                                   " pixels, the detector has " + std::to_string(d.view.rows) + " x " +
+                                   std::to_string(d.view.cols));
+      corrections.push_back(calib::to_detector_correction(*calibration));
+      continue;
+    }
+    if (!simulated && !d.simulator_calibration && (d.frames.kind == "v4l2" || d.frames.kind == "gige"))
+      return failed_precondition("detector " + d.view.name + " (" + describe_frames(d.frames) +
+                                 ") has no detector calibration: name one as detectors[].calibration "
+                                 "(lftrack calibrate detector --dark DIR --flood DIR)");
+    corrections.push_back(sim::detector_correction(scene_detector_model(p)));
+  }
+  return corrections;
+}
+
+}  // namespace
 
 LoopSession::LoopSession(std::unique_ptr<Parts> parts) : parts_(std::move(parts)) {}
 LoopSession::~LoopSession() = default;
@@ -130,80 +318,25 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
 
   std::vector<drivers::DetectorShape> shapes;
   for (const DetectorSpec& d : p.scene.detectors) shapes.push_back({d.view.name, d.view.rows, d.view.cols});
-  const bool replaying = !o.replay_sequence.empty();
-  if (replaying) {
-    drivers::ReplaySourceSpec replay;
-    replay.sequence = o.replay_sequence;
-    replay.detectors = shapes;
-    replay.options.realtime = !o.simulated_clock;
-    auto frames = drivers::make_frame_source(std::move(replay));
-    if (!frames.ok()) return frames.status();
-    parts->device_frames = std::move(frames).value();
-    parts->replay_frames = dynamic_cast<const drivers::ReplayFrameSource*>(parts->device_frames.get());
+  auto frames_spec = frame_source_spec(p, o, pool, parts.get());
+  if (!frames_spec.ok()) return frames_spec.status();
+  auto frames = drivers::make_frame_source(std::move(frames_spec).value());
+  if (!frames.ok()) return frames.status();
+  parts->frames = std::move(frames).value();
+  parts->replay_frames = dynamic_cast<const drivers::ReplayFrameSource*>(parts->frames.get());
+  if (parts->replay_frames != nullptr) {
     const std::string& note = parts->replay_frames->sequence().note;
-    if (!note.empty()) spdlog::warn("{}: {}", o.replay_sequence.string(), note);
-    if (parts->replay_frames->sequence().has_actuator) {
-      auto recorded = drivers::make_actuator(drivers::RecordedActuatorSpec{parts->replay_frames});
-      if (!recorded.ok()) return recorded.status();
-      parts->recorded_couch = std::move(recorded).value();
-      LFTRACK_RETURN_IF_ERROR(parts->recorded_couch->open());
-    }
-  } else {
-    auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);
-    if (!frame_renderer.ok()) return frame_renderer.status();
-    parts->frame_renderer = *frame_renderer;
-    sim::SimulatedRoomSpec room;
-    room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
-    room.origin_room_mm = p.registration_origin_room_mm();
-    room.setup_error = p.scene.motion.setup_error;
-    room.motion = p.scene.motion.motion;
-    room.couch = p.scene.actuator.couch;
-    if (p.scene.actuator.mounting)
-      room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
-    room.residual_box_mm = p.scene.registration.tre_box_mm;
-    parts->room = std::make_unique<sim::SimulatedRoom>(room);
-    SimFrameSourceOptions frame_options = o.frames;
-    frame_options.wait_for_frames = o.simulated_clock;
-    if (p.scene.sim.renderer == "lightfield") frame_options.margin_px = 0;  // the field covers the ROI only
-    parts->sim_frames =
-        std::make_unique<SimFrameSource>(p, parts->frame_renderer, parts->room.get(), frame_options);
+    if (!note.empty()) spdlog::warn("{}: {}", parts->replay_frames->sequence().directory.string(), note);
   }
-  const bool has_couch = !replaying && p.scene.actuator.type == "virtual";
-  if (o.hil != HilProtocol::kNone) {
-    if (!has_couch)
-      return invalid_argument(
-          "hardware in the loop needs a simulated scene with `actuator: {type: virtual}`");
-    // The simulator's side of the protocol (the couch's Modbus server, or the robot on a CAN
-    // link), then the driver the factory makes for it.
-    drivers::ActuatorSpec driver_spec;
-    std::string endpoint;
-    if (o.hil == HilProtocol::kModbus) {
-      auto server = sim::ModbusCouchServer::start(&parts->room->couch_device());
-      if (!server.ok()) return server.status();
-      parts->couch_server = std::move(server).value();
-      drivers::ModbusActuatorSpec couch;
-      couch.options.port = parts->couch_server->port();
-      couch.options.response_timeout_s = std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
-      driver_spec = couch;
-    } else {
-      auto link = sim::can_socket_pair();
-      if (!link.ok()) return link.status();
-      auto robot = sim::VirtualRobot::start(&parts->room->couch_device(), (*link)[1]);
-      if (!robot.ok()) return robot.status();
-      parts->robot = std::move(robot).value();
-      driver_spec = drivers::CanActuatorSpec{drivers::CanRobotOptions{}, (*link)[0]};
-      endpoint = "CAN node 1 over a socket pair";
-    }
-    auto driver = drivers::make_actuator(std::move(driver_spec));
-    if (!driver.ok()) return driver.status();
-    parts->hil_driver = std::move(driver).value();
-    if (const auto* modbus = dynamic_cast<const drivers::ModbusCouch*>(parts->hil_driver.get()))
-      endpoint = modbus->endpoint();
-    parts->hil_couch =
-        std::make_unique<sim::RoomClockedActuator>(parts->room.get(), parts->hil_driver.get(), o.simulated_clock);
-    LFTRACK_RETURN_IF_ERROR(parts->hil_couch->open());
-    spdlog::info("hardware in the loop: the couch is {}", endpoint);
+  auto actuator_spec = session_actuator_spec(p, o, parts.get());
+  if (!actuator_spec.ok()) return actuator_spec.status();
+  if (*actuator_spec) {
+    auto actuator = drivers::make_actuator(std::move(**actuator_spec));
+    if (!actuator.ok()) return actuator.status();
+    parts->actuator = std::move(actuator).value();
+    LFTRACK_RETURN_IF_ERROR(parts->actuator->open().with_context("actuator"));
   }
+  const bool moves_patient = parts->actuator != nullptr && parts->replay_frames == nullptr;
   // The control socket before the records: its path is checked (never another file removed)
   // before the journal and the archive create anything.
   if (!o.control_socket.empty()) {
@@ -213,7 +346,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   }
   if (!o.archive.empty()) {
     FrameArchiveOptions archive_options;
-    archive_options.with_actuator = has_couch;
+    archive_options.with_actuator = moves_patient;
     archive_options.overwrite = o.overwrite_archive;
     auto archive = FrameArchive::open(o.archive, shapes, archive_options);
     if (!archive.ok()) return archive.status();
@@ -239,19 +372,18 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   lp.geometry = loop_geometry(p);
   lp.registration = parts->registration.get();
   lp.check_renderer = parts->registration_renderer.get();
-  lp.frames =
-      replaying ? parts->device_frames.get() : static_cast<drivers::FrameSource*>(parts->sim_frames.get());
+  lp.frames = parts->frames.get();
   lp.archive = parts->archive.get();
-  lp.corrections.assign(p.scene.detectors.size(), sim::detector_correction(scene_detector_model(p)));
-  lp.actuator = parts->hil_couch ? static_cast<drivers::Actuator*>(parts->hil_couch.get())
-                : has_couch      ? &parts->room->couch_actuator()
-                                 : parts->recorded_couch.get();
-  if (has_couch && p.scene.actuator.calibration) {
+  auto corrections = detector_corrections(p, parts->room != nullptr);
+  if (!corrections.ok()) return corrections.status();
+  lp.corrections = std::move(corrections).value();
+  lp.actuator = parts->actuator.get();
+  if (moves_patient && p.scene.actuator.calibration) {
     parts->calibrated_couch = std::make_unique<CalibratedCouch>(
         lp.actuator, couch_mounting(*p.scene.actuator.calibration, p), p.registration_origin_room_mm());
     lp.actuator = parts->calibrated_couch.get();
     spdlog::info("couch commands go through the couch calibration {}", p.scene.actuator.calibration_file);
-  } else if (has_couch && p.scene.actuator.mounting) {
+  } else if (moves_patient && p.scene.actuator.mounting) {
     spdlog::warn(
         "the couch is mounted off the room's axes but the scene names no actuator.calibration: "
         "corrections assume the room's axes");
@@ -280,7 +412,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
 
 Result<LoopSummary> LoopSession::run() {
   auto summary = parts_->loop->run();
-  if (parts_->hil_couch) parts_->hil_couch->close();
+  if (parts_->actuator) parts_->actuator->close();
   if (parts_->journal) {
     if (Status s = parts_->journal->close(); !s.ok() && summary.ok()) summary->journal_error = s.message();
   }
@@ -303,7 +435,8 @@ const FrameArchive* LoopSession::archive() const {
   return parts_->archive.get();
 }
 const drivers::ModbusCouch* LoopSession::modbus_couch() const {
-  return dynamic_cast<const drivers::ModbusCouch*>(parts_->hil_driver.get());
+  const drivers::Actuator* a = parts_->device_actuator ? parts_->device_actuator.get() : parts_->actuator.get();
+  return dynamic_cast<const drivers::ModbusCouch*>(a);
 }
 sim::ModbusCouchServer* LoopSession::modbus_couch_server() {
   return parts_->couch_server.get();
@@ -312,7 +445,8 @@ std::filesystem::path LoopSession::journal_path() const {
   return parts_->journal ? parts_->journal->path() : std::filesystem::path();
 }
 const drivers::CanRobot* LoopSession::can_robot() const {
-  return dynamic_cast<const drivers::CanRobot*>(parts_->hil_driver.get());
+  const drivers::Actuator* a = parts_->device_actuator ? parts_->device_actuator.get() : parts_->actuator.get();
+  return dynamic_cast<const drivers::CanRobot*>(a);
 }
 sim::VirtualRobot* LoopSession::virtual_robot() {
   return parts_->robot.get();

@@ -19,7 +19,7 @@ Status SceneParser::vec6(const YAML::Node& n, const std::string& what, const cha
 
 Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
   LFTRACK_RETURN_IF_ERROR(
-      check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed"}));
+      check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed", "couch_link"}));
   if (n["photons_per_pixel"])
     LFTRACK_RETURN_IF_ERROR(
         positive(n["photons_per_pixel"], "sim.photons_per_pixel", &sim->photons_per_pixel));
@@ -32,6 +32,11 @@ Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
     LFTRACK_RETURN_IF_ERROR(one_of(n["renderer"], "sim.renderer", {"siddon", "lightfield"}, &sim->renderer));
   if (n["light_field"])
     LFTRACK_RETURN_IF_ERROR(parse_light_field(n["light_field"], "sim.light_field", &sim->light_field));
+  if (n["couch_link"]) {
+    std::string link;
+    LFTRACK_RETURN_IF_ERROR(text(n["couch_link"], "sim.couch_link", &link));
+    sim->couch_link = (fs::path(link).is_absolute() ? fs::path(link) : base_dir_ / link).string();
+  }
   if (n["seed"]) {
     long seed = 0;
     LFTRACK_RETURN_IF_ERROR(integer(n["seed"], "sim.seed", 0, 2147483647L, &seed));
@@ -146,10 +151,22 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
 Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
   LFTRACK_RETURN_IF_ERROR(check_keys(n, "actuator",
                                      {"type", "latency_s", "max_speed_mm_s", "max_speed_deg_s", "range_mm",
-                                      "range_deg", "mounting", "calibration"}));
+                                      "range_deg", "mounting", "calibration", "modbus", "can"}));
   YAML::Node type;
   LFTRACK_RETURN_IF_ERROR(need(n, "type", "actuator", &type));
-  LFTRACK_RETURN_IF_ERROR(one_of(type, "actuator.type", {"none", "virtual"}, &a->type));
+  LFTRACK_RETURN_IF_ERROR(one_of(type, "actuator.type", {"none", "virtual", "modbus", "can"}, &a->type));
+  if (a->type == "modbus") {
+    if (!n["modbus"]) return error(n, "actuator.type modbus needs actuator.modbus: {tcp: {host, port}} or {rtu: ...}");
+    LFTRACK_RETURN_IF_ERROR(parse_modbus(n["modbus"], &a->modbus));
+  } else if (n["modbus"]) {
+    return error(n["modbus"], "actuator.modbus is for actuator.type modbus");
+  }
+  if (a->type == "can") {
+    if (!n["can"]) return error(n, "actuator.type can needs actuator.can: {interface: can0} or {bridge: PATH}");
+    LFTRACK_RETURN_IF_ERROR(parse_can(n["can"], &a->can));
+  } else if (n["can"]) {
+    return error(n["can"], "actuator.can is for actuator.type can");
+  }
   sim::VirtualCouchSpec& c = a->couch;
   if (n["latency_s"]) {
     LFTRACK_RETURN_IF_ERROR(number(n["latency_s"], "actuator.latency_s", &c.latency_s));

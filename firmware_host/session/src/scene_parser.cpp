@@ -109,17 +109,16 @@ Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& wh
 Status SceneParser::parse_detector(const YAML::Node& n, int index, DetectorSpec* d) const {
   const std::string what = "detectors[" + std::to_string(index) + "]";
   LFTRACK_RETURN_IF_ERROR(check_keys(n, what,
-                                     {"name", "frames", "bits", "rows", "cols", "pitch_mm", "isocentric",
-                                      "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
+                                     {"name", "frames", "calibration", "bits", "rows", "cols", "pitch_mm",
+                                      "isocentric", "source_mm", "pixel00_mm", "col_axis", "row_axis"}));
   YAML::Node node;
   std::string name;
   LFTRACK_RETURN_IF_ERROR(need(n, "name", what, &node));
   LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
-  if (n["frames"]) {
-    LFTRACK_RETURN_IF_ERROR(text(n["frames"], what + ".frames", &d->frames));
-    if (d->frames != "sim" && d->frames != "v4l2" && d->frames != "replay") {
-      return error(n["frames"], what + ".frames must be one of sim, v4l2, replay; got '" + d->frames + "'");
-    }
+  if (n["frames"]) LFTRACK_RETURN_IF_ERROR(parse_frames(n["frames"], what + ".frames", &d->frames));
+  if (n["calibration"]) {
+    LFTRACK_RETURN_IF_ERROR(parse_detector_calibration(n["calibration"], what + ".calibration", &d->calibration_file));
+    d->simulator_calibration = d->calibration_file.empty();
   }
   long bits = 12, rows = 0, cols = 0;
   if (n["bits"]) LFTRACK_RETURN_IF_ERROR(integer(n["bits"], what + ".bits", 8, 16, &bits));
@@ -289,6 +288,7 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
     scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
   }
   if (root["actuator"]) LFTRACK_RETURN_IF_ERROR(parse_actuator(root["actuator"], &scene.actuator));
+  LFTRACK_RETURN_IF_ERROR(check_devices(root, scene));
   if (root["motion"]) LFTRACK_RETURN_IF_ERROR(parse_motion(root["motion"], &scene.motion));
   return scene;
 }

@@ -124,6 +124,12 @@ class SceneParser {
   Status parse_safety(const YAML::Node& n, SafetyLimits* limits) const;
   Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;
   Status parse_motion(const YAML::Node& n, MotionSpec* motion) const;
+  // The devices (scene_device_parser.cpp).
+  Status parse_frames(const YAML::Node& n, const std::string& what, DetectorFramesSpec* frames) const;
+  Status parse_detector_calibration(const YAML::Node& n, const std::string& what, std::string* file) const;
+  Status parse_modbus(const YAML::Node& n, drivers::ModbusCouchOptions* modbus) const;
+  Status parse_can(const YAML::Node& n, drivers::CanRobotOptions* can) const;
+  Status check_devices(const YAML::Node& root, const Scene& scene) const;
   Status vec6(const YAML::Node& n, const std::string& what, const char* translation_key,
               const char* rotation_key, tracking::Vector6d* out) const;
 

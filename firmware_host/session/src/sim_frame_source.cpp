@@ -3,6 +3,9 @@
 #include "lftrack/loop/realtime_setup.hpp"
 
 #include <algorithm>
+#include <time.h>
+
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -60,7 +63,8 @@ void SimFrameSource::request_exposure(std::int64_t exposure_time_ns) {
   room_->advance_to_ns(exposure_time_ns);
   Job job;
   job.exposure_ns = exposure_time_ns;
-  job.pose = room_->true_T_room_from_ct();
+  job.pose_at_exposure = room_->spec().couch_link != nullptr && !options_.wait_for_frames;
+  if (!job.pose_at_exposure) job.pose = room_->true_T_room_from_ct();
   {
     std::lock_guard lock(mutex_);
     job.index = next_index_++;
@@ -83,6 +87,13 @@ void SimFrameSource::render_loop() {
       job = pending_;
       has_pending_ = false;
       rendering_ = true;
+    }
+    if (job.pose_at_exposure) {
+      const timespec at{static_cast<time_t>(job.exposure_ns / 1'000'000'000),
+                        static_cast<long>(job.exposure_ns % 1'000'000'000)};
+      while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &at, nullptr) == EINTR) {
+      }
+      job.pose = room_->true_T_room_from_ct();
     }
     Status status;
     for (std::size_t v = 0; v < synthesizers_.size() && status.ok(); ++v) {

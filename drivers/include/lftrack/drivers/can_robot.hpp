@@ -33,6 +33,14 @@ struct CanRobotOptions {
   double heartbeat_timeout_s = 0.3;
   int error_frames_per_s_limit = 50;  // more is a flood
   double open_timeout_s = 2.0;        // for the first heartbeat
+  // Non-empty: the robot is reached through a CAN bridge process listening on this Unix socket
+  // (SOCK_SEQPACKET, one struct can_frame per datagram; `lftrack serve robot --socket PATH`)
+  // instead of `interface`. A bridge that goes away is a disconnection: the driver tries again
+  // every reconnect_interval_s from the cycle (a non-blocking connect on a local socket), and a
+  // link made again counts as a restarted robot (kCanRobotRestarted: nothing moves until a hold,
+  // which the operator's resume follows).
+  std::string bridge_path;
+  double reconnect_interval_s = 0.2;
 };
 
 // Conditions, as bits of CanRobot::faults().
@@ -48,7 +56,8 @@ enum CanRobotFault : std::uint32_t {
 std::string describe_can_faults(std::uint32_t faults);
 
 struct CanRobotCounters {
-  std::int64_t frames_in = 0, frames_out = 0, error_frames = 0, heartbeats = 0, timeouts = 0, refused = 0;
+  std::int64_t frames_in = 0, frames_out = 0, error_frames = 0, heartbeats = 0, timeouts = 0, refused = 0,
+               disconnects = 0, reconnects = 0;
 };
 
 class CanRobot final : public Actuator {
@@ -81,10 +90,14 @@ class CanRobot final : public Actuator {
   bool readback_complete() const { return status_fresh_ && travel_frames_ == 0x3F; }
   DeviceStatus send(const can_frame& frame);
   std::int64_t now_ns() const;
+  Status connect_bridge();  // bridge_path: a connected, non-blocking SOCK_SEQPACKET socket in fd_
+  void drop_link();         // the bridge went away: closed, counted, reconnected from the cycle
+  bool linked();            // fd_ open, or (bridge) opened again now that the interval has passed
 
   CanRobotOptions options_;
   int fd_ = -1;
   bool given_socket_ = false;
+  std::int64_t last_connect_attempt_ns_ = 0;
   CanRobotCounters counters_;
   std::uint32_t latched_ = 0;
   bool bus_off_ = false, error_passive_ = false;

@@ -19,6 +19,11 @@ namespace lftrack::drivers {
 // unsupported (another pixel format), out_of_range (a size other than `out`'s).
 Status read_frame_file(const char* path, tracking::ImageView<std::uint16_t> out);
 
+// The size of the frame in `path` (a .tif/.tiff or .png of the kinds read_frame_file reads),
+// read from its header; a size beyond 16384 pixels a side is refused (a header that claims more
+// than a detector has is not trusted with memory).
+Status frame_file_size(const char* path, int* rows, int* cols);
+
 // Writes `frame` as an uncompressed 16-bit TIFF (.tif/.tiff) or a 16-bit PNG (.png).
 Status write_frame_file(const char* path, tracking::ImageView<const std::uint16_t> frame);
 

@@ -40,6 +40,7 @@ enum class CouchServerFault : int {
 enum class CouchRequestKind : int { kAny, kReadback, kCommand };
 
 struct ModbusCouchServerOptions {
+  std::string address = "127.0.0.1";  // TCP: the address to listen on (0.0.0.0: every interface)
   int port = 0;  // 0: any free port (port() says which)
   // Non-empty: serve Modbus RTU on this serial device (a tty, or a pty in tests) instead of TCP.
   std::string rtu_device;

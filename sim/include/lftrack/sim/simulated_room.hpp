@@ -15,11 +15,13 @@
 // The couch cancels the patient's offset when M(couch) = (A(motion) A(setup_error))^-1.
 
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <optional>
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/sim/patient_motion.hpp"
+#include "lftrack/sim/room_link.hpp"
 #include "lftrack/sim/virtual_couch.hpp"
 
 namespace lftrack::sim {
@@ -35,6 +37,9 @@ struct SimulatedRoomSpec {
   std::optional<Eigen::Isometry3d> couch_T_room_from_couch;
   // The residual is measured over a cube of this edge at the registration origin.
   double residual_box_mm = 40;
+  // Set: the couch is another process's (`lftrack serve couch --room FILE`): the patient is
+  // where that couch has moved them, read from its room link; the room's own couch is unused.
+  std::shared_ptr<const RoomLinkReader> couch_link;
 };
 
 class SimulatedRoom {
@@ -85,6 +90,7 @@ class SimulatedRoom {
   void advance_locked(std::int64_t t_ns);
   void advance_for_command_locked(drivers::Deadline deadline);
   tracking::Pose true_locked() const;
+  tracking::Vector6d couch_position_locked() const;
   tracking::Pose patient_locked() const;
 
   mutable std::mutex mutex_;

@@ -32,6 +32,9 @@ class VirtualCouch final : public drivers::Actuator {
   void hold() override;
   void close() override {}
 
+  // Before the first command: the couch stands at `position` (a couch controller restarted
+  // where the couch stopped). Its target is that position; nothing is pending.
+  void place_at(const tracking::Vector6d& position);
   // The simulator's clock: moves the couch to where it is at time t (s; never backwards).
   void advance_to(double t_s);
   double time_s() const { return now_s_; }

@@ -59,6 +59,7 @@ class VirtualRobot {
   bool beam_permit() const { return beam_permit_.load(); }
   std::int64_t corrections() const { return corrections_.load(); }
   bool enabled() const { return enabled_.load(); }
+  bool link_closed() const { return link_closed_.load(); }  // the driver closed its end
 
  private:
   VirtualRobot(drivers::Actuator* device, int fd, const VirtualRobotOptions& options);
@@ -77,6 +78,7 @@ class VirtualRobot {
   std::vector<RobotFault> pending_faults_;
   std::atomic<bool> enabled_{false}, beam_permit_{false};
   std::atomic<std::int64_t> corrections_{0};
+  std::atomic<bool> link_closed_{false};
   bool heartbeat_on_ = true, booting_ = true;
   std::uint8_t heartbeat_counter_ = 0;
   can_frame translation_{};  // the first half of the correction being received

@@ -1,9 +1,15 @@
 #pragma once
 // One TrackingLoop assembled from a scene with everything around it: the scene's registration,
-// the journal, the frame archive and the operator inputs, and a frame source that is either
-//  - the simulated room (`lftrack sim`, the closed-loop tests): set-up error, patient motion,
-//    the simulator's detectors and the virtual couch; or
-//  - an archived sequence (`lftrack replay`): frames from disk, no actuator (track and report).
+// the journal, the frame archive and the operator inputs, and the devices, which are either
+//  - every device's simulated twin (`lftrack sim`, the closed-loop tests): set-up error,
+//    patient motion, the simulator's detectors and the virtual couch, whatever devices the
+//    scene names; or
+//  - the scene's devices as it declares them (`lftrack run`): detectors through V4L2, GigE
+//    Vision or an archived sequence, a couch through Modbus or a robot through CAN, made by the
+//    drivers' factory (scene_devices.hpp); simulated detectors see a served couch through the
+//    scene's sim.couch_link; or
+//  - an archived sequence (`lftrack replay`): frames from disk, the recorded read-backs as the
+//    actuator (track and report).
 // Hardware in the loop (`lftrack sim --hil modbus|can`): the simulated room's couch is served by
 // the virtual couch server (a libmodbus TCP server on 127.0.0.1), or moved by the virtual robot
 // on a CAN link (a socket pair carrying struct can_frame), and the loop commands it through the
@@ -33,6 +39,10 @@ namespace lftrack::host {
 
 enum class HilProtocol { kNone, kModbus, kCan };
 
+// kSimulated: every device is its simulated twin (lftrack sim). kScene: the scene's devices
+// (lftrack run).
+enum class SessionDevices { kSimulated, kScene };
+
 struct LoopSessionOptions {
   std::int64_t cycles = 300;
   bool simulated_clock = false;  // true: as fast as possible, deterministic (see tracking_loop.hpp)
@@ -51,7 +61,8 @@ struct LoopSessionOptions {
   // Replay this archived sequence instead of simulating (simulated_clock: as fast as possible;
   // otherwise at the recorded pace).
   std::filesystem::path replay_sequence;
-  HilProtocol hil = HilProtocol::kNone;  // simulation only; needs a scene with a virtual couch
+  HilProtocol hil = HilProtocol::kNone;  // simulation only; needs a scene with a couch
+  SessionDevices devices = SessionDevices::kSimulated;
   std::uint64_t (*allocation_count)() = nullptr;
 };
 
@@ -84,13 +95,14 @@ class LoopSession {
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
   const FrameArchive* archive() const;               // null without one
   std::filesystem::path journal_path() const;        // the journal written (empty: none)
-  const drivers::ModbusCouch* modbus_couch() const;  // the HIL couch driver; null otherwise
+  const drivers::ModbusCouch* modbus_couch() const;  // the Modbus couch driver (HIL or run); null otherwise
   sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
-  const drivers::CanRobot* can_robot() const;        // the HIL robot driver; null otherwise
+  const drivers::CanRobot* can_robot() const;        // the CAN robot driver (HIL or run); null otherwise
   sim::VirtualRobot* virtual_robot();                // HIL: for fault injection
 
+  struct Parts;  // defined in loop_session.cpp
+
  private:
-  struct Parts;
   explicit LoopSession(std::unique_ptr<Parts> parts);
   std::unique_ptr<Parts> parts_;
 };

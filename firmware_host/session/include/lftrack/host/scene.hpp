@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/drivers/can_robot.hpp"
+#include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/sim/patient_motion.hpp"
@@ -46,10 +48,36 @@ struct RoiSpec {
   Eigen::Vector3d size_mm{64, 64, 40};
 };
 
+// detectors[i].frames: where a detector's frames come from, with the device's settings
+// (docs/scenes.md, "Devices"). Every detector of a scene takes its frames from one kind: a pair
+// comes from one source.
+//   sim     the simulator renders them (lftrack sim, lftrack run on a simulated room)
+//   v4l2    a Video4Linux2 device: `device` (best a /dev/v4l/by-path or by-id link), `buffers`,
+//           an external trigger as a control id and value (0: free-running)
+//   gige    a GigE Vision camera through Aravis: `camera` (device id, serial or IP address),
+//           `buffers`, `packet_timeout_ms`
+//   replay  an archived sequence folder (`sequence`; the same for every detector), so `run` can
+//           drive a real couch from archived frames; `lftrack replay --sequence` needs none here
+struct DetectorFramesSpec {
+  std::string kind = "sim";
+  std::string device;  // v4l2: device path; gige: the camera
+  int buffers = 4;
+  std::uint32_t trigger_control_id = 0;  // v4l2
+  std::int32_t trigger_value = 1;        // v4l2
+  double packet_timeout_ms = 20;         // gige
+  std::string sequence;                  // replay (absolute, or empty)
+};
+
 struct DetectorSpec {
-  tracking::XrayView view;     // room frame
-  std::string frames = "sim";  // where frames come from: sim, v4l2, replay
-  int bits = 12;               // detector bit depth
+  tracking::XrayView view;  // room frame
+  DetectorFramesSpec frames;
+  int bits = 12;  // detector bit depth
+  // detectors[i].calibration: a detector calibration file (`lftrack calibrate detector`;
+  // absolute, or empty). Frames from devices are corrected with it; simulated frames use the
+  // simulator's detector model. `calibration: simulator` says so for a device too (the device
+  // is the simulator's twin, e.g. `lftrack serve detectors`): the start-up checks warn.
+  std::string calibration_file;
+  bool simulator_calibration = false;
 };
 
 using PoseEnvelope = tracking::PoseEnvelope;  // +-translation_mm, +-rotation_deg per axis
@@ -85,6 +113,10 @@ struct SimFrameSpec {
   std::string renderer = "siddon";
   tracking::LightFieldSpec light_field;
   std::uint64_t seed = 1;  // noise of the simulated loop's frames
+  // sim.couch_link: a served couch's room link (`lftrack serve couch|robot --room FILE`; absolute
+  // or empty). Simulated frames then show the patient where that couch has moved them, so
+  // `lftrack run` can drive a couch in another process from simulated detectors.
+  std::string couch_link;
 };
 
 // Where a couch is mounted in the room: the rotation vector of its axes (room from couch) and
@@ -100,9 +132,15 @@ struct CouchMountingSpec {
 //   calibration:  a couch calibration file (`lftrack calibrate couch`); the loop converts its
 //                 corrections through it. Unset: the couch's axes are assumed to be the room's,
 //                 rotating about the registration origin.
+//   type:         none, virtual, modbus (a couch: tcp {host, port} or rtu {device, baud, parity,
+//                 data_bits, stop_bits}; unit_id; response_timeout_ms), can (a robot: an
+//                 `interface` such as can0, or a `bridge` socket path to a CAN bridge process
+//                 such as `lftrack serve robot`; node_id; heartbeat_timeout_ms)
 struct ActuatorSpec {
   std::string type = "none";
-  sim::VirtualCouchSpec couch;
+  sim::VirtualCouchSpec couch;        // virtual: the simulator's couch
+  drivers::ModbusCouchOptions modbus;  // modbus
+  drivers::CanRobotOptions can;        // can (can.bridge_path set: through a bridge)
   std::optional<CouchMountingSpec> mounting;
   std::string calibration_file;                  // absolute, or empty
   std::optional<CouchMountingSpec> calibration;  // read from calibration_file at load

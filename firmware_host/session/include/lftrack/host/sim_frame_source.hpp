@@ -56,6 +56,9 @@ class SimFrameSource final : public drivers::FrameSource {
     std::int64_t index = -1;
     std::int64_t exposure_ns = 0;
     tracking::Pose pose = tracking::Pose::Identity();
+    // The couch is another process's (a room link) on the real clock: the pose is taken at the
+    // exposure time by the render thread, when that couch is where it is then.
+    bool pose_at_exposure = false;
   };
   void render_loop();
 

@@ -1,0 +1,210 @@
+// `lftrack serve detectors --scene FILE`: the scene's simulated detectors as GigE Vision cameras
+// of their own process (Aravis's fake GigE camera, sim/gige_fake_detector.hpp), whose frames are
+// the simulator's X-rays of the simulated patient (16-bit mono), where the served couch has moved
+// them (--room: its room link). `lftrack run` reads them through the real GigE driver.
+//
+// One camera per detector, each on an IPv4 address of its own (GigE Vision's control port is
+// fixed; sim/gige_fake_detector.hpp): --address per detector, by default the host's first
+// addresses, 127.0.0.1 first. Each camera's trigger renders the pair at that moment (the second
+// camera's trigger within 5 ms shares it). The frames' truth (the residual of the simulated
+// patient) is summarised at the end.
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstring>
+#include <cstdio>
+#include <mutex>
+#include <nlohmann/json.hpp>
+
+#include "lftrack/host/sim_frame_source.hpp"
+#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/sim/gige_fake_detector.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "serve_common.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+using namespace serve;
+
+// The simulated room and its detectors, rendering a pair whenever a camera asks, at that moment.
+class DetectorRoom {
+ public:
+  static Result<std::unique_ptr<DetectorRoom>> start(const PreparedScene& p, const ServeOptions& o,
+                                                     tracking::ThreadPool* pool) {
+    std::unique_ptr<DetectorRoom> r(new DetectorRoom(p));
+    auto renderer = make_sim_frame_renderer(p, o.lf_dir, pool);
+    if (!renderer.ok()) return renderer.status();
+    r->renderer_ = *renderer;
+    sim::SimulatedRoomSpec room;
+    room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
+    room.origin_room_mm = p.registration_origin_room_mm();
+    room.setup_error = p.scene.motion.setup_error;
+    room.motion = p.scene.motion.motion;
+    room.couch = p.scene.actuator.couch;
+    room.residual_box_mm = p.scene.registration.tre_box_mm;
+    if (!o.room.empty()) {
+      auto link = sim::RoomLinkReader::open(o.room);
+      if (!link.ok()) return link.status();
+      room.couch_link = std::move(link).value();
+    } else {
+      spdlog::warn("no --room: the patient is not moved by any couch (the frames show the set-up error and motion)");
+    }
+    r->room_ = std::make_unique<sim::SimulatedRoom>(room);
+    SimFrameSourceOptions frames;
+    frames.wait_for_frames = false;
+    if (p.scene.sim.renderer == "lightfield") frames.margin_px = 0;
+    r->frames_ = std::make_unique<SimFrameSource>(p, r->renderer_, r->room_.get(), frames);
+    LFTRACK_RETURN_IF_ERROR(r->frames_->open(&r->pair_));
+    r->start_ns_ = monotonic_ns();
+    return r;
+  }
+  ~DetectorRoom() { frames_->close(); }
+
+  // The pair exposed now (rendered once per exposure: the cameras that ask within 5 ms of it
+  // share it). Detector `index`'s pixels, or null if rendering failed.
+  const tracking::Image<std::uint16_t>* frame(std::size_t index) {
+    std::lock_guard lock(mutex_);
+    const std::int64_t now = monotonic_ns();
+    if (!have_ || now - exposed_ns_ > 5'000'000) {
+      frames_->request_exposure(now);
+      have_ = frames_->acquire(&pair_, std::chrono::steady_clock::now() + std::chrono::seconds(2)) ==
+              drivers::DeviceStatus::kOk;
+      exposed_ns_ = now;
+      if (have_ && 1e-9 * double(now - start_ns_) >= settle_s_) residuals_.push_back(room_->residual_mm());
+      ++exposures_;
+    }
+    return have_ && index < pair_.frames.size() ? &pair_.frames[index].pixels : nullptr;
+  }
+  void set_settle(double s) { settle_s_ = s; }
+  nlohmann::json truth() {
+    std::lock_guard lock(mutex_);
+    nlohmann::json j = {{"exposures", exposures_}, {"residual_frames", residuals_.size()}};
+    if (!residuals_.empty()) {
+      std::vector<double> v = residuals_;
+      std::sort(v.begin(), v.end());
+      double sum = 0;
+      for (double x : v) sum += x;
+      j["residual_mean_mm"] = sum / double(v.size());
+      j["residual_p95_mm"] = v[std::min(v.size() - 1, std::size_t(0.95 * double(v.size())))];
+      j["residual_max_mm"] = v.back();
+    }
+    return j;
+  }
+
+ private:
+  explicit DetectorRoom(const PreparedScene& p) : scene_(p) {}
+  static std::int64_t monotonic_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+  }
+  const PreparedScene& scene_;
+  std::shared_ptr<const tracking::DrrRenderer> renderer_;
+  std::unique_ptr<sim::SimulatedRoom> room_;
+  std::unique_ptr<SimFrameSource> frames_;
+  drivers::FramePair pair_;
+  std::mutex mutex_;
+  bool have_ = false;
+  std::int64_t exposed_ns_ = 0, start_ns_ = 0, exposures_ = 0;
+  double settle_s_ = 2;
+  std::vector<double> residuals_;
+};
+
+Status serve_detectors(const ServeOptions& o) {
+  auto scene = load_scene(o.scene.scene);
+  if (!scene.ok()) return scene.status();
+  const std::size_t views = scene->detectors.size();
+  std::vector<std::string> addresses = o.addresses;
+  if (addresses.empty()) {
+    addresses = sim::local_ipv4_addresses();
+    if (addresses.size() < views)
+      return failed_precondition("this host has " + std::to_string(addresses.size()) + " IPv4 address(es) up and the scene " +
+                                 std::to_string(views) + " detectors: a GigE camera needs an address of its own (add "
+                                 "one, e.g. ip addr add 127.0.0.2/8 dev lo, and give --address per detector)");
+    addresses.resize(views);
+  }
+  if (addresses.size() != views)
+    return invalid_argument("give one --address per detector (" + std::to_string(views) + ")");
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
+  if (!prepared.ok()) return prepared.status();
+  auto room = DetectorRoom::start(*prepared, o, &pool);
+  if (!room.ok()) return room.status();
+  (*room)->set_settle(o.settle_s);
+  DetectorRoom* r = room->get();
+  std::vector<std::unique_ptr<sim::GigeFakeDetector>> cameras;
+  std::string listening;
+  for (std::size_t k = 0; k < addresses.size(); ++k) {
+    sim::GigeFakeDetectorOptions c;
+    c.interface = addresses[k];
+    c.serial = ("LFTRACK-" + scene->detectors[k].view.name).substr(0, 15);
+    c.rows = scene->detectors[k].view.rows;
+    c.cols = scene->detectors[k].view.cols;
+    auto render = [r, k](std::uint64_t, std::uint16_t* pixels, int rows, int cols) {
+      const tracking::Image<std::uint16_t>* f = r->frame(k);
+      if (f == nullptr || f->rows() != rows || f->cols() != cols) {
+        std::memset(pixels, 0, std::size_t(rows) * std::size_t(cols) * 2);  // an unexposed frame
+        return;
+      }
+      std::memcpy(pixels, &f->at(0, 0), std::size_t(rows) * std::size_t(cols) * 2);
+    };
+    cameras.push_back(std::make_unique<sim::GigeFakeDetector>(c, render));
+    if (Status s = cameras.back()->start(); !s.ok()) return s;
+    listening += (k ? ", " : "") + cameras.back()->address() + " (" + std::to_string(c.cols) + " x " +
+                 std::to_string(c.rows) + ")";
+  }
+  std::printf("lftrack serve detectors: gige %s%s%s\n", listening.c_str(), o.room.empty() ? "" : "; room link ",
+              o.room.c_str());
+  std::fflush(stdout);
+  const std::map<std::string, int> kinds = {{"stop", 0}, {"start", 1}, {"power-cycle", 2}};
+  const auto describe = [&] {
+    std::string s = "frames served:";
+    for (const auto& c : cameras) s += " " + std::to_string(c->frames_served()) + (c->running() ? "" : " (stopped)");
+    return s;
+  };
+  LFTRACK_RETURN_IF_ERROR(serve_until_stopped(
+      o, kinds,
+      [&](const Fault& f) {
+        for (auto& c : cameras) {
+          if (f.kind != "start") c->stop();
+          if (f.kind == "power-cycle") std::this_thread::sleep_for(std::chrono::milliseconds(100 * f.count));
+          if (f.kind != "stop" && !c->start().ok()) return false;
+        }
+        return true;
+      },
+      describe));
+  nlohmann::json j = r->truth();
+  j["device"] = "detectors";
+  std::uint64_t served = 0;
+  for (const auto& c : cameras) served += c->frames_served();
+  j["frames_served"] = served;
+  cameras.clear();
+  if (o.json)
+    std::printf("%s\n", j.dump().c_str());
+  else
+    std::printf("served: %s\n", j.dump().c_str());
+  return {};
+}
+
+}  // namespace
+
+Command add_serve_detectors_command(CLI::App* parent) {
+  auto o = std::make_shared<ServeOptions>();
+  CLI::App* app = parent->add_subcommand(
+      "detectors", "The scene's simulated detectors as GigE Vision cameras (Aravis fake camera), as their own process");
+  add_common(app, o.get());
+  app->add_option("--address", o->addresses,
+                  "IPv4 address (or interface) of each detector's camera, one per detector (default: the host's "
+                  "first addresses, 127.0.0.1 first)");
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
+  app->add_option("--settle", o->settle_s, "Summarise the residual of frames after this many seconds")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
+  app->add_option("--threads", o->scene.threads, "Worker threads (0: all cores)")->check(CLI::Range(0, 256));
+  CLI::Option* scene = app->get_option("--scene");
+  scene->required();
+  return [o] { return serve_detectors(*o); };
+}
+
+}  // namespace lftrack::host::cli

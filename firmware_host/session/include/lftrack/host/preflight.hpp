@@ -1,0 +1,46 @@
+#pragma once
+// The start-up checks before the first beam (`lftrack run` runs them and refuses to start on any
+// failure, listing every reason; `lftrack run --check` runs only them and prints the
+// pre-treatment checklist):
+//   - the real-time set-up holds in enforce mode (or the operator waived it with --rt ignore);
+//   - the light fields are fresh for this CT and geometry (none is built at treatment time);
+//   - each detector opens and identifies itself (V4L2 or GigE format and size; a replayed
+//     sequence reads), then is closed again;
+//   - each device detector has its detector calibration, made for a detector of its name and
+//     size (the file's content hash is checked when it loads);
+//   - the couch or robot opens, answers a read-back (and, for CAN, its heartbeat), and is
+//     held and closed again: nothing moves;
+//   - the couch calibration, where named, loads; where not, a warning says that corrections
+//     assume the couch's axes are the room's.
+// Nothing here moves the patient or switches the beam on.
+
+#include <string>
+#include <vector>
+
+#include "lftrack/host/loop_session.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/loop/realtime_setup.hpp"
+
+namespace lftrack::host {
+
+enum class CheckResult { kPass, kWarn, kFail };
+
+struct PreflightItem {
+  std::string what;    // "detector A (v4l2 /dev/v4l/by-path/...)"
+  CheckResult result = CheckResult::kPass;
+  std::string detail;  // what was found, or why it fails and what to do
+};
+
+struct PreflightReport {
+  std::vector<PreflightItem> items;
+  bool passed() const;       // no kFail
+  std::string checklist() const;  // one line per item: [ ok ] / [warn] / [FAIL]
+  std::string failures() const;   // every failing item's reason, one per line
+};
+
+// `realtime`: the outcome of apply_realtime_setup (its status, and its report when it
+// succeeded); `rt_waived`: the operator gave --rt ignore.
+PreflightReport run_preflight(const PreparedScene& scene, const LoopSessionOptions& options,
+                              const Result<RealtimeReport>& realtime, bool rt_waived);
+
+}  // namespace lftrack::host

@@ -1,0 +1,25 @@
+#pragma once
+// From a scene's device sections to the drivers' specs (device_factory.hpp), and back to words
+// and YAML. The simulator's devices (frames: sim, actuator: virtual) are made by LoopSession,
+// which owns the simulated room they share; every other kind is filled in here.
+
+#include <string>
+
+#include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+
+// "v4l2 /dev/v4l/by-path/...", "gige 127.0.0.1", "replay DIR", "sim".
+std::string describe_frames(const DetectorFramesSpec& frames);
+// The flow-style YAML a scene writes for it: "sim", "{type: v4l2, device: /dev/video0, buffers: 4}".
+std::string frames_yaml(const DetectorFramesSpec& frames);
+// "modbus tcp 127.0.0.1:1502 unit 1", "can bridge /run/robot.sock node 1", "virtual", "none".
+std::string describe_actuator(const ActuatorSpec& actuator);
+
+// The frame source of a scene whose detectors are devices (v4l2, gige, replay). Fails for sim.
+Result<drivers::FrameSourceSpec> device_frame_source_spec(const Scene& scene);
+// The actuator of a scene with a modbus or can actuator. Fails for none and virtual.
+Result<drivers::ActuatorSpec> device_actuator_spec(const Scene& scene);
+
+}  // namespace lftrack::host

@@ -1,0 +1,202 @@
+#include "lftrack/host/preflight.hpp"
+
+#include <chrono>
+#include <sstream>
+
+#include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/host/scene_devices.hpp"
+
+namespace lftrack::host {
+
+namespace {
+
+using drivers::DeviceStatus;
+
+const char* to_string(DeviceStatus s) {
+  switch (s) {
+    case DeviceStatus::kOk:
+      return "ok";
+    case DeviceStatus::kTimeout:
+      return "no answer in time";
+    case DeviceStatus::kFault:
+      return "the device reported a fault";
+    case DeviceStatus::kDisconnected:
+      return "disconnected";
+    case DeviceStatus::kRefused:
+      return "refused (a fault condition)";
+  }
+  return "?";
+}
+
+void add(PreflightReport* r, std::string what, CheckResult result, std::string detail) {
+  r->items.push_back({std::move(what), result, std::move(detail)});
+}
+
+void check_realtime(const PreparedScene& p, const Result<RealtimeReport>& rt, bool waived, PreflightReport* r) {
+  const std::string what = "real-time set-up";
+  if (!rt.ok()) return add(r, what, CheckResult::kFail, rt.status().message());
+  if (waived) return add(r, what, CheckResult::kWarn, "waived by --rt ignore: " + rt->summary());
+  if (!p.scene.loop.realtime.enforce)
+    return add(r, what, CheckResult::kFail,
+               "the scene's loop.realtime.mode is ignore: a treatment needs enforce (priority and cpus), or "
+               "--rt ignore to waive it knowingly");
+  add(r, what, CheckResult::kPass, rt->summary());
+}
+
+void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  const std::filesystem::path dir = o.light_field_dir.empty() ? default_light_field_dir(p.scene) : o.light_field_dir;
+  if (p.scene.renderer == "lightfield") {
+    auto fields = load_light_fields(p, dir);
+    add(r, "light fields (tracking) in " + dir.string(), fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+        fields.ok() ? "fresh for this CT and geometry"
+                    : fields.status().message() + "; build them first: lftrack precompute --scene " + p.scene.source +
+                          " -o " + dir.string());
+  }
+  const bool simulated_frames = o.replay_sequence.empty() && p.scene.detectors[0].frames.kind == "sim";
+  if (simulated_frames && p.scene.sim.renderer == "lightfield") {
+    auto fields = load_light_fields(p, dir / "sim-frames", p.world_mu.get(), &p.scene.sim.light_field);
+    add(r, "light fields (simulated frames) in " + (dir / "sim-frames").string(),
+        fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+        fields.ok() ? "fresh" : fields.status().message() + "; `lftrack sim` on this scene builds them");
+  }
+}
+
+void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  std::string what = "detectors";
+  for (const DetectorSpec& d : p.scene.detectors) what += " " + d.view.name;
+  const std::string kind = o.replay_sequence.empty() ? p.scene.detectors[0].frames.kind : "replay";
+  if (kind == "sim") return add(r, what, CheckResult::kPass, "simulated (no device to open)");
+  Result<drivers::FrameSourceSpec> spec = invalid_argument("no spec");
+  if (!o.replay_sequence.empty()) {
+    drivers::ReplaySourceSpec replay;
+    replay.sequence = o.replay_sequence;
+    for (const DetectorSpec& d : p.scene.detectors) replay.detectors.push_back({d.view.name, d.view.rows, d.view.cols});
+    spec = drivers::FrameSourceSpec(std::move(replay));
+  } else {
+    spec = device_frame_source_spec(p.scene);
+  }
+  what += " (" + describe_frames(p.scene.detectors[0].frames) + (p.scene.detectors.size() > 1 ? ", ..." : "") + ")";
+  if (!spec.ok()) return add(r, what, CheckResult::kFail, spec.status().message());
+  auto source = drivers::make_frame_source(std::move(spec).value());
+  if (!source.ok()) return add(r, what, CheckResult::kFail, source.status().message());
+  drivers::FramePair pair;
+  const Status opened = (*source)->open(&pair);
+  (*source)->close();
+  if (!opened.ok()) return add(r, what, CheckResult::kFail, opened.message());
+  std::ostringstream found;
+  for (std::size_t i = 0; i < pair.frames.size(); ++i)
+    found << (i ? ", " : "") << p.scene.detectors[i].view.name << " " << pair.frames[i].pixels.rows() << " x "
+          << pair.frames[i].pixels.cols();
+  add(r, what, CheckResult::kPass, "opened and closed: " + found.str());
+}
+
+void check_detector_calibrations(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  for (const DetectorSpec& d : p.scene.detectors) {
+    const std::string what = "detector calibration of " + d.view.name;
+    const bool device = o.replay_sequence.empty() && (d.frames.kind == "v4l2" || d.frames.kind == "gige");
+    if (d.simulator_calibration) {
+      add(r, what, CheckResult::kWarn,
+          "calibration: simulator: the simulator's detector model corrects these frames (right only for frames "
+          "the simulator made, e.g. lftrack serve detectors)");
+      continue;
+    }
+    if (d.calibration_file.empty()) {
+      if (device)
+        add(r, what, CheckResult::kFail,
+            "none named (detectors[].calibration): make one with lftrack calibrate detector --dark DIR --flood DIR");
+      else
+        add(r, what, CheckResult::kWarn,
+            "none named: the simulator's detector model corrects these frames (right only for frames it made)");
+      continue;
+    }
+    auto calibration = load_detector_calibration(d.calibration_file);
+    if (!calibration.ok()) {
+      add(r, what, CheckResult::kFail, calibration.status().message());
+      continue;
+    }
+    if (calibration->rows != d.view.rows || calibration->cols != d.view.cols) {
+      add(r, what, CheckResult::kFail,
+          d.calibration_file + " is for " + std::to_string(calibration->rows) + " x " + std::to_string(calibration->cols) +
+              " pixels; " + d.view.name + " has " + std::to_string(d.view.rows) + " x " + std::to_string(d.view.cols));
+      continue;
+    }
+    if (!calibration->detector.empty() && calibration->detector != d.view.name) {
+      add(r, what, CheckResult::kFail,
+          d.calibration_file + " was made for detector '" + calibration->detector + "', not '" + d.view.name + "'");
+      continue;
+    }
+    add(r, what, CheckResult::kPass, d.calibration_file + " (hash " + calibration->content_hash + ")");
+  }
+}
+
+void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  const ActuatorSpec& a = p.scene.actuator;
+  const std::string what = "actuator (" + describe_actuator(a) + ")";
+  if (!o.replay_sequence.empty()) return add(r, what, CheckResult::kPass, "replay: the recorded read-backs, if any");
+  if (a.type == "none") return add(r, what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
+  if (a.type == "virtual") return add(r, what, CheckResult::kPass, "the simulator's couch");
+  auto spec = device_actuator_spec(p.scene);
+  if (!spec.ok()) return add(r, what, CheckResult::kFail, spec.status().message());
+  auto actuator = drivers::make_actuator(std::move(spec).value());
+  if (!actuator.ok()) return add(r, what, CheckResult::kFail, actuator.status().message());
+  if (Status s = (*actuator)->open(); !s.ok()) return add(r, what, CheckResult::kFail, s.message());
+  drivers::ActuatorState state;
+  DeviceStatus got = DeviceStatus::kTimeout;
+  // A driver that has just connected may answer its first read-back late; a second try.
+  for (int attempt = 0; attempt < 3 && got != DeviceStatus::kOk; ++attempt)
+    got = (*actuator)->readback(&state, std::chrono::steady_clock::now() + std::chrono::seconds(1));
+  (*actuator)->set_beam_permit(false);
+  (*actuator)->hold();
+  (*actuator)->close();
+  if (got != DeviceStatus::kOk)
+    return add(r, what, CheckResult::kFail, std::string("opened, but the read-back failed: ") + to_string(got));
+  std::ostringstream s;
+  s.precision(3);
+  s << std::fixed << "answered: position (" << state.position[0] << ", " << state.position[1] << ", "
+    << state.position[2] << ") mm" << (state.moving ? ", moving" : "") << (state.fault ? ", FAULT" : "");
+  add(r, what, state.fault ? CheckResult::kFail : CheckResult::kPass, s.str());
+  if (a.calibration)
+    add(r, "couch calibration", CheckResult::kPass, a.calibration_file);
+  else
+    add(r, "couch calibration", CheckResult::kWarn,
+        "none named (actuator.calibration): corrections assume the couch's axes are the room's (lftrack calibrate couch)");
+}
+
+}  // namespace
+
+bool PreflightReport::passed() const {
+  for (const PreflightItem& i : items)
+    if (i.result == CheckResult::kFail) return false;
+  return true;
+}
+
+std::string PreflightReport::checklist() const {
+  std::ostringstream s;
+  for (const PreflightItem& i : items)
+    s << (i.result == CheckResult::kPass ? "[ ok ] " : i.result == CheckResult::kWarn ? "[warn] " : "[FAIL] ") << i.what
+      << ": " << i.detail << "\n";
+  return s.str();
+}
+
+std::string PreflightReport::failures() const {
+  std::ostringstream s;
+  for (const PreflightItem& i : items)
+    if (i.result == CheckResult::kFail) s << "  " << i.what << ": " << i.detail << "\n";
+  return s.str();
+}
+
+PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& o, const Result<RealtimeReport>& realtime,
+                              bool rt_waived) {
+  PreflightReport r;
+  check_realtime(p, realtime, rt_waived, &r);
+  add(&r, "view geometry", CheckResult::kPass,
+      "from the scene file " + p.scene.source + " (lftrack calibrate views writes it there)");
+  check_light_fields(p, o, &r);
+  check_detectors(p, o, &r);
+  check_detector_calibrations(p, o, &r);
+  check_actuator(p, o, &r);
+  return r;
+}
+
+}  // namespace lftrack::host

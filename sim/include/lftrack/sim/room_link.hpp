@@ -1,0 +1,69 @@
+#pragma once
+// The room link: where a served couch (or robot) has moved the patient, shared with the
+// simulator's detectors in another process. It stands for the physics of the room, not for a
+// protocol: the controller never reads it. The couch server writes its position about every
+// millisecond; the detector server (or `lftrack run` on simulated frames) reads the newest.
+//
+// The link is a small file mapped shared (64 bytes of header and one record under a sequence
+// lock: an odd sequence is a write in progress). A reader never blocks the writer; a torn read
+// is retried. A link not written for `stale_after` seconds is reported stale: the couch stopped
+// where it was, as a couch whose controller died would.
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::sim {
+
+struct RoomLinkSample {
+  tracking::Vector6d couch_position = tracking::Vector6d::Zero();  // couch coordinates (mm, rad)
+  std::int64_t written_ns = 0;  // CLOCK_MONOTONIC of the write
+  std::uint64_t writer_pid = 0;
+};
+
+class RoomLinkReader;
+
+class RoomLinkWriter {
+ public:
+  // Creates the link file (mode 0600). An existing room link whose writer has gone (a couch
+  // server killed) is taken over in place, so readers keep their mapping, and its last position
+  // is where the couch stands (resumed_position()). A link whose writer still runs, or a file
+  // that is not a room link, is refused, never overwritten.
+  static Result<std::unique_ptr<RoomLinkWriter>> create(const std::filesystem::path& path);
+  // An orderly end removes the file (readers keep the last position and see it go stale); a
+  // writer killed leaves it, for the next server to take over.
+  ~RoomLinkWriter();
+  // The position found in a link taken over; zero for a new link.
+  const tracking::Vector6d& resumed_position() const { return resumed_; }
+  RoomLinkWriter(const RoomLinkWriter&) = delete;
+  RoomLinkWriter& operator=(const RoomLinkWriter&) = delete;
+  void publish(const tracking::Vector6d& couch_position);  // never blocks; not thread-safe (one writer)
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  RoomLinkWriter(std::filesystem::path path, void* map) : path_(std::move(path)), map_(map) {}
+  std::filesystem::path path_;
+  void* map_;
+  tracking::Vector6d resumed_ = tracking::Vector6d::Zero();
+};
+
+class RoomLinkReader {
+ public:
+  // Opens an existing link; fails with a message if the file is missing or not a room link.
+  static Result<std::unique_ptr<RoomLinkReader>> open(const std::filesystem::path& path);
+  ~RoomLinkReader();
+  RoomLinkReader(const RoomLinkReader&) = delete;
+  RoomLinkReader& operator=(const RoomLinkReader&) = delete;
+  // The newest sample; false if none has been written yet (or every read was torn).
+  bool read(RoomLinkSample* sample) const;
+
+ private:
+  friend class RoomLinkWriter;
+  explicit RoomLinkReader(const void* map) : map_(map) {}
+  const void* map_;
+};
+
+}  // namespace lftrack::sim

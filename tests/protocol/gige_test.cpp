@@ -1,0 +1,545 @@
+// The GigE Vision detector driver (drivers/gige_detector.hpp) against Aravis's fake GigE Vision
+// camera (sim/gige_fake_detector.hpp) on this host: GVCP control, GenICam registers and GVSP
+// frames over UDP on loopback, in process. Exact 16-bit pixels through a pair, the camera's frame
+// ids across their 16-bit wrap, the deadline when a camera stops, a restarted camera found and
+// reopened, a wrong size and an absent camera refused, and the transfer time of a scene-sized
+// frame.
+//
+// Every fake camera needs UDP port 3956 on its own address, so these tests hold a file lock
+// for their whole run: under `ctest -j` (one process per test) they take turns. The pair needs
+// a second address besides 127.0.0.1 (Aravis's fake camera binds only an address an interface
+// carries); where the host has none, that test is skipped with the reason.
+
+#include "lftrack/drivers/gige_detector.hpp"
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <sys/file.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "lftrack/sim/gige_fake_detector.hpp"
+#include "protocol_test_support.hpp"
+
+namespace lftrack {
+namespace {
+
+using drivers::DeviceStatus;
+using drivers::Frame;
+using drivers::FramePair;
+using drivers::GigeDetector;
+using drivers::GigeDetectorOptions;
+using drivers::GigeFrameSource;
+using drivers::GigeTrigger;
+using sim::GigeFakeDetector;
+using sim::GigeFakeDetectorOptions;
+using test::in_ms;
+
+// Frame ids of Aravis's fake camera start at 65401 (arvfakecamera.c: frame_id = 65400, then +1).
+constexpr std::uint32_t kFirstFrameId = 65401;
+
+// The known picture of frame k of a camera (`salt` tells the cameras apart): the frame index in
+// pixels (0,0) and (0,1), the extremes 65535, 65534, 256, 255, 0 and 4095 in (0,2)..(0,7), and a
+// pattern over all 16 bits everywhere else.
+std::uint16_t pattern(std::uint64_t k, int r, int c, std::uint16_t salt) {
+  if (r == 0 && c < 8) {
+    constexpr std::array<std::uint16_t, 6> fixed = {65535, 65534, 256, 255, 0, 4095};
+    if (c == 0) return std::uint16_t(k & 0xFFFF);
+    if (c == 1) return std::uint16_t((k >> 16) & 0xFFFF);
+    return fixed[std::size_t(c - 2)];
+  }
+  return std::uint16_t(
+             (std::uint32_t(r) * 40503u + std::uint32_t(c) * 2654435761u + std::uint32_t(k) * 977u) >> 8) ^
+         salt;
+}
+
+sim::GigeFrameRenderer renderer(std::uint16_t salt) {
+  return [salt](std::uint64_t k, std::uint16_t* pixels, int rows, int cols) {
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < cols; ++c)
+        pixels[std::size_t(r) * std::size_t(cols) + std::size_t(c)] = pattern(k, r, c, salt);
+  };
+}
+
+std::uint64_t frame_index(const Frame& f) {
+  return std::uint64_t(f.pixels.at(0, 0)) | (std::uint64_t(f.pixels.at(0, 1)) << 16);
+}
+
+// Pixels that differ from the known picture of the frame's own index; the first one described.
+int mismatches(const Frame& f, std::uint16_t salt, std::string* first) {
+  const std::uint64_t k = frame_index(f);
+  int n = 0;
+  for (int r = 0; r < f.pixels.rows(); ++r)
+    for (int c = 0; c < f.pixels.cols(); ++c) {
+      const std::uint16_t want = pattern(k, r, c, salt);
+      if (f.pixels.at(r, c) == want) continue;
+      if (n++ == 0 && first != nullptr) {
+        std::ostringstream d;
+        d << "(" << r << "," << c << ") = " << f.pixels.at(r, c) << ", want " << want;
+        *first = d.str();
+      }
+    }
+  return n;
+}
+
+std::int64_t monotonic_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// One GigE test at a time on this host, across processes.
+class HostLock {
+ public:
+  HostLock() {
+    const auto path = std::filesystem::temp_directory_path() / "lftrack-gige-tests.lock";
+    fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (fd_ >= 0) (void)flock(fd_, LOCK_EX);
+  }
+  ~HostLock() {
+    if (fd_ >= 0) ::close(fd_);  // releases the lock
+  }
+  HostLock(const HostLock&) = delete;
+  HostLock& operator=(const HostLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
+class GigeTest : public ::testing::Test {
+ protected:
+  // A fake camera on `address`, started (the test stops where it cannot start).
+  std::unique_ptr<GigeFakeDetector> fake(const std::string& address, const std::string& serial, int rows,
+                                         int cols, double rate_hz, std::uint16_t salt) {
+    GigeFakeDetectorOptions o;
+    o.interface = address;
+    o.serial = serial;
+    o.rows = rows;
+    o.cols = cols;
+    o.frame_rate_hz = rate_hz;
+    auto f = std::make_unique<GigeFakeDetector>(o, renderer(salt));
+    const Status s = f->start();
+    EXPECT_TRUE(s.ok()) << s.to_string();
+    return s.ok() ? std::move(f) : nullptr;
+  }
+
+  static GigeDetectorOptions client(const std::string& camera, int rows, int cols) {
+    GigeDetectorOptions o;
+    o.camera = camera;
+    o.rows = rows;
+    o.cols = cols;
+    return o;
+  }
+
+  static Frame frame(int rows, int cols) {
+    Frame f;
+    f.pixels = tracking::Image<std::uint16_t>(rows, cols);
+    return f;
+  }
+
+  // Captures until kOk or `ms` pass; the last status.
+  static DeviceStatus capture_within(GigeDetector& d, Frame* f, double ms) {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(long(ms * 1000));
+    DeviceStatus s = DeviceStatus::kTimeout;
+    while (std::chrono::steady_clock::now() < until) {
+      s = d.capture(f, in_ms(100));
+      if (s == DeviceStatus::kOk) break;
+    }
+    return s;
+  }
+
+  HostLock lock_;
+};
+
+TEST_F(GigeTest, RoundTripsSixteenBitPixelsExactlyThroughAPairOfSoftwareTriggeredCameras) {
+  const std::vector<std::string> addresses = sim::local_ipv4_addresses();
+  if (addresses.size() < 2 || addresses[0] != "127.0.0.1")
+    GTEST_SKIP()
+        << "a pair of fake GigE cameras needs 127.0.0.1 and a second local IPv4 address (Aravis's fake "
+           "camera binds GVCP port 3956 on an interface's own address); this host has only "
+        << (addresses.empty() ? std::string("none") : addresses[0]);
+  constexpr int kRows = 120, kCols = 160;
+  auto a = fake(addresses[0], "LFGV-A", kRows, kCols, 25, 0x0000);
+  auto b = fake(addresses[1], "LFGV-B", kRows, kCols, 25, 0x5A5A);
+  ASSERT_TRUE(a && b);
+
+  std::vector<GigeDetectorOptions> detectors = {client(a->address(), kRows, kCols),
+                                                client(b->address(), kRows, kCols)};
+  for (auto& d : detectors) d.trigger = GigeTrigger::kSoftware;
+  // The two triggers leave from two threads and two fake cameras serve them: on a 2-core host
+  // under load they land tens of ms apart, so the round trip allows that; the skew check itself
+  // is tested below with exposures 150 ms apart.
+  GigeFrameSource source(detectors, /*max_skew_ms=*/250);
+  FramePair pair;
+  const Status opened = source.open(&pair);
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  ASSERT_EQ(pair.frames.size(), 2u);
+  EXPECT_EQ(pair.frames[1].pixels.rows(), kRows) << "open() sizes the pair";
+  EXPECT_EQ(source.detector(0).pixel_format_name(), "Mono16");
+  EXPECT_EQ(source.detector(1).pixel_format_name(), "Mono16");
+  EXPECT_EQ(source.detector(1).device_id().find("LFGV-B") != std::string::npos, true)
+      << source.detector(1).device_id();
+
+  std::array<std::uint32_t, 2> last_sequence = {0, 0};
+  constexpr int kPairs = 12;
+  for (int i = 0; i < kPairs; ++i) {
+    const std::int64_t asked = monotonic_ns();
+    source.request_exposure(asked);
+    ASSERT_EQ(source.acquire(&pair, in_ms(1000)), DeviceStatus::kOk)
+        << "pair " << i << ": skewed " << source.skewed_pairs() << ", skew "
+        << (pair.frames[1].timestamp_ns - pair.frames[0].timestamp_ns) / 1000 << " us, incomplete "
+        << source.detector(0).counters().incomplete << "/" << source.detector(1).counters().incomplete
+        << ", timeouts " << source.detector(0).counters().timeouts << "/"
+        << source.detector(1).counters().timeouts;
+    const std::int64_t done = monotonic_ns();
+    for (std::size_t j = 0; j < 2; ++j) {
+      const Frame& f = pair.frames[j];
+      std::string first;
+      EXPECT_EQ(mismatches(f, j == 0 ? 0x0000 : 0x5A5A, &first), 0)
+          << "pair " << i << " camera " << j << ": " << first;
+      EXPECT_EQ(f.pixels.at(0, 2), 65535);
+      EXPECT_EQ(f.pixels.at(0, 3), 65534);
+      EXPECT_EQ(f.pixels.at(0, 4), 256);
+      EXPECT_EQ(f.sequence, kFirstFrameId + frame_index(f)) << "the camera's frame id, one frame per trigger";
+      if (i > 0) {
+        EXPECT_EQ(f.sequence, last_sequence[j] + 1) << "one frame per trigger, none lost";
+      }
+      last_sequence[j] = f.sequence;
+      // The leader reached us after the trigger was asked for and before acquire() returned.
+      EXPECT_GE(f.timestamp_ns, asked - 1'000'000);
+      EXPECT_LE(f.timestamp_ns, done);
+    }
+  }
+  for (std::size_t j = 0; j < 2; ++j) {
+    const drivers::GigeCounters& c = source.detector(j).counters();
+    EXPECT_EQ(c.frames, kPairs);
+    EXPECT_EQ(c.incomplete, 0);
+    EXPECT_EQ(c.frame_id_gaps, 0);
+    EXPECT_EQ(c.trigger_failures, 0);
+  }
+  EXPECT_EQ(source.skewed_pairs(), 0);
+  source.close();
+
+  // Exposures 150 ms apart: never a pair.
+  GigeFrameSource strict(detectors, /*max_skew_ms=*/20);
+  ASSERT_TRUE(strict.open(&pair).ok());
+  const std::int64_t now = monotonic_ns();
+  strict.detector(0).trigger(now);
+  strict.detector(1).trigger(now + 150'000'000);
+  EXPECT_EQ(strict.acquire(&pair, in_ms(1000)), DeviceStatus::kFault);
+  EXPECT_EQ(strict.skewed_pairs(), 1);
+  EXPECT_GE(pair.frames[1].timestamp_ns - pair.frames[0].timestamp_ns, 100'000'000);
+  strict.close();
+}
+
+TEST_F(GigeTest, SequenceIsTheCamerasFrameIdUnwrappedAcrossItsSixteenBitWrap) {
+  constexpr int kRows = 48, kCols = 64;
+  auto camera = fake("127.0.0.1", "LFGV-SEQ", kRows, kCols, /*rate_hz=*/500, 0x1234);
+  ASSERT_TRUE(camera);
+  GigeDetector d(client(camera->address(), kRows, kCols));
+  const Status opened = d.open();
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  Frame f = frame(kRows, kCols);
+  std::uint32_t previous = 0;
+  std::int64_t gaps = 0, lost = 0;
+  int delivered = 0;
+  // Ids start at 65401 and wrap to 1 after 65535: 135 frames in.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(4);
+  while (camera->frames_served() < 200 && std::chrono::steady_clock::now() < until) {
+    const DeviceStatus s = d.capture(&f, in_ms(100));
+    if (s != DeviceStatus::kOk) continue;
+    std::string first;
+    ASSERT_EQ(mismatches(f, 0x1234, &first), 0) << first;
+    ASSERT_EQ(f.sequence, kFirstFrameId + frame_index(f)) << "frame " << frame_index(f);
+    if (delivered > 0) {
+      ASSERT_GT(f.sequence, previous);
+      if (f.sequence - previous > 1) {
+        ++gaps;
+        lost += f.sequence - previous - 1;
+      }
+    }
+    previous = f.sequence;
+    ++delivered;
+  }
+  EXPECT_GT(previous, 65535u + 10) << "past the 16-bit wrap";
+  EXPECT_GE(delivered, 50);
+  EXPECT_EQ(d.counters().frames, delivered);
+  EXPECT_EQ(d.counters().frame_id_gaps, gaps);
+  EXPECT_EQ(d.counters().frames_lost, lost);
+  EXPECT_EQ(d.counters().backwards, 0);
+  d.close();
+}
+
+TEST_F(GigeTest, TakesTheNewestCompleteFrameAndHandsTheOlderOnesBack) {
+  constexpr int kRows = 48, kCols = 64;
+  auto camera = fake("127.0.0.1", "LFGV-NEW", kRows, kCols, /*rate_hz=*/200, 3);
+  ASSERT_TRUE(camera);
+  GigeDetectorOptions o = client(camera->address(), kRows, kCols);
+  o.buffers = 16;  // room for the frames of a late cycle (80 ms at 200 Hz)
+  GigeDetector d(o);
+  const Status opened = d.open();
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  Frame f = frame(kRows, kCols);
+  ASSERT_EQ(capture_within(d, &f, 1000), DeviceStatus::kOk);
+  for (int late = 0; late < 3; ++late) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // a late cycle: about 4 frames wait
+    const std::uint64_t served = camera->frames_served();
+    const std::int64_t dropped = d.counters().stale_dropped;
+    ASSERT_EQ(d.capture(&f, in_ms(100)), DeviceStatus::kOk);
+    EXPECT_GE(frame_index(f) + 2, served)
+        << "the newest (or, if its packets were still on their way, the one before)";
+    EXPECT_GE(d.counters().stale_dropped, dropped + 1) << "older complete frames went back unread";
+  }
+  EXPECT_EQ(d.counters().underruns, 0);
+  // Later than 16 frame periods: every buffer is full, the frames after them are lost, and the
+  // newest complete frame is an old one (its timestamp says how old).
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  const std::uint64_t served = camera->frames_served();
+  ASSERT_EQ(d.capture(&f, in_ms(100)), DeviceStatus::kOk);
+  EXPECT_GT(d.counters().underruns, 0);
+  EXPECT_LT(frame_index(f) + 4, served);
+  EXPECT_GT(monotonic_ns() - f.timestamp_ns, 40'000'000);
+  std::string first;
+  EXPECT_EQ(mismatches(f, 3, &first), 0) << first;
+  EXPECT_EQ(d.counters().backwards, 0);
+  d.close();
+}
+
+TEST_F(GigeTest, TimesOutByTheDeadlineWhenTheCameraStops) {
+  constexpr int kRows = 48, kCols = 64;
+  auto camera = fake("127.0.0.1", "LFGV-STOP", kRows, kCols, 100, 7);
+  ASSERT_TRUE(camera);
+  GigeDetector d(client(camera->address(), kRows, kCols));
+  const Status opened = d.open();
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  Frame f = frame(kRows, kCols);
+  ASSERT_EQ(capture_within(d, &f, 1000), DeviceStatus::kOk);
+
+  camera->stop();
+  // What was already on its way is delivered; then nothing.
+  DeviceStatus s = DeviceStatus::kOk;
+  for (int i = 0; i < 20 && s == DeviceStatus::kOk; ++i) s = d.capture(&f, in_ms(30));
+  ASSERT_EQ(s, DeviceStatus::kTimeout);
+  const std::int64_t timeouts = d.counters().timeouts;
+  for (double ms : {5.0, 50.0}) {
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_EQ(d.capture(&f, in_ms(ms)), DeviceStatus::kTimeout);
+    const double took =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_GE(took, ms - 1) << "waits for the deadline";
+    EXPECT_LE(took, ms + 60) << "and not much past it (a loaded 2-core host can be late to wake us)";
+  }
+  EXPECT_EQ(d.counters().timeouts, timeouts + 2);
+  EXPECT_TRUE(d.is_open()) << "silence alone is not a disconnect (the heartbeat decides that)";
+  // Back on before closing: releasing a camera that does not answer waits for GVCP timeouts.
+  ASSERT_TRUE(camera->start().ok());
+  d.close();
+}
+
+TEST_F(GigeTest, ARestartedCameraIsFoundByTheHeartbeatAndRecoveredByReopen) {
+  constexpr int kRows = 48, kCols = 64;
+  auto camera = fake("127.0.0.1", "LFGV-RST", kRows, kCols, 100, 9);
+  ASSERT_TRUE(camera);
+  GigeFrameSource source({client(camera->address(), kRows, kCols)}, 10);
+  FramePair pair;
+  const Status opened = source.open(&pair);
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  GigeDetector& d = source.detector(0);
+  ASSERT_EQ(capture_within(d, &pair.frames[0], 1000), DeviceStatus::kOk);
+
+  camera->stop();
+  ASSERT_TRUE(camera->start().ok()) << "a power cycle: registers reset, no controller";
+  // Aravis's heartbeat (1 s) reads the control register back as 0: control lost.
+  DeviceStatus s = DeviceStatus::kOk;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(4);
+  while (s != DeviceStatus::kDisconnected && std::chrono::steady_clock::now() < until)
+    s = source.acquire(&pair, in_ms(50));
+  ASSERT_EQ(s, DeviceStatus::kDisconnected);
+  EXPECT_FALSE(d.is_open());
+  EXPECT_EQ(d.counters().disconnects, 1);
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(source.acquire(&pair, in_ms(50)), DeviceStatus::kDisconnected);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(5))
+      << "gone: at once, no waiting";
+
+  const Status reopened = source.reopen_disconnected();
+  ASSERT_TRUE(reopened.ok()) << reopened.to_string();
+  EXPECT_TRUE(d.is_open());
+  EXPECT_EQ(d.counters().reopens, 1);
+  ASSERT_EQ(capture_within(d, &pair.frames[0], 1000), DeviceStatus::kOk);
+  std::string first;
+  EXPECT_EQ(mismatches(pair.frames[0], 9, &first), 0) << first;
+  EXPECT_EQ(pair.frames[0].sequence, kFirstFrameId + frame_index(pair.frames[0]))
+      << "the restarted camera's ids";
+  source.close();
+}
+
+TEST_F(GigeTest, FallsBackToMono8WidenedNotScaledWhereTheCameraHasNoSixteenBits) {
+  constexpr int kRows = 48, kCols = 64;
+  GigeFakeDetectorOptions fo;
+  fo.serial = "LFGV-MONO8";
+  fo.rows = kRows;
+  fo.cols = kCols;
+  fo.frame_rate_hz = 100;
+  fo.mono8_only = true;
+  GigeFakeDetector camera(fo, renderer(0x2222));
+  const Status started = camera.start();
+  ASSERT_TRUE(started.ok()) << started.to_string();
+  GigeDetector d(client(camera.address(), kRows, kCols));
+  const Status opened = d.open();
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  EXPECT_EQ(d.pixel_format_name(), "Mono8");
+  Frame f = frame(kRows, kCols);
+  ASSERT_EQ(capture_within(d, &f, 1000), DeviceStatus::kOk);
+  // The camera sends the high byte of the pattern; it arrives as 0..255 counts.
+  const std::uint64_t k = f.sequence - kFirstFrameId;
+  int wrong = 0;
+  for (int r = 0; r < kRows; ++r)
+    for (int c = 0; c < kCols; ++c) wrong += f.pixels.at(r, c) != (pattern(k, r, c, 0x2222) >> 8);
+  EXPECT_EQ(wrong, 0);
+  EXPECT_EQ(f.pixels.at(0, 2), 255) << "65535 sent as 8 bits: 255, not scaled back up";
+  d.close();
+}
+
+TEST_F(GigeTest, RefusesAWrongSizeNamingTheCamera) {
+  auto camera = fake("127.0.0.1", "LFGV-SIZE", 48, 64, 25, 0);
+  ASSERT_TRUE(camera);
+  GigeDetector d(client("127.0.0.1", 50, 64));
+  const Status s = d.open();
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_NE(s.message().find("gige camera 127.0.0.1"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("gives 64 x 48 Mono16 for the scene's 64 x 50"), std::string::npos)
+      << s.message();
+  EXPECT_FALSE(d.is_open());
+  // Released: the camera takes the next client at once; this one finds it by discovery.
+  GigeDetector right(client(camera->device_id(), 48, 64));
+  const Status ok = right.open();
+  EXPECT_TRUE(ok.ok()) << ok.to_string();
+}
+
+TEST_F(GigeTest, RefusesAnAbsentCameraAndBadOptionsWithClearMessages) {
+  GigeDetector absent(client("127.0.0.1", 48, 64));  // no fake camera: nothing answers on 3956
+  const auto t0 = std::chrono::steady_clock::now();
+  const Status s = absent.open();
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), StatusCode::kNotFound);
+  EXPECT_NE(s.message().find("gige camera 127.0.0.1: no GigE Vision camera answers"), std::string::npos)
+      << s.message();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(6))
+      << "Aravis gives up after 5 x 500 ms";
+  EXPECT_FALSE(absent.is_open());
+  EXPECT_EQ(absent.capture(nullptr, in_ms(1)), DeviceStatus::kDisconnected);
+
+  GigeDetectorOptions o = client("10.0.0.7", 0, 64);
+  const Status no_rows = drivers::validate_gige_options(o);
+  EXPECT_EQ(no_rows.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(no_rows.message().find("gige camera 10.0.0.7: rows and cols"), std::string::npos)
+      << no_rows.message();
+  o = client("", 48, 64);
+  EXPECT_NE(drivers::validate_gige_options(o).message().find("no camera"), std::string::npos);
+  o = client("10.0.0.7", 48, 64);
+  o.frame_retention_ms = 1;  // shorter than the packet timeout
+  EXPECT_EQ(drivers::validate_gige_options(o).code(), StatusCode::kInvalidArgument);
+}
+
+// The transfer time of one scene-sized frame (scenes/*.yaml: 512 x 512) over loopback: from
+// the end of the fake camera's render (its packets start leaving) to capture() returning the
+// frame, one software-triggered frame at a time. Printed, and recorded as test properties.
+TEST_F(GigeTest, MeasuresTheLoopbackTransferOfASceneSizedFrame) {
+  constexpr int kRows = 512, kCols = 512;
+  constexpr long long kNeeded = 2LL * kRows * kCols * 2;
+  long long rmem_max = -1;
+  std::ifstream("/proc/sys/net/core/rmem_max") >> rmem_max;
+  if (rmem_max >= 0 && rmem_max < kNeeded)
+    GTEST_SKIP() << "a 512 x 512 stream needs a " << kNeeded << "-byte receive buffer; net.core.rmem_max is "
+                 << rmem_max;
+  // Knobs for measuring by hand: LFTRACK_GIGE_MEASURE_FRAMES (300), LFTRACK_GIGE_PACKET_SIZE
+  // (the camera's 1400 bytes), LFTRACK_GIGE_PACKET_SOCKET=1 (Aravis's PF_PACKET ring).
+  auto knob = [](const char* name, int fallback) {
+    const char* v = std::getenv(name);
+    return v != nullptr ? std::atoi(v) : fallback;
+  };
+  const int frames = std::max(10, knob("LFTRACK_GIGE_MEASURE_FRAMES", 300));
+
+  // The renderer writes the pattern and notes when it finished (CLOCK_REALTIME, as the stream's
+  // own timestamps), per frame index.
+  std::vector<std::atomic<std::int64_t>> rendered(std::size_t(frames) + 64);
+  GigeFakeDetectorOptions fo;
+  fo.interface = "127.0.0.1";
+  fo.serial = "LFGV-512";
+  fo.rows = kRows;
+  fo.cols = kCols;
+  auto base = renderer(0x0F0F);
+  GigeFakeDetector camera(fo, [&](std::uint64_t k, std::uint16_t* pixels, int rows, int cols) {
+    base(k, pixels, rows, cols);
+    timespec ts{};
+    clock_gettime(CLOCK_REALTIME, &ts);
+    if (k < rendered.size()) rendered[k].store(std::int64_t(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec);
+  });
+  ASSERT_TRUE(camera.start().ok());
+  GigeDetectorOptions o = client(camera.address(), kRows, kCols);
+  o.trigger = GigeTrigger::kSoftware;
+  o.packet_size = knob("LFTRACK_GIGE_PACKET_SIZE", 0);
+  o.packet_socket = knob("LFTRACK_GIGE_PACKET_SOCKET", 0) != 0;
+  GigeDetector d(o);
+  const Status opened = d.open();
+  ASSERT_TRUE(opened.ok()) << opened.to_string();
+  Frame f = frame(kRows, kCols);
+  std::vector<double> transfer_us, cycle_us;
+  int failed = 0;
+  for (int i = 0; i < frames; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    d.trigger();
+    const DeviceStatus s = d.capture(&f, in_ms(500));
+    timespec now{};
+    clock_gettime(CLOCK_REALTIME, &now);
+    if (s != DeviceStatus::kOk) {
+      ++failed;
+      continue;
+    }
+    const std::uint64_t k = frame_index(f);
+    std::string first;
+    ASSERT_EQ(mismatches(f, 0x0F0F, &first), 0) << first;
+    ASSERT_LT(k, rendered.size());
+    transfer_us.push_back(
+        double(std::int64_t(now.tv_sec) * 1'000'000'000 + now.tv_nsec - rendered[k].load()) / 1e3);
+    cycle_us.push_back(
+        std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+  }
+  ASSERT_GE(transfer_us.size(), std::size_t(frames * 9 / 10))
+      << failed << " of " << frames << " frames failed";
+  auto quantile = [](std::vector<double> v, double q) {
+    std::sort(v.begin(), v.end());
+    return v[std::min(v.size() - 1, std::size_t(q * double(v.size())))];
+  };
+  const double p50 = quantile(transfer_us, 0.5), p99 = quantile(transfer_us, 0.99),
+               max = quantile(transfer_us, 1.0);
+  const double c50 = quantile(cycle_us, 0.5), c99 = quantile(cycle_us, 0.99);
+  std::cout << "[ GigE     ] 512 x 512 Mono16 (" << kRows * kCols * 2 << " bytes, packet size "
+            << (o.packet_size > 0 ? o.packet_size : 1400) << (o.packet_socket ? ", packet socket" : "")
+            << ") over loopback, " << transfer_us.size() << " frames (" << failed << " failed, "
+            << d.counters().incomplete << " incomplete): transfer p50 " << p50 << " us, p99 " << p99
+            << " us, max " << max << " us; trigger-to-frame p50 " << c50 << " us, p99 " << c99 << " us\n";
+  RecordProperty("transfer_p50_us", std::to_string(p50));
+  RecordProperty("transfer_p99_us", std::to_string(p99));
+  EXPECT_LT(p50, 100'000) << "a frame on loopback takes well under 100 ms";
+  d.close();
+}
+
+}  // namespace
+}  // namespace lftrack

@@ -1,0 +1,179 @@
+// The scene's devices: detectors[].frames with their settings, actuator modbus and can, and the
+// drivers' specs and words made from them (scene_devices.hpp). Every refusal names the file and
+// line.
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <variant>
+
+#include "test_data.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_devices.hpp"
+
+namespace lftrack::host {
+namespace {
+
+// The built-in scene with both detectors' `frames: sim` replaced by `frames`, and its actuator
+// section's first line `type: virtual` replaced by `actuator` (default none: the simulator's
+// couch needs simulated detectors).
+std::string scene_with(const std::string& frames, const std::string& actuator = "type: none") {
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  for (std::size_t at = text.find("frames: sim"); at != std::string::npos; at = text.find("frames: sim", at + 1)) {
+    text.replace(at, 11, "frames: " + frames);
+    at += frames.size();
+  }
+  text.replace(text.find("type: virtual"), 13, actuator);
+  return text;
+}
+
+Result<Scene> parse(const std::string& text) {
+  return parse_scene(text, "room.yaml", "/srv/room");
+}
+
+void expect_refused(const std::string& text, const std::string& expect) {
+  auto s = parse(text);
+  ASSERT_FALSE(s.ok()) << "accepted:\n" << text;
+  EXPECT_NE(s.status().message().find(expect), std::string::npos) << s.status().message();
+  EXPECT_NE(s.status().message().find("room.yaml:"), std::string::npos) << "with the line: " << s.status().message();
+}
+
+TEST(SceneDevices, V4l2DetectorsBecomeTheFactorysSpec) {
+  std::string text = scene_with("{type: v4l2, device: /dev/v4l/by-path/DEV, buffers: 6, trigger_control: 10094849}");
+  const std::size_t second = text.find("/dev/v4l/by-path/DEV", text.find("/dev/v4l/by-path/DEV") + 1);
+  text.replace(second, 20, "/dev/v4l/by-path/DEV2");
+  text.replace(text.find("/dev/v4l/by-path/DEV,"), 21, "/dev/v4l/by-path/DEV1,");
+  auto scene = parse(text);
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->detectors[0].frames.kind, "v4l2");
+  EXPECT_EQ(scene->detectors[0].frames.buffers, 6);
+  EXPECT_EQ(scene->detectors[0].frames.trigger_control_id, 10094849u);
+  EXPECT_EQ(describe_frames(scene->detectors[1].frames), "v4l2 /dev/v4l/by-path/DEV2");
+  auto spec = device_frame_source_spec(*scene);
+  ASSERT_TRUE(spec.ok()) << spec.status().message();
+  ASSERT_TRUE(std::holds_alternative<drivers::V4l2SourceSpec>(*spec));
+  const auto& v = std::get<drivers::V4l2SourceSpec>(*spec);
+  ASSERT_EQ(v.detectors.size(), 2u);
+  EXPECT_EQ(v.detectors[0].device, "/dev/v4l/by-path/DEV1");
+  EXPECT_EQ(v.detectors[1].rows, 512);
+  EXPECT_EQ(drivers::kind_name(*spec), std::string("v4l2"));
+  // What a scene writes back (calibrate views keeps the detectors' sources) parses again.
+  EXPECT_EQ(frames_yaml(scene->detectors[0].frames),
+            "{type: v4l2, device: \"/dev/v4l/by-path/DEV1\", buffers: 6, trigger_control: 10094849, trigger_value: 1}");
+}
+
+TEST(SceneDevices, ReplayAndGigeResolveTheirSettings) {
+  auto replay = parse(scene_with("{type: replay, sequence: archive/day1}"));
+  ASSERT_TRUE(replay.ok()) << replay.status().message();
+  EXPECT_EQ(replay->detectors[1].frames.sequence, "/srv/room/archive/day1") << "relative to the scene's folder";
+  auto spec = device_frame_source_spec(*replay);
+  ASSERT_TRUE(spec.ok());
+  EXPECT_EQ(std::get<drivers::ReplaySourceSpec>(*spec).sequence, "/srv/room/archive/day1");
+  std::string gige = scene_with("{type: gige, camera: 10.0.0.5, packet_timeout_ms: 40}");
+  gige.replace(gige.find("10.0.0.5", gige.find("10.0.0.5") + 1), 8, "10.0.0.6");
+  auto g = parse(gige);
+  ASSERT_TRUE(g.ok()) << g.status().message();
+  EXPECT_EQ(g->detectors[0].frames.device, "10.0.0.5");
+  EXPECT_EQ(g->detectors[1].frames.device, "10.0.0.6");
+  EXPECT_DOUBLE_EQ(g->detectors[0].frames.packet_timeout_ms, 40);
+}
+
+TEST(SceneDevices, BadFrameSourcesAreRefusedWithTheLine) {
+  expect_refused(scene_with("v4l2"), "v4l2 needs its device");
+  expect_refused(scene_with("gige"), "gige needs its device");
+  expect_refused(scene_with("{type: v4l2}"), "needs 'device'");
+  expect_refused(scene_with("{type: v4l2, device: video0}"), "absolute path");
+  expect_refused(scene_with("{type: v4l2, device: /dev/video0, buffers: 1}"), "buffers must be in 2..32");
+  expect_refused(scene_with("{type: v4l2, device: /dev/video0, buffers: 1e12}"), "buffers");
+  expect_refused(scene_with("{type: v4l2, device: /dev/video0, speed: 3}"), "unknown key 'speed'");
+  expect_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: .nan}"), "must be finite");
+  expect_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: -1}"), "must be positive");
+  expect_refused(scene_with("{type: replay}"), "needs 'sequence'");
+  expect_refused(scene_with("{type: firewire}"), "firewire");
+  expect_refused(scene_with("[sim]"), "a kind (sim, replay) or a mapping");
+  expect_refused(scene_with("{type: v4l2, device: /dev/video0}"), "two detectors name the same device");
+  std::string mixed = *builtin_scene_text(kBuiltinPhantom);
+  mixed.replace(mixed.find("frames: sim"), 11, "frames: {type: v4l2, device: /dev/video0}");
+  expect_refused(mixed, "a pair comes from one source");
+  std::string two_sequences = scene_with("{type: replay, sequence: a}");
+  two_sequences.replace(two_sequences.rfind("sequence: a"), 11, "sequence: b");
+  expect_refused(two_sequences, "two sequences");
+  // The simulator's couch moves a simulated patient only.
+  std::string virtual_couch = scene_with("{type: v4l2, device: /dev/video0}", "type: virtual");
+  virtual_couch.replace(virtual_couch.rfind("/dev/video0"), 11, "/dev/video1");
+  expect_refused(virtual_couch, "actuator.type virtual is the simulator's couch");
+}
+
+TEST(SceneDevices, ModbusAndCanActuatorsParse) {
+  auto tcp = parse(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: couch.room, port: 1502}, unit_id: 7, "
+                                     "response_timeout_ms: 15}"));
+  ASSERT_TRUE(tcp.ok()) << tcp.status().message();
+  EXPECT_EQ(tcp->actuator.type, "modbus");
+  EXPECT_EQ(tcp->actuator.modbus.host, "couch.room");
+  EXPECT_EQ(tcp->actuator.modbus.port, 1502);
+  EXPECT_EQ(tcp->actuator.modbus.unit_id, 7);
+  EXPECT_DOUBLE_EQ(tcp->actuator.modbus.response_timeout_s, 0.015);
+  EXPECT_EQ(describe_actuator(tcp->actuator), "modbus tcp couch.room:1502 unit 7");
+  auto spec = device_actuator_spec(*tcp);
+  ASSERT_TRUE(spec.ok());
+  EXPECT_EQ(drivers::kind_name(*spec), std::string("modbus"));
+  auto rtu = parse(scene_with("sim", "type: modbus\n  modbus: {rtu: {device: /dev/ttyUSB0, baud: 38400, parity: none, "
+                                     "stop_bits: 2}}"));
+  ASSERT_TRUE(rtu.ok()) << rtu.status().message();
+  EXPECT_EQ(rtu->actuator.modbus.transport, drivers::ModbusCouchOptions::Transport::kRtu);
+  EXPECT_EQ(rtu->actuator.modbus.parity, 'N');
+  EXPECT_EQ(rtu->actuator.modbus.stop_bits, 2);
+  auto bridge = parse(scene_with("sim", "type: can\n  can: {bridge: run/robot.sock, node_id: 3}"));
+  ASSERT_TRUE(bridge.ok()) << bridge.status().message();
+  EXPECT_EQ(bridge->actuator.can.bridge_path, "/srv/room/run/robot.sock");
+  EXPECT_EQ(bridge->actuator.can.node_id, 3);
+  EXPECT_EQ(describe_actuator(bridge->actuator), "can bridge /srv/room/run/robot.sock node 3");
+  auto can0 = parse(scene_with("sim", "type: can\n  can: {interface: can0}"));
+  ASSERT_TRUE(can0.ok()) << can0.status().message();
+  EXPECT_EQ(can0->actuator.can.interface, "can0");
+  EXPECT_TRUE(can0->actuator.can.bridge_path.empty());
+}
+
+TEST(SceneDevices, BadActuatorsAreRefusedWithTheLine) {
+  expect_refused(scene_with("sim", "type: modbus"), "needs actuator.modbus");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {}"), "needs its link");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 0}}"), "port must be in 1..65535");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 70000}}"), "1..65535");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, rtu: {device: b}}"), "both tcp and rtu");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {rtu: {device: /dev/ttyS0, baud: 12345}}"), "standard rate");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 300}"), "unit_id must be in 0..247");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: .inf}"), "finite");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: 0}"), "positive");
+  expect_refused(scene_with("sim", "type: can"), "needs actuator.can");
+  expect_refused(scene_with("sim", "type: can\n  can: {node_id: 2}"), "an interface (e.g. can0) or a bridge");
+  expect_refused(scene_with("sim", "type: can\n  can: {interface: can0, bridge: x}"), "both interface and bridge");
+  expect_refused(scene_with("sim", "type: can\n  can: {interface: can0, node_id: 16}"), "node_id must be in 1..15");
+  expect_refused(scene_with("sim", "type: can\n  can: {bridge: " + std::string(120, 'x') + "}"), "at most 107 bytes");
+  expect_refused(scene_with("sim", "type: virtual\n  can: {interface: can0}"), "actuator.can is for actuator.type can");
+}
+
+TEST(SceneDevices, ADetectorCalibrationMustExist) {
+  test::TempDir dir;
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  text.replace(text.find("frames: sim"), 11, "frames: sim\n    calibration: detector-A.tif");
+  auto missing = parse_scene(text, "room.yaml", dir.path());
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("no detector calibration file"), std::string::npos);
+  EXPECT_NE(missing.status().message().find("lftrack calibrate detector"), std::string::npos);
+  std::ofstream(dir.path() / "detector-A.tif") << "x";
+  auto found = parse_scene(text, "room.yaml", dir.path());
+  ASSERT_TRUE(found.ok()) << found.status().message();
+  EXPECT_EQ(found->detectors[0].calibration_file, (dir.path() / "detector-A.tif").string());
+  EXPECT_TRUE(found->detectors[1].calibration_file.empty());
+}
+
+TEST(SceneDevices, SimulatedDetectorsCanNameACouchLink) {
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  text.replace(text.find("detector_blur_px: 0.5"), 21, "detector_blur_px: 0.5\n  couch_link: hil/room.link");
+  auto scene = parse(text);
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->sim.couch_link, "/srv/room/hil/room.link");
+}
+
+}  // namespace
+}  // namespace lftrack::host

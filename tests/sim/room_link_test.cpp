@@ -1,0 +1,115 @@
+// The room link between a served couch and simulated detectors in other processes
+// (sim/room_link.hpp): what is written is read, never torn; nothing that is not a link is
+// replaced; a live writer's link is refused; a killed writer's link is taken over in place.
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <fstream>
+#include <thread>
+
+#include "lftrack/sim/room_link.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::sim {
+namespace {
+
+tracking::Vector6d filled(double v) {
+  return tracking::Vector6d::Constant(v);
+}
+
+TEST(RoomLink, WhatIsPublishedIsRead) {
+  test::TempDir dir;
+  auto writer = RoomLinkWriter::create(dir.path() / "room.link");
+  ASSERT_TRUE(writer.ok()) << writer.status().message();
+  auto reader = RoomLinkReader::open(dir.path() / "room.link");
+  ASSERT_TRUE(reader.ok()) << reader.status().message();
+  RoomLinkSample s;
+  EXPECT_FALSE((*reader)->read(&s)) << "nothing written yet";
+  (*writer)->publish(filled(1.5));
+  ASSERT_TRUE((*reader)->read(&s));
+  EXPECT_EQ(s.couch_position, filled(1.5));
+  EXPECT_EQ(s.writer_pid, std::uint64_t(::getpid()));
+  EXPECT_GT(s.written_ns, 0);
+  // A non-finite position is never handed on.
+  (*writer)->publish(filled(std::numeric_limits<double>::quiet_NaN()));
+  EXPECT_FALSE((*reader)->read(&s));
+}
+
+TEST(RoomLink, ReadsAreNeverTorn) {
+  test::TempDir dir;
+  auto writer = RoomLinkWriter::create(dir.path() / "room.link");
+  ASSERT_TRUE(writer.ok());
+  auto reader = RoomLinkReader::open(dir.path() / "room.link");
+  ASSERT_TRUE(reader.ok());
+  (*writer)->publish(filled(0));
+  std::atomic<bool> stop{false};
+  std::thread writing([&] {
+    for (double v = 1; !stop.load(); v += 1) (*writer)->publish(filled(v));
+  });
+  int torn = 0, reads = 0;
+  for (int i = 0; i < 200000; ++i) {
+    RoomLinkSample s;
+    if (!(*reader)->read(&s)) continue;
+    ++reads;
+    for (int k = 1; k < 6; ++k) torn += s.couch_position[k] != s.couch_position[0];
+  }
+  stop.store(true);
+  writing.join();
+  EXPECT_GT(reads, 1000);
+  EXPECT_EQ(torn, 0);
+}
+
+TEST(RoomLink, RefusesWhatIsNotALinkAndALiveWriter) {
+  test::TempDir dir;
+  const auto file = dir.path() / "journal.lfj";
+  std::ofstream(file) << "precious";
+  auto over = RoomLinkWriter::create(file);
+  ASSERT_FALSE(over.ok());
+  EXPECT_NE(over.status().message().find("not a room link"), std::string::npos);
+  std::ifstream in(file);
+  std::string kept;
+  in >> kept;
+  EXPECT_EQ(kept, "precious") << "left untouched";
+  EXPECT_FALSE(RoomLinkReader::open(file).ok());
+  auto missing = RoomLinkReader::open(dir.path() / "none.link");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("lftrack serve couch --room"), std::string::npos);
+  auto first = RoomLinkWriter::create(dir.path() / "room.link");
+  ASSERT_TRUE(first.ok());
+  auto second = RoomLinkWriter::create(dir.path() / "room.link");
+  ASSERT_FALSE(second.ok()) << "this process still writes it";
+  EXPECT_NE(second.status().message().find("still writing"), std::string::npos);
+}
+
+TEST(RoomLink, AKilledWritersLinkIsTakenOverInPlace) {
+  test::TempDir dir;
+  const auto path = dir.path() / "room.link";
+  const pid_t child = ::fork();
+  if (child == 0) {  // a couch server that dies without tidying up
+    auto writer = RoomLinkWriter::create(path);
+    if (!writer.ok()) _exit(1);
+    (*writer)->publish(filled(-2.5));
+    ::kill(::getpid(), SIGKILL);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFSIGNALED(status));
+  auto reader = RoomLinkReader::open(path);
+  ASSERT_TRUE(reader.ok()) << "the killed writer left its link";
+  auto writer = RoomLinkWriter::create(path);
+  ASSERT_TRUE(writer.ok()) << writer.status().message();
+  EXPECT_EQ((*writer)->resumed_position(), filled(-2.5)) << "the couch stands where it stopped";
+  (*writer)->publish(filled(4));
+  RoomLinkSample s;
+  ASSERT_TRUE((*reader)->read(&s)) << "a reader opened before sees the new writer";
+  EXPECT_EQ(s.couch_position, filled(4));
+  EXPECT_EQ(s.writer_pid, std::uint64_t(::getpid()));
+}
+
+}  // namespace
+}  // namespace lftrack::sim
