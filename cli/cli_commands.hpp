@@ -43,5 +43,6 @@ Command add_serve_detectors_command(CLI::App* parent);
 Command add_calibrate_views_command(CLI::App* parent);
 Command add_calibrate_couch_command(CLI::App* parent);
 Command add_calibrate_detector_command(CLI::App* parent);
+Command add_rt_check_command(CLI::App* parent);
 
 }  // namespace lftrack::host::cli

@@ -57,30 +57,43 @@ class DetectorRoom {
     if (p.scene.sim.renderer == "lightfield") frames.margin_px = 0;
     r->frames_ = std::make_unique<SimFrameSource>(p, r->renderer_, r->room_.get(), frames);
     LFTRACK_RETURN_IF_ERROR(r->frames_->open(&r->pair_));
-    r->start_ns_ = monotonic_ns();
     return r;
   }
-  ~DetectorRoom() { frames_->close(); }
+  ~DetectorRoom() {
+    if (frames_) frames_->close();
+  }
 
-  // The pair exposed now (rendered once per exposure: the cameras that ask within 5 ms of it
-  // share it). Detector `index`'s pixels, or null if rendering failed.
+  // The pair exposed now, rendered once per exposure: a camera that asks gets the newest pair if
+  // it has not had it yet and it is under 40 ms old (the other camera's trigger of the same
+  // exposure), else a new pair. Detector `index`'s pixels, or null if rendering failed.
   const tracking::Image<std::uint16_t>* frame(std::size_t index) {
     std::lock_guard lock(mutex_);
     const std::int64_t now = monotonic_ns();
-    if (!have_ || now - exposed_ns_ > 5'000'000) {
+    if (taken_.size() <= index) taken_.resize(index + 1, -1);
+    if (!have_ || taken_[index] >= pair_number_ || now - exposed_ns_ > 40'000'000) {
+      ++pair_number_;
+      if (exposures_ == 0) start_ns_ = now;  // the settle time counts from the first exposure
       frames_->request_exposure(now);
       have_ = frames_->acquire(&pair_, std::chrono::steady_clock::now() + std::chrono::seconds(2)) ==
               drivers::DeviceStatus::kOk;
+      render_ms_.push_back(1e-6 * double(monotonic_ns() - now));
       exposed_ns_ = now;
       if (have_ && 1e-9 * double(now - start_ns_) >= settle_s_) residuals_.push_back(room_->residual_mm());
       ++exposures_;
     }
+    taken_[index] = pair_number_;
     return have_ && index < pair_.frames.size() ? &pair_.frames[index].pixels : nullptr;
   }
   void set_settle(double s) { settle_s_ = s; }
   nlohmann::json truth() {
     std::lock_guard lock(mutex_);
     nlohmann::json j = {{"exposures", exposures_}, {"residual_frames", residuals_.size()}};
+    if (!render_ms_.empty()) {
+      std::vector<double> v = render_ms_;
+      std::sort(v.begin(), v.end());
+      j["render_ms"] = {{"p50", v[v.size() / 2]}, {"p99", v[std::min(v.size() - 1, std::size_t(0.99 * double(v.size())))]},
+                        {"max", v.back()}};
+    }
     if (!residuals_.empty()) {
       std::vector<double> v = residuals_;
       std::sort(v.begin(), v.end());
@@ -106,9 +119,11 @@ class DetectorRoom {
   drivers::FramePair pair_;
   std::mutex mutex_;
   bool have_ = false;
-  std::int64_t exposed_ns_ = 0, start_ns_ = 0, exposures_ = 0;
+  std::int64_t exposed_ns_ = 0, start_ns_ = 0, exposures_ = 0, pair_number_ = 0;
+  std::vector<std::int64_t> taken_;  // per detector: the last pair it was given
   double settle_s_ = 2;
   std::vector<double> residuals_;
+  std::vector<double> render_ms_;  // trigger to the pair rendered
 };
 
 Status serve_detectors(const ServeOptions& o) {

@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
   const Command calibrate_views = add_calibrate_views_command(calibrate);
   const Command calibrate_couch = add_calibrate_couch_command(calibrate);
   const Command calibrate_detector = add_calibrate_detector_command(calibrate);
+  const Command rt_check = add_rt_check_command(&app);
 
   try {
     app.parse(argc, argv);
@@ -103,6 +104,8 @@ int main(int argc, char** argv) {
       status = calibrate_couch();
     else if (calibrate->got_subcommand("detector"))
       status = calibrate_detector();
+    else if (app.got_subcommand("rt-check"))
+      status = rt_check();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

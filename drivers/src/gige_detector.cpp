@@ -511,6 +511,25 @@ GigeFrameSource::GigeFrameSource(std::vector<GigeDetectorOptions> detectors, dou
   for (GigeDetectorOptions& o : detectors) detectors_.push_back(std::make_unique<GigeDetector>(std::move(o)));
 }
 
+GigeFrameSource::~GigeFrameSource() {
+  close();
+}
+
+void GigeFrameSource::reopen_loop() {
+  while (!stop_.load()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (!gone_.load()) continue;
+    std::lock_guard lock(devices_);  // the cycle gets kDisconnected meanwhile
+    if (stop_.load()) break;
+    if (reopen_disconnected().ok()) {
+      gone_.store(false);
+      ++reopens_;
+    } else {
+      for (int i = 0; i < 5 && !stop_.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+}
+
 Status GigeFrameSource::open(FramePair* pair) {
   if (detectors_.empty()) return invalid_argument("gige frame source: no detectors");
   pair->frames.resize(detectors_.size());
@@ -527,16 +546,32 @@ Status GigeFrameSource::open(FramePair* pair) {
       return s;
     }
   }
+  stop_.store(false);
+  gone_.store(false);
+  reopener_ = std::thread([this] { reopen_loop(); });
   return {};
 }
 
 void GigeFrameSource::request_exposure(std::int64_t exposure_time_ns) {
-  for (auto& d : detectors_) d->trigger(exposure_time_ns);
+  bool software = true;
+  for (auto& d : detectors_) {
+    d->trigger(exposure_time_ns);
+    software = software && d->options().trigger == GigeTrigger::kSoftware;
+  }
+  exposure_ns_ = software ? exposure_time_ns : 0;
 }
 
 DeviceStatus GigeFrameSource::acquire(FramePair* pair, Deadline deadline) {
+  std::unique_lock lock(devices_, std::try_to_lock);
+  if (!lock.owns_lock()) return DeviceStatus::kDisconnected;  // being reopened
   for (std::size_t i = 0; i < detectors_.size(); ++i) {
-    const DeviceStatus s = detectors_[i]->capture(&pair->frames[i], deadline);
+    DeviceStatus s = detectors_[i]->capture(&pair->frames[i], deadline);
+    // A frame that arrived before this exposure was asked for is an earlier one's, late.
+    while (s == DeviceStatus::kOk && exposure_ns_ > 0 && pair->frames[i].timestamp_ns < exposure_ns_) {
+      ++stale_frames_;
+      s = detectors_[i]->capture(&pair->frames[i], deadline);
+    }
+    if (s == DeviceStatus::kDisconnected) gone_.store(true);
     if (s != DeviceStatus::kOk) return s;
   }
   std::int64_t first = pair->frames[0].timestamp_ns, last = first;
@@ -552,6 +587,8 @@ DeviceStatus GigeFrameSource::acquire(FramePair* pair, Deadline deadline) {
 }
 
 void GigeFrameSource::close() {
+  stop_.store(true);
+  if (reopener_.joinable()) reopener_.join();
   for (auto& d : detectors_) d->close();
 }
 

@@ -6,6 +6,7 @@
 #include <net/if.h>
 #include <netinet/in.h>
 #include <stdlib.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -74,6 +75,18 @@ std::string write_mono8_description() {
 
 }  // namespace
 
+bool gvcp_port_free(const std::string& address) {
+  sockaddr_in in{};
+  in.sin_family = AF_INET;
+  in.sin_port = htons(3956);
+  if (inet_pton(AF_INET, address.c_str(), &in.sin_addr) != 1) return false;
+  const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return false;
+  const bool bound = bind(fd, reinterpret_cast<const sockaddr*>(&in), sizeof in) == 0;
+  ::close(fd);
+  return bound;
+}
+
 std::vector<std::string> local_ipv4_addresses() {
   std::vector<std::string> out;
   for (const auto& [name, address] : interfaces_up())
@@ -120,6 +133,10 @@ Status GigeFakeDetector::start() {
                      "' (Aravis's fake camera listens only on an interface's own address; this host has " +
                      (known.empty() ? std::string("none") : known) + ")");
 
+  const std::string taken = name + ": cannot listen on " + address_ +
+                            ":3956 (GVCP): another GigE camera or program holds that port on that address";
+  if (!gvcp_port_free(address_)) return io_error(taken);
+
   scratch_.assign(std::size_t(options_.rows) * std::size_t(options_.cols), 0);
   next_index_ = 0;
   served_.store(0);
@@ -132,10 +149,11 @@ Status GigeFakeDetector::start() {
                                              description.empty() ? nullptr : description.c_str());
   if (!description.empty()) std::remove(description.c_str());  // read when the camera was made
   if (arv_->camera == nullptr) return internal_error(name + ": Aravis made no fake camera");
-  if (!arv_gv_fake_camera_is_running(arv_->camera)) {
+  // is_running() is true even where the GVCP socket could not be bound: the port must now be
+  // held (by this camera: it was free a moment ago).
+  if (!arv_gv_fake_camera_is_running(arv_->camera) || gvcp_port_free(address_)) {
     stop();
-    return io_error(name + ": cannot listen on " + address_ +
-                    ":3956 (GVCP): another GigE camera or process holds that port on that address");
+    return io_error(taken);
   }
   ArvFakeCamera* fake = arv_gv_fake_camera_get_fake_camera(arv_->camera);
   const auto rows = guint32(options_.rows), cols = guint32(options_.cols);

@@ -221,14 +221,18 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
 
 // Issue 18, item 4: the loop judges every registration as `lftrack register` does. Here the
 // scene's pose envelope is 1 mm while the set-up error is about 4 mm: the alignment lands outside
-// it, is rejected with the verdict's reason (which only the verdict gives), and nothing moves.
+// it, is rejected with the verdict's reason (which only the verdict gives), and nothing moves. A
+// rejected alignment is a skipped cycle: ALIGN tries again with the next pair, and the gate's
+// third failure in a row holds (the operator decides).
 TEST_F(ClosedLoop, ARegistrationTheVerdictRejectsMovesNothing) {
   edit_scene_ = [](Scene& scene) { scene.envelope.translation_mm = 1.0; };
   const LoopRun r = run_loop(kBreathing, 4, {}, kLightFieldFrames);
   const auto& records = r.journal.records;
   ASSERT_EQ(records.size(), 4u);
   EXPECT_EQ(records[0].gate_reason, std::uint8_t(GateReason::kOutsideEnvelope));
-  EXPECT_EQ(records[0].state, std::uint8_t(TrackingState::kHold)) << "alignment failed: the operator decides";
+  EXPECT_EQ(records[0].state, std::uint8_t(TrackingState::kAlign)) << "skipped: ALIGN tries the next pair";
+  EXPECT_EQ(records[2].state, std::uint8_t(TrackingState::kHold)) << "the third failure: the operator decides";
+  EXPECT_EQ(records[3].state, std::uint8_t(TrackingState::kHold));
   for (const JournalRecord& rec : records) {
     EXPECT_EQ(rec.command_sent, 0);
     EXPECT_EQ(rec.beam_permit, 0);

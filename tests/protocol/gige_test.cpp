@@ -122,6 +122,14 @@ class HostLock {
 
 class GigeTest : public ::testing::Test {
  protected:
+  // After the lock: 127.0.0.1's GVCP port must be ours to use.
+  void SetUp() override {
+    if (!sim::gvcp_port_free("127.0.0.1"))
+      GTEST_SKIP()
+          << "another program (a GigE camera, `lftrack serve detectors`, a GigE tool) holds UDP port "
+             "3956 (GVCP) on 127.0.0.1, which these tests need";
+  }
+
   // A fake camera on `address`, started (the test stops where it cannot start).
   std::unique_ptr<GigeFakeDetector> fake(const std::string& address, const std::string& serial, int rows,
                                          int cols, double rate_hz, std::uint16_t salt) {
@@ -172,6 +180,8 @@ TEST_F(GigeTest, RoundTripsSixteenBitPixelsExactlyThroughAPairOfSoftwareTriggere
         << "a pair of fake GigE cameras needs 127.0.0.1 and a second local IPv4 address (Aravis's fake "
            "camera binds GVCP port 3956 on an interface's own address); this host has only "
         << (addresses.empty() ? std::string("none") : addresses[0]);
+  if (!sim::gvcp_port_free(addresses[1]))
+    GTEST_SKIP() << "another program holds UDP port 3956 (GVCP) on " << addresses[1];
   constexpr int kRows = 120, kCols = 160;
   auto a = fake(addresses[0], "LFGV-A", kRows, kCols, 25, 0x0000);
   auto b = fake(addresses[1], "LFGV-B", kRows, kCols, 25, 0x5A5A);
@@ -248,9 +258,11 @@ TEST_F(GigeTest, RoundTripsSixteenBitPixelsExactlyThroughAPairOfSoftwareTriggere
 
 TEST_F(GigeTest, SequenceIsTheCamerasFrameIdUnwrappedAcrossItsSixteenBitWrap) {
   constexpr int kRows = 48, kCols = 64;
-  auto camera = fake("127.0.0.1", "LFGV-SEQ", kRows, kCols, /*rate_hz=*/500, 0x1234);
+  auto camera = fake("127.0.0.1", "LFGV-SEQ", kRows, kCols, /*rate_hz=*/25, 0x1234);
   ASSERT_TRUE(camera);
-  GigeDetector d(client(camera->address(), kRows, kCols));
+  GigeDetectorOptions o = client(camera->address(), kRows, kCols);
+  o.frame_rate_hz = 500;  // AcquisitionFrameRate: the camera's 25 Hz becomes 500 Hz
+  GigeDetector d(o);
   const Status opened = d.open();
   ASSERT_TRUE(opened.ok()) << opened.to_string();
   Frame f = frame(kRows, kCols);
@@ -413,6 +425,26 @@ TEST_F(GigeTest, FallsBackToMono8WidenedNotScaledWhereTheCameraHasNoSixteenBits)
   EXPECT_EQ(wrong, 0);
   EXPECT_EQ(f.pixels.at(0, 2), 255) << "65535 sent as 8 bits: 255, not scaled back up";
   d.close();
+}
+
+TEST_F(GigeTest, AFakeCameraRefusesAnAddressWhosePortIsTaken) {
+  auto first = fake("127.0.0.1", "LFGV-ONE", 48, 64, 25, 0);
+  ASSERT_TRUE(first);
+  GigeFakeDetectorOptions o;
+  o.serial = "LFGV-TWO";
+  o.rows = 48;
+  o.cols = 64;
+  GigeFakeDetector second(o, renderer(0));
+  const Status s = second.start();
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_NE(s.message().find("cannot listen on 127.0.0.1:3956"), std::string::npos) << s.message();
+  EXPECT_FALSE(second.running());
+  o.interface = "203.0.113.254";  // TEST-NET-3: no interface of a test host carries it
+  const Status nowhere = GigeFakeDetector(o, renderer(0)).start();
+  EXPECT_EQ(nowhere.code(), StatusCode::kNotFound);
+  EXPECT_NE(nowhere.message().find("no interface that is up has the address or name '203.0.113.254'"),
+            std::string::npos)
+      << nowhere.message();
 }
 
 TEST_F(GigeTest, RefusesAWrongSizeNamingTheCamera) {

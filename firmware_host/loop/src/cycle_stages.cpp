@@ -76,10 +76,29 @@ bool TrackingLoop::Impl::take_operator_command(CycleState& c) {
   return true;
 }
 
-// The frame pair, and the actuator's read-back at the frame time (where the couch is, and whether
-// it took our command).
+// The actuator's read-back at the frame time (where the couch is, and whether it took our
+// command), then the frame pair. The read-back comes first: the pair was exposed at the cycle's
+// start, and devices that take their time to deliver it (a detector's readout and transfer) must
+// not let a moving couch's read-back drift from it. The simulated truth is read there too.
 bool TrackingLoop::Impl::acquire(CycleState& c) {
   c.acquire_started_ns = monotonic_now_ns();
+  GateInput& in = c.gate_input;
+  if (parts.actuator != nullptr) {
+    drivers::ActuatorState a;
+    const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(c.start_ns + period_ns));
+    in.readback_valid = rb == DeviceStatus::kOk && !a.fault;
+    if (in.readback_valid) {
+      couch_position = a.position;
+      const Vector6d error = a.target - commanded_total;
+      in.readback_error_mm = error.head<3>().cwiseAbs().maxCoeff();
+      in.readback_error_deg = tracking::rad_to_deg(error.tail<3>().cwiseAbs().maxCoeff());
+      c.have_readback = true;
+      c.readback = a.position;
+    }
+  }
+  c.readback_done_ns = monotonic_now_ns();
+  // The truth at the frame time, before this cycle's command moves the simulated room on.
+  if (parts.truth != nullptr) c.true_residual_mm = parts.truth->residual_mm();
   const DeviceStatus acquired = parts.frames->acquire(
       &pair, to_deadline(c.start_ns + std::int64_t(settings.loop.acquire_timeout_ms * 1e6)));
   c.frames_ok = acquired == DeviceStatus::kOk;
@@ -103,27 +122,10 @@ bool TrackingLoop::Impl::acquire(CycleState& c) {
       c.newest_frame_ns = std::max(c.newest_frame_ns, f.timestamp_ns);
     }
   }
-  // The truth at the frame time, before this cycle's command moves the simulated room on.
-  if (parts.truth != nullptr) c.true_residual_mm = parts.truth->residual_mm();
-
-  GateInput& in = c.gate_input;
   in.views = static_cast<int>(pair.frames.size());
   in.frames_ok = c.frames_ok;
   in.journal_ok = parts.journal == nullptr || !parts.journal->failed();
   in.consecutive_overruns = consecutive_overruns;
-  if (parts.actuator != nullptr) {
-    drivers::ActuatorState a;
-    const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(c.start_ns + period_ns));
-    in.readback_valid = rb == DeviceStatus::kOk && !a.fault;
-    if (in.readback_valid) {
-      couch_position = a.position;
-      const Vector6d error = a.target - commanded_total;
-      in.readback_error_mm = error.head<3>().cwiseAbs().maxCoeff();
-      in.readback_error_deg = tracking::rad_to_deg(error.tail<3>().cwiseAbs().maxCoeff());
-      c.have_readback = true;
-      c.readback = a.position;
-    }
-  }
   return true;
 }
 
@@ -241,6 +243,10 @@ void TrackingLoop::Impl::gate(CycleState& c) {
   c.gate = evaluate_gate(settings.limits, c.gate_input);
   consecutive_failures = c.gate.consecutive_failures;
   if (c.aligning) {
+    // A skipped cycle (no pair yet: a device's first frames are often late; a registration that
+    // failed once) stays in ALIGN, moving nothing; failures count as in TRACK, and the gate's
+    // HOLD after hold_after_failures of them is the alignment's failure.
+    if (c.gate.decision == GateDecision::kSkip) return;
     const TrackingEvent e = c.gate.apply() ? TrackingEvent::kAligned : TrackingEvent::kAlignFailed;
     transition(c, machine.on(e), e);
     summary.aligned = summary.aligned || c.gate.apply();
@@ -267,7 +273,12 @@ void TrackingLoop::Impl::actuate(CycleState& c) {
     approve_next_step = false;
     return;
   }
-  const DeviceStatus sent = parts.actuator->command(step, to_deadline(c.start_ns + period_ns));
+  // The command is due by the end of the period; the alignment's cycle (a cold registration that
+  // may run past its period, which is why ALIGN is not counted as an overrun) gets one period
+  // from now for its set-up move.
+  const std::int64_t due_ns =
+      c.aligning && !settings.simulated_clock ? std::max(c.start_ns, monotonic_now_ns()) + period_ns : c.start_ns + period_ns;
+  const DeviceStatus sent = parts.actuator->command(step, to_deadline(due_ns));
   if (sent == DeviceStatus::kOk) {
     commanded_total += step;
     c.command = step;

@@ -37,7 +37,7 @@ struct CycleState {
 
   // acquire (and the actuator's read-back at the frame time)
   bool frames_ok = false;
-  std::int64_t acquire_started_ns = 0, acquired_ns = 0, preprocessed_ns = 0;  // wall clock
+  std::int64_t acquire_started_ns = 0, readback_done_ns = 0, acquired_ns = 0, preprocessed_ns = 0;  // wall clock
   std::int64_t oldest_frame_ns = 0, newest_frame_ns = 0;                       // loop clock
   std::int64_t frame_time_ns[2] = {0, 0};
   std::uint32_t frame_sequence[2] = {0, 0};
@@ -118,6 +118,7 @@ struct TrackingLoop::Impl {
   // Statistics.
   Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
   Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
+  Histogram readback_ms{0.001, 2000};  // the actuator's read-back (a protocol's round trip)
   double evaluations_sum = 0;
   LoopSummary summary;
 

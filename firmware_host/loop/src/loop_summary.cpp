@@ -23,6 +23,8 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   s.registration_max_ms = registration_ms.max();
   s.acquire_p95_ms = acquire_ms.quantile(0.95);
   s.acquire_max_ms = acquire_ms.max();
+  s.readback_p50_ms = readback_ms.quantile(0.5);
+  s.readback_p99_ms = readback_ms.quantile(0.99);
   s.preprocess_p95_ms = preprocess_ms.quantile(0.95);
   s.preprocess_max_ms = preprocess_ms.max();
   s.evaluations_mean =
@@ -48,6 +50,7 @@ nlohmann::json to_json(const LoopSummary& s) {
       {"p50", s.registration_p50_ms}, {"p95", s.registration_p95_ms}, {"max", s.registration_max_ms}};
   j["acquire_ms"] = {{"p95", s.acquire_p95_ms}, {"max", s.acquire_max_ms}};
   j["preprocess_ms"] = {{"p95", s.preprocess_p95_ms}, {"max", s.preprocess_max_ms}};
+  j["readback_ms"] = {{"p50", s.readback_p50_ms}, {"p99", s.readback_p99_ms}};
   j["evaluations_mean"] = s.evaluations_mean;
   j["overruns"] = s.overruns;
   j["skipped_periods"] = s.skipped_periods;

@@ -63,8 +63,11 @@
 // table, g_new0), outside the cycle's thread. The software trigger is sent from a thread of this
 // detector (a GVCP write waits for the camera's acknowledgement), so trigger() never blocks.
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -167,10 +170,16 @@ class GigeDetector {
 // Two (or more) GigE detectors as one frame source: each acquire() captures one frame from every
 // detector by the deadline, and refuses a pair whose exposure times lie further apart than
 // `max_skew_ms` (kFault, counted): never half a pair. request_exposure(t) has every
-// software-triggered detector triggered at t (the loop's real clock, CLOCK_MONOTONIC).
+// software-triggered detector triggered at t (the loop's real clock, CLOCK_MONOTONIC), and a
+// frame that reached the host before t is an earlier exposure's, late (stale_frames): it is
+// passed over and acquire() waits on for this exposure's, so a cycle never registers the
+// previous cycle's frame. A detector marked gone (kDisconnected) is reopened by a thread of the
+// source, never the cycle's: acquire() answers kDisconnected while that runs (it only tries the
+// lock), and frames resume once the camera is back; the loop journals the gap.
 class GigeFrameSource final : public FrameSource {
  public:
   GigeFrameSource(std::vector<GigeDetectorOptions> detectors, double max_skew_ms);
+  ~GigeFrameSource() override;
   // Sizes every frame of `pair` (rows x cols per detector), then opens the detectors in order.
   Status open(FramePair* pair) override;
   void request_exposure(std::int64_t exposure_time_ns) override;
@@ -182,11 +191,20 @@ class GigeFrameSource final : public FrameSource {
   GigeDetector& detector(std::size_t i) { return *detectors_[i]; }
   const GigeDetector& detector(std::size_t i) const { return *detectors_[i]; }
   std::int64_t skewed_pairs() const { return skewed_pairs_; }
+  std::int64_t stale_frames() const { return stale_frames_; }
+  std::int64_t reopens() const { return reopens_.load(); }
 
  private:
+  void reopen_loop();
+
   std::vector<std::unique_ptr<GigeDetector>> detectors_;
   double max_skew_ms_;
-  std::int64_t skewed_pairs_ = 0;
+  std::int64_t skewed_pairs_ = 0, stale_frames_ = 0;
+  std::int64_t exposure_ns_ = 0;  // the exposure asked for (software trigger); 0: any frame
+  std::mutex devices_;             // the cycle only tries it; the reopen thread holds it
+  std::atomic<bool> gone_{false}, stop_{false};
+  std::atomic<std::int64_t> reopens_{0};
+  std::thread reopener_;
 };
 
 }  // namespace lftrack::drivers

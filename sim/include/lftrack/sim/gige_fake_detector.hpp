@@ -19,6 +19,9 @@
 //   TriggerMode On and TriggerSource Software it sends one frame per TriggerSoftware, checked
 //   `trigger_poll_hz` times a second. Frame ids are 16-bit and start at 65401, so they wrap
 //   (65535 -> 1) after 135 frames: a client's wrap handling is exercised early.
+// - arv_gv_fake_camera_is_running() says only that the interface was found: a GVCP port that
+//   another program holds is logged and otherwise ignored (arvgvfakecamera.c). start() therefore
+//   checks the port itself, free before and held after.
 // - The GVSP timestamp is the host's CLOCK_REALTIME in ns at the start of the frame (tick
 //   frequency 1 GHz). It does not resend packets (GVCP PACKETRESEND is not answered).
 // - It has no "off" of its own: stop() destroys it (sockets closed, a client hears nothing);
@@ -96,5 +99,9 @@ class GigeFakeDetector {
 // The IPv4 addresses of this host's interfaces that are up, 127.0.0.1 first: where fake cameras
 // can listen (one each).
 std::vector<std::string> local_ipv4_addresses();
+
+// Whether UDP port 3956 (GVCP) on `address` is free: no GigE camera (fake or otherwise) and no
+// other program listens there.
+bool gvcp_port_free(const std::string& address);
 
 }  // namespace lftrack::sim

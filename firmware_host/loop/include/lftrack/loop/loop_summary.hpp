@@ -39,6 +39,7 @@ struct LoopSummary {
   // Waiting for the pair (real clock: from the cycle's start; simulated: the copy only), and
   // preprocessing it; TRACK/HOLD cycles.
   double acquire_p95_ms = 0, acquire_max_ms = 0, preprocess_p95_ms = 0, preprocess_max_ms = 0;
+  double readback_p50_ms = 0, readback_p99_ms = 0;  // the actuator's read-back: a protocol's round trip
   double evaluations_mean = 0;
   std::optional<double> allocations_per_cycle;
   std::int64_t allocation_cycles = 0;  // the steady-state cycles they were counted over
