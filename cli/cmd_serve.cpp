@@ -14,6 +14,7 @@
 #include "serve_common.hpp"
 #include "lftrack/sim/can_bridge_server.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
+#include "lftrack/sim/null_modem.hpp"
 #include "lftrack/sim/served_couch.hpp"
 
 namespace lftrack::host::cli {
@@ -29,27 +30,51 @@ Result<sim::VirtualCouchSpec> couch_dynamics(const ServeOptions& o) {
 }
 
 Status serve_couch(const ServeOptions& o) {
-  // tcp:ADDRESS:PORT (PORT 0: any free port)
-  if (o.endpoint.rfind("tcp:", 0) != 0)
-    return invalid_argument("--modbus must be tcp:ADDRESS:PORT (e.g. tcp:127.0.0.1:1502); got '" + o.endpoint + "'");
-  const std::string address_port = o.endpoint.substr(4);
-  const auto colon = address_port.rfind(':');
+  // tcp:ADDRESS:PORT (PORT 0: any free port), rtu:DEVICE (a serial port), or rtu:pty (a
+  // null-modem pair of pseudo-terminals made here: the server takes one end, and the first line
+  // names the other for the client).
   sim::ModbusCouchServerOptions server;
-  char* end = nullptr;
-  const long port = colon == std::string::npos ? -1 : std::strtol(address_port.c_str() + colon + 1, &end, 10);
-  if (colon == std::string::npos || colon == 0 || end == address_port.c_str() + colon + 1 || *end != '\0' || port < 0 ||
-      port > 65535)
-    return invalid_argument("--modbus tcp:ADDRESS:PORT needs an address and a port from 0 to 65535; got '" + o.endpoint + "'");
-  server.address = address_port.substr(0, colon);
-  server.port = static_cast<int>(port);
+  std::unique_ptr<sim::NullModem> serial_line;
+  std::string client_end;
+  if (o.endpoint.rfind("rtu:", 0) == 0) {
+    const std::string device = o.endpoint.substr(4);
+    if (device == "pty") {
+      serial_line = std::make_unique<sim::NullModem>();
+      if (!serial_line->ok()) return io_error("--modbus rtu:pty: no pseudo-terminals on this host");
+      server.rtu_device = serial_line->end(1);
+      client_end = serial_line->end(0);
+    } else if (!device.empty() && device.front() == '/') {
+      server.rtu_device = device;
+    } else {
+      return invalid_argument("--modbus rtu:DEVICE needs a device path (e.g. rtu:/dev/ttyS1) or rtu:pty; got '" +
+                              o.endpoint + "'");
+    }
+  } else {
+    if (o.endpoint.rfind("tcp:", 0) != 0)
+      return invalid_argument("--modbus must be tcp:ADDRESS:PORT (e.g. tcp:127.0.0.1:1502), rtu:DEVICE or rtu:pty; got '" +
+                              o.endpoint + "'");
+    const std::string address_port = o.endpoint.substr(4);
+    const auto colon = address_port.rfind(':');
+    char* end = nullptr;
+    const long port = colon == std::string::npos ? -1 : std::strtol(address_port.c_str() + colon + 1, &end, 10);
+    if (colon == std::string::npos || colon == 0 || end == address_port.c_str() + colon + 1 || *end != '\0' ||
+        port < 0 || port > 65535)
+      return invalid_argument("--modbus tcp:ADDRESS:PORT needs an address and a port from 0 to 65535; got '" +
+                              o.endpoint + "'");
+    server.address = address_port.substr(0, colon);
+    server.port = static_cast<int>(port);
+  }
   auto dynamics = couch_dynamics(o);
   if (!dynamics.ok()) return dynamics.status();
   auto couch = sim::ServedCouch::start(*dynamics, o.room);
   if (!couch.ok()) return couch.status();
   auto modbus = sim::ModbusCouchServer::start(couch->get(), server);
   if (!modbus.ok()) return modbus.status();
-  std::printf("lftrack serve couch: modbus tcp %s:%d%s%s\n", server.address.c_str(), (*modbus)->port(),
-              o.room.empty() ? "" : "; room link ", o.room.c_str());
+  if (server.rtu_device.empty())
+    std::printf("lftrack serve couch: modbus tcp %s:%d", server.address.c_str(), (*modbus)->port());
+  else
+    std::printf("lftrack serve couch: modbus rtu %s", serial_line ? client_end.c_str() : server.rtu_device.c_str());
+  std::printf("%s%s\n", o.room.empty() ? "" : "; room link ", o.room.c_str());
   std::fflush(stdout);
   using F = sim::CouchServerFault;
   const std::map<std::string, int> kinds = {{"no-reply", int(F::kNoReply)},   {"exception4", int(F::kException4)},
@@ -155,7 +180,9 @@ void add_common(CLI::App* app, ServeOptions* o) {
 Command add_serve_couch_command(CLI::App* parent) {
   auto o = std::make_shared<ServeOptions>();
   CLI::App* app = parent->add_subcommand("couch", "The virtual couch behind a Modbus TCP server, as its own process");
-  app->add_option("--modbus", o->endpoint, "tcp:ADDRESS:PORT to listen on (port 0: any free port)")
+  app->add_option("--modbus", o->endpoint,
+                  "tcp:ADDRESS:PORT to listen on (port 0: any free port), rtu:DEVICE (a serial port; 115200 8E1), or "
+                  "rtu:pty (a pseudo-terminal pair: the first line names the client's end)")
       ->default_val("tcp:127.0.0.1:1502");
   add_common(app, o.get());
   CLI::Option* scene = app->get_option("--scene");

@@ -20,6 +20,7 @@
 #include "lftrack/host/sim_frame_source.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
+#include "lftrack/sim/v4l2_loopback_writer.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "serve_common.hpp"
 
@@ -126,6 +127,53 @@ class DetectorRoom {
   std::vector<double> render_ms_;  // trigger to the pair rendered
 };
 
+// --v4l2loopback: the pair written into loopback devices every period (free-running), for
+// `run` to read through the kernel's V4L2 capture path.
+Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRoom* r) {
+  std::vector<std::unique_ptr<sim::V4l2LoopbackWriter>> writers;
+  for (std::size_t i = 0; i < o.loopback.size(); ++i) {
+    writers.push_back(std::make_unique<sim::V4l2LoopbackWriter>());
+    LFTRACK_RETURN_IF_ERROR(writers.back()->open(o.loopback[i], scene.detectors[i].view.rows, scene.detectors[i].view.cols));
+  }
+  std::string listening;
+  for (const std::string& d : o.loopback) listening += (listening.empty() ? "" : ", ") + d;
+  std::printf("lftrack serve detectors: v4l2loopback %s%s%s\n", listening.c_str(), o.room.empty() ? "" : "; room link ",
+              o.room.c_str());
+  std::fflush(stdout);
+  std::atomic<bool> paused{false}, done{false};
+  std::thread writer([&] {
+    const auto period = std::chrono::microseconds(std::int64_t(scene.loop.period_ms * 1000));
+    auto next = std::chrono::steady_clock::now();
+    while (!done.load()) {
+      next += period;
+      if (!paused.load())
+        for (std::size_t i = 0; i < writers.size(); ++i)
+          if (const tracking::Image<std::uint16_t>* f = r->frame(i))
+            if (Status s = writers[i]->write(&f->at(0, 0)); !s.ok()) spdlog::warn("{}", s.message());
+      std::this_thread::sleep_until(next);
+    }
+  });
+  const std::map<std::string, int> kinds = {{"stop", 0}, {"start", 1}};
+  const Status served = serve_until_stopped(
+      o, kinds,
+      [&](const Fault& f) {
+        paused.store(f.kind == "stop");
+        return true;
+      },
+      [&] { return "frames written: " + std::to_string(writers[0]->frames()) + (paused.load() ? " (stopped)" : ""); });
+  done.store(true);
+  writer.join();
+  LFTRACK_RETURN_IF_ERROR(served);
+  nlohmann::json j = r->truth();
+  j["device"] = "detectors";
+  j["frames_written"] = writers[0]->frames();
+  if (o.json)
+    std::printf("%s\n", j.dump().c_str());
+  else
+    std::printf("served: %s\n", j.dump().c_str());
+  return {};
+}
+
 Status serve_detectors(const ServeOptions& o) {
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
@@ -141,6 +189,8 @@ Status serve_detectors(const ServeOptions& o) {
   }
   if (addresses.size() != views)
     return invalid_argument("give one --address per detector (" + std::to_string(views) + ")");
+  if (!o.loopback.empty() && o.loopback.size() != views)
+    return invalid_argument("give one --v4l2loopback device per detector (" + std::to_string(views) + ")");
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
@@ -148,6 +198,7 @@ Status serve_detectors(const ServeOptions& o) {
   if (!room.ok()) return room.status();
   (*room)->set_settle(o.settle_s);
   DetectorRoom* r = room->get();
+  if (!o.loopback.empty()) return serve_v4l2_loopback(*scene, o, r);
   std::vector<std::unique_ptr<sim::GigeFakeDetector>> cameras;
   std::string listening;
   for (std::size_t k = 0; k < addresses.size(); ++k) {
@@ -212,6 +263,9 @@ Command add_serve_detectors_command(CLI::App* parent) {
   app->add_option("--address", o->addresses,
                   "IPv4 address (or interface) of each detector's camera, one per detector (default: the host's "
                   "first addresses, 127.0.0.1 first)");
+  app->add_option("--v4l2loopback", o->loopback,
+                  "Instead of GigE: write each detector's frames into this v4l2loopback device (one per detector), "
+                  "every period, for `run` to read through V4L2");
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
   app->add_option("--settle", o->settle_s, "Summarise the residual of frames after this many seconds")
       ->check(CLI::Range(0.0, 3600.0))

@@ -36,6 +36,7 @@ struct ServeOptions {
   bool scene_given = false;
   std::string endpoint;  // couch: tcp:ADDRESS:PORT; robot: the bridge socket path
   std::vector<std::string> addresses;  // detectors: where the GigE cameras listen
+  std::vector<std::string> loopback;   // detectors: v4l2loopback devices instead
   std::string lf_dir;                  // detectors: light fields of the simulated frames
   double settle_s = 2;                 // detectors: the residual is summarised after this
   std::string room;

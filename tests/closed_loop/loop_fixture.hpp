@@ -21,8 +21,8 @@ inline const char* kLightFieldFrames =
 inline const char* kRayCastFrames = "sim:\n  renderer: siddon\n";
 
 // The built-in scene with 0.8 mm detector pixels (a quarter of the rays), the frames' renderer
-// and the motion given.
-inline Scene small_scene(const std::string& motion_yaml, const std::string& frames_yaml) {
+// and the motion given: its text (for a server in another process) and the scene.
+inline std::string small_scene_text(const std::string& motion_yaml, const std::string& frames_yaml) {
   std::string text = *builtin_scene_text(kBuiltinPhantom);
   for (const char* from : {"    rows: 512\n    cols: 512\n    pitch_mm: 0.4\n"}) {
     for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from))
@@ -40,6 +40,11 @@ inline Scene small_scene(const std::string& motion_yaml, const std::string& fram
       "loop:\n  period_ms: 100\n  registration_budget_ms: 50\n  acquire_timeout_ms: 40\n"
       "actuator:\n  type: virtual\n  latency_s: 0.1\n  max_speed_mm_s: 40\n  max_speed_deg_s: 10\n" +
       motion_yaml;
+  return text;
+}
+
+inline Scene small_scene(const std::string& motion_yaml, const std::string& frames_yaml) {
+  const std::string text = small_scene_text(motion_yaml, frames_yaml);
   auto scene = parse_scene(text, "small-closed-loop.yaml", std::filesystem::current_path());
   EXPECT_TRUE(scene.ok()) << scene.status().message();
   return *scene;

@@ -31,8 +31,8 @@ class OperatorClient {
   OperatorClient(const OperatorClient&) = delete;
   OperatorClient& operator=(const OperatorClient&) = delete;
 
-  // The reply to `text` (empty: none within 50 ms, or the loop has gone).
-  std::string ask(const std::string& text) {
+  // The reply to `text` (empty: none within `waits` x 50 ms, or the loop has gone).
+  std::string ask(const std::string& text, int waits = 6) {
     sockaddr_un to{};
     to.sun_family = AF_UNIX;
     std::strncpy(to.sun_path, control_.c_str(), sizeof(to.sun_path) - 1);
@@ -40,7 +40,7 @@ class OperatorClient {
     while (::recv(fd_, drain, sizeof drain, MSG_DONTWAIT) > 0) {
     }
     if (::sendto(fd_, text.data(), text.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) < 0) return {};
-    for (int i = 0; i < 6; ++i) {  // the loop answers once a cycle (100 ms)
+    for (int i = 0; i < waits; ++i) {  // the loop answers once a cycle (100 ms)
       char buffer[256];
       const ssize_t n = ::recv(fd_, buffer, sizeof buffer, 0);
       if (n > 0) return std::string(buffer, std::size_t(n));

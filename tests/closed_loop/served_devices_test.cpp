@@ -2,21 +2,28 @@
 // a couch served by `lftrack serve couch` (Modbus TCP) or a robot served by `lftrack serve robot`
 // (a CAN bridge socket), each a child process; the simulated detectors see the patient where that
 // device has moved them through its room link. One parameterised suite runs every actuator kind
-// (virtual, Modbus, CAN) through the same closed-loop cases; the fault cases kill, stall, unplug
+// (virtual, Modbus TCP, Modbus RTU over a pseudo-terminal pair, CAN) through the same
+// closed-loop cases; the fault cases kill, stall, unplug
 // and restart the servers mid-treatment (docs/faults.md, "Devices in other processes").
 
+#include <fcntl.h>
+#include <linux/videodev2.h>
 #include <signal.h>
+#include <sys/ioctl.h>
 #include <stdlib.h>
 
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <fstream>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <optional>
 #include <thread>
 
 #include "child_process.hpp"
+#include "lftrack/sim/gige_fake_detector.hpp"
 #include "loop_fixture.hpp"
 #include "operator_client.hpp"
 
@@ -46,15 +53,18 @@ class SocketDir {
 // A device server started as a child process, and where it listens.
 struct ServedDevice {
   std::unique_ptr<test::ChildProcess> process;
-  int port = 0;  // Modbus TCP
+  int port = 0;     // Modbus TCP
+  std::string tty;  // Modbus RTU: the client's end of the server's pseudo-terminal pair
 };
 
 ServedDevice serve(const std::string& kind, const std::filesystem::path& dir, int port = 0) {
   ServedDevice d;
   const std::string bin = LFTRACK_BIN_PATH;
-  std::vector<std::string> argv = {bin, "serve", kind == "modbus" ? "couch" : "robot"};
+  std::vector<std::string> argv = {bin, "serve", kind == "can" ? "robot" : "couch"};
   if (kind == "modbus") {
     argv.insert(argv.end(), {"--modbus", "tcp:127.0.0.1:" + std::to_string(port)});
+  } else if (kind == "rtu") {
+    argv.insert(argv.end(), {"--modbus", "rtu:pty"});
   } else {
     argv.insert(argv.end(), {"--socket", (dir / "robot.sock").string()});
   }
@@ -69,13 +79,24 @@ ServedDevice serve(const std::string& kind, const std::filesystem::path& dir, in
     d.port = std::atoi(line->c_str() + colon + 1);
     EXPECT_GT(d.port, 0) << *line;
   }
+  if (line && kind == "rtu") {  // "... modbus rtu /dev/pts/N; room link ..."
+    const std::size_t at = line->find("rtu ") + 4;
+    d.tty = line->substr(at, line->find(';') - at);
+    EXPECT_EQ(d.tty.rfind("/dev/", 0), 0u) << *line;
+  }
   return d;
 }
 
 // The scene's actuator becomes the served device; its simulated detectors read the room link.
-void use_served(Scene& scene, const std::string& kind, const std::filesystem::path& dir, int port) {
-  scene.actuator.type = kind;
-  if (kind == "modbus") {
+void use_served(Scene& scene, const std::string& kind, const std::filesystem::path& dir, int port,
+                const std::string& tty = "") {
+  scene.actuator.type = kind == "rtu" ? "modbus" : kind;
+  if (kind == "rtu") {
+    scene.actuator.modbus.transport = drivers::ModbusCouchOptions::Transport::kRtu;
+    scene.actuator.modbus.serial_device = tty;
+    scene.actuator.modbus.response_timeout_s = 0.05;  // 115200 baud: a read-back's frames take ~5 ms
+    scene.actuator.modbus.reconnect_interval_s = 0.1;
+  } else if (kind == "modbus") {
     scene.actuator.modbus.host = "127.0.0.1";
     scene.actuator.modbus.port = port;
     scene.actuator.modbus.response_timeout_s = 0.02;
@@ -99,7 +120,7 @@ class EveryActuatorKind : public ClosedLoop, public ::testing::WithParamInterfac
     ServedDevice device;
     if (kind != "virtual") {
       device = serve(kind, sockets_.path());
-      edit_scene_ = [&](Scene& s) { use_served(s, kind, sockets_.path(), device.port); };
+      edit_scene_ = [&](Scene& s) { use_served(s, kind, sockets_.path(), device.port, device.tty); };
     }
     return run_loop(motion, cycles, options);
   }
@@ -136,7 +157,7 @@ TEST_P(EveryActuatorKind, ASuddenShiftHoldsAndMovesNothingAfter) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Room, EveryActuatorKind, ::testing::Values("virtual", "modbus", "can"),
+INSTANTIATE_TEST_SUITE_P(Room, EveryActuatorKind, ::testing::Values("virtual", "modbus", "rtu", "can"),
                          [](const ::testing::TestParamInfo<const char*>& kind) { return std::string(kind.param); });
 
 // Faults across processes: the loop on the real clock with a control socket; the test is the
@@ -251,6 +272,117 @@ TEST_F(ServedDeviceFaults, UnpluggedRobotBridgeHolds) {
   });
   ASSERT_GE(unplugged_at, 20);
   expect_held_until_the_operator(r.journal.records, unplugged_at);
+}
+
+// GigE detectors served by `lftrack serve detectors` (two fake GigE Vision cameras, one per
+// detector, on two local addresses) and a couch served by `lftrack serve couch`: the loop tracks
+// through both protocols; the detector server's cameras power-cycled (off a second) hold the loop
+// within a cycle of the frames stopping, the driver reopens the cameras off the cycle, frames
+// resume (the gap journaled as cycles without a pair), and only the operator resumes tracking.
+TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
+  const std::vector<std::string> addresses = sim::local_ipv4_addresses();
+  if (addresses.size() < 2)
+    GTEST_SKIP() << "one GigE camera per detector needs two local IPv4 addresses; this host has " << addresses.size();
+  real_clock_ = true;
+  const std::filesystem::path dir = sockets_.path();
+  // The servers' scene: the fixture's small scene, as a file.
+  std::ofstream(dir / "room.yaml") << small_scene_text(kBreathing, kLightFieldFrames);
+  device_ = serve("modbus", dir);
+  test::ChildProcess detectors({LFTRACK_BIN_PATH, "-q", "serve", "detectors", "--scene", (dir / "room.yaml").string(),
+                                "--room", (dir / "room.link").string(), "--address", addresses[0], "--address",
+                                addresses[1], "--lf-dir", lf_dir_.path().string(), "--control",
+                                (dir / "detectors.ctl").string(), "--threads", "1"});
+  const std::optional<std::string> listening = detectors.read_line(120s);
+  ASSERT_TRUE(listening.has_value()) << "the detector server started";
+  if (listening->find("gige") == std::string::npos) GTEST_SKIP() << *listening;
+  edit_scene_ = [&](Scene& s) {
+    use_served(s, "modbus", dir, device_.port);
+    s.sim.couch_link.clear();
+    for (std::size_t i = 0; i < s.detectors.size(); ++i) {
+      s.detectors[i].frames.kind = "gige";
+      s.detectors[i].frames.device = addresses[i];
+      s.detectors[i].simulator_calibration = true;
+    }
+    s.loop.acquire_timeout_ms = 60;  // the server renders each pair when triggered
+    s.loop.registration_budget_ms = 35;
+  };
+  LoopSessionOptions options;
+  options.devices = SessionDevices::kScene;
+  options.control_socket = dir / "control.sock";
+  long long cycled_at = -1;
+  bool tracked_again = false;
+  const LoopRun r = run_loop(kBreathing, 150, options, kLightFieldFrames, [&](LoopSession&) {
+    return std::thread([&] {
+      OperatorClient op(options.control_socket, dir / "operator.sock");
+      cycled_at = tracking_cycle(op, 20);
+      OperatorClient detector_control(dir / "detectors.ctl", dir / "detectors-client.sock");
+      // The server answers once the cameras are back (off for 10 x 100 ms).
+      EXPECT_EQ(detector_control.ask("fault power-cycle:10", 60).rfind("injected", 0), 0u);
+      std::this_thread::sleep_for(2s);  // the driver reopens them
+      const std::string after = op.ask("status");
+      EXPECT_TRUE(after.rfind("HOLD", 0) == 0 || after.rfind("FAULT", 0) == 0) << "no resume by itself: " << after;
+      tracked_again = op.bring_back_to_track(8s);
+    });
+  });
+  ASSERT_GE(cycled_at, 20);
+  EXPECT_TRUE(tracked_again) << "frames resumed and the operator resumed";
+  const std::size_t out = expect_held_until_the_operator(r.journal.records, cycled_at);
+  std::size_t without_pair = 0;
+  for (std::size_t i = out; i < r.journal.records.size() && r.journal.records[i].frame_sequence[0] == 0; ++i)
+    ++without_pair;
+  EXPECT_GE(without_pair, 1u) << "the gap is journaled as cycles without a pair";
+  EXPECT_NE(r.journal.records.back().frame_sequence[0], 0u) << "frames resumed";
+}
+
+// The loopback devices of the v4l2loopback module on this host, found by their driver's name.
+std::vector<std::string> v4l2_loopback_devices() {
+  std::vector<std::string> found;
+  for (int n = 0; n < 64; ++n) {
+    const std::string path = "/dev/video" + std::to_string(n);
+    const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+    if (fd < 0) continue;
+    v4l2_capability cap{};
+    if (::ioctl(fd, VIDIOC_QUERYCAP, &cap) == 0 &&
+        std::strncmp(reinterpret_cast<const char*>(cap.driver), "v4l2 loopback", 13) == 0)
+      found.push_back(path);
+    ::close(fd);
+  }
+  return found;
+}
+
+// `serve detectors --v4l2loopback` writes the frames into loopback devices and the loop reads
+// them through the kernel's V4L2 capture path (drivers/v4l2_detector.hpp), the couch served as
+// well. Skips where the module is not loaded (this machine's kernel has none).
+TEST_F(ServedDeviceFaults, FramesThroughV4l2LoopbackAreTracked) {
+  const std::vector<std::string> devices = v4l2_loopback_devices();
+  if (devices.size() < 2)
+    GTEST_SKIP() << "needs two v4l2loopback devices: sudo apt install v4l2loopback-dkms && sudo modprobe v4l2loopback "
+                    "devices=2 exclusive_caps=0 (found "
+                 << devices.size() << ")";
+  real_clock_ = true;
+  const std::filesystem::path dir = sockets_.path();
+  std::ofstream(dir / "room.yaml") << small_scene_text(kBreathing, kLightFieldFrames);
+  device_ = serve("modbus", dir);
+  test::ChildProcess detectors({LFTRACK_BIN_PATH, "-q", "serve", "detectors", "--scene", (dir / "room.yaml").string(),
+                                "--room", (dir / "room.link").string(), "--v4l2loopback", devices[0],
+                                "--v4l2loopback", devices[1], "--lf-dir", lf_dir_.path().string()});
+  const std::optional<std::string> listening = detectors.read_line(120s);
+  ASSERT_TRUE(listening.has_value() && listening->find("v4l2loopback") != std::string::npos);
+  edit_scene_ = [&](Scene& s) {
+    use_served(s, "modbus", dir, device_.port);
+    s.sim.couch_link.clear();
+    for (std::size_t i = 0; i < s.detectors.size(); ++i) {
+      s.detectors[i].frames.kind = "v4l2";
+      s.detectors[i].frames.device = devices[i];
+      s.detectors[i].simulator_calibration = true;
+    }
+    s.loop.acquire_timeout_ms = 60;
+    s.loop.registration_budget_ms = 35;
+  };
+  LoopSessionOptions options;
+  options.devices = SessionDevices::kScene;
+  const LoopRun r = run_loop(kBreathing, 60, options);
+  EXPECT_GE(r.summary.states[std::size_t(TrackingState::kTrack)], 50) << to_json(r.summary).dump();
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include "lftrack/drivers/couch_register_map.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
+#include "lftrack/sim/null_modem.hpp"
 #include "lftrack/sim/virtual_couch.hpp"
 #include "protocol_test_support.hpp"
 
@@ -207,48 +208,12 @@ TEST(ModbusCouch, OpeningWithNothingListeningSaysWhere) {
 }  // namespace
 }  // namespace lftrack
 
-// Modbus RTU: the same driver and server over a serial line. The line is two pseudo-terminals
-// joined by a thread that copies bytes both ways (what a null-modem cable does).
+// Modbus RTU: the same driver and server over a serial line (sim/null_modem.hpp: two
+// pseudo-terminals joined like a null-modem cable).
 namespace lftrack {
 namespace {
 
-class NullModem {
- public:
-  NullModem() {
-    ok_ = openpty(&master_[0], &slave_[0], name_[0], nullptr, nullptr) == 0 &&
-          openpty(&master_[1], &slave_[1], name_[1], nullptr, nullptr) == 0;
-    if (ok_) thread_ = std::thread([this] { copy(); });
-  }
-  ~NullModem() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-    for (int i = 0; i < 2; ++i) {
-      ::close(master_[i]);
-      ::close(slave_[i]);
-    }
-  }
-  bool ok() const { return ok_; }
-  const char* end(int i) const { return name_[i]; }
-
- private:
-  void copy() {
-    char buffer[512];
-    while (!stop_) {
-      pollfd p[2] = {{master_[0], POLLIN, 0}, {master_[1], POLLIN, 0}};
-      if (::poll(p, 2, 10) <= 0) continue;
-      for (int i = 0; i < 2; ++i)
-        if (p[i].revents & POLLIN) {
-          const ssize_t n = ::read(master_[i], buffer, sizeof buffer);
-          if (n > 0) (void)!::write(master_[1 - i], buffer, std::size_t(n));
-        }
-    }
-  }
-  int master_[2] = {-1, -1}, slave_[2] = {-1, -1};
-  char name_[2][64] = {};
-  bool ok_ = false;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-};
+using sim::NullModem;
 
 TEST(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTakenAsTheAnswer) {
   NullModem line;
