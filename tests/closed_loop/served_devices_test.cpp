@@ -23,6 +23,7 @@
 #include <thread>
 
 #include "child_process.hpp"
+#include "gige_host_lock.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "loop_fixture.hpp"
 #include "operator_client.hpp"
@@ -283,6 +284,7 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
   const std::vector<std::string> addresses = sim::local_ipv4_addresses();
   if (addresses.size() < 2)
     GTEST_SKIP() << "one GigE camera per detector needs two local IPv4 addresses; this host has " << addresses.size();
+  test::GigeHostLock gige_tests_one_at_a_time;
   real_clock_ = true;
   const std::filesystem::path dir = sockets_.path();
   // The servers' scene: the fixture's small scene, as a file.

@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "lftrack/sim/gige_fake_detector.hpp"
+#include "gige_host_lock.hpp"
 #include "protocol_test_support.hpp"
 
 namespace lftrack {
@@ -102,23 +103,7 @@ std::int64_t monotonic_ns() {
   return std::int64_t(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-// One GigE test at a time on this host, across processes.
-class HostLock {
- public:
-  HostLock() {
-    const auto path = std::filesystem::temp_directory_path() / "lftrack-gige-tests.lock";
-    fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
-    if (fd_ >= 0) (void)flock(fd_, LOCK_EX);
-  }
-  ~HostLock() {
-    if (fd_ >= 0) ::close(fd_);  // releases the lock
-  }
-  HostLock(const HostLock&) = delete;
-  HostLock& operator=(const HostLock&) = delete;
-
- private:
-  int fd_ = -1;
-};
+using HostLock = test::GigeHostLock;
 
 class GigeTest : public ::testing::Test {
  protected:
