@@ -421,8 +421,10 @@ TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
   // `run` on V4L2 detectors that are not there: the start-up checks list every reason (the
   // device, and the missing detector calibrations), and nothing starts.
   std::string v4l2 = scene;
-  for (std::size_t at = v4l2.find("frames: sim"); at != std::string::npos; at = v4l2.find("frames: sim"))
-    v4l2.replace(at, 11, "frames: {type: v4l2, device: /dev/v4l/by-path/lftrack-test-absent}");
+  for (char name : {'A', 'B'})
+    v4l2.replace(v4l2.find("frames: sim"), 11,
+                 std::string("frames: {type: v4l2, device: /dev/v4l/by-path/lftrack-test-absent-") + name + "}");
+  if (const std::size_t at = v4l2.find("type: virtual"); at != std::string::npos) v4l2.replace(at, 13, "type: none");
   std::ofstream(dir.path() / "v4l2.yaml") << v4l2;
   EXPECT_FALSE(
       run_process({lftrack_bin(), "run", "--scene", (dir.path() / "v4l2.yaml").string(), "--rt", "ignore"},

@@ -58,7 +58,7 @@ void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleSt
   // registration is reported on its own).
   if (!c.aligning) {
     acquire_ms.add(ms_between(c.acquire_started_ns, c.acquired_ns));
-    if (parts.actuator != nullptr) readback_ms.add(ms_between(c.acquire_started_ns, c.readback_done_ns));
+    if (parts.actuator != nullptr) readback_ms.add(c.readback_ms);
     if (c.frames_ok) preprocess_ms.add(ms_between(c.acquired_ns, c.preprocessed_ns));
   }
   if (c.registration_ran) {

@@ -77,12 +77,10 @@ bool TrackingLoop::Impl::take_operator_command(CycleState& c) {
 }
 
 // The actuator's read-back at the frame time (where the couch is, and whether it took our
-// command), then the frame pair. The read-back comes first: the pair was exposed at the cycle's
-// start, and devices that take their time to deliver it (a detector's readout and transfer) must
-// not let a moving couch's read-back drift from it. The simulated truth is read there too.
-bool TrackingLoop::Impl::acquire(CycleState& c) {
-  c.acquire_started_ns = monotonic_now_ns();
+// command), and the simulated truth then.
+void TrackingLoop::Impl::read_back(CycleState& c) {
   GateInput& in = c.gate_input;
+  const std::int64_t started = monotonic_now_ns();
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(c.start_ns + period_ns));
@@ -96,9 +94,20 @@ bool TrackingLoop::Impl::acquire(CycleState& c) {
       c.readback = a.position;
     }
   }
-  c.readback_done_ns = monotonic_now_ns();
+  c.readback_ms = ms_between(started, monotonic_now_ns());
   // The truth at the frame time, before this cycle's command moves the simulated room on.
   if (parts.truth != nullptr) c.true_residual_mm = parts.truth->residual_mm();
+}
+
+// The read-back, then the frame pair. The read-back comes first: the pair was exposed at the
+// cycle's start, and devices that take their time to deliver it (a detector's readout and
+// transfer) must not let a moving couch's read-back drift from it. A read-back recorded with the
+// pair (replay) comes after it.
+bool TrackingLoop::Impl::acquire(CycleState& c) {
+  c.acquire_started_ns = monotonic_now_ns();
+  GateInput& in = c.gate_input;
+  const bool readback_after = parts.actuator != nullptr && parts.actuator->readback_follows_frames();
+  if (!readback_after) read_back(c);
   const DeviceStatus acquired = parts.frames->acquire(
       &pair, to_deadline(c.start_ns + std::int64_t(settings.loop.acquire_timeout_ms * 1e6)));
   c.frames_ok = acquired == DeviceStatus::kOk;
@@ -122,6 +131,7 @@ bool TrackingLoop::Impl::acquire(CycleState& c) {
       c.newest_frame_ns = std::max(c.newest_frame_ns, f.timestamp_ns);
     }
   }
+  if (readback_after) read_back(c);
   in.views = static_cast<int>(pair.frames.size());
   in.frames_ok = c.frames_ok;
   in.journal_ok = parts.journal == nullptr || !parts.journal->failed();

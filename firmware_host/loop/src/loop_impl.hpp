@@ -37,7 +37,8 @@ struct CycleState {
 
   // acquire (and the actuator's read-back at the frame time)
   bool frames_ok = false;
-  std::int64_t acquire_started_ns = 0, readback_done_ns = 0, acquired_ns = 0, preprocessed_ns = 0;  // wall clock
+  std::int64_t acquire_started_ns = 0, acquired_ns = 0, preprocessed_ns = 0;  // wall clock
+  double readback_ms = 0;  // the actuator's read-back alone
   std::int64_t oldest_frame_ns = 0, newest_frame_ns = 0;                       // loop clock
   std::int64_t frame_time_ns[2] = {0, 0};
   std::uint32_t frame_sequence[2] = {0, 0};
@@ -129,6 +130,7 @@ struct TrackingLoop::Impl {
   // The stages (cycle_stages.cpp), each on cycle_state.
   bool take_operator_command(CycleState& c);  // false: stop or quit
   bool acquire(CycleState& c);                // false: an archived sequence has ended
+  void read_back(CycleState& c);              // the actuator's read-back and the simulated truth
   void preprocess(CycleState& c);
   void register_pair(CycleState& c);
   void control(CycleState& c);

@@ -165,7 +165,14 @@ void measure_on_cpu(Worker* w, const WakeupLatencyOptions& o, Start* start) {
   const std::int64_t bins = static_cast<std::int64_t>(w->result.histogram.size());
   const std::int64_t budget_ns =
       o.budget_us ? std::llround(*o.budget_us * 1e3) : std::numeric_limits<std::int64_t>::max();
+  // Counted in locals (this thread's stack), not in the Worker that shares cache lines with its
+  // neighbours in the vector, and written back after the run.
   CpuWakeupLatency& r = w->result;
+  std::uint64_t* const histogram = r.histogram.data();
+  std::int64_t samples = 0, skipped = 0, early = 0, over_budget = 0, wrong_cpu = 0;
+  std::uint64_t overflow = 0;
+  std::int64_t sum_ns = 0, min_ns = std::numeric_limits<std::int64_t>::max(),
+               max_ns = std::numeric_limits<std::int64_t>::min(), max_at_ns = 0;
   std::int64_t intended = 0;
   std::int64_t next = start_ns;
   for (;;) {
@@ -180,32 +187,42 @@ void measure_on_cpu(Worker* w, const WakeupLatencyOptions& o, Start* start) {
     const int on_cpu = sched_getcpu();
     const std::int64_t late = now - next;
     ++intended;
-    ++r.samples;
-    w->sum_ns += late;
-    w->min_ns = std::min(w->min_ns, late);
-    if (late > w->max_ns) {
-      w->max_ns = late;
-      w->max_at_ns = next - start_ns;
+    ++samples;
+    sum_ns += late;
+    min_ns = std::min(min_ns, late);
+    if (late > max_ns) {
+      max_ns = late;
+      max_at_ns = next - start_ns;
     }
-    if (late < 0) ++r.early;
-    if (late > budget_ns) ++r.over_budget;
-    if (on_cpu != w->cpu) ++r.wrong_cpu;
+    if (late < 0) ++early;
+    if (late > budget_ns) ++over_budget;
+    if (on_cpu != w->cpu) ++wrong_cpu;
     const std::int64_t bin = std::max<std::int64_t>(0, late) / 1000;
     if (bin < bins) {
-      ++r.histogram[static_cast<std::size_t>(bin)];
+      ++histogram[bin];
     } else {
-      ++r.overflow;
+      ++overflow;
       if (w->overflow_ns.size() < w->overflow_ns.capacity()) w->overflow_ns.push_back(late);
     }
     if (late >= interval_ns) {  // the intervals this wake-up ran into are skipped, not caught up
       const std::int64_t k = late / interval_ns;
       // Counted only where they were planned (within the duration or the loop count).
       const std::int64_t planned = o.loops > 0 ? loops - intended : (end_ns - next) / interval_ns;
-      r.skipped_periods += std::min(k, std::max<std::int64_t>(0, planned));
+      skipped += std::min(k, std::max<std::int64_t>(0, planned));
       next += k * interval_ns;
       intended += k;
     }
   }
+  r.samples = samples;
+  r.skipped_periods = skipped;
+  r.early = early;
+  r.over_budget = over_budget;
+  r.wrong_cpu = wrong_cpu;
+  r.overflow = overflow;
+  w->sum_ns = sum_ns;
+  w->min_ns = min_ns;
+  w->max_ns = max_ns;
+  w->max_at_ns = max_at_ns;
 
   int policy_after = -1, priority_after = 0;
   bool pinned_after = false;

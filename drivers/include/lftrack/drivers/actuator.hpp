@@ -30,6 +30,10 @@ class Actuator {
   // Every cycle, after the state machine: whether the beam may be on (a robot that carries the
   // beam gates it; a couch ignores it). Never blocks.
   virtual void set_beam_permit(bool permit) { (void)permit; }
+  // True for a read-back tied to the frame pair just delivered (the recorded read-backs of an
+  // archived sequence): the loop then reads back after the frames. Otherwise it reads back at
+  // the cycle's start, the frames' exposure time, before waiting for them.
+  virtual bool readback_follows_frames() const { return false; }
   virtual void close() = 0;
 };
 

@@ -22,6 +22,7 @@ class RecordedActuator final : public Actuator {
   DeviceStatus readback(ActuatorState* state, Deadline deadline) override;
   void hold() override {}
   void close() override {}
+  bool readback_follows_frames() const override { return true; }
 
  private:
   const ReplayFrameSource* frames_;
