@@ -1,6 +1,11 @@
 // `lftrack calibrate detector --dark DIR --flood DIR [--out FILE]`: a detector's offset, gain and
 // defect maps from its own dark and flood frames (calib/detector_calibration.hpp); the file
 // (host/detector_calibration_file.hpp) is what a scene names as detectors[i].calibration.
+//
+// Each folder holds only frames: 16-bit greyscale .tif/.tiff/.png files of one size, used in file
+// name order (names starting with '.' are skipped). Anything else in it (a notes file, a folder,
+// an 8-bit image) is refused with its name, so a mixed-up folder is not calibrated from. Every
+// refusal happens before anything is written; the default output is never replaced.
 
 #include <spdlog/spdlog.h>
 
@@ -21,11 +26,12 @@ namespace fs = std::filesystem;
 struct DetectorOptions {
   std::string dark, flood, out, detector;
   bool overwrite = false, json = false;
+  int min_frames = 8;
   calib::DetectorCalibrationOptions rule;
 };
 
-constexpr std::size_t kMaxFrames = 2000;
-constexpr std::uint64_t kMaxBytes = std::uint64_t(2) << 30;  // frames held in memory at once
+constexpr std::size_t kMaxFrames = 5000;
+constexpr std::uint64_t kMaxBytes = std::uint64_t(4) << 30;  // frames held in memory at once
 
 bool is_frame_file(const fs::path& p) {
   std::string ext = p.extension().string();
@@ -33,79 +39,164 @@ bool is_frame_file(const fs::path& p) {
   return ext == ".tif" || ext == ".tiff" || ext == ".png";
 }
 
-// The frames of `dir` (its .tif, .tiff and .png files, in name order), all of one size: the
-// first frame's, or `rows` x `cols` when given (> 0).
-Result<std::vector<tracking::Image<std::uint16_t>>> read_folder(const std::string& dir, const char* what, int* rows,
-                                                                int* cols) {
+// The frame files of `dir` in name order; a folder that is missing, empty of frames or holds
+// anything else is refused.
+Result<std::vector<fs::path>> list_folder(const std::string& dir, const char* what) {
   std::error_code ec;
-  if (!fs::is_directory(dir, ec)) return not_found(std::string(what) + " folder " + dir + ": no such directory");
+  const fs::file_status st = fs::status(dir, ec);
+  if (!fs::exists(st)) return not_found(std::string(what) + " folder " + dir + ": no such directory");
+  if (!fs::is_directory(st)) return invalid_argument(std::string(what) + " folder " + dir + " is not a directory");
   std::vector<fs::path> files;
-  std::size_t others = 0;
-  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
-    if (e.path().filename().string().front() == '.') continue;
-    if (e.is_regular_file(ec) && is_frame_file(e.path()))
-      files.push_back(e.path());
+  std::vector<std::string> others;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const fs::path& p = it->path();
+    if (p.filename().string().front() == '.') continue;
+    if (it->is_regular_file(ec) && is_frame_file(p))
+      files.push_back(p);
     else
-      ++others;
+      others.push_back(p.filename().string() + (it->is_directory(ec) ? "/" : ""));
   }
   if (ec) return io_error(std::string(what) + " folder " + dir + ": " + ec.message());
+  if (!others.empty()) {
+    std::sort(others.begin(), others.end());
+    std::string names;
+    for (std::size_t i = 0; i < others.size() && i < 3; ++i) names += (i ? ", " : "") + others[i];
+    if (others.size() > 3) names += " and " + std::to_string(others.size() - 3) + " more";
+    return invalid_argument(std::string(what) + " folder " + dir + " holds " + std::to_string(others.size()) +
+                            (others.size() == 1 ? " entry that is" : " entries that are") +
+                            " not a frame file (.tif, .tiff, .png): " + names +
+                            "; a calibration folder must hold only its frames");
+  }
   if (files.empty())
     return invalid_argument(std::string(what) + " folder " + dir + " holds no frames (.tif, .tiff or .png files)");
   if (files.size() > kMaxFrames)
     return invalid_argument(std::string(what) + " folder " + dir + " holds " + std::to_string(files.size()) +
                             " frames; at most " + std::to_string(kMaxFrames) + " are used for a calibration");
-  if (others > 0) spdlog::warn("{} folder {}: {} other entries ignored (not frame files)", what, dir, others);
   std::sort(files.begin(), files.end());
-  if (*rows <= 0) LFTRACK_RETURN_IF_ERROR(drivers::frame_file_size(files[0].c_str(), rows, cols));
-  if (std::uint64_t(*rows) * std::uint64_t(*cols) * 2 * files.size() > kMaxBytes)
-    return invalid_argument(std::string(what) + " frames would take more than 2 GiB; use fewer frames");
-  std::vector<tracking::Image<std::uint16_t>> frames;
+  return files;
+}
+
+struct FrameSize {
+  int rows = 0, cols = 0;
+  fs::path first;           // the file the size was taken from
+  std::uint64_t bytes = 0;  // of the frames read so far
+};
+
+// Reads `files`, all of the size in `size` (set from the first file when not yet set).
+Result<std::vector<tracking::Image<std::uint16_t>>> read_frames(const std::vector<fs::path>& files, const char* what,
+                                                                FrameSize* size) {
+  const auto describe = [](int rows, int cols) { return std::to_string(cols) + " x " + std::to_string(rows); };
   for (const fs::path& f : files) {
-    frames.emplace_back(*rows, *cols);
+    int rows = 0, cols = 0;
+    if (Status s = drivers::frame_file_size(f.c_str(), &rows, &cols); !s.ok())
+      return s.with_context(std::string(what) + " frame");
+    if (size->rows == 0) {
+      size->rows = rows;
+      size->cols = cols;
+      size->first = f;
+    } else if (rows != size->rows || cols != size->cols) {
+      return invalid_argument(std::string(what) + " frame " + f.string() + " is " + describe(rows, cols) +
+                              " pixels; " + size->first.string() + " is " + describe(size->rows, size->cols) +
+                              ": all frames must be one size");
+    }
+  }
+  size->bytes += std::uint64_t(size->rows) * std::uint64_t(size->cols) * 2 * files.size();
+  if (size->bytes > kMaxBytes) return invalid_argument("the frames would take more than 4 GiB of memory; use fewer frames");
+  std::vector<tracking::Image<std::uint16_t>> frames;
+  frames.reserve(files.size());
+  for (const fs::path& f : files) {
+    frames.emplace_back(size->rows, size->cols);
     if (Status s = drivers::read_frame_file(f.c_str(), frames.back().view()); !s.ok())
       return s.with_context(std::string(what) + " frame");
   }
   return frames;
 }
 
-fs::path default_out(const DetectorOptions& o) {
-  return fs::path("out/calibration") / ("detector-" + (o.detector.empty() ? std::string("detector") : o.detector) + ".tif");
+Status check_detector_name(const std::string& name) {
+  if (name.empty()) return {};
+  const bool ok = name.size() <= 64 && name.front() != '.' &&
+                  std::all_of(name.begin(), name.end(), [](unsigned char c) {
+                    return std::isalnum(c) || c == '_' || c == '-' || c == '.';
+                  });
+  if (!ok)
+    return invalid_argument("--detector '" + name +
+                            "': a detector name is 1 to 64 letters, digits, '_', '-' or '.' (not first)");
+  return {};
+}
+
+std::string saturation_text(const calib::DetectorCalibration& c) {
+  if (c.saturation_source == "option") return "from --saturation";
+  if (c.saturation_source == "bits") return "2^" + std::to_string(c.rule.bits) + " - 1, from --bits";
+  return "inferred: the largest raw value fits that full scale; give --bits or --saturation to state it";
 }
 
 Status run(const DetectorOptions& o) {
-  LFTRACK_RETURN_IF_ERROR(calib::check_detector_calibration_options(o.rule));
-  const fs::path out = o.out.empty() ? default_out(o) : fs::path(o.out);
+  calib::DetectorCalibrationOptions rule = o.rule;
+  rule.min_dark_frames = rule.min_flood_frames = o.min_frames;
+  LFTRACK_RETURN_IF_ERROR(calib::check_detector_calibration_options(rule));
+  LFTRACK_RETURN_IF_ERROR(check_detector_name(o.detector));
+  const fs::path out =
+      o.out.empty() ? fs::path("out/calibration") / ("detector-" + (o.detector.empty() ? "detector" : o.detector) + ".tif")
+                    : fs::path(o.out);
   std::error_code ec;
-  if (fs::is_directory(out, ec)) return invalid_argument("--out " + out.string() + " is a directory; name a file");
-  if (fs::exists(fs::symlink_status(out, ec)) && !o.overwrite)
-    return failed_precondition(out.string() + " exists; give --overwrite to replace it");
-  int rows = 0, cols = 0;
-  auto dark = read_folder(o.dark, "dark", &rows, &cols);
+  if (!out.has_filename())
+    return invalid_argument("--out " + out.string() + " names a folder (it ends in '/'); name the calibration file");
+  if (fs::is_directory(out, ec))
+    return invalid_argument("--out " + out.string() + " is a directory; name the calibration file");
+  const fs::file_status existing = fs::symlink_status(out, ec);
+  if (fs::exists(existing)) {
+    if (!o.overwrite) return failed_precondition(out.string() + " exists; give --overwrite to replace it");
+    if (!fs::is_regular_file(existing))
+      return failed_precondition(out.string() + " is not a regular file (a link?); not replaced");
+    // --overwrite replaces an earlier calibration, never another file (a frame, a scene) that an
+    // --out typo names.
+    if (auto earlier = load_detector_calibration(out); !earlier.ok())
+      return failed_precondition(out.string() + " is not a detector calibration (" + earlier.status().message() +
+                                 "); --overwrite replaces only a calibration file; remove it yourself if it is yours");
+  }
+  auto dark_files = list_folder(o.dark, "dark");
+  if (!dark_files.ok()) return dark_files.status();
+  auto flood_files = list_folder(o.flood, "flood");
+  if (!flood_files.ok()) return flood_files.status();
+  if (int(dark_files->size()) < rule.min_dark_frames || int(flood_files->size()) < rule.min_flood_frames)
+    return invalid_argument("too few frames: " + std::to_string(dark_files->size()) + " dark in " + o.dark + ", " +
+                            std::to_string(flood_files->size()) + " flood in " + o.flood + " (at least " +
+                            std::to_string(o.min_frames) + " of each; --min-frames)");
+  FrameSize size;
+  auto dark = read_frames(*dark_files, "dark", &size);
   if (!dark.ok()) return dark.status();
-  auto flood = read_folder(o.flood, "flood", &rows, &cols);
+  auto flood = read_frames(*flood_files, "flood", &size);
   if (!flood.ok()) return flood.status();
-  spdlog::info("{} dark and {} flood frames of {} x {} pixels", dark->size(), flood->size(), cols, rows);
-  auto calibration = calib::calibrate_detector(*dark, *flood, o.rule);
+  spdlog::info("{} dark and {} flood frames of {} x {} pixels", dark->size(), flood->size(), size.cols, size.rows);
+  auto calibration = calib::calibrate_detector(*dark, *flood, rule);
   if (!calibration.ok()) return calibration.status();
   calibration->detector = o.detector;
-  calibration->content_hash = calib::detector_calibration_hash(*calibration);
-  if (!out.parent_path().empty()) fs::create_directories(out.parent_path(), ec);
+  if (out.has_parent_path() && !fs::exists(out.parent_path(), ec)) {
+    fs::create_directories(out.parent_path(), ec);
+    if (ec) return io_error("cannot create the folder " + out.parent_path().string() + ": " + ec.message());
+  }
   LFTRACK_RETURN_IF_ERROR(write_detector_calibration(out, *calibration, o.overwrite));
-  const calib::DetectorCalibration& c = *calibration;
-  double offset_sum = 0, noise_sum = 0;
-  for (int r = 0; r < c.rows; ++r)
-    for (int k = 0; k < c.cols; ++k) {
-      offset_sum += c.offset_counts.at(r, k);
-      noise_sum += c.noise_counts.at(r, k);
-    }
+  // What was written, as the loop will read it.
+  auto written = load_detector_calibration(out);
+  if (!written.ok()) return written.status().with_context("the file just written does not load back");
+  const calib::DetectorCalibration& c = *written;
   const double pixels = double(c.rows) * double(c.cols);
   if (o.json) {
-    nlohmann::json j = {{"file", out.string()},          {"detector", c.detector},
-                        {"rows", c.rows},                {"cols", c.cols},
-                        {"dark_frames", c.dark_frames},  {"flood_frames", c.flood_frames},
-                        {"offset_mean_counts", offset_sum / pixels}, {"noise_mean_counts", noise_sum / pixels},
-                        {"open_field_counts", c.open_field_counts}, {"saturation_counts", c.saturation_counts},
-                        {"defects", c.defects},          {"content_hash", c.content_hash}};
+    nlohmann::json j = {{"file", out.string()},
+                        {"detector", c.detector},
+                        {"rows", c.rows},
+                        {"cols", c.cols},
+                        {"dark_frames", c.dark_frames},
+                        {"flood_frames", c.flood_frames},
+                        {"offset_median_counts", c.offset_median_counts},
+                        {"noise_median_counts", c.noise_median_counts},
+                        {"open_field_counts", c.open_field_counts},
+                        {"saturation_counts", c.saturation_counts},
+                        {"saturation_source", c.saturation_source},
+                        {"defects", c.defects},
+                        {"defect_rule", calib::describe_defect_rule(c.rule)},
+                        {"content_hash", c.content_hash},
+                        {"created", c.created}};
     for (int r = 0; r < calib::kDefectRules; ++r)
       j["defects_by_rule"][calib::defect_rule_name(r)] = c.defects_by_rule[std::size_t(r)];
     std::printf("%s\n", j.dump(2).c_str());
@@ -113,14 +204,16 @@ Status run(const DetectorOptions& o) {
   }
   std::printf("detector %s: %d x %d pixels from %d dark and %d flood frames\n",
               c.detector.empty() ? "(unnamed)" : c.detector.c_str(), c.cols, c.rows, c.dark_frames, c.flood_frames);
-  std::printf("offset %.1f counts mean, temporal noise %.2f counts mean; open field %.1f counts; saturation %d\n",
-              offset_sum / pixels, noise_sum / pixels, c.open_field_counts, c.saturation_counts);
-  std::printf("defective pixels masked: %lld (%.3f %%):", static_cast<long long>(c.defects), 100.0 * double(c.defects) / pixels);
+  std::printf("offset median %.1f counts, temporal noise median %.2f counts, open field %.1f counts (flood - dark, "
+              "median over good pixels)\n",
+              c.offset_median_counts, c.noise_median_counts, c.open_field_counts);
+  std::printf("saturation %d counts (%s)\n", c.saturation_counts, saturation_text(c).c_str());
+  std::printf("defective pixels masked: %lld (%.3f %%); by rule (a pixel counts under each it breaks):",
+              static_cast<long long>(c.defects), 100.0 * double(c.defects) / pixels);
   for (int r = 0; r < calib::kDefectRules; ++r)
-    std::printf(" %s %lld", calib::defect_rule_name(r), static_cast<long long>(c.defects_by_rule[std::size_t(r)]));
-  std::printf("\nrule: dark level or temporal noise beyond %.0f / %.0f robust SDs, gain outside [%.2f, %.2f], "
-              "saturated in a flood, lines with median gain outside [%.2f, %.2f]\n",
-              c.rule.dark_sd, c.rule.noise_sd, c.rule.gain_low, c.rule.gain_high, c.rule.line_low, c.rule.line_high);
+    std::printf("%s %s %lld", r ? "," : "", calib::defect_rule_name(r),
+                static_cast<long long>(c.defects_by_rule[std::size_t(r)]));
+  std::printf("\nrule: %s\n", calib::describe_defect_rule(c.rule).c_str());
   std::printf("written: %s (hash %s); a scene names it as detectors[].calibration\n", out.string().c_str(),
               c.content_hash.c_str());
   return {};
@@ -132,25 +225,34 @@ Command add_calibrate_detector_command(CLI::App* parent) {
   auto o = std::make_shared<DetectorOptions>();
   CLI::App* app = parent->add_subcommand(
       "detector", "A detector's offset, gain and defect maps from its dark and flood frames");
-  app->add_option("--dark", o->dark, "Folder of dark frames (no beam): 16-bit .tif/.png")->required();
-  app->add_option("--flood", o->flood, "Folder of flood frames (open beam, nothing in it)")->required();
-  app->add_option("--out", o->out, "The calibration file (default out/calibration/detector-NAME.tif); never overwritten "
-                                   "without --overwrite");
+  app->add_option("--dark", o->dark, "Folder of dark frames (no beam): only 16-bit .tif/.tiff/.png, one size")
+      ->required();
+  app->add_option("--flood", o->flood, "Folder of flood frames (open beam, nothing in it), as --dark")->required();
+  app->add_option("--out", o->out,
+                  "The calibration file (default out/calibration/detector-NAME.tif); never replaced without "
+                  "--overwrite");
   app->add_option("--detector", o->detector, "The scene's name of the detector (checked when a scene uses the file)");
-  app->add_option("--bits", o->rule.bits, "Bit depth (saturation at 2^bits - 1)")->check(CLI::Range(8, 16))->capture_default_str();
-  app->add_option("--saturation", o->rule.saturation_counts, "Saturation level in counts (0: from --bits)")
-      ->check(CLI::Range(0, 65535));
-  app->add_option("--min-frames", o->rule.min_dark_frames, "At least this many dark (and flood) frames")
-      ->check(CLI::Range(2, 100000))
-      ->capture_default_str();
-  app->add_option("--dark-sd", o->rule.dark_sd, "Defect: dark level beyond this many robust SDs")->capture_default_str();
-  app->add_option("--noise-sd", o->rule.noise_sd, "Defect: temporal noise beyond this many robust SDs")->capture_default_str();
   app->add_flag("--overwrite", o->overwrite, "Replace an existing --out file");
   app->add_flag("--json", o->json, "Print the summary as JSON");
-  return [o] {
-    o->rule.min_flood_frames = o->rule.min_dark_frames;
-    return run(*o);
-  };
+  app->add_option("--bits", o->rule.bits,
+                  "Bit depth 8..16: saturation at 2^bits - 1 (default: the smallest of 8, 10, 12, 14, 16 bits that "
+                  "holds every raw value seen)");
+  app->add_option("--saturation", o->rule.saturation_counts, "Saturation level in counts (overrides --bits)");
+  app->add_option("--min-frames", o->min_frames, "At least this many dark and this many flood frames")
+      ->capture_default_str();
+  app->add_option("--dark-sd", o->rule.dark_sd, "Defect: dark level beyond this many robust SDs of the median")
+      ->capture_default_str();
+  app->add_option("--noise-sd", o->rule.noise_sd, "Defect: temporal noise beyond this many robust SDs above the median")
+      ->capture_default_str();
+  app->add_option("--gain-low", o->rule.gain_low, "Defect: gain below this fraction of the median")->capture_default_str();
+  app->add_option("--gain-high", o->rule.gain_high, "Defect: gain above this multiple of the median")
+      ->capture_default_str();
+  app->add_option("--line-low", o->rule.line_low, "Defective line: median gain below this")->capture_default_str();
+  app->add_option("--line-high", o->rule.line_high, "Defective line: median gain above this")->capture_default_str();
+  app->add_option("--max-saturated", o->rule.max_saturated_fraction,
+                  "Refuse a flood with more than this fraction of its values saturated")
+      ->capture_default_str();
+  return [o] { return run(*o); };
 }
 
 }  // namespace lftrack::host::cli

@@ -8,6 +8,8 @@
 // `--control PATH` takes datagrams `fault KIND[:COUNT]` and `status` while it runs (mode 0600).
 // The first line on standard output says where the device listens; the last, what it served.
 
+#include <arpa/inet.h>
+
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
@@ -29,7 +31,25 @@ Result<sim::VirtualCouchSpec> couch_dynamics(const ServeOptions& o) {
   return scene->actuator.couch;
 }
 
+std::map<std::string, int> couch_fault_kinds() {
+  using F = sim::CouchServerFault;
+  return {{"no-reply", int(F::kNoReply)}, {"exception4", int(F::kException4)},
+          {"busy", int(F::kException6)},   {"wrong-unit", int(F::kWrongUnit)},
+          {"drop", int(F::kDropConnection)}, {"mismatch", int(F::kReadbackMismatch)}};
+}
+
+std::map<std::string, int> robot_fault_kinds() {
+  using R = sim::RobotFault;
+  return {
+      {"bus-off", int(R::kBusOff)},           {"error-passive", int(R::kErrorPassive)},
+      {"error-active", int(R::kErrorActive)}, {"controller-restarted", int(R::kControllerRestarted)},
+      {"robot-restart", int(R::kRobotRestart)}, {"stop-heartbeat", int(R::kStopHeartbeat)},
+      {"resume-heartbeat", int(R::kResumeHeartbeat)}, {"error-flood", int(R::kErrorFlood)},
+      {"unplug", -1}};
+}
+
 Status serve_couch(const ServeOptions& o) {
+  if (auto checked = check_serve_options(o, couch_fault_kinds()); !checked.ok()) return checked.status();
   // tcp:ADDRESS:PORT (PORT 0: any free port), rtu:DEVICE (a serial port), or rtu:pty (a
   // null-modem pair of pseudo-terminals made here: the server takes one end, and the first line
   // names the other for the client).
@@ -63,6 +83,10 @@ Status serve_couch(const ServeOptions& o) {
                               o.endpoint + "'");
     server.address = address_port.substr(0, colon);
     server.port = static_cast<int>(port);
+    in_addr parsed{};
+    if (::inet_pton(AF_INET, server.address.c_str(), &parsed) != 1)
+      return invalid_argument("--modbus tcp:ADDRESS:PORT: '" + server.address +
+                              "' is not an IPv4 address (e.g. 127.0.0.1, or 0.0.0.0 for every interface)");
   }
   auto dynamics = couch_dynamics(o);
   if (!dynamics.ok()) return dynamics.status();
@@ -77,9 +101,7 @@ Status serve_couch(const ServeOptions& o) {
   std::printf("%s%s\n", o.room.empty() ? "" : "; room link ", o.room.c_str());
   std::fflush(stdout);
   using F = sim::CouchServerFault;
-  const std::map<std::string, int> kinds = {{"no-reply", int(F::kNoReply)},   {"exception4", int(F::kException4)},
-                                            {"busy", int(F::kException6)},      {"wrong-unit", int(F::kWrongUnit)},
-                                            {"drop", int(F::kDropConnection)}, {"mismatch", int(F::kReadbackMismatch)}};
+  const std::map<std::string, int> kinds = couch_fault_kinds();
   sim::ModbusCouchServer* s = modbus->get();
   sim::ServedCouch* c = couch->get();
   const auto describe = [&] {
@@ -113,6 +135,7 @@ Status serve_couch(const ServeOptions& o) {
 }
 
 Status serve_robot(const ServeOptions& o) {
+  if (auto checked = check_serve_options(o, robot_fault_kinds()); !checked.ok()) return checked.status();
   auto dynamics = couch_dynamics(o);
   if (!dynamics.ok()) return dynamics.status();
   auto device = sim::ServedCouch::start(*dynamics, o.room);
@@ -123,12 +146,7 @@ Status serve_robot(const ServeOptions& o) {
               o.room.c_str());
   std::fflush(stdout);
   using R = sim::RobotFault;
-  const std::map<std::string, int> kinds = {
-      {"bus-off", int(R::kBusOff)},           {"error-passive", int(R::kErrorPassive)},
-      {"error-active", int(R::kErrorActive)}, {"controller-restarted", int(R::kControllerRestarted)},
-      {"robot-restart", int(R::kRobotRestart)}, {"stop-heartbeat", int(R::kStopHeartbeat)},
-      {"resume-heartbeat", int(R::kResumeHeartbeat)}, {"error-flood", int(R::kErrorFlood)},
-      {"unplug", -1}};
+  const std::map<std::string, int> kinds = robot_fault_kinds();
   sim::CanBridgeServer* b = bridge->get();
   sim::ServedCouch* c = device->get();
   const auto describe = [&] {

@@ -175,6 +175,11 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
 }
 
 Status serve_detectors(const ServeOptions& o) {
+  const std::map<std::string, int> loopback_kinds = {{"stop", 0}, {"start", 1}};
+  const std::map<std::string, int> gige_kinds = {{"stop", 0}, {"start", 1}, {"power-cycle", 2}};
+  if (auto checked = check_serve_options(o, o.loopback.empty() ? gige_kinds : loopback_kinds); !checked.ok())
+    return checked.status();
+  LFTRACK_RETURN_IF_ERROR(check_seconds(o.settle_s, "--settle", 3600));
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   const std::size_t views = scene->detectors.size();

@@ -56,7 +56,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every usage error (an unknown option, a value that does not
+    // parse or is out of range) exits 2, the shell's convention, after CLI11's message.
+    return app.exit(e) == 0 ? 0 : 2;
   }
   spdlog::set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);
 

@@ -14,6 +14,7 @@
 #include <spdlog/spdlog.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -54,6 +55,13 @@ struct Fault {
 };
 
 // KIND[:COUNT][@SECONDS]
+// --duration and the like: finite, from 0 to `max`.
+inline Status check_seconds(double s, const char* what, double max) {
+  if (!std::isfinite(s) || s < 0 || s > max)
+    return invalid_argument(std::string(what) + " must be a finite number of seconds from 0 to " + std::to_string(int(max)));
+  return {};
+}
+
 inline Result<Fault> parse_fault(const std::string& text, const std::map<std::string, int>& kinds, bool timed) {
   Fault f;
   std::string rest = text;
@@ -96,10 +104,12 @@ class ServeControl {
     struct stat st {};
     if (::lstat(path.c_str(), &st) == 0) {
       if (!S_ISSOCK(st.st_mode)) return failed_precondition("--control " + path + ": a file is there; refusing to replace it");
+      // Only a stale datagram socket of a server that has gone is replaced: a live one, or a
+      // socket of another kind (a bridge's), is refused.
       const int probe = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-      const bool live = ::connect(probe, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+      const bool stale = ::connect(probe, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 && errno == ECONNREFUSED;
       ::close(probe);
-      if (live) return failed_precondition("--control " + path + ": another server listens there");
+      if (!stale) return failed_precondition("--control " + path + ": a socket in use is there; refusing to replace it");
       ::unlink(path.c_str());
     }
     c.fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
@@ -141,15 +151,25 @@ class ServeControl {
 
 // Runs until a signal, --duration, or `stop` on the control socket: timed faults, control
 // datagrams. `inject` applies a fault; `status` describes the device now.
-template <class Inject, class Describe>
-Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, int>& kinds, Inject&& inject,
-                           Describe&& status) {
+// --duration and every --fault, checked before a server binds anything (a typo in a fault
+// refuses the server rather than leaving a port bound and a fault that never comes).
+inline Result<std::vector<Fault>> check_serve_options(const ServeOptions& o, const std::map<std::string, int>& kinds) {
+  LFTRACK_RETURN_IF_ERROR(check_seconds(o.duration_s, "--duration", 86400));
   std::vector<Fault> timed;
   for (const std::string& text : o.faults) {
     auto f = parse_fault(text, kinds, true);
     if (!f.ok()) return f.status().with_context("--fault");
     timed.push_back(*f);
   }
+  return timed;
+}
+
+template <class Inject, class Describe>
+Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, int>& kinds, Inject&& inject,
+                           Describe&& status) {
+  auto checked = check_serve_options(o, kinds);
+  if (!checked.ok()) return checked.status();
+  std::vector<Fault> timed = std::move(*checked);
   auto control = ServeControl::open(o.control);
   if (!control.ok()) return control.status();
   struct sigaction action {};

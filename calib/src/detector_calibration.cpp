@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <cstring>
 
@@ -9,7 +10,8 @@ namespace lftrack::calib {
 
 namespace {
 
-// Median and robust SD (1.4826 MAD) of `values` (copied; nth_element reorders).
+// Median and robust SD (1.4826 MAD) of `values` (copied; nth_element reorders). For an even
+// count the upper of the two middle values.
 struct Robust {
   double median = 0, sd = 0;
 };
@@ -25,8 +27,25 @@ Robust robust(std::vector<float> v) {
   return r;
 }
 
-bool finite_and(double v, double lo, double hi) {
+double median_of(std::vector<float>* v) {
+  if (v->empty()) return 0;
+  const auto mid = v->begin() + static_cast<std::ptrdiff_t>(v->size() / 2);
+  std::nth_element(v->begin(), mid, v->end());
+  return *mid;
+}
+
+bool finite_in(double v, double lo, double hi) {
   return std::isfinite(v) && v >= lo && v <= hi;
+}
+
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+std::string format(const char* fmt, ...) {
+  char buffer[512];
+  va_list args;
+  va_start(args, fmt);
+  std::vsnprintf(buffer, sizeof buffer, fmt, args);
+  va_end(args);
+  return buffer;
 }
 
 Status check_frames(const std::vector<tracking::Image<std::uint16_t>>& frames, const char* what, int minimum,
@@ -38,7 +57,8 @@ Status check_frames(const std::vector<tracking::Image<std::uint16_t>>& frames, c
     if (frames[i].rows() != rows || frames[i].cols() != cols)
       return invalid_argument(std::string(what) + " frame " + std::to_string(i + 1) + " is " +
                               std::to_string(frames[i].cols()) + " x " + std::to_string(frames[i].rows()) +
-                              " pixels, the first dark frame " + std::to_string(cols) + " x " + std::to_string(rows));
+                              " pixels, the first dark frame " + std::to_string(cols) + " x " +
+                              std::to_string(rows) + ": all frames must be one size");
   return {};
 }
 
@@ -49,18 +69,40 @@ const char* defect_rule_name(int rule) {
   return rule >= 0 && rule < kDefectRules ? kNames[rule] : "?";
 }
 
+std::string describe_defect_rule(const DetectorCalibrationOptions& o) {
+  return format(
+             "a pixel is defective if its dark level is more than %g robust SDs (1.4826 MAD, at least 1 count) "
+             "from the median dark level, or its temporal noise more than %g robust SDs (at least 0.5 counts) "
+             "above the median noise, or its flood-minus-dark signal outside [%g, %g] of the median signal, or it "
+             "is saturated in any flood frame; ",
+             o.dark_sd, o.noise_sd, o.gain_low, o.gain_high) +
+         format("a whole row or column is defective if its median signal is outside [%g, %g] of the median or "
+                "more than %g of its pixels are defective",
+                o.line_low, o.line_high, o.line_defect_fraction);
+}
+
 Status check_detector_calibration_options(const DetectorCalibrationOptions& o) {
-  if (o.min_dark_frames < 2 || o.min_dark_frames > 100000 || o.min_flood_frames < 1 || o.min_flood_frames > 100000)
-    return invalid_argument("the minimum frame counts must be 2 (dark) or 1 (flood) to 100000");
-  if (o.bits < 8 || o.bits > 16) return invalid_argument("bits must be 8 to 16");
-  if (o.saturation_counts < 0 || o.saturation_counts > 65535) return invalid_argument("saturation must be 0 to 65535");
-  if (!finite_and(o.dark_sd, 1, 1000) || !finite_and(o.noise_sd, 1, 1000))
-    return invalid_argument("the dark and noise thresholds must be 1 to 1000 robust SDs");
-  if (!finite_and(o.gain_low, 0, 1) || !finite_and(o.gain_high, 1, 100) || !finite_and(o.line_low, 0, 1) ||
-      !finite_and(o.line_high, 1, 100))
-    return invalid_argument("gain limits must be finite, low in [0, 1], high in [1, 100]");
-  if (!finite_and(o.max_saturated_fraction, 0, 1)) return invalid_argument("max_saturated_fraction must be in [0, 1]");
-  if (!finite_and(o.min_signal_counts, 0, 65535)) return invalid_argument("min_signal_counts must be in [0, 65535]");
+  if (o.min_dark_frames < 2 || o.min_dark_frames > 100000)
+    return invalid_argument("the minimum number of dark frames must be 2 to 100000 (a noise estimate needs 2)");
+  if (o.min_flood_frames < 1 || o.min_flood_frames > 100000)
+    return invalid_argument("the minimum number of flood frames must be 1 to 100000");
+  if (o.bits != 0 && (o.bits < 8 || o.bits > 16)) return invalid_argument("bits must be 8 to 16 (0: inferred)");
+  if (o.saturation_counts < 0 || o.saturation_counts > 65535)
+    return invalid_argument("the saturation level must be 1 to 65535 counts (0: from the bit depth)");
+  if (!finite_in(o.dark_sd, 1, 1000) || !finite_in(o.noise_sd, 1, 1000))
+    return invalid_argument("the dark and noise thresholds must be finite, 1 to 1000 robust SDs");
+  if (!finite_in(o.gain_low, 0, 1) || o.gain_low >= 1 || !finite_in(o.gain_high, 1, 100) || o.gain_high <= 1)
+    return invalid_argument("the gain limits must be finite, low in [0, 1), high in (1, 100]");
+  if (!finite_in(o.line_low, 0, 1) || o.line_low >= 1 || !finite_in(o.line_high, 1, 100) || o.line_high <= 1)
+    return invalid_argument("the line limits must be finite, low in [0, 1), high in (1, 100]");
+  if (!finite_in(o.line_defect_fraction, 0, 1) || o.line_defect_fraction <= 0)
+    return invalid_argument("the line defect fraction must be finite, in (0, 1]");
+  if (!finite_in(o.max_saturated_fraction, 0, 1))
+    return invalid_argument("the saturated fraction allowed must be finite, in [0, 1]");
+  if (!finite_in(o.min_signal_counts, 0, 65535))
+    return invalid_argument("the minimum flood signal must be finite, 0 to 65535 counts");
+  if (!finite_in(o.max_unlit_fraction, 0, 1))
+    return invalid_argument("the unlit fraction allowed must be finite, in [0, 1]");
   return {};
 }
 
@@ -68,9 +110,9 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
                                                const std::vector<tracking::Image<std::uint16_t>>& flood,
                                                const DetectorCalibrationOptions& o) {
   LFTRACK_RETURN_IF_ERROR(check_detector_calibration_options(o));
-  if (dark.empty()) return invalid_argument("no dark frames");
+  if (dark.empty()) return invalid_argument("no dark frames (at least " + std::to_string(o.min_dark_frames) + ")");
   const int rows = dark[0].rows(), cols = dark[0].cols();
-  if (rows <= 0 || cols <= 0) return invalid_argument("the dark frames are empty");
+  if (rows <= 0 || cols <= 0) return invalid_argument("the first dark frame is empty (0 pixels)");
   LFTRACK_RETURN_IF_ERROR(check_frames(dark, "dark", o.min_dark_frames, rows, cols));
   LFTRACK_RETURN_IF_ERROR(check_frames(flood, "flood", o.min_flood_frames, rows, cols));
   const std::size_t n = static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols);
@@ -80,106 +122,153 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
   c.dark_frames = static_cast<int>(dark.size());
   c.flood_frames = static_cast<int>(flood.size());
   c.rule = o;
-  c.saturation_counts = o.saturation_counts > 0 ? o.saturation_counts : (1 << o.bits) - 1;
-  c.offset_counts = tracking::Image<float>(rows, cols, 0.f);
-  c.noise_counts = tracking::Image<float>(rows, cols, 0.f);
-  c.gain = tracking::Image<float>(rows, cols, 0.f);
-  c.defective = tracking::Image<unsigned char>(rows, cols, 0);
-  std::vector<unsigned char> saturated(n, 0);
+
+  // Dark frames, two passes: the mean (exact integer sums), then the spread about it.
   std::vector<float> offset(n), noise(n), signal(n);
-  // Two passes over the dark frames (mean, then spread) in double per pixel.
-  std::vector<double> sum(n, 0.0), sum_sq(n, 0.0), flood_sum(n, 0.0);
-  for (const auto& f : dark) {
-    const std::uint16_t* p = &f.at(0, 0);
-    for (std::size_t i = 0; i < n; ++i) sum[i] += p[i];
-  }
-  const double nd = static_cast<double>(dark.size());
-  for (std::size_t i = 0; i < n; ++i) offset[i] = static_cast<float>(sum[i] / nd);
-  for (const auto& f : dark) {
-    const std::uint16_t* p = &f.at(0, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-      const double d = p[i] - static_cast<double>(offset[i]);
-      sum_sq[i] += d * d;
-    }
-  }
-  for (std::size_t i = 0; i < n; ++i) noise[i] = static_cast<float>(std::sqrt(sum_sq[i] / (nd - 1)));
-  std::int64_t saturated_values = 0;
-  for (const auto& f : flood) {
-    const std::uint16_t* p = &f.at(0, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-      flood_sum[i] += p[i];
-      if (p[i] >= c.saturation_counts) {
-        saturated[i] = 1;
-        ++saturated_values;
+  std::uint16_t largest = 0;
+  {
+    std::vector<std::uint64_t> sum(n, 0);
+    for (const auto& f : dark) {
+      const std::uint16_t* p = f.pixels().data();
+      for (std::size_t i = 0; i < n; ++i) {
+        sum[i] += p[i];
+        largest = std::max(largest, p[i]);
       }
     }
+    const double nd = static_cast<double>(dark.size());
+    std::vector<double> mean(n), sum_sq(n, 0.0);
+    for (std::size_t i = 0; i < n; ++i) mean[i] = static_cast<double>(sum[i]) / nd;
+    for (const auto& f : dark) {
+      const std::uint16_t* p = f.pixels().data();
+      for (std::size_t i = 0; i < n; ++i) {
+        const double d = p[i] - mean[i];
+        sum_sq[i] += d * d;
+      }
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      offset[i] = static_cast<float>(mean[i]);
+      noise[i] = static_cast<float>(std::sqrt(sum_sq[i] / (nd - 1)));
+    }
+    // Flood frames: the mean and each pixel's brightest value.
+    std::fill(sum.begin(), sum.end(), 0);
+    std::vector<std::uint16_t> brightest(n, 0);
+    for (const auto& f : flood) {
+      const std::uint16_t* p = f.pixels().data();
+      for (std::size_t i = 0; i < n; ++i) {
+        sum[i] += p[i];
+        brightest[i] = std::max(brightest[i], p[i]);
+      }
+    }
+    for (std::size_t i = 0; i < n; ++i) largest = std::max(largest, brightest[i]);
+    // The saturation level: stated, from the bit depth, or the smallest common full scale
+    // (8, 10, 12, 14 or 16 bits) that holds every raw value seen.
+    if (o.saturation_counts > 0) {
+      c.saturation_counts = o.saturation_counts;
+      c.saturation_source = "option";
+    } else if (o.bits > 0) {
+      c.saturation_counts = (1 << o.bits) - 1;
+      c.saturation_source = "bits";
+    } else {
+      int b = 8;
+      while (b < 16 && largest > (1 << b) - 1) b += 2;
+      c.saturation_counts = (1 << b) - 1;
+      c.saturation_source = "observed";
+    }
+    std::int64_t saturated_values = 0;
+    const auto level = static_cast<std::uint16_t>(c.saturation_counts);
+    for (const auto& f : flood) {
+      const std::uint16_t* p = f.pixels().data();
+      for (std::size_t i = 0; i < n; ++i) saturated_values += p[i] >= level;
+    }
+    const double saturated_fraction =
+        static_cast<double>(saturated_values) / (static_cast<double>(n) * static_cast<double>(flood.size()));
+    if (saturated_fraction > o.max_saturated_fraction)
+      return invalid_argument(
+          format("the flood saturates: %.2f %% of its pixel values are at or above %d counts (saturation from %s; at "
+                 "most %.2f %% allowed); lower the tube current or the exposure time",
+                 100 * saturated_fraction, c.saturation_counts,
+                 c.saturation_source == "observed" ? "the largest raw value" : c.saturation_source == "bits" ? "--bits" : "--saturation",
+                 100 * o.max_saturated_fraction));
+    const double nf = static_cast<double>(flood.size());
+    for (std::size_t i = 0; i < n; ++i) signal[i] = static_cast<float>(static_cast<double>(sum[i]) / nf - offset[i]);
+    c.defective = tracking::Image<unsigned char>(rows, cols, 0);
+    for (std::size_t i = 0; i < n; ++i) c.defective.pixels()[i] = brightest[i] >= level;  // saturated, for now
   }
-  const double saturated_fraction = static_cast<double>(saturated_values) / (static_cast<double>(n) * static_cast<double>(flood.size()));
-  if (saturated_fraction > o.max_saturated_fraction) {
-    char why[200];
-    std::snprintf(why, sizeof why,
-                  "the flood saturates: %.2f %% of its pixel values reach %d counts (at most %.2f %%); lower the "
-                  "tube current or the exposure",
-                  100 * saturated_fraction, c.saturation_counts, 100 * o.max_saturated_fraction);
-    return invalid_argument(why);
-  }
-  const double nf = static_cast<double>(flood.size());
-  for (std::size_t i = 0; i < n; ++i) signal[i] = static_cast<float>(flood_sum[i] / nf - offset[i]);
+
   const Robust all_signal = robust(signal);
-  if (!(all_signal.median > o.min_signal_counts)) {
-    char why[200];
-    std::snprintf(why, sizeof why,
-                  "the flood is no brighter than the dark: median flood - dark is %.1f counts (needs more than %.0f); "
-                  "were the dark and flood folders swapped, or the beam off?",
-                  all_signal.median, o.min_signal_counts);
-    return invalid_argument(why);
-  }
+  if (!(all_signal.median > o.min_signal_counts))
+    return invalid_argument(format("the flood is no brighter than the dark: the median of flood - dark is %.1f counts "
+                                   "(it must exceed %g); were the dark and flood folders swapped, or the beam off?",
+                                   all_signal.median, o.min_signal_counts));
+  std::size_t unlit = 0;
+  for (float s : signal) unlit += !(s > 0);
+  if (static_cast<double>(unlit) > o.max_unlit_fraction * static_cast<double>(n))
+    return invalid_argument(format("%zu of %zu pixels (%.1f %%) are no brighter in the flood than in the dark (at most "
+                                   "%.1f %% allowed): is the field open over the whole panel, were the folders mixed?",
+                                   unlit, n, 100.0 * double(unlit) / double(n), 100 * o.max_unlit_fraction));
+
   const Robust dark_level = robust(offset), noise_level = robust(noise);
-  // A robust SD of 0 (a perfectly flat map) would flag every pixel off by one count: at least 1.
+  c.offset_median_counts = dark_level.median;
+  c.noise_median_counts = noise_level.median;
   const double dark_limit = o.dark_sd * std::max(dark_level.sd, 1.0);
   const double noise_limit = o.noise_sd * std::max(noise_level.sd, 0.5);
   std::vector<unsigned char> bad(n, 0);
-  const auto mark = [&](std::size_t i, int rule) {
-    ++c.defects_by_rule[std::size_t(rule)];
-    bad[i] = 1;
-  };
+  std::vector<float> relative(n);  // signal / median signal of all pixels
   for (std::size_t i = 0; i < n; ++i) {
-    if (std::abs(offset[i] - dark_level.median) > dark_limit) mark(i, kDefectDark);
-    if (noise[i] - noise_level.median > noise_limit) mark(i, kDefectNoise);
-    const double g = signal[i] / all_signal.median;
-    if (!(g >= o.gain_low && g <= o.gain_high)) mark(i, kDefectGain);
-    if (saturated[i]) mark(i, kDefectSaturated);
+    const auto count = [&](bool broken, int rule) {
+      if (!broken) return;
+      ++c.defects_by_rule[std::size_t(rule)];
+      bad[i] = 1;
+    };
+    relative[i] = static_cast<float>(signal[i] / all_signal.median);
+    count(std::abs(offset[i] - dark_level.median) > dark_limit, kDefectDark);
+    count(noise[i] - noise_level.median > noise_limit, kDefectNoise);
+    count(!(relative[i] >= o.gain_low && relative[i] <= o.gain_high), kDefectGain);
+    count(c.defective.pixels()[i] != 0, kDefectSaturated);
   }
+
+  // Whole lines: a row or column whose median signal is off, or mostly defective already.
+  std::vector<unsigned char> in_line(n, 0);
+  std::vector<float> line;
+  const auto judge_line = [&](int length, auto&& index) {
+    line.clear();
+    std::size_t broken = 0;
+    for (int k = 0; k < length; ++k) {
+      line.push_back(relative[index(k)]);
+      broken += bad[index(k)];
+    }
+    const double m = median_of(&line);
+    if (!(m >= o.line_low && m <= o.line_high) ||
+        static_cast<double>(broken) > o.line_defect_fraction * static_cast<double>(length))
+      for (int k = 0; k < length; ++k) in_line[index(k)] = 1;
+  };
+  for (int r = 0; r < rows; ++r) judge_line(cols, [&](int k) { return std::size_t(r) * std::size_t(cols) + std::size_t(k); });
+  for (int k = 0; k < cols; ++k) judge_line(rows, [&](int r) { return std::size_t(r) * std::size_t(cols) + std::size_t(k); });
+  for (std::size_t i = 0; i < n; ++i) {
+    c.defects_by_rule[kDefectLine] += in_line[i];
+    bad[i] |= in_line[i];
+    c.defects += bad[i];
+  }
+  if (static_cast<std::size_t>(c.defects) > n / 2)
+    return invalid_argument("more than half the pixels are defective (" + std::to_string(c.defects) + " of " +
+                            std::to_string(n) + "): not a detector this rule can calibrate");
+
   // The open field over the good pixels, then the gain against it.
   std::vector<float> good;
   good.reserve(n);
   for (std::size_t i = 0; i < n; ++i)
     if (!bad[i]) good.push_back(signal[i]);
-  if (good.size() < n / 2)
-    return invalid_argument("more than half the pixels are defective (" + std::to_string(n - good.size()) + " of " +
-                            std::to_string(n) + "): not a detector this rule can calibrate");
-  c.open_field_counts = robust(good).median;
-  for (std::size_t i = 0; i < n; ++i) c.gain.view().data[i] = static_cast<float>(signal[i] / c.open_field_counts);
-  // Whole lines: a row or column whose median gain is off.
-  std::vector<float> line;
-  for (int r = 0; r < rows; ++r) {
-    line.assign(&c.gain.at(r, 0), &c.gain.at(r, 0) + cols);
-    const double m = robust(line).median;
-    if (m < o.line_low || m > o.line_high)
-      for (int k = 0; k < cols; ++k) mark(std::size_t(r) * cols + k, kDefectLine);
-  }
-  for (int k = 0; k < cols; ++k) {
-    line.clear();
-    for (int r = 0; r < rows; ++r) line.push_back(c.gain.at(r, k));
-    const double m = robust(line).median;
-    if (m < o.line_low || m > o.line_high)
-      for (int r = 0; r < rows; ++r) mark(std::size_t(r) * cols + k, kDefectLine);
-  }
+  c.open_field_counts = median_of(&good);
+  if (!(std::isfinite(c.open_field_counts) && c.open_field_counts > 0))
+    return internal_error("detector calibration: an open field of " + std::to_string(c.open_field_counts) + " counts");
+  c.offset_counts = tracking::Image<float>(rows, cols);
+  c.noise_counts = tracking::Image<float>(rows, cols);
+  c.gain = tracking::Image<float>(rows, cols);
   for (std::size_t i = 0; i < n; ++i) {
-    c.offset_counts.view().data[i] = offset[i];
-    c.noise_counts.view().data[i] = noise[i];
-    c.defective.view().data[i] = bad[i];
-    c.defects += bad[i];
+    c.offset_counts.pixels()[i] = offset[i];
+    c.noise_counts.pixels()[i] = noise[i];
+    c.gain.pixels()[i] = static_cast<float>(std::max(0.0, signal[i] / c.open_field_counts));
+    c.defective.pixels()[i] = bad[i];
   }
   c.content_hash = detector_calibration_hash(c);
   return c;
@@ -194,17 +283,21 @@ std::string detector_calibration_hash(const DetectorCalibration& c) {
       h *= 1099511628211ull;
     }
   };
-  const std::size_t n = static_cast<std::size_t>(c.rows) * static_cast<std::size_t>(c.cols);
   mix(&c.rows, sizeof c.rows);
   mix(&c.cols, sizeof c.cols);
-  if (c.offset_counts.rows() * c.offset_counts.cols() == static_cast<int>(n) && n > 0) {
-    mix(&c.offset_counts.at(0, 0), n * sizeof(float));
-    mix(&c.noise_counts.at(0, 0), n * sizeof(float));
-    mix(&c.gain.at(0, 0), n * sizeof(float));
-    mix(&c.defective.at(0, 0), n);
-  }
+  const auto mix_map = [&](const auto& image) {
+    const auto& v = image.pixels();
+    mix(v.data(), v.size() * sizeof(v[0]));
+  };
+  mix_map(c.offset_counts);
+  mix_map(c.noise_counts);
+  mix_map(c.gain);
+  mix_map(c.defective);
   mix(&c.open_field_counts, sizeof c.open_field_counts);
   mix(&c.saturation_counts, sizeof c.saturation_counts);
+  const std::uint64_t name_size = c.detector.size();
+  mix(&name_size, sizeof name_size);
+  mix(c.detector.data(), c.detector.size());
   char hex[17];
   std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
   return hex;
@@ -214,9 +307,9 @@ tracking::DetectorCorrection to_detector_correction(const DetectorCalibration& c
   tracking::DetectorCorrection d;
   d.dark_counts = c.offset_counts;
   d.gain = c.gain;
-  for (int r = 0; r < c.rows; ++r)
-    for (int k = 0; k < c.cols; ++k)
-      if (c.defective.at(r, k)) d.gain.at(r, k) = 0.f;
+  const std::size_t n = std::min(d.gain.pixels().size(), c.defective.pixels().size());
+  for (std::size_t i = 0; i < n; ++i)
+    if (c.defective.pixels()[i]) d.gain.pixels()[i] = 0.f;
   d.open_field_counts = c.open_field_counts;
   d.saturation_counts = c.saturation_counts;
   return d;

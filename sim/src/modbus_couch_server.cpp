@@ -131,6 +131,13 @@ void ModbusCouchServer::refresh_inputs(bool mismatch) {
   reg::encode_travel(state.target, in + reg::kAcceptedTarget);
 }
 
+void ModbusCouchServer::hold_where_it_is() {
+  couch_->hold();
+  drivers::ActuatorState state;
+  if (couch_->readback(&state, {}) == drivers::DeviceStatus::kOk) accepted_target_ = state.target;
+  holding_ = true;
+}
+
 void ModbusCouchServer::handle(std::uint8_t* query, int length) {
   const int h = modbus_get_header_length(ctx_);
   const std::uint8_t function = query[h];
@@ -177,15 +184,21 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       acknowledged_ = holding[reg::kCommandSequence];
       fault_word_ = reg::kNoFault;
       holding_ = false;
+    } else if (holding[reg::kControl] == reg::kHold) {
+      hold_where_it_is();
+    } else {
+      // A control word that is neither enable nor hold is refused as a real drive refuses it
+      // (exception 3), never echoed as if it were done.
+      modbus_reply_exception(ctx_, query, reg::kExceptionIllegalValue);
+      return;
     }
   } else if (function == MODBUS_FC_WRITE_SINGLE_REGISTER && address == reg::kControl) {
     const int value = (query[h + 3] << 8) | query[h + 4];
-    if (value == reg::kHold) {
-      couch_->hold();
-      drivers::ActuatorState state;
-      if (couch_->readback(&state, {}) == drivers::DeviceStatus::kOk) accepted_target_ = state.target;
-      holding_ = true;
+    if (value != reg::kHold && value != reg::kEnable) {
+      modbus_reply_exception(ctx_, query, reg::kExceptionIllegalValue);
+      return;
     }
+    if (value == reg::kHold) hold_where_it_is();
   }
   refresh_inputs(mismatch);
   modbus_reply(ctx_, query, length, map_);

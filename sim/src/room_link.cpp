@@ -1,6 +1,7 @@
 #include "lftrack/sim/room_link.hpp"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/mman.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -35,7 +36,7 @@ std::int64_t monotonic_ns() {
 
 // The pid of the process that wrote an existing link (0 if none can be read).
 std::uint64_t link_writer(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return 0;
   unsigned char bytes[sizeof(LinkFile)];
   const bool ok = ::read(fd, bytes, sizeof bytes) == ssize_t(sizeof bytes);
@@ -46,7 +47,9 @@ std::uint64_t link_writer(const std::filesystem::path& path) {
 }
 
 bool is_room_link(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  struct stat link_stat {};
+  if (::lstat(path.c_str(), &link_stat) != 0 || !S_ISREG(link_stat.st_mode)) return false;  // a FIFO never blocks us
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return false;
   char magic[16] = {};
   struct stat st {};
@@ -65,14 +68,18 @@ Result<std::unique_ptr<RoomLinkWriter>> RoomLinkWriter::create(const std::filesy
     if (!is_room_link(path))
       return failed_precondition("room link " + path.string() + ": a file that is not a room link is there; "
                                  "refusing to replace it");
-    const std::uint64_t writer = link_writer(path);
-    if (writer != 0 && ::kill(static_cast<pid_t>(writer), 0) == 0)
-      return failed_precondition("room link " + path.string() + ": process " + std::to_string(writer) +
-                                 " is still writing it (another `lftrack serve`?)");
   }
-  const int fd = existing ? ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW)
+  const int fd = existing ? ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK)
                           : ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0600);
   if (fd < 0) return io_error("room link " + path.string() + ": " + std::strerror(errno));
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int e = errno;
+    ::close(fd);
+    if (e == EWOULDBLOCK)
+      return failed_precondition("room link " + path.string() + ": process " + std::to_string(link_writer(path)) +
+                                 " is still writing it (another `lftrack serve`?)");
+    return io_error("room link " + path.string() + ": flock: " + std::strerror(e));
+  }
   if (!existing && ::ftruncate(fd, sizeof(LinkFile)) != 0) {
     const int e = errno;
     ::close(fd);
@@ -80,12 +87,13 @@ Result<std::unique_ptr<RoomLinkWriter>> RoomLinkWriter::create(const std::filesy
     return io_error("room link " + path.string() + ": " + std::strerror(e));
   }
   void* map = ::mmap(nullptr, sizeof(LinkFile), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
-  ::close(fd);
   if (map == MAP_FAILED) {
+    const int e = errno;
     if (!existing) std::filesystem::remove(path, ec);
-    return io_error("room link " + path.string() + ": mmap: " + std::strerror(errno));
+    ::close(fd);
+    return io_error("room link " + path.string() + ": mmap: " + std::strerror(e));
   }
-  std::unique_ptr<RoomLinkWriter> writer(new RoomLinkWriter(path, map));
+  std::unique_ptr<RoomLinkWriter> writer(new RoomLinkWriter(path, map, fd));
   auto* file = static_cast<LinkFile*>(map);
   if (existing) {  // taken over: the couch stands where the last writer left it
     RoomLinkReader reader(map);
@@ -107,6 +115,7 @@ RoomLinkWriter::~RoomLinkWriter() {
   ::munmap(map_, sizeof(LinkFile));
   std::error_code ec;
   std::filesystem::remove(path_, ec);
+  ::close(lock_fd_);  // after the removal: no second writer takes over a file about to go
 }
 
 void RoomLinkWriter::publish(const tracking::Vector6d& couch_position) {
@@ -124,7 +133,7 @@ Result<std::unique_ptr<RoomLinkReader>> RoomLinkReader::open(const std::filesyst
   if (!is_room_link(path))
     return not_found("room link " + path.string() + ": missing or not a room link (start the couch with "
                      "`lftrack serve couch --room " + path.string() + "`)");
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return io_error("room link " + path.string() + ": " + std::strerror(errno));
   void* map = ::mmap(nullptr, sizeof(LinkFile), PROT_READ, MAP_SHARED, fd, 0);
   ::close(fd);

@@ -62,6 +62,15 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
   EXPECT_FALSE(
       run_process({lftrack_bin(), "drr", "--renderer", "magic", "-o", dir.path().string()}, &out).ok());
   EXPECT_NE(out.find("unknown renderer 'magic'"), std::string::npos) << out;
+  // Usage errors exit 2 (status 512 from waitpid) with CLI11's reason; --help exits 0.
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"drr", "--bin", "abc"}, {"no-such-command"}, {"sim", "--cycles", "-1"}}) {
+    std::vector<std::string> argv = {lftrack_bin()};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const Status s = run_process(argv, &out);
+    EXPECT_NE(s.message().find("(status 512)"), std::string::npos) << args[0] << ": " << s.message() << "\n" << out;
+  }
+  EXPECT_TRUE(run_process({lftrack_bin(), "sim", "--help"}, &out).ok()) << out;
 }
 
 // The built-in phantom with small light fields, written next to the test's folder.

@@ -331,7 +331,7 @@ TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
   auto single = (*session)->run();
   ASSERT_TRUE(single.ok());
   EXPECT_GE(single->overruns, 1);
-  EXPECT_EQ(single->holds, 0) << "one overrun is counted, not held";
+  EXPECT_EQ(single->holds, 0) << "one overrun is counted, not held: " << to_json(*single).dump();
 
   options.frames.stall_from = 30;
   options.frames.stall_to = 35;

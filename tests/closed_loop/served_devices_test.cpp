@@ -95,7 +95,9 @@ void use_served(Scene& scene, const std::string& kind, const std::filesystem::pa
   if (kind == "rtu") {
     scene.actuator.modbus.transport = drivers::ModbusCouchOptions::Transport::kRtu;
     scene.actuator.modbus.serial_device = tty;
-    scene.actuator.modbus.response_timeout_s = 0.05;  // 115200 baud: a read-back's frames take ~5 ms
+    // 115200 baud: a read-back's frames take ~5 ms; the line's copying thread may wait its turn
+    // on a loaded host (the cycle's deadline still cuts the wait).
+    scene.actuator.modbus.response_timeout_s = 0.15;
     scene.actuator.modbus.reconnect_interval_s = 0.1;
   } else if (kind == "modbus") {
     scene.actuator.modbus.host = "127.0.0.1";
@@ -311,9 +313,9 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
   LoopSessionOptions options;
   options.devices = SessionDevices::kScene;
   options.control_socket = dir / "control.sock";
-  long long cycled_at = -1;
-  bool tracked_again = false;
-  const LoopRun r = run_loop(kBreathing, 150, options, kLightFieldFrames, [&](LoopSession&) {
+  long long cycled_at = -1, stopped_at = -1;
+  bool tracked_again = false, tracked_after_stop = false;
+  const LoopRun r = run_loop(kBreathing, 240, options, kLightFieldFrames, [&](LoopSession&) {
     return std::thread([&] {
       OperatorClient op(options.control_socket, dir / "operator.sock");
       cycled_at = tracking_cycle(op, 20);
@@ -324,6 +326,18 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
       const std::string after = op.ask("status");
       EXPECT_TRUE(after.rfind("HOLD", 0) == 0 || after.rfind("FAULT", 0) == 0) << "no resume by itself: " << after;
       tracked_again = op.bring_back_to_track(8s);
+      // Detectors whose frames stop for longer (`fault stop`: the cameras go and stay gone
+      // until `fault start`): held again, and back only by the operator once frames come.
+      stopped_at = tracking_cycle(op, cycled_at + 30);
+      EXPECT_EQ(detector_control.ask("fault stop", 10).rfind("injected", 0), 0u);
+      std::this_thread::sleep_for(1s);
+      const std::string stopped = op.ask("status");
+      EXPECT_TRUE(stopped.rfind("HOLD", 0) == 0 || stopped.rfind("FAULT", 0) == 0) << "frames stopped: " << stopped;
+      EXPECT_EQ(detector_control.ask("fault start", 10).rfind("injected", 0), 0u);
+      std::this_thread::sleep_for(1s);
+      const std::string started = op.ask("status");
+      EXPECT_TRUE(started.rfind("HOLD", 0) == 0 || started.rfind("FAULT", 0) == 0) << "no resume by itself: " << started;
+      tracked_after_stop = op.bring_back_to_track(8s);
     });
   });
   ASSERT_GE(cycled_at, 20);
@@ -333,6 +347,13 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
   for (std::size_t i = out; i < r.journal.records.size() && r.journal.records[i].frame_sequence[0] == 0; ++i)
     ++without_pair;
   EXPECT_GE(without_pair, 1u) << "the gap is journaled as cycles without a pair";
+  ASSERT_GT(stopped_at, cycled_at);
+  EXPECT_TRUE(tracked_after_stop) << "frames started again and the operator resumed";
+  const std::size_t out_stopped = expect_held_until_the_operator(r.journal.records, stopped_at);
+  std::size_t stopped_cycles = 0;
+  for (std::size_t i = out_stopped; i < r.journal.records.size() && r.journal.records[i].frame_sequence[0] == 0; ++i)
+    ++stopped_cycles;
+  EXPECT_GE(stopped_cycles, 5u) << "a second without frames is journaled as cycles without a pair";
   EXPECT_NE(r.journal.records.back().frame_sequence[0], 0u) << "frames resumed";
 }
 

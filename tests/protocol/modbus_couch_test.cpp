@@ -3,6 +3,7 @@
 // Modbus fault of the catalogue (docs/faults.md).
 
 #include <gtest/gtest.h>
+#include <modbus/modbus.h>
 #include <poll.h>
 #include <pty.h>
 #include <unistd.h>
@@ -193,6 +194,44 @@ TEST_F(ModbusCouchTest, AReadBackThatDisagreesWithTheCommandIsReportedAsItIs) {
   ActuatorState s;
   ASSERT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kOk);
   EXPECT_NEAR(s.target(0), 5.0, 1e-3);  // the loop's gate compares it with what it commanded
+}
+
+// The served couch as an outside client meets it (raw libmodbus, not our driver): a control word
+// that is neither enable nor hold is refused with exception 3 and changes nothing; the whole
+// block with hold holds.
+TEST_F(ModbusCouchTest, AControlWordThatIsNeitherEnableNorHoldIsRefused) {
+  ASSERT_EQ(driver->command(shift(5), in_ms(100)), DeviceStatus::kOk);
+  couch->advance_to(0.2);  // 0.1 s of motion at 10 mm/s after the latency: 1 mm
+  driver->close();  // the server serves one client at a time
+  modbus_t* raw = modbus_new_tcp("127.0.0.1", server->port());
+  ASSERT_NE(raw, nullptr);
+  ASSERT_EQ(modbus_connect(raw), 0) << modbus_strerror(errno);
+  namespace reg = drivers::couch_registers;
+  for (const int word : {0, 3, 0xFFFF}) {
+    EXPECT_EQ(modbus_write_register(raw, reg::kControl, static_cast<std::uint16_t>(word)), -1) << word;
+    EXPECT_EQ(errno, EMBXILVAL) << word << ": " << modbus_strerror(errno);
+    std::uint16_t block[reg::kHoldingCount] = {};
+    ASSERT_TRUE(reg::encode_travel(shift(-9), block + reg::kTarget));
+    block[reg::kCommandSequence] = 77;
+    block[reg::kControl] = static_cast<std::uint16_t>(word);
+    EXPECT_EQ(modbus_write_registers(raw, reg::kTarget, reg::kHoldingCount, block), -1) << word;
+    EXPECT_EQ(errno, EMBXILVAL) << word << ": " << modbus_strerror(errno);
+  }
+  std::uint16_t inputs[reg::kInputCount] = {};
+  ASSERT_EQ(modbus_read_input_registers(raw, 0, reg::kInputCount, inputs), reg::kInputCount);
+  EXPECT_NEAR(reg::decode_travel(inputs + reg::kAcceptedTarget)(0), 5, 1e-3) << "nothing refused may move the couch";
+  EXPECT_TRUE(inputs[reg::kStatus] & reg::kStatusMoving);
+  std::uint16_t block[reg::kHoldingCount] = {};
+  ASSERT_TRUE(reg::encode_travel(shift(-9), block + reg::kTarget));
+  block[reg::kControl] = reg::kHold;
+  EXPECT_EQ(modbus_write_registers(raw, reg::kTarget, reg::kHoldingCount, block), reg::kHoldingCount)
+      << modbus_strerror(errno);
+  ASSERT_EQ(modbus_read_input_registers(raw, 0, reg::kInputCount, inputs), reg::kInputCount);
+  EXPECT_NEAR(reg::decode_travel(inputs + reg::kAcceptedTarget)(0), 1, 1e-3)
+      << "held where it was, the block's target ignored";
+  EXPECT_TRUE(inputs[reg::kStatus] & reg::kStatusHolding);
+  modbus_close(raw);
+  modbus_free(raw);
 }
 
 TEST(ModbusCouch, OpeningWithNothingListeningSaysWhere) {

@@ -141,7 +141,12 @@ TEST(SceneDevices, BadActuatorsAreRefusedWithTheLine) {
   expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 70000}}"), "1..65535");
   expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, rtu: {device: b}}"), "both tcp and rtu");
   expect_refused(scene_with("sim", "type: modbus\n  modbus: {rtu: {device: /dev/ttyS0, baud: 12345}}"), "standard rate");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 300}"), "unit_id must be in 0..247");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 300}"), "unit_id must be in 1..247");
+  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 0}"), "unit_id must be in 1..247");
+  // A key written twice: YAML would keep the first; refused with the second's line.
+  std::string twice = scene_with("sim");
+  twice.replace(twice.find("  max_step_mm: 2\n"), 16, "  max_step_mm: 20\n  max_step_mm: 2\n");
+  expect_refused(twice, "'max_step_mm' appears twice in safety");
   expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: .inf}"), "finite");
   expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: 0}"), "positive");
   expect_refused(scene_with("sim", "type: can"), "needs actuator.can");

@@ -111,5 +111,30 @@ TEST(RoomLink, AKilledWritersLinkIsTakenOverInPlace) {
   EXPECT_EQ(s.writer_pid, std::uint64_t(::getpid()));
 }
 
+// A killed writer not yet reaped (a zombie whose pid still answers kill(pid, 0)) does not hold
+// the link: the kernel released its lock when it died.
+TEST(RoomLink, AKilledWriterNotYetReapedDoesNotBlockTheNext) {
+  test::TempDir dir;
+  const auto path = dir.path() / "room.link";
+  const pid_t child = ::fork();
+  if (child == 0) {
+    auto writer = RoomLinkWriter::create(path);
+    if (!writer.ok()) _exit(1);
+    (*writer)->publish(filled(1.5));
+    ::kill(::getpid(), SIGKILL);
+  }
+  siginfo_t info{};
+  ASSERT_EQ(::waitid(P_PID, id_t(child), &info, WEXITED | WNOWAIT), 0) << "wait for the death, leave the zombie";
+  ASSERT_EQ(info.si_code, CLD_KILLED);
+  ASSERT_EQ(::kill(child, 0), 0) << "a zombie still answers kill(pid, 0)";
+  auto writer = RoomLinkWriter::create(path);
+  EXPECT_TRUE(writer.ok()) << writer.status().message();
+  if (writer.ok()) {
+    EXPECT_EQ((*writer)->resumed_position(), filled(1.5));
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+}
+
 }  // namespace
 }  // namespace lftrack::sim

@@ -166,6 +166,16 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
   std::int64_t index = 0, start_ns = loop_start_ns;
   std::uint64_t allocations_at_warmup = 0;
   std::int64_t aligned_at = -1;
+  // A couch does not start at zero (a run after another, a controller restarted where it
+  // stopped): the loop's commands count from the target the actuator reports now.
+  if (m.parts.actuator != nullptr) {
+    drivers::ActuatorState now_at;
+    if (m.parts.actuator->readback(&now_at, to_deadline(loop_start_ns + period)) == DeviceStatus::kOk &&
+        !now_at.fault && now_at.target.allFinite()) {
+      m.commanded_total = now_at.target;
+      m.couch_position = now_at.position;
+    }
+  }
   m.parts.frames->request_exposure(start_ns);
   const char* ended = "cycle count reached";
   for (std::int64_t executed = 0; m.settings.cycles <= 0 || executed < m.settings.cycles; ++executed) {

@@ -1,35 +1,62 @@
 #include "lftrack/host/detector_calibration_file.hpp"
 
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <tiffio.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 namespace lftrack::host {
 
 namespace {
 
+namespace fs = std::filesystem;
+using nlohmann::json;
+
 constexpr const char* kFormat = "lftrack detector calibration";
-constexpr int kVersion = 1;
 constexpr int kPages = 4;
+constexpr int kMaxSide = 16384;
+constexpr std::size_t kMaxDescription = std::size_t(1) << 20;
 const char* const kPageNames[kPages] = {"offset_counts", "gain", "noise_counts", "defects"};
 
-nlohmann::json metadata(const calib::DetectorCalibration& c) {
-  nlohmann::json rule = {{"dark_sd", c.rule.dark_sd},
-                         {"noise_sd", c.rule.noise_sd},
-                         {"gain_low", c.rule.gain_low},
-                         {"gain_high", c.rule.gain_high},
-                         {"line_low", c.rule.line_low},
-                         {"line_high", c.rule.line_high},
-                         {"max_saturated_fraction", c.rule.max_saturated_fraction},
-                         {"min_signal_counts", c.rule.min_signal_counts}};
-  nlohmann::json defects;
+std::string utc_now() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+json metadata(const calib::DetectorCalibration& c, const std::string& hash, const std::string& created) {
+  const calib::DetectorCalibrationOptions& o = c.rule;
+  json rule = {{"text", calib::describe_defect_rule(o)},
+               {"dark_sd", o.dark_sd},
+               {"noise_sd", o.noise_sd},
+               {"gain_low", o.gain_low},
+               {"gain_high", o.gain_high},
+               {"line_low", o.line_low},
+               {"line_high", o.line_high},
+               {"line_defect_fraction", o.line_defect_fraction},
+               {"max_saturated_fraction", o.max_saturated_fraction},
+               {"min_signal_counts", o.min_signal_counts},
+               {"max_unlit_fraction", o.max_unlit_fraction},
+               {"min_dark_frames", o.min_dark_frames},
+               {"min_flood_frames", o.min_flood_frames},
+               {"bits", o.bits}};
+  json defects = json::object();
   for (int r = 0; r < calib::kDefectRules; ++r) defects[calib::defect_rule_name(r)] = c.defects_by_rule[std::size_t(r)];
   defects["masked"] = c.defects;
   return {{"format", kFormat},
-          {"version", kVersion},
+          {"version", kDetectorCalibrationVersion},
           {"pages", {kPageNames[0], kPageNames[1], kPageNames[2], kPageNames[3]}},
           {"detector", c.detector},
           {"rows", c.rows},
@@ -38,10 +65,91 @@ nlohmann::json metadata(const calib::DetectorCalibration& c) {
           {"flood_frames", c.flood_frames},
           {"open_field_counts", c.open_field_counts},
           {"saturation_counts", c.saturation_counts},
-          {"bits", c.rule.bits},
+          {"saturation_source", c.saturation_source},
+          {"offset_median_counts", c.offset_median_counts},
+          {"noise_median_counts", c.noise_median_counts},
           {"defect_rule", rule},
           {"defects", defects},
-          {"content_hash", c.content_hash}};
+          {"hash_algorithm", "FNV-1a 64"},
+          {"content_hash", hash},
+          {"created", created}};
+}
+
+// Reads typed, bounded values from a JSON object; the first problem is kept (with the key's
+// path) and later reads return defaults.
+class MetaReader {
+ public:
+  MetaReader(const json& j, std::string prefix, Status* error) : j_(j), prefix_(std::move(prefix)), error_(error) {}
+
+  const json* find(const char* key) {
+    if (!error_->ok()) return nullptr;
+    const auto it = j_.find(key);
+    if (it == j_.end()) {
+      fail(key, "is missing");
+      return nullptr;
+    }
+    return &*it;
+  }
+  long long integer(const char* key, long long lo, long long hi) {
+    const json* v = find(key);
+    if (v == nullptr) return lo;
+    if (!v->is_number_integer()) return fail(key, "is not an integer"), lo;
+    const long long x = v->is_number_unsigned() && v->get<unsigned long long>() >
+                                                      static_cast<unsigned long long>(std::numeric_limits<long long>::max())
+                            ? std::numeric_limits<long long>::max()
+                            : v->get<long long>();
+    if (x < lo || x > hi) return fail(key, "is " + std::to_string(x) + ", outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]"), lo;
+    return x;
+  }
+  double number(const char* key, double lo, double hi) {
+    const json* v = find(key);
+    if (v == nullptr) return lo;
+    if (!v->is_number()) return fail(key, "is not a number"), lo;
+    const double x = v->get<double>();
+    if (!(std::isfinite(x) && x >= lo && x <= hi)) return fail(key, "is " + v->dump() + ", outside [" + json(lo).dump() + ", " + json(hi).dump() + "]"), lo;
+    return x;
+  }
+  std::string text(const char* key) {
+    const json* v = find(key);
+    if (v == nullptr) return {};
+    if (!v->is_string()) return fail(key, "is not a string"), std::string();
+    return v->get<std::string>();
+  }
+  void fail(const char* key, const std::string& why) {
+    if (error_->ok()) *error_ = corrupt_data("metadata key '" + prefix_ + key + "' " + why);
+  }
+
+ private:
+  const json& j_;
+  std::string prefix_;
+  Status* error_;
+};
+
+Status check_maps(const calib::DetectorCalibration& c) {
+  if (c.rows < 1 || c.cols < 1 || c.rows > kMaxSide || c.cols > kMaxSide)
+    return invalid_argument("detector calibration of " + std::to_string(c.cols) + " x " + std::to_string(c.rows) +
+                            " pixels (1 to 16384 a side)");
+  const std::size_t n = std::size_t(c.rows) * std::size_t(c.cols);
+  const auto sized = [&](const auto& image) {
+    return image.rows() == c.rows && image.cols() == c.cols && image.pixels().size() == n;
+  };
+  if (!sized(c.offset_counts) || !sized(c.gain) || !sized(c.noise_counts) || !sized(c.defective))
+    return invalid_argument("detector calibration: a map of another size than " + std::to_string(c.cols) + " x " +
+                            std::to_string(c.rows));
+  for (std::size_t i = 0; i < n; ++i) {
+    const float o = c.offset_counts.pixels()[i], g = c.gain.pixels()[i], s = c.noise_counts.pixels()[i];
+    if (!std::isfinite(o) || !std::isfinite(g) || !std::isfinite(s))
+      return invalid_argument("detector calibration: a non-finite value in a map");
+    if (g < 0 || s < 0) return invalid_argument("detector calibration: a negative gain or noise");
+    if (c.defective.pixels()[i] > 1) return invalid_argument("detector calibration: a defect flag other than 0 or 1");
+  }
+  if (!(std::isfinite(c.open_field_counts) && c.open_field_counts > 0 && c.open_field_counts <= 65535))
+    return invalid_argument("detector calibration: open-field counts must be finite, (0, 65535]");
+  if (c.saturation_counts < 1 || c.saturation_counts > 65535)
+    return invalid_argument("detector calibration: saturation must be 1 to 65535 counts");
+  if (!std::isfinite(c.offset_median_counts) || !std::isfinite(c.noise_median_counts))
+    return invalid_argument("detector calibration: non-finite medians");
+  return calib::check_detector_calibration_options(c.rule);
 }
 
 Status write_page(TIFF* tif, const float* data, int rows, int cols, const std::string& description, int page) {
@@ -52,21 +160,22 @@ Status write_page(TIFF* tif, const float* data, int rows, int cols, const std::s
   TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, SAMPLEFORMAT_IEEEFP);
   TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
   TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
-  TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, 1);
+  TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_NONE);
+  TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, std::uint32_t(std::max(1, 65536 / (4 * cols))));
   TIFFSetField(tif, TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
   TIFFSetField(tif, TIFFTAG_PAGENUMBER, page, kPages);
   TIFFSetField(tif, TIFFTAG_PAGENAME, kPageNames[page]);
   if (!description.empty()) TIFFSetField(tif, TIFFTAG_IMAGEDESCRIPTION, description.c_str());
   for (int r = 0; r < rows; ++r)
-    if (TIFFWriteScanline(tif, const_cast<float*>(data + std::size_t(r) * cols), std::uint32_t(r), 0) < 0)
-      return io_error("cannot write the calibration's TIFF data");
-  if (!TIFFWriteDirectory(tif)) return io_error("cannot write the calibration's TIFF directory");
+    if (TIFFWriteScanline(tif, const_cast<float*>(data + std::size_t(r) * std::size_t(cols)), std::uint32_t(r), 0) < 0)
+      return io_error("cannot write the calibration's TIFF data (disk full?)");
+  if (!TIFFWriteDirectory(tif)) return io_error("cannot write the calibration's TIFF directory (disk full?)");
   return {};
 }
 
 Status read_page(TIFF* tif, int page, int rows, int cols, std::vector<float>* out, const std::string& where) {
-  if (!TIFFSetDirectory(tif, std::uint16_t(page)))
-    return corrupt_data(where + ": page " + std::to_string(page + 1) + " (" + kPageNames[page] + ") is missing");
+  const std::string name = "page " + std::to_string(page + 1) + " (" + kPageNames[page] + ")";
+  if (!TIFFSetDirectory(tif, tdir_t(page))) return corrupt_data(where + ": " + name + " is missing or unreadable");
   std::uint32_t w = 0, h = 0;
   std::uint16_t bits = 0, samples = 1, format = 0;
   TIFFGetField(tif, TIFFTAG_IMAGEWIDTH, &w);
@@ -75,57 +184,110 @@ Status read_page(TIFF* tif, int page, int rows, int cols, std::vector<float>* ou
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &samples);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &format);
   if (w != std::uint32_t(cols) || h != std::uint32_t(rows))
-    return corrupt_data(where + ": page " + kPageNames[page] + " is " + std::to_string(w) + " x " + std::to_string(h) +
-                        ", the metadata says " + std::to_string(cols) + " x " + std::to_string(rows));
+    return corrupt_data(where + ": " + name + " is " + std::to_string(w) + " x " + std::to_string(h) +
+                        " pixels, the metadata says " + std::to_string(cols) + " x " + std::to_string(rows));
   if (bits != 32 || samples != 1 || format != SAMPLEFORMAT_IEEEFP || TIFFIsTiled(tif))
-    return corrupt_data(where + ": page " + kPageNames[page] + " is not one-sample 32-bit float in strips");
+    return corrupt_data(where + ": " + name + " is not one-sample 32-bit float in strips");
+  if (std::uint64_t(TIFFScanlineSize64(tif)) != std::uint64_t(4) * std::uint64_t(cols))
+    return corrupt_data(where + ": " + name + " has rows of an unexpected size");
   out->resize(std::size_t(rows) * std::size_t(cols));
   for (int r = 0; r < rows; ++r)
-    if (TIFFReadScanline(tif, out->data() + std::size_t(r) * cols, std::uint32_t(r), 0) < 0)
-      return corrupt_data(where + ": page " + kPageNames[page] + " is truncated or unreadable");
-  for (float v : *out)
-    if (!std::isfinite(v)) return corrupt_data(where + ": page " + kPageNames[page] + " holds a non-finite value");
+    if (TIFFReadScanline(tif, out->data() + std::size_t(r) * std::size_t(cols), std::uint32_t(r), 0) < 0)
+      return corrupt_data(where + ": " + name + " is truncated or unreadable (row " + std::to_string(r + 1) + ")");
+  for (std::size_t i = 0; i < out->size(); ++i)
+    if (!std::isfinite((*out)[i]))
+      return corrupt_data(where + ": " + name + " holds a non-finite value at row " + std::to_string(i / cols + 1) +
+                          ", column " + std::to_string(i % cols + 1));
   return {};
+}
+
+// Writes the pages to `file` and flushes them to disk.
+Status write_tiff(const fs::path& file, const calib::DetectorCalibration& c, const std::string& description) {
+  TIFFSetWarningHandler(nullptr);
+  TIFFSetErrorHandler(nullptr);
+  TIFF* tif = TIFFOpen(file.c_str(), "w");
+  if (tif == nullptr) return io_error("cannot create " + file.string() + ": " + std::strerror(errno));
+  const std::size_t n = std::size_t(c.rows) * std::size_t(c.cols);
+  std::vector<float> defects(n);
+  for (std::size_t i = 0; i < n; ++i) defects[i] = c.defective.pixels()[i] ? 1.f : 0.f;
+  const float* pages[kPages] = {c.offset_counts.pixels().data(), c.gain.pixels().data(), c.noise_counts.pixels().data(),
+                                defects.data()};
+  Status s;
+  for (int p = 0; p < kPages && s.ok(); ++p) s = write_page(tif, pages[p], c.rows, c.cols, p == 0 ? description : "", p);
+  if (s.ok() && !TIFFFlush(tif)) s = io_error("cannot write " + file.string() + " (disk full?)");
+  if (s.ok() && ::fsync(TIFFFileno(tif)) != 0) s = io_error("cannot flush " + file.string() + ": " + std::strerror(errno));
+  TIFFClose(tif);
+  return s;
+}
+
+// Where the last page's directory ends, out-of-line values included, read from the file
+// itself: a file cut there still gives libtiff its four pages (it forgives a short page name),
+// but it is not what was written. 0 when the directory cannot be read.
+std::uint64_t last_directory_end(TIFF* tif, const fs::path& path) {
+  if (!TIFFSetDirectory(tif, tdir_t(kPages - 1))) return 0;
+  const std::uint64_t offset = TIFFCurrentDirOffset(tif);
+  const bool big = TIFFIsBigTIFF(tif) != 0, swapped = TIFFIsByteSwapped(tif) != 0;
+  const std::uint64_t count_size = big ? 8 : 2, entry_size = big ? 20 : 12, pointer_size = big ? 8 : 4;
+  std::ifstream in(path, std::ios::binary);
+  const auto read = [&](std::uint64_t at, std::uint64_t bytes, std::uint64_t* value) {
+    unsigned char raw[8] = {};
+    in.seekg(std::streamoff(at));
+    if (!in.read(reinterpret_cast<char*>(raw), std::streamsize(bytes))) return false;
+    *value = 0;
+    for (std::uint64_t k = 0; k < bytes; ++k)
+      *value |= std::uint64_t(raw[swapped ? bytes - 1 - k : k]) << (8 * k);
+    return true;
+  };
+  std::uint64_t entries = 0;
+  if (!read(offset, count_size, &entries) || entries > 4096) return 0;
+  std::uint64_t end = offset + count_size + entries * entry_size + pointer_size;
+  for (std::uint64_t e = 0; e < entries; ++e) {
+    const std::uint64_t at = offset + count_size + e * entry_size;
+    std::uint64_t type = 0, count = 0, value = 0;
+    if (!read(at + 2, 2, &type) || !read(at + 4, pointer_size, &count)) return 0;
+    static const std::uint64_t kTypeSize[19] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4, 8, 4, 8, 4, 0, 0, 8, 8, 8};
+    const std::uint64_t bytes = count * (type < 19 ? kTypeSize[type] : 0);
+    if (bytes <= pointer_size) continue;  // the value is in the entry
+    if (!read(at + 4 + pointer_size, pointer_size, &value)) return 0;
+    end = std::max(end, value + bytes);
+  }
+  return end;
 }
 
 }  // namespace
 
-Status write_detector_calibration(const std::filesystem::path& path, const calib::DetectorCalibration& c,
-                                  bool overwrite) {
+Status write_detector_calibration(const fs::path& path, const calib::DetectorCalibration& c, bool overwrite) {
+  if (path.empty() || !path.has_filename())
+    return invalid_argument(path.string() + " names a folder, not a calibration file");
   struct stat st {};
   if (::lstat(path.c_str(), &st) == 0) {
+    if (S_ISDIR(st.st_mode)) return invalid_argument(path.string() + " is a directory; name a file");
     if (!overwrite) return failed_precondition(path.string() + " exists; give --overwrite to replace it");
-    if (!S_ISREG(st.st_mode)) return failed_precondition(path.string() + " is not a regular file; not replaced");
+    if (!S_ISREG(st.st_mode)) return failed_precondition(path.string() + " is not a regular file (a link?); not replaced");
   }
-  const std::size_t n = std::size_t(c.rows) * std::size_t(c.cols);
-  if (c.rows <= 0 || c.cols <= 0 || c.offset_counts.rows() != c.rows || c.gain.rows() != c.rows ||
-      c.noise_counts.rows() != c.rows || c.defective.rows() != c.rows)
-    return invalid_argument("detector calibration: maps of the wrong size");
-  const std::filesystem::path temporary = path.string() + ".partial-" + std::to_string(::getpid());
-  TIFFSetWarningHandler(nullptr);
-  TIFFSetErrorHandler(nullptr);
-  TIFF* tif = TIFFOpen(temporary.c_str(), "w");
-  if (tif == nullptr) return io_error("cannot create " + temporary.string());
-  std::vector<float> defects(n);
-  for (std::size_t i = 0; i < n; ++i) defects[i] = c.defective.view().data[i] ? 1.f : 0.f;
-  const float* pages[kPages] = {&c.offset_counts.at(0, 0), &c.gain.at(0, 0), &c.noise_counts.at(0, 0), defects.data()};
-  Status s;
-  for (int p = 0; p < kPages && s.ok(); ++p) s = write_page(tif, pages[p], c.rows, c.cols, p == 0 ? metadata(c).dump() : "", p);
-  TIFFClose(tif);
+  const fs::path parent = path.has_parent_path() ? path.parent_path() : fs::path(".");
   std::error_code ec;
-  if (!s.ok()) {
-    std::filesystem::remove(temporary, ec);
-    return s;
+  if (!fs::is_directory(parent, ec)) return not_found("the folder " + parent.string() + " does not exist");
+  LFTRACK_RETURN_IF_ERROR(check_maps(c).with_context("not written"));
+  const std::string hash = calib::detector_calibration_hash(c);
+  const std::string description = metadata(c, hash, utc_now()).dump();
+  const fs::path temporary = path.string() + ".partial-" + std::to_string(::getpid());
+  Status s = write_tiff(temporary, c, description);
+  if (s.ok()) {
+    if (overwrite) {
+      if (::rename(temporary.c_str(), path.c_str()) != 0)
+        s = io_error("cannot move the calibration to " + path.string() + ": " + std::strerror(errno));
+    } else if (::link(temporary.c_str(), path.c_str()) != 0) {
+      // link() refuses an existing target atomically; rename() would replace one.
+      s = errno == EEXIST ? failed_precondition(path.string() + " exists; give --overwrite to replace it")
+                          : io_error("cannot place the calibration at " + path.string() + ": " + std::strerror(errno));
+    }
   }
-  std::filesystem::rename(temporary, path, ec);
-  if (ec) {
-    std::filesystem::remove(temporary, ec);
-    return io_error("cannot move the calibration to " + path.string());
-  }
-  return {};
+  ::unlink(temporary.c_str());  // after link(), or on failure; after rename() it is gone already
+  return s;
 }
 
-Result<calib::DetectorCalibration> load_detector_calibration(const std::filesystem::path& path) {
+Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& path) {
   const std::string where = path.string();
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) return not_found(where + ": no such detector calibration file");
@@ -141,70 +303,120 @@ Result<calib::DetectorCalibration> load_detector_calibration(const std::filesyst
   char* description = nullptr;
   if (!TIFFGetField(tif, TIFFTAG_IMAGEDESCRIPTION, &description) || description == nullptr)
     return corrupt_data(where + ": no metadata (not a detector calibration written by lftrack)");
-  nlohmann::json j = nlohmann::json::parse(description, nullptr, false);
-  if (j.is_discarded() || !j.is_object()) return corrupt_data(where + ": its metadata is not JSON");
+  const std::size_t description_size = ::strnlen(description, kMaxDescription + 1);
+  if (description_size > kMaxDescription)
+    return corrupt_data(where + ": metadata of more than 1 MiB (not a detector calibration written by lftrack)");
+  const json j = json::parse(description, description + description_size, nullptr, false);
+  if (j.is_discarded() || !j.is_object())
+    return corrupt_data(where + ": its metadata is not a JSON object (not a detector calibration written by lftrack)");
+  Status error;
+  MetaReader m(j, "", &error);
+  if (m.text("format") != kFormat)
+    return error.ok() ? corrupt_data(where + ": metadata format is not '" + kFormat + "'") : error.with_context(where);
+  const long long version = m.integer("version", 0, std::numeric_limits<int>::max());
+  if (!error.ok()) return error.with_context(where);
+  if (version != kDetectorCalibrationVersion)
+    return unsupported(where + ": detector calibration version " + std::to_string(version) + " (this build reads version " +
+                       std::to_string(kDetectorCalibrationVersion) + "; make it again with lftrack calibrate detector)");
+  if (const json* names = m.find("pages"); names != nullptr &&
+      *names != json::array({kPageNames[0], kPageNames[1], kPageNames[2], kPageNames[3]}))
+    m.fail("pages", "is not [\"offset_counts\", \"gain\", \"noise_counts\", \"defects\"]");
   calib::DetectorCalibration c;
-  try {
-    if (j.at("format").get<std::string>() != kFormat) return corrupt_data(where + ": not a detector calibration");
-    if (j.at("version").get<int>() != kVersion)
-      return unsupported(where + ": detector calibration version " + std::to_string(j.at("version").get<int>()) +
-                         " (this build reads version " + std::to_string(kVersion) + ")");
-    c.detector = j.at("detector").get<std::string>();
-    c.rows = j.at("rows").get<int>();
-    c.cols = j.at("cols").get<int>();
-    c.dark_frames = j.at("dark_frames").get<int>();
-    c.flood_frames = j.at("flood_frames").get<int>();
-    c.open_field_counts = j.at("open_field_counts").get<double>();
-    c.saturation_counts = j.at("saturation_counts").get<int>();
-    c.rule.bits = j.at("bits").get<int>();
-    const auto& rule = j.at("defect_rule");
-    c.rule.dark_sd = rule.at("dark_sd").get<double>();
-    c.rule.noise_sd = rule.at("noise_sd").get<double>();
-    c.rule.gain_low = rule.at("gain_low").get<double>();
-    c.rule.gain_high = rule.at("gain_high").get<double>();
-    c.rule.line_low = rule.at("line_low").get<double>();
-    c.rule.line_high = rule.at("line_high").get<double>();
-    c.rule.max_saturated_fraction = rule.at("max_saturated_fraction").get<double>();
-    c.rule.min_signal_counts = rule.at("min_signal_counts").get<double>();
-    for (int r = 0; r < calib::kDefectRules; ++r)
-      c.defects_by_rule[std::size_t(r)] = j.at("defects").at(calib::defect_rule_name(r)).get<std::int64_t>();
-    c.defects = j.at("defects").at("masked").get<std::int64_t>();
-    c.content_hash = j.at("content_hash").get<std::string>();
-  } catch (const nlohmann::json::exception& e) {
-    return corrupt_data(where + ": metadata incomplete or of the wrong type (" + e.what() + ")");
+  c.detector = m.text("detector");
+  c.rows = int(m.integer("rows", 1, kMaxSide));
+  c.cols = int(m.integer("cols", 1, kMaxSide));
+  c.dark_frames = int(m.integer("dark_frames", 2, 100000000));
+  c.flood_frames = int(m.integer("flood_frames", 1, 100000000));
+  c.open_field_counts = m.number("open_field_counts", std::numeric_limits<double>::min(), 65535);
+  c.saturation_counts = int(m.integer("saturation_counts", 1, 65535));
+  c.saturation_source = m.text("saturation_source");
+  if (error.ok() && c.saturation_source != "option" && c.saturation_source != "bits" && c.saturation_source != "observed")
+    m.fail("saturation_source", "is '" + c.saturation_source + "', not option, bits or observed");
+  c.offset_median_counts = m.number("offset_median_counts", 0, 65535);
+  c.noise_median_counts = m.number("noise_median_counts", 0, 65535);
+  if (const json* rule = m.find("defect_rule"); rule != nullptr) {
+    if (!rule->is_object()) {
+      m.fail("defect_rule", "is not an object");
+    } else {
+      MetaReader r(*rule, "defect_rule.", &error);
+      calib::DetectorCalibrationOptions& o = c.rule;
+      r.text("text");
+      o.dark_sd = r.number("dark_sd", 1, 1000);
+      o.noise_sd = r.number("noise_sd", 1, 1000);
+      o.gain_low = r.number("gain_low", 0, 1);
+      o.gain_high = r.number("gain_high", 1, 100);
+      o.line_low = r.number("line_low", 0, 1);
+      o.line_high = r.number("line_high", 1, 100);
+      o.line_defect_fraction = r.number("line_defect_fraction", 0, 1);
+      o.max_saturated_fraction = r.number("max_saturated_fraction", 0, 1);
+      o.min_signal_counts = r.number("min_signal_counts", 0, 65535);
+      o.max_unlit_fraction = r.number("max_unlit_fraction", 0, 1);
+      o.min_dark_frames = int(r.integer("min_dark_frames", 2, 100000));
+      o.min_flood_frames = int(r.integer("min_flood_frames", 1, 100000));
+      o.bits = int(r.integer("bits", 0, 16));
+      if (error.ok()) {
+        if (Status s = calib::check_detector_calibration_options(o); !s.ok())
+          error = corrupt_data("metadata defect_rule: " + s.message());
+      }
+    }
   }
-  if (c.rows < 1 || c.cols < 1 || c.rows > 16384 || c.cols > 16384)
-    return corrupt_data(where + ": a detector of " + std::to_string(c.cols) + " x " + std::to_string(c.rows) +
-                        " pixels (1 to 16384 a side)");
-  if (!(std::isfinite(c.open_field_counts) && c.open_field_counts > 0) || c.saturation_counts < 1 ||
-      c.saturation_counts > 65535)
-    return corrupt_data(where + ": open-field counts or saturation out of range");
+  const std::int64_t pixels = std::int64_t(c.rows) * std::int64_t(c.cols);
+  if (const json* defects = m.find("defects"); defects != nullptr) {
+    if (!defects->is_object()) {
+      m.fail("defects", "is not an object");
+    } else {
+      MetaReader d(*defects, "defects.", &error);
+      for (int r = 0; r < calib::kDefectRules; ++r)
+        c.defects_by_rule[std::size_t(r)] = d.integer(calib::defect_rule_name(r), 0, pixels);
+      c.defects = d.integer("masked", 0, pixels);
+    }
+  }
+  if (m.text("hash_algorithm") != "FNV-1a 64" && error.ok()) m.fail("hash_algorithm", "is not 'FNV-1a 64'");
+  c.content_hash = m.text("content_hash");
+  if (error.ok() && (c.content_hash.size() != 16 || c.content_hash.find_first_not_of("0123456789abcdef") != std::string::npos))
+    m.fail("content_hash", "is not 16 hex digits");
+  c.created = m.text("created");
+  if (!error.ok()) return error.with_context(where);
+
   // The pages must be there and as large as the metadata says before memory is given to them.
-  const std::uint64_t needed = std::uint64_t(kPages) * std::uint64_t(c.rows) * std::uint64_t(c.cols) * 4;
+  const tdir_t pages = TIFFNumberOfDirectories(tif);
+  if (pages != kPages)
+    return corrupt_data(where + ": " + std::to_string(pages) + " page(s); a detector calibration has " +
+                        std::to_string(kPages) + " (offset, gain, noise, defects)");
+  const std::uint64_t needed = std::uint64_t(kPages) * std::uint64_t(pixels) * 4;
   if (std::uint64_t(st.st_size) < needed)
     return corrupt_data(where + ": " + std::to_string(st.st_size) + " bytes cannot hold four " + std::to_string(c.cols) +
-                        " x " + std::to_string(c.rows) + " float maps (truncated?)");
+                        " x " + std::to_string(c.rows) + " float maps (truncated, or the metadata lies)");
   std::vector<float> page;
   c.offset_counts = tracking::Image<float>(c.rows, c.cols);
   c.gain = tracking::Image<float>(c.rows, c.cols);
   c.noise_counts = tracking::Image<float>(c.rows, c.cols);
   c.defective = tracking::Image<unsigned char>(c.rows, c.cols);
   tracking::Image<float>* maps[3] = {&c.offset_counts, &c.gain, &c.noise_counts};
+  std::int64_t masked = 0;
   for (int p = 0; p < kPages; ++p) {
     LFTRACK_RETURN_IF_ERROR(read_page(tif, p, c.rows, c.cols, &page, where));
     if (p < 3) {
-      std::copy(page.begin(), page.end(), maps[p]->view().data);
-    } else {
-      for (std::size_t i = 0; i < page.size(); ++i) {
-        if (page[i] != 0.f && page[i] != 1.f) return corrupt_data(where + ": the defect page holds values other than 0 and 1");
-        c.defective.view().data[i] = page[i] != 0.f ? 1 : 0;
-      }
+      std::copy(page.begin(), page.end(), maps[p]->pixels().begin());
+      continue;
+    }
+    for (std::size_t i = 0; i < page.size(); ++i) {
+      if (page[i] != 0.f && page[i] != 1.f)
+        return corrupt_data(where + ": the defect page holds " + std::to_string(page[i]) + " (only 0 and 1)");
+      c.defective.pixels()[i] = page[i] != 0.f ? 1 : 0;
+      masked += c.defective.pixels()[i];
     }
   }
-  if (TIFFSetDirectory(tif, kPages)) return corrupt_data(where + ": more than four pages");
-  for (int r = 0; r < c.rows; ++r)
-    for (int k = 0; k < c.cols; ++k)
-      if (c.gain.at(r, k) < 0) return corrupt_data(where + ": a negative gain");
+  for (std::size_t i = 0; i < c.gain.pixels().size(); ++i) {
+    if (c.gain.pixels()[i] < 0) return corrupt_data(where + ": a negative gain (" + std::to_string(c.gain.pixels()[i]) + ")");
+    if (c.noise_counts.pixels()[i] < 0) return corrupt_data(where + ": a negative noise");
+  }
+  if (masked != c.defects)
+    return corrupt_data(where + ": the defect page masks " + std::to_string(masked) + " pixels, the metadata says " +
+                        std::to_string(c.defects));
+  if (const std::uint64_t end = last_directory_end(tif, path); end == 0 || end > std::uint64_t(st.st_size))
+    return corrupt_data(where + ": the last page's directory runs past the end of the file (" +
+                        std::to_string(st.st_size) + " bytes): truncated");
   const std::string hash = calib::detector_calibration_hash(c);
   if (hash != c.content_hash)
     return corrupt_data(where + ": the maps do not match their hash (" + hash + " against " + c.content_hash +

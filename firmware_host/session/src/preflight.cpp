@@ -6,6 +6,7 @@
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
+#include "lftrack/sim/room_link.hpp"
 
 namespace lftrack::host {
 
@@ -163,6 +164,24 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
         "none named (actuator.calibration): corrections assume the couch's axes are the room's (lftrack calibrate couch)");
 }
 
+// Simulated detectors with a served couch: the patient moves only through the couch's room link.
+void check_couch_link(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  const bool simulated_frames = o.replay_sequence.empty() && p.scene.detectors[0].frames.kind == "sim";
+  const bool device_actuator = p.scene.actuator.type == "modbus" || p.scene.actuator.type == "can";
+  if (!simulated_frames || !device_actuator) return;
+  const std::string what = "the served couch's room link (sim.couch_link)";
+  if (p.scene.sim.couch_link.empty())
+    return add(r, what, CheckResult::kFail,
+               "none named: simulated detectors would never see the patient move with the " + p.scene.actuator.type +
+                   " actuator (lftrack serve couch|robot --room FILE)");
+  auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
+  if (!link.ok()) return add(r, what, CheckResult::kFail, link.status().message());
+  sim::RoomLinkSample sample;
+  if (!(*link)->read(&sample))
+    return add(r, what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
+  add(r, what, CheckResult::kPass, p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
+}
+
 }  // namespace
 
 bool PreflightReport::passed() const {
@@ -196,6 +215,7 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
   check_detectors(p, o, &r);
   check_detector_calibrations(p, o, &r);
   check_actuator(p, o, &r);
+  check_couch_link(p, o, &r);
   return r;
 }
 

@@ -132,7 +132,7 @@ Status SceneParser::parse_modbus(const YAML::Node& n, drivers::ModbusCouchOption
     return error(n, "actuator.modbus needs its link: tcp: {host, port} or rtu: {device, baud, parity}");
   }
   long unit = 1;
-  if (n["unit_id"]) LFTRACK_RETURN_IF_ERROR(integer(n["unit_id"], "actuator.modbus.unit_id", 0, 247, &unit));
+  if (n["unit_id"]) LFTRACK_RETURN_IF_ERROR(integer(n["unit_id"], "actuator.modbus.unit_id", 1, 247, &unit));
   m->unit_id = static_cast<int>(unit);
   if (const YAML::Node t = n["response_timeout_ms"]) {
     double ms = 0;
@@ -152,7 +152,7 @@ Status SceneParser::parse_can(const YAML::Node& n, drivers::CanRobotOptions* c) 
   } else if (n["bridge"]) {
     std::string bridge;
     LFTRACK_RETURN_IF_ERROR(text(n["bridge"], "actuator.can.bridge", &bridge));
-    c->bridge_path = resolve(base_dir_, bridge).string();
+    c->bridge_path = resolve(base_dir_, bridge).lexically_normal().string();
     if (c->bridge_path.size() >= 108)
       return error(n["bridge"], "actuator.can.bridge: a socket path is at most 107 bytes; got " + c->bridge_path);
   } else {

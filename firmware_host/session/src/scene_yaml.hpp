@@ -38,8 +38,11 @@ class SceneParser {
   Status check_keys(const YAML::Node& map, const std::string& what,
                     const std::set<std::string>& allowed) const {
     if (!map.IsMap()) return error(map, what + " must be a mapping");
+    std::set<std::string> seen;
     for (const auto& kv : map) {
       const std::string key = kv.first.as<std::string>();
+      // YAML keeps the first of two equal keys: a limit written twice must not pass unseen.
+      if (!seen.insert(key).second) return error(kv.first, "'" + key + "' appears twice in " + what);
       if (!allowed.count(key)) {
         std::string known;
         for (const auto& k : allowed) known += (known.empty() ? "" : ", ") + k;

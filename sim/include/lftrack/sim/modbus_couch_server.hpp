@@ -70,6 +70,7 @@ class ModbusCouchServer {
   void handle(std::uint8_t* query, int length);
   CouchServerFault take_fault(CouchRequestKind kind);
   void refresh_inputs(bool mismatch);
+  void hold_where_it_is();  // the control word kHold: stop, and take the position as the accepted target
 
   drivers::Actuator* couch_;
   ModbusCouchServerOptions options_;

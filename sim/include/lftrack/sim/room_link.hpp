@@ -31,7 +31,10 @@ class RoomLinkWriter {
   // Creates the link file (mode 0600). An existing room link whose writer has gone (a couch
   // server killed) is taken over in place, so readers keep their mapping, and its last position
   // is where the couch stands (resumed_position()). A link whose writer still runs, or a file
-  // that is not a room link, is refused, never overwritten.
+  // that is not a room link, is refused, never overwritten. "Still runs" is an exclusive flock
+  // the writer holds on the file for its life: the kernel drops it when the process ends, so a
+  // killed writer not yet reaped (a zombie) does not block the next, and a reused pid never
+  // looks alive.
   static Result<std::unique_ptr<RoomLinkWriter>> create(const std::filesystem::path& path);
   // An orderly end removes the file (readers keep the last position and see it go stale); a
   // writer killed leaves it, for the next server to take over.
@@ -44,9 +47,11 @@ class RoomLinkWriter {
   const std::filesystem::path& path() const { return path_; }
 
  private:
-  RoomLinkWriter(std::filesystem::path path, void* map) : path_(std::move(path)), map_(map) {}
+  RoomLinkWriter(std::filesystem::path path, void* map, int lock_fd)
+      : path_(std::move(path)), map_(map), lock_fd_(lock_fd) {}
   std::filesystem::path path_;
   void* map_;
+  int lock_fd_;  // holds the flock that marks this writer alive
   tracking::Vector6d resumed_ = tracking::Vector6d::Zero();
 };
 
