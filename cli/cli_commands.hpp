@@ -12,6 +12,11 @@ namespace lftrack::host::cli {
 
 using Command = std::function<Status()>;
 
+// A check of a number's text at parse time: a finite number in [lo, hi] (in (lo, hi] with
+// `lo_open`). NaN, infinities and text that is not a number are refused, which CLI11's Range and
+// PositiveNumber let through for NaN.
+CLI::Validator finite_in(double lo, double hi, bool lo_open = false);
+
 // Options every command that needs a scene shares.
 struct SceneOptions {
   std::string scene = "builtin:phantom";

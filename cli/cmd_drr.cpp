@@ -30,6 +30,8 @@ struct DrrOptions {
 };
 
 Status run(const DrrOptions& o) {
+  if (o.window.size() == 2 && !(o.window[0] < o.window[1]))
+    return invalid_argument("--window low,high needs low below high");
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   // Names are checked before the (slow) CT load.
@@ -154,7 +156,8 @@ Command add_drr_command(CLI::App* parent) {
       ->capture_default_str();
   app->add_option("--window", o->window, "Display window low,high in mu*mm (default: 0.5-99.8 percentiles)")
       ->expected(2)
-      ->delimiter(',');
+      ->delimiter(',')
+      ->check(finite_in(-1e6, 1e6));
   return [o] { return run(*o); };
 }
 

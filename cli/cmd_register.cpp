@@ -310,7 +310,8 @@ Command add_register_command(CLI::App* parent) {
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
   app->add_flag("--fiducial", o->fiducial, "Add the scene's first fiducial (hybrid measure, paper 2)");
   app->add_option("--seed", o->seed, "Noise seed of synthetic frames")->capture_default_str();
-  app->add_option("--i0", o->i0_counts, "Open-field counts of --frames (default: the sim detector's)");
+  app->add_option("--i0", o->i0_counts, "Open-field counts of --frames (default: the sim detector's)")
+      ->check(finite_in(0, 1e9, true));
   app->add_option("--save-frames", o->save_frames, "Write the raw frames as 16-bit TIFF into this folder");
   app->add_flag("--json", o->json, "Print the result as JSON");
   return [o] { return run(*o); };

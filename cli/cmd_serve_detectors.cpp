@@ -66,9 +66,20 @@ class DetectorRoom {
 
   // The pair exposed now, rendered once per exposure: a camera that asks gets the newest pair if
   // it has not had it yet and it is under 40 ms old (the other camera's trigger of the same
-  // exposure), else a new pair. Detector `index`'s pixels, or null if rendering failed.
-  const tracking::Image<std::uint16_t>* frame(std::size_t index) {
+  // exposure), else a new pair. Copies detector `index`'s pixels (rows x cols) into `out` under
+  // the lock: each camera asks from its own thread, and a pair rendered for one must never be
+  // rewritten while the other copies it (a half-rendered frame once reached the loop, which held
+  // on a 9 mm step). False, with nothing copied, if rendering failed or the size differs.
+  bool copy_frame(std::size_t index, std::uint16_t* out, int rows, int cols) {
     std::lock_guard lock(mutex_);
+    const tracking::Image<std::uint16_t>* f = frame_locked(index);
+    if (f == nullptr || f->rows() != rows || f->cols() != cols) return false;
+    std::memcpy(out, &f->at(0, 0), std::size_t(rows) * std::size_t(cols) * sizeof(std::uint16_t));
+    return true;
+  }
+
+ private:
+  const tracking::Image<std::uint16_t>* frame_locked(std::size_t index) {
     const std::int64_t now = monotonic_ns();
     if (taken_.size() <= index) taken_.resize(index + 1, -1);
     if (!have_ || taken_[index] >= pair_number_ || now - exposed_ns_ > 40'000'000) {
@@ -85,6 +96,8 @@ class DetectorRoom {
     taken_[index] = pair_number_;
     return have_ && index < pair_.frames.size() ? &pair_.frames[index].pixels : nullptr;
   }
+
+ public:
   void set_settle(double s) { settle_s_ = s; }
   nlohmann::json truth() {
     std::lock_guard lock(mutex_);
@@ -140,6 +153,9 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
   std::printf("lftrack serve detectors: v4l2loopback %s%s%s\n", listening.c_str(), o.room.empty() ? "" : "; room link ",
               o.room.c_str());
   std::fflush(stdout);
+  std::vector<tracking::Image<std::uint16_t>> copies;
+  for (std::size_t i = 0; i < writers.size(); ++i)
+    copies.emplace_back(scene.detectors[i].view.rows, scene.detectors[i].view.cols);
   std::atomic<bool> paused{false}, done{false};
   std::thread writer([&] {
     const auto period = std::chrono::microseconds(std::int64_t(scene.loop.period_ms * 1000));
@@ -147,9 +163,11 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
     while (!done.load()) {
       next += period;
       if (!paused.load())
-        for (std::size_t i = 0; i < writers.size(); ++i)
-          if (const tracking::Image<std::uint16_t>* f = r->frame(i))
-            if (Status s = writers[i]->write(&f->at(0, 0)); !s.ok()) spdlog::warn("{}", s.message());
+        for (std::size_t i = 0; i < writers.size(); ++i) {
+          tracking::Image<std::uint16_t>& f = copies[i];
+          if (r->copy_frame(i, &f.at(0, 0), f.rows(), f.cols()))
+            if (Status s = writers[i]->write(&f.at(0, 0)); !s.ok()) spdlog::warn("{}", s.message());
+        }
       std::this_thread::sleep_until(next);
     }
   });
@@ -213,12 +231,8 @@ Status serve_detectors(const ServeOptions& o) {
     c.rows = scene->detectors[k].view.rows;
     c.cols = scene->detectors[k].view.cols;
     auto render = [r, k](std::uint64_t, std::uint16_t* pixels, int rows, int cols) {
-      const tracking::Image<std::uint16_t>* f = r->frame(k);
-      if (f == nullptr || f->rows() != rows || f->cols() != cols) {
+      if (!r->copy_frame(k, pixels, rows, cols))
         std::memset(pixels, 0, std::size_t(rows) * std::size_t(cols) * 2);  // an unexposed frame
-        return;
-      }
-      std::memcpy(pixels, &f->at(0, 0), std::size_t(rows) * std::size_t(cols) * 2);
     };
     cameras.push_back(std::make_unique<sim::GigeFakeDetector>(c, render));
     if (Status s = cameras.back()->start(); !s.ok()) return s;

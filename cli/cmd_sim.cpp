@@ -288,7 +288,7 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                   mode == SimOptions::Mode::kReplay ? "Cycles to run (0: to the end of the sequence)"
                                                     : "Cycles to run (0: until quit)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(std::int64_t(0), std::int64_t(1000000000)));
   app->add_flag("--json", o->json, "Print the summary as JSON");
   if (mode == SimOptions::Mode::kSim)
     app->add_flag("--fast", o->fast,

@@ -166,6 +166,7 @@ Status frame_file_size(const char* path, int* rows, int* cols) {
   struct stat st {};
   if (::stat(path, &st) != 0) return not_found(std::string(path) + ": no such frame file");
   std::uint32_t w = 0, h = 0;
+  bool compressed = true;  // PNG always is
   if (type_of(path) == FileType::kTiff) {
     TIFFSetWarningHandler(nullptr);
     TIFFSetErrorHandler(nullptr);
@@ -173,6 +174,9 @@ Status frame_file_size(const char* path, int* rows, int* cols) {
     if (tif == nullptr) return corrupt_data(std::string(path) + ": not a readable TIFF file");
     TIFFGetField(tif, TIFFTAG_IMAGEWIDTH, &w);
     TIFFGetField(tif, TIFFTAG_IMAGELENGTH, &h);
+    std::uint16_t compression = COMPRESSION_NONE;
+    TIFFGetFieldDefaulted(tif, TIFFTAG_COMPRESSION, &compression);
+    compressed = compression != COMPRESSION_NONE;
     TIFFClose(tif);
   } else if (type_of(path) == FileType::kPng) {
     std::FILE* file = std::fopen(path, "rb");
@@ -196,6 +200,13 @@ Status frame_file_size(const char* path, int* rows, int* cols) {
   if (w == 0 || h == 0 || w > 16384 || h > 16384)
     return out_of_range(std::string(path) + ": the header claims " + size_text(w, h) +
                         " pixels; a frame is 1 to 16384 pixels a side");
+  // No more 16-bit pixels than the file can hold (compressed: at most 4096 to 1, beyond what
+  // deflate or LZW reach), checked before anyone allocates the frame.
+  const double data_bytes = 2.0 * double(w) * double(h);
+  if (data_bytes > (compressed ? 4096.0 : 1.0) * double(st.st_size))
+    return corrupt_data(std::string(path) + ": the header claims " + size_text(w, h) + " pixels (" +
+                        std::to_string(std::uint64_t(data_bytes)) + " bytes of data), more than a file of " +
+                        std::to_string(st.st_size) + " bytes can hold" + (compressed ? " even compressed" : ""));
   *rows = static_cast<int>(h);
   *cols = static_cast<int>(w);
   return {};

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <functional>
 #include <sstream>
+#include <string_view>
 
 namespace lftrack::drivers {
 namespace fs = std::filesystem;
@@ -51,6 +52,11 @@ Status read_csv_rows(const fs::path& file, const char* header,
       break;
     }
     if (!line.empty() && line.back() == '\r') line.pop_back();
+    // The writer's first line names the format's version; another version is refused.
+    constexpr std::string_view kVersionLine = "# lftrack frame sequence ";
+    if (!header_seen && line.rfind(kVersionLine, 0) == 0 && line != std::string(kVersionLine) + "1")
+      return unsupported(file.string() + ":" + std::to_string(line_number) + ": frame sequence version '" +
+                         line.substr(kVersionLine.size()) + "'; this build reads version 1");
     if (line.empty() || line[0] == '#') continue;
     std::string problem;
     if (!header_seen) {
@@ -98,7 +104,8 @@ std::string add_index_row(const std::vector<std::string>& f, const fs::path& dir
   return {};
 }
 
-// One actuator.csv row into the pair it names (rows for pairs the index lacks are ignored).
+// One actuator.csv row into the pair it names. Refused: a pair the index lacks, a pair's second
+// row, travel beyond what a couch or robot can read back (kMaxRecordedTravelMm, ...Rad).
 std::string add_actuator_row(const std::vector<std::string>& f, FrameSequence* sequence) {
   std::int64_t pair = 0;
   double travel[6] = {};
@@ -109,12 +116,22 @@ std::string add_actuator_row(const std::vector<std::string>& f, FrameSequence* s
     ok = end != f[i + 1].c_str() && *end == '\0' && std::isfinite(travel[i]);
   }
   if (!ok) return "a pair number and 6 finite numbers expected";
+  for (std::size_t i = 0; i < 6; ++i) {
+    const double most = i < 3 ? kMaxRecordedTravelMm : kMaxRecordedTravelRad;
+    if (std::abs(travel[i]) > most) {
+      std::ostringstream m;
+      m << "pair " << pair << ": " << (i < 3 ? "translation " : "rotation ") << travel[i]
+        << (i < 3 ? " mm" : " rad") << " is beyond any couch's travel (at most " << most << ")";
+      return m.str();
+    }
+  }
   auto it = std::lower_bound(sequence->pairs.begin(), sequence->pairs.end(), pair,
                              [](const SequencePair& p, std::int64_t index) { return p.index < index; });
-  if (it != sequence->pairs.end() && it->index == pair) {
-    it->has_actuator = true;
-    std::copy(travel, travel + 6, it->actuator_travel);
-  }
+  if (it == sequence->pairs.end() || it->index != pair)
+    return "pair " + f[0] + " is not in the index (a read-back without its frames)";
+  if (it->has_actuator) return "pair " + f[0] + " has a second read-back";
+  it->has_actuator = true;
+  std::copy(travel, travel + 6, it->actuator_travel);
   return {};
 }
 

@@ -34,6 +34,17 @@ Status ReplayFrameSource::open(FramePair* pair) {
     if (d.rows <= 0 || d.cols <= 0) return invalid_argument("replay: detector " + d.name + " has no size");
     column_.push_back(std::size_t(it - sequence_.detectors.begin()));
   }
+  // A sequence with frames of a detector the scene does not have was recorded in another room
+  // (or by another scene): refused, never half-used.
+  for (const std::string& n : sequence_.detectors) {
+    const bool known = std::any_of(detectors_.begin(), detectors_.end(), [&](const DetectorShape& d) { return d.name == n; });
+    if (!known) {
+      std::string want;
+      for (const DetectorShape& d : detectors_) want += (want.empty() ? "" : ", ") + d.name;
+      return failed_precondition(sequence_.directory.string() + ": the sequence has frames of detector '" + n +
+                                 "', which the scene does not have (it has " + want + ")");
+    }
+  }
   // Each pair's start: its earliest frame of these detectors; a pair with none listed starts
   // where the one before it did (its acquire() faults anyway).
   pair_start_ns_.assign(sequence_.pairs.size(), INT64_MAX);

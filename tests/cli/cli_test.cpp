@@ -64,13 +64,25 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
   EXPECT_NE(out.find("unknown renderer 'magic'"), std::string::npos) << out;
   // Usage errors exit 2 (status 512 from waitpid) with CLI11's reason; --help exits 0.
   for (const std::vector<std::string>& args :
-       {std::vector<std::string>{"drr", "--bin", "abc"}, {"no-such-command"}, {"sim", "--cycles", "-1"}}) {
+       {std::vector<std::string>{"drr", "--bin", "abc"},
+        {"no-such-command"},
+        {"sim", "--cycles", "-1"},
+        {"sim", "--cycles", "99999999999999999999"},  // beyond 64 bits
+        {"sim", "--cycles", "2000000000"},            // beyond the 1e9 a run may ask
+        {"register", "--i0", "0"},
+        {"register", "--i0", "-1"},
+        {"register", "--i0", "nan"},
+        {"drr", "--window", "nan,1"},
+        {"drr", "--window", "0,inf"}}) {
     std::vector<std::string> argv = {lftrack_bin()};
     argv.insert(argv.end(), args.begin(), args.end());
     const Status s = run_process(argv, &out);
     EXPECT_NE(s.message().find("(status 512)"), std::string::npos) << args[0] << ": " << s.message() << "\n" << out;
   }
   EXPECT_TRUE(run_process({lftrack_bin(), "sim", "--help"}, &out).ok()) << out;
+  const Status reversed = run_process({lftrack_bin(), "drr", "--window", "5,1", "-o", dir.path().string()}, &out);
+  EXPECT_NE(reversed.message().find("(status 256)"), std::string::npos) << reversed.message();
+  EXPECT_NE(out.find("--window low,high needs low below high"), std::string::npos) << out;
 }
 
 // The built-in phantom with small light fields, written next to the test's folder.

@@ -7,6 +7,7 @@
 
 #include <fstream>
 
+#include "lying_images.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::drivers {
@@ -59,6 +60,34 @@ TEST_P(FrameFiles, TruncatedOrGarbageIsCorrupt) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Formats, FrameFiles, ::testing::Values(".tif", ".png"));
+
+// A header that claims more 16-bit pixels than its file holds is refused by the size query
+// that callers (calibrate detector, replay) ask before allocating a frame.
+TEST(FrameFileErrors, HeadersClaimingMorePixelsThanTheFileHoldsAreRefused) {
+  test::TempDir dir;
+  ASSERT_TRUE(test::write_lying_tiff(dir.path() / "a.tif", 4000, 4000));
+  ASSERT_TRUE(test::write_lying_tiff(dir.path() / "b.tif", 16000, 16000, true));
+  ASSERT_TRUE(test::write_lying_png(dir.path() / "c.png", 4000, 4000));
+  ASSERT_TRUE(test::write_lying_png(dir.path() / "d.png", 100000, 100000));
+  for (const char* name : {"a.tif", "b.tif", "c.png", "d.png"}) {
+    int rows = 0, cols = 0;
+    const Status s = frame_file_size((dir.path() / name).c_str(), &rows, &cols);
+    ASSERT_FALSE(s.ok()) << name;
+    const bool absurd = std::string(name) == "d.png";
+    EXPECT_NE(s.message().find(absurd ? "a frame is 1 to 16384 pixels a side" : "bytes can hold"), std::string::npos)
+        << s.message();
+    EXPECT_EQ(rows, 0);
+  }
+  Image<std::uint16_t> frame = ramp(64, 48);
+  for (const char* name : {"ok.tif", "ok.png"}) {
+    const std::string file = (dir.path() / name).string();
+    ASSERT_TRUE(write_frame_file(file.c_str(), frame.view()).ok());
+    int rows = 0, cols = 0;
+    ASSERT_TRUE(frame_file_size(file.c_str(), &rows, &cols).ok()) << name;
+    EXPECT_EQ(rows, 64);
+    EXPECT_EQ(cols, 48);
+  }
+}
 
 TEST(FrameFileErrors, MissingFileIsNotFound) {
   Image<std::uint16_t> back(4, 4);

@@ -123,5 +123,35 @@ TEST(FrameSequence, BadActuatorFileIsRefused) {
       << s.status().message();
 }
 
+// Read-backs the index cannot vouch for, and a version this build does not read.
+TEST(FrameSequence, ActuatorRowsOutsideTheIndexTwiceOrBeyondAnyTravelAndOtherVersionsAreRefused) {
+  struct Case {
+    const char* rows;
+    const char* says;
+  };
+  const Case cases[] = {
+      {"0,1,2,3,0,0,0\n7,1,2,3,0,0,0\n", "actuator.csv:3: pair 7 is not in the index"},
+      {"0,1,2,3,0,0,0\n0,1,2,3,0,0,0\n", "actuator.csv:3: pair 0 has a second read-back"},
+      {"0,1e9,2,3,0,0,0\n", "actuator.csv:2: pair 0: translation 1e+09 mm is beyond any couch's travel"},
+      {"0,1,2,3,0,0,7\n", "actuator.csv:2: pair 0: rotation 7 rad is beyond any couch's travel"},
+  };
+  for (const Case& c : cases) {
+    test::TempDir dir;
+    write_text(dir.path() / "index.csv", std::string(kHeader) + "0,A,1,100,a0.tif\n");
+    write_text(dir.path() / "actuator.csv", std::string("pair,tx_mm,ty_mm,tz_mm,rx_rad,ry_rad,rz_rad\n") + c.rows);
+    auto s = read_frame_sequence(dir.path());
+    ASSERT_FALSE(s.ok()) << c.rows;
+    EXPECT_NE(s.status().message().find(c.says), std::string::npos) << s.status().message();
+  }
+  test::TempDir dir;
+  write_text(dir.path() / "index.csv",
+             "# lftrack frame sequence 2\npair,detector,sequence,timestamp_ns,file\n0,A,1,100,a0.tif\n");
+  auto s = read_frame_sequence(dir.path());
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.status().message().find("index.csv:1: frame sequence version '2'; this build reads version 1"),
+            std::string::npos)
+      << s.status().message();
+}
+
 }  // namespace
 }  // namespace lftrack::drivers

@@ -132,6 +132,16 @@ TEST_F(Replay, ADetectorTheSequenceLacksIsRefusedAtOpen) {
   EXPECT_NE(s.message().find("no frames of detector 'LAT' (it has A, B)"), std::string::npos) << s.message();
 }
 
+TEST_F(Replay, ADetectorTheSceneLacksIsRefusedAtOpen) {
+  auto sequence = read_frame_sequence(dir_.path());
+  ASSERT_TRUE(sequence.ok());
+  ReplayFrameSource source(*sequence, {{"A", kRows, kCols}}, {});
+  const Status s = source.open(&pair_);
+  EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(s.message().find("frames of detector 'B', which the scene does not have (it has A)"), std::string::npos)
+      << s.message();
+}
+
 TEST_F(Replay, TheRecordedCouchReadsBackTheDeliveredPairsTravelAndMovesNothing) {
   auto source = open(false);
   RecordedActuator couch(source.get());

@@ -5,10 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <limits>
 
 #include "lftrack/calib/couch_calibration.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
+#include "lftrack/host/calibration_files.hpp"
+#include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -103,6 +106,45 @@ TEST(CalibratedCouch, TheReadBackTargetIsTheSumOfTheCorrectionsSent) {
     worst = std::max(worst, (state.target - sent).cwiseAbs().maxCoeff());
   }
   EXPECT_LT(worst, 1e-9) << "read-back target against the corrections sent";
+}
+
+// A couch calibration file is the writer's keys with a report the solver could have made: a
+// typo, a negative rms or standard deviation, too few moves or a centre metres away is refused
+// with the line.
+TEST(CouchCalibrationFile, RefusesWhatTheSolverCouldNotHaveWritten) {
+  test::TempDir dir;
+  const std::string good =
+      "couch_calibration:\n"
+      "  rotation_deg: [0.5, -0.2, 1.0]\n"
+      "  centre_mm: [1, 2, 3]\n"
+      "  rms_mm: 0.05\n"
+      "  rotation_sd_deg: [0.01, 0.01, 0.01]\n"
+      "  centre_sd_mm: [0.1, 0.1, 0.1]\n"
+      "  centre_determined: true\n"
+      "  moves: 8\n"
+      "  source: a test\n";
+  const auto file = (dir.path() / "couch.yaml").string();
+  std::ofstream(file) << good;
+  auto ok = read_couch_calibration(file);
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  ASSERT_TRUE(ok->centre_room_mm.has_value());
+  EXPECT_NEAR(ok->centre_room_mm->x(), 1, 1e-12);
+  const std::pair<std::pair<const char*, const char*>, const char*> cases[] = {
+      {{"  rms_mm: 0.05", "  rms_mm: -1"}, "couch.yaml:4:11: couch_calibration.rms_mm must not be negative"},
+      {{"  rms_mm: 0.05", "  rms_mmm: 0.05"}, "unknown key 'rms_mmm'"},
+      {{"  moves: 8", "  moves: 1"}, "couch_calibration.moves must be in 3..100000"},
+      {{"  centre_sd_mm: [0.1, 0.1, 0.1]", "  centre_sd_mm: [0.1, -0.1, 0.1]"}, "centre_sd_mm must not be negative"},
+      {{"  centre_mm: [1, 2, 3]", "  centre_mm: [1e9, 2, 3]"}, "more than 5 m from the isocentre"},
+      {{"  centre_determined: true", "  centre_determined: perhaps"}, "must be true or false"},
+      {{"  rms_mm: 0.05", "  rms_mm: .nan"}, "must be finite"}};
+  for (const auto& [edit, says] : cases) {
+    std::string text = good;
+    text.replace(text.find(edit.first), std::string(edit.first).size(), edit.second);
+    std::ofstream(file, std::ios::trunc) << text;
+    auto bad = read_couch_calibration(file);
+    ASSERT_FALSE(bad.ok()) << edit.second;
+    EXPECT_NE(bad.status().message().find(says), std::string::npos) << bad.status().message();
+  }
 }
 
 }  // namespace

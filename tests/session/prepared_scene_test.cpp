@@ -1,5 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <fstream>
+
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
@@ -33,6 +36,41 @@ TEST(PreparedScene, MissingCtFileFailsWithItsPath) {
   auto p = prepare_scene(*scene, "/nonexistent/ct.nii.gz", nullptr);
   ASSERT_FALSE(p.ok());
   EXPECT_NE(p.status().message().find("/nonexistent/ct.nii.gz"), std::string::npos);
+}
+
+// The 1-based line of `text` that `line` begins.
+int line_of(const std::string& text, const std::string& line) {
+  const auto at = text.find(line);
+  return at == std::string::npos ? -1 : 1 + int(std::count(text.begin(), text.begin() + std::ptrdiff_t(at), '\n'));
+}
+
+// Errors found once the CT is loaded still name the scene's line: a CT that cannot be read, and
+// an ROI whose centre lies outside the scan.
+TEST(PreparedScene, ErrorsAfterLoadingNameTheScenesLine) {
+  test::TempDir dir;
+  tracking::ThreadPool pool(2);
+  const std::string roi = "  size_mm: [64, 64, 40]\n";
+  std::string far = *builtin_scene_text("builtin:phantom");
+  far.replace(far.find(roi), roi.size(), "  centre_mm: [0, 0, 5000]\n" + roi);
+  std::ofstream(dir.path() / "far.yaml") << far;
+  auto scene = load_scene((dir.path() / "far.yaml").string());
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  auto p = prepare_scene(*scene, "", &pool);
+  ASSERT_FALSE(p.ok());
+  const std::string roi_at = "far.yaml:" + std::to_string(line_of(far, "  centre_mm: [0, 0, 5000]")) + ":3: ";
+  EXPECT_NE(p.status().message().find(roi_at + "roi.centre_mm (0, 0, 5000) mm lies outside the CT"), std::string::npos)
+      << p.status().message();
+
+  std::string missing = far;
+  missing.replace(missing.find("  path: builtin:phantom\n  seed: 1\n"), 33, "  path: no-such-ct.nii.gz\n");
+  std::ofstream(dir.path() / "missing.yaml") << missing;
+  scene = load_scene((dir.path() / "missing.yaml").string());
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  p = prepare_scene(*scene, "", &pool);
+  ASSERT_FALSE(p.ok());
+  const std::string ct_at = "missing.yaml:" + std::to_string(line_of(missing, "  path: no-such-ct")) + ":3: ct.path: ";
+  EXPECT_NE(p.status().message().find(ct_at), std::string::npos) << p.status().message();
+  EXPECT_NE(p.status().message().find("no-such-ct.nii.gz"), std::string::npos) << p.status().message();
 }
 
 TEST(PreparedScene, RealCtSceneResolves) {

@@ -104,6 +104,25 @@ const BadScene kBadScenes[] = {
      "bad.yaml:9:", "(known: sim, v4l2, gige, replay)"},
     {"UnknownBuiltin", "  path: ct_folder", "  path: builtin:knee", "bad.yaml:3:", "unknown built-in CT"},
     {"NegativeRoiSize", "size_mm: [40, 40, 40]", "size_mm: [40, -4, 40]", "bad.yaml:6:", "must be positive"},
+    // Absurd numbers a typo makes: refused with the line, never obeyed.
+    {"HugeEnvelope", "      source_to_detector_mm: 1500\n",
+     "      source_to_detector_mm: 1500\nenvelope:\n  translation_mm: 1e9\n", "bad.yaml:18:",
+     "envelope.translation_mm must be at most 50"},
+    {"HugeTotalCorrection", "      source_to_detector_mm: 1500\n",
+     "      source_to_detector_mm: 1500\nsafety:\n  max_total_mm: 1e9\n", "bad.yaml:18:",
+     "safety.max_total_mm must be at most 50"},
+    {"HugeStep", "      source_to_detector_mm: 1500\n",
+     "      source_to_detector_mm: 1500\nsafety:\n  max_step_deg: 1e12\n", "bad.yaml:18:",
+     "safety.max_step_deg must be at most 10"},
+    {"StepBeyondTotal", "      source_to_detector_mm: 1500\n",
+     "      source_to_detector_mm: 1500\nsafety:\n  max_step_mm: 8\n  max_total_mm: 5\n", "bad.yaml:18:",
+     "max_step_mm must not exceed safety.max_total_mm"},
+    {"NanLimit", "      source_to_detector_mm: 1500\n",
+     "      source_to_detector_mm: 1500\nsafety:\n  readback_tolerance_mm: .nan\n", "bad.yaml:18:",
+     "must be finite"},
+    {"LightFieldOf16GiB", "      source_to_detector_mm: 1500\n",
+     "      source_to_detector_mm: 1500\ntracking:\n  light_field:\n    resolution: [64, 64, 1024, 1024]\n",
+     "bad.yaml:19:", "is 4294967296 samples: 16.0 GiB per view to build, more than the 4 GiB allowed"},
 };
 
 void PrintTo(const BadScene& c, std::ostream* os) {

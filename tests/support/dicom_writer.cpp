@@ -65,8 +65,8 @@ bool write_synthetic_slice(const std::filesystem::path& file, const SyntheticSli
   put_us(0x0028, 0x0010, static_cast<uint16_t>(s.rows));
   put_us(0x0028, 0x0011, static_cast<uint16_t>(s.cols));
   put_us(0x0028, 0x0100, 16);
-  put_us(0x0028, 0x0101, 16);
-  put_us(0x0028, 0x0102, 15);
+  put_us(0x0028, 0x0101, static_cast<uint16_t>(s.bits_stored));
+  put_us(0x0028, 0x0102, static_cast<uint16_t>(s.bits_stored - 1));
   put_us(0x0028, 0x0103, 1);
 
   std::vector<std::int16_t> pixels = s.stored;

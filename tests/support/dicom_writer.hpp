@@ -22,6 +22,7 @@ struct SyntheticSlice {
   Eigen::Vector2d pixel_spacing_mm{0.5, 0.75};  // between rows, between columns
   double slope = 1.0;
   double intercept = -1024.0;
+  int bits_stored = 16;              // BitsStored (HighBit one less); signed values
   std::vector<std::int16_t> stored;  // rows * cols raw values; empty: a pattern from `seed`
   int seed = 0;
   bool mpeg2_pixel_data = false;  // encapsulate as MPEG2 (a syntax GDCM cannot decode)

@@ -152,6 +152,51 @@ const BadSeriesCase kBadSeries[] = {
        write(d, "a.dcm", slice_at(0));
        std::ofstream(d / "notes.txt") << "this is not a DICOM file\n";
      }},
+    // A rescale no CT has, and values no rescale makes plausible: refused with the slice named.
+    {"HugeRescaleSlope", "b.dcm: RescaleSlope 1e+38 is not in (0, 1000]",
+     [](const fs::path& d) {
+       write(d, "a.dcm", slice_at(0));
+       SyntheticSlice b = slice_at(1);
+       b.slope = 1e38;
+       write(d, "b.dcm", b);
+     }},
+    {"ZeroRescaleSlope", "RescaleSlope 0 is not in (0, 1000]",
+     [](const fs::path& d) {
+       SyntheticSlice a = slice_at(0);
+       a.slope = 0;
+       write(d, "a.dcm", a);
+       write(d, "b.dcm", slice_at(1));
+     }},
+    {"NegativeRescaleSlope", "RescaleSlope -1 is not in (0, 1000]",
+     [](const fs::path& d) {
+       SyntheticSlice a = slice_at(0);
+       a.slope = -1;
+       write(d, "a.dcm", a);
+       write(d, "b.dcm", slice_at(1));
+     }},
+    {"HugeRescaleIntercept", "RescaleIntercept 1e+20 is beyond +-100000",
+     [](const fs::path& d) {
+       write(d, "a.dcm", slice_at(0));
+       SyntheticSlice b = slice_at(1);
+       b.intercept = 1e20;
+       write(d, "b.dcm", b);
+     }},
+    {"ValueBeyondBitsStored", "pixel (row 2, column 3): stored value 3000 does not fit BitsStored 12 (signed)",
+     [](const fs::path& d) {
+       write(d, "a.dcm", slice_at(0));
+       SyntheticSlice b = slice_at(1);
+       b.bits_stored = 12;
+       b.stored.assign(std::size_t(b.rows * b.cols), 100);
+       b.stored[std::size_t(2 * b.cols + 3)] = 3000;  // 12 bits signed hold -2048..2047
+       write(d, "b.dcm", b);
+     }},
+    {"ImplausibleHu", "pixel (row 0, column 0): stored value 1000 x RescaleSlope 500 + RescaleIntercept -1024 = 498976 HU",
+     [](const fs::path& d) {
+       write(d, "a.dcm", slice_at(0));
+       SyntheticSlice b = slice_at(1);
+       b.slope = 500;
+       write(d, "b.dcm", b);
+     }},
     {"TooFewSlices", "at least 2 slice files", [](const fs::path& d) { write(d, "a.dcm", slice_at(0)); }},
     {"TiltedStack", "gantry tilt",
      [](const fs::path& d) {

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include "lftrack/tracking/image_io.hpp"
+#include "lying_images.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::tracking {
@@ -61,6 +62,36 @@ TEST(ImageIo, TruncatedFilesFailCleanly) {
   std::filesystem::resize_file(dir.path() / "a.pfm", 200);
   EXPECT_FALSE(read_pfm(dir.path() / "a.pfm").ok());
   EXPECT_FALSE(read_tiff(dir.path() / "missing.tif").ok());
+}
+
+// Headers that claim more pixels than their files hold are refused at once, before anything
+// is allocated (a 65535 x 65535 TIFF once took 52 s and 16.9 GB to fail).
+TEST(ImageIo, HeadersClaimingMorePixelsThanTheFileHoldsAreRefused) {
+  test::TempDir dir;
+  ASSERT_TRUE(test::write_lying_tiff(dir.path() / "big.tif", 65535, 65535));
+  ASSERT_TRUE(test::write_lying_tiff(dir.path() / "deflated.tif", 16000, 16000, true));
+  ASSERT_TRUE(test::write_lying_tiff(dir.path() / "wide.tif", 70000, 2));
+  ASSERT_TRUE(test::write_lying_png(dir.path() / "big.png", 100000, 100000));
+  ASSERT_TRUE(test::write_lying_png(dir.path() / "tall.png", 4000, 4000));
+  const std::pair<const char*, const char*> cases[] = {
+      {"big.tif", "claims 65535 x 65535 pixels; an image is 1 to 16384 pixels a side"},
+      {"deflated.tif", "claims 16000 x 16000 pixels (512000000 bytes of data), more than a file of"},
+      {"wide.tif", "claims 70000 x 2 pixels; an image is 1 to 16384"},
+      {"big.png", "claims 100000 x 100000 pixels; an image is 1 to 16384"},
+      {"tall.png", "bytes can hold even compressed"}};
+  for (const auto& [name, expected] : cases) {
+    const std::filesystem::path file = dir.path() / name;
+    auto image = std::string(name).ends_with(".png") ? read_png(file) : read_tiff(file);
+    ASSERT_FALSE(image.ok()) << name;
+    EXPECT_NE(image.status().message().find(expected), std::string::npos) << image.status().message();
+  }
+  // A real image of the same sizes still reads.
+  ImageWriteOptions o;
+  o.float_data = true;
+  ASSERT_TRUE(write_image(dir.path() / "ok.tif", ramp(300, 200).view(), o).ok());
+  EXPECT_TRUE(read_tiff(dir.path() / "ok.tif").ok());
+  ASSERT_TRUE(write_image(dir.path() / "ok.png", ramp(300, 200).view(), {}).ok());
+  EXPECT_TRUE(read_png(dir.path() / "ok.png").ok());
 }
 
 TEST(ImageIo, PercentileWindowIgnoresOutliers) {

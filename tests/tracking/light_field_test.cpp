@@ -3,9 +3,14 @@
 #include "lftrack/tracking/light_field.hpp"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <zlib.h>
 
+#include <cstring>
 #include <fstream>
+#include <limits>
 #include <random>
+#include <vector>
 
 #include "fixtures.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
@@ -323,6 +328,71 @@ TEST_F(LightFieldFile, WrongGeometry) {
   EXPECT_NE(load_error(field_->header().ct_hash, plan_hash(moved, spec)).find("another geometry"),
             std::string::npos);
   EXPECT_EQ(load_error(field_->header().ct_hash, plan_hash(fixture_plan(), spec)), "(loaded)");
+}
+
+TEST_F(LightFieldFile, PaddedOrLyingAboutItsPayload) {
+  const auto size = std::filesystem::file_size(file_);
+  std::ofstream(file_, std::ios::app | std::ios::binary) << "trailing";
+  EXPECT_NE(load_error().find("padded: the file has " + std::to_string(size + 8) + " bytes, the 1024-byte header and its " +
+                              std::to_string(size - 1024) + "-byte payload make " + std::to_string(size)),
+            std::string::npos)
+      << load_error();
+}
+
+// A FIFO (or a folder) named like a light field: refused at once, never waited on.
+TEST_F(LightFieldFile, AFifoOrFolderIsRefusedWithoutHanging) {
+  const auto fifo = dir_.path() / "B.lf";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto loaded = LightField::load(fifo);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("not a regular file"), std::string::npos) << loaded.status().message();
+  std::filesystem::create_directory(dir_.path() / "C.lf");
+  EXPECT_FALSE(LightField::load(dir_.path() / "C.lf").ok());
+}
+
+// Rewrites the payload at `offset` (from the payload's start) and makes both checksums valid
+// again, as a tool that writes bad values with good checksums would.
+void patch_payload(const std::filesystem::path& file, std::size_t offset, const void* bytes, std::size_t n) {
+  std::vector<unsigned char> data(std::filesystem::file_size(file));
+  {
+    std::ifstream in(file, std::ios::binary);
+    in.read(reinterpret_cast<char*>(data.data()), std::streamsize(data.size()));
+  }
+  std::memcpy(data.data() + 1024 + offset, bytes, n);
+  const auto payload_crc = static_cast<std::uint32_t>(crc32(0, data.data() + 1024, uInt(data.size() - 1024)));
+  std::memcpy(data.data() + 424, &payload_crc, 4);
+  const auto header_crc = static_cast<std::uint32_t>(crc32(0, data.data(), 1020));
+  std::memcpy(data.data() + 1020, &header_crc, 4);
+  std::ofstream(file, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(data.data()),
+                                                                 std::streamsize(data.size()));
+}
+
+TEST(LightFieldFileValues, NonFiniteSamplesAndCodesOutsideTheCodebookAreRefusedUnderValidChecksums) {
+  test::TempDir dir;
+  const auto file = dir.path() / "A.lf";
+  auto field = fixture_light_field(LightFieldStorage::kFloat32);
+  ASSERT_TRUE(field->save(file).ok());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  patch_payload(file, 4 * 777, &nan, 4);
+  auto loaded = LightField::load(file);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("sample 777 is not finite"), std::string::npos) << loaded.status().message();
+
+  auto vq = fixture_light_field(LightFieldStorage::kVq);
+  ASSERT_TRUE(vq->save(file).ok());
+  const std::uint16_t beyond = static_cast<std::uint16_t>(vq->header().codebook_size);
+  patch_payload(file, std::size_t(vq->header().codebook_size) * 64 + 2 * 5, &beyond, 2);
+  loaded = LightField::load(file);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("tile 5 names codebook entry"), std::string::npos)
+      << loaded.status().message();
+  ASSERT_TRUE(vq->save(file).ok());
+  const float inf = std::numeric_limits<float>::infinity();
+  patch_payload(file, 64 * 2 + 4, &inf, 4);
+  loaded = LightField::load(file);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("codebook entry 2 is not finite"), std::string::npos)
+      << loaded.status().message();
 }
 
 TEST_F(LightFieldFile, MissingFile) {

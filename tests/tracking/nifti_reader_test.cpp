@@ -1,10 +1,12 @@
 #include <gtest/gtest.h>
 #include <nifti2_io.h>
+#include <zlib.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 
 #include "lftrack/tracking/volume_io.hpp"
 #include "test_data.hpp"
@@ -137,6 +139,36 @@ const BadNiftiCase kBadNifti[] = {
        poke(f, 280, &nan, 4);
      }},  // srow_x[0]
     {"EmptyFile", "not a readable NIfTI", [](const fs::path& f) { fs::resize_file(f, 0); }},
+    // Neither sform nor qform: left and right unknown.
+    {"NoOrientation", "the patient's orientation (left from right included) is unknown",
+     [](const fs::path& f) {
+       const int16_t zero = 0;
+       poke(f, 252, &zero, 2);  // qform_code
+       poke(f, 254, &zero, 2);  // sform_code
+     }},
+    // Rescales nifti_clib would quietly drop, or no CT has.
+    {"NanSlope", "scl_slope nan is not 0 (no scaling) or in (0, 1000]",
+     [](const fs::path& f) {
+       const float nan = std::nanf("");
+       poke(f, 112, &nan, 4);
+     }},
+    {"NegativeSlope", "scl_slope -1 is not 0",
+     [](const fs::path& f) {
+       const float v = -1;
+       poke(f, 112, &v, 4);
+     }},
+    {"HugeIntercept", "scl_inter 1e+20 is not finite within +-100000",
+     [](const fs::path& f) {
+       const float slope = 1, inter = 1e20f;
+       poke(f, 112, &slope, 4);
+       poke(f, 116, &inter, 4);
+     }},
+    {"ImplausibleValue", "voxel (1, 0, 1) holds 1010 (x scl_slope 100 + scl_inter 0): not a finite CT number",
+     [](const fs::path& f) {
+       const float slope = 100, inter = 0;
+       poke(f, 112, &slope, 4);
+       poke(f, 116, &inter, 4);
+     }},
 };
 
 void PrintTo(const BadNiftiCase& c, std::ostream* os) {
@@ -166,6 +198,55 @@ TEST(NiftiReader, TruncatedGzipFails) {
   auto ct = read_nifti(file);
   ASSERT_FALSE(ct.ok());
   EXPECT_NE(ct.status().message().find(file.string()), std::string::npos);
+}
+
+// A float volume with one NaN or infinite voxel is refused with the voxel named; so is a gzip
+// stream whose CRC is wrong although the volume itself reads (nifti_clib stops before the CRC).
+TEST(NiftiReader, NonFiniteVoxelsAndADamagedGzipStreamAreRefused) {
+  TempDir dir;
+  for (const float bad : {std::nanf(""), std::numeric_limits<float>::infinity(), -1e30f}) {
+    const int64_t dims[8] = {3, 4, 3, 2, 1, 1, 1, 1};
+    nifti_image* nim = nifti_make_new_nim(dims, DT_FLOAT32, 1);
+    auto* data = static_cast<float*>(nim->data);
+    for (int v = 0; v < 24; ++v) data[v] = -1000.0f + float(v);
+    data[2 + 4 * (1 + 3 * 1)] = bad;  // voxel (2, 1, 1)
+    nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = r == c ? 1 : 0;
+    const fs::path file = dir.path() / "float.nii";
+    nifti_set_filenames(nim, file.c_str(), 0, 1);
+    nifti_image_write(nim);
+    nifti_image_free(nim);
+    auto ct = read_nifti(file);
+    ASSERT_FALSE(ct.ok()) << bad;
+    EXPECT_NE(ct.status().message().find("voxel (2, 1, 1) holds"), std::string::npos) << ct.status().message();
+  }
+  // A stream that goes on past the volume (200 kB after the voxels), so reading the volume stops
+  // before the stream's end and its CRC.
+  const fs::path plain = write_small_nifti(dir.path() / "v.nii", Eigen::Matrix4d::Identity());
+  std::string bytes;
+  {
+    std::ifstream in(plain, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  bytes += std::string(200000, 'x');
+  const fs::path gz = dir.path() / "v.nii.gz";
+  gzFile out = gzopen(gz.c_str(), "wb");
+  ASSERT_NE(out, nullptr);
+  ASSERT_EQ(gzwrite(out, bytes.data(), unsigned(bytes.size())), int(bytes.size()));
+  ASSERT_EQ(gzclose(out), Z_OK);
+  ASSERT_TRUE(read_nifti(gz).ok()) << "the intact file reads";
+  std::fstream f(gz, std::ios::in | std::ios::out | std::ios::binary);
+  f.seekg(-8, std::ios::end);  // the gzip trailer: CRC-32, then the length
+  char crc[4];
+  f.read(crc, 4);
+  for (char& c : crc) c = static_cast<char>(~c);
+  f.seekp(-8, std::ios::end);
+  f.write(crc, 4);
+  f.close();
+  auto ct = read_nifti(gz);
+  ASSERT_FALSE(ct.ok()) << "a wrong CRC must not pass";
+  EXPECT_NE(ct.status().message().find("the gzip stream is damaged"), std::string::npos) << ct.status().message();
 }
 
 TEST(NiftiReader, UnknownExtensionIsRejected) {

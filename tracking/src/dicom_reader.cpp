@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <iomanip>
 #include <mutex>
 #include <sstream>
 #include <string_view>
@@ -82,19 +83,49 @@ Status required_decimals(DcmDataset& ds, const DcmTagKey& tag, unsigned long n, 
   return {};
 }
 
+// Stored values as BitsStored allows them (PixelRepresentation: 0 unsigned, 1 two's complement).
+struct StoredRange {
+  double lowest = 0, highest = 0;
+};
+
+// Converts stored values to HU. Returns the index of the first value outside the stored range
+// or whose HU is not finite or implausible (volume_io.hpp), or `count` when all are good.
 template <class T>
-void convert_pixels(const T* raw, std::size_t count, double slope, double intercept, std::vector<float>* hu) {
+std::size_t convert_pixels(const T* raw, std::size_t count, const StoredRange& stored, double slope,
+                           double intercept, std::vector<float>* hu) {
   hu->resize(count);
   for (std::size_t i = 0; i < count; ++i) {
-    (*hu)[i] = static_cast<float>(slope * static_cast<double>(raw[i]) + intercept);
+    const double value = static_cast<double>(raw[i]);
+    const double h = slope * value + intercept;
+    if (value < stored.lowest || value > stored.highest || !(h >= kLowestPlausibleHu && h <= kHighestPlausibleHu))
+      return i;
+    (*hu)[i] = static_cast<float>(h);
   }
+  return count;
+}
+
+std::string number_text(double v) {
+  std::ostringstream s;
+  s << std::setprecision(10) << v;
+  return s.str();
 }
 
 Status read_pixels(DcmDataset& ds, Slice* slice) {
-  Uint16 samples = 1, bits_allocated = 0, representation = 0;
+  Uint16 samples = 1, bits_allocated = 0, bits_stored = 0, representation = 0;
   ds.findAndGetUint16(DCM_SamplesPerPixel, samples);
   ds.findAndGetUint16(DCM_BitsAllocated, bits_allocated);
   ds.findAndGetUint16(DCM_PixelRepresentation, representation);
+  if (ds.findAndGetUint16(DCM_BitsStored, bits_stored).bad()) bits_stored = bits_allocated;
+  if (bits_stored < 1 || bits_stored > bits_allocated)
+    return corrupt_data("BitsStored " + std::to_string(bits_stored) + " is not 1 to BitsAllocated (" +
+                        std::to_string(bits_allocated) + ")");
+  StoredRange stored;
+  if (representation == 1) {
+    stored.lowest = -std::ldexp(1.0, bits_stored - 1);
+    stored.highest = std::ldexp(1.0, bits_stored - 1) - 1;
+  } else {
+    stored.highest = std::ldexp(1.0, bits_stored) - 1;
+  }
   if (samples != 1) {
     return unsupported("samples per pixel is " + std::to_string(samples) + ", expected 1 (greyscale)");
   }
@@ -118,15 +149,29 @@ Status read_pixels(DcmDataset& ds, Slice* slice) {
       return corrupt_data("pixel data holds " + std::to_string(got) + " values, expected " +
                           std::to_string(count));
     }
+    std::size_t bad = count;
+    double bad_value = 0;
     if constexpr (sizeof(T) == 2) {
       if (as_signed) {
-        convert_pixels(reinterpret_cast<const int16_t*>(raw), count, slice->slope, slice->intercept,
-                       &slice->hu);
-        return {};
+        const auto* words = reinterpret_cast<const int16_t*>(raw);
+        bad = convert_pixels(words, count, stored, slice->slope, slice->intercept, &slice->hu);
+        if (bad < count) bad_value = words[bad];
       }
     }
-    convert_pixels(raw, count, slice->slope, slice->intercept, &slice->hu);
-    return {};
+    if (!(as_signed && sizeof(T) == 2)) {
+      bad = convert_pixels(raw, count, stored, slice->slope, slice->intercept, &slice->hu);
+      if (bad < count) bad_value = raw[bad];
+    }
+    if (bad == count) return {};
+    const std::string where = "pixel (row " + std::to_string(bad / std::size_t(slice->cols)) + ", column " +
+                              std::to_string(bad % std::size_t(slice->cols)) + ")";
+    if (bad_value < stored.lowest || bad_value > stored.highest)
+      return corrupt_data(where + ": stored value " + number_text(bad_value) + " does not fit BitsStored " +
+                          std::to_string(bits_stored) + (representation == 1 ? " (signed)" : " (unsigned)"));
+    return corrupt_data(where + ": stored value " + number_text(bad_value) + " x RescaleSlope " +
+                        number_text(slice->slope) + " + RescaleIntercept " + number_text(slice->intercept) + " = " +
+                        number_text(slice->slope * bad_value + slice->intercept) + " HU, outside the plausible [" +
+                        number_text(kLowestPlausibleHu) + ", " + number_text(kHighestPlausibleHu) + "] HU");
   };
   if (bits_allocated == 16) {
     return convert(
@@ -187,6 +232,12 @@ Status read_slice(const fs::path& file, Slice* slice) {
     LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleIntercept, 1, "RescaleIntercept", &v));
     slice->intercept = v[0];
   }
+  if (!(slice->slope > 0) || slice->slope > kMaxRescaleSlope)
+    return corrupt_data("RescaleSlope " + number_text(slice->slope) + " is not in (0, " +
+                        number_text(kMaxRescaleSlope) + "]");
+  if (std::abs(slice->intercept) > kMaxRescaleIntercept)
+    return corrupt_data("RescaleIntercept " + number_text(slice->intercept) + " is beyond +-" +
+                        number_text(kMaxRescaleIntercept));
   Uint16 rows = 0, cols = 0;
   ds.findAndGetUint16(DCM_Rows, rows);
   ds.findAndGetUint16(DCM_Columns, cols);

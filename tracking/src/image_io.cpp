@@ -25,6 +25,26 @@ std::string lower_extension(const fs::path& file) {
   return ext;
 }
 
+// The size a header claims against the limits and the file (image_io.hpp).
+Status check_claimed_size(const fs::path& file, const char* kind, std::uint64_t cols, std::uint64_t rows,
+                          std::uint64_t bytes_per_pixel, bool compressed) {
+  std::error_code ec;
+  const std::uint64_t file_bytes = fs::file_size(file, ec);
+  if (ec) return io_error(file.string() + ": " + ec.message());
+  const std::string claimed = std::to_string(cols) + " x " + std::to_string(rows);
+  if (cols < 1 || rows < 1 || cols > kMaxImageSide || rows > kMaxImageSide)
+    return out_of_range(file.string() + ": the " + kind + " header claims " + claimed +
+                        " pixels; an image is 1 to " + std::to_string(kMaxImageSide) + " pixels a side");
+  const double data_bytes = double(cols) * double(rows) * double(bytes_per_pixel);
+  const double most = compressed ? kMaxCompressionRatio * double(file_bytes) : double(file_bytes);
+  if (data_bytes > most)
+    return corrupt_data(file.string() + ": the " + kind + " header claims " + claimed + " pixels (" +
+                        std::to_string(std::uint64_t(data_bytes)) + " bytes of data), more than a file of " +
+                        std::to_string(file_bytes) + " bytes can hold" +
+                        (compressed ? " even compressed" : ""));
+  return {};
+}
+
 std::vector<uint16_t> windowed_row(const float* src, int cols, const DisplayWindow& w) {
   std::vector<uint16_t> row(static_cast<std::size_t>(cols));
   const double span = w.high > w.low ? w.high - w.low : 1.0;
@@ -146,9 +166,10 @@ Result<Image<float>> read_pfm(const fs::path& file) {
   double scale = 0;
   in >> magic >> cols >> rows >> scale;
   if (magic != "Pf" || !in) return corrupt_data(file.string() + ": not a greyscale PFM file");
-  if (cols < 1 || rows < 1 || cols > 65536 || rows > 65536 || scale == 0) {
+  if (cols < 1 || rows < 1 || !std::isfinite(scale) || scale == 0) {
     return corrupt_data(file.string() + ": bad PFM size or scale");
   }
+  LFTRACK_RETURN_IF_ERROR(check_claimed_size(file, "PFM", std::uint64_t(cols), std::uint64_t(rows), 4, false));
   in.get();  // the single whitespace after the scale
   Image<float> image(rows, cols);
   for (int r = rows - 1; r >= 0; --r) {
@@ -179,12 +200,17 @@ Result<Image<float>> read_tiff(const fs::path& file) {
   TIFFGetField(tif, TIFFTAG_BITSPERSAMPLE, &bits);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &spp);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &fmt);
+  uint16_t compression = COMPRESSION_NONE;
+  TIFFGetFieldDefaulted(tif, TIFFTAG_COMPRESSION, &compression);
   const bool supported =
-      spp == 1 && w >= 1 && h >= 1 && w <= 65536 && h <= 65536 &&
-      ((fmt == SAMPLEFORMAT_UINT && (bits == 8 || bits == 16)) || (fmt == SAMPLEFORMAT_IEEEFP && bits == 32));
+      spp == 1 && ((fmt == SAMPLEFORMAT_UINT && (bits == 8 || bits == 16)) || (fmt == SAMPLEFORMAT_IEEEFP && bits == 32));
   if (!supported) {
     TIFFClose(tif);
     return unsupported(file.string() + ": TIFF must be one-sample 8/16-bit unsigned or 32-bit float");
+  }
+  if (Status s = check_claimed_size(file, "TIFF", w, h, bits / 8, compression != COMPRESSION_NONE); !s.ok()) {
+    TIFFClose(tif);
+    return s;
   }
   Image<float> image(static_cast<int>(h), static_cast<int>(w));
   std::vector<unsigned char> line(static_cast<std::size_t>(TIFFScanlineSize(tif)));
@@ -216,6 +242,10 @@ Result<Image<float>> read_png(const fs::path& file) {
   img.version = PNG_IMAGE_VERSION;
   if (!png_image_begin_read_from_file(&img, file.c_str())) {
     return corrupt_data(file.string() + ": not a readable PNG file");
+  }
+  if (Status s = check_claimed_size(file, "PNG", img.width, img.height, 2, true); !s.ok()) {
+    png_image_free(&img);
+    return s;
   }
   img.format = PNG_FORMAT_LINEAR_Y;  // 16-bit linear greyscale
   std::vector<uint16_t> buffer(PNG_IMAGE_SIZE(img) / 2);

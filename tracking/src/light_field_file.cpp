@@ -18,6 +18,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -91,6 +92,48 @@ std::size_t expected_payload(const LightField::Header& h) {
       return std::size_t(h.codebook_size) * 64 + tile_count(h.geometry.size) * 2;
   }
   return 0;
+}
+
+// What the renderers read without a check, checked once here: float samples and codebook entries
+// finite (a NaN under a valid CRC was written that way, or by someone else), every VQ code inside
+// the codebook, a fixed-point scale finite and positive. Returns the first problem.
+Status check_payload(const LightField::Header& h, const unsigned char* payload) {
+  auto first_non_finite = [](const unsigned char* p, std::size_t count) {
+    for (std::size_t i = 0; i < count; ++i) {
+      float v;
+      std::memcpy(&v, p + 4 * i, 4);
+      if (!std::isfinite(v)) return i;
+    }
+    return count;
+  };
+  switch (h.storage) {
+    case LightFieldStorage::kFloat32: {
+      const auto count = static_cast<std::size_t>(h.geometry.sample_count());
+      if (const std::size_t i = first_non_finite(payload, count); i < count)
+        return corrupt_data("sample " + std::to_string(i) + " is not finite (NaN or infinite) under a valid checksum");
+      return {};
+    }
+    case LightFieldStorage::kFixed16:
+      if (!std::isfinite(h.fixed_scale) || !(h.fixed_scale > 0))
+        return corrupt_data("the fixed-point scale is not a finite positive number");
+      return {};
+    case LightFieldStorage::kVq: {
+      const std::size_t entries = std::size_t(h.codebook_size) * 16;
+      if (const std::size_t i = first_non_finite(payload, entries); i < entries)
+        return corrupt_data("codebook entry " + std::to_string(i / 16) + " is not finite (NaN or infinite)");
+      const unsigned char* codes = payload + std::size_t(h.codebook_size) * 64;
+      const std::size_t tiles = tile_count(h.geometry.size);
+      for (std::size_t t = 0; t < tiles; ++t) {
+        std::uint16_t code;
+        std::memcpy(&code, codes + 2 * t, 2);
+        if (code >= h.codebook_size)
+          return corrupt_data("tile " + std::to_string(t) + " names codebook entry " + std::to_string(code) +
+                              " of " + std::to_string(h.codebook_size));
+      }
+      return {};
+    }
+  }
+  return corrupt_data("unknown storage mode");
 }
 
 std::string hex(std::uint64_t v) {
@@ -193,12 +236,18 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
                                                            std::optional<std::uint64_t> expected_ct_hash,
                                                            std::optional<std::uint64_t> expected_plan_hash) {
   const std::string name = file.string();
-  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
+  // Non-blocking: a FIFO or device named A.lf must not hang the program on open.
+  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) return not_found(name + ": cannot open light-field file (run `lftrack precompute`)");
   struct stat st {};
   if (fstat(fd, &st) != 0) {
     ::close(fd);
     return io_error(name + ": cannot stat");
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return corrupt_data(name + ": not a regular file (a FIFO, device or folder); a light field is a file written by "
+                        "`lftrack precompute`");
   }
   const auto bytes = static_cast<std::size_t>(st.st_size);
   if (bytes < kHeaderBytes) {
@@ -256,13 +305,21 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
     return corrupt_data(name + ": bad codebook size");
   }
   const std::size_t payload = expected_payload(h);
-  if (r.at<std::uint64_t>(416) != payload || bytes != kHeaderBytes + payload) {
-    return corrupt_data(name + ": truncated or padded: the file has " + std::to_string(bytes) +
-                        " bytes, its header says " + std::to_string(kHeaderBytes + payload));
+  const std::uint64_t payload_field = r.at<std::uint64_t>(416);
+  if (payload_field != payload) {
+    return corrupt_data(name + ": the header's payload size (" + std::to_string(payload_field) +
+                        " bytes) disagrees with its own geometry and storage, which need " + std::to_string(payload) +
+                        " bytes");
+  }
+  if (bytes != kHeaderBytes + payload) {
+    return corrupt_data(name + ": " + (bytes < kHeaderBytes + payload ? "truncated" : "padded") + ": the file has " +
+                        std::to_string(bytes) + " bytes, the 1024-byte header and its " + std::to_string(payload) +
+                        "-byte payload make " + std::to_string(kHeaderBytes + payload));
   }
   if (r.at<std::uint32_t>(424) != crc_of(data + kHeaderBytes, payload)) {
     return corrupt_data(name + ": sample data is corrupted (checksum mismatch)");
   }
+  if (Status s = check_payload(h, data + kHeaderBytes); !s.ok()) return s.with_context(name);
   if (expected_ct_hash && *expected_ct_hash != h.ct_hash) {
     return failed_precondition(name + ": built for another CT (CT hash " + hex(h.ct_hash) + ", this CT has " +
                                hex(*expected_ct_hash) + "); run `lftrack precompute` again");

@@ -2,14 +2,16 @@
 // parses and reads; this file validates the header and turns NIfTI's RAS world into LPS.
 
 #include <nifti2_io.h>
+#include <zlib.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <sstream>
-
-#include <spdlog/spdlog.h>
+#include <string>
+#include <vector>
 
 #include "lftrack/tracking/volume_io.hpp"
 
@@ -21,13 +23,89 @@ struct NiftiDeleter {
 };
 using NiftiPtr = std::unique_ptr<nifti_image, NiftiDeleter>;
 
+// Scales the stored values to HU. Returns the index of the first value that is not finite or
+// outside the plausible range (volume_io.hpp), or `count` when all are good; *bad_stored is the
+// stored value there.
 template <class T>
-void copy_scaled(const void* data, std::size_t count, double slope, double inter, std::vector<float>* out) {
+std::size_t copy_scaled(const void* data, std::size_t count, double slope, double inter, std::vector<float>* out,
+                        double* bad_stored) {
   const T* p = static_cast<const T*>(data);
   out->resize(count);
   for (std::size_t i = 0; i < count; ++i) {
-    (*out)[i] = static_cast<float>(slope * static_cast<double>(p[i]) + inter);
+    const double hu = slope * static_cast<double>(p[i]) + inter;
+    if (!(hu >= kLowestPlausibleHu && hu <= kHighestPlausibleHu)) {
+      *bad_stored = static_cast<double>(p[i]);
+      return i;
+    }
+    (*out)[i] = static_cast<float>(hu);
   }
+  return count;
+}
+
+std::string number_text(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+// nifti_clib replaces NaN and infinite float voxels by 0 as it reads them, without a word (a NaN
+// slice would silently become air). For float data the stored values are scanned here, as
+// stored. Returns the index of the first non-finite voxel (nvox if none), its value in *value.
+Result<std::size_t> first_non_finite_stored(const std::string& name, const nifti_image& nim, double* value) {
+  const auto total = static_cast<std::size_t>(nim.nvox);
+  if (nim.datatype != DT_FLOAT32 && nim.datatype != DT_FLOAT64) return total;
+  const bool gz = name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0;
+  znzFile f = znzopen(name.c_str(), "rb", gz ? 1 : 0);
+  if (znz_isnull(f)) return io_error(name + ": cannot open to check its float voxels");
+  const std::size_t size = nim.datatype == DT_FLOAT32 ? 4 : 8;
+  const bool swap = nim.byteorder != nifti_short_order();
+  std::size_t found = total;
+  if (znzseek(f, static_cast<znz_off_t>(nim.iname_offset), SEEK_SET) >= 0) {
+    std::vector<unsigned char> buffer(size * 65536);
+    for (std::size_t at = 0; at < total && found == total;) {
+      const std::size_t want = std::min<std::size_t>(65536, total - at);
+      const std::size_t got = znzread(buffer.data(), size, want, f);
+      for (std::size_t i = 0; i < got && found == total; ++i) {
+        unsigned char* bytes = buffer.data() + size * i;
+        if (swap) std::reverse(bytes, bytes + size);
+        double v;
+        if (size == 4) {
+          float x;
+          std::memcpy(&x, bytes, 4);
+          v = x;
+        } else {
+          std::memcpy(&v, bytes, 8);
+        }
+        if (!std::isfinite(v)) {
+          found = at + i;
+          *value = v;
+        }
+      }
+      if (got < want) break;  // a short file is reported by the load itself
+      at += got;
+    }
+  }
+  znzclose(f);
+  return found;
+}
+
+// A gzipped file read to the end of its stream: zlib checks the CRC-32 and length only there,
+// and nifti_clib stops reading where the volume ends.
+Status check_gzip_stream(const std::string& name) {
+  gzFile f = gzopen(name.c_str(), "rb");
+  if (f == nullptr) return io_error("cannot open the gzip stream");
+  std::vector<char> buffer(1 << 20);
+  int n = 0;
+  while ((n = gzread(f, buffer.data(), static_cast<unsigned>(buffer.size()))) > 0) {
+  }
+  int code = Z_OK;
+  const char* message = gzerror(f, &code);
+  const std::string text = message != nullptr ? message : "";
+  const int closed = gzclose_r(f);
+  if (n < 0 || (code != Z_OK && code != Z_STREAM_END) || closed != Z_OK)
+    return corrupt_data("the gzip stream is damaged (" + (text.empty() ? std::string("zlib error") : text) +
+                        "): the file is refused even where the volume reads");
+  return {};
 }
 
 Status check_header(const nifti_image& nim) {
@@ -48,9 +126,9 @@ Status check_header(const nifti_image& nim) {
 }
 
 // nifti_clib replaces a zero or non-finite pixdim by 1 mm without a word; a header like that is
-// corrupt, so the raw header's voxel sizes are checked here. They scale the qform and the
+// corrupt, so the raw header's voxel sizes (and rescale, below) are checked here. They scale the qform and the
 // pixdim-only fallback; the sform does not use them.
-Status check_raw_pixdim(const std::string& name, const nifti_image& nim) {
+Status check_raw_header(const std::string& name, const nifti_image& nim) {
   int version = 0;
   void* raw = nifti_read_header(name.c_str(), &version, 0);
   if (!raw) return corrupt_data("header cannot be read");
@@ -59,7 +137,18 @@ Status check_raw_pixdim(const std::string& name, const nifti_image& nim) {
     pixdim[i] = version == 2 ? static_cast<nifti_2_header*>(raw)->pixdim[i]
                              : static_cast<double>(static_cast<nifti_1_header*>(raw)->pixdim[i]);
   }
+  // nifti_clib turns a non-finite scl_slope or scl_inter into 0 ("no scaling") without a word.
+  const double slope = version == 2 ? static_cast<nifti_2_header*>(raw)->scl_slope
+                                    : static_cast<double>(static_cast<nifti_1_header*>(raw)->scl_slope);
+  const double inter = version == 2 ? static_cast<nifti_2_header*>(raw)->scl_inter
+                                    : static_cast<double>(static_cast<nifti_1_header*>(raw)->scl_inter);
   std::free(raw);
+  if (!std::isfinite(slope) || slope < 0 || slope > kMaxRescaleSlope)
+    return corrupt_data("scl_slope " + number_text(slope) + " is not 0 (no scaling) or in (0, " +
+                        number_text(kMaxRescaleSlope) + "]");
+  if (slope != 0 && (!std::isfinite(inter) || std::abs(inter) > kMaxRescaleIntercept))
+    return corrupt_data("scl_inter " + number_text(inter) + " is not finite within +-" +
+                        number_text(kMaxRescaleIntercept));
   for (int i = 1; i <= 3; ++i) {
     if (!std::isfinite(pixdim[i])) {
       return corrupt_data("voxel size pixdim[" + std::to_string(i) + "] is not finite");
@@ -103,7 +192,7 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   NiftiPtr nim(nifti_image_read(name.c_str(), /*read_data=*/0));
   if (!nim) return corrupt_data(name + ": not a readable NIfTI-1/2 file (bad magic, size or header)");
   if (Status s = check_header(*nim); !s.ok()) return s.with_context(name);
-  if (Status s = check_raw_pixdim(name, *nim); !s.ok()) return s.with_context(name);
+  if (Status s = check_raw_header(name, *nim); !s.ok()) return s.with_context(name);
 
   std::string form;
   const Eigen::Matrix4d ras = ras_from_index(*nim, &form);
@@ -121,9 +210,9 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   }
   g.origin_mm = lps_from_ras * ras.topRightCorner<3, 1>();
   if (Status s = g.validate(); !s.ok()) return s.with_context(name + " (" + form + ")");
-  if (form == "pixdim only") {
-    spdlog::warn("{}: neither sform nor qform is set; orientation assumed from pixdim alone", name);
-  }
+  if (form == "pixdim only")
+    return corrupt_data(name + ": neither sform nor qform is set, so the patient's orientation (left from right "
+                        "included) is unknown; set one (e.g. with fslorient or nibabel) and load it again");
 
   if (nifti_image_load(nim.get()) != 0 || nim->data == nullptr) {
     return corrupt_data(name + ": voxel data is truncated or unreadable (header claims " +
@@ -133,46 +222,57 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   if (static_cast<std::size_t>(nim->nvox) != count) {
     return corrupt_data(name + ": voxel count does not match the dimensions");
   }
-  double slope = nim->scl_slope;
+  if (name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0) {
+    if (Status s = check_gzip_stream(name); !s.ok()) return s.with_context(name);
+  }
+  double slope = nim->scl_slope;  // finite and in range (check_raw_header)
   double inter = nim->scl_inter;
-  if (slope == 0.0 || !std::isfinite(slope)) {  // NIfTI: slope 0 means "no scaling"
+  if (slope == 0.0) {  // NIfTI: slope 0 means "no scaling"
     slope = 1.0;
     inter = 0.0;
   }
-  if (!std::isfinite(inter)) inter = 0.0;
-  switch (nim->datatype) {
+  double bad_stored = 0;
+  auto non_finite = first_non_finite_stored(name, *nim, &bad_stored);
+  if (!non_finite.ok()) return non_finite.status();
+  std::size_t bad = *non_finite < count ? *non_finite : count;
+  if (bad == count) switch (nim->datatype) {
     case DT_INT8:
-      copy_scaled<int8_t>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<int8_t>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_UINT8:
-      copy_scaled<uint8_t>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<uint8_t>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_INT16:
-      copy_scaled<int16_t>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<int16_t>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_UINT16:
-      copy_scaled<uint16_t>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<uint16_t>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_INT32:
-      copy_scaled<int32_t>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<int32_t>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_UINT32:
-      copy_scaled<uint32_t>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<uint32_t>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_FLOAT32:
-      copy_scaled<float>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<float>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     case DT_FLOAT64:
-      copy_scaled<double>(nim->data, count, slope, inter, &ct.values);
+      bad = copy_scaled<double>(nim->data, count, slope, inter, &ct.values, &bad_stored);
       break;
     default:
       return unsupported(name + ": NIfTI datatype " + std::string(nifti_datatype_string(nim->datatype)) +
                          " is not a scalar type lftrack reads");
   }
-  std::size_t non_finite = 0;
-  for (float v : ct.values) non_finite += std::isfinite(v) ? 0 : 1;
-  if (non_finite > 0) {
-    return corrupt_data(name + ": " + std::to_string(non_finite) + " voxel(s) are NaN or infinite");
+  if (bad < count) {
+    const std::size_t nx = std::size_t(g.size[0]), ny = std::size_t(g.size[1]);
+    return corrupt_data(name + ": voxel (" + std::to_string(bad % nx) + ", " + std::to_string(bad / nx % ny) + ", " +
+                        std::to_string(bad / (nx * ny)) + ") holds " + number_text(bad_stored) +
+                        (slope == 1.0 && inter == 0.0 ? std::string()
+                                                      : " (x scl_slope " + number_text(slope) + " + scl_inter " +
+                                                            number_text(inter) + ")") +
+                        ": not a finite CT number in the plausible [" + number_text(kLowestPlausibleHu) + ", " +
+                        number_text(kHighestPlausibleHu) + "] HU");
   }
   return ct;
 }

@@ -141,6 +141,32 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
   }
   const YAML::Node c = root["couch_calibration"];
   if (!c.IsMap()) return p.error(c, "couch_calibration must be a mapping");
+  // Every key the writer writes and no other (a typo must not pass), and a report that could
+  // have come from the solver: an rms and standard deviations that are finite and not negative,
+  // at least the 3 moves it needs.
+  LFTRACK_RETURN_IF_ERROR(p.check_keys(c, "couch_calibration",
+                                       {"rotation_deg", "centre_mm", "rms_mm", "rotation_sd_deg", "centre_sd_mm",
+                                        "centre_determined", "moves", "source"}));
+  double rms = 0;
+  if (c["rms_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(p.number(c["rms_mm"], "couch_calibration.rms_mm", &rms));
+    if (rms < 0) return p.error(c["rms_mm"], "couch_calibration.rms_mm must not be negative, got " + c["rms_mm"].Scalar());
+  }
+  for (const char* key : {"rotation_sd_deg", "centre_sd_mm"}) {
+    if (!c[key]) continue;
+    Eigen::Vector3d sd;
+    LFTRACK_RETURN_IF_ERROR(p.vec3(c[key], std::string("couch_calibration.") + key, &sd));
+    if (sd.minCoeff() < 0) return p.error(c[key], std::string("couch_calibration.") + key + " must not be negative");
+  }
+  if (c["moves"]) {
+    long moves = 0;
+    LFTRACK_RETURN_IF_ERROR(p.integer(c["moves"], "couch_calibration.moves", 3, 100000, &moves));
+  }
+  if (c["centre_determined"]) {
+    bool determined = false;
+    if (!YAML::convert<bool>::decode(c["centre_determined"], determined))
+      return p.error(c["centre_determined"], "couch_calibration.centre_determined must be true or false");
+  }
   CouchMountingSpec out;
   YAML::Node node;
   LFTRACK_RETURN_IF_ERROR(p.need(c, "rotation_deg", "couch_calibration", &node));
@@ -151,6 +177,8 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
   Eigen::Vector3d centre;
   LFTRACK_RETURN_IF_ERROR(p.need(c, "centre_mm", "couch_calibration", &node));
   LFTRACK_RETURN_IF_ERROR(p.vec3(node, "couch_calibration.centre_mm", &centre));
+  if (centre.cwiseAbs().maxCoeff() > 5000)
+    return p.error(node, "couch_calibration.centre_mm: the rotation centre is more than 5 m from the isocentre");
   out.centre_room_mm = centre;
   return out;
 }

@@ -89,10 +89,6 @@ class BorrowedActuator final : public drivers::Actuator {
   drivers::Actuator* device_;
 };
 
-bool scene_actuator_is_device(const Scene& scene) {
-  return scene.actuator.type == "modbus" || scene.actuator.type == "can";
-}
-
 // The simulated room of a scene: its patient, set-up error and couch; with `couch_link`, the
 // couch is another process's.
 Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, const LoopSessionOptions& o) {
@@ -104,7 +100,7 @@ Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, co
   room.couch = p.scene.actuator.couch;
   if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
   room.residual_box_mm = p.scene.registration.tre_box_mm;
-  if (o.devices == SessionDevices::kScene && scene_actuator_is_device(p.scene)) {
+  if (o.devices == SessionDevices::kScene && actuator_is_device(p.scene)) {
     // Simulated detectors and a real protocol's couch: the patient must move with that couch.
     if (p.scene.sim.couch_link.empty())
       return failed_precondition(
@@ -129,7 +125,7 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
     replay.options.realtime = !o.simulated_clock;
     return drivers::FrameSourceSpec(std::move(replay));
   }
-  if (o.devices == SessionDevices::kScene && p.scene.detectors[0].frames.kind != "sim")
+  if (o.devices == SessionDevices::kScene && !frames_are_simulated(p.scene))
     return device_frame_source_spec(p.scene);
   drivers::SimulatedSourceSpec simulated;
   simulated.make = [&p, &o, pool, parts]() -> Result<std::unique_ptr<drivers::FrameSource>> {
@@ -198,7 +194,7 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
     if (!parts->replay_frames->sequence().has_actuator) return Spec();
     return Spec(drivers::RecordedActuatorSpec{parts->replay_frames});
   }
-  if (o.devices == SessionDevices::kScene && scene_actuator_is_device(p.scene)) {
+  if (o.devices == SessionDevices::kScene && actuator_is_device(p.scene)) {
     auto spec = device_actuator_spec(p.scene);
     if (!spec.ok()) return spec.status();
     spdlog::info("the actuator is {}", describe_actuator(p.scene.actuator));
@@ -206,7 +202,7 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
   }
   // Simulated: a scene's couch or robot is simulated by the room's couch (its twin).
   const bool couch =
-      o.devices == SessionDevices::kSimulated ? p.scene.actuator.type != "none" : p.scene.actuator.type == "virtual";
+      o.devices == SessionDevices::kSimulated ? actuator_moves(p.scene) : actuator_is_virtual(p.scene);
   if (!couch) {
     if (o.hil != HilProtocol::kNone)
       return invalid_argument("hardware in the loop needs a scene with a couch (actuator.type other than none)");
@@ -219,7 +215,7 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
     if (!spec.ok()) return spec.status();
     return Spec(std::move(spec).value());
   }
-  if (scene_actuator_is_device(p.scene))
+  if (actuator_is_device(p.scene))
     spdlog::info("the scene's {} is simulated by its twin, the virtual couch", describe_actuator(p.scene.actuator));
   drivers::VirtualActuatorSpec simulated;
   simulated.make = [room = parts->room.get()]() -> Result<std::unique_ptr<drivers::Actuator>> {
@@ -245,7 +241,7 @@ Result<std::vector<tracking::DetectorCorrection>> detector_corrections(const Pre
       corrections.push_back(calib::to_detector_correction(*calibration));
       continue;
     }
-    if (!simulated && !d.simulator_calibration && (d.frames.kind == "v4l2" || d.frames.kind == "gige"))
+    if (!simulated && !d.simulator_calibration && frames_from_device(d.frames))
       return failed_precondition("detector " + d.view.name + " (" + describe_frames(d.frames) +
                                  ") has no detector calibration: name one as detectors[].calibration "
                                  "(lftrack calibrate detector --dark DIR --flood DIR)");

@@ -54,7 +54,7 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
                     : fields.status().message() + "; build them first: lftrack precompute --scene " + p.scene.source +
                           " -o " + dir.string());
   }
-  const bool simulated_frames = o.replay_sequence.empty() && p.scene.detectors[0].frames.kind == "sim";
+  const bool simulated_frames = o.replay_sequence.empty() && frames_are_simulated(p.scene);
   if (simulated_frames && p.scene.sim.renderer == "lightfield") {
     auto fields = load_light_fields(p, dir / "sim-frames", p.world_mu.get(), &p.scene.sim.light_field);
     add(r, "light fields (simulated frames) in " + (dir / "sim-frames").string(),
@@ -66,8 +66,7 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
 void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   std::string what = "detectors";
   for (const DetectorSpec& d : p.scene.detectors) what += " " + d.view.name;
-  const std::string kind = o.replay_sequence.empty() ? p.scene.detectors[0].frames.kind : "replay";
-  if (kind == "sim") return add(r, what, CheckResult::kPass, "simulated (no device to open)");
+  if (o.replay_sequence.empty() && frames_are_simulated(p.scene)) return add(r, what, CheckResult::kPass, "simulated (no device to open)");
   Result<drivers::FrameSourceSpec> spec = invalid_argument("no spec");
   if (!o.replay_sequence.empty()) {
     drivers::ReplaySourceSpec replay;
@@ -95,7 +94,7 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
 void check_detector_calibrations(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   for (const DetectorSpec& d : p.scene.detectors) {
     const std::string what = "detector calibration of " + d.view.name;
-    const bool device = o.replay_sequence.empty() && (d.frames.kind == "v4l2" || d.frames.kind == "gige");
+    const bool device = o.replay_sequence.empty() && frames_from_device(d.frames);
     if (d.simulator_calibration) {
       add(r, what, CheckResult::kWarn,
           "calibration: simulator: the simulator's detector model corrects these frames (right only for frames "
@@ -135,8 +134,8 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
   const ActuatorSpec& a = p.scene.actuator;
   const std::string what = "actuator (" + describe_actuator(a) + ")";
   if (!o.replay_sequence.empty()) return add(r, what, CheckResult::kPass, "replay: the recorded read-backs, if any");
-  if (a.type == "none") return add(r, what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
-  if (a.type == "virtual") return add(r, what, CheckResult::kPass, "the simulator's couch");
+  if (!actuator_moves(p.scene)) return add(r, what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
+  if (actuator_is_virtual(p.scene)) return add(r, what, CheckResult::kPass, "the simulator's couch");
   auto spec = device_actuator_spec(p.scene);
   if (!spec.ok()) return add(r, what, CheckResult::kFail, spec.status().message());
   auto actuator = drivers::make_actuator(std::move(spec).value());
@@ -166,8 +165,8 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
 
 // Simulated detectors with a served couch: the patient moves only through the couch's room link.
 void check_couch_link(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
-  const bool simulated_frames = o.replay_sequence.empty() && p.scene.detectors[0].frames.kind == "sim";
-  const bool device_actuator = p.scene.actuator.type == "modbus" || p.scene.actuator.type == "can";
+  const bool simulated_frames = o.replay_sequence.empty() && frames_are_simulated(p.scene);
+  const bool device_actuator = actuator_is_device(p.scene);
   if (!simulated_frames || !device_actuator) return;
   const std::string what = "the served couch's room link (sim.couch_link)";
   if (p.scene.sim.couch_link.empty())

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <sstream>
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
@@ -109,6 +110,21 @@ int PreparedScene::detector_index(const std::string& name) const {
   return -1;
 }
 
+// The ROI's centre must lie inside the CT (a target outside the scan tracks air); its box may
+// reach past the CT's edge, which only crops it.
+Status check_roi_inside_ct(const Scene& scene, const tracking::CtVolume& ct) {
+  const Vector3d centre = *scene.roi.centre_ct_mm;
+  const tracking::VolumeGeometry& g = ct.geometry;
+  const Vector3d index = g.index_from_ct() * centre;
+  bool inside = true;
+  for (int a = 0; a < 3; ++a) inside = inside && index[a] >= -0.5 && index[a] <= double(g.size[a]) - 0.5;
+  if (inside) return {};
+  std::ostringstream m;
+  m << scene.where("roi") << ": roi.centre_mm (" << centre.x() << ", " << centre.y() << ", " << centre.z()
+    << ") mm lies outside the CT (" << tracking::describe(g) << "): the target must be in the scan";
+  return invalid_argument(m.str());
+}
+
 Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_override,
                                     tracking::ThreadPool* pool) {
   PreparedScene out;
@@ -125,7 +141,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
     out.ct = std::make_shared<const tracking::CtVolume>(std::move(phantom->ct));
   } else {
     auto ct = tracking::read_ct(out.scene.ct.path);
-    if (!ct.ok()) return ct.status();
+    if (!ct.ok()) return ct.status().with_context(out.scene.where("ct") + ": ct.path");
     out.ct = std::make_shared<const tracking::CtVolume>(std::move(ct).value());
   }
   spdlog::info("CT {}: {} ({:.1f} s)", out.scene.ct.path, tracking::describe(out.ct->geometry),
@@ -149,6 +165,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   // volume centre (only reachable through --ct on a phantom scene).
   if (out.scene.roi.centre_ct_mm) {
     out.roi_centre_ct_mm = *out.scene.roi.centre_ct_mm;
+    LFTRACK_RETURN_IF_ERROR(check_roi_inside_ct(out.scene, *out.ct));
   } else if (phantom_target) {
     out.roi_centre_ct_mm = *phantom_target + Vector3d(0, 12, 0);
   } else {

@@ -49,6 +49,14 @@ std::string describe_actuator(const ActuatorSpec& a) {
   return s.str();
 }
 
+bool frames_are_simulated(const Scene& scene) {
+  return !scene.detectors.empty() && scene.detectors[0].frames.kind == "sim";
+}
+bool frames_from_device(const DetectorFramesSpec& frames) { return frames.kind == "v4l2" || frames.kind == "gige"; }
+bool actuator_is_device(const Scene& scene) { return scene.actuator.type == "modbus" || scene.actuator.type == "can"; }
+bool actuator_is_virtual(const Scene& scene) { return scene.actuator.type == "virtual"; }
+bool actuator_moves(const Scene& scene) { return scene.actuator.type != "none"; }
+
 Result<drivers::FrameSourceSpec> device_frame_source_spec(const Scene& scene) {
   if (scene.detectors.empty()) return invalid_argument(scene.name + ": the scene has no detectors");
   const DetectorFramesSpec& first = scene.detectors[0].frames;

@@ -116,18 +116,30 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
       {"max_step_mm", "max_step_deg", "max_total_mm", "max_total_deg", "min_similarity",
        "min_similarity_ratio", "max_ratio_disagreement", "max_frame_age_ms", "max_pair_skew_ms",
        "readback_tolerance_mm", "readback_tolerance_deg", "hold_after_failures", "fault_after_failures"}));
-  const std::pair<const char*, double*> positives[] = {
-      {"max_step_mm", &l->max_step_mm},
-      {"max_step_deg", &l->max_step_deg},
-      {"max_total_mm", &l->max_total_mm},
-      {"max_total_deg", &l->max_total_deg},
-      {"max_ratio_disagreement", &l->max_ratio_disagreement},
-      {"max_frame_age_ms", &l->max_frame_age_ms},
-      {"max_pair_skew_ms", &l->max_pair_skew_ms},
-      {"readback_tolerance_mm", &l->readback_tolerance_mm},
-      {"readback_tolerance_deg", &l->readback_tolerance_deg}};
-  for (const auto& [key, out] : positives)
-    if (n[key]) LFTRACK_RETURN_IF_ERROR(positive(n[key], std::string("safety.") + key, out));
+  // Each limit has a ceiling: a tracking correction beyond it is a new set-up for the therapist,
+  // never a setting, so a value above it (a 1e9 typed for 10) is refused, not obeyed.
+  struct Limit {
+    const char* key;
+    double* out;
+    double most;
+    const char* why;
+  };
+  const Limit limits[] = {
+      {"max_step_mm", &l->max_step_mm, 20, "a per-cycle step beyond 20 mm is no tracking correction"},
+      {"max_step_deg", &l->max_step_deg, 10, "a per-cycle step beyond 10 degrees is no tracking correction"},
+      {"max_total_mm", &l->max_total_mm, 50, "beyond 50 mm from the aligned pose the patient is set up again"},
+      {"max_total_deg", &l->max_total_deg, 15, "beyond 15 degrees from the aligned pose the patient is set up again"},
+      {"max_ratio_disagreement", &l->max_ratio_disagreement, 10, "beyond 10 the views are never compared"},
+      {"max_frame_age_ms", &l->max_frame_age_ms, 10000, "a frame older than 10 s shows a patient who has moved"},
+      {"max_pair_skew_ms", &l->max_pair_skew_ms, 1000, "frames a second apart are no pair"},
+      {"readback_tolerance_mm", &l->readback_tolerance_mm, 10, "a read-back 10 mm off is a couch fault"},
+      {"readback_tolerance_deg", &l->readback_tolerance_deg, 5, "a read-back 5 degrees off is a couch fault"}};
+  for (const Limit& limit : limits)
+    if (n[limit.key])
+      LFTRACK_RETURN_IF_ERROR(
+          positive_at_most(n[limit.key], std::string("safety.") + limit.key, limit.most, limit.why, limit.out));
+  if (l->max_step_mm > l->max_total_mm) return error(n, "safety.max_step_mm must not exceed safety.max_total_mm");
+  if (l->max_step_deg > l->max_total_deg) return error(n, "safety.max_step_deg must not exceed safety.max_total_deg");
   if (n["min_similarity"])
     LFTRACK_RETURN_IF_ERROR(number(n["min_similarity"], "safety.min_similarity", &l->min_similarity));
   if (n["min_similarity_ratio"]) {

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <iomanip>
 #include <set>
 #include <sstream>
 
@@ -78,6 +79,19 @@ Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& wh
       long value = 0;
       LFTRACK_RETURN_IF_ERROR(integer(r[a], what + ".resolution", 2, 4096, &value));
       spec->resolution[a] = static_cast<int>(value);
+    }
+    // Each view's field is built as 32-bit floats before any compression: refused here, before
+    // anything is allocated, where that exceeds 4 GiB (2^30 samples).
+    double samples = 1;
+    for (int v : spec->resolution) samples *= double(v);
+    if (samples > double(1u << 30)) {
+      std::ostringstream m;
+      m << what << ".resolution [" << spec->resolution[0] << ", " << spec->resolution[1] << ", "
+        << spec->resolution[2] << ", " << spec->resolution[3] << "] is " << static_cast<unsigned long long>(samples)
+        << " samples: "
+        << std::fixed << std::setprecision(1) << samples * 4 / double(1u << 30)
+        << " GiB per view to build, more than the 4 GiB allowed";
+      return error(r, m.str());
     }
   }
   if (const YAML::Node s = n["storage"]) {
@@ -215,8 +229,10 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
   if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
   LFTRACK_RETURN_IF_ERROR(need(root, "ct", "the scene", &node));
   LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
+  scene.lines["ct"] = where(node);
   if (root["roi"]) {
     LFTRACK_RETURN_IF_ERROR(parse_roi(root["roi"], scene.ct.is_builtin_phantom(), &scene.roi));
+    scene.lines["roi"] = where(root["roi"]);
   } else if (!scene.ct.is_builtin_phantom()) {
     return error(root, "the scene needs 'roi' (centre_mm, size_mm) for a CT read from a file");
   }
@@ -247,8 +263,10 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
     const YAML::Node e = root["envelope"];
     LFTRACK_RETURN_IF_ERROR(check_keys(e, "envelope", {"translation_mm", "rotation_deg"}));
     if (e["translation_mm"])
-      LFTRACK_RETURN_IF_ERROR(
-          positive(e["translation_mm"], "envelope.translation_mm", &scene.envelope.translation_mm));
+      LFTRACK_RETURN_IF_ERROR(positive_at_most(e["translation_mm"], "envelope.translation_mm", 50,
+                                               "light fields cover the poses the envelope names; beyond 50 mm "
+                                               "the patient is set up again",
+                                               &scene.envelope.translation_mm));
     if (e["rotation_deg"])
       LFTRACK_RETURN_IF_ERROR(
           positive(e["rotation_deg"], "envelope.rotation_deg", &scene.envelope.rotation_deg));

@@ -33,6 +33,13 @@ class SceneParser {
   Status error(const YAML::Node& node, const std::string& message) const {
     return error_at(node.Mark(), message);
   }
+  // "FILE:LINE:COLUMN" of a node (FILE alone where it has no mark).
+  std::string where(const YAML::Node& node) const {
+    std::ostringstream s;
+    s << source_;
+    if (!node.Mark().is_null()) s << ':' << node.Mark().line + 1 << ':' << node.Mark().column + 1;
+    return s.str();
+  }
 
   // Rejects keys of `map` that are not in `allowed` (typos must not pass silently).
   Status check_keys(const YAML::Node& map, const std::string& what,
@@ -66,6 +73,19 @@ class SceneParser {
   Status positive(const YAML::Node& n, const std::string& what, double* out) const {
     LFTRACK_RETURN_IF_ERROR(number(n, what, out));
     if (!(*out > 0)) return error(n, what + " must be positive, got " + n.Scalar());
+    return {};
+  }
+
+  // A positive number at most `most` (a limit beyond which the value is a typo, never a setting;
+  // `why` says so in the error).
+  Status positive_at_most(const YAML::Node& n, const std::string& what, double most, const std::string& why,
+                          double* out) const {
+    LFTRACK_RETURN_IF_ERROR(positive(n, what, out));
+    if (*out > most) {
+      std::ostringstream m;
+      m << what << " must be at most " << most << " (" << why << "), got " << n.Scalar();
+      return error(n, m.str());
+    }
     return {};
   }
 

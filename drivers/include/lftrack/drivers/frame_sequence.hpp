@@ -18,7 +18,11 @@
 // `pair` groups the frames exposed together (ascending); `detector` is the scene's detector
 // name; `sequence` the detector's frame counter; `timestamp_ns` the middle of the exposure on
 // CLOCK_MONOTONIC (only differences matter); `file` is relative to the directory. A pair may
-// lack a detector's row (that frame is then missing). Lines starting with '#' are comments.
+// lack a detector's row (that frame is then missing). Lines starting with '#' are comments; the
+// writer's first, "# lftrack frame sequence 1", names the version, and another is refused.
+// actuator.csv rows are refused for a pair the index lacks, a pair's second row, and travel
+// beyond kMaxRecordedTravelMm / kMaxRecordedTravelRad. The replay refuses a sequence with
+// frames of a detector the scene lacks.
 // Every line ends with a newline: a last line without one is an unfinished write (the archive
 // was killed) and is ignored, with a note.
 
@@ -34,6 +38,8 @@ namespace lftrack::drivers {
 
 inline constexpr const char* kSequenceIndexName = "index.csv";
 inline constexpr const char* kSequenceActuatorName = "actuator.csv";
+inline constexpr double kMaxRecordedTravelMm = 1000;   // no couch travels a metre
+inline constexpr double kMaxRecordedTravelRad = 3.1416;  // nor turns more than half a turn
 
 struct SequenceFrame {
   bool present = false;  // the index has a row for this detector in this pair

@@ -6,6 +6,7 @@
 // - .pfm  : float32 data (Portable Float Map; rows stored bottom-up as the format says).
 // Windowed writes map larger line integrals (bone) to brighter pixels.
 
+#include <cstdint>
 #include <filesystem>
 
 #include "lftrack/tracking/image.hpp"
@@ -30,6 +31,13 @@ struct ImageWriteOptions {
 // Writes by extension (.png, .tif/.tiff, .pfm); any other extension is an error.
 Status write_image(const std::filesystem::path& file, const ImageView<const float>& image,
                    const ImageWriteOptions& options);
+
+// Every reader checks the size its header claims before allocating: at most kMaxImageSide
+// pixels a side, and no more data than the file can hold (uncompressed: the pixels' bytes;
+// compressed: kMaxCompressionRatio times the file's size, above what deflate or LZW reach), so
+// a 500 KB file claiming 65535 x 65535 pixels is refused at once with both sizes named.
+inline constexpr std::uint32_t kMaxImageSide = 16384;
+inline constexpr double kMaxCompressionRatio = 4096;
 
 Result<Image<float>> read_pfm(const std::filesystem::path& file);
 // Reads a greyscale TIFF (8/16-bit unsigned or 32-bit float, one sample per pixel) as float.

@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -155,6 +156,14 @@ struct MotionSpec {
 
 struct Scene {
   std::string source;  // the scene file, or "builtin:phantom"
+  // Where sections checked after parsing were written ("ct", "roi"): "FILE:LINE:COLUMN", so an
+  // error found once the CT is loaded still names the scene's line. where("ct") falls back to
+  // the source.
+  std::map<std::string, std::string> lines;
+  std::string where(const std::string& section) const {
+    const auto it = lines.find(section);
+    return it != lines.end() ? it->second : source;
+  }
   std::string name;
   CtSpec ct;
   RoiSpec roi;

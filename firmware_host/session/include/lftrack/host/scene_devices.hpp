@@ -17,6 +17,14 @@ std::string frames_yaml(const DetectorFramesSpec& frames);
 // "modbus tcp 127.0.0.1:1502 unit 1", "can bridge /run/robot.sock node 1", "virtual", "none".
 std::string describe_actuator(const ActuatorSpec& actuator);
 
+// What kind of device a scene names, asked by the session and the start-up checks, so that
+// device names are spelled here and in the parser only.
+bool frames_are_simulated(const Scene& scene);               // detectors' frames: sim
+bool frames_from_device(const DetectorFramesSpec& frames);   // v4l2 or gige: a detector of its own
+bool actuator_is_device(const Scene& scene);                 // modbus or can
+bool actuator_is_virtual(const Scene& scene);                // the simulator's couch
+bool actuator_moves(const Scene& scene);                     // anything but none
+
 // The frame source of a scene whose detectors are devices (v4l2, gige, replay). Fails for sim.
 Result<drivers::FrameSourceSpec> device_frame_source_spec(const Scene& scene);
 // The actuator of a scene with a modbus or can actuator. Fails for none and virtual.
