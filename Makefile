@@ -6,7 +6,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 LFTRACK := $(BUILD_DIR)/bin/lftrack
 
-.PHONY: all setup configure build demo check bench clean
+.PHONY: all setup configure build demo check bench fuzz clean
 
 all: build
 
@@ -25,8 +25,19 @@ demo: build
 check: build
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
 
+# Fuzzing (issue 23): every fuzz target built with clang, libFuzzer, ASan and UBSan in
+# build-fuzz/, seeded from valid files, run FUZZ_SECONDS each; report in out/fuzz/report.md.
+FUZZ_SECONDS ?= 60
+fuzz: build
+	@bash scripts/setup.sh --fuzz
+	@CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFTRACK_FUZZ=ON \
+	    -DLFTRACK_BUILD_TESTS=OFF -DLFTRACK_BUILD_BENCH=OFF >/dev/null
+	@cmake --build build-fuzz -j $(JOBS) --target lftrack_fuzzers
+	@bash scripts/fuzz-seeds.sh $(LFTRACK)
+	@bash scripts/fuzz-run.sh $(FUZZ_SECONDS) build-fuzz
+
 bench: build
 	@$(LFTRACK) bench drr --size 256
 
 clean:
-	rm -rf $(BUILD_DIR) out
+	rm -rf $(BUILD_DIR) build-fuzz out

@@ -20,6 +20,10 @@ packages=(
   gnuplot-nox                           # plots of studies (PNG)
   stress-ng                             # a loaded core for the real-time loop benchmark
 )
+# `scripts/setup.sh --fuzz` (make fuzz) adds clang with libFuzzer and its sanitizer runtimes.
+if [ "${1:-}" = "--fuzz" ]; then
+  packages+=(clang libclang-rt-dev)
+fi
 
 missing=()
 for p in "${packages[@]}"; do

@@ -186,7 +186,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   }
   for (const DetectorSpec& d : out.scene.detectors) {
     auto w = roi_window(d.view, out.nominal_T_room_from_ct, out.roi_centre_ct_mm, out.scene.roi.size_mm);
-    if (!w.ok()) return w.status().with_context(out.scene.source);
+    if (!w.ok()) return w.status().with_context(out.scene.where("roi"));
     out.roi_windows.push_back(*w);
   }
   return out;
