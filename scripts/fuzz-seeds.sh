@@ -102,7 +102,7 @@ nifti(work + '/float32', 16, 32, 'f', [-1000.0 + 10 * i for i in range(24)])
 PY
 cp "$work/int16" "$seeds/fuzz_ct/nifti-int16"
 cp "$work/float32" "$seeds/fuzz_ct/nifti-float32"
-slice=$(find ../shared/data -type f \( -iname '*.dcm' -o -path '*pancreas*' \) 2>/dev/null | head -1 || true)
+slice=$(find "${LFTRACK_DATA_DIR:-../shared/data}" -type f -iname '*.dcm' 2>/dev/null | sort | head -1 || true)
 [ -n "$slice" ] && prefix "$slice" 1 "$seeds/fuzz_ct/dicom-slice"
 
 # Operator commands.

@@ -147,5 +147,20 @@ TEST(CouchCalibrationFile, RefusesWhatTheSolverCouldNotHaveWritten) {
   }
 }
 
+// fuzz_calibration_files' first crash: a complex key in a phantom file threw out of the key
+// check and aborted the program. Every YAML file lftrack reads goes through the same check.
+TEST(CalibrationFiles, AComplexKeyIsRefusedNotThrown) {
+  test::TempDir dir;
+  const auto file = (dir.path() / "phantom.yaml").string();
+  std::ofstream(file) << "name: seed\nmarker_diameter_mm: 2\n? - [0, 30, 0]\n: 1\n";
+  auto phantom = load_calibration_phantom(file);
+  ASSERT_FALSE(phantom.ok());
+  EXPECT_NE(phantom.status().message().find("must be a plain name"), std::string::npos) << phantom.status().message();
+  std::ofstream(file, std::ios::trunc) << "couch_calibration:\n  ? {a: 1}\n  : 2\n";
+  auto couch = read_couch_calibration(file);
+  ASSERT_FALSE(couch.ok());
+  EXPECT_NE(couch.status().message().find("must be a plain name"), std::string::npos) << couch.status().message();
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -104,6 +104,8 @@ const BadScene kBadScenes[] = {
      "bad.yaml:9:", "(known: sim, v4l2, gige, replay)"},
     {"UnknownBuiltin", "  path: ct_folder", "  path: builtin:knee", "bad.yaml:3:", "unknown built-in CT"},
     {"NegativeRoiSize", "size_mm: [40, 40, 40]", "size_mm: [40, -4, 40]", "bad.yaml:6:", "must be positive"},
+    // A complex key (fuzz_calibration_files found that it threw out of check_keys and aborted).
+    {"ComplexKey", "version: 1\n", "version: 1\n? [a, b]\n: 1\n", "bad.yaml:2:", "a key in the scene must be a plain name"},
     // Absurd numbers a typo makes: refused with the line, never obeyed.
     {"HugeEnvelope", "      source_to_detector_mm: 1500\n",
      "      source_to_detector_mm: 1500\nenvelope:\n  translation_mm: 1e9\n", "bad.yaml:18:",

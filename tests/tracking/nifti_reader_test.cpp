@@ -139,6 +139,13 @@ const BadNiftiCase kBadNifti[] = {
        poke(f, 280, &nan, 4);
      }},  // srow_x[0]
     {"EmptyFile", "not a readable NIfTI", [](const fs::path& f) { fs::resize_file(f, 0); }},
+    // A tiny file whose header claims gigabytes: refused before nifti_clib allocates them
+    // (fuzz_ct found 446 bytes claiming 6.5 GB).
+    {"ClaimsGigabytes", "bytes), more than the file's",
+     [](const fs::path& f) {
+       const int16_t dims[3] = {1000, 1000, 1000};  // under the voxel limit, 2 GB of int16
+       poke(f, 42, dims, sizeof dims);
+     }},
     // Neither sform nor qform: left and right unknown.
     {"NoOrientation", "the patient's orientation (left from right included) is unknown",
      [](const fs::path& f) {

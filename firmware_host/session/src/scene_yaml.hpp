@@ -47,7 +47,9 @@ class SceneParser {
     if (!map.IsMap()) return error(map, what + " must be a mapping");
     std::set<std::string> seen;
     for (const auto& kv : map) {
-      const std::string key = kv.first.as<std::string>();
+      // A complex key ("? [a, b]: 1") is no name; as<std::string>() would throw (found by fuzz_calibration_files).
+      if (!kv.first.IsScalar()) return error(kv.first, "a key in " + what + " must be a plain name");
+      const std::string key = kv.first.Scalar();
       // YAML keeps the first of two equal keys: a limit written twice must not pass unseen.
       if (!seen.insert(key).second) return error(kv.first, "'" + key + "' appears twice in " + what);
       if (!allowed.count(key)) {
