@@ -6,7 +6,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 LFTRACK := $(BUILD_DIR)/bin/lftrack
 
-.PHONY: all setup configure build demo check bench fuzz clean
+.PHONY: all setup configure build demo check check-asan check-tsan bench fuzz clean
 
 all: build
 
@@ -25,6 +25,22 @@ demo: build
 check: build
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
 
+# The suite under sanitizers (issue 23), each in a build folder of its own: AddressSanitizer with
+# UndefinedBehaviorSanitizer, and ThreadSanitizer (the loop's journal, archive, replay and
+# operator threads; the thread pool). SANITIZE_TESTS narrows the run (a ctest -R regex).
+SANITIZE_TESTS ?= .
+check-asan: setup
+	@cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFTRACK_BUILD_BENCH=OFF \
+	    -DCMAKE_CXX_FLAGS="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer" >/dev/null
+	@cmake --build build-asan -j $(JOBS)
+	@cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	    ctest --output-on-failure -j $(JOBS) --timeout 1800 -R '$(SANITIZE_TESTS)'
+check-tsan: setup
+	@cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFTRACK_BUILD_BENCH=OFF \
+	    -DCMAKE_CXX_FLAGS="-fsanitize=thread -fno-omit-frame-pointer" >/dev/null
+	@cmake --build build-tsan -j $(JOBS)
+	@cd build-tsan && TSAN_OPTIONS=halt_on_error=1 ctest --output-on-failure -j $(JOBS) --timeout 1800 -R '$(SANITIZE_TESTS)'
+
 # Fuzzing (issue 23): every fuzz target built with clang, libFuzzer, ASan and UBSan in
 # build-fuzz/, seeded from valid files, run FUZZ_SECONDS each; report in out/fuzz/report.md.
 FUZZ_SECONDS ?= 60
@@ -40,4 +56,4 @@ bench: build
 	@$(LFTRACK) bench drr --size 256
 
 clean:
-	rm -rf $(BUILD_DIR) build-fuzz out
+	rm -rf $(BUILD_DIR) build-fuzz build-asan build-tsan out
