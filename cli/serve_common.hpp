@@ -18,6 +18,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <map>
 #include <string>
 #include <thread>
@@ -94,24 +95,41 @@ inline Result<Fault> parse_fault(const std::string& text, const std::map<std::st
 // stale socket is replaced.
 class ServeControl {
  public:
-  static Result<ServeControl> open(const std::string& path) {
-    ServeControl c;
-    if (path.empty()) return c;
+  // Whether `path` can become the control socket: short enough, its folder there, and nothing
+  // at it but a stale datagram socket of a server that has gone (a live one, a socket of another
+  // kind, or any other file is refused). Checked before a server binds anything; *stale says
+  // whether a stale socket is to be replaced.
+  static Status check_path(const std::string& path, bool* stale = nullptr) {
+    if (stale != nullptr) *stale = false;
+    if (path.empty()) return {};
     sockaddr_un a{};
     a.sun_family = AF_UNIX;
     if (path.size() >= sizeof a.sun_path) return invalid_argument("--control path is too long: " + path);
     std::memcpy(a.sun_path, path.data(), path.size());
+    const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+    std::error_code ec;
+    if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
+      return not_found("--control " + path + ": no folder " + parent.string());
     struct stat st {};
-    if (::lstat(path.c_str(), &st) == 0) {
-      if (!S_ISSOCK(st.st_mode)) return failed_precondition("--control " + path + ": a file is there; refusing to replace it");
-      // Only a stale datagram socket of a server that has gone is replaced: a live one, or a
-      // socket of another kind (a bridge's), is refused.
-      const int probe = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-      const bool stale = ::connect(probe, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 && errno == ECONNREFUSED;
-      ::close(probe);
-      if (!stale) return failed_precondition("--control " + path + ": a socket in use is there; refusing to replace it");
-      ::unlink(path.c_str());
-    }
+    if (::lstat(path.c_str(), &st) != 0) return {};
+    if (!S_ISSOCK(st.st_mode)) return failed_precondition("--control " + path + ": a file is there; refusing to replace it");
+    const int probe = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    const bool gone = ::connect(probe, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 && errno == ECONNREFUSED;
+    ::close(probe);
+    if (!gone) return failed_precondition("--control " + path + ": a socket in use is there; refusing to replace it");
+    if (stale != nullptr) *stale = true;
+    return {};
+  }
+
+  static Result<ServeControl> open(const std::string& path) {
+    ServeControl c;
+    if (path.empty()) return c;
+    bool stale = false;
+    LFTRACK_RETURN_IF_ERROR(check_path(path, &stale));
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    std::memcpy(a.sun_path, path.data(), path.size());
+    if (stale) ::unlink(path.c_str());
     c.fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     if (c.fd_ < 0 || ::bind(c.fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::chmod(path.c_str(), 0600) != 0)
       return io_error("--control " + path + ": " + std::strerror(errno));
@@ -155,6 +173,10 @@ class ServeControl {
 // refuses the server rather than leaving a port bound and a fault that never comes).
 inline Result<std::vector<Fault>> check_serve_options(const ServeOptions& o, const std::map<std::string, int>& kinds) {
   LFTRACK_RETURN_IF_ERROR(check_seconds(o.duration_s, "--duration", 86400));
+  LFTRACK_RETURN_IF_ERROR(ServeControl::check_path(o.control));
+  if (!o.control.empty() && !o.room.empty() &&
+      std::filesystem::path(o.control).lexically_normal() == std::filesystem::path(o.room).lexically_normal())
+    return invalid_argument("--control and --room name the same path: " + o.control);
   std::vector<Fault> timed;
   for (const std::string& text : o.faults) {
     auto f = parse_fault(text, kinds, true);

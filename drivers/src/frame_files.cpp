@@ -151,6 +151,9 @@ Status write_png_frame(const char* path, tracking::ImageView<const std::uint16_t
 Status read_frame_file(const char* path, tracking::ImageView<std::uint16_t> out) {
   struct stat st {};
   if (::stat(path, &st) != 0) return not_found(std::string(path) + ": no such frame file");
+  // A FIFO or device named like a frame would block the read for ever (an outside probe hung a
+  // replay that way); a frame is a regular file.
+  if (!S_ISREG(st.st_mode)) return corrupt_data(std::string(path) + ": not a regular file");
   switch (type_of(path)) {
     case FileType::kTiff:
       return read_tiff_frame(path, out);
@@ -165,6 +168,7 @@ Status read_frame_file(const char* path, tracking::ImageView<std::uint16_t> out)
 Status frame_file_size(const char* path, int* rows, int* cols) {
   struct stat st {};
   if (::stat(path, &st) != 0) return not_found(std::string(path) + ": no such frame file");
+  if (!S_ISREG(st.st_mode)) return corrupt_data(std::string(path) + ": not a regular file");
   std::uint32_t w = 0, h = 0;
   bool compressed = true;  // PNG always is
   if (type_of(path) == FileType::kTiff) {

@@ -83,9 +83,32 @@ std::string add_index_row(const std::vector<std::string>& f, const fs::path& dir
   if (!parse_integer(f[2], &counter)) return "sequence '" + f[2] + "' is not a 32-bit count";
   if (!parse_integer(f[3], &timestamp_ns)) return "timestamp_ns '" + f[3] + "' is not an integer";
   if (f[4].empty()) return "no file";
+  if (timestamp_ns < 0) return "timestamp_ns " + f[3] + " is negative";
+  // Frames live in the sequence's folder: no absolute path, no '..', no control characters.
+  const fs::path file(f[4]);
+  if (file.is_absolute()) return "file '" + f[4] + "' is absolute; frames are named inside the sequence folder";
+  for (const fs::path& part : file)
+    if (part == "..") return "file '" + f[4] + "' leaves the sequence folder ('..')";
+  if (std::any_of(f[4].begin(), f[4].end(), [](char c) { return static_cast<unsigned char>(c) < 0x20; }))
+    return "file name holds a control character";
   std::vector<SequencePair>& pairs = sequence->pairs;
   if (!pairs.empty() && pair < pairs.back().index)
     return "pair " + f[0] + " after pair " + std::to_string(pairs.back().index) + ": pairs must ascend";
+  // Time runs forward between pairs, without gaps a replay at the recorded pace would sit out
+  // for hours (more than kMaxSequenceGapNs after the previous pair's frames).
+  if (!pairs.empty() && pair > pairs.back().index) {
+    std::int64_t earliest = INT64_MAX, latest = INT64_MIN;
+    for (const SequenceFrame& g : pairs.back().frames)
+      if (g.present) {
+        earliest = std::min(earliest, g.timestamp_ns);
+        latest = std::max(latest, g.timestamp_ns);
+      }
+    if (timestamp_ns < earliest)
+      return "timestamp_ns " + f[3] + " is before the previous pair's (" + std::to_string(earliest) +
+             "): time must run forward";
+    if (timestamp_ns - latest > kMaxSequenceGapNs)
+      return "timestamp_ns " + f[3] + " is more than an hour after the previous pair's";
+  }
   auto detector = std::find(sequence->detectors.begin(), sequence->detectors.end(), f[1]);
   if (detector == sequence->detectors.end()) {
     sequence->detectors.push_back(f[1]);

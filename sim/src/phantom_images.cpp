@@ -34,9 +34,9 @@ Result<tracking::Image<float>> render_phantom_image(const calib::CalibrationPhan
                                                     const PhantomImageSpec& spec) {
   LFTRACK_RETURN_IF_ERROR(phantom.validate());
   LFTRACK_RETURN_IF_ERROR(view.validate());
-  if (spec.supersample < 1 || spec.supersample > 16 || !(spec.photons_per_pixel >= 0) ||
+  if (spec.supersample < 1 || spec.supersample > 16 || !(spec.photons_per_pixel >= 0 && spec.photons_per_pixel <= 1e9) ||
       !(spec.blur_px >= 0)) {
-    return invalid_argument("phantom image: supersample 1..16, photons and blur >= 0");
+    return invalid_argument("phantom image: supersample 1..16, photons 0..1e9, blur >= 0");
   }
   // Work in the phantom's frame.
   const tracking::XrayView v = view.transformed(T_view_from_phantom.inverse());

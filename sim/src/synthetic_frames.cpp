@@ -18,10 +18,15 @@ DetectorCorrection detector_correction(const DetectorModel& model) {
 
 namespace {
 
+// More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it);
+// std::poisson_distribution spins without end on means near 1e25 (an outside probe's
+// `photons_per_pixel: 1e40` ignored SIGTERM).
+constexpr double kMaxPhotonsPerPixel = 1e9;
+
 Status check_model(const DetectorModel& model) {
-  if (!(model.photons_per_pixel > 0) || !(model.open_field_fraction > 0 && model.open_field_fraction <= 1) ||
-      model.bits < 8 || model.bits > 16)
-    return invalid_argument("synthetic frame: photons > 0, open-field fraction in (0, 1], 8-16 bits");
+  if (!(model.photons_per_pixel > 0 && model.photons_per_pixel <= kMaxPhotonsPerPixel) ||
+      !(model.open_field_fraction > 0 && model.open_field_fraction <= 1) || model.bits < 8 || model.bits > 16)
+    return invalid_argument("synthetic frame: photons in (0, 1e9], open-field fraction in (0, 1], 8-16 bits");
   return {};
 }
 

@@ -80,6 +80,20 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
     EXPECT_NE(s.message().find("(status 512)"), std::string::npos) << args[0] << ": " << s.message() << "\n" << out;
   }
   EXPECT_TRUE(run_process({lftrack_bin(), "sim", "--help"}, &out).ok()) << out;
+  // A server refuses a bad --control path before it binds its port (an outside probe saw the
+  // Modbus port bound first), and leaves the file there alone.
+  const auto taken = dir.path() / "control.txt";
+  std::ofstream(taken) << "someone's";
+  const Status serve = run_process({lftrack_bin(), "serve", "couch", "--modbus", "tcp:127.0.0.1:0", "--duration", "0.5",
+                                    "--control", taken.string()},
+                                   &out);
+  EXPECT_NE(serve.message().find("(status 256)"), std::string::npos) << serve.message();
+  EXPECT_NE(out.find("a file is there; refusing to replace it"), std::string::npos) << out;
+  EXPECT_EQ(out.find("modbus tcp 127.0.0.1"), std::string::npos) << "bound before refusing: " << out;
+  std::ifstream kept(taken);
+  std::string word;
+  kept >> word;
+  EXPECT_EQ(word, "someone's");
   const Status reversed = run_process({lftrack_bin(), "drr", "--window", "5,1", "-o", dir.path().string()}, &out);
   EXPECT_NE(reversed.message().find("(status 256)"), std::string::npos) << reversed.message();
   EXPECT_NE(out.find("--window low,high needs low below high"), std::string::npos) << out;

@@ -76,6 +76,11 @@ TEST(FrameSequence, MalformedIndexesAreRefusedWithFileAndLine) {
       {"0,A,1,100,\n1,A,2,200,a.tif\n", ":3: no file"},
       {"1,A,1,100,a.tif\n0,A,2,200,a.tif\n", ":4: pair 0 after pair 1: pairs must ascend"},
       {"0,A,1,100,a.tif\n0,A,2,200,a.tif\n", ":4: detector A appears twice in pair 0"},
+      {"0,A,1,-5,a.tif\n", ":3: timestamp_ns -5 is negative"},
+      {"0,A,1,100,a.tif\n1,A,2,50,b.tif\n", ":4: timestamp_ns 50 is before the previous pair's (100)"},
+      {"0,A,1,100,a.tif\n1,A,2,4000000000000100,b.tif\n", ":4: timestamp_ns 4000000000000100 is more than an hour"},
+      {"0,A,1,100,/etc/passwd\n", ":3: file '/etc/passwd' is absolute"},
+      {"0,A,1,100,frames/../../x.tif\n", ":3: file 'frames/../../x.tif' leaves the sequence folder"},
   };
   for (const Case& c : cases) {
     test::TempDir dir;

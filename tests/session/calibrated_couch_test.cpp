@@ -136,7 +136,11 @@ TEST(CouchCalibrationFile, RefusesWhatTheSolverCouldNotHaveWritten) {
       {{"  centre_sd_mm: [0.1, 0.1, 0.1]", "  centre_sd_mm: [0.1, -0.1, 0.1]"}, "centre_sd_mm must not be negative"},
       {{"  centre_mm: [1, 2, 3]", "  centre_mm: [1e9, 2, 3]"}, "more than 5 m from the isocentre"},
       {{"  centre_determined: true", "  centre_determined: perhaps"}, "must be true or false"},
-      {{"  rms_mm: 0.05", "  rms_mm: .nan"}, "must be finite"}};
+      {{"  rms_mm: 0.05", "  rms_mm: .nan"}, "must be finite"},
+      {{"  rms_mm: 0.05", "  rms_mm: 1e9"}, "is no calibration"},
+      {{"  rms_mm: 0.05\n", ""}, "needs 'rms_mm'"},
+      {{"  centre_mm: [1, 2, 3]", "  centre_mm: [4000, 4000, 0]"}, "more than 5 m from the isocentre"},
+      {{"  source: a test\n", "  source: a test\nother: 1\n"}, "unknown key 'other' in a couch calibration file"}};
   for (const auto& [edit, says] : cases) {
     std::string text = good;
     text.replace(text.find(edit.first), std::string(edit.first).size(), edit.second);

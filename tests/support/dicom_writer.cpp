@@ -58,8 +58,8 @@ bool write_synthetic_slice(const std::filesystem::path& file, const SyntheticSli
              decimals({s.row_cosine.x(), s.row_cosine.y(), s.row_cosine.z(), s.col_cosine.x(),
                        s.col_cosine.y(), s.col_cosine.z()}));
   put_string(0x0028, 0x0030, gdcm::VR::DS, decimals({s.pixel_spacing_mm.x(), s.pixel_spacing_mm.y()}));
-  put_string(0x0028, 0x1052, gdcm::VR::DS, decimals({s.intercept}));
-  put_string(0x0028, 0x1053, gdcm::VR::DS, decimals({s.slope}));
+  if (!s.omit_intercept) put_string(0x0028, 0x1052, gdcm::VR::DS, decimals({s.intercept}));
+  put_string(0x0028, 0x1053, gdcm::VR::DS, s.slope_text.empty() ? decimals({s.slope}) : s.slope_text);
   put_string(0x0028, 0x0004, gdcm::VR::CS, "MONOCHROME2");
   put_us(0x0028, 0x0002, 1);
   put_us(0x0028, 0x0010, static_cast<uint16_t>(s.rows));

@@ -22,6 +22,8 @@ struct SyntheticSlice {
   Eigen::Vector2d pixel_spacing_mm{0.5, 0.75};  // between rows, between columns
   double slope = 1.0;
   double intercept = -1024.0;
+  std::string slope_text;        // written instead of `slope` when not empty (bad text on purpose)
+  bool omit_intercept = false;   // no RescaleIntercept at all
   int bits_stored = 16;              // BitsStored (HighBit one less); signed values
   std::vector<std::int16_t> stored;  // rows * cols raw values; empty: a pattern from `seed`
   int seed = 0;

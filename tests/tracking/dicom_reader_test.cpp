@@ -153,21 +153,21 @@ const BadSeriesCase kBadSeries[] = {
        std::ofstream(d / "notes.txt") << "this is not a DICOM file\n";
      }},
     // A rescale no CT has, and values no rescale makes plausible: refused with the slice named.
-    {"HugeRescaleSlope", "b.dcm: RescaleSlope 1e+38 is not in (0, 1000]",
+    {"HugeRescaleSlope", "b.dcm: RescaleSlope 1e+38 is not in [0.001, 1000]",
      [](const fs::path& d) {
        write(d, "a.dcm", slice_at(0));
        SyntheticSlice b = slice_at(1);
        b.slope = 1e38;
        write(d, "b.dcm", b);
      }},
-    {"ZeroRescaleSlope", "RescaleSlope 0 is not in (0, 1000]",
+    {"ZeroRescaleSlope", "RescaleSlope 0 is not in [0.001, 1000]",
      [](const fs::path& d) {
        SyntheticSlice a = slice_at(0);
        a.slope = 0;
        write(d, "a.dcm", a);
        write(d, "b.dcm", slice_at(1));
      }},
-    {"NegativeRescaleSlope", "RescaleSlope -1 is not in (0, 1000]",
+    {"NegativeRescaleSlope", "RescaleSlope -1 is not in [0.001, 1000]",
      [](const fs::path& d) {
        SyntheticSlice a = slice_at(0);
        a.slope = -1;
@@ -179,6 +179,27 @@ const BadSeriesCase kBadSeries[] = {
        write(d, "a.dcm", slice_at(0));
        SyntheticSlice b = slice_at(1);
        b.intercept = 1e20;
+       write(d, "b.dcm", b);
+     }},
+    {"NonNumericRescaleSlope", "RescaleSlope is not 1 finite decimal numbers: '1abc'",
+     [](const fs::path& d) {
+       write(d, "a.dcm", slice_at(0));
+       SyntheticSlice b = slice_at(1);
+       b.slope_text = "1abc";
+       write(d, "b.dcm", b);
+     }},
+    {"MissingRescaleIntercept", "b.dcm: missing RescaleIntercept",
+     [](const fs::path& d) {
+       write(d, "a.dcm", slice_at(0));
+       SyntheticSlice b = slice_at(1);
+       b.omit_intercept = true;
+       write(d, "b.dcm", b);
+     }},
+    {"FarAwayOrigin", "is more than 10000 mm from the scanner's origin",
+     [](const fs::path& d) {
+       SyntheticSlice a = slice_at(0), b = slice_at(1);
+       a.position_mm.x() = b.position_mm.x() = 1e30;
+       write(d, "a.dcm", a);
        write(d, "b.dcm", b);
      }},
     {"ValueBeyondBitsStored", "pixel (row 2, column 3): stored value 3000 does not fit BitsStored 12 (signed)",

@@ -352,13 +352,17 @@ TEST_F(LightFieldFile, AFifoOrFolderIsRefusedWithoutHanging) {
 
 // Rewrites the payload at `offset` (from the payload's start) and makes both checksums valid
 // again, as a tool that writes bad values with good checksums would.
+void patch_file(const std::filesystem::path& file, std::size_t offset, const void* bytes, std::size_t n);
 void patch_payload(const std::filesystem::path& file, std::size_t offset, const void* bytes, std::size_t n) {
+  patch_file(file, 1024 + offset, bytes, n);
+}
+void patch_file(const std::filesystem::path& file, std::size_t offset, const void* bytes, std::size_t n) {
   std::vector<unsigned char> data(std::filesystem::file_size(file));
   {
     std::ifstream in(file, std::ios::binary);
     in.read(reinterpret_cast<char*>(data.data()), std::streamsize(data.size()));
   }
-  std::memcpy(data.data() + 1024 + offset, bytes, n);
+  std::memcpy(data.data() + offset, bytes, n);
   const auto payload_crc = static_cast<std::uint32_t>(crc32(0, data.data() + 1024, uInt(data.size() - 1024)));
   std::memcpy(data.data() + 424, &payload_crc, 4);
   const auto header_crc = static_cast<std::uint32_t>(crc32(0, data.data(), 1020));
@@ -376,7 +380,7 @@ TEST(LightFieldFileValues, NonFiniteSamplesAndCodesOutsideTheCodebookAreRefusedU
   patch_payload(file, 4 * 777, &nan, 4);
   auto loaded = LightField::load(file);
   ASSERT_FALSE(loaded.ok());
-  EXPECT_NE(loaded.status().message().find("sample 777 is not finite"), std::string::npos) << loaded.status().message();
+  EXPECT_NE(loaded.status().message().find("sample 777 is not a line integral"), std::string::npos) << loaded.status().message();
 
   auto vq = fixture_light_field(LightFieldStorage::kVq);
   ASSERT_TRUE(vq->save(file).ok());
@@ -386,12 +390,28 @@ TEST(LightFieldFileValues, NonFiniteSamplesAndCodesOutsideTheCodebookAreRefusedU
   ASSERT_FALSE(loaded.ok());
   EXPECT_NE(loaded.status().message().find("tile 5 names codebook entry"), std::string::npos)
       << loaded.status().message();
+  ASSERT_TRUE(field->save(file).ok());
+  const float huge = 3e38f;  // finite, yet no line integral
+  patch_payload(file, 4 * 12, &huge, 4);
+  loaded = LightField::load(file);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("sample 12 is not a line integral"), std::string::npos)
+      << loaded.status().message();
+  ASSERT_TRUE(field->save(file).ok());
+  const double nan_envelope = std::numeric_limits<double>::quiet_NaN();
+  patch_file(file, 376, &nan_envelope, 8);  // envelope.translation_mm
+  loaded = LightField::load(file);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.status().message().find("nominal pose, registration origin or envelope is not a valid one"),
+            std::string::npos)
+      << loaded.status().message();
+
   ASSERT_TRUE(vq->save(file).ok());
   const float inf = std::numeric_limits<float>::infinity();
   patch_payload(file, 64 * 2 + 4, &inf, 4);
   loaded = LightField::load(file);
   ASSERT_FALSE(loaded.ok());
-  EXPECT_NE(loaded.status().message().find("codebook entry 2 is not finite"), std::string::npos)
+  EXPECT_NE(loaded.status().message().find("codebook entry 2 is not a line integral"), std::string::npos)
       << loaded.status().message();
 }
 

@@ -141,10 +141,21 @@ const BadNiftiCase kBadNifti[] = {
     {"EmptyFile", "not a readable NIfTI", [](const fs::path& f) { fs::resize_file(f, 0); }},
     // A tiny file whose header claims gigabytes: refused before nifti_clib allocates them
     // (fuzz_ct found 446 bytes claiming 6.5 GB).
-    {"ClaimsGigabytes", "bytes), more than the file's",
+    {"ClaimsGigabytes", "(2000000000 bytes from offset 352), more than the file's",
      [](const fs::path& f) {
        const int16_t dims[3] = {1000, 1000, 1000};  // under the voxel limit, 2 GB of int16
        poke(f, 42, dims, sizeof dims);
+     }},
+    // Voxels that would start inside the header (or nowhere): read as header bytes before.
+    {"VoxOffsetInsideTheHeader", "vox_offset 100 is not a whole number of bytes at or after the 352-byte header",
+     [](const fs::path& f) {
+       const float offset = 100;
+       poke(f, 108, &offset, 4);
+     }},
+    {"NanVoxOffset", "vox_offset nan",
+     [](const fs::path& f) {
+       const float offset = std::nanf("");
+       poke(f, 108, &offset, 4);
      }},
     // Neither sform nor qform: left and right unknown.
     {"NoOrientation", "the patient's orientation (left from right included) is unknown",
@@ -154,7 +165,7 @@ const BadNiftiCase kBadNifti[] = {
        poke(f, 254, &zero, 2);  // sform_code
      }},
     // Rescales nifti_clib would quietly drop, or no CT has.
-    {"NanSlope", "scl_slope nan is not 0 (no scaling) or in (0, 1000]",
+    {"NanSlope", "scl_slope nan is not 0 (no scaling) or in [0.001, 1000]",
      [](const fs::path& f) {
        const float nan = std::nanf("");
        poke(f, 112, &nan, 4);

@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <iomanip>
 #include <mutex>
@@ -72,13 +73,22 @@ Status required_decimals(DcmDataset& ds, const DcmTagKey& tag, unsigned long n, 
     return corrupt_data(std::string(name) + " is not " + std::to_string(n) + " numbers: '" +
                         get_string(ds, tag) + "'");
   }
+  // Each value read from its own text, whole: DCMTK reads "1abc" as 1 and "0x10" as 0.
+  const std::string text = get_string(ds, tag);
+  std::size_t start = 0;
   for (unsigned long i = 0; i < n; ++i) {
-    Float64 v = 0;
-    if (ds.findAndGetFloat64(tag, v, i).bad() || !std::isfinite(v)) {
-      return corrupt_data(std::string(name) + " is not " + std::to_string(n) + " finite numbers: '" +
-                          get_string(ds, tag) + "'");
-    }
+    const std::size_t end = std::min(text.find('\\', start), text.size());
+    std::string part = text.substr(start, end - start);
+    part.erase(0, part.find_first_not_of(' '));
+    part.erase(part.find_last_not_of(' ') + 1);
+    char* stop = nullptr;
+    const double v = part.empty() ? 0 : std::strtod(part.c_str(), &stop);
+    if (part.empty() || stop != part.c_str() + part.size() || !std::isfinite(v) ||
+        part.find_first_of("xXpP") != std::string::npos)
+      return corrupt_data(std::string(name) + " is not " + std::to_string(n) + " finite decimal numbers: '" + text +
+                          "'");
     (*out)[i] = v;
+    start = end + 1;
   }
   return {};
 }
@@ -224,17 +234,15 @@ Status read_slice(const fs::path& file, Slice* slice) {
   LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_PixelSpacing, 2, "PixelSpacing", &v));
   slice->pixel_spacing = {v[0], v[1]};
   if (!(v[0] > 0) || !(v[1] > 0)) return corrupt_data("PixelSpacing is not positive");
-  if (ds.tagExistsWithValue(DCM_RescaleSlope)) {
-    LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleSlope, 1, "RescaleSlope", &v));
-    slice->slope = v[0];
-  }
-  if (ds.tagExistsWithValue(DCM_RescaleIntercept)) {
-    LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleIntercept, 1, "RescaleIntercept", &v));
-    slice->intercept = v[0];
-  }
-  if (!(slice->slope > 0) || slice->slope > kMaxRescaleSlope)
-    return corrupt_data("RescaleSlope " + number_text(slice->slope) + " is not in (0, " +
-                        number_text(kMaxRescaleSlope) + "]");
+  // Both are Type 1 in a CT image: a slice without them is refused, never read as slope 1 and
+  // intercept 0 (1024 HU off its neighbours).
+  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleSlope, 1, "RescaleSlope", &v));
+  slice->slope = v[0];
+  LFTRACK_RETURN_IF_ERROR(required_decimals(ds, DCM_RescaleIntercept, 1, "RescaleIntercept", &v));
+  slice->intercept = v[0];
+  if (!(slice->slope >= kMinRescaleSlope) || slice->slope > kMaxRescaleSlope)
+    return corrupt_data("RescaleSlope " + number_text(slice->slope) + " is not in [" + number_text(kMinRescaleSlope) +
+                        ", " + number_text(kMaxRescaleSlope) + "]");
   if (std::abs(slice->intercept) > kMaxRescaleIntercept)
     return corrupt_data("RescaleIntercept " + number_text(slice->intercept) + " is beyond +-" +
                         number_text(kMaxRescaleIntercept));

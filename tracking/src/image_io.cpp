@@ -25,6 +25,15 @@ std::string lower_extension(const fs::path& file) {
   return ext;
 }
 
+// Readers open only regular files: a FIFO named like an image would block the open for ever.
+Status check_regular(const fs::path& file) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(file, ec);
+  if (ec || !fs::exists(st)) return not_found(file.string() + ": no such file");
+  if (!fs::is_regular_file(st)) return corrupt_data(file.string() + ": not a regular file");
+  return {};
+}
+
 // The size a header claims against the limits and the file (image_io.hpp).
 Status check_claimed_size(const fs::path& file, const char* kind, std::uint64_t cols, std::uint64_t rows,
                           std::uint64_t bytes_per_pixel, bool compressed) {
@@ -159,6 +168,7 @@ Status write_image(const fs::path& file, const ImageView<const float>& image, co
 }
 
 Result<Image<float>> read_pfm(const fs::path& file) {
+  LFTRACK_RETURN_IF_ERROR(check_regular(file));
   std::ifstream in(file, std::ios::binary);
   if (!in) return not_found(file.string() + ": cannot open");
   std::string magic;
@@ -189,6 +199,7 @@ Result<Image<float>> read_pfm(const fs::path& file) {
 }
 
 Result<Image<float>> read_tiff(const fs::path& file) {
+  LFTRACK_RETURN_IF_ERROR(check_regular(file));
   TIFFSetWarningHandler(nullptr);
   TIFFSetErrorHandler(nullptr);
   TIFF* tif = TIFFOpen(file.c_str(), "r");
@@ -237,6 +248,7 @@ Result<Image<float>> read_tiff(const fs::path& file) {
 }
 
 Result<Image<float>> read_png(const fs::path& file) {
+  LFTRACK_RETURN_IF_ERROR(check_regular(file));
   png_image img;
   std::memset(&img, 0, sizeof img);
   img.version = PNG_IMAGE_VERSION;

@@ -98,11 +98,13 @@ std::size_t expected_payload(const LightField::Header& h) {
 // finite (a NaN under a valid CRC was written that way, or by someone else), every VQ code inside
 // the codebook, a fixed-point scale finite and positive. Returns the first problem.
 Status check_payload(const LightField::Header& h, const unsigned char* payload) {
+  // A sample is a line integral of attenuation (mu x mm): never meaningfully negative, and no
+  // patient reaches 10^4 (steel, 50 mm: about 25).
   auto first_non_finite = [](const unsigned char* p, std::size_t count) {
     for (std::size_t i = 0; i < count; ++i) {
       float v;
       std::memcpy(&v, p + 4 * i, 4);
-      if (!std::isfinite(v)) return i;
+      if (!(v >= -1.0f && v <= 1e4f)) return i;
     }
     return count;
   };
@@ -110,7 +112,8 @@ Status check_payload(const LightField::Header& h, const unsigned char* payload) 
     case LightFieldStorage::kFloat32: {
       const auto count = static_cast<std::size_t>(h.geometry.sample_count());
       if (const std::size_t i = first_non_finite(payload, count); i < count)
-        return corrupt_data("sample " + std::to_string(i) + " is not finite (NaN or infinite) under a valid checksum");
+        return corrupt_data("sample " + std::to_string(i) +
+                            " is not a line integral (NaN, infinite or outside [-1, 1e4]) under a valid checksum");
       return {};
     }
     case LightFieldStorage::kFixed16:
@@ -120,7 +123,8 @@ Status check_payload(const LightField::Header& h, const unsigned char* payload) 
     case LightFieldStorage::kVq: {
       const std::size_t entries = std::size_t(h.codebook_size) * 16;
       if (const std::size_t i = first_non_finite(payload, entries); i < entries)
-        return corrupt_data("codebook entry " + std::to_string(i / 16) + " is not finite (NaN or infinite)");
+        return corrupt_data("codebook entry " + std::to_string(i / 16) +
+                            " is not a line integral (NaN, infinite or outside [-1, 1e4])");
       const unsigned char* codes = payload + std::size_t(h.codebook_size) * 64;
       const std::size_t tiles = tile_count(h.geometry.size);
       for (std::size_t t = 0; t < tiles; ++t) {
@@ -301,6 +305,15 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   std::memcpy(view_name, data + 428, 64);
   g.view_name = view_name;
   if (Status s = g.validate(); !s.ok()) return s.with_context(name);
+  // The pose and envelope the field was planned for: what the plan hash cannot vouch for when a
+  // field is loaded without one (an outside probe loaded NaN envelopes and poses).
+  const Eigen::Matrix3d R = h.nominal_T_room_from_ct.linear();
+  if (!h.nominal_T_room_from_ct.matrix().allFinite() ||
+      !(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+      !h.registration_origin_room_mm.allFinite() || !(h.envelope.translation_mm > 0 && h.envelope.translation_mm <= 50) ||
+      !(h.envelope.rotation_deg > 0 && h.envelope.rotation_deg <= 45))
+    return corrupt_data(name + ": the header's nominal pose, registration origin or envelope is not a valid one "
+                        "(non-finite, not a rotation, or an envelope beyond 50 mm / 45 degrees)");
   if (h.storage == LightFieldStorage::kVq && (h.codebook_size < 1 || h.codebook_size > 65536)) {
     return corrupt_data(name + ": bad codebook size");
   }

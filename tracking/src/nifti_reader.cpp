@@ -137,15 +137,27 @@ Status check_raw_header(const std::string& name, const nifti_image& nim) {
     pixdim[i] = version == 2 ? static_cast<nifti_2_header*>(raw)->pixdim[i]
                              : static_cast<double>(static_cast<nifti_1_header*>(raw)->pixdim[i]);
   }
+  // Where the voxels start: in a single-file NIfTI at or after the header (352 bytes for
+  // NIfTI-1, 540 for NIfTI-2); nifti_clib takes a NaN, negative or short offset as it comes and
+  // reads header bytes as voxels (an outside probe's finding).
+  const double vox_offset = version == 2 ? double(static_cast<nifti_2_header*>(raw)->vox_offset)
+                                         : static_cast<double>(static_cast<nifti_1_header*>(raw)->vox_offset);
+  const double header_bytes = version == 2 ? 540 : 352;
+  if (!std::isfinite(vox_offset) || vox_offset < header_bytes || vox_offset > 1e12 ||
+      vox_offset != std::floor(vox_offset)) {
+    std::free(raw);
+    return corrupt_data("vox_offset " + number_text(vox_offset) + " is not a whole number of bytes at or after the " +
+                        number_text(header_bytes) + "-byte header");
+  }
   // nifti_clib turns a non-finite scl_slope or scl_inter into 0 ("no scaling") without a word.
   const double slope = version == 2 ? static_cast<nifti_2_header*>(raw)->scl_slope
                                     : static_cast<double>(static_cast<nifti_1_header*>(raw)->scl_slope);
   const double inter = version == 2 ? static_cast<nifti_2_header*>(raw)->scl_inter
                                     : static_cast<double>(static_cast<nifti_1_header*>(raw)->scl_inter);
   std::free(raw);
-  if (!std::isfinite(slope) || slope < 0 || slope > kMaxRescaleSlope)
-    return corrupt_data("scl_slope " + number_text(slope) + " is not 0 (no scaling) or in (0, " +
-                        number_text(kMaxRescaleSlope) + "]");
+  if (!std::isfinite(slope) || slope < 0 || slope > kMaxRescaleSlope || (slope != 0 && slope < kMinRescaleSlope))
+    return corrupt_data("scl_slope " + number_text(slope) + " is not 0 (no scaling) or in [" +
+                        number_text(kMinRescaleSlope) + ", " + number_text(kMaxRescaleSlope) + "]");
   if (slope != 0 && (!std::isfinite(inter) || std::abs(inter) > kMaxRescaleIntercept))
     return corrupt_data("scl_inter " + number_text(inter) + " is not finite within +-" +
                         number_text(kMaxRescaleIntercept));
@@ -188,6 +200,10 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(file, ec)) return not_found(name + ": no such file");
   nifti_set_debug_level(0);  // nifti_clib otherwise prints its own errors; ours name the file
+  // A damaged gzip stream is named as such before nifti_clib fails on it with a vaguer reason.
+  if (name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0) {
+    if (Status s = check_gzip_stream(name); !s.ok()) return s.with_context(name);
+  }
 
   NiftiPtr nim(nifti_image_read(name.c_str(), /*read_data=*/0));
   if (!nim) return corrupt_data(name + ": not a readable NIfTI-1/2 file (bad magic, size or header)");
@@ -227,9 +243,9 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
     if (size_error || claimed > most) {
       std::ostringstream m;
       m << name << ": the header claims " << nim->nx << " x " << nim->ny << " x " << nim->nz << " voxels of "
-        << nim->nbyper << " bytes (" << std::uint64_t(claimed) << " bytes), more than the file's "
-        << std::uint64_t(file_bytes) << " bytes can hold" << (gz ? " even compressed" : "")
-        << ": truncated or a damaged header";
+        << nim->nbyper << " bytes (" << std::uint64_t(claimed) << " bytes from offset " << nim->iname_offset
+        << "), more than the file's " << std::uint64_t(file_bytes) << " bytes can hold"
+        << (gz ? " even compressed" : "") << ": truncated or a damaged header";
       return corrupt_data(m.str());
     }
   }
@@ -240,9 +256,6 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   const std::size_t count = static_cast<std::size_t>(g.voxel_count());
   if (static_cast<std::size_t>(nim->nvox) != count) {
     return corrupt_data(name + ": voxel count does not match the dimensions");
-  }
-  if (name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0) {
-    if (Status s = check_gzip_stream(name); !s.ok()) return s.with_context(name);
   }
   double slope = nim->scl_slope;  // finite and in range (check_raw_header)
   double inter = nim->scl_inter;

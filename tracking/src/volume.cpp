@@ -50,6 +50,12 @@ Status VolumeGeometry::validate() const {
     }
   }
   if (!origin_mm.allFinite()) return out_of_range("volume origin is not finite");
+  if (origin_mm.cwiseAbs().maxCoeff() > kMaxOriginMm) {
+    std::ostringstream m;
+    m << "volume origin (" << origin_mm.x() << ", " << origin_mm.y() << ", " << origin_mm.z() << ") mm is more than "
+      << kMaxOriginMm << " mm from the scanner's origin along an axis: a damaged position, not a patient";
+    return out_of_range(m.str());
+  }
   if (!direction.allFinite() ||
       !(direction.transpose() * direction).isApprox(Eigen::Matrix3d::Identity(), 1e-4)) {
     return unsupported("voxel axes are not orthonormal (sheared or scaled direction matrix)");

@@ -139,6 +139,7 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
   if (!root.IsMap() || !root["couch_calibration"]) {
     return invalid_argument(file + ": not a couch calibration (no 'couch_calibration' section)");
   }
+  LFTRACK_RETURN_IF_ERROR(p.check_keys(root, "a couch calibration file", {"couch_calibration"}));
   const YAML::Node c = root["couch_calibration"];
   if (!c.IsMap()) return p.error(c, "couch_calibration must be a mapping");
   // Every key the writer writes and no other (a typo must not pass), and a report that could
@@ -148,10 +149,13 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
                                        {"rotation_deg", "centre_mm", "rms_mm", "rotation_sd_deg", "centre_sd_mm",
                                         "centre_determined", "moves", "source"}));
   double rms = 0;
-  if (c["rms_mm"]) {
-    LFTRACK_RETURN_IF_ERROR(p.number(c["rms_mm"], "couch_calibration.rms_mm", &rms));
-    if (rms < 0) return p.error(c["rms_mm"], "couch_calibration.rms_mm must not be negative, got " + c["rms_mm"].Scalar());
-  }
+  YAML::Node rms_node;
+  LFTRACK_RETURN_IF_ERROR(p.need(c, "rms_mm", "couch_calibration", &rms_node));
+  LFTRACK_RETURN_IF_ERROR(p.number(rms_node, "couch_calibration.rms_mm", &rms));
+  if (rms < 0) return p.error(rms_node, "couch_calibration.rms_mm must not be negative, got " + rms_node.Scalar());
+  if (rms > 5)
+    return p.error(rms_node, "couch_calibration.rms_mm " + rms_node.Scalar() +
+                                 ": a calibration that fits its moves this badly (over 5 mm) is no calibration");
   for (const char* key : {"rotation_sd_deg", "centre_sd_mm"}) {
     if (!c[key]) continue;
     Eigen::Vector3d sd;
@@ -177,7 +181,7 @@ Result<CouchMountingSpec> read_couch_calibration(const std::string& file) {
   Eigen::Vector3d centre;
   LFTRACK_RETURN_IF_ERROR(p.need(c, "centre_mm", "couch_calibration", &node));
   LFTRACK_RETURN_IF_ERROR(p.vec3(node, "couch_calibration.centre_mm", &centre));
-  if (centre.cwiseAbs().maxCoeff() > 5000)
+  if (centre.norm() > 5000)
     return p.error(node, "couch_calibration.centre_mm: the rotation centre is more than 5 m from the isocentre");
   out.centre_room_mm = centre;
   return out;

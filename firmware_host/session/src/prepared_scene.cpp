@@ -141,7 +141,9 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
     out.ct = std::make_shared<const tracking::CtVolume>(std::move(phantom->ct));
   } else {
     auto ct = tracking::read_ct(out.scene.ct.path);
-    if (!ct.ok()) return ct.status().with_context(out.scene.where("ct") + ": ct.path");
+    if (!ct.ok())
+      return ct_override.empty() ? ct.status().with_context(out.scene.where("ct") + ": ct.path")
+                                 : ct.status().with_context("--ct");
     out.ct = std::make_shared<const tracking::CtVolume>(std::move(ct).value());
   }
   spdlog::info("CT {}: {} ({:.1f} s)", out.scene.ct.path, tracking::describe(out.ct->geometry),

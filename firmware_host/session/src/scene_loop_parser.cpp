@@ -1,5 +1,7 @@
 // The scene's host-loop sections: sim, loop, safety, actuator, motion.
 
+#include <sstream>
+
 #include "lftrack/host/calibration_files.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"
@@ -21,8 +23,9 @@ Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
   LFTRACK_RETURN_IF_ERROR(
       check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed", "couch_link"}));
   if (n["photons_per_pixel"])
-    LFTRACK_RETURN_IF_ERROR(
-        positive(n["photons_per_pixel"], "sim.photons_per_pixel", &sim->photons_per_pixel));
+    LFTRACK_RETURN_IF_ERROR(positive_at_most(n["photons_per_pixel"], "sim.photons_per_pixel", 1e9,
+                                             "no detector counts more; a 16-bit panel saturates far below",
+                                             &sim->photons_per_pixel));
   if (n["detector_blur_px"]) {
     LFTRACK_RETURN_IF_ERROR(number(n["detector_blur_px"], "sim.detector_blur_px", &sim->detector_blur_px));
     if (sim->detector_blur_px < 0 || sim->detector_blur_px > 20)
@@ -220,14 +223,31 @@ Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
   return {};
 }
 
+// The simulated patient moves within what a patient on a couch can: each translation component
+// within `mm`, each rotation within `deg` (an outside probe's 1e12 mm breathing gave residuals
+// of 2e10 mm, a 1e300 mm/s drift infinite ones).
+Status SceneParser::check_motion(const YAML::Node& n, const std::string& what, const tracking::Vector6d& v,
+                                 double mm, double deg) const {
+  if (v.head<3>().cwiseAbs().maxCoeff() > mm || v.tail<3>().cwiseAbs().maxCoeff() > tracking::deg_to_rad(deg)) {
+    std::ostringstream m;
+    m << what << " must stay within " << mm << " mm and " << deg << " degrees per axis";
+    return error(n, m.str());
+  }
+  return {};
+}
+
 Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
   LFTRACK_RETURN_IF_ERROR(check_keys(n, "motion", {"setup_error", "drift", "breathing", "shifts"}));
-  if (n["setup_error"])
+  if (n["setup_error"]) {
     LFTRACK_RETURN_IF_ERROR(
         vec6(n["setup_error"], "motion.setup_error", "translation_mm", "rotation_deg", &m->setup_error));
-  if (n["drift"])
+    LFTRACK_RETURN_IF_ERROR(check_motion(n["setup_error"], "motion.setup_error", m->setup_error, 100, 45));
+  }
+  if (n["drift"]) {
     LFTRACK_RETURN_IF_ERROR(vec6(n["drift"], "motion.drift", "translation_mm_per_s", "rotation_deg_per_s",
                                  &m->motion.drift_per_s));
+    LFTRACK_RETURN_IF_ERROR(check_motion(n["drift"], "motion.drift (per second)", m->motion.drift_per_s, 10, 5));
+  }
   if (const YAML::Node b = n["breathing"]) {
     LFTRACK_RETURN_IF_ERROR(check_keys(b, "motion.breathing", {"amplitude_mm", "amplitude_deg", "period_s"}));
     Vector3d t = Vector3d::Zero(), r = Vector3d::Zero();
@@ -237,9 +257,13 @@ Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
       LFTRACK_RETURN_IF_ERROR(vec3(b["amplitude_deg"], "motion.breathing.amplitude_deg", &r));
     m->motion.breathing_amplitude.head<3>() = t;
     m->motion.breathing_amplitude.tail<3>() = r * tracking::deg_to_rad(1.0);
-    if (b["period_s"])
+    LFTRACK_RETURN_IF_ERROR(check_motion(b, "motion.breathing amplitudes", m->motion.breathing_amplitude, 50, 10));
+    if (b["period_s"]) {
       LFTRACK_RETURN_IF_ERROR(
           positive(b["period_s"], "motion.breathing.period_s", &m->motion.breathing_period_s));
+      if (m->motion.breathing_period_s < 0.5 || m->motion.breathing_period_s > 60)
+        return error(b["period_s"], "motion.breathing.period_s must be in 0.5..60 s");
+    }
   }
   if (const YAML::Node shifts = n["shifts"]) {
     if (!shifts.IsSequence())
@@ -258,6 +282,8 @@ Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
       if (s["rotation_deg"]) LFTRACK_RETURN_IF_ERROR(vec3(s["rotation_deg"], what + ".rotation_deg", &r));
       step.delta.head<3>() = t;
       step.delta.tail<3>() = r * tracking::deg_to_rad(1.0);
+      LFTRACK_RETURN_IF_ERROR(check_motion(s, what, step.delta, 100, 45));
+      if (step.time_s < 0 || step.time_s > 1e6) return error(time, what + ".time_s must be in 0..1e6 s");
       m->motion.shifts.push_back(step);
     }
   }

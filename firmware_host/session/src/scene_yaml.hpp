@@ -149,6 +149,8 @@ class SceneParser {
   Status parse_safety(const YAML::Node& n, SafetyLimits* limits) const;
   Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;
   Status parse_motion(const YAML::Node& n, MotionSpec* motion) const;
+  Status check_motion(const YAML::Node& n, const std::string& what, const tracking::Vector6d& v, double mm,
+                      double deg) const;
   // The devices (scene_device_parser.cpp).
   Status parse_frames(const YAML::Node& n, const std::string& what, DetectorFramesSpec* frames) const;
   Status parse_detector_calibration(const YAML::Node& n, const std::string& what, std::string* file) const;

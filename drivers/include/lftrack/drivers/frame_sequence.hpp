@@ -20,6 +20,8 @@
 // CLOCK_MONOTONIC (only differences matter); `file` is relative to the directory. A pair may
 // lack a detector's row (that frame is then missing). Lines starting with '#' are comments; the
 // writer's first, "# lftrack frame sequence 1", names the version, and another is refused.
+// Index rows are refused for a negative timestamp, time running backwards between pairs, a gap
+// of more than an hour, and a file outside the folder (absolute, '..', control characters).
 // actuator.csv rows are refused for a pair the index lacks, a pair's second row, and travel
 // beyond kMaxRecordedTravelMm / kMaxRecordedTravelRad. The replay refuses a sequence with
 // frames of a detector the scene lacks.
@@ -38,6 +40,7 @@ namespace lftrack::drivers {
 
 inline constexpr const char* kSequenceIndexName = "index.csv";
 inline constexpr const char* kSequenceActuatorName = "actuator.csv";
+inline constexpr std::int64_t kMaxSequenceGapNs = 3'600'000'000'000;  // an hour between pairs
 inline constexpr double kMaxRecordedTravelMm = 1000;   // no couch travels a metre
 inline constexpr double kMaxRecordedTravelRad = 3.1416;  // nor turns more than half a turn
 

@@ -35,13 +35,14 @@ struct VolumeGeometry {
   Eigen::Vector3d extent_mm() const { return size.cast<double>().cwiseProduct(spacing_mm); }
 
   // Checks sizes (1..kMaxVoxelsPerAxis, total <= kMaxVoxels), spacing (finite, in
-  // [kMinSpacingMm, kMaxSpacingMm]), origin (finite) and direction (orthonormal to 1e-4).
+  // [kMinSpacingMm, kMaxSpacingMm]), origin (finite, within kMaxOriginMm) and direction (orthonormal to 1e-4).
   Status validate() const;
 
   static constexpr int kMaxVoxelsPerAxis = 8192;
   static constexpr std::int64_t kMaxVoxels = std::int64_t{1} << 31;  // 8 GiB of float
   static constexpr double kMinSpacingMm = 1e-3;
   static constexpr double kMaxSpacingMm = 100.0;
+  static constexpr double kMaxOriginMm = 10000;  // 10 m: table positions stay within a few metres
 };
 
 // Unit tags so that HU volumes and attenuation volumes cannot be mixed up.

@@ -18,8 +18,9 @@ namespace lftrack::tracking {
 // with the slice and pixel (DICOM) or voxel (NIfTI) named.
 inline constexpr double kLowestPlausibleHu = -40000;
 inline constexpr double kHighestPlausibleHu = 100000;
-// A rescale slope is refused outside (0, kMaxRescaleSlope], an intercept beyond
-// +-kMaxRescaleIntercept.
+// A rescale slope is refused outside [kMinRescaleSlope, kMaxRescaleSlope] (DICOM; NIfTI's
+// scl_slope 0 means no scaling), an intercept beyond +-kMaxRescaleIntercept.
+inline constexpr double kMinRescaleSlope = 1e-3;
 inline constexpr double kMaxRescaleSlope = 1000;
 inline constexpr double kMaxRescaleIntercept = 100000;
 
@@ -27,7 +28,8 @@ inline constexpr double kMaxRescaleIntercept = 100000;
 // along the slice normal (not by file name or InstanceNumber); RescaleSlope/Intercept give HU.
 // Rejects: mixed series, mixed sizes, orientations or pixel spacings, duplicated, missing or
 // unevenly spaced slices, tilted stacks, non-CT modality, multi-frame objects, pixel data the
-// library cannot decode, a rescale slope or intercept out of range (above), stored values beyond
+// library cannot decode, a missing, non-numeric or out-of-range rescale slope or intercept
+// (above), stored values beyond
 // BitsStored, and CT numbers outside the plausible range.
 Result<CtVolume> read_dicom_series(const std::filesystem::path& folder);
 
