@@ -140,6 +140,10 @@ class DetectorRoom {
   std::vector<double> render_ms_;  // trigger to the pair rendered
 };
 
+// The faults each kind of detector server takes (--fault, `fault KIND` on the control socket).
+std::map<std::string, int> loopback_fault_kinds() { return {{"stop", 0}, {"start", 1}}; }
+std::map<std::string, int> gige_fault_kinds() { return {{"stop", 0}, {"start", 1}, {"power-cycle", 2}}; }
+
 // --v4l2loopback: the pair written into loopback devices every period (free-running), for
 // `run` to read through the kernel's V4L2 capture path.
 Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRoom* r) {
@@ -171,7 +175,7 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
       std::this_thread::sleep_until(next);
     }
   });
-  const std::map<std::string, int> kinds = {{"stop", 0}, {"start", 1}};
+  const std::map<std::string, int> kinds = loopback_fault_kinds();
   const Status served = serve_until_stopped(
       o, kinds,
       [&](const Fault& f) {
@@ -193,9 +197,8 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
 }
 
 Status serve_detectors(const ServeOptions& o) {
-  const std::map<std::string, int> loopback_kinds = {{"stop", 0}, {"start", 1}};
-  const std::map<std::string, int> gige_kinds = {{"stop", 0}, {"start", 1}, {"power-cycle", 2}};
-  if (auto checked = check_serve_options(o, o.loopback.empty() ? gige_kinds : loopback_kinds); !checked.ok())
+  if (auto checked = check_serve_options(o, o.loopback.empty() ? gige_fault_kinds() : loopback_fault_kinds());
+      !checked.ok())
     return checked.status();
   LFTRACK_RETURN_IF_ERROR(check_seconds(o.settle_s, "--settle", 3600));
   auto scene = load_scene(o.scene.scene);
@@ -242,7 +245,7 @@ Status serve_detectors(const ServeOptions& o) {
   std::printf("lftrack serve detectors: gige %s%s%s\n", listening.c_str(), o.room.empty() ? "" : "; room link ",
               o.room.c_str());
   std::fflush(stdout);
-  const std::map<std::string, int> kinds = {{"stop", 0}, {"start", 1}, {"power-cycle", 2}};
+  const std::map<std::string, int> kinds = gige_fault_kinds();
   const auto describe = [&] {
     std::string s = "frames served:";
     for (const auto& c : cameras) s += " " + std::to_string(c->frames_served()) + (c->running() ? "" : " (stopped)");

@@ -55,7 +55,6 @@ struct Fault {
   bool done = false;
 };
 
-// KIND[:COUNT][@SECONDS]
 // --duration and the like: finite, from 0 to `max`.
 inline Status check_seconds(double s, const char* what, double max) {
   if (!std::isfinite(s) || s < 0 || s > max)
@@ -63,6 +62,7 @@ inline Status check_seconds(double s, const char* what, double max) {
   return {};
 }
 
+// KIND[:COUNT][@SECONDS]
 inline Result<Fault> parse_fault(const std::string& text, const std::map<std::string, int>& kinds, bool timed) {
   Fault f;
   std::string rest = text;
@@ -167,10 +167,8 @@ class ServeControl {
   std::string path_;
 };
 
-// Runs until a signal, --duration, or `stop` on the control socket: timed faults, control
-// datagrams. `inject` applies a fault; `status` describes the device now.
-// --duration and every --fault, checked before a server binds anything (a typo in a fault
-// refuses the server rather than leaving a port bound and a fault that never comes).
+// --duration, --control and every --fault, checked before a server binds anything (a typo in a
+// fault refuses the server rather than leaving a port bound and a fault that never comes).
 inline Result<std::vector<Fault>> check_serve_options(const ServeOptions& o, const std::map<std::string, int>& kinds) {
   LFTRACK_RETURN_IF_ERROR(check_seconds(o.duration_s, "--duration", 86400));
   LFTRACK_RETURN_IF_ERROR(ServeControl::check_path(o.control));
@@ -186,6 +184,8 @@ inline Result<std::vector<Fault>> check_serve_options(const ServeOptions& o, con
   return timed;
 }
 
+// Runs until a signal, --duration, or `stop` on the control socket: timed faults, control
+// datagrams. `inject` applies a fault; `status` describes the device now.
 template <class Inject, class Describe>
 Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, int>& kinds, Inject&& inject,
                            Describe&& status) {

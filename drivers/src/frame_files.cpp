@@ -11,6 +11,8 @@
 #include <cstring>
 #include <string>
 
+#include "lftrack/tracking/image_io.hpp"
+
 namespace lftrack::drivers {
 namespace {
 
@@ -204,13 +206,9 @@ Status frame_file_size(const char* path, int* rows, int* cols) {
   if (w == 0 || h == 0 || w > 16384 || h > 16384)
     return out_of_range(std::string(path) + ": the header claims " + size_text(w, h) +
                         " pixels; a frame is 1 to 16384 pixels a side");
-  // No more 16-bit pixels than the file can hold (compressed: at most 4096 to 1, beyond what
-  // deflate or LZW reach), checked before anyone allocates the frame.
-  const double data_bytes = 2.0 * double(w) * double(h);
-  if (data_bytes > (compressed ? 4096.0 : 1.0) * double(st.st_size))
-    return corrupt_data(std::string(path) + ": the header claims " + size_text(w, h) + " pixels (" +
-                        std::to_string(std::uint64_t(data_bytes)) + " bytes of data), more than a file of " +
-                        std::to_string(st.st_size) + " bytes can hold" + (compressed ? " even compressed" : ""));
+  // No more 16-bit pixels than the file can hold, checked before anyone allocates the frame.
+  LFTRACK_RETURN_IF_ERROR(tracking::check_claimed_image_size(
+      path, type_of(path) == FileType::kTiff ? "TIFF" : "PNG", w, h, sizeof(std::uint16_t), compressed));
   *rows = static_cast<int>(h);
   *cols = static_cast<int>(w);
   return {};

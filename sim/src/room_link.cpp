@@ -3,7 +3,6 @@
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/mman.h>
-#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 

@@ -224,6 +224,13 @@ std::size_t expect_held_until_the_operator(const std::vector<JournalRecord>& rec
   return out;
 }
 
+// The cycles in a row from `from` that journaled no frame pair (frame sequence 0).
+std::size_t cycles_without_a_pair(const std::vector<JournalRecord>& records, std::size_t from) {
+  std::size_t n = 0;
+  for (std::size_t i = from; i < records.size() && records[i].frame_sequence[0] == 0; ++i) ++n;
+  return n;
+}
+
 TEST_F(ServedDeviceFaults, KilledCouchServerHoldsUntilTheOperator) {
   long long killed_at = -1;
   bool tracked_again = false;
@@ -343,17 +350,11 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
   ASSERT_GE(cycled_at, 20);
   EXPECT_TRUE(tracked_again) << "frames resumed and the operator resumed";
   const std::size_t out = expect_held_until_the_operator(r.journal.records, cycled_at);
-  std::size_t without_pair = 0;
-  for (std::size_t i = out; i < r.journal.records.size() && r.journal.records[i].frame_sequence[0] == 0; ++i)
-    ++without_pair;
-  EXPECT_GE(without_pair, 1u) << "the gap is journaled as cycles without a pair";
+  EXPECT_GE(cycles_without_a_pair(r.journal.records, out), 1u) << "the gap is journaled as cycles without a pair";
   ASSERT_GT(stopped_at, cycled_at);
   EXPECT_TRUE(tracked_after_stop) << "frames started again and the operator resumed";
   const std::size_t out_stopped = expect_held_until_the_operator(r.journal.records, stopped_at);
-  std::size_t stopped_cycles = 0;
-  for (std::size_t i = out_stopped; i < r.journal.records.size() && r.journal.records[i].frame_sequence[0] == 0; ++i)
-    ++stopped_cycles;
-  EXPECT_GE(stopped_cycles, 5u) << "a second without frames is journaled as cycles without a pair";
+  EXPECT_GE(cycles_without_a_pair(r.journal.records, out_stopped), 5u) << "a second without frames is journaled as cycles without a pair";
   EXPECT_NE(r.journal.records.back().frame_sequence[0], 0u) << "frames resumed";
 }
 

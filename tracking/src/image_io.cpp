@@ -34,25 +34,6 @@ Status check_regular(const fs::path& file) {
   return {};
 }
 
-// The size a header claims against the limits and the file (image_io.hpp).
-Status check_claimed_size(const fs::path& file, const char* kind, std::uint64_t cols, std::uint64_t rows,
-                          std::uint64_t bytes_per_pixel, bool compressed) {
-  std::error_code ec;
-  const std::uint64_t file_bytes = fs::file_size(file, ec);
-  if (ec) return io_error(file.string() + ": " + ec.message());
-  const std::string claimed = std::to_string(cols) + " x " + std::to_string(rows);
-  if (cols < 1 || rows < 1 || cols > kMaxImageSide || rows > kMaxImageSide)
-    return out_of_range(file.string() + ": the " + kind + " header claims " + claimed +
-                        " pixels; an image is 1 to " + std::to_string(kMaxImageSide) + " pixels a side");
-  const double data_bytes = double(cols) * double(rows) * double(bytes_per_pixel);
-  const double most = compressed ? kMaxCompressionRatio * double(file_bytes) : double(file_bytes);
-  if (data_bytes > most)
-    return corrupt_data(file.string() + ": the " + kind + " header claims " + claimed + " pixels (" +
-                        std::to_string(std::uint64_t(data_bytes)) + " bytes of data), more than a file of " +
-                        std::to_string(file_bytes) + " bytes can hold" +
-                        (compressed ? " even compressed" : ""));
-  return {};
-}
 
 std::vector<uint16_t> windowed_row(const float* src, int cols, const DisplayWindow& w) {
   std::vector<uint16_t> row(static_cast<std::size_t>(cols));
@@ -138,6 +119,25 @@ Status write_pfm(const fs::path& file, const ImageView<const float>& image) {
 
 }  // namespace
 
+Status check_claimed_image_size(const fs::path& file, const char* kind, std::uint64_t cols, std::uint64_t rows,
+                                std::uint64_t bytes_per_pixel, bool compressed) {
+  std::error_code ec;
+  const std::uint64_t file_bytes = fs::file_size(file, ec);
+  if (ec) return io_error(file.string() + ": " + ec.message());
+  const std::string claimed = std::to_string(cols) + " x " + std::to_string(rows);
+  if (cols < 1 || rows < 1 || cols > kMaxImageSide || rows > kMaxImageSide)
+    return out_of_range(file.string() + ": the " + kind + " header claims " + claimed +
+                        " pixels; an image is 1 to " + std::to_string(kMaxImageSide) + " pixels a side");
+  const double data_bytes = double(cols) * double(rows) * double(bytes_per_pixel);
+  const double most = compressed ? kMaxCompressionRatio * double(file_bytes) : double(file_bytes);
+  if (data_bytes > most)
+    return corrupt_data(file.string() + ": the " + kind + " header claims " + claimed + " pixels (" +
+                        std::to_string(std::uint64_t(data_bytes)) + " bytes of data), more than a file of " +
+                        std::to_string(file_bytes) + " bytes can hold" +
+                        (compressed ? " even compressed" : ""));
+  return {};
+}
+
 DisplayWindow percentile_window(const ImageView<const float>& image, double low_pct, double high_pct) {
   std::vector<float> v;
   v.reserve(static_cast<std::size_t>(image.rows) * std::size_t(image.cols));
@@ -179,7 +179,7 @@ Result<Image<float>> read_pfm(const fs::path& file) {
   if (cols < 1 || rows < 1 || !std::isfinite(scale) || scale == 0) {
     return corrupt_data(file.string() + ": bad PFM size or scale");
   }
-  LFTRACK_RETURN_IF_ERROR(check_claimed_size(file, "PFM", std::uint64_t(cols), std::uint64_t(rows), 4, false));
+  LFTRACK_RETURN_IF_ERROR(check_claimed_image_size(file, "PFM", std::uint64_t(cols), std::uint64_t(rows), 4, false));
   in.get();  // the single whitespace after the scale
   Image<float> image(rows, cols);
   for (int r = rows - 1; r >= 0; --r) {
@@ -219,7 +219,7 @@ Result<Image<float>> read_tiff(const fs::path& file) {
     TIFFClose(tif);
     return unsupported(file.string() + ": TIFF must be one-sample 8/16-bit unsigned or 32-bit float");
   }
-  if (Status s = check_claimed_size(file, "TIFF", w, h, bits / 8, compression != COMPRESSION_NONE); !s.ok()) {
+  if (Status s = check_claimed_image_size(file, "TIFF", w, h, bits / 8, compression != COMPRESSION_NONE); !s.ok()) {
     TIFFClose(tif);
     return s;
   }
@@ -255,7 +255,7 @@ Result<Image<float>> read_png(const fs::path& file) {
   if (!png_image_begin_read_from_file(&img, file.c_str())) {
     return corrupt_data(file.string() + ": not a readable PNG file");
   }
-  if (Status s = check_claimed_size(file, "PNG", img.width, img.height, 2, true); !s.ok()) {
+  if (Status s = check_claimed_image_size(file, "PNG", img.width, img.height, 2, true); !s.ok()) {
     png_image_free(&img);
     return s;
   }

@@ -100,7 +100,7 @@ std::size_t expected_payload(const LightField::Header& h) {
 Status check_payload(const LightField::Header& h, const unsigned char* payload) {
   // A sample is a line integral of attenuation (mu x mm): never meaningfully negative, and no
   // patient reaches 10^4 (steel, 50 mm: about 25).
-  auto first_non_finite = [](const unsigned char* p, std::size_t count) {
+  auto first_not_a_line_integral = [](const unsigned char* p, std::size_t count) {
     for (std::size_t i = 0; i < count; ++i) {
       float v;
       std::memcpy(&v, p + 4 * i, 4);
@@ -111,7 +111,7 @@ Status check_payload(const LightField::Header& h, const unsigned char* payload) 
   switch (h.storage) {
     case LightFieldStorage::kFloat32: {
       const auto count = static_cast<std::size_t>(h.geometry.sample_count());
-      if (const std::size_t i = first_non_finite(payload, count); i < count)
+      if (const std::size_t i = first_not_a_line_integral(payload, count); i < count)
         return corrupt_data("sample " + std::to_string(i) +
                             " is not a line integral (NaN, infinite or outside [-1, 1e4]) under a valid checksum");
       return {};
@@ -122,7 +122,7 @@ Status check_payload(const LightField::Header& h, const unsigned char* payload) 
       return {};
     case LightFieldStorage::kVq: {
       const std::size_t entries = std::size_t(h.codebook_size) * 16;
-      if (const std::size_t i = first_non_finite(payload, entries); i < entries)
+      if (const std::size_t i = first_not_a_line_integral(payload, entries); i < entries)
         return corrupt_data("codebook entry " + std::to_string(i / 16) +
                             " is not a line integral (NaN, infinite or outside [-1, 1e4])");
       const unsigned char* codes = payload + std::size_t(h.codebook_size) * 64;

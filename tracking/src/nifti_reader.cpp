@@ -42,6 +42,8 @@ std::size_t copy_scaled(const void* data, std::size_t count, double slope, doubl
   return count;
 }
 
+bool is_gzipped(const std::string& name) { return name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0; }
+
 std::string number_text(double v) {
   std::ostringstream s;
   s << v;
@@ -54,7 +56,7 @@ std::string number_text(double v) {
 Result<std::size_t> first_non_finite_stored(const std::string& name, const nifti_image& nim, double* value) {
   const auto total = static_cast<std::size_t>(nim.nvox);
   if (nim.datatype != DT_FLOAT32 && nim.datatype != DT_FLOAT64) return total;
-  const bool gz = name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0;
+  const bool gz = is_gzipped(name);
   znzFile f = znzopen(name.c_str(), "rb", gz ? 1 : 0);
   if (znz_isnull(f)) return io_error(name + ": cannot open to check its float voxels");
   const std::size_t size = nim.datatype == DT_FLOAT32 ? 4 : 8;
@@ -201,7 +203,7 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
   if (!std::filesystem::is_regular_file(file, ec)) return not_found(name + ": no such file");
   nifti_set_debug_level(0);  // nifti_clib otherwise prints its own errors; ours name the file
   // A damaged gzip stream is named as such before nifti_clib fails on it with a vaguer reason.
-  if (name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0) {
+  if (is_gzipped(name)) {
     if (Status s = check_gzip_stream(name); !s.ok()) return s.with_context(name);
   }
 
@@ -238,7 +240,7 @@ Result<CtVolume> read_nifti(const std::filesystem::path& file) {
     const double claimed = double(nim->nvox) * double(nim->nbyper);
     std::error_code size_error;
     const double file_bytes = double(std::filesystem::file_size(file, size_error));
-    const bool gz = name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0;
+    const bool gz = is_gzipped(name);
     const double most = gz ? 1032.0 * file_bytes : file_bytes - double(nim->iname_offset);
     if (size_error || claimed > most) {
       std::ostringstream m;

@@ -38,6 +38,10 @@ Status write_image(const std::filesystem::path& file, const ImageView<const floa
 // a 500 KB file claiming 65535 x 65535 pixels is refused at once with both sizes named.
 inline constexpr std::uint32_t kMaxImageSide = 16384;
 inline constexpr double kMaxCompressionRatio = 4096;
+// That check, for any reader of image files (the frame readers in drivers/ use it too): `kind`
+// names the format in the message.
+Status check_claimed_image_size(const std::filesystem::path& file, const char* kind, std::uint64_t cols,
+                                std::uint64_t rows, std::uint64_t bytes_per_pixel, bool compressed);
 
 Result<Image<float>> read_pfm(const std::filesystem::path& file);
 // Reads a greyscale TIFF (8/16-bit unsigned or 32-bit float, one sample per pixel) as float.
