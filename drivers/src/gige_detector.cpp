@@ -148,6 +148,13 @@ bool GigeDetector::is_open() const {
   return arv_->camera != nullptr && !arv_->gone;
 }
 
+int GigeDetector::frames_waiting() const {
+  if (arv_->stream == nullptr) return 0;
+  gint input = 0, output = 0;
+  arv_stream_get_n_buffers(arv_->stream, &input, &output);
+  return int(output);
+}
+
 Status GigeDetector::fail(const std::string& what) {
   const std::string message = "gige camera " + options_.camera + ": " + what;
   release();

@@ -293,18 +293,37 @@ TEST_F(GigeTest, TakesTheNewestCompleteFrameAndHandsTheOlderOnesBack) {
   Frame f = frame(kRows, kCols);
   ASSERT_EQ(capture_within(d, &f, 1000), DeviceStatus::kOk);
   for (int late = 0; late < 3; ++late) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // a late cycle: about 4 frames wait
+    // A late cycle: wait (bounded) until at least three finished frames are queued, not for a
+    // fixed time: on a loaded host the camera or Aravis's receive thread may not have run at all
+    // in 20 ms (CI once saw no older frame queued after such a sleep).
+    const std::uint64_t previous = frame_index(f);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    while (d.frames_waiting() < 3 && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    const int waiting = d.frames_waiting();
+    ASSERT_GE(waiting, 3) << "the camera at 200 Hz queued fewer than 3 frames in 2 s";
     const std::uint64_t served = camera->frames_served();
-    const std::int64_t dropped = d.counters().stale_dropped;
+    const std::int64_t dropped = d.counters().stale_dropped, incomplete = d.counters().incomplete;
     ASSERT_EQ(d.capture(&f, in_ms(100)), DeviceStatus::kOk);
-    EXPECT_GE(frame_index(f) + 2, served)
-        << "the newest (or, if its packets were still on their way, the one before)";
-    EXPECT_GE(d.counters().stale_dropped, dropped + 1) << "older complete frames went back unread";
+    // Queued frames are in order, so the newest of `waiting` queued ones is at least `waiting`
+    // frames past the last one taken, and every queued frame before it went back unread.
+    const std::int64_t newly_incomplete = d.counters().incomplete - incomplete;
+    EXPECT_GE(frame_index(f) + std::uint64_t(newly_incomplete), previous + std::uint64_t(waiting))
+        << "the newest complete queued frame";
+    EXPECT_GE(frame_index(f) + 16, served) << "not a frame from a full buffer ring ago";
+    EXPECT_GE((d.counters().stale_dropped - dropped) + newly_incomplete, waiting - 1)
+        << "older complete frames went back unread";
   }
   EXPECT_EQ(d.counters().underruns, 0);
   // Later than 16 frame periods: every buffer is full, the frames after them are lost, and the
   // newest complete frame is an old one (its timestamp says how old).
-  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  // Waited for (bounded), not slept: every buffer queued and four frames served past them.
+  const std::uint64_t taken = frame_index(f);
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+  while ((d.frames_waiting() < o.buffers || camera->frames_served() < taken + o.buffers + 4) &&
+         std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(40));  // the newest of them is 40 ms old
   const std::uint64_t served = camera->frames_served();
   ASSERT_EQ(d.capture(&f, in_ms(100)), DeviceStatus::kOk);
   EXPECT_GT(d.counters().underruns, 0);

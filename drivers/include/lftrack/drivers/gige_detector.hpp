@@ -137,6 +137,9 @@ class GigeDetector {
 
   // Open and not marked gone.
   bool is_open() const;
+  // Buffers Aravis has finished (complete or not) that no capture() has taken yet; 0 when closed.
+  // Takes the stream queue's mutex for a moment: a diagnostic, not for the cycle.
+  int frames_waiting() const;
   const std::string& camera() const { return options_.camera; }
   const GigeDetectorOptions& options() const { return options_; }
   std::uint32_t pixel_format() const { return pixel_format_; }  // GenICam PFNC value negotiated
