@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <functional>
 
+#include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
@@ -26,6 +27,9 @@ struct SceneOptions {
 void add_scene_options(CLI::App* app, SceneOptions* options);
 // Loads the scene named in `options` and prepares it (CT read, ROI resolved) on `pool`.
 Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool);
+
+// `lftrack sim --chaos SEED` (cmd_chaos.cpp).
+Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json);
 
 Command add_info_command(CLI::App* parent);
 Command add_drr_command(CLI::App* parent);

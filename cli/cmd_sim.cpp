@@ -15,6 +15,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/preflight.hpp"
 #include "lftrack/host/scene_devices.hpp"
@@ -43,6 +44,8 @@ struct SimOptions {
   std::string sequence;  // `lftrack replay`: the archived sequence
   std::string hil;       // `lftrack sim --hil modbus`: actuators through their real drivers
   bool check = false;    // `lftrack run --check`: the start-up checks only
+  std::optional<std::uint64_t> chaos_seed;  // `lftrack sim --chaos SEED`: the chaos soak instead
+  ChaosOptions chaos;
   enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
 };
 
@@ -304,6 +307,24 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                     "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1 "
                     "(modbus), or a virtual robot on a CAN link (can), commanded through the real driver")
         ->check(CLI::IsMember({"modbus", "can"}));
+  CLI::Option* chaos = nullptr;
+  if (mode == SimOptions::Mode::kSim) {
+    chaos = app->add_option("--chaos", o->chaos_seed,
+                            "Chaos soak: faults from the whole catalogue at random moments drawn from SEED, the "
+                            "safety invariants checked every cycle, in segments on a simulated clock (--cycles: "
+                            "in all, default 20000); exit 1 on any violation");
+    app->add_option("--chaos-rate", o->chaos.fault_rate, "Chaos: the chance of a fault per cycle")
+        ->capture_default_str()
+        ->check(finite_in(0, 0.5))
+        ->needs(chaos);
+    app->add_option("--chaos-segment", o->chaos.segment_cycles,
+                    "Chaos: cycles per segment (a fresh loop, journal and patient)")
+        ->capture_default_str()
+        ->check(CLI::Range(std::int64_t(10), std::int64_t(1000000)))
+        ->needs(chaos);
+    app->add_option("--chaos-out", o->chaos.journal_dir, "Chaos: the segments' journals (default out/chaos)")
+        ->needs(chaos);
+  }
   if (mode != SimOptions::Mode::kReplay)
     app->add_option("--archive", o->archive,
                     "Archive every frame pair in this directory (the format `lftrack replay` reads)");
@@ -321,8 +342,19 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                   "Real-time set-up: enforce or ignore (default: the scene's loop.realtime.mode)")
       ->check(CLI::IsMember({"enforce", "ignore"}));
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
-  return [o, journal] {
+  if (chaos != nullptr)  // the soak makes its own devices, operator and journals
+    for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume"})
+      chaos->excludes(app->get_option(other));
+  CLI::Option* cycles = app->get_option("--cycles");
+  return [o, journal, chaos, cycles] {
     o->journal_named = journal->count() > 0;
+    if (chaos != nullptr && chaos->count() > 0) {
+      o->chaos.seed = *o->chaos_seed;
+      o->chaos.cycles = cycles->count() > 0 ? o->cycles : 20000;
+      if (o->chaos.journal_dir.empty()) o->chaos.journal_dir = "out/chaos";
+      o->chaos.light_field_dir = o->lf_dir;
+      return run_chaos_command(o->scene, o->chaos, o->json);
+    }
     return run(*o);
   };
 }

@@ -84,7 +84,9 @@ void TrackingLoop::Impl::read_back(CycleState& c) {
   if (parts.actuator != nullptr) {
     drivers::ActuatorState a;
     const DeviceStatus rb = parts.actuator->readback(&a, to_deadline(c.start_ns + period_ns));
-    in.readback_valid = rb == DeviceStatus::kOk && !a.fault;
+    // A read-back with a non-finite number in it is no read-back: taking its position would
+    // carry NaN into the patient's offset and the predictor's history (found by the chaos soak).
+    in.readback_valid = rb == DeviceStatus::kOk && !a.fault && a.position.allFinite() && a.target.allFinite();
     if (in.readback_valid) {
       couch_position = a.position;
       const Vector6d error = a.target - commanded_total;

@@ -201,9 +201,17 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     // The next cycle: on the simulated clock always the next period; on the real one the next
     // period start not yet past (an overrun skips the periods it ran into).
     NextCycle next;
-    if (simulated) {
+    const std::int64_t stall_ns =
+        simulated && m.parts.observer != nullptr ? m.parts.observer->simulated_stall_ns(index) : 0;
+    if (simulated && stall_ns <= 0) {
       next.index = index + 1;
       next.start_ns = loop_start_ns + next.index * period;
+    } else if (simulated) {  // an injected stall: the cycle ends a period and the stall after its start
+      next = next_cycle(loop_start_ns, period, index, start_ns + period + stall_ns);
+      if (next.overrun && !was_align) {
+        ++m.summary.overruns;
+        m.summary.skipped_periods += next.skipped;
+      }
     } else {
       next = next_cycle(loop_start_ns, period, index, wall_end);
       if (next.overrun && !was_align) {
@@ -214,6 +222,7 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     m.consecutive_overruns = next.overrun && !was_align ? m.consecutive_overruns + 1 : 0;
     record.overrun = next.overrun ? 1 : 0;
     record.skipped_periods = static_cast<std::uint32_t>(next.skipped);
+    if (m.parts.observer != nullptr) m.parts.observer->on_cycle(record);
     if (m.parts.journal != nullptr) m.parts.journal->append(record);
     if (m.settings.status_line) m.write_status_line(index, record);
     if (!go_on) break;

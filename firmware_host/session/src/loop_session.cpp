@@ -30,6 +30,17 @@ class RoomTruth final : public SimulatedTruth {
   const sim::SimulatedRoom* room_;
 };
 
+// An operator input someone else owns (SessionHooks::operator_input) among the session's own.
+class BorrowedOperator final : public OperatorInput {
+ public:
+  explicit BorrowedOperator(OperatorInput* input) : input_(input) {}
+  void poll(const OperatorView& view, OperatorPoll* out) override { input_->poll(view, out); }
+  void on_hold(const OperatorView& view, OperatorPoll* out) override { input_->on_hold(view, out); }
+
+ private:
+  OperatorInput* input_;
+};
+
 }  // namespace
 
 LoopGeometry loop_geometry(const PreparedScene& p) {
@@ -358,6 +369,8 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
     auto terminal = TerminalOperator::open();
     if (terminal.ok()) parts->operators.add(std::move(terminal).value());
   }
+  if (o.hooks.operator_input != nullptr)
+    parts->operators.add(std::make_unique<BorrowedOperator>(o.hooks.operator_input));
   if (o.auto_resume_s) {
     const double period_s = 1e-3 * p.scene.loop.period_ms;
     parts->operators.add(std::make_unique<ScriptedOperator>(
@@ -368,12 +381,13 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   lp.geometry = loop_geometry(p);
   lp.registration = parts->registration.get();
   lp.check_renderer = parts->registration_renderer.get();
-  lp.frames = parts->frames.get();
+  lp.frames = o.hooks.wrap_frames ? o.hooks.wrap_frames(parts->frames.get()) : parts->frames.get();
   lp.archive = parts->archive.get();
   auto corrections = detector_corrections(p, parts->room != nullptr);
   if (!corrections.ok()) return corrections.status();
   lp.corrections = std::move(corrections).value();
   lp.actuator = parts->actuator.get();
+  if (lp.actuator != nullptr && o.hooks.wrap_actuator) lp.actuator = o.hooks.wrap_actuator(lp.actuator);
   if (moves_patient && p.scene.actuator.calibration) {
     parts->calibrated_couch = std::make_unique<CalibratedCouch>(
         lp.actuator, couch_mounting(*p.scene.actuator.calibration, p), p.registration_origin_room_mm());
@@ -389,6 +403,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   if (parts->room) parts->truth = std::make_unique<RoomTruth>(parts->room.get());
   lp.truth = parts->truth.get();  // null when replaying
   lp.allocation_count = o.allocation_count;
+  lp.observer = o.hooks.observer;
   LoopSettings settings;
   settings.loop = p.scene.loop;
   settings.limits = p.scene.safety;

@@ -42,6 +42,22 @@ class SimulatedTruth {
   virtual double residual_mm() const = 0;
 };
 
+// Watches the loop from its own thread (the chaos soak's invariant checks; a monitor): called
+// once per cycle, after the cycle's record is complete (overrun and skipped periods included)
+// and before it is journaled. Must not block; should not allocate in the steady state.
+class CycleObserver {
+ public:
+  virtual ~CycleObserver() = default;
+  virtual void on_cycle(const JournalRecord& record) = 0;
+  // Simulated clock only: an injected host stall, how much longer than its period cycle
+  // `cycle` is taken to have lasted (ns). The loop then overruns and skips periods exactly as
+  // on the real clock. 0 (the default): the cycle ends within its period.
+  virtual std::int64_t simulated_stall_ns(std::int64_t cycle) {
+    (void)cycle;
+    return 0;
+  }
+};
+
 // What the loop runs on. Owned by the caller; all must outlive the loop. Optional parts may be
 // null: no actuator (track and report), no journal or archive, no operator, no truth (not a simulation),
 // no allocation counter (allocations_per_cycle is then not reported).
@@ -59,6 +75,7 @@ struct LoopParts {
   // renderer); null: the check is not made.
   const tracking::DrrRenderer* check_renderer = nullptr;
   std::uint64_t (*allocation_count)() = nullptr;
+  CycleObserver* observer = nullptr;
 };
 
 struct LoopSettings {

@@ -17,6 +17,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 
@@ -38,6 +39,16 @@ class ThreadPool;
 namespace lftrack::host {
 
 enum class HilProtocol { kNone, kModbus, kCan };
+
+// Fault injection around a session's devices (the chaos soak, chaos_soak.hpp). A wrap hook, if
+// set, is given the device the session built and returns the one the loop is to use instead;
+// whoever sets the hooks owns what they return and keeps it alive as long as the session.
+struct SessionHooks {
+  std::function<drivers::FrameSource*(drivers::FrameSource*)> wrap_frames;
+  std::function<drivers::Actuator*(drivers::Actuator*)> wrap_actuator;
+  OperatorInput* operator_input = nullptr;  // polled with the session's own operators
+  CycleObserver* observer = nullptr;        // LoopParts::observer
+};
 
 // kSimulated: every device is its simulated twin (lftrack sim). kScene: the scene's devices
 // (lftrack run).
@@ -64,6 +75,7 @@ struct LoopSessionOptions {
   HilProtocol hil = HilProtocol::kNone;  // simulation only; needs a scene with a couch
   SessionDevices devices = SessionDevices::kSimulated;
   std::uint64_t (*allocation_count)() = nullptr;
+  SessionHooks hooks;
 };
 
 // The room's geometry as the loop sees it: the scene's detectors, ROI windows, nominal pose and

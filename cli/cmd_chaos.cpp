@@ -1,0 +1,76 @@
+// `lftrack sim --chaos SEED`: the chaos soak (chaos_soak.hpp) on a scene: faults from the whole
+// catalogue at random moments, the safety invariants checked every cycle. Exit 0 when no
+// invariant was violated, 1 when any was (each listed) or the soak could not run.
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstdio>
+
+#include "cli_commands.hpp"
+#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/loop/tracking_states.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+
+namespace {
+
+void print_report(const ChaosReport& r) {
+  std::printf("chaos soak, seed %llu: %lld cycles in %lld segments (%lld over Modbus, %lld over CAN), %.0f s\n",
+              static_cast<unsigned long long>(r.seed), static_cast<long long>(r.cycles),
+              static_cast<long long>(r.segments), static_cast<long long>(r.modbus_segments),
+              static_cast<long long>(r.can_segments), r.wall_s);
+  std::int64_t total = 0;
+  for (std::int64_t n : r.injected) total += n;
+  std::printf("faults injected: %lld\n", static_cast<long long>(total));
+  for (std::size_t k = 0; k < kChaosFaultKinds; ++k)
+    std::printf("  %-24s %lld\n", to_string(static_cast<ChaosFault>(k)), static_cast<long long>(r.injected[k]));
+  std::printf("states at cycle end:");
+  for (std::size_t s = 0; s < r.states.size(); ++s)
+    if (r.states[s] > 0)
+      std::printf(" %s %lld", to_string(static_cast<TrackingState>(s)), static_cast<long long>(r.states[s]));
+  std::printf("\ncommands %lld, holds %lld, faults %lld, overruns %lld; operator: %lld resumes and %lld resets "
+              "accepted, %lld commands refused\n",
+              static_cast<long long>(r.commands), static_cast<long long>(r.holds), static_cast<long long>(r.faults),
+              static_cast<long long>(r.overruns), static_cast<long long>(r.resumes_accepted),
+              static_cast<long long>(r.resets_accepted), static_cast<long long>(r.operator_refused));
+  std::printf("journal records read back and checked: %lld\n", static_cast<long long>(r.journal_records));
+  std::printf("invariant violations: %lld\n", static_cast<long long>(r.violation_count));
+  for (const ChaosViolation& v : r.violations)
+    std::printf("  segment %lld, cycle %lld: %s\n", static_cast<long long>(v.segment),
+                static_cast<long long>(v.cycle), v.what.c_str());
+}
+
+}  // namespace
+
+Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json) {
+  LFTRACK_RETURN_IF_ERROR(check_chaos_options(options));
+  tracking::ThreadPool pool(scene.threads);
+  auto prepared = load_prepared_scene(scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  ChaosOptions o = options;
+  if (!json)
+    o.progress = [](std::int64_t done, std::int64_t total) {
+      std::fprintf(stderr, "\rchaos: %lld of %lld cycles", static_cast<long long>(done), static_cast<long long>(total));
+      if (done >= total) std::fprintf(stderr, "\n");
+    };
+  spdlog::info("chaos soak on {}: {} cycles, seed {}, fault rate {} per cycle, journals in {}",
+               prepared->scene.name, o.cycles, o.seed, o.fault_rate, o.journal_dir.string());
+  // Each segment's session would say how it was assembled (hundreds of times in a long soak):
+  // only warnings and errors while the soak runs.
+  const spdlog::level::level_enum level = spdlog::get_level();
+  spdlog::set_level(std::max(level, spdlog::level::warn));
+  auto report = run_chaos_soak(*prepared, o, &pool);
+  spdlog::set_level(level);
+  if (!report.ok()) return report.status();
+  if (json)
+    std::printf("%s\n", to_json(*report).dump(2).c_str());
+  else
+    print_report(*report);
+  if (report->violation_count > 0)
+    return failed_precondition("chaos soak: " + std::to_string(report->violation_count) + " invariant violations");
+  return {};
+}
+
+}  // namespace lftrack::host::cli

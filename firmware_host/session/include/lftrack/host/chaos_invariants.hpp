@@ -1,0 +1,82 @@
+#pragma once
+// The chaos soak's invariants (chaos_soak.hpp), checked after every cycle from two witnesses
+// that do not share code with the loop's decisions: the cycle's journal record, and what the
+// actuator was really told (the soak's actuator wrapper logs every call as it passes):
+//
+//  1. Every value sent to the actuator is finite.
+//  2. The journal says what the actuator was told: a command recorded if and only if one was
+//     accepted by the device, with the same value; the beam permit recorded is the device's.
+//  3. No command beyond the limits: each step within safety.max_step_* unless approved (the
+//     set-up move of the ALIGN cycle; the first move after an accepted resume), and the total
+//     travel from the aligned target within safety.max_total_*.
+//  4. The beam permit only in TRACK, in a cycle whose gate decided APPLY.
+//  5. Nothing re-arms the beam or moves without a fresh operator decision: after a cycle that
+//     ends in HOLD or FAULT, no command and no beam until a cycle with an accepted resume or
+//     reset.
+//  6. A resume is accepted only in HOLD (a reset only in FAULT) that has been shown for at
+//     least kMinHoldBeforeResumeS, and names that HOLD's id.
+//  7. Every injected fault reaches its catalogued safe state (docs/faults.md): a frame fault
+//     sends nothing and keeps the beam off in its cycle; a read-back fault ends its cycle in
+//     HOLD or FAULT with nothing sent; a failed command ends its cycle in HOLD or FAULT; a
+//     stalled cycle is recorded as an overrun, and the cycle after three overruns in a row sends
+//     nothing; after a full disk, once the loop reports the journal failed, nothing is sent and
+//     the beam stays off.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/tracking/pose.hpp"
+
+namespace lftrack::host {
+
+// What the actuator was told in one cycle, as its wrapper saw the calls.
+struct ActuatorCalls {
+  int commands_accepted = 0;  // command() calls the device answered kOk
+  int commands_failed = 0;    // command() calls that failed (timeout, fault, disconnect, throw)
+  bool non_finite = false;    // a command() value was not finite
+  tracking::Vector6d last_command = tracking::Vector6d::Zero();   // the last accepted command
+  tracking::Vector6d target_before = tracking::Vector6d::Zero();  // the device's target before it
+  bool beam_permit = false;   // the device's beam permit after the cycle
+};
+
+// What the soak injected into one cycle (and that met the loop).
+struct CycleInjection {
+  bool frame_fault = false;     // any frame fault but a throw
+  bool readback_fault = false;  // a read-back fault that was answered to the loop
+  bool command_fault = false;   // a command that failed
+  bool stalled = false;         // the cycle was made to overrun
+  const char* what = "";        // the injected fault's name, or the device's own failure, for messages
+};
+
+// What the operator did in one cycle, as the soak's operator knows it.
+struct OperatorAction {
+  bool accepted = false;        // a resume or reset it sent was accepted into the poll
+  std::uint32_t named_id = 0;   // the hold id that command named
+};
+
+class InvariantChecker {
+ public:
+  InvariantChecker(const SafetyLimits& limits, double period_s) : limits_(limits), period_s_(period_s) {}
+  // One cycle, in order. Appends a line per violation to `violations`.
+  void check(const JournalRecord& record, const ActuatorCalls& calls, const CycleInjection& injected,
+             const OperatorAction& action, std::vector<std::string>* violations);
+  // The journal reported failed (the gate's kJournalFailed) from this cycle on.
+  bool journal_failed() const { return journal_failed_; }
+
+ private:
+  SafetyLimits limits_;
+  double period_s_;
+  bool aligned_ = false;
+  tracking::Vector6d aligned_target_ = tracking::Vector6d::Zero();
+  bool step_approved_ = false;    // an accepted resume approved the next move
+  bool needs_operator_ = false;   // a HOLD or FAULT has not yet been answered
+  std::uint32_t hold_id_ = 0;     // the HOLD or FAULT the last record ended in
+  std::uint64_t hold_since_ = 0;  // the cycle it began in
+  int overruns_in_a_row_ = 0;
+  bool journal_failed_ = false;
+};
+
+}  // namespace lftrack::host

@@ -1,0 +1,365 @@
+#include "chaos_devices.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <vector>
+
+#include "lftrack/sim/modbus_couch_server.hpp"
+#include "lftrack/sim/virtual_robot.hpp"
+
+namespace lftrack::host::chaos {
+
+namespace {
+
+std::atomic<bool> g_disk_full{false};
+
+bool is_frame_fault(ChaosFault f) {
+  return f >= ChaosFault::kFrameLost && f <= ChaosFault::kFrameThrows;
+}
+bool is_readback_fault(ChaosFault f) {
+  return f >= ChaosFault::kReadbackTimeout && f <= ChaosFault::kReadbackThrows;
+}
+bool is_command_fault(ChaosFault f) {
+  return f >= ChaosFault::kCommandTimeout && f <= ChaosFault::kCommandThrows;
+}
+bool is_modbus_fault(ChaosFault f) {
+  return f >= ChaosFault::kModbusNoReply && f <= ChaosFault::kModbusDropConnection;
+}
+bool is_can_fault(ChaosFault f) {
+  return f >= ChaosFault::kCanBusOff && f <= ChaosFault::kCanHeartbeatLoss;
+}
+
+double uniform(std::mt19937_64& random, double lo, double hi) {
+  return std::uniform_real_distribution<double>(lo, hi)(random);
+}
+
+[[noreturn]] void throw_into_loop(Injector* injector, const char* what) {
+  injector->threw = true;
+  throw std::runtime_error(what);
+}
+
+}  // namespace
+
+ssize_t write_or_disk_full(int fd, const void* data, std::size_t bytes) {
+  if (g_disk_full.load(std::memory_order_acquire)) {
+    errno = ENOSPC;
+    return -1;
+  }
+  return ::write(fd, data, bytes);
+}
+
+void set_disk_full(bool full) {
+  g_disk_full.store(full, std::memory_order_release);
+}
+
+Injector::Injector(std::uint64_t seed, double fault_rate, double period_s)
+    : random_(seed), side_random_(seed ^ 0x9E3779B97F4A7C15ull), fault_rate_(fault_rate), period_s_(period_s) {}
+
+void Injector::inject_can(ChaosFault f) {
+  using sim::RobotFault;
+  RobotFault fault = RobotFault::kErrorFlood;
+  int undo = -1;
+  std::int64_t undo_after = 0;
+  switch (f) {
+    case ChaosFault::kCanBusOff:
+      fault = RobotFault::kBusOff, undo = int(RobotFault::kControllerRestarted), undo_after = 5;
+      break;
+    case ChaosFault::kCanErrorPassive:
+      fault = RobotFault::kErrorPassive, undo = int(RobotFault::kErrorActive), undo_after = 5;
+      break;
+    case ChaosFault::kCanRobotRestart:
+      fault = RobotFault::kRobotRestart;
+      break;
+    case ChaosFault::kCanHeartbeatLoss:
+      fault = RobotFault::kStopHeartbeat, undo = int(RobotFault::kResumeHeartbeat), undo_after = 20;
+      break;
+    default:
+      break;
+  }
+  can_robot_->inject(fault);
+  if (undo >= 0) {
+    can_followup_ = undo;
+    can_followup_at_ = cycle_ + undo_after;
+  }
+  if (!can_pending_) can_pending_ = PendingCanFault{f, cycle_, std::chrono::steady_clock::now()};
+}
+
+void Injector::begin_cycle(std::int64_t cycle) {
+  cycle_ = cycle;
+  injection = CycleInjection{};
+  const bool permit = calls.beam_permit;
+  calls = ActuatorCalls{};
+  calls.beam_permit = permit;  // the device keeps its permit until told otherwise
+  action = OperatorAction{};
+  drawn_ = ChaosFault::kCount;
+  if (can_followup_ >= 0 && cycle >= can_followup_at_) {  // the bus or heartbeat comes back
+    can_robot_->inject(static_cast<sim::RobotFault>(can_followup_));
+    can_followup_ = -1;
+  }
+  // The same three draws every cycle, so that the schedule depends on the seed and the cycle
+  // alone, never on what the loop did.
+  const double fault_draw = uniform(random_, 0, 1);
+  const double kind_draw = uniform(random_, 0, 1);
+  const double parameter = uniform(random_, 0, 1);
+  if (stall_cycles_left_ > 0) {
+    --stall_cycles_left_;
+    injection.stalled = true;
+    return;
+  }
+  stall_ns_ = 0;
+  if (fault_draw >= fault_rate_) return;
+  // Every kind that fits this segment: shifts are drawn into the patient's motion beforehand,
+  // the Modbus server's faults only where there is one, a full disk once.
+  std::vector<ChaosFault> kinds;
+  for (std::size_t k = 0; k < kChaosFaultKinds; ++k) {
+    const auto f = static_cast<ChaosFault>(k);
+    if (f == ChaosFault::kPatientShift) continue;
+    if (is_modbus_fault(f) && modbus_server_ == nullptr) continue;
+    if (is_can_fault(f) && (can_robot_ == nullptr || can_followup_ >= 0)) continue;
+    if (f == ChaosFault::kDiskFull && disk_full_at_ >= 0) continue;
+    kinds.push_back(f);
+  }
+  const ChaosFault f = kinds[std::min(kinds.size() - 1, std::size_t(kind_draw * double(kinds.size())))];
+  if (f == ChaosFault::kHostStall) {
+    stall_cycles_left_ = int(parameter * 4);  // this cycle and up to three after it
+    stall_ns_ = std::int64_t((0.2 + 2.3 * parameter) * period_s_ * 1e9);
+    injection.stalled = true;
+    injection.what = to_string(f);
+    ++injected[std::size_t(f)];
+  } else if (f == ChaosFault::kDiskFull) {
+    disk_full_at_ = cycle;
+    disk_full_wall_ = std::chrono::steady_clock::now();
+    set_disk_full(true);
+    ++injected[std::size_t(f)];
+  } else if (is_modbus_fault(f)) {
+    const sim::CouchServerFault server_fault = f == ChaosFault::kModbusNoReply ? sim::CouchServerFault::kNoReply
+                                               : f == ChaosFault::kModbusException4
+                                                   ? sim::CouchServerFault::kException4
+                                                   : sim::CouchServerFault::kDropConnection;
+    modbus_server_->inject(server_fault, 1, sim::CouchRequestKind::kAny);
+    ++injected[std::size_t(f)];
+  } else if (is_can_fault(f)) {
+    inject_can(f);
+    ++injected[std::size_t(f)];
+  } else {
+    drawn_ = f;  // taken, and counted, by the wrapper it is for
+  }
+}
+
+ChaosFault Injector::take_frame_fault() {
+  if (!is_frame_fault(drawn_)) return ChaosFault::kCount;
+  const ChaosFault f = drawn_;
+  drawn_ = ChaosFault::kCount;
+  ++injected[std::size_t(f)];
+  return f;
+}
+
+ChaosFault Injector::take_readback_fault() {
+  if (!is_readback_fault(drawn_)) return ChaosFault::kCount;
+  const ChaosFault f = drawn_;
+  drawn_ = ChaosFault::kCount;
+  ++injected[std::size_t(f)];
+  return f;
+}
+
+ChaosFault Injector::take_command_fault() {
+  if (!is_command_fault(drawn_)) return ChaosFault::kCount;
+  const ChaosFault f = drawn_;
+  drawn_ = ChaosFault::kCount;
+  ++injected[std::size_t(f)];
+  return f;
+}
+
+void ChaosFrameSource::request_exposure(std::int64_t exposure_time_ns) {
+  if (first_exposure_ns_ < 0) first_exposure_ns_ = exposure_time_ns;
+  injector_->begin_cycle((exposure_time_ns - first_exposure_ns_ + period_ns_ / 2) / period_ns_);
+  inner_->request_exposure(exposure_time_ns);
+}
+
+drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline deadline) {
+  const ChaosFault fault = injector_->take_frame_fault();
+  if (fault == ChaosFault::kFrameThrows) throw_into_loop(injector_, "chaos: the frame source threw");
+  // The simulator's pair is always collected, so that its renderer stays in step.
+  const drivers::DeviceStatus status = inner_->acquire(pair, deadline);
+  if (status != drivers::DeviceStatus::kOk) {
+    injector_->injection.frame_fault = true;  // a fault of its own: the same safe state
+    injector_->injection.what = "the frame source's own failure";
+    return status;
+  }
+  if (fault == ChaosFault::kCount) return status;
+  injector_->injection.frame_fault = true;
+  injector_->injection.what = to_string(fault);
+  std::vector<drivers::Frame>& frames = pair->frames;
+  switch (fault) {
+    case ChaosFault::kFrameLost:
+      return drivers::DeviceStatus::kTimeout;
+    case ChaosFault::kFrameLate:  // exposed 180 ms before the cycle asked: older than max_frame_age
+      for (drivers::Frame& f : frames) f.timestamp_ns -= 180'000'000;
+      break;
+    case ChaosFault::kFrameStale:  // an exposure of a second ago delivered again
+      for (drivers::Frame& f : frames) {
+        f.timestamp_ns -= 1'000'000'000;
+        f.sequence -= 10;
+      }
+      break;
+    case ChaosFault::kFrameSkewed:
+      if (frames.size() > 1) frames[1].timestamp_ns += 50'000'000;
+      break;
+    case ChaosFault::kFrameBlank:
+      for (drivers::Frame& f : frames) std::fill(f.pixels.pixels().begin(), f.pixels.pixels().end(), 0);
+      break;
+    case ChaosFault::kFrameSaturated:
+      std::fill(frames[0].pixels.pixels().begin(), frames[0].pixels.pixels().end(), 0xFFFF);
+      break;
+    case ChaosFault::kFrameTorn: {
+      tracking::Image<std::uint16_t>& image = frames[0].pixels;
+      for (int r = image.rows() / 2; r < image.rows(); ++r)
+        for (int c = 0; c < image.cols(); ++c) image.at(r, c) = 0;
+      break;
+    }
+    case ChaosFault::kFrameDisconnected:
+      return drivers::DeviceStatus::kDisconnected;
+    case ChaosFault::kFrameDeviceFault:
+      return drivers::DeviceStatus::kFault;
+    default:
+      break;
+  }
+  return drivers::DeviceStatus::kOk;
+}
+
+drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correction, drivers::Deadline deadline) {
+  ActuatorCalls& calls = injector_->calls;
+  if (!correction.allFinite()) calls.non_finite = true;
+  const ChaosFault fault = injector_->take_command_fault();
+  if (fault == ChaosFault::kCommandThrows) throw_into_loop(injector_, "chaos: the actuator's command threw");
+  if (fault != ChaosFault::kCount) {
+    // The device may or may not have taken it before the line failed.
+    if (injector_->random()() % 2 == 0) (void)inner_->command(correction, deadline);
+    ++calls.commands_failed;
+    injector_->injection.command_fault = true;
+    injector_->injection.what = to_string(fault);
+    return fault == ChaosFault::kCommandTimeout        ? drivers::DeviceStatus::kTimeout
+           : fault == ChaosFault::kCommandDisconnected ? drivers::DeviceStatus::kDisconnected
+                                                       : drivers::DeviceStatus::kFault;
+  }
+  const drivers::DeviceStatus status = inner_->command(correction, deadline);
+  if (status == drivers::DeviceStatus::kOk) {
+    ++calls.commands_accepted;
+    calls.last_command = correction;
+    calls.target_before = known_target_;
+    known_target_ += correction;
+  } else {
+    ++calls.commands_failed;
+    injector_->injection.command_fault = true;
+    injector_->injection.what = "the actuator's own command failure";
+  }
+  return status;
+}
+
+drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, drivers::Deadline deadline) {
+  const bool first = readback_cycle_ != injector_->cycle();
+  readback_cycle_ = injector_->cycle();
+  const ChaosFault fault = first ? injector_->take_readback_fault() : ChaosFault::kCount;
+  if (fault == ChaosFault::kReadbackThrows) throw_into_loop(injector_, "chaos: the actuator's read-back threw");
+  const drivers::DeviceStatus status = inner_->readback(state, deadline);
+  if (status == drivers::DeviceStatus::kOk && state->target.allFinite()) known_target_ = state->target;
+  if (first && status != drivers::DeviceStatus::kOk) {
+    injector_->injection.readback_fault = true;
+    injector_->injection.what = "the actuator's own read-back failure";
+  }
+  if (fault == ChaosFault::kCount || status != drivers::DeviceStatus::kOk) return status;
+  injector_->injection.readback_fault = true;
+  injector_->injection.what = to_string(fault);
+  std::mt19937_64& random = injector_->random();
+  switch (fault) {
+    case ChaosFault::kReadbackTimeout:
+      return drivers::DeviceStatus::kTimeout;
+    case ChaosFault::kReadbackDisconnected:
+      return drivers::DeviceStatus::kDisconnected;
+    case ChaosFault::kReadbackFaultFlag:
+      state->fault = true;
+      break;
+    case ChaosFault::kReadbackMismatch: {
+      Eigen::Vector3d offset(uniform(random, -1, 1), uniform(random, -1, 1), uniform(random, -1, 1));
+      offset = offset.normalized() * uniform(random, 1.0, 5.0);
+      if (!offset.allFinite()) offset = Eigen::Vector3d(3, 0, 0);
+      state->position.head<3>() += offset;
+      state->target.head<3>() += offset;
+      break;
+    }
+    case ChaosFault::kReadbackNonFinite:
+      state->position[0] = std::numeric_limits<double>::quiet_NaN();
+      if (random() % 2 == 0) state->target[1] = std::numeric_limits<double>::quiet_NaN();
+      break;
+    default:
+      break;
+  }
+  return drivers::DeviceStatus::kOk;
+}
+
+void ChaosActuator::hold() {
+  inner_->hold();
+  if (injector_->threw) injector_->held_after_throw = true;
+}
+
+void ChaosActuator::set_beam_permit(bool permit) {
+  injector_->calls.beam_permit = permit;
+  if (injector_->threw) injector_->beam_dropped_after_throw = !permit;
+  inner_->set_beam_permit(permit);
+}
+
+void ChaosOperator::poll(const OperatorView& view, OperatorPoll* out) {
+  std::mt19937_64& random = injector_->random();
+  const bool held = view.state == TrackingState::kHold || view.state == TrackingState::kFault;
+  if (held && view.hold_id != 0) {
+    if (view.hold_id != planned_for_) {
+      planned_for_ = view.hold_id;
+      answer_at_s_ = uniform(random, 0.2, 3.0);
+      mistake_ = uniform(random, 0, 1) < 0.1;
+      answered_ = false;
+    }
+    if (!answered_ && view.hold_age_s >= answer_at_s_) {
+      OperatorRequest request;
+      request.command = view.state == TrackingState::kHold ? OperatorCommand::kResume : OperatorCommand::kReset;
+      request.names_hold = true;
+      request.hold_id = view.hold_id;
+      if (mistake_ && random() % 2 == 0)
+        request.hold_id = view.hold_id == 999999 ? 100000 : view.hold_id + 1;  // another HOLD's id
+      else if (mistake_)
+        request.command = request.command == OperatorCommand::kResume ? OperatorCommand::kReset
+                                                                      : OperatorCommand::kResume;
+      const OperatorRefusal why = judge_operator_request(request, view, /*id_required=*/true);
+      if (why == OperatorRefusal::kNone) {
+        out->accept(request.command);
+        answered_ = true;
+        injector_->action.accepted = true;
+        injector_->action.named_id = request.hold_id;
+      } else {
+        out->refuse(why);
+        mistake_ = false;
+        answer_at_s_ = view.hold_age_s + 0.5;
+      }
+    }
+  } else if (view.state == TrackingState::kTrack && uniform(random, 0, 1) < 0.002) {
+    OperatorRequest stale;  // a resume sent for a HOLD that is over
+    stale.command = OperatorCommand::kResume;
+    stale.names_hold = true;
+    stale.hold_id = last_hold_id_ != 0 ? last_hold_id_ : 123456;
+    const OperatorRefusal why = judge_operator_request(stale, view, /*id_required=*/true);
+    if (why == OperatorRefusal::kNone) {
+      out->accept(stale.command);
+      injector_->action.accepted = true;
+      injector_->action.named_id = stale.hold_id;
+    } else {
+      out->refuse(why);
+    }
+  }
+  if (view.hold_id != 0) last_hold_id_ = view.hold_id;
+}
+
+}  // namespace lftrack::host::chaos

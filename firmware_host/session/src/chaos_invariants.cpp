@@ -1,0 +1,131 @@
+#include "lftrack/host/chaos_invariants.hpp"
+
+#include <cmath>
+#include <string>
+
+#include "lftrack/loop/operator_input.hpp"
+#include "lftrack/loop/tracking_states.hpp"
+
+namespace lftrack::host {
+
+namespace {
+
+constexpr double kTolerance = 1e-6;  // mm and degrees: the loop's own sums against ours
+
+std::uint8_t code(TrackingState s) {
+  return static_cast<std::uint8_t>(s);
+}
+std::uint8_t code(OperatorCommand c) {
+  return static_cast<std::uint8_t>(1 + static_cast<int>(c));  // JournalRecord::operator_command
+}
+
+double translation_mm(const tracking::Vector6d& v) {
+  return v.head<3>().cwiseAbs().maxCoeff();  // per component, as the gate limits it
+}
+double angle_deg(const tracking::Vector6d& v) {
+  return v.tail<3>().norm() * 180.0 / M_PI;
+}
+
+bool held(std::uint8_t state) {
+  return state == code(TrackingState::kHold) || state == code(TrackingState::kFault);
+}
+
+}  // namespace
+
+void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls, const CycleInjection& injected,
+                             const OperatorAction& action, std::vector<std::string>* out) {
+  const auto fail = [&](const std::string& what) {
+    out->push_back(*injected.what != '\0' ? what + " (injected: " + injected.what + ")" : what);
+  };
+  const bool sent = r.command_sent != 0;
+  const bool beam = r.beam_permit != 0;
+
+  // 6. An accepted resume or reset answers the HOLD or FAULT shown, after the minimum time.
+  const bool resumed = r.operator_command == code(OperatorCommand::kResume);
+  const bool reset = r.operator_command == code(OperatorCommand::kReset);
+  if (resumed || reset) {
+    const TrackingState answers = resumed ? TrackingState::kHold : TrackingState::kFault;
+    if (r.previous_state != code(answers))
+      fail(std::string(resumed ? "resume" : "reset") + " acted on outside " + to_string(answers));
+    if (hold_id_ == 0 || !action.accepted || action.named_id != hold_id_)
+      fail("an accepted " + std::string(resumed ? "resume" : "reset") + " named hold " +
+           std::to_string(action.named_id) + ", the loop was in hold " + std::to_string(hold_id_));
+    if (double(r.cycle - hold_since_) * period_s_ < kMinHoldBeforeResumeS - 1e-9)
+      fail("a resume acted on " + std::to_string(r.cycle - hold_since_) + " cycles into its HOLD");
+    needs_operator_ = false;
+    if (resumed) step_approved_ = true;
+  }
+
+  // 1, 2. What the device was told, and what the journal says it was told.
+  if (calls.non_finite) fail("a non-finite value reached the actuator");
+  if (calls.commands_failed == 0 && sent != (calls.commands_accepted > 0))
+    fail(sent ? "the journal records a command the actuator never accepted"
+              : "the actuator accepted a command the journal does not record");
+  if (sent && calls.commands_accepted > 0) {
+    for (int i = 0; i < 6; ++i)
+      if (!(std::abs(r.command[i] - calls.last_command[i]) <= 1e-9 * (1 + std::abs(r.command[i])))) {
+        fail("the journal's command differs from the one sent");
+        break;
+      }
+  }
+  if (beam != calls.beam_permit) fail("the journal's beam permit differs from the device's");
+
+  // 3. Limits on what was sent.
+  if (calls.commands_accepted > 0) {
+    const tracking::Vector6d& step = calls.last_command;
+    const tracking::Vector6d target = calls.target_before + step;
+    const bool setup_move = r.event == 1 + static_cast<int>(TrackingEvent::kAligned);
+    if (setup_move) {
+      aligned_ = true;
+      aligned_target_ = target;
+    } else {
+      if (!step_approved_ && (translation_mm(step) > limits_.max_step_mm + kTolerance ||
+                              angle_deg(step) > limits_.max_step_deg + kTolerance))
+        fail("a step of " + std::to_string(translation_mm(step)) + " mm / " + std::to_string(angle_deg(step)) +
+             " deg beyond the step limit");
+      if (aligned_) {
+        const tracking::Vector6d total = target - aligned_target_;
+        if (translation_mm(total) > limits_.max_total_mm + kTolerance ||
+            angle_deg(total) > limits_.max_total_deg + kTolerance)
+          fail("a total of " + std::to_string(translation_mm(total)) + " mm / " +
+               std::to_string(angle_deg(total)) + " deg from the aligned pose, beyond the total limit");
+      } else {
+        fail("a command before any alignment");
+      }
+    }
+    step_approved_ = false;
+  }
+
+  // 4. The beam only in TRACK after APPLY.
+  if (beam && !(r.state == code(TrackingState::kTrack) && r.gate_decision == std::uint8_t(GateDecision::kApply)))
+    fail("beam permit outside TRACK after APPLY");
+
+  // 5. No move and no beam between a HOLD or FAULT and the operator's answer.
+  if (needs_operator_ && (sent || beam)) fail("moved or armed the beam after a HOLD without an operator decision");
+
+  // 7. Each injected fault in its safe state.
+  if (injected.frame_fault && (sent || beam)) fail("a frame fault's cycle sent a command or kept the beam");
+  if (injected.readback_fault && (sent || !held(r.state)))
+    fail(std::string("a read-back fault's cycle ended in ") + to_string(TrackingState(r.state)) +
+         (sent ? " and sent a command" : ""));
+  if (injected.command_fault && !held(r.state))
+    fail(std::string("a failed command's cycle ended in ") + to_string(TrackingState(r.state)));
+  if (injected.stalled && r.overrun == 0) fail("a stalled cycle was not recorded as an overrun");
+  if (overruns_in_a_row_ >= limits_.hold_after_overruns && (sent || beam))
+    fail("sent or armed after " + std::to_string(overruns_in_a_row_) + " overruns in a row");
+  if (r.gate_reason == std::uint8_t(GateReason::kJournalFailed)) journal_failed_ = true;
+  if (journal_failed_ && (sent || beam)) fail("sent or armed after the journal failed");
+
+  // What the next cycle is judged against.
+  overruns_in_a_row_ =
+      r.overrun != 0 && r.previous_state != code(TrackingState::kAlign) ? overruns_in_a_row_ + 1 : 0;
+  if (held(r.state)) {
+    needs_operator_ = true;
+    if (r.hold_id != hold_id_) hold_since_ = r.cycle;
+    hold_id_ = r.hold_id;
+  } else {
+    hold_id_ = 0;
+  }
+}
+
+}  // namespace lftrack::host

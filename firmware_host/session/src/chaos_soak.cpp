@@ -1,0 +1,336 @@
+#include "lftrack/host/chaos_soak.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <memory>
+#include <random>
+#include <system_error>
+
+#include "chaos_devices.hpp"
+#include "lftrack/host/loop_session.hpp"
+
+namespace lftrack::host {
+
+const char* to_string(ChaosFault fault) {
+  switch (fault) {
+    case ChaosFault::kFrameLost: return "frame_lost";
+    case ChaosFault::kFrameLate: return "frame_late";
+    case ChaosFault::kFrameStale: return "frame_stale";
+    case ChaosFault::kFrameSkewed: return "frame_skewed";
+    case ChaosFault::kFrameBlank: return "frame_blank";
+    case ChaosFault::kFrameSaturated: return "frame_saturated";
+    case ChaosFault::kFrameTorn: return "frame_torn";
+    case ChaosFault::kFrameDisconnected: return "frame_disconnected";
+    case ChaosFault::kFrameDeviceFault: return "frame_device_fault";
+    case ChaosFault::kFrameThrows: return "frame_throws";
+    case ChaosFault::kReadbackTimeout: return "readback_timeout";
+    case ChaosFault::kReadbackDisconnected: return "readback_disconnected";
+    case ChaosFault::kReadbackFaultFlag: return "readback_fault_flag";
+    case ChaosFault::kReadbackMismatch: return "readback_mismatch";
+    case ChaosFault::kReadbackNonFinite: return "readback_non_finite";
+    case ChaosFault::kReadbackThrows: return "readback_throws";
+    case ChaosFault::kCommandTimeout: return "command_timeout";
+    case ChaosFault::kCommandDisconnected: return "command_disconnected";
+    case ChaosFault::kCommandFault: return "command_fault";
+    case ChaosFault::kCommandThrows: return "command_throws";
+    case ChaosFault::kModbusNoReply: return "modbus_no_reply";
+    case ChaosFault::kModbusException4: return "modbus_exception_4";
+    case ChaosFault::kModbusDropConnection: return "modbus_drop_connection";
+    case ChaosFault::kCanBusOff: return "can_bus_off";
+    case ChaosFault::kCanErrorPassive: return "can_error_passive";
+    case ChaosFault::kCanErrorFlood: return "can_error_flood";
+    case ChaosFault::kCanRobotRestart: return "can_robot_restart";
+    case ChaosFault::kCanHeartbeatLoss: return "can_heartbeat_loss";
+    case ChaosFault::kHostStall: return "host_stall";
+    case ChaosFault::kDiskFull: return "disk_full";
+    case ChaosFault::kPatientShift: return "patient_shift";
+    case ChaosFault::kCount: break;
+  }
+  return "none";
+}
+
+Status check_chaos_options(const ChaosOptions& o) {
+  constexpr std::int64_t kMaxCycles = 1'000'000'000;
+  if (o.cycles < 1 || o.cycles > kMaxCycles)
+    return invalid_argument("chaos: cycles must be 1 to " + std::to_string(kMaxCycles));
+  if (o.segment_cycles < 10 || o.segment_cycles > 1'000'000)
+    return invalid_argument("chaos: a segment must be 10 to 1000000 cycles");
+  if (!std::isfinite(o.fault_rate) || o.fault_rate < 0 || o.fault_rate > 0.5)
+    return invalid_argument("chaos: the fault rate must be a probability per cycle from 0 to 0.5");
+  if (o.journal_dir.empty()) return invalid_argument("chaos: a folder for the segments' journals is required");
+  std::error_code ec;
+  if (std::filesystem::exists(o.journal_dir, ec) && !std::filesystem::is_directory(o.journal_dir, ec))
+    return invalid_argument("chaos: " + o.journal_dir.string() + " is not a folder");
+  return {};
+}
+
+nlohmann::json to_json(const ChaosReport& r) {
+  nlohmann::json j;
+  j["seed"] = r.seed;
+  j["cycles"] = r.cycles;
+  j["segments"] = r.segments;
+  j["modbus_segments"] = r.modbus_segments;
+  j["can_segments"] = r.can_segments;
+  nlohmann::json injected = nlohmann::json::object();
+  std::int64_t total = 0;
+  for (std::size_t k = 0; k < kChaosFaultKinds; ++k) {
+    injected[to_string(static_cast<ChaosFault>(k))] = r.injected[k];
+    total += r.injected[k];
+  }
+  j["faults_injected"] = injected;
+  j["faults_injected_total"] = total;
+  nlohmann::json states = nlohmann::json::object();
+  for (std::size_t s = 0; s < r.states.size(); ++s) states[to_string(static_cast<TrackingState>(s))] = r.states[s];
+  j["states"] = states;
+  j["commands"] = r.commands;
+  j["holds"] = r.holds;
+  j["faults"] = r.faults;
+  j["overruns"] = r.overruns;
+  j["resumes_accepted"] = r.resumes_accepted;
+  j["resets_accepted"] = r.resets_accepted;
+  j["operator_commands_refused"] = r.operator_refused;
+  j["journal_records_checked"] = r.journal_records;
+  j["violation_count"] = r.violation_count;
+  nlohmann::json violations = nlohmann::json::array();
+  for (const ChaosViolation& v : r.violations)
+    violations.push_back({{"segment", v.segment}, {"cycle", v.cycle}, {"what", v.what}});
+  j["violations"] = violations;
+  j["wall_s"] = r.wall_s;
+  return j;
+}
+
+namespace {
+
+constexpr std::size_t kViolationsKept = 100;
+constexpr std::chrono::milliseconds kDiskFullGrace{500};  // the journal writer's latency, wall time
+constexpr std::int64_t kCyclesAfterDiskFull = 30;      // then the segment's safe state is final
+constexpr std::int64_t kCyclesToHoldOnCan = 50;        // and 2 s: a heartbeat times out on the real clock
+
+void add_violation(ChaosReport* report, std::int64_t segment, std::int64_t cycle, std::string what) {
+  ++report->violation_count;
+  if (report->violations.size() < kViolationsKept) report->violations.push_back({segment, cycle, std::move(what)});
+}
+
+// Watches one segment's cycles: the invariants, the tallies, and the end of a segment whose
+// disk is full.
+class SegmentObserver final : public CycleObserver {
+ public:
+  SegmentObserver(const PreparedScene& scene, chaos::Injector* injector, ChaosReport* report, std::int64_t segment)
+      : checker_(scene.scene.safety, 1e-3 * scene.scene.loop.period_ms),
+        injector_(injector),
+        report_(report),
+        segment_(segment) {}
+  void set_session(LoopSession* session) { session_ = session; }
+  std::int64_t cycles_seen() const { return cycles_; }
+
+  std::int64_t simulated_stall_ns(std::int64_t cycle) override {
+    (void)cycle;
+    return injector_->injection.stalled ? injector_->stall_ns() : 0;
+  }
+
+  void on_cycle(const JournalRecord& r) override {
+    violations_.clear();
+    checker_.check(r, injector_->calls, injector_->injection, injector_->action, &violations_);
+    for (std::string& v : violations_) add_violation(report_, segment_, std::int64_t(r.cycle), std::move(v));
+    ++cycles_;
+    if (r.state < report_->states.size()) ++report_->states[r.state];
+    report_->commands += r.command_sent;
+    if (r.state != r.previous_state && r.state == std::uint8_t(TrackingState::kHold)) ++report_->holds;
+    if (r.state != r.previous_state && r.state == std::uint8_t(TrackingState::kFault)) ++report_->faults;
+    report_->overruns += r.overrun;
+    report_->operator_refused += r.operator_refused;
+    if (r.operator_command == 1 + int(OperatorCommand::kResume)) ++report_->resumes_accepted;
+    if (r.operator_command == 1 + int(OperatorCommand::kReset)) ++report_->resets_accepted;
+    // A CAN fault reaches the loop through the driver (a read-back or command that fails, a
+    // heartbeat that times out on the real clock): HOLD or FAULT within 50 cycles and 2 s.
+    if (const auto since = injector_->can_fault_pending()) {
+      const bool held = r.state == std::uint8_t(TrackingState::kHold) || r.state == std::uint8_t(TrackingState::kFault);
+      if (held) {
+        injector_->clear_can_fault();
+      } else if (std::int64_t(r.cycle) - since->cycle > kCyclesToHoldOnCan &&
+                 std::chrono::steady_clock::now() - since->wall > std::chrono::seconds(2)) {
+        add_violation(report_, segment_, std::int64_t(r.cycle),
+                      std::string("no HOLD after ") + to_string(since->fault));
+        injector_->clear_can_fault();
+      }
+    }
+    // A full disk: the writer thread fails on its next write, within milliseconds; the loop
+    // must see it (the gate's "journal write failed", which a higher-precedence hold such as an
+    // actuator fault may stand in front of) and from then on send nothing and keep the beam off.
+    // On the simulated clock cycles run faster than the writer's wall-clock latency, so the
+    // grace is wall time. Then the segment's safe state is final and it ends.
+    if (injector_->disk_full_injected()) {
+      const auto since = std::chrono::steady_clock::now() - injector_->disk_full_wall();
+      if (checker_.journal_failed() || since > kDiskFullGrace) {
+        if (r.command_sent != 0 || r.beam_permit != 0)
+          add_violation(report_, segment_, std::int64_t(r.cycle),
+                        std::string(r.command_sent != 0 ? "sent a command" : "armed the beam") +
+                            " after the disk filled (cycle " + std::to_string(injector_->disk_full_at()) + ")");
+        if (++cycles_after_journal_failed_ >= kCyclesAfterDiskFull && session_ != nullptr) session_->request_stop();
+      }
+    }
+  }
+
+ private:
+  InvariantChecker checker_;
+  chaos::Injector* injector_;
+  ChaosReport* report_;
+  std::int64_t segment_;
+  LoopSession* session_ = nullptr;
+  std::vector<std::string> violations_;
+  std::int64_t cycles_ = 0;
+  std::int64_t cycles_after_journal_failed_ = 0;
+};
+
+// Sudden shifts of the patient, drawn for a segment of `cycles`: at any cycle with the chance of
+// one fault kind, 1 to 8 mm in a random direction, each undone by a later one (the patient moves
+// back), so that the patient stays near the envelope over a long segment.
+std::vector<sim::MotionStep> draw_shifts(std::mt19937_64& random, std::int64_t cycles, double period_s,
+                                         double fault_rate) {
+  std::vector<sim::MotionStep> shifts;
+  std::uniform_real_distribution<double> unit(0, 1), signed_unit(-1, 1);
+  const double chance = fault_rate / double(kChaosFaultKinds);
+  Eigen::Vector3d displaced = Eigen::Vector3d::Zero();
+  for (std::int64_t k = 1; k < cycles; ++k) {
+    if (unit(random) >= chance) continue;
+    sim::MotionStep step;
+    step.time_s = double(k) * period_s;
+    if (displaced.isZero()) {
+      Eigen::Vector3d d(signed_unit(random), signed_unit(random), signed_unit(random));
+      if (d.norm() < 1e-6) d = Eigen::Vector3d::UnitX();
+      displaced = d.normalized() * (1.0 + 7.0 * unit(random));
+      step.delta.head<3>() = displaced;
+    } else {
+      step.delta.head<3>() = -displaced;
+      displaced.setZero();
+    }
+    shifts.push_back(step);
+  }
+  return shifts;
+}
+
+// The segment's journal, read back: one valid record per cycle seen, in order, up to a full disk.
+void check_journal(const std::filesystem::path& path, std::int64_t cycles_seen, bool disk_full,
+                   std::int64_t segment, ChaosReport* report) {
+  auto journal = read_journal(path);
+  if (!journal.ok()) {
+    add_violation(report, segment, -1, "journal unreadable: " + journal.status().message());
+    return;
+  }
+  const std::vector<JournalRecord>& records = journal->records;
+  report->journal_records += std::int64_t(records.size());
+  if (journal->damaged()) add_violation(report, segment, -1, "journal damaged: " + path.string());
+  if (!disk_full && std::int64_t(records.size()) != cycles_seen)
+    add_violation(report, segment, -1,
+                  "journal holds " + std::to_string(records.size()) + " records for " + std::to_string(cycles_seen) +
+                      " cycles");
+  if (disk_full && std::int64_t(records.size()) > cycles_seen)
+    add_violation(report, segment, -1, "journal holds more records than cycles");
+  for (std::size_t i = 1; i < records.size(); ++i) {
+    if (records[i].cycle <= records[i - 1].cycle) {
+      add_violation(report, segment, std::int64_t(records[i].cycle), "journal cycles out of order");
+      break;
+    }
+  }
+}
+
+}  // namespace
+
+Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOptions& options,
+                                   tracking::ThreadPool* pool) {
+  LFTRACK_RETURN_IF_ERROR(check_chaos_options(options));
+  std::error_code ec;
+  std::filesystem::create_directories(options.journal_dir, ec);
+  if (ec) return io_error("chaos: cannot create " + options.journal_dir.string() + ": " + ec.message());
+  const auto wall_start = std::chrono::steady_clock::now();
+  const double period_s = 1e-3 * scene.scene.loop.period_ms;
+  ChaosReport report;
+  report.seed = options.seed;
+  std::int64_t done = 0;
+  for (std::int64_t segment = 0; done < options.cycles; ++segment) {
+    const std::int64_t cycles = std::min(options.segment_cycles, options.cycles - done);
+    const bool modbus = options.hil_segments && segment % 3 == 2;
+    const bool can = options.hil_segments && segment % 3 == 1;
+    std::mt19937_64 segment_random(options.seed * 1'000'003 + std::uint64_t(segment));
+    PreparedScene patient = scene;  // volumes are shared; only the motion differs
+    std::vector<sim::MotionStep>& shifts = patient.scene.motion.motion.shifts;
+    const std::size_t scene_shifts = shifts.size();  // the scene's own, before the soak's
+    for (const sim::MotionStep& s : draw_shifts(segment_random, cycles, period_s, options.fault_rate))
+      shifts.push_back(s);
+
+    LoopSessionOptions so;
+    so.cycles = cycles;
+    so.simulated_clock = true;
+    so.light_field_dir = options.light_field_dir;
+    so.journal = options.journal_dir / ("chaos-" + std::to_string(options.seed) + "-" + std::to_string(segment) + ".lfj");
+    so.journal_options.add_suffix = true;  // a second soak over the first one's folder keeps both
+    so.journal_options.write_call = &chaos::write_or_disk_full;
+    so.hil = modbus ? HilProtocol::kModbus : can ? HilProtocol::kCan : HilProtocol::kNone;
+    chaos::set_disk_full(false);
+
+    // The injector needs the Modbus server, which the session creates: the wrappers are made
+    // when the session asks for them, and the injector then.
+    std::unique_ptr<chaos::Injector> injector;
+    std::unique_ptr<chaos::ChaosFrameSource> frames;
+    std::unique_ptr<chaos::ChaosActuator> actuator;
+    std::unique_ptr<chaos::ChaosOperator> operator_input;
+    std::unique_ptr<SegmentObserver> observer;
+    injector = std::make_unique<chaos::Injector>(segment_random(), options.fault_rate, period_s);
+    operator_input = std::make_unique<chaos::ChaosOperator>(injector.get());
+    observer = std::make_unique<SegmentObserver>(patient, injector.get(), &report, segment);
+    const std::int64_t period_ns = std::int64_t(std::llround(period_s * 1e9));
+    so.hooks.wrap_frames = [&](drivers::FrameSource* inner) -> drivers::FrameSource* {
+      frames = std::make_unique<chaos::ChaosFrameSource>(inner, injector.get(), period_ns);
+      return frames.get();
+    };
+    so.hooks.wrap_actuator = [&](drivers::Actuator* inner) -> drivers::Actuator* {
+      actuator = std::make_unique<chaos::ChaosActuator>(inner, injector.get());
+      return actuator.get();
+    };
+    so.hooks.operator_input = operator_input.get();
+    so.hooks.observer = observer.get();
+    auto session = LoopSession::create(patient, so, pool);
+    if (!session.ok()) return session.status().with_context("chaos segment " + std::to_string(segment));
+    if (modbus) {
+      injector->set_modbus_server((*session)->modbus_couch_server());
+      ++report.modbus_segments;
+    }
+    if (can) {
+      injector->set_can_robot((*session)->virtual_robot());
+      ++report.can_segments;
+    }
+    observer->set_session(session->get());
+    const std::filesystem::path journal = (*session)->journal_path();
+    bool threw = false;
+    try {
+      auto summary = (*session)->run();
+      if (!summary.ok()) add_violation(&report, segment, -1, "the loop failed: " + summary.status().message());
+    } catch (const std::exception& e) {
+      threw = true;
+      if (!injector->threw) add_violation(&report, segment, observer->cycles_seen(), std::string("the loop threw: ") + e.what());
+    }
+    if (threw && !(injector->held_after_throw && injector->beam_dropped_after_throw))
+      add_violation(&report, segment, observer->cycles_seen(),
+                    "after an exception the actuator was not held or the beam not dropped");
+    session->reset();  // closes the journal (drains it) before it is read
+    for (std::size_t k = 0; k < kChaosFaultKinds; ++k) report.injected[k] += injector->injected[k];
+    std::int64_t shifts_met = 0;
+    for (std::size_t i = scene_shifts; i < shifts.size(); ++i)
+      if (shifts[i].time_s < double(observer->cycles_seen()) * period_s) ++shifts_met;
+    report.injected[std::size_t(ChaosFault::kPatientShift)] += shifts_met;
+    check_journal(journal, observer->cycles_seen(), injector->disk_full_injected(), segment, &report);
+    chaos::set_disk_full(false);
+    report.cycles += observer->cycles_seen();
+    ++report.segments;
+    // A segment cut short (an exception, a full disk) still counts its cycles; the next starts.
+    done += std::max<std::int64_t>(observer->cycles_seen(), 1);
+    if (options.progress) options.progress(done, options.cycles);
+  }
+  report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  return report;
+}
+
+}  // namespace lftrack::host
