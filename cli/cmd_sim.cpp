@@ -312,7 +312,14 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
     chaos = app->add_option("--chaos", o->chaos_seed,
                             "Chaos soak: faults from the whole catalogue at random moments drawn from SEED, the "
                             "safety invariants checked every cycle, in segments on a simulated clock (--cycles: "
-                            "in all, default 20000); exit 1 on any violation");
+                            "in all, default 20000); exit 1 on any violation")
+                ->check(CLI::Validator(
+                    [](const std::string& text) {
+                      const bool digits = !text.empty() && text.size() <= 18 &&
+                                          text.find_first_not_of("0123456789") == std::string::npos;
+                      return digits ? std::string() : "'" + text + "' is not a seed (a whole number, 0 to 18 digits)";
+                    },
+                    "SEED"));
     app->add_option("--chaos-rate", o->chaos.fault_rate, "Chaos: the chance of a fault per cycle")
         ->capture_default_str()
         ->check(finite_in(0, 0.5))

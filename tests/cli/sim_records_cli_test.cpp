@@ -190,5 +190,42 @@ TEST_F(SimRecords, AnOfflineRunTakesNoRealtimePriority) {
   EXPECT_EQ(j["realtime"].get<std::string>().rfind("not applied", 0), 0u) << j["realtime"];
 }
 
+TEST_F(SimRecords, TheChaosSoakRefusesAbsurdValuesAndNeverOverwritesAnEarlierSoak) {
+  std::string out;
+  const std::vector<std::vector<std::string>> usage_errors = {
+      {"--chaos", "-1"},          {"--chaos", "1e12"},       {"--chaos", "nan"},
+      {"--chaos", "1", "--chaos-rate", "nan"},               {"--chaos", "1", "--chaos-rate", "0.6"},
+      {"--chaos", "1", "--chaos-segment", "0"},              {"--chaos", "1", "--journal", "x.lfj"},
+      {"--chaos", "1", "--hil", "modbus"},                   {"--chaos-rate", "0.1"}};
+  for (const auto& bad : usage_errors) {
+    const Status s = sim(bad, &out, 3, dir_.path());
+    EXPECT_NE(s.message().find("status 512"), std::string::npos) << bad[1] << ": a usage error, exit 2: " << out;
+  }
+  EXPECT_TRUE(fs::is_empty(dir_.path())) << "nothing created by a refused soak";
+
+  const fs::path folder = dir_.path() / "soak";
+  const std::vector<std::string> soak = {"--chaos", "7", "--chaos-segment", "40", "--chaos-rate", "0.1",
+                                         "--chaos-out", folder.string(), "--json"};
+  ASSERT_TRUE(sim(soak, &out, 120).ok()) << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["violation_count"], 0) << j.dump(1);
+  EXPECT_GT(j["cycles"].get<int>(), 60);
+  EXPECT_GT(j["faults_injected_total"].get<int>(), 0);
+  EXPECT_GT(j["journal_records_checked"].get<int>(), 0);
+  const auto journals = [&] {
+    std::vector<fs::path> files;
+    for (const auto& e : fs::directory_iterator(folder)) files.push_back(e.path());
+    std::sort(files.begin(), files.end());
+    return files;
+  };
+  const std::vector<fs::path> first = journals();
+  ASSERT_GE(first.size(), 3u);
+  const std::string first_journal = contents(first[0]);
+  // The same soak again over the same folder: new journals beside the old ones, none replaced.
+  ASSERT_TRUE(sim(soak, &out, 120).ok()) << out;
+  EXPECT_GT(journals().size(), first.size());
+  EXPECT_EQ(contents(first[0]), first_journal);
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -19,8 +19,11 @@
 //     sends nothing and keeps the beam off in its cycle; a read-back fault ends its cycle in
 //     HOLD or FAULT with nothing sent; a failed command ends its cycle in HOLD or FAULT; a
 //     stalled cycle is recorded as an overrun, and the cycle after three overruns in a row sends
-//     nothing; after a full disk, once the loop reports the journal failed, nothing is sent and
-//     the beam stays off.
+//     nothing; once the loop reports the journal failed, nothing is sent and the beam stays off.
+// The soak (chaos_soak.cpp) adds what needs the wall clock or the segment: half a second after
+// the disk filled nothing is sent (whatever reason the gate gives first); a CAN fault holds
+// within 50 cycles and 2 s; an exception leaves the actuator held and the beam off; each
+// segment's journal holds one valid record per cycle, in order.
 
 #include <cstdint>
 #include <string>
