@@ -2,7 +2,10 @@
 // catalogue at random moments, the safety invariants checked every cycle. Exit 0 when no
 // invariant was violated, 1 when any was (each listed) or the soak could not run.
 
+#include <signal.h>
 #include <spdlog/spdlog.h>
+
+#include <atomic>
 
 #include <algorithm>
 #include <cstdio>
@@ -16,11 +19,17 @@ namespace lftrack::host::cli {
 
 namespace {
 
+std::atomic<bool> g_interrupt{false};
+
+extern "C" void on_chaos_interrupt(int) {
+  g_interrupt.store(true);
+}
+
 void print_report(const ChaosReport& r) {
-  std::printf("chaos soak, seed %llu: %lld cycles in %lld segments (%lld over Modbus, %lld over CAN), %.0f s\n",
+  std::printf("chaos soak, seed %llu: %lld cycles in %lld segments (%lld over Modbus, %lld over CAN), %.0f s%s\n",
               static_cast<unsigned long long>(r.seed), static_cast<long long>(r.cycles),
               static_cast<long long>(r.segments), static_cast<long long>(r.modbus_segments),
-              static_cast<long long>(r.can_segments), r.wall_s);
+              static_cast<long long>(r.can_segments), r.wall_s, r.interrupted ? ", interrupted" : "");
   std::int64_t total = 0;
   for (std::int64_t n : r.injected) total += n;
   std::printf("faults injected: %lld\n", static_cast<long long>(total));
@@ -30,12 +39,15 @@ void print_report(const ChaosReport& r) {
   for (std::size_t s = 0; s < r.states.size(); ++s)
     if (r.states[s] > 0)
       std::printf(" %s %lld", to_string(static_cast<TrackingState>(s)), static_cast<long long>(r.states[s]));
-  std::printf("\ncommands %lld, holds %lld, faults %lld, overruns %lld; operator: %lld resumes and %lld resets "
-              "accepted, %lld commands refused\n",
+  std::printf("\ncommands %lld, entries into HOLD %lld and FAULT %lld, overruns %lld; operator: %lld resumes and "
+              "%lld resets accepted, %lld commands refused\n",
               static_cast<long long>(r.commands), static_cast<long long>(r.holds), static_cast<long long>(r.faults),
               static_cast<long long>(r.overruns), static_cast<long long>(r.resumes_accepted),
               static_cast<long long>(r.resets_accepted), static_cast<long long>(r.operator_refused));
-  std::printf("journal records read back and checked: %lld\n", static_cast<long long>(r.journal_records));
+  std::printf("cycles checked %lld (a cycle that threw has no record); journal records read back and checked "
+              "%lld, in %s\n",
+              static_cast<long long>(r.cycles_checked), static_cast<long long>(r.journal_records),
+              r.journal_dir.string().c_str());
   std::printf("invariant violations: %lld\n", static_cast<long long>(r.violation_count));
   for (const ChaosViolation& v : r.violations)
     std::printf("  segment %lld, cycle %lld: %s\n", static_cast<long long>(v.segment),
@@ -52,8 +64,11 @@ Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options,
   ChaosOptions o = options;
   if (!json)
     o.progress = [](std::int64_t done, std::int64_t total) {
-      std::fprintf(stderr, "\rchaos: %lld of %lld cycles", static_cast<long long>(done), static_cast<long long>(total));
-      if (done >= total) std::fprintf(stderr, "\n");
+      if (total > 0)
+        std::fprintf(stderr, "\rchaos: %lld of %lld cycles", static_cast<long long>(done), static_cast<long long>(total));
+      else
+        std::fprintf(stderr, "\rchaos: %lld cycles (Ctrl-C ends the soak)", static_cast<long long>(done));
+      if (total > 0 && done >= total) std::fprintf(stderr, "\n");
     };
   spdlog::info("chaos soak on {}: {} cycles, seed {}, fault rate {} per cycle, journals in {}",
                prepared->scene.name, o.cycles, o.seed, o.fault_rate, o.journal_dir.string());
@@ -61,6 +76,13 @@ Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options,
   // only warnings and errors while the soak runs.
   const spdlog::level::level_enum level = spdlog::get_level();
   spdlog::set_level(std::max(level, spdlog::level::warn));
+  // Ctrl-C or SIGTERM ends the soak after the current cycle, with the report of what ran.
+  g_interrupt.store(false);
+  o.interrupt = &g_interrupt;
+  struct sigaction action {};
+  action.sa_handler = on_chaos_interrupt;
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
   auto report = run_chaos_soak(*prepared, o, &pool);
   spdlog::set_level(level);
   if (!report.ok()) return report.status();
@@ -70,6 +92,7 @@ Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options,
     print_report(*report);
   if (report->violation_count > 0)
     return failed_precondition("chaos soak: " + std::to_string(report->violation_count) + " invariant violations");
+  if (report->interrupted) return failed_precondition("chaos soak interrupted after " + std::to_string(report->cycles) + " cycles");
   return {};
 }
 

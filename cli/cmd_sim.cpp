@@ -312,7 +312,9 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
     chaos = app->add_option("--chaos", o->chaos_seed,
                             "Chaos soak: faults from the whole catalogue at random moments drawn from SEED, the "
                             "safety invariants checked every cycle, in segments on a simulated clock (--cycles: "
-                            "in all, default 20000); exit 1 on any violation")
+                            "in all, default 20000, 0 until Ctrl-C); exit 1 on any violation. The faults drawn "
+                            "follow from SEED; the states they lead to are not bit-for-bit reproducible (each "
+                            "registration has a wall-clock budget)")
                 ->check(CLI::Validator(
                     [](const std::string& text) {
                       const bool digits = !text.empty() && text.size() <= 18 &&
@@ -329,7 +331,9 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
         ->capture_default_str()
         ->check(CLI::Range(std::int64_t(10), std::int64_t(1000000)))
         ->needs(chaos);
-    app->add_option("--chaos-out", o->chaos.journal_dir, "Chaos: the segments' journals (default out/chaos)")
+    app->add_option("--chaos-out", o->chaos.journal_dir,
+                    "Chaos: the segments' journals go to a new folder DIR/chaos-SEED-N (default DIR out/chaos)")
+        ->check(CLI::Validator([](const std::string& t) { return t.empty() ? std::string("an empty folder name") : std::string(); }, "DIR"))
         ->needs(chaos);
   }
   if (mode != SimOptions::Mode::kReplay)
@@ -350,7 +354,7 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
       ->check(CLI::IsMember({"enforce", "ignore"}));
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
   if (chaos != nullptr)  // the soak makes its own devices, operator and journals
-    for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume"})
+    for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume", "--rt"})
       chaos->excludes(app->get_option(other));
   CLI::Option* cycles = app->get_option("--cycles");
   return [o, journal, chaos, cycles] {

@@ -528,7 +528,7 @@ void GigeFrameSource::reopen_loop() {
     if (!gone_.load()) continue;
     std::lock_guard lock(devices_);  // the cycle gets kDisconnected meanwhile
     if (stop_.load()) break;
-    if (reopen_disconnected().ok()) {
+    if (reopen_disconnected_locked().ok()) {
       gone_.store(false);
       ++reopens_;
     } else {
@@ -600,6 +600,13 @@ void GigeFrameSource::close() {
 }
 
 Status GigeFrameSource::reopen_disconnected() {
+  std::lock_guard lock(devices_);
+  const Status s = reopen_disconnected_locked();
+  if (s.ok()) gone_.store(false);
+  return s;
+}
+
+Status GigeFrameSource::reopen_disconnected_locked() {
   for (auto& d : detectors_)
     if (!d->is_open()) LFTRACK_RETURN_IF_ERROR(d->reopen());
   return {};

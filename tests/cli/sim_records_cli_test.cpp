@@ -196,7 +196,8 @@ TEST_F(SimRecords, TheChaosSoakRefusesAbsurdValuesAndNeverOverwritesAnEarlierSoa
       {"--chaos", "-1"},          {"--chaos", "1e12"},       {"--chaos", "nan"},
       {"--chaos", "1", "--chaos-rate", "nan"},               {"--chaos", "1", "--chaos-rate", "0.6"},
       {"--chaos", "1", "--chaos-segment", "0"},              {"--chaos", "1", "--journal", "x.lfj"},
-      {"--chaos", "1", "--hil", "modbus"},                   {"--chaos-rate", "0.1"}};
+      {"--chaos", "1", "--hil", "modbus"},                   {"--chaos-rate", "0.1"},
+      {"--chaos", "1", "--chaos-out", ""},                   {"--chaos", "1", "--rt", "enforce"}};
   for (const auto& bad : usage_errors) {
     const Status s = sim(bad, &out, 3, dir_.path());
     EXPECT_NE(s.message().find("status 512"), std::string::npos) << bad[1] << ": a usage error, exit 2: " << out;
@@ -212,18 +213,20 @@ TEST_F(SimRecords, TheChaosSoakRefusesAbsurdValuesAndNeverOverwritesAnEarlierSoa
   EXPECT_GT(j["cycles"].get<int>(), 60);
   EXPECT_GT(j["faults_injected_total"].get<int>(), 0);
   EXPECT_GT(j["journal_records_checked"].get<int>(), 0);
-  const auto journals = [&] {
+  EXPECT_EQ(j["journal_dir"], (folder / "chaos-7-1").string());
+  const auto journals = [&](const fs::path& run) {
     std::vector<fs::path> files;
-    for (const auto& e : fs::directory_iterator(folder)) files.push_back(e.path());
+    for (const auto& e : fs::directory_iterator(run)) files.push_back(e.path());
     std::sort(files.begin(), files.end());
     return files;
   };
-  const std::vector<fs::path> first = journals();
+  const std::vector<fs::path> first = journals(folder / "chaos-7-1");
   ASSERT_GE(first.size(), 3u);
   const std::string first_journal = contents(first[0]);
-  // The same soak again over the same folder: new journals beside the old ones, none replaced.
+  // The same soak again over the same folder: a folder of its own beside the first, which stays.
   ASSERT_TRUE(sim(soak, &out, 120).ok()) << out;
-  EXPECT_GT(journals().size(), first.size());
+  EXPECT_GE(journals(folder / "chaos-7-2").size(), 3u);
+  EXPECT_EQ(journals(folder / "chaos-7-1"), first);
   EXPECT_EQ(contents(first[0]), first_journal);
 }
 

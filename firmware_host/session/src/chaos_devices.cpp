@@ -57,26 +57,38 @@ void set_disk_full(bool full) {
   g_disk_full.store(full, std::memory_order_release);
 }
 
-Injector::Injector(std::uint64_t seed, double fault_rate, double period_s)
-    : random_(seed), side_random_(seed ^ 0x9E3779B97F4A7C15ull), fault_rate_(fault_rate), period_s_(period_s) {}
+Injector::Injector(std::uint64_t seed, double fault_rate, double period_s, std::int64_t segment_cycles,
+                   const SafetyLimits& limits)
+    : random_(seed),
+      side_random_(seed ^ 0x9E3779B97F4A7C15ull),
+      fault_rate_(fault_rate),
+      period_s_(period_s),
+      segment_cycles_(segment_cycles),
+      limits_(limits) {}
+
+void Injector::count(ChaosFault f) {
+  if (f == ChaosFault::kDiskFull) disk_full_wall_ = std::chrono::steady_clock::now();
+  ++injected[std::size_t(f)];
+}
 
 void Injector::inject_can(ChaosFault f) {
   using sim::RobotFault;
   RobotFault fault = RobotFault::kErrorFlood;
   int undo = -1;
-  std::int64_t undo_after = 0;
+  std::int64_t undo_after = 0;  // cycles, and at least `undo_after_s` of wall time: the driver's
+  double undo_after_s = 0;      // heartbeat timeout (0.3 s) runs on the real clock
   switch (f) {
     case ChaosFault::kCanBusOff:
-      fault = RobotFault::kBusOff, undo = int(RobotFault::kControllerRestarted), undo_after = 5;
+      fault = RobotFault::kBusOff, undo = int(RobotFault::kControllerRestarted), undo_after = 5, undo_after_s = 0.5;
       break;
     case ChaosFault::kCanErrorPassive:
-      fault = RobotFault::kErrorPassive, undo = int(RobotFault::kErrorActive), undo_after = 5;
+      fault = RobotFault::kErrorPassive, undo = int(RobotFault::kErrorActive), undo_after = 5, undo_after_s = 0.5;
       break;
     case ChaosFault::kCanRobotRestart:
       fault = RobotFault::kRobotRestart;
       break;
     case ChaosFault::kCanHeartbeatLoss:
-      fault = RobotFault::kStopHeartbeat, undo = int(RobotFault::kResumeHeartbeat), undo_after = 20;
+      fault = RobotFault::kStopHeartbeat, undo = int(RobotFault::kResumeHeartbeat), undo_after = 20, undo_after_s = 1.0;
       break;
     default:
       break;
@@ -85,6 +97,8 @@ void Injector::inject_can(ChaosFault f) {
   if (undo >= 0) {
     can_followup_ = undo;
     can_followup_at_ = cycle_ + undo_after;
+    can_followup_wall_ = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                               std::chrono::duration<double>(undo_after_s));
   }
   if (!can_pending_) can_pending_ = PendingCanFault{f, cycle_, std::chrono::steady_clock::now()};
 }
@@ -97,7 +111,8 @@ void Injector::begin_cycle(std::int64_t cycle) {
   calls.beam_permit = permit;  // the device keeps its permit until told otherwise
   action = OperatorAction{};
   drawn_ = ChaosFault::kCount;
-  if (can_followup_ >= 0 && cycle >= can_followup_at_) {  // the bus or heartbeat comes back
+  if (can_followup_ >= 0 && cycle >= can_followup_at_ &&
+      std::chrono::steady_clock::now() >= can_followup_wall_) {  // the bus or heartbeat comes back
     can_robot_->inject(static_cast<sim::RobotFault>(can_followup_));
     can_followup_ = -1;
   }
@@ -112,7 +127,9 @@ void Injector::begin_cycle(std::int64_t cycle) {
     return;
   }
   stall_ns_ = 0;
-  if (fault_draw >= fault_rate_) return;
+  // The loop asks for the next exposure after its last cycle too: no fault for a cycle that
+  // will not run.
+  if (fault_draw >= fault_rate_ || cycle >= segment_cycles_) return;
   // Every kind that fits this segment: shifts are drawn into the patient's motion beforehand,
   // the Modbus server's faults only where there is one, a full disk once.
   std::vector<ChaosFault> kinds;
@@ -130,49 +147,40 @@ void Injector::begin_cycle(std::int64_t cycle) {
     stall_ns_ = std::int64_t((0.2 + 2.3 * parameter) * period_s_ * 1e9);
     injection.stalled = true;
     injection.what = to_string(f);
-    ++injected[std::size_t(f)];
+    count(f);
   } else if (f == ChaosFault::kDiskFull) {
     disk_full_at_ = cycle;
-    disk_full_wall_ = std::chrono::steady_clock::now();
     set_disk_full(true);
-    ++injected[std::size_t(f)];
+    count(f);
   } else if (is_modbus_fault(f)) {
     const sim::CouchServerFault server_fault = f == ChaosFault::kModbusNoReply ? sim::CouchServerFault::kNoReply
                                                : f == ChaosFault::kModbusException4
                                                    ? sim::CouchServerFault::kException4
                                                    : sim::CouchServerFault::kDropConnection;
     modbus_server_->inject(server_fault, 1, sim::CouchRequestKind::kAny);
-    ++injected[std::size_t(f)];
+    count(f);
   } else if (is_can_fault(f)) {
     inject_can(f);
-    ++injected[std::size_t(f)];
+    count(f);
   } else {
-    drawn_ = f;  // taken, and counted, by the wrapper it is for
+    drawn_ = f;  // taken by the wrapper it is for, and counted where it applies it
   }
 }
 
+ChaosFault Injector::take_if(bool (*of_kind)(ChaosFault)) {
+  if (!of_kind(drawn_)) return ChaosFault::kCount;
+  const ChaosFault f = drawn_;
+  drawn_ = ChaosFault::kCount;
+  return f;
+}
 ChaosFault Injector::take_frame_fault() {
-  if (!is_frame_fault(drawn_)) return ChaosFault::kCount;
-  const ChaosFault f = drawn_;
-  drawn_ = ChaosFault::kCount;
-  ++injected[std::size_t(f)];
-  return f;
+  return take_if(&is_frame_fault);
 }
-
 ChaosFault Injector::take_readback_fault() {
-  if (!is_readback_fault(drawn_)) return ChaosFault::kCount;
-  const ChaosFault f = drawn_;
-  drawn_ = ChaosFault::kCount;
-  ++injected[std::size_t(f)];
-  return f;
+  return take_if(&is_readback_fault);
 }
-
 ChaosFault Injector::take_command_fault() {
-  if (!is_command_fault(drawn_)) return ChaosFault::kCount;
-  const ChaosFault f = drawn_;
-  drawn_ = ChaosFault::kCount;
-  ++injected[std::size_t(f)];
-  return f;
+  return take_if(&is_command_fault);
 }
 
 void ChaosFrameSource::request_exposure(std::int64_t exposure_time_ns) {
@@ -183,7 +191,10 @@ void ChaosFrameSource::request_exposure(std::int64_t exposure_time_ns) {
 
 drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline deadline) {
   const ChaosFault fault = injector_->take_frame_fault();
-  if (fault == ChaosFault::kFrameThrows) throw_into_loop(injector_, "chaos: the frame source threw");
+  if (fault == ChaosFault::kFrameThrows) {
+    injector_->count(fault);
+    throw_into_loop(injector_, "chaos: the frame source threw");
+  }
   // The simulator's pair is always collected, so that its renderer stays in step.
   const drivers::DeviceStatus status = inner_->acquire(pair, deadline);
   if (status != drivers::DeviceStatus::kOk) {
@@ -192,23 +203,29 @@ drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, driver
     return status;
   }
   if (fault == ChaosFault::kCount) return status;
+  injector_->count(fault);
   injector_->injection.frame_fault = true;
   injector_->injection.what = to_string(fault);
   std::vector<drivers::Frame>& frames = pair->frames;
+  const SafetyLimits& limits = injector_->limits();
   switch (fault) {
     case ChaosFault::kFrameLost:
       return drivers::DeviceStatus::kTimeout;
-    case ChaosFault::kFrameLate:  // exposed 180 ms before the cycle asked: older than max_frame_age
-      for (drivers::Frame& f : frames) f.timestamp_ns -= 180'000'000;
+    case ChaosFault::kFrameLate: {  // exposed well before the cycle asked: older than max_frame_age
+      const auto late_ns = std::int64_t((1.2 * limits.max_frame_age_ms + 30) * 1e6);
+      for (drivers::Frame& f : frames) f.timestamp_ns -= late_ns;
       break;
-    case ChaosFault::kFrameStale:  // an exposure of a second ago delivered again
+    }
+    case ChaosFault::kFrameStale: {  // an exposure of a second (and the age limit) ago delivered again
+      const auto stale_ns = std::int64_t((1000 + limits.max_frame_age_ms) * 1e6);
       for (drivers::Frame& f : frames) {
-        f.timestamp_ns -= 1'000'000'000;
+        f.timestamp_ns -= stale_ns;
         f.sequence -= 10;
       }
       break;
-    case ChaosFault::kFrameSkewed:
-      if (frames.size() > 1) frames[1].timestamp_ns += 50'000'000;
+    }
+    case ChaosFault::kFrameSkewed:  // views exposed further apart than a pair may be
+      if (frames.size() > 1) frames[1].timestamp_ns += std::int64_t((2.5 * limits.max_pair_skew_ms + 5) * 1e6);
       break;
     case ChaosFault::kFrameBlank:
       for (drivers::Frame& f : frames) std::fill(f.pixels.pixels().begin(), f.pixels.pixels().end(), 0);
@@ -236,6 +253,7 @@ drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correctio
   ActuatorCalls& calls = injector_->calls;
   if (!correction.allFinite()) calls.non_finite = true;
   const ChaosFault fault = injector_->take_command_fault();
+  if (fault != ChaosFault::kCount) injector_->count(fault);
   if (fault == ChaosFault::kCommandThrows) throw_into_loop(injector_, "chaos: the actuator's command threw");
   if (fault != ChaosFault::kCount) {
     // The device may or may not have taken it before the line failed.
@@ -265,7 +283,10 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
   const bool first = readback_cycle_ != injector_->cycle();
   readback_cycle_ = injector_->cycle();
   const ChaosFault fault = first ? injector_->take_readback_fault() : ChaosFault::kCount;
-  if (fault == ChaosFault::kReadbackThrows) throw_into_loop(injector_, "chaos: the actuator's read-back threw");
+  if (fault == ChaosFault::kReadbackThrows) {
+    injector_->count(fault);
+    throw_into_loop(injector_, "chaos: the actuator's read-back threw");
+  }
   const drivers::DeviceStatus status = inner_->readback(state, deadline);
   if (status == drivers::DeviceStatus::kOk && state->target.allFinite()) known_target_ = state->target;
   if (first && status != drivers::DeviceStatus::kOk) {
@@ -273,6 +294,7 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
     injector_->injection.what = "the actuator's own read-back failure";
   }
   if (fault == ChaosFault::kCount || status != drivers::DeviceStatus::kOk) return status;
+  injector_->count(fault);
   injector_->injection.readback_fault = true;
   injector_->injection.what = to_string(fault);
   std::mt19937_64& random = injector_->random();
@@ -284,12 +306,12 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
     case ChaosFault::kReadbackFaultFlag:
       state->fault = true;
       break;
-    case ChaosFault::kReadbackMismatch: {
-      Eigen::Vector3d offset(uniform(random, -1, 1), uniform(random, -1, 1), uniform(random, -1, 1));
-      offset = offset.normalized() * uniform(random, 1.0, 5.0);
-      if (!offset.allFinite()) offset = Eigen::Vector3d(3, 0, 0);
-      state->position.head<3>() += offset;
-      state->target.head<3>() += offset;
+    case ChaosFault::kReadbackMismatch: {  // along one axis, 2 to 10 times the tolerance
+      const int axis = int(random() % 3);
+      const double sign = random() % 2 == 0 ? 1.0 : -1.0;
+      const double offset = sign * uniform(random, 2.0, 10.0) * injector_->limits().readback_tolerance_mm;
+      state->position[axis] += offset;
+      state->target[axis] += offset;
       break;
     }
     case ChaosFault::kReadbackNonFinite:

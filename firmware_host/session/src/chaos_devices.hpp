@@ -13,6 +13,7 @@
 #include "lftrack/host/chaos_invariants.hpp"
 #include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/loop/operator_input.hpp"
+#include "lftrack/loop/safety_gate.hpp"
 
 #include <chrono>
 #include <optional>
@@ -32,7 +33,15 @@ void set_disk_full(bool full);
 // cycle (begin_cycle, from request_exposure); the wrappers take the fault of their kind once.
 class Injector {
  public:
-  Injector(std::uint64_t seed, double fault_rate, double period_s);
+  // `segment_cycles`: the cycles the segment will run (none is drawn for a later one); the
+  // fault sizes (late, skewed, mismatched) are drawn beyond `limits`.
+  Injector(std::uint64_t seed, double fault_rate, double period_s, std::int64_t segment_cycles,
+           const SafetyLimits& limits);
+  const SafetyLimits& limits() const { return limits_; }
+  // No fault is drawn for any later cycle (the segment is being stopped).
+  void end_draws() { segment_cycles_ = 0; }
+  // A fault that met the loop: counted in `injected`.
+  void count(ChaosFault fault);
   // A Modbus segment's server or a CAN segment's robot (their faults become kinds to draw); set
   // before the first cycle.
   void set_modbus_server(sim::ModbusCouchServer* server) { modbus_server_ = server; }
@@ -71,11 +80,15 @@ class Injector {
   double fault_rate_;
   double period_s_;
   void inject_can(ChaosFault fault);
+  ChaosFault take_if(bool (*of_kind)(ChaosFault));
   sim::ModbusCouchServer* modbus_server_ = nullptr;
   sim::VirtualRobot* can_robot_ = nullptr;
   std::optional<PendingCanFault> can_pending_;
   int can_followup_ = -1;               // a sim::RobotFault that undoes the last one, or -1
-  std::int64_t can_followup_at_ = -1;   // at this cycle
+  std::int64_t can_followup_at_ = -1;   // at this cycle, and not before this wall time
+  std::chrono::steady_clock::time_point can_followup_wall_{};
+  std::int64_t segment_cycles_;
+  SafetyLimits limits_;
   std::int64_t cycle_ = -1;
   ChaosFault drawn_ = ChaosFault::kCount;
   int stall_cycles_left_ = 0;

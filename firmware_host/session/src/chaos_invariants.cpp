@@ -51,7 +51,8 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
       fail("an accepted " + std::string(resumed ? "resume" : "reset") + " named hold " +
            std::to_string(action.named_id) + ", the loop was in hold " + std::to_string(hold_id_));
     if (double(r.cycle - hold_since_) * period_s_ < kMinHoldBeforeResumeS - 1e-9)
-      fail("a resume acted on " + std::to_string(r.cycle - hold_since_) + " cycles into its HOLD");
+      fail(std::string(resumed ? "a resume" : "a reset") + " acted on " + std::to_string(r.cycle - hold_since_) +
+           " cycles into its " + (resumed ? "HOLD" : "FAULT"));
     needs_operator_ = false;
     if (resumed) step_approved_ = true;
   }

@@ -2,7 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <exception>
 #include <memory>
@@ -54,8 +56,8 @@ const char* to_string(ChaosFault fault) {
 
 Status check_chaos_options(const ChaosOptions& o) {
   constexpr std::int64_t kMaxCycles = 1'000'000'000;
-  if (o.cycles < 1 || o.cycles > kMaxCycles)
-    return invalid_argument("chaos: cycles must be 1 to " + std::to_string(kMaxCycles));
+  if (o.cycles < 0 || o.cycles > kMaxCycles)
+    return invalid_argument("chaos: cycles must be 0 (until interrupted) to " + std::to_string(kMaxCycles));
   if (o.segment_cycles < 10 || o.segment_cycles > 1'000'000)
     return invalid_argument("chaos: a segment must be 10 to 1000000 cycles");
   if (!std::isfinite(o.fault_rate) || o.fault_rate < 0 || o.fault_rate > 0.5)
@@ -71,6 +73,9 @@ nlohmann::json to_json(const ChaosReport& r) {
   nlohmann::json j;
   j["seed"] = r.seed;
   j["cycles"] = r.cycles;
+  j["cycles_checked"] = r.cycles_checked;
+  j["interrupted"] = r.interrupted;
+  j["journal_dir"] = r.journal_dir.string();
   j["segments"] = r.segments;
   j["modbus_segments"] = r.modbus_segments;
   j["can_segments"] = r.can_segments;
@@ -105,24 +110,27 @@ nlohmann::json to_json(const ChaosReport& r) {
 namespace {
 
 constexpr std::size_t kViolationsKept = 100;
-constexpr std::chrono::milliseconds kDiskFullGrace{500};  // the journal writer's latency, wall time
-constexpr std::int64_t kCyclesAfterDiskFull = 30;      // then the segment's safe state is final
-constexpr std::int64_t kCyclesToHoldOnCan = 50;        // and 2 s: a heartbeat times out on the real clock
+constexpr std::int64_t kCyclesAfterDiskFull = 30;  // after the writer failed: the segment's safe state is final
+constexpr std::int64_t kCyclesToHoldOnCan = 50;    // and kWallToHoldOnCan: heartbeats time out on the real clock
+constexpr std::chrono::seconds kWallToHoldOnCan{3};
+constexpr std::chrono::seconds kWriterMustFailWithin{10};  // a full disk the journal writer never meets
 
 void add_violation(ChaosReport* report, std::int64_t segment, std::int64_t cycle, std::string what) {
   ++report->violation_count;
   if (report->violations.size() < kViolationsKept) report->violations.push_back({segment, cycle, std::move(what)});
 }
 
-// Watches one segment's cycles: the invariants, the tallies, and the end of a segment whose
-// disk is full.
+// Watches one segment's cycles: the invariants, the tallies, a CAN fault's HOLD, the end of a
+// segment whose disk is full, and the operator's interrupt.
 class SegmentObserver final : public CycleObserver {
  public:
-  SegmentObserver(const PreparedScene& scene, chaos::Injector* injector, ChaosReport* report, std::int64_t segment)
+  SegmentObserver(const PreparedScene& scene, chaos::Injector* injector, ChaosReport* report, std::int64_t segment,
+                  const std::atomic<bool>* interrupt)
       : checker_(scene.scene.safety, 1e-3 * scene.scene.loop.period_ms),
         injector_(injector),
         report_(report),
-        segment_(segment) {}
+        segment_(segment),
+        interrupt_(interrupt) {}
   void set_session(LoopSession* session) { session_ = session; }
   std::int64_t cycles_seen() const { return cycles_; }
 
@@ -136,6 +144,14 @@ class SegmentObserver final : public CycleObserver {
     checker_.check(r, injector_->calls, injector_->injection, injector_->action, &violations_);
     for (std::string& v : violations_) add_violation(report_, segment_, std::int64_t(r.cycle), std::move(v));
     ++cycles_;
+    tally(r);
+    check_can_fault(r);
+    check_full_disk(r);
+    if (interrupt_ != nullptr && interrupt_->load(std::memory_order_relaxed)) stop();
+  }
+
+ private:
+  void tally(const JournalRecord& r) {
     if (r.state < report_->states.size()) ++report_->states[r.state];
     report_->commands += r.command_sent;
     if (r.state != r.previous_state && r.state == std::uint8_t(TrackingState::kHold)) ++report_->holds;
@@ -144,46 +160,88 @@ class SegmentObserver final : public CycleObserver {
     report_->operator_refused += r.operator_refused;
     if (r.operator_command == 1 + int(OperatorCommand::kResume)) ++report_->resumes_accepted;
     if (r.operator_command == 1 + int(OperatorCommand::kReset)) ++report_->resets_accepted;
-    // A CAN fault reaches the loop through the driver (a read-back or command that fails, a
-    // heartbeat that times out on the real clock): HOLD or FAULT within 50 cycles and 2 s.
-    if (const auto since = injector_->can_fault_pending()) {
-      const bool held = r.state == std::uint8_t(TrackingState::kHold) || r.state == std::uint8_t(TrackingState::kFault);
-      if (held) {
-        injector_->clear_can_fault();
-      } else if (std::int64_t(r.cycle) - since->cycle > kCyclesToHoldOnCan &&
-                 std::chrono::steady_clock::now() - since->wall > std::chrono::seconds(2)) {
-        add_violation(report_, segment_, std::int64_t(r.cycle),
-                      std::string("no HOLD after ") + to_string(since->fault));
-        injector_->clear_can_fault();
-      }
-    }
-    // A full disk: the writer thread fails on its next write, within milliseconds; the loop
-    // must see it (the gate's "journal write failed", which a higher-precedence hold such as an
-    // actuator fault may stand in front of) and from then on send nothing and keep the beam off.
-    // On the simulated clock cycles run faster than the writer's wall-clock latency, so the
-    // grace is wall time. Then the segment's safe state is final and it ends.
-    if (injector_->disk_full_injected()) {
-      const auto since = std::chrono::steady_clock::now() - injector_->disk_full_wall();
-      if (checker_.journal_failed() || since > kDiskFullGrace) {
-        if (r.command_sent != 0 || r.beam_permit != 0)
-          add_violation(report_, segment_, std::int64_t(r.cycle),
-                        std::string(r.command_sent != 0 ? "sent a command" : "armed the beam") +
-                            " after the disk filled (cycle " + std::to_string(injector_->disk_full_at()) + ")");
-        if (++cycles_after_journal_failed_ >= kCyclesAfterDiskFull && session_ != nullptr) session_->request_stop();
-      }
+  }
+
+  // A CAN fault reaches the loop through the driver (a read-back or command that fails, a
+  // heartbeat that times out on the real clock; each lasts at least half a second of wall
+  // time): a HOLD or FAULT for an actuator fault within 50 cycles and 3 s.
+  void check_can_fault(const JournalRecord& r) {
+    const auto& pending = injector_->can_fault_pending();
+    if (!pending) return;
+    const bool held = r.state == std::uint8_t(TrackingState::kHold) || r.state == std::uint8_t(TrackingState::kFault);
+    if (held && r.gate_reason == std::uint8_t(GateReason::kActuatorFault)) {
+      injector_->clear_can_fault();
+    } else if (std::int64_t(r.cycle) - pending->cycle > kCyclesToHoldOnCan &&
+               std::chrono::steady_clock::now() - pending->wall > kWallToHoldOnCan) {
+      add_violation(report_, segment_, std::int64_t(r.cycle),
+                    std::string("no HOLD for an actuator fault after ") + to_string(pending->fault));
+      injector_->clear_can_fault();
     }
   }
 
- private:
+  // A full disk: the journal writer fails at its next write. From the cycle after the session
+  // reports that failure, nothing may be sent and the beam must stay off (whatever reason the
+  // gate gives first: an actuator fault stands before "journal write failed"). Then the
+  // segment's safe state is final and it ends.
+  void check_full_disk(const JournalRecord& r) {
+    if (!injector_->disk_full_injected() || session_ == nullptr) return;
+    if (writer_failed_) {
+      if (r.command_sent != 0 || r.beam_permit != 0)
+        add_violation(report_, segment_, std::int64_t(r.cycle),
+                      std::string(r.command_sent != 0 ? "sent a command" : "armed the beam") +
+                          " after the journal writer failed on a full disk");
+      if (++cycles_after_writer_failed_ >= kCyclesAfterDiskFull) stop();
+    } else if (session_->journal_failed()) {
+      writer_failed_ = true;
+    } else if (std::chrono::steady_clock::now() - injector_->disk_full_wall() > kWriterMustFailWithin) {
+      add_violation(report_, segment_, std::int64_t(r.cycle), "the journal writer never met the full disk");
+      stop();
+    }
+  }
+
+  void stop() {
+    injector_->end_draws();
+    if (session_ != nullptr) session_->request_stop();
+  }
+
   InvariantChecker checker_;
   chaos::Injector* injector_;
   ChaosReport* report_;
   std::int64_t segment_;
+  const std::atomic<bool>* interrupt_;
   LoopSession* session_ = nullptr;
   std::vector<std::string> violations_;
   std::int64_t cycles_ = 0;
-  std::int64_t cycles_after_journal_failed_ = 0;
+  bool writer_failed_ = false;
+  std::int64_t cycles_after_writer_failed_ = 0;
 };
+
+// The scene must be one the soak can drive: a couch or robot (its simulated twin moves the
+// patient, and the Modbus and CAN segments need one) on the room's own axes (a calibrated couch
+// would put the wrapper's commands in another frame than the journal's).
+Status check_chaos_scene(const PreparedScene& p) {
+  const ActuatorSpec& a = p.scene.actuator;
+  if (a.type == "none")
+    return invalid_argument("chaos: the scene has no actuator (actuator.type none); the soak needs a couch or robot");
+  if (a.mounting || a.calibration)
+    return invalid_argument("chaos: the scene's couch has a mounting or calibration; the soak checks commands in the "
+                            "room's axes and needs a couch on them");
+  return {};
+}
+
+// A folder of this soak's own under `parent`: chaos-SEED-1, or the next number free (a second
+// soak over the first one's folder never mixes with it).
+Result<std::filesystem::path> claim_run_folder(const std::filesystem::path& parent, std::uint64_t seed) {
+  std::error_code ec;
+  std::filesystem::create_directories(parent, ec);
+  if (ec) return io_error("chaos: cannot create " + parent.string() + ": " + ec.message());
+  for (int k = 1; k < 10000; ++k) {
+    const std::filesystem::path run = parent / ("chaos-" + std::to_string(seed) + "-" + std::to_string(k));
+    if (std::filesystem::create_directory(run, ec)) return run;
+    if (ec) return io_error("chaos: cannot create " + run.string() + ": " + ec.message());
+  }
+  return io_error("chaos: 9999 soaks of seed " + std::to_string(seed) + " in " + parent.string() + " already");
+}
 
 // Sudden shifts of the patient, drawn for a segment of `cycles`: at any cycle with the chance of
 // one fault kind, 1 to 8 mm in a random direction, each undone by a later one (the patient moves
@@ -242,16 +300,20 @@ void check_journal(const std::filesystem::path& path, std::int64_t cycles_seen, 
 Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOptions& options,
                                    tracking::ThreadPool* pool) {
   LFTRACK_RETURN_IF_ERROR(check_chaos_options(options));
-  std::error_code ec;
-  std::filesystem::create_directories(options.journal_dir, ec);
-  if (ec) return io_error("chaos: cannot create " + options.journal_dir.string() + ": " + ec.message());
+  LFTRACK_RETURN_IF_ERROR(check_chaos_scene(scene));
+  auto run_folder = claim_run_folder(options.journal_dir, options.seed);
+  if (!run_folder.ok()) return run_folder.status();
   const auto wall_start = std::chrono::steady_clock::now();
   const double period_s = 1e-3 * scene.scene.loop.period_ms;
+  const std::int64_t period_ns = std::int64_t(std::llround(period_s * 1e9));
   ChaosReport report;
   report.seed = options.seed;
+  report.journal_dir = *run_folder;
   std::int64_t done = 0;
-  for (std::int64_t segment = 0; done < options.cycles; ++segment) {
-    const std::int64_t cycles = std::min(options.segment_cycles, options.cycles - done);
+  const auto interrupted = [&] { return options.interrupt != nullptr && options.interrupt->load(); };
+  for (std::int64_t segment = 0; (options.cycles == 0 || done < options.cycles) && !interrupted(); ++segment) {
+    const std::int64_t cycles =
+        options.cycles == 0 ? options.segment_cycles : std::min(options.segment_cycles, options.cycles - done);
     const bool modbus = options.hil_segments && segment % 3 == 2;
     const bool can = options.hil_segments && segment % 3 == 1;
     std::mt19937_64 segment_random(options.seed * 1'000'003 + std::uint64_t(segment));
@@ -265,23 +327,21 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
     so.cycles = cycles;
     so.simulated_clock = true;
     so.light_field_dir = options.light_field_dir;
-    so.journal = options.journal_dir / ("chaos-" + std::to_string(options.seed) + "-" + std::to_string(segment) + ".lfj");
-    so.journal_options.add_suffix = true;  // a second soak over the first one's folder keeps both
+    char name[32];
+    std::snprintf(name, sizeof name, "segment-%06lld.lfj", static_cast<long long>(segment));
+    so.journal = *run_folder / name;
     so.journal_options.write_call = &chaos::write_or_disk_full;
     so.hil = modbus ? HilProtocol::kModbus : can ? HilProtocol::kCan : HilProtocol::kNone;
     chaos::set_disk_full(false);
 
-    // The injector needs the Modbus server, which the session creates: the wrappers are made
-    // when the session asks for them, and the injector then.
-    std::unique_ptr<chaos::Injector> injector;
+    // The wrappers are made when the session asks for them (it builds the devices they wrap);
+    // everything here is declared before the session, so it outlives it.
+    auto injector = std::make_unique<chaos::Injector>(segment_random(), options.fault_rate, period_s, cycles,
+                                                      scene.scene.safety);
+    auto operator_input = std::make_unique<chaos::ChaosOperator>(injector.get());
+    auto observer = std::make_unique<SegmentObserver>(patient, injector.get(), &report, segment, options.interrupt);
     std::unique_ptr<chaos::ChaosFrameSource> frames;
     std::unique_ptr<chaos::ChaosActuator> actuator;
-    std::unique_ptr<chaos::ChaosOperator> operator_input;
-    std::unique_ptr<SegmentObserver> observer;
-    injector = std::make_unique<chaos::Injector>(segment_random(), options.fault_rate, period_s);
-    operator_input = std::make_unique<chaos::ChaosOperator>(injector.get());
-    observer = std::make_unique<SegmentObserver>(patient, injector.get(), &report, segment);
-    const std::int64_t period_ns = std::int64_t(std::llround(period_s * 1e9));
     so.hooks.wrap_frames = [&](drivers::FrameSource* inner) -> drivers::FrameSource* {
       frames = std::make_unique<chaos::ChaosFrameSource>(inner, injector.get(), period_ns);
       return frames.get();
@@ -310,25 +370,29 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
       if (!summary.ok()) add_violation(&report, segment, -1, "the loop failed: " + summary.status().message());
     } catch (const std::exception& e) {
       threw = true;
-      if (!injector->threw) add_violation(&report, segment, observer->cycles_seen(), std::string("the loop threw: ") + e.what());
+      if (!injector->threw)
+        add_violation(&report, segment, observer->cycles_seen(), std::string("the loop threw: ") + e.what());
     }
     if (threw && !(injector->held_after_throw && injector->beam_dropped_after_throw))
       add_violation(&report, segment, observer->cycles_seen(),
                     "after an exception the actuator was not held or the beam not dropped");
     session->reset();  // closes the journal (drains it) before it is read
     for (std::size_t k = 0; k < kChaosFaultKinds; ++k) report.injected[k] += injector->injected[k];
-    std::int64_t shifts_met = 0;
-    for (std::size_t i = scene_shifts; i < shifts.size(); ++i)
-      if (shifts[i].time_s < double(observer->cycles_seen()) * period_s) ++shifts_met;
-    report.injected[std::size_t(ChaosFault::kPatientShift)] += shifts_met;
+    // The shifts alternate: one displaces the patient, the next brings them back.
+    for (std::size_t i = scene_shifts; i < shifts.size(); i += 2)
+      if (shifts[i].time_s < double(observer->cycles_seen()) * period_s)
+        ++report.injected[std::size_t(ChaosFault::kPatientShift)];
     check_journal(journal, observer->cycles_seen(), injector->disk_full_injected(), segment, &report);
     chaos::set_disk_full(false);
-    report.cycles += observer->cycles_seen();
+    // The cycle that threw ran too, up to the throw; it has no record.
+    const std::int64_t cycles_run = observer->cycles_seen() + (threw ? 1 : 0);
+    report.cycles += cycles_run;
+    report.cycles_checked += observer->cycles_seen();
     ++report.segments;
-    // A segment cut short (an exception, a full disk) still counts its cycles; the next starts.
-    done += std::max<std::int64_t>(observer->cycles_seen(), 1);
+    done += std::max<std::int64_t>(cycles_run, 1);
     if (options.progress) options.progress(done, options.cycles);
   }
+  report.interrupted = interrupted();
   report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   return report;
 }

@@ -455,6 +455,9 @@ sim::ModbusCouchServer* LoopSession::modbus_couch_server() {
 std::filesystem::path LoopSession::journal_path() const {
   return parts_->journal ? parts_->journal->path() : std::filesystem::path();
 }
+bool LoopSession::journal_failed() const {
+  return parts_->journal != nullptr && parts_->journal->failed();
+}
 const drivers::CanRobot* LoopSession::can_robot() const {
   const drivers::Actuator* a = parts_->device_actuator ? parts_->device_actuator.get() : parts_->actuator.get();
   return dynamic_cast<const drivers::CanRobot*>(a);

@@ -188,7 +188,10 @@ class GigeFrameSource final : public FrameSource {
   void request_exposure(std::int64_t exposure_time_ns) override;
   DeviceStatus acquire(FramePair* pair, Deadline deadline) override;
   void close() override;
-  // Outside the cycle: reopens any detector that was marked gone (or never opened).
+  // Outside the cycle: reopens any detector that was marked gone (or never opened). Takes the
+  // same lock as the source's own reopen thread, so the two never open one camera at once (two
+  // Aravis devices opening one camera together deadlocked inside Aravis: a test that called
+  // this while the thread was reopening hung in the thread's join).
   Status reopen_disconnected();
   std::size_t size() const { return detectors_.size(); }
   GigeDetector& detector(std::size_t i) { return *detectors_[i]; }
@@ -199,6 +202,7 @@ class GigeFrameSource final : public FrameSource {
 
  private:
   void reopen_loop();
+  Status reopen_disconnected_locked();  // with devices_ held
 
   std::vector<std::unique_ptr<GigeDetector>> detectors_;
   double max_skew_ms_;

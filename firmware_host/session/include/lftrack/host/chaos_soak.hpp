@@ -29,6 +29,7 @@
 // function pointer, JournalOptions::write_call, so its switch is process-wide).
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -85,14 +86,19 @@ const char* to_string(ChaosFault fault);
 
 struct ChaosOptions {
   std::uint64_t seed = 1;
-  std::int64_t cycles = 20000;         // simulated cycles in all, over every segment
+  std::int64_t cycles = 20000;         // simulated cycles in all, over every segment; 0: until interrupted
   std::int64_t segment_cycles = 2000;  // the longest segment (a treatment session), cycles
   double fault_rate = 0.03;            // per cycle: the chance that a fault is injected
   bool hil_segments = true;  // every third segment over Modbus, every third over CAN (else none)
-  std::filesystem::path journal_dir;   // each segment's journal, chaos-SEED-SEGMENT.lfj (required)
+  // The soak's journals go to a folder of its own in here, chaos-SEED-N (the first N free), one
+  // segment-NNNNNN.lfj each (required).
+  std::filesystem::path journal_dir;
   std::filesystem::path light_field_dir;
   // After each segment: cycles done so far, of options.cycles.
   std::function<void(std::int64_t done, std::int64_t total)> progress;
+  // Set (from a signal handler or another thread) to end the soak after the current cycle; the
+  // report then says it was interrupted.
+  const std::atomic<bool>* interrupt = nullptr;
 };
 // Finite values in range, a journal folder that can be written: checked before anything runs.
 Status check_chaos_options(const ChaosOptions& options);
@@ -105,12 +111,15 @@ struct ChaosViolation {
 
 struct ChaosReport {
   std::uint64_t seed = 0;
-  std::int64_t cycles = 0;    // cycles run and checked
+  std::int64_t cycles = 0;          // cycles run (a cycle that threw into the loop included)
+  std::int64_t cycles_checked = 0;  // cycles whose record the invariants were checked on
+  bool interrupted = false;
+  std::filesystem::path journal_dir;  // this soak's folder of journals
   std::int64_t segments = 0;  // of which over Modbus and over CAN:
   std::int64_t modbus_segments = 0, can_segments = 0;
   std::array<std::int64_t, kChaosFaultKinds> injected{};  // faults that met the loop, per kind
   std::array<std::int64_t, 5> states{};                   // cycles ending in each TrackingState
-  std::int64_t commands = 0, holds = 0, faults = 0, overruns = 0;
+  std::int64_t commands = 0, holds = 0, faults = 0, overruns = 0;  // holds, faults: entries into them
   std::int64_t resumes_accepted = 0, resets_accepted = 0, operator_refused = 0;
   std::int64_t journal_records = 0;  // read back from the segments' journals and checked
   std::int64_t violation_count = 0;

@@ -107,6 +107,7 @@ class LoopSession {
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
   const FrameArchive* archive() const;               // null without one
   std::filesystem::path journal_path() const;        // the journal written (empty: none)
+  bool journal_failed() const;                       // the journal's writer failed (disk full, I/O error)
   const drivers::ModbusCouch* modbus_couch() const;  // the Modbus couch driver (HIL or run); null otherwise
   sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
   const drivers::CanRobot* can_robot() const;        // the CAN robot driver (HIL or run); null otherwise
