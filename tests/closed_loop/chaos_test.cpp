@@ -108,7 +108,7 @@ TEST(ChaosOptions, AbsurdValuesAreRefusedBeforeAnythingRuns) {
     EXPECT_FALSE(check_chaos_options(o).ok()) << rate;
   }
   o.fault_rate = 0.03;
-  for (std::int64_t cycles : {std::int64_t(0), std::int64_t(-1), std::int64_t(1'000'000'000'000)}) {
+  for (std::int64_t cycles : {std::int64_t(-1), std::int64_t(1'000'000'000'000)}) {  // 0: until interrupted
     o.cycles = cycles;
     EXPECT_FALSE(check_chaos_options(o).ok()) << cycles;
   }
