@@ -60,18 +60,17 @@ TEST_F(ClosedLoop, AReadbackCarryingNanHoldsAsAnActuatorFault) {
     EXPECT_EQ(r.journal.records[i].state, std::uint8_t(TrackingState::kTrack)) << "cycle " << i;
 }
 
-// CI's 20,000 chaotic cycles, as two soaks of 10,000 with their own seeds (ctest runs them side
-// by side). A fault rate of 0.08 gives about 800 faults a soak: every kind, many times over.
-class ChaosSoak : public ClosedLoop, public ::testing::WithParamInterface<std::uint64_t> {};
-
-TEST_P(ChaosSoak, TenThousandChaoticCyclesKeepEveryInvariant) {
+// CI's 20,000 chaotic cycles. A fault rate of 0.1 gives about 2,000 faults: every kind many
+// times over (the rarest, CAN kinds only in a third of the segments, about 8 times; as two soaks
+// of 10,000 at 0.08 one of them went without a CAN error flood a few times in a hundred).
+TEST_F(ClosedLoop, TwentyThousandChaoticCyclesKeepEveryInvariant) {
   Scene scene = small_scene(kBreathing, kLightFieldFrames);
   auto prepared = prepare_scene(scene, "", pool_);
   ASSERT_TRUE(prepared.ok()) << prepared.status().message();
   ChaosOptions o;
-  o.seed = GetParam();
-  o.cycles = 10000;
-  o.fault_rate = 0.08;
+  o.seed = 23;
+  o.cycles = 20000;
+  o.fault_rate = 0.1;
   o.journal_dir = dir_.path() / "chaos";
   o.light_field_dir = lf_dir_.path();
   auto report = run_chaos_soak(*prepared, o, pool_);
@@ -79,8 +78,8 @@ TEST_P(ChaosSoak, TenThousandChaoticCyclesKeepEveryInvariant) {
   const ChaosReport& r = *report;
   SCOPED_TRACE(to_json(r).dump(1));
   EXPECT_EQ(r.violation_count, 0);
-  EXPECT_EQ(r.cycles, 10000);
-  EXPECT_GT(r.cycles_checked, 9500) << "a cycle that threw has no record";
+  EXPECT_EQ(r.cycles, 20000);
+  EXPECT_GT(r.cycles_checked, 19000) << "a cycle that threw has no record";
   EXPECT_FALSE(r.interrupted);
   for (std::size_t k = 0; k < kChaosFaultKinds; ++k)
     EXPECT_GT(r.injected[k], 0) << to_string(static_cast<ChaosFault>(k)) << " never met the loop";
@@ -90,15 +89,13 @@ TEST_P(ChaosSoak, TenThousandChaoticCyclesKeepEveryInvariant) {
   // bounds: on a loaded host more registrations run out of their wall-clock budget).
   EXPECT_GT(r.states[std::size_t(TrackingState::kTrack)], r.cycles / 5);
   EXPECT_GT(r.commands, r.cycles / 5);
-  EXPECT_GT(r.resumes_accepted, 5);
-  EXPECT_GT(r.resets_accepted, 2);
+  EXPECT_GT(r.resumes_accepted, 20);
+  EXPECT_GT(r.resets_accepted, 10);
   EXPECT_GT(r.operator_refused, 0) << "stale, early and wrong-id commands were sent";
   // Every journal was read back and checked (each segment's against its cycles); a full disk
   // loses the records after it.
   EXPECT_GT(r.journal_records, r.cycles * 3 / 4);
 }
-
-INSTANTIATE_TEST_SUITE_P(TwentyThousandCycles, ChaosSoak, ::testing::Values(23u, 24u));
 
 TEST(ChaosOptions, AbsurdValuesAreRefusedBeforeAnythingRuns) {
   ChaosOptions o;
