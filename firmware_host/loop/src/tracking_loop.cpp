@@ -206,14 +206,8 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     if (simulated && stall_ns <= 0) {
       next.index = index + 1;
       next.start_ns = loop_start_ns + next.index * period;
-    } else if (simulated) {  // an injected stall: the cycle ends a period and the stall after its start
-      next = next_cycle(loop_start_ns, period, index, start_ns + period + stall_ns);
-      if (next.overrun && !was_align) {
-        ++m.summary.overruns;
-        m.summary.skipped_periods += next.skipped;
-      }
-    } else {
-      next = next_cycle(loop_start_ns, period, index, wall_end);
+    } else {  // the real clock, or an injected stall: the cycle ends a period and the stall after its start
+      next = next_cycle(loop_start_ns, period, index, simulated ? start_ns + period + stall_ns : wall_end);
       if (next.overrun && !was_align) {
         ++m.summary.overruns;
         m.summary.skipped_periods += next.skipped;

@@ -23,7 +23,7 @@ double translation_mm(const tracking::Vector6d& v) {
   return v.head<3>().cwiseAbs().maxCoeff();  // per component, as the gate limits it
 }
 double angle_deg(const tracking::Vector6d& v) {
-  return v.tail<3>().norm() * 180.0 / M_PI;
+  return tracking::rad_to_deg(v.tail<3>().norm());
 }
 
 bool held(std::uint8_t state) {
