@@ -13,7 +13,8 @@ seeds=out/fuzz/seeds
 work=out/fuzz/work
 rm -rf "$seeds" "$work"
 mkdir -p "$work"
-for t in fuzz_scene fuzz_calibration_files fuzz_light_field fuzz_images fuzz_sequence fuzz_journal fuzz_ct fuzz_commands; do
+for t in fuzz_scene fuzz_calibration_files fuzz_light_field fuzz_images fuzz_sequence fuzz_journal fuzz_ct fuzz_commands \
+    fuzz_modbus fuzz_v4l2; do
   mkdir -p "$seeds/$t"
 done
 # prefix FILE BYTE OUT: OUT is BYTE (a selector, 0..255) followed by FILE.
@@ -107,5 +108,43 @@ slice=$(find "${LFTRACK_DATA_DIR:-../shared/data}" -type f -iname '*.dcm' 2>/dev
 
 # Operator commands.
 for c in "resume 417263" "stop" "reset 1" "status" "quit" "resume"; do printf '%s\n' "$c" > "$seeds/fuzz_commands/$(echo "$c" | tr ' ' _)"; done
+
+# Modbus replies (fuzz/fuzz_modbus.cpp's script format): a couch that answers every request
+# well, one that answers with an exception, one whose reply is cut short, one that goes silent.
+python3 - "$seeds/fuzz_modbus" <<'PY'
+import struct, sys
+out = sys.argv[1]
+def reply(pdu, flags=3, unit=1):
+    adu = struct.pack('>HHHB', 0, 0, len(pdu) + 1, unit) + pdu
+    return bytes([flags, len(adu)]) + adu
+def inputs(status=8, ack=0, position=(1000, -2000, 500, 100, -50, 0), target=(1000, -2000, 500, 100, -50, 0)):
+    regs = [status, ack, 0]
+    for v in list(position) + list(target):
+        b = struct.unpack('>HH', struct.pack('>i', v))
+        regs += list(b)
+    return reply(bytes([4, 2 * len(regs)]) + struct.pack('>%dH' % len(regs), *regs))
+write_holding = reply(bytes([16, 0, 0, 0, 14]))
+write_control = reply(bytes([6, 0, 13, 0, 2]))
+# calls byte: read back, command, hold, read back = 0b11_10_01_00
+calls = bytes([0b11100100])
+seeds = {
+    'good-couch': calls + inputs() + inputs() + write_holding + write_control + inputs(ack=1),
+    'exception': calls + inputs() + inputs() + reply(bytes([0x90, 3])) + write_control + inputs(),
+    'short-reply': calls + inputs() + inputs()[:20],
+    'silent': calls + inputs() + bytes([8, 0]) + inputs(),
+    'moving-fault': bytes([0]) + inputs() + inputs(status=3, ack=7, position=(2**31 - 1, -2**31, 0, 0, 0, 0)),
+}
+for name, data in seeds.items():
+    open(out + '/' + name, 'wb').write(data)
+PY
+
+# V4L2 devices (fuzz/fuzz_v4l2.cpp reads its answers in call order): short seeds whose bytes
+# mostly say "succeed"; the fuzzer grows them into devices that open and hand buffers over.
+python3 - "$seeds/fuzz_v4l2" <<'PY'
+import os, sys
+out = sys.argv[1]
+for n, size in enumerate([16, 64, 256, 1024]):
+    open('%s/device-%d' % (out, n), 'wb').write(bytes((7 * i + n) % 200 for i in range(size)))
+PY
 
 for t in "$seeds"/*; do echo "$(basename "$t"): $(ls "$t" | wc -l) seeds" >&2; done

@@ -36,6 +36,10 @@ class KernelSyscalls final : public V4l2Syscalls {
 // Preferred formats, best first: 16-bit, 12- and 10-bit in 16-bit containers, then 8-bit.
 constexpr std::uint32_t kFormats[] = {V4L2_PIX_FMT_Y16, V4L2_PIX_FMT_Y12, V4L2_PIX_FMT_Y10,
                                       V4L2_PIX_FMT_GREY};
+constexpr std::uint32_t kMaxFormats = 256;  // formats enumerated, at most
+constexpr std::uint32_t kMaxBuffers = 64;   // buffers a device may give for the ones asked
+// A time stamp on CLOCK_MONOTONIC: seconds since boot, far below 2^62 ns.
+constexpr std::int64_t kMaxTimestampS = std::int64_t(1) << 32;
 
 std::string fourcc(std::uint32_t f) {
   std::string s(4, ' ');
@@ -79,7 +83,7 @@ Status V4l2Detector::open() {
   if ((caps & V4L2_CAP_STREAMING) == 0) return fail("cannot stream (no V4L2_CAP_STREAMING)");
 
   std::vector<std::uint32_t> offered;
-  for (std::uint32_t i = 0;; ++i) {
+  for (std::uint32_t i = 0; i < kMaxFormats; ++i) {  // bounded: a device may never say "no more"
     v4l2_fmtdesc d{};
     d.index = i;
     d.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -122,6 +126,10 @@ Status V4l2Detector::open() {
   if (sys_.ioctl(fd_, VIDIOC_REQBUFS, &request) != 0)
     return fail(std::string("no mmap streaming buffers (VIDIOC_REQBUFS: ") + std::strerror(errno) + ")");
   if (request.count < 2) return fail("gives fewer than 2 buffers");
+  if (request.count > kMaxBuffers)
+    return fail("gives " + std::to_string(request.count) + " buffers for the " +
+                std::to_string(options_.buffers) + " asked; at most " + std::to_string(kMaxBuffers) +
+                " are mapped");
   buffers_.assign(request.count, {});
   for (std::uint32_t i = 0; i < request.count; ++i) {
     v4l2_buffer b{};
@@ -213,10 +221,16 @@ DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
     ++counters_.timeouts;
     return DeviceStatus::kTimeout;
   }
-  // The newest filled buffer; older ones go back unread.
+  // The newest filled buffer; older ones go back unread. At most one pass over the buffers the
+  // device has (plus one): a device that keeps handing buffers over is faulty, not endless.
   v4l2_buffer newest{};
   bool have = false, failed = false;
-  for (;;) {
+  for (std::size_t dequeued = 0;; ++dequeued) {
+    if (dequeued > buffers_.size()) {
+      ++counters_.bad_buffers;
+      failed = true;
+      break;
+    }
     v4l2_buffer b{};
     b.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     b.memory = V4L2_MEMORY_MMAP;
@@ -226,6 +240,11 @@ DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
       ++counters_.io_errors;  // EIO and the like: this buffer is lost to us
       failed = true;
       break;
+    }
+    if (b.index >= buffers_.size()) {  // not a buffer we mapped: nothing to read, nothing to requeue
+      ++counters_.bad_buffers;
+      failed = true;
+      continue;
     }
     if (have) {
       ++counters_.stale_dropped;
@@ -239,9 +258,20 @@ DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
     ++counters_.timeouts;  // woken without a frame
     return DeviceStatus::kTimeout;
   }
-  if (newest.index >= buffers_.size()) return DeviceStatus::kFault;
   if ((newest.flags & V4L2_BUF_FLAG_ERROR) != 0 || failed) {
     ++counters_.error_buffers;
+    requeue(newest.index);
+    return DeviceStatus::kFault;
+  }
+  // A buffer whose bytes do not cover the frame is a torn transfer: its tail would be an older
+  // frame's pixels. So is a time stamp that is not a CLOCK_MONOTONIC time.
+  const std::size_t bytes_per_pixel = pixel_format_ == V4L2_PIX_FMT_GREY ? 1 : 2;
+  const std::size_t frame_bytes = std::size_t(bytes_per_line_) * std::size_t(options_.rows - 1) +
+                                  std::size_t(options_.cols) * bytes_per_pixel;
+  const bool timestamp_valid = newest.timestamp.tv_sec >= 0 && newest.timestamp.tv_sec < kMaxTimestampS &&
+                               newest.timestamp.tv_usec >= 0 && newest.timestamp.tv_usec < 1'000'000;
+  if (newest.bytesused < frame_bytes || !timestamp_valid) {
+    ++counters_.bad_buffers;
     requeue(newest.index);
     return DeviceStatus::kFault;
   }

@@ -7,6 +7,7 @@
 #include <linux/videodev2.h>
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -27,6 +28,8 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
   std::uint32_t buffer_count = 4;
   std::uint32_t trigger_control = 0;  // a control it has (0: none)
   std::int32_t trigger_value = 0;     // what was set
+  std::uint32_t granted_buffers = 0;  // REQBUFS grants this many when not 0 (else buffer_count)
+  bool endless = false;               // DQBUF never says EAGAIN: it hands the last frame again
 
   // What the driver did.
   std::vector<std::string> log;
@@ -35,8 +38,10 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
 
   // A frame: the first queued buffer is filled (row r, column c: value + c) and made ready;
   // with no buffer queued the frame is lost, as on a real device.
+  // `bytes_used` (when not 0) is what DQBUF reports instead of the whole buffer: a torn transfer.
+  // A time stamp may be given raw (`raw_seconds`, `raw_microseconds`), as a faulty device would.
   void expose(std::uint32_t sequence, std::int64_t timestamp_ns, std::uint16_t value,
-              std::uint32_t flags = 0) {
+              std::uint32_t flags = 0, std::uint32_t bytes_used = 0) {
     if (queued_.empty()) return;
     const std::uint32_t i = queued_.front();
     queued_.pop_front();
@@ -54,7 +59,15 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
     d.sequence = sequence;
     d.flags = flags;
     d.timestamp_ns = timestamp_ns;
+    d.bytes_used = bytes_used;
     done_.push_back(d);
+  }
+  void expose_raw_time(std::uint32_t sequence, std::int64_t raw_seconds, std::int64_t raw_microseconds) {
+    expose(sequence, 0, 1);
+    if (done_.empty()) return;
+    done_.back().raw_time = true;
+    done_.back().raw_seconds = raw_seconds;
+    done_.back().raw_microseconds = raw_microseconds;
   }
   void fail_next_dqbuf(int error) { dqbuf_errno_ = error; }
   void unplug() { unplugged_ = true; }
@@ -120,8 +133,9 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
         log.push_back("REQBUFS");
         auto* r = static_cast<v4l2_requestbuffers*>(arg);
         if (r->memory != V4L2_MEMORY_MMAP) return errno = EINVAL, -1;
-        r->count = buffer_count;
-        memory_.assign(buffer_count, std::vector<std::uint8_t>(bytes_per_line() * std::size_t(height)));
+        r->count = granted_buffers != 0 ? granted_buffers : buffer_count;
+        memory_.assign(std::min<std::uint32_t>(r->count, 256),
+                       std::vector<std::uint8_t>(bytes_per_line() * std::size_t(height)));
         return 0;
       }
       case VIDIOC_QUERYBUF: {
@@ -146,14 +160,14 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
         }
         if (done_.empty()) return errno = EAGAIN, -1;
         const Done d = done_.front();
-        done_.pop_front();
+        if (!endless || done_.size() > 1) done_.pop_front();
         auto* b = static_cast<v4l2_buffer*>(arg);
         b->index = d.index;
         b->sequence = d.sequence;
         b->flags = d.flags | V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
-        b->bytesused = static_cast<std::uint32_t>(memory_[d.index].size());
-        b->timestamp.tv_sec = d.timestamp_ns / 1'000'000'000;
-        b->timestamp.tv_usec = (d.timestamp_ns % 1'000'000'000) / 1000;
+        b->bytesused = d.bytes_used != 0 ? d.bytes_used : static_cast<std::uint32_t>(memory_[d.index].size());
+        b->timestamp.tv_sec = d.raw_time ? d.raw_seconds : d.timestamp_ns / 1'000'000'000;
+        b->timestamp.tv_usec = d.raw_time ? d.raw_microseconds : (d.timestamp_ns % 1'000'000'000) / 1000;
         return 0;
       }
       case VIDIOC_QUERYCTRL: {
@@ -183,8 +197,10 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
   static constexpr int kFd = 42;
   static constexpr off_t kOffsetStep = 1 << 20;
   struct Done {
-    std::uint32_t index = 0, sequence = 0, flags = 0;
+    std::uint32_t index = 0, sequence = 0, flags = 0, bytes_used = 0;
     std::int64_t timestamp_ns = 0;
+    bool raw_time = false;
+    std::int64_t raw_seconds = 0, raw_microseconds = 0;
   };
   std::size_t bytes_per_line() const { return std::size_t(width) * (format_ == V4L2_PIX_FMT_GREY ? 1 : 2); }
 

@@ -143,6 +143,46 @@ TEST(V4l2Detector, ErrorBuffersAndEioAreFaultsNeverHalfFrames) {
   EXPECT_EQ(f.pixels.at(0, 0), 300);
 }
 
+// Found while writing the V4L2 fuzz target (fuzz/fuzz_v4l2.cpp): the driver trusted what a
+// device said about a filled buffer. A torn buffer (bytes used short of a frame) was delivered
+// with an older frame's pixels in its tail, a time stamp of 10^12 s overflowed the nanosecond
+// count, a device that never said "no more buffers" held the cycle forever, and a device that
+// granted 4 x 10^9 buffers made the driver allocate for all of them.
+TEST(V4l2Detector, TornBuffersBadTimeStampsAndEndlessDevicesAreFaultsNotFrames) {
+  ScriptedV4l2Device dev;
+  V4l2Detector d(options(), dev);
+  ASSERT_TRUE(d.open().ok());
+  Frame f = frame();
+  dev.expose(0, 1000, 100);
+  ASSERT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kOk);
+  const std::uint32_t whole = 48 * 64 * 2;
+  dev.expose(1, 2000, 999, 0, whole - 1);
+  EXPECT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kFault) << "a buffer one byte short is torn";
+  EXPECT_EQ(f.pixels.at(0, 0), 100) << "the caller's frame is untouched";
+  dev.expose_raw_time(2, 1'000'000'000'000, 0);
+  EXPECT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kFault) << "10^12 s is no monotonic time";
+  dev.expose_raw_time(3, 5, -1);
+  EXPECT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kFault) << "negative microseconds";
+  dev.expose_raw_time(4, 5, 1'000'000);
+  EXPECT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kFault) << "a million microseconds";
+  EXPECT_EQ(d.counters().bad_buffers, 4);
+  dev.expose(5, 6000, 300, 0, whole);
+  ASSERT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kOk) << "exactly a frame's bytes is whole";
+  EXPECT_EQ(f.pixels.at(0, 0), 300);
+  EXPECT_EQ(dev.queued(), 4u) << "every refused buffer went back to the queue";
+
+  dev.endless = true;
+  dev.expose(6, 7000, 400);
+  EXPECT_EQ(d.capture(&f, in_ms(5)), DeviceStatus::kFault) << "a device that never runs dry";
+  EXPECT_EQ(d.counters().bad_buffers, 5);
+
+  ScriptedV4l2Device greedy;
+  greedy.granted_buffers = 4'000'000'000u;
+  const Status s = V4l2Detector(options(), greedy).open();
+  EXPECT_NE(s.message().find("gives 4000000000 buffers"), std::string::npos) << s.message();
+  EXPECT_EQ(greedy.close_count, 1);
+}
+
 TEST(V4l2Detector, SequenceGapsAreCountedWrapsAreNotAndGoingBackwardsIsAFault) {
   ScriptedV4l2Device dev;
   V4l2Detector d(options(), dev);

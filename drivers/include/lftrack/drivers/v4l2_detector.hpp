@@ -14,6 +14,9 @@
 //   poll timeout                           -> kTimeout
 //   V4L2_BUF_FLAG_ERROR, EIO from DQBUF    -> kFault (the buffer is requeued, nothing delivered)
 //   sequence going backwards               -> kFault (the device restarted: not the next frame)
+//   a buffer the driver did not map, bytes used short of a whole frame (a torn transfer), a
+//   time stamp outside CLOCK_MONOTONIC's range, a device that keeps handing buffers over
+//                                          -> kFault (counted in bad_buffers; nothing delivered)
 //   sequence gap                           -> counted (frames lost before this fresh one)
 //   ENODEV, POLLERR (unplugged)            -> kDisconnected: the device is closed at once;
 //                                             reopen() (outside the cycle) opens it again
@@ -39,7 +42,7 @@ struct V4l2DetectorOptions {
 
 struct V4l2Counters {
   std::int64_t frames = 0, timeouts = 0, error_buffers = 0, io_errors = 0, sequence_gaps = 0, frames_lost = 0,
-               backwards = 0, stale_dropped = 0, disconnects = 0, reopens = 0;
+               backwards = 0, stale_dropped = 0, disconnects = 0, reopens = 0, bad_buffers = 0;
 };
 
 class V4l2Detector {
