@@ -16,6 +16,7 @@
 #include "lftrack/sim/phantom_images.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 
 namespace lftrack::host::cli {
 namespace {
@@ -72,8 +73,8 @@ double orientation_error_deg(const XrayView& a, const XrayView& b) {
 Eigen::Isometry3d random_placement(std::mt19937_64& rng, double mm, double deg) {
   std::uniform_real_distribution<double> u(-1, 1);
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.linear() = tracking::rotation_exp(Eigen::Vector3d(u(rng), u(rng), u(rng)) * tracking::deg_to_rad(deg));
-  t.translation() = Eigen::Vector3d(u(rng), u(rng), u(rng)) * mm;
+  t.linear() = tracking::rotation_exp(tracking::draw3(u, rng) * tracking::deg_to_rad(deg));
+  t.translation() = tracking::draw3(u, rng) * mm;
   return t;
 }
 
@@ -84,11 +85,11 @@ XrayView nominal_from_truth(const XrayView& truth, std::mt19937_64& rng) {
   XrayView v = truth;
   const Eigen::Vector3d centre = v.detector_centre_mm();
   const Eigen::Matrix3d tilt =
-      tracking::rotation_exp(Eigen::Vector3d(u(rng), u(rng), u(rng)) * tracking::deg_to_rad(1.0));
+      tracking::rotation_exp(tracking::draw3(u, rng) * tracking::deg_to_rad(1.0));
   v.col_axis = tilt * v.col_axis;
   v.row_axis = tilt * v.row_axis;
-  v.set_detector_centre(centre + 3 * Eigen::Vector3d(u(rng), u(rng), u(rng)));
-  v.source_mm += 5 * Eigen::Vector3d(u(rng), u(rng), u(rng));
+  v.set_detector_centre(centre + 3 * tracking::draw3(u, rng));
+  v.source_mm += 5 * tracking::draw3(u, rng);
   return v;
 }
 

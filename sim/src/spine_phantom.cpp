@@ -4,6 +4,7 @@
 #include <cmath>
 #include <random>
 
+#include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::sim {
@@ -210,7 +211,7 @@ Anatomy make_anatomy(const SpinePhantomOptions& o, const tracking::VolumeGeometr
     Gas gas;
     gas.centre = {an.body_centre.x() + 90 * u(rng), an.body_centre.y() - 40 + 30 * u(rng),
                   o.centre_mm.z() + 0.45 * g.extent_mm().z() * u(rng)};
-    gas.semi = Vector3d(14, 10, 18) + 6 * Vector3d(u(rng), u(rng), u(rng));
+    gas.semi = Vector3d(14, 10, 18) + 6 * tracking::draw3(u, rng);
     an.gas.push_back(gas);
   }
   return an;

@@ -10,6 +10,7 @@
 
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "quantile.hpp"
 
@@ -48,7 +49,8 @@ Pose perturbed_start(const PreparedScene& p, const Pose& gold, double target_mm,
   const Eigen::Vector3d origin = p.registration_origin_room_mm();
   for (int attempt = 0;; ++attempt) {
     // Direction: translation and rotation (1 deg ~ 1 mm) in a random proportion.
-    Eigen::Vector3d u(normal(rng), normal(rng), normal(rng)), w(normal(rng), normal(rng), normal(rng));
+    const Eigen::Vector3d u = tracking::draw3(normal, rng);
+    const Eigen::Vector3d w = tracking::draw3(normal, rng);
     const double share = std::uniform_real_distribution<double>(0.2, 0.8)(rng);
     tracking::Vector6d dir;
     dir << u.normalized() * share, w.normalized() * tracking::deg_to_rad(1.0) * (1 - share);

@@ -9,6 +9,7 @@
 #include "lftrack/calib/calibration_phantom.hpp"
 #include "lftrack/calib/phantom_pose.hpp"
 #include "lftrack/sim/phantom_images.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 
 namespace lftrack::calib {
 namespace {
@@ -47,8 +48,8 @@ std::vector<CouchObservation> observe(const Eigen::Isometry3d& x, const tracking
   for (const Vector6d& q : moves) {
     tracking::Pose measured = room_motion_of_couch(x, q) * zero;
     Eigen::Isometry3d err = Eigen::Isometry3d::Identity();
-    err.linear() = tracking::rotation_exp(noise_rad * Eigen::Vector3d(n(rng), n(rng), n(rng)));
-    err.translation() = noise_mm * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    err.linear() = tracking::rotation_exp(noise_rad * tracking::draw3(n, rng));
+    err.translation() = noise_mm * tracking::draw3(n, rng);
     out.push_back({q, err * measured});
   }
   return out;

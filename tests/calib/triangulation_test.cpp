@@ -6,6 +6,7 @@
 #include <random>
 
 #include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 
 namespace lftrack::calib {
 namespace {
@@ -38,7 +39,7 @@ TEST(FitRigid, RecoversTransformAndGuardsAgainstReflection) {
   truth.linear() = tracking::rotation_exp(Vector3d(0.2, -1.4, 0.7));
   truth.translation() = Vector3d(-284.1, -247.0, -226.7);
   for (int i = 0; i < 6; ++i) {
-    from.emplace_back(n(rng), n(rng), n(rng));
+    from.push_back(tracking::draw3(n, rng));
     to.push_back(truth * from.back());
   }
   auto fit = fit_rigid(from, to);

@@ -16,6 +16,7 @@
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::tracking {
@@ -76,8 +77,8 @@ TEST(LightFieldPlan, ExtentsCoverEveryEnvelopePoseAndGrowWithTheEnvelope) {
   std::uniform_real_distribution<double> u(-1, 1);
   for (int n = 0; n < 300; ++n) {
     PoseDelta d;
-    d.translation_mm = in.envelope.translation_mm * Vector3d(u(rng), u(rng), u(rng));
-    d.rotation_rad = deg_to_rad(in.envelope.rotation_deg) * Vector3d(u(rng), u(rng), u(rng));
+    d.translation_mm = in.envelope.translation_mm * tracking::draw3(u, rng);
+    d.rotation_rad = deg_to_rad(in.envelope.rotation_deg) * tracking::draw3(u, rng);
     const Pose pose = apply_delta(in.nominal_T_room_from_ct, d, in.registration_origin_room_mm);
     const Vector3d s = pose.inverse() * in.view_room.source_mm;
     const Vector3d p = pose.inverse() * in.view_room.pixel_centre_mm(u(rng) * 10 + 24, u(rng) * 10 + 20);

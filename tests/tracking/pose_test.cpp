@@ -3,6 +3,7 @@
 #include <random>
 
 #include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -25,7 +26,7 @@ TEST(RotationLog, InvertsExpUpToPi) {
   std::mt19937 rng(1);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int n = 0; n < 200; ++n) {
-    Vector3d axis(u(rng), u(rng), u(rng));
+    Vector3d axis = tracking::draw3(u, rng);
     axis.normalize();
     const double angle = 3.14159 * std::abs(u(rng));
     const Vector3d w = axis * angle;

@@ -8,6 +8,7 @@
 
 #include "fixtures.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
+#include "lftrack/tracking/random_draws.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -56,7 +57,8 @@ TEST(Siddon, HomogeneousBoxGivesChordTimesMu) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-60, 60);
   for (int n = 0; n < 500; ++n) {
-    const Vector3d p0(u(rng), u(rng), u(rng)), p1(u(rng), u(rng), u(rng));
+    const Vector3d p0 = tracking::draw3(u, rng);
+    const Vector3d p1 = tracking::draw3(u, rng);
     const double expected = 0.02 * chord_in_box(p0, p1, lo, hi);
     EXPECT_NEAR(caster.siddon(p0, p1), expected, 1e-5 * std::max(expected, 1e-3)) << n;
   }
@@ -121,20 +123,20 @@ TEST(SiddonBatch, EqualsTheScalarWalkBitForBit) {
   std::vector<Vector3d> from, to;
   std::normal_distribution<double> gauss;
   for (int n = 0; n < 1000; ++n) {  // random lines through the volume
-    const Vector3d p = Vector3d(inside(rng), inside(rng), inside(rng)).cwiseProduct(hi);
-    const Vector3d d = Vector3d(gauss(rng), gauss(rng), gauss(rng)).normalized();
+    const Vector3d p = tracking::draw3(inside, rng).cwiseProduct(hi);
+    const Vector3d d = tracking::draw3(gauss, rng).normalized();
     from.push_back(p - 100 * d);
     to.push_back(p + 100 * d);
   }
   for (int n = 0; n < 100; ++n) {  // random segments, many missing
-    from.emplace_back(far(rng), far(rng), far(rng));
-    to.emplace_back(far(rng), far(rng), far(rng));
+    from.push_back(tracking::draw3(far, rng));
+    to.push_back(tracking::draw3(far, rng));
   }
   for (int n = 0; n < 200; ++n) {  // starting or ending inside
-    const Vector3d p = Vector3d(inside(rng), inside(rng), inside(rng)).cwiseProduct(hi);
+    const Vector3d p = tracking::draw3(inside, rng).cwiseProduct(hi);
     from.push_back(p);
-    to.emplace_back(far(rng), far(rng), far(rng));
-    from.emplace_back(far(rng), far(rng), far(rng));
+    to.push_back(tracking::draw3(far, rng));
+    from.push_back(tracking::draw3(far, rng));
     to.push_back(p);
   }
   for (int ax = 0; ax < 3; ++ax) {  // along each axis, on a shared face, on lower and upper faces
@@ -202,8 +204,8 @@ TEST_P(VoxelisedShape, SiddonEqualsExactVoxelChords) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int n = 0; n < 40; ++n) {
-    const Vector3d dir = Vector3d(u(rng), u(rng), u(rng)).normalized();
-    const Vector3d offset = 0.6 * GetParam().minCoeff() * Vector3d(u(rng), u(rng), u(rng));
+    const Vector3d dir = tracking::draw3(u, rng).normalized();
+    const Vector3d offset = 0.6 * GetParam().minCoeff() * tracking::draw3(u, rng);
     const Vector3d p0 = centre + offset - 100 * dir, p1 = centre + offset + 100 * dir;
     const double expected = brute_force(v, p0, p1);
     ASSERT_GT(expected, 0);
@@ -221,8 +223,8 @@ TEST_P(VoxelisedShape, ConvergesToTheAnalyticChord) {
     std::uniform_real_distribution<double> u(-1, 1);
     double error = 0;
     for (int n = 0; n < 30; ++n) {
-      const Vector3d dir = Vector3d(u(rng), u(rng), u(rng)).normalized();
-      const Vector3d offset = 0.5 * GetParam().minCoeff() * Vector3d(u(rng), u(rng), u(rng)) / std::sqrt(3.0);
+      const Vector3d dir = tracking::draw3(u, rng).normalized();
+      const Vector3d offset = 0.5 * GetParam().minCoeff() * tracking::draw3(u, rng) / std::sqrt(3.0);
       const Vector3d p0 = offset - 100 * dir, p1 = offset + 100 * dir;
       const double exact = analytic_chord(GetParam(), p0, p1);
       error += std::abs(caster.siddon(centre + p0, centre + p1) - exact) / exact;
@@ -245,7 +247,8 @@ TEST(Trilinear, HomogeneousBoxMatchesSiddon) {
   std::mt19937 rng(2);
   std::uniform_real_distribution<double> u(-40, 40);
   for (int n = 0; n < 200; ++n) {
-    const Vector3d p0(u(rng), u(rng), u(rng)), p1(u(rng), u(rng), u(rng));
+    const Vector3d p0 = tracking::draw3(u, rng);
+    const Vector3d p1 = tracking::draw3(u, rng);
     const double s = caster.siddon(p0, p1);
     EXPECT_NEAR(caster.trilinear(p0, p1, 0.4), s, 1e-5 * std::max(s, 1e-3)) << n;
   }
