@@ -6,7 +6,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 LFTRACK := $(BUILD_DIR)/bin/lftrack
 
-.PHONY: all setup configure build demo check check-asan check-tsan bench fuzz clean
+.PHONY: all setup configure build demo check check-asan check-tsan check-sanitized fuzz-build bench fuzz clean
 
 all: build
 
@@ -43,14 +43,28 @@ check-tsan: setup
 
 # Fuzzing (issue 23): every fuzz target built with clang, libFuzzer, ASan and UBSan in
 # build-fuzz/, seeded from valid files, run FUZZ_SECONDS each; report in out/fuzz/report.md.
+# The same build folder holds the unit and protocol test suites compiled the same way (clang,
+# ASan, UBSan), for check-sanitized.
 FUZZ_SECONDS ?= 60
-fuzz: build
+UNIT_AND_PROTOCOL_SUITES := tracking_tests calib_tests drivers_tests sim_tests loop_tests protocol_tests
+fuzz-build: setup
 	@bash scripts/setup.sh --fuzz
 	@CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFTRACK_FUZZ=ON \
-	    -DLFTRACK_BUILD_TESTS=OFF -DLFTRACK_BUILD_BENCH=OFF >/dev/null
-	@cmake --build build-fuzz -j $(JOBS) --target lftrack_fuzzers
+	    -DLFTRACK_BUILD_TESTS=ON -DLFTRACK_BUILD_BENCH=OFF >/dev/null
+	@cmake --build build-fuzz -j $(JOBS) --target lftrack_fuzzers $(UNIT_AND_PROTOCOL_SUITES)
+fuzz: build fuzz-build
 	@bash scripts/fuzz-seeds.sh $(LFTRACK)
 	@bash scripts/fuzz-run.sh $(FUZZ_SECONDS) build-fuzz
+
+# What CI runs after `make check` (issue 23): the unit and protocol suites under ASan and UBSan,
+# then every fuzz target for CI_FUZZ_SECONDS on its seeds. Fails on any test failure, sanitizer
+# report, fuzzer crash, leak or timeout. About 13 minutes on 2 cores (BENCHMARKS.md).
+CI_FUZZ_SECONDS ?= 10
+check-sanitized: build fuzz-build
+	@cd build-fuzz && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	    ctest --output-on-failure -j $(JOBS) --timeout 900 -L '^($(subst $() ,|,$(UNIT_AND_PROTOCOL_SUITES)))$$'
+	@bash scripts/fuzz-seeds.sh $(LFTRACK)
+	@bash scripts/fuzz-run.sh $(CI_FUZZ_SECONDS) build-fuzz
 
 bench: build
 	@$(LFTRACK) bench drr --size 256
