@@ -39,7 +39,7 @@ check-tsan: setup
 	@cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFTRACK_BUILD_BENCH=OFF \
 	    -DCMAKE_CXX_FLAGS="-fsanitize=thread -fno-omit-frame-pointer" >/dev/null
 	@cmake --build build-tsan -j $(JOBS)
-	@cd build-tsan && TSAN_OPTIONS=halt_on_error=1 ctest --output-on-failure -j $(JOBS) --timeout 1800 -R '$(SANITIZE_TESTS)'
+	@cd build-tsan && TSAN_OPTIONS="halt_on_error=1 suppressions=$(CURDIR)/tests/tsan.supp" ctest --output-on-failure -j $(JOBS) --timeout 1800 -R '$(SANITIZE_TESTS)'
 
 # Fuzzing (issue 23): every fuzz target built with clang, libFuzzer, ASan and UBSan in
 # build-fuzz/, seeded from valid files, run FUZZ_SECONDS each; report in out/fuzz/report.md.
