@@ -35,10 +35,13 @@ class FuzzedV4l2Device final : public V4l2Syscalls {
     timeval timestamp{};
   };
   std::vector<Handed> handed;  // this capture's dequeues, in order
-  std::uint32_t granted_width = 0, granted_height = 0, granted_stride = 0, granted_format = 0;
-  std::size_t mapped_buffers() const { return memory_.size(); }
+  std::uint32_t granted_width = 0, granted_height = 0, granted_stride = 0;
+  std::size_t mapped_buffers() const { return memory_.size(); }  // by this opening
 
-  int open(const char*, int) override { return fails() ? -1 : kFd; }
+  int open(const char*, int) override {
+    memory_.clear();
+    return fails() ? -1 : kFd;
+  }
   int close(int) override { return 0; }
   void* mmap(std::size_t length, int, off_t offset) override {
     if (fails() || length == 0 || length > (std::size_t(1) << 22)) return errno = ENOMEM, MAP_FAILED;
@@ -81,7 +84,6 @@ class FuzzedV4l2Device final : public V4l2Syscalls {
         granted_width = pix.width;
         granted_height = pix.height;
         granted_stride = pix.bytesperline;
-        granted_format = pix.pixelformat;
         return 0;
       }
       case VIDIOC_REQBUFS: {

@@ -118,6 +118,8 @@ Status V4l2Detector::open() {
                 " " + fourcc(pixel_format_));
   const std::uint32_t bytes_per_pixel = pixel_format_ == V4L2_PIX_FMT_GREY ? 1 : 2;
   bytes_per_line_ = std::max(format.fmt.pix.bytesperline, format.fmt.pix.width * bytes_per_pixel);
+  frame_bytes_ = std::size_t(bytes_per_line_) * std::size_t(options_.rows - 1) +
+                 std::size_t(options_.cols) * bytes_per_pixel;
 
   v4l2_requestbuffers request{};
   request.count = static_cast<std::uint32_t>(options_.buffers);
@@ -265,12 +267,9 @@ DeviceStatus V4l2Detector::capture(Frame* frame, Deadline deadline) {
   }
   // A buffer whose bytes do not cover the frame is a torn transfer: its tail would be an older
   // frame's pixels. So is a time stamp that is not a CLOCK_MONOTONIC time.
-  const std::size_t bytes_per_pixel = pixel_format_ == V4L2_PIX_FMT_GREY ? 1 : 2;
-  const std::size_t frame_bytes = std::size_t(bytes_per_line_) * std::size_t(options_.rows - 1) +
-                                  std::size_t(options_.cols) * bytes_per_pixel;
   const bool timestamp_valid = newest.timestamp.tv_sec >= 0 && newest.timestamp.tv_sec < kMaxTimestampS &&
                                newest.timestamp.tv_usec >= 0 && newest.timestamp.tv_usec < 1'000'000;
-  if (newest.bytesused < frame_bytes || !timestamp_valid) {
+  if (newest.bytesused < frame_bytes_ || !timestamp_valid) {
     ++counters_.bad_buffers;
     requeue(newest.index);
     return DeviceStatus::kFault;

@@ -63,8 +63,9 @@ class ScriptedV4l2Device final : public drivers::V4l2Syscalls {
     done_.push_back(d);
   }
   void expose_raw_time(std::uint32_t sequence, std::int64_t raw_seconds, std::int64_t raw_microseconds) {
+    const std::size_t ready = done_.size();
     expose(sequence, 0, 1);
-    if (done_.empty()) return;
+    if (done_.size() == ready) return;  // no buffer queued: the frame was lost
     done_.back().raw_time = true;
     done_.back().raw_seconds = raw_seconds;
     done_.back().raw_microseconds = raw_microseconds;

@@ -77,6 +77,7 @@ class V4l2Detector {
   int fd_ = -1;
   std::uint32_t pixel_format_ = 0;
   std::uint32_t bytes_per_line_ = 0;
+  std::size_t frame_bytes_ = 0;  // bytes a filled buffer must hold: rows - 1 strides and one line
   std::vector<Buffer> buffers_;
   bool have_sequence_ = false;
   std::uint32_t last_sequence_ = 0;
