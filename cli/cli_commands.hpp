@@ -27,6 +27,8 @@ struct SceneOptions {
 void add_scene_options(CLI::App* app, SceneOptions* options);
 // Loads the scene named in `options` and prepares it (CT read, ROI resolved) on `pool`.
 Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool);
+// "--shard k/n" of a sharded study: (k, n) with 1 <= k <= n.
+Result<std::pair<int, int>> parse_shard(const std::string& text);
 
 // `lftrack sim --chaos SEED` (cmd_chaos.cpp).
 Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json);
@@ -43,6 +45,8 @@ Command add_study_capture_range_command(CLI::App* parent);
 Command add_study_sensitivity_command(CLI::App* parent);
 Command add_study_trade_command(CLI::App* parent);
 Command add_study_merge_command(CLI::App* parent);
+Command add_study_submit_command(CLI::App* parent);
+Command add_study_status_command(CLI::App* parent);
 Command add_sim_command(CLI::App* parent);
 Command add_run_command(CLI::App* parent);
 Command add_replay_command(CLI::App* parent);

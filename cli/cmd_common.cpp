@@ -1,4 +1,5 @@
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <sstream>
 
@@ -31,6 +32,14 @@ Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking:
   auto scene = load_scene(options.scene);
   if (!scene.ok()) return scene.status();
   return prepare_scene(*scene, options.ct, pool);
+}
+
+Result<std::pair<int, int>> parse_shard(const std::string& text) {
+  int k = 0, n = 0;
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%d/%d%c", &k, &n, &tail) != 2 || n < 1 || k < 1 || k > n || n > 10000)
+    return invalid_argument("--shard '" + text + "': expected k/n with 1 <= k <= n <= 10000, e.g. 3/8");
+  return std::make_pair(k, n);
 }
 
 }  // namespace lftrack::host::cli

@@ -6,7 +6,9 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
+#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/studies/geometry_sensitivity.hpp"
+#include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
@@ -22,9 +24,26 @@ struct CaptureRangeCliOptions {
   std::string renderer = "lightfield";
   std::string lf_dir;
   std::uint64_t seed = 1;
+  std::string shard = "1/1";
+  bool fields_prebuilt = false;
+  bool build_fields = false;
+  bool check_args = false;
 };
 
+void print_capture_range(const CaptureRangeReport& report) {
+  std::printf("%-24s %8s %8s %9s %9s %9s %9s %9s\n", "method", "success", "<2.5mm", "mean TRE", "max TRE",
+              "capture", "median", "p95");
+  for (const auto& s : report.summaries)
+    std::printf("%-24s %7.1f%% %7.1f%% %6.3f mm %6.3f mm %6.1f mm %6.0f ms %6.0f ms\n", s.name.c_str(),
+                100 * s.success_rate, 100 * s.success_rate_loose, s.mean_tre_mm, s.max_tre_mm,
+                s.capture_range_mm, s.median_ms, s.p95_ms);
+}
+
 Status run(const CaptureRangeCliOptions& o) {
+  auto shard = parse_shard(o.shard);
+  if (!shard.ok()) return shard.status();
+  if ((o.fields_prebuilt || o.build_fields) && o.lf_dir.empty())
+    return invalid_argument("--fields-prebuilt and --build-fields need --lf-dir");
   CaptureRangeOptions options;
   for (const auto& text : o.methods) {
     auto m = parse_registration_method(text);
@@ -36,22 +55,54 @@ Status run(const CaptureRangeCliOptions& o) {
   options.seed = o.seed;
   options.renderer = o.renderer;
   options.light_field_dir = o.lf_dir;
+  options.shard = shard->first;
+  options.shards = shard->second;
+  if (o.check_args) return {};
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
-  ProgressBar bar("capture range");
-  auto report = run_capture_range_study(*prepared, options, &pool, [&](double f) { bar.update(f); });
-  if (!report.ok()) return report.status();
-  bar.finish();
-  LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(*report, o.out_dir));
-  std::printf("%-24s %8s %8s %9s %9s %9s %9s %9s\n", "method", "success", "<2.5mm", "mean TRE", "max TRE",
-              "capture", "median", "p95");
-  for (const auto& s : report->summaries)
-    std::printf("%-24s %7.1f%% %7.1f%% %6.3f mm %6.3f mm %6.1f mm %6.0f ms %6.0f ms\n", s.name.c_str(),
-                100 * s.success_rate, 100 * s.success_rate_loose, s.mean_tre_mm, s.max_tre_mm,
-                s.capture_range_mm, s.median_ms, s.p95_ms);
-  std::printf("wrote %s/{runs.csv,summary.json,capture_range.png}\n", o.out_dir.c_str());
-  return {};
+  const bool uses_fields = options.renderer == "lightfield";
+  if (o.build_fields) {  // a job array's first job: load the fields, or build and save them
+    if (!uses_fields) return {};
+    auto renderer = make_scene_renderer(*prepared, options.renderer, options.light_field_dir, &pool);
+    if (!renderer.ok()) return renderer.status();
+    std::printf("light fields ready in %s\n", o.lf_dir.c_str());
+    return {};
+  }
+  if (o.out_dir.empty()) return invalid_argument("--out DIR is required");
+  if (o.fields_prebuilt && uses_fields) {
+    auto fields = load_light_fields(*prepared, options.light_field_dir);
+    if (!fields.ok())
+      return failed_precondition("light fields in " + o.lf_dir + " are not built (" + fields.status().message() +
+                                 "); the study's field job builds them: `lftrack study capture-range " +
+                                 "--build-fields --lf-dir DIR`");
+  }
+  CaptureRangeReport expected;
+  expected.scene = prepared->scene.name;
+  expected.options = options;
+  std::string said;
+  const Status s = run_shard_task(
+      o.out_dir, [&] { return check_capture_range_shard_complete(o.out_dir, expected); },
+      [&]() -> Status {
+        ProgressBar bar("capture range");
+        auto report = run_capture_range_study(*prepared, options, &pool, [&](double f) { bar.update(f); });
+        if (!report.ok()) return report.status();
+        bar.finish();
+        if (options.shards > 1) {
+          LFTRACK_RETURN_IF_ERROR(write_capture_range_shard(*report, o.out_dir));
+          std::printf("shard %d/%d: %zu runs; wrote %s/{runs.csv,study.json}; join the shards with "
+                      "`lftrack study merge --out DIR SHARD_DIR...`\n",
+                      options.shard, options.shards, report->runs.size(), o.out_dir.c_str());
+          return {};
+        }
+        LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(*report, o.out_dir));
+        print_capture_range(*report);
+        std::printf("wrote %s/{runs.csv,summary.json,capture_range.png}\n", o.out_dir.c_str());
+        return {};
+      },
+      &said);
+  if (s.ok() && !said.empty()) std::printf("%s\n", said.c_str());
+  return s;
 }
 
 }  // namespace
@@ -60,7 +111,7 @@ Command add_study_capture_range_command(CLI::App* parent) {
   auto* app = parent->add_subcommand("capture-range", "Success rate against initial TRE, per method");
   auto o = std::make_shared<CaptureRangeCliOptions>();
   add_scene_options(app, &o->scene);
-  app->add_option("--out", o->out_dir, "Output folder")->required();
+  app->add_option("--out", o->out_dir, "Output folder");
   app->add_option("--per-bin", o->per_bin, "Starts per bin")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
@@ -73,6 +124,14 @@ Command add_study_capture_range_command(CLI::App* parent) {
   app->add_option("--renderer", o->renderer, "DRR renderer inside the registration")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
   app->add_option("--seed", o->seed, "Seed of gold poses, starts and noise")->capture_default_str();
+  app->add_option("--shard", o->shard, "Run only shard k of n (k/n) of the samples, for a job array; join with "
+                                       "`study merge`")
+      ->capture_default_str();
+  app->add_flag("--fields-prebuilt", o->fields_prebuilt,
+                "With --lf-dir: refuse to build missing light fields (a job array's tasks)");
+  app->add_flag("--build-fields", o->build_fields,
+                "Build the light fields into --lf-dir if they are not there, and exit (a job array's first job)");
+  app->add_flag("--check-args", o->check_args, "Check the options and exit (`study submit` does, before submitting)");
   return [o] { return run(*o); };
 }
 

@@ -36,6 +36,8 @@ int main(int argc, char** argv) {
   const Command sensitivity = add_study_sensitivity_command(study);
   const Command trade = add_study_trade_command(study);
   const Command merge = add_study_merge_command(study);
+  const Command submit = add_study_submit_command(study);
+  const Command study_status = add_study_status_command(study);
   const Command journal = add_journal_command(&app);
   const Command sim = add_sim_command(&app);
   const Command run_loop = add_run_command(&app);
@@ -86,6 +88,10 @@ int main(int argc, char** argv) {
       status = trade();
     else if (study->got_subcommand("merge"))
       status = merge();
+    else if (study->got_subcommand("submit"))
+      status = submit();
+    else if (study->got_subcommand("status"))
+      status = study_status();
     else if (app.got_subcommand("journal"))
       status = journal();
     else if (app.got_subcommand("sim"))

@@ -19,6 +19,7 @@ packages=(
   plastimatch                           # independent reference DRR generator
   gnuplot-nox                           # plots of studies (PNG)
   stress-ng                             # a loaded core for the real-time loop benchmark
+  slurmctld slurmd slurm-client munge   # a local Slurm cluster for job-array studies (scripts/slurm-local.sh)
 )
 # `scripts/setup.sh --fuzz` (make fuzz) adds clang with libFuzzer and its sanitizer runtimes.
 if [ "${1:-}" = "--fuzz" ]; then

@@ -63,6 +63,11 @@ Pose perturbed_start(const PreparedScene& p, const Pose& gold, double target_mm,
 
 }  // namespace
 
+int capture_range_shard_samples(const CaptureRangeOptions& o) {
+  if (o.shards < 1 || o.shard < 1 || o.shard > o.shards || o.per_bin < o.shard) return 0;
+  return (o.per_bin - o.shard) / o.shards + 1;  // samples shard-1, shard-1+n, ... below per_bin
+}
+
 std::vector<CaptureRangeSummary> summarize_capture_range(const CaptureRangeOptions& o,
                                                          const std::vector<CaptureRangeRun>& runs) {
   std::vector<CaptureRangeSummary> out;
@@ -109,8 +114,12 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
                                                    const std::function<void(double)>& progress) {
   if (o.methods.empty()) return invalid_argument("capture range: no methods");
   if (o.per_bin < 1 || o.bins < 1 || !(o.bin_width_mm > 0)) return invalid_argument("capture range: empty bins");
+  if (o.shards < 1 || o.shard < 1 || o.shard > o.shards)
+    return out_of_range("capture range: shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) +
+                        " (k/n needs 1 <= k <= n)");
   CaptureRangeReport report;
   report.options = o;
+  report.scene = p.scene.name;
   auto renderer = make_scene_renderer(p, o.renderer, o.light_field_dir, pool);
   if (!renderer.ok()) return renderer.status();
   tracking::RendererOptions exact_options;
@@ -132,7 +141,7 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
   }
   std::mt19937_64 rng(o.seed);
   std::uniform_real_distribution<double> unit(-1, 1);
-  const int total = o.per_bin * o.bins * int(o.methods.size());
+  const int total = capture_range_shard_samples(o) * o.bins * int(o.methods.size());
   int done = 0;
   for (int k = 0; k < o.per_bin; ++k) {
     tracking::Vector6d g;
@@ -140,6 +149,15 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
     for (int a = 3; a < 6; ++a) g(a) = tracking::deg_to_rad(unit(rng) * o.gold_rotation_deg);
     const Pose gold =
         tracking::apply_delta(p.nominal_T_room_from_ct, PoseDelta::from_vector(g), p.registration_origin_room_mm());
+    if (k % o.shards != o.shard - 1) {
+      // Another shard's sample: draw its starts all the same (cheap, no rendering), so that every
+      // sample of every shard sees the random numbers it sees in the whole study.
+      for (int b = 0; b < o.bins; ++b) {
+        const double target = (b + std::uniform_real_distribution<double>(0.02, 0.98)(rng)) * o.bin_width_mm;
+        perturbed_start(p, gold, target, o.max_start_rotation_deg, rng);
+      }
+      continue;
+    }
     auto raw = synthesize_scene_frames(p, **exact, gold, o.seed * 100003 + std::uint64_t(k));
     if (!raw.ok()) return raw.status();
     auto frames = preprocess_scene_frames(p, *raw, sim::detector_correction(scene_detector_model(p)));
@@ -197,17 +215,7 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
   const CaptureRangeOptions& o = report.options;
-  {
-    std::ofstream csv(dir / "runs.csv");
-    if (!csv) return io_error((dir / "runs.csv").string() + ": cannot write");
-    csv << "method,bin_lo_mm,bin_hi_mm,sample,initial_tre_mm,tre_mean_mm,tre_max_mm,success_2mm,success_2_5mm,"
-           "evaluations,ms\n";
-    for (const CaptureRangeRun& r : report.runs) {
-      csv << r.method << ',' << r.bin * o.bin_width_mm << ',' << (r.bin + 1) * o.bin_width_mm << ',' << r.sample << ','
-          << r.initial_tre_mm << ',' << r.tre_mean_mm << ',' << r.tre_max_mm << ',' << int(r.success) << ','
-          << int(r.success_loose) << ',' << r.evaluations << ',' << r.ms << '\n';
-    }
-  }
+  LFTRACK_RETURN_IF_ERROR(write_capture_range_shard(report, dir));
   nlohmann::json j;
   j["per_bin"] = o.per_bin;
   j["bins_mm"] = nlohmann::json::array();

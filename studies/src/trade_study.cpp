@@ -9,9 +9,14 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
 #include <random>
+#include <set>
 
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/octree_volume.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -88,10 +93,79 @@ Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, st
   return problems;
 }
 
-// Renderers of the points, with the float fields of each (resolution, envelope) built once.
+std::string field_set_key(const std::array<int, 4>& resolution, double envelope_scale) {
+  return resolution_label(resolution) + "@" + fmt_number(envelope_scale);
+}
+
+// The folder of one float field set inside a trade study's field folder.
+std::filesystem::path field_set_dir(const std::filesystem::path& field_dir, const std::array<int, 4>& resolution,
+                                    double envelope_scale) {
+  return field_dir / ("float-" + resolution_label(resolution) + "-envelope-x" + fmt_number(envelope_scale));
+}
+
+using Fields = std::vector<std::shared_ptr<const tracking::LightField>>;
+
+// The float fields of one (resolution, envelope scale) set: built in memory (empty `dir`), or
+// loaded from `dir` with the build time recorded there, or built and saved there (unless
+// `prebuilt`, which refuses). `build_s` gets the time the build took, here or when saved.
+Result<Fields> field_set(const PreparedScene& p, const std::array<int, 4>& resolution, double envelope_scale,
+                         const std::filesystem::path& dir, bool prebuilt, tracking::ThreadPool* pool,
+                         double* build_s) {
+  PreparedScene scaled = p;
+  scaled.scene.envelope.translation_mm *= envelope_scale;
+  scaled.scene.envelope.rotation_deg *= envelope_scale;
+  tracking::LightFieldSpec spec = p.scene.light_field;
+  spec.resolution = resolution;
+  spec.storage = tracking::LightFieldStorage::kFloat32;
+  const std::string key = field_set_key(resolution, envelope_scale);
+  std::string why_not_loaded;
+  if (!dir.empty()) {
+    auto loaded = load_light_fields(scaled, dir, p.mu.get(), &spec);
+    std::ifstream record(dir / "build.json");
+    double recorded_s = -1;
+    try {
+      if (record) recorded_s = nlohmann::json::parse(record).at("build_s").get<double>();
+    } catch (const std::exception&) {
+      recorded_s = -1;
+    }
+    if (loaded.ok() && recorded_s >= 0) {
+      *build_s = recorded_s;
+      return std::move(loaded).value();
+    }
+    why_not_loaded = loaded.ok() ? (dir / "build.json").string() + " missing or unreadable"
+                                 : loaded.status().message();
+    if (prebuilt)
+      return failed_precondition("light fields " + key + " are not built in " + dir.string() + " (" +
+                                 why_not_loaded + "); the study's field job builds them: `lftrack study trade " +
+                                 "--build-fields --lf-dir DIR`");
+  }
+  const auto t0 = Clock::now();
+  Fields fields;
+  for (std::size_t i = 0; i < scaled.scene.detectors.size(); ++i) {
+    auto f = tracking::LightField::build(*p.mu, scaled.light_field_plan(int(i)), spec, pool);
+    if (!f.ok()) return f.status().with_context("light field " + key);
+    fields.push_back(*f);
+  }
+  *build_s = seconds_since(t0);
+  if (!dir.empty()) {
+    spdlog::info("light fields {}: built in {:.1f} s ({}); saving to {}", key, *build_s, why_not_loaded,
+                 dir.string());
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
+    for (std::size_t i = 0; i < fields.size(); ++i)
+      LFTRACK_RETURN_IF_ERROR(fields[i]->save(light_field_file(dir, p.scene.detectors[i].view.name)));
+    LFTRACK_RETURN_IF_ERROR(write_file_atomically(
+        dir / "build.json", nlohmann::json{{"key", key}, {"build_s", *build_s}}.dump(2) + "\n"));
+  }
+  return fields;
+}
+
+// Renderers of the points, with the float fields of each (resolution, envelope) built or loaded once.
 class RendererCache {
  public:
-  RendererCache(const PreparedScene& p, tracking::ThreadPool* pool) : p_(p), pool_(pool) {}
+  RendererCache(const PreparedScene& p, const TradeOptions& o, tracking::ThreadPool* pool)
+      : p_(p), field_dir_(o.field_dir), prebuilt_(o.fields_prebuilt), pool_(pool) {}
 
   // The point's renderer, its memory, and the precompute time it needed (the float field's
   // build plus any conversion, or the octree's compression).
@@ -134,34 +208,26 @@ class RendererCache {
   }
 
  private:
-  using Fields = std::vector<std::shared_ptr<const tracking::LightField>>;
-
   Result<Fields> float_fields(const TradePoint& t, double* build_s) {
-    const std::string key = resolution_label(t.lf_resolution) + "@" + fmt_number(t.envelope_scale);
+    const std::string key = field_set_key(t.lf_resolution, t.envelope_scale);
     auto it = cache_.find(key);
     if (it == cache_.end()) {
-      PreparedScene scaled = p_;
-      scaled.scene.envelope.translation_mm *= t.envelope_scale;
-      scaled.scene.envelope.rotation_deg *= t.envelope_scale;
-      tracking::LightFieldSpec spec = p_.scene.light_field;
-      spec.resolution = t.lf_resolution;
-      spec.storage = tracking::LightFieldStorage::kFloat32;
-      const auto t0 = Clock::now();
-      Fields fields;
-      for (std::size_t i = 0; i < scaled.scene.detectors.size(); ++i) {
-        auto f = tracking::LightField::build(*p_.mu, scaled.light_field_plan(int(i)), spec, pool_);
-        if (!f.ok()) return f.status().with_context("light field " + key);
-        fields.push_back(*f);
-      }
+      double seconds = 0;
+      const std::filesystem::path dir =
+          field_dir_.empty() ? std::filesystem::path() : field_set_dir(field_dir_, t.lf_resolution, t.envelope_scale);
+      auto fields = field_set(p_, t.lf_resolution, t.envelope_scale, dir, prebuilt_, pool_, &seconds);
+      if (!fields.ok()) return fields.status();
       // Only the last few are kept: a full study holds one field set at a time per resolution.
       if (cache_.size() > 2) cache_.clear();
-      it = cache_.emplace(key, std::make_pair(fields, seconds_since(t0))).first;
+      it = cache_.emplace(key, std::make_pair(std::move(fields).value(), seconds)).first;
     }
     *build_s = it->second.second;
     return it->second.first;
   }
 
   const PreparedScene& p_;
+  std::filesystem::path field_dir_;
+  bool prebuilt_ = false;
   tracking::ThreadPool* pool_;
   std::map<std::string, std::pair<Fields, double>> cache_;
 };
@@ -248,12 +314,11 @@ std::vector<TradePoint> trade_points(const PreparedScene& p, bool quick) {
   return points;
 }
 
-Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o, tracking::ThreadPool* pool,
-                                   const std::function<void(double, const std::string&)>& progress) {
+Result<std::vector<TradePoint>> trade_shard_points(const PreparedScene& p, const TradeOptions& o,
+                                                   int* points_total) {
   if (o.shards < 1 || o.shard < 1 || o.shard > o.shards)
     return out_of_range("trade study: shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) +
                         " (k/n needs 1 <= k <= n)");
-  const int problem_count = o.problems > 0 ? o.problems : (o.quick ? 6 : 24);
   std::vector<TradePoint> all = trade_points(p, o.quick);
   if (!o.only.empty()) {
     std::vector<TradePoint> chosen;
@@ -268,6 +333,41 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
                          " study: " + known + ")");
     all = std::move(chosen);
   }
+  if (points_total) *points_total = int(all.size());
+  std::vector<TradePoint> mine;
+  for (std::size_t i = 0; i < all.size(); ++i)
+    if (int(i % std::size_t(o.shards)) == o.shard - 1) mine.push_back(all[i]);
+  return mine;
+}
+
+Status build_trade_fields(const PreparedScene& p, const TradeOptions& o, tracking::ThreadPool* pool,
+                          const std::function<void(const std::string&)>& progress) {
+  if (o.field_dir.empty()) return invalid_argument("trade study: building the fields needs a folder (--lf-dir)");
+  TradeOptions whole = o;
+  whole.shard = whole.shards = 1;
+  auto points = trade_shard_points(p, whole);
+  if (!points.ok()) return points.status();
+  std::set<std::string> done;
+  for (const TradePoint& t : *points) {
+    if (t.renderer != "lightfield" || !done.insert(field_set_key(t.lf_resolution, t.envelope_scale)).second)
+      continue;
+    const auto dir = field_set_dir(o.field_dir, t.lf_resolution, t.envelope_scale);
+    double build_s = 0;
+    auto fields = field_set(p, t.lf_resolution, t.envelope_scale, dir, false, pool, &build_s);
+    if (!fields.ok()) return fields.status();
+    if (progress)
+      progress(dir.string() + ": " + field_set_key(t.lf_resolution, t.envelope_scale) + ", built in " +
+               fmt_number(build_s) + " s");
+  }
+  return {};
+}
+
+Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o, tracking::ThreadPool* pool,
+                                   const std::function<void(double, const std::string&)>& progress) {
+  const int problem_count = o.problems > 0 ? o.problems : (o.quick ? 6 : 24);
+  int points_total = 0;
+  auto mine = trade_shard_points(p, o, &points_total);
+  if (!mine.ok()) return mine.status();
   TradeStudy study;
   study.scene = p.scene.name;
   study.seed = o.seed;
@@ -275,17 +375,14 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
   study.quick = o.quick;
   study.shard = o.shard;
   study.shards = o.shards;
-  study.points_total = int(all.size());
-  std::vector<TradePoint> mine;
-  for (std::size_t i = 0; i < all.size(); ++i)
-    if (int(i % std::size_t(o.shards)) == o.shard - 1) mine.push_back(all[i]);
+  study.points_total = points_total;
   if (progress) progress(0, "making the problems");
   auto problems = make_problems(p, problem_count, o.seed, pool);
   if (!problems.ok()) return problems.status();
-  RendererCache renderers(p, pool);
-  const double steps = double(mine.size()) * problem_count;
+  RendererCache renderers(p, o, pool);
+  const double steps = double(mine->size()) * problem_count;
   double done = 0;
-  for (const TradePoint& t : mine) {
+  for (const TradePoint& t : *mine) {
     if (progress) progress(done / steps, t.id);
     const auto point_started = Clock::now();
     TradeResult res;
@@ -306,13 +403,17 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
       LFTRACK_RETURN_IF_ERROR((*reg)->set_frames(pr.frames.frames(), pr.frames.masks()));
       auto result = (*reg)->run(pr.start, *plan);
       double final_tre = scene_tre(p, pr.start, pr.gold).mean_mm;
+      double elapsed_ms = std::numeric_limits<double>::quiet_NaN();
       if (result.ok()) {
         final_tre = scene_tre(p, result->T_room_from_ct, pr.gold).mean_mm;
+        elapsed_ms = result->elapsed_ms;
         ms.push_back(result->elapsed_ms);
       } else {
         spdlog::warn("point {}: {}", t.id, result.status().message());
       }
       tre.push_back(final_tre);
+      res.problem_tre_mm.push_back(final_tre);
+      res.problem_ms.push_back(elapsed_ms);
       ok += final_tre < 2.0;
       for (std::size_t v = 0; v < pr.siddon_drr.size(); ++v) {
         const tracking::PixelWindow& w = p.roi_windows[v];

@@ -5,15 +5,20 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 
 #include "lftrack/studies/plot.hpp"
+#include "lftrack/studies/study_shard.hpp"
 #include "lftrack/studies/trade_study.hpp"
+#include "quantile.hpp"
 
 namespace lftrack::host {
 namespace {
+
+const char* const kRunsHeader = "id,problem,tre_mm,ms";
 
 const char* const kCsvHeader =
     "id,renderer,storage,vq_codebook,lf_u,lf_v,lf_s,lf_t,envelope_scale,octree_pivot,bin,similarity,plan,"
@@ -79,7 +84,8 @@ const char* const kTableHeader =
     "Siddon | settings |\n|---|---|---|---|---|---|---|---|---|---|\n";
 
 nlohmann::json study_json(const TradeStudy& s) {
-  return {{"scene", s.scene},
+  return {{"study", "trade"},
+          {"scene", s.scene},
           {"seed", s.seed},
           {"problems", s.problems},
           {"quick", s.quick},
@@ -87,6 +93,41 @@ nlohmann::json study_json(const TradeStudy& s) {
           {"shards", s.shards},
           {"points_total", s.points_total},
           {"points", s.results.size()}};
+}
+
+// Fills each result's per-problem rows from runs.csv, if there is one (folders written before
+// it existed have none). Rows must name known points and come in the problems' order.
+Status read_trade_runs(const std::filesystem::path& file, TradeStudy* s) {
+  std::ifstream in(file);
+  if (!in) return {};
+  std::map<std::string, TradeResult*> by_id;
+  for (TradeResult& r : s->results) by_id[r.point.id] = &r;
+  std::string line;
+  if (!std::getline(in, line) || line != kRunsHeader)
+    return corrupt_data(file.string() + ": line 1 is not the trade study's runs header");
+  int line_no = 1;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty()) continue;
+    const auto c = split(line);
+    const std::string where = file.string() + ":" + std::to_string(line_no);
+    if (c.size() != 4) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 4");
+    auto it = by_id.find(c[0]);
+    if (it == by_id.end()) return corrupt_data(where + ": point '" + c[0] + "' is not in points.csv");
+    TradeResult& r = *it->second;
+    char* end = nullptr;
+    const long k = std::strtol(c[1].c_str(), &end, 10);
+    if (*end || k != long(r.problem_tre_mm.size()))
+      return corrupt_data(where + ": problem '" + c[1] + "' out of order for point '" + c[0] + "'");
+    const double tre = std::strtod(c[2].c_str(), &end);
+    if (*end || !std::isfinite(tre) || tre < 0) return corrupt_data(where + ": TRE '" + c[2] + "' is not a distance");
+    const double ms = std::strtod(c[3].c_str(), &end);
+    if (*end || !(std::isnan(ms) || (std::isfinite(ms) && ms >= 0)))
+      return corrupt_data(where + ": time '" + c[3] + "' is not a duration");
+    r.problem_tre_mm.push_back(tre);
+    r.problem_ms.push_back(ms);
+  }
+  return {};
 }
 
 }  // namespace
@@ -136,26 +177,28 @@ Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& d
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
-  {
-    std::ofstream csv(dir / "points.csv");
-    if (!csv) return io_error((dir / "points.csv").string() + ": cannot write");
-    csv << kCsvHeader << '\n';
-    for (const TradeResult& r : study.results) {
-      const TradePoint& t = r.point;
-      csv << t.id << ',' << t.renderer << ',' << t.storage << ',' << t.vq_codebook << ','
-          << t.lf_resolution[0] << ',' << t.lf_resolution[1] << ',' << t.lf_resolution[2] << ','
-          << t.lf_resolution[3] << ',' << num(t.envelope_scale) << ',' << num(t.octree_pivot) << ',' << t.bin
-          << ',' << t.similarity << ',' << t.plan << ',' << num(t.final_step_mm) << ',' << num(t.budget_ms)
-          << ',' << r.runs << ',' << num(r.median_ms) << ',' << num(r.p95_ms) << ',' << num(r.mean_tre_mm)
-          << ',' << num(r.p95_tre_mm) << ',' << num(r.success_rate) << ',' << num(r.memory_bytes) << ','
-          << num(r.precompute_s) << ',' << num(r.ncc_vs_siddon) << ',' << num(r.psnr_db_vs_siddon) << '\n';
-    }
-    if (!csv) return io_error((dir / "points.csv").string() + ": write failed");
+  std::ostringstream csv;
+  csv << kCsvHeader << '\n';
+  for (const TradeResult& r : study.results) {
+    const TradePoint& t = r.point;
+    csv << t.id << ',' << t.renderer << ',' << t.storage << ',' << t.vq_codebook << ',' << t.lf_resolution[0]
+        << ',' << t.lf_resolution[1] << ',' << t.lf_resolution[2] << ',' << t.lf_resolution[3] << ','
+        << num(t.envelope_scale) << ',' << num(t.octree_pivot) << ',' << t.bin << ',' << t.similarity << ','
+        << t.plan << ',' << num(t.final_step_mm) << ',' << num(t.budget_ms) << ',' << r.runs << ','
+        << num(r.median_ms) << ',' << num(r.p95_ms) << ',' << num(r.mean_tre_mm) << ',' << num(r.p95_tre_mm)
+        << ',' << num(r.success_rate) << ',' << num(r.memory_bytes) << ',' << num(r.precompute_s) << ','
+        << num(r.ncc_vs_siddon) << ',' << num(r.psnr_db_vs_siddon) << '\n';
   }
-  std::ofstream j(dir / "study.json");
-  j << study_json(study).dump(2) << '\n';
-  if (!j) return io_error((dir / "study.json").string() + ": write failed");
-  return {};
+  std::ostringstream runs;
+  runs << kRunsHeader << '\n';
+  for (const TradeResult& r : study.results)
+    for (std::size_t k = 0; k < r.problem_tre_mm.size(); ++k)
+      runs << r.point.id << ',' << k << ',' << num(r.problem_tre_mm[k]) << ','
+           << num(k < r.problem_ms.size() ? r.problem_ms[k] : std::nan("")) << '\n';
+  // study.json last: a folder without it is not a result (study_shard.hpp).
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "points.csv", csv.str()));
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", runs.str()));
+  return write_file_atomically(dir / "study.json", study_json(study).dump(2) + "\n");
 }
 
 Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
@@ -165,6 +208,9 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
     if (!in) return not_found((dir / "study.json").string() + ": no such file (not a trade study folder?)");
     try {
       const auto j = nlohmann::json::parse(in);
+      if (j.value("study", "trade") != "trade")
+        return failed_precondition((dir / "study.json").string() + ": a " + j.value("study", "") +
+                                   " study, not a trade study");
       s.scene = j.at("scene").get<std::string>();
       s.seed = j.at("seed").get<std::uint64_t>();
       s.problems = j.at("problems").get<int>();
@@ -215,6 +261,7 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
     if (t.id.empty()) return corrupt_data(where + ": empty point id");
     s.results.push_back(r);
   }
+  LFTRACK_RETURN_IF_ERROR(read_trade_runs(dir / "runs.csv", &s));
   return s;
 }
 
@@ -233,11 +280,22 @@ Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards) {
                                  std::to_string(s.seed) + ", " + std::to_string(s.problems) + " problems)");
     if (!seen.insert(s.shard).second)
       return failed_precondition("merge: shard " + std::to_string(s.shard) + " given twice");
-    for (const TradeResult& r : s.results) {
+    for (const TradeResult& r : s.results)
       if (!ids.insert(r.point.id).second)
         return failed_precondition("merge: point '" + r.point.id + "' measured twice");
-      merged.results.push_back(r);
+  }
+  // The whole study's order: point i was the (i / n)-th point of shard i % n + 1.
+  for (std::size_t i = 0;; ++i) {
+    const std::size_t n = std::size_t(first.shards), position = i / n;
+    const int shard = int(i % n) + 1;
+    auto it = std::find_if(shards.begin(), shards.end(), [&](const TradeStudy& s) { return s.shard == shard; });
+    if (it == shards.end()) break;  // a missing shard: reported below
+    if (position >= it->results.size()) {
+      if (std::all_of(shards.begin(), shards.end(), [&](const TradeStudy& s) { return position >= s.results.size(); }))
+        break;
+      continue;
     }
+    merged.results.push_back(it->results[position]);
   }
   for (int k = 1; k <= first.shards; ++k)
     if (!seen.count(k))
@@ -248,6 +306,103 @@ Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards) {
                                std::to_string(first.points_total));
   merged.shard = merged.shards = 1;
   return merged;
+}
+
+Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeStudy& expected,
+                                  const std::vector<std::string>& ids) {
+  auto s = read_trade_shard(dir);
+  if (!s.ok()) return s.status();
+  if (s->scene != expected.scene || s->seed != expected.seed || s->problems != expected.problems ||
+      s->quick != expected.quick || s->shard != expected.shard || s->shards != expected.shards ||
+      s->points_total != expected.points_total)
+    return failed_precondition(dir.string() + " holds another study: scene '" + s->scene + "', seed " +
+                               std::to_string(s->seed) + ", " + std::to_string(s->problems) +
+                               " problems, shard " + std::to_string(s->shard) + "/" + std::to_string(s->shards) +
+                               ", " + std::to_string(s->points_total) + " points in all");
+  std::vector<std::string> found;
+  for (const TradeResult& r : s->results) {
+    found.push_back(r.point.id);
+    if (int(r.problem_tre_mm.size()) != expected.problems || r.runs != expected.problems)
+      return corrupt_data(dir.string() + ": point '" + r.point.id + "' has " +
+                          std::to_string(r.problem_tre_mm.size()) + " problem rows of " +
+                          std::to_string(expected.problems));
+  }
+  if (found != ids) {
+    std::string want;
+    for (const auto& id : ids) want += (want.empty() ? "" : ",") + id;
+    return corrupt_data(dir.string() + ": its points are not this shard's (" + want + ")");
+  }
+  return {};
+}
+
+Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std::vector<std::string>* left_out) {
+  if (scenes.empty()) return invalid_argument("pool: no scenes");
+  std::set<std::string> names;
+  for (const TradeStudy& s : scenes) {
+    if (!names.insert(s.scene).second) return failed_precondition("pool: scene '" + s.scene + "' given twice");
+    if (s.seed != scenes[0].seed || s.problems != scenes[0].problems || s.quick != scenes[0].quick)
+      return failed_precondition("pool: scene '" + s.scene + "' was studied with another seed, problem count "
+                                 "or size than '" + scenes[0].scene + "'");
+    for (const TradeResult& r : s.results)
+      if (int(r.problem_tre_mm.size()) != r.runs || r.problem_ms.size() != r.problem_tre_mm.size())
+        return failed_precondition("pool: scene '" + s.scene + "', point '" + r.point.id +
+                                   "' has no per-problem rows (runs.csv); run its study again");
+  }
+  TradeStudy pooled = scenes[0];
+  pooled.scene.clear();
+  for (const TradeStudy& s : scenes) pooled.scene += (pooled.scene.empty() ? "" : " + ") + s.scene;
+  pooled.problems = 0;
+  for (const TradeStudy& s : scenes) pooled.problems += s.problems;
+  pooled.results.clear();
+  std::set<std::string> dropped;
+  for (const TradeResult& first : scenes[0].results) {
+    std::vector<const TradeResult*> same;
+    for (const TradeStudy& s : scenes)
+      for (const TradeResult& r : s.results)
+        if (r.point.id == first.point.id) same.push_back(&r);
+    if (same.size() != scenes.size()) {
+      dropped.insert(first.point.id);
+      continue;
+    }
+    TradeResult p = first;
+    p.problem_tre_mm.clear();
+    p.problem_ms.clear();
+    p.memory_bytes = p.precompute_s = p.ncc_vs_siddon = p.psnr_db_vs_siddon = 0;
+    for (const TradeResult* r : same) {
+      p.problem_tre_mm.insert(p.problem_tre_mm.end(), r->problem_tre_mm.begin(), r->problem_tre_mm.end());
+      p.problem_ms.insert(p.problem_ms.end(), r->problem_ms.begin(), r->problem_ms.end());
+      const double w = 1.0 / double(same.size());
+      p.memory_bytes += w * r->memory_bytes;
+      p.precompute_s += w * r->precompute_s;
+      p.ncc_vs_siddon += w * r->ncc_vs_siddon;
+      p.psnr_db_vs_siddon += w * r->psnr_db_vs_siddon;
+    }
+    p.runs = int(p.problem_tre_mm.size());
+    std::vector<double> ms;
+    double sum = 0;
+    int ok = 0;
+    for (std::size_t k = 0; k < p.problem_tre_mm.size(); ++k) {
+      if (!std::isnan(p.problem_ms[k])) ms.push_back(p.problem_ms[k]);
+      sum += p.problem_tre_mm[k];
+      ok += p.problem_tre_mm[k] < 2.0;
+    }
+    p.median_ms = quantile(ms, 0.5);
+    p.p95_ms = quantile(ms, 0.95);
+    p.mean_tre_mm = sum / double(p.runs);
+    p.p95_tre_mm = quantile(p.problem_tre_mm, 0.95);
+    p.success_rate = double(ok) / double(p.runs);
+    pooled.results.push_back(p);
+  }
+  for (const TradeStudy& s : scenes)
+    for (const TradeResult& r : s.results)
+      if (std::none_of(pooled.results.begin(), pooled.results.end(),
+                       [&](const TradeResult& p) { return p.point.id == r.point.id; }))
+        dropped.insert(r.point.id);
+  if (left_out) left_out->assign(dropped.begin(), dropped.end());
+  if (pooled.results.empty()) return failed_precondition("pool: the scenes have no point in common");
+  pooled.points_total = int(pooled.results.size());
+  pooled.shard = pooled.shards = 1;
+  return pooled;
 }
 
 Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir) {

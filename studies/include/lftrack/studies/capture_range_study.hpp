@@ -6,6 +6,11 @@
 // Gold poses are drawn inside the scene's envelope (one per sample index, with its own noisy
 // synthetic frames); sample k of every bin starts from gold pose k perturbed along a random
 // 6-D direction scaled (by bisection) to an initial mean TRE drawn uniformly in the bin.
+//
+// Sharded for a job array by gold sample: shard k of n registers the samples whose index is k-1
+// modulo n, drawing the other samples' random numbers without rendering or registering, so each
+// run is the run of the whole study. `lftrack study merge` joins the shards; several scenes'
+// (patients') studies are pooled by concatenating their runs.
 
 #include <cstdint>
 #include <filesystem>
@@ -39,7 +44,11 @@ struct CaptureRangeOptions {
   std::uint64_t seed = 1;
   std::string renderer = "lightfield";
   std::filesystem::path light_field_dir;  // empty: the scene's default
+  int shard = 1, shards = 1;              // register samples with index % shards == shard - 1
 };
+
+// Gold samples shard `options.shard` registers.
+int capture_range_shard_samples(const CaptureRangeOptions& options);
 
 struct CaptureRangeRun {
   std::string method;
@@ -67,6 +76,7 @@ struct CaptureRangeSummary {
 };
 
 struct CaptureRangeReport {
+  std::string scene;  // the scene's name; pooled reports: the names joined by " + "
   CaptureRangeOptions options;
   std::vector<CaptureRangeRun> runs;
   std::vector<CaptureRangeSummary> summaries;
@@ -81,5 +91,18 @@ std::vector<CaptureRangeSummary> summarize_capture_range(const CaptureRangeOptio
                                                          const std::vector<CaptureRangeRun>& runs);
 // runs.csv, summary.json, capture_range.png (+ .dat, .gp) into `dir`.
 Status write_capture_range_outputs(const CaptureRangeReport& report, const std::filesystem::path& dir);
+
+// A shard's runs.csv and study.json (its options; written last, atomically) into `dir`.
+Status write_capture_range_shard(const CaptureRangeReport& report, const std::filesystem::path& dir);
+// Reads what write_capture_range_shard (or write_capture_range_outputs after it) wrote.
+Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path& dir);
+// OK when `dir` holds the complete shard of the study `expected` describes (same scene and
+// options, every run of its samples); otherwise why not.
+Status check_capture_range_shard_complete(const std::filesystem::path& dir, const CaptureRangeReport& expected);
+// Joins the shards of one study (refuses another study's shard, one given twice or missing).
+Result<CaptureRangeReport> merge_capture_range_shards(const std::vector<CaptureRangeReport>& shards);
+// Several scenes' whole studies as one: their runs together (samples renumbered after each
+// other), summarised again. Refuses scenes given twice or studied with other options.
+Result<CaptureRangeReport> pool_capture_range_reports(const std::vector<CaptureRangeReport>& scenes);
 
 }  // namespace lftrack::host

@@ -15,7 +15,13 @@
 //
 // The study is sharded for a cluster's job array: shard k of n runs the points whose index is
 // k-1 modulo n (every shard makes the same problems); `lftrack study merge` joins the shards'
-// CSVs and writes the plots and the summary.
+// CSVs and writes the plots and the summary. Shards of several scenes (one per patient) are
+// merged per scene and pooled over the problems of every scene (pool_trade_studies).
+//
+// The float light fields the points need (one set per resolution and envelope) are built in the
+// run, or, with `field_dir`, loaded from a folder that build_trade_fields filled once: a job
+// array's tasks then map the same files read-only and report the precompute time measured when
+// the fields were built.
 
 #include <array>
 #include <cstdint>
@@ -49,6 +55,8 @@ struct TradeOptions {
   int shard = 1, shards = 1;  // run points with index % shards == shard - 1
   std::uint64_t seed = 1;
   std::vector<std::string> only;  // non-empty: just these points (by id), in the study's order
+  std::filesystem::path field_dir;  // non-empty: float fields from here (built and saved if missing)
+  bool fields_prebuilt = false;     // with field_dir: refuse to build a missing field set
 };
 
 struct TradeResult {
@@ -61,6 +69,9 @@ struct TradeResult {
   double precompute_s = 0;
   double ncc_vs_siddon = 0;      // mean over problems and views, at the gold poses
   double psnr_db_vs_siddon = 0;  // mean (infinite for an exact renderer)
+  // Per problem, in the problems' order (runs.csv): final mean TRE, and the registration time
+  // (NaN where the registration failed). Empty for results read from a folder without runs.csv.
+  std::vector<double> problem_tre_mm, problem_ms;
 };
 
 struct TradeStudy {
@@ -75,6 +86,17 @@ struct TradeStudy {
 
 // The operating points of the study on `scene`, in a stable order.
 std::vector<TradePoint> trade_points(const PreparedScene& scene, bool quick);
+
+// The points shard `options.shard` of `options.shards` runs (after `options.only`), and in
+// `points_total` the number in the whole study.
+Result<std::vector<TradePoint>> trade_shard_points(const PreparedScene& scene, const TradeOptions& options,
+                                                   int* points_total = nullptr);
+
+// Builds and saves into `options.field_dir` every float field set the points of the whole study
+// (after `options.only`, every shard) need, skipping sets already there and valid. `progress`
+// gets a line per set.
+Status build_trade_fields(const PreparedScene& scene, const TradeOptions& options, tracking::ThreadPool* pool,
+                          const std::function<void(const std::string&)>& progress = {});
 
 // Runs this shard's points. `progress` gets the fraction done and the point being run.
 Result<TradeStudy> run_trade_study(const PreparedScene& scene, const TradeOptions& options,
@@ -98,9 +120,21 @@ TradeRecommendations recommend(const std::vector<TradeResult>& results);
 Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& dir);
 // Reads what write_trade_shard wrote.
 Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir);
+// OK when `dir` holds the complete result of the shard `expected` describes (scene, seed,
+// problems, quick, shard k/n, points total) with exactly the points `ids` and every problem's
+// row; otherwise why not. A task that finds its shard complete has nothing to do.
+Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeStudy& expected,
+                                  const std::vector<std::string>& ids);
 // Joins shards of one study: refuses shards of another scene, seed or problem count, a shard
 // missing or given twice, and a point measured twice.
 Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards);
+// One study over several scenes (patients), each merged: the points every scene has, each with
+// the problems of every scene together (times, TREs and success recomputed from runs.csv;
+// memory, precompute and fidelity averaged over the scenes). Refuses scenes given twice or
+// studies of different seeds, problem counts or sizes, and results without per-problem rows.
+// `left_out` (may be null) gets the ids some scene lacks.
+Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes,
+                                      std::vector<std::string>* left_out = nullptr);
 // points.csv, study.json, tre_vs_time.png, memory_vs_fidelity.png (+ their .dat/.gp) and
 // summary.md in `dir`.
 Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir);

@@ -1,0 +1,242 @@
+// Sharded studies as a cluster runs them (issue 25): shards equal to the unsharded study, tasks
+// that find their shard complete, light fields built once, and a real single-node Slurm cluster
+// (scripts/slurm-local.sh) running `lftrack study submit`'s job array when the test runs as root.
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/studies/plastimatch_peer.hpp"  // run_process
+#include "test_data.hpp"
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string lftrack_bin() { return LFTRACK_BIN_PATH; }
+
+// The built-in phantom with a tiny 16-bit light field, named `name` (one "patient" per name).
+fs::path patient_scene(const fs::path& dir, const std::string& name, int phantom_seed) {
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  auto swap = [&](const std::string& from, const std::string& to) {
+    const auto at = scene.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    scene.replace(at, from.size(), to);
+  };
+  swap("    resolution: [16, 16, 128, 128]\n", "    resolution: [4, 4, 48, 48]\n    storage: fixed16\n");
+  swap("name: builtin spine phantom", "name: " + name);
+  swap("  seed: 1\n", "  seed: " + std::to_string(phantom_seed) + "\n");
+  const fs::path file = dir / (name + ".yaml");
+  std::ofstream(file) << scene;
+  return file;
+}
+
+// A CSV's rows with only its first `columns` columns (the rest are times, which differ by run).
+std::string columns_of(const fs::path& csv, int columns) {
+  std::ifstream in(csv);
+  std::string line, out;
+  while (std::getline(in, line)) {
+    std::istringstream cells(line);
+    std::string cell;
+    for (int c = 0; c < columns && std::getline(cells, cell, ','); ++c) out += cell + ",";
+    out += "\n";
+  }
+  return out;
+}
+
+const std::vector<std::string> kCaptureArgs = {"--per-bin", "3", "--bins", "2", "--methods", "warm:ncc"};
+
+std::vector<std::string> capture_range(const fs::path& scene, const std::vector<std::string>& more) {
+  std::vector<std::string> a{lftrack_bin(), "-q", "study", "capture-range", "--scene", scene.string()};
+  a.insert(a.end(), kCaptureArgs.begin(), kCaptureArgs.end());
+  a.insert(a.end(), more.begin(), more.end());
+  return a;
+}
+
+TEST(Cli, CaptureRangeShardsMergeIntoTheUnshardedStudyAndFinishedShardsAreNotRunAgain) {
+  test::TempDir dir;
+  const fs::path scene = patient_scene(dir.path(), "p1", 1);
+  const std::string lf = (dir.path() / "lf").string();
+  std::string out;
+  // A task told the fields are prebuilt refuses to build them.
+  EXPECT_FALSE(run_process(capture_range(scene, {"--out", (dir.path() / "x").string(), "--lf-dir", lf,
+                                                 "--fields-prebuilt"}),
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("the study's field job builds them"), std::string::npos) << out;
+  ASSERT_TRUE(run_process(capture_range(scene, {"--build-fields", "--lf-dir", lf}), &out).ok()) << out;
+  ASSERT_TRUE(run_process(capture_range(scene, {"--out", (dir.path() / "whole").string(), "--lf-dir", lf}), &out).ok())
+      << out;
+  std::vector<std::string> shards;
+  for (const char* k : {"1/2", "2/2"}) {
+    shards.push_back((dir.path() / (std::string("shard") += k[0])).string());
+    ASSERT_TRUE(run_process(capture_range(scene, {"--shard", k, "--out", shards.back(), "--lf-dir", lf,
+                                                  "--fields-prebuilt"}),
+                            &out)
+                    .ok())
+        << out;
+  }
+  std::vector<std::string> merge{lftrack_bin(), "-q", "study", "merge", "--out", (dir.path() / "merged").string()};
+  merge.insert(merge.end(), shards.rbegin(), shards.rend());
+  ASSERT_TRUE(run_process(merge, &out).ok()) << out;
+  const std::string whole = columns_of(dir.path() / "whole" / "runs.csv", 10);
+  EXPECT_EQ(std::count(whole.begin(), whole.end(), '\n'), 1 + 3 * 2);
+  EXPECT_EQ(columns_of(dir.path() / "merged" / "runs.csv", 10), whole) << "every run is the unsharded study's run";
+  // Shard 1 again: found complete, not computed (its results keep their time).
+  const auto written = fs::last_write_time(fs::path(shards[0]) / "runs.csv");
+  ASSERT_TRUE(run_process(capture_range(scene, {"--shard", "1/2", "--out", shards[0], "--lf-dir", lf,
+                                                "--fields-prebuilt"}),
+                          &out)
+                  .ok())
+      << out;
+  EXPECT_NE(out.find("nothing to do"), std::string::npos) << out;
+  EXPECT_EQ(fs::last_write_time(fs::path(shards[0]) / "runs.csv"), written);
+  // Another study in that folder (another seed) is refused, and the folder kept.
+  EXPECT_FALSE(run_process(capture_range(scene, {"--shard", "1/2", "--seed", "5", "--out", shards[0]}), &out).ok());
+  EXPECT_NE(out.find("refusing to overwrite"), std::string::npos) << out;
+  EXPECT_EQ(fs::last_write_time(fs::path(shards[0]) / "runs.csv"), written);
+  // A torn shard (its description lost) is computed again.
+  fs::remove(fs::path(shards[0]) / "study.json");
+  ASSERT_TRUE(run_process(capture_range(scene, {"--shard", "1/2", "--out", shards[0], "--lf-dir", lf,
+                                                "--fields-prebuilt"}),
+                          &out)
+                  .ok())
+      << out;
+  EXPECT_TRUE(fs::exists(fs::path(shards[0]) / "study.json"));
+}
+
+TEST(Cli, TradeStudyFieldsAreBuiltOnceAndShardsOnlyMapThem) {
+  test::TempDir dir;
+  const fs::path scene = patient_scene(dir.path(), "p1", 1);
+  const std::string lf = (dir.path() / "fields").string();
+  const std::vector<std::string> common{lftrack_bin(), "-q",         "study",  "trade",
+                                        "--scene",     scene.string(), "--quick", "--problems",
+                                        "1",           "--points",   "baseline,lf-st32,bin2"};
+  auto with = [&](std::vector<std::string> more) {
+    auto a = common;
+    a.insert(a.end(), more.begin(), more.end());
+    return a;
+  };
+  std::string out;
+  EXPECT_FALSE(run_process(with({"--shard", "1/2", "--out", (dir.path() / "x").string(), "--lf-dir", lf,
+                                 "--fields-prebuilt"}),
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("are not built in"), std::string::npos) << out;
+  ASSERT_TRUE(run_process(with({"--build-fields", "--lf-dir", lf}), &out).ok()) << out;
+  int sets = 0;
+  for (const auto& e : fs::directory_iterator(lf)) {
+    ++sets;
+    EXPECT_TRUE(fs::exists(e.path() / "A.lf") && fs::exists(e.path() / "build.json")) << e.path();
+  }
+  EXPECT_EQ(sets, 2) << "baseline and bin2 share one field set, lf-st32 has its own";
+  ASSERT_TRUE(run_process(with({"--out", (dir.path() / "whole").string()}), &out).ok()) << out;
+  for (const char* k : {"1/2", "2/2"})
+    ASSERT_TRUE(run_process(with({"--shard", k, "--out", (dir.path() / (std::string("s") += k[0])).string(),
+                                  "--lf-dir", lf, "--fields-prebuilt"}),
+                            &out)
+                    .ok())
+        << out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "study", "merge", "--out", (dir.path() / "merged").string(),
+                           (dir.path() / "s1").string(), (dir.path() / "s2").string()},
+                          &out)
+                  .ok())
+      << out;
+  // Settings, runs and TRE columns (1-16, 19-21) agree; times and precompute differ by run.
+  auto accuracy = [](const fs::path& csv) {
+    std::string all = columns_of(csv, 21), kept;
+    std::istringstream lines(all);
+    for (std::string line; std::getline(lines, line);) {
+      std::istringstream cells(line);
+      std::string cell;
+      for (int c = 1; std::getline(cells, cell, ','); ++c)
+        if (c <= 16 || c >= 19) kept += cell + ",";
+      kept += "\n";
+    }
+    return kept;
+  };
+  EXPECT_EQ(accuracy(dir.path() / "merged" / "points.csv"), accuracy(dir.path() / "whole" / "points.csv"));
+  EXPECT_EQ(columns_of(dir.path() / "merged" / "runs.csv", 3), columns_of(dir.path() / "whole" / "runs.csv", 3));
+}
+
+// A single-node Slurm cluster under a test folder, stopped when the test ends.
+class LocalSlurm {
+ public:
+  explicit LocalSlurm(const fs::path& dir) : dir_(dir) {
+    started_ = run_process({"bash", std::string(LFTRACK_SOURCE_DIR) + "/scripts/slurm-local.sh", "start", dir.string()},
+                           &log_)
+                   .ok();
+  }
+  ~LocalSlurm() {
+    std::string ignored;
+    (void)run_process({"bash", std::string(LFTRACK_SOURCE_DIR) + "/scripts/slurm-local.sh", "stop", dir_.string()},
+                      &ignored);
+  }
+  bool started() const { return started_; }
+  const std::string& log() const { return log_; }
+  std::string conf() const { return "SLURM_CONF=" + (dir_ / "slurm.conf").string(); }
+
+ private:
+  fs::path dir_;
+  bool started_ = false;
+  std::string log_;
+};
+
+TEST(Cli, SlurmJobArrayOnALocalClusterEqualsTheUnshardedStudy) {
+  if (geteuid() != 0) GTEST_SKIP() << "a local Slurm cluster needs root (slurmd starts jobs as their owner)";
+  std::string out;
+  for (const char* tool : {"slurmctld", "slurmd", "sbatch", "munged", "mungekey"})
+    if (std::system((std::string("command -v ") + tool + " >/dev/null 2>&1").c_str()) != 0)
+      GTEST_SKIP() << tool << " is not installed (scripts/setup.sh installs Slurm)";
+  test::TempDir dir;
+  LocalSlurm cluster(dir.path() / "slurm");
+  ASSERT_TRUE(cluster.started()) << cluster.log();
+  const fs::path p1 = patient_scene(dir.path(), "patient-1", 1);
+  const fs::path p2 = patient_scene(dir.path(), "patient-2", 2);
+  const fs::path study = dir.path() / "study";
+  std::vector<std::string> submit{lftrack_bin(), "study", "submit", "--scheduler", "slurm", "--study", "capture-range",
+                                  "--scene", p1.string(), "--scene", p2.string(), "--out", study.string(),
+                                  "--shards", "2", "--cpus-per-task", "1", "--"};
+  submit.insert(submit.end(), kCaptureArgs.begin(), kCaptureArgs.end());
+  ASSERT_TRUE(run_process(submit, &out, {cluster.conf()}).ok()) << out;
+  EXPECT_NE(out.find("submitted: fields job"), std::string::npos) << out;
+  // Wait for the merge (the whole array is about 7 processes of a few seconds each).
+  nlohmann::json status;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(3);
+  while (std::chrono::steady_clock::now() < deadline) {
+    ASSERT_TRUE(run_process({lftrack_bin(), "study", "status", study.string(), "--json"}, &out).ok()) << out;
+    status = nlohmann::json::parse(out.substr(out.find('{')));
+    if (status["merged"].get<bool>() || status["failed"].get<int>() > 0) break;
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+  }
+  ASSERT_TRUE(status["merged"].get<bool>()) << status.dump(2) << "\nlogs in " << (study / "slurm" / "logs");
+  EXPECT_EQ(status["done"].get<int>(), 4);
+  for (const auto& row : status["shards"]) EXPECT_FALSE(row["slurm_job"].get<std::string>().empty()) << row;
+  // Each patient's merged study equals the same study run unsharded, outside Slurm; the pooled
+  // study holds both patients' runs.
+  for (const auto& [scene, name] : {std::pair{p1, "patient-1"}, std::pair{p2, "patient-2"}}) {
+    const fs::path whole = dir.path() / (std::string(name) + "-whole");
+    ASSERT_TRUE(run_process(capture_range(scene, {"--out", whole.string(), "--lf-dir", (dir.path() / "lf" / name).string()}),
+                            &out)
+                    .ok())
+        << out;
+    EXPECT_EQ(columns_of(study / "merged" / name / "runs.csv", 10), columns_of(whole / "runs.csv", 10)) << name;
+  }
+  const std::string pooled = columns_of(study / "merged" / "pooled" / "runs.csv", 1);
+  EXPECT_EQ(std::count(pooled.begin(), pooled.end(), '\n'), 1 + 2 * 3 * 2);
+  // The same submission again: every task finds its shard complete.
+  ASSERT_TRUE(run_process(submit, &out, {cluster.conf()}).ok()) << out;
+  std::ifstream record(study / "submit.json");
+  EXPECT_EQ(nlohmann::json::parse(record)["submissions"].size(), 2u);
+}
+
+}  // namespace
+}  // namespace lftrack::host
