@@ -1,3 +1,4 @@
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -35,10 +36,14 @@ Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking:
 }
 
 Result<std::pair<int, int>> parse_shard(const std::string& text) {
-  int k = 0, n = 0;
-  char tail = 0;
-  if (std::sscanf(text.c_str(), "%d/%d%c", &k, &n, &tail) != 2 || n < 1 || k < 1 || k > n || n > 10000)
-    return invalid_argument("--shard '" + text + "': expected k/n with 1 <= k <= n <= 10000, e.g. 3/8");
+  const Status bad = invalid_argument("--shard '" + text + "': expected k/n with 1 <= k <= n <= 10000, e.g. 3/8");
+  const auto slash = text.find('/');
+  if (slash == std::string::npos || slash == 0 || slash + 1 == text.size() || slash > 5 || text.size() - slash > 6)
+    return bad;
+  for (std::size_t i = 0; i < text.size(); ++i)
+    if (i != slash && !std::isdigit(static_cast<unsigned char>(text[i]))) return bad;
+  const int k = std::stoi(text.substr(0, slash)), n = std::stoi(text.substr(slash + 1));
+  if (n < 1 || k < 1 || k > n || n > 10000) return bad;
   return std::make_pair(k, n);
 }
 

@@ -79,6 +79,7 @@ Status run(const CaptureRangeCliOptions& o) {
   }
   CaptureRangeReport expected;
   expected.scene = prepared->scene.name;
+  expected.fingerprint = study_scene_fingerprint(*prepared);
   expected.options = options;
   std::string said;
   const Status s = run_shard_task(

@@ -4,7 +4,9 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -100,8 +102,18 @@ struct StatusCliOptions {
 
 // A shard's state: the task's record, checked against the folder (a "done" shard whose result
 // does not read is failed).
+// Text from a file, fit for a terminal: at most `max` characters, no control characters.
+std::string printable(const std::string& text, std::size_t max) {
+  std::string out = text.substr(0, max);
+  for (char& c : out)
+    if (std::iscntrl(static_cast<unsigned char>(c))) c = ' ';
+  return out;
+}
+
 ShardTask shard_state(const std::string& study, const fs::path& dir) {
   ShardTask t = read_shard_task(dir);
+  t.host = printable(t.host, 64);
+  t.slurm_job = printable(t.slurm_job, 32);
   if (t.phase != ShardPhase::kDone) return t;
   const Status readable = study == "trade" ? read_trade_shard(dir).status() : read_capture_range_shard(dir).status();
   if (!readable.ok()) {
@@ -121,8 +133,12 @@ Status run_status(const StatusCliOptions& o) {
     const auto& spec = submitted.at("spec");
     const std::string study = spec.at("study").get<std::string>();
     const auto names = spec.at("scene_names").get<std::vector<std::string>>();
-    const int shards = spec.at("shards").get<int>();
-    if (shards < 1 || shards > 10000 || names.empty()) return corrupt_data(record.string() + ": shards or scenes out of range");
+    const auto shards64 = spec.at("shards").get<std::int64_t>();
+    if (shards64 < 1 || shards64 > 10000 || names.empty() || names.size() * std::size_t(shards64) > 1000)
+      return corrupt_data(record.string() + ": shards or scenes out of range");
+    const int shards = int(shards64);
+    for (const std::string& name : names)
+      if (folder_safe_name(name) != name) return corrupt_data(record.string() + ": scene name '" + name + "' is not a folder name");
     const double now =
         std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
     int counts[4] = {0, 0, 0, 0};
@@ -134,9 +150,11 @@ Status run_status(const StatusCliOptions& o) {
         const fs::path dir = shard_dir(o.dir, name, k, shards);
         const ShardTask t = shard_state(study, dir);
         ++counts[int(t.phase)];
-        const double seconds = t.started_unix_s <= 0 ? 0
-                               : t.finished_unix_s > 0 ? t.finished_unix_s - t.started_unix_s
-                                                       : now - t.started_unix_s;
+        double seconds = t.started_unix_s <= 0 ? 0
+                         : t.finished_unix_s > 0 ? t.finished_unix_s - t.started_unix_s
+                                                 : now - t.started_unix_s;
+        if (!std::isfinite(seconds) || seconds < 0 || seconds > 1e9) seconds = 0;  // a hand-edited record
+        const std::string note = printable(t.message, 300);  // from a file: nothing raw to the terminal
         const std::string shard = std::to_string(k) + "/" + std::to_string(shards);
         rows.push_back({{"scene", name},
                         {"shard", shard},
@@ -144,12 +162,12 @@ Status run_status(const StatusCliOptions& o) {
                         {"slurm_job", t.slurm_job},
                         {"host", t.host},
                         {"seconds", seconds},
-                        {"note", t.message},
+                        {"note", note},
                         {"dir", dir.string()}});
         if (!o.json)
           std::printf("%-20s %-12s %-8s %-14s %-16s %9.0f  %s\n", name.c_str(), shard.c_str(), to_string(t.phase),
                       t.slurm_job.empty() ? "-" : t.slurm_job.c_str(), t.host.empty() ? "-" : t.host.c_str(),
-                      seconds, t.message.c_str());
+                      seconds, note.c_str());
       }
     }
     std::error_code ec;

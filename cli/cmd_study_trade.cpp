@@ -82,6 +82,7 @@ Status run_trade(const TradeCliOptions& o) {
   if (!mine.ok()) return mine.status();
   TradeStudy expected;
   expected.scene = prepared->scene.name;
+  expected.fingerprint = study_scene_fingerprint(*prepared);
   expected.seed = options.seed;
   expected.problems = options.problems > 0 ? options.problems : (options.quick ? 6 : 24);
   expected.quick = options.quick;
@@ -236,6 +237,16 @@ Status merge_capture_range(const std::vector<std::string>& dirs, const std::file
 }
 
 Status run_merge(const MergeCliOptions& o) {
+  // The output is never one of the shards (a merge there would overwrite that shard's result).
+  std::error_code ec;
+  const auto out = std::filesystem::weakly_canonical(o.out_dir, ec);
+  for (const auto& dir : o.shards) {
+    const auto shard = std::filesystem::weakly_canonical(dir, ec);
+    const auto rel = out.lexically_relative(shard);
+    if (out == shard || (!rel.empty() && *rel.begin() != ".."))
+      return invalid_argument("merge: --out " + o.out_dir + " is, or is inside, the shard folder " + dir +
+                              "; choose a folder of its own");
+  }
   std::string kind;
   for (const auto& dir : o.shards) {
     auto k = study_kind(dir);

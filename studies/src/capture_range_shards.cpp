@@ -86,6 +86,8 @@ Status parse_run(const std::vector<std::string>& c, const CaptureRangeOptions& o
   run->tre_max_mm = values[5];
   run->success = values[6] != 0;
   run->success_loose = values[7] != 0;
+  if (values[8] > 1e9 || std::abs(values[1] - values[0] - o.bin_width_mm) > 1e-6 * o.bin_width_mm)
+    return corrupt_data(where + ": evaluations or bin edges out of range");
   run->evaluations = int(values[8]);
   run->ms = values[9];
   return {};
@@ -93,10 +95,14 @@ Status parse_run(const std::vector<std::string>& c, const CaptureRangeOptions& o
 
 }  // namespace
 
-Status write_capture_range_shard(const CaptureRangeReport& report, const std::filesystem::path& dir) {
+Status write_capture_range_shard(const CaptureRangeReport& report, const std::filesystem::path& dir,
+                                 bool describe) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
+  // An earlier description goes first: a folder being rewritten never reads as a result.
+  std::filesystem::remove(dir / "study.json", ec);
+  if (ec) return io_error((dir / "study.json").string() + ": cannot remove the earlier description");
   const CaptureRangeOptions& o = report.options;
   std::ostringstream csv;
   csv << kRunsHeader << '\n';
@@ -106,8 +112,14 @@ Status write_capture_range_shard(const CaptureRangeReport& report, const std::fi
         << ',' << int(r.success) << ',' << int(r.success_loose) << ',' << r.evaluations << ',' << num(r.ms)
         << '\n';
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", csv.str()));
+  return describe ? write_capture_range_description(report, dir) : Status{};
+}
+
+Status write_capture_range_description(const CaptureRangeReport& report, const std::filesystem::path& dir) {
+  const CaptureRangeOptions& o = report.options;
   nlohmann::json j = {{"study", "capture-range"},
                       {"scene", report.scene},
+                      {"fingerprint", report.fingerprint},
                       {"shard", o.shard},
                       {"shards", o.shards},
                       {"runs", report.runs.size()},
@@ -128,8 +140,13 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
       if (j.value("study", "") != "capture-range")
         return failed_precondition(file.string() + ": not a capture-range study");
       r.scene = j.at("scene").get<std::string>();
-      o.shard = j.at("shard").get<int>();
-      o.shards = j.at("shards").get<int>();
+      r.fingerprint = j.value("fingerprint", "");
+      const auto shard = j.at("shard").get<std::int64_t>();
+      const auto shards = j.at("shards").get<std::int64_t>();
+      if (shards < 1 || shards > 10000 || shard < 1 || shard > shards)
+        return corrupt_data(file.string() + ": shard k/n out of range");
+      o.shard = int(shard);
+      o.shards = int(shards);
       runs_expected = j.at("runs").get<std::size_t>();
       const auto& opt = j.at("options");
       o.methods.clear();
@@ -138,8 +155,12 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
         if (!m.ok()) return m.status().with_context(file.string());
         o.methods.push_back(*m);
       }
-      o.per_bin = opt.at("per_bin").get<int>();
-      o.bins = opt.at("bins").get<int>();
+      const auto per_bin = opt.at("per_bin").get<std::int64_t>();
+      const auto bins = opt.at("bins").get<std::int64_t>();
+      if (per_bin < 1 || per_bin > 1000000 || bins < 1 || bins > 32)
+        return corrupt_data(file.string() + ": per_bin or bins out of range");
+      o.per_bin = int(per_bin);
+      o.bins = int(bins);
       o.bin_width_mm = opt.at("bin_width_mm").get<double>();
       o.success_mm = opt.at("success_mm").get<double>();
       o.success_loose_mm = opt.at("success_loose_mm").get<double>();
@@ -151,9 +172,8 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
     } catch (const std::exception& e) {
       return corrupt_data(file.string() + ": " + e.what());
     }
-    if (o.shards < 1 || o.shard < 1 || o.shard > o.shards || o.per_bin < 1 || o.per_bin > 10000 || o.bins < 1 ||
-        o.bins > 32 || !(o.bin_width_mm > 0) || o.methods.empty())
-      return corrupt_data(file.string() + ": shard, bins or methods out of range");
+    if (!(o.bin_width_mm > 0) || !std::isfinite(o.bin_width_mm) || o.methods.empty())
+      return corrupt_data(file.string() + ": bin width or methods out of range");
   }
   const auto file = dir / "runs.csv";
   std::ifstream csv(file);
@@ -162,11 +182,19 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
   if (!std::getline(csv, line) || line != kRunsHeader)
     return corrupt_data(file.string() + ": line 1 is not the capture-range header");
   int line_no = 1;
+  std::set<std::tuple<int, int, std::string>> seen;
   while (std::getline(csv, line)) {
     ++line_no;
     if (line.empty()) continue;
     CaptureRangeRun run;
-    LFTRACK_RETURN_IF_ERROR(parse_run(split(line), o, file.string() + ":" + std::to_string(line_no), &run));
+    const std::string where = file.string() + ":" + std::to_string(line_no);
+    LFTRACK_RETURN_IF_ERROR(parse_run(split(line), o, where, &run));
+    if (run.sample % o.shards != o.shard - 1)
+      return corrupt_data(where + ": sample " + std::to_string(run.sample) + " is not shard " +
+                          std::to_string(o.shard) + "/" + std::to_string(o.shards) + "'s");
+    if (!seen.insert({run.sample, run.bin, run.method}).second)
+      return corrupt_data(where + ": sample " + std::to_string(run.sample) + ", bin " + std::to_string(run.bin) +
+                          ", method " + run.method + " twice");
     r.runs.push_back(run);
   }
   if (r.runs.size() != runs_expected)
@@ -180,10 +208,12 @@ Status check_capture_range_shard_complete(const std::filesystem::path& dir, cons
   auto found = read_capture_range_shard(dir);
   if (!found.ok()) return found.status();
   const CaptureRangeOptions& o = expected.options;
-  if (found->scene != expected.scene || !same_study(found->options, o) || found->options.shard != o.shard ||
+  if (found->scene != expected.scene || found->fingerprint != expected.fingerprint ||
+      !same_study(found->options, o) || found->options.shard != o.shard ||
       found->options.shards != o.shards)
     return failed_precondition(dir.string() + " holds another study (" + shard_name(*found) + ", seed " +
-                               std::to_string(found->options.seed) + ")");
+                               std::to_string(found->options.seed) + ", scene fingerprint " +
+                               (found->fingerprint.empty() ? "none" : found->fingerprint) + ")");
   const std::size_t want = std::size_t(capture_range_shard_samples(o)) * std::size_t(o.bins) * o.methods.size();
   if (found->runs.size() != want)
     return corrupt_data(dir.string() + ": " + std::to_string(found->runs.size()) + " runs of " + std::to_string(want));
@@ -195,11 +225,13 @@ Result<CaptureRangeReport> merge_capture_range_shards(const std::vector<CaptureR
   const CaptureRangeReport& first = shards.front();
   CaptureRangeReport merged;
   merged.scene = first.scene;
+  merged.fingerprint = first.fingerprint;
   merged.options = first.options;
   merged.options.shard = merged.options.shards = 1;
   std::set<int> seen;
   for (const CaptureRangeReport& s : shards) {
-    if (s.scene != first.scene || !same_study(s.options, first.options) || s.options.shards != first.options.shards)
+    if (s.scene != first.scene || s.fingerprint != first.fingerprint || !same_study(s.options, first.options) ||
+        s.options.shards != first.options.shards)
       return failed_precondition("merge: " + shard_name(s) + " is of another study than " + shard_name(first));
     if (!seen.insert(s.options.shard).second)
       return failed_precondition("merge: " + shard_name(s) + " given twice");

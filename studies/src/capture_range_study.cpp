@@ -9,6 +9,7 @@
 #include <random>
 
 #include "lftrack/studies/plot.hpp"
+#include "lftrack/studies/study_shard.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -120,6 +121,7 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
   CaptureRangeReport report;
   report.options = o;
   report.scene = p.scene.name;
+  report.fingerprint = study_scene_fingerprint(p);
   auto renderer = make_scene_renderer(p, o.renderer, o.light_field_dir, pool);
   if (!renderer.ok()) return renderer.status();
   tracking::RendererOptions exact_options;
@@ -215,7 +217,7 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
   const CaptureRangeOptions& o = report.options;
-  LFTRACK_RETURN_IF_ERROR(write_capture_range_shard(report, dir));
+  LFTRACK_RETURN_IF_ERROR(write_capture_range_shard(report, dir, false));
   nlohmann::json j;
   j["per_bin"] = o.per_bin;
   j["bins_mm"] = nlohmann::json::array();
@@ -233,11 +235,7 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
                             {"p95_ms", s.p95_ms},
                             {"bin_success_rate", s.bin_success_rate}});
   }
-  {
-    std::ofstream out(dir / "summary.json");
-    if (!out) return io_error((dir / "summary.json").string() + ": cannot write");
-    out << j.dump(2) << '\n';
-  }
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "summary.json", j.dump(2) + "\n"));
   LinePlot plot;
   plot.title = "Capture range: success (final TRE < " + std::to_string(o.success_mm).substr(0, 3) + " mm)";
   plot.x_label = "initial mean TRE (mm, bin centre)";
@@ -252,7 +250,7 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
   }
   auto drawn = draw_line_plot(plot, dir / "capture_range.png");
   if (!drawn.ok()) return drawn.status();
-  return {};
+  return write_capture_range_description(report, dir);  // last: the folder is now a complete result
 }
 
 }  // namespace lftrack::host

@@ -30,6 +30,11 @@ Result<bool> run_gnuplot(const std::filesystem::path& gp) {
   const std::string command = "cd " + quoted(gp.parent_path().empty() ? "." : gp.parent_path().string()) +
                               " && gnuplot " + quoted(gp.filename().string()) + " 2>&1";
   if (std::system(command.c_str()) != 0) return io_error("gnuplot failed on " + gp.string());
+  // gnuplot exits 0 on an empty script and on a PNG it could not finish (a full disk).
+  std::error_code ec;
+  const auto png = std::filesystem::path(gp).replace_extension(".png");
+  if (!std::filesystem::exists(png, ec) || std::filesystem::file_size(png, ec) == 0 || ec)
+    return io_error(png.string() + ": gnuplot wrote no image (disk full?)");
   return true;
 }
 
@@ -55,6 +60,8 @@ Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& p
       }
       d << '\n';
     }
+    d.flush();
+    if (!d) return io_error(dat.string() + ": write failed (disk full?)");
   }
   {
     std::ofstream g(gp);
@@ -72,6 +79,8 @@ Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& p
         << " with linespoints lw 2 pt 7 title " << gp_string(plot.series[s].name);
     }
     g << "\n";
+    g.flush();
+    if (!g) return io_error(gp.string() + ": write failed (disk full?)");
   }
   return run_gnuplot(gp);
 }
@@ -88,6 +97,8 @@ Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::p
     for (const auto& p : points)
       if (std::isfinite(p.x) && std::isfinite(p.y))
         d << p.x << '\t' << p.y << '\t' << gp_string(p.label) << '\n';
+    d.flush();
+    if (!d) return io_error(file.string() + ": write failed (disk full?)");
     return {};
   };
   LFTRACK_RETURN_IF_ERROR(write_points(dat, plot.points));
@@ -110,6 +121,8 @@ Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::p
       << " every 2 using 1:2:3 with labels left offset 0.8,0.6 font ',9' noenhanced notitle, \\\n     "
       << gp_string(front_name)  // every other label below its point, so neighbours do not overlap
       << " every 2::1 using 1:2:3 with labels left offset 0.8,-0.9 font ',9' noenhanced notitle\n";
+    g.flush();
+    if (!g) return io_error(gp.string() + ": write failed (disk full?)");
   }
   return run_gnuplot(gp);
 }

@@ -19,7 +19,8 @@ namespace {
 // Options every task sets itself; a user's copy would contradict the job's layout.
 const std::set<std::string>& reserved_options() {
   static const std::set<std::string> reserved{"--scene", "--shard", "--out", "--lf-dir", "--fields-prebuilt",
-                                              "--build-fields", "--threads", "--ct", "--list", "--check-args"};
+                                              "--build-fields", "--threads", "--ct", "--list", "--check-args",
+                                              "-h", "--help"};
   return reserved;
 }
 
@@ -111,9 +112,25 @@ Status check_job_array_spec(const JobArraySpec& spec) {
     if (n == "pooled") return invalid_argument("scene " + spec.scenes[i] + ": 'pooled' names the pooled study's folder");
   }
   if (spec.shards < 1 || spec.shards > 10000) return out_of_range("--shards must be in [1, 10000]");
+  // Slurm's default MaxArraySize is 1001 (task ids 0-1000); the merge job lists every shard.
+  if (std::size_t(spec.shards) * spec.scenes.size() > 1000)
+    return out_of_range("scenes x shards is " + std::to_string(std::size_t(spec.shards) * spec.scenes.size()) +
+                        " array tasks; at most 1000 (Slurm's default MaxArraySize is 1001)");
+  // Paths go into scripts and sbatch options: no control characters anywhere (a newline would
+  // end a line of the script), and no '%' or '\\' in the output folder (sbatch expands them in
+  // --output).
+  auto has_control = [](const std::string& text) {
+    return std::any_of(text.begin(), text.end(), [](char c) { return std::iscntrl(static_cast<unsigned char>(c)); });
+  };
+  for (const std::string& path : {spec.out_dir.string(), spec.work_dir.string(), spec.lftrack})
+    if (has_control(path)) return invalid_argument("a path (output, work folder or program) holds a control character");
+  for (const std::string& scene : spec.scenes)
+    if (has_control(scene)) return invalid_argument("the scene path holds a control character");
+  for (const std::string& a : spec.study_args)
+    if (has_control(a)) return invalid_argument("a study argument holds a control character");
+  if (spec.out_dir.string().find_first_of("%\\") != std::string::npos)
+    return invalid_argument("--out " + spec.out_dir.string() + ": '%' and '\\' are not allowed (sbatch expands them)");
   if (spec.cpus_per_task < 1 || spec.cpus_per_task > 1024) return out_of_range("--cpus-per-task must be in [1, 1024]");
-  if (std::size_t(spec.shards) * spec.scenes.size() > 100000)
-    return out_of_range("scenes x shards is over 100,000 array tasks");
   static const std::regex time_form(R"(^([0-9]{1,3}-)?[0-9]{1,3}:[0-5][0-9]:[0-5][0-9]$)");
   if (!spec.time_limit.empty() && !std::regex_match(spec.time_limit, time_form))
     return invalid_argument("--time '" + spec.time_limit + "': expected [D-]HH:MM:SS");
@@ -202,6 +219,8 @@ Result<SubmittedJobs> submit_job_array(const JobArraySpec& spec) {
                                    (earlier.contains("spec") ? earlier["spec"].dump() : std::string("unknown")) +
                                    "); choose another --out");
       history = earlier.value("submissions", nlohmann::json::array());
+      if (!history.is_array())
+        return corrupt_data(record.string() + ": 'submissions' is not a list; not submitting over it");
     }
   }
   std::error_code ec;
@@ -230,10 +249,19 @@ Result<SubmittedJobs> submit_job_array(const JobArraySpec& spec) {
     argv.push_back(j.file.string());
     std::string output;
     const Status s = run_process(argv, &output);
-    if (!s.ok())
+    if (!s.ok()) {
+      // The jobs already queued would wait for a chain that never comes: cancel them.
+      std::string cancelled;
+      for (const std::string& id : {ids.fields, ids.shards})
+        if (!id.empty()) {
+          std::string ignored;
+          (void)run_process({"scancel", id}, &ignored);
+          cancelled += " " + id;
+        }
       return internal_error("sbatch refused the " + j.name + " job" +
-                            (previous.empty() ? "" : " (earlier jobs stay queued: scancel them or let them run)") +
+                            (cancelled.empty() ? "" : " (cancelled the jobs already queued:" + cancelled + ")") +
                             ": " + output);
+    }
     auto id = parse_job_id(output);
     if (!id.ok()) return id.status();
     (j.name == "fields" ? ids.fields : j.name == "shards" ? ids.shards : ids.merge) = *id;

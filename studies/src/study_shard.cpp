@@ -1,14 +1,20 @@
 #include "lftrack/studies/study_shard.hpp"
 
 #include <nlohmann/json.hpp>
+#include <fcntl.h>
 #include <signal.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
+#include <cmath>
+#include <cstdio>
 #include <sstream>
+
+#include "lftrack/tracking/light_field.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -63,24 +69,35 @@ std::string slurm_job_from_environment() {
 }
 
 Status write_file_atomically(const std::filesystem::path& file, const std::string& text) {
+  // The temporary name carries host and pid: tasks on two hosts of a shared file system, or two
+  // processes here, never write the same temporary file.
   std::string partial_name = ".";
   partial_name += file.filename().string();
+  partial_name += '.';
+  partial_name += this_host();
   partial_name += '.';
   partial_name += std::to_string(getpid());
   partial_name += ".partial";
   const std::filesystem::path partial = file.parent_path() / partial_name;
-  {
-    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
-    if (!out) return io_error(partial.string() + ": cannot open for writing");
-    out << text;
-    out.flush();
-    if (!out) {
-      std::error_code ignored;
-      std::filesystem::remove(partial, ignored);
-      return io_error(partial.string() + ": write failed (disk full?)");
-    }
+  const int fd = open(partial.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return io_error(partial.string() + ": cannot open for writing: " + std::strerror(errno));
+  std::size_t written = 0;
+  bool ok = true;
+  while (ok && written < text.size()) {
+    const ssize_t n = write(fd, text.data() + written, text.size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    ok = n > 0;
+    if (ok) written += std::size_t(n);
   }
+  const int write_errno = errno;
+  // On the disk before the rename: a crash leaves the old file or the whole new one.
+  ok = ok && fsync(fd) == 0;
+  ok = close(fd) == 0 && ok;
   std::error_code ec;
+  if (!ok) {
+    std::filesystem::remove(partial, ec);
+    return io_error(file.string() + ": write failed: " + std::strerror(write_errno ? write_errno : EIO));
+  }
   std::filesystem::rename(partial, file, ec);
   if (ec) {
     std::filesystem::remove(partial, ec);
@@ -147,6 +164,16 @@ Status run_shard_task(const std::filesystem::path& dir, const std::function<Stat
       return failed_precondition(complete.message() + "; refusing to overwrite it (choose another --out)");
     note = "the result there is incomplete (" + complete.message() + "); computing it again";
   }
+  // Two tasks on one shard at once (a resubmission while the first still runs) would interleave
+  // their files: a live task here is left alone. One on another host cannot be asked; say so.
+  const ShardTask current = read_shard_task(dir);
+  if (current.phase == ShardPhase::kRunning && current.host == this_host() && current.pid != getpid())
+    return failed_precondition(dir.string() + ": another task (pid " + std::to_string(current.pid) +
+                               (current.slurm_job.empty() ? "" : ", Slurm job " + current.slurm_job) +
+                               ") is computing this shard; not starting a second one");
+  if (current.phase == ShardPhase::kRunning && current.host != this_host())
+    note += (note.empty() ? "" : "; ") + std::string("a task on ") + current.host +
+            " was recorded running this shard; computing it here";
   const double started = now_unix_s();
   LFTRACK_RETURN_IF_ERROR(record_shard_task(dir, ShardPhase::kRunning, note));
   const Status s = run();
@@ -158,6 +185,34 @@ Status run_shard_task(const std::filesystem::path& dir, const std::function<Stat
   LFTRACK_RETURN_IF_ERROR(record_shard_task(dir, ShardPhase::kDone, note, started));
   if (said) *said = note;
   return {};
+}
+
+std::string study_scene_fingerprint(const PreparedScene& p) {
+  // FNV-1a over the volumes' and views' identities and what registers and renders the frames.
+  std::uint64_t h = 1469598103934665603ull;
+  auto mix = [&](std::uint64_t v) {
+    for (int i = 0; i < 8; ++i) {
+      h ^= (v >> (8 * i)) & 0xffu;
+      h *= 1099511628211ull;
+    }
+  };
+  auto mix_text = [&](const std::string& text) {
+    for (unsigned char c : text) mix(c);
+    mix(0xff);
+  };
+  if (p.mu) mix(tracking::volume_hash(*p.mu));
+  if (p.world_mu) mix(tracking::volume_hash(*p.world_mu));
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i)
+    mix(tracking::plan_hash(p.light_field_plan(int(i)), p.scene.light_field));
+  const RegistrationSpec& r = p.scene.registration;
+  mix_text(r.similarity);
+  mix_text(r.plan);
+  mix_text(p.scene.sim.renderer);
+  mix(std::uint64_t(std::llround(p.scene.sim.photons_per_pixel)));
+  mix(std::uint64_t(std::llround(p.scene.sim.detector_blur_px * 1e6)));
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return hex;
 }
 
 }  // namespace lftrack::host

@@ -370,6 +370,7 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
   if (!mine.ok()) return mine.status();
   TradeStudy study;
   study.scene = p.scene.name;
+  study.fingerprint = study_scene_fingerprint(p);
   study.seed = o.seed;
   study.problems = problem_count;
   study.quick = o.quick;

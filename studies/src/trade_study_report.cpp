@@ -2,6 +2,7 @@
 // Pareto front, the recommended defaults, the two plots and summary.md.
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -86,6 +87,7 @@ const char* const kTableHeader =
 nlohmann::json study_json(const TradeStudy& s) {
   return {{"study", "trade"},
           {"scene", s.scene},
+          {"fingerprint", s.fingerprint},
           {"seed", s.seed},
           {"problems", s.problems},
           {"quick", s.quick},
@@ -173,10 +175,20 @@ TradeRecommendations recommend(const std::vector<TradeResult>& results) {
   return r;
 }
 
-Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& dir) {
+namespace {
+
+Status write_trade_description(const TradeStudy& study, const std::filesystem::path& dir) {
+  return write_file_atomically(dir / "study.json", study_json(study).dump(2) + "\n");
+}
+
+// points.csv and runs.csv, then (if `describe_now`) study.json. An earlier study.json goes
+// first, so a folder being rewritten never reads as a result.
+Status write_trade_data(const TradeStudy& study, const std::filesystem::path& dir, bool describe_now) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
+  std::filesystem::remove(dir / "study.json", ec);
+  if (ec) return io_error((dir / "study.json").string() + ": cannot remove the earlier description");
   std::ostringstream csv;
   csv << kCsvHeader << '\n';
   for (const TradeResult& r : study.results) {
@@ -198,7 +210,14 @@ Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& d
   // study.json last: a folder without it is not a result (study_shard.hpp).
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "points.csv", csv.str()));
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", runs.str()));
-  return write_file_atomically(dir / "study.json", study_json(study).dump(2) + "\n");
+  if (!describe_now) return {};
+  return write_trade_description(study, dir);
+}
+
+}  // namespace
+
+Status write_trade_shard(const TradeStudy& study, const std::filesystem::path& dir) {
+  return write_trade_data(study, dir, true);
 }
 
 Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
@@ -212,12 +231,20 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
         return failed_precondition((dir / "study.json").string() + ": a " + j.value("study", "") +
                                    " study, not a trade study");
       s.scene = j.at("scene").get<std::string>();
+      s.fingerprint = j.value("fingerprint", "");
       s.seed = j.at("seed").get<std::uint64_t>();
-      s.problems = j.at("problems").get<int>();
+      const auto problems = j.at("problems").get<std::int64_t>();
       s.quick = j.at("quick").get<bool>();
-      s.shard = j.at("shard").get<int>();
-      s.shards = j.at("shards").get<int>();
-      s.points_total = j.at("points_total").get<int>();
+      const auto shard = j.at("shard").get<std::int64_t>();
+      const auto shards = j.at("shards").get<std::int64_t>();
+      const auto points_total = j.at("points_total").get<std::int64_t>();
+      if (problems < 1 || problems > 1000000 || shards < 1 || shards > 10000 || shard < 1 || shard > shards ||
+          points_total < 0 || points_total > 100000)
+        return corrupt_data((dir / "study.json").string() + ": problems, shard k/n or points out of range");
+      s.problems = int(problems);
+      s.shard = int(shard);
+      s.shards = int(shards);
+      s.points_total = int(points_total);
     } catch (const std::exception& e) {
       return corrupt_data((dir / "study.json").string() + ": " + e.what());
     }
@@ -237,27 +264,43 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
     if (c.size() != 25) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 25");
     TradeResult r;
     TradePoint& t = r.point;
-    try {
-      std::size_t k = 0;
-      t.id = c[k++];
-      t.renderer = c[k++];
-      t.storage = c[k++];
-      t.vq_codebook = std::stoi(c[k++]);
-      for (int a = 0; a < 4; ++a) t.lf_resolution[std::size_t(a)] = std::stoi(c[k++]);
-      t.envelope_scale = std::stod(c[k++]);
-      t.octree_pivot = std::stod(c[k++]);
-      t.bin = std::stoi(c[k++]);
-      t.similarity = c[k++];
-      t.plan = c[k++];
-      t.final_step_mm = std::stod(c[k++]);
-      t.budget_ms = std::stod(c[k++]);
-      r.runs = std::stoi(c[k++]);
-      for (double* v : {&r.median_ms, &r.p95_ms, &r.mean_tre_mm, &r.p95_tre_mm, &r.success_rate,
-                        &r.memory_bytes, &r.precompute_s, &r.ncc_vs_siddon, &r.psnr_db_vs_siddon})
-        *v = std::strtod(c[k++].c_str(), nullptr);
-    } catch (const std::exception&) {
-      return corrupt_data(where + ": a number does not parse");
-    }
+    std::size_t k = 0;
+    auto integer = [&](long lo, long hi, int* out) {
+      const std::string& text = c[k++];
+      char* end = nullptr;
+      errno = 0;
+      const long v = std::strtol(text.c_str(), &end, 10);
+      if (text.empty() || *end || errno || v < lo || v > hi) return false;
+      *out = int(v);
+      return true;
+    };
+    // lo..hi for finite values; NaN and infinities only where `special` allows them.
+    auto real = [&](double lo, double hi, bool special, double* out) {
+      const std::string& text = c[k++];
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      if (text.empty() || *end) return false;
+      if (!std::isfinite(v) ? !special : (v < lo || v > hi)) return false;
+      *out = v;
+      return true;
+    };
+    constexpr double kBig = 1e15;
+    t.id = c[k++];
+    t.renderer = c[k++];
+    t.storage = c[k++];
+    bool ok = integer(0, 1 << 24, &t.vq_codebook);
+    for (int a = 0; a < 4; ++a) ok = ok && integer(1, 1 << 16, &t.lf_resolution[std::size_t(a)]);
+    ok = ok && real(0, kBig, false, &t.envelope_scale) && real(0, kBig, false, &t.octree_pivot) &&
+         integer(1, 1024, &t.bin);
+    t.similarity = c[k++];
+    t.plan = c[k++];
+    ok = ok && real(0, kBig, false, &t.final_step_mm) && real(0, kBig, false, &t.budget_ms) &&
+         integer(1, 1000000, &r.runs) && real(0, kBig, true, &r.median_ms) && real(0, kBig, true, &r.p95_ms) &&
+         real(0, kBig, false, &r.mean_tre_mm) && real(0, kBig, false, &r.p95_tre_mm) &&
+         real(0, 1, false, &r.success_rate) && real(0, kBig, false, &r.memory_bytes) &&
+         real(0, kBig, false, &r.precompute_s) && real(-1, 1, true, &r.ncc_vs_siddon) &&
+         real(-kBig, kBig, true, &r.psnr_db_vs_siddon);
+    if (!ok) return corrupt_data(where + ": field " + std::to_string(k) + " ('" + c[k - 1] + "') is not a valid value");
     if (t.id.empty()) return corrupt_data(where + ": empty point id");
     s.results.push_back(r);
   }
@@ -273,7 +316,8 @@ Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards) {
   std::set<int> seen;
   std::set<std::string> ids;
   for (const TradeStudy& s : shards) {
-    if (s.scene != first.scene || s.seed != first.seed || s.problems != first.problems ||
+    if (s.scene != first.scene || s.fingerprint != first.fingerprint || s.seed != first.seed ||
+        s.problems != first.problems ||
         s.quick != first.quick || s.shards != first.shards || s.points_total != first.points_total)
       return failed_precondition("merge: shard " + std::to_string(s.shard) + "/" + std::to_string(s.shards) +
                                  " is of another study (scene '" + s.scene + "', seed " +
@@ -312,13 +356,15 @@ Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeS
                                   const std::vector<std::string>& ids) {
   auto s = read_trade_shard(dir);
   if (!s.ok()) return s.status();
-  if (s->scene != expected.scene || s->seed != expected.seed || s->problems != expected.problems ||
+  if (s->scene != expected.scene || s->fingerprint != expected.fingerprint || s->seed != expected.seed ||
+      s->problems != expected.problems ||
       s->quick != expected.quick || s->shard != expected.shard || s->shards != expected.shards ||
       s->points_total != expected.points_total)
     return failed_precondition(dir.string() + " holds another study: scene '" + s->scene + "', seed " +
                                std::to_string(s->seed) + ", " + std::to_string(s->problems) +
                                " problems, shard " + std::to_string(s->shard) + "/" + std::to_string(s->shards) +
-                               ", " + std::to_string(s->points_total) + " points in all");
+                               ", " + std::to_string(s->points_total) + " points in all, scene fingerprint " +
+                               (s->fingerprint.empty() ? "none" : s->fingerprint) + ")");
   std::vector<std::string> found;
   for (const TradeResult& r : s->results) {
     found.push_back(r.point.id);
@@ -350,6 +396,7 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std
   }
   TradeStudy pooled = scenes[0];
   pooled.scene.clear();
+  pooled.fingerprint.clear();
   for (const TradeStudy& s : scenes) pooled.scene += (pooled.scene.empty() ? "" : " + ") + s.scene;
   pooled.problems = 0;
   for (const TradeStudy& s : scenes) pooled.problems += s.problems;
@@ -406,7 +453,7 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std
 }
 
 Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir) {
-  LFTRACK_RETURN_IF_ERROR(write_trade_shard(study, dir));
+  LFTRACK_RETURN_IF_ERROR(write_trade_data(study, dir, false));
   const std::vector<TradeResult> front = pareto_front(study.results);
 
   ScatterPlot time_plot;
@@ -447,7 +494,7 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
   if (!drawn2.ok()) return drawn2.status();
 
   const TradeRecommendations rec = recommend(study.results);
-  std::ofstream md(dir / "summary.md");
+  std::ostringstream md;
   md << "# Trade study: " << study.scene << "\n\n"
      << study.results.size() << " operating points" << (study.quick ? " (quick)" : "")
      << ", each registering the same " << study.problems << " problems (seed " << study.seed
@@ -476,8 +523,8 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
      << "## Every point\n\n"
      << kTableHeader;
   for (const TradeResult& r : study.results) md << table_row(r);
-  if (!md) return io_error((dir / "summary.md").string() + ": write failed");
-  return {};
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "summary.md", md.str()));
+  return write_trade_description(study, dir);  // last: the folder is now a complete result
 }
 
 }  // namespace lftrack::host

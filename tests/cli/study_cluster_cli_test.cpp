@@ -39,6 +39,11 @@ fs::path patient_scene(const fs::path& dir, const std::string& name, int phantom
   return file;
 }
 
+std::string read_text_file(const fs::path& file) {
+  std::ifstream in(file);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
 // A CSV's rows with only its first `columns` columns (the rest are times, which differ by run).
 std::string columns_of(const fs::path& csv, int columns) {
   std::ifstream in(csv);
@@ -103,6 +108,18 @@ TEST(Cli, CaptureRangeShardsMergeIntoTheUnshardedStudyAndFinishedShardsAreNotRun
   EXPECT_FALSE(run_process(capture_range(scene, {"--shard", "1/2", "--seed", "5", "--out", shards[0]}), &out).ok());
   EXPECT_NE(out.find("refusing to overwrite"), std::string::npos) << out;
   EXPECT_EQ(fs::last_write_time(fs::path(shards[0]) / "runs.csv"), written);
+  // The same name on another patient (another CT) is another study: refused, not taken as done.
+  std::string other = read_text_file(scene);
+  other.replace(other.find("  seed: 1\n"), 10, "  seed: 4\n");
+  std::ofstream(dir.path() / "p1-other-ct.yaml") << other;
+  EXPECT_FALSE(run_process(capture_range(dir.path() / "p1-other-ct.yaml", {"--shard", "1/2", "--out", shards[0]}), &out)
+                   .ok());
+  EXPECT_NE(out.find("fingerprint"), std::string::npos) << out;
+  // A merge into one of its shards would overwrite it: refused.
+  EXPECT_FALSE(run_process({lftrack_bin(), "study", "merge", "--out", shards[0], shards[0], shards[1]}, &out).ok());
+  EXPECT_NE(out.find("is, or is inside, the shard folder"), std::string::npos) << out;
+  EXPECT_EQ(fs::last_write_time(fs::path(shards[0]) / "runs.csv"), written);
+  EXPECT_FALSE(run_process(capture_range(scene, {"--shard", "4294967297/4294967298", "--out", shards[0]}), &out).ok());
   // A torn shard (its description lost) is computed again.
   fs::remove(fs::path(shards[0]) / "study.json");
   ASSERT_TRUE(run_process(capture_range(scene, {"--shard", "1/2", "--out", shards[0], "--lf-dir", lf,

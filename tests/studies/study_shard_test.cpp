@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
@@ -82,6 +83,19 @@ TEST(StudyShard, AFailedTaskAndADeadTaskReadAsFailed) {
   EXPECT_NE(t.message.find("gone"), std::string::npos) << t.message;
   std::ofstream(shard / "task.json") << "{ not json";
   EXPECT_EQ(read_shard_task(shard).phase, ShardPhase::kFailed);
+  // A live task on this host (the test's parent process stands in for it) is not run twice.
+  text.replace(text.find("\"pid\": 2147483000"), 17, "\"pid\": " + std::to_string(getppid()));
+  std::ofstream(shard / "task.json") << text;
+  int runs = 0;
+  const Status second = run_shard_task(
+      shard, [] { return corrupt_data("torn"); },
+      [&] {
+        ++runs;
+        return Status{};
+      });
+  EXPECT_EQ(second.code(), StatusCode::kFailedPrecondition) << second.message();
+  EXPECT_NE(second.message().find("another task"), std::string::npos) << second.message();
+  EXPECT_EQ(runs, 0);
 }
 
 TEST(StudyShard, AtomicWritesLeaveNoPartialFiles) {
@@ -147,6 +161,29 @@ TEST(TradeShards, AShardIsCompleteOnlyWithItsPointsAndEveryProblemRow) {
   EXPECT_EQ(read_trade_shard(dir.path()).status().code(), StatusCode::kCorruptData);
   std::ofstream(dir.path() / "runs.csv") << "id,problem,tre_mm,ms\na,0,-1,10\n";
   EXPECT_EQ(read_trade_shard(dir.path()).status().code(), StatusCode::kCorruptData);
+  // Values that do not parse or cannot be, and a description out of range, are refused.
+  ASSERT_TRUE(write_trade_shard(s, dir.path()).ok());
+  const std::string points = read_text(dir.path() / "points.csv");
+  const std::string row = points.substr(points.find("\na,") + 1);
+  auto with_field = [&](int field, const std::string& value) {
+    std::vector<std::string> cells;
+    std::istringstream in(row.substr(0, row.find('\n')));
+    for (std::string c; std::getline(in, c, ',');) cells.push_back(c);
+    cells[std::size_t(field)] = value;
+    std::string line;
+    for (const auto& c : cells) line += (line.empty() ? "" : ",") + c;
+    std::ofstream(dir.path() / "points.csv") << points.substr(0, points.find('\n') + 1) << line << "\n";
+    return read_trade_shard(dir.path()).status();
+  };
+  EXPECT_EQ(with_field(15, "1e12").code(), StatusCode::kCorruptData) << "runs";
+  EXPECT_EQ(with_field(20, "7").code(), StatusCode::kCorruptData) << "a success rate of 700 %";
+  EXPECT_EQ(with_field(18, "nan").code(), StatusCode::kCorruptData) << "a mean TRE that is not a number";
+  EXPECT_EQ(with_field(16, "abc").code(), StatusCode::kCorruptData) << "a time that does not parse";
+  ASSERT_TRUE(write_trade_shard(s, dir.path()).ok());
+  std::string description = read_text(dir.path() / "study.json");
+  description.replace(description.find("\"shards\": 2"), 12, "\"shards\": 0");
+  std::ofstream(dir.path() / "study.json") << description;
+  EXPECT_EQ(read_trade_shard(dir.path()).status().code(), StatusCode::kCorruptData) << "shard 1 of 0";
 }
 
 TEST(TradeShards, MergingRestoresTheStudysOrder) {
@@ -246,6 +283,29 @@ TEST(CaptureRangeShards, ShardsRoundTripMergeAndPool) {
   EXPECT_EQ(pooled->runs.size(), 12u);
   EXPECT_EQ(pooled->options.per_bin, 6);
   EXPECT_FALSE(pool_capture_range_reports({*merged, *merged}).ok());
+  // A row twice, or a sample of another shard, is not a shard's result.
+  const fs::path s1 = dir.path() / "s1";
+  const std::string runs = read_text(s1 / "runs.csv");
+  const std::string first_row = runs.substr(runs.find('\n') + 1, runs.find('\n', runs.find('\n') + 1) - runs.find('\n'));
+  std::string twice = runs;
+  twice.replace(twice.rfind("warm:ncc"), std::string::npos, first_row);
+  std::ofstream(s1 / "runs.csv") << twice;
+  EXPECT_EQ(read_capture_range_shard(s1).status().code(), StatusCode::kCorruptData);
+  std::string foreign = runs;
+  const auto sample_at = foreign.find(",0,", foreign.find('\n') + 1);  // bin 0..2 mm: ",0,2,0,"
+  foreign.replace(foreign.find(",2,0,", sample_at - 2), 5, ",2,1,");
+  std::ofstream(s1 / "runs.csv") << foreign;
+  EXPECT_EQ(read_capture_range_shard(s1).status().code(), StatusCode::kCorruptData) << "sample 1 is shard 2's";
+  // Whole outputs: their description comes last, so a failed plot leaves no result behind.
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    const fs::path out = dir.path() / "out";
+    fs::create_directories(out / "capture_range.png");  // gnuplot cannot write its image here
+    EXPECT_FALSE(write_capture_range_outputs(*merged, out).ok());
+    EXPECT_FALSE(fs::exists(out / "study.json"));
+    fs::remove(out / "capture_range.png");
+    EXPECT_TRUE(write_capture_range_outputs(*merged, out).ok());
+    EXPECT_TRUE(fs::exists(out / "study.json"));
+  }
   // A shard folder with a trade study in it is another study.
   ASSERT_TRUE(write_trade_shard(study("p", {}), dir.path() / "trade").ok());
   EXPECT_EQ(read_capture_range_shard(dir.path() / "trade").status().code(), StatusCode::kFailedPrecondition);
@@ -281,6 +341,12 @@ TEST(SlurmJobArray, RefusesWhatCannotBeSubmitted) {
   EXPECT_FALSE(with([](JobArraySpec& s) { s.partition = "a b"; }).ok());
   EXPECT_FALSE(with([](JobArraySpec& s) { s.study_args = {"--out=/elsewhere"}; }).ok());
   EXPECT_FALSE(with([](JobArraySpec& s) { s.study_args = {"--shard", "1/2"}; }).ok());
+  EXPECT_FALSE(with([](JobArraySpec& s) { s.study_args = {"--help"}; }).ok()) << "every task would print help";
+  EXPECT_FALSE(with([&](JobArraySpec& s) { s.out_dir = dir.path() / "a\ntouch /tmp/x\n#"; }).ok());
+  EXPECT_FALSE(with([&](JobArraySpec& s) { s.out_dir = dir.path() / "e%j"; }).ok()) << "sbatch expands %j";
+  EXPECT_FALSE(with([](JobArraySpec& s) { s.scenes[0] = "/a\nb.yaml"; }).ok());
+  EXPECT_FALSE(with([](JobArraySpec& s) { s.shards = 501; }).ok()) << "1002 array tasks";
+  EXPECT_TRUE(with([](JobArraySpec& s) { s.shards = 500; }).ok());
   EXPECT_EQ(folder_safe_name("builtin spine phantom"), "builtin_spine_phantom");
   EXPECT_EQ(folder_safe_name("../x"), "scene.._x");
   EXPECT_EQ(folder_safe_name(std::string(300, 'a')).size(), 100u);
@@ -366,12 +432,24 @@ TEST(SlurmJobArray, SubmitChainsTheJobsAndRefusesAnotherStudysFolder) {
   EXPECT_EQ(refused.status().code(), StatusCode::kFailedPrecondition);
   const std::string record = read_text(spec.out_dir / "submit.json");
   EXPECT_NE(record.find("\"106\""), std::string::npos) << "the second submission is recorded: " << record;
-  // An sbatch that refuses is reported with what it said.
-  std::ofstream(bin / "sbatch") << "#!/bin/bash\necho 'sbatch: error: invalid partition' >&2\nexit 1\n";
+  // An sbatch that refuses the shards job: reported with what it said, the fields job cancelled.
+  const fs::path calls = dir.path() / "calls.log";
+  std::ofstream(bin / "sbatch") << "#!/bin/bash\nif [[ \"$*\" == *shards.sh ]]; then echo 'sbatch: error: invalid array' "
+                                   ">&2; exit 1; fi\necho 201\n";
+  std::ofstream(bin / "scancel") << "#!/bin/bash\necho \"scancel $*\" >> '" << calls.string() << "'\n";
+  fs::permissions(bin / "scancel", fs::perms::owner_all);
   const auto failed = submit_job_array(spec);
-  setenv("PATH", old_path.c_str(), 1);
   ASSERT_FALSE(failed.ok());
-  EXPECT_NE(failed.status().message().find("invalid partition"), std::string::npos) << failed.status().message();
+  EXPECT_NE(failed.status().message().find("invalid array"), std::string::npos) << failed.status().message();
+  EXPECT_EQ(read_text(calls), "scancel 201\n");
+  // A record whose history is not a list is refused before anything is queued.
+  std::string damaged = read_text(spec.out_dir / "submit.json");
+  damaged.replace(damaged.find("\"submissions\": ["), 16, "\"submissions\": \"x\", \"old\": [");
+  std::ofstream(spec.out_dir / "submit.json") << damaged;
+  fs::remove(calls);
+  const auto refused_record = submit_job_array(spec);
+  setenv("PATH", old_path.c_str(), 1);
+  EXPECT_EQ(refused_record.status().code(), StatusCode::kCorruptData) << refused_record.status().message();
 }
 
 }  // namespace

@@ -222,7 +222,9 @@ Status LightField::save(const std::filesystem::path& file) const {
   std::strncpy(reinterpret_cast<char*>(header + 428), g.view_name.c_str(), 63);
   w.at(1020, crc_of(header, 1020));
 
-  const std::filesystem::path partial = file.string() + ".partial";
+  // Per process: two processes saving the same field (tasks of a job array) never share a
+  // half-written file.
+  const std::filesystem::path partial = file.string() + "." + std::to_string(getpid()) + ".partial";
   {
     std::ofstream out(partial, std::ios::binary | std::ios::trunc);
     if (!out) return io_error(file.string() + ": cannot open for writing");

@@ -76,7 +76,8 @@ struct CaptureRangeSummary {
 };
 
 struct CaptureRangeReport {
-  std::string scene;  // the scene's name; pooled reports: the names joined by " + "
+  std::string scene;        // the scene's name; pooled reports: the names joined by " + "
+  std::string fingerprint;  // study_scene_fingerprint of the scene; pooled: empty
   CaptureRangeOptions options;
   std::vector<CaptureRangeRun> runs;
   std::vector<CaptureRangeSummary> summaries;
@@ -92,8 +93,12 @@ std::vector<CaptureRangeSummary> summarize_capture_range(const CaptureRangeOptio
 // runs.csv, summary.json, capture_range.png (+ .dat, .gp) into `dir`.
 Status write_capture_range_outputs(const CaptureRangeReport& report, const std::filesystem::path& dir);
 
-// A shard's runs.csv and study.json (its options; written last, atomically) into `dir`.
-Status write_capture_range_shard(const CaptureRangeReport& report, const std::filesystem::path& dir);
+// A shard's runs.csv and study.json (its options; written last, atomically) into `dir`. With
+// `describe` false, study.json is left out (removed if there), for a writer with more to write.
+Status write_capture_range_shard(const CaptureRangeReport& report, const std::filesystem::path& dir,
+                                 bool describe = true);
+// study.json alone: what makes a folder a complete result.
+Status write_capture_range_description(const CaptureRangeReport& report, const std::filesystem::path& dir);
 // Reads what write_capture_range_shard (or write_capture_range_outputs after it) wrote.
 Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path& dir);
 // OK when `dir` holds the complete shard of the study `expected` describes (same scene and

@@ -14,6 +14,7 @@
 #include <functional>
 #include <string>
 
+#include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::host {
@@ -48,10 +49,17 @@ std::string slurm_job_from_environment();
 // nothing runs and the task succeeds (a requeued or resubmitted array only finishes what is
 // missing); if it is another study's (kFailedPrecondition), the task refuses rather than
 // overwrite it; anything else (a torn or partial result) is computed again. Otherwise `run` is
-// called, with the task recorded as running, then done or failed. `said` (may be null) gets
-// what happened, for the user.
+// called, with the task recorded as running, then done or failed; a task recorded running by a
+// live process on this host is not started twice (kFailedPrecondition). `said` (may be null)
+// gets what happened, for the user.
 Status run_shard_task(const std::filesystem::path& dir, const std::function<Status()>& check_complete,
                       const std::function<Status()>& run, std::string* said = nullptr);
+
+// What a study's results depend on besides its options, as 16 hex digits: the CT (and the
+// simulated patient's volume), each view's geometry with the ROI and envelope, the registration's
+// measure and plan, and the simulated frames' renderer and noise. Shards with different
+// fingerprints are different studies even when their scenes share a name.
+std::string study_scene_fingerprint(const PreparedScene& scene);
 
 // Writes `text` to `file` through a temporary file in the same folder and a rename: readers see
 // the old file or the whole new one, never part of it.

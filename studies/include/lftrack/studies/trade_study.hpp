@@ -76,6 +76,7 @@ struct TradeResult {
 
 struct TradeStudy {
   std::string scene;
+  std::string fingerprint;  // study_scene_fingerprint of the scene; pooled: empty
   std::uint64_t seed = 1;
   int problems = 0;
   bool quick = false;
