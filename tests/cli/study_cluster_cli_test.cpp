@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <iterator>
 #include <nlohmann/json.hpp>
@@ -215,7 +216,13 @@ TEST(Cli, SlurmJobArrayOnALocalClusterEqualsTheUnshardedStudy) {
       GTEST_SKIP() << tool << " is not installed (scripts/setup.sh installs Slurm)";
   test::TempDir dir;
   LocalSlurm cluster(dir.path() / "slurm");
-  ASSERT_TRUE(cluster.started()) << cluster.log();
+  // A host whose Slurm cannot start (a container without what slurmd needs) skips, saying why;
+  // LFTRACK_REQUIRE_SLURM=1 makes that a failure.
+  if (!cluster.started()) {
+    const char* require = std::getenv("LFTRACK_REQUIRE_SLURM");
+    ASSERT_FALSE(require && std::string(require) == "1") << cluster.log();
+    GTEST_SKIP() << "the local Slurm cluster did not start: " << cluster.log();
+  }
   const fs::path p1 = patient_scene(dir.path(), "patient-1", 1);
   const fs::path p2 = patient_scene(dir.path(), "patient-2", 2);
   const fs::path study = dir.path() / "study";
