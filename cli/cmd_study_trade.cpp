@@ -84,7 +84,7 @@ Status run_trade(const TradeCliOptions& o) {
   expected.scene = prepared->scene.name;
   expected.fingerprint = study_scene_fingerprint(*prepared);
   expected.seed = options.seed;
-  expected.problems = options.problems > 0 ? options.problems : (options.quick ? 6 : 24);
+  expected.problems = trade_problem_count(options);
   expected.quick = options.quick;
   expected.shard = options.shard;
   expected.shards = options.shards;

@@ -12,6 +12,7 @@
 
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/study_shard.hpp"
+#include "csv_cells.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -19,21 +20,6 @@ namespace {
 const char* const kRunsHeader =
     "method,bin_lo_mm,bin_hi_mm,sample,initial_tre_mm,tre_mean_mm,tre_max_mm,success_2mm,success_2_5mm,"
     "evaluations,ms";
-
-std::string num(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
-
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> cells;
-  std::stringstream in(line);
-  std::string cell;
-  while (std::getline(in, cell, ',')) cells.push_back(cell);
-  if (!line.empty() && line.back() == ',') cells.emplace_back();
-  return cells;
-}
 
 nlohmann::json options_json(const CaptureRangeOptions& o) {
   nlohmann::json methods = nlohmann::json::array();
@@ -107,9 +93,9 @@ Status write_capture_range_shard(const CaptureRangeReport& report, const std::fi
   std::ostringstream csv;
   csv << kRunsHeader << '\n';
   for (const CaptureRangeRun& r : report.runs)
-    csv << r.method << ',' << num(r.bin * o.bin_width_mm) << ',' << num((r.bin + 1) * o.bin_width_mm) << ','
-        << r.sample << ',' << num(r.initial_tre_mm) << ',' << num(r.tre_mean_mm) << ',' << num(r.tre_max_mm)
-        << ',' << int(r.success) << ',' << int(r.success_loose) << ',' << r.evaluations << ',' << num(r.ms)
+    csv << r.method << ',' << csv_number(r.bin * o.bin_width_mm) << ',' << csv_number((r.bin + 1) * o.bin_width_mm) << ','
+        << r.sample << ',' << csv_number(r.initial_tre_mm) << ',' << csv_number(r.tre_mean_mm) << ',' << csv_number(r.tre_max_mm)
+        << ',' << int(r.success) << ',' << int(r.success_loose) << ',' << r.evaluations << ',' << csv_number(r.ms)
         << '\n';
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", csv.str()));
   return describe ? write_capture_range_description(report, dir) : Status{};
@@ -188,7 +174,7 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
     if (line.empty()) continue;
     CaptureRangeRun run;
     const std::string where = file.string() + ":" + std::to_string(line_no);
-    LFTRACK_RETURN_IF_ERROR(parse_run(split(line), o, where, &run));
+    LFTRACK_RETURN_IF_ERROR(parse_run(split_csv_line(line), o, where, &run));
     if (run.sample % o.shards != o.shard - 1)
       return corrupt_data(where + ": sample " + std::to_string(run.sample) + " is not shard " +
                           std::to_string(o.shard) + "/" + std::to_string(o.shards) + "'s");

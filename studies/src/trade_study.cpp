@@ -314,6 +314,8 @@ std::vector<TradePoint> trade_points(const PreparedScene& p, bool quick) {
   return points;
 }
 
+int trade_problem_count(const TradeOptions& o) { return o.problems > 0 ? o.problems : (o.quick ? 6 : 24); }
+
 Result<std::vector<TradePoint>> trade_shard_points(const PreparedScene& p, const TradeOptions& o,
                                                    int* points_total) {
   if (o.shards < 1 || o.shard < 1 || o.shard > o.shards)
@@ -364,7 +366,7 @@ Status build_trade_fields(const PreparedScene& p, const TradeOptions& o, trackin
 
 Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o, tracking::ThreadPool* pool,
                                    const std::function<void(double, const std::string&)>& progress) {
-  const int problem_count = o.problems > 0 ? o.problems : (o.quick ? 6 : 24);
+  const int problem_count = trade_problem_count(o);
   int points_total = 0;
   auto mine = trade_shard_points(p, o, &points_total);
   if (!mine.ok()) return mine.status();

@@ -13,6 +13,7 @@
 
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/studies/study_shard.hpp"
+#include "csv_cells.hpp"
 #include "lftrack/studies/trade_study.hpp"
 #include "quantile.hpp"
 
@@ -26,23 +27,6 @@ const char* const kCsvHeader =
     "final_step_mm,budget_ms,runs,median_ms,p95_ms,mean_tre_mm,p95_tre_mm,success_rate,memory_bytes,"
     "precompute_s,ncc_vs_siddon,psnr_db_vs_siddon";
 
-std::string num(double v) {
-  if (std::isnan(v)) return "nan";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
-
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> cells;
-  std::stringstream in(line);
-  std::string cell;
-  while (std::getline(in, cell, ',')) cells.push_back(cell);
-  if (!line.empty() && line.back() == ',') cells.emplace_back();
-  return cells;
-}
-
 // How a point is set, in words.
 std::string describe(const TradePoint& t) {
   std::string s = t.renderer;
@@ -50,12 +34,12 @@ std::string describe(const TradePoint& t) {
     s += " " + t.storage + (t.storage == "vq" ? std::to_string(t.vq_codebook) : "") + " " +
          std::to_string(t.lf_resolution[0]) + "x" + std::to_string(t.lf_resolution[1]) + "x" +
          std::to_string(t.lf_resolution[2]) + "x" + std::to_string(t.lf_resolution[3]);
-    if (t.envelope_scale != 1) s += ", envelope x" + num(t.envelope_scale);
+    if (t.envelope_scale != 1) s += ", envelope x" + csv_number(t.envelope_scale);
   }
-  if (t.renderer == "octree") s += " P=" + num(t.octree_pivot);
+  if (t.renderer == "octree") s += " P=" + csv_number(t.octree_pivot);
   s += ", bin " + std::to_string(t.bin) + ", " + t.similarity + ", plan " + t.plan + ", final step " +
-       num(t.final_step_mm) + " mm, " +
-       (t.budget_ms > 0 ? "budget " + num(t.budget_ms) + " ms" : "no budget");
+       csv_number(t.final_step_mm) + " mm, " +
+       (t.budget_ms > 0 ? "budget " + csv_number(t.budget_ms) + " ms" : "no budget");
   return s;
 }
 
@@ -111,7 +95,7 @@ Status read_trade_runs(const std::filesystem::path& file, TradeStudy* s) {
   while (std::getline(in, line)) {
     ++line_no;
     if (line.empty()) continue;
-    const auto c = split(line);
+    const auto c = split_csv_line(line);
     const std::string where = file.string() + ":" + std::to_string(line_no);
     if (c.size() != 4) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 4");
     auto it = by_id.find(c[0]);
@@ -195,18 +179,18 @@ Status write_trade_data(const TradeStudy& study, const std::filesystem::path& di
     const TradePoint& t = r.point;
     csv << t.id << ',' << t.renderer << ',' << t.storage << ',' << t.vq_codebook << ',' << t.lf_resolution[0]
         << ',' << t.lf_resolution[1] << ',' << t.lf_resolution[2] << ',' << t.lf_resolution[3] << ','
-        << num(t.envelope_scale) << ',' << num(t.octree_pivot) << ',' << t.bin << ',' << t.similarity << ','
-        << t.plan << ',' << num(t.final_step_mm) << ',' << num(t.budget_ms) << ',' << r.runs << ','
-        << num(r.median_ms) << ',' << num(r.p95_ms) << ',' << num(r.mean_tre_mm) << ',' << num(r.p95_tre_mm)
-        << ',' << num(r.success_rate) << ',' << num(r.memory_bytes) << ',' << num(r.precompute_s) << ','
-        << num(r.ncc_vs_siddon) << ',' << num(r.psnr_db_vs_siddon) << '\n';
+        << csv_number(t.envelope_scale) << ',' << csv_number(t.octree_pivot) << ',' << t.bin << ',' << t.similarity << ','
+        << t.plan << ',' << csv_number(t.final_step_mm) << ',' << csv_number(t.budget_ms) << ',' << r.runs << ','
+        << csv_number(r.median_ms) << ',' << csv_number(r.p95_ms) << ',' << csv_number(r.mean_tre_mm) << ',' << csv_number(r.p95_tre_mm)
+        << ',' << csv_number(r.success_rate) << ',' << csv_number(r.memory_bytes) << ',' << csv_number(r.precompute_s) << ','
+        << csv_number(r.ncc_vs_siddon) << ',' << csv_number(r.psnr_db_vs_siddon) << '\n';
   }
   std::ostringstream runs;
   runs << kRunsHeader << '\n';
   for (const TradeResult& r : study.results)
     for (std::size_t k = 0; k < r.problem_tre_mm.size(); ++k)
-      runs << r.point.id << ',' << k << ',' << num(r.problem_tre_mm[k]) << ','
-           << num(k < r.problem_ms.size() ? r.problem_ms[k] : std::nan("")) << '\n';
+      runs << r.point.id << ',' << k << ',' << csv_number(r.problem_tre_mm[k]) << ','
+           << csv_number(k < r.problem_ms.size() ? r.problem_ms[k] : std::nan("")) << '\n';
   // study.json last: a folder without it is not a result (study_shard.hpp).
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "points.csv", csv.str()));
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", runs.str()));
@@ -259,7 +243,7 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
   while (std::getline(csv, line)) {
     ++line_no;
     if (line.empty()) continue;
-    const auto c = split(line);
+    const auto c = split_csv_line(line);
     const std::string where = file.string() + ":" + std::to_string(line_no);
     if (c.size() != 25) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 25");
     TradeResult r;

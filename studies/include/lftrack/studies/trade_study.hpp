@@ -88,6 +88,9 @@ struct TradeStudy {
 // The operating points of the study on `scene`, in a stable order.
 std::vector<TradePoint> trade_points(const PreparedScene& scene, bool quick);
 
+// The problems each point registers: options.problems, or 6 quick and 24 full.
+int trade_problem_count(const TradeOptions& options);
+
 // The points shard `options.shard` of `options.shards` runs (after `options.only`), and in
 // `points_total` the number in the whole study.
 Result<std::vector<TradePoint>> trade_shard_points(const PreparedScene& scene, const TradeOptions& options,
