@@ -42,31 +42,149 @@ FrameSynthesizer::FrameSynthesizer(const PixelWindow& window, const DetectorMode
 
 Status FrameSynthesizer::synthesize(const DrrRenderer& renderer, const Pose& gold, const XrayView& view,
                                     std::uint64_t seed, ImageView<std::uint16_t> frame) {
+  PatientRenderers patient;
+  patient.attenuation = &renderer;
+  return synthesize(patient, gold, view, seed, frame);
+}
+
+Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWindow& window,
+                                                                   const DetectorModel& model,
+                                                                   const XrayPhysicsSpec& physics, int rows,
+                                                                   int cols, double pitch_mm,
+                                                                   std::uint64_t pattern_seed) {
+  LFTRACK_RETURN_IF_ERROR(check_model(model));
+  LFTRACK_RETURN_IF_ERROR(check_physics(physics));
+  if (!window.inside(rows, cols)) return invalid_argument("synthetic frame: the window must lie inside the detector");
+  if (!(pitch_mm > 0 && std::isfinite(pitch_mm))) return invalid_argument("synthetic frame: pitch must be positive");
+  auto s = std::make_unique<FrameSynthesizer>(window, model);
+  const int wr = window.rows, wc = window.cols;
+  if (physics.spectrum) {
+    auto spectrum = make_spectrum(physics.spectrum->spectrum);
+    if (!spectrum.ok()) return spectrum.status();
+    auto table = PolyenergeticTable::create(*spectrum);
+    if (!table.ok()) return table.status();
+    s->table_ = std::move(table).value();
+    s->bone_integral_ = Image<float>(wr, wc);
+  }
+  if (physics.scatter) s->scatter_ = std::make_unique<ScatterModel>(wr, wc, pitch_mm, *physics.scatter);
+  if (physics.detector) {
+    DetectorEffectsSpec effects = *physics.detector;
+    effects.pattern_seed = effects.pattern_seed * 1000003ull + pattern_seed;
+    s->effects_ = effects;
+    s->pattern_ = std::make_unique<DetectorPattern>(effects, rows, cols);
+    if (effects.glare_fraction > 0)
+      s->glare_ = std::make_unique<GaussianBlur>(wr, wc, effects.glare_sigma_mm / pitch_mm);
+    s->gain_ = Image<float>(wr, wc, 1.f);
+    s->stuck_ = Image<float>(wr, wc, -1.f);
+    s->heel_ = Image<float>(wr, wc, 1.f);
+    for (int r = 0; r < wr; ++r)
+      for (int c = 0; c < wc; ++c) {
+        s->gain_.at(r, c) = float(s->pattern_->gain(window.row0 + r, window.col0 + c));
+        s->stuck_.at(r, c) = float(s->pattern_->stuck_level(window.row0 + r, window.col0 + c));
+        s->heel_.at(r, c) = float(s->pattern_->heel(window.row0 + r));
+      }
+    s->glared_ = Image<float>(wr, wc);
+    s->previous_ = Image<float>(wr, wc);
+  }
+  s->primary_ = Image<float>(wr, wc);
+  s->thickness_cm_ = Image<float>(wr, wc);
+  s->total_ = Image<float>(wr, wc);
+  return s;
+}
+
+Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose& gold, const XrayView& view,
+                                    std::uint64_t seed, ImageView<std::uint16_t> frame) {
   LFTRACK_RETURN_IF_ERROR(check_model(model_));
   if (frame.rows != view.rows || frame.cols != view.cols || !window_.inside(view.rows, view.cols))
     return invalid_argument("synthetic frame: the frame must be the whole detector, the window inside it");
-  LFTRACK_RETURN_IF_ERROR(renderer.render(gold, view, window_, line_integral_.view()));
-  // Photons, with Poisson noise.
+  const bool physics = table_ || scatter_ || effects_;
+  if (table_ ? (patient.water == nullptr || patient.bone == nullptr) : patient.attenuation == nullptr)
+    return invalid_argument(table_ ? "synthetic frame: a spectrum needs the water and bone renderers"
+                                   : "synthetic frame: no attenuation renderer");
   std::mt19937_64 rng(seed);
-  for (int r = 0; r < window_.rows; ++r) {
-    for (int c = 0; c < window_.cols; ++c) {
-      const double expected = model_.photons_per_pixel * std::exp(-double(line_integral_.at(r, c)));
-      if (model_.noise) {
-        std::poisson_distribution<long> poisson(expected);
-        photons_.at(r, c) = static_cast<float>(poisson(rng));
-      } else {
-        photons_.at(r, c) = static_cast<float>(expected);
-      }
-    }
-  }
-  // Detector blur, then quantisation.
-  LFTRACK_RETURN_IF_ERROR(blur_.blur(photons_.view(), {}, blurred_.view()));
+  auto draw = [&](double expected) {
+    if (!model_.noise) return static_cast<float>(expected);
+    std::poisson_distribution<long> poisson(expected);
+    return static_cast<float>(poisson(rng));
+  };
   const DetectorCorrection correction = detector_correction(model_);
-  const double counts_per_photon = correction.open_field_counts / model_.photons_per_pixel;
+  if (!physics) {
+    LFTRACK_RETURN_IF_ERROR(patient.attenuation->render(gold, view, window_, line_integral_.view()));
+    // Photons, with Poisson noise.
+    for (int r = 0; r < window_.rows; ++r)
+      for (int c = 0; c < window_.cols; ++c)
+        photons_.at(r, c) = draw(model_.photons_per_pixel * std::exp(-double(line_integral_.at(r, c))));
+    // Detector blur, then quantisation.
+    LFTRACK_RETURN_IF_ERROR(blur_.blur(photons_.view(), {}, blurred_.view()));
+    const double counts_per_photon = correction.open_field_counts / model_.photons_per_pixel;
+    for (int r = 0; r < window_.rows; ++r)
+      for (int c = 0; c < window_.cols; ++c)
+        frame.at(window_.row0 + r, window_.col0 + c) = static_cast<std::uint16_t>(std::clamp(
+            std::lround(blurred_.at(r, c) * counts_per_photon), 0L, long(correction.saturation_counts)));
+    return {};
+  }
+  // The primary's transmission and each ray's water-equivalent thickness (cm).
+  if (table_) {
+    LFTRACK_RETURN_IF_ERROR(patient.water->render(gold, view, window_, line_integral_.view()));
+    LFTRACK_RETURN_IF_ERROR(patient.bone->render(gold, view, window_, bone_integral_.view()));
+    for (int r = 0; r < window_.rows; ++r)
+      for (int c = 0; c < window_.cols; ++c) {
+        const float w = line_integral_.at(r, c), b = bone_integral_.at(r, c);
+        primary_.at(r, c) = float(std::exp(-double(table_->log_attenuation(w, b))));
+        thickness_cm_.at(r, c) = std::max(0.f, w) + std::max(0.f, b);  // g/cm^2 ~ cm of water
+      }
+  } else {
+    LFTRACK_RETURN_IF_ERROR(patient.attenuation->render(gold, view, window_, line_integral_.view()));
+    const double mu_water_per_cm = 10 * kDefaultMuWaterPerMm;
+    for (int r = 0; r < window_.rows; ++r)
+      for (int c = 0; c < window_.cols; ++c) {
+        const double p = line_integral_.at(r, c);
+        primary_.at(r, c) = float(std::exp(-p));
+        thickness_cm_.at(r, c) = float(std::max(0.0, p) / mu_water_per_cm);
+      }
+  }
+  if (scatter_) {
+    LFTRACK_RETURN_IF_ERROR(scatter_->add_scatter(primary_.view(), thickness_cm_.view(), total_.view()));
+  } else {
+    total_.pixels() = primary_.pixels();
+  }
+  // Photons reaching the detector: the heel's intensity, the grid's share.
+  const double photon_fraction = scatter_ ? scatter_->photon_fraction() : 1.0;
+  const double photons_open = model_.photons_per_pixel * photon_fraction;
   for (int r = 0; r < window_.rows; ++r)
-    for (int c = 0; c < window_.cols; ++c)
-      frame.at(window_.row0 + r, window_.col0 + c) = static_cast<std::uint16_t>(std::clamp(
-          std::lround(blurred_.at(r, c) * counts_per_photon), 0L, long(correction.saturation_counts)));
+    for (int c = 0; c < window_.cols; ++c) {
+      const double heel = effects_ ? double(heel_.at(r, c)) : 1.0;
+      const double expected = photons_open * heel * std::max(0.0, double(total_.at(r, c)));
+      photons_.at(r, c) = draw(std::isfinite(expected) ? expected : 0.0);
+    }
+  LFTRACK_RETURN_IF_ERROR(blur_.blur(photons_.view(), {}, blurred_.view()));
+  if (effects_ && glare_) {
+    LFTRACK_RETURN_IF_ERROR(glare_->blur(blurred_.view(), {}, glared_.view()));
+    const float g = float(effects_->glare_fraction);
+    for (std::size_t i = 0; i < blurred_.pixels().size(); ++i)
+      blurred_.pixels()[i] = (1 - g) * blurred_.pixels()[i] + g * glared_.pixels()[i];
+  }
+  if (effects_ && effects_->lag_fraction > 0) {
+    const float lag = float(effects_->lag_fraction);
+    for (std::size_t i = 0; i < blurred_.pixels().size(); ++i) {
+      const float now = blurred_.pixels()[i];
+      if (has_previous_) blurred_.pixels()[i] = (1 - lag) * now + lag * previous_.pixels()[i];
+      previous_.pixels()[i] = now;
+    }
+    has_previous_ = true;
+  }
+  // Counts: the gridded open field reads the open-field level.
+  const double counts_per_photon = correction.open_field_counts / photons_open;
+  for (int r = 0; r < window_.rows; ++r)
+    for (int c = 0; c < window_.cols; ++c) {
+      double counts = blurred_.at(r, c) * counts_per_photon;
+      if (effects_) {
+        counts *= gain_.at(r, c);
+        if (stuck_.at(r, c) > 0) counts = stuck_.at(r, c) * correction.open_field_counts;
+      }
+      frame.at(window_.row0 + r, window_.col0 + c) = static_cast<std::uint16_t>(
+          std::clamp(std::isfinite(counts) ? std::lround(counts) : 0L, 0L, long(correction.saturation_counts)));
+    }
   return {};
 }
 
