@@ -28,6 +28,8 @@ struct CaptureRangeCliOptions {
   bool fields_prebuilt = false;
   bool build_fields = false;
   bool check_args = false;
+  std::string physics = "ideal";
+  int anatomy_draws = 5;
 };
 
 void print_capture_range(const CaptureRangeReport& report) {
@@ -57,10 +59,21 @@ Status run(const CaptureRangeCliOptions& o) {
   options.light_field_dir = o.lf_dir;
   options.shard = shard->first;
   options.shards = shard->second;
+  if (o.physics != "scene") {
+    auto physics = sim::physics_preset(o.physics);
+    if (!physics.ok()) return invalid_argument("--physics: ideal, clinical or scene (the scene's sim.physics)");
+    options.physics = *physics;
+    options.physics_name = o.physics;
+  }
+  options.anatomy_draws = o.anatomy_draws;
   if (o.check_args) return {};
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
+  if (o.physics == "scene") {
+    options.physics = prepared->scene.sim.physics;
+    options.physics_name = prepared->scene.sim.physics_name;
+  }
   const bool uses_fields = options.renderer == "lightfield";
   if (o.build_fields) {  // a job array's first job: load the fields, or build and save them
     if (!uses_fields) return {};
@@ -133,6 +146,12 @@ Command add_study_capture_range_command(CLI::App* parent) {
   app->add_flag("--build-fields", o->build_fields,
                 "Build the light fields into --lf-dir if they are not there, and exit (a job array's first job)");
   app->add_flag("--check-args", o->check_args, "Check the options and exit (`study submit` does, before submitting)");
+  app->add_option("--physics", o->physics,
+                  "What the frames carry: ideal (DRRs of the planning CT), clinical, or scene (its sim.physics)")
+      ->capture_default_str();
+  app->add_option("--anatomy-draws", o->anatomy_draws, "Deformed patients the gold poses share (with anatomy)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   return [o] { return run(*o); };
 }
 

@@ -35,6 +35,7 @@ int main(int argc, char** argv) {
   const Command capture_range = add_study_capture_range_command(study);
   const Command sensitivity = add_study_sensitivity_command(study);
   const Command trade = add_study_trade_command(study);
+  const Command realism = add_study_realism_command(study);
   const Command merge = add_study_merge_command(study);
   const Command submit = add_study_submit_command(study);
   const Command study_status = add_study_status_command(study);
@@ -86,6 +87,8 @@ int main(int argc, char** argv) {
       status = sensitivity();
     else if (study->got_subcommand("trade"))
       status = trade();
+    else if (study->got_subcommand("realism"))
+      status = realism();
     else if (study->got_subcommand("merge"))
       status = merge();
     else if (study->got_subcommand("submit"))

@@ -41,18 +41,21 @@ AnatomySpec clinical_anatomy() {
   return a;
 }
 
+XrayPhysicsSpec clinical_physics() {
+  XrayPhysicsSpec p;
+  p.spectrum = clinical_beam();
+  p.scatter = clinical_scatter();
+  p.detector = clinical_detector();
+  p.anatomy = clinical_anatomy();
+  return p;
+}
+
 std::vector<std::string> physics_preset_names() { return {"ideal", "clinical"}; }
 
 Result<XrayPhysicsSpec> physics_preset(const std::string& name) {
   XrayPhysicsSpec p;
   if (name == "ideal") return p;
-  if (name == "clinical") {
-    p.spectrum = clinical_beam();
-    p.scatter = clinical_scatter();
-    p.detector = clinical_detector();
-    p.anatomy = clinical_anatomy();
-    return p;
-  }
+  if (name == "clinical") return clinical_physics();
   return invalid_argument("unknown physics preset '" + name + "' (ideal, clinical)");
 }
 

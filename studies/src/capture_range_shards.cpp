@@ -34,7 +34,10 @@ nlohmann::json options_json(const CaptureRangeOptions& o) {
           {"gold_rotation_deg", o.gold_rotation_deg},
           {"max_start_rotation_deg", o.max_start_rotation_deg},
           {"seed", o.seed},
-          {"renderer", o.renderer}};
+          {"renderer", o.renderer},
+          {"physics", o.physics_name},
+          {"physics_description", o.physics_description.empty() ? sim::describe(o.physics) : o.physics_description},
+          {"anatomy_draws", o.anatomy_draws}};
 }
 
 // The options two shards (or two scenes) must share to be one study.
@@ -155,6 +158,11 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
       o.max_start_rotation_deg = opt.at("max_start_rotation_deg").get<double>();
       o.seed = opt.at("seed").get<std::uint64_t>();
       o.renderer = opt.at("renderer").get<std::string>();
+      // Studies from before issue 21 had ideal frames.
+      o.physics_name = opt.value("physics", std::string("ideal"));
+      o.physics_description = opt.value("physics_description", sim::describe(sim::XrayPhysicsSpec{}));
+      o.anatomy_draws = opt.value("anatomy_draws", 1);
+      if (o.anatomy_draws < 1 || o.anatomy_draws > 100000) return corrupt_data(file.string() + ": anatomy_draws out of range");
     } catch (const std::exception& e) {
       return corrupt_data(file.string() + ": " + e.what());
     }

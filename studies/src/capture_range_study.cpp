@@ -11,6 +11,7 @@
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "quantile.hpp"
@@ -122,12 +123,26 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
   report.options = o;
   report.scene = p.scene.name;
   report.fingerprint = study_scene_fingerprint(p);
+  if (o.anatomy_draws < 1) return invalid_argument("capture range: anatomy_draws must be >= 1");
   auto renderer = make_scene_renderer(p, o.renderer, o.light_field_dir, pool);
   if (!renderer.ok()) return renderer.status();
-  tracking::RendererOptions exact_options;
-  exact_options.pool = pool;
-  auto exact = tracking::make_renderer("siddon", p.world_mu, exact_options);
-  if (!exact.ok()) return exact.status();
+  // The imaged patient, one per anatomy draw (built when a sample of this shard first needs it),
+  // and the detectors.
+  auto imager = SceneImager::create(p, o.physics);
+  if (!imager.ok()) return imager.status();
+  std::vector<std::shared_ptr<const SimulatedPatient>> patients(std::size_t(o.physics.anatomy ? o.anatomy_draws : 1));
+  auto patient_of = [&](int k) -> Result<std::shared_ptr<const SimulatedPatient>> {
+    auto& slot = patients[std::size_t(k) % patients.size()];
+    if (!slot) {
+      const std::uint64_t draw = std::uint64_t(k) % patients.size();
+      auto made = make_simulated_patient(p, o.physics, o.seed * 7727 + draw + 1, pool, pool);
+      if (!made.ok()) return made.status();
+      if (o.physics.anatomy) spdlog::info("capture range: anatomy draw {} of {} built", draw + 1, patients.size());
+      slot = std::make_shared<const SimulatedPatient>(std::move(made).value());
+    }
+    return slot;
+  };
+  const bool lag = o.physics.detector && o.physics.detector->lag_fraction > 0;
   // One Registration per method (each holds its measure's prepared frames).
   std::vector<std::unique_ptr<tracking::Registration>> registrations;
   std::vector<tracking::RegistrationPlan> plans;
@@ -160,9 +175,24 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
       }
       continue;
     }
-    auto raw = synthesize_scene_frames(p, **exact, gold, o.seed * 100003 + std::uint64_t(k));
+    auto patient = patient_of(k);
+    if (!patient.ok()) return patient.status();
+    imager->forget_previous_frames();
+    if (lag) {
+      // The exposure before this one, of the patient 1 mm and 0.5 degrees away (its own random
+      // numbers, so the study's draws do not depend on the physics).
+      std::mt19937_64 before_rng(o.seed * 0x9e3779b97f4a7c15ULL + std::uint64_t(k));
+      std::normal_distribution<double> normal;
+      tracking::Vector6d step;
+      step << tracking::draw3(normal, before_rng).normalized() * 1.0,
+          tracking::draw3(normal, before_rng).normalized() * tracking::deg_to_rad(0.5);
+      const Pose before = tracking::apply_delta(gold, PoseDelta::from_vector(step), p.registration_origin_room_mm());
+      auto previous = imager->expose(**patient, before, o.seed * 100003 + std::uint64_t(k) + 50000);
+      if (!previous.ok()) return previous.status();
+    }
+    auto raw = imager->expose(**patient, gold, o.seed * 100003 + std::uint64_t(k));
     if (!raw.ok()) return raw.status();
-    auto frames = preprocess_scene_frames(p, *raw, sim::detector_correction(scene_detector_model(p)));
+    auto frames = preprocess_scene_frames(p, *raw, imager->correction());
     if (!frames.ok()) return frames.status();
     for (auto& r : registrations) LFTRACK_RETURN_IF_ERROR(r->set_frames(frames->frames(), frames->masks()));
     for (int b = 0; b < o.bins; ++b) {

@@ -21,7 +21,9 @@ Status SceneParser::vec6(const YAML::Node& n, const std::string& what, const cha
 
 Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
   LFTRACK_RETURN_IF_ERROR(
-      check_keys(n, "sim", {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed", "couch_link"}));
+      check_keys(n, "sim",
+                 {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed", "couch_link", "physics"}));
+  if (n["physics"]) LFTRACK_RETURN_IF_ERROR(parse_physics(n["physics"], sim));
   if (n["photons_per_pixel"])
     LFTRACK_RETURN_IF_ERROR(positive_at_most(n["photons_per_pixel"], "sim.photons_per_pixel", 1e9,
                                              "no detector counts more; a 16-bit panel saturates far below",

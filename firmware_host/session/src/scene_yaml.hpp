@@ -145,6 +145,7 @@ class SceneParser {
   Result<Scene> parse(const std::string& yaml_text) const;
   // The host-loop sections (scene_loop_parser.cpp).
   Status parse_sim(const YAML::Node& n, SimFrameSpec* sim) const;
+  Status parse_physics(const YAML::Node& n, SimFrameSpec* sim) const;
   Status parse_loop(const YAML::Node& n, LoopSpec* loop) const;
   Status parse_safety(const YAML::Node& n, SafetyLimits* limits) const;
   Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;

@@ -48,6 +48,7 @@ struct AnatomySpec {
   double disc_mm = 8;
   double breathing_mm = 0;
   Eigen::Vector3d target_size_mm{60, 60, 30};
+  std::uint64_t seed = 1;  // the draw a scene's simulated patient takes (studies draw their own)
 };
 
 Status check_anatomy_spec(const AnatomySpec& spec);

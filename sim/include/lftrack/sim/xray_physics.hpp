@@ -43,6 +43,7 @@ std::vector<std::string> physics_preset_names();
 // from the imaging beam's through the filtration); scatter 0.05 per cm, a 40 mm kernel, a 10:1
 // grid; the detector values of detector_effects.hpp; anatomy 3 mm soft tissue, 1 mm / 1 degree
 // adjacent vertebrae, no breathing (a thoracic scene sets breathing_mm).
+XrayPhysicsSpec clinical_physics();
 BeamSpec clinical_beam();
 ScatterSpec clinical_scatter();
 DetectorEffectsSpec clinical_detector();

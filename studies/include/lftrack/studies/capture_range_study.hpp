@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/sim/xray_physics.hpp"
 
 namespace lftrack::host {
 
@@ -45,6 +46,13 @@ struct CaptureRangeOptions {
   std::string renderer = "lightfield";
   std::filesystem::path light_field_dir;  // empty: the scene's default
   int shard = 1, shards = 1;              // register samples with index % shards == shard - 1
+  // What the frames carry (issue 21): ideal DRRs of the planning CT, or realistic physics. With an
+  // anatomy part, sample k images anatomy draw k % anatomy_draws (each draw a deformed patient);
+  // with detector lag, each sample's frames follow an exposure at a pose 1 mm / 0.5 degrees away.
+  sim::XrayPhysicsSpec physics;
+  std::string physics_name = "ideal";  // recorded with the study (and compared between shards)
+  std::string physics_description;     // empty: sim::describe(physics); a study read back has only this
+  int anatomy_draws = 1;
 };
 
 // Gold samples shard `options.shard` registers.

@@ -21,6 +21,7 @@
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/sim/patient_motion.hpp"
 #include "lftrack/sim/virtual_couch.hpp"
+#include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/light_field.hpp"
@@ -114,6 +115,10 @@ struct SimFrameSpec {
   std::string renderer = "siddon";
   tracking::LightFieldSpec light_field;
   std::uint64_t seed = 1;  // noise of the simulated loop's frames
+  // sim.physics: what the frames carry beyond the planning CT's ideal DRR (a preset name, or a
+  // mapping: `preset` and per-part overrides; docs/scenes.md "Imaging physics").
+  sim::XrayPhysicsSpec physics;
+  std::string physics_name = "ideal";  // the preset the physics started from ("custom" once changed)
   // sim.couch_link: a served couch's room link (`lftrack serve couch|robot --room FILE`; absolute
   // or empty). Simulated frames then show the patient where that couch has moved them, so
   // `lftrack run` can drive a couch in another process from simulated detectors.

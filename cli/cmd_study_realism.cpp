@@ -1,0 +1,90 @@
+// `lftrack study realism`: what each part of the imaging physics costs the registration (issue 21).
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+
+#include "cli_commands.hpp"
+#include "lftrack/host/progress_bar.hpp"
+#include "lftrack/studies/realism_study.hpp"
+#include "lftrack/studies/study_shard.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+struct RealismCliOptions {
+  SceneOptions scene;
+  std::string out_dir;
+  bool quick = false;
+  int per_bin = 0, anatomy_draws = 0;  // 0: the study's (or --quick's) default
+  std::string renderer = "lightfield";
+  std::string lf_dir;
+  std::uint64_t seed = 1;
+  std::string shard = "1/1";
+  std::vector<std::string> only;
+};
+
+Status run(const RealismCliOptions& o) {
+  auto shard = parse_shard(o.shard);
+  if (!shard.ok()) return shard.status();
+  if (o.out_dir.empty()) return invalid_argument("--out DIR is required");
+  RealismOptions options = o.quick ? RealismOptions::quick() : RealismOptions{};
+  if (o.per_bin > 0) options.per_bin = o.per_bin;
+  if (o.anatomy_draws > 0) options.anatomy_draws = o.anatomy_draws;
+  options.renderer = o.renderer;
+  options.light_field_dir = o.lf_dir;
+  options.seed = o.seed;
+  options.shard = shard->first;
+  options.shards = shard->second;
+  options.only = o.only;
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = load_prepared_scene(o.scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  ProgressBar bar("realism");
+  auto report = run_realism_study(*prepared, options, &pool, [&](double f) { bar.update(f); });
+  if (!report.ok()) return report.status();
+  bar.finish();
+  LFTRACK_RETURN_IF_ERROR(write_realism_outputs(*report, o.out_dir));
+  if (options.shards > 1) {
+    std::printf("shard %d/%d of every factor set written under %s/<set>/\n", options.shard, options.shards,
+                o.out_dir.c_str());
+    return {};
+  }
+  std::printf("%s; image-only %s for starts <= %.0f mm%s\n", report->scene.c_str(), report->image_method.c_str(),
+              options.image_max_mm,
+              report->hybrid_method.empty() ? "" : ("; hybrid " + report->hybrid_method).c_str());
+  std::printf("%-20s %10s %10s %9s %9s %9s %10s\n", "factor set", "mean TRE", "p95 TRE", "success", "median",
+              "hybrid", "hybrid TRE");
+  for (const RealismFactorSummary& f : report->factors)
+    std::printf("%-20s %7.3f mm %7.3f mm %8.1f%% %6.0f ms %8.1f%% %7.3f mm\n", f.name.c_str(), f.mean_tre_mm,
+                f.p95_tre_mm, 100 * f.success_rate, f.median_ms, 100 * f.hybrid_success_rate, f.hybrid_mean_tre_mm);
+  std::printf("wrote %s/{summary.json,realism.csv,realism.png} and a capture-range study per factor set\n",
+              o.out_dir.c_str());
+  return {};
+}
+
+}  // namespace
+
+Command add_study_realism_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand(
+      "realism", "TRE and success per imaging-physics factor: ideal, each part alone, clinical (issue 21)");
+  auto o = std::make_shared<RealismCliOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--out", o->out_dir, "Output folder");
+  app->add_flag("--quick", o->quick, "4 gold poses and 2 anatomy draws per factor set (minutes)");
+  app->add_option("--gold-poses", o->per_bin, "Gold poses per factor set, each with one start per 2 mm bin")
+      ->check(CLI::Range(1, 10000));
+  app->add_option("--anatomy-draws", o->anatomy_draws, "Deformed patients the gold poses share")
+      ->check(CLI::Range(1, 1000));
+  app->add_option("--renderer", o->renderer, "DRR renderer inside the registration")->capture_default_str();
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
+  app->add_option("--seed", o->seed, "Seed of gold poses, starts, noise and anatomy")->capture_default_str();
+  app->add_option("--shard", o->shard, "Run only shard k of n (k/n) of the gold poses")->capture_default_str();
+  app->add_option("--only", o->only, "Factor sets to run (ideal, spectrum, scatter, detector, soft_tissue, "
+                                     "adjacent_vertebrae, breathing, clinical)")
+      ->delimiter(',');
+  return [o] { return run(*o); };
+}
+
+}  // namespace lftrack::host::cli

@@ -1,0 +1,54 @@
+#pragma once
+// The patient the simulator images (issue 21): the planning CT's anatomy, deformed by one draw of
+// the scene's sim.physics.anatomy when it has one, with the scene's steel markers, as the volumes
+// its frames need (attenuation, or with a spectrum water and bone mass thicknesses), and the
+// scene's detectors exposing it with the rest of sim.physics.
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+
+namespace lftrack::host {
+
+struct SimulatedPatient {
+  // Set: attenuation (mono-energetic frames), or water and bone (a spectrum).
+  std::shared_ptr<const tracking::MuVolume> attenuation, water, bone;
+  std::shared_ptr<const tracking::DrrRenderer> attenuation_renderer, water_renderer, bone_renderer;
+  sim::PatientRenderers renderers() const;
+};
+
+// Builds the patient for `physics` (the scene's own or a study's) with anatomy draw
+// `anatomy_seed`, on `pool`; Siddon renderers over the volumes, rendering on `render_pool` (null:
+// the caller's thread). Ideal physics reuses the scene's world anatomy without a copy.
+Result<SimulatedPatient> make_simulated_patient(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
+                                                std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
+                                                tracking::ThreadPool* render_pool = nullptr);
+
+// The scene's detectors with `physics`: one frame synthesizer per detector over its ROI window
+// grown by `margin_px`, each detector with its own fixed pattern. Keeps each detector's previous
+// frame for lag.
+class SceneImager {
+ public:
+  static Result<SceneImager> create(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
+                                    int margin_px = 16);
+  // Raw whole-detector frames at `gold`; the same seed and history give the same frames.
+  Result<std::vector<tracking::Image<std::uint16_t>>> expose(const SimulatedPatient& patient,
+                                                             const tracking::Pose& gold_T_room_from_ct,
+                                                             std::uint64_t seed);
+  // The next exposure carries no lag.
+  void forget_previous_frames();
+  // What preprocessing needs to undo the detectors' levels.
+  tracking::DetectorCorrection correction() const;
+
+ private:
+  const PreparedScene* scene_ = nullptr;
+  sim::DetectorModel model_;
+  std::vector<std::shared_ptr<sim::FrameSynthesizer>> synthesizers_;
+};
+
+}  // namespace lftrack::host

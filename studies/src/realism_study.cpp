@@ -1,0 +1,203 @@
+#include "lftrack/studies/realism_study.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "lftrack/studies/plot.hpp"
+#include "lftrack/studies/study_shard.hpp"
+#include "quantile.hpp"
+
+namespace lftrack::host {
+
+RealismOptions RealismOptions::quick() {
+  RealismOptions o;
+  o.per_bin = 4;
+  o.anatomy_draws = 2;
+  return o;
+}
+
+std::vector<RealismFactor> realism_factors(const PreparedScene& p) {
+  const sim::XrayPhysicsSpec all = p.scene.sim.physics.ideal() ? sim::clinical_physics() : p.scene.sim.physics;
+  std::vector<RealismFactor> out;
+  auto add = [&](const std::string& name, auto set_part) {
+    RealismFactor f;
+    f.name = name;
+    set_part(f.physics);
+    out.push_back(std::move(f));
+  };
+  add("ideal", [](sim::XrayPhysicsSpec&) {});
+  if (all.spectrum) add("spectrum", [&](sim::XrayPhysicsSpec& s) { s.spectrum = all.spectrum; });
+  if (all.scatter) add("scatter", [&](sim::XrayPhysicsSpec& s) { s.scatter = all.scatter; });
+  if (all.detector) add("detector", [&](sim::XrayPhysicsSpec& s) { s.detector = all.detector; });
+  if (all.anatomy) {
+    const sim::AnatomySpec a = *all.anatomy;
+    if (a.soft_tissue_mm > 0)
+      add("soft_tissue", [&](sim::XrayPhysicsSpec& s) {
+        s.anatomy = a;
+        s.anatomy->adjacent_translation_mm = s.anatomy->adjacent_rotation_deg = s.anatomy->breathing_mm = 0;
+      });
+    if (a.adjacent_translation_mm > 0 || a.adjacent_rotation_deg > 0)
+      add("adjacent_vertebrae", [&](sim::XrayPhysicsSpec& s) {
+        s.anatomy = a;
+        s.anatomy->soft_tissue_mm = s.anatomy->breathing_mm = 0;
+      });
+    if (a.breathing_mm > 0)
+      add("breathing", [&](sim::XrayPhysicsSpec& s) {
+        s.anatomy = a;
+        s.anatomy->soft_tissue_mm = s.anatomy->adjacent_translation_mm = s.anatomy->adjacent_rotation_deg = 0;
+      });
+  }
+  add("clinical", [&](sim::XrayPhysicsSpec& s) { s = all; });
+  return out;
+}
+
+namespace {
+std::string image_method_of(const PreparedScene& p) { return p.scene.registration.plan + ":" + p.scene.registration.similarity; }
+std::string hybrid_method_of(const PreparedScene& p) {
+  return p.scene.fiducials.positions_ct_mm.empty() ? "" : image_method_of(p) + "+fiducial";
+}
+}  // namespace
+
+CaptureRangeOptions realism_capture_range_options(const PreparedScene& p, const RealismOptions& o,
+                                                  const RealismFactor& factor) {
+  CaptureRangeOptions c;
+  c.methods.push_back(*parse_registration_method(image_method_of(p)));
+  if (!hybrid_method_of(p).empty()) c.methods.push_back(*parse_registration_method(hybrid_method_of(p)));
+  c.per_bin = o.per_bin;
+  c.bins = o.bins;
+  c.seed = o.seed;
+  c.renderer = o.renderer;
+  c.light_field_dir = o.light_field_dir;
+  c.shard = o.shard;
+  c.shards = o.shards;
+  c.physics = factor.physics;
+  c.physics_name = factor.name;
+  c.anatomy_draws = std::max(1, std::min(o.anatomy_draws, o.per_bin));
+  return c;
+}
+
+RealismFactorSummary summarize_realism_factor(const RealismOptions& o, const CaptureRangeReport& study,
+                                              const std::string& image_method, const std::string& hybrid_method) {
+  RealismFactorSummary s;
+  s.name = study.options.physics_name;
+  s.physics = study.options.physics_description.empty() ? sim::describe(study.options.physics)
+                                                        : study.options.physics_description;
+  std::vector<double> tre, ms;
+  int image_runs = 0, image_ok = 0, hybrid_runs = 0, hybrid_ok = 0;
+  double hybrid_sum = 0;
+  for (const CaptureRangeRun& r : study.runs) {
+    if (r.method == image_method && r.initial_tre_mm <= o.image_max_mm) {
+      ++image_runs;
+      ms.push_back(r.ms);
+      if (r.success) {
+        ++image_ok;
+        tre.push_back(r.tre_mean_mm);
+      }
+    } else if (!hybrid_method.empty() && r.method == hybrid_method && r.initial_tre_mm <= o.hybrid_max_mm) {
+      ++hybrid_runs;
+      if (r.success) {
+        ++hybrid_ok;
+        hybrid_sum += r.tre_mean_mm;
+      }
+    }
+  }
+  s.runs = image_runs;
+  s.success_rate = image_runs ? double(image_ok) / image_runs : 0;
+  double sum = 0;
+  for (double t : tre) sum += t;
+  s.mean_tre_mm = tre.empty() ? 0 : sum / double(tre.size());
+  s.p95_tre_mm = quantile(tre, 0.95);
+  s.median_ms = quantile(ms, 0.5);
+  if (!hybrid_method.empty()) {
+    s.hybrid_success_rate = hybrid_runs ? double(hybrid_ok) / hybrid_runs : 0;
+    s.hybrid_mean_tre_mm = hybrid_ok ? hybrid_sum / hybrid_ok : 0;
+  }
+  return s;
+}
+
+Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOptions& o, tracking::ThreadPool* pool,
+                                        const std::function<void(double)>& progress) {
+  RealismReport report;
+  report.scene = p.scene.name;
+  report.options = o;
+  report.image_method = image_method_of(p);
+  report.hybrid_method = hybrid_method_of(p);
+  std::vector<RealismFactor> factors;
+  for (const RealismFactor& f : realism_factors(p))
+    if (o.only.empty() || std::find(o.only.begin(), o.only.end(), f.name) != o.only.end()) factors.push_back(f);
+  if (factors.empty()) return invalid_argument("realism: no factor set matches --only");
+  for (std::size_t i = 0; i < factors.size(); ++i) {
+    spdlog::info("realism: {} ({})", factors[i].name, sim::describe(factors[i].physics));
+    auto study = run_capture_range_study(p, realism_capture_range_options(p, o, factors[i]), pool, [&](double f) {
+      if (progress) progress((double(i) + f) / double(factors.size()));
+    });
+    if (!study.ok()) return study.status().with_context("factor set " + factors[i].name);
+    report.factors.push_back(summarize_realism_factor(o, *study, report.image_method, report.hybrid_method));
+    report.studies.push_back(std::move(study).value());
+  }
+  return report;
+}
+
+Status write_realism_outputs(const RealismReport& report, const std::filesystem::path& dir) {
+  const RealismOptions& o = report.options;
+  for (const CaptureRangeReport& study : report.studies) {
+    const auto sub = dir / study.options.physics_name;
+    if (o.shards > 1)
+      LFTRACK_RETURN_IF_ERROR(write_capture_range_shard(study, sub));
+    else
+      LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(study, sub));
+  }
+  if (o.shards > 1) return {};
+  nlohmann::json j;
+  j["study"] = "realism";
+  j["scene"] = report.scene;
+  j["image_method"] = report.image_method;
+  j["hybrid_method"] = report.hybrid_method;
+  j["image_starts_up_to_mm"] = o.image_max_mm;
+  j["hybrid_starts_up_to_mm"] = o.hybrid_max_mm;
+  j["gold_poses"] = o.per_bin;
+  j["anatomy_draws"] = o.anatomy_draws;
+  j["renderer"] = o.renderer;
+  j["factors"] = nlohmann::json::array();
+  std::string csv = "factor,mean_tre_mm,p95_tre_mm,success_rate,median_ms,hybrid_success_rate,hybrid_mean_tre_mm,runs,physics\n";
+  for (const RealismFactorSummary& f : report.factors) {
+    nlohmann::json e = {{"name", f.name},
+                        {"physics", f.physics},
+                        {"mean_tre_mm", f.mean_tre_mm},
+                        {"p95_tre_mm", f.p95_tre_mm},
+                        {"success_rate", f.success_rate},
+                        {"median_ms", f.median_ms},
+                        {"runs", f.runs}};
+    if (f.hybrid_success_rate >= 0) {
+      e["hybrid_success_rate"] = f.hybrid_success_rate;
+      e["hybrid_mean_tre_mm"] = f.hybrid_mean_tre_mm;
+    }
+    j["factors"].push_back(e);
+    char line[512];
+    std::snprintf(line, sizeof line, "%s,%.4f,%.4f,%.4f,%.2f,%.4f,%.4f,%d,\"%s\"\n", f.name.c_str(), f.mean_tre_mm,
+                  f.p95_tre_mm, f.success_rate, f.median_ms, f.hybrid_success_rate, f.hybrid_mean_tre_mm, f.runs,
+                  f.physics.c_str());
+    csv += line;
+  }
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "realism.csv", csv));
+  LinePlot plot;
+  plot.title = "Realism: mean TRE of successes per physics factor (starts <= " +
+               std::to_string(int(o.image_max_mm)) + " mm)";
+  plot.x_label = "factor set (1 = ideal ... last = clinical)";
+  plot.y_label = "mean TRE (mm) / failure rate (x 1 mm)";
+  plot.y_min = 0;
+  PlotSeries tre{"mean TRE of successes (mm)", {}}, failures{"failure rate (1 = all)", {}};
+  for (std::size_t i = 0; i < report.factors.size(); ++i) {
+    plot.x.push_back(double(i + 1));
+    tre.y.push_back(report.factors[i].mean_tre_mm);
+    failures.y.push_back(1 - report.factors[i].success_rate);
+  }
+  plot.series = {tre, failures};
+  if (auto drawn = draw_line_plot(plot, dir / "realism.png"); !drawn.ok()) return drawn.status();
+  return write_file_atomically(dir / "summary.json", j.dump(2) + "\n");  // last: the folder is complete
+}
+
+}  // namespace lftrack::host
