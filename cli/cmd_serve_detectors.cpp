@@ -35,9 +35,13 @@ class DetectorRoom {
   static Result<std::unique_ptr<DetectorRoom>> start(const PreparedScene& p, const ServeOptions& o,
                                                      tracking::ThreadPool* pool) {
     std::unique_ptr<DetectorRoom> r(new DetectorRoom(p));
-    auto renderer = make_sim_frame_renderer(p, o.lf_dir, pool);
-    if (!renderer.ok()) return renderer.status();
-    r->renderer_ = *renderer;
+    auto patient = make_scene_patient(p, pool);  // realistic physics (null: ideal frames)
+    if (!patient.ok()) return patient.status();
+    if (!*patient) {
+      auto renderer = make_sim_frame_renderer(p, o.lf_dir, pool);
+      if (!renderer.ok()) return renderer.status();
+      r->renderer_ = *renderer;
+    }
     sim::SimulatedRoomSpec room;
     room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
     room.origin_room_mm = p.registration_origin_room_mm();
@@ -56,7 +60,7 @@ class DetectorRoom {
     SimFrameSourceOptions frames;
     frames.wait_for_frames = false;
     if (p.scene.sim.renderer == "lightfield") frames.margin_px = 0;
-    r->frames_ = std::make_unique<SimFrameSource>(p, r->renderer_, r->room_.get(), frames);
+    r->frames_ = std::make_unique<SimFrameSource>(p, r->renderer_, r->room_.get(), frames, *patient);
     LFTRACK_RETURN_IF_ERROR(r->frames_->open(&r->pair_));
     return r;
   }

@@ -262,5 +262,42 @@ TEST(Cli, SlurmJobArrayOnALocalClusterEqualsTheUnshardedStudy) {
   EXPECT_EQ(nlohmann::json::parse(record)["submissions"].size(), 2u);
 }
 
+// The realism study (issue 21) on the tiny phantom: one gold pose, the ideal and the clinical
+// sets. Every set's capture-range study and the summary's factors are written; physics that
+// differs from the planning CT costs accuracy.
+TEST(Cli, RealismStudyReportsEachFactorSet) {
+  test::TempDir dir;
+  const fs::path scene = patient_scene(dir.path(), "p1", 1);
+  const fs::path out = dir.path() / "realism";
+  std::string said;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "study", "realism", "--scene", scene.string(), "--gold-poses", "2",
+                           "--anatomy-draws", "1", "--only", "ideal,spectrum,clinical", "--lf-dir",
+                           (dir.path() / "lf").string(), "--out", out.string()},
+                          &said)
+                  .ok())
+      << said;
+  const auto summary = nlohmann::json::parse(read_text_file(out / "summary.json"));
+  ASSERT_EQ(summary["factors"].size(), 3u);
+  EXPECT_EQ(summary["factors"][0]["name"], "ideal");
+  EXPECT_EQ(summary["factors"][2]["name"], "clinical");
+  for (const auto& f : summary["factors"]) {
+    EXPECT_TRUE(fs::exists(out / f["name"].get<std::string>() / "runs.csv")) << f["name"];
+    for (const char* key : {"mean_tre_mm", "success_rate", "median_ms"}) EXPECT_TRUE(f.contains(key)) << key;
+    EXPECT_EQ(f["runs"], 2 * 5);  // 2 gold poses x the 5 bins up to 10 mm
+  }
+  EXPECT_NE(summary["factors"][2]["physics"].get<std::string>().find("scatter"), std::string::npos);
+  EXPECT_GT(summary["factors"][0]["success_rate"].get<double>(), 0.5);
+  EXPECT_GT(summary["factors"][2]["mean_tre_mm"].get<double>(), summary["factors"][0]["mean_tre_mm"].get<double>());
+  const auto study = nlohmann::json::parse(read_text_file(out / "clinical" / "study.json"));
+  EXPECT_EQ(study["options"]["physics"], "clinical");
+  EXPECT_TRUE(fs::exists(out / "realism.csv"));
+  // Unknown factor sets are refused.
+  EXPECT_FALSE(run_process({lftrack_bin(), "-q", "study", "realism", "--scene", scene.string(), "--only", "bogus",
+                            "--lf-dir", (dir.path() / "lf").string(), "--out", (dir.path() / "x").string()},
+                           &said)
+                   .ok());
+  EXPECT_NE(said.find("no factor set"), std::string::npos) << said;
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -12,8 +12,29 @@
 
 namespace lftrack::host {
 
+namespace {
+std::string phantom_scene_text();
+}  // namespace
+
+// builtin:phantom-clinical: the same room with X-rays that differ from the planning CT the way real
+// ones do (sim.physics: clinical, issue 21), rendered by Siddon.
 std::optional<std::string> builtin_scene_text(const std::string& name) {
-  if (name != kBuiltinPhantom) return std::nullopt;
+  if (name == kBuiltinPhantom) return phantom_scene_text();
+  if (name != kBuiltinPhantomClinical) return std::nullopt;
+  std::string text = phantom_scene_text();
+  auto swap = [&](const std::string& from, const std::string& to) {
+    const auto at = text.find(from);
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+  };
+  swap("name: builtin spine phantom\n", "name: builtin spine phantom, clinical X-rays\n");
+  swap("  renderer: lightfield    # frames from a separate, finer field of the anatomy\n  light_field:\n"
+       "    resolution: [24, 24, 192, 192]\n",
+       "  renderer: siddon        # realistic physics renders water and bone with Siddon\n  physics: clinical\n");
+  return text;
+}
+
+namespace {
+std::string phantom_scene_text() {
   return std::string(R"yaml(
 version: 1
 name: builtin spine phantom
@@ -84,5 +105,6 @@ motion:
   breathing: {amplitude_mm: [0.5, 1.5, 4.5], amplitude_deg: [0.2, 0, 0], period_s: 4}
 )yaml");
 }
+}  // namespace
 
 }  // namespace lftrack::host

@@ -140,9 +140,13 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
     return device_frame_source_spec(p.scene);
   drivers::SimulatedSourceSpec simulated;
   simulated.make = [&p, &o, pool, parts]() -> Result<std::unique_ptr<drivers::FrameSource>> {
-    auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);
-    if (!frame_renderer.ok()) return frame_renderer.status();
-    parts->frame_renderer = *frame_renderer;
+    auto patient = make_scene_patient(p, pool);  // realistic physics (null: ideal frames)
+    if (!patient.ok()) return patient.status();
+    if (!*patient) {
+      auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);
+      if (!frame_renderer.ok()) return frame_renderer.status();
+      parts->frame_renderer = *frame_renderer;
+    }
     auto room = make_room(p, o);
     if (!room.ok()) return room.status();
     parts->room = std::move(room).value();
@@ -150,7 +154,7 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
     frame_options.wait_for_frames = o.simulated_clock;
     if (p.scene.sim.renderer == "lightfield") frame_options.margin_px = 0;  // the field covers the ROI only
     return std::unique_ptr<drivers::FrameSource>(
-        new SimFrameSource(p, parts->frame_renderer, parts->room.get(), frame_options));
+        new SimFrameSource(p, parts->frame_renderer, parts->room.get(), frame_options, *patient));
   };
   return drivers::FrameSourceSpec(std::move(simulated));
 }

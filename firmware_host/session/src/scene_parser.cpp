@@ -22,7 +22,7 @@ Status SceneParser::parse_ct(const YAML::Node& n, CtSpec* ct) const {
   LFTRACK_RETURN_IF_ERROR(text(path, "ct.path", &ct->path));
   if (!ct->is_builtin_phantom()) {
     if (ct->path.rfind("builtin:", 0) == 0)
-      return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom)");
+      return error(path, "unknown built-in CT '" + ct->path + "' (known: builtin:phantom, builtin:phantom-clinical)");
     const fs::path p(ct->path);
     ct->path = (p.is_absolute() ? p : base_dir_ / p).lexically_normal().string();
   }
@@ -385,7 +385,7 @@ Result<Scene> load_scene(const std::string& file_or_builtin) {
     return parse_scene(*text, file_or_builtin, std::filesystem::current_path());
   }
   if (file_or_builtin.rfind("builtin:", 0) == 0) {
-    return not_found("unknown built-in scene '" + file_or_builtin + "' (known: builtin:phantom)");
+    return not_found("unknown built-in scene '" + file_or_builtin + "' (known: builtin:phantom, builtin:phantom-clinical)");
   }
   std::ifstream in(file_or_builtin);
   if (!in) return not_found(file_or_builtin + ": cannot open scene file");

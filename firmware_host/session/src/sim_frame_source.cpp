@@ -19,9 +19,11 @@ using drivers::DeviceStatus;
 
 SimFrameSource::SimFrameSource(const PreparedScene& scene,
                                std::shared_ptr<const tracking::DrrRenderer> renderer,
-                               sim::SimulatedRoom* room, const SimFrameSourceOptions& options)
+                               sim::SimulatedRoom* room, const SimFrameSourceOptions& options,
+                               std::shared_ptr<const SimulatedPatient> patient)
     : scene_(scene),
       renderer_(std::move(renderer)),
+      patient_(std::move(patient)),
       room_(room),
       options_(options),
       model_(scene_detector_model(scene)) {}
@@ -31,7 +33,7 @@ SimFrameSource::~SimFrameSource() {
 }
 
 Status SimFrameSource::open(drivers::FramePair* pair) {
-  if (!renderer_ || room_ == nullptr) return invalid_argument("sim frames: no renderer or room");
+  if ((!renderer_ && !patient_) || room_ == nullptr) return invalid_argument("sim frames: no renderer or room");
   if (thread_.joinable()) return failed_precondition("sim frames: already open");
   const std::size_t views = scene_.scene.detectors.size();
   pair->frames.assign(views, {});
@@ -41,8 +43,15 @@ Status SimFrameSource::open(drivers::FramePair* pair) {
     const auto& view = scene_.scene.detectors[i].view;
     pair->frames[i].pixels = tracking::Image<std::uint16_t>(view.rows, view.cols, 0);
     rendered_.emplace_back(view.rows, view.cols, 0);
-    synthesizers_.push_back(std::make_unique<sim::FrameSynthesizer>(
-        sim_frame_window(scene_, int(i), options_.margin_px), model_));
+    const tracking::PixelWindow window = sim_frame_window(scene_, int(i), options_.margin_px);
+    if (patient_) {  // realistic physics: the detector's own fixed pattern, lag kept between frames
+      auto s = sim::FrameSynthesizer::create(window, model_, scene_.scene.sim.physics, view.rows, view.cols,
+                                             0.5 * (view.pitch_col_mm + view.pitch_row_mm), i + 1);
+      if (!s.ok()) return s.status().with_context("sim frames, detector " + view.name);
+      synthesizers_.push_back(std::move(s).value());
+    } else {
+      synthesizers_.push_back(std::make_unique<sim::FrameSynthesizer>(window, model_));
+    }
   }
   stopping_ = false;
   has_pending_ = has_rendered_ = rendering_ = false;
@@ -98,8 +107,10 @@ void SimFrameSource::render_loop() {
     Status status;
     for (std::size_t v = 0; v < synthesizers_.size() && status.ok(); ++v) {
       const std::uint64_t seed = scene_.scene.sim.seed * 1000003ull + std::uint64_t(job.index) * 7919ull + v;
-      status = synthesizers_[v]->synthesize(*renderer_, job.pose, scene_.scene.detectors[v].view, seed,
-                                            rendered_[v].view());
+      status = patient_ ? synthesizers_[v]->synthesize(patient_->renderers(), job.pose,
+                                                       scene_.scene.detectors[v].view, seed, rendered_[v].view())
+                        : synthesizers_[v]->synthesize(*renderer_, job.pose, scene_.scene.detectors[v].view, seed,
+                                                       rendered_[v].view());
     }
     {
       std::lock_guard lock(mutex_);

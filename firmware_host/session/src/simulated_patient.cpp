@@ -67,6 +67,19 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
   return patient;
 }
 
+Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& p,
+                                                                   tracking::ThreadPool* pool) {
+  const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
+  if (physics.ideal()) return std::shared_ptr<const SimulatedPatient>();
+  if (p.scene.sim.renderer == "lightfield")
+    return failed_precondition(
+        "sim.physics other than ideal renders frames with Siddon (water and bone, scatter); light-field frames of "
+        "realistic physics are not built yet: set sim.renderer: siddon");
+  auto patient = make_simulated_patient(p, physics, physics.anatomy ? physics.anatomy->seed : 1, pool);
+  if (!patient.ok()) return patient.status();
+  return std::make_shared<const SimulatedPatient>(std::move(patient).value());
+}
+
 Result<SceneImager> SceneImager::create(const PreparedScene& p, const sim::XrayPhysicsSpec& physics, int margin_px) {
   SceneImager imager;
   imager.scene_ = &p;

@@ -37,6 +37,7 @@ class ThreadPool;
 namespace lftrack::host {
 
 inline constexpr const char* kBuiltinPhantom = "builtin:phantom";
+inline constexpr const char* kBuiltinPhantomClinical = "builtin:phantom-clinical";
 
 struct CtSpec {
   std::string path;  // "builtin:phantom", or a DICOM folder / NIfTI file (absolute)

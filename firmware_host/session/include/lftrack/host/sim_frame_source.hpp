@@ -21,6 +21,7 @@
 
 #include "lftrack/drivers/frame_source.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 
@@ -42,8 +43,11 @@ struct SimFrameSourceOptions {
 
 class SimFrameSource final : public drivers::FrameSource {
  public:
+  // `patient`: the scene's realistic patient (make_scene_patient), or null for ideal frames from
+  // `renderer`.
   SimFrameSource(const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
-                 sim::SimulatedRoom* room, const SimFrameSourceOptions& options = {});
+                 sim::SimulatedRoom* room, const SimFrameSourceOptions& options = {},
+                 std::shared_ptr<const SimulatedPatient> patient = nullptr);
   ~SimFrameSource() override;
 
   Status open(drivers::FramePair* pair) override;
@@ -64,6 +68,7 @@ class SimFrameSource final : public drivers::FrameSource {
 
   const PreparedScene& scene_;
   std::shared_ptr<const tracking::DrrRenderer> renderer_;
+  std::shared_ptr<const SimulatedPatient> patient_;
   sim::SimulatedRoom* room_;
   SimFrameSourceOptions options_;
   sim::DetectorModel model_;

@@ -29,6 +29,12 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& scene, cons
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool = nullptr);
 
+// The patient of the scene's own sim.physics for the simulated loop (draw sim.physics.anatomy.seed),
+// or null where the physics is ideal (the loop's frame renderer then renders the world anatomy).
+// Realistic physics renders through Siddon: with sim.renderer lightfield it is refused.
+Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& scene,
+                                                                   tracking::ThreadPool* pool);
+
 // The scene's detectors with `physics`: one frame synthesizer per detector over its ROI window
 // grown by `margin_px`, each detector with its own fixed pattern. Keeps each detector's previous
 // frame for lag.
