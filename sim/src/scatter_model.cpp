@@ -31,7 +31,7 @@ ScatterModel::ScatterModel(int rows, int cols, double pitch_mm, const ScatterSpe
       coarse_amplitude_(coarse_rows_, coarse_cols_),
       coarse_weight_(coarse_rows_, coarse_cols_),
       coarse_scatter_(coarse_rows_, coarse_cols_),
-      coarse_valid_(coarse_rows_, coarse_cols_),
+      coarse_valid_(coarse_rows_, coarse_cols_, 1),  // every block is exposed
       blur_(coarse_rows_, coarse_cols_, spec.kernel_sigma_mm / pitch_mm / factor_) {}
 
 double ScatterModel::measured_spr(double thickness_cm) const {
@@ -57,10 +57,7 @@ Status ScatterModel::add_scatter(const ImageView<const float>& primary, const Im
       coarse_weight_.at(r / factor_, c / factor_) += 1.f;
     }
   for (int r = 0; r < coarse_rows_; ++r)
-    for (int c = 0; c < coarse_cols_; ++c) {
-      coarse_amplitude_.at(r, c) /= coarse_weight_.at(r, c);
-      coarse_valid_.at(r, c) = 1;
-    }
+    for (int c = 0; c < coarse_cols_; ++c) coarse_amplitude_.at(r, c) /= coarse_weight_.at(r, c);
   LFTRACK_RETURN_IF_ERROR(blur_.blur(coarse_amplitude_.view(), coarse_valid_.view(), coarse_scatter_.view()));
   // Back to full resolution, bilinear between block centres (clamped at the edges).
   for (int r = 0; r < rows_; ++r) {

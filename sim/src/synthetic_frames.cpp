@@ -71,7 +71,7 @@ Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWi
     DetectorEffectsSpec effects = *physics.detector;
     effects.pattern_seed = effects.pattern_seed * 1000003ull + pattern_seed;
     s->effects_ = effects;
-    s->pattern_ = std::make_unique<DetectorPattern>(effects, rows, cols);
+    const DetectorPattern pattern(effects, rows, cols);
     if (effects.glare_fraction > 0)
       s->glare_ = std::make_unique<GaussianBlur>(wr, wc, effects.glare_sigma_mm / pitch_mm);
     s->gain_ = Image<float>(wr, wc, 1.f);
@@ -79,9 +79,9 @@ Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWi
     s->heel_ = Image<float>(wr, wc, 1.f);
     for (int r = 0; r < wr; ++r)
       for (int c = 0; c < wc; ++c) {
-        s->gain_.at(r, c) = float(s->pattern_->gain(window.row0 + r, window.col0 + c));
-        s->stuck_.at(r, c) = float(s->pattern_->stuck_level(window.row0 + r, window.col0 + c));
-        s->heel_.at(r, c) = float(s->pattern_->heel(window.row0 + r));
+        s->gain_.at(r, c) = float(pattern.gain(window.row0 + r, window.col0 + c));
+        s->stuck_.at(r, c) = float(pattern.stuck_level(window.row0 + r, window.col0 + c));
+        s->heel_.at(r, c) = float(pattern.heel(window.row0 + r));
       }
     s->glared_ = Image<float>(wr, wc);
     s->previous_ = Image<float>(wr, wc);

@@ -101,7 +101,6 @@ class FrameSynthesizer {
   std::optional<PolyenergeticTable> table_;
   std::unique_ptr<ScatterModel> scatter_;
   std::optional<DetectorEffectsSpec> effects_;
-  std::unique_ptr<DetectorPattern> pattern_;
   std::unique_ptr<tracking::GaussianBlur> glare_;
   tracking::Image<float> bone_integral_, primary_, thickness_cm_, total_, glared_, previous_;
   tracking::Image<float> gain_, stuck_, heel_;  // the fixed pattern over the window
