@@ -11,17 +11,27 @@ using tracking::ImageView;
 
 namespace {
 
+// Share of a candidate's disc-minus-ring contrast that must remain over the ring's brightest
+// sector (a compact blob keeps nearly all of it, a ridge almost none).
+constexpr double kBlobShare = 0.5;
+constexpr double kPi = 3.14159265358979323846;
+
 struct DiscRing {
   double disc = 0, ring = 0;
+  double brightest_sector = 0;  // the largest mean of the ring's kSectors sectors
   bool ok = false;
 };
+constexpr int kSectors = 8;
 
-// Mean over the disc r <= a and over the ring b <= r <= c around (col, row).
+// Mean over the disc r <= a and over the ring b <= r <= c around (col, row), and per sector of
+// the ring.
 DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const unsigned char>& valid, int col,
                        int row, double a, double b, double c) {
   const int reach = static_cast<int>(std::ceil(c));
   double sd = 0, sr = 0;
   int nd = 0, nr = 0;
+  double sector_sum[kSectors] = {};
+  int sector_n[kSectors] = {};
   for (int dr = -reach; dr <= reach; ++dr) {
     const int r = row + dr;
     if (r < 0 || r >= im.rows) continue;
@@ -38,6 +48,10 @@ DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const u
       } else if (d2 >= b * b && d2 <= c * c) {
         sr += v;
         ++nr;
+        const double angle = std::atan2(double(dr), double(dc)) + kPi;  // [0, 2 pi]
+        const int k = std::min(kSectors - 1, static_cast<int>(angle / (2 * kPi) * kSectors));
+        sector_sum[k] += v;
+        ++sector_n[k];
       }
     }
   }
@@ -46,7 +60,34 @@ DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const u
   if (out.ok) {
     out.disc = sd / nd;
     out.ring = sr / nr;
+    out.brightest_sector = -1e300;
+    for (int k = 0; k < kSectors; ++k)
+      if (sector_n[k] > 0) out.brightest_sector = std::max(out.brightest_sector, sector_sum[k] / sector_n[k]);
   }
+  return out;
+}
+
+// 3 x 3 median of the usable pixels of `im` over rows [r0, r1] x cols [c0, c1] (NaN where none is
+// usable), so a stuck pixel or a one-pixel bad line cannot pose as a marker.
+tracking::Image<float> median3(const ImageView<const float>& im, const ImageView<const unsigned char>& valid, int r0,
+                               int r1, int c0, int c1) {
+  tracking::Image<float> out(r1 - r0 + 1, c1 - c0 + 1, std::nanf(""));
+  float values[9];
+  for (int r = r0; r <= r1; ++r)
+    for (int c = c0; c <= c1; ++c) {
+      int n = 0;
+      for (int dr = -1; dr <= 1; ++dr)
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int rr = r + dr, cc = c + dc;
+          if (rr < 0 || rr >= im.rows || cc < 0 || cc >= im.cols) continue;
+          if (!valid.empty() && valid.at(rr, cc) == 0) continue;
+          const float v = im.at(rr, cc);
+          if (std::isfinite(v)) values[n++] = v;
+        }
+      if (n == 0) continue;
+      std::nth_element(values, values + n / 2, values + n);
+      out.at(r - r0, c - c0) = values[n / 2];
+    }
   return out;
 }
 
@@ -63,15 +104,30 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
   const double b = a + 2, c = a + 5;
   int best_col = -1, best_row = -1;
   double best = -1e300, best_ring = 0;
+  int not_compact = 0;  // candidates brighter along a line than the ring around them
   const int r0 = static_cast<int>(std::floor(s.expected_px.y() - s.search_radius_px));
   const int r1 = static_cast<int>(std::ceil(s.expected_px.y() + s.search_radius_px));
   const int c0 = static_cast<int>(std::floor(s.expected_px.x() - s.search_radius_px));
   const int c1 = static_cast<int>(std::ceil(s.expected_px.x() + s.search_radius_px));
+  // The search runs on the 3 x 3 median of the area (plus the ring's reach); the centroid below
+  // on the image itself.
+  const int reach_px = static_cast<int>(std::ceil(c)) + 1;
+  const int mr0 = std::max(0, r0 - reach_px), mr1 = std::min(image.rows - 1, r1 + reach_px);
+  const int mc0 = std::max(0, c0 - reach_px), mc1 = std::min(image.cols - 1, c1 + reach_px);
+  if (mr0 > mr1 || mc0 > mc1) return not_found("marker search: the search area lies outside the image");
+  const tracking::Image<float> median = median3(image, valid, mr0, mr1, mc0, mc1);
+  const ImageView<const float> search_image = median.view();
   for (int row = std::max(r0, 0); row <= std::min(r1, image.rows - 1); ++row) {
     for (int col = std::max(c0, 0); col <= std::min(c1, image.cols - 1); ++col) {
       if ((Eigen::Vector2d(col, row) - s.expected_px).norm() > s.search_radius_px) continue;
-      const DiscRing dr = disc_and_ring(image, valid, col, row, a, b, c);
+      const DiscRing dr = disc_and_ring(search_image, {}, col - mc0, row - mr0, a, b, c);
       if (!dr.ok) continue;
+      // A marker is brighter than its whole ring; a bone edge or a ridge through the disc is as
+      // bright as the ring's sectors along it.
+      if (dr.disc - dr.brightest_sector < kBlobShare * (dr.disc - dr.ring)) {
+        ++not_compact;
+        continue;
+      }
       if (dr.disc - dr.ring > best) {
         best = dr.disc - dr.ring;
         best_col = col;
@@ -83,6 +139,8 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
   std::ostringstream where;
   where << "near (" << s.expected_px.x() << ", " << s.expected_px.y() << ") within " << s.search_radius_px
         << " px";
+  if (best_col < 0 && not_compact > 0)
+    return not_found("marker search: nothing blob-like " + where.str() + " (only edges and ridges)");
   if (best_col < 0) return not_found("marker search: no usable pixels " + where.str());
   if (best < s.min_contrast) {
     std::ostringstream m;

@@ -74,5 +74,33 @@ TEST(FindMarker, IgnoresAMaskedBrighterBlob) {
   EXPECT_NEAR(found->pixel.x(), 60, 0.3);
 }
 
+// What a clinical detector and anatomy put beside a marker: stuck pixels brighter than the marker,
+// a bad column, and a bright ridge (a cortex seen edge-on) with more disc-minus-ring contrast than
+// the marker's. None of them is taken for it.
+TEST(FindMarker, IgnoresStuckPixelsBadLinesAndRidges) {
+  Image<float> im = frame_with_marker(60.3, 50.7, 3.5, 0.8, 11);
+  for (const auto& [r, c] : std::vector<std::pair<int, int>>{{40, 45}, {62, 70}, {30, 80}}) im.at(r, c) = 40.f;
+  for (int r = 0; r < im.rows(); ++r) im.at(r, 75) += 3.f;  // a bad column
+  for (int r = 0; r < im.rows(); ++r)                        // a ridge 3 pixels wide, brighter than the marker
+    for (int c = 30; c <= 32; ++c) im.at(r, c) += 1.5f;
+  MarkerSearch s;
+  s.expected_px = {62, 48};
+  s.search_radius_px = 35;
+  s.marker_radius_px = 3.5;
+  auto found = find_marker(im.view(), {}, s);
+  ASSERT_TRUE(found.ok()) << found.status().message();
+  EXPECT_NEAR(found->pixel.x(), 60.3, 0.3);
+  EXPECT_NEAR(found->pixel.y(), 50.7, 0.3);
+  // With the marker gone, the ridge and the defects are still not a marker.
+  Image<float> no_marker = frame_with_marker(60.3, 50.7, 3.5, 0.0, 11);
+  for (int r = 0; r < im.rows(); ++r) {
+    no_marker.at(r, 75) += 3.f;
+    for (int c = 30; c <= 32; ++c) no_marker.at(r, c) += 1.5f;
+  }
+  no_marker.at(40, 45) = 40.f;
+  s.min_contrast = 0.2;
+  EXPECT_FALSE(find_marker(no_marker.view(), {}, s).ok());
+}
+
 }  // namespace
 }  // namespace lftrack::calib

@@ -78,5 +78,71 @@ TEST(GaussianBlur, SpreadsAnImpulseWithTheRequestedSigma) {
   EXPECT_NEAR(std::sqrt(second_moment / sum), 3.0, 0.05);
 }
 
+// The high-pass keeps an impulse's energy at the impulse and takes out what varies slowly: a
+// constant and a plane vanish away from the borders (a symmetric box's mean of a plane is its centre
+// value), and its low-pass part has the requested standard deviation.
+TEST(BoxHighPass, RemovesPlanesKeepsImpulsesAndHasTheRequestedSigma) {
+  const int n = 61;
+  Image<float> plane(n, n), out(n, n);
+  for (int r = 0; r < n; ++r)
+    for (int c = 0; c < n; ++c) plane.at(r, c) = 5.f + 0.3f * float(r) - 0.2f * float(c);
+  const double sigma = std::sqrt(12.0);  // three boxes of 7 pixels exactly
+  const int radius = BoxHighPass::radius_for_sigma(sigma);
+  ASSERT_EQ(radius, 3);
+  BoxHighPass highpass(n, n, radius);
+  ASSERT_TRUE(highpass.apply(plane.view(), {}, out.view()).ok());
+  const int margin = BoxHighPass::kPasses * radius;
+  for (int r = margin; r < n - margin; ++r)
+    for (int c = margin; c < n - margin; ++c) ASSERT_NEAR(out.at(r, c), 0.f, 1e-4) << r << "," << c;
+  Image<float> impulse(n, n, 0.f);
+  impulse.at(30, 30) = 1.f;
+  ASSERT_TRUE(highpass.apply(impulse.view(), {}, out.view()).ok());
+  // out = impulse - low; low sums to 1 and spreads with the requested sigma.
+  double low_sum = 0, second_moment = 0;
+  for (int r = 0; r < n; ++r)
+    for (int c = 0; c < n; ++c) {
+      const double low = impulse.at(r, c) - out.at(r, c);
+      low_sum += low;
+      second_moment += low * (c - 30) * (c - 30);
+    }
+  EXPECT_NEAR(low_sum, 1.0, 1e-4);
+  EXPECT_NEAR(std::sqrt(second_moment / low_sum), sigma, 0.02);
+  EXPECT_GT(out.at(30, 30), 0.9f);
+}
+
+TEST(BoxHighPass, MaskedPixelsNeitherContributeNorReceiveAndInPlaceMatches) {
+  Image<float> in(20, 30, 2.f);
+  Image<unsigned char> mask(20, 30, 1);
+  in.at(10, 10) = 1000.f;
+  mask.at(10, 10) = 0;
+  in.at(3, 3) = std::nanf("");
+  Image<float> out(20, 30);
+  BoxHighPass highpass(20, 30, 3);
+  ASSERT_TRUE(highpass.apply(in.view(), mask.view(), out.view()).ok());
+  EXPECT_EQ(out.at(10, 10), 0.f);
+  EXPECT_EQ(out.at(3, 3), 0.f);  // not finite: masked
+  EXPECT_NEAR(out.at(10, 11), 0.f, 1e-5);  // the outlier did not leak
+  for (int r = 0; r < 20; ++r)
+    for (int c = 0; c < 30; ++c) ASSERT_TRUE(std::isfinite(out.at(r, c)));
+  Image<float> same = in;
+  ASSERT_TRUE(highpass.apply(same.view(), mask.view(), same.view()).ok());
+  for (int r = 0; r < 20; ++r)
+    for (int c = 0; c < 30; ++c) ASSERT_EQ(same.at(r, c), out.at(r, c));
+  Image<float> wrong(5, 5);
+  EXPECT_FALSE(highpass.apply(wrong.view(), {}, out.view()).ok());
+  Image<unsigned char> wrong_mask(5, 5, 1);
+  EXPECT_FALSE(highpass.apply(in.view(), wrong_mask.view(), out.view()).ok());
+  for (double sigma : {0.0, -1.0, std::nan(""), 1e12, HUGE_VAL}) {
+    const int r = BoxHighPass::radius_for_sigma(sigma);
+    EXPECT_GE(r, 1) << sigma;
+    EXPECT_LE(r, 20000) << sigma;
+  }
+  BoxHighPass tiny(1, 1, 0);  // a radius below 1 is raised; a 1 x 1 image high-passes to 0
+  Image<float> one(1, 1, 7.f), one_out(1, 1);
+  ASSERT_TRUE(tiny.apply(one.view(), {}, one_out.view()).ok());
+  EXPECT_EQ(tiny.radius_px(), 1);
+  EXPECT_EQ(one_out.at(0, 0), 0.f);
+}
+
 }  // namespace
 }  // namespace lftrack::tracking

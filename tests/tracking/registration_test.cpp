@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "lftrack/sim/spine_phantom.hpp"
@@ -152,14 +153,17 @@ TEST(Registration, ParallelAndSerialEvaluationAgree) {
   EXPECT_EQ(a.evaluations, b.evaluations);
 }
 
-TEST(Registration, SetFramesAndAPreparedRunAllocateNothing) {
+class PreparedRunByPlan : public ::testing::TestWithParam<std::string> {};
+
+// warm-robust adds a second measure and high-passed levels, made at prepare_plan().
+TEST_P(PreparedRunByPlan, SetFramesAndAPreparedRunAllocateNothing) {
   const RegistrationSetup setup = two_view_setup("mi");
   ThreadPool pool(2);
   auto reg = std::move(Registration::create(light_field_renderer(), setup, &pool)).value();
   const Frames f = frames_at(setup, gold_pose());
   const auto frames = f.views();
   const std::vector<ImageView<const unsigned char>> masks;
-  const PreparedPlan plan = std::move(reg->prepare_plan(*registration_plan("warm"))).value();
+  const PreparedPlan plan = std::move(reg->prepare_plan(*registration_plan(GetParam()))).value();
   RegistrationResult result;
   ASSERT_TRUE(reg->set_frames(frames, masks).ok());
   ASSERT_TRUE(reg->run(phantom().nominal, plan, 1e9, &result).ok());  // sizes the result once
@@ -171,8 +175,45 @@ TEST(Registration, SetFramesAndAPreparedRunAllocateNothing) {
   EXPECT_EQ(lftrack_test_allocations() - before, 0);
   EXPECT_GT(result.evaluations, 12);
   // The same answer as the allocating entry point.
-  const auto again = *reg->run(phantom().nominal, *registration_plan("warm"));
+  const auto again = *reg->run(phantom().nominal, *registration_plan(GetParam()));
   EXPECT_TRUE(again.T_room_from_ct.isApprox(result.T_room_from_ct, 1e-12));
+}
+
+INSTANTIATE_TEST_SUITE_P(Registration, PreparedRunByPlan, ::testing::Values("warm", "warm-robust"),
+                         [](const ::testing::TestParamInfo<std::string>& p) {
+                           std::string name = p.param;
+                           std::replace(name.begin(), name.end(), '-', '_');
+                           return name;
+                         });
+
+// A smooth trend added to the line integrals (what scatter and moved soft tissue do to a real
+// frame) pulls mutual information off the pose; the robust plan's high-passed final pass does not
+// see it. Its result still reports the setup's measure (MI), so a gate's thresholds keep their
+// meaning.
+TEST(Registration, RobustPlanHoldsAgainstASmoothTrendThatPullsMutualInformation) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  ThreadPool pool(2);
+  auto reg = std::move(Registration::create(light_field_renderer(), setup, &pool)).value();
+  const Pose gold = gold_pose();
+  // A broad bump of 0.3 (line-integral units; the phantom's bone adds about that much) and a ramp
+  // of half that across each view.
+  Frames f = frames_at(setup, gold);
+  for (Image<float>& image : f.images) {
+    const double rows = image.rows(), cols = image.cols();
+    for (int r = 0; r < image.rows(); ++r)
+      for (int c = 0; c < image.cols(); ++c) {
+        const double x = c / cols - 0.3, y = r / rows - 0.6;
+        image.at(r, c) += static_cast<float>(0.3 * (std::exp(-(x * x + y * y) / 0.3) + 0.5 * c / cols));
+      }
+  }
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  const auto plain = *reg->run(phantom().nominal, *registration_plan("quadratic"));
+  const auto robust = *reg->run(phantom().nominal, *registration_plan("robust"));
+  const double plain_tre = tre_mm(plain.T_room_from_ct, gold), robust_tre = tre_mm(robust.T_room_from_ct, gold);
+  EXPECT_LT(robust_tre, 0.2);
+  EXPECT_LT(robust_tre, 0.5 * plain_tre) << "MI " << plain_tre << " mm, robust " << robust_tre << " mm";
+  ASSERT_EQ(robust.view_similarity.size(), 2u);
+  EXPECT_NEAR(-(robust.view_similarity[0] + robust.view_similarity[1]), reg->cost_at(robust.T_room_from_ct), 1e-9);
 }
 
 TEST(Registration, FiducialTermPullsTowardsTheMarker) {
@@ -232,8 +273,28 @@ TEST(Registration, RefusesMisuse) {
   bad.translation().x() = std::nan("");
   EXPECT_FALSE(reg->run(bad, *registration_plan("warm")).ok());
   RegistrationPlan odd = *registration_plan("warm");
-  odd.passes[0].blur_sigma_mm = 0.7;  // not prepared
-  EXPECT_FALSE(reg->run(phantom().nominal, odd).ok());
+  odd.passes[0].blur_sigma_mm = 0.7;  // a level the set-up did not name is made on demand
+  EXPECT_TRUE(reg->run(phantom().nominal, odd).ok());
+  for (double absurd : {-1.0, std::nan(""), HUGE_VAL, 1e12}) {
+    RegistrationPlan blur = *registration_plan("warm"), highpass = blur;
+    blur.passes[0].blur_sigma_mm = absurd;
+    highpass.passes[1].highpass_sigma_mm = absurd;
+    EXPECT_FALSE(reg->run(phantom().nominal, blur).ok()) << absurd;
+    EXPECT_FALSE(reg->run(phantom().nominal, highpass).ok()) << absurd;
+  }
+  RegistrationPlan zero_bin = *registration_plan("warm");
+  zero_bin.passes[0].bin = 0;
+  EXPECT_FALSE(reg->run(phantom().nominal, zero_bin).ok());
+  RegistrationPlan unknown_measure = *registration_plan("robust");
+  unknown_measure.passes[1].similarity = "entropy";
+  EXPECT_FALSE(reg->run(phantom().nominal, unknown_measure).ok());
+  RegistrationResult ignored;
+  PreparedPlan tampered = std::move(reg->prepare_plan(*registration_plan("warm"))).value();
+  tampered.measures[0] = 99;
+  EXPECT_FALSE(reg->run(phantom().nominal, tampered, 1e9, &ignored).ok());
+  tampered = std::move(reg->prepare_plan(*registration_plan("warm"))).value();
+  tampered.levels[1] = -1;
+  EXPECT_FALSE(reg->run(phantom().nominal, tampered, 1e9, &ignored).ok());
   EXPECT_FALSE(registration_plan("fast").ok());
   RegistrationSetup no_views = setup;
   no_views.views.clear();

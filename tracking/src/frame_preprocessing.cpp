@@ -1,5 +1,6 @@
 #include "lftrack/tracking/frame_preprocessing.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace lftrack::tracking {
@@ -88,6 +89,70 @@ Status GaussianBlur::blur(const ImageView<const float>& in, const ImageView<cons
       out.at(r, c) = static_cast<float>(w > 0 ? v / w : in.at(r, c));
     }
   }
+  return {};
+}
+
+BoxHighPass::BoxHighPass(int rows, int cols, int radius_px)
+    : rows_(std::max(rows, 0)),
+      cols_(std::max(cols, 0)),
+      radius_(std::max(radius_px, 1)),
+      value_sum_(std::size_t(rows_ + 1) * std::size_t(cols_ + 1), 0.0),
+      count_sum_(value_sum_.size(), 0.0),
+      low_(std::size_t(rows_) * std::size_t(cols_), 0.f) {}
+
+int BoxHighPass::radius_for_sigma(double sigma_px) {
+  if (!std::isfinite(sigma_px) || sigma_px <= 0) return 1;
+  // kPasses boxes of width 2r+1: sigma^2 = kPasses * ((2r+1)^2 - 1) / 12
+  const double s = std::min(sigma_px, 1e4);
+  const double width = std::sqrt(12.0 * s * s / kPasses + 1.0);
+  return std::max(1, static_cast<int>(std::lround(0.5 * (width - 1.0))));
+}
+
+Status BoxHighPass::apply(const ImageView<const float>& in, const ImageView<const unsigned char>& valid,
+                          ImageView<float> out) {
+  if (in.rows != rows_ || in.cols != cols_ || out.rows != rows_ || out.cols != cols_ ||
+      (!valid.empty() && (valid.rows != rows_ || valid.cols != cols_)))
+    return invalid_argument("high-pass: image sizes differ from the filter's");
+  const std::size_t stride = std::size_t(cols_) + 1;
+  auto usable = [&](int r, int c) {
+    return std::isfinite(in.at(r, c)) && (valid.empty() || valid.at(r, c) != 0);
+  };
+  auto box = [&](const std::vector<double>& t, int r0, int c0, int r1, int c1) {  // [r0, r1) x [c0, c1)
+    return t[std::size_t(r1) * stride + std::size_t(c1)] - t[std::size_t(r0) * stride + std::size_t(c1)] -
+           t[std::size_t(r1) * stride + std::size_t(c0)] + t[std::size_t(r0) * stride + std::size_t(c0)];
+  };
+  for (int r = 0; r < rows_; ++r)
+    for (int c = 0; c < cols_; ++c) low_[std::size_t(r) * std::size_t(cols_) + std::size_t(c)] = in.at(r, c);
+  // Each pass replaces low_ at the usable pixels by the mean of the usable pixels in the box.
+  for (int pass = 0; pass < kPasses; ++pass) {
+    for (int r = 0; r < rows_; ++r) {
+      double row_value = 0, row_count = 0;
+      for (int c = 0; c < cols_; ++c) {
+        if (usable(r, c)) {
+          row_value += low_[std::size_t(r) * std::size_t(cols_) + std::size_t(c)];
+          row_count += 1;
+        }
+        const std::size_t i = std::size_t(r + 1) * stride + std::size_t(c + 1);
+        value_sum_[i] = value_sum_[i - stride] + row_value;
+        count_sum_[i] = count_sum_[i - stride] + row_count;
+      }
+    }
+    for (int r = 0; r < rows_; ++r) {
+      const int r0 = std::max(0, r - radius_), r1 = std::min(rows_, r + radius_ + 1);
+      for (int c = 0; c < cols_; ++c) {
+        if (!usable(r, c)) continue;
+        const int c0 = std::max(0, c - radius_), c1 = std::min(cols_, c + radius_ + 1);
+        const double n = box(count_sum_, r0, c0, r1, c1);  // >= 1: the pixel itself
+        low_[std::size_t(r) * std::size_t(cols_) + std::size_t(c)] =
+            static_cast<float>(box(value_sum_, r0, c0, r1, c1) / n);
+      }
+    }
+  }
+  for (int r = 0; r < rows_; ++r)
+    for (int c = 0; c < cols_; ++c)
+      out.at(r, c) =
+          usable(r, c) ? static_cast<float>(in.at(r, c) - low_[std::size_t(r) * std::size_t(cols_) + std::size_t(c)])
+                       : 0.f;
   return {};
 }
 

@@ -4,24 +4,27 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "lftrack/tracking/frame_preprocessing.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::tracking {
 
-// Scratch of one worker: a DRR and its mask per view, and the prepared similarity per blur level
-// and view (each slot prepares its own, so set_frames() reuses them without allocating).
+// Scratch of one worker: a DRR and its mask per view, and the prepared similarity per measure,
+// level and view (each slot prepares its own, so set_frames() reuses them without allocating).
 struct Registration::Slot {
-  std::vector<std::vector<Image<float>>> drr;                        // [level][view]
-  std::vector<std::vector<Image<unsigned char>>> valid;              // [level][view]
-  std::vector<std::vector<std::unique_ptr<Similarity>>> similarity;  // [level][view]
+  std::vector<std::vector<Image<float>>> drr;            // [level][view]
+  std::vector<std::vector<Image<unsigned char>>> valid;  // [level][view]
+  std::vector<std::vector<std::optional<BoxHighPass>>> highpass;  // [level][view], levels with one
+  std::vector<std::vector<std::vector<std::unique_ptr<Similarity>>>> similarity;  // [measure][level][view]
 };
 
 // The optimizer's view of one pass: x = delta from the start pose.
 class Registration::Cost final : public CostFunction {
  public:
-  Cost(Registration& r, const Pose& start, int level) : r_(r), start_(start), level_(level) {}
+  Cost(Registration& r, const Pose& start, int measure, int level)
+      : r_(r), start_(start), measure_(measure), level_(level) {}
   double cost(const Vector6d& x) override {
     double out = 0;
     cost_batch(&x, 1, &out);
@@ -33,7 +36,7 @@ class Registration::Cost final : public CostFunction {
     const int slots = static_cast<int>(r_.slots_.size());
     const int tasks = n * views;
     if (r_.pool_ == nullptr || slots < 2 || tasks < 2 || n > kMaxBatch) {
-      for (int i = 0; i < n; ++i) out[i] = r_.evaluate(0, level_, pose(xs[i]), nullptr);
+      for (int i = 0; i < n; ++i) out[i] = r_.evaluate(0, measure_, level_, pose(xs[i]), nullptr);
       return;
     }
     for (int i = 0; i < n; ++i) {
@@ -45,7 +48,7 @@ class Registration::Cost final : public CostFunction {
       const int slot = begin / grain;
       for (int t = begin; t < end; ++t) {
         const int i = t / views;
-        view_scores_[t] = inside_[i] ? r_.view_score(slot, level_, poses_[i], t % views) : 0.0;
+        view_scores_[t] = inside_[i] ? r_.view_score(slot, measure_, level_, poses_[i], t % views) : 0.0;
       }
     });
     for (int i = 0; i < n; ++i)
@@ -61,7 +64,7 @@ class Registration::Cost final : public CostFunction {
   static constexpr int kMaxViews = 4;
   Registration& r_;
   Pose start_;
-  int level_;
+  int measure_, level_;
   std::array<Pose, kMaxBatch> poses_;
   std::array<bool, kMaxBatch> inside_{};
   std::array<double, kMaxBatch * kMaxViews> view_scores_{};
@@ -69,21 +72,32 @@ class Registration::Cost final : public CostFunction {
 
 // The reference image of one level and view.
 struct Registration::ReferenceLevel {
-  ReferenceLevel(int rows, int cols, double blur_sigma_px)
-      : binned(rows, cols),
-        binned_valid(rows, cols, 1),
-        blurred(rows, cols),
-        blur(rows, cols, blur_sigma_px) {}
+  ReferenceLevel(int rows, int cols, double blur_sigma_px, double highpass_sigma_px)
+      : binned(rows, cols), binned_valid(rows, cols, 1), blurred(rows, cols), blur(rows, cols, blur_sigma_px) {
+    if (highpass_sigma_px > 0) highpass.emplace(rows, cols, BoxHighPass::radius_for_sigma(highpass_sigma_px));
+  }
   Image<float> binned;
   Image<unsigned char> binned_valid;
-  Image<float> blurred;
+  Image<float> blurred;  // blurred and high-passed: what the level's measures compare DRRs with
   GaussianBlur blur;
+  std::optional<BoxHighPass> highpass;
 };
+
+namespace {
+double highpass_sigma_px(const RegistrationSetup::Level& l, const XrayView& view) {
+  return l.highpass_sigma_mm > 0 ? l.highpass_sigma_mm / (0.5 * (view.pitch_col_mm + view.pitch_row_mm) * l.bin)
+                                 : 0.0;
+}
+}  // namespace
 
 Registration::~Registration() = default;
 
+// The robust plans' high-pass (sigma, mm on the detector): the lumbar realism study's best of
+// 5, 7, 10 and 15 mm (BENCHMARKS.md, "A registration that holds up").
+constexpr double kRobustHighPassMm = 7.0;
+
 std::vector<std::string> registration_plan_names() {
-  return {"papers", "decoupled", "quadratic", "cmaes", "warm"};
+  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust"};
 }
 
 Result<RegistrationPlan> registration_plan(const std::string& name) {
@@ -91,15 +105,21 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
   plan.name = name;
   if (name == "papers" || name == "decoupled") {
     const std::string opt = name == "papers" ? "best-neighbour" : "decoupled";
-    plan.passes = {{opt, 1.5, 1, 5.0, 0.5, 3000}, {opt, 0.0, 1, 2.0, 0.1, 3000}};
+    plan.passes = {{opt, 1.5, 1, 5.0, 0.5, 3000, ""}, {opt, 0.0, 1, 2.0, 0.1, 3000, ""}};
   } else if (name == "quadratic") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000},
-                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000}};
+    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, ""}};
   } else if (name == "cmaes") {
-    plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000}};
+    plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000, ""}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000, ""}};
   } else if (name == "warm") {
-    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400},
-                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200}};
+    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, ""},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, ""}};
+  } else if (name == "robust") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},
+                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, "ncc", kRobustHighPassMm}};
+  } else if (name == "warm-robust") {
+    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, "ncc", kRobustHighPassMm},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, "ncc", kRobustHighPassMm}};
   } else {
     std::string known;
     for (const auto& n : registration_plan_names()) known += (known.empty() ? "" : ", ") + n;
@@ -155,73 +175,75 @@ Result<std::unique_ptr<Registration>> Registration::create(std::shared_ptr<const
       return invalid_argument("registration: the window of view '" + v.view.name +
                               "' lies outside its detector");
   }
-  auto probe = make_similarity(setup.similarity, setup.similarity_options);
-  if (!probe.ok()) return probe.status();
   std::unique_ptr<Registration> r(new Registration());
   r->renderer_ = std::move(renderer);
   r->pool_ = pool;
-  std::vector<RegistrationSetup::Level> levels{{0.0, 1}};
-  for (const RegistrationSetup::Level& l : setup.levels) {
-    if (!std::isfinite(l.blur_sigma_mm) || l.blur_sigma_mm < 0 || l.bin < 1 || l.bin > 16)
-      return invalid_argument("registration: a level needs a blur >= 0 mm and a binning of 1 to 16");
-    const bool known = std::any_of(levels.begin(), levels.end(), [&](const auto& k) {
-      return k.bin == l.bin && std::abs(k.blur_sigma_mm - l.blur_sigma_mm) < 1e-9;
-    });
-    if (!known) levels.push_back(l);
-  }
-  for (const RegistrationSetup::Level& l : levels) {
-    LevelGeometry g;
-    g.level = l;
-    for (const RegistrationView& v : setup.views) {
-      const int rows = v.window.rows / l.bin, cols = v.window.cols / l.bin;
-      if (rows < 4 || cols < 4)
-        return invalid_argument("registration: binning " + std::to_string(l.bin) + " leaves view '" +
-                                v.view.name + "' fewer than 4 x 4 pixels");
-      g.views.push_back(l.bin == 1 ? v.view
-                                   : v.view.resampled(v.window.row0, v.window.col0, rows * l.bin,
-                                                      cols * l.bin, rows, cols));
-      g.windows.push_back(l.bin == 1 ? v.window : PixelWindow::full(rows, cols));
-    }
-    r->levels_.push_back(std::move(g));
-  }
   const Vector6d motion = projected_motion_per_unit(setup);
   if (!(motion.array() > 1e-9).all() || !motion.allFinite())
     return invalid_argument("registration: a pose parameter does not move the ROI on any detector");
   r->scales_ = motion.cwiseInverse();
   r->setup_ = std::move(setup);
   const int slots = pool != nullptr ? std::max(1, pool->size()) : 1;
-  for (int s = 0; s < slots; ++s) {
-    auto slot = std::make_unique<Slot>();
-    slot->drr.resize(r->levels_.size());
-    slot->valid.resize(r->levels_.size());
-    slot->similarity.resize(r->levels_.size());
-    for (std::size_t l = 0; l < r->levels_.size(); ++l) {
-      for (const PixelWindow& w : r->levels_[l].windows) {
-        slot->drr[l].emplace_back(w.rows, w.cols, 0.f);
-        slot->valid[l].emplace_back(w.rows, w.cols, 0);
-        slot->similarity[l].push_back(
-            std::move(make_similarity(r->setup_.similarity, r->setup_.similarity_options)).value());
-      }
-    }
-    r->slots_.push_back(std::move(slot));
-  }
-  r->references_.resize(r->levels_.size());
-  r->level_prepared_.assign(r->levels_.size(), 0);
+  for (int s = 0; s < slots; ++s) r->slots_.push_back(std::make_unique<Slot>());
   for (const auto& view : r->setup_.views) {
     r->frames_.emplace_back(view.window.rows, view.window.cols);
     r->frame_masks_.emplace_back(view.window.rows, view.window.cols, 1);
   }
-  for (std::size_t l = 0; l < r->levels_.size(); ++l) {
-    for (std::size_t v = 0; v < r->setup_.views.size(); ++v) {
-      const XrayView& view = r->setup_.views[v].view;
-      const double pitch = 0.5 * (view.pitch_col_mm + view.pitch_row_mm);
-      const int bin = r->levels_[l].level.bin;
-      const PixelWindow& w = r->levels_[l].windows[v];
-      r->references_[l].push_back(std::make_unique<ReferenceLevel>(
-          w.rows, w.cols, r->levels_[l].level.blur_sigma_mm / (pitch * bin)));
+  LFTRACK_RETURN_IF_ERROR(r->level_for({0.0, 1, 0.0}).status());  // level 0: the originals
+  for (const RegistrationSetup::Level& l : r->setup_.levels) LFTRACK_RETURN_IF_ERROR(r->level_for(l).status());
+  LFTRACK_RETURN_IF_ERROR(r->measure_index(r->setup_.similarity).status());
+  return r;
+}
+
+Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
+  if (!std::isfinite(l.blur_sigma_mm) || l.blur_sigma_mm < 0 || l.blur_sigma_mm > 1000 || l.bin < 1 ||
+      l.bin > 16 || !std::isfinite(l.highpass_sigma_mm) || l.highpass_sigma_mm < 0 || l.highpass_sigma_mm > 1000)
+    return invalid_argument(
+        "registration: a level needs a blur of 0 to 1000 mm, a binning of 1 to 16 and a high-pass of 0 to 1000 mm");
+  const int known = level_index(l.blur_sigma_mm, l.bin, l.highpass_sigma_mm);
+  if (known >= 0) return known;
+  LevelGeometry g;
+  g.level = l;
+  for (const RegistrationView& v : setup_.views) {
+    const int rows = v.window.rows / l.bin, cols = v.window.cols / l.bin;
+    if (rows < 4 || cols < 4)
+      return invalid_argument("registration: binning " + std::to_string(l.bin) + " leaves view '" + v.view.name +
+                              "' fewer than 4 x 4 pixels");
+    g.views.push_back(l.bin == 1 ? v.view
+                                 : v.view.resampled(v.window.row0, v.window.col0, rows * l.bin, cols * l.bin,
+                                                    rows, cols));
+    g.windows.push_back(l.bin == 1 ? v.window : PixelWindow::full(rows, cols));
+  }
+  const std::size_t index = levels_.size();
+  for (auto& slot : slots_) {
+    slot->drr.emplace_back();
+    slot->valid.emplace_back();
+    slot->highpass.emplace_back();
+    for (std::size_t v = 0; v < g.windows.size(); ++v) {
+      const PixelWindow& w = g.windows[v];
+      slot->drr[index].emplace_back(w.rows, w.cols, 0.f);
+      slot->valid[index].emplace_back(w.rows, w.cols, 0);
+      const double hp = highpass_sigma_px(l, setup_.views[v].view);
+      auto& filter = slot->highpass[index].emplace_back();
+      if (hp > 0) filter.emplace(w.rows, w.cols, BoxHighPass::radius_for_sigma(hp));
+    }
+    // Every measure made so far gets this level's similarities.
+    for (auto& per_level : slot->similarity) {
+      per_level.emplace_back();
+      for (std::size_t v = 0; v < g.windows.size(); ++v) per_level[index].push_back(per_level[0][v]->clone());
     }
   }
-  return r;
+  references_.emplace_back();
+  for (std::size_t v = 0; v < setup_.views.size(); ++v) {
+    const XrayView& view = setup_.views[v].view;
+    const double pitch = 0.5 * (view.pitch_col_mm + view.pitch_row_mm);
+    references_[index].push_back(std::make_unique<ReferenceLevel>(
+        g.windows[v].rows, g.windows[v].cols, l.blur_sigma_mm / (pitch * l.bin), highpass_sigma_px(l, view)));
+  }
+  references_made_.push_back(0);
+  for (auto& prepared : level_prepared_) prepared.push_back(0);
+  levels_.push_back(std::move(g));
+  return int(index);
 }
 
 Status Registration::set_frames(const std::vector<ImageView<const float>>& frames,
@@ -250,13 +272,46 @@ Status Registration::set_frames(const std::vector<ImageView<const float>>& frame
         std::copy(valid[v].row_ptr(r), valid[v].row_ptr(r) + w.cols, mask_row);
     }
   }
-  std::fill(level_prepared_.begin(), level_prepared_.end(), 0);
+  for (auto& prepared : level_prepared_) std::fill(prepared.begin(), prepared.end(), 0);
+  std::fill(references_made_.begin(), references_made_.end(), 0);
   frames_set_ = true;
   return {};
 }
 
-Status Registration::prepare_level(int level) {
-  if (level_prepared_[std::size_t(level)] != 0) return {};
+Result<int> Registration::measure_index(const std::string& name) {
+  const std::string wanted = name.empty() ? setup_.similarity : name;
+  for (std::size_t m = 0; m < measure_names_.size(); ++m)
+    if (measure_names_[m] == wanted) return int(m);
+  auto probe = make_similarity(wanted, setup_.similarity_options);
+  if (!probe.ok()) return probe.status();
+  for (auto& slot : slots_) {
+    auto& per_level = slot->similarity.emplace_back(levels_.size());
+    for (std::size_t l = 0; l < levels_.size(); ++l)
+      for (std::size_t v = 0; v < setup_.views.size(); ++v) per_level[l].push_back((*probe)->clone());
+  }
+  measure_names_.push_back(wanted);
+  level_prepared_.emplace_back(levels_.size(), 0);
+  return int(measure_names_.size() - 1);
+}
+
+Status Registration::prepare_level(int measure, int level) {
+  char& prepared = level_prepared_[std::size_t(measure)][std::size_t(level)];
+  if (prepared != 0) return {};
+  if (references_made_[std::size_t(level)] == 0) {
+    LFTRACK_RETURN_IF_ERROR(make_references(level));
+    references_made_[std::size_t(level)] = 1;
+  }
+  for (std::size_t v = 0; v < setup_.views.size(); ++v) {
+    const ReferenceLevel& ref = *references_[std::size_t(level)][v];
+    for (auto& slot : slots_)
+      LFTRACK_RETURN_IF_ERROR(slot->similarity[std::size_t(measure)][std::size_t(level)][v]->prepare(
+          ref.blurred.view(), ref.binned_valid.view()));
+  }
+  prepared = 1;
+  return {};
+}
+
+Status Registration::make_references(int level) {
   const int bin = levels_[std::size_t(level)].level.bin;
   const bool blurred = levels_[std::size_t(level)].level.blur_sigma_mm > 0;
   for (std::size_t v = 0; v < setup_.views.size(); ++v) {
@@ -285,17 +340,16 @@ Status Registration::prepare_level(int level) {
       LFTRACK_RETURN_IF_ERROR(ref.blur.blur(ref.binned.view(), ref.binned_valid.view(), ref.blurred.view()));
     else  // a blur of width 0 is the identity
       ref.blurred.pixels() = ref.binned.pixels();
-    for (auto& slot : slots_)
-      LFTRACK_RETURN_IF_ERROR(
-          slot->similarity[std::size_t(level)][v]->prepare(ref.blurred.view(), ref.binned_valid.view()));
+    if (ref.highpass)
+      LFTRACK_RETURN_IF_ERROR(ref.highpass->apply(ref.blurred.view(), ref.binned_valid.view(), ref.blurred.view()));
   }
-  level_prepared_[std::size_t(level)] = 1;
   return {};
 }
 
-int Registration::level_index(double blur_sigma_mm, int bin) const {
+int Registration::level_index(double blur_sigma_mm, int bin, double highpass_sigma_mm) const {
   for (std::size_t i = 0; i < levels_.size(); ++i)
-    if (levels_[i].level.bin == bin && std::abs(levels_[i].level.blur_sigma_mm - blur_sigma_mm) < 1e-9)
+    if (levels_[i].level.bin == bin && std::abs(levels_[i].level.blur_sigma_mm - blur_sigma_mm) < 1e-9 &&
+        std::abs(levels_[i].level.highpass_sigma_mm - highpass_sigma_mm) < 1e-9)
       return static_cast<int>(i);
   return -1;
 }
@@ -312,18 +366,21 @@ bool Registration::inside_search_region(const Pose& T) const {
   return true;
 }
 
-double Registration::view_score(int slot_index, int level, const Pose& T, int v) {
+double Registration::view_score(int slot_index, int measure, int level, const Pose& T, int v) {
   Slot& slot = *slots_[static_cast<std::size_t>(slot_index)];
   const std::size_t l = static_cast<std::size_t>(level), vi = static_cast<std::size_t>(v);
   const XrayView& view = levels_[l].views[vi];
   const PixelWindow& window = levels_[l].windows[vi];
   RenderExtras extras;
   extras.valid = slot.valid[l][vi].view();
-  Similarity& similarity = *slot.similarity[l][vi];
+  Similarity& similarity = *slot.similarity[std::size_t(measure)][l][vi];
   if (!renderer_->render(T, view, window, slot.drr[l][vi].view(), &extras).ok())
     return similarity.worst_score();
   const double valid_fraction = 1.0 - double(extras.masked_pixels) / (double(window.rows) * window.cols);
   if (valid_fraction < setup_.min_valid_fraction) return similarity.worst_score();
+  if (auto& highpass = slot.highpass[l][vi]; highpass &&
+      !highpass->apply(slot.drr[l][vi].view(), extras.valid, slot.drr[l][vi].view()).ok())
+    return similarity.worst_score();
   return similarity.score(slot.drr[l][vi].view(), extras.valid);
 }
 
@@ -335,32 +392,31 @@ double Registration::combine(const Pose& T, const double* view_scores) const {
   return std::isfinite(cost) ? cost : std::numeric_limits<double>::infinity();
 }
 
-double Registration::evaluate(int slot_index, int level, const Pose& T, std::vector<double>* view_scores) {
+double Registration::evaluate(int slot_index, int measure, int level, const Pose& T,
+                              std::vector<double>* view_scores) {
   if (view_scores == nullptr && !inside_search_region(T)) return std::numeric_limits<double>::infinity();
   std::array<double, 8> scores{};
   for (std::size_t v = 0; v < setup_.views.size() && v < scores.size(); ++v) {
-    scores[v] = view_score(slot_index, level, T, int(v));
+    scores[v] = view_score(slot_index, measure, level, T, int(v));
     if (view_scores != nullptr) (*view_scores)[v] = scores[v];
   }
   return combine(T, scores.data());
 }
 
-double Registration::cost_at(const Pose& T, double blur_sigma_mm, int bin) {
-  const int level = level_index(blur_sigma_mm, bin);
-  if (!frames_set_ || level < 0 || !prepare_level(level).ok()) return std::numeric_limits<double>::infinity();
-  return evaluate(0, level, T, nullptr);
+double Registration::cost_at(const Pose& T, double blur_sigma_mm, int bin, double highpass_sigma_mm) {
+  const int level = level_index(blur_sigma_mm, bin, highpass_sigma_mm);
+  if (!frames_set_ || level < 0 || !prepare_level(0, level).ok()) return std::numeric_limits<double>::infinity();
+  return evaluate(0, 0, level, T, nullptr);
 }
 
-Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bool record_trace) const {
+Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bool record_trace) {
   if (plan.passes.empty()) return invalid_argument("registration: the plan has no passes");
   PreparedPlan prepared;
   prepared.plan = plan;
   prepared.record_trace = record_trace;
   for (const RegistrationPass& pass : plan.passes) {
-    const int level = level_index(pass.blur_sigma_mm, pass.bin);
-    if (level < 0)
-      return invalid_argument("registration: blur " + std::to_string(pass.blur_sigma_mm) + " mm at binning " +
-                              std::to_string(pass.bin) + " was not prepared in the set-up");
+    auto level = level_for({pass.blur_sigma_mm, pass.bin, pass.highpass_sigma_mm});
+    if (!level.ok()) return level.status();
     OptimizerSettings settings;
     settings.scale = scales_;
     settings.initial_step_mm = pass.initial_step_mm;
@@ -368,8 +424,11 @@ Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bo
     settings.record_trace = record_trace;
     auto optimizer = make_optimizer(pass.optimizer, settings);
     if (!optimizer.ok()) return optimizer.status();
+    auto measure = measure_index(pass.similarity);
+    if (!measure.ok()) return measure.status();
     prepared.optimizers.push_back(std::move(*optimizer));
-    prepared.levels.push_back(level);
+    prepared.levels.push_back(*level);
+    prepared.measures.push_back(*measure);
   }
   return prepared;
 }
@@ -387,13 +446,19 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
                          RegistrationResult* result) {
   if (!frames_set_) return failed_precondition("registration: no frames (call set_frames first)");
   if (!start.matrix().allFinite()) return invalid_argument("registration: the start pose is not finite");
-  if (prepared.optimizers.empty() || prepared.optimizers.size() != prepared.plan.passes.size())
+  if (prepared.optimizers.empty() || prepared.optimizers.size() != prepared.plan.passes.size() ||
+      prepared.levels.size() != prepared.optimizers.size() || prepared.measures.size() != prepared.optimizers.size())
     return invalid_argument("registration: the plan was not prepared");
+  for (std::size_t p = 0; p < prepared.measures.size(); ++p)
+    if (prepared.measures[p] < 0 || std::size_t(prepared.measures[p]) >= measure_names_.size() ||
+        prepared.levels[p] < 0 || std::size_t(prepared.levels[p]) >= levels_.size())
+      return invalid_argument("registration: the plan was not prepared by this registration");
   const auto t0 = std::chrono::steady_clock::now();
   // The references of the levels this plan uses (level 0 scores the result), made once per
   // set of frames; their time counts against the budget.
-  LFTRACK_RETURN_IF_ERROR(prepare_level(0));
-  for (int level : prepared.levels) LFTRACK_RETURN_IF_ERROR(prepare_level(level));
+  LFTRACK_RETURN_IF_ERROR(prepare_level(0, 0));
+  for (std::size_t p = 0; p < prepared.levels.size(); ++p)
+    LFTRACK_RETURN_IF_ERROR(prepare_level(prepared.measures[p], prepared.levels[p]));
   const double budget_ms = std::min(max_ms, prepared.plan.max_ms);
   result->evaluations = 0;
   result->cost = 0;
@@ -406,7 +471,7 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
     budget.max_ms =
         budget_ms - std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    Cost cost(*this, current, prepared.levels[p]);
+    Cost cost(*this, current, prepared.measures[p], prepared.levels[p]);
     OptimizerResult r = prepared.optimizers[p]->minimize(cost, Vector6d::Zero(), budget);
     current = cost.pose(r.x);
     result->evaluations += r.evaluations;
@@ -424,7 +489,7 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   result->delta_from_start = delta_between(start, result->T_room_from_ct, setup_.origin_room_mm);
   result->view_similarity.resize(setup_.views.size());
   std::fill(result->view_similarity.begin(), result->view_similarity.end(), 0.0);
-  evaluate(0, 0, result->T_room_from_ct, &result->view_similarity);
+  evaluate(0, 0, 0, result->T_room_from_ct, &result->view_similarity);
   if (fiducial_)
     result->fiducial_distance_mm =
         (result->T_room_from_ct * fiducial_->marker_ct_mm - fiducial_->marker_room_mm).norm();

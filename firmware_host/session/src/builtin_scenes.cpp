@@ -17,7 +17,7 @@ std::string phantom_scene_text();
 }  // namespace
 
 // builtin:phantom-clinical: the same room with X-rays that differ from the planning CT the way real
-// ones do (sim.physics: clinical, issue 21), rendered by Siddon.
+// ones do (sim.physics: clinical, issue 21), rendered by Siddon, registered by the robust plans.
 std::optional<std::string> builtin_scene_text(const std::string& name) {
   if (name == kBuiltinPhantom) return phantom_scene_text();
   if (name != kBuiltinPhantomClinical) return std::nullopt;
@@ -30,6 +30,10 @@ std::optional<std::string> builtin_scene_text(const std::string& name) {
   swap("  renderer: lightfield    # frames from a separate, finer field of the anatomy\n  light_field:\n"
        "    resolution: [24, 24, 192, 192]\n",
        "  renderer: siddon        # realistic physics renders water and bone with Siddon\n  physics: clinical\n");
+  // The plans that hold up on such frames (registration.hpp: robust, warm-robust).
+  swap("  plan: quadratic\n", "  plan: robust\n");
+  swap("  align_plan: quadratic\n", "  align_plan: robust\n");
+  swap("  track_plan: warm\n", "  track_plan: warm-robust\n");
   return text;
 }
 

@@ -3,6 +3,7 @@
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/anatomy_deformation.hpp"
 #include "lftrack/sim/material_decomposition.hpp"
+#include "lftrack/sim/sphere_markers.hpp"
 
 namespace lftrack::host {
 
@@ -26,8 +27,19 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
     if (!r.ok()) return r.status();
     return std::shared_ptr<const tracking::DrrRenderer>(std::move(r).value());
   };
+  // The scene's markers as the spheres they are (sphere_markers.hpp), added to the renderers
+  // below, not written into the voxels: in 3 mm slices a voxel marker sits at its slice's centre.
+  // The planning CT's own clipped image of a marker stays, as it would in a patient's CT.
+  const auto& f = p.scene.fiducials;
+  auto markers = [&](double value_per_mm) {
+    std::vector<sim::SphereMarker> out;
+    if (f.insert)
+      for (const Eigen::Vector3d& c : f.positions_ct_mm) out.push_back({c, f.radius_mm, value_per_mm});
+    return out;
+  };
+  double marker_value_per_mm = sim::kSteelMuPerMm;  // in the attenuation volume; bone-equivalent below
   if (!physics.anatomy && !physics.spectrum) {
-    patient.attenuation = p.world_mu;
+    patient.attenuation = p.mu;
   } else {
     // The day's anatomy (the CT already shows the markers, clipped).
     std::shared_ptr<const tracking::CtVolume> ct = p.ct;
@@ -37,32 +49,32 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
       if (!moved.ok()) return moved.status().with_context("the simulated patient's anatomy");
       ct = std::make_shared<const tracking::CtVolume>(std::move(moved).value());
     }
-    const auto& f = p.scene.fiducials;
     if (physics.spectrum) {
       auto split = sim::decompose_ct(*ct, physics.spectrum->ct_effective_kev, pool);
       if (!split.ok()) return split.status().with_context("the simulated patient's water and bone");
-      if (f.insert)
-        sim::insert_markers(&split->bone, f.positions_ct_mm, f.radius_mm,
-                            sim::bone_equivalent_of(sim::kSteelMuPerMm, physics.spectrum->ct_effective_kev));
+      marker_value_per_mm = sim::bone_equivalent_of(sim::kSteelMuPerMm, physics.spectrum->ct_effective_kev);
       patient.water = std::make_shared<const tracking::MuVolume>(std::move(split->water));
       patient.bone = std::make_shared<const tracking::MuVolume>(std::move(split->bone));
     } else {
-      auto mu = std::make_shared<tracking::MuVolume>(tracking::to_attenuation(*ct, p.scene.ct.mu_water_per_mm));
-      if (f.insert) sim::insert_markers(mu.get(), f.positions_ct_mm, f.radius_mm, sim::kSteelMuPerMm);
-      patient.attenuation = std::move(mu);
+      patient.attenuation =
+          std::make_shared<const tracking::MuVolume>(tracking::to_attenuation(*ct, p.scene.ct.mu_water_per_mm));
     }
   }
   if (patient.attenuation) {
     auto r = siddon(patient.attenuation);
     if (!r.ok()) return r.status();
-    patient.attenuation_renderer = *r;
+    auto with = sim::with_sphere_markers(*r, markers(marker_value_per_mm));
+    if (!with.ok()) return with.status().with_context("the simulated patient's markers");
+    patient.attenuation_renderer = *with;
   } else {
     auto w = siddon(patient.water);
     if (!w.ok()) return w.status();
     auto b = siddon(patient.bone);
     if (!b.ok()) return b.status();
+    auto with = sim::with_sphere_markers(*b, markers(marker_value_per_mm));
+    if (!with.ok()) return with.status().with_context("the simulated patient's markers");
     patient.water_renderer = *w;
-    patient.bone_renderer = *b;
+    patient.bone_renderer = *with;
   }
   return patient;
 }

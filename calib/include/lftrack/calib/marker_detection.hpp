@@ -1,7 +1,9 @@
 #pragma once
 // Finding a metal fiducial's projection in a preprocessed frame (line integrals, where metal is
-// bright): the pixel of greatest disc-minus-ring contrast within a search radius of the expected
-// projection, then the background-subtracted intensity centroid around it (sub-pixel).
+// bright): on the 3 x 3 median of the search area (stuck pixels and one-pixel bad lines gone),
+// the pixel of greatest disc-minus-ring contrast within a search radius of the expected
+// projection whose disc is also brighter than every sector of its ring (a blob, not a bone edge
+// or ridge), then the background-subtracted intensity centroid around it (sub-pixel).
 
 #include <Eigen/Core>
 #include <vector>

@@ -48,4 +48,28 @@ class GaussianBlur {
   std::vector<double> value_tmp_, weight_tmp_;
 };
 
+// High-pass filter that removes what varies slowly across the image (scatter, soft tissue that is
+// not the planning CT's, a flat-field residue): out = in - low, where low is kPasses box means
+// of the usable pixels in a (2r+1) x (2r+1) box (close to a Gaussian of the stated sigma, without
+// a single box's ringing), each from summed-area tables, so the cost does not grow with the box.
+// Masked pixels (valid == 0, or not finite) neither contribute nor receive a value: they get 0
+// and stay masked. Sized once for an image shape; apply() allocates nothing.
+class BoxHighPass {
+ public:
+  static constexpr int kPasses = 3;
+  // radius_px >= 1 (smaller values are raised to 1).
+  BoxHighPass(int rows, int cols, int radius_px);
+  // The radius whose kPasses boxes have standard deviation sigma_px (at least 1).
+  static int radius_for_sigma(double sigma_px);
+  int radius_px() const { return radius_; }
+  // in and out have the shape given at construction (they may alias); `valid` may be empty.
+  Status apply(const ImageView<const float>& in, const ImageView<const unsigned char>& valid,
+               ImageView<float> out);
+
+ private:
+  int rows_, cols_, radius_;
+  std::vector<double> value_sum_, count_sum_;  // (rows+1) x (cols+1) summed-area tables
+  std::vector<float> low_;                     // rows x cols
+};
+
 }  // namespace lftrack::tracking

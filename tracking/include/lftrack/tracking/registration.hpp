@@ -42,13 +42,18 @@ struct RegistrationSetup {
   std::string similarity = "mi";
   SimilarityOptions similarity_options;
   // Image levels the passes may ask for: a blur (sigma, mm on the detector) of the reference
-  // frames and a detector binning (K x K pixels averaged into one, for frames and DRRs alike).
-  // The originals (0 mm, bin 1) are always available.
+  // frames, a detector binning (K x K pixels averaged into one, for frames and DRRs alike), and a
+  // high-pass (BoxHighPass of that sigma, mm on the detector; 0: none) applied to frames and DRRs
+  // alike, which leaves out what the CT cannot explain because it varies slowly: scatter, soft
+  // tissue that moved, a flat-field residue. The originals (0 mm, bin 1, no high-pass) are always
+  // available.
   struct Level {
     double blur_sigma_mm = 0;
     int bin = 1;
+    double highpass_sigma_mm = 0;
   };
-  std::vector<Level> levels{{1.5, 1}, {1.5, 2}, {0.0, 2}};
+  // Levels made at create(); a plan's passes make the levels they name at prepare_plan().
+  std::vector<Level> levels{{1.5, 1, 0}, {1.5, 2, 0}, {0.0, 2, 0}};
   // A candidate whose DRR has fewer valid pixels than this fraction of a window scores the
   // measure's worst value in that view (a pose outside a light field's envelope).
   double min_valid_fraction = 0.9;
@@ -69,11 +74,16 @@ struct FiducialTerm {
 
 struct RegistrationPass {
   std::string optimizer = "best-neighbour";
-  double blur_sigma_mm = 0;  // with `bin`, one of the setup's levels (0 and 1: the originals)
+  double blur_sigma_mm = 0;  // with `bin` and `highpass_sigma_mm`, the pass's image level
   int bin = 1;
   double initial_step_mm = 2.0;
   double final_step_mm = 0.1;
   int max_evaluations = 3000;
+  // The measure this pass optimizes (a make_similarity name); empty: the setup's. The result's
+  // view_similarity is always the setup's measure on the originals, so a gate's thresholds keep
+  // their meaning.
+  std::string similarity;
+  double highpass_sigma_mm = 0;  // with blur and bin, the level
 };
 
 struct RegistrationPlan {
@@ -92,6 +102,12 @@ struct RegistrationPlan {
 //              quadratic-neighbour on the originals 1 -> 0.1 mm
 //   warm       tracking from the last pose: quadratic-neighbour on 2 x 2 binned originals
 //              1 -> 0.25 mm, then at full resolution 0.25 -> 0.1 mm
+//   robust     quadratic's first pass (the setup's measure, for range), then NCC of frames and
+//              DRRs high-passed at 7 mm (BoxHighPass), 2 -> 0.1 mm: what varies slowly across
+//              the image (scatter, soft tissue and neighbours that moved, flat-field residue)
+//              no longer pulls the pose. On the lumbar CT's clinical frames it quarters the
+//              mean TRE; on ideal frames it costs about 0.01 mm (BENCHMARKS.md)
+//   warm-robust  warm's passes with robust's high-passed NCC, for tracking clinical frames
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
@@ -112,6 +128,7 @@ struct PreparedPlan {
   RegistrationPlan plan;
   std::vector<std::unique_ptr<Optimizer>> optimizers;  // per pass
   std::vector<int> levels;                             // per pass
+  std::vector<int> measures;                           // per pass: index into the measures made
   bool record_trace = false;
 };
 
@@ -137,8 +154,9 @@ class Registration {
   Result<RegistrationResult> run(const Pose& start_T_room_from_ct, const RegistrationPlan& plan,
                                  bool record_trace = false);
 
-  // Makes the plan's optimizers and checks its levels, once, outside the cycle.
-  Result<PreparedPlan> prepare_plan(const RegistrationPlan& plan, bool record_trace = false) const;
+  // Makes the plan's optimizers and the similarity measures its passes name, and checks its
+  // levels, once, outside the cycle (not while a run is under way).
+  Result<PreparedPlan> prepare_plan(const RegistrationPlan& plan, bool record_trace = false);
   // Registers from `start` within `max_ms` (and the plan's own budget) into `result`. Allocates
   // nothing when the plan records no trace and `result` has held a result of this registration
   // before (its per-view vector keeps its capacity).
@@ -147,18 +165,25 @@ class Registration {
 
   // The cost of one pose at an image level (for tests and plots); +infinity for a level that
   // was not prepared.
-  double cost_at(const Pose& T_room_from_ct, double blur_sigma_mm = 0, int bin = 1);
+  double cost_at(const Pose& T_room_from_ct, double blur_sigma_mm = 0, int bin = 1,
+                 double highpass_sigma_mm = 0);
 
  private:
   class Cost;
   struct Slot;
   struct ReferenceLevel;
   Registration() = default;
-  int level_index(double blur_sigma_mm, int bin) const;
+  int level_index(double blur_sigma_mm, int bin, double highpass_sigma_mm) const;
   bool inside_search_region(const Pose& T) const;
-  double evaluate(int slot, int level, const Pose& T, std::vector<double>* view_scores);
+  // Cost of T at `level` under measure `measure` (0: the setup's).
+  double evaluate(int slot, int measure, int level, const Pose& T, std::vector<double>* view_scores);
   // Similarity of view v at T (worst score where the DRR fails or is mostly masked).
-  double view_score(int slot, int level, const Pose& T, int v);
+  double view_score(int slot, int measure, int level, const Pose& T, int v);
+  // The index of measure `name` among those made (empty: 0, the setup's), making it for every
+  // slot, level and view if it is new.
+  Result<int> measure_index(const std::string& name);
+  // The index of level `l`, making its geometry, scratch and references if it is new.
+  Result<int> level_for(const RegistrationSetup::Level& l);
   // Cost from the per-view scores: minus their sum, plus the fiducial term.
   double combine(const Pose& T, const double* view_scores) const;
 
@@ -182,8 +207,13 @@ class Registration {
   // alignment plan's blurred levels).
   std::vector<Image<float>> frames_;
   std::vector<Image<unsigned char>> frame_masks_;
-  std::vector<char> level_prepared_;
-  Status prepare_level(int level);
+  // The measures' names (0: the setup's) and, per measure and level, whether its similarities
+  // hold the current frames.
+  std::vector<std::string> measure_names_;
+  std::vector<std::vector<char>> level_prepared_;  // [measure][level]
+  std::vector<char> references_made_;              // [level]
+  Status prepare_level(int measure, int level);
+  Status make_references(int level);  // bins and blurs the frames for `level`
   std::optional<FiducialTerm> fiducial_;
   bool frames_set_ = false;
 };
