@@ -70,9 +70,15 @@ Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& p
       << "set output " << gp_string(png.filename().string()) << "\n"
       << "set title " << gp_string(plot.title) << "\n"
       << "set xlabel " << gp_string(plot.x_label) << "\nset ylabel " << gp_string(plot.y_label) << "\n"
-      << "set grid\nset key bottom left box opaque\nset datafile missing 'NaN'\n";
+      << "set grid\nset key " << plot.key_position << " box opaque\nset datafile missing 'NaN'\n";
     if (plot.log_x) g << "set logscale x\n";
     if (plot.y_max > plot.y_min) g << "set yrange [" << plot.y_min << ":" << plot.y_max << "]\n";
+    if (!plot.x_tick_labels.empty() && plot.x_tick_labels.size() == plot.x.size()) {
+      g << "set xtics noenhanced rotate by -25 (";
+      for (std::size_t i = 0; i < plot.x.size(); ++i)
+        g << (i ? ", " : "") << gp_string(plot.x_tick_labels[i]) << " " << plot.x[i];
+      g << ")\nset xrange [" << plot.x.front() - 0.5 << ":" << plot.x.back() + 0.5 << "]\n";
+    }
     g << "plot ";
     for (std::size_t s = 0; s < plot.series.size(); ++s) {
       g << (s ? ", \\\n     " : "") << gp_string(dat.filename().string()) << " using 1:" << s + 2

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
@@ -184,18 +185,26 @@ Status write_realism_outputs(const RealismReport& report, const std::filesystem:
   }
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "realism.csv", csv));
   LinePlot plot;
-  plot.title = "Realism: mean TRE of successes per physics factor (starts <= " +
+  plot.title = report.scene + ": " + report.image_method + " per physics factor (starts <= " +
                std::to_string(int(o.image_max_mm)) + " mm)";
-  plot.x_label = "factor set (1 = ideal ... last = clinical)";
-  plot.y_label = "mean TRE (mm) / failure rate (x 1 mm)";
+  plot.x_label = "factor set";
+  plot.y_label = "TRE (mm) / failure rate";
+  plot.key_position = "top left";
   plot.y_min = 0;
-  PlotSeries tre{"mean TRE of successes (mm)", {}}, failures{"failure rate (1 = all)", {}};
+  PlotSeries tre{"mean TRE of successes (mm)", {}}, p95{"p95 TRE of successes (mm)", {}},
+      failures{"failure rate (1 = all)", {}}, hybrid{"hybrid: mean TRE (mm), starts <= " +
+                                                          std::to_string(int(o.hybrid_max_mm)) + " mm", {}};
   for (std::size_t i = 0; i < report.factors.size(); ++i) {
+    const RealismFactorSummary& f = report.factors[i];
     plot.x.push_back(double(i + 1));
-    tre.y.push_back(report.factors[i].mean_tre_mm);
-    failures.y.push_back(1 - report.factors[i].success_rate);
+    plot.x_tick_labels.push_back(f.name);
+    tre.y.push_back(f.mean_tre_mm);
+    p95.y.push_back(f.p95_tre_mm);
+    failures.y.push_back(1 - f.success_rate);
+    hybrid.y.push_back(f.hybrid_success_rate >= 0 ? f.hybrid_mean_tre_mm : NAN);
   }
-  plot.series = {tre, failures};
+  plot.series = {tre, p95, failures};
+  if (!report.hybrid_method.empty()) plot.series.push_back(hybrid);
   if (auto drawn = draw_line_plot(plot, dir / "realism.png"); !drawn.ok()) return drawn.status();
   return write_file_atomically(dir / "summary.json", j.dump(2) + "\n");  // last: the folder is complete
 }

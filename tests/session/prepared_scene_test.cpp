@@ -87,5 +87,45 @@ TEST(PreparedScene, RealCtSceneResolves) {
   }
 }
 
+// Every real-CT scene that ships resolves: its CT reads, its ROI lies in it and projects inside
+// both detectors, and the clinical variants name the robust plan and realistic physics.
+struct ShippedScene {
+  const char* file;
+  bool thoracic;
+  bool clinical;
+};
+class ShippedScenes : public ::testing::TestWithParam<ShippedScene> {};
+
+TEST_P(ShippedScenes, Resolve) {
+  const ShippedScene s = GetParam();
+  LFTRACK_REQUIRE_SHARED_DATA(s.thoracic ? test::totalseg_aorta() : test::pancreas_dicom());
+  auto scene = load_scene((std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes" / s.file).string());
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  tracking::ThreadPool pool(2);
+  auto p = prepare_scene(*scene, "", &pool);
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  for (std::size_t i = 0; i < p->roi_windows.size(); ++i)
+    EXPECT_TRUE(p->roi_windows[i].inside(p->scene.detectors[i].view.rows, p->scene.detectors[i].view.cols));
+  EXPECT_EQ(p->scene.registration.plan, s.clinical ? "robust" : "quadratic");
+  EXPECT_EQ(p->scene.sim.physics.ideal(), !s.clinical);
+  if (s.clinical && s.thoracic) {
+    ASSERT_TRUE(p->scene.sim.physics.anatomy.has_value());
+    EXPECT_GT(p->scene.sim.physics.anatomy->breathing_mm, 0);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(PreparedScene, ShippedScenes,
+                         ::testing::Values(ShippedScene{"lumbar-ct.yaml", false, false},
+                                           ShippedScene{"lumbar-ct-clinical.yaml", false, true},
+                                           ShippedScene{"thoracic-ct.yaml", true, false},
+                                           ShippedScene{"thoracic-ct-clinical.yaml", true, true}),
+                         [](const ::testing::TestParamInfo<ShippedScene>& param) {
+                           std::string name = param.param.file;
+                           name = name.substr(0, name.find('.'));
+                           for (char& c : name)
+                             if (c == '-') c = '_';
+                           return name;
+                         });
+
 }  // namespace
 }  // namespace lftrack::host

@@ -19,7 +19,9 @@ struct PlotSeries {
 struct LinePlot {
   std::string title, x_label, y_label;
   std::vector<double> x;
+  std::vector<std::string> x_tick_labels;  // empty, or one per x: the axis names the points
   std::vector<PlotSeries> series;
+  std::string key_position = "bottom left";  // gnuplot's `set key` position
   bool log_x = false;
   double y_min = 0, y_max = 0;  // equal: automatic
 };
