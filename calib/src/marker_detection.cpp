@@ -11,14 +11,18 @@ using tracking::ImageView;
 
 namespace {
 
-// Share of a candidate's disc-minus-ring contrast that must remain over the ring's brightest
-// sector (a compact blob keeps nearly all of it, a ridge almost none).
+// Share of a candidate's contrast over the ring's plane that must remain over the ring's brightest
+// sector, after the plane (a background gradient, a soft edge) is taken out of both: a compact
+// blob keeps nearly all of it, a ridge through the disc almost none.
 constexpr double kBlobShare = 0.5;
 constexpr double kPi = 3.14159265358979323846;
+constexpr double kMaxMarkerRadiusPx = 100;
+constexpr double kMaxCoordinatePx = 1e6;
 
 struct DiscRing {
   double disc = 0, ring = 0;
-  double brightest_sector = 0;  // the largest mean of the ring's kSectors sectors
+  double disc_over_plane = 0;      // disc mean minus the plane fitted to the ring, over the disc
+  double brightest_sector = 0;     // the largest mean residual over that plane of the ring's sectors
   bool ok = false;
 };
 constexpr int kSectors = 8;
@@ -28,10 +32,12 @@ constexpr int kSectors = 8;
 DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const unsigned char>& valid, int col,
                        int row, double a, double b, double c) {
   const int reach = static_cast<int>(std::ceil(c));
-  double sd = 0, sr = 0;
+  double sd = 0, sr = 0, sd_x = 0, sd_y = 0;
   int nd = 0, nr = 0;
-  double sector_sum[kSectors] = {};
+  double sector_sum[kSectors] = {}, sector_x[kSectors] = {}, sector_y[kSectors] = {};
   int sector_n[kSectors] = {};
+  Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();  // the ring's plane v = p0 + p1 dc + p2 dr
+  Eigen::Vector3d atb = Eigen::Vector3d::Zero();
   for (int dr = -reach; dr <= reach; ++dr) {
     const int r = row + dr;
     if (r < 0 || r >= im.rows) continue;
@@ -44,6 +50,8 @@ DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const u
       const double d2 = dr * dr + dc * dc;
       if (d2 <= a * a) {
         sd += v;
+        sd_x += dc;
+        sd_y += dr;
         ++nd;
       } else if (d2 >= b * b && d2 <= c * c) {
         sr += v;
@@ -51,7 +59,12 @@ DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const u
         const double angle = std::atan2(double(dr), double(dc)) + kPi;  // [0, 2 pi]
         const int k = std::min(kSectors - 1, static_cast<int>(angle / (2 * kPi) * kSectors));
         sector_sum[k] += v;
+        sector_x[k] += dc;
+        sector_y[k] += dr;
         ++sector_n[k];
+        const Eigen::Vector3d row_vec(1.0, dc, dr);
+        ata += row_vec * row_vec.transpose();
+        atb += row_vec * double(v);
       }
     }
   }
@@ -60,9 +73,16 @@ DiscRing disc_and_ring(const ImageView<const float>& im, const ImageView<const u
   if (out.ok) {
     out.disc = sd / nd;
     out.ring = sr / nr;
+    Eigen::Vector3d plane(out.ring, 0, 0);
+    if (std::abs(ata.determinant()) > 1e-9) plane = ata.ldlt().solve(atb);
+    out.disc_over_plane = out.disc - (plane(0) + (plane(1) * sd_x + plane(2) * sd_y) / nd);
     out.brightest_sector = -1e300;
     for (int k = 0; k < kSectors; ++k)
-      if (sector_n[k] > 0) out.brightest_sector = std::max(out.brightest_sector, sector_sum[k] / sector_n[k]);
+      if (sector_n[k] > 0)
+        out.brightest_sector =
+            std::max(out.brightest_sector,
+                     (sector_sum[k] - plane(0) * sector_n[k] - plane(1) * sector_x[k] - plane(2) * sector_y[k]) /
+                         sector_n[k]);
   }
   return out;
 }
@@ -98,19 +118,28 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
   if (image.empty()) return invalid_argument("marker search: empty image");
   if (!valid.empty() && (valid.rows != image.rows || valid.cols != image.cols))
     return invalid_argument("marker search: mask size differs from the image's");
-  if (!s.expected_px.allFinite() || !(s.search_radius_px >= 0) || !(s.marker_radius_px > 0))
-    return invalid_argument("marker search: expected position, radii must be finite and positive");
+  if (!s.expected_px.allFinite() || !(s.search_radius_px >= 0) || !(s.marker_radius_px > 0) ||
+      !std::isfinite(s.search_radius_px) || !std::isfinite(s.marker_radius_px) || !std::isfinite(s.min_contrast))
+    return invalid_argument("marker search: expected position, radii and contrast must be finite, radii positive");
+  if (s.marker_radius_px > kMaxMarkerRadiusPx)
+    return invalid_argument("marker search: a marker radius over " + std::to_string(int(kMaxMarkerRadiusPx)) +
+                            " px is not a marker");
+  if (std::abs(s.expected_px.x()) > kMaxCoordinatePx || std::abs(s.expected_px.y()) > kMaxCoordinatePx)
+    return not_found("marker search: the expected position lies far outside the image");
+  // Beyond the image's diagonal a larger radius finds nothing more.
+  const double search_radius_px =
+      std::min(s.search_radius_px, std::hypot(double(image.rows), double(image.cols)));
   const double a = std::max(1.0, s.marker_radius_px);
   const double b = a + 2, c = a + 5;
   int best_col = -1, best_row = -1;
   double best = -1e300, best_ring = 0;
   int not_compact = 0;  // candidates brighter along a line than the ring around them
-  const int r0 = static_cast<int>(std::floor(s.expected_px.y() - s.search_radius_px));
-  const int r1 = static_cast<int>(std::ceil(s.expected_px.y() + s.search_radius_px));
-  const int c0 = static_cast<int>(std::floor(s.expected_px.x() - s.search_radius_px));
-  const int c1 = static_cast<int>(std::ceil(s.expected_px.x() + s.search_radius_px));
+  const int r0 = static_cast<int>(std::floor(s.expected_px.y() - search_radius_px));
+  const int r1 = static_cast<int>(std::ceil(s.expected_px.y() + search_radius_px));
+  const int c0 = static_cast<int>(std::floor(s.expected_px.x() - search_radius_px));
+  const int c1 = static_cast<int>(std::ceil(s.expected_px.x() + search_radius_px));
   // The search runs on the 3 x 3 median of the area (plus the ring's reach); the centroid below
-  // on the image itself.
+  // on the image itself, where a pixel far from its median counts at the median.
   const int reach_px = static_cast<int>(std::ceil(c)) + 1;
   const int mr0 = std::max(0, r0 - reach_px), mr1 = std::min(image.rows - 1, r1 + reach_px);
   const int mc0 = std::max(0, c0 - reach_px), mc1 = std::min(image.cols - 1, c1 + reach_px);
@@ -119,13 +148,14 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
   const ImageView<const float> search_image = median.view();
   for (int row = std::max(r0, 0); row <= std::min(r1, image.rows - 1); ++row) {
     for (int col = std::max(c0, 0); col <= std::min(c1, image.cols - 1); ++col) {
-      if ((Eigen::Vector2d(col, row) - s.expected_px).norm() > s.search_radius_px) continue;
+      if ((Eigen::Vector2d(col, row) - s.expected_px).norm() > search_radius_px) continue;
       const DiscRing dr = disc_and_ring(search_image, {}, col - mc0, row - mr0, a, b, c);
       if (!dr.ok) continue;
-      // A marker is brighter than its whole ring; a bone edge or a ridge through the disc is as
-      // bright as the ring's sectors along it.
-      if (dr.disc - dr.brightest_sector < kBlobShare * (dr.disc - dr.ring)) {
-        ++not_compact;
+      // A marker is brighter than its whole ring; a ridge through the disc is as bright as the
+      // ring's sectors along it (both over the ring's plane, so a gradient or a soft edge under a
+      // marker does not count against it).
+      if (dr.disc_over_plane - dr.brightest_sector < kBlobShare * dr.disc_over_plane) {
+        if (dr.disc - dr.ring >= s.min_contrast) ++not_compact;
         continue;
       }
       if (dr.disc - dr.ring > best) {
@@ -137,7 +167,7 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
     }
   }
   std::ostringstream where;
-  where << "near (" << s.expected_px.x() << ", " << s.expected_px.y() << ") within " << s.search_radius_px
+  where << "near (" << s.expected_px.x() << ", " << s.expected_px.y() << ") within " << search_radius_px
         << " px";
   if (best_col < 0 && not_compact > 0)
     return not_found("marker search: nothing blob-like " + where.str() + " (only edges and ridges)");
@@ -181,8 +211,13 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
       for (int cc = std::max(c_lo, 0); cc <= std::min(c_hi, image.cols - 1); ++cc) {
         if ((Eigen::Vector2d(cc, r) - centre).norm() > reach) continue;
         if (!valid.empty() && valid.at(r, cc) == 0) continue;
-        const double w = image.at(r, cc) - background(cc, r);
-        if (!(w > 0)) continue;
+        // A pixel far from its 3 x 3 median (stuck, or on a bad line) counts at the median.
+        double value = image.at(r, cc);
+        const bool in_median = r >= mr0 && r <= mr1 && cc >= mc0 && cc <= mc1;
+        const double m = in_median ? double(median.at(r - mr0, cc - mc0)) : value;
+        if (!std::isfinite(value) || (std::isfinite(m) && std::abs(value - m) > 0.5 * best)) value = m;
+        const double w = value - background(cc, r);
+        if (!(w > 0) || !std::isfinite(w)) continue;
         sw += w;
         sc += w * cc;
         sr += w * r;
@@ -194,6 +229,7 @@ Result<MarkerDetection> find_marker(const ImageView<const float>& image,
     centre = next;
     if (settled) break;
   }
+  if (!centre.allFinite()) return not_found("marker search: the marker's centroid is not finite " + where.str());
   MarkerDetection d;
   d.contrast = best;
   d.pixel = centre;

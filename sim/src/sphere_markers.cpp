@@ -30,10 +30,15 @@ class SphereMarkerRenderer final : public tracking::DrrRenderer {
       const double magnification = view.source_to_detector_mm() / (distance - m.radius_mm);
       const double reach_px =
           m.radius_mm * magnification / std::min(view.pitch_col_mm, view.pitch_row_mm) + 2.0;
-      const int r0 = std::max(window.row0, int(std::floor(projected->y() - reach_px)));
-      const int r1 = std::min(window.row0 + window.rows - 1, int(std::ceil(projected->y() + reach_px)));
-      const int c0 = std::max(window.col0, int(std::floor(projected->x() - reach_px)));
-      const int c1 = std::min(window.col0 + window.cols - 1, int(std::ceil(projected->x() + reach_px)));
+      // Clamped to the window in double before the cast: a sphere next to the source has an
+      // enormous shadow, and a centre beside the source plane projects far off the detector.
+      auto clamp_to = [](double v, int lo, int hi) { return int(std::clamp(v, double(lo), double(hi))); };
+      const int last_row = window.row0 + window.rows - 1, last_col = window.col0 + window.cols - 1;
+      const double lo_r = std::floor(projected->y() - reach_px), hi_r = std::ceil(projected->y() + reach_px);
+      const double lo_c = std::floor(projected->x() - reach_px), hi_c = std::ceil(projected->x() + reach_px);
+      if (!(hi_r >= window.row0 && lo_r <= last_row && hi_c >= window.col0 && lo_c <= last_col)) continue;
+      const int r0 = clamp_to(lo_r, window.row0, last_row), r1 = clamp_to(hi_r, window.row0, last_row);
+      const int c0 = clamp_to(lo_c, window.col0, last_col), c1 = clamp_to(hi_c, window.col0, last_col);
       for (int r = r0; r <= r1; ++r)
         for (int c = c0; c <= c1; ++c) {
           double sum = 0;
@@ -50,7 +55,8 @@ class SphereMarkerRenderer final : public tracking::DrrRenderer {
               if (h2 > 0) sum += 2.0 * std::sqrt(h2);
             }
           const double add = m.mu_per_mm * sum * sub * sub;
-          if (add > 0) {
+          // A pixel the inner renderer masked stays 0 and masked (drr_renderer.hpp).
+          if (add > 0 && (extras->valid.empty() || extras->valid.at(r - window.row0, c - window.col0) != 0)) {
             float& v = out.at(r - window.row0, c - window.col0);
             v = static_cast<float>(v + add);
           }

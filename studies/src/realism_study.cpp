@@ -201,7 +201,7 @@ Status write_realism_outputs(const RealismReport& report, const std::filesystem:
     tre.y.push_back(f.mean_tre_mm);
     p95.y.push_back(f.p95_tre_mm);
     failures.y.push_back(1 - f.success_rate);
-    hybrid.y.push_back(f.hybrid_success_rate >= 0 ? f.hybrid_mean_tre_mm : NAN);
+    hybrid.y.push_back(f.hybrid_success_rate > 0 ? f.hybrid_mean_tre_mm : NAN);  // no successes: no point
   }
   plot.series = {tre, p95, failures};
   if (!report.hybrid_method.empty()) plot.series.push_back(hybrid);

@@ -99,7 +99,53 @@ TEST(FindMarker, IgnoresStuckPixelsBadLinesAndRidges) {
   }
   no_marker.at(40, 45) = 40.f;
   s.min_contrast = 0.2;
-  EXPECT_FALSE(find_marker(no_marker.view(), {}, s).ok());
+  auto none = find_marker(no_marker.view(), {}, s);
+  ASSERT_FALSE(none.ok());
+  const std::string why = none.status().message();  // the ridges are not blobs; what is left is faint
+  EXPECT_TRUE(why.find("nothing blob-like") != std::string::npos || why.find("no marker") != std::string::npos)
+      << why;
+}
+
+// A marker beside a bone edge (a step in its ring, two thirds of the marker's own contrast) and on
+// a steep gradient is still a blob once the ring's plane is taken out, and a stuck pixel inside
+// it does not move its centroid.
+TEST(FindMarker, KeepsMarkersOnEdgesAndGradientsAndIgnoresAStuckPixelInside) {
+  Image<float> im = frame_with_marker(64.4, 60.2, 3.5, 0.6, 13);  // the frame's 0.4 step is at column 70
+  for (int r = 0; r < im.rows(); ++r)
+    for (int c = 0; c < im.cols(); ++c) im.at(r, c) += 0.04f * float(r);  // 0.28 across the ring
+  im.at(61, 65) = 50.f;
+  MarkerSearch s;
+  s.expected_px = {66, 58};
+  s.search_radius_px = 12;
+  s.marker_radius_px = 3.5;
+  auto found = find_marker(im.view(), {}, s);
+  ASSERT_TRUE(found.ok()) << found.status().message();
+  EXPECT_NEAR(found->pixel.x(), 64.4, 0.3);
+  EXPECT_NEAR(found->pixel.y(), 60.2, 0.3);
+}
+
+TEST(FindMarker, RefusesAbsurdSearches) {
+  const Image<float> im = frame_with_marker(60, 50, 3.5, 1.0, 3);
+  for (double bad : {std::nan(""), HUGE_VAL, -1.0}) {
+    MarkerSearch s;
+    s.expected_px = {60, 50};
+    s.search_radius_px = bad;
+    EXPECT_FALSE(find_marker(im.view(), {}, s).ok()) << bad;
+    s.search_radius_px = 20;
+    s.marker_radius_px = bad;
+    EXPECT_FALSE(find_marker(im.view(), {}, s).ok()) << bad;
+  }
+  MarkerSearch huge;
+  huge.expected_px = {60, 50};
+  huge.marker_radius_px = 1e12;
+  EXPECT_FALSE(find_marker(im.view(), {}, huge).ok());
+  huge.marker_radius_px = 3.5;
+  huge.search_radius_px = 1e12;  // searched over the whole image: still the marker
+  auto found = find_marker(im.view(), {}, huge);
+  ASSERT_TRUE(found.ok()) << found.status().message();
+  EXPECT_NEAR(found->pixel.x(), 60, 0.3);
+  huge.expected_px = {1e12, -1e12};
+  EXPECT_FALSE(find_marker(im.view(), {}, huge).ok());
 }
 
 }  // namespace

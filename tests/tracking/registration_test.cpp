@@ -295,6 +295,9 @@ TEST(Registration, RefusesMisuse) {
   tampered = std::move(reg->prepare_plan(*registration_plan("warm"))).value();
   tampered.levels[1] = -1;
   EXPECT_FALSE(reg->run(phantom().nominal, tampered, 1e9, &ignored).ok());
+  auto other = std::move(Registration::create(renderer, setup, nullptr)).value();
+  const PreparedPlan foreign = std::move(other->prepare_plan(*registration_plan("warm"))).value();
+  EXPECT_FALSE(reg->run(phantom().nominal, foreign, 1e9, &ignored).ok());  // another registration's indices
   EXPECT_FALSE(registration_plan("fast").ok());
   RegistrationSetup no_views = setup;
   no_views.views.clear();

@@ -95,7 +95,7 @@ Status GaussianBlur::blur(const ImageView<const float>& in, const ImageView<cons
 BoxHighPass::BoxHighPass(int rows, int cols, int radius_px)
     : rows_(std::max(rows, 0)),
       cols_(std::max(cols, 0)),
-      radius_(std::max(radius_px, 1)),
+      radius_(std::clamp(radius_px, 1, std::max({rows_, cols_, 1}))),  // a larger box sees no more
       value_sum_(std::size_t(rows_ + 1) * std::size_t(cols_ + 1), 0.0),
       count_sum_(value_sum_.size(), 0.0),
       low_(std::size_t(rows_) * std::size_t(cols_), 0.f) {}

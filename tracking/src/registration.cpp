@@ -17,6 +17,9 @@ struct Registration::Slot {
   std::vector<std::vector<Image<float>>> drr;            // [level][view]
   std::vector<std::vector<Image<unsigned char>>> valid;  // [level][view]
   std::vector<std::vector<std::optional<BoxHighPass>>> highpass;  // [level][view], levels with one
+  // [level][view], levels with a high-pass: pixels usable in the DRR and in the reference, so
+  // both are high-passed over the same pixels.
+  std::vector<std::vector<Image<unsigned char>>> both_valid;
   std::vector<std::vector<std::vector<std::unique_ptr<Similarity>>>> similarity;  // [measure][level][view]
 };
 
@@ -219,6 +222,7 @@ Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
     slot->drr.emplace_back();
     slot->valid.emplace_back();
     slot->highpass.emplace_back();
+    slot->both_valid.emplace_back();
     for (std::size_t v = 0; v < g.windows.size(); ++v) {
       const PixelWindow& w = g.windows[v];
       slot->drr[index].emplace_back(w.rows, w.cols, 0.f);
@@ -226,6 +230,7 @@ Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
       const double hp = highpass_sigma_px(l, setup_.views[v].view);
       auto& filter = slot->highpass[index].emplace_back();
       if (hp > 0) filter.emplace(w.rows, w.cols, BoxHighPass::radius_for_sigma(hp));
+      slot->both_valid[index].emplace_back(hp > 0 ? w.rows : 0, hp > 0 ? w.cols : 0, 0);
     }
     // Every measure made so far gets this level's similarities.
     for (auto& per_level : slot->similarity) {
@@ -378,9 +383,15 @@ double Registration::view_score(int slot_index, int measure, int level, const Po
     return similarity.worst_score();
   const double valid_fraction = 1.0 - double(extras.masked_pixels) / (double(window.rows) * window.cols);
   if (valid_fraction < setup_.min_valid_fraction) return similarity.worst_score();
-  if (auto& highpass = slot.highpass[l][vi]; highpass &&
-      !highpass->apply(slot.drr[l][vi].view(), extras.valid, slot.drr[l][vi].view()).ok())
-    return similarity.worst_score();
+  if (auto& highpass = slot.highpass[l][vi]; highpass) {
+    // Over the pixels usable in both images (the reference's were high-passed over its own).
+    const ImageView<const unsigned char> reference_valid = references_[l][vi]->binned_valid.view();
+    ImageView<unsigned char> both = slot.both_valid[l][vi].view();
+    for (int r = 0; r < window.rows; ++r)
+      for (int c = 0; c < window.cols; ++c)
+        both.at(r, c) = static_cast<unsigned char>(extras.valid.at(r, c) != 0 && reference_valid.at(r, c) != 0);
+    if (!highpass->apply(slot.drr[l][vi].view(), both, slot.drr[l][vi].view()).ok()) return similarity.worst_score();
+  }
   return similarity.score(slot.drr[l][vi].view(), extras.valid);
 }
 
@@ -412,6 +423,7 @@ double Registration::cost_at(const Pose& T, double blur_sigma_mm, int bin, doubl
 Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bool record_trace) {
   if (plan.passes.empty()) return invalid_argument("registration: the plan has no passes");
   PreparedPlan prepared;
+  prepared.owner = this;
   prepared.plan = plan;
   prepared.record_trace = record_trace;
   for (const RegistrationPass& pass : plan.passes) {
@@ -449,6 +461,8 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   if (prepared.optimizers.empty() || prepared.optimizers.size() != prepared.plan.passes.size() ||
       prepared.levels.size() != prepared.optimizers.size() || prepared.measures.size() != prepared.optimizers.size())
     return invalid_argument("registration: the plan was not prepared");
+  if (prepared.owner != this)
+    return invalid_argument("registration: the plan was prepared by another registration");
   for (std::size_t p = 0; p < prepared.measures.size(); ++p)
     if (prepared.measures[p] < 0 || std::size_t(prepared.measures[p]) >= measure_names_.size() ||
         prepared.levels[p] < 0 || std::size_t(prepared.levels[p]) >= levels_.size())

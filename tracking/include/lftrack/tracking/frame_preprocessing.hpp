@@ -57,7 +57,7 @@ class GaussianBlur {
 class BoxHighPass {
  public:
   static constexpr int kPasses = 3;
-  // radius_px >= 1 (smaller values are raised to 1).
+  // radius_px is clamped to [1, max(rows, cols)] (a larger box sees no more of the image).
   BoxHighPass(int rows, int cols, int radius_px);
   // The radius whose kPasses boxes have standard deviation sigma_px (at least 1).
   static int radius_for_sigma(double sigma_px);

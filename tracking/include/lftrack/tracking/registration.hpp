@@ -4,9 +4,10 @@
 // (sum over views), and let an optimizer move the pose 6-vector about the registration origin.
 // An optional fiducial term adds paper 2's hybrid measure: cost = -sum(S_k) + gamma * d.
 //
-// create() and prepare_plan() allocate; after them set_frames() and run() with a prepared plan
-// allocate nothing (so the real-time cycle may call them), and candidates of a batch are
-// evaluated in parallel on the pool.
+// create() and prepare_plan() allocate, and so does the first run() of a prepared plan (its
+// measures size their scratch on their first frames); after that set_frames() and run() with a
+// prepared plan allocate nothing (so the real-time cycle may call them once a first registration,
+// the loop's ALIGN, has run), and candidates of a batch are evaluated in parallel on the pool.
 
 #include <Eigen/Core>
 #include <memory>
@@ -130,6 +131,7 @@ struct PreparedPlan {
   std::vector<int> levels;                             // per pass
   std::vector<int> measures;                           // per pass: index into the measures made
   bool record_trace = false;
+  const class Registration* owner = nullptr;           // the indices above are this one's
 };
 
 class Registration {
@@ -150,7 +152,8 @@ class Registration {
                     const std::vector<ImageView<const unsigned char>>& valid);
   void set_fiducial(const std::optional<FiducialTerm>& term) { fiducial_ = term; }
 
-  // Registers from `start`. Fails before set_frames() or for an unknown optimizer or blur level.
+  // Registers from `start`. Fails before set_frames(), for an unknown optimizer or measure, or a
+  // level out of range (levels the set-up did not name are made here).
   Result<RegistrationResult> run(const Pose& start_T_room_from_ct, const RegistrationPlan& plan,
                                  bool record_trace = false);
 
