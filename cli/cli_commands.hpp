@@ -29,6 +29,13 @@ void add_scene_options(CLI::App* app, SceneOptions* options);
 Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool);
 // "--shard k/n" of a sharded study: (k, n) with 1 <= k <= n.
 Result<std::pair<int, int>> parse_shard(const std::string& text);
+// "--physics ideal|clinical|scene" of a study: the physics its frames carry and its name. `scene`
+// takes the scene's sim.physics; pass null to only check the name (before the scene is read).
+struct StudyPhysics {
+  sim::XrayPhysicsSpec physics;
+  std::string name = "ideal";
+};
+Result<StudyPhysics> study_physics(const std::string& option, const PreparedScene* scene);
 
 // `lftrack sim --chaos SEED` (cmd_chaos.cpp).
 Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json);

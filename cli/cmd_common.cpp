@@ -35,6 +35,22 @@ Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking:
   return prepare_scene(*scene, options.ct, pool);
 }
 
+Result<StudyPhysics> study_physics(const std::string& option, const PreparedScene* scene) {
+  StudyPhysics out;
+  if (option == "scene") {
+    if (scene) {
+      out.physics = scene->scene.sim.physics;
+      out.name = scene->scene.sim.physics_name;
+    }
+    return out;
+  }
+  auto preset = sim::physics_preset(option);
+  if (!preset.ok()) return invalid_argument("--physics: ideal, clinical or scene (the scene's sim.physics)");
+  out.physics = *preset;
+  out.name = option;
+  return out;
+}
+
 Result<std::pair<int, int>> parse_shard(const std::string& text) {
   const Status bad = invalid_argument("--shard '" + text + "': expected k/n with 1 <= k <= n <= 10000, e.g. 3/8");
   const auto slash = text.find('/');

@@ -59,21 +59,15 @@ Status run(const CaptureRangeCliOptions& o) {
   options.light_field_dir = o.lf_dir;
   options.shard = shard->first;
   options.shards = shard->second;
-  if (o.physics != "scene") {
-    auto physics = sim::physics_preset(o.physics);
-    if (!physics.ok()) return invalid_argument("--physics: ideal, clinical or scene (the scene's sim.physics)");
-    options.physics = *physics;
-    options.physics_name = o.physics;
-  }
+  if (auto checked = study_physics(o.physics, nullptr); !checked.ok()) return checked.status();
   options.anatomy_draws = o.anatomy_draws;
   if (o.check_args) return {};
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
-  if (o.physics == "scene") {
-    options.physics = prepared->scene.sim.physics;
-    options.physics_name = prepared->scene.sim.physics_name;
-  }
+  const StudyPhysics physics = *study_physics(o.physics, &*prepared);
+  options.physics = physics.physics;
+  options.physics_name = physics.name;
   const bool uses_fields = options.renderer == "lightfield";
   if (o.build_fields) {  // a job array's first job: load the fields, or build and save them
     if (!uses_fields) return {};

@@ -34,6 +34,7 @@ struct TradeCliOptions {
   bool fields_prebuilt = false;
   bool build_fields = false;
   bool check_args = false;
+  std::string physics = "ideal";
 };
 
 void print_front(const TradeStudy& study) {
@@ -51,6 +52,7 @@ Status run_trade(const TradeCliOptions& o) {
   auto shard = parse_shard(o.shard);
   if (!shard.ok()) return shard.status();
   if (o.fields_prebuilt && o.lf_dir.empty()) return invalid_argument("--fields-prebuilt needs --lf-dir");
+  if (auto checked = study_physics(o.physics, nullptr); !checked.ok()) return checked.status();
   if (o.check_args) return {};
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
@@ -68,6 +70,9 @@ Status run_trade(const TradeCliOptions& o) {
   options.only = o.points;
   options.field_dir = o.lf_dir;
   options.fields_prebuilt = o.fields_prebuilt;
+  const StudyPhysics physics = *study_physics(o.physics, &*prepared);
+  options.physics = physics.physics;
+  options.physics_name = physics.name;
   if (o.build_fields) {
     if (o.lf_dir.empty()) return invalid_argument("--build-fields needs --lf-dir DIR");
     return build_trade_fields(*prepared, options, &pool, [](const std::string& line) {
@@ -89,6 +94,8 @@ Status run_trade(const TradeCliOptions& o) {
   expected.shard = options.shard;
   expected.shards = options.shards;
   expected.points_total = points_total;
+  expected.physics = options.physics_name;
+  expected.physics_description = sim::describe(options.physics);
   std::vector<std::string> ids;
   for (const TradePoint& t : *mine) ids.push_back(t.id);
   std::string said;
@@ -270,6 +277,8 @@ Command add_study_trade_command(CLI::App* parent) {
   add_scene_options(app, &o->scene);
   app->add_option("--out", o->out_dir, "Output folder");
   app->add_flag("--quick", o->quick, "Fewer points and problems and a coarser baseline field (minutes)");
+  app->add_option("--physics", o->physics,
+                  "What the frames carry: ideal (DRRs of the planning CT), clinical, or scene (its sim.physics)");
   app->add_option("--problems", o->problems, "Registration problems per point (default 6 quick, 24 full)")
       ->check(CLI::Range(1, 10000));
   app->add_option("--shard", o->shard,

@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -16,6 +17,7 @@
 #include <set>
 
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/octree_volume.hpp"
@@ -51,8 +53,13 @@ struct Problem {
   std::vector<tracking::Image<float>> siddon_drr;  // per view, ROI window, at gold (fidelity reference)
 };
 
+// With realistic physics the frames come from the simulated patient (kAnatomyDraws deformed
+// anatomies shared by the problems in turn), exposed by the scene's imager; ideal frames are
+// Siddon DRRs of the world with noise, as before.
+constexpr int kAnatomyDraws = 4;
+
 Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, std::uint64_t seed,
-                                           tracking::ThreadPool* pool) {
+                                           const sim::XrayPhysicsSpec& physics, tracking::ThreadPool* pool) {
   tracking::RendererOptions options;
   options.pool = pool;
   auto world = tracking::make_renderer("siddon", p.world_mu, options);
@@ -62,7 +69,16 @@ Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, st
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> unit(-1, 1);
   std::normal_distribution<double> normal(0, 1);
-  const auto correction = sim::detector_correction(scene_detector_model(p));
+  auto correction = sim::detector_correction(scene_detector_model(p));
+  std::optional<SceneImager> imager;
+  std::vector<std::shared_ptr<const SimulatedPatient>> patients;
+  if (!physics.ideal()) {
+    auto made = SceneImager::create(p, physics);
+    if (!made.ok()) return made.status();
+    imager = std::move(made).value();
+    correction = imager->correction();
+    patients.resize(physics.anatomy ? kAnatomyDraws : 1);
+  }
   std::vector<Problem> problems;
   for (int k = 0; k < count; ++k) {
     Problem pr;
@@ -77,7 +93,19 @@ Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, st
     for (int a = 3; a < 6; ++a) dir(a) = tracking::deg_to_rad(normal(rng));
     const double initial_mm = 1 + 3 * std::uniform_real_distribution<double>(0, 1)(rng);
     pr.start = pose_at_tre(p, pr.gold, dir, initial_mm);
-    auto raw = synthesize_scene_frames(p, **world, pr.gold, seed * 7919 + std::uint64_t(k));
+    Result<std::vector<tracking::Image<std::uint16_t>>> raw = internal_error("no frames");
+    if (imager) {
+      auto& patient = patients[std::size_t(k) % patients.size()];
+      if (!patient) {
+        auto made = make_simulated_patient(p, physics, seed * 7727 + std::uint64_t(k) % patients.size() + 1, pool, pool);
+        if (!made.ok()) return made.status();
+        patient = std::make_shared<const SimulatedPatient>(std::move(made).value());
+      }
+      imager->forget_previous_frames();
+      raw = imager->expose(*patient, pr.gold, seed * 7919 + std::uint64_t(k));
+    } else {
+      raw = synthesize_scene_frames(p, **world, pr.gold, seed * 7919 + std::uint64_t(k));
+    }
     if (!raw.ok()) return raw.status();
     auto frames = preprocess_scene_frames(p, *raw, correction);
     if (!frames.ok()) return frames.status();
@@ -379,8 +407,10 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
   study.shard = o.shard;
   study.shards = o.shards;
   study.points_total = points_total;
+  study.physics = o.physics_name;
+  study.physics_description = sim::describe(o.physics);
   if (progress) progress(0, "making the problems");
-  auto problems = make_problems(p, problem_count, o.seed, pool);
+  auto problems = make_problems(p, problem_count, o.seed, o.physics, pool);
   if (!problems.ok()) return problems.status();
   RendererCache renderers(p, o, pool);
   const double steps = double(mine->size()) * problem_count;

@@ -78,6 +78,8 @@ nlohmann::json study_json(const TradeStudy& s) {
           {"shard", s.shard},
           {"shards", s.shards},
           {"points_total", s.points_total},
+          {"physics", s.physics},
+          {"physics_description", s.physics_description},
           {"points", s.results.size()}};
 }
 
@@ -219,6 +221,8 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
       s.seed = j.at("seed").get<std::uint64_t>();
       const auto problems = j.at("problems").get<std::int64_t>();
       s.quick = j.at("quick").get<bool>();
+      s.physics = j.value("physics", std::string("ideal"));  // studies before issue 21: ideal frames
+      s.physics_description = j.value("physics_description", std::string());
       const auto shard = j.at("shard").get<std::int64_t>();
       const auto shards = j.at("shards").get<std::int64_t>();
       const auto points_total = j.at("points_total").get<std::int64_t>();
@@ -302,7 +306,8 @@ Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards) {
   for (const TradeStudy& s : shards) {
     if (s.scene != first.scene || s.fingerprint != first.fingerprint || s.seed != first.seed ||
         s.problems != first.problems ||
-        s.quick != first.quick || s.shards != first.shards || s.points_total != first.points_total)
+        s.quick != first.quick || s.shards != first.shards || s.points_total != first.points_total ||
+        s.physics != first.physics || s.physics_description != first.physics_description)
       return failed_precondition("merge: shard " + std::to_string(s.shard) + "/" + std::to_string(s.shards) +
                                  " is of another study (scene '" + s.scene + "', seed " +
                                  std::to_string(s.seed) + ", " + std::to_string(s.problems) + " problems)");
@@ -343,11 +348,13 @@ Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeS
   if (s->scene != expected.scene || s->fingerprint != expected.fingerprint || s->seed != expected.seed ||
       s->problems != expected.problems ||
       s->quick != expected.quick || s->shard != expected.shard || s->shards != expected.shards ||
-      s->points_total != expected.points_total)
+      s->points_total != expected.points_total || s->physics != expected.physics ||
+      s->physics_description != expected.physics_description)
     return failed_precondition(dir.string() + " holds another study: scene '" + s->scene + "', seed " +
                                std::to_string(s->seed) + ", " + std::to_string(s->problems) +
                                " problems, shard " + std::to_string(s->shard) + "/" + std::to_string(s->shards) +
-                               ", " + std::to_string(s->points_total) + " points in all, scene fingerprint " +
+                               ", " + std::to_string(s->points_total) + " points in all, " + s->physics +
+                               " physics, scene fingerprint " +
                                (s->fingerprint.empty() ? "none" : s->fingerprint) + ")");
   std::vector<std::string> found;
   for (const TradeResult& r : s->results) {
@@ -370,9 +377,10 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std
   std::set<std::string> names;
   for (const TradeStudy& s : scenes) {
     if (!names.insert(s.scene).second) return failed_precondition("pool: scene '" + s.scene + "' given twice");
-    if (s.seed != scenes[0].seed || s.problems != scenes[0].problems || s.quick != scenes[0].quick)
-      return failed_precondition("pool: scene '" + s.scene + "' was studied with another seed, problem count "
-                                 "or size than '" + scenes[0].scene + "'");
+    if (s.seed != scenes[0].seed || s.problems != scenes[0].problems || s.quick != scenes[0].quick ||
+        s.physics != scenes[0].physics)
+      return failed_precondition("pool: scene '" + s.scene + "' was studied with another seed, problem count, "
+                                 "size or physics than '" + scenes[0].scene + "'");
     for (const TradeResult& r : s.results)
       if (int(r.problem_tre_mm.size()) != r.runs || r.problem_ms.size() != r.problem_tre_mm.size())
         return failed_precondition("pool: scene '" + s.scene + "', point '" + r.point.id +
@@ -483,7 +491,10 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
      << study.results.size() << " operating points" << (study.quick ? " (quick)" : "")
      << ", each registering the same " << study.problems << " problems (seed " << study.seed
      << "): gold poses within 0.4 x the scene's envelope, starts at an initial mean TRE of 1-4 mm, frames "
-        "rendered by Siddon with noise. Success: final mean TRE < 2 mm. Times are wall-clock on this host; "
+        "rendered by Siddon with noise"
+     << (study.physics == "ideal" ? std::string()
+                                  : " and " + study.physics + " physics (" + study.physics_description + ")")
+     << ". Success: final mean TRE < 2 mm. Times are wall-clock on this host; "
         "compare them within one study.\n\n"
      << "![TRE against time](tre_vs_time.png)\n\n## Pareto front (mean TRE against median time)\n\n"
      << kTableHeader;

@@ -185,6 +185,34 @@ TEST(Cli, TradeStudyFieldsAreBuiltOnceAndShardsOnlyMapThem) {
   EXPECT_EQ(columns_of(dir.path() / "merged" / "runs.csv", 3), columns_of(dir.path() / "whole" / "runs.csv", 3));
 }
 
+// The trade study on clinical frames (issue 21): the physics is recorded and named in the summary,
+// a folder of ideal frames is not overwritten by it, and a bad --physics is refused before work.
+TEST(Cli, TradeStudyOnClinicalFramesRecordsItsPhysics) {
+  test::TempDir dir;
+  const fs::path scene = patient_scene(dir.path(), "p1", 1);
+  const std::string out_dir = (dir.path() / "clinical").string();
+  const std::vector<std::string> common{lftrack_bin(), "-q",      "study",      "trade", "--scene", scene.string(),
+                                        "--quick",     "--problems", "1",        "--points", "bin2"};
+  auto with = [&](std::vector<std::string> more) {
+    auto a = common;
+    a.insert(a.end(), more.begin(), more.end());
+    return a;
+  };
+  std::string out;
+  EXPECT_FALSE(run_process(with({"--physics", "bogus", "--out", out_dir}), &out).ok());
+  EXPECT_NE(out.find("--physics"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(out_dir));
+  ASSERT_TRUE(run_process(with({"--physics", "clinical", "--out", out_dir}), &out).ok()) << out;
+  std::ifstream study(fs::path(out_dir) / "study.json");
+  const std::string text((std::istreambuf_iterator<char>(study)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("\"physics\": \"clinical\""), std::string::npos) << text;
+  std::ifstream summary(fs::path(out_dir) / "summary.md");
+  const std::string md((std::istreambuf_iterator<char>(summary)), std::istreambuf_iterator<char>());
+  EXPECT_NE(md.find("clinical physics"), std::string::npos) << md;
+  EXPECT_FALSE(run_process(with({"--out", out_dir}), &out).ok());  // ideal frames: another study
+  EXPECT_NE(out.find("another study"), std::string::npos) << out;
+}
+
 // A single-node Slurm cluster under a test folder, stopped when the test ends.
 class LocalSlurm {
  public:

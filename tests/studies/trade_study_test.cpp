@@ -103,6 +103,18 @@ TEST(TradeStudy, ShardsRoundTripThroughTheirFilesAndMerge) {
   TradeStudy other = *rb;
   other.seed = 5;
   refused(merge_trade_shards({*ra, other}), "another study");
+  // A shard whose frames carried other physics (issue 21) is another study; the name survives the
+  // round trip, and a folder from before physics was recorded reads as ideal.
+  EXPECT_EQ(ra->physics, "ideal");
+  TradeStudy clinical = b;
+  clinical.physics = "clinical";
+  clinical.physics_description = "spectrum 120 kVp";
+  ASSERT_TRUE(write_trade_shard(clinical, dir.path() / "clinical").ok());
+  auto rc = read_trade_shard(dir.path() / "clinical");
+  ASSERT_TRUE(rc.ok()) << rc.status().message();
+  EXPECT_EQ(rc->physics, "clinical");
+  EXPECT_EQ(rc->physics_description, "spectrum 120 kVp");
+  refused(merge_trade_shards({*ra, *rc}), "another study");
   TradeStudy twice = *rb;
   twice.results[0].point.id = "middle";
   refused(merge_trade_shards({*ra, twice}), "measured twice");

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/host/scene.hpp"
 
 namespace lftrack::host {
@@ -57,6 +58,10 @@ struct TradeOptions {
   std::vector<std::string> only;  // non-empty: just these points (by id), in the study's order
   std::filesystem::path field_dir;  // non-empty: float fields from here (built and saved if missing)
   bool fields_prebuilt = false;     // with field_dir: refuse to build a missing field set
+  // What the problems' frames carry (issue 21): ideal (DRRs of the planning CT with noise) or
+  // realistic physics, rendered from the simulated patient (4 anatomy draws, shared in turn).
+  sim::XrayPhysicsSpec physics;
+  std::string physics_name = "ideal";
 };
 
 struct TradeResult {
@@ -82,6 +87,8 @@ struct TradeStudy {
   bool quick = false;
   int shard = 1, shards = 1;
   int points_total = 0;  // in the whole study, over every shard
+  std::string physics = "ideal";    // the frames' physics (TradeOptions::physics_name)
+  std::string physics_description;  // sim::describe of it
   std::vector<TradeResult> results;
 };
 
