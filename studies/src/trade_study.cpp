@@ -320,8 +320,10 @@ std::vector<TradePoint> trade_points(const PreparedScene& p, bool quick) {
   // Similarity measures and plans.
   for (const auto& m : quick ? std::vector<std::string>{"ncc"} : tracking::similarity_names())
     if (m != base.similarity) add("sim-" + m, [&](TradePoint& t) { t.similarity = m; });
-  for (const auto& plan : quick ? std::vector<std::string>{"quadratic"}
-                                : std::vector<std::string>{"quadratic", "decoupled", "papers", "cmaes"})
+  // warm-robust: the tracking plan that holds up on realistic frames (issue 21), against the
+  // baseline's warm on the same problems.
+  for (const auto& plan : quick ? std::vector<std::string>{"quadratic", "warm-robust"}
+                                : std::vector<std::string>{"quadratic", "decoupled", "papers", "cmaes", "warm-robust"})
     add("plan-" + plan, [&](TradePoint& t) { t.plan = plan; });
   // Final step and time budget.
   for (double step : quick ? std::vector<double>{0.25} : std::vector<double>{0.05, 0.25, 0.5})
