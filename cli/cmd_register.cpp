@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
@@ -131,13 +132,28 @@ Status run(const RegisterOptions& o) {
   if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
   if (o.sim) {
     if (!gold) gold = p.nominal_T_room_from_ct;
-    tracking::RendererOptions exact_options;
-    exact_options.pool = &pool;
-    auto exact = tracking::make_renderer("siddon", p.world_mu, exact_options);
-    if (!exact.ok()) return exact.status();
-    auto frames = synthesize_scene_frames(p, **exact, *gold, o.seed);
-    if (!frames.ok()) return frames.status();
-    raw = std::move(frames).value();
+    const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
+    if (!physics.ideal()) {
+      // The scene's imaging physics (sim.physics): the simulated patient exposed by its imager.
+      auto patient = make_simulated_patient(p, physics, physics.anatomy ? physics.anatomy->seed : 1, &pool, &pool);
+      if (!patient.ok()) return patient.status();
+      auto imager = SceneImager::create(p, physics);
+      if (!imager.ok()) return imager.status();
+      auto frames = imager->expose(*patient, *gold, o.seed);
+      if (!frames.ok()) return frames.status();
+      raw = std::move(frames).value();
+      correction = imager->correction();
+      if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
+      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(physics));
+    } else {
+      tracking::RendererOptions exact_options;
+      exact_options.pool = &pool;
+      auto exact = tracking::make_renderer("siddon", p.world_mu, exact_options);
+      if (!exact.ok()) return exact.status();
+      auto frames = synthesize_scene_frames(p, **exact, *gold, o.seed);
+      if (!frames.ok()) return frames.status();
+      raw = std::move(frames).value();
+    }
   } else {
     if (o.frames.size() != p.scene.detectors.size())
       return invalid_argument("--frames needs one file per detector (" + std::to_string(p.scene.detectors.size()) + ")");
@@ -300,11 +316,14 @@ Command add_register_command(CLI::App* parent) {
   auto o = std::make_shared<RegisterOptions>();
   add_scene_options(app, &o->scene);
   app->add_option("--frames", o->frames, "Raw 16-bit frames, one per detector (TIFF or PNG)")->expected(1, 4);
-  app->add_flag("--sim", o->sim, "Synthetic frames at --gold (exact ray casting, noise, blur, 12 bits)");
+  app->add_flag("--sim", o->sim,
+                "Synthetic frames at --gold (exact ray casting, noise, blur, 12 bits; the scene's sim.physics)");
   const std::string pose_help = "tx,ty,tz (mm) and rx,ry,rz (rotation vector, deg) from the nominal pose";
   app->add_option("--gold", o->gold, "Gold pose: " + pose_help)->expected(6)->delimiter(',');
   app->add_option("--init", o->init, "Start pose: " + pose_help + " (default: nominal)")->expected(6)->delimiter(',');
-  app->add_option("--plan", o->plan, "Registration plan: papers, decoupled, cmaes, warm (default: the scene's)");
+  std::string plans;
+  for (const auto& n : tracking::registration_plan_names()) plans += (plans.empty() ? "" : ", ") + n;
+  app->add_option("--plan", o->plan, "Registration plan: " + plans + " (default: the scene's)");
   app->add_option("--similarity", o->similarity, "Similarity: mi, nmi, ncc, gc, pi, gd (default: the scene's)");
   app->add_option("--renderer", o->renderer, "DRR renderer")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");

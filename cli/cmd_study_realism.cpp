@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <filesystem>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/progress_bar.hpp"
@@ -38,6 +39,14 @@ Status run(const RealismCliOptions& o) {
   options.shard = shard->first;
   options.shards = shard->second;
   options.only = o.only;
+  // Nothing is overwritten: a whole study needs an empty or new folder; a shard, one without a
+  // whole study's summary (each set's shard folder checks its own study).
+  std::error_code ec;
+  const std::filesystem::path out(o.out_dir);
+  if (std::filesystem::exists(out / "summary.json", ec))
+    return failed_precondition(o.out_dir + " holds a realism study already (summary.json); choose another --out");
+  if (options.shards == 1 && std::filesystem::exists(out, ec) && !std::filesystem::is_empty(out, ec))
+    return failed_precondition(o.out_dir + " is not empty; a whole realism study writes into a new or empty folder");
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();

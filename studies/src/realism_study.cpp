@@ -127,9 +127,14 @@ Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOpt
   report.image_method = image_method_of(p);
   report.hybrid_method = hybrid_method_of(p);
   std::vector<RealismFactor> factors;
-  for (const RealismFactor& f : realism_factors(p))
+  const std::vector<RealismFactor> all = realism_factors(p);
+  std::string known;
+  for (const RealismFactor& f : all) known += (known.empty() ? "" : ", ") + f.name;
+  for (const std::string& name : o.only)
+    if (std::none_of(all.begin(), all.end(), [&](const RealismFactor& f) { return f.name == name; }))
+      return invalid_argument("realism: --only names '" + name + "', not a factor set of this scene (" + known + ")");
+  for (const RealismFactor& f : all)
     if (o.only.empty() || std::find(o.only.begin(), o.only.end(), f.name) != o.only.end()) factors.push_back(f);
-  if (factors.empty()) return invalid_argument("realism: no factor set matches --only");
   for (std::size_t i = 0; i < factors.size(); ++i) {
     spdlog::info("realism: {} ({})", factors[i].name, sim::describe(factors[i].physics));
     auto study = run_capture_range_study(p, realism_capture_range_options(p, o, factors[i]), pool, [&](double f) {

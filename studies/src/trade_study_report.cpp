@@ -350,7 +350,7 @@ Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeS
       s->quick != expected.quick || s->shard != expected.shard || s->shards != expected.shards ||
       s->points_total != expected.points_total || s->physics != expected.physics ||
       s->physics_description != expected.physics_description)
-    return failed_precondition(dir.string() + " holds another study: scene '" + s->scene + "', seed " +
+    return failed_precondition(dir.string() + " holds another study (scene '" + s->scene + "', seed " +
                                std::to_string(s->seed) + ", " + std::to_string(s->problems) +
                                " problems, shard " + std::to_string(s->shard) + "/" + std::to_string(s->shards) +
                                ", " + std::to_string(s->points_total) + " points in all, " + s->physics +

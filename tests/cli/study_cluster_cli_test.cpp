@@ -319,12 +319,21 @@ TEST(Cli, RealismStudyReportsEachFactorSet) {
   const auto study = nlohmann::json::parse(read_text_file(out / "clinical" / "study.json"));
   EXPECT_EQ(study["options"]["physics"], "clinical");
   EXPECT_TRUE(fs::exists(out / "realism.csv"));
-  // Unknown factor sets are refused.
-  EXPECT_FALSE(run_process({lftrack_bin(), "-q", "study", "realism", "--scene", scene.string(), "--only", "bogus",
-                            "--lf-dir", (dir.path() / "lf").string(), "--out", (dir.path() / "x").string()},
+  // Unknown factor sets are refused, with the known ones, even beside a known one.
+  EXPECT_FALSE(run_process({lftrack_bin(), "-q", "study", "realism", "--scene", scene.string(), "--only",
+                            "ideal,bogus", "--lf-dir", (dir.path() / "lf").string(), "--out",
+                            (dir.path() / "x").string()},
                            &said)
                    .ok());
-  EXPECT_NE(said.find("no factor set"), std::string::npos) << said;
+  EXPECT_NE(said.find("'bogus', not a factor set of this scene (ideal, "), std::string::npos) << said;
+  // A second study into the same folder is refused and the first one's summary stays.
+  const std::string before = read_text_file(out / "summary.json");
+  EXPECT_FALSE(run_process({lftrack_bin(), "-q", "study", "realism", "--scene", scene.string(), "--only", "ideal",
+                            "--seed", "7", "--lf-dir", (dir.path() / "lf").string(), "--out", out.string()},
+                           &said)
+                   .ok());
+  EXPECT_NE(said.find("holds a realism study already"), std::string::npos) << said;
+  EXPECT_EQ(read_text_file(out / "summary.json"), before);
 }
 
 }  // namespace
