@@ -332,7 +332,8 @@ TEST(SlurmJobArray, RefusesWhatCannotBeSubmitted) {
     edit(s);
     return check_job_array_spec(s);
   };
-  EXPECT_NE(with([](JobArraySpec& s) { s.study = "realism"; }).message().find("issue 21"), std::string::npos);
+  EXPECT_NE(with([](JobArraySpec& s) { s.study = "realism"; }).message().find("not built yet: issue 25"),
+            std::string::npos);
   EXPECT_FALSE(with([](JobArraySpec& s) { s.scene_names = {"a", "a"}; }).ok());
   EXPECT_FALSE(with([](JobArraySpec& s) { s.scene_names = {"a", "../b"}; }).ok());
   EXPECT_FALSE(with([](JobArraySpec& s) { s.shards = 0; }).ok());
