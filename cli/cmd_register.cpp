@@ -129,7 +129,6 @@ Status run(const RegisterOptions& o) {
 
   std::vector<Image<std::uint16_t>> raw;
   tracking::DetectorCorrection correction = sim::detector_correction(scene_detector_model(p));
-  if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
   if (o.sim) {
     if (!gold) gold = p.nominal_T_room_from_ct;
     const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
@@ -143,7 +142,6 @@ Status run(const RegisterOptions& o) {
       if (!frames.ok()) return frames.status();
       raw = std::move(frames).value();
       correction = imager->correction();
-      if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
       spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(physics));
     } else {
       tracking::RendererOptions exact_options;
@@ -163,6 +161,7 @@ Status run(const RegisterOptions& o) {
       raw.push_back(std::move(frame).value());
     }
   }
+  if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
   if (!o.save_frames.empty()) {
     std::filesystem::create_directories(o.save_frames);
     for (std::size_t i = 0; i < raw.size(); ++i) {

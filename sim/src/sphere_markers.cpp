@@ -25,7 +25,8 @@ class SphereMarkerRenderer final : public tracking::DrrRenderer {
       const auto projected = view.project(centre);
       if (!projected) continue;
       // Pixels the sphere's shadow can reach: its projected radius, magnified, plus a margin.
-      const double distance = (centre - view.source_mm).norm();
+      const Eigen::Vector3d to_centre = centre - view.source_mm;
+      const double distance = to_centre.norm();
       if (distance <= m.radius_mm) continue;  // the source inside a marker: nothing sensible to add
       const double magnification = view.source_to_detector_mm() / (distance - m.radius_mm);
       const double reach_px =
@@ -48,7 +49,6 @@ class SphereMarkerRenderer final : public tracking::DrrRenderer {
                   view.pixel_centre_mm(r - 0.5 + (a + 0.5) * sub, c - 0.5 + (b + 0.5) * sub);
               const Eigen::Vector3d direction = (pixel - view.source_mm).normalized();
               // Distance from the centre to the ray; the chord is 2 sqrt(R^2 - d^2).
-              const Eigen::Vector3d to_centre = centre - view.source_mm;
               const double along = to_centre.dot(direction);
               const double d2 = to_centre.squaredNorm() - along * along;
               const double h2 = m.radius_mm * m.radius_mm - d2;

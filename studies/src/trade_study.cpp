@@ -93,8 +93,9 @@ Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, st
     for (int a = 3; a < 6; ++a) dir(a) = tracking::deg_to_rad(normal(rng));
     const double initial_mm = 1 + 3 * std::uniform_real_distribution<double>(0, 1)(rng);
     pr.start = pose_at_tre(p, pr.gold, dir, initial_mm);
-    Result<std::vector<tracking::Image<std::uint16_t>>> raw = internal_error("no frames");
-    if (imager) {
+    auto expose = [&]() -> Result<std::vector<tracking::Image<std::uint16_t>>> {
+      const std::uint64_t frame_seed = seed * 7919 + std::uint64_t(k);
+      if (!imager) return synthesize_scene_frames(p, **world, pr.gold, frame_seed);
       auto& patient = patients[std::size_t(k) % patients.size()];
       if (!patient) {
         auto made = make_simulated_patient(p, physics, seed * 7727 + std::uint64_t(k) % patients.size() + 1, pool, pool);
@@ -102,10 +103,9 @@ Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, st
         patient = std::make_shared<const SimulatedPatient>(std::move(made).value());
       }
       imager->forget_previous_frames();
-      raw = imager->expose(*patient, pr.gold, seed * 7919 + std::uint64_t(k));
-    } else {
-      raw = synthesize_scene_frames(p, **world, pr.gold, seed * 7919 + std::uint64_t(k));
-    }
+      return imager->expose(*patient, pr.gold, frame_seed);
+    };
+    auto raw = expose();
     if (!raw.ok()) return raw.status();
     auto frames = preprocess_scene_frames(p, *raw, correction);
     if (!frames.ok()) return frames.status();

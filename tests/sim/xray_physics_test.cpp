@@ -146,6 +146,15 @@ std::shared_ptr<const MuVolume> cube(float mu) {
   v->values.assign(64000, mu);
   return v;
 }
+// A detector that adds nothing of its own: no noise, no blur, 16 bits.
+DetectorModel exact_detector() {
+  DetectorModel model;
+  model.noise = false;
+  model.blur_sigma_px = 0;
+  model.bits = 16;
+  return model;
+}
+
 XrayView small_view() {
   return *XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(0, -1, 0), Eigen::Vector3d(0, 0, 1), 500,
                                700, 32, 32, 1.0);
@@ -153,10 +162,7 @@ XrayView small_view() {
 
 TEST(PhysicsFrames, ScatterRaisesTheCountsBehindAThickObjectByTheStatedRatio) {
   auto renderer = std::move(make_renderer("siddon", cube(0.1f))).value();  // p = 4: 20.7 cm of water
-  DetectorModel model;
-  model.noise = false;
-  model.blur_sigma_px = 0;
-  model.bits = 16;
+  const DetectorModel model = exact_detector();
   const XrayView v = small_view();
   const PixelWindow window = PixelWindow::full(v.rows, v.cols);
   XrayPhysicsSpec physics;
@@ -202,10 +208,7 @@ TEST(PhysicsFrames, IdealPhysicsGivesTodaysFramesAndMaterialsAreRequiredWithASpe
 TEST(PhysicsFrames, LagCarriesTheStatedShareOfThePreviousFrame) {
   auto dark = std::move(make_renderer("siddon", cube(0.05f))).value();
   auto light = std::move(make_renderer("siddon", cube(0.0f))).value();
-  DetectorModel model;
-  model.noise = false;
-  model.blur_sigma_px = 0;
-  model.bits = 16;
+  const DetectorModel model = exact_detector();
   const XrayView v = small_view();
   const PixelWindow window = PixelWindow::full(v.rows, v.cols);
   XrayPhysicsSpec physics;

@@ -95,8 +95,8 @@ double highpass_sigma_px(const RegistrationSetup::Level& l, const XrayView& view
 
 Registration::~Registration() = default;
 
-// The robust plans' high-pass (sigma, mm on the detector): the lumbar realism study's best of
-// 5, 7, 10 and 15 mm (BENCHMARKS.md, "A registration that holds up").
+// The robust plans' high-pass (sigma, mm on the detector): the best of 5, 7, 10 and 15 mm on the
+// lumbar CT's clinical and ideal frames (BENCHMARKS.md, "X-rays that differ from the planning CT").
 constexpr double kRobustHighPassMm = 7.0;
 
 std::vector<std::string> registration_plan_names() {
