@@ -9,6 +9,11 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
+namespace lftrack::host {
+struct TradeStudy;
+struct RealismReport;
+}  // namespace lftrack::host
+
 namespace lftrack::host::cli {
 
 using Command = std::function<Status()>;
@@ -36,6 +41,10 @@ struct StudyPhysics {
   std::string name = "ideal";
 };
 Result<StudyPhysics> study_physics(const std::string& option, const PreparedScene* scene);
+
+// The tables a study prints when it is whole (its own command, or `study merge`).
+void print_trade_front(const TradeStudy& study);
+void print_realism_table(const RealismReport& report);
 
 // `lftrack sim --chaos SEED` (cmd_chaos.cpp).
 Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json);

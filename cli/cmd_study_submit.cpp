@@ -15,6 +15,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
+#include "lftrack/studies/realism_study.hpp"
 #include "lftrack/studies/slurm_job_array.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/studies/trade_study.hpp"
@@ -115,7 +116,9 @@ ShardTask shard_state(const std::string& study, const fs::path& dir) {
   t.host = printable(t.host, 64);
   t.slurm_job = printable(t.slurm_job, 32);
   if (t.phase != ShardPhase::kDone) return t;
-  const Status readable = study == "trade" ? read_trade_shard(dir).status() : read_capture_range_shard(dir).status();
+  const Status readable = study == "trade"     ? read_trade_shard(dir).status()
+                          : study == "realism" ? read_realism_shard(dir).status()
+                                               : read_capture_range_shard(dir).status();
   if (!readable.ok()) {
     t.phase = ShardPhase::kFailed;
     t.message = "result unreadable: " + readable.message();
@@ -172,7 +175,9 @@ Status run_status(const StatusCliOptions& o) {
     }
     std::error_code ec;
     const fs::path merged = fs::path(o.dir) / "merged";
-    const bool is_merged = fs::exists(merged / (names.size() > 1 ? "pooled/study.json" : "study.json"), ec);
+    // What a merge writes last: a realism study's summary, the others' description.
+    const std::string last = study == "realism" ? "summary.json" : "study.json";
+    const bool is_merged = fs::exists(names.size() > 1 ? merged / "pooled" / last : merged / last, ec);
     if (o.json) {
       std::printf("%s\n", nlohmann::json{{"study", study},
                                          {"shards", rows},
@@ -208,7 +213,7 @@ Command add_study_submit_command(CLI::App* parent) {
       "Run a sharded study as a cluster job array: the light fields once, the shards, then the merge");
   auto o = std::make_shared<SubmitCliOptions>();
   app->add_option("--scheduler", o->scheduler, "Cluster scheduler (slurm)")->required();
-  app->add_option("--study", o->study, "trade or capture-range")->required();
+  app->add_option("--study", o->study, "trade, capture-range or realism")->required();
   app->add_option("--scene", o->scenes, "Scene file; repeat once per patient")->required();
   app->add_option("--out", o->out_dir, "Output folder: fields/, shards/, merged/, slurm/ and submit.json")
       ->required();

@@ -1,5 +1,5 @@
-// `lftrack study trade` and `lftrack study merge`: the speed-accuracy trade study, sharded, and the
-// merge of any sharded study's shards (trade, capture range), per scene and pooled.
+// `lftrack study trade`: the speed-accuracy trade study, sharded (joined by `study merge`,
+// cmd_study_merge.cpp).
 
 #include <spdlog/spdlog.h>
 
@@ -37,13 +37,17 @@ struct TradeCliOptions {
   std::string physics = "ideal";
 };
 
-void print_front(const TradeStudy& study) {
+}  // namespace
+
+void print_trade_front(const TradeStudy& study) {
   std::printf("%-22s %10s %10s %10s %10s %8s %10s\n", "Pareto front", "median ms", "p95 ms", "mean TRE",
               "p95 TRE", "success", "memory MB");
   for (const auto& r : pareto_front(study.results))
     std::printf("%-22s %10.1f %10.1f %10.3f %10.3f %7.0f%% %10.2f\n", r.point.id.c_str(), r.median_ms,
                 r.p95_ms, r.mean_tre_mm, r.p95_tre_mm, 100 * r.success_rate, r.memory_bytes / 1e6);
 }
+
+namespace {
 
 Status run_trade_points(const PreparedScene& prepared, const TradeOptions& options, tracking::ThreadPool* pool,
                         const std::string& out_dir);
@@ -126,145 +130,9 @@ Status run_trade_points(const PreparedScene& prepared, const TradeOptions& optio
     return {};
   }
   LFTRACK_RETURN_IF_ERROR(write_trade_outputs(*study, out_dir));
-  print_front(*study);
+  print_trade_front(*study);
   std::printf("wrote %s/{points.csv,summary.md,tre_vs_time.png,memory_vs_fidelity.png}\n", out_dir.c_str());
   return {};
-}
-
-struct MergeCliOptions {
-  std::string out_dir;
-  std::vector<std::string> shards;
-};
-
-// Which study a shard folder holds ("trade" for folders written before study.json named it).
-Result<std::string> study_kind(const std::string& dir) {
-  std::ifstream in(std::filesystem::path(dir) / "study.json");
-  if (!in) return not_found(dir + "/study.json: no such file (not a study's shard?)");
-  try {
-    return nlohmann::json::parse(in).value("study", std::string("trade"));
-  } catch (const std::exception& e) {
-    return corrupt_data(dir + "/study.json: " + e.what());
-  }
-}
-
-template <typename Study>
-using Merger = std::function<Result<Study>(const std::vector<Study>&)>;
-
-// Shards grouped by scene (in the order first seen), each group merged; `name_of` names a study's scene.
-template <typename Study>
-Result<std::vector<Study>> merge_per_scene(const std::vector<Study>& shards, const Merger<Study>& merge,
-                                           const std::function<std::string(const Study&)>& name_of) {
-  std::vector<std::string> order;
-  std::map<std::string, std::vector<Study>> groups;
-  for (const Study& s : shards) {
-    if (!groups.count(name_of(s))) order.push_back(name_of(s));
-    groups[name_of(s)].push_back(s);
-  }
-  std::vector<Study> merged;
-  for (const std::string& name : order) {
-    auto m = merge(groups[name]);
-    if (!m.ok()) return m.status().with_context("scene '" + name + "'");
-    merged.push_back(std::move(m).value());
-  }
-  return merged;
-}
-
-// Several scenes' folders under the merge's --out: one each, none called "pooled".
-template <typename Study>
-Status check_scene_folders(const std::vector<Study>& merged) {
-  std::set<std::string> folders{"pooled"};
-  for (const Study& s : merged)
-    if (!folders.insert(folder_safe_name(s.scene)).second)
-      return failed_precondition("merge: scene '" + s.scene + "' would be written to the folder '" +
-                                 folder_safe_name(s.scene) + "', which another scene or the pooled study takes; "
-                                 "rename the scene");
-  return {};
-}
-
-Status merge_trade(const std::vector<std::string>& dirs, const std::filesystem::path& out) {
-  std::vector<TradeStudy> shards;
-  for (const auto& dir : dirs) {
-    auto s = read_trade_shard(dir);
-    if (!s.ok()) return s.status();
-    shards.push_back(std::move(s).value());
-  }
-  auto merged = merge_per_scene<TradeStudy>(shards, merge_trade_shards, [](const TradeStudy& s) { return s.scene; });
-  if (!merged.ok()) return merged.status();
-  if (merged->size() == 1) {
-    LFTRACK_RETURN_IF_ERROR(write_trade_outputs(merged->front(), out));
-    print_front(merged->front());
-    std::printf("merged %zu shards, %zu points; wrote %s/{points.csv,summary.md,tre_vs_time.png,"
-                "memory_vs_fidelity.png}\n",
-                shards.size(), merged->front().results.size(), out.c_str());
-    return {};
-  }
-  LFTRACK_RETURN_IF_ERROR(check_scene_folders(*merged));
-  for (const TradeStudy& s : *merged) LFTRACK_RETURN_IF_ERROR(write_trade_outputs(s, out / folder_safe_name(s.scene)));
-  std::vector<std::string> left_out;
-  auto pooled = pool_trade_studies(*merged, &left_out);
-  if (!pooled.ok()) return pooled.status();
-  LFTRACK_RETURN_IF_ERROR(write_trade_outputs(*pooled, out / "pooled"));
-  std::printf("Pooled over %zu scenes (%d problems per point):\n", merged->size(), pooled->problems);
-  print_front(*pooled);
-  if (!left_out.empty()) {
-    std::string ids;
-    for (const auto& id : left_out) ids += (ids.empty() ? "" : ", ") + id;
-    std::printf("left out of the pooled study (not in every scene): %s\n", ids.c_str());
-  }
-  std::printf("merged %zu shards of %zu scenes; wrote %s/<scene>/ per scene and %s/pooled/\n", shards.size(),
-              merged->size(), out.c_str(), out.c_str());
-  return {};
-}
-
-Status merge_capture_range(const std::vector<std::string>& dirs, const std::filesystem::path& out) {
-  std::vector<CaptureRangeReport> shards;
-  for (const auto& dir : dirs) {
-    auto s = read_capture_range_shard(dir);
-    if (!s.ok()) return s.status();
-    shards.push_back(std::move(s).value());
-  }
-  auto merged = merge_per_scene<CaptureRangeReport>(shards, merge_capture_range_shards,
-                                                    [](const CaptureRangeReport& s) { return s.scene; });
-  if (!merged.ok()) return merged.status();
-  if (merged->size() == 1) {
-    LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(merged->front(), out));
-    std::printf("merged %zu shards, %zu runs; wrote %s/{runs.csv,summary.json,capture_range.png}\n", shards.size(),
-                merged->front().runs.size(), out.c_str());
-    return {};
-  }
-  LFTRACK_RETURN_IF_ERROR(check_scene_folders(*merged));
-  for (const CaptureRangeReport& s : *merged)
-    LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(s, out / folder_safe_name(s.scene)));
-  auto pooled = pool_capture_range_reports(*merged);
-  if (!pooled.ok()) return pooled.status();
-  LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(*pooled, out / "pooled"));
-  std::printf("merged %zu shards of %zu scenes; wrote %s/<scene>/ per scene and %s/pooled/\n", shards.size(),
-              merged->size(), out.c_str(), out.c_str());
-  return {};
-}
-
-Status run_merge(const MergeCliOptions& o) {
-  // The output is never one of the shards (a merge there would overwrite that shard's result).
-  std::error_code ec;
-  const auto out = std::filesystem::weakly_canonical(o.out_dir, ec);
-  for (const auto& dir : o.shards) {
-    const auto shard = std::filesystem::weakly_canonical(dir, ec);
-    const auto rel = out.lexically_relative(shard);
-    if (out == shard || (!rel.empty() && *rel.begin() != ".."))
-      return invalid_argument("merge: --out " + o.out_dir + " is, or is inside, the shard folder " + dir +
-                              "; choose a folder of its own");
-  }
-  std::string kind;
-  for (const auto& dir : o.shards) {
-    auto k = study_kind(dir);
-    if (!k.ok()) return k.status();
-    if (!kind.empty() && *k != kind)
-      return failed_precondition("merge: " + dir + " holds a " + *k + " study, the others a " + kind + " study");
-    kind = *k;
-  }
-  if (kind == "trade") return merge_trade(o.shards, o.out_dir);
-  if (kind == "capture-range") return merge_capture_range(o.shards, o.out_dir);
-  return unsupported("merge: unknown study '" + kind + "'");
 }
 
 }  // namespace
@@ -296,18 +164,6 @@ Command add_study_trade_command(CLI::App* parent) {
                 "Build every field set the study needs into --lf-dir and exit (a job array's first job)");
   app->add_flag("--check-args", o->check_args, "Check the options and exit (`study submit` does, before submitting)");
   return [o]() { return run_trade(*o); };
-}
-
-Command add_study_merge_command(CLI::App* parent) {
-  auto* app =
-      parent->add_subcommand("merge", "Join the shards of a trade or capture-range study (several scenes: per scene "
-                                      "and pooled) and write its plots and summary");
-  auto o = std::make_shared<MergeCliOptions>();
-  app->add_option("--out", o->out_dir, "Output folder")->required();
-  app->add_option("shards", o->shards, "The shards' output folders")
-      ->required()
-      ->check(CLI::ExistingDirectory);
-  return [o]() { return run_merge(*o); };
 }
 
 }  // namespace lftrack::host::cli

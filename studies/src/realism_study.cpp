@@ -119,36 +119,69 @@ RealismFactorSummary summarize_realism_factor(const RealismOptions& o, const Cap
   return s;
 }
 
-Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOptions& o, tracking::ThreadPool* pool,
-                                        const std::function<void(double)>& progress) {
-  RealismReport report;
-  report.scene = p.scene.name;
-  report.options = o;
-  report.image_method = image_method_of(p);
-  report.hybrid_method = hybrid_method_of(p);
-  std::vector<RealismFactor> factors;
+Result<std::vector<RealismFactor>> selected_realism_factors(const PreparedScene& p, const RealismOptions& o) {
   const std::vector<RealismFactor> all = realism_factors(p);
   std::string known;
   for (const RealismFactor& f : all) known += (known.empty() ? "" : ", ") + f.name;
   for (const std::string& name : o.only)
     if (std::none_of(all.begin(), all.end(), [&](const RealismFactor& f) { return f.name == name; }))
       return invalid_argument("realism: --only names '" + name + "', not a factor set of this scene (" + known + ")");
+  std::vector<RealismFactor> factors;
   for (const RealismFactor& f : all)
     if (o.only.empty() || std::find(o.only.begin(), o.only.end(), f.name) != o.only.end()) factors.push_back(f);
-  for (std::size_t i = 0; i < factors.size(); ++i) {
-    spdlog::info("realism: {} ({})", factors[i].name, sim::describe(factors[i].physics));
-    auto study = run_capture_range_study(p, realism_capture_range_options(p, o, factors[i]), pool, [&](double f) {
-      if (progress) progress((double(i) + f) / double(factors.size()));
+  return factors;
+}
+
+Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOptions& o, tracking::ThreadPool* pool,
+                                        const std::function<void(double)>& progress) {
+  RealismReport report;
+  report.scene = p.scene.name;
+  report.fingerprint = study_scene_fingerprint(p);
+  report.options = o;
+  report.image_method = image_method_of(p);
+  report.hybrid_method = hybrid_method_of(p);
+  auto factors = selected_realism_factors(p, o);
+  if (!factors.ok()) return factors.status();
+  for (std::size_t i = 0; i < factors->size(); ++i) {
+    const RealismFactor& factor = (*factors)[i];
+    spdlog::info("realism: {} ({})", factor.name, sim::describe(factor.physics));
+    auto study = run_capture_range_study(p, realism_capture_range_options(p, o, factor), pool, [&](double f) {
+      if (progress) progress((double(i) + f) / double(factors->size()));
     });
-    if (!study.ok()) return study.status().with_context("factor set " + factors[i].name);
+    if (!study.ok()) return study.status().with_context("factor set " + factor.name);
     report.factors.push_back(summarize_realism_factor(o, *study, report.image_method, report.hybrid_method));
     report.studies.push_back(std::move(study).value());
   }
   return report;
 }
 
+Result<RealismReport> expected_realism_shard(const PreparedScene& p, const RealismOptions& o) {
+  RealismReport report;
+  report.scene = p.scene.name;
+  report.fingerprint = study_scene_fingerprint(p);
+  report.options = o;
+  report.image_method = image_method_of(p);
+  report.hybrid_method = hybrid_method_of(p);
+  auto factors = selected_realism_factors(p, o);
+  if (!factors.ok()) return factors.status();
+  for (const RealismFactor& factor : *factors) {
+    CaptureRangeReport study;
+    study.scene = report.scene;
+    study.fingerprint = report.fingerprint;
+    study.options = realism_capture_range_options(p, o, factor);
+    report.studies.push_back(std::move(study));
+  }
+  return report;
+}
+
 Status write_realism_outputs(const RealismReport& report, const std::filesystem::path& dir) {
   const RealismOptions& o = report.options;
+  if (o.shards > 1) {
+    // An earlier description goes first: a folder being rewritten never reads as a result.
+    std::error_code ec;
+    std::filesystem::remove(dir / "study.json", ec);
+    if (ec) return io_error((dir / "study.json").string() + ": cannot remove the earlier description");
+  }
   for (const CaptureRangeReport& study : report.studies) {
     const auto sub = dir / study.options.physics_name;
     if (o.shards > 1)
@@ -156,10 +189,12 @@ Status write_realism_outputs(const RealismReport& report, const std::filesystem:
     else
       LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(study, sub));
   }
-  if (o.shards > 1) return {};
+  if (o.shards > 1) return write_realism_description(report, dir);  // last: the shard is complete
   nlohmann::json j;
   j["study"] = "realism";
   j["scene"] = report.scene;
+  j["fingerprint"] = report.fingerprint;
+  j["seed"] = o.seed;
   j["image_method"] = report.image_method;
   j["hybrid_method"] = report.hybrid_method;
   j["image_starts_up_to_mm"] = o.image_max_mm;

@@ -95,12 +95,8 @@ std::filesystem::path shard_dir(const std::filesystem::path& out_dir, const std:
 }
 
 Status check_job_array_spec(const JobArraySpec& spec) {
-  if (spec.study != "trade" && spec.study != "capture-range")
-    return invalid_argument("--study '" + spec.study + "': expected trade or capture-range" +
-                            (spec.study == "realism"
-                                 ? " (the realism study shards with `lftrack study realism --shard k/n`; submitting "
-                                   "and merging its shards is not built yet: issue 25)"
-                                 : ""));
+  if (spec.study != "trade" && spec.study != "capture-range" && spec.study != "realism")
+    return invalid_argument("--study '" + spec.study + "': expected trade, capture-range or realism");
   if (spec.scenes.empty()) return invalid_argument("no scene given (--scene FILE, once per patient)");
   if (spec.scene_names.size() != spec.scenes.size()) return internal_error("a name per scene is needed");
   static const std::regex safe_name(R"(^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$)");

@@ -336,5 +336,94 @@ TEST(Cli, RealismStudyReportsEachFactorSet) {
   EXPECT_EQ(read_text_file(out / "summary.json"), before);
 }
 
+// A realism study in shards (issue 25): the field job builds the light fields once, each shard
+// task maps them, the merge equals the unsharded study set by set, a finished shard is not run
+// again, and `study submit --study realism` writes tasks that run exactly these commands.
+TEST(Cli, RealismShardsMergeIntoTheUnshardedStudy) {
+  test::TempDir dir;
+  const fs::path scene = patient_scene(dir.path(), "p1", 1);
+  const std::string lf = (dir.path() / "lf").string();
+  auto realism = [&](std::vector<std::string> more) {
+    std::vector<std::string> a{lftrack_bin(), "-q",      "study", "realism", "--scene", scene.string(), "--gold-poses",
+                               "2",           "--bins",  "3",     "--anatomy-draws", "1", "--only", "ideal,clinical",
+                               "--lf-dir",    lf};
+    a.insert(a.end(), more.begin(), more.end());
+    return a;
+  };
+  std::string out;
+  EXPECT_FALSE(run_process(realism({"--shard", "1/2", "--out", (dir.path() / "x").string(), "--fields-prebuilt"}), &out)
+                   .ok());
+  EXPECT_NE(out.find("the study's field job builds them"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.path() / "x" / "study.json"));
+  ASSERT_TRUE(run_process(realism({"--build-fields"}), &out).ok()) << out;
+  const fs::path whole = dir.path() / "whole";
+  ASSERT_TRUE(run_process(realism({"--out", whole.string()}), &out).ok()) << out;
+  std::vector<std::string> shards;
+  for (const char* k : {"1/2", "2/2"}) {
+    shards.push_back((dir.path() / (std::string("shard") += k[0])).string());
+    ASSERT_TRUE(run_process(realism({"--shard", k, "--out", shards.back(), "--fields-prebuilt"}), &out).ok()) << out;
+    EXPECT_TRUE(fs::exists(fs::path(shards.back()) / "study.json"));
+    EXPECT_FALSE(fs::exists(fs::path(shards.back()) / "summary.json")) << "a shard is not a whole study";
+  }
+  // A merge missing a shard is refused; the whole merge (shards in any order) is the whole study.
+  EXPECT_FALSE(run_process({lftrack_bin(), "-q", "study", "merge", "--out", (dir.path() / "half").string(), shards[0]},
+                           &out)
+                   .ok());
+  const fs::path merged = dir.path() / "merged";
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "study", "merge", "--out", merged.string(), shards[1], shards[0]}, &out)
+                  .ok())
+      << out;
+  EXPECT_NE(out.find("clinical"), std::string::npos) << "the merge prints the realism table: " << out;
+  for (const char* set : {"ideal", "clinical"}) {
+    const std::string runs = columns_of(whole / set / "runs.csv", 10);
+    EXPECT_EQ(std::count(runs.begin(), runs.end(), '\n'), 1 + 2 * 3) << set << ": 2 gold poses x 3 bins to 6 mm";
+    EXPECT_EQ(columns_of(merged / set / "runs.csv", 10), runs) << set << ": every run is the unsharded study's run";
+  }
+  const auto summary_whole = nlohmann::json::parse(read_text_file(whole / "summary.json"));
+  const auto summary_merged = nlohmann::json::parse(read_text_file(merged / "summary.json"));
+  ASSERT_EQ(summary_merged["factors"].size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    for (const char* key : {"name", "runs", "success_rate"})
+      EXPECT_EQ(summary_merged["factors"][i][key], summary_whole["factors"][i][key]) << i << " " << key;
+    // The merge reads the runs back from runs.csv (10 significant digits).
+    for (const char* key : {"mean_tre_mm", "p95_tre_mm"})
+      EXPECT_NEAR(summary_merged["factors"][i][key].get<double>(), summary_whole["factors"][i][key].get<double>(), 1e-8)
+          << i << " " << key;
+  }
+  EXPECT_EQ(summary_merged["fingerprint"], summary_whole["fingerprint"]);
+  EXPECT_TRUE(fs::exists(merged / "realism.csv"));
+  // Shard 1 again: found complete, not computed; another seed in its folder is refused.
+  const auto written = fs::last_write_time(fs::path(shards[0]) / "clinical" / "runs.csv");
+  ASSERT_TRUE(run_process(realism({"--shard", "1/2", "--out", shards[0], "--fields-prebuilt"}), &out).ok()) << out;
+  EXPECT_NE(out.find("nothing to do"), std::string::npos) << out;
+  EXPECT_FALSE(run_process(realism({"--shard", "1/2", "--seed", "9", "--out", shards[0], "--fields-prebuilt"}), &out)
+                   .ok());
+  EXPECT_EQ(fs::last_write_time(fs::path(shards[0]) / "clinical" / "runs.csv"), written);
+  // A shard whose set folder was lost reads as incomplete, and the merge says which.
+  fs::remove_all(fs::path(shards[1]) / "clinical");
+  EXPECT_FALSE(run_process({lftrack_bin(), "-q", "study", "merge", "--out", (dir.path() / "m2").string(), shards[0],
+                            shards[1]},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("clinical"), std::string::npos) << out;
+  // The job array runs these commands.
+  ASSERT_TRUE(run_process({lftrack_bin(), "study", "submit", "--scheduler", "slurm", "--study", "realism", "--scene",
+                           scene.string(), "--out", (dir.path() / "array").string(), "--shards", "2", "--dry-run",
+                           "--", "--gold-poses", "2", "--only", "ideal,clinical"},
+                          &out)
+                  .ok())
+      << out;
+  EXPECT_NE(out.find("study realism --scene \"${scenes[$i]}\""), std::string::npos) << out;
+  EXPECT_NE(out.find("--build-fields"), std::string::npos) << out;
+  EXPECT_NE(out.find("--fields-prebuilt"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.path() / "array")) << "a dry run writes nothing";
+  // Options the realism study does not take are refused before anything is submitted.
+  EXPECT_FALSE(run_process({lftrack_bin(), "study", "submit", "--scheduler", "slurm", "--study", "realism", "--scene",
+                            scene.string(), "--out", (dir.path() / "array").string(), "--shards", "2", "--dry-run",
+                            "--", "--points", "bin2"},
+                           &out)
+                   .ok());
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -53,7 +53,8 @@ struct RealismFactorSummary {
 };
 
 struct RealismReport {
-  std::string scene;
+  std::string scene;        // pooled reports: the names joined by " + "
+  std::string fingerprint;  // study_scene_fingerprint of the scene; pooled: empty
   RealismOptions options;
   std::string image_method, hybrid_method;  // hybrid: empty without a fiducial
   std::vector<CaptureRangeReport> studies;  // per factor set (physics_name = the set's name)
@@ -64,13 +65,38 @@ struct RealismReport {
 CaptureRangeOptions realism_capture_range_options(const PreparedScene& scene, const RealismOptions& options,
                                                   const RealismFactor& factor);
 
+// The factor sets `options.only` selects (all when empty), in report order; names that are not a
+// set of this scene are refused, with the scene's sets.
+Result<std::vector<RealismFactor>> selected_realism_factors(const PreparedScene& scene, const RealismOptions& options);
+
 Result<RealismReport> run_realism_study(const PreparedScene& scene, const RealismOptions& options,
                                         tracking::ThreadPool* pool, const std::function<void(double)>& progress = {});
 RealismFactorSummary summarize_realism_factor(const RealismOptions& options, const CaptureRangeReport& study,
                                               const std::string& image_method, const std::string& hybrid_method);
 // DIR/<set>/ (each set's capture-range outputs, or its shard), and for a whole study
 // DIR/summary.json (`factors`: name, mean_tre_mm, success_rate, median_ms, ...), DIR/realism.csv,
-// DIR/realism.png.
+// DIR/realism.png; for a shard, DIR/study.json (see write_realism_description).
 Status write_realism_outputs(const RealismReport& report, const std::filesystem::path& dir);
+
+// ---- Shards (issue 25; realism_shards.cpp) ----
+// A realism shard is a folder with each factor set's capture-range shard in DIR/<set>/ and, written
+// last, DIR/study.json: the scene, its fingerprint, the options, the methods and the sets. Without
+// study.json the folder is not a result.
+Status write_realism_description(const RealismReport& report, const std::filesystem::path& dir);
+// Reads a shard back (each set's runs from its folder, summarised); refuses a folder whose sets do
+// not match its description.
+Result<RealismReport> read_realism_shard(const std::filesystem::path& dir);
+// What shard `options.shard` of `scene`'s study holds when complete: the description and each
+// set's capture-range options, without runs.
+Result<RealismReport> expected_realism_shard(const PreparedScene& scene, const RealismOptions& options);
+// OK when `dir` holds the complete shard `expected` describes (every set with every run);
+// kFailedPrecondition when it holds another study's; otherwise why not.
+Status check_realism_shard_complete(const std::filesystem::path& dir, const RealismReport& expected);
+// Joins the shards of one scene's study into the whole study (refuses another study's shard, one
+// given twice, or a missing one).
+Result<RealismReport> merge_realism_shards(const std::vector<RealismReport>& shards);
+// Several scenes' whole studies as one, per factor set (each set's runs pooled as the
+// capture-range study pools them). Refuses scenes with other options, methods or sets.
+Result<RealismReport> pool_realism_reports(const std::vector<RealismReport>& scenes);
 
 }  // namespace lftrack::host
