@@ -17,6 +17,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
@@ -127,23 +129,84 @@ std::string summary(const JournalContents& c) {
   return text;
 }
 
+struct ExportOptions {
+  std::string file;
+  bool csv = false;
+  std::string dicom_sro;
+  SceneOptions scene;
+  std::int64_t cycle = -1;  // -1: the last cycle whose registration the gate applied
+};
+
+// `--dicom-sro FILE`: one cycle's registered pose as a DICOM Spatial Registration object. Only a
+// registration the safety gate applied is exported (a HOLD's or a rejected alignment's pose is
+// no registration of record); the journal holds the pose as a delta from the scene's nominal
+// pose, so the scene (the same one the run used) gives it back as T_room_from_ct.
+Status export_dicom(const ExportOptions& o, const JournalContents& contents) {
+  std::error_code ec;
+  if (std::filesystem::exists(std::filesystem::symlink_status(o.dicom_sro, ec)))
+    return failed_precondition(o.dicom_sro + " exists; a registration is never written over another file");
+  const JournalRecord* chosen = nullptr;
+  for (const JournalRecord& r : contents.records) {
+    const bool applied = r.gate_decision == static_cast<std::uint8_t>(GateDecision::kApply);
+    if (o.cycle >= 0 && r.cycle == static_cast<std::uint64_t>(o.cycle)) {
+      if (!applied)
+        return failed_precondition("cycle " + std::to_string(o.cycle) + ": its registration was not applied (gate " +
+                                   to_string(static_cast<GateDecision>(r.gate_decision)) + ": " +
+                                   to_string(static_cast<GateReason>(r.gate_reason)) +
+                                   "); export a cycle the gate applied");
+      chosen = &r;
+    }
+    if (o.cycle < 0 && applied) chosen = &r;
+  }
+  if (chosen == nullptr)
+    return not_found(o.file + (o.cycle >= 0 ? ": no cycle " + std::to_string(o.cycle)
+                                            : std::string(": no cycle whose registration the gate applied")));
+  tracking::ThreadPool pool(o.scene.threads);
+  auto scene = load_scene(o.scene.scene);
+  if (!scene.ok()) return scene.status();
+  if (!o.scene.ct.empty()) scene->ct.path = o.scene.ct;
+  auto identity = scene_ct_dicom_identity(*scene);  // before the CT's voxels are read
+  if (!identity.ok()) return identity.status().with_context("--dicom-sro");
+  auto prepared = load_prepared_scene(o.scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  Eigen::Map<const tracking::Vector6d> delta(chosen->pose_delta);
+  SpatialRegistration reg;
+  reg.T_room_from_ct = tracking::apply_delta(prepared->nominal_T_room_from_ct, tracking::PoseDelta::from_vector(delta),
+                                             prepared->registration_origin_room_mm());
+  reg.room_frame_of_reference_uid = room_frame_of_reference_uid(prepared->scene);
+  reg.description = "lftrack journal cycle " + std::to_string(chosen->cycle);
+  LFTRACK_RETURN_IF_ERROR(write_spatial_registration(o.dicom_sro, *identity, reg));
+  std::printf("wrote %s: cycle %llu's registration (T_room_from_ct) of the CT series %s\n", o.dicom_sro.c_str(),
+              static_cast<unsigned long long>(chosen->cycle), identity->series_uid.c_str());
+  return {};
+}
+
 }  // namespace
 
 Command add_journal_command(CLI::App* parent) {
   auto* journal = parent->add_subcommand("journal", "Read cycle journals");
   journal->require_subcommand(1);
-  auto* app = journal->add_subcommand("export", "Print a journal's records as JSON lines or CSV");
-  struct Options {
-    std::string file;
-    bool csv = false;
-  };
-  auto o = std::make_shared<Options>();
+  auto* app = journal->add_subcommand(
+      "export", "Print a journal's records as JSON lines or CSV, or one registration as a DICOM file");
+  auto o = std::make_shared<ExportOptions>();
   app->add_option("file", o->file, "Journal file")->required();
-  app->add_flag("--csv", o->csv, "CSV instead of JSON lines");
+  CLI::Option* csv = app->add_flag("--csv", o->csv, "CSV instead of JSON lines");
+  CLI::Option* dicom = app->add_option("--dicom-sro", o->dicom_sro,
+                                       "Write one cycle's registration as a DICOM Spatial Registration object "
+                                       "referencing the scene's planning CT (a DICOM series); needs --scene")
+                           ->excludes(csv);
+  add_scene_options(app, &o->scene);
+  app->add_option("--cycle", o->cycle, "With --dicom-sro: the cycle (default: the last one the gate applied)")
+      ->check(CLI::Range(std::int64_t(0), std::int64_t(1) << 50))
+      ->needs(dicom);
   return [o, app]() -> Status {
     if (!app->parsed()) return {};
     auto contents = read_journal(o->file);
     if (!contents.ok()) return contents.status();
+    if (!o->dicom_sro.empty()) {
+      warn_each_problem(o->file, *contents);
+      return export_dicom(*o, *contents);
+    }
     if (o->csv)
       print_csv(contents->records);
     else

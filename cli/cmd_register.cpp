@@ -6,9 +6,11 @@
 
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
@@ -33,6 +35,7 @@ struct RegisterOptions {
   std::uint64_t seed = 1;
   double i0_counts = 0;
   bool json = false;
+  std::string dicom_sro;  // the result as a DICOM Spatial Registration object
 };
 
 Result<Image<std::uint16_t>> read_frame(const std::string& file) {
@@ -98,12 +101,43 @@ Status check_ncc_at(const PreparedScene& p, const tracking::DrrRenderer& rendere
   return {};
 }
 
+// --dicom-sro: the result, if the verdict accepts it, as a DICOM Spatial Registration object (a
+// rejected registration is not one of record: nothing is written, and the verdict's status says
+// why). Reports on stderr with --json, which keeps stdout for the JSON.
+Status write_dicom_result(const RegisterOptions& o, const PreparedScene& p, const std::optional<CtDicomIdentity>& ct,
+                          const Pose& T_room_from_ct, const RegistrationVerdict& verdict, const std::string& method) {
+  if (!ct) return {};
+  FILE* to = o.json ? stderr : stdout;
+  if (!verdict.ok) {
+    std::fprintf(to, "  DICOM registration not written: the verdict rejected the result\n");
+    return {};
+  }
+  SpatialRegistration reg;
+  reg.T_room_from_ct = T_room_from_ct;
+  reg.room_frame_of_reference_uid = room_frame_of_reference_uid(p.scene);
+  reg.description = "lftrack register: " + method;
+  LFTRACK_RETURN_IF_ERROR(write_spatial_registration(o.dicom_sro, *ct, reg));
+  std::fprintf(to, "  wrote %s (DICOM Spatial Registration, CT series %s)\n", o.dicom_sro.c_str(),
+               ct->series_uid.c_str());
+  return {};
+}
+
 Status run(const RegisterOptions& o) {
   if (o.sim == !o.frames.empty()) return invalid_argument("give either --frames A B or --sim");
+  std::error_code ec;
+  if (!o.dicom_sro.empty() && std::filesystem::exists(std::filesystem::symlink_status(o.dicom_sro, ec)))
+    return failed_precondition("--dicom-sro " + o.dicom_sro + " exists; a registration is never written over "
+                               "another file");
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
   const PreparedScene& p = *prepared;
+  std::optional<CtDicomIdentity> dicom_ct;  // read before any registration: a NIfTI CT is refused now
+  if (!o.dicom_sro.empty()) {
+    auto identity = scene_ct_dicom_identity(p.scene);
+    if (!identity.ok()) return identity.status().with_context("--dicom-sro");
+    dicom_ct = *identity;
+  }
   LFTRACK_RETURN_IF_ERROR(check_views_observable(p.scene));
   const std::optional<Eigen::Vector3d> unobservable = unobservable_direction_room(p.scene);
   RegistrationSpec spec = p.scene.registration;
@@ -281,7 +315,10 @@ Status run(const RegisterOptions& o) {
       j["tre_mm"] = {{"mean", tre->mean_mm}, {"max", tre->max_mm}, {"points", tre->points}};
     }
     j["verdict"] = verdict_json(verdict, p);
+    if (dicom_ct && verdict.ok) j["dicom_sro"] = o.dicom_sro;
     std::printf("%s\n", j.dump(2).c_str());
+    LFTRACK_RETURN_IF_ERROR(write_dicom_result(o, p, dicom_ct, result->T_room_from_ct, verdict,
+                                               plan->name + ", " + spec.similarity));
     return verdict_status(verdict, p);
   }
   std::printf("registered %s with %s (%s), %s renderer\n", p.scene.source.c_str(), plan->name.c_str(),
@@ -305,6 +342,8 @@ Status run(const RegisterOptions& o) {
     std::printf("  TRE: mean %.3f mm, max %.3f mm (initial mean %.3f mm) over %d points\n", tre->mean_mm, tre->max_mm,
                 initial_tre->mean_mm, tre->points);
   std::printf("  verdict: %s\n", verdict_text(verdict, view_names(p)).c_str());
+  LFTRACK_RETURN_IF_ERROR(
+      write_dicom_result(o, p, dicom_ct, result->T_room_from_ct, verdict, plan->name + ", " + spec.similarity));
   return verdict_status(verdict, p);
 }
 
@@ -332,6 +371,9 @@ Command add_register_command(CLI::App* parent) {
       ->check(finite_in(0, 1e9, true));
   app->add_option("--save-frames", o->save_frames, "Write the raw frames as 16-bit TIFF into this folder");
   app->add_flag("--json", o->json, "Print the result as JSON");
+  app->add_option("--dicom-sro", o->dicom_sro,
+                  "Write an accepted result as a DICOM Spatial Registration object referencing the planning CT "
+                  "(the scene's CT must be a DICOM series); never over an existing file");
   return [o] { return run(*o); };
 }
 

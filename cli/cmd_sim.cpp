@@ -44,6 +44,10 @@ struct SimOptions {
   std::string sequence;  // `lftrack replay`: the archived sequence
   std::string hil;       // `lftrack sim --hil modbus`: actuators through their real drivers
   bool check = false;    // `lftrack run --check`: the start-up checks only
+  std::string monitor;   // --monitor [ADDRESS:]PORT: the operator's page
+  std::vector<std::string> monitor_origins;
+  std::string monitor_token_file;
+  std::string igtl;      // --igtl [ADDRESS:]PORT: the OpenIGTLink server
   std::optional<std::uint64_t> chaos_seed;  // `lftrack sim --chaos SEED`: the chaos soak instead
   ChaosOptions chaos;
   enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
@@ -106,6 +110,21 @@ void print_summary(const LoopSummary& s) {
                 to_string(t.to), t.reason);
 }
 
+// Where the watchers listen, on standard output (standard error with --json, which keeps standard
+// output for the summary), flushed at once: a script or a test starting lftrack reads the port.
+void announce_watchers(const LoopSession& session, bool json) {
+  FILE* to = json ? stderr : stdout;
+  if (const MonitorServer* m = session.monitor()) {
+    std::fprintf(to, "monitor: %s (view only)\n", m->url().c_str());
+    std::fprintf(to, "monitor: operator token %s (also in %s, mode 0600); to act, open %s#token=%s\n",
+                 m->token().c_str(), m->token_file().c_str(), m->url().c_str(), m->token().c_str());
+  }
+  if (const IgtlServer* i = session.igtl())
+    std::fprintf(to, "igtl: OpenIGTLink server on port %d (TRANSFORM T_room_from_ct and Correction, STATUS)\n",
+                 i->port());
+  std::fflush(to);
+}
+
 Status run(const SimOptions& o) {
   // The options that need no scene first: a bad path or value is refused before the CT is
   // loaded and the light fields are built (minutes), and before anything is created.
@@ -131,6 +150,23 @@ Status run(const SimOptions& o) {
   if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
   if (o.hil == "can") so.hil = HilProtocol::kCan;
   so.allocation_count = &process_allocation_count;
+  if (!o.monitor.empty()) {
+    auto listen = parse_listen_address(o.monitor);
+    if (!listen.ok()) return listen.status().with_context("--monitor");
+    MonitorOptions m;
+    m.listen = *listen;
+    m.extra_origins = o.monitor_origins;
+    m.token_file = o.monitor_token_file;
+    m.token_dir = o.journal_folder;  // out/sim, out/run or out/replay
+    so.monitor = m;
+  }
+  if (!o.igtl.empty()) {
+    auto listen = parse_listen_address(o.igtl);
+    if (!listen.ok()) return listen.status().with_context("--igtl");
+    IgtlOptions i;
+    i.listen = *listen;
+    so.igtl = i;
+  }
   LFTRACK_RETURN_IF_ERROR(check_session_options(so));
 
   auto scene = load_scene(o.scene.scene);
@@ -184,6 +220,7 @@ Status run(const SimOptions& o) {
     spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
                  o.fast ? " on a simulated clock" : "",
                  so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
+  announce_watchers(**session, o.json);
   const std::string journal = (*session)->journal_path().string();  // the file written, suffix included
   g_session.store(session->get());
   struct sigaction action {};
@@ -354,8 +391,24 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                   "Real-time set-up: enforce or ignore (default: the scene's loop.realtime.mode)")
       ->check(CLI::IsMember({"enforce", "ignore"}));
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
+  CLI::Option* monitor = app->add_option(
+      "--monitor", o->monitor,
+      "Serve the operator's live page on [ADDRESS:]PORT (default address 127.0.0.1; port 0: any free one); "
+      "its actions need the run's token, printed at start");
+  app->add_option("--monitor-origin", o->monitor_origins,
+                  "Another origin (http://HOST:PORT) whose page may act, e.g. the console's name when the page "
+                  "listens on 0.0.0.0")
+      ->needs(monitor);
+  app->add_option("--monitor-token-file", o->monitor_token_file,
+                  "Where the token is stored, mode 0600 (default " + o->journal_folder +
+                      "/monitor-ADDRESS-PORT.token); removed at exit")
+      ->needs(monitor);
+  app->add_option("--igtl", o->igtl,
+                  "Serve the registered pose over OpenIGTLink on [ADDRESS:]PORT (3D Slicer's OpenIGTLinkIF "
+                  "connects as a client)");
   if (chaos != nullptr)  // the soak makes its own devices, operator and journals
-    for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume", "--rt"})
+    for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume", "--rt",
+                              "--monitor", "--igtl"})
       chaos->excludes(app->get_option(other));
   CLI::Option* cycles = app->get_option("--cycles");
   return [o, journal, chaos, cycles] {

@@ -20,6 +20,10 @@ packages=(
   gnuplot-nox                           # plots of studies (PNG)
   stress-ng                             # a loaded core for the real-time loop benchmark
   slurmctld slurmd slurm-client munge   # a local Slurm cluster for job-array studies (scripts/slurm-local.sh)
+  libcpp-httplib-dev                    # the monitor page's embedded HTTP server
+  libopenigtlink-dev                    # OpenIGTLink server for navigation software (3D Slicer, PLUS)
+  dicom3tools                           # dciodvfy: validates the exported DICOM registration
+  chromium chromium-driver              # the monitor page tested in a real headless browser
 )
 # `scripts/setup.sh --fuzz` (make fuzz) adds clang with libFuzzer and its sanitizer runtimes.
 if [ "${1:-}" = "--fuzz" ]; then

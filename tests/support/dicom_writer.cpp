@@ -52,6 +52,7 @@ bool write_synthetic_slice(const std::filesystem::path& file, const SyntheticSli
   put_string(0x0008, 0x0060, gdcm::VR::CS, s.modality);
   put_string(0x0020, 0x000D, gdcm::VR::UI, "1.2.826.0.1.3680043.2.1125.9");
   put_string(0x0020, 0x000E, gdcm::VR::UI, s.series_uid);
+  if (!s.frame_of_reference_uid.empty()) put_string(0x0020, 0x0052, gdcm::VR::UI, s.frame_of_reference_uid);
   put_string(0x0020, 0x0032, gdcm::VR::DS,
              decimals({s.position_mm.x(), s.position_mm.y(), s.position_mm.z()}));
   put_string(0x0020, 0x0037, gdcm::VR::DS,

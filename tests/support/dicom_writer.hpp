@@ -13,6 +13,7 @@ namespace lftrack::test {
 
 struct SyntheticSlice {
   std::string series_uid = "1.2.826.0.1.3680043.2.1125.1";
+  std::string frame_of_reference_uid = "1.2.826.0.1.3680043.2.1125.5";  // empty: none written
   std::string modality = "CT";
   int rows = 8;
   int cols = 6;

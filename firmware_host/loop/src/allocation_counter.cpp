@@ -9,7 +9,7 @@ namespace {
 std::atomic<std::uint64_t> g_allocations{0};
 
 void* counted_allocation(std::size_t n, std::size_t alignment) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (lftrack::host::this_thread_allocations_counted()) g_allocations.fetch_add(1, std::memory_order_relaxed);
   if (n == 0) n = 1;
   void* p = nullptr;
   if (alignment <= alignof(std::max_align_t)) {

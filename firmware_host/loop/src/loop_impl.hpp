@@ -156,6 +156,8 @@ struct TrackingLoop::Impl {
   // Now on the loop's clock: the real one, or (simulated) the cycle's start plus the real time
   // spent in the cycle so far.
   std::int64_t now_ns(std::int64_t cycle_start_ns) const;
+  // The cycle's record, and its images when due, to the watchers' feed (parts.feed).
+  void publish_to_feed(const JournalRecord& record);
   void write_status_line(std::int64_t index, const JournalRecord& r) const;
   void finish_summary(std::int64_t aligned_at, std::uint64_t allocations_at_warmup,
                       std::uint64_t allocations_at_end);

@@ -56,6 +56,12 @@ const char* to_string(OperatorRefusal r) {
       return "the HOLD has been shown for less than a second";
     case OperatorRefusal::kKeyHeld:
       return "key held down (press it again)";
+    case OperatorRefusal::kBadToken:
+      return "no operator token, or a wrong one";
+    case OperatorRefusal::kReplayed:
+      return "replayed or stale request";
+    case OperatorRefusal::kOrigin:
+      return "from another origin or host";
   }
   return "?";
 }

@@ -78,6 +78,8 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
     impl->frame_views.push_back(impl->line_integral[v].view());
     impl->mask_views.push_back(impl->valid[v].view());
   }
+  if (parts.feed != nullptr)
+    LFTRACK_RETURN_IF_ERROR(parts.feed->allocate(impl->pair, parts.geometry.roi_windows).with_context("cycle feed"));
   impl->result.view_similarity.reserve(views);
   impl->summary.transitions.reserve(256);
   return std::unique_ptr<TrackingLoop>(new TrackingLoop(std::move(impl)));
@@ -107,6 +109,15 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   gather_statistics(*record, c);
   ++cycles_in_state;
   return true;
+}
+
+void TrackingLoop::Impl::publish_to_feed(const JournalRecord& record) {
+  CycleFeed& feed = *parts.feed;
+  const CycleState& c = cycle_state;
+  feed.publish_record(record, c.registered);
+  if (!c.frames_usable || !feed.images_due(c.start_ns)) return;
+  const tracking::Pose& shown = c.registered ? result.T_room_from_ct : have_registration ? last_registered : nominal;
+  feed.publish_images(c.index, c.start_ns, c.registered, shown, pair, line_integral, valid);
 }
 
 void TrackingLoop::Impl::hold_actuator(std::int64_t deadline_ns) {
@@ -217,6 +228,7 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     record.overrun = next.overrun ? 1 : 0;
     record.skipped_periods = static_cast<std::uint32_t>(next.skipped);
     if (m.parts.observer != nullptr) m.parts.observer->on_cycle(record);
+    if (m.parts.feed != nullptr) m.publish_to_feed(record);
     if (m.parts.journal != nullptr) m.parts.journal->append(record);
     if (m.settings.status_line) m.write_status_line(index, record);
     if (!go_on) break;

@@ -7,6 +7,8 @@
 #include <cmath>
 #include <string>
 
+#include <unistd.h>
+
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
@@ -75,6 +77,13 @@ struct LoopSession::Parts {
   std::unique_ptr<CalibratedCouch> calibrated_couch;  // the couch through its calibration
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;
+  // The watchers, in the order they depend on each other (destroyed in reverse: the servers,
+  // then the hub that feeds them, then what the hub reads).
+  std::unique_ptr<CycleFeed> feed;
+  std::unique_ptr<PageOperator> page_operator;
+  std::unique_ptr<CycleHub> hub;
+  std::unique_ptr<MonitorServer> monitor;
+  std::unique_ptr<IgtlServer> igtl;
   OperatorInputs operators;
   std::unique_ptr<TrackingLoop> loop;
 };
@@ -296,10 +305,56 @@ Status check_distinct_paths(const LoopSessionOptions& o) {
   return {};
 }
 
+// The monitor page and the OpenIGTLink server, when asked for, on a hub fed by the loop.
+Status start_watchers(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts) {
+  if (!o.monitor && !o.igtl) return {};
+  parts->feed = std::make_unique<CycleFeed>();
+  HubOptions h;
+  h.scene = p.scene.name;
+  h.period_ms = p.scene.loop.period_ms;
+  for (const DetectorSpec& d : p.scene.detectors) h.views.push_back(d.view);
+  h.roi_windows = p.roi_windows;
+  h.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
+  h.registration_origin_room_mm = p.registration_origin_room_mm();
+  h.renderer = parts->registration_renderer;
+  auto hub = CycleHub::start(parts->feed.get(), h);
+  if (!hub.ok()) return hub.status();
+  parts->hub = std::move(hub).value();
+  if (o.monitor) {
+    parts->page_operator = std::make_unique<PageOperator>();
+    auto monitor = MonitorServer::start(parts->hub.get(), parts->page_operator.get(), *o.monitor);
+    if (!monitor.ok()) return monitor.status();
+    parts->monitor = std::move(monitor).value();
+    parts->operators.add(std::make_unique<BorrowedOperator>(parts->page_operator.get()));
+  }
+  if (o.igtl) {
+    auto igtl = IgtlServer::start(parts->hub.get(), *o.igtl);
+    if (!igtl.ok()) return igtl.status();
+    parts->igtl = std::move(igtl).value();
+  }
+  return {};
+}
+
 }  // namespace
+
+// A watcher's port that is taken now is refused before minutes of preparation (a later bind
+// can still fail; the server says so then).
+static Status check_watcher_ports(const LoopSessionOptions& o) {
+  if (o.monitor && o.igtl && o.monitor->listen.port != 0 && o.monitor->listen.port == o.igtl->listen.port)
+    return invalid_argument("--monitor and --igtl name the same port " + std::to_string(o.igtl->listen.port));
+  for (const ListenAddress* at : {o.monitor ? &o.monitor->listen : nullptr, o.igtl ? &o.igtl->listen : nullptr}) {
+    if (at == nullptr || at->port == 0) continue;
+    int port = 0;
+    auto fd = open_listening_socket(*at, &port);
+    if (!fd.ok()) return fd.status().with_context(o.monitor && at == &o.monitor->listen ? "--monitor" : "--igtl");
+    ::close(*fd);
+  }
+  return {};
+}
 
 Status check_session_options(const LoopSessionOptions& o) {
   if (o.auto_resume_s) LFTRACK_RETURN_IF_ERROR(check_auto_resume_s(*o.auto_resume_s));
+  LFTRACK_RETURN_IF_ERROR(check_watcher_ports(o));
   LFTRACK_RETURN_IF_ERROR(check_distinct_paths(o));
   if (!o.control_socket.empty()) LFTRACK_RETURN_IF_ERROR(ControlSocket::check_path(o.control_socket));
   if (!o.journal.empty() && !o.journal_options.add_suffix)
@@ -355,6 +410,8 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
     if (!socket.ok()) return socket.status();
     parts->operators.add(std::move(socket).value());
   }
+  // The watchers next, also before the records: a port in use is refused with no journal made.
+  LFTRACK_RETURN_IF_ERROR(start_watchers(p, o, parts.get()));
   if (!o.archive.empty()) {
     FrameArchiveOptions archive_options;
     archive_options.with_actuator = moves_patient;
@@ -408,6 +465,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   lp.truth = parts->truth.get();  // null when replaying
   lp.allocation_count = o.allocation_count;
   lp.observer = o.hooks.observer;
+  lp.feed = parts->feed.get();
   LoopSettings settings;
   settings.loop = p.scene.loop;
   settings.limits = p.scene.safety;
@@ -468,6 +526,15 @@ const drivers::CanRobot* LoopSession::can_robot() const {
 }
 sim::VirtualRobot* LoopSession::virtual_robot() {
   return parts_->robot.get();
+}
+const MonitorServer* LoopSession::monitor() const {
+  return parts_->monitor.get();
+}
+const IgtlServer* LoopSession::igtl() const {
+  return parts_->igtl.get();
+}
+const CycleHub* LoopSession::hub() const {
+  return parts_->hub.get();
 }
 
 }  // namespace lftrack::host

@@ -10,6 +10,7 @@
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/loop/cycle_feed.hpp"
 #include "lftrack/loop/frame_archive.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/loop_spec.hpp"
@@ -76,6 +77,9 @@ struct LoopParts {
   const tracking::DrrRenderer* check_renderer = nullptr;
   std::uint64_t (*allocation_count)() = nullptr;
   CycleObserver* observer = nullptr;
+  // Watchers on other threads (the monitor page, OpenIGTLink): every record and, when due, the
+  // images; sized by create(), published after each cycle, never waited for.
+  CycleFeed* feed = nullptr;
 };
 
 struct LoopSettings {

@@ -49,6 +49,10 @@ enum class OperatorRefusal : std::uint8_t {
   kBeforeHold,     // typed or sent before the loop entered this HOLD or FAULT
   kTooSoon,        // the HOLD has been shown for less than kMinHoldBeforeResumeS
   kKeyHeld,        // a key held down or repeating (a fresh press counts)
+  // The monitor page's actions (watch/page_operator.hpp), judged before the loop sees them:
+  kBadToken,  // no operator token, or the wrong one
+  kReplayed,  // a request already used, or too old (its single-use nonce)
+  kOrigin,    // from a page of another origin, or for another host
 };
 
 // How long a HOLD or FAULT must have been shown before a resume or reset counts (seconds on the

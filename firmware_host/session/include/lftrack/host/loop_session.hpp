@@ -31,6 +31,8 @@
 #include "lftrack/loop/tracking_loop.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/virtual_robot.hpp"
+#include "lftrack/watch/igtl_server.hpp"
+#include "lftrack/watch/monitor_server.hpp"
 
 namespace lftrack::tracking {
 class ThreadPool;
@@ -76,6 +78,10 @@ struct LoopSessionOptions {
   SessionDevices devices = SessionDevices::kSimulated;
   std::uint64_t (*allocation_count)() = nullptr;
   SessionHooks hooks;
+  // Watchers of the loop (watch/), fed through a CycleFeed the loop never waits for: the
+  // operator's monitor page (its actions join the operator inputs) and the OpenIGTLink server.
+  std::optional<MonitorOptions> monitor;
+  std::optional<IgtlOptions> igtl;
 };
 
 // The room's geometry as the loop sees it: the scene's detectors, ROI windows, nominal pose and
@@ -112,6 +118,9 @@ class LoopSession {
   sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
   const drivers::CanRobot* can_robot() const;        // the CAN robot driver (HIL or run); null otherwise
   sim::VirtualRobot* virtual_robot();                // HIL: for fault injection
+  const MonitorServer* monitor() const;              // null without --monitor
+  const IgtlServer* igtl() const;                    // null without --igtl
+  const CycleHub* hub() const;                       // null without watchers
 
   struct Parts;  // defined in loop_session.cpp
 

@@ -1,0 +1,28 @@
+#pragma once
+// Where a watcher's server listens: "[ADDRESS:]PORT" on the command line (--monitor, --igtl).
+// ADDRESS is an IPv4 address in dotted decimal or "localhost"; without one, 127.0.0.1 (loopback:
+// nothing outside this host reaches the server unless the operator names an address). PORT is 0
+// (any free port, said at start) to 65535.
+
+#include <cstdint>
+#include <string>
+
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::host {
+
+struct ListenAddress {
+  std::string address = "127.0.0.1";  // dotted IPv4
+  int port = 0;
+  bool loopback() const;     // 127.0.0.0/8
+  bool wildcard() const;     // 0.0.0.0: every interface
+  std::string text() const;  // "ADDRESS:PORT"
+};
+
+Result<ListenAddress> parse_listen_address(const std::string& text);
+
+// Opens a TCP socket listening on `where` (SO_REUSEADDR, close-on-exec, non-blocking) and says
+// which port it took (`where.port` 0: the kernel's choice). The caller closes the descriptor.
+Result<int> open_listening_socket(const ListenAddress& where, int* port);
+
+}  // namespace lftrack::host

@@ -1,0 +1,102 @@
+#include "monitor_json.hpp"
+
+#include <openssl/evp.h>
+
+#include "lftrack/loop/operator_input.hpp"
+#include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/tracking/pose.hpp"
+
+namespace lftrack::host {
+namespace {
+
+std::string base64(const std::vector<std::uint8_t>& bytes) {
+  std::string out(4 * ((bytes.size() + 2) / 3) + 1, '\0');
+  const int n = EVP_EncodeBlock(reinterpret_cast<unsigned char*>(out.data()), bytes.data(), static_cast<int>(bytes.size()));
+  out.resize(std::size_t(std::max(0, n)));
+  return out;
+}
+
+nlohmann::json grey_json(const GreyImage& image) {
+  return {{"rows", image.rows}, {"cols", image.cols}, {"pixels", base64(image.pixels)}};
+}
+
+// (mm, mm, mm, deg, deg, deg) of a journal 6-vector (mm, rad).
+nlohmann::json mm_deg(const double v[6]) {
+  return nlohmann::json::array({v[0], v[1], v[2], tracking::rad_to_deg(v[3]), tracking::rad_to_deg(v[4]),
+                                tracking::rad_to_deg(v[5])});
+}
+
+// Why the loop is in its state: the reason of the transition into it ("" before any).
+std::string state_reason(const HubStatus& s) {
+  const auto state = static_cast<TrackingState>(s.last.record.state);
+  for (auto t = s.transitions.rbegin(); t != s.transitions.rend(); ++t)
+    if (t->to == state) return t->reason;
+  return "";
+}
+
+}  // namespace
+
+nlohmann::json state_json(const HubStatus& s, const HubOptions& options) {
+  const JournalRecord& r = s.last.record;
+  nlohmann::json views = nlohmann::json::array();
+  for (const auto& v : options.views) views.push_back(v.name);
+  nlohmann::json j = {{"scene", options.scene}, {"period_ms", options.period_ms}, {"views", views},
+                      {"started", s.started}, {"seq", s.seq}, {"images_seq", s.images_seq}};
+  if (!s.started) return j;
+  nlohmann::json transitions = nlohmann::json::array();
+  for (const HubTransition& t : s.transitions)
+    transitions.push_back({{"cycle", t.cycle}, {"from", to_string(t.from)}, {"to", to_string(t.to)},
+                           {"reason", t.reason}, {"hold_id", t.hold_id}});
+  nlohmann::json similarity = nlohmann::json::array();
+  for (std::size_t v = 0; v < options.views.size(); ++v) similarity.push_back(r.similarity[v]);
+  j.update({{"cycle", r.cycle},
+            {"state", to_string(static_cast<TrackingState>(r.state))},
+            {"hold_id", r.hold_id},
+            {"state_reason", state_reason(s)},
+            {"beam_permit", r.beam_permit != 0},
+            {"gate", {{"decision", to_string(static_cast<GateDecision>(r.gate_decision))},
+                      {"reason", to_string(static_cast<GateReason>(r.gate_reason))}}},
+            {"registered", s.last.registered},
+            {"offset_mm_deg", mm_deg(r.pose_delta)},
+            {"command_sent", r.command_sent != 0},
+            {"correction_mm_deg", mm_deg(r.command)},
+            {"similarity", similarity},
+            {"registration_ms", r.registration_ms},
+            {"true_residual_mm", r.true_residual_mm},
+            {"operator", {{"refused", r.operator_refused},
+                          {"last_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))}}},
+            {"counts", {{"cycles", s.counts.cycles},
+                        {"holds", s.counts.holds},
+                        {"faults", s.counts.faults},
+                        {"overruns", s.counts.overruns},
+                        {"skipped_periods", s.counts.skipped_periods},
+                        {"commands", s.counts.commands},
+                        {"operator_refused", s.counts.operator_refused},
+                        {"records_dropped", s.counts.records_dropped}}},
+            {"transitions", transitions}});
+  return j;
+}
+
+nlohmann::json trace_json(const std::vector<TracePoint>& points) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const TracePoint& p : points)
+    rows.push_back({p.cycle, p.registered ? 1 : 0, p.offset[0], p.offset[1], p.offset[2], p.offset[3], p.offset[4],
+                    p.offset[5], p.true_residual_mm, p.similarity[0], p.similarity[1], p.registration_ms, p.state,
+                    p.command_sent ? 1 : 0});
+  return rows;
+}
+
+nlohmann::json images_json(const DisplayImages& images) {
+  nlohmann::json views = nlohmann::json::array();
+  for (const DisplayView& v : images.views)
+    views.push_back({{"name", v.name},
+                     {"bin", v.bin},
+                     {"roi", grey_json(v.roi)},
+                     {"drr", grey_json(v.drr)},
+                     {"thumbnail", grey_json(v.thumbnail)},
+                     {"roi_in_thumbnail", v.roi_in_thumbnail}});
+  return {{"seq", images.seq}, {"cycle", images.cycle}, {"registered", images.registered},
+          {"render_ms", images.render_ms}, {"views", views}};
+}
+
+}  // namespace lftrack::host

@@ -1,0 +1,226 @@
+// The OpenIGTLink server (igtl_server.hpp) against the library's own client (igtl::ClientSocket
+// and its message classes, as 3D Slicer's OpenIGTLinkIF uses them): transforms and state changes
+// per cycle, in RAS, and a stalled client that is dropped while another keeps receiving.
+
+#include "lftrack/watch/igtl_server.hpp"
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <igtlClientSocket.h>
+#include <igtlMessageHeader.h>
+#include <igtlStatusMessage.h>
+#include <igtlTransformMessage.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cstring>
+
+#include "watch_fixture.hpp"
+
+namespace lftrack::host {
+namespace {
+
+using test_watch::HubOnFeed;
+using test_watch::record;
+
+struct Message {
+  std::string type, device;
+  Eigen::Matrix4d matrix = Eigen::Matrix4d::Zero();
+  int code = 0;
+  std::int64_t subcode = 0;
+  std::string error_name, status;
+};
+
+class IgtlClient {
+ public:
+  explicit IgtlClient(int port) : socket_(igtl::ClientSocket::New()) {
+    connected_ = socket_->ConnectToServer("127.0.0.1", port) == 0;
+    if (connected_) socket_->SetReceiveTimeout(200);
+  }
+  bool connected() const { return connected_; }
+  // The next message, or nothing within `wait`.
+  std::optional<Message> next(std::chrono::milliseconds wait = std::chrono::milliseconds(3000)) {
+    const auto deadline = std::chrono::steady_clock::now() + wait;
+    igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
+    header->InitPack();
+    if (!read(header->GetPackPointer(), header->GetPackSize(), deadline)) return std::nullopt;
+    header->Unpack();
+    Message m;
+    m.type = header->GetDeviceType();
+    m.device = header->GetDeviceName();
+    if (m.type == "TRANSFORM") {
+      igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
+      t->SetMessageHeader(header);
+      t->AllocatePack();
+      if (!read(t->GetPackBodyPointer(), t->GetPackBodySize(), deadline)) return std::nullopt;
+      EXPECT_TRUE(t->Unpack(1) & igtl::MessageHeader::UNPACK_BODY) << "CRC";
+      igtl::Matrix4x4 matrix;
+      t->GetMatrix(matrix);
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) m.matrix(r, c) = matrix[r][c];
+    } else if (m.type == "STATUS") {
+      igtl::StatusMessage::Pointer s = igtl::StatusMessage::New();
+      s->SetMessageHeader(header);
+      s->AllocatePack();
+      if (!read(s->GetPackBodyPointer(), s->GetPackBodySize(), deadline)) return std::nullopt;
+      EXPECT_TRUE(s->Unpack(1) & igtl::MessageHeader::UNPACK_BODY) << "CRC";
+      m.code = s->GetCode();
+      m.subcode = s->GetSubCode();
+      m.error_name = s->GetErrorName();
+      m.status = s->GetStatusString();
+    } else {
+      ADD_FAILURE() << "unexpected message type " << m.type;
+    }
+    return m;
+  }
+
+ private:
+  bool read(void* data, int length, std::chrono::steady_clock::time_point deadline) {
+    int got = 0;
+    while (got < length) {
+      const int n = socket_->Receive(static_cast<char*>(data) + got, length - got, 0);
+      if (n > 0) got += n;
+      if (n == 0 || std::chrono::steady_clock::now() > deadline) return false;
+    }
+    return true;
+  }
+  igtl::ClientSocket::Pointer socket_;
+  bool connected_ = false;
+};
+
+bool wait_until(const std::function<bool()>& condition) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+  while (!condition()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return true;
+}
+
+TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
+  HubOnFeed h;
+  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8});
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  IgtlClient client((*server)->port());
+  ASSERT_TRUE(client.connected());
+  ASSERT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 1; }));
+  h.publish(record(10, TrackingState::kTrack, TrackingState::kTrack, 1.5, true));
+  h.publish(record(11, TrackingState::kTrack, TrackingState::kHold, 9.0, false, 123456));
+  FeedRecord unregistered = record(12, TrackingState::kHold, TrackingState::kHold, 0, false, 123456);
+  unregistered.registered = false;
+  h.publish(unregistered);
+  h.publish(record(13, TrackingState::kHold, TrackingState::kTrack, 0.2, true));
+  const Eigen::Vector3d origin(1, 2, 3);
+  auto expected_pose = [&](double tx) {
+    tracking::Vector6d d = tracking::Vector6d::Zero();
+    d(0) = tx;
+    d(5) = 0.5 * 3.14159265358979 / 180;
+    return ras_from_lps(tracking::apply_delta(tracking::Pose::Identity(), tracking::PoseDelta::from_vector(d), origin).matrix());
+  };
+  auto expected_correction = [&](double ty) {
+    tracking::Vector6d d = tracking::Vector6d::Zero();
+    d(1) = ty;
+    return ras_from_lps(tracking::apply_delta(tracking::Pose::Identity(), tracking::PoseDelta::from_vector(d), origin).matrix());
+  };
+  // Cycle 10: pose and correction; 11: pose and the HOLD; 12: nothing (no registration, no
+  // change); 13: pose, correction and TRACK.
+  const std::vector<std::pair<std::string, std::string>> order = {
+      {"TRANSFORM", "T_room_from_ct"}, {"TRANSFORM", "Correction"},     {"TRANSFORM", "T_room_from_ct"},
+      {"STATUS", "lftrack"},           {"TRANSFORM", "T_room_from_ct"}, {"TRANSFORM", "Correction"},
+      {"STATUS", "lftrack"}};
+  std::vector<Message> got;
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    auto m = client.next();
+    ASSERT_TRUE(m) << "message " << i;
+    EXPECT_EQ(m->type, order[i].first) << i;
+    EXPECT_EQ(m->device, order[i].second) << i;
+    got.push_back(*m);
+  }
+  EXPECT_LT((got[0].matrix - expected_pose(1.5)).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_LT((got[1].matrix - expected_correction(-1.5)).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_LT((got[2].matrix - expected_pose(9.0)).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_EQ(got[3].code, igtl::StatusMessage::STATUS_DISABLED);
+  EXPECT_EQ(got[3].error_name, "HOLD");
+  EXPECT_EQ(got[3].subcode, 11);
+  EXPECT_NE(got[3].status.find("gate"), std::string::npos) << got[3].status;
+  EXPECT_EQ(got[6].code, igtl::StatusMessage::STATUS_OK);
+  EXPECT_EQ(got[6].error_name, "TRACK");
+  EXPECT_FALSE(client.next(std::chrono::milliseconds(300))) << "nothing more";
+  // A client that connects now is told the state at once.
+  IgtlClient late((*server)->port());
+  ASSERT_TRUE(late.connected());
+  auto first = late.next();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->type, "STATUS");
+  EXPECT_EQ(first->error_name, "TRACK");
+}
+
+TEST(IgtlServer, RasIsXAndYNegatedOnBothSides) {
+  tracking::Pose T = tracking::Pose::Identity();
+  T.translation() << 10, 20, 30;
+  const Eigen::Matrix4d ras = ras_from_lps(T.matrix());
+  EXPECT_EQ(ras(0, 3), -10);
+  EXPECT_EQ(ras(1, 3), -20);
+  EXPECT_EQ(ras(2, 3), 30);
+  EXPECT_TRUE((ras.topLeftCorner<3, 3>().isIdentity()));
+}
+
+TEST(IgtlServer, AStalledClientIsDroppedAndAnotherKeepsReceiving) {
+  HubOnFeed h;
+  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8});
+  ASSERT_TRUE(server.ok());
+  // A client that connects and never reads, with a small receive buffer.
+  const int stalled = ::socket(AF_INET, SOCK_STREAM, 0);
+  const int small = 1024;
+  ::setsockopt(stalled, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<std::uint16_t>((*server)->port()));
+  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+  ASSERT_EQ(::connect(stalled, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  IgtlClient reader((*server)->port());
+  ASSERT_TRUE(reader.connected());
+  ASSERT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 2; }));
+  std::atomic<int> transforms{0};
+  std::atomic<bool> stop{false};
+  std::thread reading([&] {
+    while (!stop)
+      if (auto m = reader.next(std::chrono::milliseconds(500)); m && m->type == "TRANSFORM") ++transforms;
+  });
+  // 30,000 cycles (about 6 MB to each client): far more than the stalled client's buffers hold.
+  constexpr int kCycles = 30000;
+  for (int c = 0; c < kCycles; ++c) {
+    h.feed.publish_record(record(std::uint64_t(c), TrackingState::kTrack, TrackingState::kTrack, 0.1, true).record,
+                          true);
+    if (c % 40 == 39) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 1; })) << "the stalled client was dropped";
+  // Every cycle reached the reader but those the server itself fell behind on (published here far
+  // faster than a loop runs, beyond the hub's history), which it counts.
+  EXPECT_TRUE(wait_until([&] {
+    return transforms.load() == 2 * (kCycles - static_cast<int>((*server)->counters().records_skipped));
+  })) << "the reader got " << transforms.load() << " transforms; skipped " << (*server)->counters().records_skipped;
+  EXPECT_GT(transforms.load(), kCycles / 10);
+  stop = true;
+  reading.join();
+  ::close(stalled);
+}
+
+TEST(IgtlServer, ManyClientsAreBoundedAndADisconnectIsNoticed) {
+  HubOnFeed h;
+  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 2});
+  ASSERT_TRUE(server.ok());
+  {
+    IgtlClient a((*server)->port()), b((*server)->port()), c((*server)->port());
+    ASSERT_TRUE(wait_until([&] { return (*server)->counters().clients_total == 3; }));
+    EXPECT_EQ((*server)->counters().clients_now, 2) << "a third beyond max_clients is closed";
+  }
+  EXPECT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 0; })) << "disconnects are noticed";
+  EXPECT_FALSE(IgtlServer::start(h.hub.get(), {{"127.0.0.1", (*server)->port()}, 2}).ok()) << "port taken";
+  EXPECT_FALSE(IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 0}).ok());
+  EXPECT_FALSE(IgtlServer::start(nullptr, {{"127.0.0.1", 0}, 2}).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::host

@@ -1,0 +1,259 @@
+// The monitor page's server on loopback (monitor_server.hpp), spoken to with cpp-httplib's client:
+// the page and its headers, the state, hosts and origins, the operator's token and nonces with
+// each refusal journaled, and server-sent events to many clients with a stalled one among them.
+
+#include "lftrack/watch/monitor_server.hpp"
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <httplib.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "test_data.hpp"
+#include "watch_fixture.hpp"
+
+namespace lftrack::host {
+namespace {
+
+using test_watch::HubOnFeed;
+using test_watch::PollingLoop;
+using test_watch::record;
+
+struct Served {
+  test::TempDir dir;
+  HubOnFeed hub;
+  PageOperator page;
+  std::unique_ptr<MonitorServer> server;
+  explicit Served(int max_event_clients = 16) {
+    MonitorOptions o;
+    o.listen = {"127.0.0.1", 0};
+    o.token_dir = dir.path();
+    o.max_event_clients = max_event_clients;
+    auto s = MonitorServer::start(hub.hub.get(), &page, o);
+    EXPECT_TRUE(s.ok()) << s.status().message();
+    server = std::move(s).value();
+  }
+  httplib::Client client() const {
+    httplib::Client c("127.0.0.1", server->port());
+    c.set_read_timeout(5, 0);
+    return c;
+  }
+  std::string nonce() const {
+    auto res = client().Get("/api/nonce");
+    EXPECT_TRUE(res && res->status == 200);
+    return res ? nlohmann::json::parse(res->body).value("nonce", "") : "";
+  }
+  // POSTs an action; the status and the JSON answer.
+  std::pair<int, nlohmann::json> act(const std::string& action, const nlohmann::json& body,
+                                     const std::string& token, const std::string& origin = "") const {
+    httplib::Headers headers;
+    if (!token.empty()) headers.emplace("Authorization", "Bearer " + token);
+    if (!origin.empty()) headers.emplace("Origin", origin);
+    auto res = client().Post(("/api/" + action).c_str(), headers, body.dump(), "application/json");
+    if (!res) return {0, {}};
+    return {res->status, nlohmann::json::parse(res->body, nullptr, false)};
+  }
+};
+
+TEST(MonitorServer, ServesThePageAndTheStateOnlyForItsOwnHost) {
+  Served s;
+  s.hub.publish(record(41, TrackingState::kTrack, TrackingState::kHold, 8.0, false, 123456));
+  auto page = s.client().Get("/");
+  ASSERT_TRUE(page);
+  EXPECT_EQ(page->status, 200);
+  EXPECT_NE(page->body.find("lftrack monitor"), std::string::npos);
+  EXPECT_EQ(page->get_header_value("X-Frame-Options"), "DENY") << "no page may frame the resume button";
+  EXPECT_NE(page->get_header_value("Content-Security-Policy").find("frame-ancestors 'none'"), std::string::npos);
+  for (const char* asset : {"/monitor.js", "/monitor.css"}) {
+    auto res = s.client().Get(asset);
+    ASSERT_TRUE(res) << asset;
+    EXPECT_EQ(res->status, 200) << asset;
+    EXPECT_GT(res->body.size(), 500u) << asset;
+  }
+  auto state = s.client().Get("/api/state");
+  ASSERT_TRUE(state);
+  ASSERT_EQ(state->status, 200);
+  const auto j = nlohmann::json::parse(state->body);
+  EXPECT_EQ(j["cycle"], 41);
+  EXPECT_EQ(j["state"], "HOLD");
+  EXPECT_EQ(j["hold_id"], 123456);
+  EXPECT_EQ(j["gate"]["reason"], to_string(GateReason::kStepTooLarge));
+  EXPECT_NEAR(j["offset_mm_deg"][0].get<double>(), 8.0, 1e-9);
+  EXPECT_NEAR(j["offset_mm_deg"][5].get<double>(), 0.5, 1e-6);
+  EXPECT_EQ(j["counts"]["holds"], 1);
+  EXPECT_EQ(j["transitions"].size(), 1u);
+  EXPECT_EQ(s.client().Get("/nothing")->status, 404);
+  // Another host name (a page elsewhere resolving its name to this host) is answered nothing.
+  auto rebound = s.client().Get("/api/state", {{"Host", "attacker.example:" + std::to_string(s.server->port())}});
+  ASSERT_TRUE(rebound);
+  EXPECT_EQ(rebound->status, 403);
+  EXPECT_EQ(s.client().Get("/api/state", {{"Host", "localhost:" + std::to_string(s.server->port())}})->status, 200);
+  // The token's file: this user's only.
+  struct stat st {};
+  ASSERT_EQ(::stat(s.server->token_file().c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+  std::ifstream in(s.server->token_file());
+  std::string token;
+  std::getline(in, token);
+  EXPECT_EQ(token, s.server->token());
+}
+
+TEST(MonitorServer, ActionsNeedTheTokenAFreshNonceAndThePagesOrigin) {
+  Served s;
+  OperatorView hold;
+  hold.state = TrackingState::kHold;
+  hold.hold_id = 123456;
+  hold.hold_age_s = 5;
+  PollingLoop loop(&s.page, hold);
+  const std::string token = s.server->token();
+  const std::string own = "http://127.0.0.1:" + std::to_string(s.server->port());
+  // View only: no token, or a wrong one.
+  auto none = s.act("resume", {{"nonce", s.nonce()}, {"hold_id", 123456}}, "");
+  EXPECT_EQ(none.first, 401);
+  EXPECT_EQ(none.second["accepted"], false);
+  EXPECT_TRUE(loop.saw(OperatorRefusal::kBadToken)) << "journaled as a refusal";
+  std::string wrong = token;
+  wrong[0] = wrong[0] == 'a' ? 'b' : 'a';
+  EXPECT_EQ(s.act("resume", {{"nonce", s.nonce()}, {"hold_id", 123456}}, wrong).first, 401);
+  EXPECT_EQ(s.act("stop", {{"nonce", s.nonce()}}, token.substr(0, 10)).first, 401);
+  // Another origin, even with the token (a page elsewhere that learnt it).
+  EXPECT_EQ(s.act("resume", {{"nonce", s.nonce()}, {"hold_id", 123456}}, token, "http://evil.example").first, 403);
+  EXPECT_TRUE(loop.saw(OperatorRefusal::kOrigin));
+  // Malformed bodies.
+  for (const nlohmann::json& body : {nlohmann::json{{"hold_id", 123456}}, nlohmann::json{{"nonce", 5}},
+                                     nlohmann::json{{"nonce", s.nonce()}, {"hold_id", -1}},
+                                     nlohmann::json{{"nonce", s.nonce()}, {"hold_id", 1e12}},
+                                     nlohmann::json{{"nonce", s.nonce()}, {"hold_id", "123456"}},
+                                     nlohmann::json{{"nonce", s.nonce()}, {"hold_id", 0}}, nlohmann::json::array()})
+    EXPECT_EQ(s.act("resume", body, token).first, 400) << body.dump();
+  EXPECT_TRUE(loop.saw(OperatorRefusal::kMalformed));
+  // No HOLD named: the loop refuses it for that.
+  auto unnamed = s.act("resume", {{"nonce", s.nonce()}}, token);
+  EXPECT_EQ(unnamed.first, 409);
+  EXPECT_EQ(unnamed.second["reason"], to_string(OperatorRefusal::kNoHoldId));
+  // A nonce never issued.
+  EXPECT_EQ(s.act("resume", {{"nonce", std::string(32, 'a')}, {"hold_id", 123456}}, token).first, 409);
+  EXPECT_TRUE(loop.saw(OperatorRefusal::kReplayed));
+  // Everything right but the HOLD it names: the loop refuses it.
+  auto other_hold = s.act("resume", {{"nonce", s.nonce()}, {"hold_id", 654321}}, token, own);
+  EXPECT_EQ(other_hold.first, 409);
+  EXPECT_EQ(other_hold.second["reason"], to_string(OperatorRefusal::kWrongHold));
+  // Everything right: accepted by the loop; the same request again is a replay.
+  const nlohmann::json body = {{"nonce", s.nonce()}, {"hold_id", 123456}};
+  auto accepted = s.act("resume", body, token, own);
+  EXPECT_EQ(accepted.first, 200);
+  EXPECT_EQ(accepted.second["accepted"], true);
+  auto replayed = s.act("resume", body, token, own);
+  EXPECT_EQ(replayed.first, 409);
+  EXPECT_EQ(s.server->counters().actions_accepted, 1);
+  EXPECT_GE(s.server->counters().requests_refused, 13);
+  // A huge body is refused before anything reads it.
+  auto huge = s.client().Post("/api/stop", {{"Authorization", "Bearer " + token}}, std::string(1 << 20, 'x'),
+                              "application/json");
+  ASSERT_TRUE(huge);
+  EXPECT_NE(huge->status, 200);
+}
+
+TEST(MonitorServer, WithoutALoopAnActionIsAnsweredAndWithdrawn) {
+  Served s;
+  auto answer = s.act("stop", {{"nonce", s.nonce()}}, s.server->token());
+  EXPECT_EQ(answer.first, 504);
+  OperatorPoll poll;
+  s.page.poll(OperatorView{}, &poll);
+  EXPECT_EQ(poll.command, OperatorCommand::kNone) << "a stop nobody answered does not act later";
+}
+
+// Reads an event stream until `done` says so or 5 s pass; the text received.
+std::string read_events(int port, const std::function<bool(const std::string&)>& done) {
+  httplib::Client c("127.0.0.1", port);
+  c.set_read_timeout(5, 0);
+  std::string text;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  c.Get("/api/events", [&](const char* data, std::size_t length) {
+    text.append(data, length);
+    return !done(text) && std::chrono::steady_clock::now() < deadline;
+  });
+  return text;
+}
+
+TEST(MonitorServer, EventsReachTenClientsWhileAStalledOneDelaysNobody) {
+  Served s;
+  // A client that asks for the stream and never reads it.
+  const int stalled = ::socket(AF_INET, SOCK_STREAM, 0);
+  const int small = 1024;
+  ::setsockopt(stalled, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<std::uint16_t>(s.server->port()));
+  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+  ASSERT_EQ(::connect(stalled, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  const std::string request = "GET /api/events HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(s.server->port()) + "\r\n\r\n";
+  ASSERT_EQ(::send(stalled, request.data(), request.size(), 0), ssize_t(request.size()));
+  std::vector<std::thread> clients;
+  std::atomic<int> saw_last{0}, saw_images{0};
+  for (int i = 0; i < 10; ++i)
+    clients.emplace_back([&] {
+      const std::string text = read_events(s.server->port(), [](const std::string& t) {
+        return t.find("\"cycle\":299") != std::string::npos && t.find("event: images") != std::string::npos;
+      });
+      if (text.find("\"cycle\":299") != std::string::npos) ++saw_last;
+      if (text.find("event: images") != std::string::npos) ++saw_images;
+    });
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (s.server->counters().event_clients < 11 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(s.server->counters().event_clients, 11) << "ten readers and the stalled one";
+  for (std::uint64_t c = 0; c < 300; ++c) {
+    s.hub.feed.publish_record(record(c, TrackingState::kTrack, TrackingState::kTrack, 0.01 * double(c), true).record,
+                              true);
+    if (c % 50 == 0) s.hub.publish_images(std::int64_t(c));
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  for (auto& t : clients) t.join();
+  EXPECT_EQ(saw_last.load(), 10) << "every client saw the last cycle";
+  EXPECT_EQ(saw_images.load(), 10);
+  EXPECT_EQ(s.hub.hub->status().counts.records_dropped, 0u) << "the hub kept up with every record";
+  ::close(stalled);
+}
+
+TEST(MonitorServer, EventStreamsAreLimited) {
+  Served s(2);
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> open;
+  for (int i = 0; i < 2; ++i)
+    open.emplace_back([&] { read_events(s.server->port(), [&](const std::string&) { return stop.load(); }); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  auto third = s.client().Get("/api/events");
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->status, 503);
+  stop = true;
+  s.hub.publish(record(1, TrackingState::kTrack, TrackingState::kTrack, 0, false));  // wakes the streams
+  for (auto& t : open) t.join();
+}
+
+TEST(MonitorServer, RefusesBadSettingsAndABusyPort) {
+  Served s;
+  MonitorOptions o;
+  o.token_dir = s.dir.path();
+  o.listen = {"127.0.0.1", s.server->port()};
+  EXPECT_FALSE(MonitorServer::start(s.hub.hub.get(), &s.page, o).ok()) << "the port is taken";
+  o.listen.port = 0;
+  for (double rate : {0.0, -1.0, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), 1e12}) {
+    MonitorOptions bad = o;
+    bad.event_rate_hz = rate;
+    EXPECT_FALSE(MonitorServer::start(s.hub.hub.get(), &s.page, bad).ok()) << rate;
+  }
+  MonitorOptions origin = o;
+  origin.extra_origins = {"javascript:alert(1)"};
+  EXPECT_FALSE(MonitorServer::start(s.hub.hub.get(), &s.page, origin).ok());
+  EXPECT_FALSE(MonitorServer::start(nullptr, &s.page, o).ok());
+}
+
+}  // namespace
+}  // namespace lftrack::host
