@@ -42,6 +42,13 @@ struct StudyPhysics {
 };
 Result<StudyPhysics> study_physics(const std::string& option, const PreparedScene* scene);
 
+// A sharded study's light fields (capture-range and realism): `build` (a job array's field job)
+// loads or builds them into `lf_dir` and says so; `prebuilt` (a shard task) refuses to build
+// them, naming the field job's command. True when the command's work is done (the field job).
+// Renderers other than the light field need no fields: nothing to do.
+Result<bool> study_light_fields(const PreparedScene& scene, const std::string& study, const std::string& renderer,
+                                const std::string& lf_dir, bool build, bool prebuilt, tracking::ThreadPool* pool);
+
 // The tables a study prints when it is whole (its own command, or `study merge`).
 void print_trade_front(const TradeStudy& study);
 void print_realism_table(const RealismReport& report);

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/scene_registration.hpp"
 
 namespace lftrack::host::cli {
 
@@ -61,6 +62,25 @@ Result<std::pair<int, int>> parse_shard(const std::string& text) {
   const int k = std::stoi(text.substr(0, slash)), n = std::stoi(text.substr(slash + 1));
   if (n < 1 || k < 1 || k > n || n > 10000) return bad;
   return std::make_pair(k, n);
+}
+
+Result<bool> study_light_fields(const PreparedScene& scene, const std::string& study, const std::string& renderer,
+                                const std::string& lf_dir, bool build, bool prebuilt, tracking::ThreadPool* pool) {
+  if (renderer != "lightfield") return build;  // nothing to build or map
+  if (build) {
+    auto built = make_scene_renderer(scene, renderer, lf_dir, pool);
+    if (!built.ok()) return built.status();
+    std::printf("light fields ready in %s\n", lf_dir.c_str());
+    return true;
+  }
+  if (prebuilt) {
+    auto fields = load_light_fields(scene, lf_dir);
+    if (!fields.ok())
+      return failed_precondition("light fields in " + lf_dir + " are not built (" + fields.status().message() +
+                                 "); the study's field job builds them: `lftrack study " + study +
+                                 " --build-fields --lf-dir DIR`");
+  }
+  return false;
 }
 
 }  // namespace lftrack::host::cli

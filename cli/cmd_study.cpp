@@ -6,7 +6,6 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/studies/geometry_sensitivity.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -68,22 +67,11 @@ Status run(const CaptureRangeCliOptions& o) {
   const StudyPhysics physics = *study_physics(o.physics, &*prepared);
   options.physics = physics.physics;
   options.physics_name = physics.name;
-  const bool uses_fields = options.renderer == "lightfield";
-  if (o.build_fields) {  // a job array's first job: load the fields, or build and save them
-    if (!uses_fields) return {};
-    auto renderer = make_scene_renderer(*prepared, options.renderer, options.light_field_dir, &pool);
-    if (!renderer.ok()) return renderer.status();
-    std::printf("light fields ready in %s\n", o.lf_dir.c_str());
-    return {};
-  }
-  if (o.out_dir.empty()) return invalid_argument("--out DIR is required");
-  if (o.fields_prebuilt && uses_fields) {
-    auto fields = load_light_fields(*prepared, options.light_field_dir);
-    if (!fields.ok())
-      return failed_precondition("light fields in " + o.lf_dir + " are not built (" + fields.status().message() +
-                                 "); the study's field job builds them: `lftrack study capture-range " +
-                                 "--build-fields --lf-dir DIR`");
-  }
+  if (!o.build_fields && o.out_dir.empty()) return invalid_argument("--out DIR is required");
+  auto fields_done = study_light_fields(*prepared, "capture-range", options.renderer, options.light_field_dir,
+                                        o.build_fields, o.fields_prebuilt, &pool);
+  if (!fields_done.ok()) return fields_done.status();
+  if (*fields_done) return {};  // the field job
   CaptureRangeReport expected;
   expected.scene = prepared->scene.name;
   expected.fingerprint = study_scene_fingerprint(*prepared);

@@ -7,7 +7,6 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/progress_bar.hpp"
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/studies/realism_study.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -83,21 +82,10 @@ Status run(const RealismCliOptions& o) {
   if (!prepared.ok()) return prepared.status();
   auto expected = expected_realism_shard(*prepared, options);  // refuses unknown --only sets before any work
   if (!expected.ok()) return expected.status();
-  const bool uses_fields = options.renderer == "lightfield";
-  if (o.build_fields) {  // a job array's first job: load the fields, or build and save them
-    if (!uses_fields) return {};
-    auto renderer = make_scene_renderer(*prepared, options.renderer, options.light_field_dir, &pool);
-    if (!renderer.ok()) return renderer.status();
-    std::printf("light fields ready in %s\n", o.lf_dir.c_str());
-    return {};
-  }
-  if (o.fields_prebuilt && uses_fields) {
-    auto fields = load_light_fields(*prepared, options.light_field_dir);
-    if (!fields.ok())
-      return failed_precondition("light fields in " + o.lf_dir + " are not built (" + fields.status().message() +
-                                 "); the study's field job builds them: `lftrack study realism --build-fields "
-                                 "--lf-dir DIR`");
-  }
+  auto fields_done = study_light_fields(*prepared, "realism", options.renderer, options.light_field_dir,
+                                        o.build_fields, o.fields_prebuilt, &pool);
+  if (!fields_done.ok()) return fields_done.status();
+  if (*fields_done) return {};  // the field job
   auto run_study = [&]() -> Status {
     ProgressBar bar("realism");
     auto report = run_realism_study(*prepared, options, &pool, [&](double f) { bar.update(f); });

@@ -132,8 +132,7 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
       r.fingerprint = j.value("fingerprint", "");
       const auto shard = j.at("shard").get<std::int64_t>();
       const auto shards = j.at("shards").get<std::int64_t>();
-      if (shards < 1 || shards > 10000 || shard < 1 || shard > shards)
-        return corrupt_data(file.string() + ": shard k/n out of range");
+      LFTRACK_RETURN_IF_ERROR(check_shard_position(shard, shards, file));
       o.shard = int(shard);
       o.shards = int(shards);
       runs_expected = j.at("runs").get<std::size_t>();

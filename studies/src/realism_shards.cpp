@@ -74,8 +74,7 @@ Result<RealismReport> read_realism_shard(const std::filesystem::path& dir) {
       r.fingerprint = j.at("fingerprint").get<std::string>();
       const auto shard = j.at("shard").get<std::int64_t>();
       const auto shards = j.at("shards").get<std::int64_t>();
-      if (shards < 1 || shards > 10000 || shard < 1 || shard > shards)
-        return corrupt_data(file.string() + ": shard k/n out of range");
+      LFTRACK_RETURN_IF_ERROR(check_shard_position(shard, shards, file));
       o.shard = int(shard);
       o.shards = int(shards);
       const auto& opt = j.at("options");

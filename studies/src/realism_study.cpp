@@ -132,14 +132,24 @@ Result<std::vector<RealismFactor>> selected_realism_factors(const PreparedScene&
   return factors;
 }
 
-Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOptions& o, tracking::ThreadPool* pool,
-                                        const std::function<void(double)>& progress) {
+namespace {
+
+// What a realism report says of its study before any run: the scene, options and methods.
+RealismReport realism_report_of(const PreparedScene& p, const RealismOptions& o) {
   RealismReport report;
   report.scene = p.scene.name;
   report.fingerprint = study_scene_fingerprint(p);
   report.options = o;
   report.image_method = image_method_of(p);
   report.hybrid_method = hybrid_method_of(p);
+  return report;
+}
+
+}  // namespace
+
+Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOptions& o, tracking::ThreadPool* pool,
+                                        const std::function<void(double)>& progress) {
+  RealismReport report = realism_report_of(p, o);
   auto factors = selected_realism_factors(p, o);
   if (!factors.ok()) return factors.status();
   for (std::size_t i = 0; i < factors->size(); ++i) {
@@ -156,12 +166,7 @@ Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOpt
 }
 
 Result<RealismReport> expected_realism_shard(const PreparedScene& p, const RealismOptions& o) {
-  RealismReport report;
-  report.scene = p.scene.name;
-  report.fingerprint = study_scene_fingerprint(p);
-  report.options = o;
-  report.image_method = image_method_of(p);
-  report.hybrid_method = hybrid_method_of(p);
+  RealismReport report = realism_report_of(p, o);
   auto factors = selected_realism_factors(p, o);
   if (!factors.ok()) return factors.status();
   for (const RealismFactor& factor : *factors) {

@@ -215,4 +215,10 @@ std::string study_scene_fingerprint(const PreparedScene& p) {
   return hex;
 }
 
+Status check_shard_position(std::int64_t shard, std::int64_t shards, const std::filesystem::path& file) {
+  if (shards < 1 || shards > 10000 || shard < 1 || shard > shards)
+    return corrupt_data(file.string() + ": shard k/n out of range");
+  return {};
+}
+
 }  // namespace lftrack::host

@@ -21,9 +21,8 @@
 #include "test_data.hpp"
 // After Eigen: httplib.h brings in <resolv.h>, whose _res macro breaks Eigen's headers.
 #include <httplib.h>
-#include <igtlClientSocket.h>
-#include <igtlMessageHeader.h>
-#include <igtlTransformMessage.h>
+
+#include "igtl_test_client.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -264,33 +263,14 @@ TEST(IgtlAcrossProcesses, TheClientsPosesAreTheJournals) {
     std::smatch m;
     if (std::regex_search(*line, m, std::regex(R"(^igtl: OpenIGTLink server on port (\d+))"))) port = std::stoi(m[1]);
   }
-  igtl::ClientSocket::Pointer socket = igtl::ClientSocket::New();
-  ASSERT_EQ(socket->ConnectToServer("127.0.0.1", port), 0);
   std::vector<Eigen::Matrix4d> poses;
-  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < until && poses.size() < 40) {
-    igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
-    header->InitPack();
-    if (socket->Receive(header->GetPackPointer(), header->GetPackSize()) != header->GetPackSize()) break;
-    header->Unpack();
-    if (std::string(header->GetDeviceType()) != "TRANSFORM" || std::string(header->GetDeviceName()) != "T_room_from_ct") {
-      std::vector<char> body(std::size_t(header->GetBodySizeToRead()));  // a STATUS, or the correction
-      if (!body.empty() && socket->Receive(body.data(), int(body.size())) != int(body.size())) break;
-      continue;
-    }
-    igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
-    t->SetMessageHeader(header);
-    t->AllocatePack();
-    if (socket->Receive(t->GetPackBodyPointer(), t->GetPackBodySize()) != t->GetPackBodySize()) break;
-    t->Unpack(1);
-    igtl::Matrix4x4 m;
-    t->GetMatrix(m);
-    Eigen::Matrix4d e;
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) e(r, c) = m[r][c];
-    poses.push_back(e);
+  {
+    test::IgtlClient client(port);
+    ASSERT_TRUE(client.connected());
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (std::chrono::steady_clock::now() < until && poses.size() < 40 && !client.closed())
+      if (auto m = client.next(); m && m->type == "TRANSFORM" && m->device == "T_room_from_ct") poses.push_back(m->matrix);
   }
-  socket->CloseSocket();
   sim.signal(SIGTERM);
   ASSERT_EQ(sim.wait(std::chrono::seconds(30)), 0);
   ASSERT_GT(poses.size(), 20u);

@@ -135,9 +135,18 @@ TEST_P(EveryActuatorKind, TracksBreathingEveryCycle) {
   expect_tracks_every_cycle(r.summary, 60);
   ASSERT_TRUE(r.summary.residual_p95_mm.has_value());
   // The set-up error (about 4 mm) is removed in the first cycles; then the breathing residual.
-  EXPECT_LT(*r.summary.residual_mean_mm, 0.5);
-  for (std::size_t i = 10; i < r.journal.records.size(); ++i)
+  // The mean is over the cycles after the set-up: on the real clock how many cycles the couch
+  // takes to remove 4 mm depends on the host's load (CI once measured a whole-run mean of 0.516;
+  // after the set-up 0.18-0.24 mm on a loaded host; untracked, the breathing alone is about 3 mm).
+  double steady_sum_mm = 0;
+  std::size_t steady_cycles = 0;
+  for (std::size_t i = 10; i < r.journal.records.size(); ++i) {
     EXPECT_LT(r.journal.records[i].true_residual_mm, 1.0) << "cycle " << i;
+    steady_sum_mm += r.journal.records[i].true_residual_mm;
+    ++steady_cycles;
+  }
+  ASSERT_GT(steady_cycles, 0u);
+  EXPECT_LT(steady_sum_mm / double(steady_cycles), 0.4) << "mean residual after the set-up";
 }
 
 TEST_P(EveryActuatorKind, ASuddenShiftHoldsAndMovesNothingAfter) {

@@ -13,9 +13,8 @@
 #include "loop_fixture.hpp"
 // After Eigen: httplib.h brings in <resolv.h>, whose _res macro breaks Eigen's headers.
 #include <httplib.h>
-#include <igtlClientSocket.h>
-#include <igtlMessageHeader.h>
-#include <igtlTransformMessage.h>
+
+#include "igtl_test_client.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -44,40 +43,10 @@ struct IgtlReader {
   explicit IgtlReader(int port) {
     thread = std::thread([this, port] {
       exclude_this_thread_from_allocation_count();  // stands for another process (3D Slicer)
-      igtl::ClientSocket::Pointer socket = igtl::ClientSocket::New();
-      if (socket->ConnectToServer("127.0.0.1", port) != 0) return;
-      socket->SetReceiveTimeout(100);
-      auto read = [&](void* data, int length) {
-        int got = 0;
-        while (got < length) {
-          const int n = socket->Receive(static_cast<char*>(data) + got, length - got, 0);
-          if (n == 0) return false;
-          if (n > 0) got += n;
-          if (n < 0 && stop && got == 0) return false;
-        }
-        return true;
-      };
-      for (;;) {
-        igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
-        header->InitPack();
-        if (!read(header->GetPackPointer(), header->GetPackSize())) return;
-        header->Unpack();
-        if (std::string(header->GetDeviceType()) != "TRANSFORM") {
-          std::vector<char> body(std::size_t(header->GetBodySizeToRead()));
-          if (!body.empty() && !read(body.data(), int(body.size()))) return;
-          continue;
-        }
-        igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
-        t->SetMessageHeader(header);
-        t->AllocatePack();
-        if (!read(t->GetPackBodyPointer(), t->GetPackBodySize())) return;
-        t->Unpack(1);
-        igtl::Matrix4x4 m;
-        t->GetMatrix(m);
-        Eigen::Matrix4d e;
-        for (int r = 0; r < 4; ++r)
-          for (int c = 0; c < 4; ++c) e(r, c) = m[r][c];
-        transforms.emplace_back(t->GetDeviceName(), e);
+      test::IgtlClient client(port);
+      while (client.connected() && !client.closed() && !stop) {
+        auto m = client.next(std::chrono::milliseconds(200));
+        if (m && m->type == "TRANSFORM") transforms.emplace_back(m->device, m->matrix);
       }
     });
   }

@@ -6,16 +6,13 @@
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
-#include <igtlClientSocket.h>
-#include <igtlMessageHeader.h>
-#include <igtlStatusMessage.h>
-#include <igtlTransformMessage.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <cstring>
 
+#include "igtl_test_client.hpp"
 #include "watch_fixture.hpp"
 
 namespace lftrack::host {
@@ -24,70 +21,8 @@ namespace {
 using test_watch::HubOnFeed;
 using test_watch::record;
 
-struct Message {
-  std::string type, device;
-  Eigen::Matrix4d matrix = Eigen::Matrix4d::Zero();
-  int code = 0;
-  std::int64_t subcode = 0;
-  std::string error_name, status;
-};
-
-class IgtlClient {
- public:
-  explicit IgtlClient(int port) : socket_(igtl::ClientSocket::New()) {
-    connected_ = socket_->ConnectToServer("127.0.0.1", port) == 0;
-    if (connected_) socket_->SetReceiveTimeout(200);
-  }
-  bool connected() const { return connected_; }
-  // The next message, or nothing within `wait`.
-  std::optional<Message> next(std::chrono::milliseconds wait = std::chrono::milliseconds(3000)) {
-    const auto deadline = std::chrono::steady_clock::now() + wait;
-    igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
-    header->InitPack();
-    if (!read(header->GetPackPointer(), header->GetPackSize(), deadline)) return std::nullopt;
-    header->Unpack();
-    Message m;
-    m.type = header->GetDeviceType();
-    m.device = header->GetDeviceName();
-    if (m.type == "TRANSFORM") {
-      igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
-      t->SetMessageHeader(header);
-      t->AllocatePack();
-      if (!read(t->GetPackBodyPointer(), t->GetPackBodySize(), deadline)) return std::nullopt;
-      EXPECT_TRUE(t->Unpack(1) & igtl::MessageHeader::UNPACK_BODY) << "CRC";
-      igtl::Matrix4x4 matrix;
-      t->GetMatrix(matrix);
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) m.matrix(r, c) = matrix[r][c];
-    } else if (m.type == "STATUS") {
-      igtl::StatusMessage::Pointer s = igtl::StatusMessage::New();
-      s->SetMessageHeader(header);
-      s->AllocatePack();
-      if (!read(s->GetPackBodyPointer(), s->GetPackBodySize(), deadline)) return std::nullopt;
-      EXPECT_TRUE(s->Unpack(1) & igtl::MessageHeader::UNPACK_BODY) << "CRC";
-      m.code = s->GetCode();
-      m.subcode = s->GetSubCode();
-      m.error_name = s->GetErrorName();
-      m.status = s->GetStatusString();
-    } else {
-      ADD_FAILURE() << "unexpected message type " << m.type;
-    }
-    return m;
-  }
-
- private:
-  bool read(void* data, int length, std::chrono::steady_clock::time_point deadline) {
-    int got = 0;
-    while (got < length) {
-      const int n = socket_->Receive(static_cast<char*>(data) + got, length - got, 0);
-      if (n > 0) got += n;
-      if (n == 0 || std::chrono::steady_clock::now() > deadline) return false;
-    }
-    return true;
-  }
-  igtl::ClientSocket::Pointer socket_;
-  bool connected_ = false;
-};
+using test::IgtlClient;
+using test::IgtlMessage;
 
 bool wait_until(const std::function<bool()>& condition) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
@@ -129,7 +64,7 @@ TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
       {"TRANSFORM", "T_room_from_ct"}, {"TRANSFORM", "Correction"},     {"TRANSFORM", "T_room_from_ct"},
       {"STATUS", "lftrack"},           {"TRANSFORM", "T_room_from_ct"}, {"TRANSFORM", "Correction"},
       {"STATUS", "lftrack"}};
-  std::vector<Message> got;
+  std::vector<IgtlMessage> got;
   for (std::size_t i = 0; i < order.size(); ++i) {
     auto m = client.next();
     ASSERT_TRUE(m) << "message " << i;

@@ -65,4 +65,8 @@ std::string study_scene_fingerprint(const PreparedScene& scene);
 // the old file or the whole new one, never part of it.
 Status write_file_atomically(const std::filesystem::path& file, const std::string& text);
 
+// A shard description's place in its study: `shard` and `shards` as 1 <= shard <= shards <= 10000
+// (kCorruptData naming `file` otherwise). The numbers as a description's JSON holds them.
+Status check_shard_position(std::int64_t shard, std::int64_t shards, const std::filesystem::path& file);
+
 }  // namespace lftrack::host
