@@ -119,7 +119,7 @@ Registration::~Registration() = default;
 constexpr double kRobustHighPassMm = 7.0;
 
 std::vector<std::string> registration_plan_names() {
-  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust"};
+  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust", "pyramid"};
 }
 
 Result<RegistrationPlan> registration_plan(const std::string& name) {
@@ -139,6 +139,10 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
   } else if (name == "robust") {
     plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},
                    {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, "ncc", kRobustHighPassMm}};
+  } else if (name == "pyramid") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 3000, ""}};
   } else if (name == "warm-robust") {
     plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, "ncc", kRobustHighPassMm},
                    {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, "ncc", kRobustHighPassMm}};
