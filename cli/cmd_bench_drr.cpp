@@ -34,6 +34,9 @@ Command add_bench_drr_command(CLI::App* parent) {
   app->add_option("--render-threads", o->bench.render_threads, "Threads for the timed renders (default 1)")
       ->capture_default_str();
   app->add_flag("--no-light-fields", o->no_light_fields, "Skip building and timing light fields");
+  app->add_option("--lf-dir", o->bench.light_field_dir,
+                  "Load the float light fields from this folder (`lftrack precompute`) instead of building "
+                  "them; the precompute is then not timed");
   app->add_option("--vq-codebooks", o->bench.vq_codebooks, "VQ codebook sizes to time (comma-separated)")
       ->delimiter(',');
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");

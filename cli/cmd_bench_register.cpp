@@ -5,6 +5,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/studies/registration_benchmark.hpp"
+#include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
@@ -18,6 +19,13 @@ Command add_bench_register_command(CLI::App* parent) {
   };
   auto o = std::make_shared<Options>();
   add_scene_options(app, &o->scene);
+  std::string plans;
+  for (const auto& name : tracking::registration_plan_names()) plans += (plans.empty() ? "" : ", ") + name;
+  app->add_option("--plan", o->bench.cold_plan, "Cold registration plan (default: the scene's tracking.plan; " + plans + ")")
+      ->check(CLI::IsMember(tracking::registration_plan_names()));
+  app->add_option("--warm-plan", o->bench.warm_plan, "Warm registration plan (" + plans + ")")
+      ->capture_default_str()
+      ->check(CLI::IsMember(tracking::registration_plan_names()));
   app->add_option("--cold", o->bench.cold_runs, "Cold registrations")->capture_default_str();
   app->add_option("--warm", o->bench.warm_runs, "Warm (tracking) registrations")->capture_default_str();
   app->add_option("--siddon-runs", o->bench.renderer_runs,
@@ -39,8 +47,8 @@ Command add_bench_register_command(CLI::App* parent) {
       std::printf("%-28s %5d %9.1f %9.1f %9.1f %9.3f %9.3f %7.1f%% %7.0f\n", what, t.runs, t.median_ms, t.p95_ms,
                   t.max_ms, t.mean_tre_mm, t.max_tre_mm, 100 * t.success_rate, t.median_evaluations);
     };
-    std::printf("%s, plan %s, %s, %d threads\n", report->scene.c_str(), report->plan.c_str(),
-                report->similarity.c_str(), report->threads);
+    std::printf("%s, plan %s, warm plan %s, %s, %d threads\n", report->scene.c_str(), report->plan.c_str(),
+                report->warm_plan.c_str(), report->similarity.c_str(), report->threads);
     std::printf("%-28s %5s %9s %9s %9s %9s %9s %8s %7s\n", "", "runs", "median ms", "p95 ms", "max ms", "mean TRE",
                 "max TRE", "success", "evals");
     line("cold", report->cold);

@@ -1,5 +1,7 @@
 #include "lftrack/sim/synthetic_frames.hpp"
 
+#include "lftrack/sim/poisson_sampler.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -19,8 +21,8 @@ DetectorCorrection detector_correction(const DetectorModel& model) {
 namespace {
 
 // More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it);
-// std::poisson_distribution spins without end on means near 1e25 (an outside probe's
-// `photons_per_pixel: 1e40` ignored SIGTERM).
+// std::poisson_distribution, which drew the noise before, spun without end on means near 1e25
+// (an outside probe's `photons_per_pixel: 1e40` ignored SIGTERM).
 constexpr double kMaxPhotonsPerPixel = 1e9;
 
 Status check_model(const DetectorModel& model) {
@@ -104,8 +106,7 @@ Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose&
   std::mt19937_64 rng(seed);
   auto draw = [&](double expected) {
     if (!model_.noise) return static_cast<float>(expected);
-    std::poisson_distribution<long> poisson(expected);
-    return static_cast<float>(poisson(rng));
+    return static_cast<float>(poisson_draw(expected, rng));
   };
   const DetectorCorrection correction = detector_correction(model_);
   if (!physics) {

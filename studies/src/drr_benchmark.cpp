@@ -163,10 +163,11 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
     tracking::LightFieldSpec spec = scene.scene.light_field;
     spec.storage = tracking::LightFieldStorage::kFloat32;
     const auto t0 = Clock::now();
-    auto built = build_light_fields(scene, spec, pool);
+    auto built = o.light_field_dir.empty() ? build_light_fields(scene, spec, pool)
+                                           : load_light_fields(scene, o.light_field_dir, nullptr, &spec);
     if (!built.ok()) return built.status();
     const auto& float_fields = *built;
-    report.precompute_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    report.precompute_s = o.light_field_dir.empty() ? std::chrono::duration<double>(Clock::now() - t0).count() : 0.0;
     report.light_field_resolution = spec.resolution;
     std::vector<tracking::LightFieldSpec> modes;
     for (auto storage : {tracking::LightFieldStorage::kFloat32, tracking::LightFieldStorage::kFixed16}) {

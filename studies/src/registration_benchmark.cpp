@@ -60,12 +60,15 @@ Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& 
                                                            tracking::ThreadPool* pool) {
   RegistrationBenchReport report;
   report.scene = p.scene.source;
-  report.plan = p.scene.registration.plan;
+  report.plan = o.cold_plan.empty() ? p.scene.registration.plan : o.cold_plan;
+  report.warm_plan = o.warm_plan;
   report.similarity = p.scene.registration.similarity;
   report.threads = pool != nullptr ? pool->size() : 1;
-  auto plan = tracking::registration_plan(p.scene.registration.plan);
+  auto plan = tracking::registration_plan(report.plan);
   if (!plan.ok()) return plan.status();
-  const tracking::RegistrationPlan warm_plan = *tracking::registration_plan("warm");
+  auto warm_planned = tracking::registration_plan(o.warm_plan);
+  if (!warm_planned.ok()) return warm_planned.status();
+  const tracking::RegistrationPlan warm_plan = *warm_planned;
   auto lightfield = make_scene_renderer(p, "lightfield", {}, pool);
   if (!lightfield.ok()) return lightfield.status();
   tracking::RendererOptions ray_options;
@@ -173,7 +176,8 @@ nlohmann::json to_json(const RegistrationBenchReport& r) {
                           {"success_rate", t.success_rate},
                           {"median_evaluations", t.median_evaluations}};
   };
-  nlohmann::json j{{"scene", r.scene}, {"plan", r.plan}, {"similarity", r.similarity}, {"threads", r.threads},
+  nlohmann::json j{{"scene", r.scene}, {"plan", r.plan}, {"warm_plan", r.warm_plan}, {"similarity", r.similarity},
+                   {"threads", r.threads},
                    {"cold", timed(r.cold)}, {"warm", timed(r.warm)}};
   if (r.siddon_inside.runs > 0) {
     j["renderers_inside_registration"] = {

@@ -184,7 +184,8 @@ TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
 
 // The vectorised kernels (AVX-512 and AVX2, where the CPU has them) against the portable scalar
 // kernels, with a window whose width is a multiple of neither 8 nor 16, and poses inside the
-// field (where the AVX-512 kernel reads runs of samples), at its edge and outside it.
+// field (where the AVX-512 and AVX2 kernels read runs of samples), at its edge and outside it;
+// the whole detector and its 2 x 2 binning (wider runs per chunk).
 struct KernelCase {
   LightFieldStorage storage;
   SimdLevel simd;
@@ -199,8 +200,11 @@ TEST_P(VectorisedKernel, MatchesScalar) {
   auto scalar = make_renderer("lightfield", nullptr, scalar_options);
   auto simd = make_renderer("lightfield", nullptr, simd_options);
   ASSERT_TRUE(scalar.ok() && simd.ok());
-  const XrayView view = fixture_plan().view_room;
-  for (const PixelWindow w : {PixelWindow{3, 2, 41, 37}, PixelWindow::full(view.rows, view.cols)}) {
+  const XrayView detector = fixture_plan().view_room;
+  const XrayView binned = detector.resampled(0, 0, detector.rows, detector.cols, detector.rows / 2, detector.cols / 2);
+  for (const auto& [view, w] : {std::pair{detector, PixelWindow{3, 2, 41, 37}},
+                                std::pair{detector, PixelWindow::full(detector.rows, detector.cols)},
+                                std::pair{binned, PixelWindow::full(binned.rows, binned.cols)}}) {
     for (double shift : {0.0, 2.0, 30.0}) {
       for (double turn : {0.0, 1.0}) {
         Pose pose = Pose::Identity();
@@ -229,10 +233,14 @@ INSTANTIATE_TEST_SUITE_P(StorageModes, VectorisedKernel,
                                            KernelCase{LightFieldStorage::kFixed16, SimdLevel::kBest},
                                            KernelCase{LightFieldStorage::kVq, SimdLevel::kBest},
                                            KernelCase{LightFieldStorage::kFloat32, SimdLevel::kAvx2},
-                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kAvx2}),
+                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kAvx2},
+                                           KernelCase{LightFieldStorage::kFloat32, SimdLevel::kAvx2Gathers},
+                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kAvx2Gathers}),
                          [](const auto& p) {
-                           return std::string(to_string(p.param.storage)) +
-                                  (p.param.simd == SimdLevel::kBest ? "_best" : "_avx2");
+                           const char* simd = p.param.simd == SimdLevel::kBest   ? "_best"
+                                              : p.param.simd == SimdLevel::kAvx2 ? "_avx2"
+                                                                                 : "_avx2_gathers";
+                           return std::string(to_string(p.param.storage)) + simd;
                          });
 
 TEST(LightFieldRender, RefusesViewsItWasNotBuiltFor) {

@@ -1,6 +1,26 @@
-// The AVX2 light-field kernel for float storage: eight pixels of a row per iteration, the 16
-// samples of each pixel fetched with gathers, t-neighbours in pairs. Compiled for AVX2 + FMA through function target
-// attributes and chosen at run time, so the binary still runs on any x86-64 CPU.
+// The AVX2 light-field kernels for float and 16-bit storage: eight pixels of a row per iteration
+// and, wherever possible, no gathers.
+//
+// As in the AVX-512 kernel (light_field_kernel_avx512.cpp, which explains why), eight
+// neighbouring pixels of a row usually share their four (u, v) cells, their t indices rise or
+// fall over a few samples and their s indices span at most three rows. Then each (u, v) cell's
+// samples for all eight pixels lie in runs of consecutive samples, one per s row: the kernel
+// loads a run and hands each pixel its pair (t, t + 1) with vpermps. Where the eight t indices
+// span at most 6 samples (the full-resolution windows and the 256 x 256 benchmark image) a run
+// is one register and each sample of the pair one permutation; where they span up to 14 (2 x 2
+// binned windows) a run is two registers, each sample two permutations and a blend. Chunks that
+// do not qualify (the field's edges, out-of-field pixels, a row's tail, a (u, v) cell boundary)
+// take the gather path with the same arithmetic. 16-bit samples are converted to float as they
+// are loaded and scaled once at the end (the scale commutes with the interpolation).
+//
+// The results equal the scalar kernel's up to float rounding (fused multiply-adds). Compiled for
+// AVX2 + FMA through function target attributes and chosen at run time, so the binary still runs
+// on any x86-64 CPU.
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
 
 #include "light_field_kernels.hpp"
 
@@ -21,57 +41,139 @@ namespace {
 
 #define LFTRACK_AVX2 __attribute__((target("avx2,fma")))
 
-// The samples at idx and idx + 1 (adjacent in t) for 8 pixels, fetched as 4-byte pairs: two
-// gathers of four 8-byte elements instead of two of eight 4-byte ones. The indices go in as
-// pixels (0,1,4,5) and (2,3,6,7) so that the unpacking shuffles give pixel order back.
-struct FloatPairs {
+// A storage mode's access to the samples, as floats before `finish`:
+//   pairs(idx, first, second): the gather path, the samples at idx and idx + 1 (t neighbours)
+//   load8(offset):             the eight consecutive samples from offset
+//   finish(value):             the interpolated value in mu * mm
+
+// Float samples: pairs fetched as 8-byte elements, two gathers of four instead of two of eight.
+// The indices go in as pixels (0,1,4,5) and (2,3,6,7) so that the unpacking shuffles give pixel
+// order back.
+struct FloatSamples {
   const float* f;
-  LFTRACK_AVX2 inline void operator()(__m256i idx, __m256* first, __m256* second) const;
+  LFTRACK_AVX2 inline void pairs(__m256i idx, __m256* first, __m256* second) const {
+    const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+    const __m256i p = _mm256_permutevar8x32_epi32(idx, order);
+    const double* base = reinterpret_cast<const double*>(f);
+    // The masked form with an explicit zero source (GCC 12 flags the plain form's undefined one).
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    const __m256 x = _mm256_castpd_ps(_mm256_mask_i32gather_pd(zero, base, _mm256_castsi256_si128(p), all, 4));
+    const __m256 y =
+        _mm256_castpd_ps(_mm256_mask_i32gather_pd(zero, base, _mm256_extracti128_si256(p, 1), all, 4));
+    *first = _mm256_shuffle_ps(x, y, _MM_SHUFFLE(2, 0, 2, 0));
+    *second = _mm256_shuffle_ps(x, y, _MM_SHUFFLE(3, 1, 3, 1));
+  }
+  LFTRACK_AVX2 inline __m256 load8(std::size_t offset) const { return _mm256_loadu_ps(f + offset); }
+  LFTRACK_AVX2 inline __m256 finish(__m256 value) const { return value; }
 };
 
-// 16-bit samples: one gather of eight 4-byte words at idx reads both q[idx] and q[idx + 1]
-// (idx + 1 is always inside the field: t is clamped to size - 2).
-struct Fixed16Pairs {
+// 16-bit samples (value = code * scale): one gather of eight 4-byte words at idx reads both
+// q[idx] and q[idx + 1] (idx + 1 is always inside the field: t is clamped to size - 2).
+struct Fixed16Samples {
   const std::uint16_t* q;
   float scale;
-  LFTRACK_AVX2 inline void operator()(__m256i idx, __m256* first, __m256* second) const {
-    const __m256i words = _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), reinterpret_cast<const int*>(q), idx,
-                                                      _mm256_set1_epi32(-1), 2);
-    const __m256 s = _mm256_set1_ps(scale);
-    *first = _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_and_si256(words, _mm256_set1_epi32(0xffff))), s);
-    *second = _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_srli_epi32(words, 16)), s);
+  LFTRACK_AVX2 inline void pairs(__m256i idx, __m256* first, __m256* second) const {
+    const __m256i words = _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), reinterpret_cast<const int*>(q),
+                                                      idx, _mm256_set1_epi32(-1), 2);
+    *first = _mm256_cvtepi32_ps(_mm256_and_si256(words, _mm256_set1_epi32(0xffff)));
+    *second = _mm256_cvtepi32_ps(_mm256_srli_epi32(words, 16));
   }
+  LFTRACK_AVX2 inline __m256 load8(std::size_t offset) const {
+    const __m128i codes = _mm_loadu_si128(reinterpret_cast<const __m128i*>(q + offset));
+    return _mm256_cvtepi32_ps(_mm256_cvtepu16_epi32(codes));
+  }
+  LFTRACK_AVX2 inline __m256 finish(__m256 value) const { return _mm256_mul_ps(value, _mm256_set1_ps(scale)); }
 };
 
-LFTRACK_AVX2 inline void FloatPairs::operator()(__m256i idx, __m256* first, __m256* second) const {
-  const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
-  const __m256i p = _mm256_permutevar8x32_epi32(idx, order);
-  const double* base = reinterpret_cast<const double*>(f);
-  // The masked form with an explicit zero source (GCC 12 flags the plain form's undefined one).
-  const __m256d zero = _mm256_setzero_pd();
-  const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
-  const __m256 x = _mm256_castpd_ps(_mm256_mask_i32gather_pd(zero, base, _mm256_castsi256_si128(p), all, 4));
-  const __m256 y = _mm256_castpd_ps(_mm256_mask_i32gather_pd(zero, base, _mm256_extracti128_si256(p, 1), all, 4));
-  *first = _mm256_shuffle_ps(x, y, _MM_SHUFFLE(2, 0, 2, 0));
-  *second = _mm256_shuffle_ps(x, y, _MM_SHUFFLE(3, 1, 3, 1));
-}
-
-// Bilinear blend in (s, t) of the 2 x 2 samples at idx, idx + 1, idx + ns_t, idx + ns_t + 1.
-template <class Pairs>
-LFTRACK_AVX2 inline __m256 bilinear(const Pairs& pairs, __m256i idx, __m256i stride_s, __m256 ws, __m256 wt) {
-  __m256 a, b, c, d;
-  pairs(idx, &a, &b);
-  pairs(_mm256_add_epi32(idx, stride_s), &c, &d);
+// Bilinear blend in (s, t) of a top pair (a, b) and a bottom pair (c, d).
+LFTRACK_AVX2 inline __m256 blend_st(__m256 a, __m256 b, __m256 c, __m256 d, __m256 ws, __m256 wt) {
   const __m256 top = _mm256_fmadd_ps(wt, _mm256_sub_ps(b, a), a);
   const __m256 bottom = _mm256_fmadd_ps(wt, _mm256_sub_ps(d, c), c);
   return _mm256_fmadd_ps(ws, _mm256_sub_ps(bottom, top), top);
 }
 
-template <class Pairs>
-LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
-                             ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
-  const int su = g.size[1] * g.size[2] * g.size[3], sv = g.size[2] * g.size[3], ss = g.size[3];
-  const __m256i v_su = _mm256_set1_epi32(su), v_sv = _mm256_set1_epi32(sv), v_ss = _mm256_set1_epi32(ss);
+// The gather path: (u, v) cell at idx (its (s, t) corner), blended in (s, t).
+template <class Samples>
+LFTRACK_AVX2 inline __m256 gathered_cell(const Samples& f, __m256i idx, __m256i stride_s, __m256 ws, __m256 wt) {
+  __m256 a, b, c, d;
+  f.pairs(idx, &a, &b);
+  f.pairs(_mm256_add_epi32(idx, stride_s), &c, &d);
+  return blend_st(a, b, c, d, ws, wt);
+}
+
+// One run of samples of a (u, v, s) row, from t0, and each lane's pair (dt, dt + 1) from it.
+// Narrow runs: dt + 1 < 8, one register. Wide runs: dt + 1 < 16, two registers.
+template <class Samples, bool kWide>
+LFTRACK_AVX2 inline void run_pairs(const Samples& f, std::size_t offset, __m256i dt, __m256i dt_next,
+                                   __m256 upper_first, __m256 upper_second, __m256* first, __m256* second) {
+  const __m256 lo = f.load8(offset);
+  if constexpr (!kWide) {
+    *first = _mm256_permutevar8x32_ps(lo, dt);
+    *second = _mm256_permutevar8x32_ps(lo, dt_next);
+  } else {
+    // vpermps reads the low three index bits; the lane's fourth bit picks the register.
+    const __m256 hi = f.load8(offset + 8);
+    *first = _mm256_blendv_ps(_mm256_permutevar8x32_ps(lo, dt), _mm256_permutevar8x32_ps(hi, dt), upper_first);
+    *second =
+        _mm256_blendv_ps(_mm256_permutevar8x32_ps(lo, dt_next), _mm256_permutevar8x32_ps(hi, dt_next), upper_second);
+  }
+}
+
+// The chunk's lanes in the runs of one s row range: each lane's offset dt from t0, which of
+// two registers holds dt and dt + 1 (wide runs), and whether its top row is below s0 + 1 and
+// s0 + 2.
+struct RunLanes {
+  __m256i dt, dt_next;
+  __m256 upper_first, upper_second;
+  __m256 below1, below2;
+};
+
+// One (u, v) cell of a chunk that qualifies for runs, blended in (s, t): rows s0 .. s0 + s_span
+// + 1 of the cell from `cell` (its row s0 at t0); each lane's top row is is - s0 of them and its
+// bottom row the next. (No arrays: GCC clears or spills arrays of vectors.)
+template <class Samples, bool kWide>
+LFTRACK_AVX2 inline __m256 run_cell(const Samples& f, std::size_t cell, std::size_t nt, int s_span, const RunLanes& l,
+                                    __m256 ws, __m256 wt) {
+  __m256 a0, b0, a1, b1;
+  run_pairs<Samples, kWide>(f, cell, l.dt, l.dt_next, l.upper_first, l.upper_second, &a0, &b0);
+  run_pairs<Samples, kWide>(f, cell + nt, l.dt, l.dt_next, l.upper_first, l.upper_second, &a1, &b1);
+  if (s_span == 0) return blend_st(a0, b0, a1, b1, ws, wt);
+  __m256 a2, b2;
+  run_pairs<Samples, kWide>(f, cell + 2 * nt, l.dt, l.dt_next, l.upper_first, l.upper_second, &a2, &b2);
+  __m256 a = _mm256_blendv_ps(a0, a1, l.below1), b = _mm256_blendv_ps(b0, b1, l.below1);
+  __m256 c = _mm256_blendv_ps(a1, a2, l.below1), d = _mm256_blendv_ps(b1, b2, l.below1);
+  if (s_span == 2) {
+    __m256 a3, b3;
+    run_pairs<Samples, kWide>(f, cell + 3 * nt, l.dt, l.dt_next, l.upper_first, l.upper_second, &a3, &b3);
+    a = _mm256_blendv_ps(a, a2, l.below2);
+    b = _mm256_blendv_ps(b, b2, l.below2);
+    c = _mm256_blendv_ps(c, a3, l.below2);
+    d = _mm256_blendv_ps(d, b3, l.below2);
+  }
+  return blend_st(a, b, c, d, ws, wt);
+}
+
+LFTRACK_AVX2 inline int first_lane(__m256i v) { return _mm_cvtsi128_si32(_mm256_castsi256_si128(v)); }
+LFTRACK_AVX2 inline int last_lane(__m256i v) { return _mm256_extract_epi32(v, 7); }
+
+// Eight mask bits as eight bytes of 0 or 1 (bit k to byte k, little-endian).
+struct MaskBytes {
+  std::uint64_t bytes[256];
+  constexpr MaskBytes() : bytes() {
+    for (int bits = 0; bits < 256; ++bits)
+      for (int k = 0; k < 8; ++k)
+        if ((bits >> k) & 1) bytes[bits] |= std::uint64_t{1} << (8 * k);
+  }
+};
+constexpr MaskBytes kMaskBytes;
+
+template <class Samples>
+LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
+                             ImageView<unsigned char> valid, int cols, int r_begin, int r_end, bool runs) {
+  const int nt = g.size[3];
+  const std::size_t su = std::size_t(g.size[1]) * g.size[2] * g.size[3], sv = std::size_t(g.size[2]) * g.size[3];
+  const __m256i v_su = _mm256_set1_epi32(int(su)), v_sv = _mm256_set1_epi32(int(sv)), v_ss = _mm256_set1_epi32(nt);
   const __m256i top_u = _mm256_set1_epi32(g.size[0] - 2), top_v = _mm256_set1_epi32(g.size[1] - 2);
   const __m256i top_s = _mm256_set1_epi32(g.size[2] - 2), top_t = _mm256_set1_epi32(g.size[3] - 2);
   const __m256 zero = _mm256_setzero_ps();
@@ -81,7 +183,7 @@ LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const 
     gain[a] = _mm256_set1_ps(m.gain[a]);
     limit[a] = _mm256_set1_ps(m.limit[a]);
   }
-  const __m256 lane = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256 lanes8 = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
     const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
@@ -91,7 +193,7 @@ LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const 
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     for (int c = 0; c < cols; c += 8) {
-      const __m256 cf = _mm256_add_ps(_mm256_set1_ps(float(c)), lane);
+      const __m256 cf = _mm256_add_ps(_mm256_set1_ps(float(c)), lanes8);
       const __m256 dn = _mm256_fmadd_ps(dn1, cf, dn0);
       const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), dn);
       const __m256 q1 = _mm256_mul_ps(_mm256_fmadd_ps(de11, cf, de10), inv);
@@ -106,7 +208,7 @@ LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const 
       inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(ft, zero, _CMP_GE_OQ), _mm256_cmp_ps(ft, limit[3], _CMP_LE_OQ)));
       // Lanes past the row's end are outside too.
       const int lanes = cols - c < 8 ? cols - c : 8;
-      inside = _mm256_and_ps(inside, _mm256_cmp_ps(lane, _mm256_set1_ps(float(lanes)), _CMP_LT_OQ));
+      inside = _mm256_and_ps(inside, _mm256_cmp_ps(lanes8, _mm256_set1_ps(float(lanes)), _CMP_LT_OQ));
       const __m256 cu = _mm256_and_ps(fu, inside), cv = _mm256_and_ps(fv, inside);
       const __m256 cs = _mm256_and_ps(fs, inside), ct = _mm256_and_ps(ft, inside);
       const __m256i iu = _mm256_min_epi32(_mm256_cvttps_epi32(cu), top_u);
@@ -115,17 +217,67 @@ LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const 
       const __m256i it = _mm256_min_epi32(_mm256_cvttps_epi32(ct), top_t);
       const __m256 wu = _mm256_sub_ps(cu, _mm256_cvtepi32_ps(iu)), wv = _mm256_sub_ps(cv, _mm256_cvtepi32_ps(iv));
       const __m256 ws = _mm256_sub_ps(cs, _mm256_cvtepi32_ps(is)), wt = _mm256_sub_ps(ct, _mm256_cvtepi32_ps(it));
-      const __m256i st = _mm256_add_epi32(_mm256_mullo_epi32(is, v_ss), it);
-      const __m256i i00 = _mm256_add_epi32(_mm256_add_epi32(_mm256_mullo_epi32(iu, v_su), _mm256_mullo_epi32(iv, v_sv)), st);
-      const __m256i i01 = _mm256_add_epi32(i00, v_sv);
-      const __m256i i10 = _mm256_add_epi32(i00, v_su);
-      const __m256i i11 = _mm256_add_epi32(i10, v_sv);
-      const __m256 s00 = bilinear(f, i00, v_ss, ws, wt), s01 = bilinear(f, i01, v_ss, ws, wt);
-      const __m256 s10 = bilinear(f, i10, v_ss, ws, wt), s11 = bilinear(f, i11, v_ss, ws, wt);
-      const __m256 low = _mm256_fmadd_ps(wv, _mm256_sub_ps(s01, s00), s00);
-      const __m256 high = _mm256_fmadd_ps(wv, _mm256_sub_ps(s11, s10), s10);
-      const __m256 value = _mm256_and_ps(_mm256_fmadd_ps(wu, _mm256_sub_ps(high, low), low), inside);
       const int inside_bits = _mm256_movemask_ps(inside);
+
+      // (u, v) cells (0,0), (0,1), (1,0), (1,1), each blended in (s, t).
+      __m256 corner0 = zero, corner1 = zero, corner2 = zero, corner3 = zero;
+      bool done = false;
+      if (runs && inside_bits == 0xff) {
+        // The run test: one (u, v) cell for every lane, t within 15 samples, s within three
+        // rows. Lanes 0 and 7 give the range (t and s are monotonic along a row); every lane is
+        // then checked against it, since rounding may bend monotonicity by a sample where the
+        // coordinates barely change.
+        const int u0 = first_lane(iu), v0 = first_lane(iv);
+        const int t_first = first_lane(it), t_last = last_lane(it);
+        const int s_first = first_lane(is), s_last = last_lane(is);
+        const int t0 = std::min(t_first, t_last), s0 = std::min(s_first, s_last);
+        const int t_span = std::max(t_first, t_last) - t0, s_span = std::max(s_first, s_last) - s0;
+        const __m256i vt0 = _mm256_set1_epi32(t0), vs0 = _mm256_set1_epi32(s0);
+        const __m256i outside_runs = _mm256_or_si256(
+            _mm256_or_si256(_mm256_xor_si256(iu, _mm256_set1_epi32(u0)), _mm256_xor_si256(iv, _mm256_set1_epi32(v0))),
+            _mm256_or_si256(
+                _mm256_or_si256(_mm256_cmpgt_epi32(vt0, it), _mm256_cmpgt_epi32(it, _mm256_set1_epi32(t0 + t_span))),
+                _mm256_or_si256(_mm256_cmpgt_epi32(vs0, is), _mm256_cmpgt_epi32(is, _mm256_set1_epi32(s0 + s_span)))));
+        if (_mm256_testz_si256(outside_runs, outside_runs) && t_span <= 14 && s_span <= 2) {
+          RunLanes l;
+          l.dt = _mm256_sub_epi32(it, vt0);
+          l.dt_next = _mm256_add_epi32(l.dt, _mm256_set1_epi32(1));
+          l.upper_first = _mm256_castsi256_ps(_mm256_cmpgt_epi32(l.dt, _mm256_set1_epi32(7)));
+          l.upper_second = _mm256_castsi256_ps(_mm256_cmpgt_epi32(l.dt_next, _mm256_set1_epi32(7)));
+          l.below1 = _mm256_castsi256_ps(_mm256_cmpgt_epi32(is, vs0));
+          l.below2 = _mm256_castsi256_ps(_mm256_cmpgt_epi32(is, _mm256_set1_epi32(s0 + 1)));
+          const std::size_t run0 =
+              std::size_t(u0) * su + std::size_t(v0) * sv + std::size_t(s0) * std::size_t(nt) + std::size_t(t0);
+          const std::size_t n_t = std::size_t(nt);
+          // A run must not read past its (u, v, s) row's samples.
+          if (t_span <= 6 && t0 + 8 <= nt) {
+            corner0 = run_cell<Samples, false>(f, run0, n_t, s_span, l, ws, wt);
+            corner1 = run_cell<Samples, false>(f, run0 + sv, n_t, s_span, l, ws, wt);
+            corner2 = run_cell<Samples, false>(f, run0 + su, n_t, s_span, l, ws, wt);
+            corner3 = run_cell<Samples, false>(f, run0 + su + sv, n_t, s_span, l, ws, wt);
+            done = true;
+          } else if (t0 + 16 <= nt) {
+            corner0 = run_cell<Samples, true>(f, run0, n_t, s_span, l, ws, wt);
+            corner1 = run_cell<Samples, true>(f, run0 + sv, n_t, s_span, l, ws, wt);
+            corner2 = run_cell<Samples, true>(f, run0 + su, n_t, s_span, l, ws, wt);
+            corner3 = run_cell<Samples, true>(f, run0 + su + sv, n_t, s_span, l, ws, wt);
+            done = true;
+          }
+        }
+      }
+      if (!done) {
+        const __m256i st = _mm256_add_epi32(_mm256_mullo_epi32(is, v_ss), it);
+        const __m256i i00 =
+            _mm256_add_epi32(_mm256_add_epi32(_mm256_mullo_epi32(iu, v_su), _mm256_mullo_epi32(iv, v_sv)), st);
+        const __m256i i10 = _mm256_add_epi32(i00, v_su);
+        corner0 = gathered_cell(f, i00, v_ss, ws, wt);
+        corner1 = gathered_cell(f, _mm256_add_epi32(i00, v_sv), v_ss, ws, wt);
+        corner2 = gathered_cell(f, i10, v_ss, ws, wt);
+        corner3 = gathered_cell(f, _mm256_add_epi32(i10, v_sv), v_ss, ws, wt);
+      }
+      const __m256 low = _mm256_fmadd_ps(wv, _mm256_sub_ps(corner1, corner0), corner0);
+      const __m256 high = _mm256_fmadd_ps(wv, _mm256_sub_ps(corner3, corner2), corner2);
+      const __m256 value = _mm256_and_ps(f.finish(_mm256_fmadd_ps(wu, _mm256_sub_ps(high, low), low)), inside);
       masked += lanes - __builtin_popcount(static_cast<unsigned>(inside_bits));
       if (lanes == 8) {
         _mm256_storeu_ps(dst + c, value);
@@ -135,7 +287,11 @@ LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const 
         for (int k = 0; k < lanes; ++k) dst[c + k] = tail[k];
       }
       if (ok_row) {
-        for (int k = 0; k < lanes; ++k) ok_row[c + k] = static_cast<unsigned char>((inside_bits >> k) & 1);
+        const std::uint64_t flags = kMaskBytes.bytes[inside_bits];
+        if (lanes == 8)
+          std::memcpy(ok_row + c, &flags, 8);
+        else
+          for (int k = 0; k < lanes; ++k) ok_row[c + k] = static_cast<unsigned char>((inside_bits >> k) & 1);
       }
     }
   }
@@ -145,24 +301,25 @@ LFTRACK_AVX2 int render_avx2(const Pairs& f, const LightFieldGeometry& g, const 
 }  // namespace
 
 int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
-                      ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
-  return render_avx2(FloatPairs{samples}, g, m, out, valid, cols, r_begin, r_end);
+                      ImageView<unsigned char> valid, int cols, int r_begin, int r_end, bool runs) {
+  return render_avx2(FloatSamples{samples}, g, m, out, valid, cols, r_begin, r_end, runs);
 }
 
 int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
-                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
-  return render_avx2(Fixed16Pairs{codes, scale}, g, m, out, valid, cols, r_begin, r_end);
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end,
+                        bool runs) {
+  return render_avx2(Fixed16Samples{codes, scale}, g, m, out, valid, cols, r_begin, r_end, runs);
 }
 
 #else
 
 bool light_field_avx2_available() { return false; }
 int render_float_avx2(const float*, const LightFieldGeometry&, const RayMap&, ImageView<float>, ImageView<unsigned char>,
-                      int, int, int) {
+                      int, int, int, bool) {
   return 0;
 }
 int render_fixed16_avx2(const std::uint16_t*, float, const LightFieldGeometry&, const RayMap&, ImageView<float>,
-                        ImageView<unsigned char>, int, int, int) {
+                        ImageView<unsigned char>, int, int, int, bool) {
   return 0;
 }
 

@@ -20,15 +20,17 @@ struct RayMap {
 // True if this CPU runs the AVX2 kernel (AVX2 and FMA).
 bool light_field_avx2_available();
 
-// Float storage, 8 pixels at a time with AVX2 gathers; the same results as the scalar kernel up
-// to float rounding. Needs light_field_avx2_available() and fewer than 2^31 samples. Returns the
-// number of masked pixels.
+// Float storage, 8 pixels at a time in AVX2 lanes, reading runs of samples where eight pixels
+// share their (u, v) cells (with `runs`; otherwise, and where they do not, gathering them); the
+// same results as the scalar kernel up to float rounding. Needs light_field_avx2_available() and
+// fewer than 2^31 samples. Returns the number of masked pixels.
 int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m,
-                      ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+                      ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end,
+                      bool runs = true);
 // The same for 16-bit storage (value = code * scale).
 int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
                         ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
-                        int r_end);
+                        int r_end, bool runs = true);
 
 // True if this CPU runs the AVX-512 kernels (AVX-512F and BW).
 bool light_field_avx512_available();

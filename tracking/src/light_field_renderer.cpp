@@ -162,6 +162,7 @@ class LightFieldRenderer final : public DrrRenderer {
       indexable = indexable && f->geometry().sample_count() < (std::int64_t{1} << 31);
     use_avx512_ = indexable && simd == SimdLevel::kBest && light_field_avx512_available();
     use_avx2_ = indexable && simd != SimdLevel::kScalar && light_field_avx2_available();
+    avx2_runs_ = simd != SimdLevel::kAvx2Gathers;
     if (fields_.front()->header().storage == LightFieldStorage::kVq) {
       name_ += std::to_string(fields_.front()->header().codebook_size);
     }
@@ -223,7 +224,7 @@ class LightFieldRenderer final : public DrrRenderer {
             break;
           }
           if (use_avx2_) {
-            n = render_float_avx2(field->float_samples(), g, m, out, extras->valid, window.cols, r0, r1);
+            n = render_float_avx2(field->float_samples(), g, m, out, extras->valid, window.cols, r0, r1, avx2_runs_);
             break;
           }
           const FloatFetch f{field->float_samples(), std::size_t(s[1]) * s[2] * s[3],
@@ -239,7 +240,7 @@ class LightFieldRenderer final : public DrrRenderer {
           }
           if (use_avx2_) {
             n = render_fixed16_avx2(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid,
-                                    window.cols, r0, r1);
+                                    window.cols, r0, r1, avx2_runs_);
             break;
           }
           const Fixed16Fetch f{field->fixed_samples(), float(h.fixed_scale), std::size_t(s[1]) * s[2] * s[3],
@@ -277,6 +278,7 @@ class LightFieldRenderer final : public DrrRenderer {
   // storage mode) or AVX2 + FMA (float and 16-bit).
   bool use_avx512_ = false;
   bool use_avx2_ = false;
+  bool avx2_runs_ = true;  // false: every AVX2 sample gathered (SimdLevel::kAvx2Gathers)
 };
 
 }  // namespace

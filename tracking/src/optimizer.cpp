@@ -230,13 +230,18 @@ class QuadraticNeighbour final : public Optimizer {
       search.checkpoint();
       const bool jump_wins = jump_cost <= costs[best];
       const double candidate_cost = jump_wins ? jump_cost : costs[best];
+      // The model's minimum lies within the tolerance of the centre, and no neighbour says otherwise.
+      const bool converged = settings_.tolerance_mm > 0 && (jump - centre).cwiseAbs().maxCoeff() <= settings_.tolerance_mm &&
+                             (jump_wins || !(candidate_cost < centre_cost));
       if (candidate_cost < centre_cost) {
         const Vector6d next = jump_wins ? jump : neighbours[best];
         const double moved = (next - centre).cwiseAbs().maxCoeff();
         centre = next;
         centre_cost = candidate_cost;
+        if (converged) break;
         if (moved > 0.5 * step) continue;  // still travelling at this step
       }
+      if (converged) break;
       step *= 0.5;  // settled to within half a step: refine
     }
     return search.finish(OptimizerStop::kConverged);
@@ -356,6 +361,9 @@ Result<std::unique_ptr<Optimizer>> make_optimizer(std::string_view name, const O
   if (!(settings.final_step_mm > 0) || !(settings.initial_step_mm >= settings.final_step_mm) ||
       !std::isfinite(settings.initial_step_mm))
     return invalid_argument("optimizer: steps must satisfy initial >= final > 0");
+  if (!std::isfinite(settings.tolerance_mm) || settings.tolerance_mm < 0 ||
+      settings.tolerance_mm > settings.initial_step_mm)
+    return invalid_argument("optimizer: the tolerance must be from 0 (off) to the initial step");
   if (name == "best-neighbour") return std::unique_ptr<Optimizer>(new BestNeighbour(settings));
   if (name == "quadratic-neighbour") return std::unique_ptr<Optimizer>(new QuadraticNeighbour(settings));
   if (name == "decoupled") return std::unique_ptr<Optimizer>(new Decoupled(settings));

@@ -23,9 +23,13 @@ struct Registration::Slot {
   std::vector<std::vector<std::vector<std::unique_ptr<Similarity>>>> similarity;  // [measure][level][view]
 };
 
-// The optimizer's view of one pass: x = delta from the start pose.
+// The optimizer's view of one pass: x = delta from the start pose. It keeps the per-view scores
+// of the best candidate so far (the lowest cost, the first of equals, as the optimizer's Search
+// keeps its best point), so that a pass on the originals needs no evaluation of its result.
 class Registration::Cost final : public CostFunction {
  public:
+  static constexpr int kMaxViews = 4;
+
   Cost(Registration& r, const Pose& start, int measure, int level)
       : r_(r), start_(start), measure_(measure), level_(level) {}
   double cost(const Vector6d& x) override {
@@ -33,44 +37,59 @@ class Registration::Cost final : public CostFunction {
     cost_batch(&x, 1, &out);
     return out;
   }
-  // Spreads (candidate, view) pairs over the pool, so a batch of one still uses two threads.
   void cost_batch(const Vector6d* xs, int n, double* out) override {
-    const int views = static_cast<int>(r_.setup_.views.size());
-    const int slots = static_cast<int>(r_.slots_.size());
-    const int tasks = n * views;
-    if (r_.pool_ == nullptr || slots < 2 || tasks < 2 || n > kMaxBatch) {
-      for (int i = 0; i < n; ++i) out[i] = r_.evaluate(0, measure_, level_, pose(xs[i]), nullptr);
-      return;
-    }
-    for (int i = 0; i < n; ++i) {
-      poses_[i] = pose(xs[i]);
-      inside_[i] = r_.inside_search_region(poses_[i]);
-    }
-    const int grain = (tasks + slots - 1) / slots;
-    r_.pool_->parallel_for(tasks, grain, [&](int begin, int end) {
-      const int slot = begin / grain;
-      for (int t = begin; t < end; ++t) {
-        const int i = t / views;
-        view_scores_[t] = inside_[i] ? r_.view_score(slot, measure_, level_, poses_[i], t % views) : 0.0;
-      }
-    });
-    for (int i = 0; i < n; ++i)
-      out[i] = inside_[i] ? r_.combine(poses_[i], &view_scores_[i * views])
-                          : std::numeric_limits<double>::infinity();
+    for (int first = 0; first < n; first += kMaxBatch) evaluate(xs + first, std::min(n - first, kMaxBatch), out + first);
   }
   Pose pose(const Vector6d& x) const {
     return apply_delta(start_, PoseDelta::from_vector(x), r_.setup_.origin_room_mm);
   }
+  // The best candidate's cost and per-view scores (+infinity and nothing before a finite cost).
+  double best_cost() const { return best_cost_; }
+  const double* best_view_scores() const { return best_scores_.data(); }
 
  private:
   static constexpr int kMaxBatch = 64;
-  static constexpr int kMaxViews = 4;
+
+  // Spreads (candidate, view) pairs over the pool, so a batch of one still uses two threads.
+  void evaluate(const Vector6d* xs, int n, double* out) {
+    const int views = static_cast<int>(r_.setup_.views.size());
+    const int slots = static_cast<int>(r_.slots_.size());
+    const int tasks = n * views;
+    for (int i = 0; i < n; ++i) {
+      poses_[i] = pose(xs[i]);
+      inside_[i] = r_.inside_search_region(poses_[i]);
+    }
+    if (r_.pool_ == nullptr || slots < 2 || tasks < 2) {
+      for (int t = 0; t < tasks; ++t)
+        view_scores_[t] = inside_[t / views] ? r_.view_score(0, measure_, level_, poses_[t / views], t % views) : 0.0;
+    } else {
+      const int grain = (tasks + slots - 1) / slots;
+      r_.pool_->parallel_for(tasks, grain, [&](int begin, int end) {
+        const int slot = begin / grain;
+        for (int t = begin; t < end; ++t) {
+          const int i = t / views;
+          view_scores_[t] = inside_[i] ? r_.view_score(slot, measure_, level_, poses_[i], t % views) : 0.0;
+        }
+      });
+    }
+    for (int i = 0; i < n; ++i) {
+      out[i] = inside_[i] ? r_.combine(poses_[i], &view_scores_[i * views])
+                          : std::numeric_limits<double>::infinity();
+      if (out[i] < best_cost_) {
+        best_cost_ = out[i];
+        std::copy_n(&view_scores_[i * views], views, best_scores_.begin());
+      }
+    }
+  }
+
   Registration& r_;
   Pose start_;
   int measure_, level_;
   std::array<Pose, kMaxBatch> poses_;
   std::array<bool, kMaxBatch> inside_{};
   std::array<double, kMaxBatch * kMaxViews> view_scores_{};
+  double best_cost_ = std::numeric_limits<double>::infinity();
+  std::array<double, kMaxViews> best_scores_{};
 };
 
 // The reference image of one level and view.
@@ -100,7 +119,7 @@ Registration::~Registration() = default;
 constexpr double kRobustHighPassMm = 7.0;
 
 std::vector<std::string> registration_plan_names() {
-  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust"};
+  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust", "pyramid"};
 }
 
 Result<RegistrationPlan> registration_plan(const std::string& name) {
@@ -115,11 +134,15 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
   } else if (name == "cmaes") {
     plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000, ""}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000, ""}};
   } else if (name == "warm") {
-    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, ""},
-                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, ""}};
+    plan.passes = {{"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 400, ""},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
   } else if (name == "robust") {
     plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},
                    {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, "ncc", kRobustHighPassMm}};
+  } else if (name == "pyramid") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 3000, ""}};
   } else if (name == "warm-robust") {
     plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, "ncc", kRobustHighPassMm},
                    {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, "ncc", kRobustHighPassMm}};
@@ -433,6 +456,7 @@ Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bo
     settings.scale = scales_;
     settings.initial_step_mm = pass.initial_step_mm;
     settings.final_step_mm = pass.final_step_mm;
+    settings.tolerance_mm = pass.tolerance_mm;
     settings.record_trace = record_trace;
     auto optimizer = make_optimizer(pass.optimizer, settings);
     if (!optimizer.ok()) return optimizer.status();
@@ -480,6 +504,10 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   result->fiducial_distance_mm = -1;
   result->trace.clear();
   Pose current = start;
+  // The result's per-view scores when the last pass ran on the originals with the setup's measure
+  // (its best candidate is the result); otherwise they are evaluated at the result below.
+  std::array<double, Cost::kMaxViews> result_scores{};
+  bool have_result_scores = false;
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
@@ -488,6 +516,10 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     Cost cost(*this, current, prepared.measures[p], prepared.levels[p]);
     OptimizerResult r = prepared.optimizers[p]->minimize(cost, Vector6d::Zero(), budget);
     current = cost.pose(r.x);
+    have_result_scores = prepared.levels[p] == 0 && prepared.measures[p] == 0 && std::isfinite(r.cost) &&
+                         cost.best_cost() == r.cost;
+    if (have_result_scores)
+      std::copy_n(cost.best_view_scores(), setup_.views.size(), result_scores.begin());
     result->evaluations += r.evaluations;
     result->cost = r.cost;
     result->stop = r.stop;
@@ -503,7 +535,10 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   result->delta_from_start = delta_between(start, result->T_room_from_ct, setup_.origin_room_mm);
   result->view_similarity.resize(setup_.views.size());
   std::fill(result->view_similarity.begin(), result->view_similarity.end(), 0.0);
-  evaluate(0, 0, 0, result->T_room_from_ct, &result->view_similarity);
+  if (have_result_scores)
+    std::copy_n(result_scores.begin(), setup_.views.size(), result->view_similarity.begin());
+  else
+    evaluate(0, 0, 0, result->T_room_from_ct, &result->view_similarity);
   if (fiducial_)
     result->fiducial_distance_mm =
         (result->T_room_from_ct * fiducial_->marker_ct_mm - fiducial_->marker_room_mm).norm();

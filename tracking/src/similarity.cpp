@@ -4,6 +4,7 @@
 #include "lftrack/tracking/similarity.hpp"
 
 #include "lftrack/tracking/correlation_sums.hpp"
+#include "mutual_information.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -118,118 +119,6 @@ class GradientCorrelation final : public Similarity {
 
  private:
   FixedImage fixed_;
-};
-
-// Mutual information from a joint histogram: the fixed image's bin is fixed at prepare(); the
-// moving value is split linearly between its two nearest bins (partial-volume binning), which
-// keeps the measure continuous in the pose.
-class MutualInformation final : public Similarity {
- public:
-  MutualInformation(int bins, bool normalised) : bins_(std::clamp(bins, 2, 1024)), normalised_(normalised) {}
-  std::string_view name() const override { return normalised_ ? "nmi" : "mi"; }
-  double worst_score() const override { return normalised_ ? 1.0 : 0.0; }
-
-  Status prepare(const ImageView<const float>& f, const ImageView<const unsigned char>& v) override {
-    LFTRACK_RETURN_IF_ERROR(fixed_.set(f, v));
-    float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
-    for (std::size_t i = 0; i < fixed_.values.size(); ++i) {
-      if (!fixed_.usable[i]) continue;
-      lo = std::min(lo, fixed_.values[i]);
-      hi = std::max(hi, fixed_.values[i]);
-    }
-    fixed_bin_.assign(fixed_.values.size(), kUnusable);
-    pair_bin_.assign(fixed_.values.size(), 0);
-    pair_value_.assign(fixed_.values.size(), 0.f);
-    const double scale = hi > lo ? (bins_ - 1e-9) / (double(hi) - lo) : 0.0;
-    for (std::size_t i = 0; i < fixed_.values.size(); ++i) {
-      if (fixed_.usable[i])
-        fixed_bin_[i] = static_cast<std::uint16_t>(
-            std::clamp(static_cast<int>((fixed_.values[i] - lo) * scale), 0, bins_ - 1));
-    }
-    joint_.assign(static_cast<std::size_t>(bins_) * bins_, 0.0);
-    joint_odd_.assign(joint_.size(), 0.0);
-    fixed_marginal_.assign(bins_, 0.0);
-    moving_marginal_.assign(bins_, 0.0);
-    return {};
-  }
-
-  double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
-    if (!fixed_.fits(m, mv)) return worst_score();
-    // Pass 1: the usable pixels' fixed bins and moving values, compacted without branches, and
-    // the moving range.
-    int n = 0;
-    float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
-    for (int r = 0; r < fixed_.rows; ++r) {
-      const float* moving = m.row_ptr(r);
-      const unsigned char* moving_valid = mv.empty() ? nullptr : mv.row_ptr(r);
-      const std::uint16_t* bins = &fixed_bin_[fixed_.index(r, 0)];
-      for (int c = 0; c < fixed_.cols; ++c) {
-        const float v = moving[c];
-        const bool ok = (bins[c] != kUnusable) & (moving_valid == nullptr || moving_valid[c] != 0) &
-                        (std::abs(v) <= std::numeric_limits<float>::max());  // false for NaN and inf
-        pair_bin_[std::size_t(n)] = bins[c];
-        pair_value_[std::size_t(n)] = v;
-        lo = ok && v < lo ? v : lo;
-        hi = ok && v > hi ? v : hi;
-        n += ok ? 1 : 0;
-      }
-    }
-    if (n < kMinPixels) return worst_score();
-    if (!(double(hi) - lo > 1e-12 * std::max(1.0, std::abs(double(hi))))) return worst_score();  // constant
-    // Pass 2: the joint histogram, the moving value split between its two nearest bins. Even
-    // and odd pixels go to two copies, so that neighbours (often in the same bin) do not wait
-    // on each other's update; the copies are summed afterwards.
-    std::fill(joint_.begin(), joint_.end(), 0.0);
-    std::fill(joint_odd_.begin(), joint_odd_.end(), 0.0);
-    const float scale = float((bins_ - 1) / (double(hi) - lo));
-    const int last = bins_ - 2;
-    auto add = [&](std::vector<double>& joint, int i) {
-      const float x = (pair_value_[std::size_t(i)] - lo) * scale;
-      const int j = std::min(static_cast<int>(x), last);
-      const double w = double(x) - j;
-      double* row = &joint[static_cast<std::size_t>(pair_bin_[std::size_t(i)]) * bins_ + j];
-      row[0] += 1.0 - w;
-      row[1] += w;
-    };
-    int i = 0;
-    for (; i + 1 < n; i += 2) {
-      add(joint_, i);
-      add(joint_odd_, i + 1);
-    }
-    if (i < n) add(joint_, i);
-    for (std::size_t k = 0; k < joint_.size(); ++k) joint_[k] += joint_odd_[k];
-    std::fill(fixed_marginal_.begin(), fixed_marginal_.end(), 0.0);
-    std::fill(moving_marginal_.begin(), moving_marginal_.end(), 0.0);
-    for (int a = 0; a < bins_; ++a) {
-      for (int b = 0; b < bins_; ++b) {
-        const double p = joint_[static_cast<std::size_t>(a) * bins_ + b];
-        fixed_marginal_[a] += p;
-        moving_marginal_[b] += p;
-      }
-    }
-    const double inv_n = 1.0 / n;
-    auto entropy = [&](const std::vector<double>& counts) {
-      double h = 0;
-      for (double k : counts)
-        if (k > 0) h -= k * inv_n * std::log(k * inv_n);
-      return h;
-    };
-    const double h_fixed = entropy(fixed_marginal_), h_moving = entropy(moving_marginal_),
-                 h_joint = entropy(joint_);
-    if (normalised_) return h_joint > 1e-12 ? std::clamp((h_fixed + h_moving) / h_joint, 1.0, 2.0) : 1.0;
-    return std::max(0.0, h_fixed + h_moving - h_joint);
-  }
-  std::unique_ptr<Similarity> clone() const override { return std::make_unique<MutualInformation>(*this); }
-
- private:
-  static constexpr std::uint16_t kUnusable = 0xFFFF;
-  int bins_;
-  bool normalised_;
-  FixedImage fixed_;
-  std::vector<std::uint16_t> fixed_bin_;  // kUnusable where the fixed pixel is not usable
-  std::vector<std::uint16_t> pair_bin_;   // scratch: compacted usable pixels
-  std::vector<float> pair_value_;
-  std::vector<double> joint_, joint_odd_, fixed_marginal_, moving_marginal_;
 };
 
 // Pattern intensity on the difference of the standardised images, over the pixel pairs closer
@@ -366,8 +255,8 @@ Result<std::unique_ptr<Similarity>> make_similarity(std::string_view name, const
   if ((name == "mi" || name == "nmi") && (options.histogram_bins < 2 || options.histogram_bins > 1024))
     return out_of_range(std::string(name) + ": histogram bins must be in 2..1024, not " +
                         std::to_string(options.histogram_bins));
-  if (name == "mi") return std::unique_ptr<Similarity>(new MutualInformation(options.histogram_bins, false));
-  if (name == "nmi") return std::unique_ptr<Similarity>(new MutualInformation(options.histogram_bins, true));
+  if (name == "mi") return make_mutual_information(options.histogram_bins, false, options.vector_lanes);
+  if (name == "nmi") return make_mutual_information(options.histogram_bins, true, options.vector_lanes);
   if (name == "ncc") return std::unique_ptr<Similarity>(new Ncc());
   if (name == "gc") return std::unique_ptr<Similarity>(new GradientCorrelation());
   if (name == "pi")

@@ -25,6 +25,9 @@ struct DrrBenchOptions {
   bool light_fields = true;  // build the scene's light fields and time every storage mode
   std::vector<int> vq_codebooks{256, 4096, 65536};
   std::filesystem::path work_dir;  // for the peer's files; empty: a fresh temporary folder
+  // Float light fields to load instead of building them (their precompute is then not timed);
+  // empty: build them in the run.
+  std::filesystem::path light_field_dir;
 };
 
 struct RendererFigures {
@@ -58,7 +61,7 @@ struct DrrBenchReport {
   int rows = 0, cols = 0;
   int threads = 1;
   int render_threads = 1;
-  double precompute_s = 0;  // building the float light fields of all views
+  double precompute_s = 0;  // building the float light fields of all views (0: loaded)
   std::array<int, 4> light_field_resolution{};
   int poses = 0;
   std::vector<std::string> views;

@@ -3,7 +3,7 @@
 // - cold: the scene's plan from starts at an initial mean TRE of up to `cold_max_initial_mm`;
 // - warm: tracking a moving patient, each frame pair after a motion of up to
 //   `warm_translation_mm` and `warm_rotation_deg` (per axis), started from the previous result
-//   with the "warm" plan, timed per registration;
+//   with the warm plan ("warm" unless asked otherwise), timed per registration;
 // - renderers: the same cold registrations with light-field and with Siddon DRRs inside the
 //   registration (frames always ray-cast), mean TRE of each.
 
@@ -17,6 +17,9 @@
 namespace lftrack::host {
 
 struct RegistrationBenchOptions {
+  // The cold plan (empty: the scene's tracking.plan) and the warm plan (a registration_plan name).
+  std::string cold_plan;
+  std::string warm_plan = "warm";
   int cold_runs = 20;
   double cold_max_initial_mm = 8;
   int warm_runs = 100;
@@ -35,7 +38,7 @@ struct TimedRegistrations {
 };
 
 struct RegistrationBenchReport {
-  std::string scene, plan, similarity;
+  std::string scene, plan, warm_plan, similarity;
   int threads = 0;
   TimedRegistrations cold, warm;
   TimedRegistrations lightfield_inside, siddon_inside;  // same starts and frames

@@ -58,7 +58,9 @@ class DrrRenderer {
                            ImageView<float> out, RenderExtras* extras) const = 0;
 };
 
-enum class SimdLevel { kBest, kAvx2, kScalar };
+// kAvx2Gathers: the AVX2 kernel with every sample gathered (no runs), as before issue 24, for
+// side-by-side benchmarks and tests of both paths.
+enum class SimdLevel { kBest, kAvx2, kScalar, kAvx2Gathers };
 
 struct RendererOptions {
   // Rows are spread over this pool; null renders on the calling thread.
@@ -73,7 +75,7 @@ struct RendererOptions {
   std::shared_ptr<const OctreeVolume> octree;
   double octree_pivot = 0.0;
   // Which vectorised kernels the light-field renderer may use: the best the CPU has, at most
-  // AVX2, or none (the portable scalar kernels). Tests compare them.
+  // AVX2 (with or without runs), or none (the portable scalar kernels). Tests compare them.
   SimdLevel simd = SimdLevel::kBest;
 };
 

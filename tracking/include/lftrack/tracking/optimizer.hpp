@@ -40,6 +40,10 @@ struct OptimizerSettings {
   Vector6d scale = Vector6d::Ones();  // parameter units per projected mm
   double initial_step_mm = 2.0;       // projected mm
   double final_step_mm = 0.1;
+  // quadratic-neighbour: converged once an iteration's parabola jump moves no parameter by more
+  // than this (projected mm) and nothing beats the jump, however large the step still is: the
+  // model then puts the minimum within this of the centre. 0: off (halve down to the final step).
+  double tolerance_mm = 0;
   // cmaes: population (0: 4 + 3 ln 6 rounded up to even), and the RNG seed.
   int population = 0;
   std::uint64_t seed = 1;
@@ -78,6 +82,7 @@ class Optimizer {
 //                   parabolas through them (at most two steps per axis); moves to the better of
 //                   the jump and the best neighbour; halves the step once a move is shorter than
 //                   half a step. Fewer evaluations than best-neighbour for the same end point.
+//                   With a tolerance, stops as soon as the jump is that short and nothing beats it.
 //   decoupled       paper 3: pairs {tx, wy}, {ty, wz}, {tz, wx} (weakly coupled for views about
 //                   the room's z axis), five costs each, a separable quadratic fit, a jump to its
 //                   minimum (at most two steps away); halve the step when no pair improves.

@@ -85,6 +85,9 @@ struct RegistrationPass {
   // their meaning.
   std::string similarity;
   double highpass_sigma_mm = 0;  // with blur and bin, the level
+  // quadratic-neighbour: stop once the parabola jump is this short (projected mm; 0: off, halve
+  // down to the final step). OptimizerSettings::tolerance_mm.
+  double tolerance_mm = 0;
 };
 
 struct RegistrationPlan {
@@ -101,14 +104,20 @@ struct RegistrationPlan {
 //              images (a 1.5 mm blur leaves nothing for full resolution to add)
 //   cmaes      CMA-ES on the blurred, binned references (sigma 2.5 -> 0.5 mm) for range, then
 //              quadratic-neighbour on the originals 1 -> 0.1 mm
-//   warm       tracking from the last pose: quadratic-neighbour on 2 x 2 binned originals
-//              1 -> 0.25 mm, then at full resolution 0.25 -> 0.1 mm
+//   warm       tracking from the last pose: quadratic-neighbour on 4 x 4 binned originals
+//              1 -> 0.25 mm, then one iteration at full resolution with 0.25 mm probes (the
+//              parabola jump lands the result; a second iteration at 0.125 mm, or a 2 x 2 binned
+//              first pass, did not lower the mean TRE on the lumbar CT: BENCHMARKS.md, "Tracking at
+//              30 Hz")
 //   robust     quadratic's first pass (the setup's measure, for range), then NCC of frames and
 //              DRRs high-passed at 7 mm (BoxHighPass), 2 -> 0.1 mm: what varies slowly across
 //              the image (scatter, soft tissue and neighbours that moved, flat-field residue)
 //              no longer pulls the pose. On the lumbar CT's clinical frames it quarters the
 //              mean TRE; on ideal frames it costs about 0.01 mm (BENCHMARKS.md)
 //   warm-robust  warm's passes with robust's high-passed NCC, for tracking clinical frames
+//   pyramid    the cold set-up at a third of quadratic's time: quadratic-neighbour on 4 x 4 binned
+//              references blurred 1.5 mm (5 -> 0.5 mm), on 4 x 4 binned originals (1 -> 0.25 mm),
+//              then warm's single full-resolution iteration (0.25 mm)
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
@@ -116,7 +125,10 @@ struct RegistrationResult {
   Pose T_room_from_ct = Pose::Identity();
   PoseDelta delta_from_start;           // about the origin
   double cost = 0;                      // of the last pass (lower is better)
-  std::vector<double> view_similarity;  // unblurred, at the result
+  // The setup's measure on the originals, per view, at the result (the last pass's best candidate's
+  // scores when that pass ran there: the result before re-orthonormalisation, which moves it by
+  // rounding only).
+  std::vector<double> view_similarity;
   double fiducial_distance_mm = -1;     // with a fiducial term
   int evaluations = 0;
   double elapsed_ms = 0;

@@ -27,6 +27,9 @@ struct SimilarityOptions {
   int histogram_bins = 64;     // mi, nmi: bins per axis of the joint histogram, 2..1024
   int pattern_radius_px = 3;   // pi: neighbourhood radius
   double pattern_sigma = 0.1;  // pi: in units of the difference image's standard deviation
+  // mi, nmi: per-pixel passes in AVX2 lanes where the CPU has them (the same scores bit for bit);
+  // false: the portable loops.
+  bool vector_lanes = true;
 };
 
 class Similarity {

@@ -1,0 +1,91 @@
+// Light-field DRRs on one core: the ROI window of a real-CT-sized detector (144 x 316 pixels of
+// 0.4 mm, SAD 1500, SID 2100), at full resolution and 2 x 2 binned (the warm registration's two
+// levels), and a 256 x 256 resampling of it (`bench drr`'s image), each with the portable
+// kernel, the AVX2 kernel gathering every sample (as before issue 24) and the AVX2 kernel with
+// runs, side by side in one run. The field is the built-in phantom's at 16 x 16 x 192 x 192
+// (built once, a few seconds); `lftrack bench drr` times the real CT's paper-resolution fields.
+
+#include <benchmark/benchmark.h>
+
+#include <memory>
+
+#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/tracking/light_field.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace {
+
+using namespace lftrack;
+
+struct Setup {
+  tracking::XrayView view;
+  tracking::PixelWindow window;
+  tracking::Pose pose = tracking::Pose::Identity();
+  std::shared_ptr<const tracking::LightField> field;
+};
+
+const Setup& setup() {
+  static const Setup s = [] {
+    sim::SpinePhantomOptions o;
+    auto phantom = sim::make_spine_phantom(o);
+    const tracking::MuVolume mu = tracking::to_attenuation(phantom->ct);
+    Setup out;
+    out.view = *tracking::XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(1, -1, 0),
+                                               Eigen::Vector3d(0, 0, 1), 1500, 2100, 512, 512, 0.4);
+    out.window = {184, 98, 144, 316};
+    out.pose.translation() = -phantom->vertebral_body_centres_mm[std::size_t(phantom->target_vertebra)];
+    tracking::LightFieldPlanInput in;
+    in.view_room = out.view;
+    in.roi_window = out.window;
+    in.nominal_T_room_from_ct = out.pose;
+    in.roi_centre_ct_mm = out.pose.inverse() * Eigen::Vector3d::Zero();
+    tracking::LightFieldSpec spec;
+    spec.resolution = {16, 16, 192, 192};
+    tracking::ThreadPool pool(0);
+    out.field = *tracking::LightField::build(mu, in, spec, &pool);
+    return out;
+  }();
+  return s;
+}
+
+// Arg 0: the image (0: the window, 1: binned 2 x 2, 2: resampled to 256 x 256); Arg 1: the
+// kernel (0: portable, 1: AVX2 gathers, 2: AVX2 runs).
+void BM_LightFieldDrr(benchmark::State& state) {
+  const Setup& s = setup();
+  const int image = int(state.range(0));
+  tracking::XrayView view = s.view;
+  tracking::PixelWindow window = s.window;
+  if (image > 0) {
+    const int rows = image == 1 ? window.rows / 2 : 256, cols = image == 1 ? window.cols / 2 : 256;
+    view = s.view.resampled(window.row0, window.col0, window.rows, window.cols, rows, cols);
+    window = tracking::PixelWindow::full(rows, cols);
+  }
+  tracking::RendererOptions options;
+  options.light_fields = {s.field};
+  const tracking::SimdLevel kernels[] = {tracking::SimdLevel::kScalar, tracking::SimdLevel::kAvx2Gathers,
+                                         tracking::SimdLevel::kAvx2};
+  options.simd = kernels[state.range(1)];
+  auto renderer = tracking::make_renderer("lightfield", nullptr, options);
+  tracking::Image<float> out(window.rows, window.cols);
+  tracking::Image<unsigned char> valid(window.rows, window.cols);
+  tracking::RenderExtras extras;
+  extras.valid = valid.view();
+  // A pose off the nominal one (a tracked patient a little away from the set-up).
+  tracking::PoseDelta d;
+  d.translation_mm = {1.2, -0.7, 0.9};
+  d.rotation_rad = {0.01, -0.015, 0.008};
+  const tracking::Pose pose = tracking::apply_delta(s.pose, d, Eigen::Vector3d::Zero());
+  for (auto _ : state) {
+    const Status st = (*renderer)->render(pose, view, window, out.view(), &extras);
+    benchmark::DoNotOptimize(out.pixels().data());
+    if (!st.ok()) state.SkipWithError(st.message().c_str());
+  }
+  state.SetItemsProcessed(state.iterations() * window.rows * window.cols);
+}
+BENCHMARK(BM_LightFieldDrr)
+    ->ArgsProduct({{0, 1, 2}, {0, 1, 2}})
+    ->ArgNames({"image", "kernel"})
+    ->Unit(benchmark::kMicrosecond);
+
+}  // namespace
