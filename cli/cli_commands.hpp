@@ -22,6 +22,8 @@ using Command = std::function<Status()>;
 // `lo_open`). NaN, infinities and text that is not a number are refused, which CLI11's Range and
 // PositiveNumber let through for NaN.
 CLI::Validator finite_in(double lo, double hi, bool lo_open = false);
+// Refuses an empty value (`--out ""`), which would otherwise read as "not given".
+CLI::Validator not_empty();
 
 // Options every command that needs a scene shares.
 struct SceneOptions {

@@ -9,6 +9,12 @@
 
 namespace lftrack::host::cli {
 
+CLI::Validator not_empty() {
+  return CLI::Validator(
+      [](const std::string& text) -> std::string { return text.empty() ? "an empty value names nothing" : ""; },
+      "");
+}
+
 CLI::Validator finite_in(double lo, double hi, bool lo_open) {
   std::ostringstream range;
   range << (lo_open ? "(" : "[") << lo << ", " << hi << "]";

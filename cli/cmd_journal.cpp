@@ -18,6 +18,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/operator_input.hpp"
@@ -138,22 +139,25 @@ struct ExportOptions {
 };
 
 // `--dicom-sro FILE`: one cycle's registered pose as a DICOM Spatial Registration object. Only a
-// registration the safety gate applied is exported (a HOLD's or a rejected alignment's pose is
-// no registration of record); the journal holds the pose as a delta from the scene's nominal
-// pose, so the scene (the same one the run used) gives it back as T_room_from_ct.
+// registration the safety gate applied in a cycle that ended in TRACK is exported (a HOLD's or a
+// rejected alignment's pose is no registration of record), from an undamaged journal of this
+// scene (the header's fingerprint: the same room and CT); the journal holds the pose as a delta
+// from the scene's nominal pose, so the scene gives it back as T_room_from_ct.
 Status export_dicom(const ExportOptions& o, const JournalContents& contents) {
-  std::error_code ec;
-  if (std::filesystem::exists(std::filesystem::symlink_status(o.dicom_sro, ec)))
-    return failed_precondition(o.dicom_sro + " exists; a registration is never written over another file");
+  LFTRACK_RETURN_IF_ERROR(check_registration_path(o.dicom_sro).with_context("--dicom-sro"));
+  if (contents.damaged())
+    return corrupt_data(o.file + ": journal damaged (" + summary(contents) + "); no registration exported from it");
   const JournalRecord* chosen = nullptr;
   for (const JournalRecord& r : contents.records) {
-    const bool applied = r.gate_decision == static_cast<std::uint8_t>(GateDecision::kApply);
+    const bool applied = r.gate_decision == static_cast<std::uint8_t>(GateDecision::kApply) &&
+                         r.state == static_cast<std::uint8_t>(TrackingState::kTrack);
     if (o.cycle >= 0 && r.cycle == static_cast<std::uint64_t>(o.cycle)) {
       if (!applied)
         return failed_precondition("cycle " + std::to_string(o.cycle) + ": its registration was not applied (gate " +
-                                   to_string(static_cast<GateDecision>(r.gate_decision)) + ": " +
-                                   to_string(static_cast<GateReason>(r.gate_reason)) +
-                                   "); export a cycle the gate applied");
+                                   to_string(static_cast<GateDecision>(r.gate_decision)) + ", reason " +
+                                   to_string(static_cast<GateReason>(r.gate_reason)) + ", the cycle ended in " +
+                                   to_string(static_cast<TrackingState>(r.state)) +
+                                   "); export a cycle the gate applied that ended in TRACK");
       chosen = &r;
     }
     if (o.cycle < 0 && applied) chosen = &r;
@@ -165,6 +169,14 @@ Status export_dicom(const ExportOptions& o, const JournalContents& contents) {
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   if (!o.scene.ct.empty()) scene->ct.path = o.scene.ct;
+  constexpr std::array<std::uint8_t, 16> kNotRecorded{};
+  if (contents.scene_fingerprint == kNotRecorded)
+    return failed_precondition(o.file + ": the journal does not record its scene (written before lftrack recorded "
+                               "it); its poses cannot be tied to this scene's CT");
+  if (contents.scene_fingerprint != scene_fingerprint(*scene))
+    return failed_precondition(o.file + ": the journal was written with another room or CT (scene fingerprint " +
+                               to_hex(contents.scene_fingerprint) + ", this scene's " +
+                               to_hex(scene_fingerprint(*scene)) + "); give the scene and --ct of the run");
   auto identity = scene_ct_dicom_identity(*scene);  // before the CT's voxels are read
   if (!identity.ok()) return identity.status().with_context("--dicom-sro");
   auto prepared = load_prepared_scene(o.scene, &pool);
@@ -194,6 +206,7 @@ Command add_journal_command(CLI::App* parent) {
   CLI::Option* dicom = app->add_option("--dicom-sro", o->dicom_sro,
                                        "Write one cycle's registration as a DICOM Spatial Registration object "
                                        "referencing the scene's planning CT (a DICOM series); needs --scene")
+                           ->check(not_empty())
                            ->excludes(csv);
   add_scene_options(app, &o->scene);
   app->add_option("--cycle", o->cycle, "With --dicom-sro: the cycle (default: the last one the gate applied)")

@@ -124,10 +124,7 @@ Status write_dicom_result(const RegisterOptions& o, const PreparedScene& p, cons
 
 Status run(const RegisterOptions& o) {
   if (o.sim == !o.frames.empty()) return invalid_argument("give either --frames A B or --sim");
-  std::error_code ec;
-  if (!o.dicom_sro.empty() && std::filesystem::exists(std::filesystem::symlink_status(o.dicom_sro, ec)))
-    return failed_precondition("--dicom-sro " + o.dicom_sro + " exists; a registration is never written over "
-                               "another file");
+  if (!o.dicom_sro.empty()) LFTRACK_RETURN_IF_ERROR(check_registration_path(o.dicom_sro).with_context("--dicom-sro"));
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
@@ -373,7 +370,8 @@ Command add_register_command(CLI::App* parent) {
   app->add_flag("--json", o->json, "Print the result as JSON");
   app->add_option("--dicom-sro", o->dicom_sro,
                   "Write an accepted result as a DICOM Spatial Registration object referencing the planning CT "
-                  "(the scene's CT must be a DICOM series); never over an existing file");
+                  "(the scene's CT must be a DICOM series); never over an existing file")
+      ->check(not_empty());
   return [o] { return run(*o); };
 }
 

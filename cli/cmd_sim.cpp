@@ -394,18 +394,22 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
   CLI::Option* monitor = app->add_option(
       "--monitor", o->monitor,
       "Serve the operator's live page on [ADDRESS:]PORT (default address 127.0.0.1; port 0: any free one); "
-      "its actions need the run's token, printed at start");
+      "its actions need the run's token, printed at start")
+      ->check(not_empty());
   app->add_option("--monitor-origin", o->monitor_origins,
                   "Another origin (http://HOST:PORT) whose page may act, e.g. the console's name when the page "
                   "listens on 0.0.0.0")
+      ->check(not_empty())
       ->needs(monitor);
   app->add_option("--monitor-token-file", o->monitor_token_file,
                   "Where the token is stored, mode 0600 (default " + o->journal_folder +
                       "/monitor-ADDRESS-PORT.token); removed at exit")
+      ->check(not_empty())
       ->needs(monitor);
   app->add_option("--igtl", o->igtl,
                   "Serve the registered pose over OpenIGTLink on [ADDRESS:]PORT (3D Slicer's OpenIGTLinkIF "
-                  "connects as a client)");
+                  "connects as a client)")
+      ->check(not_empty());
   if (chaos != nullptr)  // the soak makes its own devices, operator and journals
     for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume", "--rt",
                               "--monitor", "--igtl"})

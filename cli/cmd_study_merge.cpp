@@ -171,6 +171,10 @@ Status run_merge(const MergeCliOptions& o) {
       return invalid_argument("merge: --out " + o.out_dir + " is, or is inside, the shard folder " + dir +
                               "; choose a folder of its own");
   }
+  // Nothing is replaced: the merge writes into a new or empty folder.
+  if (std::filesystem::exists(o.out_dir, ec) && !std::filesystem::is_empty(o.out_dir, ec))
+    return failed_precondition("merge: --out " + o.out_dir +
+                               " is not empty (an earlier merge?); a merge writes into a new or empty folder");
   std::string kind;
   for (const auto& dir : o.shards) {
     auto k = study_kind(dir);
@@ -192,7 +196,9 @@ Command add_study_merge_command(CLI::App* parent) {
       parent->add_subcommand("merge", "Join the shards of a trade, capture-range or realism study (several scenes: per "
                                       "scene and pooled) and write its plots and summary");
   auto o = std::make_shared<MergeCliOptions>();
-  app->add_option("--out", o->out_dir, "Output folder")->required();
+  app->add_option("--out", o->out_dir, "Output folder, new or empty (nothing in it is replaced)")
+      ->required()
+      ->check(not_empty());
   app->add_option("shards", o->shards, "The shards' output folders")
       ->required()
       ->check(CLI::ExistingDirectory);

@@ -341,11 +341,19 @@ TEST(Cli, TradeStudyShardsMergeIntoPlotsAndASummary) {
     EXPECT_GT(std::filesystem::file_size(merged / "tre_vs_time.png"), 1000u);
     EXPECT_GT(std::filesystem::file_size(merged / "memory_vs_fidelity.png"), 1000u);
   }
+  // A second merge into the first one's folder replaces nothing.
+  const auto merged_summary_time = std::filesystem::last_write_time(merged / "summary.md");
+  EXPECT_FALSE(run_process({lftrack_bin(), "study", "merge", "--out", merged.string(), (dir.path() / "shard1").string(),
+                            (dir.path() / "shard2").string()},
+                           &out)
+                   .ok());
+  EXPECT_NE(out.find("is not empty"), std::string::npos) << out;
+  EXPECT_EQ(std::filesystem::last_write_time(merged / "summary.md"), merged_summary_time);
   // A missing shard and a bad shard spec are refused.
-  EXPECT_FALSE(
-      run_process(
-          {lftrack_bin(), "study", "merge", "--out", merged.string(), (dir.path() / "shard1").string()}, &out)
-          .ok());
+  EXPECT_FALSE(run_process({lftrack_bin(), "study", "merge", "--out", (dir.path() / "merged-half").string(),
+                            (dir.path() / "shard1").string()},
+                           &out)
+                   .ok());
   EXPECT_NE(out.find("shard 2 of 2 is missing"), std::string::npos) << out;
   auto bad = common;
   bad.insert(bad.end(), {"--shard", "3/2", "--out", "x"});

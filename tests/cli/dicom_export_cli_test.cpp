@@ -16,8 +16,10 @@
 
 #include "dicom_writer.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
@@ -143,24 +145,29 @@ TEST_F(DicomExportCli, RegisterWritesTheAcceptedResultAgainstTheCtsFrameOfRefere
 }
 
 TEST_F(DicomExportCli, JournalExportWritesAnAppliedCyclesRegistration) {
-  const fs::path journal = dir_->path() / "run.lfj";
-  {
-    auto writer = JournalWriter::open(journal);
+  tracking::ThreadPool pool(1);
+  auto scene = load_scene(scene_file().string());
+  ASSERT_TRUE(scene.ok());
+  // Five cycles: 3 held by the gate; 1 applied by the gate but ended in HOLD (the couch refused).
+  const auto write_journal = [](const fs::path& file, const std::array<std::uint8_t, 16>& fingerprint) {
+    JournalOptions options;
+    options.scene_fingerprint = fingerprint;
+    auto writer = JournalWriter::open(file, options);
     ASSERT_TRUE(writer.ok());
     for (std::uint64_t c = 0; c < 5; ++c) {
       JournalRecord r;
       r.cycle = c;
       r.gate_decision = static_cast<std::uint8_t>(c == 3 ? GateDecision::kHold : GateDecision::kApply);
+      r.state = static_cast<std::uint8_t>(c == 1 || c == 3 ? TrackingState::kHold : TrackingState::kTrack);
       r.pose_delta[0] = 0.5 * double(c);
       r.pose_delta[4] = 0.01 * double(c);
       r.similarity[0] = 0.4;
       (*writer)->append(r);
     }
     ASSERT_TRUE((*writer)->close().ok());
-  }
-  tracking::ThreadPool pool(1);
-  auto scene = load_scene(scene_file().string());
-  ASSERT_TRUE(scene.ok());
+  };
+  const fs::path journal = dir_->path() / "run.lfj";
+  write_journal(journal, scene_fingerprint(*scene));
   auto prepared = prepare_scene(*scene, "", &pool);
   ASSERT_TRUE(prepared.ok());
   auto expected = [&](std::uint64_t c) {
@@ -198,6 +205,51 @@ TEST_F(DicomExportCli, JournalExportWritesAnAppliedCyclesRegistration) {
                            &said)
                    .ok());
   EXPECT_NE(said.find("not applied"), std::string::npos) << said;
+  EXPECT_FALSE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", journal.string(), "--dicom-sro",
+                            held.string(), "--scene", scene_file().string(), "--cycle", "1"},
+                           &said)
+                   .ok());
+  EXPECT_NE(said.find("ended in HOLD"), std::string::npos) << said;
+  // A journal of another scene (the built-in phantom's room and CT), one that does not record its
+  // scene, and a damaged one: refused (an outside probe exported the phantom's poses as a
+  // registration of a patient's CT).
+  const fs::path other = dir_->path() / "other-scene.lfj", unrecorded = dir_->path() / "unrecorded.lfj",
+                 damaged = dir_->path() / "damaged.lfj";
+  auto builtin = load_scene(kBuiltinPhantom);
+  ASSERT_TRUE(builtin.ok());
+  write_journal(other, scene_fingerprint(*builtin));
+  write_journal(unrecorded, {});
+  fs::copy_file(journal, damaged);
+  {
+    std::fstream f(damaged, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(32 + 8 + 20);  // inside the first record's payload: its CRC no longer matches
+    f.put('\x55');
+  }
+  for (const auto& [file, why] : std::vector<std::pair<fs::path, std::string>>{
+           {other, "another room or CT"}, {unrecorded, "does not record its scene"}, {damaged, "damaged"}}) {
+    EXPECT_FALSE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", file.string(), "--dicom-sro", held.string(),
+                              "--scene", scene_file().string()},
+                             &said)
+                     .ok())
+        << file;
+    EXPECT_NE(said.find(why), std::string::npos) << said;
+  }
+  // A link at the target is never written through; a missing folder is refused before anything.
+  const fs::path victim = dir_->path() / "victim.txt", link = dir_->path() / "link.dcm";
+  std::ofstream(victim) << "kept\n";
+  fs::create_symlink(victim, link);
+  EXPECT_FALSE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", journal.string(), "--dicom-sro",
+                            link.string(), "--scene", scene_file().string()},
+                           &said)
+                   .ok());
+  EXPECT_EQ(fs::file_size(victim), 5u) << "written through the link";
+  EXPECT_FALSE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", journal.string(), "--dicom-sro",
+                            (dir_->path() / "no-such-folder" / "x.dcm").string(), "--scene", scene_file().string()},
+                           &said)
+                   .ok());
+  EXPECT_NE(said.find("does not exist"), std::string::npos) << said;
+  for (const auto& entry : fs::directory_iterator(dir_->path()))
+    EXPECT_EQ(entry.path().filename().string().find(".partial"), std::string::npos) << entry.path() << " left behind";
   EXPECT_FALSE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", journal.string(), "--dicom-sro",
                             held.string(), "--scene", scene_file().string(), "--cycle", "99"},
                            &said)

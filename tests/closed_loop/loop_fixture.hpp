@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "lftrack/host/loop_session.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
@@ -98,6 +99,9 @@ class ClosedLoop : public ::testing::Test {
     r.summary = *summary;
     auto journal = read_journal(options.journal);
     EXPECT_TRUE(journal.ok()) << journal.status().message();
+    if (journal.ok()) {  // what `journal export --dicom-sro` checks the scene by
+      EXPECT_EQ(journal->scene_fingerprint, scene_fingerprint(scene_->scene));
+    }
     r.journal = *journal;
     return r;
   }

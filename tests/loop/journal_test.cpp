@@ -119,6 +119,25 @@ TEST(Journal, RoundTripsEveryRecord) {
   }
 }
 
+TEST(Journal, TheHeaderKeepsTheScenesFingerprint) {
+  test::TempDir dir;
+  JournalOptions options;
+  for (std::size_t i = 0; i < options.scene_fingerprint.size(); ++i)
+    options.scene_fingerprint[i] = static_cast<std::uint8_t>(0xA0 + i);
+  for (const bool with_fingerprint : {true, false}) {
+    const auto file = dir.path() / (with_fingerprint ? "with.journal" : "without.journal");
+    auto w = with_fingerprint ? JournalWriter::open(file, options) : JournalWriter::open(file);
+    ASSERT_TRUE(w.ok()) << w.status().message();
+    ASSERT_TRUE((*w)->append(record(0)));
+    ASSERT_TRUE((*w)->close().ok());
+    auto j = read_journal(file);
+    ASSERT_TRUE(j.ok()) << j.status().message();
+    const std::array<std::uint8_t, 16> expected = with_fingerprint ? options.scene_fingerprint : std::array<std::uint8_t, 16>{};
+    EXPECT_EQ(j->scene_fingerprint, expected);
+    EXPECT_EQ(j->records.size(), 1u);
+  }
+}
+
 // A disk that fills up: write(2) takes bytes until a budget is spent (the last write partly),
 // then fails with ENOSPC, as a real file system does.
 std::atomic<long long> g_disk_bytes_left{0};

@@ -52,10 +52,14 @@ struct Served {
   // POSTs an action; the status and the JSON answer.
   std::pair<int, nlohmann::json> act(const std::string& action, const nlohmann::json& body,
                                      const std::string& token, const std::string& origin = "") const {
+    return act_text(action, body.dump(), token, origin);
+  }
+  std::pair<int, nlohmann::json> act_text(const std::string& action, const std::string& body,
+                                          const std::string& token, const std::string& origin = "") const {
     httplib::Headers headers;
     if (!token.empty()) headers.emplace("Authorization", "Bearer " + token);
     if (!origin.empty()) headers.emplace("Origin", origin);
-    auto res = client().Post(("/api/" + action).c_str(), headers, body.dump(), "application/json");
+    auto res = client().Post(("/api/" + action).c_str(), headers, body, "application/json");
     if (!res) return {0, {}};
     return {res->status, nlohmann::json::parse(res->body, nullptr, false)};
   }
@@ -133,6 +137,14 @@ TEST(MonitorServer, ActionsNeedTheTokenAFreshNonceAndThePagesOrigin) {
                                      nlohmann::json{{"nonce", s.nonce()}, {"hold_id", 0}}, nlohmann::json::array()})
     EXPECT_EQ(s.act("resume", body, token).first, 400) << body.dump();
   EXPECT_TRUE(loop.saw(OperatorRefusal::kMalformed));
+  // A key given twice is ambiguous, whichever value would win (an outside probe found the last
+  // one taken); a repeated key inside a nested value is the same refusal.
+  EXPECT_EQ(s.act_text("resume", "{\"nonce\":\"" + s.nonce() + "\",\"hold_id\":1,\"hold_id\":123456}", token).first,
+            400);
+  EXPECT_EQ(s.act_text("resume", "{\"nonce\":\"" + s.nonce() + "\",\"nonce\":\"" + s.nonce() + "\",\"hold_id\":123456}",
+                       token)
+                .first,
+            400);
   // No HOLD named: the loop refuses it for that.
   auto unnamed = s.act("resume", {{"nonce", s.nonce()}}, token);
   EXPECT_EQ(unnamed.first, 409);
@@ -249,9 +261,22 @@ TEST(MonitorServer, RefusesBadSettingsAndABusyPort) {
     bad.event_rate_hz = rate;
     EXPECT_FALSE(MonitorServer::start(s.hub.hub.get(), &s.page, bad).ok()) << rate;
   }
-  MonitorOptions origin = o;
-  origin.extra_origins = {"javascript:alert(1)"};
-  EXPECT_FALSE(MonitorServer::start(s.hub.hub.get(), &s.page, origin).ok());
+  for (const char* bad : {"javascript:alert(1)", "http://console", "http://console:99999", "http://console:0",
+                          "http://console:8o", "http://:8080", "http://console:8080/page", "https://console:8080"}) {
+    MonitorOptions origin = o;
+    origin.extra_origins = {bad};
+    EXPECT_FALSE(check_monitor_origins(origin).ok()) << bad;
+    EXPECT_FALSE(MonitorServer::start(s.hub.hub.get(), &s.page, origin).ok()) << bad;
+  }
+  MonitorOptions console = o;
+  console.extra_origins = {"http://console.room:8080"};
+  EXPECT_TRUE(check_monitor_origins(console).ok());
+  // Every interface: a browser's Host is the name it used, which the server must be told.
+  MonitorOptions every = o;
+  every.listen = {"0.0.0.0", 0};
+  EXPECT_FALSE(check_monitor_origins(every).ok());
+  every.extra_origins = console.extra_origins;
+  EXPECT_TRUE(check_monitor_origins(every).ok());
   EXPECT_FALSE(MonitorServer::start(nullptr, &s.page, o).ok());
 }
 

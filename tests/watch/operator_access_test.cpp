@@ -88,9 +88,27 @@ TEST(OperatorToken, FileIsTheRunsOwnAndNeverReplacesAnotherFile) {
     // A second run at the same path while the first holds it replaces only a token file.
   }
   EXPECT_FALSE(fs::exists(file)) << "removed when the run ends";
-  // An earlier run's file (a crash left it) is replaced.
-  std::ofstream(file) << "deadbeef\n";
+  // An earlier run's file (a crash left it: 64 hexadecimal digits, mode 0600) is replaced.
+  const std::string earlier(64, 'e');
+  std::ofstream(file) << earlier << "\n";
+  fs::permissions(file, fs::perms::owner_read | fs::perms::owner_write);
   EXPECT_TRUE(TokenFile::write(file, "0123").ok());
+  // A user's file that merely looks like one (another mode, or other text) is kept.
+  const fs::path lookalike = dir.path() / "lookalike.token";
+  std::ofstream(lookalike) << earlier << "\n";
+  fs::permissions(lookalike, fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read |
+                                 fs::perms::others_read);
+  EXPECT_FALSE(TokenFile::write(lookalike, "0123").ok());
+  const fs::path short_hex = dir.path() / "short.token";
+  std::ofstream(short_hex) << "deadbeef\n";
+  fs::permissions(short_hex, fs::perms::owner_read | fs::perms::owner_write);
+  EXPECT_FALSE(TokenFile::write(short_hex, "0123").ok());
+  for (const fs::path& kept : {lookalike, short_hex}) {
+    std::ifstream in(kept);
+    std::string line;
+    std::getline(in, line);
+    EXPECT_TRUE(line == earlier || line == "deadbeef") << kept << " was replaced";
+  }
   // Anything else is refused and kept: a file with other text, a link, a folder.
   const fs::path notes = dir.path() / "notes.token";
   std::ofstream(notes) << "treatment notes, not a token\n";

@@ -79,13 +79,15 @@ bool ReadWindow::want(std::size_t n) {
 }
 
 // The record size the header promises, after checking magic, version and size.
-Result<std::size_t> read_header(ReadWindow* in, const std::string& name, std::uint32_t* version) {
+Result<std::size_t> read_header(ReadWindow* in, const std::string& name, std::uint32_t* version,
+                                std::array<std::uint8_t, 16>* scene_fingerprint) {
   if (!in->want(kHeaderBytes)) return io_error(name + ": cannot read: " + std::strerror(errno));
   if (in->available() < kHeaderBytes || std::memcmp(in->data(), kFileMagic, 8) != 0)
     return invalid_argument(name + ": not an lftrack journal");
   std::uint32_t record_size = 0;
   std::memcpy(version, in->data() + 8, 4);
   std::memcpy(&record_size, in->data() + 12, 4);
+  std::memcpy(scene_fingerprint->data(), in->data() + 16, scene_fingerprint->size());
   in->consume(kHeaderBytes);
   if (*version < kFirstFormatVersion || *version > kFormatVersion)
     return invalid_argument(name + ": journal format version " + std::to_string(*version) +
@@ -312,7 +314,7 @@ Result<JournalContents> read_journal(const std::filesystem::path& file, const Jo
   if (fd < 0) return io_error(file.string() + ": cannot open journal: " + std::strerror(errno));
   ReadWindow in(fd);
   JournalContents out;
-  auto record_bytes = read_header(&in, file.string(), &out.format_version);
+  auto record_bytes = read_header(&in, file.string(), &out.format_version, &out.scene_fingerprint);
   if (!record_bytes.ok()) return record_bytes.status();
   reserve_for_file(fd, 8 + *record_bytes + 4, limits.max_records, &out.records);
   read_frames(&in, out.format_version, *record_bytes, limits, &out);

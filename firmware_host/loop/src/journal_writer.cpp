@@ -101,6 +101,8 @@ Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem
   const std::uint32_t version = kFormatVersion, record_size = sizeof(JournalRecord);
   std::memcpy(header + 8, &version, 4);
   std::memcpy(header + 12, &record_size, 4);
+  static_assert(kHeaderBytes >= 16 + sizeof options.scene_fingerprint);
+  std::memcpy(header + 16, options.scene_fingerprint.data(), options.scene_fingerprint.size());
   if (!write_all(options.write_call, fd, header, kHeaderBytes) || ::fdatasync(fd) != 0) {
     ::close(fd);
     return io_error(file.string() + ": cannot write the journal header: " + std::strerror(errno));

@@ -1,11 +1,17 @@
 #include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
 
 #include <dcmtk/dcmdata/dcdeftag.h>
 #include <dcmtk/dcmdata/dcfilefo.h>
 #include <dcmtk/dcmdata/dcuid.h>
 #include <openssl/sha.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -150,15 +156,7 @@ Result<CtDicomIdentity> scene_ct_dicom_identity(const Scene& scene) {
 }
 
 std::string room_frame_of_reference_uid(const Scene& scene) {
-  std::ostringstream geometry;
-  geometry.precision(17);
-  for (const DetectorSpec& d : scene.detectors) {
-    const tracking::XrayView& v = d.view;
-    geometry << v.name << ' ' << v.rows << ' ' << v.cols << ' ' << v.pitch_row_mm << ' ' << v.pitch_col_mm << ' '
-             << v.source_mm.transpose() << ' ' << v.pixel00_mm.transpose() << ' ' << v.row_axis.transpose() << ' '
-             << v.col_axis.transpose() << '\n';
-  }
-  const std::string text = "lftrack room frame\n" + geometry.str();
+  const std::string text = "lftrack room frame\n" + room_geometry_text(scene);
   unsigned char hash[SHA256_DIGEST_LENGTH];
   SHA256(reinterpret_cast<const unsigned char*>(text.data()), text.size(), hash);
   // The first 128 bits of the hash as a decimal number: long division of the big-endian bytes by 10.
@@ -186,9 +184,7 @@ Status write_spatial_registration(const fs::path& file, const CtDicomIdentity& c
     return invalid_argument("DICOM registration: the pose is not a rigid transform");
   if (r.room_frame_of_reference_uid.empty() || ct.frame_of_reference_uid.empty())
     return invalid_argument("DICOM registration: both Frames of Reference are needed");
-  std::error_code ec;
-  if (fs::exists(fs::symlink_status(file, ec)))
-    return failed_precondition(file.string() + " exists; a registration is never written over another file");
+  LFTRACK_RETURN_IF_ERROR(check_registration_path(file));
 
   DcmFileFormat format;
   DcmDataset* ds = format.getDataset();
@@ -242,19 +238,32 @@ Status write_spatial_registration(const fs::path& file, const CtDicomIdentity& c
     LFTRACK_RETURN_IF_ERROR(put(*instance, DCM_ReferencedSOPClassUID, sop_class));
     LFTRACK_RETURN_IF_ERROR(put(*instance, DCM_ReferencedSOPInstanceUID, sop_instance));
   }
-  // Written beside the target and renamed into place: no half-written object under its name.
-  const fs::path partial = file.string() + ".partial";
+  // Written into a file this call creates (mkstemp: O_EXCL, a fresh name) beside the target, then
+  // linked into place: no half-written object under its name, and nothing else written through.
+  std::string partial = file.string() + ".partial-XXXXXX";
+  const int fd = ::mkstemp(partial.data());
+  if (fd < 0) return io_error(file.string() + ": cannot create a file beside it: " + std::strerror(errno));
+  ::close(fd);
   const OFCondition saved = format.saveFile(partial.c_str(), EXS_LittleEndianExplicit);
+  Status placed;
   if (saved.bad()) {
-    fs::remove(partial, ec);
-    return io_error(file.string() + ": cannot write: " + saved.text());
+    placed = io_error(file.string() + ": cannot write: " + saved.text());
+  } else if (::link(partial.c_str(), file.c_str()) != 0) {
+    placed = errno == EEXIST ? failed_precondition(file.string() + " appeared while writing; not replacing it")
+                             : io_error(file.string() + ": cannot place the registration: " + std::strerror(errno));
   }
-  if (fs::exists(fs::symlink_status(file, ec))) {
-    fs::remove(partial, ec);
-    return failed_precondition(file.string() + " appeared while writing; not replacing it");
-  }
-  fs::rename(partial, file, ec);
-  if (ec) return io_error(file.string() + ": " + ec.message());
+  ::unlink(partial.c_str());
+  return placed;
+}
+
+Status check_registration_path(const fs::path& file) {
+  if (file.empty() || !file.has_filename())
+    return invalid_argument(file.string() + ": names no file for the registration");
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(file, ec)))
+    return failed_precondition(file.string() + " exists; a registration is never written over another file");
+  const fs::path parent = file.has_parent_path() ? file.parent_path() : fs::path(".");
+  if (!fs::is_directory(parent, ec)) return not_found("the folder " + parent.string() + " does not exist");
   return {};
 }
 

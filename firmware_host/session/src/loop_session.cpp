@@ -13,6 +13,7 @@
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
@@ -342,6 +343,7 @@ Status start_watchers(const PreparedScene& p, const LoopSessionOptions& o, LoopS
 static Status check_watcher_ports(const LoopSessionOptions& o) {
   if (o.monitor && o.igtl && o.monitor->listen.port != 0 && o.monitor->listen.port == o.igtl->listen.port)
     return invalid_argument("--monitor and --igtl name the same port " + std::to_string(o.igtl->listen.port));
+  if (o.monitor) LFTRACK_RETURN_IF_ERROR(check_monitor_origins(*o.monitor));
   for (const ListenAddress* at : {o.monitor ? &o.monitor->listen : nullptr, o.igtl ? &o.igtl->listen : nullptr}) {
     if (at == nullptr || at->port == 0) continue;
     int port = 0;
@@ -422,7 +424,9 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   }
 
   if (!o.journal.empty()) {
-    auto journal = JournalWriter::open(o.journal, o.journal_options);
+    JournalOptions journal_options = o.journal_options;
+    journal_options.scene_fingerprint = scene_fingerprint(p.scene);
+    auto journal = JournalWriter::open(o.journal, journal_options);
     if (!journal.ok()) return journal.status();
     parts->journal = std::move(journal).value();
   }

@@ -9,6 +9,7 @@
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <set>
 
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
@@ -84,7 +85,17 @@ OperatorCommand action_command(const std::string& path) {
 // (the loop then refuses a resume or reset for not naming its HOLD, or for coming outside one).
 // False when it is anything else.
 bool parse_action(const std::string& body, OperatorCommand command, std::string* nonce, OperatorRequest* request) {
-  const auto j = nlohmann::json::parse(body, nullptr, /*allow_exceptions=*/false);
+  // A key given twice is refused, not read as its last value: a safety command is unambiguous.
+  std::set<std::string> top_level_keys;
+  bool repeated_key = false;
+  const auto note_keys = [&](int depth, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+    if (event == nlohmann::json::parse_event_t::key && depth == 1 &&
+        !top_level_keys.insert(parsed.get<std::string>()).second)
+      repeated_key = true;
+    return true;
+  };
+  const auto j = nlohmann::json::parse(body, note_keys, /*allow_exceptions=*/false);
+  if (repeated_key) return false;
   if (!j.is_object() || !j.contains("nonce") || !j["nonce"].is_string()) return false;
   *nonce = j["nonce"].get<std::string>();
   *request = {};
@@ -100,9 +111,27 @@ bool parse_action(const std::string& body, OperatorCommand command, std::string*
 
 }  // namespace
 
+Status check_monitor_origins(const MonitorOptions& options) {
+  for (const std::string& origin : options.extra_origins) {
+    const std::size_t colon = origin.rfind(':');
+    const bool form = origin.rfind("http://", 0) == 0 && origin.size() > 7 && origin.find('/', 7) == std::string::npos &&
+                      colon != std::string::npos && colon > 7 && colon + 1 < origin.size() &&
+                      origin.find_first_not_of("0123456789", colon + 1) == std::string::npos;
+    const long port = form && origin.size() - colon - 1 <= 5 ? std::stol(origin.substr(colon + 1)) : 0;
+    if (!form || port < 1 || port > 65535)
+      return invalid_argument("monitor: origin '" + origin + "' is not of the form http://HOST:PORT (port 1 to 65535)");
+  }
+  if (options.listen.wildcard() && options.extra_origins.empty())
+    return invalid_argument("monitor: listening on every interface (" + options.listen.text() +
+                            "), a browser's Host is the name it used; give it with --monitor-origin "
+                            "http://HOST:PORT, or listen on the one address the console uses");
+  return {};
+}
+
 Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageOperator* page,
                                                             const MonitorOptions& options) {
   if (hub == nullptr || page == nullptr) return invalid_argument("monitor: needs the cycle hub and the page operator");
+  LFTRACK_RETURN_IF_ERROR(check_monitor_origins(options));
   if (options.max_event_clients < 1 || options.max_event_clients > 256)
     return invalid_argument("monitor: the event clients must be 1 to 256");
   if (!(std::isfinite(options.event_rate_hz) && options.event_rate_hz > 0 && options.event_rate_hz <= 1000))
@@ -118,12 +147,16 @@ Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageO
   s->token_ = *token;
   s->server_ = std::make_unique<httplib::Server>();
   httplib::Server& svr = *s->server_;
-  const std::size_t threads = std::size_t(options.max_event_clients) + 8;  // every event stream holds one
+  // Every event stream holds a thread; the rest serve the page, state and actions. One request per
+  // connection: an idle keep-alive connection (a refused event stream's, say) would hold a thread
+  // for nothing while others wait (an outside probe starved the actions with 32 event clients).
+  const std::size_t threads = std::size_t(options.max_event_clients) + 16;
   svr.new_task_queue = [threads] { return new WatcherTaskQueue(threads); };
   svr.set_payload_max_length(4096);
-  svr.set_read_timeout(5, 0);
+  svr.set_read_timeout(2, 0);
   svr.set_write_timeout(2, 0);  // a client that stops reading loses its stream, nothing else
-  svr.set_keep_alive_timeout(5);
+  svr.set_keep_alive_max_count(1);
+  svr.set_keep_alive_timeout(1);
   // cpp-httplib's default sets SO_REUSEPORT, which lets a second server (another lftrack) bind the
   // same port and take half the connections. Only SO_REUSEADDR: a restart may rebind a port in
   // TIME_WAIT, and a port another server listens on is refused.
@@ -144,11 +177,7 @@ Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageO
   const std::string port = std::to_string(s->port_);
   s->hosts_.push_back(at.address + ":" + port);
   if (at.loopback()) s->hosts_.push_back("localhost:" + port);
-  for (const std::string& origin : options.extra_origins) {
-    if (origin.rfind("http://", 0) != 0 || origin.size() <= 7 || origin.find('/', 7) != std::string::npos)
-      return invalid_argument("monitor: origin '" + origin + "' is not of the form http://HOST:PORT");
-    s->hosts_.push_back(origin.substr(7));
-  }
+  for (const std::string& origin : options.extra_origins) s->hosts_.push_back(origin.substr(7));
   for (const std::string& host : s->hosts_) s->origins_.push_back("http://" + host);
   std::filesystem::path file = options.token_file;
   if (file.empty()) {

@@ -34,15 +34,18 @@ bool token_matches(const std::string& expected, const std::string& offered) {
 
 namespace {
 
-// An earlier run's token file: a regular file of this user, small, only hexadecimal digits.
+// An earlier run's token file, exactly as write() leaves it: a regular file of this user, mode
+// 0600, one line of 64 lowercase hexadecimal digits. Anything else (a user's file that merely
+// looks like a token, with another mode) is never replaced.
 bool is_earlier_token_file(const std::filesystem::path& path) {
   struct stat st {};
-  if (::lstat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode) || st.st_uid != ::geteuid() || st.st_size > 200)
+  if (::lstat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode) || st.st_uid != ::geteuid() ||
+      (st.st_mode & 07777) != 0600 || st.st_size != 65)
     return false;
   std::ifstream in(path);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  while (!text.empty() && text.back() == '\n') text.pop_back();
-  return !text.empty() && text.find_first_not_of("0123456789abcdef") == std::string::npos;
+  return text.size() == 65 && text.back() == '\n' &&
+         text.find_first_not_of("0123456789abcdef") == 64;
 }
 
 }  // namespace

@@ -2,7 +2,8 @@
 // The cycle journal: one fixed-size record per cycle, appended to a file by a writer thread fed
 // through a lock-free single-producer queue, so the cycle never waits on the disk.
 //
-// File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size), then
+// File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size, the
+// scene's 16-byte fingerprint or zeros), then
 // one frame per record: u32 magic 0x4A52464C ("LFRJ"), u32 payload size, the payload (a
 // JournalRecord), u32 CRC-32C of the payload. Version 2 (written now) has 264-byte records;
 // version 1 (still read) had 256, the prefix of JournalRecord up to `hold_id`.
@@ -20,6 +21,7 @@
 
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
@@ -77,6 +79,10 @@ struct JournalOptions {
   // The write(2) the writer thread calls: the kernel's, or a fault injector in tests (a disk
   // that fills up, an I/O error).
   ssize_t (*write_call)(int fd, const void* data, std::size_t bytes) = &::write;
+  // What the journal records the cycles of, written into the header's last 16 bytes (zeros:
+  // not recorded): the session's scene fingerprint, so that an export can refuse a scene other
+  // than the one the run used.
+  std::array<std::uint8_t, 16> scene_fingerprint{};
 };
 
 // Whether a journal may be created at `file`: nothing there, or (overwrite) an earlier lftrack
@@ -163,6 +169,7 @@ struct JournalReadLimits {
 
 struct JournalContents {
   std::uint32_t format_version = 0;
+  std::array<std::uint8_t, 16> scene_fingerprint{};  // zeros: the writer recorded none
   std::vector<JournalRecord> records;     // every valid frame, in file order (repeats included)
   std::vector<JournalBadSpan> bad_spans;  // in file order; a torn tail is the last one
   std::vector<JournalCycleGap> gaps;

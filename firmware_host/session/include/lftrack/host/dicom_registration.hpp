@@ -55,8 +55,14 @@ struct SpatialRegistration {
   std::string description;  // Content Description, e.g. "lftrack register: quadratic, MI 0.41"
 };
 
+// Whether a registration may be written at `file`: nothing there (not even a dangling link), in a
+// folder that exists. For checking before a registration runs; the writer checks again.
+Status check_registration_path(const std::filesystem::path& file);
+
 // Writes the object to `file`; refuses a file that exists (nothing is overwritten) and a pose
-// that is not finite or not rigid.
+// that is not finite or not rigid. The object is written into a new file of its own (O_EXCL)
+// beside the target and linked into place: link() refuses a target that appeared meanwhile, and
+// no link or earlier file of any name is ever written through.
 Status write_spatial_registration(const std::filesystem::path& file, const CtDicomIdentity& ct,
                                   const SpatialRegistration& registration);
 

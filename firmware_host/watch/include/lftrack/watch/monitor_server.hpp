@@ -56,6 +56,11 @@ struct MonitorCounters {
   std::int64_t actions_accepted = 0;
 };
 
+// The options' origins, before anything listens: each of the form http://HOST:PORT with a port of
+// 1 to 65535; listening on every interface (0.0.0.0) needs at least one, the name the console
+// reaches the page by (a browser sends that name as Host, which is checked).
+Status check_monitor_origins(const MonitorOptions& options);
+
 class MonitorServer {
  public:
   // Listens, writes the token file and serves on threads of its own. `hub` and `page` must

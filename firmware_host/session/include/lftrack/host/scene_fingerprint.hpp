@@ -1,0 +1,25 @@
+#pragma once
+// What identifies the room and the patient a run's records belong to, so that a record read back
+// later (a journal exported as a DICOM registration) is never joined with another scene.
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+#include "lftrack/host/scene.hpp"
+
+namespace lftrack::host {
+
+// The room's geometry as text: every detector's view (name, size, pitch, source, pixel (0,0),
+// axes) at full precision, in the scene's order. Room frame, mm.
+std::string room_geometry_text(const Scene& scene);
+
+// The first 16 bytes of SHA-256 over the room's geometry and the planning CT (its path made
+// absolute and canonical, or the built-in phantom and its seed). Two scenes with the same room and
+// CT have the same fingerprint, whatever their motion, tracking or loop settings; never all zeros
+// (zeros mean "not recorded" in a journal's header).
+std::array<std::uint8_t, 16> scene_fingerprint(const Scene& scene);
+
+std::string to_hex(const std::array<std::uint8_t, 16>& fingerprint);
+
+}  // namespace lftrack::host
