@@ -33,6 +33,18 @@ Result<std::string> study_kind(const std::string& dir) {
   }
 }
 
+// Every shard folder read with `reader`; the first that does not read stops it.
+template <typename Study, typename Reader>
+Result<std::vector<Study>> read_shards(const std::vector<std::string>& dirs, Reader reader) {
+  std::vector<Study> shards;
+  for (const auto& dir : dirs) {
+    auto s = reader(dir);
+    if (!s.ok()) return s.status();
+    shards.push_back(std::move(s).value());
+  }
+  return shards;
+}
+
 template <typename Study>
 using Merger = std::function<Result<Study>(const std::vector<Study>&)>;
 
@@ -68,12 +80,9 @@ Status check_scene_folders(const std::vector<Study>& merged) {
 }
 
 Status merge_trade(const std::vector<std::string>& dirs, const std::filesystem::path& out) {
-  std::vector<TradeStudy> shards;
-  for (const auto& dir : dirs) {
-    auto s = read_trade_shard(dir);
-    if (!s.ok()) return s.status();
-    shards.push_back(std::move(s).value());
-  }
+  auto read = read_shards<TradeStudy>(dirs, read_trade_shard);
+  if (!read.ok()) return read.status();
+  const std::vector<TradeStudy>& shards = *read;
   auto merged = merge_per_scene<TradeStudy>(shards, merge_trade_shards, [](const TradeStudy& s) { return s.scene; });
   if (!merged.ok()) return merged.status();
   if (merged->size() == 1) {
@@ -103,12 +112,9 @@ Status merge_trade(const std::vector<std::string>& dirs, const std::filesystem::
 }
 
 Status merge_capture_range(const std::vector<std::string>& dirs, const std::filesystem::path& out) {
-  std::vector<CaptureRangeReport> shards;
-  for (const auto& dir : dirs) {
-    auto s = read_capture_range_shard(dir);
-    if (!s.ok()) return s.status();
-    shards.push_back(std::move(s).value());
-  }
+  auto read = read_shards<CaptureRangeReport>(dirs, read_capture_range_shard);
+  if (!read.ok()) return read.status();
+  const std::vector<CaptureRangeReport>& shards = *read;
   auto merged = merge_per_scene<CaptureRangeReport>(shards, merge_capture_range_shards,
                                                     [](const CaptureRangeReport& s) { return s.scene; });
   if (!merged.ok()) return merged.status();
@@ -130,12 +136,9 @@ Status merge_capture_range(const std::vector<std::string>& dirs, const std::file
 }
 
 Status merge_realism(const std::vector<std::string>& dirs, const std::filesystem::path& out) {
-  std::vector<RealismReport> shards;
-  for (const auto& dir : dirs) {
-    auto s = read_realism_shard(dir);
-    if (!s.ok()) return s.status();
-    shards.push_back(std::move(s).value());
-  }
+  auto read = read_shards<RealismReport>(dirs, read_realism_shard);
+  if (!read.ok()) return read.status();
+  const std::vector<RealismReport>& shards = *read;
   auto merged = merge_per_scene<RealismReport>(shards, merge_realism_shards,
                                                [](const RealismReport& s) { return s.scene; });
   if (!merged.ok()) return merged.status();
