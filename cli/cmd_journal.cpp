@@ -173,10 +173,11 @@ Status export_dicom(const ExportOptions& o, const JournalContents& contents) {
   if (contents.scene_fingerprint == kNotRecorded)
     return failed_precondition(o.file + ": the journal does not record its scene (written before lftrack recorded "
                                "it); its poses cannot be tied to this scene's CT");
-  if (contents.scene_fingerprint != scene_fingerprint(*scene))
+  const std::array<std::uint8_t, 16> fingerprint = scene_fingerprint(*scene);
+  if (contents.scene_fingerprint != fingerprint)
     return failed_precondition(o.file + ": the journal was written with another room or CT (scene fingerprint " +
-                               to_hex(contents.scene_fingerprint) + ", this scene's " +
-                               to_hex(scene_fingerprint(*scene)) + "); give the scene and --ct of the run");
+                               to_hex(contents.scene_fingerprint) + ", this scene's " + to_hex(fingerprint) +
+                               "); give the scene and --ct of the run");
   auto identity = scene_ct_dicom_identity(*scene);  // before the CT's voxels are read
   if (!identity.ok()) return identity.status().with_context("--dicom-sro");
   auto prepared = load_prepared_scene(o.scene, &pool);

@@ -138,7 +138,7 @@ TEST(MonitorServer, ActionsNeedTheTokenAFreshNonceAndThePagesOrigin) {
     EXPECT_EQ(s.act("resume", body, token).first, 400) << body.dump();
   EXPECT_TRUE(loop.saw(OperatorRefusal::kMalformed));
   // A key given twice is ambiguous, whichever value would win (an outside probe found the last
-  // one taken); a repeated key inside a nested value is the same refusal.
+  // one taken): a repeated hold_id and a repeated nonce are refused alike.
   EXPECT_EQ(s.act_text("resume", "{\"nonce\":\"" + s.nonce() + "\",\"hold_id\":1,\"hold_id\":123456}", token).first,
             400);
   EXPECT_EQ(s.act_text("resume", "{\"nonce\":\"" + s.nonce() + "\",\"nonce\":\"" + s.nonce() + "\",\"hold_id\":123456}",
