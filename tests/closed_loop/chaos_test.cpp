@@ -72,7 +72,7 @@ TEST_F(ClosedLoop, TwentyThousandChaoticCyclesKeepEveryInvariant) {
   o.cycles = 20000;
   o.fault_rate = 0.1;
   o.journal_dir = dir_.path() / "chaos";
-  o.light_field_dir = lf_dir_.path();
+  o.light_field_dir = shared_light_field_dir(*prepared);
   auto report = run_chaos_soak(*prepared, o, pool_);
   ASSERT_TRUE(report.ok()) << report.status().message();
   const ChaosReport& r = *report;

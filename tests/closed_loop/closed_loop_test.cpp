@@ -291,7 +291,7 @@ TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
   ASSERT_TRUE(prepared.ok());
   options.cycles = 60;
   options.simulated_clock = true;
-  options.light_field_dir = lf_dir_.path();
+  options.light_field_dir = shared_light_field_dir(*prepared);
   auto session = LoopSession::create(*prepared, options, pool_);
   ASSERT_TRUE(session.ok()) << session.status().message();
   auto summary = (*session)->run();
@@ -324,7 +324,7 @@ TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
   prepared->scene.safety.max_frame_age_ms = 2000;
   options.cycles = 45;
   options.simulated_clock = false;
-  options.light_field_dir = lf_dir_.path();
+  options.light_field_dir = shared_light_field_dir(*prepared);
   // One stall first; then five in a row (exposure requests 35..39), after the first has passed.
   auto session = LoopSession::create(*prepared, options, pool_);
   ASSERT_TRUE(session.ok()) << session.status().message();

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <functional>
 #include <memory>
 #include <string>
@@ -12,6 +13,7 @@
 
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
@@ -20,6 +22,10 @@ namespace lftrack::host {
 inline const char* kLightFieldFrames =
     "sim:\n  renderer: lightfield\n  light_field:\n    resolution: [16, 16, 96, 144]\n";
 inline const char* kRayCastFrames = "sim:\n  renderer: siddon\n";
+inline const char* kBreathing =
+    "motion:\n  setup_error: {translation_mm: [3, -2, 2], rotation_deg: [1, -0.5, 1]}\n"
+    "  drift: {translation_mm_per_s: [0.02, 0.01, -0.02]}\n"
+    "  breathing: {amplitude_mm: [0.5, 1.5, 4.5], period_s: 4}\n";
 
 // The built-in scene with 0.8 mm detector pixels (a quarter of the rays), the frames' renderer
 // and the motion given: its text (for a server in another process) and the scene.
@@ -61,6 +67,23 @@ inline void expect_tracks_every_cycle(const LoopSummary& s, std::int64_t cycles)
   EXPECT_EQ(s.faults, 0);
 }
 
+// The light-field folder for `p`, shared by every test process (test::test_cache_dir()): the
+// first run that needs the fields builds and saves them (each file written whole, then renamed
+// into place, so a concurrent reader sees all of a file or none), later runs load them. Loading
+// checks each field against the CT's and the plan's hashes, so a field from another scene or an
+// older build is rebuilt, never used. The folder is named after the CT and both plans, so the
+// few tests that change the plan (the envelope) do not rebuild the others' fields.
+inline std::filesystem::path shared_light_field_dir(const PreparedScene& p) {
+  std::uint64_t key = 0;
+  for (int i = 0; i < int(p.scene.detectors.size()); ++i)
+    key = key * 1000003u ^ tracking::plan_hash(p.light_field_plan(i), p.scene.light_field);
+  const auto& r = p.scene.sim.light_field.resolution;
+  char name[96];
+  std::snprintf(name, sizeof name, "%s-%016llx-sim%dx%dx%dx%d", to_hex(scene_fingerprint(p.scene)).c_str(),
+                static_cast<unsigned long long>(key), r[0], r[1], r[2], r[3]);
+  return test::test_cache_dir() / "closed-loop-light-fields" / name;
+}
+
 struct LoopRun {
   LoopSummary summary;
   JournalContents journal;
@@ -83,7 +106,7 @@ class ClosedLoop : public ::testing::Test {
     scene_ = std::make_unique<PreparedScene>(std::move(prepared).value());
     options.cycles = cycles;
     options.simulated_clock = !real_clock_;
-    options.light_field_dir = lf_dir_.path();
+    options.light_field_dir = shared_light_field_dir(*scene_);
     // A journal of its own per run (journals are never overwritten).
     if (options.journal.empty()) options.journal = dir_.path() / ("journal-" + std::to_string(++runs_) + ".lfj");
     auto session = LoopSession::create(*scene_, options, pool_);
@@ -106,18 +129,19 @@ class ClosedLoop : public ::testing::Test {
     return r;
   }
 
+  // The shared light-field folder of the fixture's scene (prepares it: the CT takes a few seconds).
+  std::filesystem::path small_scene_light_field_dir() {
+    auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
+    EXPECT_TRUE(prepared.ok()) << prepared.status().message();
+    return prepared.ok() ? shared_light_field_dir(*prepared) : dir_.path() / "light-fields";
+  }
+
   int runs_ = 0;                             // loops run by this test
   bool real_clock_ = false;                  // on the real clock (devices in other processes)
   std::function<void(Scene&)> edit_scene_;  // applied to the scene before each run, if set
   static inline tracking::ThreadPool* pool_ = nullptr;
   test::TempDir dir_;
-  static inline test::TempDir lf_dir_;  // light fields, built once for every test
   std::unique_ptr<PreparedScene> scene_;
 };
-
-inline const char* kBreathing =
-    "motion:\n  setup_error: {translation_mm: [3, -2, 2], rotation_deg: [1, -0.5, 1]}\n"
-    "  drift: {translation_mm_per_s: [0.02, 0.01, -0.02]}\n"
-    "  breathing: {amplitude_mm: [0.5, 1.5, 4.5], period_s: 4}\n";
 
 }  // namespace lftrack::host

@@ -126,7 +126,7 @@ TEST_F(ArchiveAndReplay, AMissingOrBrokenSequenceIsRefusedAtStart) {
   options.replay_sequence = dir_.path() / "nothing-here";
   auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
   ASSERT_TRUE(prepared.ok());
-  options.light_field_dir = lf_dir_.path();
+  options.light_field_dir = shared_light_field_dir(*prepared);
   auto session = LoopSession::create(*prepared, options, pool_);
   ASSERT_FALSE(session.ok());
   EXPECT_NE(session.status().message().find("no such sequence directory"), std::string::npos);

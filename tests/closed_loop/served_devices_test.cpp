@@ -310,7 +310,7 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
   device_ = serve("modbus", dir);
   test::ChildProcess detectors({LFTRACK_BIN_PATH, "-q", "serve", "detectors", "--scene", (dir / "room.yaml").string(),
                                 "--room", (dir / "room.link").string(), "--address", addresses[0], "--address",
-                                addresses[1], "--lf-dir", lf_dir_.path().string(), "--control",
+                                addresses[1], "--lf-dir", small_scene_light_field_dir().string(), "--control",
                                 (dir / "detectors.ctl").string(), "--threads", "1"});
   const std::optional<std::string> listening = detectors.read_line(120s);
   ASSERT_TRUE(listening.has_value()) << "the detector server started";
@@ -398,7 +398,7 @@ TEST_F(ServedDeviceFaults, FramesThroughV4l2LoopbackAreTracked) {
   device_ = serve("modbus", dir);
   test::ChildProcess detectors({LFTRACK_BIN_PATH, "-q", "serve", "detectors", "--scene", (dir / "room.yaml").string(),
                                 "--room", (dir / "room.link").string(), "--v4l2loopback", devices[0],
-                                "--v4l2loopback", devices[1], "--lf-dir", lf_dir_.path().string()});
+                                "--v4l2loopback", devices[1], "--lf-dir", small_scene_light_field_dir().string()});
   const std::optional<std::string> listening = detectors.read_line(120s);
   ASSERT_TRUE(listening.has_value() && listening->find("v4l2loopback") != std::string::npos);
   edit_scene_ = [&](Scene& s) {
