@@ -20,7 +20,12 @@ namespace {
 struct Sample {
   double ms = 0, tre_mm = 0;
   int evaluations = 0;
+  std::vector<tracking::RegistrationPassSummary> passes;
 };
+
+Sample sample_of(const tracking::RegistrationResult& r, double tre_mm) {
+  return {r.elapsed_ms, tre_mm, r.evaluations, r.passes};
+}
 
 
 TimedRegistrations summarize(const std::vector<Sample>& samples) {
@@ -41,6 +46,16 @@ TimedRegistrations summarize(const std::vector<Sample>& samples) {
   t.max_ms = quantile(ms, 1.0);
   t.success_rate = double(ok) / double(samples.size());
   t.median_evaluations = quantile(evals, 0.5);
+  for (std::size_t p = 0;; ++p) {
+    std::vector<double> pass_ms, pass_evals;
+    for (const Sample& s : samples) {
+      if (p >= s.passes.size()) continue;
+      pass_ms.push_back(s.passes[p].elapsed_ms);
+      pass_evals.push_back(s.passes[p].evaluations);
+    }
+    if (pass_ms.empty()) break;
+    t.passes.push_back({quantile(pass_ms, 0.5), quantile(pass_evals, 0.5)});
+  }
   return t;
 }
 
@@ -106,7 +121,7 @@ Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& 
     LFTRACK_RETURN_IF_ERROR(reg.set_frames(frames->frames(), frames->masks()));
     auto r = reg.run(start, *plan);
     if (!r.ok()) return r.status();
-    cold.push_back({r->elapsed_ms, scene_tre(p, r->T_room_from_ct, gold).mean_mm, r->evaluations});
+    cold.push_back(sample_of(*r, scene_tre(p, r->T_room_from_ct, gold).mean_mm));
     if (i < o.renderer_runs) problems.push_back({gold, start, std::move(frames).value()});
     cold_bar.update(double(i + 1) / o.cold_runs);
   }
@@ -130,7 +145,7 @@ Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& 
     LFTRACK_RETURN_IF_ERROR(reg.set_frames(frames->frames(), frames->masks()));
     auto r = reg.run(last, warm_plan);
     if (!r.ok()) return r.status();
-    warm.push_back({r->elapsed_ms, scene_tre(p, r->T_room_from_ct, gold).mean_mm, r->evaluations});
+    warm.push_back(sample_of(*r, scene_tre(p, r->T_room_from_ct, gold).mean_mm));
     last = r->T_room_from_ct;
     warm_bar.update(double(i + 1) / o.warm_runs);
   }
@@ -154,8 +169,8 @@ Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& 
       auto b = (*siddon_registration)->run(pr.start, *plan);
       if (!a.ok()) return a.status();
       if (!b.ok()) return b.status();
-      with_lf.push_back({a->elapsed_ms, scene_tre(p, a->T_room_from_ct, pr.gold).mean_mm, a->evaluations});
-      with_siddon.push_back({b->elapsed_ms, scene_tre(p, b->T_room_from_ct, pr.gold).mean_mm, b->evaluations});
+      with_lf.push_back(sample_of(*a, scene_tre(p, a->T_room_from_ct, pr.gold).mean_mm));
+      with_siddon.push_back(sample_of(*b, scene_tre(p, b->T_room_from_ct, pr.gold).mean_mm));
       bar.update(double(i + 1) / double(problems.size()));
     }
     bar.finish();
@@ -174,7 +189,13 @@ nlohmann::json to_json(const RegistrationBenchReport& r) {
                           {"mean_tre_mm", t.mean_tre_mm},
                           {"max_tre_mm", t.max_tre_mm},
                           {"success_rate", t.success_rate},
-                          {"median_evaluations", t.median_evaluations}};
+                          {"median_evaluations", t.median_evaluations},
+                          {"passes", [&] {
+                             auto passes = nlohmann::json::array();
+                             for (const auto& p : t.passes)
+                               passes.push_back({{"median_ms", p.median_ms}, {"median_evaluations", p.median_evaluations}});
+                             return passes;
+                           }()}};
   };
   nlohmann::json j{{"scene", r.scene}, {"plan", r.plan}, {"warm_plan", r.warm_plan}, {"similarity", r.similarity},
                    {"threads", r.threads},

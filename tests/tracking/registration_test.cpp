@@ -174,6 +174,18 @@ TEST_P(PreparedRunByPlan, SetFramesAndAPreparedRunAllocateNothing) {
   }
   EXPECT_EQ(lftrack_test_allocations() - before, 0);
   EXPECT_GT(result.evaluations, 12);
+  // Where the time went: one summary per pass, adding up to the run's evaluations and time.
+  ASSERT_EQ(result.passes.size(), plan.plan.passes.size());
+  int evaluations = 0;
+  double pass_ms = 0;
+  for (const RegistrationPassSummary& pass : result.passes) {
+    EXPECT_GT(pass.evaluations, 0);
+    EXPECT_GT(pass.elapsed_ms, 0.0);
+    evaluations += pass.evaluations;
+    pass_ms += pass.elapsed_ms;
+  }
+  EXPECT_EQ(evaluations, result.evaluations);
+  EXPECT_LE(pass_ms, result.elapsed_ms);
   // The same answer as the allocating entry point.
   const auto again = *reg->run(phantom().nominal, *registration_plan(GetParam()));
   EXPECT_TRUE(again.T_room_from_ct.isApprox(result.T_room_from_ct, 1e-12));

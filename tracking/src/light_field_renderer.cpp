@@ -9,8 +9,17 @@
 // AVX2 kernels (light_field_kernel_avx2.cpp) where the CPU has them; the scalar kernels below serve VQ fields
 // and other CPUs. (GCC 12 does not vectorise the scalar loop itself: it sinks the blend into a branch on the
 // field test.)
+//
+// Coarse pixels (a registration's 4 x 4 binned levels) read a copy of the field averaged over 2 x 2
+// or 4 x 4 (s, t) samples (LightField::downsampled_st, light_field_mip.cpp), chosen by the pixel's
+// footprint at the window's centre: the pixel is then the mean over its footprint, as a binned
+// detector pixel is, and its samples are 1/4 or 1/16 as many. The fields' (s, t) slices (256 KB
+// each on the lumbar CT) otherwise miss the caches when a coarse row steps several samples per
+// pixel: on the lumbar CT a 4 x 4 binned window rendered in about 100 us, now about 30 us
+// (BENCHMARKS.md, "Tracking at 30 Hz").
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 
@@ -152,39 +161,86 @@ int render_vq(const VqFetch& f, const RayMap& m, const LightFieldGeometry& g, Im
   return render_rows(f, m, g, out, valid, cols, r0, r1);
 }
 
+// A view's fields: the field as built, and its (s, t)-averaged copies by 2 and 4 (absent where
+// the renderer makes none or the field is too small for them).
+struct FieldLevels {
+  std::shared_ptr<const LightField> field;
+  std::array<std::shared_ptr<const LightField>, 2> averaged;  // by 2, by 4
+};
+
+// The ray map of `field` for the pixels of `window` at the moved source.
+RayMap ray_map(const LightFieldGeometry& g, const Vector3d& source, const Vector3d& d00, const Vector3d& d_row,
+               const Vector3d& d_col) {
+  RayMap m;
+  m.d00 = d00;
+  m.d_row = d_row;
+  m.d_col = d_col;
+  // u = (S'-S).e1 + ((S-S').n) q1, s = (S'-C).e1 + ((C-S').n) q1; likewise v, t with e2, q2.
+  const double k_uv = (g.source_ct_mm - source).dot(g.axis), k_st = (g.roi_centre_ct_mm - source).dot(g.axis);
+  const double offset[4] = {(source - g.source_ct_mm).dot(g.e1), (source - g.source_ct_mm).dot(g.e2),
+                            (source - g.roi_centre_ct_mm).dot(g.e1), (source - g.roi_centre_ct_mm).dot(g.e2)};
+  const double gain[4] = {k_uv, k_uv, k_st, k_st};
+  for (int a = 0; a < 4; ++a) {
+    m.base[a] = float((offset[a] - g.lo[a]) / g.spacing(a));
+    m.gain[a] = float(gain[a] / g.spacing(a));
+    m.limit[a] = float(g.size[a] - 1);
+  }
+  return m;
+}
+
+// How many (s, t) samples of the map's field one pixel spans, on the narrower of the two axes:
+// at the window's centre pixel, the change of the sample coordinates s and t over one row and
+// one column.
+double pixel_footprint_samples(const RayMap& m, const LightFieldGeometry& g, int rows, int cols) {
+  const auto st_at = [&](double r, double c) {
+    const Vector3d d = m.d00 + m.d_row * r + m.d_col * c;
+    const double dn = d.dot(g.axis);
+    return Eigen::Vector2d(m.gain[2] * d.dot(g.e1) / dn, m.gain[3] * d.dot(g.e2) / dn);
+  };
+  const double r = 0.5 * (rows - 1), c = 0.5 * (cols - 1);
+  const Eigen::Vector2d centre = st_at(r, c);
+  const Eigen::Vector2d along_row = (st_at(r, c + 1) - centre).cwiseAbs();
+  const Eigen::Vector2d along_col = (st_at(r + 1, c) - centre).cwiseAbs();
+  const Eigen::Vector2d span = along_row + along_col;  // a pixel's extent on s and on t
+  return std::isfinite(span.minCoeff()) ? span.minCoeff() : 0.0;
+}
+
 class LightFieldRenderer final : public DrrRenderer {
  public:
-  LightFieldRenderer(std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd)
+  LightFieldRenderer(std::vector<FieldLevels> fields, ThreadPool* pool, SimdLevel simd)
       : fields_(std::move(fields)), pool_(pool) {
-    name_ = std::string("lightfield-") + to_string(fields_.front()->header().storage);
+    name_ = std::string("lightfield-") + to_string(fields_.front().field->header().storage);
     bool indexable = true;  // the kernels index samples with 32-bit lanes
     for (const auto& f : fields_)
-      indexable = indexable && f->geometry().sample_count() < (std::int64_t{1} << 31);
+      indexable = indexable && f.field->geometry().sample_count() < (std::int64_t{1} << 31);
     use_avx512_ = indexable && simd == SimdLevel::kBest && light_field_avx512_available();
     use_avx2_ = indexable && simd != SimdLevel::kScalar && light_field_avx2_available();
     avx2_runs_ = simd != SimdLevel::kAvx2Gathers;
-    if (fields_.front()->header().storage == LightFieldStorage::kVq) {
-      name_ += std::to_string(fields_.front()->header().codebook_size);
+    if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
+      name_ += std::to_string(fields_.front().field->header().codebook_size);
     }
   }
 
   std::string_view name() const override { return name_; }
   std::size_t bytes() const override {
     std::size_t total = 0;
-    for (const auto& f : fields_) total += f->payload_bytes();
+    for (const auto& f : fields_) {
+      total += f.field->payload_bytes();
+      for (const auto& averaged : f.averaged) total += averaged ? averaged->payload_bytes() : 0;
+    }
     return total;
   }
 
  protected:
   Status do_render(const Pose& T_room_from_ct, const XrayView& view, const PixelWindow& window,
                    ImageView<float> out, RenderExtras* extras) const override {
-    const LightField* field = nullptr;
+    const FieldLevels* levels = nullptr;
     for (const auto& f : fields_)
-      if (f->geometry().view_name == view.name) field = f.get();
-    if (!field) return not_found("no light field for view '" + view.name + "'");
+      if (f.field->geometry().view_name == view.name) levels = &f;
+    if (!levels) return not_found("no light field for view '" + view.name + "'");
+    const LightField* field = levels->field.get();
     const LightField::Header& h = field->header();
-    const LightFieldGeometry& g = h.geometry;
-    if ((h.nominal_T_room_from_ct.inverse() * view.source_mm - g.source_ct_mm).norm() > 1e-3) {
+    if ((h.nominal_T_room_from_ct.inverse() * view.source_mm - h.geometry.source_ct_mm).norm() > 1e-3) {
       return failed_precondition("view '" + view.name + "' has another source position than its light field");
     }
     const PoseDelta delta =
@@ -196,28 +252,28 @@ class LightFieldRenderer final : public DrrRenderer {
     // The moved source S' and pixel directions in the CT frame.
     const Pose ct_from_room = T_room_from_ct.inverse();
     const Vector3d source = ct_from_room * view.source_mm;
-    RayMap m;
-    m.d00 = ct_from_room * view.pixel_centre_mm(window.row0, window.col0) - source;
-    m.d_row = ct_from_room.linear() * view.row_axis * view.pitch_row_mm;
-    m.d_col = ct_from_room.linear() * view.col_axis * view.pitch_col_mm;
-    // u = (S'-S).e1 + ((S-S').n) q1, s = (S'-C).e1 + ((C-S').n) q1; likewise v, t with e2, q2.
-    const double k_uv = (g.source_ct_mm - source).dot(g.axis),
-                 k_st = (g.roi_centre_ct_mm - source).dot(g.axis);
-    const double offset[4] = {(source - g.source_ct_mm).dot(g.e1), (source - g.source_ct_mm).dot(g.e2),
-                              (source - g.roi_centre_ct_mm).dot(g.e1),
-                              (source - g.roi_centre_ct_mm).dot(g.e2)};
-    const double gain[4] = {k_uv, k_uv, k_st, k_st};
-    for (int a = 0; a < 4; ++a) {
-      m.base[a] = float((offset[a] - g.lo[a]) / g.spacing(a));
-      m.gain[a] = float(gain[a] / g.spacing(a));
-      m.limit[a] = float(g.size[a] - 1);
+    const Vector3d d00 = ct_from_room * view.pixel_centre_mm(window.row0, window.col0) - source;
+    const Vector3d d_row = ct_from_room.linear() * view.row_axis * view.pitch_row_mm;
+    const Vector3d d_col = ct_from_room.linear() * view.col_axis * view.pitch_col_mm;
+    RayMap m = ray_map(h.geometry, source, d00, d_row, d_col);
+    // Coarse pixels read the copy averaged over their footprint (the largest made that fits it).
+    const double footprint = pixel_footprint_samples(m, h.geometry, window.rows, window.cols);
+    for (int k = int(levels->averaged.size()) - 1; k >= 0; --k) {
+      if (levels->averaged[std::size_t(k)] && footprint >= double(2 << k)) {
+        field = levels->averaged[std::size_t(k)].get();
+        m = ray_map(field->geometry(), source, d00, d_row, d_col);
+        break;
+      }
     }
+    const LightFieldGeometry& g = field->geometry();
+    const LightFieldStorage storage = field->header().storage;
+    const double fixed_scale = field->header().fixed_scale;
 
     std::atomic<int> masked{0};
     const auto& s = g.size;
     auto rows = [&](int r0, int r1) {
       int n = 0;
-      switch (h.storage) {
+      switch (storage) {
         case LightFieldStorage::kFloat32: {
           if (use_avx512_) {
             n = render_float_avx512(field->float_samples(), g, m, out, extras->valid, window.cols, r0, r1);
@@ -234,16 +290,16 @@ class LightFieldRenderer final : public DrrRenderer {
         }
         case LightFieldStorage::kFixed16: {
           if (use_avx512_) {
-            n = render_fixed16_avx512(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid,
+            n = render_fixed16_avx512(field->fixed_samples(), float(fixed_scale), g, m, out, extras->valid,
                                       window.cols, r0, r1);
             break;
           }
           if (use_avx2_) {
-            n = render_fixed16_avx2(field->fixed_samples(), float(h.fixed_scale), g, m, out, extras->valid,
+            n = render_fixed16_avx2(field->fixed_samples(), float(fixed_scale), g, m, out, extras->valid,
                                     window.cols, r0, r1, avx2_runs_);
             break;
           }
-          const Fixed16Fetch f{field->fixed_samples(), float(h.fixed_scale), std::size_t(s[1]) * s[2] * s[3],
+          const Fixed16Fetch f{field->fixed_samples(), float(fixed_scale), std::size_t(s[1]) * s[2] * s[3],
                                std::size_t(s[2]) * s[3], std::size_t(s[3])};
           n = render_fixed16(f, m, g, out, extras->valid, window.cols, r0, r1);
           break;
@@ -271,7 +327,7 @@ class LightFieldRenderer final : public DrrRenderer {
   }
 
  private:
-  std::vector<std::shared_ptr<const LightField>> fields_;
+  std::vector<FieldLevels> fields_;
   ThreadPool* pool_;
   std::string name_;
   // Fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first choice; every
@@ -284,7 +340,7 @@ class LightFieldRenderer final : public DrrRenderer {
 }  // namespace
 
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
-    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd) {
+    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd, bool mips) {
   if (fields.empty()) {
     return failed_precondition(
         "the lightfield renderer needs precomputed light fields (run `lftrack precompute`)");
@@ -295,7 +351,21 @@ Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
       return invalid_argument("light fields of one renderer must share a storage mode");
     }
   }
-  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(fields), pool, simd));
+  std::vector<FieldLevels> levels;
+  for (auto& f : fields) {
+    FieldLevels& l = levels.emplace_back();
+    l.field = std::move(f);
+    // A copy needs a few blocks on each (s, t) axis to be worth its memory.
+    for (std::size_t k = 0; mips && k < l.averaged.size(); ++k) {
+      const int factor = 2 << k;
+      const auto& size = l.field->geometry().size;
+      if (std::min(size[2], size[3]) < 8 * factor) break;
+      auto averaged = LightField::downsampled_st(*l.field, factor, pool);
+      if (!averaged.ok()) return averaged.status();
+      l.averaged[k] = *averaged;
+    }
+  }
+  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(levels), pool, simd));
 }
 
 }  // namespace lftrack::tracking

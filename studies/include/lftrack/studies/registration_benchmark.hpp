@@ -35,6 +35,12 @@ struct TimedRegistrations {
   double mean_tre_mm = 0, max_tre_mm = 0;  // of every run's mean TRE
   double success_rate = 0;                 // mean TRE < 2 mm
   double median_evaluations = 0;
+  // Per pass of the plan: the median time (its references included) and evaluations, over the
+  // runs that reached it.
+  struct Pass {
+    double median_ms = 0, median_evaluations = 0;
+  };
+  std::vector<Pass> passes;
 };
 
 struct RegistrationBenchReport {

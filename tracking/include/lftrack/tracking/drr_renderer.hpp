@@ -77,6 +77,14 @@ struct RendererOptions {
   // Which vectorised kernels the light-field renderer may use: the best the CPU has, at most
   // AVX2 (with or without runs), or none (the portable scalar kernels). Tests compare them.
   SimdLevel simd = SimdLevel::kBest;
+  // Light-field renderer: render coarse pixels from (s, t)-averaged copies of the fields
+  // (LightField::downsampled_st, by 2 and 4, made when the renderer is made: a quarter and a
+  // sixteenth of the fields' memory again): a pixel whose footprint spans k >= 2 (s, t) samples
+  // on both axes renders from the copy averaged over the largest such power of two k (at most 4),
+  // so it is the mean over its footprint, not the ray through its centre, and reads 1 / k^2 of
+  // the samples (the 4 x 4 binned registration levels). False: every pixel samples the ray
+  // through its centre.
+  bool light_field_mips = true;
 };
 
 // Names accepted by make_renderer, in a stable order.

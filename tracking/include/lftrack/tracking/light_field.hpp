@@ -141,6 +141,16 @@ class LightField {
   static Result<std::shared_ptr<const LightField>> convert(const LightField& source,
                                                            const LightFieldSpec& spec, ThreadPool* pool);
 
+  // The field averaged over blocks of `factor` x `factor` (s, t) samples (factor 2 to 64), as
+  // float, for views whose pixels each span about that many samples: its sample j of s (and t)
+  // sits at sample j * factor of the source and holds the trapezoid-weighted mean of the source's
+  // samples within factor / 2 of it (replicated at the edges), so a coarse pixel renders the mean
+  // of the rays across its footprint rather than the one ray through its centre, and reads 1 /
+  // factor^2 of the samples. Its (s, t) extent ends at the last whole block (at most factor - 1
+  // samples short of the source's). VQ fields are decoded sample by sample.
+  static Result<std::shared_ptr<const LightField>> downsampled_st(const LightField& source, int factor,
+                                                                  ThreadPool* pool);
+
   // Writes a versioned, checksummed file.
   Status save(const std::filesystem::path& file) const;
   // Memory-maps a file and checks its version, size and checksums; then, if given, that it was

@@ -121,6 +121,13 @@ struct RegistrationPlan {
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
+// What one pass of a plan did: where a registration's time and evaluations go.
+struct RegistrationPassSummary {
+  int evaluations = 0;
+  double elapsed_ms = 0;  // wall time, the pass's references included
+  OptimizerStop stop = OptimizerStop::kConverged;
+};
+
 struct RegistrationResult {
   Pose T_room_from_ct = Pose::Identity();
   PoseDelta delta_from_start;           // about the origin
@@ -134,6 +141,9 @@ struct RegistrationResult {
   double elapsed_ms = 0;
   OptimizerStop stop = OptimizerStop::kConverged;
   std::vector<OptimizerTracePoint> trace;  // x: delta from the start pose
+  // Per pass of the plan, in order (a pass the time budget left out has none); reuses its
+  // capacity, so a result that held this plan's before allocates nothing.
+  std::vector<RegistrationPassSummary> passes;
 };
 
 // A plan with its optimizers made and its image levels resolved, for one Registration.
@@ -228,7 +238,9 @@ class Registration {
   std::vector<std::vector<char>> level_prepared_;  // [measure][level]
   std::vector<char> references_made_;              // [level]
   Status prepare_level(int measure, int level);
-  Status make_references(int level);  // bins and blurs the frames for `level`
+  // The setup's measure options for a level's view (fewer histogram bins for few pixels).
+  SimilarityOptions level_similarity_options(const LevelGeometry& level, std::size_t view) const;
+  Status make_reference(int level, int view);  // bins and blurs view's frame for `level`
   std::optional<FiducialTerm> fiducial_;
   bool frames_set_ = false;
 };
