@@ -192,6 +192,7 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
       const double convert_s = std::chrono::duration<double>(Clock::now() - c0).count();
       tracking::RendererOptions lf = ropts;
       lf.light_fields = fields;
+      lf.light_field_mips = false;  // the benchmark's DRRs are full resolution: the field alone
       auto renderer = make_renderer("lightfield", nullptr, lf);
       if (!renderer.ok()) return renderer.status();
       RendererFigures fig;

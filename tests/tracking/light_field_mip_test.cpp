@@ -47,12 +47,13 @@ TEST(LightFieldAveraged, SamplesAreTrapezoidMeansOnACoarserGridOverTheSameStart)
         EXPECT_EQ(m.hi[a], g.hi[a]);
       }
       for (int a = 2; a < 4; ++a) {
-        EXPECT_EQ(m.size[a], (g.size[a] - 1) / factor + 1);
+        EXPECT_EQ(m.size[a], (g.size[a] - 2 + factor) / factor + 1);
         EXPECT_EQ(m.lo[a], g.lo[a]);
         EXPECT_NEAR(m.spacing(a), factor * g.spacing(a), 1e-9);
-        EXPECT_LE(m.hi[a], g.hi[a] + 1e-9) << "never reaches past the source's extent";
-        EXPECT_GT(m.hi[a], g.hi[a] - factor * g.spacing(a));
+        EXPECT_GE(m.hi[a], g.hi[a] - 1e-9) << "reaches the source's last sample";
+        EXPECT_LT(m.hi[a], g.hi[a] + factor * g.spacing(a));
       }
+      EXPECT_EQ((*averaged)->header().plan_hash, 0u) << "never taken for the field its plan describes";
       std::mt19937 rng(7);
       for (int k = 0; k < 300; ++k) {
         const int iu = int(rng() % unsigned(m.size[0])), iv = int(rng() % unsigned(m.size[1]));
@@ -70,8 +71,8 @@ TEST(LightFieldAveraged, RefusesFactorsThatAreNotPowersOfTwoAndFieldsTooSmallFor
   const auto source = fixture_light_field(LightFieldStorage::kFloat32);  // 64 x 64 (s, t)
   for (int factor : {-2, 0, 1, 3, 6, 128})
     EXPECT_FALSE(LightField::downsampled_st(*source, factor, nullptr).ok()) << factor;
-  EXPECT_FALSE(LightField::downsampled_st(*source, 64, nullptr).ok()) << "one sample left per axis";
-  EXPECT_TRUE(LightField::downsampled_st(*source, 32, nullptr).ok()) << "two samples per axis";
+  EXPECT_FALSE(LightField::downsampled_st(*source, 64, nullptr).ok()) << "fewer than 64 steps to average";
+  EXPECT_TRUE(LightField::downsampled_st(*source, 32, nullptr).ok()) << "63 steps: three samples per axis";
 }
 
 // A coarse view of the fixture: its detector binned 4 x 4, as the registration's coarse levels
@@ -127,6 +128,43 @@ TEST(LightFieldAveraged, CoarsePixelsRenderTheMeanOverTheirFootprintAndFinePixel
   EXPECT_LT(error_copy, 0.8 * error_centre) << "rms " << std::sqrt(error_copy / signal) << " against "
                                             << std::sqrt(error_centre / signal) << " of the signal";
   EXPECT_LT(std::sqrt(error_copy / signal), 0.05);
+}
+
+// At the field's edge (the envelope's corner pose) a coarse view masks exactly the pixels the
+// field alone masks, whichever copy it reads: the copies end where the field ends.
+TEST(LightFieldAveraged, CoarseViewsMaskWhatTheFieldAloneMasks) {
+  for (LightFieldStorage storage : {LightFieldStorage::kFloat32, LightFieldStorage::kFixed16}) {
+    const auto field = fixture_light_field(storage);
+    RendererOptions with, without;
+    with.light_fields = without.light_fields = {field};
+    without.light_field_mips = false;
+    auto averaging = make_renderer("lightfield", nullptr, with);
+    auto sampling = make_renderer("lightfield", nullptr, without);
+    ASSERT_TRUE(averaging.ok() && sampling.ok());
+    const XrayView fine = fixture_plan().view_room;
+    for (int bin : {2, 3, 4, 6}) {  // footprints of about 2 to 6 samples: both copies
+      const XrayView coarse = coarse_view(fine, bin);
+      for (double reach : {0.9, 1.3, 2.0}) {  // inside, at and beyond the envelope's corner
+        SCOPED_TRACE(to_string(storage) + std::string(", bin ") + std::to_string(bin) + ", reach " +
+                     std::to_string(reach));
+        PoseDelta d;
+        d.translation_mm = reach * Eigen::Vector3d(3, -3, 3);
+        d.rotation_rad = reach * 0.2 * Eigen::Vector3d(1, -1, 1);
+        const Pose T = apply_delta(Pose::Identity(), d, Eigen::Vector3d::Zero());
+        Image<float> a(coarse.rows, coarse.cols), b(coarse.rows, coarse.cols);
+        Image<unsigned char> va(coarse.rows, coarse.cols), vb(coarse.rows, coarse.cols);
+        RenderExtras ea, eb;
+        ea.valid = va.view();
+        eb.valid = vb.view();
+        const PixelWindow w = PixelWindow::full(coarse.rows, coarse.cols);
+        ASSERT_TRUE((*averaging)->render(T, coarse, w, a.view(), &ea).ok());
+        ASSERT_TRUE((*sampling)->render(T, coarse, w, b.view(), &eb).ok());
+        EXPECT_EQ(va.pixels(), vb.pixels());
+        EXPECT_EQ(ea.masked_pixels, eb.masked_pixels);
+        for (float v : a.pixels()) ASSERT_TRUE(std::isfinite(v));
+      }
+    }
+  }
 }
 
 }  // namespace

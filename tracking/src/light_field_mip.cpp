@@ -31,12 +31,15 @@ Result<std::shared_ptr<const LightField>> LightField::downsampled_st(const Light
   field->header_.storage = LightFieldStorage::kFloat32;
   field->header_.codebook_size = 0;
   field->header_.fixed_scale = 0;
+  field->header_.plan_hash = 0;  // not the field its plan describes: never to be taken for it
   LightFieldGeometry& m = field->header_.geometry;
   for (int a = 2; a < 4; ++a) {
-    m.size[a] = (g.size[a] - 1) / factor + 1;
-    if (m.size[a] < 2)
+    // Enough samples to reach the source's last one or past it (the renderer keeps its rays
+    // inside the source's extent).
+    m.size[a] = (g.size[a] - 1 + factor - 1) / factor + 1;
+    if (g.size[a] - 1 < factor)
       return invalid_argument("light field: " + std::to_string(g.size[a]) + " samples along " + (a == 2 ? "s" : "t") +
-                              " leave fewer than 2 after downsampling by " + std::to_string(factor));
+                              " are too few to average by " + std::to_string(factor));
     m.hi[a] = g.lo[a] + (m.size[a] - 1) * factor * g.spacing(a);
   }
   LFTRACK_RETURN_IF_ERROR(m.validate().with_context("downsampled light field"));
@@ -47,17 +50,34 @@ Result<std::shared_ptr<const LightField>> LightField::downsampled_st(const Light
   const std::size_t out_slice = std::size_t(ms) * std::size_t(mt);
   field->owned_.resize(std::size_t(m.size[0]) * std::size_t(m.size[1]) * out_slice * sizeof(float));
   float* out = reinterpret_cast<float*>(field->owned_.data());
-  // One (u, v) slice per task: t averaged into a row buffer per source s row, then s.
+  // One (u, v) slice per task: t averaged into a row buffer per source s row, then s. Float
+  // fields are read in place; 16-bit ones decoded a row at a time; VQ ones sample by sample.
   auto slices = [&](int begin, int end) {
     std::vector<float> rows(std::size_t(ns) * std::size_t(mt));
+    std::vector<float> decoded(static_cast<std::size_t>(nt));
     for (int uv = begin; uv < end; ++uv) {
       const int iu = uv / g.size[1], iv = uv % g.size[1];
+      const std::size_t slice_start = std::size_t(uv) * std::size_t(ns) * std::size_t(nt);
       for (int is = 0; is < ns; ++is) {
+        const float* row = nullptr;
+        const std::size_t row_start = slice_start + std::size_t(is) * std::size_t(nt);
+        if (source.float_samples() != nullptr) {
+          row = source.float_samples() + row_start;
+        } else {
+          if (source.fixed_samples() != nullptr) {
+            const double scale = source.header().fixed_scale;  // decoded as sample() decodes
+            for (int it = 0; it < nt; ++it)
+              decoded[std::size_t(it)] = static_cast<float>(source.fixed_samples()[row_start + std::size_t(it)] * scale);
+          } else {
+            for (int it = 0; it < nt; ++it) decoded[std::size_t(it)] = source.sample(iu, iv, is, it);
+          }
+          row = decoded.data();
+        }
         for (int jt = 0; jt < mt; ++jt) {
           float sum = 0;
           for (int k = -half; k <= half; ++k) {
             const int it = std::clamp(jt * factor + k, 0, nt - 1);
-            sum += w[std::size_t(k + half)] * source.sample(iu, iv, is, it);
+            sum += w[std::size_t(k + half)] * row[it];
           }
           rows[std::size_t(is) * std::size_t(mt) + std::size_t(jt)] = sum;
         }

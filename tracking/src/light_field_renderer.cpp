@@ -12,8 +12,9 @@
 //
 // Coarse pixels (a registration's 4 x 4 binned levels) read a copy of the field averaged over 2 x 2
 // or 4 x 4 (s, t) samples (LightField::downsampled_st, light_field_mip.cpp), chosen by the pixel's
-// footprint at the window's centre: the pixel is then the mean over its footprint, as a binned
-// detector pixel is, and its samples are 1/4 or 1/16 as many. The fields' (s, t) slices (256 KB
+// footprint at the window's centre at the nominal pose: the pixel then averages rays over about
+// its footprint (a box of the copy's spacing, interpolated), as a binned detector pixel averages,
+// and its samples are 1/4 or 1/16 as many. The fields' (s, t) slices (256 KB
 // each on the lumbar CT) otherwise miss the caches when a coarse row steps several samples per
 // pixel: on the lumbar CT a 4 x 4 binned window rendered in about 100 us, now about 30 us
 // (BENCHMARKS.md, "Tracking at 30 Hz").
@@ -205,6 +206,16 @@ double pixel_footprint_samples(const RayMap& m, const LightFieldGeometry& g, int
   return std::isfinite(span.minCoeff()) ? span.minCoeff() : 0.0;
 }
 
+// The footprint (pixel_footprint_samples) of the window's pixels at the field's nominal pose.
+double nominal_footprint_samples(const LightField::Header& h, const XrayView& view, const PixelWindow& window) {
+  const Pose ct_from_room = h.nominal_T_room_from_ct.inverse();
+  const Vector3d source = ct_from_room * view.source_mm;
+  const RayMap m = ray_map(h.geometry, source, ct_from_room * view.pixel_centre_mm(window.row0, window.col0) - source,
+                           ct_from_room.linear() * view.row_axis * view.pitch_row_mm,
+                           ct_from_room.linear() * view.col_axis * view.pitch_col_mm);
+  return pixel_footprint_samples(m, h.geometry, window.rows, window.cols);
+}
+
 class LightFieldRenderer final : public DrrRenderer {
  public:
   LightFieldRenderer(std::vector<FieldLevels> fields, ThreadPool* pool, SimdLevel simd)
@@ -256,12 +267,16 @@ class LightFieldRenderer final : public DrrRenderer {
     const Vector3d d_row = ct_from_room.linear() * view.row_axis * view.pitch_row_mm;
     const Vector3d d_col = ct_from_room.linear() * view.col_axis * view.pitch_col_mm;
     RayMap m = ray_map(h.geometry, source, d00, d_row, d_col);
-    // Coarse pixels read the copy averaged over their footprint (the largest made that fits it).
-    const double footprint = pixel_footprint_samples(m, h.geometry, window.rows, window.cols);
+    // Coarse pixels read the copy averaged over about their footprint (the largest made that fits
+    // it), chosen by the footprint at the nominal pose: the same copy for every pose of the view
+    // and window, so a registration's cost does not jump between copies as its pose moves.
+    const double footprint = nominal_footprint_samples(h, view, window);
     for (int k = int(levels->averaged.size()) - 1; k >= 0; --k) {
       if (levels->averaged[std::size_t(k)] && footprint >= double(2 << k)) {
         field = levels->averaged[std::size_t(k)].get();
         m = ray_map(field->geometry(), source, d00, d_row, d_col);
+        // Rays past the source field's last (s, t) sample stay outside, as they are there.
+        for (int a = 2; a < 4; ++a) m.limit[a] = float(double(h.geometry.size[a] - 1) / double(2 << k));
         break;
       }
     }
@@ -355,8 +370,10 @@ Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
   for (auto& f : fields) {
     FieldLevels& l = levels.emplace_back();
     l.field = std::move(f);
-    // A copy needs a few blocks on each (s, t) axis to be worth its memory.
-    for (std::size_t k = 0; mips && k < l.averaged.size(); ++k) {
+    // A copy needs a few blocks on each (s, t) axis to be worth its memory; a VQ field (chosen to
+    // save memory) gets none: its float copies would outweigh it.
+    const bool copies = mips && l.field->header().storage != LightFieldStorage::kVq;
+    for (std::size_t k = 0; copies && k < l.averaged.size(); ++k) {
       const int factor = 2 << k;
       const auto& size = l.field->geometry().size;
       if (std::min(size[2], size[3]) < 8 * factor) break;

@@ -320,7 +320,8 @@ SimilarityOptions Registration::level_similarity_options(const LevelGeometry& le
   // are fewer than two pixels per cell, down to 16 (a 4 x 4 binned window of about 3,000 pixels
   // gets 32 of 64; on the lumbar CT that lowered the warm plan's mean TRE and its time).
   const long pixels = long(level.windows[view].rows) * level.windows[view].cols;
-  while (o.histogram_bins > 16 && long(o.histogram_bins) * o.histogram_bins > pixels / 2) o.histogram_bins /= 2;
+  while (o.histogram_bins > 16 && long(o.histogram_bins) * o.histogram_bins > pixels / 2)
+    o.histogram_bins = std::max(16, o.histogram_bins / 2);
   return o;
 }
 
@@ -500,6 +501,8 @@ double Registration::cost_at(const Pose& T, double blur_sigma_mm, int bin, doubl
 
 Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bool record_trace) {
   if (plan.passes.empty()) return invalid_argument("registration: the plan has no passes");
+  if (plan.passes.size() > kMaxRegistrationPasses)
+    return invalid_argument("registration: a plan has at most " + std::to_string(kMaxRegistrationPasses) + " passes");
   PreparedPlan prepared;
   prepared.owner = this;
   prepared.plan = plan;
@@ -554,15 +557,30 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   result->fiducial_distance_mm = -1;
   result->trace.clear();
   result->passes.clear();
+  result->passes.reserve(kMaxRegistrationPasses);  // once per result: every plan fits
   Pose current = start;
   // The result's per-view scores when the last pass ran on the originals with the setup's measure
   // (its best candidate is the result); otherwise they are evaluated at the result below.
   std::array<double, Cost::kMaxViews> result_scores{};
   bool have_result_scores = false;
+  // Every level the plan uses and the originals (which score the result), made once per set of
+  // frames, before any pass: a run cut short by its budget still leaves them all prepared, so no
+  // later run prepares (and allocates) one for the first time. Each one's time is charged to the
+  // first pass that uses it (the originals', if no pass uses them, to the first pass); all of it
+  // counts against the budget.
+  std::array<double, kMaxRegistrationPasses> prepare_ms{};
+  for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
+    const auto level_t0 = std::chrono::steady_clock::now();
+    LFTRACK_RETURN_IF_ERROR(prepare_level(prepared.measures[p], prepared.levels[p]));
+    prepare_ms[p] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - level_t0).count();
+  }
+  {
+    const auto level_t0 = std::chrono::steady_clock::now();
+    LFTRACK_RETURN_IF_ERROR(prepare_level(0, 0));
+    prepare_ms[0] += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - level_t0).count();
+  }
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
     const auto pass_t0 = std::chrono::steady_clock::now();
-    // The pass's references (made once per set of frames), on its time and the plan's budget.
-    LFTRACK_RETURN_IF_ERROR(prepare_level(prepared.measures[p], prepared.levels[p]));
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
     budget.max_ms =
@@ -578,7 +596,8 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     result->cost = r.cost;
     result->stop = r.stop;
     result->passes.push_back(
-        {r.evaluations, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - pass_t0).count(),
+        {r.evaluations,
+         prepare_ms[p] + std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - pass_t0).count(),
          r.stop});
     for (const OptimizerTracePoint& point : r.trace) {
       OptimizerTracePoint q = point;
@@ -595,9 +614,7 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   if (have_result_scores) {
     std::copy_n(result_scores.begin(), setup_.views.size(), result->view_similarity.begin());
   } else {
-    // The setup's measure on the originals (their references made once per set of frames).
-    LFTRACK_RETURN_IF_ERROR(prepare_level(0, 0));
-    evaluate(0, 0, 0, result->T_room_from_ct, &result->view_similarity);
+    evaluate(0, 0, 0, result->T_room_from_ct, &result->view_similarity);  // the setup's measure, originals
   }
   if (fiducial_)
     result->fiducial_distance_mm =

@@ -70,6 +70,7 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const P
 Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
     const PreparedScene& p, const std::filesystem::path& lf_dir, tracking::ThreadPool* pool) {
   tracking::RendererOptions options;
+  options.light_field_mips = false;  // whole-detector frames: no coarse pixels to average
   if (p.scene.sim.renderer == "lightfield") {
     const std::filesystem::path dir =
         (lf_dir.empty() ? default_light_field_dir(p.scene) : lf_dir) / "sim-frames";

@@ -78,12 +78,13 @@ struct RendererOptions {
   // AVX2 (with or without runs), or none (the portable scalar kernels). Tests compare them.
   SimdLevel simd = SimdLevel::kBest;
   // Light-field renderer: render coarse pixels from (s, t)-averaged copies of the fields
-  // (LightField::downsampled_st, by 2 and 4, made when the renderer is made: a quarter and a
-  // sixteenth of the fields' memory again): a pixel whose footprint spans k >= 2 (s, t) samples
-  // on both axes renders from the copy averaged over the largest such power of two k (at most 4),
-  // so it is the mean over its footprint, not the ray through its centre, and reads 1 / k^2 of
-  // the samples (the 4 x 4 binned registration levels). False: every pixel samples the ray
-  // through its centre.
+  // (LightField::downsampled_st, by 2 and 4, made when the renderer is made, in float: 5/16 of a
+  // float field's memory again, 5/8 of a 16-bit one's; VQ fields get none): a view and window
+  // whose pixels span k >= 2 (s, t) samples on both axes at the nominal pose render from the copy
+  // averaged over the largest such power of two k (at most 4), so a pixel averages rays over
+  // about its footprint instead of taking the ray through its centre, and reads 1 / k^2 of the
+  // samples (the 4 x 4 binned registration levels). False: every pixel samples the ray through
+  // its centre.
   bool light_field_mips = true;
 };
 

@@ -141,13 +141,15 @@ class LightField {
   static Result<std::shared_ptr<const LightField>> convert(const LightField& source,
                                                            const LightFieldSpec& spec, ThreadPool* pool);
 
-  // The field averaged over blocks of `factor` x `factor` (s, t) samples (factor 2 to 64), as
-  // float, for views whose pixels each span about that many samples: its sample j of s (and t)
-  // sits at sample j * factor of the source and holds the trapezoid-weighted mean of the source's
-  // samples within factor / 2 of it (replicated at the edges), so a coarse pixel renders the mean
-  // of the rays across its footprint rather than the one ray through its centre, and reads 1 /
-  // factor^2 of the samples. Its (s, t) extent ends at the last whole block (at most factor - 1
-  // samples short of the source's). VQ fields are decoded sample by sample.
+  // The field averaged over blocks of `factor` x `factor` (s, t) samples (a power of two from 2
+  // to 64, fewer than the source's samples less one on each axis), as float, for views whose
+  // pixels each span about that many samples: its sample j of s (and t) sits at sample
+  // j * factor of the source and holds the trapezoid-weighted mean of the source's samples
+  // within factor / 2 of it (the source's edge samples repeated beyond its edges), so a coarse
+  // pixel renders rays averaged over about its footprint rather than the one ray through its
+  // centre, and reads 1 / factor^2 of the samples. Its last sample reaches the source's last one
+  // or up to factor - 1 samples past it; the renderer masks rays past the source's extent, so
+  // both mask the same pixels. Its plan hash is 0 (it is not the field its plan describes).
   static Result<std::shared_ptr<const LightField>> downsampled_st(const LightField& source, int factor,
                                                                   ThreadPool* pool);
 

@@ -121,10 +121,13 @@ struct RegistrationPlan {
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
+// The most passes a plan may have (prepare_plan refuses more).
+inline constexpr std::size_t kMaxRegistrationPasses = 8;
+
 // What one pass of a plan did: where a registration's time and evaluations go.
 struct RegistrationPassSummary {
   int evaluations = 0;
-  double elapsed_ms = 0;  // wall time, the pass's references included
+  double elapsed_ms = 0;  // wall time, with the references of the levels it is the first to use
   OptimizerStop stop = OptimizerStop::kConverged;
 };
 
@@ -141,8 +144,8 @@ struct RegistrationResult {
   double elapsed_ms = 0;
   OptimizerStop stop = OptimizerStop::kConverged;
   std::vector<OptimizerTracePoint> trace;  // x: delta from the start pose
-  // Per pass of the plan, in order (a pass the time budget left out has none); reuses its
-  // capacity, so a result that held this plan's before allocates nothing.
+  // Per pass of the plan, in order (a pass after one stopped by the time budget or a non-finite
+  // cost has none); room for kMaxRegistrationPasses is reserved on a result's first run.
   std::vector<RegistrationPassSummary> passes;
 };
 
