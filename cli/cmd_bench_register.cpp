@@ -47,7 +47,7 @@ Command add_bench_register_command(CLI::App* parent) {
       std::printf("%-28s %5d %9.1f %9.1f %9.1f %9.3f %9.3f %7.1f%% %7.0f\n", what, t.runs, t.median_ms, t.p95_ms,
                   t.max_ms, t.mean_tre_mm, t.max_tre_mm, 100 * t.success_rate, t.median_evaluations);
       for (std::size_t p = 0; p < t.passes.size(); ++p)
-        std::printf("  pass %zu%-21s %5s %9.1f %9s %9s %9s %9s %8s %7.0f\n", p + 1, "", "", t.passes[p].median_ms, "",
+        std::printf("  pass %zu%-20s %5s %9.1f %9s %9s %9s %9s %8s %7.0f\n", p + 1, "", "", t.passes[p].median_ms, "",
                     "", "", "", "", t.passes[p].median_evaluations);
     };
     std::printf("%s, plan %s, warm plan %s, %s, %d threads\n", report->scene.c_str(), report->plan.c_str(),

@@ -160,8 +160,10 @@ double voxel_hu(const Anatomy& an, const Vector3d& p, double vox) {
   paint(&hu, kCouch, coverage(couch_sd, vox));
   // Torso: fat layer, then soft tissue.
   const double skin = ellipse_sd(x, y, an.body_a, an.body_b);
-  // Outside the skin's ramp nothing below paints (every weight is 0): skip the noise lattices,
-  // which are most of a voxel's cost. The values are exactly those the full evaluation gives.
+  // Outside the skin's ramp the fat and soft tissue paint with weight 0 (the soft tissue's
+  // distance is the skin's plus fat_mm + fat_var, at least 12 - 3 mm) and the organs are not
+  // reached (skin > 0 returns below): skip the noise lattices, which are most of a voxel's cost.
+  // The values are exactly those the full evaluation gives.
   if (coverage(skin, vox) == 0.0) return hu;
   paint(&hu, kFat, coverage(skin, vox));
   const double fat_var = 3.0 * value_noise(an.seed + 11, p, 40.0);

@@ -70,13 +70,18 @@ inline void expect_tracks_every_cycle(const LoopSummary& s, std::int64_t cycles)
 // The light-field folder for `p`, shared by every test process (test::test_cache_dir()): the
 // first run that needs the fields builds and saves them (each file written whole, then renamed
 // into place, so a concurrent reader sees all of a file or none), later runs load them. Loading
-// checks each field against the CT's and the plan's hashes, so a field from another scene or an
-// older build is rebuilt, never used. The folder is named after the CT and both plans, so the
-// few tests that change the plan (the envelope) do not rebuild the others' fields.
+// checks each field against the CT's and the plan's hashes, so a field from another scene is
+// rebuilt, never used. The folder is named after the CT, both plans and the lftrack build (the
+// program's modification time: the hashes do not cover the code that samples a field, so a
+// rebuilt lftrack builds its fields anew), so the few tests that change the plan (the envelope)
+// do not rebuild the others' fields.
 inline std::filesystem::path shared_light_field_dir(const PreparedScene& p) {
   std::uint64_t key = 0;
   for (int i = 0; i < int(p.scene.detectors.size()); ++i)
     key = key * 1000003u ^ tracking::plan_hash(p.light_field_plan(i), p.scene.light_field);
+  std::error_code ec;
+  const auto built = std::filesystem::last_write_time(LFTRACK_BIN_PATH, ec);
+  key = key * 1000003u ^ static_cast<std::uint64_t>(ec ? 0 : built.time_since_epoch().count());
   const auto& r = p.scene.sim.light_field.resolution;
   char name[96];
   std::snprintf(name, sizeof name, "%s-%016llx-sim%dx%dx%dx%d", to_hex(scene_fingerprint(p.scene)).c_str(),

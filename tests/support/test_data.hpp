@@ -34,7 +34,8 @@ inline bool data_required() {
 
 // What tests build once and share across test processes (light fields): a folder in the build
 // tree, `test-cache`, which `make clean` removes. Whatever is kept there must be checked when read
-// back (a light field is, against its CT and plan), so a stale entry is rebuilt, never trusted.
+// back (a light field is, against its CT and plan; its folder names the lftrack build), so a
+// stale entry is rebuilt, never trusted.
 inline std::filesystem::path test_cache_dir() { return std::filesystem::path(LFTRACK_TEST_CACHE_DIR); }
 
 // A fresh, empty temporary folder named after the running test; removed by the destructor.
