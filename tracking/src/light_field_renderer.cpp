@@ -266,20 +266,20 @@ class LightFieldRenderer final : public DrrRenderer {
     const Vector3d d00 = ct_from_room * view.pixel_centre_mm(window.row0, window.col0) - source;
     const Vector3d d_row = ct_from_room.linear() * view.row_axis * view.pitch_row_mm;
     const Vector3d d_col = ct_from_room.linear() * view.col_axis * view.pitch_col_mm;
-    RayMap m = ray_map(h.geometry, source, d00, d_row, d_col);
     // Coarse pixels read the copy averaged over about their footprint (the largest made that fits
     // it), chosen by the footprint at the nominal pose: the same copy for every pose of the view
     // and window, so a registration's cost does not jump between copies as its pose moves.
+    int factor = 1;
     const double footprint = nominal_footprint_samples(h, view, window);
-    for (int k = int(levels->averaged.size()) - 1; k >= 0; --k) {
+    for (int k = int(levels->averaged.size()) - 1; k >= 0 && factor == 1; --k) {
       if (levels->averaged[std::size_t(k)] && footprint >= double(2 << k)) {
         field = levels->averaged[std::size_t(k)].get();
-        m = ray_map(field->geometry(), source, d00, d_row, d_col);
-        // Rays past the source field's last (s, t) sample stay outside, as they are there.
-        for (int a = 2; a < 4; ++a) m.limit[a] = float(double(h.geometry.size[a] - 1) / double(2 << k));
-        break;
+        factor = 2 << k;
       }
     }
+    RayMap m = ray_map(field->geometry(), source, d00, d_row, d_col);
+    // Rays past the built field's last (s, t) sample stay outside in a copy, as they are there.
+    for (int a = 2; a < 4; ++a) m.limit[a] = float(double(h.geometry.size[a] - 1) / double(factor));
     const LightFieldGeometry& g = field->geometry();
     const LightFieldStorage storage = field->header().storage;
     const double fixed_scale = field->header().fixed_scale;

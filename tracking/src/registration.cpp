@@ -116,45 +116,12 @@ double highpass_sigma_px(const RegistrationSetup::Level& l, const XrayView& view
 
 Registration::~Registration() = default;
 
-// The robust plans' high-pass (sigma, mm on the detector): the best of 5, 7, 10 and 15 mm on the
-// lumbar CT's clinical and ideal frames (BENCHMARKS.md, "X-rays that differ from the planning CT").
-constexpr double kRobustHighPassMm = 7.0;
-
-std::vector<std::string> registration_plan_names() {
-  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust", "pyramid"};
+namespace {
+// Milliseconds of wall time since `t0`.
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
-
-Result<RegistrationPlan> registration_plan(const std::string& name) {
-  RegistrationPlan plan;
-  plan.name = name;
-  if (name == "papers" || name == "decoupled") {
-    const std::string opt = name == "papers" ? "best-neighbour" : "decoupled";
-    plan.passes = {{opt, 1.5, 1, 5.0, 0.5, 3000, ""}, {opt, 0.0, 1, 2.0, 0.1, 3000, ""}};
-  } else if (name == "quadratic") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, ""},
-                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, ""}};
-  } else if (name == "cmaes") {
-    plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000, ""}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000, ""}};
-  } else if (name == "warm") {
-    plan.passes = {{"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 400, ""},
-                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
-  } else if (name == "robust") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},
-                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, "ncc", kRobustHighPassMm}};
-  } else if (name == "pyramid") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, ""},
-                   {"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 3000, ""},
-                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 3000, ""}};
-  } else if (name == "warm-robust") {
-    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, "ncc", kRobustHighPassMm},
-                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, "ncc", kRobustHighPassMm}};
-  } else {
-    std::string known;
-    for (const auto& n : registration_plan_names()) known += (known.empty() ? "" : ", ") + n;
-    return invalid_argument("unknown registration plan '" + name + "' (known: " + known + ")");
-  }
-  return plan;
-}
+}  // namespace
 
 namespace {
 
@@ -329,8 +296,8 @@ Result<int> Registration::measure_index(const std::string& name) {
   const std::string wanted = name.empty() ? setup_.similarity : name;
   for (std::size_t m = 0; m < measure_names_.size(); ++m)
     if (measure_names_[m] == wanted) return int(m);
-  auto probe = make_similarity(wanted, setup_.similarity_options);
-  if (!probe.ok()) return probe.status();
+  // An unknown name is refused before any slot changes.
+  if (auto probe = make_similarity(wanted, setup_.similarity_options); !probe.ok()) return probe.status();
   for (auto& slot : slots_) {
     auto& per_level = slot->similarity.emplace_back(levels_.size());
     for (std::size_t l = 0; l < levels_.size(); ++l)
@@ -572,19 +539,19 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
     const auto level_t0 = std::chrono::steady_clock::now();
     LFTRACK_RETURN_IF_ERROR(prepare_level(prepared.measures[p], prepared.levels[p]));
-    prepare_ms[p] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - level_t0).count();
+    prepare_ms[p] = ms_since(level_t0);
   }
   {
     const auto level_t0 = std::chrono::steady_clock::now();
     LFTRACK_RETURN_IF_ERROR(prepare_level(0, 0));
-    prepare_ms[0] += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - level_t0).count();
+    prepare_ms[0] += ms_since(level_t0);
   }
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
     const auto pass_t0 = std::chrono::steady_clock::now();
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
     budget.max_ms =
-        budget_ms - std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        budget_ms - ms_since(t0);
     Cost cost(*this, current, prepared.measures[p], prepared.levels[p]);
     OptimizerResult r = prepared.optimizers[p]->minimize(cost, Vector6d::Zero(), budget);
     current = cost.pose(r.x);
@@ -595,10 +562,7 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     result->evaluations += r.evaluations;
     result->cost = r.cost;
     result->stop = r.stop;
-    result->passes.push_back(
-        {r.evaluations,
-         prepare_ms[p] + std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - pass_t0).count(),
-         r.stop});
+    result->passes.push_back({r.evaluations, prepare_ms[p] + ms_since(pass_t0), r.stop});
     for (const OptimizerTracePoint& point : r.trace) {
       OptimizerTracePoint q = point;
       q.evaluations += result->evaluations - r.evaluations;
@@ -619,8 +583,7 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   if (fiducial_)
     result->fiducial_distance_mm =
         (result->T_room_from_ct * fiducial_->marker_ct_mm - fiducial_->marker_room_mm).norm();
-  result->elapsed_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  result->elapsed_ms = ms_since(t0);
   return {};
 }
 

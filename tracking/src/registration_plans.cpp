@@ -1,0 +1,50 @@
+// The named registration plans (registration.hpp lists them and says what each is for).
+
+#include <string>
+#include <vector>
+
+#include "lftrack/tracking/registration.hpp"
+
+namespace lftrack::tracking {
+
+// The robust plans' high-pass (sigma, mm on the detector): the best of 5, 7, 10 and 15 mm on the
+// lumbar CT's clinical and ideal frames (BENCHMARKS.md, "X-rays that differ from the planning CT").
+constexpr double kRobustHighPassMm = 7.0;
+
+std::vector<std::string> registration_plan_names() {
+  return {"papers", "decoupled", "quadratic", "cmaes", "warm", "robust", "warm-robust", "pyramid"};
+}
+
+Result<RegistrationPlan> registration_plan(const std::string& name) {
+  RegistrationPlan plan;
+  plan.name = name;
+  if (name == "papers" || name == "decoupled") {
+    const std::string opt = name == "papers" ? "best-neighbour" : "decoupled";
+    plan.passes = {{opt, 1.5, 1, 5.0, 0.5, 3000, ""}, {opt, 0.0, 1, 2.0, 0.1, 3000, ""}};
+  } else if (name == "quadratic") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, ""}};
+  } else if (name == "cmaes") {
+    plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000, ""}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000, ""}};
+  } else if (name == "warm") {
+    plan.passes = {{"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 400, ""},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
+  } else if (name == "robust") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},
+                   {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, "ncc", kRobustHighPassMm}};
+  } else if (name == "pyramid") {
+    plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 3000, ""},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 3000, ""}};
+  } else if (name == "warm-robust") {
+    plan.passes = {{"quadratic-neighbour", 0.0, 2, 1.0, 0.25, 400, "ncc", kRobustHighPassMm},
+                   {"quadratic-neighbour", 0.0, 1, 0.25, 0.1, 200, "ncc", kRobustHighPassMm}};
+  } else {
+    std::string known;
+    for (const auto& n : registration_plan_names()) known += (known.empty() ? "" : ", ") + n;
+    return invalid_argument("unknown registration plan '" + name + "' (known: " + known + ")");
+  }
+  return plan;
+}
+
+}  // namespace lftrack::tracking
