@@ -109,7 +109,7 @@ TEST(Siddon, MissingZeroLengthAndInsideRays) {
   EXPECT_EQ(caster.siddon({nan, 2, 2}, {4.5, 2, 2}), 0.0);  // NaN: no ray
 }
 
-// siddon_batch (sixteen AVX-512 lanes where the CPU has them) against siddon() one ray at a time:
+// siddon_batch (sixteen AVX-512 or AVX2 lanes, each kernel the CPU has) against siddon() one ray at a time:
 // the same bits for every ray, including rays that miss, start or end inside, run along faces,
 // edges and axes, or have zero length, and a count that leaves a partial group of lanes.
 TEST(SiddonBatch, EqualsTheScalarWalkBitForBit) {
@@ -156,18 +156,20 @@ TEST(SiddonBatch, EqualsTheScalarWalkBitForBit) {
   from.emplace_back(std::nan(""), 2, 2), to.emplace_back(4, 2, 2);   // not a ray
   ASSERT_NE(from.size() % 16, 0u) << "the test wants a partial group";
 
-  std::vector<double> batch(from.size()), scalar_batch(from.size());
+  std::vector<double> batch(from.size()), avx2_batch(from.size()), scalar_batch(from.size());
   caster.siddon_batch(from, to, batch);
-  caster.siddon_batch(from, to, scalar_batch, /*vector_lanes=*/false);
+  caster.siddon_batch(from, to, avx2_batch, SiddonLanes::kAvx2);
+  caster.siddon_batch(from, to, scalar_batch, SiddonLanes::kNone);
   int nonzero = 0;
   for (std::size_t i = 0; i < from.size(); ++i) {
     const double expected = caster.siddon(from[i], to[i]);
     nonzero += expected > 0;
     EXPECT_EQ(batch[i], expected) << "ray " << i;
+    EXPECT_EQ(avx2_batch[i], expected) << "ray " << i;
     EXPECT_EQ(scalar_batch[i], expected) << "ray " << i;
   }
   EXPECT_GT(nonzero, 1000);
-  if (!GridRayCaster::siddon_lanes_available()) GTEST_SKIP() << "no AVX-512: only the scalar path ran";
+  if (!GridRayCaster::siddon_lanes_available()) GTEST_SKIP() << "no AVX-512 or AVX2: only the scalar path ran";
 }
 
 // A voxelised sphere and ellipsoid: Siddon equals the exact sum of per-voxel chords to 1e-5

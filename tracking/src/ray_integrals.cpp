@@ -127,23 +127,42 @@ double GridRayCaster::siddon(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
   return sum * w.length;
 }
 
-bool GridRayCaster::siddon_lanes_available() {
-  static const bool available = detail::siddon_avx512_available();
-  return available;
+namespace {
+
+// The lane kernel this CPU runs for `lanes`, or none.
+using LaneKernel = void (*)(const float*, const detail::SiddonWalk*, double*);
+LaneKernel lane_kernel(SiddonLanes lanes) {
+  static const bool avx512 = detail::siddon_avx512_available(), avx2 = detail::siddon_avx2_available();
+  switch (lanes) {
+    case SiddonLanes::kBest:
+      return avx512 ? &detail::siddon_walk_avx512 : avx2 ? &detail::siddon_walk_avx2 : nullptr;
+    case SiddonLanes::kAvx2:
+      return avx2 ? &detail::siddon_walk_avx2 : nullptr;
+    case SiddonLanes::kNone:
+      break;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+bool GridRayCaster::siddon_lanes_available(SiddonLanes lanes) {
+  return lane_kernel(lanes) != nullptr;
 }
 
 void GridRayCaster::siddon_batch(std::span<const Eigen::Vector3d> from, std::span<const Eigen::Vector3d> to,
-                                 std::span<double> integrals, bool vector_lanes) const {
+                                 std::span<double> integrals, SiddonLanes lanes) const {
   const std::size_t n = std::min({from.size(), to.size(), integrals.size()});
   std::size_t i = 0;
-  if (vector_lanes && siddon_lanes_available() && !volume_.values.empty()) {
+  const LaneKernel kernel = lane_kernel(lanes);
+  if (kernel && !volume_.values.empty()) {
     constexpr int kLanes = detail::kSiddonLanes;
     for (; i + kLanes <= n; i += kLanes) {
       detail::SiddonWalk walks[kLanes];
       bool hit[kLanes];
       for (int k = 0; k < kLanes; ++k) hit[k] = start_walk(from[i + k], to[i + k], &walks[k]);
       // A missed ray keeps the default walk: an empty range at voxel 0, summing nothing.
-      detail::siddon_walk_avx512(volume_.values.data(), walks, &integrals[i]);
+      kernel(volume_.values.data(), walks, &integrals[i]);
       for (int k = 0; k < kLanes; ++k) {
         if (!hit[k]) integrals[i + k] = 0.0;
       }

@@ -1,6 +1,6 @@
 #pragma once
-// Private to the ray casters: where one Siddon walk starts, and the AVX-512 kernel that walks
-// sixteen of them at once (siddon_kernel_avx512.cpp).
+// Private to the ray casters: where one Siddon walk starts, and the kernels that walk sixteen of
+// them at once: AVX-512 (siddon_kernel_avx512.cpp) and AVX2 (siddon_kernel_avx2.cpp).
 
 #include <cstddef>
 
@@ -18,8 +18,9 @@ struct SiddonWalk {
   int left[3] = {0, 0, 0};
 };
 
-// Sixteen walks at a time (two groups of eight AVX-512 lanes, stepped alternately so that one
-// group's dependency chain hides the other's) need at least this many rays to be worth it.
+// Sixteen walks at a time (two groups of eight AVX-512 lanes, or four groups of four AVX2 lanes,
+// stepped in turn so that one group's dependency chain hides the others') need at least this
+// many rays to be worth it.
 inline constexpr int kSiddonLanes = 16;
 
 // True if this CPU runs siddon_walk_avx512 (AVX-512F).
@@ -29,5 +30,12 @@ bool siddon_avx512_available();
 // `integrals`: bit for bit what GridRayCaster::siddon returns for the same ray. Needs
 // siddon_avx512_available().
 void siddon_walk_avx512(const float* mu, const SiddonWalk* walks, double* integrals);
+
+// True if this CPU runs siddon_walk_avx2 (AVX2).
+bool siddon_avx2_available();
+
+// siddon_walk_avx512 for CPUs with AVX2: the same results, bit for bit. Needs
+// siddon_avx2_available().
+void siddon_walk_avx2(const float* mu, const SiddonWalk* walks, double* integrals);
 
 }  // namespace lftrack::tracking::detail
