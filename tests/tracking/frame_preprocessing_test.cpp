@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <vector>
 
 namespace lftrack::tracking {
 namespace {
@@ -142,6 +144,67 @@ TEST(BoxHighPass, MaskedPixelsNeitherContributeNorReceiveAndInPlaceMatches) {
   ASSERT_TRUE(tiny.apply(one.view(), {}, one_out.view()).ok());
   EXPECT_EQ(tiny.radius_px(), 1);
   EXPECT_EQ(one_out.at(0, 0), 0.f);
+}
+
+// The filter against the definition, computed the slow way: kPasses times, each usable pixel
+// becomes the mean of the usable pixels in its box. Random images, random masks (including a
+// fully masked row and column), several radii and a box wider than the image; then the same
+// filter object on another mask (its kept counts must not be reused) and on the first again.
+std::vector<float> slow_high_pass(const Image<float>& in, const Image<unsigned char>& mask, int radius) {
+  const int rows = in.rows(), cols = in.cols();
+  auto usable = [&](int r, int c) { return std::isfinite(in.at(r, c)) && mask.at(r, c) != 0; };
+  std::vector<double> low(std::size_t(rows * cols));
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) low[std::size_t(r * cols + c)] = usable(r, c) ? in.at(r, c) : 0.0;
+  for (int pass = 0; pass < BoxHighPass::kPasses; ++pass) {
+    std::vector<double> next(low.size(), 0.0);
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < cols; ++c) {
+        if (!usable(r, c)) continue;
+        double sum = 0, n = 0;
+        for (int rr = std::max(0, r - radius); rr <= std::min(rows - 1, r + radius); ++rr)
+          for (int cc = std::max(0, c - radius); cc <= std::min(cols - 1, c + radius); ++cc)
+            if (usable(rr, cc)) sum += low[std::size_t(rr * cols + cc)], n += 1;
+        next[std::size_t(r * cols + c)] = sum / n;
+      }
+    low = next;
+  }
+  std::vector<float> out(low.size());
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c)
+      out[std::size_t(r * cols + c)] = usable(r, c) ? float(in.at(r, c) - low[std::size_t(r * cols + c)]) : 0.f;
+  return out;
+}
+
+TEST(BoxHighPass, EqualsTheDefinitionComputedSlowlyForAnyMaskAndRadius) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> value(0.f, 8.f), unit(0.f, 1.f);
+  const int rows = 23, cols = 37;
+  auto random_mask = [&](float keep) {
+    Image<unsigned char> m(rows, cols, 1);
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < cols; ++c) m.at(r, c) = unit(rng) < keep ? 1 : 0;
+    for (int c = 0; c < cols; ++c) m.at(4, c) = 0;  // a masked row
+    for (int r = 0; r < rows; ++r) m.at(r, 9) = 0;  // and column
+    return m;
+  };
+  for (const int radius : {1, 2, 5, 40}) {
+    Image<float> in(rows, cols);
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < cols; ++c) in.at(r, c) = value(rng);
+    in.at(7, 7) = std::nanf("");
+    const Image<unsigned char> first = random_mask(0.8f), second = random_mask(0.5f);
+    BoxHighPass highpass(rows, cols, radius);
+    Image<float> out(rows, cols);
+    for (const Image<unsigned char>* mask : {&first, &first, &second, &first}) {
+      ASSERT_TRUE(highpass.apply(in.view(), mask->view(), out.view()).ok());
+      const std::vector<float> expected = slow_high_pass(in, *mask, highpass.radius_px());
+      for (int r = 0; r < rows; ++r)
+        for (int c = 0; c < cols; ++c)
+          ASSERT_NEAR(out.at(r, c), expected[std::size_t(r * cols + c)], 2e-5)
+              << "radius " << radius << " at " << r << "," << c;
+    }
+  }
 }
 
 }  // namespace

@@ -51,9 +51,11 @@ class GaussianBlur {
 // High-pass filter that removes what varies slowly across the image (scatter, soft tissue that is
 // not the planning CT's, a flat-field residue): out = in - low, where low is kPasses box means
 // of the usable pixels in a (2r+1) x (2r+1) box (close to a Gaussian of the stated sigma, without
-// a single box's ringing), each from summed-area tables, so the cost does not grow with the box.
-// Masked pixels (valid == 0, or not finite) neither contribute nor receive a value: they get 0
-// and stay masked. Sized once for an image shape; apply() allocates nothing.
+// a single box's ringing), each from running sums along rows and down columns, so the cost does
+// not grow with the box. Masked pixels (valid == 0, or not finite) neither contribute nor receive
+// a value: they get 0 and stay masked. Sized once for an image shape; apply() allocates nothing.
+// It keeps the last call's usable pixels and their box counts: calls over the same pixels (every
+// DRR of a registration level) skip the counting. Not for concurrent use.
 class BoxHighPass {
  public:
   static constexpr int kPasses = 3;
@@ -68,8 +70,14 @@ class BoxHighPass {
 
  private:
   int rows_, cols_, radius_;
-  std::vector<double> value_sum_, count_sum_;  // (rows+1) x (cols+1) summed-area tables
-  std::vector<float> low_;                     // rows x cols
+  bool counts_ready_ = false;           // usable_ and inverse_count_ hold the last call's
+  std::vector<unsigned char> usable_;   // rows x cols, 1 where usable
+  std::vector<int> row_counts_;         // rows x cols: usable pixels in each row segment
+  std::vector<int> column_counts_;      // cols: usable pixels in the box, sliding down
+  std::vector<double> inverse_count_;   // rows x cols: 1 / usable pixels in the box; 0 unusable
+  std::vector<double> row_sums_;        // rows x cols: sums along the rows
+  std::vector<double> column_sums_;     // cols: box sums, sliding down
+  std::vector<float> low_;              // rows x cols: the low-pass image; 0 at unusable pixels
 };
 
 }  // namespace lftrack::tracking
