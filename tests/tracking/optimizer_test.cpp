@@ -4,8 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <limits>
+#include <thread>
 
 namespace lftrack::tracking {
 namespace {
@@ -80,6 +82,26 @@ TEST_P(EveryOptimizer, KeepsToItsBudgets) {
   budget.max_ms = 0;
   const OptimizerResult t = make_optimizer(GetParam(), s).value()->minimize(bowl, Vector6d::Zero(), budget);
   EXPECT_EQ(t.stop, OptimizerStop::kTimeBudget);
+}
+
+// A batch that would end past the time budget is not started. Each evaluation takes at least
+// 4 ms and the budget is 10 ms: after the start point, every optimizer's first batch (4 to 13
+// evaluations) would end at 20 ms or later, so it stops after one evaluation. (Before, it started
+// the batch because 4 ms is inside the budget.) A slower machine only makes the estimate larger.
+TEST_P(EveryOptimizer, StartsNoBatchThatWouldEndPastTheTimeBudget) {
+  class Slow : public CostFunction {
+   public:
+    double cost(const Vector6d& x) override {
+      std::this_thread::sleep_for(std::chrono::milliseconds(4));
+      return bowl.cost(x);
+    }
+    Bowl bowl{Vector6d::Constant(5)};
+  } slow;
+  OptimizerBudget budget;
+  budget.max_ms = 10;
+  const OptimizerResult r = make_optimizer(GetParam(), {}).value()->minimize(slow, Vector6d::Zero(), budget);
+  EXPECT_EQ(r.evaluations, 1) << GetParam();
+  EXPECT_EQ(r.stop, OptimizerStop::kTimeBudget) << GetParam();
 }
 
 TEST_P(EveryOptimizer, NonFiniteCostsNeverWin) {
