@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 
 #include "lftrack/host/scene.hpp"
@@ -266,6 +267,19 @@ TEST(Scene, ShippedExampleScenesParse) {
     ++count;
   }
   EXPECT_GE(count, 1);
+}
+
+// Every scene shipped in scenes/ (and scenes/room/) parses and validates: a user copies them.
+TEST(Scene, EveryShippedSceneFileLoads) {
+  int count = 0;
+  for (const auto& entry :
+       std::filesystem::recursive_directory_iterator(std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes")) {
+    if (entry.path().extension() != ".yaml") continue;
+    ++count;
+    auto scene = load_scene(entry.path().string());
+    EXPECT_TRUE(scene.ok()) << entry.path() << ": " << scene.status().message();
+  }
+  EXPECT_GE(count, 10);
 }
 
 }  // namespace

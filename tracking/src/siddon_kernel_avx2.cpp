@@ -44,25 +44,17 @@ LFTRACK_AVX2 inline __m256i load_ints(const long long* v) {
 }
 
 LFTRACK_AVX2 Lanes load(const SiddonWalk* w) {
-  alignas(32) double a[4], a_end[4], nx[4], ny[4], nz[4], dx[4], dy[4], dz[4];
-  alignas(32) long long offset[4], lx[4], ly[4], lz[4], ox[4], oy[4], oz[4];
-  for (int k = 0; k < 4; ++k) {
-    a[k] = w[k].a;
-    a_end[k] = w[k].a_end;
-    nx[k] = w[k].next[0], ny[k] = w[k].next[1], nz[k] = w[k].next[2];
-    dx[k] = w[k].delta[0], dy[k] = w[k].delta[1], dz[k] = w[k].delta[2];
-    offset[k] = w[k].offset;
-    lx[k] = w[k].left[0], ly[k] = w[k].left[1], lz[k] = w[k].left[2];
-    ox[k] = w[k].offset_step[0], oy[k] = w[k].offset_step[1], oz[k] = w[k].offset_step[2];
-  }
+  const WalkColumns<4> c(w);
   Lanes l;
-  l.a = _mm256_load_pd(a), l.a_end = _mm256_load_pd(a_end);
-  l.next_x = _mm256_load_pd(nx), l.next_y = _mm256_load_pd(ny), l.next_z = _mm256_load_pd(nz);
-  l.delta_x = _mm256_load_pd(dx), l.delta_y = _mm256_load_pd(dy), l.delta_z = _mm256_load_pd(dz);
+  l.a = _mm256_load_pd(c.a), l.a_end = _mm256_load_pd(c.a_end);
+  l.next_x = _mm256_load_pd(c.next[0]), l.next_y = _mm256_load_pd(c.next[1]), l.next_z = _mm256_load_pd(c.next[2]);
+  l.delta_x = _mm256_load_pd(c.delta[0]), l.delta_y = _mm256_load_pd(c.delta[1]);
+  l.delta_z = _mm256_load_pd(c.delta[2]);
   l.sum = _mm256_setzero_pd();
-  l.offset = load_ints(offset);
-  l.left_x = load_ints(lx), l.left_y = load_ints(ly), l.left_z = load_ints(lz);
-  l.step_x = load_ints(ox), l.step_y = load_ints(oy), l.step_z = load_ints(oz);
+  l.offset = load_ints(c.offset);
+  l.left_x = load_ints(c.left[0]), l.left_y = load_ints(c.left[1]), l.left_z = load_ints(c.left[2]);
+  l.step_x = load_ints(c.offset_step[0]), l.step_y = load_ints(c.offset_step[1]);
+  l.step_z = load_ints(c.offset_step[2]);
   l.live = true;
   return l;
 }

@@ -41,25 +41,18 @@ struct Lanes {
 };
 
 LFTRACK_AVX512 Lanes load(const SiddonWalk* w) {
-  alignas(64) double a[8], a_end[8], nx[8], ny[8], nz[8], dx[8], dy[8], dz[8];
-  alignas(64) long long offset[8], lx[8], ly[8], lz[8], ox[8], oy[8], oz[8];
-  for (int k = 0; k < 8; ++k) {
-    a[k] = w[k].a;
-    a_end[k] = w[k].a_end;
-    nx[k] = w[k].next[0], ny[k] = w[k].next[1], nz[k] = w[k].next[2];
-    dx[k] = w[k].delta[0], dy[k] = w[k].delta[1], dz[k] = w[k].delta[2];
-    offset[k] = w[k].offset;
-    lx[k] = w[k].left[0], ly[k] = w[k].left[1], lz[k] = w[k].left[2];
-    ox[k] = w[k].offset_step[0], oy[k] = w[k].offset_step[1], oz[k] = w[k].offset_step[2];
-  }
+  const WalkColumns<8> c(w);
   Lanes l;
-  l.a = _mm512_load_pd(a), l.a_end = _mm512_load_pd(a_end);
-  l.next_x = _mm512_load_pd(nx), l.next_y = _mm512_load_pd(ny), l.next_z = _mm512_load_pd(nz);
-  l.delta_x = _mm512_load_pd(dx), l.delta_y = _mm512_load_pd(dy), l.delta_z = _mm512_load_pd(dz);
+  l.a = _mm512_load_pd(c.a), l.a_end = _mm512_load_pd(c.a_end);
+  l.next_x = _mm512_load_pd(c.next[0]), l.next_y = _mm512_load_pd(c.next[1]), l.next_z = _mm512_load_pd(c.next[2]);
+  l.delta_x = _mm512_load_pd(c.delta[0]), l.delta_y = _mm512_load_pd(c.delta[1]);
+  l.delta_z = _mm512_load_pd(c.delta[2]);
   l.sum = _mm512_setzero_pd();
-  l.offset = _mm512_load_si512(offset);
-  l.left_x = _mm512_load_si512(lx), l.left_y = _mm512_load_si512(ly), l.left_z = _mm512_load_si512(lz);
-  l.step_x = _mm512_load_si512(ox), l.step_y = _mm512_load_si512(oy), l.step_z = _mm512_load_si512(oz);
+  l.offset = _mm512_load_si512(c.offset);
+  l.left_x = _mm512_load_si512(c.left[0]), l.left_y = _mm512_load_si512(c.left[1]);
+  l.left_z = _mm512_load_si512(c.left[2]);
+  l.step_x = _mm512_load_si512(c.offset_step[0]), l.step_y = _mm512_load_si512(c.offset_step[1]);
+  l.step_z = _mm512_load_si512(c.offset_step[2]);
   l.live = true;
   return l;
 }

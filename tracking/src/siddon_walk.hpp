@@ -18,6 +18,27 @@ struct SiddonWalk {
   int left[3] = {0, 0, 0};
 };
 
+// kLanes walks turned into one array per field, each aligned for a vector load: what the lane
+// kernels load their registers from.
+template <int kLanes>
+struct WalkColumns {
+  alignas(64) double a[kLanes], a_end[kLanes], next[3][kLanes], delta[3][kLanes];
+  alignas(64) long long offset[kLanes], left[3][kLanes], offset_step[3][kLanes];
+  explicit WalkColumns(const SiddonWalk* walks) {
+    for (int k = 0; k < kLanes; ++k) {
+      a[k] = walks[k].a;
+      a_end[k] = walks[k].a_end;
+      offset[k] = walks[k].offset;
+      for (int axis = 0; axis < 3; ++axis) {
+        next[axis][k] = walks[k].next[axis];
+        delta[axis][k] = walks[k].delta[axis];
+        left[axis][k] = walks[k].left[axis];
+        offset_step[axis][k] = walks[k].offset_step[axis];
+      }
+    }
+  }
+};
+
 // Sixteen walks at a time (two groups of eight AVX-512 lanes, or four groups of four AVX2 lanes,
 // stepped in turn so that one group's dependency chain hides the others') need at least this
 // many rays to be worth it.
