@@ -17,51 +17,32 @@
 namespace lftrack::tracking {
 namespace {
 
-// Sums of `in` over [c - radius, c + radius] (clipped to the row), for each c of a row of `cols`.
-template <class In, class Sum>
-void row_box_sums(const In* in, int cols, int radius, Sum* out) {
-  Sum sum = 0;
-  for (int c = 0; c <= std::min(radius, cols - 1); ++c) sum += Sum(in[c]);
-  out[0] = sum;
+// Sums of `in` over [c - radius, c + radius] (clipped to the row), for each c, in kRows rows
+// `stride` apart at once: kRows independent chains of adds, which the core overlaps (one row's
+// chain, two dependent adds a pixel, was the filter's bottleneck).
+template <int kRows, class In, class Sum>
+void row_box_sums(const In* in, std::size_t stride, int cols, int radius, Sum* out) {
+  Sum sum[kRows] = {};
+  for (int c = 0; c <= std::min(radius, cols - 1); ++c)
+    for (int k = 0; k < kRows; ++k) sum[k] += Sum(in[std::size_t(k) * stride + std::size_t(c)]);
+  for (int k = 0; k < kRows; ++k) out[std::size_t(k) * stride] = sum[k];
   for (int c = 1; c < cols; ++c) {
-    if (c + radius < cols) sum += Sum(in[c + radius]);
-    if (c - radius - 1 >= 0) sum -= Sum(in[c - radius - 1]);
-    out[c] = sum;
+    if (c + radius < cols)
+      for (int k = 0; k < kRows; ++k) sum[k] += Sum(in[std::size_t(k) * stride + std::size_t(c + radius)]);
+    if (c - radius - 1 >= 0)
+      for (int k = 0; k < kRows; ++k) sum[k] -= Sum(in[std::size_t(k) * stride + std::size_t(c - radius - 1)]);
+    for (int k = 0; k < kRows; ++k) out[std::size_t(k) * stride + std::size_t(c)] = sum[k];
   }
 }
 
-// row_box_sums for four rows at once: four independent chains of adds, which the core overlaps
-// (one row's chain, two dependent adds a pixel, was the filter's bottleneck).
-template <class In, class Sum>
-void row_box_sums4(const In* in, std::size_t stride, int cols, int radius, Sum* out) {
-  Sum s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-  const In *i0 = in, *i1 = in + stride, *i2 = in + 2 * stride, *i3 = in + 3 * stride;
-  Sum *o0 = out, *o1 = out + stride, *o2 = out + 2 * stride, *o3 = out + 3 * stride;
-  for (int c = 0; c <= std::min(radius, cols - 1); ++c) {
-    s0 += Sum(i0[c]), s1 += Sum(i1[c]), s2 += Sum(i2[c]), s3 += Sum(i3[c]);
-  }
-  o0[0] = s0, o1[0] = s1, o2[0] = s2, o3[0] = s3;
-  for (int c = 1; c < cols; ++c) {
-    if (c + radius < cols) {
-      const int k = c + radius;
-      s0 += Sum(i0[k]), s1 += Sum(i1[k]), s2 += Sum(i2[k]), s3 += Sum(i3[k]);
-    }
-    if (c - radius - 1 >= 0) {
-      const int k = c - radius - 1;
-      s0 -= Sum(i0[k]), s1 -= Sum(i1[k]), s2 -= Sum(i2[k]), s3 -= Sum(i3[k]);
-    }
-    o0[c] = s0, o1[c] = s1, o2[c] = s2, o3[c] = s3;
-  }
-}
-
-// row_box_sums for every row of a rows x cols image (rows `stride` apart).
-template <class In, class Sum>
-void image_row_box_sums(const In* in, int rows, int cols, int radius, Sum* out) {
+// row_box_sums for every row of a rows x cols image, four rows at a time.
+template <class In>
+void image_row_box_sums(const In* in, int rows, int cols, int radius, double* out) {
   const std::size_t stride = std::size_t(cols);
   int r = 0;
   for (; r + 4 <= rows; r += 4)
-    row_box_sums4(in + std::size_t(r) * stride, stride, cols, radius, out + std::size_t(r) * stride);
-  for (; r < rows; ++r) row_box_sums(in + std::size_t(r) * stride, cols, radius, out + std::size_t(r) * stride);
+    row_box_sums<4>(in + std::size_t(r) * stride, stride, cols, radius, out + std::size_t(r) * stride);
+  for (; r < rows; ++r) row_box_sums<1>(in + std::size_t(r) * stride, stride, cols, radius, out + std::size_t(r) * stride);
 }
 
 // column_sums += add_row - sub_row (either may be null), across a row.
@@ -71,6 +52,22 @@ void slide_columns(double* column_sums, const double* add_row, const double* sub
     for (int c = 0; c < cols; ++c) column_sums[c] += add_row[c];
   if (sub_row)
     for (int c = 0; c < cols; ++c) column_sums[c] -= sub_row[c];
+}
+
+// Slides a box of rows [r - radius, r + radius] down `row_sums` (rows x cols) and calls
+// at_row(r, column_sums) with the box's sums for each row r.
+template <class AtRow>
+void column_box_sums(const double* row_sums, int rows, int cols, int radius, double* column_sums, AtRow at_row) {
+  const std::size_t stride = std::size_t(cols);
+  std::fill(column_sums, column_sums + cols, 0.0);
+  for (int r = 0; r <= std::min(radius, rows - 1); ++r)
+    slide_columns(column_sums, row_sums + std::size_t(r) * stride, nullptr, cols);
+  for (int r = 0; r < rows; ++r) {
+    if (r > 0)
+      slide_columns(column_sums, r + radius < rows ? row_sums + std::size_t(r + radius) * stride : nullptr,
+                    r - radius - 1 >= 0 ? row_sums + std::size_t(r - radius - 1) * stride : nullptr, cols);
+    at_row(r, column_sums);
+  }
 }
 
 // out = column_sums * scale, across a row (scale is 0 at unusable pixels).
@@ -86,8 +83,6 @@ BoxHighPass::BoxHighPass(int rows, int cols, int radius_px)
       cols_(std::max(cols, 0)),
       radius_(std::clamp(radius_px, 1, std::max({rows_, cols_, 1}))),  // a larger box sees no more
       usable_(std::size_t(rows_) * std::size_t(cols_), 0),
-      row_counts_(usable_.size(), 0),
-      column_counts_(std::size_t(cols_), 0),
       inverse_count_(usable_.size(), 0.0),
       row_sums_(usable_.size(), 0.0),
       column_sums_(std::size_t(cols_), 0.0),
@@ -122,38 +117,22 @@ Status BoxHighPass::apply(const ImageView<const float>& in, const ImageView<cons
     }
   }
   if (!same_pixels) {
-    // The usable pixels in each box (exact, in integers), as the scale of the box's sums.
-    image_row_box_sums(usable_.data(), rows_, cols_, radius_, row_counts_.data());
-    std::fill(column_counts_.begin(), column_counts_.end(), 0);
-    for (int r = 0; r <= std::min(radius_, rows_ - 1); ++r)
-      for (std::size_t c = 0; c < cols; ++c) column_counts_[c] += row_counts_[std::size_t(r) * cols + c];
-    for (int r = 0; r < rows_; ++r) {
-      if (r > 0 && r + radius_ < rows_)
-        for (std::size_t c = 0; c < cols; ++c) column_counts_[c] += row_counts_[std::size_t(r + radius_) * cols + c];
-      if (r > 0 && r - radius_ - 1 >= 0)
-        for (std::size_t c = 0; c < cols; ++c) column_counts_[c] -= row_counts_[std::size_t(r - radius_ - 1) * cols + c];
+    // The usable pixels in each box (0/1 summed in double: exact), as the scale of its sums.
+    image_row_box_sums(usable_.data(), rows_, cols_, radius_, row_sums_.data());
+    column_box_sums(row_sums_.data(), rows_, cols_, radius_, column_sums_.data(), [&](int r, const double* counts) {
       for (std::size_t c = 0; c < cols; ++c) {
         const std::size_t i = std::size_t(r) * cols + c;
-        inverse_count_[i] = usable_[i] ? 1.0 / double(column_counts_[c]) : 0.0;  // count >= 1: the pixel itself
+        inverse_count_[i] = usable_[i] ? 1.0 / counts[c] : 0.0;  // count >= 1: the pixel itself
       }
-    }
+    });
     counts_ready_ = true;
   }
   // Each pass replaces low_ by the mean of the usable pixels in the box (0 at unusable ones).
   for (int pass = 0; pass < kPasses; ++pass) {
     image_row_box_sums(low_.data(), rows_, cols_, radius_, row_sums_.data());  // floats summed in double
-    std::fill(column_sums_.begin(), column_sums_.end(), 0.0);
-    for (int r = 0; r <= std::min(radius_, rows_ - 1); ++r)
-      slide_columns(column_sums_.data(), row_sums_.data() + std::size_t(r) * cols, nullptr, cols_);
-    for (int r = 0; r < rows_; ++r) {
-      if (r > 0)
-        slide_columns(column_sums_.data(),
-                      r + radius_ < rows_ ? row_sums_.data() + std::size_t(r + radius_) * cols : nullptr,
-                      r - radius_ - 1 >= 0 ? row_sums_.data() + std::size_t(r - radius_ - 1) * cols : nullptr,
-                      cols_);
-      scale_row(column_sums_.data(), inverse_count_.data() + std::size_t(r) * cols, cols_,
-                low_.data() + std::size_t(r) * cols);
-    }
+    column_box_sums(row_sums_.data(), rows_, cols_, radius_, column_sums_.data(), [&](int r, const double* sums) {
+      scale_row(sums, inverse_count_.data() + std::size_t(r) * cols, cols_, low_.data() + std::size_t(r) * cols);
+    });
   }
   for (int r = 0; r < rows_; ++r)
     for (int c = 0; c < cols_; ++c) {

@@ -72,10 +72,8 @@ class BoxHighPass {
   int rows_, cols_, radius_;
   bool counts_ready_ = false;           // usable_ and inverse_count_ hold the last call's
   std::vector<unsigned char> usable_;   // rows x cols, 1 where usable
-  std::vector<int> row_counts_;         // rows x cols: usable pixels in each row segment
-  std::vector<int> column_counts_;      // cols: usable pixels in the box, sliding down
   std::vector<double> inverse_count_;   // rows x cols: 1 / usable pixels in the box; 0 unusable
-  std::vector<double> row_sums_;        // rows x cols: sums along the rows
+  std::vector<double> row_sums_;        // rows x cols: sums along the rows (of counts, then values)
   std::vector<double> column_sums_;     // cols: box sums, sliding down
   std::vector<float> low_;              // rows x cols: the low-pass image; 0 at unusable pixels
 };
