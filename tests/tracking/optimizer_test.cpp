@@ -108,6 +108,40 @@ TEST(Optimizer, StartsNoBatchThatWouldEndPastTheTimeBudget) {
   EXPECT_EQ(r.stop, OptimizerStop::kTimeBudget);
 }
 
+// Until a search has timed a batch after its first, the budget's prior per evaluation judges
+// whether the next batch fits. With 3 ms evaluations and a 30 ms budget, the batch of 13 after the
+// start would end at about 42 ms: without a prior it starts (14 evaluations, reported at 3 ms or
+// more each); with a prior of 3 ms it does not. A prior that is not a positive number is unknown.
+TEST(Optimizer, APriorTimePerEvaluationKeepsTheSecondBatchInsideTheBudget) {
+  class Slow : public CostFunction {
+   public:
+    double cost(const Vector6d& x) override {
+      std::this_thread::sleep_for(std::chrono::milliseconds(3));
+      return bowl.cost(x);
+    }
+    Bowl bowl{Vector6d::Constant(5)};
+  } slow;
+  OptimizerSettings s;
+  s.final_step_mm = 1e-3;
+  const auto optimizer = make_optimizer("quadratic-neighbour", s).value();
+  OptimizerBudget budget;
+  budget.max_ms = 30;
+  const OptimizerResult blind = optimizer->minimize(slow, Vector6d::Zero(), budget);
+  EXPECT_EQ(blind.evaluations, 14);
+  EXPECT_GT(blind.elapsed_ms, 30);  // the overrun a prior prevents
+  EXPECT_GE(blind.ms_per_evaluation, 3.0);
+  for (const double unknown : {0.0, -3.0, std::numeric_limits<double>::quiet_NaN(),
+                               std::numeric_limits<double>::infinity()}) {
+    budget.prior_ms_per_evaluation = unknown;
+    EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), budget).evaluations, 14) << unknown;
+  }
+  budget.prior_ms_per_evaluation = 3.0;
+  const OptimizerResult warned = optimizer->minimize(slow, Vector6d::Zero(), budget);
+  EXPECT_EQ(warned.evaluations, 1);
+  EXPECT_EQ(warned.stop, OptimizerStop::kTimeBudget);
+  EXPECT_EQ(warned.ms_per_evaluation, 0.0);  // no batch after the first ran
+}
+
 TEST_P(EveryOptimizer, NonFiniteCostsNeverWin) {
   class Holey : public CostFunction {
    public:

@@ -6,7 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <thread>
 
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/tracking/light_field.hpp"
@@ -269,6 +271,48 @@ TEST(Registration, StaysInsideTheSearchRegion) {
   const Vector6d d = delta_between(phantom().nominal, result->T_room_from_ct, Vector3d::Zero()).as_vector();
   EXPECT_LE(d.head<3>().cwiseAbs().maxCoeff(), 4 + 1e-9);
   EXPECT_LT(tre_mm(result->T_room_from_ct, gold_pose()), 0.5);
+}
+
+// A renderer 2 ms slower than the light field's: each evaluation of two views takes 4 ms or more.
+class SlowRenderer final : public DrrRenderer {
+ public:
+  explicit SlowRenderer(std::shared_ptr<const DrrRenderer> inner) : inner_(std::move(inner)) {}
+  std::string_view name() const override { return "slow"; }
+
+ protected:
+  Status do_render(const Pose& T, const XrayView& view, const PixelWindow& window, ImageView<float> out,
+                   RenderExtras* extras) const override {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    return inner_->render(T, view, window, out, extras);
+  }
+
+ private:
+  std::shared_ptr<const DrrRenderer> inner_;
+};
+
+// A pass takes its time per evaluation from the earlier passes on its level. The first run of a
+// one-pass plan with a 30 ms budget has no such time: after its start it begins the batch of 12
+// neighbours and the jump (14 evaluations, 56 ms or more). The next run knows 4 ms or more an
+// evaluation, so it begins no batch that would end past 30 ms.
+TEST(Registration, APassKnowsItsLevelsTimePerEvaluationFromEarlierRuns) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  auto reg = std::move(Registration::create(std::make_shared<SlowRenderer>(light_field_renderer()), setup, nullptr))
+                 .value();
+  const Frames f = frames_at(setup, gold_pose());
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  RegistrationPlan plan;
+  plan.name = "one full-resolution pass";
+  plan.passes = {{"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
+  plan.max_ms = 30;
+  const auto first = reg->run(phantom().nominal, plan);
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(first->evaluations, 14);
+  EXPECT_GT(first->elapsed_ms, 30);
+  const auto next = reg->run(phantom().nominal, plan);
+  ASSERT_TRUE(next.ok());
+  EXPECT_LE(next->evaluations, 1);
+  EXPECT_EQ(next->stop, OptimizerStop::kTimeBudget);
+  EXPECT_TRUE(next->T_room_from_ct.matrix().allFinite());
 }
 
 TEST(Registration, RefusesMisuse) {

@@ -102,16 +102,19 @@ class MutualInformation final : public Similarity {
     binning.weight_max = int(unit);
     binning.unit = unit;
     std::fill(histograms_.begin(), histograms_.end(), std::uint64_t{0});
-    const MiHistograms histograms{histograms_.data(), histogram_stride_};
+    const MiHistograms histograms{histograms_.data()};
     if (contiguous)
       mi_accumulate(whole, binning, histograms, avx2_);
     else
       for (int r = 0; r < rows_; ++r) mi_accumulate(image_row(r), binning, histograms, avx2_);
-    // The sub-histograms summed (no half carries: every count stays below 2^32).
+    // The sub-histograms summed in place, cell k into word k (it reads words k * kMiSubHistograms
+    // and on, never below k; no half carries: every count stays below 2^32).
     std::uint64_t* joint = histograms_.data();
-    for (int s = 1; s < kMiSubHistograms; ++s) {
-      const std::uint64_t* other = histograms_.data() + std::size_t(s) * histogram_stride_;
-      for (std::size_t k = 0; k < unusable_row_; ++k) joint[k] += other[k];
+    for (std::size_t k = 0; k < unusable_row_; ++k) {
+      const std::uint64_t* copies = joint + k * kMiSubHistograms;
+      std::uint64_t sum = copies[0];
+      for (int s = 1; s < kMiSubHistograms; ++s) sum += copies[s];
+      joint[k] = sum;
     }
     // Entropies from sum(k ln k) over the non-empty cells: H = ln N - sum(k ln k) / N, N = n * unit.
     std::fill(moving_marginal_.begin(), moving_marginal_.end(), 0.0);

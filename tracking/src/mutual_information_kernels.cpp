@@ -45,7 +45,7 @@ void accumulate_scalar(const MiRow& row, const MiBinning& b, int c0, const MiHis
     const float rounded = (x - float(j)) * b.weight_unit + 0.5f;
     const int w = std::min(static_cast<int>(rounded), b.weight_max);
     const std::uint32_t cell = (ok ? row.fixed_row[c] : b.unusable_row) + std::uint32_t(j);
-    h.counts[std::size_t(c % kMiSubHistograms) * h.stride + cell] += cell_pair(std::uint32_t(ok ? w : 0), b.unit);
+    h.counts[std::size_t(cell) * kMiSubHistograms + std::size_t(c % kMiSubHistograms)] += cell_pair(std::uint32_t(ok ? w : 0), b.unit);
   }
 }
 
@@ -114,7 +114,7 @@ LFTRACK_AVX2 void accumulate_avx2(const MiRow& row, const MiBinning& b, const Mi
     // Lane k to sub-histogram k % 4, as the portable loop (c is a multiple of 8).
     static_assert(8 % kMiSubHistograms == 0);
     for (int k = 0; k < 8; ++k)
-      h.counts[std::size_t(k % kMiSubHistograms) * h.stride + cell[k]] += cell_pair(weight[k], b.unit);
+      h.counts[std::size_t(cell[k]) * kMiSubHistograms + std::size_t(k % kMiSubHistograms)] += cell_pair(weight[k], b.unit);
   }
   accumulate_scalar(row, b, c, h);
 }

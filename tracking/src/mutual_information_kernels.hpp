@@ -31,12 +31,15 @@ struct MiBinning {
 
 constexpr int kMiSubHistograms = 4;
 
-// kMiSubHistograms sub-histograms of `stride` cells each; pixel c of a row goes to sub-histogram c % 4. A
-// cell is a pair of counts in one 64-bit word: the low half gets the pixel's lower bin's share
+// kMiSubHistograms sub-histograms, interleaved: cell k of sub-histogram s is counts[k *
+// kMiSubHistograms + s], and pixel c of a row goes to sub-histogram c % kMiSubHistograms. A cell
+// is a pair of counts in one 64-bit word: the low half gets the pixel's lower bin's share
 // (unit - weight), the high half its upper bin's (weight), so that a pixel is one read-add-write.
+// Interleaved, the sub-histograms' copies of a cell share a cache line: neighbouring pixels, which
+// often fall in the same cell, write different words of one line, and the lines a score touches
+// are a quarter of those of four separate histograms (133 KB at 64 bins, beyond the L1 cache).
 struct MiHistograms {
   std::uint64_t* counts = nullptr;
-  std::size_t stride = 0;
 };
 
 // A float's bits as an integer of the same order (negative floats reversed): the moving range

@@ -31,15 +31,21 @@ class Search {
   // this a 13-evaluation batch begun just inside a 20 ms budget ran to 33 ms and over a 30 Hz
   // loop's period. The first batch (the start point) is left out of the estimate: it alone pays
   // one-time costs (the first touch of a level's images, page faults in a mapped light field), and
-  // one slow evaluation must not end a registration that has most of its budget left.
+  // one slow evaluation must not end a registration that has most of its budget left. Until a
+  // batch after the first has run, the budget's prior stands in for the estimate (the time an
+  // earlier search of the same cost measured): without it the second batch always started, and
+  // a registration's last pass overran a 30 Hz period with its first batch of 13.
   bool can_evaluate(int n) {
     if (result_.evaluations + n > budget_.max_evaluations) {
       stop_ = OptimizerStop::kEvaluationBudget;
       return false;
     }
     const double elapsed = elapsed_ms();
-    const int timed = result_.evaluations - first_batch_evaluations_;
-    const double per_evaluation_ms = timed > 0 ? (elapsed - first_batch_end_ms_) / timed : 0.0;
+    const double measured_ms = measured_ms_per_evaluation(elapsed);
+    const double prior_ms = std::isfinite(budget_.prior_ms_per_evaluation) && budget_.prior_ms_per_evaluation > 0
+                                ? budget_.prior_ms_per_evaluation
+                                : 0.0;
+    const double per_evaluation_ms = measured_ms > 0 ? measured_ms : prior_ms;
     if (elapsed >= budget_.max_ms || elapsed + n * per_evaluation_ms > budget_.max_ms) {
       stop_ = OptimizerStop::kTimeBudget;
       return false;
@@ -70,6 +76,7 @@ class Search {
     result_.x = to_x(best_y_);
     result_.cost = best_cost_;
     result_.elapsed_ms = elapsed_ms();
+    result_.ms_per_evaluation = measured_ms_per_evaluation(result_.elapsed_ms);
     result_.stop = stop_.value_or(converged_or_not);
     if (result_.evaluations > 0 && !std::isfinite(best_cost_)) result_.stop = OptimizerStop::kNonFinite;
     return std::move(result_);
@@ -81,6 +88,12 @@ class Search {
   static constexpr int kMaxBatch = 64;
 
  private:
+  // The mean wall time per evaluation of the batches after the first, up to `elapsed` (0: none).
+  double measured_ms_per_evaluation(double elapsed) const {
+    const int timed = result_.evaluations - first_batch_evaluations_;
+    return timed > 0 ? std::max(0.0, elapsed - first_batch_end_ms_) / timed : 0.0;
+  }
+
   CostFunction& cost_;
   Vector6d start_;
   OptimizerSettings settings_;

@@ -116,6 +116,25 @@ double highpass_sigma_px(const RegistrationSetup::Level& l, const XrayView& view
 
 Registration::~Registration() = default;
 
+void Registration::RecentEvaluationTimes::add(double ms) {
+  if (!std::isfinite(ms) || ms <= 0) return;
+  ms_[std::size_t(next_)] = ms;
+  next_ = (next_ + 1) % int(ms_.size());
+  count_ = std::min(count_ + 1, int(ms_.size()));
+}
+
+double Registration::RecentEvaluationTimes::median() const {
+  if (count_ == 0) return 0.0;
+  // Insertion sort of the few kept (std::sort over part of the array trips GCC 12's bounds check).
+  std::array<double, 5> sorted{};
+  for (int i = 0; i < count_; ++i) {
+    int j = i;
+    for (; j > 0 && sorted[std::size_t(j - 1)] > ms_[std::size_t(i)]; --j) sorted[std::size_t(j)] = sorted[std::size_t(j - 1)];
+    sorted[std::size_t(j)] = ms_[std::size_t(i)];
+  }
+  return sorted[std::size_t(count_ - 1) / 2];  // the lower of two middles: the smaller time
+}
+
 namespace {
 // Milliseconds of wall time since `t0`.
 double ms_since(std::chrono::steady_clock::time_point t0) {
@@ -244,6 +263,7 @@ Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
   }
   references_made_.push_back(0);
   for (auto& prepared : level_prepared_) prepared.push_back(0);
+  for (auto& times : evaluation_ms_) times.emplace_back();
   levels_.push_back(std::move(g));
   return int(index);
 }
@@ -309,6 +329,7 @@ Result<int> Registration::measure_index(const std::string& name) {
   }
   measure_names_.push_back(wanted);
   level_prepared_.emplace_back(levels_.size(), 0);
+  evaluation_ms_.emplace_back(levels_.size());
   return int(measure_names_.size() - 1);
 }
 
@@ -550,10 +571,13 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     const auto pass_t0 = std::chrono::steady_clock::now();
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
-    budget.max_ms =
-        budget_ms - ms_since(t0);
+    budget.max_ms = budget_ms - ms_since(t0);
+    RecentEvaluationTimes& times =
+        evaluation_ms_[std::size_t(prepared.measures[p])][std::size_t(prepared.levels[p])];
+    budget.prior_ms_per_evaluation = times.median();
     Cost cost(*this, current, prepared.measures[p], prepared.levels[p]);
     OptimizerResult r = prepared.optimizers[p]->minimize(cost, Vector6d::Zero(), budget);
+    if (r.ms_per_evaluation > 0) times.add(r.ms_per_evaluation);
     current = cost.pose(r.x);
     have_result_scores = prepared.levels[p] == 0 && prepared.measures[p] == 0 && std::isfinite(r.cost) &&
                          cost.best_cost() == r.cost;

@@ -27,7 +27,8 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
   } else if (name == "cmaes") {
     plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000, ""}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000, ""}};
   } else if (name == "warm") {
-    plan.passes = {{"quadratic-neighbour", 0.0, 4, 1.0, 0.25, 400, ""},
+    plan.passes = {{"quadratic-neighbour", 0.0, 8, 1.0, 0.5, 400, ""},
+                   {"quadratic-neighbour", 0.0, 4, 0.5, 0.25, 400, ""},
                    {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
   } else if (name == "robust") {
     plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},

@@ -34,6 +34,10 @@ class CostFunction {
 struct OptimizerBudget {
   int max_evaluations = 5000;
   double max_ms = 1e12;  // wall time
+  // The expected wall time of one evaluation (ms), used to judge whether a batch fits max_ms
+  // until the search has timed batches of its own (those after its first). 0 (or not finite):
+  // unknown, and the batch after the first then always starts.
+  double prior_ms_per_evaluation = 0;
 };
 
 struct OptimizerSettings {
@@ -64,6 +68,9 @@ struct OptimizerResult {
   double cost = 0;
   int evaluations = 0;
   double elapsed_ms = 0;
+  // The mean wall time per evaluation of the batches after the first (ms; 0: none ran): what a
+  // later search of the same cost may take as its OptimizerBudget::prior_ms_per_evaluation.
+  double ms_per_evaluation = 0;
   OptimizerStop stop = OptimizerStop::kConverged;
   std::vector<OptimizerTracePoint> trace;  // the best point after each iteration (if asked)
 };

@@ -10,6 +10,7 @@
 // the loop's ALIGN, has run), and candidates of a batch are evaluated in parallel on the pool.
 
 #include <Eigen/Core>
+#include <array>
 #include <memory>
 #include <optional>
 #include <string>
@@ -104,20 +105,24 @@ struct RegistrationPlan {
 //              images (a 1.5 mm blur leaves nothing for full resolution to add)
 //   cmaes      CMA-ES on the blurred, binned references (sigma 2.5 -> 0.5 mm) for range, then
 //              quadratic-neighbour on the originals 1 -> 0.1 mm
-//   warm       tracking from the last pose: quadratic-neighbour on 4 x 4 binned originals
-//              1 -> 0.25 mm, then one iteration at full resolution with 0.25 mm probes (the
-//              parabola jump lands the result; a second iteration at 0.125 mm, or a 2 x 2 binned
-//              first pass, did not lower the mean TRE on the lumbar CT: BENCHMARKS.md, "Tracking at
-//              30 Hz")
+//   warm       tracking from the last pose: quadratic-neighbour on 8 x 8 binned originals
+//              1 -> 0.5 mm, on 4 x 4 binned ones 0.5 -> 0.25 mm, then one iteration at full
+//              resolution with 0.25 mm probes (the parabola jump lands the result; a second
+//              iteration at 0.125 mm, or a 2 x 2 binned first pass, did not lower the mean TRE on
+//              the lumbar CT). The 8 x 8 pass does the travelling at a quarter of the 4 x 4 pass's
+//              cost a probe: the binned passes took 2.8 instead of 4.3 ms, at the same mean TRE
+//              (BENCHMARKS.md, "Tracking at 30 Hz")
 //   robust     quadratic's first pass (the setup's measure, for range), then NCC of frames and
 //              DRRs high-passed at 7 mm (BoxHighPass), 2 -> 0.1 mm: what varies slowly across
 //              the image (scatter, soft tissue and neighbours that moved, flat-field residue)
 //              no longer pulls the pose. On the lumbar CT's clinical frames it quarters the
 //              mean TRE; on ideal frames it costs about 0.01 mm (BENCHMARKS.md)
-//   warm-robust  warm's passes with robust's high-passed NCC, for tracking clinical frames
+//   warm-robust  tracking clinical frames: quadratic-neighbour with robust's high-passed NCC on
+//              2 x 2 binned originals (1 -> 0.25 mm), then at full resolution with probes of
+//              0.25 and 0.125 mm
 //   pyramid    the cold set-up at a third of quadratic's time: quadratic-neighbour on 4 x 4 binned
 //              references blurred 1.5 mm (5 -> 0.5 mm), on 4 x 4 binned originals (1 -> 0.25 mm),
-//              then warm's single full-resolution iteration (0.25 mm)
+//              then a single full-resolution iteration (0.25 mm), as warm's last pass
 std::vector<std::string> registration_plan_names();
 Result<RegistrationPlan> registration_plan(const std::string& name);
 
@@ -240,6 +245,20 @@ class Registration {
   std::vector<std::string> measure_names_;
   std::vector<std::vector<char>> level_prepared_;  // [measure][level]
   std::vector<char> references_made_;              // [level]
+  // The wall times per evaluation (ms) that the last five passes on one measure and level
+  // measured (OptimizerResult::ms_per_evaluation). Their median is the next such pass's prior
+  // (OptimizerBudget::prior_ms_per_evaluation), so a pass does not start a batch that would run
+  // past the budget before it has timed one of its own, and one slow pass does not cut short the
+  // next registration. Kept across frames: the time depends on the level, not on the images.
+  class RecentEvaluationTimes {
+   public:
+    void add(double ms);
+    double median() const;  // 0 before the first
+   private:
+    std::array<double, 5> ms_{};
+    int count_ = 0, next_ = 0;
+  };
+  std::vector<std::vector<RecentEvaluationTimes>> evaluation_ms_;  // [measure][level]
   Status prepare_level(int measure, int level);
   // The setup's measure options for a level's view (fewer histogram bins for few pixels).
   SimilarityOptions level_similarity_options(const LevelGeometry& level, std::size_t view) const;
