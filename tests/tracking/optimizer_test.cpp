@@ -84,6 +84,16 @@ TEST_P(EveryOptimizer, KeepsToItsBudgets) {
   EXPECT_EQ(t.stop, OptimizerStop::kTimeBudget);
 }
 
+// A bowl whose every evaluation takes at least 3 ms (a sleep: a slower machine only adds to it).
+class SlowBowl : public CostFunction {
+ public:
+  double cost(const Vector6d& x) override {
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+    return bowl.cost(x);
+  }
+  Bowl bowl{Vector6d::Constant(5)};
+};
+
 // A batch that would end past the time budget is not started. Each evaluation takes at least
 // 3 ms and the budget is 60 ms. quadratic-neighbour evaluates its start (3 ms), then its first
 // batch of 12 neighbours and a jump (about 42 ms in all); the next batch of 13, at the 3 ms an
@@ -91,14 +101,7 @@ TEST_P(EveryOptimizer, KeepsToItsBudgets) {
 // to 27 before: 42 ms is inside the budget.) A slower machine only makes the estimate larger,
 // and a first batch that ran past the budget stops it at 14 too.
 TEST(Optimizer, StartsNoBatchThatWouldEndPastTheTimeBudget) {
-  class Slow : public CostFunction {
-   public:
-    double cost(const Vector6d& x) override {
-      std::this_thread::sleep_for(std::chrono::milliseconds(3));
-      return bowl.cost(x);
-    }
-    Bowl bowl{Vector6d::Constant(5)};
-  } slow;
+  SlowBowl slow;
   OptimizerBudget budget;
   budget.max_ms = 60;
   OptimizerSettings s;
@@ -113,14 +116,7 @@ TEST(Optimizer, StartsNoBatchThatWouldEndPastTheTimeBudget) {
 // start would end at about 42 ms: without a prior it starts (14 evaluations, reported at 3 ms or
 // more each); with a prior of 3 ms it does not. A prior that is not a positive number is unknown.
 TEST(Optimizer, APriorTimePerEvaluationKeepsTheSecondBatchInsideTheBudget) {
-  class Slow : public CostFunction {
-   public:
-    double cost(const Vector6d& x) override {
-      std::this_thread::sleep_for(std::chrono::milliseconds(3));
-      return bowl.cost(x);
-    }
-    Bowl bowl{Vector6d::Constant(5)};
-  } slow;
+  SlowBowl slow;
   OptimizerSettings s;
   s.final_step_mm = 1e-3;
   const auto optimizer = make_optimizer("quadratic-neighbour", s).value();
@@ -140,6 +136,13 @@ TEST(Optimizer, APriorTimePerEvaluationKeepsTheSecondBatchInsideTheBudget) {
   EXPECT_EQ(warned.evaluations, 1);
   EXPECT_EQ(warned.stop, OptimizerStop::kTimeBudget);
   EXPECT_EQ(warned.ms_per_evaluation, 0.0);  // no batch after the first ran
+  // A stale prior from a slower spell (100 ms) is capped by the first batch's 3 ms: with 60 ms the
+  // batch of 13 fits (about 42 ms) and runs, so the search measures its time again.
+  budget.max_ms = 60;
+  budget.prior_ms_per_evaluation = 100.0;
+  const OptimizerResult recovered = optimizer->minimize(slow, Vector6d::Zero(), budget);
+  EXPECT_EQ(recovered.evaluations, 14);
+  EXPECT_GE(recovered.ms_per_evaluation, 3.0);
 }
 
 TEST_P(EveryOptimizer, NonFiniteCostsNeverWin) {

@@ -31,21 +31,22 @@ class Search {
   // this a 13-evaluation batch begun just inside a 20 ms budget ran to 33 ms and over a 30 Hz
   // loop's period. The first batch (the start point) is left out of the estimate: it alone pays
   // one-time costs (the first touch of a level's images, page faults in a mapped light field), and
-  // one slow evaluation must not end a registration that has most of its budget left. Until a
-  // batch after the first has run, the budget's prior stands in for the estimate (the time an
-  // earlier search of the same cost measured): without it the second batch always started, and
-  // a registration's last pass overran a 30 Hz period with its first batch of 13.
+  // one slow evaluation must not end a registration that has most of its budget left. Between
+  // the first batch and the next, the budget's prior stands in for the estimate (the time an
+  // earlier search of the same cost measured; without it the second batch always started, and
+  // a registration's last pass overran a 30 Hz period with its batch of 13), capped by the first
+  // batch's own time: a prior from a slower spell must not refuse every later batch, since only
+  // a search that runs one can measure the time again.
   bool can_evaluate(int n) {
     if (result_.evaluations + n > budget_.max_evaluations) {
       stop_ = OptimizerStop::kEvaluationBudget;
       return false;
     }
     const double elapsed = elapsed_ms();
-    const double measured_ms = measured_ms_per_evaluation(elapsed);
-    const double prior_ms = std::isfinite(budget_.prior_ms_per_evaluation) && budget_.prior_ms_per_evaluation > 0
-                                ? budget_.prior_ms_per_evaluation
-                                : 0.0;
-    const double per_evaluation_ms = measured_ms > 0 ? measured_ms : prior_ms;
+    double per_evaluation_ms = measured_ms_per_evaluation(elapsed);
+    const double prior_ms = budget_.prior_ms_per_evaluation;
+    if (per_evaluation_ms == 0 && first_batch_evaluations_ > 0 && std::isfinite(prior_ms) && prior_ms > 0)
+      per_evaluation_ms = std::min(prior_ms, first_batch_end_ms_ / first_batch_evaluations_);
     if (elapsed >= budget_.max_ms || elapsed + n * per_evaluation_ms > budget_.max_ms) {
       stop_ = OptimizerStop::kTimeBudget;
       return false;

@@ -34,9 +34,9 @@ class CostFunction {
 struct OptimizerBudget {
   int max_evaluations = 5000;
   double max_ms = 1e12;  // wall time
-  // The expected wall time of one evaluation (ms), used to judge whether a batch fits max_ms
-  // until the search has timed batches of its own (those after its first). 0 (or not finite):
-  // unknown, and the batch after the first then always starts.
+  // The expected wall time of one evaluation (ms), used to judge whether the batch after the
+  // first fits max_ms (later ones go by the search's own times), at most the first batch's time
+  // per evaluation. 0 (or negative, or not finite): unknown, and that batch always starts.
   double prior_ms_per_evaluation = 0;
 };
 
