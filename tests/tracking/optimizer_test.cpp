@@ -136,13 +136,24 @@ TEST(Optimizer, APriorTimePerEvaluationKeepsTheSecondBatchInsideTheBudget) {
   EXPECT_EQ(warned.evaluations, 1);
   EXPECT_EQ(warned.stop, OptimizerStop::kTimeBudget);
   EXPECT_EQ(warned.ms_per_evaluation, 0.0);  // no batch after the first ran
-  // A stale prior from a slower spell (100 ms) is capped by the first batch's 3 ms: with 60 ms the
-  // batch of 13 fits (about 42 ms) and runs, so the search measures its time again.
-  budget.max_ms = 60;
+  EXPECT_GE(warned.first_batch_ms_per_evaluation, 3.0);
+  // A stale prior from a slower spell (100 ms) gives way to the first batch's 3 ms (times the
+  // ratio, unknown here: 1; 7 or NaN: 1 too): with 80 ms the batch of 13 fits (about 42 ms) and
+  // runs, so the search measures its time again (the next batch, at about 81 ms, does not fit).
+  budget.max_ms = 80;
   budget.prior_ms_per_evaluation = 100.0;
-  const OptimizerResult recovered = optimizer->minimize(slow, Vector6d::Zero(), budget);
-  EXPECT_EQ(recovered.evaluations, 14);
-  EXPECT_GE(recovered.ms_per_evaluation, 3.0);
+  for (const double ratio : {0.0, 7.0, std::numeric_limits<double>::quiet_NaN()}) {
+    budget.prior_later_to_first_batch = ratio;
+    const OptimizerResult recovered = optimizer->minimize(slow, Vector6d::Zero(), budget);
+    EXPECT_EQ(recovered.evaluations, 14) << ratio;
+    EXPECT_GE(recovered.ms_per_evaluation, 3.0) << ratio;
+  }
+  // A ratio below 1 shrinks the estimate: 3 ms x 0.25 says the batch ends at about 13 ms, inside
+  // a 30 ms budget, so it starts (and, at its real 3 ms an evaluation, runs past it).
+  budget.max_ms = 30;
+  budget.prior_ms_per_evaluation = 3.0;
+  budget.prior_later_to_first_batch = 0.25;
+  EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), budget).evaluations, 14);
 }
 
 TEST_P(EveryOptimizer, NonFiniteCostsNeverWin) {

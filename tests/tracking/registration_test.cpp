@@ -324,6 +324,56 @@ TEST(Registration, APassKnowsItsLevelsTimePerEvaluationFromEarlierRuns) {
   EXPECT_GE(fast->evaluations, 14);  // the batch after the start ran (the pass may travel on)
 }
 
+// On a pool of eight the first batch (one candidate: two renders, on two threads) takes about
+// three times a batch of 13's time per evaluation (26 renders on eight threads), so the first
+// batch's time alone does not show that a prior from a slower spell is stale: its ratio to the
+// later batches' time does. Renders of 12 ms teach about 3.7 ms an evaluation, at about 0.31 of
+// the first batch's 12. At 6 ms a render a 40 ms budget fits the start and the batch (about
+// 30 ms): the first batch's 6 ms times 0.31 says so, where the stale 3.7 ms alone said 6 + 13 x
+// 3.7 = 54 ms and refused the batch in every later run (nothing else measures the time again).
+TEST(Registration, APriorFromASlowerSpellGivesWayWhenTheFirstBatchRunsFaster) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  const auto renderer = std::make_shared<SlowRenderer>(light_field_renderer());
+  ThreadPool pool(8);
+  auto reg = std::move(Registration::create(renderer, setup, &pool)).value();
+  const Frames f = frames_at(setup, gold_pose());
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  RegistrationPlan plan;
+  plan.name = "one batch at full resolution";
+  plan.passes = {{"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 14, ""}};  // the start and one batch of 13
+  renderer->delay_ms = 12;
+  for (int i = 0; i < 3; ++i) {
+    const auto learning = reg->run(phantom().nominal, plan);
+    ASSERT_TRUE(learning.ok());
+    ASSERT_EQ(learning->evaluations, 14);
+  }
+  renderer->delay_ms = 6;
+  plan.max_ms = 40;
+  const auto faster = reg->run(phantom().nominal, plan);
+  ASSERT_TRUE(faster.ok());
+  EXPECT_EQ(faster->evaluations, 14);
+}
+
+// A plan's pass binned past what a small window allows runs at the coarsest binning it does
+// allow: warm's 8 x 8 pass would leave a 24 x 28 window 3 x 3 pixels, so it runs at 4 x 4 (6 x 7)
+// and the plan registers as on a larger window.
+TEST(Registration, APassBinnedPastASmallWindowRunsAtTheCoarsestBinningItAllows) {
+  RegistrationSetup setup = two_view_setup("mi");
+  for (RegistrationView& v : setup.views) v.window = {28, 34, 24, 28};
+  auto reg = std::move(Registration::create(light_field_renderer(), setup, nullptr)).value();
+  PoseDelta d;
+  d.translation_mm = {0.6, -0.4, 0.3};
+  d.rotation_rad = {deg_to_rad(0.3), 0, deg_to_rad(-0.2)};
+  const Pose gold = apply_delta(phantom().nominal, d, Vector3d::Zero());
+  const Frames f = frames_at(setup, gold);
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  const auto result = reg->run(phantom().nominal, *registration_plan("warm"));
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  ASSERT_EQ(result->passes.size(), 3u);
+  EXPECT_TRUE(result->T_room_from_ct.matrix().allFinite());
+  EXPECT_LT(tre_mm(result->T_room_from_ct, gold), tre_mm(phantom().nominal, gold));
+}
+
 TEST(Registration, RefusesMisuse) {
   const RegistrationSetup setup = two_view_setup("mi");
   std::shared_ptr<const DrrRenderer> renderer = light_field_renderer();

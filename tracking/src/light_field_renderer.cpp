@@ -10,7 +10,7 @@
 // and other CPUs. (GCC 12 does not vectorise the scalar loop itself: it sinks the blend into a branch on the
 // field test.)
 //
-// Coarse pixels (a registration's 4 x 4 binned levels) read a copy of the field averaged over 2 x 2
+// Coarse pixels (a registration's 4 x 4 and 8 x 8 binned levels) read a copy of the field averaged over 2 x 2
 // or 4 x 4 (s, t) samples (LightField::downsampled_st, light_field_mip.cpp), chosen by the pixel's
 // footprint at the window's centre at the nominal pose: the pixel then averages rays over about
 // its footprint (a box of the copy's spacing, interpolated), as a binned detector pixel averages,

@@ -32,11 +32,12 @@ class Search {
   // loop's period. The first batch (the start point) is left out of the estimate: it alone pays
   // one-time costs (the first touch of a level's images, page faults in a mapped light field), and
   // one slow evaluation must not end a registration that has most of its budget left. Between
-  // the first batch and the next, the budget's prior stands in for the estimate (the time an
-  // earlier search of the same cost measured; without it the second batch always started, and
-  // a registration's last pass overran a 30 Hz period with its batch of 13), capped by the first
-  // batch's own time: a prior from a slower spell must not refuse every later batch, since only
-  // a search that runs one can measure the time again.
+  // the first batch and the next, the budget's priors stand in for the estimate (what earlier
+  // searches of the same cost measured; without them the second batch always started, and a
+  // registration's last pass overran a 30 Hz period with its batch of 13): the smaller of their
+  // time per evaluation and this search's first batch's time scaled by their ratio of a later
+  // batch's time to the first's, so that a prior time from a slower spell cannot refuse every
+  // later batch (only a search that runs one measures the time again).
   bool can_evaluate(int n) {
     if (result_.evaluations + n > budget_.max_evaluations) {
       stop_ = OptimizerStop::kEvaluationBudget;
@@ -44,9 +45,13 @@ class Search {
     }
     const double elapsed = elapsed_ms();
     double per_evaluation_ms = measured_ms_per_evaluation(elapsed);
-    const double prior_ms = budget_.prior_ms_per_evaluation;
-    if (per_evaluation_ms == 0 && first_batch_evaluations_ > 0 && std::isfinite(prior_ms) && prior_ms > 0)
-      per_evaluation_ms = std::min(prior_ms, first_batch_end_ms_ / first_batch_evaluations_);
+    const auto known = [](double v) { return std::isfinite(v) && v > 0; };
+    const bool timed = result_.evaluations > first_batch_evaluations_;
+    if (!timed && first_batch_evaluations_ > 0 && known(budget_.prior_ms_per_evaluation)) {
+      const double ratio =
+          known(budget_.prior_later_to_first_batch) ? std::min(1.0, budget_.prior_later_to_first_batch) : 1.0;
+      per_evaluation_ms = std::min(budget_.prior_ms_per_evaluation, first_batch_ms_per_evaluation() * ratio);
+    }
     if (elapsed >= budget_.max_ms || elapsed + n * per_evaluation_ms > budget_.max_ms) {
       stop_ = OptimizerStop::kTimeBudget;
       return false;
@@ -77,6 +82,7 @@ class Search {
     result_.x = to_x(best_y_);
     result_.cost = best_cost_;
     result_.elapsed_ms = elapsed_ms();
+    result_.first_batch_ms_per_evaluation = first_batch_ms_per_evaluation();
     result_.ms_per_evaluation = measured_ms_per_evaluation(result_.elapsed_ms);
     result_.stop = stop_.value_or(converged_or_not);
     if (result_.evaluations > 0 && !std::isfinite(best_cost_)) result_.stop = OptimizerStop::kNonFinite;
@@ -89,6 +95,9 @@ class Search {
   static constexpr int kMaxBatch = 64;
 
  private:
+  double first_batch_ms_per_evaluation() const {
+    return first_batch_evaluations_ > 0 ? first_batch_end_ms_ / first_batch_evaluations_ : 0.0;
+  }
   // The mean wall time per evaluation of the batches after the first, up to `elapsed` (0: none).
   double measured_ms_per_evaluation(double elapsed) const {
     const int timed = result_.evaluations - first_batch_evaluations_;

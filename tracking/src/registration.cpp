@@ -116,23 +116,24 @@ double highpass_sigma_px(const RegistrationSetup::Level& l, const XrayView& view
 
 Registration::~Registration() = default;
 
-void Registration::RecentEvaluationTimes::add(double ms) {
-  if (!std::isfinite(ms) || ms <= 0) return;
-  ms_[std::size_t(next_)] = ms;
-  next_ = (next_ + 1) % int(ms_.size());
-  count_ = std::min(count_ + 1, int(ms_.size()));
+void Registration::RecentMedian::add(double value) {
+  if (!std::isfinite(value) || value <= 0) return;
+  values_[std::size_t(next_)] = value;
+  next_ = (next_ + 1) % int(values_.size());
+  count_ = std::min(count_ + 1, int(values_.size()));
 }
 
-double Registration::RecentEvaluationTimes::median() const {
+double Registration::RecentMedian::median() const {
   if (count_ == 0) return 0.0;
   // Insertion sort of the few kept (std::sort over part of the array trips GCC 12's bounds check).
   std::array<double, 5> sorted{};
   for (int i = 0; i < count_; ++i) {
     int j = i;
-    for (; j > 0 && sorted[std::size_t(j - 1)] > ms_[std::size_t(i)]; --j) sorted[std::size_t(j)] = sorted[std::size_t(j - 1)];
-    sorted[std::size_t(j)] = ms_[std::size_t(i)];
+    for (; j > 0 && sorted[std::size_t(j - 1)] > values_[std::size_t(i)]; --j)
+      sorted[std::size_t(j)] = sorted[std::size_t(j - 1)];
+    sorted[std::size_t(j)] = values_[std::size_t(i)];
   }
-  return sorted[std::size_t(count_ - 1) / 2];  // the lower of two middles: the smaller time
+  return sorted[std::size_t(count_ - 1) / 2];  // the lower of two middles
 }
 
 namespace {
@@ -263,7 +264,7 @@ Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
   }
   references_made_.push_back(0);
   for (auto& prepared : level_prepared_) prepared.push_back(0);
-  for (auto& times : evaluation_ms_) times.emplace_back();
+  for (auto& times : pass_times_) times.emplace_back();
   levels_.push_back(std::move(g));
   return int(index);
 }
@@ -329,7 +330,7 @@ Result<int> Registration::measure_index(const std::string& name) {
   }
   measure_names_.push_back(wanted);
   level_prepared_.emplace_back(levels_.size(), 0);
-  evaluation_ms_.emplace_back(levels_.size());
+  pass_times_.emplace_back(levels_.size());
   return int(measure_names_.size() - 1);
 }
 
@@ -496,7 +497,17 @@ Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bo
   prepared.plan = plan;
   prepared.record_trace = record_trace;
   for (const RegistrationPass& pass : plan.passes) {
-    auto level = level_for({pass.blur_sigma_mm, pass.bin, pass.highpass_sigma_mm});
+    // A pass binned past what the windows allow (fewer than 4 x 4 pixels) runs at the coarsest
+    // binning they do allow, so a plan made for larger windows (warm's 8 x 8 pass) still runs on
+    // a small one. Binnings outside 1..16 stay as given, for level_for to refuse.
+    int bin = pass.bin;
+    const auto windows_allow = [&](int b) {
+      for (const RegistrationView& v : setup_.views)
+        if (v.window.rows / b < 4 || v.window.cols / b < 4) return false;
+      return true;
+    };
+    while (bin > 1 && bin <= 16 && !windows_allow(bin)) bin /= 2;
+    auto level = level_for({pass.blur_sigma_mm, bin, pass.highpass_sigma_mm});
     if (!level.ok()) return level.status();
     OptimizerSettings settings;
     settings.scale = scales_;
@@ -572,12 +583,15 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
     budget.max_ms = budget_ms - ms_since(t0);
-    RecentEvaluationTimes& times =
-        evaluation_ms_[std::size_t(prepared.measures[p])][std::size_t(prepared.levels[p])];
-    budget.prior_ms_per_evaluation = times.median();
+    PassTimes& times = pass_times_[std::size_t(prepared.measures[p])][std::size_t(prepared.levels[p])];
+    budget.prior_ms_per_evaluation = times.ms_per_evaluation.median();
+    budget.prior_later_to_first_batch = times.later_to_first_batch.median();
     Cost cost(*this, current, prepared.measures[p], prepared.levels[p]);
     OptimizerResult r = prepared.optimizers[p]->minimize(cost, Vector6d::Zero(), budget);
-    if (r.ms_per_evaluation > 0) times.add(r.ms_per_evaluation);
+    if (r.ms_per_evaluation > 0 && r.first_batch_ms_per_evaluation > 0) {
+      times.ms_per_evaluation.add(r.ms_per_evaluation);
+      times.later_to_first_batch.add(r.ms_per_evaluation / r.first_batch_ms_per_evaluation);
+    }
     current = cost.pose(r.x);
     have_result_scores = prepared.levels[p] == 0 && prepared.measures[p] == 0 && std::isfinite(r.cost) &&
                          cost.best_cost() == r.cost;

@@ -34,10 +34,16 @@ class CostFunction {
 struct OptimizerBudget {
   int max_evaluations = 5000;
   double max_ms = 1e12;  // wall time
-  // The expected wall time of one evaluation (ms), used to judge whether the batch after the
-  // first fits max_ms (later ones go by the search's own times), at most the first batch's time
-  // per evaluation. 0 (or negative, or not finite): unknown, and that batch always starts.
+  // What earlier searches of the same cost measured (OptimizerResult's times), to judge whether
+  // the batch after the first fits max_ms before this search has timed one of its own (later
+  // batches go by its own times). That batch's time per evaluation is taken as the smaller of
+  // prior_ms_per_evaluation and this search's first batch's time per evaluation times
+  // prior_later_to_first_batch (at most 1: a later batch is spread over as many threads or more),
+  // so a prior from a slower spell gives way as soon as a first batch runs faster. A value that is
+  // not a positive finite number is unknown: an unknown ratio counts as 1, and with no prior time
+  // the batch always starts.
   double prior_ms_per_evaluation = 0;
+  double prior_later_to_first_batch = 0;
 };
 
 struct OptimizerSettings {
@@ -68,8 +74,9 @@ struct OptimizerResult {
   double cost = 0;
   int evaluations = 0;
   double elapsed_ms = 0;
-  // The mean wall time per evaluation of the batches after the first (ms; 0: none ran): what a
-  // later search of the same cost may take as its OptimizerBudget::prior_ms_per_evaluation.
+  // The mean wall time per evaluation of the first batch and of the batches after it (ms; 0: none
+  // ran): what a later search of the same cost may take as its OptimizerBudget's priors.
+  double first_batch_ms_per_evaluation = 0;
   double ms_per_evaluation = 0;
   OptimizerStop stop = OptimizerStop::kConverged;
   std::vector<OptimizerTracePoint> trace;  // the best point after each iteration (if asked)

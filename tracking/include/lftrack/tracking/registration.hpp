@@ -245,20 +245,28 @@ class Registration {
   std::vector<std::string> measure_names_;
   std::vector<std::vector<char>> level_prepared_;  // [measure][level]
   std::vector<char> references_made_;              // [level]
-  // The wall times per evaluation (ms) that the last five passes on one measure and level
-  // measured (OptimizerResult::ms_per_evaluation). Their median is the next such pass's prior
-  // (OptimizerBudget::prior_ms_per_evaluation), so a pass does not start a batch that would run
-  // past the budget before it has timed one of its own, and one slow pass does not cut short the
-  // next registration. Kept across frames: the time depends on the level, not on the images.
-  class RecentEvaluationTimes {
+  // The last five positive finite values added, and their median (the lower of two middles; 0
+  // before the first).
+  class RecentMedian {
    public:
-    void add(double ms);
-    double median() const;  // 0 before the first
+    void add(double value);
+    double median() const;
+
    private:
-    std::array<double, 5> ms_{};
+    std::array<double, 5> values_{};
     int count_ = 0, next_ = 0;
   };
-  std::vector<std::vector<RecentEvaluationTimes>> evaluation_ms_;  // [measure][level]
+  // Per measure and level, what its last five passes that timed a batch after their first measured
+  // (OptimizerResult): the time per evaluation of those batches (ms), and its ratio to their first
+  // batch's. Their medians are the next such pass's priors (OptimizerBudget), so a pass does not
+  // start a batch that would run past the budget before it has timed one of its own, one slow pass
+  // does not cut short the next registration, and a time from a slower spell gives way as soon as
+  // a pass's first batch runs faster. Kept across frames: the times depend on the level, not on
+  // the images.
+  struct PassTimes {
+    RecentMedian ms_per_evaluation, later_to_first_batch;
+  };
+  std::vector<std::vector<PassTimes>> pass_times_;  // [measure][level]
   Status prepare_level(int measure, int level);
   // The setup's measure options for a level's view (fewer histogram bins for few pixels).
   SimilarityOptions level_similarity_options(const LevelGeometry& level, std::size_t view) const;
