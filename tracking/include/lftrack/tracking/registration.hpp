@@ -207,6 +207,8 @@ class Registration {
   struct ReferenceLevel;
   Registration() = default;
   int level_index(double blur_sigma_mm, int bin, double highpass_sigma_mm) const;
+  // The first view whose window binned by `bin` has fewer than 4 x 4 pixels (null: none).
+  const RegistrationView* view_too_small_for(int bin) const;
   bool inside_search_region(const Pose& T) const;
   // Cost of T at `level` under measure `measure` (0: the setup's).
   double evaluate(int slot, int measure, int level, const Pose& T, std::vector<double>* view_scores);
