@@ -37,6 +37,10 @@ Command add_bench_drr_command(CLI::App* parent) {
   app->add_option("--lf-dir", o->bench.light_field_dir,
                   "Load the float light fields from this folder (`lftrack precompute`) instead of building "
                   "them; the precompute is then not timed");
+  app->add_flag("--both-integrations", o->bench.both_integrations,
+                "Also build the float fields the other way (slices or the exact Siddon walk) beside the "
+                "scene's: both precomputes timed, both fields' DRRs against Siddon (the walk takes minutes "
+                "on a real CT)");
   app->add_option("--vq-codebooks", o->bench.vq_codebooks, "VQ codebook sizes to time (comma-separated)")
       ->delimiter(',');
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
@@ -56,10 +60,13 @@ Command add_bench_drr_command(CLI::App* parent) {
     std::printf("CT %s, %d x %d DRRs, %d poses x %zu views, renders on %d thread(s)\n", report->ct.c_str(),
                 report->rows, report->cols, report->poses, report->views.size(), report->render_threads);
     if (report->precompute_s > 0) {
-      std::printf("light fields %d x %d x %d x %d, all views precomputed in %.1f s on %d threads\n",
+      std::printf("light fields %d x %d x %d x %d, all views precomputed in %.1f s (%s) on %d threads",
                   report->light_field_resolution[0], report->light_field_resolution[1],
                   report->light_field_resolution[2], report->light_field_resolution[3], report->precompute_s,
-                  report->threads);
+                  report->integration.c_str(), report->threads);
+      if (report->other_precompute_s > 0)
+        std::printf("; by %s in %.1f s", report->other_integration.c_str(), report->other_precompute_s);
+      std::printf("\n");
     }
     std::printf("%-24s %10s %10s %13s %10s %9s %10s %8s %13s\n", "renderer", "ms median", "x Siddon",
                 "NCC vs Siddon", "NCC min", "PSNR dB", "MB", "masked", "x plastimatch");

@@ -28,10 +28,14 @@ Status run(const PrecomputeOptions& o) {
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
   const auto& spec = p.scene.light_field;
-  spdlog::info("light fields {} x {} x {} x {}, {} storage{}, {} threads", spec.resolution[0],
+  spdlog::info("light fields {} x {} x {} x {}, {} storage{}, integrated by {}{}, {} threads", spec.resolution[0],
                spec.resolution[1], spec.resolution[2], spec.resolution[3], tracking::to_string(spec.storage),
                spec.storage == tracking::LightFieldStorage::kVq
                    ? " (" + std::to_string(spec.vq_codebook_size) + " codewords)"
+                   : "",
+               tracking::to_string(spec.integration),
+               spec.integration == tracking::LightFieldIntegration::kSlices
+                   ? fmt::format(" of {:.2f} mm", tracking::light_field_slice_step_mm(*p.mu, spec.slice_step_mm))
                    : "",
                pool.size());
   auto fields = build_light_fields(p, spec, &pool);

@@ -168,6 +168,7 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
     if (!built.ok()) return built.status();
     const auto& float_fields = *built;
     report.precompute_s = o.light_field_dir.empty() ? std::chrono::duration<double>(Clock::now() - t0).count() : 0.0;
+    report.integration = tracking::to_string(spec.integration);
     report.light_field_resolution = spec.resolution;
     std::vector<tracking::LightFieldSpec> modes;
     for (auto storage : {tracking::LightFieldStorage::kFloat32, tracking::LightFieldStorage::kFixed16}) {
@@ -199,6 +200,33 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
       LFTRACK_RETURN_IF_ERROR(measure(**renderer, poses, views, o.size, o.repeats, &reference, &fig));
       fig.speedup_vs_siddon = siddon_ms / fig.ms_median;
       fig.precompute_s = report.precompute_s + convert_s;
+      log_figures(fig);
+      report.renderers.push_back(fig);
+      beside_peer.emplace_back(report.renderers.size() - 1, std::move(*renderer));
+    }
+    if (o.both_integrations) {
+      if (!o.light_field_dir.empty())
+        return invalid_argument("bench drr: the second integration is compared with fields built in the run, not loaded");
+      tracking::LightFieldSpec other = scene.scene.light_field;
+      other.storage = tracking::LightFieldStorage::kFloat32;
+      other.integration = other.integration == tracking::LightFieldIntegration::kSiddon
+                              ? tracking::LightFieldIntegration::kSlices
+                              : tracking::LightFieldIntegration::kSiddon;
+      report.other_integration = tracking::to_string(other.integration);
+      const auto w0 = Clock::now();
+      auto other_fields = build_light_fields(scene, other, pool);
+      if (!other_fields.ok()) return other_fields.status();
+      report.other_precompute_s = std::chrono::duration<double>(Clock::now() - w0).count();
+      tracking::RendererOptions lf = ropts;
+      lf.light_fields = *other_fields;
+      lf.light_field_mips = false;
+      auto renderer = make_renderer("lightfield", nullptr, lf);
+      if (!renderer.ok()) return renderer.status();
+      RendererFigures fig;
+      LFTRACK_RETURN_IF_ERROR(measure(**renderer, poses, views, o.size, o.repeats, &reference, &fig));
+      fig.name += "-" + report.other_integration;
+      fig.speedup_vs_siddon = siddon_ms / fig.ms_median;
+      fig.precompute_s = report.other_precompute_s;
       log_figures(fig);
       report.renderers.push_back(fig);
       beside_peer.emplace_back(report.renderers.size() - 1, std::move(*renderer));
@@ -278,7 +306,13 @@ nlohmann::json to_json(const DrrBenchReport& r) {
   j["threads"] = r.threads;
   j["render_threads"] = r.render_threads;
   if (r.precompute_s > 0) {
-    j["light_field"] = {{"resolution", r.light_field_resolution}, {"precompute_s_all_views", r.precompute_s}};
+    j["light_field"] = {{"resolution", r.light_field_resolution},
+                        {"precompute_s_all_views", r.precompute_s},
+                        {"integration", r.integration}};
+    if (r.other_precompute_s > 0) {
+      j["light_field"]["other_integration"] = r.other_integration;
+      j["light_field"]["other_precompute_s_all_views"] = r.other_precompute_s;
+    }
   }
   j["poses"] = r.poses;
   j["views"] = r.views;

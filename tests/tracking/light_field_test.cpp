@@ -17,6 +17,7 @@
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
 #include "lftrack/tracking/random_draws.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::tracking {
@@ -95,8 +96,101 @@ TEST(LightFieldPlan, ExtentsCoverEveryEnvelopePoseAndGrowWithTheEnvelope) {
   EXPECT_GT(g2->hi[0] - g2->lo[0], 1.5 * (g->hi[0] - g->lo[0]));
 }
 
+// A field over the fixture integrated as asked (the fixture's own fields take the default, the walk).
+std::shared_ptr<const LightField> fixture_field_by(LightFieldIntegration integration, double step_mm = 0,
+                                                   ThreadPool* pool = nullptr) {
+  LightFieldSpec spec;
+  spec.resolution = {12, 12, 64, 64};
+  spec.integration = integration;
+  spec.slice_step_mm = step_mm;
+  auto field = LightField::build(*test::fixture_volume(), fixture_plan(), spec, pool);
+  return field.ok() ? *field : nullptr;
+}
+
+// How far a field's samples are from the exact walk's, relative to the walk's largest sample:
+// the largest difference, the root mean square one, and the largest over the rays of the
+// nominal source sample (u, v) = (0, 0).
+struct FieldDifference {
+  double max = 0, rms = 0, max_at_the_nominal_source = 0;
+};
+FieldDifference difference(const LightField& field, const LightField& walked) {
+  const auto& n = walked.geometry().size;
+  const LightFieldGeometry& g = walked.geometry();
+  const int u0 = int(std::lround(-g.lo[0] / g.spacing(0))), v0 = int(std::lround(-g.lo[1] / g.spacing(1)));
+  double peak = 0, sum = 0;
+  FieldDifference d;
+  std::int64_t count = 0;
+  for (int iu = 0; iu < n[0]; ++iu)
+    for (int iv = 0; iv < n[1]; ++iv)
+      for (int is = 0; is < n[2]; ++is)
+        for (int it = 0; it < n[3]; ++it) {
+          const double w = walked.sample(iu, iv, is, it), e = std::abs(field.sample(iu, iv, is, it) - w);
+          peak = std::max(peak, w);
+          d.max = std::max(d.max, e);
+          if (iu == u0 && iv == v0) d.max_at_the_nominal_source = std::max(d.max_at_the_nominal_source, e);
+          sum += e * e;
+          ++count;
+        }
+  d.max /= peak;
+  d.max_at_the_nominal_source /= peak;
+  d.rms = std::sqrt(sum / double(count)) / peak;
+  return d;
+}
+
+// The integration by slices of the voxels' box model against the exact walk: the
+// samples differ by its quadrature and its linear shifts between resampled samples, a fraction
+// of a percent of the largest sample; least where the rays read the slices unshifted (the
+// nominal source). A finer depth step comes closer.
+TEST(LightFieldBuild, SlicesStayCloseToTheExactWalk) {
+  const auto walked = fixture_field_by(LightFieldIntegration::kSiddon);
+  const auto sliced = fixture_field_by(LightFieldIntegration::kSlices);
+  const auto fine = fixture_field_by(LightFieldIntegration::kSlices, 0.25);
+  ASSERT_TRUE(walked && sliced && fine);
+  EXPECT_EQ(sliced->geometry().size, walked->geometry().size);
+  EXPECT_NE(sliced->header().plan_hash, walked->header().plan_hash);
+  EXPECT_NE(fine->header().plan_hash, sliced->header().plan_hash);
+  const FieldDifference d = difference(*sliced, *walked), d_fine = difference(*fine, *walked);
+  // Measured: max 0.115 (rays grazing the dense block's edges, where the walk's integral jumps
+  // between neighbouring rays), rms 0.0060, nominal source 0.0072; at 0.25 mm 0.0015 there.
+  // Without the step's length along each ray the rms was 0.024; with one box-model sample a
+  // slice (not four), 0.0085 and 0.018 at the nominal source.
+  EXPECT_LT(d.max, 0.15);
+  EXPECT_LT(d.rms, 0.0075);
+  EXPECT_LT(d.max_at_the_nominal_source, 0.01);
+  EXPECT_LT(d_fine.max_at_the_nominal_source, 0.5 * d.max_at_the_nominal_source);
+  EXPECT_LT(d_fine.rms, d.rms);
+}
+
+// The field is the same bit for bit however many threads build it.
+TEST(LightFieldBuild, SlicesDoNotDependOnTheThreads) {
+  ThreadPool pool(3);
+  const auto alone = fixture_field_by(LightFieldIntegration::kSlices);
+  const auto together = fixture_field_by(LightFieldIntegration::kSlices, 0, &pool);
+  ASSERT_TRUE(alone && together);
+  ASSERT_EQ(alone->payload_bytes(), together->payload_bytes());
+  EXPECT_EQ(std::memcmp(alone->float_samples(), together->float_samples(), alone->payload_bytes()), 0);
+}
+
+// Slices need the volume well in front of the source (a slice's grid shrinks towards it): a
+// volume that reaches the source plane's tenth of the way to the ROI is walked exactly instead,
+// the same samples as a field asked to walk.
+TEST(LightFieldBuild, AVolumeReachingTowardsTheSourceIsWalkedExactly) {
+  MuVolume big = test::uniform_box({40, 40, 40}, {20, 20, 20}, 0.001f);
+  big.geometry.origin_mm = {-390, -390, -390};  // 800 mm a side about the isocentre; the source is 400 mm out
+  LightFieldSpec spec;
+  spec.resolution = {4, 4, 16, 16};
+  spec.integration = LightFieldIntegration::kSlices;
+  auto sliced = LightField::build(big, fixture_plan(), spec, nullptr);
+  spec.integration = LightFieldIntegration::kSiddon;
+  auto walked = LightField::build(big, fixture_plan(), spec, nullptr);
+  ASSERT_TRUE(sliced.ok() && walked.ok());
+  ASSERT_EQ((*sliced)->payload_bytes(), (*walked)->payload_bytes());
+  EXPECT_EQ(std::memcmp((*sliced)->float_samples(), (*walked)->float_samples(), (*walked)->payload_bytes()), 0);
+  EXPECT_GT((*walked)->sample(2, 2, 8, 8), 0.5);  // about 800 mm of 0.001 / mm
+}
+
 TEST(LightFieldBuild, SamplesAreWholeLineIntegrals) {
-  const auto field = fixture_light_field(LightFieldStorage::kFloat32);
+  const auto field = fixture_field_by(LightFieldIntegration::kSiddon);
   ASSERT_TRUE(field);
   const LightFieldGeometry& g = field->geometry();
   const MuVolume& mu = *test::fixture_volume();

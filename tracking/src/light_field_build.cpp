@@ -1,17 +1,16 @@
-// Building light fields: ray casting every sample, and converting float samples to 16-bit fixed
-// point or vector-quantised tiles.
+// Building light fields: integrating every sample (by slices, or by the exact walk), and
+// converting float samples to 16-bit fixed point or vector-quantised tiles.
 
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cmath>
 #include <cstring>
-#include <mutex>
 #include <random>
 
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
+#include "build_progress.hpp"
+#include "light_field_slices.hpp"
 #include "vector_quantizer.hpp"
 
 namespace lftrack::tracking {
@@ -19,62 +18,18 @@ namespace {
 
 using Eigen::Vector3d;
 
-// Throttled, thread-safe progress reporting: at most four calls a second, plus the final one.
-class Progress {
- public:
-  Progress(const std::function<void(double)>& fn, std::int64_t total) : fn_(fn), total_(total) {}
-  void advance() {
-    const std::int64_t done = done_.fetch_add(1) + 1;
-    if (!fn_) return;
-    const auto now = std::chrono::steady_clock::now();
-    std::unique_lock lock(mutex_, std::try_to_lock);
-    if (!lock.owns_lock()) return;
-    if (done < total_ && now - last_ < std::chrono::milliseconds(250)) return;
-    last_ = now;
-    fn_(double(done) / double(total_));
-  }
-
- private:
-  const std::function<void(double)>& fn_;
-  std::int64_t total_;
-  std::atomic<std::int64_t> done_{0};
-  std::mutex mutex_;
-  std::chrono::steady_clock::time_point last_{};
-};
-
 std::array<int, 4> tile_grid(const std::array<int, 4>& size) {
   return {(size[0] + 1) / 2, (size[1] + 1) / 2, (size[2] + 1) / 2, (size[3] + 1) / 2};
 }
 
-}  // namespace
-
-Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu,
-                                                            const LightFieldPlanInput& input,
-                                                            const LightFieldSpec& spec, ThreadPool* pool,
-                                                            const std::function<void(double)>& progress) {
-  LFTRACK_RETURN_IF_ERROR(check_attenuation_volume(mu));
-  auto planned = plan_light_field(input, spec);
-  if (!planned.ok()) return planned.status();
-  std::shared_ptr<LightField> field(new LightField);
-  Header& h = field->header_;
-  h.geometry = *planned;
-  h.storage = LightFieldStorage::kFloat32;
-  h.nominal_T_room_from_ct = input.nominal_T_room_from_ct;
-  h.registration_origin_room_mm = input.registration_origin_room_mm;
-  h.envelope = input.envelope;
-  h.ct_hash = volume_hash(mu);
-  h.plan_hash = plan_hash(input, spec);
-  const LightFieldGeometry& g = h.geometry;
-  const auto count = static_cast<std::size_t>(g.sample_count());
-  field->owned_.resize(count * sizeof(float));
-  float* samples = reinterpret_cast<float*>(field->owned_.data());
-
-  // Whole lines: from well before the volume to well beyond it, in the grid frame.
+// The exact walk: whole lines, from well before the volume to well beyond it, in the grid frame.
+void walk_every_ray(const MuVolume& mu, const LightFieldGeometry& g, float* samples, ThreadPool* pool,
+                    const std::function<void(double)>& progress) {
   const GridRayCaster caster(mu);
   const Eigen::Isometry3d grid_from_ct = mu.geometry.grid_from_ct();
   const double reach = mu.geometry.extent_mm().norm() + (g.roi_centre_ct_mm - g.source_ct_mm).norm() + 10.0;
   const int nu = g.size[0], nv = g.size[1], ns = g.size[2], nt = g.size[3];
-  Progress report(progress, std::int64_t{nu} * nv);
+  detail::BuildProgress report(progress, std::int64_t{nu} * nv);
   // One (u, v) slice a job; its rays go to the caster a row of t at a time (siddon_batch walks
   // them in vector lanes where the CPU can).
   auto slices = [&](int begin, int end) {
@@ -105,6 +60,34 @@ Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu,
     pool->parallel_for(nu * nv, 1, slices);
   else
     slices(0, nu * nv);
+}
+
+}  // namespace
+
+Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu,
+                                                            const LightFieldPlanInput& input,
+                                                            const LightFieldSpec& spec, ThreadPool* pool,
+                                                            const std::function<void(double)>& progress) {
+  LFTRACK_RETURN_IF_ERROR(check_attenuation_volume(mu));
+  auto planned = plan_light_field(input, spec);
+  if (!planned.ok()) return planned.status();
+  std::shared_ptr<LightField> field(new LightField);
+  Header& h = field->header_;
+  h.geometry = *planned;
+  h.storage = LightFieldStorage::kFloat32;
+  h.nominal_T_room_from_ct = input.nominal_T_room_from_ct;
+  h.registration_origin_room_mm = input.registration_origin_room_mm;
+  h.envelope = input.envelope;
+  h.ct_hash = volume_hash(mu);
+  h.plan_hash = plan_hash(input, spec);
+  const LightFieldGeometry& g = h.geometry;
+  const auto count = static_cast<std::size_t>(g.sample_count());
+  field->owned_.resize(count * sizeof(float));
+  float* samples = reinterpret_cast<float*>(field->owned_.data());
+
+  if (spec.integration != LightFieldIntegration::kSlices ||
+      !detail::integrate_by_slices(mu, g, spec.slice_step_mm, samples, pool, progress).ok())
+    walk_every_ray(mu, g, samples, pool, progress);
   field->payload_bytes_ = field->owned_.size();
   field->point_at(field->owned_.data());
   if (spec.storage == LightFieldStorage::kFloat32) return std::shared_ptr<const LightField>(field);

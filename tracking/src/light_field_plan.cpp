@@ -26,6 +26,16 @@ const char* to_string(LightFieldStorage storage) {
   return "unknown";
 }
 
+const char* to_string(LightFieldIntegration integration) {
+  switch (integration) {
+    case LightFieldIntegration::kSlices:
+      return "slices";
+    case LightFieldIntegration::kSiddon:
+      return "siddon";
+  }
+  return "unknown";
+}
+
 std::optional<Vector4d> LightFieldGeometry::coordinates(const Vector3d& a, const Vector3d& b) const {
   const Vector3d d = b - a;
   const double dn = d.dot(axis);
@@ -218,6 +228,10 @@ std::uint64_t plan_hash(const LightFieldPlanInput& in, const LightFieldSpec& spe
   feed(&rest, in.envelope.rotation_deg);
   for (int a = 0; a < 4; ++a) feed(&rest, spec.resolution[a]);
   feed(&rest, spec.margin_fraction);
+  if (spec.integration != LightFieldIntegration::kSiddon) {
+    feed(&rest, spec.integration);
+    feed(&rest, spec.slice_step_mm > 0 && std::isfinite(spec.slice_step_mm) ? spec.slice_step_mm : 0.0);
+  }
   return combine(view, rest);
 }
 

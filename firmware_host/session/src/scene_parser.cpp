@@ -72,7 +72,8 @@ Status SceneParser::parse_pose(const YAML::Node& n, tracking::Pose* pose) const 
 
 Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& what,
                                       tracking::LightFieldSpec* spec) const {
-  LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"resolution", "storage", "codebook", "margin"}));
+  LFTRACK_RETURN_IF_ERROR(
+      check_keys(n, what, {"resolution", "storage", "codebook", "margin", "integration", "slice_step_mm"}));
   if (const YAML::Node r = n["resolution"]) {
     if (!r.IsSequence() || r.size() != 4) return error(r, what + ".resolution must be [u, v, s, t]");
     for (std::size_t a = 0; a < 4; ++a) {
@@ -110,6 +111,21 @@ Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& wh
     long size = 0;
     LFTRACK_RETURN_IF_ERROR(integer(c, what + ".codebook", 2, 65536, &size));
     spec->vq_codebook_size = static_cast<int>(size);
+  }
+  if (const YAML::Node i = n["integration"]) {
+    std::string integration;
+    LFTRACK_RETURN_IF_ERROR(text(i, what + ".integration", &integration));
+    if (integration == "slices")
+      spec->integration = tracking::LightFieldIntegration::kSlices;
+    else if (integration == "siddon")
+      spec->integration = tracking::LightFieldIntegration::kSiddon;
+    else
+      return error(i, what + ".integration must be slices or siddon; got '" + integration + "'");
+  }
+  if (const YAML::Node step = n["slice_step_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(number(step, what + ".slice_step_mm", &spec->slice_step_mm));
+    if (!(spec->slice_step_mm >= 0.01 && spec->slice_step_mm <= 10))
+      return error(step, what + ".slice_step_mm is the depth between slices, in [0.01, 10] mm");
   }
   if (const YAML::Node m = n["margin"]) {
     LFTRACK_RETURN_IF_ERROR(number(m, what + ".margin", &spec->margin_fraction));

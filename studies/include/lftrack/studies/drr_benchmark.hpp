@@ -28,6 +28,10 @@ struct DrrBenchOptions {
   // Float light fields to load instead of building them (their precompute is then not timed);
   // empty: build them in the run.
   std::filesystem::path light_field_dir;
+  // Also build the float fields with the other integration than the scene's (slices against the
+  // exact walk), timed and measured as one more renderer, "lightfield-float-slices" (or
+  // "-siddon"); needs the fields built in the run (no light_field_dir).
+  bool both_integrations = false;
 };
 
 struct RendererFigures {
@@ -62,6 +66,9 @@ struct DrrBenchReport {
   int threads = 1;
   int render_threads = 1;
   double precompute_s = 0;  // building the float light fields of all views (0: loaded)
+  std::string integration;  // how those were integrated (the scene's tracking.light_field.integration)
+  std::string other_integration;  // both_integrations: the other way, and its precompute (0: not built)
+  double other_precompute_s = 0;
   std::array<int, 4> light_field_resolution{};
   int poses = 0;
   std::vector<std::string> views;

@@ -73,9 +73,22 @@ struct LightFieldGeometry {
   Status validate() const;
 };
 
+// How a float field's samples are integrated.
+enum class LightFieldIntegration : std::uint32_t {
+  // Depth slices of the voxels' box model, each resampled once and shifted for every source
+  // sample (tracking/src/light_field_slices.hpp): about 5x faster than the walk on the lumbar CT,
+  // slightly less faithful (BENCHMARKS.md, issue 24).
+  kSlices = 0,
+  // The exact Siddon walk of every ray through the voxels (the papers' precompute; the default).
+  kSiddon = 1,
+};
+const char* to_string(LightFieldIntegration integration);
+
 struct LightFieldSpec {
   std::array<int, 4> resolution{32, 32, 256, 256};
   double margin_fraction = 0.02;  // each axis' extent grows by this fraction on both sides
+  LightFieldIntegration integration = LightFieldIntegration::kSiddon;
+  double slice_step_mm = 0;  // kSlices: the depth step; 0 takes the CT's finest voxel spacing
   LightFieldStorage storage = LightFieldStorage::kFloat32;
   int vq_codebook_size = 4096;    // 2 .. 65536
   int vq_training_tiles = 65536;  // tiles sampled to train the codebook
@@ -131,7 +144,9 @@ class LightField {
   const float* codebook() const { return codebook_; }
   const std::uint16_t* tile_codes() const { return codes_; }
 
-  // Builds a float field by ray casting `mu` (Siddon, whole lines), on every thread of `pool`.
+  // Builds a float field from `mu` (whole lines through the volume), integrated as the spec
+  // says, on every thread of `pool`. Slices refused by the geometry (the volume within a tenth
+  // of the way from the source to the ROI; light_field_slices.hpp) fall back to the exact walk.
   // `progress` (may be empty) is called with the fraction done, from any worker thread, at most
   // a few times a second.
   static Result<std::shared_ptr<const LightField>> build(const MuVolume& mu, const LightFieldPlanInput& input,
@@ -176,10 +191,15 @@ class LightField {
   const std::uint16_t* codes_ = nullptr;
 };
 
+// The depth step a field integrated by slices takes: `step_mm` (LightFieldSpec::slice_step_mm)
+// if positive and finite, else the volume's finest voxel spacing.
+double light_field_slice_step_mm(const MuVolume& mu, double step_mm);
+
 // Identity of an attenuation volume (geometry and every voxel) for light-field files.
 std::uint64_t volume_hash(const MuVolume& mu);
-// Identity of a plan input and spec (view, window, pose, origin, ROI, envelope, resolution and
-// margin; not the storage mode, which a file states on its own) and of the planning convention
+// Identity of a plan input and spec (view, window, pose, origin, ROI, envelope, resolution,
+// margin and integration, with the slices' step; not the storage mode, which a file states on its
+// own; fields walked by Siddon keep the hash they had before slices existed) and of the planning convention
 // (a file planned by an older lftrack is stale) for light-field files.
 std::uint64_t plan_hash(const LightFieldPlanInput& input, const LightFieldSpec& spec);
 
