@@ -237,7 +237,9 @@ TEST_F(GigeTest, RoundTripsSixteenBitPixelsExactlyThroughAPairOfSoftwareTriggere
   strict.detector(1).trigger(now + 150'000'000);
   EXPECT_EQ(strict.acquire(&pair, in_ms(1000)), DeviceStatus::kFault);
   EXPECT_EQ(strict.skewed_pairs(), 1);
-  EXPECT_GE(pair.frames[1].timestamp_ns - pair.frames[0].timestamp_ns, 100'000'000);
+  // The frames carry their exposures' times, further apart than the 20 ms skew a pair allows.
+  // (Not the whole 150 ms: on a loaded host the first exposure can start late; CI once saw 98 ms.)
+  EXPECT_GT(pair.frames[1].timestamp_ns - pair.frames[0].timestamp_ns, 20'000'000);
   strict.close();
 }
 
