@@ -159,6 +159,26 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
 
   // The light-field renderers are timed again beside every plastimatch run (below).
   std::vector<std::pair<std::size_t, std::unique_ptr<tracking::DrrRenderer>>> beside_peer;
+  if (o.light_fields && o.both_integrations && !o.light_field_dir.empty())
+    return invalid_argument("bench drr: the second integration is compared with fields built in the run, not loaded");
+  // Times one set of light fields as a renderer, with the precompute it took, into the report.
+  auto time_fields = [&](std::vector<std::shared_ptr<const tracking::LightField>> fields,
+                         const std::string& name_suffix, double precompute_s) -> Status {
+    tracking::RendererOptions lf = ropts;
+    lf.light_fields = std::move(fields);
+    lf.light_field_mips = false;  // the benchmark's DRRs are full resolution: the field alone
+    auto renderer = make_renderer("lightfield", nullptr, lf);
+    if (!renderer.ok()) return renderer.status();
+    RendererFigures fig;
+    LFTRACK_RETURN_IF_ERROR(measure(**renderer, poses, views, o.size, o.repeats, &reference, &fig));
+    fig.name += name_suffix;
+    fig.speedup_vs_siddon = siddon_ms / fig.ms_median;
+    fig.precompute_s = precompute_s;
+    log_figures(fig);
+    report.renderers.push_back(fig);
+    beside_peer.emplace_back(report.renderers.size() - 1, std::move(*renderer));
+    return {};
+  };
   if (o.light_fields) {
     tracking::LightFieldSpec spec = scene.scene.light_field;
     spec.storage = tracking::LightFieldStorage::kFloat32;
@@ -191,22 +211,9 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
         fields.push_back(*converted);
       }
       const double convert_s = std::chrono::duration<double>(Clock::now() - c0).count();
-      tracking::RendererOptions lf = ropts;
-      lf.light_fields = fields;
-      lf.light_field_mips = false;  // the benchmark's DRRs are full resolution: the field alone
-      auto renderer = make_renderer("lightfield", nullptr, lf);
-      if (!renderer.ok()) return renderer.status();
-      RendererFigures fig;
-      LFTRACK_RETURN_IF_ERROR(measure(**renderer, poses, views, o.size, o.repeats, &reference, &fig));
-      fig.speedup_vs_siddon = siddon_ms / fig.ms_median;
-      fig.precompute_s = report.precompute_s + convert_s;
-      log_figures(fig);
-      report.renderers.push_back(fig);
-      beside_peer.emplace_back(report.renderers.size() - 1, std::move(*renderer));
+      LFTRACK_RETURN_IF_ERROR(time_fields(std::move(fields), "", report.precompute_s + convert_s));
     }
     if (o.both_integrations) {
-      if (!o.light_field_dir.empty())
-        return invalid_argument("bench drr: the second integration is compared with fields built in the run, not loaded");
       tracking::LightFieldSpec other = scene.scene.light_field;
       other.storage = tracking::LightFieldStorage::kFloat32;
       other.integration = other.integration == tracking::LightFieldIntegration::kSiddon
@@ -217,19 +224,8 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
       auto other_fields = build_light_fields(scene, other, pool);
       if (!other_fields.ok()) return other_fields.status();
       report.other_precompute_s = std::chrono::duration<double>(Clock::now() - w0).count();
-      tracking::RendererOptions lf = ropts;
-      lf.light_fields = *other_fields;
-      lf.light_field_mips = false;
-      auto renderer = make_renderer("lightfield", nullptr, lf);
-      if (!renderer.ok()) return renderer.status();
-      RendererFigures fig;
-      LFTRACK_RETURN_IF_ERROR(measure(**renderer, poses, views, o.size, o.repeats, &reference, &fig));
-      fig.name += "-" + report.other_integration;
-      fig.speedup_vs_siddon = siddon_ms / fig.ms_median;
-      fig.precompute_s = report.other_precompute_s;
-      log_figures(fig);
-      report.renderers.push_back(fig);
-      beside_peer.emplace_back(report.renderers.size() - 1, std::move(*renderer));
+      LFTRACK_RETURN_IF_ERROR(
+          time_fields(std::move(*other_fields), "-" + report.other_integration, report.other_precompute_s));
     }
   }
 

@@ -25,12 +25,27 @@ constexpr int kDepthSamples = 4;  // box-model samples averaged into each resamp
 constexpr int kRowsATask = 8;     // rows of s a task adds: all v of them stay in a core's L2 (256 KB)
 constexpr int kSlicesAPass = 4;   // slices added together in one pass over a task's rays
 
-// One depth: where it lies and which part of the (s, t)-spaced grid its rays read.
+// A source sample's shift at one depth, within its slice's rows (or columns): whole samples and the fraction towards the next.
+struct Shift {
+  int whole = 0;
+  float fraction = 0;
+};
+
+Shift split(double shift, int lo, int max_whole) {
+  const double local = shift - lo;
+  const int whole = std::clamp(static_cast<int>(std::floor(local)), 0, max_whole);
+  return {whole, static_cast<float>(std::clamp(local - whole, 0.0, 1.0))};
+}
+
+// One depth: where it lies, which part of the (s, t)-spaced grid its rays read, and where each
+// source sample reads it.
 struct Slice {
   double lambda = 0;     // depth / D
   int row_lo = 0;        // first resampled row, in s samples (may be negative)
   int col_lo = 0;        // first resampled column, in t samples
   int rows = 0, cols = 0;
+  std::vector<Shift> row_shifts;  // per u sample
+  std::vector<Shift> col_shifts;  // per v sample
 };
 
 struct Layout {
@@ -67,19 +82,18 @@ Result<Layout> lay_out(const MuVolume& mu, const LightFieldGeometry& g, double s
   for (int k = 0; k < count; ++k) {
     Slice s;
     s.lambda = (z_lo + (k + 0.5) * layout.step_mm) / distance_mm;
-    double lo[2] = {HUGE_VAL, HUGE_VAL}, hi[2] = {-HUGE_VAL, -HUGE_VAL};
-    for (int axis = 0; axis < 2; ++axis) {
-      for (int i = 0; i < g.size[axis]; ++i) {
-        const double shift = shift_samples(g, axis, i, s.lambda);
-        lo[axis] = std::min(lo[axis], shift);
-        hi[axis] = std::max(hi[axis], shift);
-      }
-    }
-    s.row_lo = static_cast<int>(std::floor(lo[0]));
-    s.col_lo = static_cast<int>(std::floor(lo[1]));
+    std::vector<double> shifts[2];
+    for (int axis = 0; axis < 2; ++axis)
+      for (int i = 0; i < g.size[axis]; ++i) shifts[axis].push_back(shift_samples(g, axis, i, s.lambda));
+    const auto [u_lo, u_hi] = std::minmax_element(shifts[0].begin(), shifts[0].end());
+    const auto [v_lo, v_hi] = std::minmax_element(shifts[1].begin(), shifts[1].end());
+    s.row_lo = static_cast<int>(std::floor(*u_lo));
+    s.col_lo = static_cast<int>(std::floor(*v_lo));
     // A ray reads the resampled sample at its shifted index and the next one.
-    s.rows = g.size[2] + static_cast<int>(std::floor(hi[0])) - s.row_lo + 1;
-    s.cols = g.size[3] + static_cast<int>(std::floor(hi[1])) - s.col_lo + 1;
+    s.rows = g.size[2] + static_cast<int>(std::floor(*u_hi)) - s.row_lo + 1;
+    s.cols = g.size[3] + static_cast<int>(std::floor(*v_hi)) - s.col_lo + 1;
+    for (double shift : shifts[0]) s.row_shifts.push_back(split(shift, s.row_lo, s.rows - g.size[2] - 1));
+    for (double shift : shifts[1]) s.col_shifts.push_back(split(shift, s.col_lo, s.cols - g.size[3] - 1));
     layout.max_rows = std::max(layout.max_rows, s.rows);
     layout.max_cols = std::max(layout.max_cols, s.cols);
     layout.slices.push_back(s);
@@ -96,18 +110,6 @@ float voxel_at(const float* mu, const Eigen::Vector3i& n, const Vector3d& index)
   if (!(x >= 0 && x < n.x() && y >= 0 && y < n.y() && z >= 0 && z < n.z())) return 0;
   return mu[static_cast<std::ptrdiff_t>(x) +
             std::ptrdiff_t{n.x()} * (static_cast<std::ptrdiff_t>(y) + std::ptrdiff_t{n.y()} * static_cast<std::ptrdiff_t>(z))];
-}
-
-// A source row's shift at one depth: whole samples and the fraction towards the next.
-struct Shift {
-  int whole = 0;
-  float fraction = 0;
-};
-
-Shift split(double shift, int lo, int max_whole) {
-  const double local = shift - lo;
-  const int whole = std::clamp(static_cast<int>(std::floor(local)), 0, max_whole);
-  return {whole, static_cast<float>(std::clamp(local - whole, 0.0, 1.0))};
 }
 
 // Interpolates `rows` rows of a resampled slice (`cols` wide) at `first_row` + `fraction`
@@ -214,7 +216,6 @@ Status integrate_by_slices(const MuVolume& mu, const LightFieldGeometry& g, doub
     run(tasks, 1, [&](int begin, int end) {
       const std::size_t part = static_cast<std::size_t>(kRowsATask) * static_cast<std::size_t>(layout.max_cols);
       std::vector<float> scratch(part * kSlicesAPass);
-      std::vector<Shift> col_shifts(static_cast<std::size_t>(nv) * kSlicesAPass);
       // A chunk's last pass may hold fewer slices: the rest read zeros.
       const std::vector<float> zeros(static_cast<std::size_t>(kRowsATask) * static_cast<std::size_t>(nt + 1), 0.0f);
       const std::vector<Shift> no_shifts(static_cast<std::size_t>(nv));
@@ -230,14 +231,11 @@ Status integrate_by_slices(const MuVolume& mu, const LightFieldGeometry& g, doub
               continue;
             }
             const Slice& s = layout.slices[static_cast<std::size_t>(k0 + kk + p)];
-            const Shift row = split(shift_samples(g, 0, iu, s.lambda), s.row_lo, s.rows - ns - 1);
+            const Shift row = s.row_shifts[static_cast<std::size_t>(iu)];
             float* rows_of_p = scratch.data() + static_cast<std::size_t>(p) * part;
             interpolate_rows(resampled.data() + (kk + p) * slice_size, s.cols, first_s + row.whole, row.fraction, rows,
                              rows_of_p);
-            Shift* shifts = col_shifts.data() + static_cast<std::size_t>(p) * static_cast<std::size_t>(nv);
-            for (int iv = 0; iv < nv; ++iv)
-              shifts[iv] = split(shift_samples(g, 1, iv, s.lambda), s.col_lo, s.cols - nt - 1);
-            parts[p] = {rows_of_p, s.cols, shifts};
+            parts[p] = {rows_of_p, s.cols, s.col_shifts.data()};
           }
           add_slices(parts, rows, nv, v_stride, nt, out);
         }
