@@ -1,9 +1,10 @@
 // Light-field DRRs on one core: the ROI window of a real-CT-sized detector (144 x 316 pixels of
 // 0.4 mm, SAD 1500, SID 2100), at full resolution and 2 x 2 binned (the warm registration's two
 // levels), and a 256 x 256 resampling of it (`bench drr`'s image), each with the portable
-// kernel, the AVX2 kernel gathering every sample (as before issue 24) and the AVX2 kernel with
-// runs, side by side in one run. The field is the built-in phantom's at 16 x 16 x 192 x 192
-// (built once, a few seconds); `lftrack bench drr` times the real CT's paper-resolution fields.
+// kernel, the AVX2 kernel gathering every sample (as before issue 24), the AVX2 kernel with
+// runs, and the source-image path (portable and AVX2), side by side in one run. The field is
+// the built-in phantom's at 16 x 16 x 192 x 192 (built once, a few seconds); `lftrack bench drr`
+// times the real CT's paper-resolution fields.
 
 #include <benchmark/benchmark.h>
 
@@ -50,7 +51,8 @@ const Setup& setup() {
 }
 
 // Arg 0: the image (0: the window, 1: binned 2 x 2, 2: resampled to 256 x 256); Arg 1: the
-// kernel (0: portable, 1: AVX2 gathers, 2: AVX2 runs).
+// kernel (0: portable, 1: AVX2 gathers, 2: AVX2 runs, each blending 16 samples at every pixel's
+// ray; 3: the source image, portable; 4: the source image, AVX2, the renderer's default).
 void BM_LightFieldDrr(benchmark::State& state) {
   const Setup& s = setup();
   const int image = int(state.range(0));
@@ -64,8 +66,10 @@ void BM_LightFieldDrr(benchmark::State& state) {
   tracking::RendererOptions options;
   options.light_fields = {s.field};
   const tracking::SimdLevel kernels[] = {tracking::SimdLevel::kScalar, tracking::SimdLevel::kAvx2Gathers,
+                                         tracking::SimdLevel::kAvx2, tracking::SimdLevel::kScalar,
                                          tracking::SimdLevel::kAvx2};
   options.simd = kernels[state.range(1)];
+  options.light_field_source_image = state.range(1) >= 3;
   auto renderer = tracking::make_renderer("lightfield", nullptr, options);
   tracking::Image<float> out(window.rows, window.cols);
   tracking::Image<unsigned char> valid(window.rows, window.cols);
@@ -84,7 +88,7 @@ void BM_LightFieldDrr(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * window.rows * window.cols);
 }
 BENCHMARK(BM_LightFieldDrr)
-    ->ArgsProduct({{0, 1, 2}, {0, 1, 2}})
+    ->ArgsProduct({{0, 1, 2}, {0, 1, 2, 3, 4}})
     ->ArgNames({"image", "kernel"})
     ->Unit(benchmark::kMicrosecond);
 

@@ -162,11 +162,13 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
   if (o.light_fields && o.both_integrations && !o.light_field_dir.empty())
     return invalid_argument("bench drr: the second integration is compared with fields built in the run, not loaded");
   // Times one set of light fields as a renderer, with the precompute it took, into the report.
+  // source_image false: the per-ray blend (RendererOptions::light_field_source_image).
   auto time_fields = [&](std::vector<std::shared_ptr<const tracking::LightField>> fields,
-                         const std::string& name_suffix, double precompute_s) -> Status {
+                         const std::string& name_suffix, double precompute_s, bool source_image = true) -> Status {
     tracking::RendererOptions lf = ropts;
     lf.light_fields = std::move(fields);
     lf.light_field_mips = false;  // the benchmark's DRRs are full resolution: the field alone
+    lf.light_field_source_image = source_image;
     auto renderer = make_renderer("lightfield", nullptr, lf);
     if (!renderer.ok()) return renderer.status();
     RendererFigures fig;
@@ -211,7 +213,11 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
         fields.push_back(*converted);
       }
       const double convert_s = std::chrono::duration<double>(Clock::now() - c0).count();
+      const auto float_fields_again = fields;
       LFTRACK_RETURN_IF_ERROR(time_fields(std::move(fields), "", report.precompute_s + convert_s));
+      // Float fields also by the papers' per-ray blend, beside the source image.
+      if (mode.storage == tracking::LightFieldStorage::kFloat32)
+        LFTRACK_RETURN_IF_ERROR(time_fields(float_fields_again, "-per-ray", report.precompute_s, false));
     }
     if (o.both_integrations) {
       tracking::LightFieldSpec other = scene.scene.light_field;

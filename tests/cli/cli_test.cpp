@@ -184,7 +184,7 @@ TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
       EXPECT_TRUE(r.contains(key)) << key;
   }
   for (const char* name :
-       {"siddon", "trilinear", "lightfield-float", "lightfield-fixed16", "lightfield-vq16"})
+       {"siddon", "trilinear", "lightfield-float", "lightfield-float-per-ray", "lightfield-fixed16", "lightfield-vq16"})
     EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
   for (const auto& p : json["peers"])
     for (const char* key : {"name", "ms_median", "ncc_vs_siddon"}) EXPECT_TRUE(p.contains(key)) << key;

@@ -25,7 +25,8 @@ TEST(DrrBenchmark, SmallRunReportsEveryRendererAndThePeer) {
   ASSERT_TRUE(report.ok()) << report.status().message();
   const nlohmann::json j = to_json(*report);
   EXPECT_EQ(j["size"], nlohmann::json({32, 32}));
-  ASSERT_EQ(j["renderers"].size(), 5u);  // siddon, trilinear, light field float, fixed16, vq16
+  // siddon, trilinear, light field float (source image), float per ray, fixed16, vq16
+  ASSERT_EQ(j["renderers"].size(), 6u);
   EXPECT_EQ(j["renderers"][0]["name"], "siddon");
   EXPECT_DOUBLE_EQ(j["renderers"][0]["ncc_vs_siddon"].get<double>(), 1.0);
   EXPECT_DOUBLE_EQ(j["renderers"][0]["speedup_vs_siddon"].get<double>(), 1.0);
@@ -36,6 +37,9 @@ TEST(DrrBenchmark, SmallRunReportsEveryRendererAndThePeer) {
   }
   EXPECT_EQ(j["renderers"][2]["name"], "lightfield-float");
   EXPECT_EQ(j["renderers"][2]["bytes"].get<std::size_t>(), 2u * 4 * 4 * 32 * 32 * 4);
+  EXPECT_EQ(j["renderers"][3]["name"], "lightfield-float-per-ray");
+  EXPECT_NEAR(j["renderers"][3]["ncc_vs_siddon"].get<double>(), j["renderers"][2]["ncc_vs_siddon"].get<double>(),
+              1e-4);
   EXPECT_GT(j["light_field"]["precompute_s_all_views"].get<double>(), 0.0);
   if (o.peers) {
     ASSERT_EQ(j["peers"].size(), 1u);

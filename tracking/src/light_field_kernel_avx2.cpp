@@ -168,6 +168,117 @@ struct MaskBytes {
 };
 constexpr MaskBytes kMaskBytes;
 
+// A row's ray directions: d.n, d.e1 and d.e2 are affine in the column.
+struct RowRays {
+  __m256 dn0, dn1, de10, de11, de20, de21;
+};
+
+LFTRACK_AVX2 inline RowRays row_rays(const LightFieldGeometry& g, const RayMap& m, int r) {
+  const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
+  return {_mm256_set1_ps(float(d_row.dot(g.axis))), _mm256_set1_ps(float(m.d_col.dot(g.axis))),
+          _mm256_set1_ps(float(d_row.dot(g.e1))),   _mm256_set1_ps(float(m.d_col.dot(g.e1))),
+          _mm256_set1_ps(float(d_row.dot(g.e2))),   _mm256_set1_ps(float(m.d_col.dot(g.e2)))};
+}
+
+// The ray map's constants in lanes.
+struct MapLanes {
+  __m256 base[4], gain[4], limit[4];
+  explicit LFTRACK_AVX2 MapLanes(const RayMap& m) {
+    for (int a = 0; a < 4; ++a) {
+      base[a] = _mm256_set1_ps(m.base[a]);
+      gain[a] = _mm256_set1_ps(m.gain[a]);
+      limit[a] = _mm256_set1_ps(m.limit[a]);
+    }
+  }
+};
+
+// Eight pixels' rays from column c: their sample coordinates (u, v, s, t), 0 in lanes outside
+// the field or past the row's end, which lanes are inside, and how many lanes the row has left.
+struct ChunkRays {
+  __m256 cu, cv, cs, ct, inside;
+  int inside_bits, lanes;
+};
+
+LFTRACK_AVX2 inline ChunkRays chunk_rays(const RowRays& row, const MapLanes& map, int c, int cols) {
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 lanes8 = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256 cf = _mm256_add_ps(_mm256_set1_ps(float(c)), lanes8);
+  const __m256 dn = _mm256_fmadd_ps(row.dn1, cf, row.dn0);
+  const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), dn);
+  const __m256 q1 = _mm256_mul_ps(_mm256_fmadd_ps(row.de11, cf, row.de10), inv);
+  const __m256 q2 = _mm256_mul_ps(_mm256_fmadd_ps(row.de21, cf, row.de20), inv);
+  const __m256 fu = _mm256_fmadd_ps(map.gain[0], q1, map.base[0]), fv = _mm256_fmadd_ps(map.gain[1], q2, map.base[1]);
+  const __m256 fs = _mm256_fmadd_ps(map.gain[2], q1, map.base[2]), ft = _mm256_fmadd_ps(map.gain[3], q2, map.base[3]);
+  // Ordered comparisons: NaN is outside.
+  __m256 inside = _mm256_cmp_ps(dn, zero, _CMP_GT_OQ);
+  inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fu, zero, _CMP_GE_OQ), _mm256_cmp_ps(fu, map.limit[0], _CMP_LE_OQ)));
+  inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fv, zero, _CMP_GE_OQ), _mm256_cmp_ps(fv, map.limit[1], _CMP_LE_OQ)));
+  inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fs, zero, _CMP_GE_OQ), _mm256_cmp_ps(fs, map.limit[2], _CMP_LE_OQ)));
+  inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(ft, zero, _CMP_GE_OQ), _mm256_cmp_ps(ft, map.limit[3], _CMP_LE_OQ)));
+  // Lanes past the row's end are outside too.
+  const int lanes = cols - c < 8 ? cols - c : 8;
+  inside = _mm256_and_ps(inside, _mm256_cmp_ps(lanes8, _mm256_set1_ps(float(lanes)), _CMP_LT_OQ));
+  return {_mm256_and_ps(fu, inside), _mm256_and_ps(fv, inside), _mm256_and_ps(fs, inside), _mm256_and_ps(ft, inside),
+          inside, _mm256_movemask_ps(inside), lanes};
+}
+
+// Stores a chunk's values (0 outside) and, with a mask row, its inside flags.
+LFTRACK_AVX2 inline void store_chunk(const ChunkRays& k, __m256 value, float* dst, unsigned char* ok_row) {
+  value = _mm256_and_ps(value, k.inside);
+  if (k.lanes == 8) {
+    _mm256_storeu_ps(dst, value);
+  } else {
+    alignas(32) float tail[8];
+    _mm256_store_ps(tail, value);
+    for (int i = 0; i < k.lanes; ++i) dst[i] = tail[i];
+  }
+  if (ok_row) {
+    const std::uint64_t flags = kMaskBytes.bytes[k.inside_bits];
+    if (k.lanes == 8)
+      std::memcpy(ok_row, &flags, 8);
+    else
+      for (int i = 0; i < k.lanes; ++i) ok_row[i] = static_cast<unsigned char>((k.inside_bits >> i) & 1);
+  }
+}
+
+// Where a chunk's (s, t) indices lie in runs: t within 15 samples and s within three rows from
+// (s0, t0). Lanes 0 and 7 give the range (t and s are monotonic along a row); every lane is then
+// checked against it, since rounding may bend monotonicity by a sample where the coordinates
+// barely change. `other` holds nonzero lanes where a caller's own test fails.
+struct RunRange {
+  int s0, t0, s_span, t_span;
+  bool ok;
+};
+
+LFTRACK_AVX2 inline RunRange run_range(__m256i is, __m256i it, __m256i other) {
+  const int t_first = first_lane(it), t_last = last_lane(it);
+  const int s_first = first_lane(is), s_last = last_lane(is);
+  RunRange r;
+  r.t0 = std::min(t_first, t_last);
+  r.s0 = std::min(s_first, s_last);
+  r.t_span = std::max(t_first, t_last) - r.t0;
+  r.s_span = std::max(s_first, s_last) - r.s0;
+  const __m256i vt0 = _mm256_set1_epi32(r.t0), vs0 = _mm256_set1_epi32(r.s0);
+  const __m256i outside = _mm256_or_si256(
+      other, _mm256_or_si256(
+                 _mm256_or_si256(_mm256_cmpgt_epi32(vt0, it), _mm256_cmpgt_epi32(it, _mm256_set1_epi32(r.t0 + r.t_span))),
+                 _mm256_or_si256(_mm256_cmpgt_epi32(vs0, is), _mm256_cmpgt_epi32(is, _mm256_set1_epi32(r.s0 + r.s_span)))));
+  r.ok = _mm256_testz_si256(outside, outside) && r.t_span <= 14 && r.s_span <= 2;
+  return r;
+}
+
+LFTRACK_AVX2 inline RunLanes run_lanes(__m256i is, __m256i it, const RunRange& r) {
+  RunLanes l;
+  const __m256i vs0 = _mm256_set1_epi32(r.s0);
+  l.dt = _mm256_sub_epi32(it, _mm256_set1_epi32(r.t0));
+  l.dt_next = _mm256_add_epi32(l.dt, _mm256_set1_epi32(1));
+  l.upper_first = _mm256_castsi256_ps(_mm256_cmpgt_epi32(l.dt, _mm256_set1_epi32(7)));
+  l.upper_second = _mm256_castsi256_ps(_mm256_cmpgt_epi32(l.dt_next, _mm256_set1_epi32(7)));
+  l.below1 = _mm256_castsi256_ps(_mm256_cmpgt_epi32(is, vs0));
+  l.below2 = _mm256_castsi256_ps(_mm256_cmpgt_epi32(is, _mm256_set1_epi32(r.s0 + 1)));
+  return l;
+}
+
 template <class Samples>
 LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
                              ImageView<unsigned char> valid, int cols, int r_begin, int r_end, bool runs) {
@@ -177,90 +288,46 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
   const __m256i top_u = _mm256_set1_epi32(g.size[0] - 2), top_v = _mm256_set1_epi32(g.size[1] - 2);
   const __m256i top_s = _mm256_set1_epi32(g.size[2] - 2), top_t = _mm256_set1_epi32(g.size[3] - 2);
   const __m256 zero = _mm256_setzero_ps();
-  __m256 base[4], gain[4], limit[4];
-  for (int a = 0; a < 4; ++a) {
-    base[a] = _mm256_set1_ps(m.base[a]);
-    gain[a] = _mm256_set1_ps(m.gain[a]);
-    limit[a] = _mm256_set1_ps(m.limit[a]);
-  }
-  const __m256 lanes8 = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+  const MapLanes map(m);
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
-    const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
-    const __m256 dn0 = _mm256_set1_ps(float(d_row.dot(g.axis))), dn1 = _mm256_set1_ps(float(m.d_col.dot(g.axis)));
-    const __m256 de10 = _mm256_set1_ps(float(d_row.dot(g.e1))), de11 = _mm256_set1_ps(float(m.d_col.dot(g.e1)));
-    const __m256 de20 = _mm256_set1_ps(float(d_row.dot(g.e2))), de21 = _mm256_set1_ps(float(m.d_col.dot(g.e2)));
+    const RowRays row = row_rays(g, m, r);
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     for (int c = 0; c < cols; c += 8) {
-      const __m256 cf = _mm256_add_ps(_mm256_set1_ps(float(c)), lanes8);
-      const __m256 dn = _mm256_fmadd_ps(dn1, cf, dn0);
-      const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), dn);
-      const __m256 q1 = _mm256_mul_ps(_mm256_fmadd_ps(de11, cf, de10), inv);
-      const __m256 q2 = _mm256_mul_ps(_mm256_fmadd_ps(de21, cf, de20), inv);
-      const __m256 fu = _mm256_fmadd_ps(gain[0], q1, base[0]), fv = _mm256_fmadd_ps(gain[1], q2, base[1]);
-      const __m256 fs = _mm256_fmadd_ps(gain[2], q1, base[2]), ft = _mm256_fmadd_ps(gain[3], q2, base[3]);
-      // Ordered comparisons: NaN is outside.
-      __m256 inside = _mm256_cmp_ps(dn, zero, _CMP_GT_OQ);
-      inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fu, zero, _CMP_GE_OQ), _mm256_cmp_ps(fu, limit[0], _CMP_LE_OQ)));
-      inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fv, zero, _CMP_GE_OQ), _mm256_cmp_ps(fv, limit[1], _CMP_LE_OQ)));
-      inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fs, zero, _CMP_GE_OQ), _mm256_cmp_ps(fs, limit[2], _CMP_LE_OQ)));
-      inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(ft, zero, _CMP_GE_OQ), _mm256_cmp_ps(ft, limit[3], _CMP_LE_OQ)));
-      // Lanes past the row's end are outside too.
-      const int lanes = cols - c < 8 ? cols - c : 8;
-      inside = _mm256_and_ps(inside, _mm256_cmp_ps(lanes8, _mm256_set1_ps(float(lanes)), _CMP_LT_OQ));
-      const __m256 cu = _mm256_and_ps(fu, inside), cv = _mm256_and_ps(fv, inside);
-      const __m256 cs = _mm256_and_ps(fs, inside), ct = _mm256_and_ps(ft, inside);
-      const __m256i iu = _mm256_min_epi32(_mm256_cvttps_epi32(cu), top_u);
-      const __m256i iv = _mm256_min_epi32(_mm256_cvttps_epi32(cv), top_v);
-      const __m256i is = _mm256_min_epi32(_mm256_cvttps_epi32(cs), top_s);
-      const __m256i it = _mm256_min_epi32(_mm256_cvttps_epi32(ct), top_t);
-      const __m256 wu = _mm256_sub_ps(cu, _mm256_cvtepi32_ps(iu)), wv = _mm256_sub_ps(cv, _mm256_cvtepi32_ps(iv));
-      const __m256 ws = _mm256_sub_ps(cs, _mm256_cvtepi32_ps(is)), wt = _mm256_sub_ps(ct, _mm256_cvtepi32_ps(it));
-      const int inside_bits = _mm256_movemask_ps(inside);
+      const ChunkRays k = chunk_rays(row, map, c, cols);
+      const __m256i iu = _mm256_min_epi32(_mm256_cvttps_epi32(k.cu), top_u);
+      const __m256i iv = _mm256_min_epi32(_mm256_cvttps_epi32(k.cv), top_v);
+      const __m256i is = _mm256_min_epi32(_mm256_cvttps_epi32(k.cs), top_s);
+      const __m256i it = _mm256_min_epi32(_mm256_cvttps_epi32(k.ct), top_t);
+      const __m256 wu = _mm256_sub_ps(k.cu, _mm256_cvtepi32_ps(iu)), wv = _mm256_sub_ps(k.cv, _mm256_cvtepi32_ps(iv));
+      const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(is)), wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(it));
 
       // (u, v) cells (0,0), (0,1), (1,0), (1,1), each blended in (s, t).
       __m256 corner0 = zero, corner1 = zero, corner2 = zero, corner3 = zero;
       bool done = false;
-      if (runs && inside_bits == 0xff) {
-        // The run test: one (u, v) cell for every lane, t within 15 samples, s within three
-        // rows. Lanes 0 and 7 give the range (t and s are monotonic along a row); every lane is
-        // then checked against it, since rounding may bend monotonicity by a sample where the
-        // coordinates barely change.
+      if (runs && k.inside_bits == 0xff) {
+        // The run test, and one (u, v) cell for every lane.
         const int u0 = first_lane(iu), v0 = first_lane(iv);
-        const int t_first = first_lane(it), t_last = last_lane(it);
-        const int s_first = first_lane(is), s_last = last_lane(is);
-        const int t0 = std::min(t_first, t_last), s0 = std::min(s_first, s_last);
-        const int t_span = std::max(t_first, t_last) - t0, s_span = std::max(s_first, s_last) - s0;
-        const __m256i vt0 = _mm256_set1_epi32(t0), vs0 = _mm256_set1_epi32(s0);
-        const __m256i outside_runs = _mm256_or_si256(
-            _mm256_or_si256(_mm256_xor_si256(iu, _mm256_set1_epi32(u0)), _mm256_xor_si256(iv, _mm256_set1_epi32(v0))),
-            _mm256_or_si256(
-                _mm256_or_si256(_mm256_cmpgt_epi32(vt0, it), _mm256_cmpgt_epi32(it, _mm256_set1_epi32(t0 + t_span))),
-                _mm256_or_si256(_mm256_cmpgt_epi32(vs0, is), _mm256_cmpgt_epi32(is, _mm256_set1_epi32(s0 + s_span)))));
-        if (_mm256_testz_si256(outside_runs, outside_runs) && t_span <= 14 && s_span <= 2) {
-          RunLanes l;
-          l.dt = _mm256_sub_epi32(it, vt0);
-          l.dt_next = _mm256_add_epi32(l.dt, _mm256_set1_epi32(1));
-          l.upper_first = _mm256_castsi256_ps(_mm256_cmpgt_epi32(l.dt, _mm256_set1_epi32(7)));
-          l.upper_second = _mm256_castsi256_ps(_mm256_cmpgt_epi32(l.dt_next, _mm256_set1_epi32(7)));
-          l.below1 = _mm256_castsi256_ps(_mm256_cmpgt_epi32(is, vs0));
-          l.below2 = _mm256_castsi256_ps(_mm256_cmpgt_epi32(is, _mm256_set1_epi32(s0 + 1)));
-          const std::size_t run0 =
-              std::size_t(u0) * su + std::size_t(v0) * sv + std::size_t(s0) * std::size_t(nt) + std::size_t(t0);
+        const RunRange range = run_range(
+            is, it, _mm256_or_si256(_mm256_xor_si256(iu, _mm256_set1_epi32(u0)), _mm256_xor_si256(iv, _mm256_set1_epi32(v0))));
+        if (range.ok) {
+          const RunLanes l = run_lanes(is, it, range);
+          const std::size_t run0 = std::size_t(u0) * su + std::size_t(v0) * sv +
+                                   std::size_t(range.s0) * std::size_t(nt) + std::size_t(range.t0);
           const std::size_t n_t = std::size_t(nt);
           // A run must not read past its (u, v, s) row's samples.
-          if (t_span <= 6 && t0 + 8 <= nt) {
-            corner0 = run_cell<Samples, false>(f, run0, n_t, s_span, l, ws, wt);
-            corner1 = run_cell<Samples, false>(f, run0 + sv, n_t, s_span, l, ws, wt);
-            corner2 = run_cell<Samples, false>(f, run0 + su, n_t, s_span, l, ws, wt);
-            corner3 = run_cell<Samples, false>(f, run0 + su + sv, n_t, s_span, l, ws, wt);
+          if (range.t_span <= 6 && range.t0 + 8 <= nt) {
+            corner0 = run_cell<Samples, false>(f, run0, n_t, range.s_span, l, ws, wt);
+            corner1 = run_cell<Samples, false>(f, run0 + sv, n_t, range.s_span, l, ws, wt);
+            corner2 = run_cell<Samples, false>(f, run0 + su, n_t, range.s_span, l, ws, wt);
+            corner3 = run_cell<Samples, false>(f, run0 + su + sv, n_t, range.s_span, l, ws, wt);
             done = true;
-          } else if (t0 + 16 <= nt) {
-            corner0 = run_cell<Samples, true>(f, run0, n_t, s_span, l, ws, wt);
-            corner1 = run_cell<Samples, true>(f, run0 + sv, n_t, s_span, l, ws, wt);
-            corner2 = run_cell<Samples, true>(f, run0 + su, n_t, s_span, l, ws, wt);
-            corner3 = run_cell<Samples, true>(f, run0 + su + sv, n_t, s_span, l, ws, wt);
+          } else if (range.t0 + 16 <= nt) {
+            corner0 = run_cell<Samples, true>(f, run0, n_t, range.s_span, l, ws, wt);
+            corner1 = run_cell<Samples, true>(f, run0 + sv, n_t, range.s_span, l, ws, wt);
+            corner2 = run_cell<Samples, true>(f, run0 + su, n_t, range.s_span, l, ws, wt);
+            corner3 = run_cell<Samples, true>(f, run0 + su + sv, n_t, range.s_span, l, ws, wt);
             done = true;
           }
         }
@@ -277,22 +344,63 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
       }
       const __m256 low = _mm256_fmadd_ps(wv, _mm256_sub_ps(corner1, corner0), corner0);
       const __m256 high = _mm256_fmadd_ps(wv, _mm256_sub_ps(corner3, corner2), corner2);
-      const __m256 value = _mm256_and_ps(f.finish(_mm256_fmadd_ps(wu, _mm256_sub_ps(high, low), low)), inside);
-      masked += lanes - __builtin_popcount(static_cast<unsigned>(inside_bits));
-      if (lanes == 8) {
-        _mm256_storeu_ps(dst + c, value);
+      masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
+      store_chunk(k, f.finish(_mm256_fmadd_ps(wu, _mm256_sub_ps(high, low), low)), dst + c, ok_row ? ok_row + c : nullptr);
+    }
+  }
+  return masked;
+}
+
+// The source-image path (light_field_kernels.hpp): each pixel's (s, t) neighbours in the image,
+// read as runs where eight pixels' lie in at most three rows of 15 samples, gathered otherwise.
+LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                                   ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                                   int r_end) {
+  const FloatSamples f{image.values};
+  const __m256i v_cols = _mm256_set1_epi32(image.cols), zero_i = _mm256_setzero_si256();
+  const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
+  const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
+  const __m256i last = _mm256_set1_epi32(7), one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2);
+  const __m256i six = _mm256_set1_epi32(6), fourteen = _mm256_set1_epi32(14);
+  const MapLanes map(m);
+  int masked = 0;
+  for (int r = r_begin; r < r_end; ++r) {
+    const RowRays row = row_rays(g, m, r);
+    float* dst = out.row_ptr(r);
+    unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
+    for (int c = 0; c < cols; c += 8) {
+      const ChunkRays k = chunk_rays(row, map, c, cols);
+      // Image indices, clamped into it (inside pixels are already).
+      const __m256i is = _mm256_max_epi32(_mm256_min_epi32(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), top_s), zero_i);
+      const __m256i it = _mm256_max_epi32(_mm256_min_epi32(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), top_t), zero_i);
+      const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(_mm256_add_epi32(is, s0)));
+      const __m256 wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(_mm256_add_epi32(it, t0)));
+      // The run test in lanes (no round trip through scalar registers but for the run's start):
+      // the range's start is the smaller of lanes 0 and 7 (s and t are monotonic along a row),
+      // and every lane must lie within 6 (narrow) or 14 (wide) samples and two rows of it.
+      __m256 value;
+      const __m256i t_lo = _mm256_min_epi32(_mm256_permutevar8x32_epi32(it, zero_i), _mm256_permutevar8x32_epi32(it, last));
+      const __m256i s_lo = _mm256_min_epi32(_mm256_permutevar8x32_epi32(is, zero_i), _mm256_permutevar8x32_epi32(is, last));
+      const __m256i dt = _mm256_sub_epi32(it, t_lo), ds = _mm256_sub_epi32(is, s_lo);
+      const __m256i off_rows = _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, ds), _mm256_cmpgt_epi32(ds, two));
+      const __m256i off_wide = _mm256_or_si256(off_rows, _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, dt), _mm256_cmpgt_epi32(dt, fourteen)));
+      const int t_first = first_lane(t_lo), s_first = first_lane(s_lo);
+      if (k.inside_bits == 0xff && _mm256_testz_si256(off_wide, off_wide) && t_first + 16 <= image.cols) {
+        RunRange range;
+        range.s0 = s_first;
+        range.t0 = t_first;
+        range.s_span = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ds, one))) ? 2
+                       : _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ds, zero_i))) ? 1 : 0;
+        const bool narrow = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(dt, six))) == 0;
+        const std::size_t run0 = std::size_t(s_first) * std::size_t(image.cols) + std::size_t(t_first);
+        const RunLanes l = run_lanes(is, it, range);
+        value = narrow ? run_cell<FloatSamples, false>(f, run0, std::size_t(image.cols), range.s_span, l, ws, wt)
+                       : run_cell<FloatSamples, true>(f, run0, std::size_t(image.cols), range.s_span, l, ws, wt);
       } else {
-        alignas(32) float tail[8];
-        _mm256_store_ps(tail, value);
-        for (int k = 0; k < lanes; ++k) dst[c + k] = tail[k];
+        value = gathered_cell(f, _mm256_add_epi32(_mm256_mullo_epi32(is, v_cols), it), v_cols, ws, wt);
       }
-      if (ok_row) {
-        const std::uint64_t flags = kMaskBytes.bytes[inside_bits];
-        if (lanes == 8)
-          std::memcpy(ok_row + c, &flags, 8);
-        else
-          for (int k = 0; k < lanes; ++k) ok_row[c + k] = static_cast<unsigned char>((inside_bits >> k) & 1);
-      }
+      masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
+      store_chunk(k, value, dst + c, ok_row ? ok_row + c : nullptr);
     }
   }
   return masked;
@@ -311,6 +419,11 @@ int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFiel
   return render_avx2(Fixed16Samples{codes, scale}, g, m, out, valid, cols, r_begin, r_end, runs);
 }
 
+int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                             ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+  return render_image_avx2(image, g, m, out, valid, cols, r_begin, r_end);
+}
+
 #else
 
 bool light_field_avx2_available() { return false; }
@@ -320,6 +433,10 @@ int render_float_avx2(const float*, const LightFieldGeometry&, const RayMap&, Im
 }
 int render_fixed16_avx2(const std::uint16_t*, float, const LightFieldGeometry&, const RayMap&, ImageView<float>,
                         ImageView<unsigned char>, int, int, int, bool) {
+  return 0;
+}
+int render_source_image_avx2(const SourceImage&, const LightFieldGeometry&, const RayMap&, ImageView<float>,
+                             ImageView<unsigned char>, int, int, int) {
   return 0;
 }
 

@@ -20,6 +20,40 @@ struct RayMap {
 // True if this CPU runs the AVX2 kernel (AVX2 and FMA).
 bool light_field_avx2_available();
 
+// One render's source image (light_field_source_image.cpp): the field blended bilinearly in
+// (u, v) once per (s, t) sample of a box, at the (u, v) where the ray from the moved source
+// through that (s, t) sample crosses the source plane. The source plane and the (s, t) plane are
+// parallel, so that (u, v) is affine in (s, t): u depends on s only and v on t only, and the
+// (u, v) cell of neighbouring samples is nearly always the same. A pixel then needs only its
+// four (s, t) neighbours in the image instead of sixteen samples of the field. Against the
+// quadrilinear blend at the pixel's own ray the difference is the change of the (u, v) weights
+// between the pixel's ray and its (s, t) neighbours' rays: 0 where the source sits on the source
+// plane (the nominal pose), and a few thousandths of the difference between neighbouring (u, v)
+// samples at the envelope's edge.
+struct SourceImage {
+  float* values = nullptr;  // rows x cols, row-major: sample (s0 + i, t0 + j) at i * cols + j
+  int s0 = 0, t0 = 0, rows = 0, cols = 0;
+};
+
+// The box of (s, t) samples that the rays of a window's pixels (rows x cols from the map's
+// pixel (0, 0)) can read, with a sample's margin for rounding, clamped to the field; false where
+// a source image does not suit: a corner ray runs away from the planes, the rays miss the field
+// altogether (the per-ray kernels mask them), or the box holds more than max_samples samples.
+bool source_image_box(const LightFieldGeometry& g, const RayMap& m, int rows, int cols, long max_samples,
+                      SourceImage* box);
+// Fills rows [i_begin, i_end) of the image (its values must hold rows x cols floats).
+void blend_source_image_float(const float* samples, const LightFieldGeometry& g, const RayMap& m,
+                              const SourceImage& image, int i_begin, int i_end);
+void blend_source_image_fixed16(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
+                                const SourceImage& image, int i_begin, int i_end);
+// Renders rows [r_begin, r_end) of the window from the image, bilinearly in (s, t): the per-ray
+// kernels' mask (each pixel's own ray tested against the field) and pixel layout. Returns the
+// number of masked pixels. The AVX2 form equals the scalar one up to float rounding.
+int render_source_image(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                             ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
+
 // Float storage, 8 pixels at a time in AVX2 lanes, reading runs of samples where eight pixels
 // share their (u, v) cells (with `runs`; otherwise, and where they do not, gathering them); the
 // same results as the scalar kernel up to float rounding. Needs light_field_avx2_available() and

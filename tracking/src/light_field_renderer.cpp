@@ -1,6 +1,13 @@
 // The light-field renderer: for each pixel, the ray from the (moved) source through the pixel is
 // intersected with the two planes and the 16 surrounding samples are blended quadrilinearly.
 //
+// By default (RendererOptions::light_field_source_image) float and 16-bit fields take a shorter
+// way to nearly the same blend: the (u, v) part is done once per (s, t) sample of the window's
+// footprint, at that sample's own ray, into a per-render "source image"
+// (light_field_source_image.cpp explains why that works), and each pixel then reads its four (s, t)
+// neighbours from it. Where the image does not suit (source_image_box), the per-ray kernels below
+// render.
+//
 // Per render, everything is moved into the CT frame once. A pixel's ray direction d is affine in
 // (row, col); with q1 = d.e1 / d.n and q2 = d.e2 / d.n (one division per pixel) the four ray
 // coordinates are affine in (q1, q2), so the inner loop is a handful of multiply-adds, one
@@ -23,6 +30,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <vector>
 
 #include "cpu_dispatch.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
@@ -85,16 +93,51 @@ LFTRACK_INLINE float bilinear_st(const Fetch& fetch, std::size_t base, int is, i
   return top + ws * (bottom - top);
 }
 
+// The papers' blend: the 16 samples around (u, v, s, t), quadrilinearly.
+template <class Fetch>
+struct Quadrilinear {
+  Fetch fetch;
+  int top_u, top_v, top_s, top_t;  // size - 2 per axis
+  Quadrilinear(const Fetch& f, const LightFieldGeometry& g)
+      : fetch(f), top_u(g.size[0] - 2), top_v(g.size[1] - 2), top_s(g.size[2] - 2), top_t(g.size[3] - 2) {}
+  // Coordinates inside the field (clamped by the caller).
+  LFTRACK_INLINE float operator()(float cu, float cv, float cs, float ct) const {
+    const int iu = std::min(int(cu), top_u), iv = std::min(int(cv), top_v);
+    const int is = std::min(int(cs), top_s), it = std::min(int(ct), top_t);
+    const float wu = cu - float(iu), wv = cv - float(iv), ws = cs - float(is), wt = ct - float(it);
+    const float s00 = bilinear_st(fetch, fetch.uv(iu, iv), is, it, ws, wt);
+    const float s01 = bilinear_st(fetch, fetch.uv(iu, iv + 1), is, it, ws, wt);
+    const float s10 = bilinear_st(fetch, fetch.uv(iu + 1, iv), is, it, ws, wt);
+    const float s11 = bilinear_st(fetch, fetch.uv(iu + 1, iv + 1), is, it, ws, wt);
+    const float low = s00 + wv * (s01 - s00), high = s10 + wv * (s11 - s10);
+    return low + wu * (high - low);
+  }
+};
+
+// A render's source image (light_field_kernels.hpp), bilinearly in (s, t): (u, v) were blended
+// into it. Indices are clamped into the image, which holds every inside pixel's neighbours.
+struct SourceImageBilinear {
+  SourceImage image;
+  LFTRACK_INLINE float operator()(float, float, float cs, float ct) const {
+    const int is = std::clamp(int(cs) - image.s0, 0, image.rows - 2);
+    const int it = std::clamp(int(ct) - image.t0, 0, image.cols - 2);
+    const float ws = cs - float(is + image.s0), wt = ct - float(it + image.t0);
+    const float* row = image.values + std::size_t(is) * std::size_t(image.cols) + std::size_t(it);
+    const float* next = row + image.cols;
+    const float top = row[0] + wt * (row[1] - row[0]), bottom = next[0] + wt * (next[1] - next[0]);
+    return top + ws * (bottom - top);
+  }
+};
+
 // Renders rows [r_begin, r_end) of the window; returns the number of masked pixels. The column
-// loop is straight-line code (indices clamped into the field, the out-of-field test applied as
-// a select at the end) so that the compiler can vectorise it with gathers.
-template <bool kWithMask, class Fetch>
-LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g,
+// loop is straight-line code (coordinates clamped into the field, the out-of-field test applied
+// as a select at the end) so that the compiler can vectorise it with gathers.
+template <bool kWithMask, class Sampler>
+LFTRACK_INLINE int render_rows_impl(const Sampler& sample, const RayMap& m, const LightFieldGeometry& g,
                                     ImageView<float> out, ImageView<unsigned char> valid, int cols,
                                     int r_begin, int r_end) {
   int masked = 0;
   const Vector3d& n = g.axis;
-  const int top_u = g.size[0] - 2, top_v = g.size[1] - 2, top_s = g.size[2] - 2, top_t = g.size[3] - 2;
   for (int r = r_begin; r < r_end; ++r) {
     const Vector3d d_row = m.d00 + m.d_row * r;
     // d.n, d.e1, d.e2 are affine in the column.
@@ -115,15 +158,7 @@ LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const L
                           (fs >= 0) & (fs <= m.limit[2]) & (ft >= 0) & (ft <= m.limit[3]);
       const float cu = inside ? fu : 0.0f, cv = inside ? fv : 0.0f, cs = inside ? fs : 0.0f,
                   ct = inside ? ft : 0.0f;
-      const int iu = std::min(int(cu), top_u), iv = std::min(int(cv), top_v);
-      const int is = std::min(int(cs), top_s), it = std::min(int(ct), top_t);
-      const float wu = cu - float(iu), wv = cv - float(iv), ws = cs - float(is), wt = ct - float(it);
-      const float s00 = bilinear_st(fetch, fetch.uv(iu, iv), is, it, ws, wt);
-      const float s01 = bilinear_st(fetch, fetch.uv(iu, iv + 1), is, it, ws, wt);
-      const float s10 = bilinear_st(fetch, fetch.uv(iu + 1, iv), is, it, ws, wt);
-      const float s11 = bilinear_st(fetch, fetch.uv(iu + 1, iv + 1), is, it, ws, wt);
-      const float low = s00 + wv * (s01 - s00), high = s10 + wv * (s11 - s10);
-      const float value = low + wu * (high - low);
+      const float value = sample(cu, cv, cs, ct);
       // Multiplying (not selecting) keeps the interpolation unconditional, so it is not sunk
       // into a branch; outside the field the clamped coordinates read finite samples, so the
       // product is an exact 0.
@@ -138,28 +173,28 @@ LFTRACK_INLINE int render_rows_impl(const Fetch& fetch, const RayMap& m, const L
 }
 
 // The mask store is a template parameter so that neither loop has a branch in it.
-template <class Fetch>
-LFTRACK_INLINE int render_rows(const Fetch& fetch, const RayMap& m, const LightFieldGeometry& g,
+template <class Sampler>
+LFTRACK_INLINE int render_rows(const Sampler& sample, const RayMap& m, const LightFieldGeometry& g,
                                ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
                                int r_end) {
-  return valid.data ? render_rows_impl<true>(fetch, m, g, out, valid, cols, r_begin, r_end)
-                    : render_rows_impl<false>(fetch, m, g, out, valid, cols, r_begin, r_end);
+  return valid.data ? render_rows_impl<true>(sample, m, g, out, valid, cols, r_begin, r_end)
+                    : render_rows_impl<false>(sample, m, g, out, valid, cols, r_begin, r_end);
 }
 
 LFTRACK_HOT_CLONES
 int render_float(const FloatFetch& f, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
                  ImageView<unsigned char> valid, int cols, int r0, int r1) {
-  return render_rows(f, m, g, out, valid, cols, r0, r1);
+  return render_rows(Quadrilinear<FloatFetch>(f, g), m, g, out, valid, cols, r0, r1);
 }
 LFTRACK_HOT_CLONES
 int render_fixed16(const Fixed16Fetch& f, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
                    ImageView<unsigned char> valid, int cols, int r0, int r1) {
-  return render_rows(f, m, g, out, valid, cols, r0, r1);
+  return render_rows(Quadrilinear<Fixed16Fetch>(f, g), m, g, out, valid, cols, r0, r1);
 }
 LFTRACK_HOT_CLONES
 int render_vq(const VqFetch& f, const RayMap& m, const LightFieldGeometry& g, ImageView<float> out,
               ImageView<unsigned char> valid, int cols, int r0, int r1) {
-  return render_rows(f, m, g, out, valid, cols, r0, r1);
+  return render_rows(Quadrilinear<VqFetch>(f, g), m, g, out, valid, cols, r0, r1);
 }
 
 // A view's fields: the field as built, and its (s, t)-averaged copies by 2 and 4 (absent where
@@ -218,8 +253,8 @@ double nominal_footprint_samples(const LightField::Header& h, const XrayView& vi
 
 class LightFieldRenderer final : public DrrRenderer {
  public:
-  LightFieldRenderer(std::vector<FieldLevels> fields, ThreadPool* pool, SimdLevel simd)
-      : fields_(std::move(fields)), pool_(pool) {
+  LightFieldRenderer(std::vector<FieldLevels> fields, ThreadPool* pool, SimdLevel simd, bool source_image)
+      : fields_(std::move(fields)), pool_(pool), source_image_(source_image) {
     name_ = std::string("lightfield-") + to_string(fields_.front().field->header().storage);
     bool indexable = true;  // the kernels index samples with 32-bit lanes
     for (const auto& f : fields_)
@@ -227,6 +262,11 @@ class LightFieldRenderer final : public DrrRenderer {
     use_avx512_ = indexable && simd == SimdLevel::kBest && light_field_avx512_available();
     use_avx2_ = indexable && simd != SimdLevel::kScalar && light_field_avx2_available();
     avx2_runs_ = simd != SimdLevel::kAvx2Gathers;
+    for (const auto& f : fields_) {
+      const auto& size = f.field->geometry().size;
+      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]));
+    }
+    image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
     if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
       name_ += std::to_string(fields_.front().field->header().codebook_size);
     }
@@ -284,6 +324,7 @@ class LightFieldRenderer final : public DrrRenderer {
     const LightFieldStorage storage = field->header().storage;
     const double fixed_scale = field->header().fixed_scale;
 
+    if (render_from_source_image(g, m, storage, *field, window, out, extras)) return {};
     std::atomic<int> masked{0};
     const auto& s = g.size;
     auto rows = [&](int r0, int r1) {
@@ -342,8 +383,54 @@ class LightFieldRenderer final : public DrrRenderer {
   }
 
  private:
+  // The source-image path (light_field_kernels.hpp) for float and 16-bit fields; false where
+  // it does not suit (source_image_box), and the per-ray kernels render instead.
+  bool render_from_source_image(const LightFieldGeometry& g, const RayMap& m, LightFieldStorage storage,
+                                const LightField& field, const PixelWindow& window, ImageView<float> out,
+                                RenderExtras* extras) const {
+    if (!source_image_ || storage == LightFieldStorage::kVq) return false;
+    SourceImage image;
+    // A window reads about one (s, t) sample a pixel, or fewer; a box far larger means pixels far
+    // coarser than the samples (without an averaged copy), where blending it all would cost more
+    // than it saves.
+    const long max_samples = 4L * window.rows * window.cols + 4096;
+    if (!source_image_box(g, m, window.rows, window.cols, max_samples, &image)) return false;
+    // One buffer per thread, kept: sized for the largest field's (s, t) plane on first use, so a
+    // registration allocates nothing after its first render on each thread.
+    thread_local std::vector<float> buffer;
+    const std::size_t needed = std::size_t(image.rows) * std::size_t(image.cols);
+    if (buffer.size() < needed) buffer.resize(std::max(needed, image_reserve_));
+    image.values = buffer.data();
+    const auto blend = [&](int i0, int i1) {
+      if (storage == LightFieldStorage::kFloat32)
+        blend_source_image_float(field.float_samples(), g, m, image, i0, i1);
+      else
+        blend_source_image_fixed16(field.fixed_samples(), float(field.header().fixed_scale), g, m, image, i0, i1);
+    };
+    std::atomic<int> masked{0};
+    const auto rows = [&](int r0, int r1) {
+      const int n = use_avx2_ ? render_source_image_avx2(image, g, m, out, extras->valid, window.cols, r0, r1)
+                              : render_source_image(image, g, m, out, extras->valid, window.cols, r0, r1);
+      masked.fetch_add(n, std::memory_order_relaxed);
+    };
+    if (pool_) {
+      pool_->parallel_for(image.rows, 8, blend);
+      pool_->parallel_for(window.rows, 8, rows);
+    } else {
+      blend(0, image.rows);
+      rows(0, window.rows);
+    }
+    extras->masked_pixels = masked.load();
+    return true;
+  }
+
+  // At most 16 MiB of source image a thread kept between renders.
+  static constexpr std::size_t kMaxImageReserve = std::size_t{1} << 22;
+
   std::vector<FieldLevels> fields_;
   ThreadPool* pool_;
+  bool source_image_;
+  std::size_t image_reserve_ = 0;  // floats
   std::string name_;
   // Fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first choice; every
   // storage mode) or AVX2 + FMA (float and 16-bit).
@@ -354,8 +441,15 @@ class LightFieldRenderer final : public DrrRenderer {
 
 }  // namespace
 
+LFTRACK_HOT_CLONES
+int render_source_image(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+  return render_rows(SourceImageBilinear{image}, m, g, out, valid, cols, r_begin, r_end);
+}
+
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
-    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd, bool mips) {
+    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd, bool mips,
+    bool source_image) {
   if (fields.empty()) {
     return failed_precondition(
         "the lightfield renderer needs precomputed light fields (run `lftrack precompute`)");
@@ -382,7 +476,7 @@ Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
       l.averaged[k] = *averaged;
     }
   }
-  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(levels), pool, simd));
+  return std::unique_ptr<DrrRenderer>(std::make_unique<LightFieldRenderer>(std::move(levels), pool, simd, source_image));
 }
 
 }  // namespace lftrack::tracking

@@ -104,7 +104,8 @@ std::vector<std::string> renderer_names() {
 
 // In light_field_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_light_field_renderer(
-    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd, bool mips);
+    std::vector<std::shared_ptr<const LightField>> fields, ThreadPool* pool, SimdLevel simd, bool mips,
+    bool source_image);
 // In octree_renderer.cpp.
 Result<std::unique_ptr<DrrRenderer>> make_octree_renderer(std::shared_ptr<const MuVolume> volume,
                                                           const RendererOptions& options);
@@ -113,7 +114,8 @@ Result<std::unique_ptr<DrrRenderer>> make_renderer(std::string_view name,
                                                    std::shared_ptr<const MuVolume> volume,
                                                    const RendererOptions& options) {
   if (name == "lightfield")
-    return make_light_field_renderer(options.light_fields, options.pool, options.simd, options.light_field_mips);
+    return make_light_field_renderer(options.light_fields, options.pool, options.simd, options.light_field_mips,
+                                     options.light_field_source_image);
   if (name == "octree") return make_octree_renderer(std::move(volume), options);
   if (!volume) return invalid_argument("make_renderer: no volume");
   if (auto s = check_attenuation_volume(*volume); !s.ok()) return s.with_context("make_renderer");

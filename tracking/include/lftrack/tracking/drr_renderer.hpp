@@ -86,6 +86,14 @@ struct RendererOptions {
   // samples (the 4 x 4 binned registration levels). False: every pixel samples the ray through
   // its centre.
   bool light_field_mips = true;
+  // Light-field renderer, float and 16-bit fields: blend (u, v) once per (s, t) sample of the
+  // window's footprint at that sample's ray from the moved source (a "source image"), then each
+  // pixel bilinearly in (s, t) from it, instead of each pixel's 16 samples quadrilinearly at its
+  // own ray. The two differ only by how much (u, v) moves between a pixel's ray and its (s, t)
+  // neighbours' (nothing at the nominal pose); the image path reads a quarter of the samples a
+  // pixel (BENCHMARKS.md, issue 24). False: the papers' per-ray blend (and, on AVX-512 CPUs,
+  // its AVX-512 kernels).
+  bool light_field_source_image = true;
 };
 
 // Names accepted by make_renderer, in a stable order.
