@@ -395,12 +395,20 @@ class LightFieldRenderer final : public DrrRenderer {
     // than it saves.
     const long max_samples = 4L * window.rows * window.cols + 4096;
     if (!source_image_box(g, m, window.rows, window.cols, max_samples, &image)) return false;
-    // One buffer per thread, kept: sized for the largest field's (s, t) plane on first use, so a
-    // registration allocates nothing after its first render on each thread.
-    thread_local std::vector<float> buffer;
+    // One buffer per thread, kept: sized for the largest field's (s, t) plane (at most 16 MiB) on
+    // first use, so a registration allocates nothing after its first render on each thread. A
+    // larger image (a window over most of a field of more than 2^22 (s, t) samples) gets a buffer
+    // of its own for the render.
+    thread_local std::vector<float> kept;
+    std::vector<float> own;
     const std::size_t needed = std::size_t(image.rows) * std::size_t(image.cols);
-    if (buffer.size() < needed) buffer.resize(std::max(needed, image_reserve_));
-    image.values = buffer.data();
+    if (needed > kMaxImageReserve) {
+      own.resize(needed);
+      image.values = own.data();
+    } else {
+      if (kept.size() < needed) kept.resize(std::max(needed, image_reserve_));
+      image.values = kept.data();
+    }
     const auto blend = [&](int i0, int i1) {
       if (storage == LightFieldStorage::kFloat32)
         blend_source_image_float(field.float_samples(), g, m, image, i0, i1);
