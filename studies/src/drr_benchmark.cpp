@@ -213,11 +213,10 @@ Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBe
         fields.push_back(*converted);
       }
       const double convert_s = std::chrono::duration<double>(Clock::now() - c0).count();
-      const auto float_fields_again = fields;
       LFTRACK_RETURN_IF_ERROR(time_fields(std::move(fields), "", report.precompute_s + convert_s));
-      // Float fields also by the papers' per-ray blend, beside the source image.
+      // The float fields also by the papers' per-ray blend, beside the source image.
       if (mode.storage == tracking::LightFieldStorage::kFloat32)
-        LFTRACK_RETURN_IF_ERROR(time_fields(float_fields_again, "-per-ray", report.precompute_s, false));
+        LFTRACK_RETURN_IF_ERROR(time_fields(float_fields, "-per-ray", report.precompute_s, false));
     }
     if (o.both_integrations) {
       tracking::LightFieldSpec other = scene.scene.light_field;
