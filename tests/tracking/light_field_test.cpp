@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "fixtures.hpp"
-#include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
 #include "lftrack/tracking/random_draws.hpp"
