@@ -78,6 +78,8 @@ TEST_P(MutualInformationAgainstReference, AgreesWithinRounding) {
       if (u(rng) < 0.05f) moving_valid.at(r, c) = 0;
       if (u(rng) < 0.01f) moving.at(r, c) = u(rng) < 0.5f ? std::numeric_limits<float>::quiet_NaN()
                                                           : std::numeric_limits<float>::infinity();
+      if (u(rng) < 0.01f) fixed.at(r, c) = u(rng) < 0.5f ? std::numeric_limits<float>::quiet_NaN()
+                                                         : -std::numeric_limits<float>::infinity();
     }
   for (const bool normalised : {false, true}) {
     SimilarityOptions options;
@@ -98,11 +100,13 @@ TEST_P(MutualInformationAgainstReference, AgreesWithinRounding) {
   }
 }
 
-// The real-CT window, its 2 x 2 binned level, and a detector larger than 2^16 pixels (fewer
-// weight bits, so that no sub-histogram cell can overflow).
+// The real-CT window, its 2 x 2 binned level, a detector larger than 2^16 pixels (fewer weight
+// bits, so that no sub-histogram cell can overflow), and the images on either side of
+// kMiManyPixels (4,096: one histogram up to it, four sub-histograms beyond).
 INSTANTIATE_TEST_SUITE_P(Sizes, MutualInformationAgainstReference,
                          ::testing::Values(Case{144, 316, 64}, Case{72, 158, 64}, Case{512, 512, 64},
-                                           Case{7, 9, 2}, Case{40, 33, 1024}));
+                                           Case{7, 9, 2}, Case{40, 33, 1024}, Case{64, 64, 64},
+                                           Case{64, 65, 64}));
 
 }  // namespace
 }  // namespace lftrack::tracking

@@ -44,30 +44,28 @@ class MutualInformation final : public Similarity {
     rows_ = f.rows;
     cols_ = f.cols;
     const std::size_t pixels = std::size_t(rows_) * std::size_t(cols_);
-    auto usable = [&](int r, int c) { return std::isfinite(f.at(r, c)) && (v.empty() || v.at(r, c) != 0); };
-    float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
-    for (int r = 0; r < rows_; ++r)
-      for (int c = 0; c < cols_; ++c)
-        if (usable(r, c)) {
-          lo = std::min(lo, f.at(r, c));
-          hi = std::max(hi, f.at(r, c));
-        }
     // Rows of bins_ counts, one per fixed bin, and a spare row for the unusable pixels.
     row_stride_ = std::uint32_t(bins_);
     unusable_row_ = std::uint32_t(bins_) * row_stride_;
     histogram_stride_ = std::size_t(bins_ + 1) * row_stride_;
-    fixed_row_.assign(pixels, unusable_row_);
+    // The usable pixels' range (finite, and the mask's), by the moving range's pass: with every
+    // fixed row offset 0 (usable), only the mask and the value decide.
+    fixed_row_.assign(pixels, 0);
+    std::int32_t lo_key = std::numeric_limits<std::int32_t>::max(), hi_key = std::numeric_limits<std::int32_t>::min();
+    for (int r = 0; r < rows_; ++r)
+      mi_moving_range(MiRow{f.row_ptr(r), v.empty() ? nullptr : v.row_ptr(r), &fixed_row_[std::size_t(r) * std::size_t(cols_)], cols_},
+                      unusable_row_, &lo_key, &hi_key, avx2_);
+    const bool any_usable = lo_key <= hi_key;
+    const float lo = any_usable ? mi_from_order_key(lo_key) : 0.f, hi = any_usable ? mi_from_order_key(hi_key) : 0.f;
     const double scale = hi > lo ? (bins_ - 1e-9) / (double(hi) - lo) : 0.0;
     for (int r = 0; r < rows_; ++r)
-      for (int c = 0; c < cols_; ++c)
-        if (usable(r, c)) {
-          const int bin = std::clamp(static_cast<int>((f.at(r, c) - lo) * scale), 0, bins_ - 1);
-          fixed_row_[std::size_t(r) * std::size_t(cols_) + std::size_t(c)] = std::uint32_t(bin) * row_stride_;
-        }
+      mi_fixed_rows(f.row_ptr(r), v.empty() ? nullptr : v.row_ptr(r), cols_, lo, scale, bins_ - 1, row_stride_,
+                    unusable_row_, &fixed_row_[std::size_t(r) * std::size_t(cols_)], avx2_);
     // No count may reach 2^32: the pixels times the unit stay below it.
     const int pixel_bits = static_cast<int>(std::bit_width(pixels));
     weight_bits_ = std::clamp(32 - pixel_bits, 1, 16);
-    histograms_.assign(kMiSubHistograms * histogram_stride_, 0);
+    copies_ = pixels > std::size_t(kMiManyPixels) ? kMiSubHistograms : 1;
+    histograms_.assign(std::size_t(copies_) * histogram_stride_, 0);
     moving_marginal_.assign(std::size_t(bins_ + 1), 0.0);
     return {};
   }
@@ -98,24 +96,26 @@ class MutualInformation final : public Similarity {
     binning.lo = lo;
     binning.scale = float((bins_ - 1) / (double(hi) - lo));
     binning.last_bin = bins_ - 2;
+    binning.top = float(bins_ - 1);
     binning.weight_unit = float(unit);
     binning.weight_max = int(unit);
     binning.unit = unit;
     std::fill(histograms_.begin(), histograms_.end(), std::uint64_t{0});
-    const MiHistograms histograms{histograms_.data()};
+    const MiHistograms histograms{histograms_.data(), copies_};
     if (contiguous)
       mi_accumulate(whole, binning, histograms, avx2_);
     else
       for (int r = 0; r < rows_; ++r) mi_accumulate(image_row(r), binning, histograms, avx2_);
-    // The sub-histograms summed in place, cell k into word k (it reads words k * kMiSubHistograms
-    // and on, never below k; no half carries: every count stays below 2^32).
+    // The sub-histograms summed in place, cell k into word k (it reads words k * copies_ and on,
+    // never below k; no half carries: every count stays below 2^32).
     std::uint64_t* joint = histograms_.data();
-    for (std::size_t k = 0; k < unusable_row_; ++k) {
-      const std::uint64_t* copies = joint + k * kMiSubHistograms;
-      std::uint64_t sum = copies[0];
-      for (int s = 1; s < kMiSubHistograms; ++s) sum += copies[s];
-      joint[k] = sum;
-    }
+    if (copies_ > 1)
+      for (std::size_t k = 0; k < unusable_row_; ++k) {
+        const std::uint64_t* copies = joint + k * std::size_t(copies_);
+        std::uint64_t sum = copies[0];
+        for (int s = 1; s < copies_; ++s) sum += copies[s];
+        joint[k] = sum;
+      }
     // Entropies from sum(k ln k) over the non-empty cells: H = ln N - sum(k ln k) / N, N = n * unit.
     std::fill(moving_marginal_.begin(), moving_marginal_.end(), 0.0);
     double joint_sum = 0, fixed_sum = 0, moving_sum = 0;
@@ -124,6 +124,11 @@ class MutualInformation final : public Similarity {
       double fixed_count = 0;
       std::uint64_t upper = 0;  // the previous cell's upper-bin count
       for (int b = 0; b < bins_; ++b) {
+        // Runs of empty words (most of a joint histogram) skipped eight at a time.
+        while (upper == 0 && b + 8 <= bins_ &&
+               (row[b] | row[b + 1] | row[b + 2] | row[b + 3] | row[b + 4] | row[b + 5] | row[b + 6] | row[b + 7]) == 0)
+          b += 8;
+        if (b >= bins_) break;
         const std::uint64_t k = (row[b] & 0xffffffffu) + upper;
         upper = row[b] >> 32;
         if (k == 0) continue;
@@ -149,6 +154,7 @@ class MutualInformation final : public Similarity {
   bool avx2_;
   int rows_ = 0, cols_ = 0;
   int weight_bits_ = 16;
+  int copies_ = kMiSubHistograms;  // sub-histograms (MiHistograms::copies), by the image's size
   std::uint32_t row_stride_ = 0, unusable_row_ = 0;
   std::size_t histogram_stride_ = 0;
   std::vector<std::uint32_t> fixed_row_;  // per pixel: its fixed bin's row offset, or the spare row
