@@ -112,6 +112,42 @@ TEST_P(VectorisedKernel, MatchesScalar) {
   }
 }
 
+// The AVX2 kernels skip the per-pixel field test on rows whose two end rays lie inside the field
+// with a margin (row_inside_field). Rows that graze the field's edge must keep the per-pixel
+// mask: the whole detector shifted and turned in small steps, so that the edge crosses rows and
+// columns at many sub-sample positions, against the portable kernel (which tests every pixel).
+TEST(VectorisedKernelRows, RowsGrazingTheFieldsEdgeKeepThePerPixelMask) {
+  const XrayView detector = fixture_plan().view_room;
+  const PixelWindow w = PixelWindow::full(detector.rows, detector.cols);
+  for (const bool source_image : {false, true}) {
+    RendererOptions scalar_options, simd_options;
+    scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
+    scalar_options.simd = SimdLevel::kScalar;
+    simd_options.simd = SimdLevel::kBest;
+    scalar_options.light_field_source_image = simd_options.light_field_source_image = source_image;
+    auto scalar = make_renderer("lightfield", nullptr, scalar_options);
+    auto simd = make_renderer("lightfield", nullptr, simd_options);
+    ASSERT_TRUE(scalar.ok() && simd.ok());
+    Image<float> a(w.rows, w.cols), b(w.rows, w.cols);
+    Image<unsigned char> va(w.rows, w.cols), vb(w.rows, w.cols);
+    int partly_masked = 0;
+    for (int step = 0; step < 40; ++step) {
+      Pose pose = Pose::Identity();
+      pose.linear() = rotation_exp(Vector3d(0.0013, -0.0021, 0.0017) * step);
+      pose.translation() = Vector3d(1.07, -0.83, 0.61) * step;
+      RenderExtras ea, eb;
+      ea.valid = va.view();
+      eb.valid = vb.view();
+      ASSERT_TRUE((*scalar)->render(pose, detector, w, a.view(), &ea).ok());
+      ASSERT_TRUE((*simd)->render(pose, detector, w, b.view(), &eb).ok());
+      ASSERT_EQ(ea.masked_pixels, eb.masked_pixels) << step << " " << source_image;
+      ASSERT_EQ(va.pixels(), vb.pixels()) << step << " " << source_image;
+      partly_masked += ea.masked_pixels > 0 && ea.masked_pixels < w.rows * w.cols;
+    }
+    EXPECT_GT(partly_masked, 10) << "the edge must cross the detector in most steps";
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(StorageModes, VectorisedKernel,
                          ::testing::Values(KernelCase{LightFieldStorage::kFloat32, SimdLevel::kBest},
                                            KernelCase{LightFieldStorage::kFixed16, SimdLevel::kBest},

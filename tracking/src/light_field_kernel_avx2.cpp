@@ -168,16 +168,19 @@ struct MaskBytes {
 };
 constexpr MaskBytes kMaskBytes;
 
-// A row's ray directions: d.n, d.e1 and d.e2 are affine in the column.
+// A row's ray directions: d.n, d.e1 and d.e2 are affine in the column. inside: every ray of the
+// row passes the field test (row_inside_field), so its chunks of eight skip it.
 struct RowRays {
   __m256 dn0, dn1, de10, de11, de20, de21;
+  bool inside;
 };
 
-LFTRACK_AVX2 inline RowRays row_rays(const LightFieldGeometry& g, const RayMap& m, int r) {
+LFTRACK_AVX2 inline RowRays row_rays(const LightFieldGeometry& g, const RayMap& m, int r, int cols) {
   const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
   return {_mm256_set1_ps(float(d_row.dot(g.axis))), _mm256_set1_ps(float(m.d_col.dot(g.axis))),
           _mm256_set1_ps(float(d_row.dot(g.e1))),   _mm256_set1_ps(float(m.d_col.dot(g.e1))),
-          _mm256_set1_ps(float(d_row.dot(g.e2))),   _mm256_set1_ps(float(m.d_col.dot(g.e2)))};
+          _mm256_set1_ps(float(d_row.dot(g.e2))),   _mm256_set1_ps(float(m.d_col.dot(g.e2))),
+          row_inside_field(g, m, r, cols)};
 }
 
 // The ray map's constants in lanes.
@@ -209,6 +212,8 @@ LFTRACK_AVX2 inline ChunkRays chunk_rays(const RowRays& row, const MapLanes& map
   const __m256 q2 = _mm256_mul_ps(_mm256_fmadd_ps(row.de21, cf, row.de20), inv);
   const __m256 fu = _mm256_fmadd_ps(map.gain[0], q1, map.base[0]), fv = _mm256_fmadd_ps(map.gain[1], q2, map.base[1]);
   const __m256 fs = _mm256_fmadd_ps(map.gain[2], q1, map.base[2]), ft = _mm256_fmadd_ps(map.gain[3], q2, map.base[3]);
+  // A whole chunk of a row whose rays are all inside: the test below would pass in every lane.
+  if (row.inside && cols - c >= 8) return {fu, fv, fs, ft, _mm256_castsi256_ps(_mm256_set1_epi32(-1)), 0xff, 8};
   // Ordered comparisons: NaN is outside.
   __m256 inside = _mm256_cmp_ps(dn, zero, _CMP_GT_OQ);
   inside = _mm256_and_ps(inside, _mm256_and_ps(_mm256_cmp_ps(fu, zero, _CMP_GE_OQ), _mm256_cmp_ps(fu, map.limit[0], _CMP_LE_OQ)));
@@ -291,7 +296,7 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
   const MapLanes map(m);
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
-    const RowRays row = row_rays(g, m, r);
+    const RowRays row = row_rays(g, m, r, cols);
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     for (int c = 0; c < cols; c += 8) {
@@ -365,7 +370,7 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
   const MapLanes map(m);
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
-    const RowRays row = row_rays(g, m, r);
+    const RowRays row = row_rays(g, m, r, cols);
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     for (int c = 0; c < cols; c += 8) {

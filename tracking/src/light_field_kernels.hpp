@@ -17,6 +17,13 @@ struct RayMap {
   Eigen::Vector3d d00, d_row, d_col;  // direction of pixel (row0, col0) and its increments, CT frame
 };
 
+// True if every pixel ray of row r (columns 0 .. cols - 1 from the map's pixel (0, 0)) runs
+// towards the planes (d.n > 0) and reaches them inside the field on all four axes, with a margin
+// far beyond the kernels' float rounding: the kernels' per-pixel test then passes for each of
+// them, and a kernel may skip it. Along a row a coordinate q = (e0 + e1 c) / (n0 + n1 c) is
+// monotonic where the denominator keeps its sign, so the row's two end rays bound it.
+bool row_inside_field(const LightFieldGeometry& g, const RayMap& m, int r, int cols);
+
 // True if this CPU runs the AVX2 kernel (AVX2 and FMA).
 bool light_field_avx2_available();
 

@@ -1,0 +1,46 @@
+// Whether a whole row of pixel rays lies inside a light field (light_field_kernels.hpp,
+// row_inside_field): the kernels' per-pixel field test, made once per row where it cannot fail.
+//
+// The kernels compute each ray's sample coordinates in float from float constants:
+// f_a = base_a + gain_a * q, q = (e0 + e1 c) / (n0 + n1 c). Here the row's two end rays are
+// evaluated in double, and the field must hold them with a margin of about 170 float epsilons of
+// every term that enters the float computation (each of the kernel's roundings is at most half
+// an epsilon of one of them). A row near the field's edge, or one that fails, keeps the
+// per-pixel test; the result is the same mask either way.
+
+#include <algorithm>
+#include <cmath>
+
+#include "light_field_kernels.hpp"
+
+namespace lftrack::tracking {
+
+bool row_inside_field(const LightFieldGeometry& g, const RayMap& m, int r, int cols) {
+  if (cols < 1) return false;
+  constexpr double kRelative = 1e-5;  // about 170 float epsilons
+  const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
+  const double last = double(cols - 1);
+  const double n0 = d_row.dot(g.axis), n1 = m.d_col.dot(g.axis);
+  const double n_first = n0, n_last = n0 + n1 * last, n_min = std::min(n_first, n_last);
+  const double n_size = std::abs(n0) + std::abs(n1) * last;
+  // Both end rays run towards the planes, and so (n is affine in c) does every ray between them.
+  if (!(n_min > 1e-3 * n_size)) return false;  // NaN fails too
+  const Eigen::Vector3d* const e_axes[2] = {&g.e1, &g.e2};
+  for (int k = 0; k < 2; ++k) {
+    const double e0 = d_row.dot(*e_axes[k]), e1 = m.d_col.dot(*e_axes[k]);
+    const double q_first = e0 / n_first, q_last = (e0 + e1 * last) / n_last;
+    const double q_max = std::max(std::abs(q_first), std::abs(q_last));
+    // q's error: of its numerator and denominator, relative to the smallest denominator.
+    const double dq = kRelative * ((std::abs(e0) + std::abs(e1) * last) + q_max * n_size) / n_min;
+    for (const int a : {k, k + 2}) {  // q1 maps to u and s, q2 to v and t
+      const double gain = m.gain[a], base = m.base[a];
+      const double lo = std::min(gain * q_first, gain * q_last) + base;
+      const double hi = std::max(gain * q_first, gain * q_last) + base;
+      const double margin = std::abs(gain) * dq + kRelative * (std::abs(gain) * q_max + std::abs(base) + 1.0);
+      if (!(lo >= margin && hi <= double(m.limit[a]) - margin)) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace lftrack::tracking
