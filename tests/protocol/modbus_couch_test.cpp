@@ -166,9 +166,13 @@ TEST_F(ModbusCouchTest, ADroppedConnectionIsReconnectedOutsideTheCycleWithTheCou
   server->inject(CouchServerFault::kDropConnection);
   ActuatorState s;
   EXPECT_EQ(driver->readback(&s, in_ms(100)), DeviceStatus::kDisconnected);
-  // Cycle calls now answer at once, without touching the socket.
+  // Cycle calls now answer at once and send nothing: disconnected, or, where the reconnection
+  // outside the cycle has already finished (a loaded host can run it first), refused until a
+  // read-back has taken the couch's target as the base. Either way the couch holds (below).
   const auto t0 = Clock::now();
-  EXPECT_EQ(driver->command(shift(1), in_ms(100)), DeviceStatus::kDisconnected);
+  const DeviceStatus right_after = driver->command(shift(1), in_ms(100));
+  EXPECT_TRUE(right_after == DeviceStatus::kDisconnected || right_after == DeviceStatus::kRefused)
+      << static_cast<int>(right_after);
   EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.002);
   const auto until = Clock::now() + std::chrono::seconds(5);
   while (!driver->connected() && Clock::now() < until)
