@@ -5,13 +5,15 @@
 // value's two nearest bins by its linear weight rounded to a multiple of 2^-weight_bits (16 bits
 // up to 65,535 pixels; scores agree with a double-precision histogram to about 1e-6). Integer
 // sums do not depend on the order of the additions, so the score is the same bit for bit whatever
-// the pass structure, and the additions go to four sub-histograms: neighbouring pixels, which
-// often fall in the same cell, then update different memory and do not wait on each other's store.
+// the pass structure, and the additions of an image of more than 4,096 pixels go to four
+// sub-histograms: neighbouring pixels, which often fall in the same cell, then update different
+// memory and do not wait on each other's store. A smaller image's score is set by clearing and
+// scanning the cells, so it uses one.
 //
 // A score is two passes over the pixels, in AVX2 lanes where the CPU has them
 // (mutual_information_kernels.cpp): the moving range, then each pixel's cell and weight
 // (unusable pixels go to a spare row that is never read) added into the sub-histograms; then the
-// entropies from the non-empty cells.
+// entropies from the non-empty cells. prepare() bins the fixed image by two such passes too.
 
 #include "mutual_information.hpp"
 
