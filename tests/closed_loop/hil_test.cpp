@@ -21,13 +21,14 @@ using sim::CouchServerFault;
 
 // The same seed and timing as in process: every cycle tracked, the same residual to within the
 // protocol's rounding and the in-process run's own spread. The in-process run is not the same
-// from one run to the next (2026-11-27, repeated: mean 0.380-0.388 mm, p95 0.456-0.505 mm, where
-// the Modbus and CAN runs gave 0.391 / 0.473 and 0.369 / 0.448 mm every time; not yet explained),
-// so the p95 of its 120 cycles gets 0.08 mm.
+// from one run to the next (2026-11-27, repeated: mean 0.380-0.390 mm, p95 0.453-0.505 mm, also
+// when it runs after the HIL run, where the Modbus and CAN runs gave 0.391 / 0.473 and 0.369 /
+// 0.448 mm every time; not yet explained), so the mean gets 0.03 mm and the p95 of its 120
+// cycles 0.08 mm.
 void expect_tracks_as_in_process(const LoopSummary& in_process, const LoopSummary& hil) {
   expect_tracks_every_cycle(hil, 120);
   ASSERT_TRUE(in_process.residual_mean_mm && hil.residual_mean_mm);
-  EXPECT_NEAR(*hil.residual_mean_mm, *in_process.residual_mean_mm, 0.02);
+  EXPECT_NEAR(*hil.residual_mean_mm, *in_process.residual_mean_mm, 0.03);
   EXPECT_NEAR(*hil.residual_p95_mm, *in_process.residual_p95_mm, 0.08);
 }
 
