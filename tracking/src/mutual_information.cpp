@@ -50,13 +50,13 @@ class MutualInformation final : public Similarity {
     row_stride_ = std::uint32_t(bins_);
     unusable_row_ = std::uint32_t(bins_) * row_stride_;
     histogram_stride_ = std::size_t(bins_ + 1) * row_stride_;
-    // The usable pixels' range (finite, and the mask's), by the moving range's pass: with every
-    // fixed row offset 0 (usable), only the mask and the value decide.
-    fixed_row_.assign(pixels, 0);
+    // The usable pixels' range (finite, and the mask's), by the moving range's pass on the fixed
+    // image alone (no fixed rows: only the mask and the value decide).
+    fixed_row_.resize(pixels);
     std::int32_t lo_key = std::numeric_limits<std::int32_t>::max(), hi_key = std::numeric_limits<std::int32_t>::min();
     for (int r = 0; r < rows_; ++r)
-      mi_moving_range(MiRow{f.row_ptr(r), v.empty() ? nullptr : v.row_ptr(r), &fixed_row_[std::size_t(r) * std::size_t(cols_)], cols_},
-                      unusable_row_, &lo_key, &hi_key, avx2_);
+      mi_moving_range(MiRow{f.row_ptr(r), v.empty() ? nullptr : v.row_ptr(r), nullptr, cols_}, unusable_row_, &lo_key,
+                      &hi_key, avx2_);
     const bool any_usable = lo_key <= hi_key;
     const float lo = any_usable ? mi_from_order_key(lo_key) : 0.f, hi = any_usable ? mi_from_order_key(hi_key) : 0.f;
     const double scale = hi > lo ? (bins_ - 1e-9) / (double(hi) - lo) : 0.0;

@@ -15,9 +15,13 @@
 namespace lftrack::tracking {
 namespace {
 
+// A value finite (false for NaN and inf) and its mask (nullptr: all valid) non-zero.
+inline bool finite_and_valid(const float* values, const unsigned char* valid, int c) {
+  return (valid == nullptr || valid[c] != 0) & (std::abs(values[c]) <= std::numeric_limits<float>::max());
+}
+
 inline bool usable_pixel(const MiRow& row, std::uint32_t unusable_row, int c) {
-  return (row.fixed_row[c] != unusable_row) & (row.moving_valid == nullptr || row.moving_valid[c] != 0) &
-         (std::abs(row.moving[c]) <= std::numeric_limits<float>::max());  // false for NaN and inf
+  return (row.fixed_row == nullptr || row.fixed_row[c] != unusable_row) & finite_and_valid(row.moving, row.moving_valid, c);
 }
 
 int range_scalar(const MiRow& row, std::uint32_t unusable_row, int c0, std::int32_t* lo_key, std::int32_t* hi_key) {
@@ -56,7 +60,7 @@ void accumulate_scalar(const MiRow& row, const MiBinning& b, int c0, const MiHis
 void fixed_rows_scalar(const float* in, const unsigned char* valid, int c0, int cols, float lo, double scale,
                        int last_bin, std::uint32_t row_stride, std::uint32_t unusable_row, std::uint32_t* out) {
   for (int c = c0; c < cols; ++c) {
-    const bool ok = (std::abs(in[c]) <= std::numeric_limits<float>::max()) & (valid == nullptr || valid[c] != 0);
+    const bool ok = finite_and_valid(in, valid, c);
     const float x = ok ? in[c] : lo;
     // Capped before the conversion: a difference past the float range (inf) gets the last bin.
     const double t = double(x - lo) * scale;
@@ -69,20 +73,28 @@ void fixed_rows_scalar(const float* in, const unsigned char* valid, int c0, int 
 
 #define LFTRACK_AVX2 __attribute__((target("avx2")))
 
-// All-ones in the lanes of pixels c .. c + 7 that are usable.
-LFTRACK_AVX2 inline __m256i usable_lanes(const MiRow& row, __m256i unusable, int c) {
-  const __m256i fixed = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(row.fixed_row + c));
-  __m256i ok = _mm256_xor_si256(_mm256_cmpeq_epi32(fixed, unusable), _mm256_set1_epi32(-1));
-  if (row.moving_valid != nullptr) {
-    const __m128i bytes = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(row.moving_valid + c));
+// All-ones in the lanes of values c .. c + 7 that are finite and whose mask (nullptr: all valid)
+// is non-zero, within `ok`.
+LFTRACK_AVX2 inline __m256i finite_and_valid_lanes(const float* values, const unsigned char* valid, int c, __m256i ok) {
+  if (valid != nullptr) {
+    const __m128i bytes = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(valid + c));
     const __m256i mask = _mm256_cvtepu8_epi32(bytes);
     ok = _mm256_andnot_si256(_mm256_cmpeq_epi32(mask, _mm256_setzero_si256()), ok);
   }
   // Finite: |bits| at most the largest float's.
   const __m256i magnitude =
-      _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(row.moving + c)),
-                       _mm256_set1_epi32(0x7fffffff));
+      _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(values + c)), _mm256_set1_epi32(0x7fffffff));
   return _mm256_andnot_si256(_mm256_cmpgt_epi32(magnitude, _mm256_set1_epi32(0x7f7fffff)), ok);
+}
+
+// All-ones in the lanes of pixels c .. c + 7 that are usable.
+LFTRACK_AVX2 inline __m256i usable_lanes(const MiRow& row, __m256i unusable, int c) {
+  __m256i ok = _mm256_set1_epi32(-1);
+  if (row.fixed_row != nullptr) {
+    const __m256i fixed = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(row.fixed_row + c));
+    ok = _mm256_xor_si256(_mm256_cmpeq_epi32(fixed, unusable), ok);
+  }
+  return finite_and_valid_lanes(row.moving, row.moving_valid, c, ok);
 }
 
 LFTRACK_AVX2 int range_avx2(const MiRow& row, std::uint32_t unusable_row, std::int32_t* lo_key,
@@ -146,14 +158,7 @@ LFTRACK_AVX2 void fixed_rows_avx2(const float* in, const unsigned char* valid, i
   const __m256i stride = _mm256_set1_epi32(int(row_stride)), unusable = _mm256_set1_epi32(int(unusable_row));
   int c = 0;
   for (; c + 8 <= cols; c += 8) {
-    __m256i ok = _mm256_set1_epi32(-1);
-    if (valid != nullptr) {
-      const __m256i mask = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(valid + c)));
-      ok = _mm256_xor_si256(_mm256_cmpeq_epi32(mask, _mm256_setzero_si256()), ok);
-    }
-    const __m256i magnitude =
-        _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(in + c)), _mm256_set1_epi32(0x7fffffff));
-    ok = _mm256_andnot_si256(_mm256_cmpgt_epi32(magnitude, _mm256_set1_epi32(0x7f7fffff)), ok);
+    const __m256i ok = finite_and_valid_lanes(in, valid, c, _mm256_set1_epi32(-1));
     const __m256 d = _mm256_sub_ps(_mm256_blendv_ps(lo8, _mm256_loadu_ps(in + c), _mm256_castsi256_ps(ok)), lo8);
     // min_pd(t, last) is last where t is NaN, as the portable loop's t < last ? t : last.
     const __m128i low = _mm256_cvttpd_epi32(_mm256_min_pd(_mm256_mul_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(d)), scale4), last4));

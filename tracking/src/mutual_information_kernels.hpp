@@ -8,8 +8,9 @@
 
 namespace lftrack::tracking {
 
-// One row of the images. A pixel is usable when its fixed row offset is not `unusable_row`, its
-// moving mask (nullptr: all valid) is non-zero and its moving value is finite.
+// One row of the images. A pixel is usable when its fixed row offset is not `unusable_row`
+// (fixed_row nullptr: every offset usable, for a range of one image alone), its moving mask
+// (nullptr: all valid) is non-zero and its moving value is finite.
 struct MiRow {
   const float* moving = nullptr;
   const unsigned char* moving_valid = nullptr;
