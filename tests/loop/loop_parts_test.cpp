@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <vector>
 
 #include "lftrack/loop/histogram.hpp"
 #include "lftrack/loop/motion_predictor.hpp"
@@ -26,12 +28,14 @@ Vector6d along(double x) {
   return v;
 }
 
+constexpr std::int64_t kMs = 1'000'000;  // ns
+
 TEST(MotionPredictor, ExtrapolatesLinesAndParabolasExactly) {
   MotionPredictor line(4, 1, 0.2), parabola(6, 2, 0.2);
   for (int k = 0; k < 8; ++k) {
     const double t = 0.1 * k;
-    line.add(t, along(1.0 + 2.0 * t));
-    parabola.add(t, along(1.0 + 2.0 * t - 3.0 * t * t));
+    line.add(100 * kMs * k, along(1.0 + 2.0 * t));
+    parabola.add(100 * kMs * k, along(1.0 + 2.0 * t - 3.0 * t * t));
   }
   const double t = 0.7 + 0.2;
   EXPECT_NEAR(line.predict()(2), 1.0 + 2.0 * t, 1e-9);
@@ -40,23 +44,48 @@ TEST(MotionPredictor, ExtrapolatesLinesAndParabolasExactly) {
   EXPECT_EQ(parabola.size(), 6) << "keeps its window";
 }
 
+// Only differences of time count, so the same estimates give the same prediction bit for bit at
+// any clock origin: a loop on the simulated clock starts at the host's uptime, and two runs of
+// one seed must agree (with seconds as doubles they drifted apart from the third cycle on).
+TEST(MotionPredictor, ThePredictionDoesNotDependOnTheClocksOrigin) {
+  const std::int64_t origins[] = {0, 11'532'174'319'670, -5'000'000'000'000,
+                                  std::numeric_limits<std::int64_t>::max() - 2000 * kMs};
+  std::vector<Vector6d> predictions;
+  for (const std::int64_t origin : origins) {
+    MotionPredictor p(6, 2, 0.137);
+    for (int k = 0; k < 9; ++k) {
+      const double t = 0.0333 * k;
+      p.add(origin + 33 * kMs * k + 300'000 * (k % 3), along(0.3 + std::sin(7.1 * t) + 0.001 * k * k));
+    }
+    predictions.push_back(p.predict());
+  }
+  for (std::size_t i = 1; i < predictions.size(); ++i)
+    EXPECT_EQ(predictions[i], predictions[0]) << "origin " << origins[i];
+  // Times further apart than int64 holds (a device's garbage timestamps) still predict finitely.
+  MotionPredictor absurd(4, 2, 0.2);
+  absurd.add(std::numeric_limits<std::int64_t>::min(), along(1.0));
+  absurd.add(0, along(2.0));
+  absurd.add(std::numeric_limits<std::int64_t>::max(), along(3.0));
+  EXPECT_TRUE(absurd.predict().allFinite());
+}
+
 TEST(MotionPredictor, FewEstimatesResetAndNoPrediction) {
   MotionPredictor p(6, 2, 0.2);
   EXPECT_TRUE(p.predict().isZero());
-  p.add(0.0, along(1.0));
+  p.add(0, along(1.0));
   EXPECT_NEAR(p.predict()(2), 1.0, 1e-12) << "one estimate: itself";
-  p.add(0.1, along(2.0));
+  p.add(100 * kMs, along(2.0));
   EXPECT_NEAR(p.predict()(2), 4.0, 1e-9) << "two: a line";
   p.reset();
-  p.add(5.0, along(-1.0));
+  p.add(5000 * kMs, along(-1.0));
   EXPECT_NEAR(p.predict()(2), -1.0, 1e-12) << "nothing extrapolates across a reset";
   MotionPredictor none(1, 2, 0.2);
-  none.add(0.0, along(0.0));
-  none.add(0.1, along(1.0));
+  none.add(0, along(0.0));
+  none.add(100 * kMs, along(1.0));
   EXPECT_NEAR(none.predict()(2), 1.0, 1e-12);
   MotionPredictor same_time(4, 2, 0.2);
-  same_time.add(1.0, along(1.0));
-  same_time.add(1.0, along(3.0));
+  same_time.add(1000 * kMs, along(1.0));
+  same_time.add(1000 * kMs, along(3.0));
   EXPECT_TRUE(same_time.predict().allFinite()) << "a singular fit falls back, never NaN";
 }
 

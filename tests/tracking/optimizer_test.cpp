@@ -84,48 +84,66 @@ TEST_P(EveryOptimizer, KeepsToItsBudgets) {
   EXPECT_EQ(t.stop, OptimizerStop::kTimeBudget);
 }
 
-// A bowl whose every evaluation takes at least 3 ms (a sleep: a slower machine only adds to it).
-class SlowBowl : public CostFunction {
+// A bowl whose every evaluation takes exactly 3 ms on a virtual clock (the budget's clock), so
+// that what fits a time budget is decided the same way on a loaded machine as on an idle one
+// (with a 3 ms sleep on the steady clock, a loaded CI machine once made a 3 ms evaluation look
+// slow enough to refuse a batch the test expected to run).
+class SlowBowl : public CostFunction, public BudgetClock {
  public:
   double cost(const Vector6d& x) override {
-    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+    virtual_ms += ms_per_evaluation;
     return bowl.cost(x);
   }
+  double now_ms() const override { return virtual_ms; }
+  // The budget, counted on this bowl's clock.
+  OptimizerBudget budget(double max_ms) const {
+    OptimizerBudget b;
+    b.max_ms = max_ms;
+    b.clock = this;
+    return b;
+  }
   Bowl bowl{Vector6d::Constant(5)};
+  double ms_per_evaluation = 3;
+  double virtual_ms = 1e6;  // any origin: a search counts from its start
 };
 
-// A batch that would end past the time budget is not started. Each evaluation takes at least
-// 3 ms and the budget is 60 ms. quadratic-neighbour evaluates its start (3 ms), then its first
-// batch of 12 neighbours and a jump (about 42 ms in all); the next batch of 13, at the 3 ms an
-// evaluation it has seen, would end at about 81 ms, so it stops with 14 evaluations. (It went on
-// to 27 before: 42 ms is inside the budget.) A slower machine only makes the estimate larger,
-// and a first batch that ran past the budget stops it at 14 too.
+// A batch that would end past the time budget is not started. Each evaluation takes 3 ms and the
+// budget is 60 ms. quadratic-neighbour evaluates its start (3 ms), then its first batch of 12
+// neighbours and a jump (42 ms in all); the next batch of 13, at the 3 ms an evaluation it has
+// seen, would end at 81 ms, so it stops with 14 evaluations. (It went on to 27 before: 42 ms is
+// inside the budget.) A first batch that ran past the budget stops it at 14 too.
 TEST(Optimizer, StartsNoBatchThatWouldEndPastTheTimeBudget) {
   SlowBowl slow;
-  OptimizerBudget budget;
-  budget.max_ms = 60;
   OptimizerSettings s;
   s.final_step_mm = 1e-3;
-  const OptimizerResult r = make_optimizer("quadratic-neighbour", s).value()->minimize(slow, Vector6d::Zero(), budget);
+  const auto optimizer = make_optimizer("quadratic-neighbour", s).value();
+  const OptimizerResult r = optimizer->minimize(slow, Vector6d::Zero(), slow.budget(60));
   EXPECT_EQ(r.evaluations, 14);
   EXPECT_EQ(r.stop, OptimizerStop::kTimeBudget);
+  EXPECT_DOUBLE_EQ(r.elapsed_ms, 42);
+  EXPECT_DOUBLE_EQ(r.ms_per_evaluation, 3);
+  EXPECT_LE(r.elapsed_ms, 60);
+  // 80 ms still refuses the batch that would end at 81; 81 ms takes it.
+  EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), slow.budget(80)).evaluations, 14);
+  EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), slow.budget(81)).evaluations, 27);
+  slow.ms_per_evaluation = 10;  // the first batch of 13 alone ends at 140 ms, past the budget
+  EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), slow.budget(60)).evaluations, 14);
 }
 
 // Until a search has timed a batch after its first, the budget's prior per evaluation judges
 // whether the next batch fits. With 3 ms evaluations and a 30 ms budget, the batch of 13 after the
-// start would end at about 42 ms: without a prior it starts (14 evaluations, reported at 3 ms or
-// more each); with a prior of 3 ms it does not. A prior that is not a positive number is unknown.
+// start would end at 42 ms: without a prior it starts (14 evaluations, reported at 3 ms each);
+// with a prior of 3 ms it does not. A prior that is not a positive number is unknown.
 TEST(Optimizer, APriorTimePerEvaluationKeepsTheSecondBatchInsideTheBudget) {
   SlowBowl slow;
   OptimizerSettings s;
   s.final_step_mm = 1e-3;
   const auto optimizer = make_optimizer("quadratic-neighbour", s).value();
-  OptimizerBudget budget;
-  budget.max_ms = 30;
+  OptimizerBudget budget = slow.budget(30);
   const OptimizerResult blind = optimizer->minimize(slow, Vector6d::Zero(), budget);
   EXPECT_EQ(blind.evaluations, 14);
-  EXPECT_GT(blind.elapsed_ms, 30);  // the overrun a prior prevents
-  EXPECT_GE(blind.ms_per_evaluation, 3.0);
+  EXPECT_DOUBLE_EQ(blind.elapsed_ms, 42);  // the overrun a prior prevents
+  EXPECT_DOUBLE_EQ(blind.ms_per_evaluation, 3.0);
   for (const double unknown : {0.0, -3.0, std::numeric_limits<double>::quiet_NaN(),
                                std::numeric_limits<double>::infinity()}) {
     budget.prior_ms_per_evaluation = unknown;
@@ -136,24 +154,48 @@ TEST(Optimizer, APriorTimePerEvaluationKeepsTheSecondBatchInsideTheBudget) {
   EXPECT_EQ(warned.evaluations, 1);
   EXPECT_EQ(warned.stop, OptimizerStop::kTimeBudget);
   EXPECT_EQ(warned.ms_per_evaluation, 0.0);  // no batch after the first ran
-  EXPECT_GE(warned.first_batch_ms_per_evaluation, 3.0);
+  EXPECT_DOUBLE_EQ(warned.first_batch_ms_per_evaluation, 3.0);
   // A stale prior from a slower spell (100 ms) gives way to the first batch's 3 ms (times the
-  // ratio, unknown here: 1; 7 or NaN: 1 too): with 80 ms the batch of 13 fits (about 42 ms) and
-  // runs, so the search measures its time again (the next batch, at about 81 ms, does not fit).
+  // ratio, unknown here: 1; 7 or NaN: 1 too): with 80 ms the batch of 13 fits (ending at 42 ms)
+  // and runs, so the search measures its time again (the next batch, ending at 81 ms, does not fit).
   budget.max_ms = 80;
   budget.prior_ms_per_evaluation = 100.0;
   for (const double ratio : {0.0, 7.0, std::numeric_limits<double>::quiet_NaN()}) {
     budget.prior_later_to_first_batch = ratio;
     const OptimizerResult recovered = optimizer->minimize(slow, Vector6d::Zero(), budget);
     EXPECT_EQ(recovered.evaluations, 14) << ratio;
-    EXPECT_GE(recovered.ms_per_evaluation, 3.0) << ratio;
+    EXPECT_DOUBLE_EQ(recovered.ms_per_evaluation, 3.0) << ratio;
   }
-  // A ratio below 1 shrinks the estimate: 3 ms x 0.25 says the batch ends at about 13 ms, inside
-  // a 30 ms budget, so it starts (and, at its real 3 ms an evaluation, runs past it).
+  // A ratio below 1 shrinks the estimate: 3 ms x 0.25 says the batch ends at 12.75 ms, inside a
+  // 30 ms budget, so it starts (and, at its real 3 ms an evaluation, runs past it to 42 ms).
   budget.max_ms = 30;
   budget.prior_ms_per_evaluation = 3.0;
   budget.prior_later_to_first_batch = 0.25;
   EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), budget).evaluations, 14);
+  budget.max_ms = 12.5;  // 12.75 does not fit 12.5
+  EXPECT_EQ(optimizer->minimize(slow, Vector6d::Zero(), budget).evaluations, 1);
+}
+
+// The time budget is counted on the steady clock when no clock is given: a search whose
+// evaluations sleep cannot take less wall time than they do.
+TEST(Optimizer, WithoutAClockTheBudgetIsWallTime) {
+  class Sleepy : public CostFunction {
+   public:
+    double cost(const Vector6d& x) override {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      return bowl.cost(x);
+    }
+    Bowl bowl{Vector6d::Constant(5)};
+  } sleepy;
+  OptimizerSettings s;
+  s.final_step_mm = 1e-3;
+  OptimizerBudget budget;
+  budget.max_ms = 1;  // past after the start point's 2 ms sleep, however fast the machine
+  const OptimizerResult r = make_optimizer("quadratic-neighbour", s).value()->minimize(sleepy, Vector6d::Zero(), budget);
+  EXPECT_EQ(r.stop, OptimizerStop::kTimeBudget);
+  EXPECT_EQ(r.evaluations, 1);
+  EXPECT_GE(r.elapsed_ms, 2.0);
+  EXPECT_GE(r.first_batch_ms_per_evaluation, 2.0);
 }
 
 TEST_P(EveryOptimizer, NonFiniteCostsNeverWin) {

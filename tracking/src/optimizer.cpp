@@ -19,12 +19,16 @@ using Clock = std::chrono::steady_clock;
 class Search {
  public:
   Search(CostFunction& cost, const Vector6d& start, const OptimizerSettings& settings, const OptimizerBudget& budget)
-      : cost_(cost), start_(start), settings_(settings), budget_(budget), t0_(Clock::now()) {
+      : cost_(cost), start_(start), settings_(settings), budget_(budget), t0_ms_(now_ms()) {
     if (settings.record_trace) result_.trace.reserve(256);
   }
 
   Vector6d to_x(const Vector6d& y) const { return start_ + settings_.scale.cwiseProduct(y); }
-  double elapsed_ms() const { return std::chrono::duration<double, std::milli>(Clock::now() - t0_).count(); }
+  double now_ms() const {
+    if (budget_.clock != nullptr) return budget_.clock->now_ms();
+    return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count();
+  }
+  double elapsed_ms() const { return now_ms() - t0_ms_; }
   // True while another batch of `n` evaluations fits the budget. The time budget bounds when the
   // search ends, not only when its last batch starts: a batch that would end past it, at the mean
   // wall time per evaluation of this search's batches after its first, is not started. Without
@@ -108,7 +112,7 @@ class Search {
   Vector6d start_;
   OptimizerSettings settings_;
   OptimizerBudget budget_;
-  Clock::time_point t0_;
+  double t0_ms_;  // on now_ms()'s clock
   OptimizerResult result_;
   std::optional<OptimizerStop> stop_;
   int first_batch_evaluations_ = 0;  // the first batch, left out of the time estimate

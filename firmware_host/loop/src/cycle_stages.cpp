@@ -227,7 +227,7 @@ void TrackingLoop::Impl::control(CycleState& c) {
     const Pose patient = motion_of(couch_position, origin_room).inverse() * result.T_room_from_ct;
     const Vector6d patient_offset = tracking::delta_between(nominal, patient, origin_room).as_vector();
     if (c.aligning) predictor.reset();
-    predictor.add(1e-9 * double(c.newest_frame_ns), patient_offset);
+    predictor.add(c.newest_frame_ns, patient_offset);
     const Vector6d predicted = predictor.predict();
     c.desired = tracking::delta_between(motion_of(predicted, origin_room), Pose::Identity(), origin_room).as_vector();
     last_registered = result.T_room_from_ct;

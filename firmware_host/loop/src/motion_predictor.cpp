@@ -8,14 +8,14 @@ namespace lftrack::host {
 MotionPredictor::MotionPredictor(int window, int order, double lookahead_s)
     : window_(std::clamp(window, 0, kCapacity)), order_(std::clamp(order, 1, 2)), lookahead_s_(lookahead_s) {}
 
-void MotionPredictor::add(double t_s, const tracking::Vector6d& offset) {
+void MotionPredictor::add(std::int64_t t_ns, const tracking::Vector6d& offset) {
   const int keep = std::max(1, window_);
   if (count_ == keep) {
-    std::move(t_.begin() + 1, t_.begin() + count_, t_.begin());
+    std::move(t_ns_.begin() + 1, t_ns_.begin() + count_, t_ns_.begin());
     std::move(x_.begin() + 1, x_.begin() + count_, x_.begin());
     --count_;
   }
-  t_[std::size_t(count_)] = t_s;
+  t_ns_[std::size_t(count_)] = t_ns;
   x_[std::size_t(count_)] = offset;
   ++count_;
 }
@@ -24,13 +24,17 @@ tracking::Vector6d MotionPredictor::predict() const {
   if (count_ == 0) return tracking::Vector6d::Zero();
   const tracking::Vector6d& newest = x_[std::size_t(count_ - 1)];
   if (window_ < 2 || count_ < 2) return newest;
-  // Times relative to the newest estimate keep the normal equations well conditioned.
+  // Times relative to the newest estimate keep the normal equations well conditioned; the integer
+  // difference is exact, and exact in double up to 2^53 ns (104 days) apart.
   const int order = count_ >= order_ + 2 ? order_ : 1;
-  const double t0 = t_[std::size_t(count_ - 1)];
+  const std::int64_t t0_ns = t_ns_[std::size_t(count_ - 1)];
   Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
   Eigen::Matrix<double, 3, 6> rhs = Eigen::Matrix<double, 3, 6>::Zero();
   for (int i = 0; i < count_; ++i) {
-    const double dt = t_[std::size_t(i)] - t0;
+    std::int64_t dt_ns = 0;  // absurd device times may lie further apart than int64 holds
+    const double dt = __builtin_sub_overflow(t_ns_[std::size_t(i)], t0_ns, &dt_ns)
+                          ? 1e-9 * (double(t_ns_[std::size_t(i)]) - double(t0_ns))
+                          : 1e-9 * double(dt_ns);  // s
     const Eigen::Vector3d basis(1.0, dt, order == 2 ? dt * dt : 0.0);
     normal += basis * basis.transpose();
     rhs += basis * x_[std::size_t(i)].transpose();

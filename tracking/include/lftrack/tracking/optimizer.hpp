@@ -31,9 +31,19 @@ class CostFunction {
   }
 };
 
+// The monotonic time (ms, any origin) that a search's time budget is counted in. The default is
+// the steady clock. A test gives a virtual clock that its cost function advances, so that whether
+// a batch fits the budget is decided the same way on a loaded machine as on an idle one.
+class BudgetClock {
+ public:
+  virtual ~BudgetClock() = default;
+  virtual double now_ms() const = 0;
+};
+
 struct OptimizerBudget {
   int max_evaluations = 5000;
-  double max_ms = 1e12;  // wall time
+  double max_ms = 1e12;  // wall time, on `clock`
+  const BudgetClock* clock = nullptr;  // null: std::chrono::steady_clock; must outlive the search
   // What earlier searches of the same cost measured (OptimizerResult's times), to judge whether
   // the batch after the first fits max_ms before this search has timed one of its own (later
   // batches go by its own times). That batch's time per evaluation is taken as the smaller of

@@ -6,6 +6,12 @@
 // lag a couch with latency would otherwise leave; a parabola also follows the turning points,
 // where a line overshoots. A jump (a shift, a resumed HOLD) resets the history, so it never
 // extrapolates across one. Fixed capacity, allocates nothing.
+//
+// Times are integer nanoseconds on any clock (CLOCK_MONOTONIC, the loop's simulated clock) and
+// only their differences count: the fit is the same bit for bit whatever the clock's origin. (It
+// took seconds as doubles once: 1e-9 * ns rounds differently at every origin, so two runs of the
+// same seed on the simulated clock, which starts at the host's uptime, drifted apart by 1e-12 mm
+// from the third cycle on and by 0.05 mm in the residual's p95 after 120 cycles.)
 
 #include <array>
 #include <cstdint>
@@ -22,8 +28,8 @@ class MotionPredictor {
   MotionPredictor(int window, int order, double lookahead_s);
 
   void reset() { count_ = 0; }
-  // The patient's offset (delta 6-vector, mm and rad) estimated at time t_s.
-  void add(double t_s, const tracking::Vector6d& offset);
+  // The patient's offset (delta 6-vector, mm and rad) estimated at time t_ns.
+  void add(std::int64_t t_ns, const tracking::Vector6d& offset);
   int size() const { return count_; }
   // The offset expected lookahead_s after the newest estimate; zero with no estimate.
   tracking::Vector6d predict() const;
@@ -32,7 +38,7 @@ class MotionPredictor {
   int window_;
   int order_;
   double lookahead_s_;
-  std::array<double, kCapacity> t_{};
+  std::array<std::int64_t, kCapacity> t_ns_{};
   std::array<tracking::Vector6d, kCapacity> x_{};
   int count_ = 0;  // newest last
 };
