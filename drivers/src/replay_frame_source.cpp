@@ -122,13 +122,15 @@ DeviceStatus ReplayFrameSource::acquire(FramePair* pair, Deadline deadline) {
   }
   auto ready = [&] { return !loading_ && !has_request_ && loaded_job_ == job; };
   if (options_.realtime) {
-    if (!done_.wait_until(lock, deadline, ready)) return DeviceStatus::kTimeout;
+    // A pair not due by the deadline is late whether or not it has been read yet: the index
+    // alone says when it is due, so the answer does not wait on the reader thread.
     const auto due =
         std::chrono::steady_clock::time_point(std::chrono::nanoseconds(first_request_ns_ + offset_ns(job)));
     if (due > deadline) {
       ++counters_.late;
       return DeviceStatus::kTimeout;
     }
+    if (!done_.wait_until(lock, deadline, ready)) return DeviceStatus::kTimeout;
     lock.unlock();
     std::this_thread::sleep_until(due);
     lock.lock();

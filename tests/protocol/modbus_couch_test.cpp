@@ -128,11 +128,16 @@ TEST_F(ModbusCouchTest, NoReplyIsATimeoutWithinTheResponseTimeoutAndTheNextReque
 
 TEST_F(ModbusCouchTest, TheCyclesDeadlineCutsTheResponseTimeout) {
   server->inject(CouchServerFault::kNoReply);
+  const std::int64_t at_start = server->requests();
   const auto t0 = Clock::now();
   EXPECT_EQ(driver->command(shift(1), in_ms(5)), DeviceStatus::kTimeout);
-  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.04);
-  // A deadline already past sends nothing.
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.04);  // the timeout is 50 ms
+  // A deadline already past sends nothing. The server counts the request above on its own
+  // thread: wait until it has, or a late count would look like a request sent now.
+  for (const auto until = Clock::now() + std::chrono::seconds(5); server->requests() == at_start && Clock::now() < until;)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
   const std::int64_t before = server->requests();
+  ASSERT_GT(before, at_start);
   EXPECT_EQ(driver->command(shift(1), Clock::now()), DeviceStatus::kTimeout);
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   EXPECT_EQ(server->requests(), before);

@@ -22,7 +22,7 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
     const std::string opt = name == "papers" ? "best-neighbour" : "decoupled";
     plan.passes = {{opt, 1.5, 1, 5.0, 0.5, 3000, ""}, {opt, 0.0, 1, 2.0, 0.1, 3000, ""}};
   } else if (name == "quadratic") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, ""},
+    plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, ""},
                    {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, ""}};
   } else if (name == "cmaes") {
     plan.passes = {{"cmaes", 1.5, 2, 2.5, 0.5, 3000, ""}, {"quadratic-neighbour", 0.0, 1, 1.0, 0.1, 3000, ""}};
@@ -31,7 +31,7 @@ Result<RegistrationPlan> registration_plan(const std::string& name) {
                    {"quadratic-neighbour", 0.0, 4, 0.5, 0.25, 400, ""},
                    {"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
   } else if (name == "robust") {
-    plan.passes = {{"quadratic-neighbour", 1.5, 2, 5.0, 0.5, 3000, "", 0},
+    plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, "", 0},
                    {"quadratic-neighbour", 0.0, 1, 2.0, 0.1, 3000, "ncc", kRobustHighPassMm}};
   } else if (name == "pyramid") {
     plan.passes = {{"quadratic-neighbour", 1.5, 4, 5.0, 0.5, 3000, ""},

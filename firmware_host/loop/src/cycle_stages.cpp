@@ -177,7 +177,10 @@ void TrackingLoop::Impl::register_pair(CycleState& c) {
   if (!c.aligning && have_registration)
     start = tracking::apply_delta(last_registered, PoseDelta::from_vector(couch_position - couch_at_last_registration),
                                   origin_room);
-  const double budget_ms = c.aligning ? 1e12 : settings.loop.registration_budget_ms;
+  // The budget is wall time, so on the simulated clock, whose runs must repeat bit for bit
+  // whatever the host's load, a tracking registration is not cut short either: a search cut at a
+  // load-dependent moment made two runs of one seed diverge (ClosedLoop.TwoRunsOfOneSeed...).
+  const double budget_ms = c.aligning || settings.simulated_clock ? 1e12 : settings.loop.registration_budget_ms;
   c.registered = parts.registration->run(start, c.aligning ? align_plan : track_plan, budget_ms, &result).ok() &&
                  result_is_finite();
   c.registration_ran = true;

@@ -101,8 +101,11 @@ struct RegistrationPlan {
 //   papers     best-neighbour on references blurred 1.5 mm, steps 5 -> 0.5 mm, then on the
 //              originals, 2 -> 0.1 mm (papers 1 and 2), full resolution throughout
 //   decoupled  paper 3's decoupled quadratic-fit optimizer in the same two passes
-//   quadratic  quadratic-neighbour in the papers' two passes, the blurred one on 2 x 2 binned
-//              images (a 1.5 mm blur leaves nothing for full resolution to add)
+//   quadratic  quadratic-neighbour in the papers' two passes, the blurred one on 4 x 4 binned
+//              images (a 1.5 mm blur leaves nothing for full resolution to add; 4 x 4 bins of
+//              0.4 mm pixels still sample it at its sigma). On 2 x 2 bins that pass cost 3-4 times
+//              as much, at the same capture and accuracy on 1,440 starts (BENCHMARKS.md, "The
+//              cold plan's first pass on 4 x 4 bins")
 //   cmaes      CMA-ES on the blurred, binned references (sigma 2.5 -> 0.5 mm) for range, then
 //              quadratic-neighbour on the originals 1 -> 0.1 mm
 //   warm       tracking from the last pose: quadratic-neighbour on 8 x 8 binned originals
@@ -120,7 +123,7 @@ struct RegistrationPlan {
 //   warm-robust  tracking clinical frames: quadratic-neighbour with robust's high-passed NCC on
 //              2 x 2 binned originals (1 -> 0.25 mm), then at full resolution with probes of
 //              0.25 and 0.125 mm
-//   pyramid    the cold set-up at a third of quadratic's time: quadratic-neighbour on 4 x 4 binned
+//   pyramid    the cold set-up at half quadratic's time: quadratic-neighbour on 4 x 4 binned
 //              references blurred 1.5 mm (5 -> 0.5 mm), on 4 x 4 binned originals (1 -> 0.25 mm),
 //              then a single full-resolution iteration (0.25 mm), as warm's last pass
 std::vector<std::string> registration_plan_names();

@@ -17,7 +17,7 @@ struct RealtimeSpec {
 };
 struct LoopSpec {
   double period_ms = 100;
-  double registration_budget_ms = 60;    // the warm registration's wall-time budget per cycle
+  double registration_budget_ms = 60;    // the warm registration's wall-time budget per cycle (real clock only)
   double acquire_timeout_ms = 40;        // how long a cycle waits for its frame pair
   std::string align_plan = "quadratic";  // the cold, wide-range registration before tracking
   std::string track_plan = "warm";       // each cycle's registration, from the last pose
