@@ -14,12 +14,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <cmath>
 #include <cstring>
 #include <memory>
 #include <optional>
+#include <string>
 #include <thread>
 
 #include "child_process.hpp"
@@ -280,7 +282,20 @@ TEST_F(ServedDeviceFaults, KilledCouchServerHoldsUntilTheOperator) {
   ASSERT_GE(killed_at, 20);
   EXPECT_TRUE(tracked_again);
   expect_held_until_the_operator(r.journal.records, killed_at);
-  EXPECT_LT(r.journal.records.back().true_residual_mm, 1.0) << "tracking again after the restart";
+  // Failed twice in about 45 runs on a loaded host (2026-11-27: 2.26 and 2.19 mm), never in
+  // isolation; the cause is not found. The message carries the cycles from the operator's resume
+  // on, for the next person to read.
+  std::string after_resume;
+  for (std::size_t i = std::size_t(std::max(0LL, killed_at)); i < r.journal.records.size(); ++i) {
+    const JournalRecord& q = r.journal.records[i];
+    if (q.operator_command == 0 && after_resume.empty()) continue;
+    after_resume += "\n  cycle " + std::to_string(q.cycle) + ": state " + std::to_string(q.state) + ", gate " +
+                    to_string(GateReason(q.gate_reason)) + ", sent " + std::to_string(q.command_sent) +
+                    ", evaluations " + std::to_string(q.evaluations) + ", registration " +
+                    std::to_string(q.registration_ms) + " ms, residual " + std::to_string(q.true_residual_mm) +
+                    " mm" + (q.overrun ? ", overrun" : "");
+  }
+  EXPECT_LT(r.journal.records.back().true_residual_mm, 1.0) << "tracking again after the restart" << after_resume;
 }
 
 TEST_F(ServedDeviceFaults, StalledCouchServerHolds) {
