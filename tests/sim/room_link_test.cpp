@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <fstream>
 #include <thread>
 
@@ -48,11 +49,18 @@ TEST(RoomLink, ReadsAreNeverTorn) {
   ASSERT_TRUE(reader.ok());
   (*writer)->publish(filled(0));
   std::atomic<bool> stop{false};
+  // The writer publishes without pause; the reader reads until it has 5,000 samples (or 20 s).
+  // On a loaded host 200,000 tries once gave no sample at all: every try met a write under way,
+  // which says nothing about tearing, so the test now waits for enough samples to judge by.
   std::thread writing([&] {
-    for (double v = 1; !stop.load(); v += 1) (*writer)->publish(filled(v));
+    for (double v = 1; !stop.load(); v += 1) {
+      (*writer)->publish(filled(v));
+      std::this_thread::yield();
+    }
   });
   int torn = 0, reads = 0;
-  for (int i = 0; i < 200000; ++i) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (reads < 5000 && std::chrono::steady_clock::now() < until) {
     RoomLinkSample s;
     if (!(*reader)->read(&s)) continue;
     ++reads;
