@@ -3,6 +3,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 
+#include "lftrack/loop/time_interval.hpp"
+
 namespace lftrack::host {
 
 MotionPredictor::MotionPredictor(int window, int order, double lookahead_s)
@@ -24,17 +26,14 @@ tracking::Vector6d MotionPredictor::predict() const {
   if (count_ == 0) return tracking::Vector6d::Zero();
   const tracking::Vector6d& newest = x_[std::size_t(count_ - 1)];
   if (window_ < 2 || count_ < 2) return newest;
-  // Times relative to the newest estimate keep the normal equations well conditioned; the integer
-  // difference is exact, and exact in double up to 2^53 ns (104 days) apart.
+  // Times relative to the newest estimate keep the normal equations well conditioned (ns_between:
+  // exact differences).
   const int order = count_ >= order_ + 2 ? order_ : 1;
   const std::int64_t t0_ns = t_ns_[std::size_t(count_ - 1)];
   Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
   Eigen::Matrix<double, 3, 6> rhs = Eigen::Matrix<double, 3, 6>::Zero();
   for (int i = 0; i < count_; ++i) {
-    std::int64_t dt_ns = 0;  // absurd device times may lie further apart than int64 holds
-    const double dt = __builtin_sub_overflow(t_ns_[std::size_t(i)], t0_ns, &dt_ns)
-                          ? 1e-9 * (double(t_ns_[std::size_t(i)]) - double(t0_ns))
-                          : 1e-9 * double(dt_ns);  // s
+    const double dt = 1e-9 * ns_between(t0_ns, t_ns_[std::size_t(i)]);  // s
     const Eigen::Vector3d basis(1.0, dt, order == 2 ? dt * dt : 0.0);
     normal += basis * basis.transpose();
     rhs += basis * x_[std::size_t(i)].transpose();

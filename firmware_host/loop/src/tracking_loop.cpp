@@ -11,6 +11,7 @@
 #include <cmath>
 
 #include "lftrack/loop/cycle_schedule.hpp"
+#include "lftrack/loop/time_interval.hpp"
 #include "loop_impl.hpp"
 
 namespace lftrack::host {
@@ -22,9 +23,7 @@ drivers::Deadline to_deadline(std::int64_t ns) {
       std::chrono::duration_cast<drivers::Deadline::duration>(std::chrono::nanoseconds(ns)));
 }
 
-double ms_between(std::int64_t a_ns, std::int64_t b_ns) {
-  return 1e-6 * static_cast<double>(b_ns - a_ns);
-}
+double ms_between(std::int64_t a_ns, std::int64_t b_ns) { return 1e-6 * ns_between(a_ns, b_ns); }
 
 TrackingLoop::TrackingLoop(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 TrackingLoop::~TrackingLoop() {
