@@ -276,32 +276,56 @@ TEST(Registration, StaysInsideTheSearchRegion) {
 
 // The light field's renderer, `delay_ms` slower a render (2 ms: an evaluation of two views takes
 // 4 ms or more).
+// A virtual clock that the renderer below advances by its delay per render, from any thread:
+// the budget's decisions are the same on a loaded host as on an idle one.
+class RenderClock final : public BudgetClock {
+ public:
+  double now_ms() const override { return 1e-3 * double(us_.load()); }
+  void advance_ms(int ms) { us_ += 1000LL * ms; }
+
+ private:
+  std::atomic<long long> us_{0};
+};
+
+// Each render takes `delay_ms` on the clock (renders on several threads add up, as on one core).
 class SlowRenderer final : public DrrRenderer {
  public:
-  explicit SlowRenderer(std::shared_ptr<const DrrRenderer> inner) : inner_(std::move(inner)) {}
+  SlowRenderer(std::shared_ptr<const DrrRenderer> inner, RenderClock* clock)
+      : inner_(std::move(inner)), clock_(clock) {}
   std::string_view name() const override { return "slow"; }
   std::atomic<int> delay_ms{2};
 
  protected:
   Status do_render(const Pose& T, const XrayView& view, const PixelWindow& window, ImageView<float> out,
                    RenderExtras* extras) const override {
-    std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms.load()));
+    clock_->advance_ms(delay_ms.load());
     return inner_->render(T, view, window, out, extras);
   }
 
  private:
   std::shared_ptr<const DrrRenderer> inner_;
+  RenderClock* clock_;
 };
+
+// Runs `plan` with its own budget on `clock`.
+Result<RegistrationResult> run_on(Registration& reg, const RegistrationPlan& plan, const RenderClock& clock) {
+  auto prepared = reg.prepare_plan(plan);
+  if (!prepared.ok()) return prepared.status();
+  RegistrationResult result;
+  LFTRACK_RETURN_IF_ERROR(reg.run(phantom().nominal, *prepared, plan.max_ms, &result, &clock));
+  return result;
+}
 
 // A pass takes its time per evaluation from the earlier passes on its level. The first run of a
 // one-pass plan with a 50 ms budget has no such time: after its start it begins the batch of 12
-// neighbours and the jump (14 evaluations, 112 ms or more). The next run knows 8 ms or more an
-// evaluation, so it begins no batch that would end past 50 ms. Once the renderer is fast again,
-// the pass's start point is quicker than that stale time, the batch fits and runs, and the pass
-// measures its time anew (without the cap every later run stopped after its start point).
+// neighbours and the jump (14 evaluations, 2 renders of 4 ms each: 112 ms). The next run knows
+// 8 ms an evaluation, so it begins no batch that would end past 50 ms. Once the renderer is fast
+// again, the pass's start point is quicker than that stale time, the batch fits and runs, and the
+// pass measures its time anew (without the cap every later run stopped after its start point).
 TEST(Registration, APassKnowsItsLevelsTimePerEvaluationFromEarlierRuns) {
   const RegistrationSetup setup = two_view_setup("mi");
-  const auto renderer = std::make_shared<SlowRenderer>(light_field_renderer());
+  RenderClock clock;
+  const auto renderer = std::make_shared<SlowRenderer>(light_field_renderer(), &clock);
   auto reg = std::move(Registration::create(renderer, setup, nullptr)).value();
   const Frames f = frames_at(setup, gold_pose());
   ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
@@ -310,32 +334,32 @@ TEST(Registration, APassKnowsItsLevelsTimePerEvaluationFromEarlierRuns) {
   plan.passes = {{"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 200, ""}};
   plan.max_ms = 50;
   renderer->delay_ms = 4;
-  const auto first = reg->run(phantom().nominal, plan);
+  const auto first = run_on(*reg, plan, clock);
   ASSERT_TRUE(first.ok());
   EXPECT_EQ(first->evaluations, 14);
-  EXPECT_GT(first->elapsed_ms, 50);
-  const auto next = reg->run(phantom().nominal, plan);
+  EXPECT_GE(first->elapsed_ms, 112.0) << "the renders' time on the run's clock";
+  const auto next = run_on(*reg, plan, clock);
   ASSERT_TRUE(next.ok());
-  EXPECT_LE(next->evaluations, 1);
+  EXPECT_EQ(next->evaluations, 1);
   EXPECT_EQ(next->stop, OptimizerStop::kTimeBudget);
   EXPECT_TRUE(next->T_room_from_ct.matrix().allFinite());
-  renderer->delay_ms = 0;
-  const auto fast = reg->run(phantom().nominal, plan);
+  renderer->delay_ms = 1;
+  const auto fast = run_on(*reg, plan, clock);
   ASSERT_TRUE(fast.ok());
   EXPECT_GE(fast->evaluations, 14);  // the batch after the start ran (the pass may travel on)
 }
 
-// On a pool of eight the first batch (one candidate: two renders, on two threads) takes about
-// three times a batch of 13's time per evaluation (26 renders on eight threads), so the first
-// batch's time alone does not show that a prior from a slower spell is stale: its ratio to the
-// later batches' time does. Renders of 30 ms teach about 9.2 ms an evaluation, at about 0.31 of
-// the first batch's 30. At 10 ms a render a 100 ms budget fits the start and the batch (about
-// 50 ms): the first batch's 10 ms times 0.31 says so, where the stale 9.2 ms alone said 10 + 13 x
-// 9.2 = 130 ms and refused the batch in every later run (nothing else measures the time again).
-// The margins leave a loaded host's scheduling (CI runs two tests at once) 10 ms a batch.
+// A prior time per evaluation from a slower spell gives way as soon as a first batch runs faster.
+// Renders of 30 ms teach 60 ms an evaluation (two views). At 10 ms a render a 300 ms budget fits
+// the start and the batch of 13 (20 + 13 x 20 = 280 ms) by the first batch's own time, where the
+// stale 60 ms alone said 20 + 13 x 60 = 800 ms and refused the batch in every later run (nothing
+// else measures the time again). At 30 ms the same budget refuses it. (A pool's later batches
+// spread over its threads, which the prior's ratio to the first batch accounts for: the
+// optimizer's budget tests.)
 TEST(Registration, APriorFromASlowerSpellGivesWayWhenTheFirstBatchRunsFaster) {
   const RegistrationSetup setup = two_view_setup("mi");
-  const auto renderer = std::make_shared<SlowRenderer>(light_field_renderer());
+  RenderClock clock;
+  const auto renderer = std::make_shared<SlowRenderer>(light_field_renderer(), &clock);
   ThreadPool pool(8);
   auto reg = std::move(Registration::create(renderer, setup, &pool)).value();
   const Frames f = frames_at(setup, gold_pose());
@@ -345,15 +369,19 @@ TEST(Registration, APriorFromASlowerSpellGivesWayWhenTheFirstBatchRunsFaster) {
   plan.passes = {{"quadratic-neighbour", 0.0, 1, 0.25, 0.25, 14, ""}};  // the start and one batch of 13
   renderer->delay_ms = 30;
   for (int i = 0; i < 3; ++i) {
-    const auto learning = reg->run(phantom().nominal, plan);
+    const auto learning = run_on(*reg, plan, clock);
     ASSERT_TRUE(learning.ok());
     ASSERT_EQ(learning->evaluations, 14);
   }
+  plan.max_ms = 300;
+  const auto slow = run_on(*reg, plan, clock);
+  ASSERT_TRUE(slow.ok());
+  EXPECT_EQ(slow->evaluations, 1) << "at the learnt speed the batch does not fit";
   renderer->delay_ms = 10;
-  plan.max_ms = 100;
-  const auto faster = reg->run(phantom().nominal, plan);
+  const auto faster = run_on(*reg, plan, clock);
   ASSERT_TRUE(faster.ok());
   EXPECT_EQ(faster->evaluations, 14);
+  EXPECT_LE(faster->elapsed_ms, 300.0 + 1e-9);
 }
 
 // A plan's pass binned past what a small window allows runs at the coarsest binning it does

@@ -103,9 +103,10 @@ double Registration::RecentMedian::median() const {
 }
 
 namespace {
-// Milliseconds of wall time since `t0`.
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+// Now in ms on `clock` (null: the steady clock), any origin.
+double now_ms(const BudgetClock* clock) {
+  if (clock != nullptr) return clock->now_ms();
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 }  // namespace
 
@@ -152,7 +153,7 @@ Result<RegistrationResult> Registration::run(const Pose& start, const Registrati
 }
 
 Status Registration::run(const Pose& start, const PreparedPlan& prepared, double max_ms,
-                         RegistrationResult* result) {
+                         RegistrationResult* result, const BudgetClock* clock) {
   if (!frames_set_) return failed_precondition("registration: no frames (call set_frames first)");
   if (!start.matrix().allFinite()) return invalid_argument("registration: the start pose is not finite");
   if (prepared.optimizers.empty() || prepared.optimizers.size() != prepared.plan.passes.size() ||
@@ -164,7 +165,8 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     if (prepared.measures[p] < 0 || std::size_t(prepared.measures[p]) >= measure_names_.size() ||
         prepared.levels[p] < 0 || std::size_t(prepared.levels[p]) >= levels_.size())
       return invalid_argument("registration: the plan was not prepared by this registration");
-  const auto t0 = std::chrono::steady_clock::now();
+  const double t0_ms = now_ms(clock);
+  auto ms_since = [clock](double since_ms) { return now_ms(clock) - since_ms; };
   const double budget_ms = std::min(max_ms, prepared.plan.max_ms);
   result->evaluations = 0;
   result->cost = 0;
@@ -185,20 +187,21 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   // counts against the budget.
   std::array<double, kMaxRegistrationPasses> prepare_ms{};
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
-    const auto level_t0 = std::chrono::steady_clock::now();
+    const double level_t0 = now_ms(clock);
     LFTRACK_RETURN_IF_ERROR(prepare_level(prepared.measures[p], prepared.levels[p]));
     prepare_ms[p] = ms_since(level_t0);
   }
   {
-    const auto level_t0 = std::chrono::steady_clock::now();
+    const double level_t0 = now_ms(clock);
     LFTRACK_RETURN_IF_ERROR(prepare_level(0, 0));
     prepare_ms[0] += ms_since(level_t0);
   }
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
-    const auto pass_t0 = std::chrono::steady_clock::now();
+    const double pass_t0 = now_ms(clock);
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
-    budget.max_ms = budget_ms - ms_since(t0);
+    budget.max_ms = budget_ms - ms_since(t0_ms);
+    budget.clock = clock;
     PassTimes& times = pass_times_[std::size_t(prepared.measures[p])][std::size_t(prepared.levels[p])];
     budget.prior_ms_per_evaluation = times.ms_per_evaluation.median();
     budget.prior_later_to_first_batch = times.later_to_first_batch.median();
@@ -237,7 +240,7 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   if (fiducial_)
     result->fiducial_distance_mm =
         (result->T_room_from_ct * fiducial_->marker_ct_mm - fiducial_->marker_room_mm).norm();
-  result->elapsed_ms = ms_since(t0);
+  result->elapsed_ms = ms_since(t0_ms);
   return {};
 }
 

@@ -195,9 +195,10 @@ class Registration {
   Result<PreparedPlan> prepare_plan(const RegistrationPlan& plan, bool record_trace = false);
   // Registers from `start` within `max_ms` (and the plan's own budget) into `result`. Allocates
   // nothing when the plan records no trace and `result` has held a result of this registration
-  // before (its per-view vector keeps its capacity).
+  // before (its per-view vector keeps its capacity). The budget and every time in the result are
+  // counted on `clock` (null: the steady clock; a test's virtual clock must outlive the run).
   Status run(const Pose& start_T_room_from_ct, const PreparedPlan& plan, double max_ms,
-             RegistrationResult* result);
+             RegistrationResult* result, const BudgetClock* clock = nullptr);
 
   // The cost of one pose at an image level (for tests and plots); +infinity for a level that
   // was not prepared.
