@@ -390,7 +390,9 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
       const __m256i off_rows = _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, ds), _mm256_cmpgt_epi32(ds, two));
       const __m256i off_wide = _mm256_or_si256(off_rows, _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, dt), _mm256_cmpgt_epi32(dt, fourteen)));
       const int t_first = first_lane(t_lo), s_first = first_lane(s_lo);
-      if (k.inside_bits == 0xff && _mm256_testz_si256(off_wide, off_wide) && t_first + 16 <= image.cols) {
+      // A run reads 8 or 16 samples from (s_first, t_first), t_first <= cols - 2: past the last
+      // row's end only into the image's tail (SourceImage::kTailFloats).
+      if (k.inside_bits == 0xff && _mm256_testz_si256(off_wide, off_wide)) {
         RunRange range;
         range.s0 = s_first;
         range.t0 = t_first;

@@ -264,7 +264,7 @@ class LightFieldRenderer final : public DrrRenderer {
     avx2_runs_ = simd != SimdLevel::kAvx2Gathers;
     for (const auto& f : fields_) {
       const auto& size = f.field->geometry().size;
-      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]));
+      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) + SourceImage::kTailFloats);
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
     if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
@@ -401,7 +401,7 @@ class LightFieldRenderer final : public DrrRenderer {
     // of its own for the render.
     thread_local std::vector<float> kept;
     std::vector<float> own;
-    const std::size_t needed = std::size_t(image.rows) * std::size_t(image.cols);
+    const std::size_t needed = std::size_t(image.rows) * std::size_t(image.cols) + SourceImage::kTailFloats;
     if (needed > kMaxImageReserve) {
       own.resize(needed);
       image.values = own.data();
