@@ -10,9 +10,13 @@
 #include <random>
 
 namespace lftrack::tracking {
-namespace {
 
-using Clock = std::chrono::steady_clock;
+double budget_now_ms(const BudgetClock* clock) {
+  if (clock != nullptr) return clock->now_ms();
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+namespace {
 
 // Evaluation bookkeeping shared by the optimizers: scaled coordinates y (x = start + scale .* y),
 // budget, best point, trace.
@@ -24,10 +28,7 @@ class Search {
   }
 
   Vector6d to_x(const Vector6d& y) const { return start_ + settings_.scale.cwiseProduct(y); }
-  double now_ms() const {
-    if (budget_.clock != nullptr) return budget_.clock->now_ms();
-    return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count();
-  }
+  double now_ms() const { return budget_now_ms(budget_.clock); }
   double elapsed_ms() const { return now_ms() - t0_ms_; }
   // True while another batch of `n` evaluations fits the budget. The time budget bounds when the
   // search ends, not only when its last batch starts: a batch that would end past it, at the mean

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -102,14 +101,6 @@ double Registration::RecentMedian::median() const {
   return sorted[std::size_t(count_ - 1) / 2];  // the lower of two middles
 }
 
-namespace {
-// Now in ms on `clock` (null: the steady clock), any origin.
-double now_ms(const BudgetClock* clock) {
-  if (clock != nullptr) return clock->now_ms();
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-}  // namespace
-
 Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bool record_trace) {
   if (plan.passes.empty()) return invalid_argument("registration: the plan has no passes");
   if (plan.passes.size() > kMaxRegistrationPasses)
@@ -165,8 +156,8 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
     if (prepared.measures[p] < 0 || std::size_t(prepared.measures[p]) >= measure_names_.size() ||
         prepared.levels[p] < 0 || std::size_t(prepared.levels[p]) >= levels_.size())
       return invalid_argument("registration: the plan was not prepared by this registration");
-  const double t0_ms = now_ms(clock);
-  auto ms_since = [clock](double since_ms) { return now_ms(clock) - since_ms; };
+  const double t0_ms = budget_now_ms(clock);
+  auto ms_since = [clock](double since_ms) { return budget_now_ms(clock) - since_ms; };
   const double budget_ms = std::min(max_ms, prepared.plan.max_ms);
   result->evaluations = 0;
   result->cost = 0;
@@ -187,17 +178,17 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
   // counts against the budget.
   std::array<double, kMaxRegistrationPasses> prepare_ms{};
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
-    const double level_t0 = now_ms(clock);
+    const double level_t0 = budget_now_ms(clock);
     LFTRACK_RETURN_IF_ERROR(prepare_level(prepared.measures[p], prepared.levels[p]));
     prepare_ms[p] = ms_since(level_t0);
   }
   {
-    const double level_t0 = now_ms(clock);
+    const double level_t0 = budget_now_ms(clock);
     LFTRACK_RETURN_IF_ERROR(prepare_level(0, 0));
     prepare_ms[0] += ms_since(level_t0);
   }
   for (std::size_t p = 0; p < prepared.optimizers.size(); ++p) {
-    const double pass_t0 = now_ms(clock);
+    const double pass_t0 = budget_now_ms(clock);
     OptimizerBudget budget;
     budget.max_evaluations = prepared.plan.passes[p].max_evaluations;
     budget.max_ms = budget_ms - ms_since(t0_ms);

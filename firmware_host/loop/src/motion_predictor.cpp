@@ -29,28 +29,33 @@ tracking::Vector6d MotionPredictor::predict() const {
   // Times relative to the newest estimate keep the normal equations well conditioned (ns_between:
   // exact differences).
   const std::int64_t t0_ns = t_ns_[std::size_t(count_ - 1)];
+  // The normal equations of the parabola, once; a line's are their leading 2 x 2 block.
+  Eigen::Matrix3d normal2 = Eigen::Matrix3d::Zero();
+  Eigen::Matrix<double, 3, 6> rhs2 = Eigen::Matrix<double, 3, 6>::Zero();
+  for (int i = 0; i < count_; ++i) {
+    const double dt = 1e-9 * ns_between(t0_ns, t_ns_[std::size_t(i)]);  // s
+    const Eigen::Vector3d basis(1.0, dt, dt * dt);
+    normal2 += basis * basis.transpose();
+    rhs2 += basis * x_[std::size_t(i)].transpose();
+  }
   const double h = lookahead_s_;
-  const Eigen::Vector3d at(1.0, h, h * h);
   // The configured order first, then a line: the first whose noise gain is within the bound.
   for (int order = count_ >= order_ + 2 ? order_ : 1; order >= 1; --order) {
-    Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
-    Eigen::Matrix<double, 3, 6> rhs = Eigen::Matrix<double, 3, 6>::Zero();
-    for (int i = 0; i < count_; ++i) {
-      const double dt = 1e-9 * ns_between(t0_ns, t_ns_[std::size_t(i)]);  // s
-      const Eigen::Vector3d basis(1.0, dt, order == 2 ? dt * dt : 0.0);
-      normal += basis * basis.transpose();
-      rhs += basis * x_[std::size_t(i)].transpose();
+    Eigen::Matrix3d normal = normal2;
+    Eigen::Matrix<double, 3, 6> rhs = rhs2;
+    if (order == 1) {  // the unused coefficient solves to zero
+      normal.row(2).setZero();
+      normal.col(2).setZero();
+      normal(2, 2) = 1.0;
+      rhs.row(2).setZero();
     }
-    if (order == 1) normal(2, 2) = 1.0;  // the unused coefficient solves to zero
     const Eigen::Matrix3d inverse = normal.inverse();
     if (!inverse.allFinite()) continue;
     // The prediction is a weighted sum of the estimates, w = at' N^-1 B'; with independent noise
     // of one deviation in each, its deviation is |w| = sqrt(at' N^-1 at) times that.
-    const Eigen::Vector3d at_used(1.0, h, order == 2 ? h * h : 0.0);
-    const double noise_gain_squared = at_used.dot(inverse * at_used);
-    if (!(noise_gain_squared <= kMaxNoiseGain * kMaxNoiseGain)) continue;
-    const Eigen::Matrix<double, 3, 6> coefficients = inverse * rhs;
-    const tracking::Vector6d predicted = (at_used.transpose() * coefficients).transpose();
+    const Eigen::Vector3d at(1.0, h, order == 2 ? h * h : 0.0);
+    if (!(at.dot(inverse * at) <= kMaxNoiseGain * kMaxNoiseGain)) continue;
+    const tracking::Vector6d predicted = (at.transpose() * (inverse * rhs)).transpose();
     if (predicted.allFinite()) return predicted;
   }
   return newest;

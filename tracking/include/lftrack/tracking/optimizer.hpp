@@ -40,6 +40,9 @@ class BudgetClock {
   virtual double now_ms() const = 0;
 };
 
+// Now in ms on `clock`, or on std::chrono::steady_clock where it is null (any origin).
+double budget_now_ms(const BudgetClock* clock);
+
 struct OptimizerBudget {
   int max_evaluations = 5000;
   double max_ms = 1e12;  // wall time, on `clock`
