@@ -68,7 +68,9 @@ TEST_F(CanBridge, LinksCommandsAndReadsBack) {
   // A second controller is turned away while the first is linked.
   drivers::CanRobot other(options());
   other.open().ok();  // it may or may not see a heartbeat before the bridge closes it
-  std::this_thread::sleep_for(100ms);
+  for (const auto until = std::chrono::steady_clock::now() + 5s;
+       bridge_->refused() < 1 && std::chrono::steady_clock::now() < until;)
+    std::this_thread::sleep_for(5ms);
   EXPECT_GE(bridge_->refused(), 1);
   EXPECT_EQ(robot.readback(&state, in(200ms)), DeviceStatus::kOk) << "the first link is untouched";
 }
@@ -92,8 +94,15 @@ TEST_F(CanBridge, AnUnpluggedBridgeDisconnectsAndTheReplugIsARestartedRobot) {
   EXPECT_EQ(robot.counters().reconnects, 1);
   EXPECT_NE(robot.faults() & drivers::kCanRobotRestarted, 0u);
   EXPECT_EQ(couch_->commands(), 0) << "nothing moved";
-  std::this_thread::sleep_for(100ms);  // heartbeats arrive
-  robot.hold();                        // the operator's resume follows a hold
+  // Until the linked robot's heartbeats arrive (read back: the driver takes frames in its calls).
+  const std::int64_t heartbeats = robot.counters().heartbeats;
+  for (const auto until = std::chrono::steady_clock::now() + 5s;
+       robot.counters().heartbeats < heartbeats + 2 && std::chrono::steady_clock::now() < until;) {
+    robot.readback(&state, in(50ms));
+    std::this_thread::sleep_for(5ms);
+  }
+  ASSERT_GE(robot.counters().heartbeats, heartbeats + 2);
+  robot.hold();  // the operator's resume follows a hold
   EXPECT_EQ(robot.command(step, in(200ms)), DeviceStatus::kOk);
   EXPECT_EQ(couch_->commands(), 1);
 }

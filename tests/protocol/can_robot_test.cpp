@@ -51,18 +51,22 @@ class CanRobotTest : public ::testing::Test {
     const Status s = driver->open();
     ASSERT_TRUE(s.ok()) << s.message();
   }
-  // Read back until the driver reports `want`, for up to a second (the robot's thread acts
-  // asynchronously).
-  DeviceStatus readback_until(DeviceStatus want) {
+  // Reads back until `done(status)` holds, for up to five seconds (the robot's thread acts
+  // asynchronously, later on a loaded host); returns the last status.
+  template <class Done>
+  DeviceStatus readback_until(Done done) {
     ActuatorState s;
     DeviceStatus got = DeviceStatus::kOk;
-    const auto until = Clock::now() + std::chrono::seconds(1);
+    const auto until = Clock::now() + std::chrono::seconds(5);
     while (Clock::now() < until) {
       got = driver->readback(&s, in_ms(50));
-      if (got == want) break;
+      if (done(got)) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
     return got;
+  }
+  DeviceStatus readback_until(DeviceStatus want) {
+    return readback_until([want](DeviceStatus got) { return got == want; });
   }
 
   test::LockedCouch arm{arm_spec()};
@@ -129,11 +133,13 @@ TEST_F(CanRobotTest, BusOffHoldsUntilTheControllerRestartsAndThenUntilHold) {
   EXPECT_TRUE(driver->faults() & drivers::kCanBusOff) << drivers::describe_can_faults(driver->faults());
   EXPECT_EQ(driver->command(shift(1), in_ms(50)), DeviceStatus::kRefused) << "nothing is sent while bus-off";
   robot->inject(RobotFault::kControllerRestarted);
-  std::this_thread::sleep_for(std::chrono::milliseconds(30));
-  ActuatorState s;
-  EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kFault) << "a restart does not resume by itself";
+  // Until the restart's notice has arrived (it replaces bus-off).
+  const DeviceStatus restarted =
+      readback_until([&](DeviceStatus) { return driver->faults() == drivers::kCanControllerRestarted; });
+  EXPECT_EQ(restarted, DeviceStatus::kFault) << "a restart does not resume by itself";
   EXPECT_EQ(driver->faults(), drivers::kCanControllerRestarted)
       << drivers::describe_can_faults(driver->faults());
+  ActuatorState s;
   driver->hold();  // what the loop does on entering HOLD; the operator's resume follows
   EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kOk);
   EXPECT_EQ(driver->faults(), 0u);
@@ -171,7 +177,11 @@ TEST_F(CanRobotTest, AMissingHeartbeatHoldsAndNeedsTheHeartbeatBackAndAHold) {
   EXPECT_EQ(readback_until(DeviceStatus::kFault), DeviceStatus::kFault);
   EXPECT_TRUE(driver->faults() & drivers::kCanHeartbeatMissing);
   robot->inject(RobotFault::kResumeHeartbeat);
-  std::this_thread::sleep_for(std::chrono::milliseconds(120));
+  // Until two heartbeats have come back (the robot sends one every 50 ms).
+  const std::int64_t heartbeats = driver->counters().heartbeats;
+  const DeviceStatus back = readback_until([&](DeviceStatus) { return driver->counters().heartbeats >= heartbeats + 2; });
+  ASSERT_GE(driver->counters().heartbeats, heartbeats + 2) << "the heartbeat came back";
+  EXPECT_EQ(back, DeviceStatus::kFault) << "latched until hold";
   ActuatorState s;
   EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kFault) << "latched until hold";
   driver->hold();
