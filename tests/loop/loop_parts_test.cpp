@@ -90,6 +90,40 @@ TEST(MotionPredictor, NeverMultipliesTheEstimatesNoiseByMoreThanTwoAndAHalf) {
   }
 }
 
+// What a scene's full window predicts with, as the loop session reports it (a warning for a window
+// too short for its order): the order predict() uses, and gains equal to those measured from
+// outside on evenly spaced estimates.
+TEST(MotionPredictor, TellsWhatAFullWindowPredictsWith) {
+  struct Case {
+    int window, order;
+    double period_s, lookahead_s;
+    int order_used;
+  };
+  for (const Case c : {Case{8, 2, 0.1, 0.2, 2}, Case{24, 2, 1.0 / 30, 0.1 + 1.0 / 30, 2}, Case{6, 2, 0.1, 0.2, 1},
+                       Case{2, 1, 0.1, 0.2, 0}, Case{3, 2, 0.1, 0.2, 1}, Case{8, 1, 0.1, 0.2, 1}}) {
+    SCOPED_TRACE(std::to_string(c.window) + " cycles, order " + std::to_string(c.order));
+    const MotionPredictor::FullWindow w = MotionPredictor::full_window(c.window, c.order, c.period_s, c.lookahead_s);
+    EXPECT_EQ(w.order_used, c.order_used);
+    std::vector<std::int64_t> times_ns;
+    for (int k = 0; k < c.window; ++k) times_ns.push_back(std::llround(1e9 * c.period_s * k));
+    EXPECT_NEAR(w.gain_used, noise_gain(c.window, c.order, c.lookahead_s, times_ns), 1e-7);  // ns rounding
+    if (c.order_used == c.order) {
+      EXPECT_DOUBLE_EQ(w.gain_configured, w.gain_used);
+    } else {
+      EXPECT_GT(w.gain_configured, MotionPredictor::kMaxNoiseGain);
+    }
+    EXPECT_FALSE(std::isnan(w.gain_configured));
+  }
+  // The window of 6 at 10 Hz, the README's example: a parabola would multiply noise by 3.06.
+  EXPECT_NEAR(MotionPredictor::full_window(6, 2, 0.1, 0.2).gain_configured, 3.06, 0.01);
+  // No prediction, and absurd periods: the newest estimate, gain 1.
+  for (const double period_s : {0.0, -1.0, std::nan("")})
+    EXPECT_EQ(MotionPredictor::full_window(8, 2, period_s, 0.2).order_used, 0) << period_s;
+  EXPECT_EQ(MotionPredictor::full_window(1, 2, 0.1, 0.2).order_used, 0);
+  // Too few estimates for a parabola: it is never fitted, so it has no gain of its own.
+  EXPECT_EQ(MotionPredictor::full_window(3, 2, 0.1, 0.2).gain_configured, INFINITY);
+}
+
 // Only differences of time count, so the same estimates give the same prediction bit for bit at
 // any clock origin: a loop on the simulated clock starts at the host's uptime, and two runs of
 // one seed must agree (with seconds as doubles they drifted apart from the third cycle on).

@@ -2,10 +2,35 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 
 #include "lftrack/loop/time_interval.hpp"
 
 namespace lftrack::host {
+namespace {
+
+// The normal equations of a fit of `order` (1 or 2) from the parabola's: a line's are their
+// leading 2 x 2 block, its unused coefficient solving to zero. Null `rhs`: only the matrix.
+Eigen::Matrix3d normal_of_order(const Eigen::Matrix3d& normal2, int order, Eigen::Matrix<double, 3, 6>* rhs) {
+  Eigen::Matrix3d normal = normal2;
+  if (order == 1) {
+    normal.row(2).setZero();
+    normal.col(2).setZero();
+    normal(2, 2) = 1.0;
+    if (rhs != nullptr) rhs->row(2).setZero();
+  }
+  return normal;
+}
+
+// The fit's prediction at h is a weighted sum of the estimates, w = at' N^-1 B'; with independent
+// noise of one deviation in each, its deviation is |w| = sqrt(at' N^-1 at) times that.
+Eigen::Vector3d evaluation_at(double h, int order) { return {1.0, h, order == 2 ? h * h : 0.0}; }
+double noise_gain(const Eigen::Matrix3d& inverse, double h, int order) {
+  const Eigen::Vector3d at = evaluation_at(h, order);
+  return std::sqrt(at.dot(inverse * at));
+}
+
+}  // namespace
 
 MotionPredictor::MotionPredictor(int window, int order, double lookahead_s)
     : window_(std::clamp(window, 0, kCapacity)), order_(std::clamp(order, 1, 2)), lookahead_s_(lookahead_s) {}
@@ -41,24 +66,43 @@ tracking::Vector6d MotionPredictor::predict() const {
   const double h = lookahead_s_;
   // The configured order first, then a line: the first whose noise gain is within the bound.
   for (int order = count_ >= order_ + 2 ? order_ : 1; order >= 1; --order) {
-    Eigen::Matrix3d normal = normal2;
     Eigen::Matrix<double, 3, 6> rhs = rhs2;
-    if (order == 1) {  // the unused coefficient solves to zero
-      normal.row(2).setZero();
-      normal.col(2).setZero();
-      normal(2, 2) = 1.0;
-      rhs.row(2).setZero();
-    }
-    const Eigen::Matrix3d inverse = normal.inverse();
+    const Eigen::Matrix3d inverse = normal_of_order(normal2, order, &rhs).inverse();
     if (!inverse.allFinite()) continue;
-    // The prediction is a weighted sum of the estimates, w = at' N^-1 B'; with independent noise
-    // of one deviation in each, its deviation is |w| = sqrt(at' N^-1 at) times that.
-    const Eigen::Vector3d at(1.0, h, order == 2 ? h * h : 0.0);
-    if (!(at.dot(inverse * at) <= kMaxNoiseGain * kMaxNoiseGain)) continue;
-    const tracking::Vector6d predicted = (at.transpose() * (inverse * rhs)).transpose();
+    if (!(noise_gain(inverse, h, order) <= kMaxNoiseGain)) continue;
+    const tracking::Vector6d predicted = (evaluation_at(h, order).transpose() * (inverse * rhs)).transpose();
     if (predicted.allFinite()) return predicted;
   }
   return newest;
+}
+
+MotionPredictor::FullWindow MotionPredictor::full_window(int window, int order, double period_s, double lookahead_s) {
+  FullWindow out;
+  const int n = std::clamp(window, 0, kCapacity);
+  order = std::clamp(order, 1, 2);
+  if (n < 2 || !(period_s > 0)) return out;  // no prediction: the newest estimate, gain 1
+  Eigen::Matrix3d normal2 = Eigen::Matrix3d::Zero();
+  for (int i = 0; i < n; ++i) {
+    const double dt = -period_s * double(n - 1 - i);  // relative to the newest, as predict()
+    const Eigen::Vector3d basis(1.0, dt, dt * dt);
+    normal2 += basis * basis.transpose();
+  }
+  const auto gain = [&](int k) {
+    const Eigen::Matrix3d inverse = normal_of_order(normal2, k, nullptr).inverse();
+    return inverse.allFinite() ? noise_gain(inverse, lookahead_s, k) : INFINITY;
+  };
+  // Too few estimates for the order (predict() never fits it): no gain of its own.
+  const int first = n >= order + 2 ? order : 1;
+  out.gain_configured = first == order ? gain(order) : INFINITY;
+  for (int k = first; k >= 1; --k) {
+    const double g = gain(k);
+    if (g <= kMaxNoiseGain) {
+      out.order_used = k;
+      out.gain_used = g;
+      return out;
+    }
+  }
+  return out;
 }
 
 }  // namespace lftrack::host

@@ -25,6 +25,14 @@ drivers::Deadline to_deadline(std::int64_t ns) {
 
 double ms_between(std::int64_t a_ns, std::int64_t b_ns) { return 1e-6 * ns_between(a_ns, b_ns); }
 
+std::int64_t loop_period_ns(const LoopSettings& s) {
+  return static_cast<std::int64_t>(std::llround(s.loop.period_ms * 1e6));
+}
+
+double prediction_lookahead_s(const LoopSettings& s) {
+  return s.loop.lookahead_s.value_or(1e-9 * double(loop_period_ns(s)) + s.actuator_latency_s);
+}
+
 TrackingLoop::TrackingLoop(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 TrackingLoop::~TrackingLoop() {
   if (impl_ && impl_->parts.frames != nullptr) impl_->parts.frames->close();
@@ -45,7 +53,7 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   auto impl = std::make_unique<Impl>();
   impl->parts = parts;
   impl->settings = settings;
-  impl->period_ns = static_cast<std::int64_t>(std::llround(settings.loop.period_ms * 1e6));
+  impl->period_ns = loop_period_ns(settings);
   impl->origin_room = parts.geometry.registration_origin_room_mm;
   impl->nominal = parts.geometry.nominal_T_room_from_ct;
   auto align = tracking::registration_plan(settings.loop.align_plan);
@@ -58,10 +66,8 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   if (!track_prepared.ok()) return track_prepared.status().with_context("track plan");
   impl->align_plan = std::move(align_prepared).value();
   impl->track_plan = std::move(track_prepared).value();
-  const double lookahead =
-      settings.loop.lookahead_s.value_or(1e-9 * double(impl->period_ns) + settings.actuator_latency_s);
-  impl->predictor =
-      MotionPredictor(settings.loop.prediction_cycles, settings.loop.prediction_order, lookahead);
+  impl->predictor = MotionPredictor(settings.loop.prediction_cycles, settings.loop.prediction_order,
+                                    prediction_lookahead_s(settings));
 
   LFTRACK_RETURN_IF_ERROR(parts.frames->open(&impl->pair).with_context("frame source"));
   if (impl->pair.frames.size() != views)

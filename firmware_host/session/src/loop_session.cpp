@@ -1,5 +1,6 @@
 #include "lftrack/host/loop_session.hpp"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/loop/motion_predictor.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/room_clocked_actuator.hpp"
@@ -306,6 +308,29 @@ Status check_distinct_paths(const LoopSessionOptions& o) {
   return {};
 }
 
+// A prediction window too short for its order is not an error (the predictor drops to a line, or
+// to the newest estimate, MotionPredictor::kMaxNoiseGain), but the scene's author should know.
+void warn_if_prediction_window_short(const LoopSettings& s) {
+  const LoopSpec& l = s.loop;
+  if (l.prediction_cycles < 2) return;
+  const MotionPredictor::FullWindow w = MotionPredictor::full_window(
+      l.prediction_cycles, l.prediction_order, 1e-3 * l.period_ms, prediction_lookahead_s(s));
+  if (w.order_used >= l.prediction_order) return;
+  const std::string used = w.order_used == 1 ? fmt::format("a line (noise gain {:.2f})", w.gain_used)
+                                             : std::string("the newest estimate alone");
+  const std::string advice = "a longer prediction_cycles or a lower prediction_order says so";
+  if (!std::isfinite(w.gain_configured)) {
+    spdlog::warn("loop: prediction_order {} needs at least {} prediction_cycles ({} given): the loop predicts with {}; {}",
+                 l.prediction_order, l.prediction_order + 2, l.prediction_cycles, used, advice);
+    return;
+  }
+  spdlog::warn(
+      "loop: prediction_order {} over prediction_cycles {} ({} ms apart, {:.3f} s ahead) would multiply the "
+      "registration's noise by {:.2f}, more than {}: the loop predicts with {}; {}",
+      l.prediction_order, l.prediction_cycles, l.period_ms, prediction_lookahead_s(s), w.gain_configured,
+      MotionPredictor::kMaxNoiseGain, used, advice);
+}
+
 // The monitor page and the OpenIGTLink server, when asked for, on a hub fed by the loop.
 Status start_watchers(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts) {
   if (!o.monitor && !o.igtl) return {};
@@ -478,6 +503,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.simulated_clock = o.simulated_clock;
   settings.status_line = o.status_line;
   settings.announce_holds = o.announce_holds;
+  warn_if_prediction_window_short(settings);
   auto verdict = verdict_limits(p.scene, p.scene.registration.similarity);
   if (!verdict.ok()) return verdict.status();
   settings.verdict = *verdict;

@@ -99,4 +99,9 @@ struct LoopSettings {
   std::optional<VerdictLimits> verdict;
 };
 
+// The loop's period in integer nanoseconds, and the motion predictor's look-ahead (s): the scene's
+// lookahead_s, or one period plus the actuator's latency.
+std::int64_t loop_period_ns(const LoopSettings& s);
+double prediction_lookahead_s(const LoopSettings& s);
+
 }  // namespace lftrack::host

@@ -46,6 +46,17 @@ class MotionPredictor {
   // The offset expected lookahead_s after the newest estimate; zero with no estimate.
   tracking::Vector6d predict() const;
 
+  // What a full window of estimates `period_s` apart predicts with, as predict() chooses: the
+  // order (`order`, 1, or 0 for the newest estimate alone) and that fit's noise gain; and the
+  // configured order's gain (infinite where the window is shorter than order + 2). A scene whose window is too short for its order is told so
+  // (loop_session.cpp) rather than silently predicting with a line.
+  struct FullWindow {
+    int order_used = 0;
+    double gain_used = 1.0;
+    double gain_configured = 1.0;
+  };
+  static FullWindow full_window(int window, int order, double period_s, double lookahead_s);
+
  private:
   int window_;
   int order_;
