@@ -24,6 +24,16 @@ drivers::Deadline in(std::chrono::milliseconds ms) {
   return std::chrono::steady_clock::now() + ms;
 }
 
+// Calls `step` every 5 ms until `done` holds, for up to five seconds (the bridge and the robot
+// act on threads of their own, later on a loaded host).
+template <class Done, class Step>
+void poll_until(Done done, Step step) {
+  for (const auto until = std::chrono::steady_clock::now() + 5s; !done() && std::chrono::steady_clock::now() < until;) {
+    step();
+    std::this_thread::sleep_for(5ms);
+  }
+}
+
 class CanBridge : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -68,9 +78,7 @@ TEST_F(CanBridge, LinksCommandsAndReadsBack) {
   // A second controller is turned away while the first is linked.
   drivers::CanRobot other(options());
   other.open().ok();  // it may or may not see a heartbeat before the bridge closes it
-  for (const auto until = std::chrono::steady_clock::now() + 5s;
-       bridge_->refused() < 1 && std::chrono::steady_clock::now() < until;)
-    std::this_thread::sleep_for(5ms);
+  poll_until([&] { return bridge_->refused() >= 1; }, [] {});
   EXPECT_GE(bridge_->refused(), 1);
   EXPECT_EQ(robot.readback(&state, in(200ms)), DeviceStatus::kOk) << "the first link is untouched";
 }
@@ -96,11 +104,7 @@ TEST_F(CanBridge, AnUnpluggedBridgeDisconnectsAndTheReplugIsARestartedRobot) {
   EXPECT_EQ(couch_->commands(), 0) << "nothing moved";
   // Until the linked robot's heartbeats arrive (read back: the driver takes frames in its calls).
   const std::int64_t heartbeats = robot.counters().heartbeats;
-  for (const auto until = std::chrono::steady_clock::now() + 5s;
-       robot.counters().heartbeats < heartbeats + 2 && std::chrono::steady_clock::now() < until;) {
-    robot.readback(&state, in(50ms));
-    std::this_thread::sleep_for(5ms);
-  }
+  poll_until([&] { return robot.counters().heartbeats >= heartbeats + 2; }, [&] { robot.readback(&state, in(50ms)); });
   ASSERT_GE(robot.counters().heartbeats, heartbeats + 2);
   robot.hold();  // the operator's resume follows a hold
   EXPECT_EQ(robot.command(step, in(200ms)), DeviceStatus::kOk);

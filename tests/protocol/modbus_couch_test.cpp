@@ -45,9 +45,14 @@ class ModbusCouchTest : public ::testing::Test {
     auto s = sim::ModbusCouchServer::start(couch.get());
     ASSERT_TRUE(s.ok()) << s.status().message();
     server = std::move(s).value();
+    open_driver(0.05);
+  }
+  // The driver under test, against this server, replacing any before it.
+  void open_driver(double response_timeout_s) {
+    if (driver) driver->close();
     drivers::ModbusCouchOptions o;
     o.port = server->port();
-    o.response_timeout_s = 0.05;
+    o.response_timeout_s = response_timeout_s;
     o.reconnect_interval_s = 0.05;
     driver = std::make_unique<ModbusCouch>(o);
     ASSERT_TRUE(driver->open().ok());
@@ -128,12 +133,8 @@ TEST_F(ModbusCouchTest, NoReplyIsATimeoutWithinTheResponseTimeoutAndTheNextReque
 
 TEST_F(ModbusCouchTest, TheCyclesDeadlineCutsTheResponseTimeout) {
   // A response timeout of 2 s, so that a loaded host's scheduling cannot pass for it.
-  driver->close();
-  drivers::ModbusCouchOptions o;
-  o.port = server->port();
-  o.response_timeout_s = 2.0;
-  driver = std::make_unique<ModbusCouch>(o);
-  ASSERT_TRUE(driver->open().ok());
+  open_driver(2.0);
+  if (HasFatalFailure()) return;
   server->inject(CouchServerFault::kNoReply);
   const std::int64_t at_start = server->requests();
   const auto t0 = Clock::now();

@@ -22,6 +22,14 @@ Eigen::Matrix3d normal_of_order(const Eigen::Matrix3d& normal2, int order, Eigen
   return normal;
 }
 
+// A parabola's basis at dt (s, relative to the newest estimate): the normal equations of every
+// fit are sums of its outer products.
+Eigen::Vector3d parabola_basis(double dt) { return {1.0, dt, dt * dt}; }
+
+// The first order predict() tries with `count` estimates: the configured one where there are
+// enough estimates to smooth it (order + 2), else a line; it then drops while the gain is too high.
+int first_order_to_try(int count, int order) { return count >= order + 2 ? order : 1; }
+
 // The fit's prediction at h is a weighted sum of the estimates, w = at' N^-1 B'; with independent
 // noise of one deviation in each, its deviation is |w| = sqrt(at' N^-1 at) times that.
 Eigen::Vector3d evaluation_at(double h, int order) { return {1.0, h, order == 2 ? h * h : 0.0}; }
@@ -59,13 +67,13 @@ tracking::Vector6d MotionPredictor::predict() const {
   Eigen::Matrix<double, 3, 6> rhs2 = Eigen::Matrix<double, 3, 6>::Zero();
   for (int i = 0; i < count_; ++i) {
     const double dt = 1e-9 * ns_between(t0_ns, t_ns_[std::size_t(i)]);  // s
-    const Eigen::Vector3d basis(1.0, dt, dt * dt);
+    const Eigen::Vector3d basis = parabola_basis(dt);
     normal2 += basis * basis.transpose();
     rhs2 += basis * x_[std::size_t(i)].transpose();
   }
   const double h = lookahead_s_;
   // The configured order first, then a line: the first whose noise gain is within the bound.
-  for (int order = count_ >= order_ + 2 ? order_ : 1; order >= 1; --order) {
+  for (int order = first_order_to_try(count_, order_); order >= 1; --order) {
     Eigen::Matrix<double, 3, 6> rhs = rhs2;
     const Eigen::Matrix3d inverse = normal_of_order(normal2, order, &rhs).inverse();
     if (!inverse.allFinite()) continue;
@@ -83,8 +91,7 @@ MotionPredictor::FullWindow MotionPredictor::full_window(int window, int order, 
   if (n < 2 || !(period_s > 0)) return out;  // no prediction: the newest estimate, gain 1
   Eigen::Matrix3d normal2 = Eigen::Matrix3d::Zero();
   for (int i = 0; i < n; ++i) {
-    const double dt = -period_s * double(n - 1 - i);  // relative to the newest, as predict()
-    const Eigen::Vector3d basis(1.0, dt, dt * dt);
+    const Eigen::Vector3d basis = parabola_basis(-period_s * double(n - 1 - i));
     normal2 += basis * basis.transpose();
   }
   const auto gain = [&](int k) {
@@ -92,7 +99,7 @@ MotionPredictor::FullWindow MotionPredictor::full_window(int window, int order, 
     return inverse.allFinite() ? noise_gain(inverse, lookahead_s, k) : INFINITY;
   };
   // Too few estimates for the order (predict() never fits it): no gain of its own.
-  const int first = n >= order + 2 ? order : 1;
+  const int first = first_order_to_try(n, order);
   out.gain_configured = first == order ? gain(order) : INFINITY;
   for (int k = first; k >= 1; --k) {
     const double g = gain(k);

@@ -313,8 +313,9 @@ Status check_distinct_paths(const LoopSessionOptions& o) {
 void warn_if_prediction_window_short(const LoopSettings& s) {
   const LoopSpec& l = s.loop;
   if (l.prediction_cycles < 2) return;
+  const double lookahead_s = prediction_lookahead_s(s);
   const MotionPredictor::FullWindow w = MotionPredictor::full_window(
-      l.prediction_cycles, l.prediction_order, 1e-3 * l.period_ms, prediction_lookahead_s(s));
+      l.prediction_cycles, l.prediction_order, 1e-9 * double(loop_period_ns(s)), lookahead_s);
   if (w.order_used >= l.prediction_order) return;
   const std::string used = w.order_used == 1 ? fmt::format("a line (noise gain {:.2f})", w.gain_used)
                                              : std::string("the newest estimate alone");
@@ -327,7 +328,7 @@ void warn_if_prediction_window_short(const LoopSettings& s) {
   spdlog::warn(
       "loop: prediction_order {} over prediction_cycles {} ({} ms apart, {:.3f} s ahead) would multiply the "
       "registration's noise by {:.2f}, more than {}: the loop predicts with {}; {}",
-      l.prediction_order, l.prediction_cycles, l.period_ms, prediction_lookahead_s(s), w.gain_configured,
+      l.prediction_order, l.prediction_cycles, l.period_ms, lookahead_s, w.gain_configured,
       MotionPredictor::kMaxNoiseGain, used, advice);
 }
 
