@@ -67,7 +67,7 @@ TEST(LightFieldRender, EnvelopeEdgeAndBeyond) {
 // The vectorised kernels (AVX-512 and AVX2, where the CPU has them) against the portable scalar
 // kernels, with a window whose width is a multiple of neither 8 nor 16, and poses inside the
 // field (where the AVX-512 and AVX2 kernels read runs of samples), at its edge and outside it;
-// the whole detector and its 2 x 2 binning (wider runs per chunk).
+// the whole detector, its 2 x 2 binning (wider runs per chunk) and a 256 x 256 image of it.
 struct KernelCase {
   LightFieldStorage storage;
   SimdLevel simd;
@@ -104,9 +104,13 @@ TEST_P(VectorisedKernel, MatchesScalar) {
   ASSERT_TRUE(scalar.ok() && simd.ok());
   const XrayView detector = fixture_plan().view_room;
   const XrayView binned = detector.resampled(0, 0, detector.rows, detector.cols, detector.rows / 2, detector.cols / 2);
+  // A 256 x 256 image of the detector, as the benchmark renders: pixels finer than the field's
+  // samples, where the AVX2 source-image kernel takes most chunks as one run over one image row.
+  const XrayView fine = detector.resampled(0, 0, detector.rows, detector.cols, 256, 256);
   for (const auto& [view, w] : {std::pair{detector, PixelWindow{3, 2, 41, 37}},
                                 std::pair{detector, PixelWindow::full(detector.rows, detector.cols)},
-                                std::pair{binned, PixelWindow::full(binned.rows, binned.cols)}}) {
+                                std::pair{binned, PixelWindow::full(binned.rows, binned.cols)},
+                                std::pair{fine, PixelWindow::full(fine.rows, fine.cols)}}) {
     for (double shift : {0.0, 2.0, 30.0}) {
       for (double turn : {0.0, 1.0}) {
         Pose pose = Pose::Identity();

@@ -356,58 +356,183 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
   return masked;
 }
 
-// The source-image path (light_field_kernels.hpp): each pixel's (s, t) neighbours in the image,
-// read as runs where eight pixels' lie in at most three rows of 15 samples, gathered otherwise.
+// The common case first, in fewer steps: every lane inside, in one image row and within 6
+// samples (nearly nine chunks in ten of a 256 x 256 render). s and t share a lane as two 16-bit
+// halves, st = is << 16 | it (the caller keeps the image at most 65,536 samples a side; the
+// clamps keep is and it in 0 .. 65,534), so one pair of permutations finds both starts and one
+// saturating subtraction tests both offsets: an offset below 0 wraps above 6.
+struct OneRowRun {
+  __m256i dt;        // each lane's t offset from the run's start, where `holds`
+  std::size_t run0;  // the run's first sample
+  bool holds;
+};
+
+LFTRACK_AVX2 inline OneRowRun one_row_narrow_run(__m256i st, std::size_t image_cols) {
+  const __m256i lo = _mm256_min_epu16(_mm256_permutevar8x32_epi32(st, _mm256_setzero_si256()),
+                                      _mm256_permutevar8x32_epi32(st, _mm256_set1_epi32(7)));
+  const __m256i d = _mm256_sub_epi16(st, lo);
+  const __m256i over = _mm256_subs_epu16(d, _mm256_set1_epi32(6));  // nonzero where ds > 0 or dt > 6 (or < 0)
+  const unsigned start = unsigned(first_lane(lo));
+  return {d, std::size_t(start >> 16) * image_cols + std::size_t(start & 0xffff),
+          bool(_mm256_testz_si256(over, over))};
+}
+
+// Its value: two rows of one run each, each sample of a pair one permutation.
+LFTRACK_AVX2 inline __m256 sample_one_row_narrow(const FloatSamples& f, std::size_t image_cols, const OneRowRun& run,
+                                                 __m256 ws, __m256 wt) {
+  RunLanes l;
+  l.dt = run.dt;
+  l.dt_next = _mm256_add_epi32(run.dt, _mm256_set1_epi32(1));
+  return run_cell<FloatSamples, false>(f, run.run0, image_cols, 0, l, ws, wt);
+}
+
+// A source-image chunk's value from its cells (is, it) in the image and weights: its pixels' (s, t)
+// neighbours read as runs where all eight lie in at most three rows of 15 samples (and every
+// lane is inside, inside_bits 0xff), gathered otherwise.
+LFTRACK_AVX2 inline __m256 sample_image_chunk(const FloatSamples& f, const SourceImage& image, __m256i is, __m256i it,
+                                              __m256 ws, __m256 wt, int inside_bits) {
+  const __m256i zero_i = _mm256_setzero_si256(), last = _mm256_set1_epi32(7), one = _mm256_set1_epi32(1);
+  const __m256i two = _mm256_set1_epi32(2), six = _mm256_set1_epi32(6), fourteen = _mm256_set1_epi32(14);
+  // The run test in lanes (no round trip through scalar registers but for the run's start):
+  // the range's start is the smaller of lanes 0 and 7 (s and t are monotonic along a row),
+  // and every lane must lie within 6 (narrow) or 14 (wide) samples and two rows of it.
+  const __m256i t_lo = _mm256_min_epi32(_mm256_permutevar8x32_epi32(it, zero_i), _mm256_permutevar8x32_epi32(it, last));
+  const __m256i s_lo = _mm256_min_epi32(_mm256_permutevar8x32_epi32(is, zero_i), _mm256_permutevar8x32_epi32(is, last));
+  const __m256i dt = _mm256_sub_epi32(it, t_lo), ds = _mm256_sub_epi32(is, s_lo);
+  const __m256i off_rows = _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, ds), _mm256_cmpgt_epi32(ds, two));
+  const __m256i off_wide =
+      _mm256_or_si256(off_rows, _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, dt), _mm256_cmpgt_epi32(dt, fourteen)));
+  // A run reads 8 or 16 samples from (s_lo, t_lo), t_lo <= cols - 2: past the last row's end
+  // only into the image's tail (SourceImage::kTailFloats).
+  if (inside_bits == 0xff && _mm256_testz_si256(off_wide, off_wide)) {
+    RunRange range;
+    range.s0 = first_lane(s_lo);
+    range.t0 = first_lane(t_lo);
+    range.s_span = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ds, one)))      ? 2
+                   : _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ds, zero_i))) ? 1
+                                                                                              : 0;
+    const bool narrow = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(dt, six))) == 0;
+    const std::size_t run0 = std::size_t(range.s0) * std::size_t(image.cols) + std::size_t(range.t0);
+    const RunLanes l = run_lanes(is, it, range);
+    return narrow ? run_cell<FloatSamples, false>(f, run0, std::size_t(image.cols), range.s_span, l, ws, wt)
+                  : run_cell<FloatSamples, true>(f, run0, std::size_t(image.cols), range.s_span, l, ws, wt);
+  }
+  const __m256i v_cols = _mm256_set1_epi32(image.cols);
+  return gathered_cell(f, _mm256_add_epi32(_mm256_mullo_epi32(is, v_cols), it), v_cols, ws, wt);
+}
+
+// A row whose rays are all inside (RowRays::inside) in the image's coordinates: s - image.s0 =
+// (ns0 + ns1 c) / (dn0 + dn1 c) at column c, likewise t - image.t0 with nt. The same as the map's
+// s = base + gain q1, q1 = d.e1 / d.n, with base, gain and the image's origin folded into the
+// numerator once a row: four multiply-adds and two subtractions fewer a chunk, and no field test.
+struct ImageRow {
+  __m256 dn0, dn1, ns0, ns1, nt0, nt1;
+};
+
+LFTRACK_AVX2 inline ImageRow image_row(const LightFieldGeometry& g, const RayMap& m, const SourceImage& image, int r) {
+  const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
+  const double dn0 = d_row.dot(g.axis), dn1 = m.d_col.dot(g.axis);
+  const double s_off = double(m.base[2]) - image.s0, t_off = double(m.base[3]) - image.t0;
+  const double ns0 = s_off * dn0 + double(m.gain[2]) * d_row.dot(g.e1);
+  const double ns1 = s_off * dn1 + double(m.gain[2]) * m.d_col.dot(g.e1);
+  const double nt0 = t_off * dn0 + double(m.gain[3]) * d_row.dot(g.e2);
+  const double nt1 = t_off * dn1 + double(m.gain[3]) * m.d_col.dot(g.e2);
+  return {_mm256_set1_ps(float(dn0)), _mm256_set1_ps(float(dn1)), _mm256_set1_ps(float(ns0)),
+          _mm256_set1_ps(float(ns1)), _mm256_set1_ps(float(nt0)), _mm256_set1_ps(float(nt1))};
+}
+
+// A chunk's cells in the image as st = is << 16 | it (one_row_narrow_run), and its weights.
+struct ImageCells {
+  __m256i st;
+  __m256 ws, wt;
+};
+
+LFTRACK_AVX2 inline ImageCells image_cells(const ImageRow& row, __m256 cf, __m256i top_s, __m256i top_t) {
+  const __m256i zero_i = _mm256_setzero_si256();
+  const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), _mm256_fmadd_ps(row.dn1, cf, row.dn0));
+  const __m256 cs = _mm256_mul_ps(_mm256_fmadd_ps(row.ns1, cf, row.ns0), inv);
+  const __m256 ct = _mm256_mul_ps(_mm256_fmadd_ps(row.nt1, cf, row.nt0), inv);
+  // Cells clamped into the image, as the per-ray kernels clamp them, and the weights measured
+  // from the clamped cell (an inside pixel's cell lies in the image, source_image_box, so the
+  // clamps only act on rounding at the image's last row or column).
+  const __m256i is = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(cs), top_s), zero_i);
+  const __m256i it = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(ct), top_t), zero_i);
+  return {_mm256_or_si256(_mm256_slli_epi32(is, 16), it), _mm256_sub_ps(cs, _mm256_cvtepi32_ps(is)),
+          _mm256_sub_ps(ct, _mm256_cvtepi32_ps(it))};
+}
+
+// Renders the whole chunks of a row whose rays are all inside; returns the first column left.
+// Software-pipelined by one chunk: the next chunk's cells and run test are computed before this
+// chunk's samples are read, so that the two chunks' chains of dependent steps overlap. Needs an
+// image of at most 65,536 samples a side.
+LFTRACK_AVX2 inline int render_inside_row(const FloatSamples& f, const SourceImage& image, const ImageRow& row,
+                                          int cols, float* dst, unsigned char* ok_row) {
+  struct Planned {
+    ImageCells x;
+    OneRowRun run;
+  };
+  // Copies: the mask bytes' stores may alias the image's fields as far as the compiler knows.
+  const std::size_t image_cols = std::size_t(image.cols);
+  const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
+  const __m256 step = _mm256_set1_ps(8.0f);
+  const std::uint64_t all_inside = kMaskBytes.bytes[0xff];
+  const int whole = cols - cols % 8;
+  if (whole == 0) return 0;
+  const auto plan = [&](__m256 cf) LFTRACK_AVX2 {
+    Planned p;
+    p.x = image_cells(row, cf, top_s, top_t);
+    p.run = one_row_narrow_run(p.x.st, image_cols);
+    return p;
+  };
+  __m256 cf = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+  Planned next = plan(cf);
+  for (int c = 0; c < whole; c += 8) {
+    const Planned p = next;
+    cf = _mm256_add_ps(cf, step);
+    if (c + 8 < whole) next = plan(cf);
+    __m256 value;
+    if (p.run.holds) {
+      value = sample_one_row_narrow(f, image_cols, p.run, p.x.ws, p.x.wt);
+    } else {
+      const __m256i is = _mm256_srli_epi32(p.x.st, 16), it = _mm256_and_si256(p.x.st, _mm256_set1_epi32(0xffff));
+      value = sample_image_chunk(f, image, is, it, p.x.ws, p.x.wt, 0xff);
+    }
+    _mm256_storeu_ps(dst + c, value);
+    if (ok_row) std::memcpy(ok_row + c, &all_inside, 8);
+  }
+  return whole;
+}
+
+// The source-image path (light_field_kernels.hpp): rows whose rays are all inside in the image's
+// own coordinates (render_inside_row), the others (and a row's last partial chunk) as the
+// per-ray kernels do, each ray tested against the field.
 LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
                                    ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
                                    int r_end) {
   const FloatSamples f{image.values};
-  const __m256i v_cols = _mm256_set1_epi32(image.cols), zero_i = _mm256_setzero_si256();
+  const __m256i zero_i = _mm256_setzero_si256();
   const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
-  const __m256i last = _mm256_set1_epi32(7), one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2);
-  const __m256i six = _mm256_set1_epi32(6), fourteen = _mm256_set1_epi32(14);
   const MapLanes map(m);
+  const bool one_row_runs = image.rows <= 65536 && image.cols <= 65536;  // render_inside_row's 16-bit halves
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
-    const RowRays row = row_rays(g, m, r, cols);
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
-    for (int c = 0; c < cols; c += 8) {
+    const int c_first = one_row_runs && row_inside_field(g, m, r, cols)
+                            ? render_inside_row(f, image, image_row(g, m, image, r), cols, dst, ok_row)
+                            : 0;
+    if (c_first == cols) continue;
+    const RowRays row = row_rays(g, m, r, cols);
+    for (int c = c_first; c < cols; c += 8) {
       const ChunkRays k = chunk_rays(row, map, c, cols);
       // Image indices, clamped into it (inside pixels are already).
       const __m256i is = _mm256_max_epi32(_mm256_min_epi32(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), top_s), zero_i);
       const __m256i it = _mm256_max_epi32(_mm256_min_epi32(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), top_t), zero_i);
       const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(_mm256_add_epi32(is, s0)));
       const __m256 wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(_mm256_add_epi32(it, t0)));
-      // The run test in lanes (no round trip through scalar registers but for the run's start):
-      // the range's start is the smaller of lanes 0 and 7 (s and t are monotonic along a row),
-      // and every lane must lie within 6 (narrow) or 14 (wide) samples and two rows of it.
-      __m256 value;
-      const __m256i t_lo = _mm256_min_epi32(_mm256_permutevar8x32_epi32(it, zero_i), _mm256_permutevar8x32_epi32(it, last));
-      const __m256i s_lo = _mm256_min_epi32(_mm256_permutevar8x32_epi32(is, zero_i), _mm256_permutevar8x32_epi32(is, last));
-      const __m256i dt = _mm256_sub_epi32(it, t_lo), ds = _mm256_sub_epi32(is, s_lo);
-      const __m256i off_rows = _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, ds), _mm256_cmpgt_epi32(ds, two));
-      const __m256i off_wide = _mm256_or_si256(off_rows, _mm256_or_si256(_mm256_cmpgt_epi32(zero_i, dt), _mm256_cmpgt_epi32(dt, fourteen)));
-      const int t_first = first_lane(t_lo), s_first = first_lane(s_lo);
-      // A run reads 8 or 16 samples from (s_first, t_first), t_first <= cols - 2: past the last
-      // row's end only into the image's tail (SourceImage::kTailFloats).
-      if (k.inside_bits == 0xff && _mm256_testz_si256(off_wide, off_wide)) {
-        RunRange range;
-        range.s0 = s_first;
-        range.t0 = t_first;
-        range.s_span = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ds, one))) ? 2
-                       : _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ds, zero_i))) ? 1 : 0;
-        const bool narrow = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(dt, six))) == 0;
-        const std::size_t run0 = std::size_t(s_first) * std::size_t(image.cols) + std::size_t(t_first);
-        const RunLanes l = run_lanes(is, it, range);
-        value = narrow ? run_cell<FloatSamples, false>(f, run0, std::size_t(image.cols), range.s_span, l, ws, wt)
-                       : run_cell<FloatSamples, true>(f, run0, std::size_t(image.cols), range.s_span, l, ws, wt);
-      } else {
-        value = gathered_cell(f, _mm256_add_epi32(_mm256_mullo_epi32(is, v_cols), it), v_cols, ws, wt);
-      }
       masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
-      store_chunk(k, value, dst + c, ok_row ? ok_row + c : nullptr);
+      store_chunk(k, sample_image_chunk(f, image, is, it, ws, wt, k.inside_bits), dst + c, ok_row ? ok_row + c : nullptr);
     }
   }
   return masked;
