@@ -169,18 +169,18 @@ struct MaskBytes {
 constexpr MaskBytes kMaskBytes;
 
 // A row's ray directions: d.n, d.e1 and d.e2 are affine in the column. inside: every ray of the
-// row passes the field test (row_inside_field), so its chunks of eight skip it.
+// row passes the field test (row_inside_field, the caller's), so its chunks of eight skip it.
 struct RowRays {
   __m256 dn0, dn1, de10, de11, de20, de21;
   bool inside;
 };
 
-LFTRACK_AVX2 inline RowRays row_rays(const LightFieldGeometry& g, const RayMap& m, int r, int cols) {
+LFTRACK_AVX2 inline RowRays row_rays(const LightFieldGeometry& g, const RayMap& m, int r, bool inside) {
   const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
   return {_mm256_set1_ps(float(d_row.dot(g.axis))), _mm256_set1_ps(float(m.d_col.dot(g.axis))),
           _mm256_set1_ps(float(d_row.dot(g.e1))),   _mm256_set1_ps(float(m.d_col.dot(g.e1))),
           _mm256_set1_ps(float(d_row.dot(g.e2))),   _mm256_set1_ps(float(m.d_col.dot(g.e2))),
-          row_inside_field(g, m, r, cols)};
+          inside};
 }
 
 // The ray map's constants in lanes.
@@ -296,7 +296,7 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
   const MapLanes map(m);
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
-    const RowRays row = row_rays(g, m, r, cols);
+    const RowRays row = row_rays(g, m, r, row_inside_field(g, m, r, cols));
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     for (int c = 0; c < cols; c += 8) {
@@ -358,11 +358,12 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
 
 // The common case first, in fewer steps: every lane inside, in one image row and within 6
 // samples (nearly nine chunks in ten of a 256 x 256 render). s and t share a lane as two 16-bit
-// halves, st = is << 16 | it (the caller keeps the image at most 65,536 samples a side; the
-// clamps keep is and it in 0 .. 65,534), so one pair of permutations finds both starts and one
-// saturating subtraction tests both offsets: an offset below 0 wraps above 6.
+// halves, st = is << 16 | it (the caller keeps the image at most 32,768 samples a side, so is and
+// it lie in 0 .. 32,766), so one pair of permutations finds both starts and one saturating
+// subtraction tests both offsets against (0, 6) (set1_epi32(6): 0 in the s half, 6 in the t
+// half): an offset below 0 wraps to at least 32,770 and fails.
 struct OneRowRun {
-  __m256i dt;        // each lane's t offset from the run's start, where `holds`
+  __m256i dt;        // each lane's offsets from the run's start, ds << 16 | dt: its t offset where `holds`
   std::size_t run0;  // the run's first sample
   bool holds;
 };
@@ -380,7 +381,7 @@ LFTRACK_AVX2 inline OneRowRun one_row_narrow_run(__m256i st, std::size_t image_c
 // Its value: two rows of one run each, each sample of a pair one permutation.
 LFTRACK_AVX2 inline __m256 sample_one_row_narrow(const FloatSamples& f, std::size_t image_cols, const OneRowRun& run,
                                                  __m256 ws, __m256 wt) {
-  RunLanes l;
+  RunLanes l{};  // a narrow run over one row reads only dt and dt_next
   l.dt = run.dt;
   l.dt_next = _mm256_add_epi32(run.dt, _mm256_set1_epi32(1));
   return run_cell<FloatSamples, false>(f, run.run0, image_cols, 0, l, ws, wt);
@@ -421,10 +422,11 @@ LFTRACK_AVX2 inline __m256 sample_image_chunk(const FloatSamples& f, const Sourc
   return gathered_cell(f, _mm256_add_epi32(_mm256_mullo_epi32(is, v_cols), it), v_cols, ws, wt);
 }
 
-// A row whose rays are all inside (RowRays::inside) in the image's coordinates: s - image.s0 =
+// A row whose rays are all inside (row_inside_field) in the image's coordinates: s - image.s0 =
 // (ns0 + ns1 c) / (dn0 + dn1 c) at column c, likewise t - image.t0 with nt. The same as the map's
 // s = base + gain q1, q1 = d.e1 / d.n, with base, gain and the image's origin folded into the
-// numerator once a row: four multiply-adds and two subtractions fewer a chunk, and no field test.
+// numerator once a row: two multiply-adds and four integer additions fewer a chunk, and no
+// field test.
 struct ImageRow {
   __m256 dn0, dn1, ns0, ns1, nt0, nt1;
 };
@@ -464,14 +466,15 @@ LFTRACK_AVX2 inline ImageCells image_cells(const ImageRow& row, __m256 cf, __m25
 // Renders the whole chunks of a row whose rays are all inside; returns the first column left.
 // Software-pipelined by one chunk: the next chunk's cells and run test are computed before this
 // chunk's samples are read, so that the two chunks' chains of dependent steps overlap. Needs an
-// image of at most 65,536 samples a side.
+// image of at most 32,768 samples a side (one_row_narrow_run).
 LFTRACK_AVX2 inline int render_inside_row(const FloatSamples& f, const SourceImage& image, const ImageRow& row,
                                           int cols, float* dst, unsigned char* ok_row) {
   struct Planned {
-    ImageCells x;
+    ImageCells cells;
     OneRowRun run;
   };
-  // Copies: the mask bytes' stores may alias the image's fields as far as the compiler knows.
+  // Copies for the common chunk: the mask bytes' stores may alias the image's fields as far as
+  // the compiler knows, which would reload them every chunk.
   const std::size_t image_cols = std::size_t(image.cols);
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
   const __m256 step = _mm256_set1_ps(8.0f);
@@ -480,8 +483,8 @@ LFTRACK_AVX2 inline int render_inside_row(const FloatSamples& f, const SourceIma
   if (whole == 0) return 0;
   const auto plan = [&](__m256 cf) LFTRACK_AVX2 {
     Planned p;
-    p.x = image_cells(row, cf, top_s, top_t);
-    p.run = one_row_narrow_run(p.x.st, image_cols);
+    p.cells = image_cells(row, cf, top_s, top_t);
+    p.run = one_row_narrow_run(p.cells.st, image_cols);
     return p;
   };
   __m256 cf = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
@@ -492,10 +495,11 @@ LFTRACK_AVX2 inline int render_inside_row(const FloatSamples& f, const SourceIma
     if (c + 8 < whole) next = plan(cf);
     __m256 value;
     if (p.run.holds) {
-      value = sample_one_row_narrow(f, image_cols, p.run, p.x.ws, p.x.wt);
+      value = sample_one_row_narrow(f, image_cols, p.run, p.cells.ws, p.cells.wt);
     } else {
-      const __m256i is = _mm256_srli_epi32(p.x.st, 16), it = _mm256_and_si256(p.x.st, _mm256_set1_epi32(0xffff));
-      value = sample_image_chunk(f, image, is, it, p.x.ws, p.x.wt, 0xff);
+      const __m256i is = _mm256_srli_epi32(p.cells.st, 16);
+      const __m256i it = _mm256_and_si256(p.cells.st, _mm256_set1_epi32(0xffff));
+      value = sample_image_chunk(f, image, is, it, p.cells.ws, p.cells.wt, 0xff);
     }
     _mm256_storeu_ps(dst + c, value);
     if (ok_row) std::memcpy(ok_row + c, &all_inside, 8);
@@ -514,16 +518,17 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
   const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
   const MapLanes map(m);
-  const bool one_row_runs = image.rows <= 65536 && image.cols <= 65536;  // render_inside_row's 16-bit halves
+  const bool cells_fit_16_bits = image.rows <= 32768 && image.cols <= 32768;  // render_inside_row's packed cells
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
-    const int c_first = one_row_runs && row_inside_field(g, m, r, cols)
+    const bool inside = row_inside_field(g, m, r, cols);
+    const int c_first = cells_fit_16_bits && inside
                             ? render_inside_row(f, image, image_row(g, m, image, r), cols, dst, ok_row)
                             : 0;
     if (c_first == cols) continue;
-    const RowRays row = row_rays(g, m, r, cols);
+    const RowRays row = row_rays(g, m, r, inside);
     for (int c = c_first; c < cols; c += 8) {
       const ChunkRays k = chunk_rays(row, map, c, cols);
       // Image indices, clamped into it (inside pixels are already).
