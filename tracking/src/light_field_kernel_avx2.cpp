@@ -387,6 +387,11 @@ LFTRACK_AVX2 inline __m256 sample_one_row_narrow(const FloatSamples& f, std::siz
   return run_cell<FloatSamples, false>(f, run.run0, image_cols, 0, l, ws, wt);
 }
 
+// An image cell index clamped into 0 .. top (top: the image's rows or columns - 2).
+LFTRACK_AVX2 inline __m256i clamp_cell(__m256i index, __m256i top) {
+  return _mm256_max_epi32(_mm256_min_epi32(index, top), _mm256_setzero_si256());
+}
+
 // A source-image chunk's value from its cells (is, it) in the image and weights: its pixels' (s, t)
 // neighbours read as runs where all eight lie in at most three rows of 15 samples (and every
 // lane is inside, inside_bits 0xff), gathered otherwise.
@@ -450,15 +455,13 @@ struct ImageCells {
 };
 
 LFTRACK_AVX2 inline ImageCells image_cells(const ImageRow& row, __m256 cf, __m256i top_s, __m256i top_t) {
-  const __m256i zero_i = _mm256_setzero_si256();
   const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), _mm256_fmadd_ps(row.dn1, cf, row.dn0));
   const __m256 cs = _mm256_mul_ps(_mm256_fmadd_ps(row.ns1, cf, row.ns0), inv);
   const __m256 ct = _mm256_mul_ps(_mm256_fmadd_ps(row.nt1, cf, row.nt0), inv);
   // Cells clamped into the image, as the per-ray kernels clamp them, and the weights measured
   // from the clamped cell (an inside pixel's cell lies in the image, source_image_box, so the
   // clamps only act on rounding at the image's last row or column).
-  const __m256i is = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(cs), top_s), zero_i);
-  const __m256i it = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(ct), top_t), zero_i);
+  const __m256i is = clamp_cell(_mm256_cvttps_epi32(cs), top_s), it = clamp_cell(_mm256_cvttps_epi32(ct), top_t);
   return {_mm256_or_si256(_mm256_slli_epi32(is, 16), it), _mm256_sub_ps(cs, _mm256_cvtepi32_ps(is)),
           _mm256_sub_ps(ct, _mm256_cvtepi32_ps(it))};
 }
@@ -514,7 +517,6 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
                                    ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
                                    int r_end) {
   const FloatSamples f{image.values};
-  const __m256i zero_i = _mm256_setzero_si256();
   const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
   const MapLanes map(m);
@@ -532,8 +534,8 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
     for (int c = c_first; c < cols; c += 8) {
       const ChunkRays k = chunk_rays(row, map, c, cols);
       // Image indices, clamped into it (inside pixels are already).
-      const __m256i is = _mm256_max_epi32(_mm256_min_epi32(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), top_s), zero_i);
-      const __m256i it = _mm256_max_epi32(_mm256_min_epi32(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), top_t), zero_i);
+      const __m256i is = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), top_s);
+      const __m256i it = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), top_t);
       const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(_mm256_add_epi32(is, s0)));
       const __m256 wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(_mm256_add_epi32(it, t0)));
       masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
