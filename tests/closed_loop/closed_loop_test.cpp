@@ -294,6 +294,71 @@ TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
   EXPECT_EQ(r.summary.faults, 1);
 }
 
+// The session's couch, except that it refuses its first `refusals` commands (a fault it knows
+// of, as a CAN robot in error-passive does): nothing is sent, nothing moves.
+class RefusingCouch final : public drivers::Actuator {
+ public:
+  RefusingCouch(drivers::Actuator* inner, int refusals) : inner_(inner), refusals_(refusals) {}
+  Status open() override { return inner_->open(); }
+  drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
+    if (refusals_ > 0) {
+      --refusals_;
+      return drivers::DeviceStatus::kRefused;
+    }
+    return inner_->command(c, d);
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline d) override {
+    return inner_->readback(state, d);
+  }
+  void hold() override { inner_->hold(); }
+  void set_beam_permit(bool permit) override { inner_->set_beam_permit(permit); }
+  void close() override { inner_->close(); }
+
+ private:
+  drivers::Actuator* inner_;
+  int refusals_;
+};
+
+// The chaos soak found it (segment 34 of seed 23, a CAN segment): the couch refused the set-up
+// move, the loop held, and it had nonetheless counted itself aligned, so the operator's resume
+// went straight to TRACK and made the whole set-up move there, as a tracking correction with
+// the beam permitted. An alignment is done when its set-up move is accepted: a refused one
+// holds as an alignment that failed, and the resume aligns again (beam off while it moves).
+TEST_F(ClosedLoop, ARefusedSetUpMoveIsAnAlignmentThatFailedAndTheResumeAlignsAgain) {
+  std::unique_ptr<RefusingCouch> couch;
+  LoopSessionOptions options;
+  options.auto_resume_s = 1.0;
+  options.hooks.wrap_actuator = [&](drivers::Actuator* inner) -> drivers::Actuator* {
+    couch = std::make_unique<RefusingCouch>(inner, 1);
+    return couch.get();
+  };
+  const LoopRun r = run_loop(kBreathing, 30, options);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 30u);
+  const JournalRecord& refused = records[0];
+  EXPECT_EQ(refused.previous_state, std::uint8_t(TrackingState::kAlign));
+  EXPECT_EQ(refused.state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(refused.gate_reason, std::uint8_t(GateReason::kActuatorFault));
+  EXPECT_EQ(refused.event, 1 + int(TrackingEvent::kAlignFailed));
+  EXPECT_EQ(refused.command_sent, 0);
+  EXPECT_EQ(refused.beam_permit, 0);
+  std::size_t first_move = 0;
+  for (std::size_t i = 1; i < records.size() && first_move == 0; ++i) {
+    if (records[i].command_sent != 0) first_move = i;
+    if (first_move == 0) {
+      EXPECT_EQ(records[i].beam_permit, 0) << "cycle " << i;
+    }
+  }
+  ASSERT_GT(first_move, 0u) << "the operator resumed and the loop aligned";
+  const JournalRecord& aligned = records[first_move];
+  EXPECT_EQ(aligned.event, 1 + int(TrackingEvent::kAligned)) << "the resume went back to ALIGN";
+  EXPECT_EQ(aligned.state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_EQ(aligned.beam_permit, 0) << "no beam while the set-up move is made";
+  EXPECT_NEAR(aligned.command[0], -3.0, 0.6) << "the set-up move (3 mm, and breathing of 0.5 mm on x)";
+  EXPECT_EQ(records.back().state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_TRUE(r.summary.aligned);
+}
+
 }  // namespace
 }  // namespace lftrack::host
 

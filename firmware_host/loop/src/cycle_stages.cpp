@@ -260,33 +260,54 @@ void TrackingLoop::Impl::gate(CycleState& c) {
   if (c.aligning) {
     // A skipped cycle (no pair yet: a device's first frames are often late; a registration that
     // failed once) stays in ALIGN, moving nothing; failures count as in TRACK, and the gate's
-    // HOLD after hold_after_failures of them is the alignment's failure.
-    if (c.gate.decision == GateDecision::kSkip) return;
-    const TrackingEvent e = c.gate.apply() ? TrackingEvent::kAligned : TrackingEvent::kAlignFailed;
-    transition(c, machine.on(e), e);
-    summary.aligned = summary.aligned || c.gate.apply();
+    // HOLD after hold_after_failures of them is the alignment's failure. An APPLY is not yet the
+    // alignment: that is done when the actuator has accepted the set-up move (actuate).
+    if (c.gate.decision == GateDecision::kSkip || c.gate.apply()) return;
+    transition(c, machine.on(TrackingEvent::kAlignFailed), TrackingEvent::kAlignFailed);
   } else {
     transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
   }
 }
 
-// Only an APPLY in TRACK moves. A command the actuator refuses (it knows of a fault; nothing
-// moved) goes back to the gate as an input, which holds; one that may have moved is a device
-// fault.
+// Only an APPLY in TRACK, or ALIGN's APPLY (the set-up move), moves. ALIGN becomes TRACK only
+// once the set-up move is accepted: a loop that counted itself aligned without it would make the
+// whole set-up move later as a tracking correction, with the beam on (the chaos soak found a
+// refused set-up move doing so after a resume). A command the actuator refuses (it knows of a
+// fault; nothing moved) goes back to the gate as an input, which holds (in ALIGN: the alignment
+// failed, and a resume aligns again); one that may have moved is a device fault.
 void TrackingLoop::Impl::actuate(CycleState& c) {
-  const bool move = c.gate.apply() && machine.state() == TrackingState::kTrack;
+  const bool move = c.gate.apply() && (c.aligning || machine.state() == TrackingState::kTrack);
   if (!move) return;
+  const DeviceStatus sent = send_step(c);
+  if (sent == DeviceStatus::kOk) {
+    if (c.aligning) {
+      transition(c, machine.on(TrackingEvent::kAligned), TrackingEvent::kAligned);
+      summary.aligned = true;
+    }
+  } else if (sent == DeviceStatus::kRefused) {
+    c.gate_input.command_refused = true;
+    c.gate = evaluate_gate(settings.limits, c.gate_input);
+    consecutive_failures = c.gate.consecutive_failures;
+    const TrackingEvent e = c.aligning ? TrackingEvent::kAlignFailed : TrackingEvent::kGate;
+    transition(c, machine.on(e, c.gate), e);
+  } else {  // it may have moved: stop safely (held in settle, with every other entry into HOLD or FAULT)
+    transition(c, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault);
+  }
+}
+
+// This cycle's step to the actuator; kOk without one (track and report) or with nothing to send.
+DeviceStatus TrackingLoop::Impl::send_step(CycleState& c) {
   const Vector6d& step = c.gate_input.step;
   if (parts.actuator == nullptr) {
     // Track and report: the correction is reported (the journal's pose), and taken as the new
     // reference, so the step limit judges the change from cycle to cycle.
     commanded_total = c.desired;
     approve_next_step = false;
-    return;
+    return DeviceStatus::kOk;
   }
   if (!(step.array().abs() > 1e-9).any()) {
     approve_next_step = false;
-    return;
+    return DeviceStatus::kOk;
   }
   // The command is due by the end of the period; the alignment's cycle (a cold registration that
   // may run past its period, which is why ALIGN is not counted as an overrun) gets one period
@@ -299,14 +320,8 @@ void TrackingLoop::Impl::actuate(CycleState& c) {
     c.command = step;
     c.command_sent = true;
     approve_next_step = false;
-  } else if (sent == DeviceStatus::kRefused) {
-    c.gate_input.command_refused = true;
-    c.gate = evaluate_gate(settings.limits, c.gate_input);
-    consecutive_failures = c.gate.consecutive_failures;
-    transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
-  } else {  // it may have moved: stop safely (held in settle, with every other entry into HOLD or FAULT)
-    transition(c, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault);
   }
+  return sent;
 }
 
 // On entry into HOLD or FAULT the actuator is held and earlier operator commands discarded; the

@@ -136,6 +136,7 @@ struct TrackingLoop::Impl {
   void control(CycleState& c);
   void gate(CycleState& c);
   void actuate(CycleState& c);
+  drivers::DeviceStatus send_step(CycleState& c);  // the command, if any: what the actuator answered
   void settle(CycleState& c);  // holds on entry into HOLD/FAULT, the beam permit, the state
 
   // The journal record of a cycle, from its state alone (cycle_record.cpp), and the statistics

@@ -7,6 +7,8 @@
 // src/cycle_stages.cpp, src/cycle_record.cpp).
 // The first cycle is ALIGN: the cold, wide-range registration whose result is the set-up move
 // (operator-approved: no step limit) and the reference similarity the gate compares against.
+// ALIGN becomes TRACK only when the actuator has accepted the set-up move; a refused one is an
+// alignment that failed (HOLD), and the operator's resume aligns again.
 //
 // Control: the registered pose, minus the couch's read-back travel, is the patient's own offset;
 // a line through the last few offsets predicts it one latency ahead (motion_predictor.hpp); the

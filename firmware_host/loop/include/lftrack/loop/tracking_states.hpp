@@ -17,8 +17,8 @@ const char* to_string(TrackingState state);
 
 enum class TrackingEvent : std::uint8_t {
   kStart,           // operator: begin (IDLE -> ALIGN)
-  kAligned,         // the cold registration succeeded
-  kAlignFailed,     // it did not (-> HOLD: the operator decides)
+  kAligned,         // the cold registration succeeded and the actuator accepted its set-up move
+  kAlignFailed,     // either did not (-> HOLD: the operator decides; a resume aligns again)
   kGate,            // a gate decision (see gate)
   kOperatorResume,  // HOLD -> TRACK (or ALIGN if never aligned)
   kOperatorStop,    // any -> IDLE, actuators held
