@@ -521,11 +521,13 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
   const MapLanes map(m);
   const bool cells_fit_16_bits = image.rows <= 32768 && image.cols <= 32768;  // render_inside_row's packed cells
+  // Nearly always every row is inside: one test for the block, else one a row.
+  const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
-    const bool inside = row_inside_field(g, m, r, cols);
+    const bool inside = all_inside || row_inside_field(g, m, r, cols);
     const int c_first = cells_fit_16_bits && inside
                             ? render_inside_row(f, image, image_row(g, m, image, r), cols, dst, ok_row)
                             : 0;

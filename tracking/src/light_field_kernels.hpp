@@ -23,6 +23,10 @@ struct RayMap {
 // them, and a kernel may skip it. Along a row a coordinate q = (e0 + e1 c) / (n0 + n1 c) is
 // monotonic where the denominator keeps its sign, so the row's two end rays bound it.
 bool row_inside_field(const LightFieldGeometry& g, const RayMap& m, int r, int cols);
+// True if row_inside_field holds for every row from r_first to r_last (inclusive), judged from
+// the block's four corner rays: one test instead of one a row. A false says nothing of single
+// rows (the bounds are the block's): test those one by one.
+bool rows_inside_field(const LightFieldGeometry& g, const RayMap& m, int r_first, int r_last, int cols);
 
 // True if this CPU runs the AVX2 kernel (AVX2 and FMA).
 bool light_field_avx2_available();

@@ -43,4 +43,52 @@ bool row_inside_field(const LightFieldGeometry& g, const RayMap& m, int r, int c
   return true;
 }
 
+// The same test for a block of rows at once, from its four corner rays. Each term of the row
+// test is bounded over the block by its corners: n and e are affine in (r, c), so |e0| + |e1|
+// (cols - 1) and the n size are largest at the first or last row (convex), the smallest n is
+// at a corner (n > 0 throughout), and q = e / n, linear-fractional over the rectangle, takes
+// its extremes at the corners. A block that passes with the bounds passes row by row.
+bool rows_inside_field(const LightFieldGeometry& g, const RayMap& m, int r_first, int r_last, int cols) {
+  if (cols < 1 || r_last < r_first) return false;
+  constexpr double kRelative = 1e-5;  // as row_inside_field
+  const double last = double(cols - 1);
+  const Eigen::Vector3d d_rows[2] = {m.d00 + m.d_row * r_first, m.d00 + m.d_row * r_last};
+  const double n1 = m.d_col.dot(g.axis);
+  double n_corner[4];
+  double n_min = INFINITY, n_size = 0;
+  for (int i = 0; i < 2; ++i) {
+    const double n0 = d_rows[i].dot(g.axis);
+    n_corner[2 * i] = n0;
+    n_corner[2 * i + 1] = n0 + n1 * last;
+    n_min = std::min({n_min, n_corner[2 * i], n_corner[2 * i + 1]});
+    n_size = std::max(n_size, std::abs(n0) + std::abs(n1) * last);
+  }
+  // min and max pass a NaN over: every term is tested finite.
+  if (!std::isfinite(n_min + n_size) || !(n_min > 1e-3 * n_size)) return false;
+  const Eigen::Vector3d* const e_axes[2] = {&g.e1, &g.e2};
+  for (int k = 0; k < 2; ++k) {
+    const double e1 = m.d_col.dot(*e_axes[k]);
+    double q_lo = INFINITY, q_hi = -INFINITY, e_size = 0;
+    for (int i = 0; i < 2; ++i) {
+      const double e0 = d_rows[i].dot(*e_axes[k]);
+      e_size = std::max(e_size, std::abs(e0) + std::abs(e1) * last);
+      for (const double q : {e0 / n_corner[2 * i], (e0 + e1 * last) / n_corner[2 * i + 1]}) {
+        if (!std::isfinite(q)) return false;
+        q_lo = std::min(q_lo, q);
+        q_hi = std::max(q_hi, q);
+      }
+    }
+    const double q_max = std::max(std::abs(q_lo), std::abs(q_hi));
+    const double dq = kRelative * (e_size + q_max * n_size) / n_min;
+    for (const int a : {k, k + 2}) {
+      const double gain = m.gain[a], base = m.base[a];
+      const double lo = std::min(gain * q_lo, gain * q_hi) + base;
+      const double hi = std::max(gain * q_lo, gain * q_hi) + base;
+      const double margin = std::abs(gain) * dq + kRelative * (std::abs(gain) * q_max + std::abs(base) + 1.0);
+      if (!std::isfinite(margin) || !(lo >= margin && hi <= double(m.limit[a]) - margin)) return false;
+    }
+  }
+  return true;
+}
+
 }  // namespace lftrack::tracking
