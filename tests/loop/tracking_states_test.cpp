@@ -57,6 +57,17 @@ TEST(TrackingStates, FailedAlignmentHoldsAndResumeRealigns) {
   EXPECT_EQ(m.on(TrackingEvent::kOperatorResume).to, TrackingState::kAlign);
 }
 
+// The gate stops (its failures in a row reached fault_after_failures) in ALIGN as in TRACK.
+TEST(TrackingStates, AFailedAlignmentTheGateStopsIsAFault) {
+  TrackingStateMachine m;
+  m.on(TrackingEvent::kStart);
+  const StateTransition t = m.on(TrackingEvent::kAlignFailed, gate(GateDecision::kStop, GateReason::kActuatorFault));
+  EXPECT_EQ(t.to, TrackingState::kFault);
+  EXPECT_STREQ(t.reason, "actuator read-back failed");
+  EXPECT_FALSE(m.beam_permit());
+  EXPECT_EQ(m.on(TrackingEvent::kOperatorResume).to, TrackingState::kFault) << "only a reset leaves FAULT";
+}
+
 TEST(TrackingStates, StopAndDeviceFaultsEndInFaultUntilReset) {
   for (TrackingEvent e : {TrackingEvent::kGate, TrackingEvent::kDeviceFault}) {
     TrackingStateMachine m;

@@ -51,6 +51,7 @@ struct Harness {
     c.calls.target_before = target_;
     c.calls.beam_permit = true;
     target_ += c.calls.last_command;
+    c.calls.target_after = target_;
     return c;
   }
   // The ALIGN cycle's set-up move to `x_mm`.
@@ -189,6 +190,55 @@ TEST(ChaosInvariants, EachInjectedFaultMustReachItsSafeState) {
   Cycle stalled = h.tracking_cycle(4);
   stalled.injected.stalled = true;
   EXPECT_TRUE(h.mentions(h.check(stalled), "not recorded as an overrun"));
+}
+
+// A command with no alignment before it is reported; an alignment with nothing to move (its
+// record the alignment's, no command) counts as one; after an accepted reset the loop must
+// align again before it moves.
+TEST(ChaosInvariants, EveryMoveNeedsAnAlignmentSinceTheLastReset) {
+  Harness never;
+  EXPECT_TRUE(never.mentions(never.check(never.applied(0, 0.5)), "before any alignment"));
+
+  Harness still;
+  Cycle nothing_to_move = still.tracking_cycle(0);
+  nothing_to_move.record.previous_state = code(TrackingState::kAlign);
+  nothing_to_move.record.event = 1 + static_cast<int>(TrackingEvent::kAligned);
+  nothing_to_move.record.gate_decision = std::uint8_t(GateDecision::kApply);
+  ASSERT_TRUE(still.check(nothing_to_move).empty());
+  EXPECT_TRUE(still.check(still.applied(1, 0.5)).empty()) << "aligned, with nothing to move";
+
+  Harness h;
+  ASSERT_TRUE(h.check(h.aligned(1)).empty());
+  ASSERT_TRUE(h.check(h.held(1, 417263, TrackingState::kFault)).empty());
+  Cycle reset = h.tracking_cycle(12);  // the reset's cycle ends in ALIGN, a pair skipped
+  reset.record.previous_state = code(TrackingState::kFault);
+  reset.record.state = code(TrackingState::kAlign);
+  reset.record.gate_decision = std::uint8_t(GateDecision::kSkip);
+  reset.record.operator_command = 1 + static_cast<int>(OperatorCommand::kReset);
+  reset.action = {true, 417263};
+  ASSERT_TRUE(h.check(reset).empty());
+  EXPECT_TRUE(h.mentions(h.check(h.applied(13, 0.5)), "before any alignment")) << "no alignment since the reset";
+}
+
+// An overrun in a cycle that ran in ALIGN (a cold registration) does not count towards the
+// overruns in a row, also when a resume took the loop there from a HOLD before any alignment.
+TEST(ChaosInvariants, AnAlignmentsOverrunIsNotCountedInARow) {
+  Harness h;
+  for (std::uint64_t k = 0; k < 2; ++k) {  // the alignment failed: two HOLD cycles that overran
+    Cycle c = h.held(k, 654321);
+    c.record.overrun = 1;
+    ASSERT_TRUE(h.check(c).empty());
+  }
+  Cycle realign = h.applied(12, 3.0);  // the resume aligns again: the set-up move, overrunning
+  realign.record.previous_state = code(TrackingState::kHold);
+  realign.record.operator_command = 1 + static_cast<int>(OperatorCommand::kResume);
+  realign.record.event = 1 + static_cast<int>(TrackingEvent::kAligned);
+  realign.record.beam_permit = 0;
+  realign.calls.beam_permit = false;
+  realign.record.overrun = 1;
+  realign.action = {true, 654321};
+  ASSERT_TRUE(h.check(realign).empty());
+  EXPECT_TRUE(h.check(h.applied(13, 0.5)).empty()) << "the alignment's overrun ended the run of overruns";
 }
 
 TEST(ChaosInvariants, ThreeOverrunsInARowThenNothingIsSent) {

@@ -20,7 +20,7 @@ struct Case {
   RayMap m;
 };
 
-Case make_case(double spread, double offset_s, double offset_t, double tilt, int rows, int cols) {
+Case make_case(double spread, double offset_s, double offset_t, double tilt, int rows, int cols, double slant = 0) {
   Case k;
   k.g.size = {16, 16, 256, 256};
   const double st_per_mm = 1.0;  // (s, t) samples per mm on the plane 1,000 mm away
@@ -31,7 +31,8 @@ Case make_case(double spread, double offset_s, double offset_t, double tilt, int
   }
   // Ray directions (not normalised): q1 = d.x / d.z and q2 = d.y / d.z.
   const double per_pixel = spread / (1000.0 * st_per_mm * std::max(rows, cols));
-  const Eigen::Vector3d row_dir(std::cos(tilt), std::sin(tilt), 0.02 * tilt);
+  // `slant` tilts the window out of the plane: the rays' n then changes across it.
+  const Eigen::Vector3d row_dir(std::cos(tilt), std::sin(tilt), 0.02 * tilt + slant);
   const Eigen::Vector3d col_dir(-std::sin(tilt), std::cos(tilt), -0.03 * tilt);
   k.m.d_row = row_dir * per_pixel;
   k.m.d_col = col_dir * per_pixel;
@@ -66,12 +67,50 @@ TEST(RowsInsideField, ABlockIsInsideOnlyWhereEveryRowIs) {
   EXPECT_LT(rows_all_inside_but_block_not, blocks_judged / 50);
 }
 
+// Where it matters: within a few thousandths of a sample of where the first row leaves the
+// field, each margin term counts. Found by bisection on the field's s offset for each block,
+// then stepped across in 2e-5 sample steps (a few float epsilons of the offset).
+TEST(RowsInsideField, AtTheFieldsEdgeABlockIsNeverInsideWhereARowIsNot) {
+  std::mt19937_64 random(11);
+  std::uniform_real_distribution<double> unit(0, 1);
+  int near_edge = 0, block_inside_near_edge = 0;
+  for (int trial = 0; trial < 150; ++trial) {
+    const int rows = 2 + int(unit(random) * 60), cols = 1 + int(unit(random) * 60);
+    Case k = make_case(20 + 200 * unit(random), 0, 40 * (unit(random) - 0.5), 3.0 * (unit(random) - 0.5), rows,
+                       cols, 0.6 * (unit(random) - 0.5));
+    const int r_first = int(unit(random) * rows / 2), r_last = r_first + int(unit(random) * (rows - r_first));
+    const auto every_row = [&](double base_s) {
+      k.m.base[2] = float(base_s);
+      for (int r = r_first; r <= r_last; ++r)
+        if (!row_inside_field(k.g, k.m, r, cols)) return false;
+      return true;
+    };
+    double inside = k.m.base[2], outside = inside + 300;
+    if (!every_row(inside) || every_row(outside)) continue;
+    for (int i = 0; i < 60; ++i) {
+      const double mid = 0.5 * (inside + outside);
+      (every_row(mid) ? inside : outside) = mid;
+    }
+    for (int j = -150; j <= 150; ++j) {
+      const bool rows_ok = every_row(inside + 2e-5 * j);  // sets base[2]
+      const bool block = rows_inside_field(k.g, k.m, r_first, r_last, cols);
+      ASSERT_TRUE(!block || rows_ok) << "trial " << trial << ", " << j << " steps from the edge";
+      ++near_edge;
+      block_inside_near_edge += block;
+    }
+  }
+  EXPECT_GT(near_edge, 20000);
+  // The block's bounds are a little wider than each row's, but it reaches the edge's last
+  // thousandths of a sample too (else this test would say nothing about the margins).
+  EXPECT_GT(block_inside_near_edge, near_edge / 5);
+}
+
 TEST(RowsInsideField, AWindowWellInsideIsOneBlockAndAWindowOverTheEdgeIsNot) {
   const Case inside = make_case(150, 10, -20, 0.3, 256, 256);
   EXPECT_TRUE(rows_inside_field(inside.g, inside.m, 0, 255, 256));
   const Case over = make_case(150, 60, 0, 0.3, 256, 256);  // 60 + 75 * 1.3 samples: past 127.5
   EXPECT_FALSE(rows_inside_field(over.g, over.m, 0, 255, 256));
-  EXPECT_TRUE(row_inside_field(over.g, over.m, 128, 1)) << "the window's centre is inside";
+  EXPECT_TRUE(row_inside_field(over.g, over.m, 128, 1)) << "the middle of the window's first column is inside";
   // No rows, no columns, rays that run away from the planes, NaN: never inside.
   EXPECT_FALSE(rows_inside_field(inside.g, inside.m, 5, 4, 256));
   EXPECT_FALSE(rows_inside_field(inside.g, inside.m, 0, 255, 0));

@@ -63,8 +63,10 @@ bool rows_inside_field(const LightFieldGeometry& g, const RayMap& m, int r_first
     n_min = std::min({n_min, n_corner[2 * i], n_corner[2 * i + 1]});
     n_size = std::max(n_size, std::abs(n0) + std::abs(n1) * last);
   }
-  // min and max pass a NaN over: every term is tested finite.
-  if (!std::isfinite(n_min + n_size) || !(n_min > 1e-3 * n_size)) return false;
+  // min and max pass a NaN over: each corner's n is tested finite here, each q and margin below.
+  for (const double n : n_corner)
+    if (!std::isfinite(n)) return false;
+  if (!(n_min > 1e-3 * n_size)) return false;
   const Eigen::Vector3d* const e_axes[2] = {&g.e1, &g.e2};
   for (int k = 0; k < 2; ++k) {
     const double e1 = m.d_col.dot(*e_axes[k]);

@@ -263,7 +263,7 @@ void TrackingLoop::Impl::gate(CycleState& c) {
     // HOLD after hold_after_failures of them is the alignment's failure. An APPLY is not yet the
     // alignment: that is done when the actuator has accepted the set-up move (actuate).
     if (c.gate.decision == GateDecision::kSkip || c.gate.apply()) return;
-    transition(c, machine.on(TrackingEvent::kAlignFailed), TrackingEvent::kAlignFailed);
+    transition(c, machine.on(TrackingEvent::kAlignFailed, c.gate), TrackingEvent::kAlignFailed);
   } else {
     transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
   }

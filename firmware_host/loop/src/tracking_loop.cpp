@@ -210,7 +210,9 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     if (aligned_at < 0 && m.summary.aligned) aligned_at = executed;
     const std::int64_t wall_end = monotonic_now_ns();
     if (simulated) wall_start = m.cycle_wall_start_ns;  // the work after the frames arrived
-    const bool was_align = record.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign);
+    // A cycle that ran in ALIGN (a cold registration, which may run past its period), also one
+    // that a resume or reset took there from HOLD or FAULT.
+    const bool was_align = m.cycle_state.aligning;
     if (!was_align) m.cycle_ms.add(ms_between(wall_start, wall_end));
     ++m.summary.cycles;
     m.summary.operator_refused += record.operator_refused;

@@ -69,7 +69,11 @@ StateTransition TrackingStateMachine::on(TrackingEvent event, const GateOutput& 
         aligned_ = true;
         return go(TrackingState::kTrack, "aligned");
       }
-      if (event == TrackingEvent::kAlignFailed) return go(TrackingState::kHold, "alignment failed");
+      // A failed alignment holds for the operator, or stops where the gate says so (its failures
+      // in a row reached fault_after_failures): the same gate decision in TRACK stops too.
+      if (event == TrackingEvent::kAlignFailed)
+        return gate.decision == GateDecision::kStop ? go(TrackingState::kFault, to_string(gate.reason))
+                                                    : go(TrackingState::kHold, "alignment failed");
       return t;
     case TrackingState::kTrack:
       if (event != TrackingEvent::kGate) return t;

@@ -107,8 +107,10 @@ void Injector::begin_cycle(std::int64_t cycle) {
   cycle_ = cycle;
   injection = CycleInjection{};
   const bool permit = calls.beam_permit;
+  const tracking::Vector6d target = calls.target_after;
   calls = ActuatorCalls{};
-  calls.beam_permit = permit;  // the device keeps its permit until told otherwise
+  calls.beam_permit = permit;  // the device keeps its permit and its target until told otherwise
+  calls.target_after = target;
   action = OperatorAction{};
   drawn_ = ChaosFault::kCount;
   if (can_followup_ >= 0 && cycle >= can_followup_at_ &&
@@ -271,6 +273,7 @@ drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correctio
     calls.last_command = correction;
     calls.target_before = known_target_;
     known_target_ += correction;
+    calls.target_after = known_target_;
   } else {
     ++calls.commands_failed;
     injector_->injection.command_fault = true;
@@ -288,7 +291,10 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
     throw_into_loop(injector_, "chaos: the actuator's read-back threw");
   }
   const drivers::DeviceStatus status = inner_->readback(state, deadline);
-  if (status == drivers::DeviceStatus::kOk && state->target.allFinite()) known_target_ = state->target;
+  if (status == drivers::DeviceStatus::kOk && state->target.allFinite()) {
+    known_target_ = state->target;
+    injector_->calls.target_after = known_target_;
+  }
   if (first && status != drivers::DeviceStatus::kOk) {
     injector_->injection.readback_fault = true;
     injector_->injection.what = "the actuator's own read-back failure";

@@ -39,10 +39,13 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   };
   const bool sent = r.command_sent != 0;
   const bool beam = r.beam_permit != 0;
-
-  // 6. An accepted resume or reset answers the HOLD or FAULT shown, after the minimum time.
   const bool resumed = r.operator_command == code(OperatorCommand::kResume);
   const bool reset = r.operator_command == code(OperatorCommand::kReset);
+  // The cycle ran in ALIGN (its cold registration is not judged for overruns): it began there, or
+  // a reset took it there (through IDLE), or a resume did, from a HOLD before any alignment.
+  const bool ran_in_align = r.previous_state == code(TrackingState::kAlign) || reset || (resumed && !aligned_);
+
+  // 6. An accepted resume or reset answers the HOLD or FAULT shown, after the minimum time.
   if (resumed || reset) {
     const TrackingState answers = resumed ? TrackingState::kHold : TrackingState::kFault;
     if (r.previous_state != code(answers))
@@ -55,6 +58,7 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
            " cycles into its " + (resumed ? "HOLD" : "FAULT"));
     needs_operator_ = false;
     if (resumed) step_approved_ = true;
+    if (reset) aligned_ = false;  // the loop aligns again before it moves
   }
 
   // 1, 2. What the device was told, and what the journal says it was told.
@@ -71,15 +75,17 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   }
   if (beam != calls.beam_permit) fail("the journal's beam permit differs from the device's");
 
-  // 3. Limits on what was sent.
+  // 3. Limits on what was sent. The alignment's record sets the aligned target, with or without
+  // a set-up move to send (one with nothing to move sends nothing).
+  const bool setup_move = r.event == 1 + static_cast<int>(TrackingEvent::kAligned);
+  if (setup_move) {
+    aligned_ = true;
+    aligned_target_ = calls.target_after;
+  }
   if (calls.commands_accepted > 0) {
     const tracking::Vector6d& step = calls.last_command;
     const tracking::Vector6d target = calls.target_before + step;
-    const bool setup_move = r.event == 1 + static_cast<int>(TrackingEvent::kAligned);
-    if (setup_move) {
-      aligned_ = true;
-      aligned_target_ = target;
-    } else {
+    if (!setup_move) {
       if (!step_approved_ && (translation_mm(step) > limits_.max_step_mm + kTolerance ||
                               angle_deg(step) > limits_.max_step_deg + kTolerance))
         fail("a step of " + std::to_string(translation_mm(step)) + " mm / " + std::to_string(angle_deg(step)) +
@@ -118,8 +124,7 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   if (journal_failed_ && (sent || beam)) fail("sent or armed after the journal failed");
 
   // What the next cycle is judged against.
-  overruns_in_a_row_ =
-      r.overrun != 0 && r.previous_state != code(TrackingState::kAlign) ? overruns_in_a_row_ + 1 : 0;
+  overruns_in_a_row_ = r.overrun != 0 && !ran_in_align ? overruns_in_a_row_ + 1 : 0;
   if (held(r.state)) {
     needs_operator_ = true;
     if (r.hold_id != hold_id_) hold_since_ = r.cycle;

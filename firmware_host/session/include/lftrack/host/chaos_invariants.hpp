@@ -42,6 +42,9 @@ struct ActuatorCalls {
   bool non_finite = false;    // a command() value was not finite
   tracking::Vector6d last_command = tracking::Vector6d::Zero();   // the last accepted command
   tracking::Vector6d target_before = tracking::Vector6d::Zero();  // the device's target before it
+  // The device's target after the cycle's calls, as read back or commanded (carried across
+  // cycles): the aligned target of an alignment with nothing to move.
+  tracking::Vector6d target_after = tracking::Vector6d::Zero();
   bool beam_permit = false;   // the device's beam permit after the cycle
 };
 
