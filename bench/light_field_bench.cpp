@@ -51,12 +51,13 @@ const Setup& setup() {
   return s;
 }
 
-// Arg 0: the image (0: the window, 1: binned 2 x 2, 2: resampled to 256 x 256); Arg 1: the
-// kernel (0: portable, 1: AVX2 gathers, 2: AVX2 runs, each blending 16 samples at every pixel's
-// ray; 3: the source image, portable; 4: the source image, AVX2, the renderer's default).
-void BM_LightFieldDrr(benchmark::State& state) {
+// Renders the image (0: the window, 1: binned 2 x 2, 2: resampled to 256 x 256) with the kernel
+// (0: portable, 1: AVX2 gathers, 2: AVX2 runs, each blending 16 samples at every pixel's ray;
+// 3: the source image, portable; 4: the source image, AVX2, the renderer's default) at a pose off
+// the nominal one (a tracked patient a little away from the set-up). With `cold_cache`, 48 MiB
+// (more than the L3 cache) are written between renders, untimed.
+void render_light_field_drr(benchmark::State& state, int image, int kernel, bool cold_cache) {
   const Setup& s = setup();
-  const int image = int(state.range(0));
   tracking::XrayView view = s.view;
   tracking::PixelWindow window = s.window;
   if (image > 0) {
@@ -69,62 +70,45 @@ void BM_LightFieldDrr(benchmark::State& state) {
   const tracking::SimdLevel kernels[] = {tracking::SimdLevel::kScalar, tracking::SimdLevel::kAvx2Gathers,
                                          tracking::SimdLevel::kAvx2, tracking::SimdLevel::kScalar,
                                          tracking::SimdLevel::kAvx2};
-  options.simd = kernels[state.range(1)];
-  options.light_field_source_image = state.range(1) >= 3;
+  options.simd = kernels[kernel];
+  options.light_field_source_image = kernel >= 3;
   auto renderer = tracking::make_renderer("lightfield", nullptr, options);
   tracking::Image<float> out(window.rows, window.cols);
   tracking::Image<unsigned char> valid(window.rows, window.cols);
   tracking::RenderExtras extras;
   extras.valid = valid.view();
-  // A pose off the nominal one (a tracked patient a little away from the set-up).
   tracking::PoseDelta d;
   d.translation_mm = {1.2, -0.7, 0.9};
   d.rotation_rad = {0.01, -0.015, 0.008};
   const tracking::Pose pose = tracking::apply_delta(s.pose, d, Eigen::Vector3d::Zero());
+  std::vector<unsigned char> evict(cold_cache ? std::size_t(48) << 20 : 0);
   for (auto _ : state) {
+    if (cold_cache) {
+      state.PauseTiming();
+      for (std::size_t i = 0; i < evict.size(); i += 64) evict[i] = static_cast<unsigned char>(evict[i] + 1);
+      benchmark::ClobberMemory();
+      state.ResumeTiming();
+    }
     const Status st = (*renderer)->render(pose, view, window, out.view(), &extras);
     benchmark::DoNotOptimize(out.pixels().data());
     if (!st.ok()) state.SkipWithError(st.message().c_str());
   }
   state.SetItemsProcessed(state.iterations() * window.rows * window.cols);
+}
+
+// Arg 0: the image; Arg 1: the kernel (render_light_field_drr). One pose over and over: every
+// sample it reads is cached.
+void BM_LightFieldDrr(benchmark::State& state) {
+  render_light_field_drr(state, int(state.range(0)), int(state.range(1)), false);
 }
 BENCHMARK(BM_LightFieldDrr)
     ->ArgsProduct({{0, 1, 2}, {0, 1, 2, 3, 4}})
     ->ArgNames({"image", "kernel"})
     ->Unit(benchmark::kMicrosecond);
 
-// The renderer's default (the source image, AVX2) on the 256 x 256 image, as a tracking
-// registration meets it after the pose or the view changed: the field's samples not in any cache
-// (48 MiB, more than the L3 cache, written between renders, untimed). BM_LightFieldDrr renders one pose over and over,
-// with every sample it reads cached; `bench drr`'s first render of each pose and view is like this.
-void BM_LightFieldDrrColdCache(benchmark::State& state) {
-  const Setup& s = setup();
-  const tracking::XrayView view = s.view.resampled(s.window.row0, s.window.col0, s.window.rows, s.window.cols, 256, 256);
-  const tracking::PixelWindow window = tracking::PixelWindow::full(256, 256);
-  tracking::RendererOptions options;
-  options.light_fields = {s.field};
-  auto renderer = tracking::make_renderer("lightfield", nullptr, options);
-  tracking::Image<float> out(window.rows, window.cols);
-  tracking::Image<unsigned char> valid(window.rows, window.cols);
-  tracking::RenderExtras extras;
-  extras.valid = valid.view();
-  tracking::PoseDelta d;
-  d.translation_mm = {1.2, -0.7, 0.9};
-  d.rotation_rad = {0.01, -0.015, 0.008};
-  const tracking::Pose pose = tracking::apply_delta(s.pose, d, Eigen::Vector3d::Zero());
-  std::vector<unsigned char> evict(std::size_t(48) << 20);
-  for (auto _ : state) {
-    state.PauseTiming();
-    for (std::size_t i = 0; i < evict.size(); i += 64) evict[i] = static_cast<unsigned char>(evict[i] + 1);
-    benchmark::ClobberMemory();
-    state.ResumeTiming();
-    const Status st = (*renderer)->render(pose, view, window, out.view(), &extras);
-    benchmark::DoNotOptimize(out.pixels().data());
-    if (!st.ok()) state.SkipWithError(st.message().c_str());
-  }
-  state.SetItemsProcessed(state.iterations() * window.rows * window.cols);
-}
-// A fixed count: each render's eviction takes several times the render.
+// The renderer's default on the 256 x 256 image as a registration meets it after the pose or the
+// view changed, with nothing cached (`bench drr`'s first render of each pose and view is like
+// this). A fixed count: each render's eviction takes several times the render.
+void BM_LightFieldDrrColdCache(benchmark::State& state) { render_light_field_drr(state, 2, 4, true); }
 BENCHMARK(BM_LightFieldDrrColdCache)->Iterations(100)->Unit(benchmark::kMicrosecond);
-
 }  // namespace
