@@ -15,24 +15,16 @@ namespace lftrack::host {
 namespace {
 
 // The session's couch, except that read-back number `nan_at` reports a NaN position.
-class NanReadback final : public drivers::Actuator {
+class NanReadback final : public ForwardingActuator {
  public:
-  NanReadback(drivers::Actuator* inner, int nan_at) : inner_(inner), nan_at_(nan_at) {}
-  Status open() override { return inner_->open(); }
-  drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
-    return inner_->command(c, d);
-  }
+  NanReadback(drivers::Actuator* inner, int nan_at) : ForwardingActuator(inner), nan_at_(nan_at) {}
   drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline d) override {
     const drivers::DeviceStatus s = inner_->readback(state, d);
     if (readbacks_++ == nan_at_) state->position[1] = std::numeric_limits<double>::quiet_NaN();
     return s;
   }
-  void hold() override { inner_->hold(); }
-  void set_beam_permit(bool permit) override { inner_->set_beam_permit(permit); }
-  void close() override { inner_->close(); }
 
  private:
-  drivers::Actuator* inner_;
   int nan_at_;
   int readbacks_ = 0;
 };

@@ -296,10 +296,9 @@ TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
 
 // The session's couch, except that it refuses its first `refusals` commands (a fault it knows
 // of, as a CAN robot in error-passive does): nothing is sent, nothing moves.
-class RefusingCouch final : public drivers::Actuator {
+class RefusingCouch final : public ForwardingActuator {
  public:
-  RefusingCouch(drivers::Actuator* inner, int refusals) : inner_(inner), refusals_(refusals) {}
-  Status open() override { return inner_->open(); }
+  RefusingCouch(drivers::Actuator* inner, int refusals) : ForwardingActuator(inner), refusals_(refusals) {}
   drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
     if (refusals_ > 0) {
       --refusals_;
@@ -307,20 +306,13 @@ class RefusingCouch final : public drivers::Actuator {
     }
     return inner_->command(c, d);
   }
-  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline d) override {
-    return inner_->readback(state, d);
-  }
-  void hold() override { inner_->hold(); }
-  void set_beam_permit(bool permit) override { inner_->set_beam_permit(permit); }
-  void close() override { inner_->close(); }
 
  private:
-  drivers::Actuator* inner_;
   int refusals_;
 };
 
-// The chaos soak found it (segment 34 of seed 23, a CAN segment): the couch refused the set-up
-// move, the loop held, and it had nonetheless counted itself aligned, so the operator's resume
+// Most likely what the chaos soak met (seed 23, segment 34, a CAN segment, "a command before any
+// alignment"): the couch refused the set-up move, the loop held, and it had nonetheless counted itself aligned, so the operator's resume
 // went straight to TRACK and made the whole set-up move there, as a tracking correction with
 // the beam permitted. An alignment is done when its set-up move is accepted: a refused one
 // holds as an alignment that failed, and the resume aligns again (beam off while it moves).
