@@ -15,9 +15,9 @@ namespace lftrack::host {
 namespace {
 
 // The session's couch, except that read-back number `nan_at` reports a NaN position.
-class NanReadback final : public ForwardingActuator {
+class NanReadback final : public drivers::ForwardingActuator {
  public:
-  NanReadback(drivers::Actuator* inner, int nan_at) : ForwardingActuator(inner), nan_at_(nan_at) {}
+  NanReadback(drivers::Actuator* inner, int nan_at) : drivers::ForwardingActuator(inner), nan_at_(nan_at) {}
   drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline d) override {
     const drivers::DeviceStatus s = inner_->readback(state, d);
     if (readbacks_++ == nan_at_) state->position[1] = std::numeric_limits<double>::quiet_NaN();

@@ -296,9 +296,9 @@ TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
 
 // The session's couch, except that it refuses its first `refusals` commands (a fault it knows
 // of, as a CAN robot in error-passive does): nothing is sent, nothing moves.
-class RefusingCouch final : public ForwardingActuator {
+class RefusingCouch final : public drivers::ForwardingActuator {
  public:
-  RefusingCouch(drivers::Actuator* inner, int refusals) : ForwardingActuator(inner), refusals_(refusals) {}
+  RefusingCouch(drivers::Actuator* inner, int refusals) : drivers::ForwardingActuator(inner), refusals_(refusals) {}
   drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
     if (refusals_ > 0) {
       --refusals_;

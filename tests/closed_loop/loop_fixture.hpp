@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/tracking/light_field.hpp"
@@ -88,27 +89,6 @@ inline std::filesystem::path shared_light_field_dir(const PreparedScene& p) {
                 static_cast<unsigned long long>(key), r[0], r[1], r[2], r[3]);
   return test::test_cache_dir() / "closed-loop-light-fields" / name;
 }
-
-// The session's own actuator, every call passed through: a test overrides the call it breaks
-// (set as the session's hooks.wrap_actuator).
-class ForwardingActuator : public drivers::Actuator {
- public:
-  explicit ForwardingActuator(drivers::Actuator* inner) : inner_(inner) {}
-  Status open() override { return inner_->open(); }
-  drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
-    return inner_->command(c, d);
-  }
-  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline d) override {
-    return inner_->readback(state, d);
-  }
-  void hold() override { inner_->hold(); }
-  void set_beam_permit(bool permit) override { inner_->set_beam_permit(permit); }
-  bool readback_follows_frames() const override { return inner_->readback_follows_frames(); }
-  void close() override { inner_->close(); }
-
- protected:
-  drivers::Actuator* inner_;
-};
 
 struct LoopRun {
   LoopSummary summary;

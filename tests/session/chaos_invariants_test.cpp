@@ -48,7 +48,6 @@ struct Harness {
     c.calls.commands_accepted = 1;
     c.calls.last_command = tracking::Vector6d::Zero();
     c.calls.last_command[0] = step_mm;
-    c.calls.target_before = target_;
     c.calls.beam_permit = true;
     target_ += c.calls.last_command;
     c.calls.target_after = target_;

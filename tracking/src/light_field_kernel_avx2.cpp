@@ -294,9 +294,10 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
   const __m256i top_s = _mm256_set1_epi32(g.size[2] - 2), top_t = _mm256_set1_epi32(g.size[3] - 2);
   const __m256 zero = _mm256_setzero_ps();
   const MapLanes map(m);
+  const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);  // else one test a row
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
-    const RowRays row = row_rays(g, m, r, row_inside_field(g, m, r, cols));
+    const RowRays row = row_rays(g, m, r, all_inside || row_inside_field(g, m, r, cols));
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     for (int c = 0; c < cols; c += 8) {
@@ -521,8 +522,7 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
   const MapLanes map(m);
   const bool cells_fit_16_bits = image.rows <= 32768 && image.cols <= 32768;  // render_inside_row's packed cells
-  // Nearly always every row is inside: one test for the block, else one a row.
-  const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);
+  const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);  // else one test a row
   int masked = 0;
   for (int r = r_begin; r < r_end; ++r) {
     float* dst = out.row_ptr(r);

@@ -271,7 +271,6 @@ drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correctio
   if (status == drivers::DeviceStatus::kOk) {
     ++calls.commands_accepted;
     calls.last_command = correction;
-    calls.target_before = known_target_;
     known_target_ += correction;
     calls.target_after = known_target_;
   } else {

@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <random>
 
-#include "lftrack/drivers/actuator.hpp"
+#include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/drivers/frame_source.hpp"
 #include "lftrack/host/chaos_invariants.hpp"
 #include "lftrack/host/chaos_soak.hpp"
@@ -113,19 +113,17 @@ class ChaosFrameSource final : public drivers::FrameSource {
   std::int64_t first_exposure_ns_ = -1;
 };
 
-class ChaosActuator final : public drivers::Actuator {
+// The session's actuator with the cycle's actuator fault injected; open, close and the read-back
+// order pass through.
+class ChaosActuator final : public drivers::ForwardingActuator {
  public:
-  ChaosActuator(drivers::Actuator* inner, Injector* injector) : inner_(inner), injector_(injector) {}
-  Status open() override { return inner_->open(); }
+  ChaosActuator(drivers::Actuator* inner, Injector* injector) : ForwardingActuator(inner), injector_(injector) {}
   drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
   drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
   void hold() override;
   void set_beam_permit(bool permit) override;
-  bool readback_follows_frames() const override { return inner_->readback_follows_frames(); }
-  void close() override { inner_->close(); }
 
  private:
-  drivers::Actuator* inner_;
   Injector* injector_;
   tracking::Vector6d known_target_ = tracking::Vector6d::Zero();  // the device's target, as it last told us
   std::int64_t readback_cycle_ = -1;  // the cycle whose first read-back has been taken

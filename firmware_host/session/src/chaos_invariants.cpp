@@ -84,14 +84,13 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   }
   if (calls.commands_accepted > 0) {
     const tracking::Vector6d& step = calls.last_command;
-    const tracking::Vector6d target = calls.target_before + step;
     if (!setup_move) {
       if (!step_approved_ && (translation_mm(step) > limits_.max_step_mm + kTolerance ||
                               angle_deg(step) > limits_.max_step_deg + kTolerance))
         fail("a step of " + std::to_string(translation_mm(step)) + " mm / " + std::to_string(angle_deg(step)) +
              " deg beyond the step limit");
       if (aligned_) {
-        const tracking::Vector6d total = target - aligned_target_;
+        const tracking::Vector6d total = calls.target_after - aligned_target_;
         if (translation_mm(total) > limits_.max_total_mm + kTolerance ||
             angle_deg(total) > limits_.max_total_deg + kTolerance)
           fail("a total of " + std::to_string(translation_mm(total)) + " mm / " +

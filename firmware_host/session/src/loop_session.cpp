@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
@@ -92,25 +93,6 @@ struct LoopSession::Parts {
 };
 
 namespace {
-
-// A device someone else owns (the simulated room's couch) as the session's actuator.
-class BorrowedActuator final : public drivers::Actuator {
- public:
-  explicit BorrowedActuator(drivers::Actuator* device) : device_(device) {}
-  Status open() override { return device_->open(); }
-  drivers::DeviceStatus command(const tracking::Vector6d& c, drivers::Deadline d) override {
-    return device_->command(c, d);
-  }
-  drivers::DeviceStatus readback(drivers::ActuatorState* s, drivers::Deadline d) override {
-    return device_->readback(s, d);
-  }
-  void hold() override { device_->hold(); }
-  void set_beam_permit(bool permit) override { device_->set_beam_permit(permit); }
-  void close() override { device_->close(); }
-
- private:
-  drivers::Actuator* device_;
-};
 
 // The simulated room of a scene: its patient, set-up error and couch; with `couch_link`, the
 // couch is another process's.
@@ -246,7 +228,8 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
     spdlog::info("the scene's {} is simulated by its twin, the virtual couch", describe_actuator(p.scene.actuator));
   drivers::VirtualActuatorSpec simulated;
   simulated.make = [room = parts->room.get()]() -> Result<std::unique_ptr<drivers::Actuator>> {
-    return std::unique_ptr<drivers::Actuator>(new BorrowedActuator(&room->couch_actuator()));
+    // The room owns its couch; the session borrows it.
+    return std::unique_ptr<drivers::Actuator>(new drivers::ForwardingActuator(&room->couch_actuator()));
   };
   return Spec(std::move(simulated));
 }

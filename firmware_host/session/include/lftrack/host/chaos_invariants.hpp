@@ -40,10 +40,10 @@ struct ActuatorCalls {
   int commands_accepted = 0;  // command() calls the device answered kOk
   int commands_failed = 0;    // command() calls that failed (timeout, fault, disconnect, throw)
   bool non_finite = false;    // a command() value was not finite
-  tracking::Vector6d last_command = tracking::Vector6d::Zero();   // the last accepted command
-  tracking::Vector6d target_before = tracking::Vector6d::Zero();  // the device's target before it
+  tracking::Vector6d last_command = tracking::Vector6d::Zero();  // the last accepted command
   // The device's target after the cycle's calls, as read back or commanded (carried across
-  // cycles): the aligned target of an alignment with nothing to move.
+  // cycles): where the last accepted command took it, or the aligned target of an alignment with
+  // nothing to move.
   tracking::Vector6d target_after = tracking::Vector6d::Zero();
   bool beam_permit = false;   // the device's beam permit after the cycle
 };
