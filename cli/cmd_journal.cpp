@@ -46,7 +46,7 @@ void print_csv(const std::vector<JournalRecord>& records) {
       "tx_mm,ty_mm,tz_mm,rx_rad,ry_rad,rz_rad,similarity_a,similarity_b,evaluations,registration_ms,"
       "command_sent,cmd_tx_mm,cmd_ty_mm,cmd_tz_mm,cmd_rx_rad,cmd_ry_rad,cmd_rz_rad,"
       "beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm,event,"
-      "hold_id,operator_command,operator_refused,operator_refusal\n");
+      "hold_id,operator_command,operator_refused,operator_refusal,beam_withheld\n");
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
@@ -59,8 +59,9 @@ void print_csv(const std::vector<JournalRecord>& records) {
     for (double v : r.command) std::printf(",%.6g", v);
     std::printf(",%d,%d,%u,%u,%.4f,\"%s\"", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
                 r.true_residual_mm, event_name(r.event));
-    std::printf(",%u,\"%s\",%u,\"%s\"\n", r.hold_id, operator_command_name(r.operator_command),
-                unsigned{r.operator_refused}, to_string(static_cast<OperatorRefusal>(r.operator_refusal)));
+    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\"\n", r.hold_id, operator_command_name(r.operator_command),
+                unsigned{r.operator_refused}, to_string(static_cast<OperatorRefusal>(r.operator_refusal)),
+                to_string(static_cast<BeamWithheld>(r.beam_withheld)));
   }
 }
 
@@ -89,7 +90,8 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"hold_id", r.hold_id},
                      {"operator_command", operator_command_name(r.operator_command)},
                      {"operator_refused", r.operator_refused},
-                     {"operator_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))}};
+                     {"operator_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))},
+                     {"beam_withheld", to_string(static_cast<BeamWithheld>(r.beam_withheld))}};
     std::printf("%s\n", j.dump().c_str());
   }
 }

@@ -627,6 +627,7 @@ TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
       r.state = 2;
       r.hold_id = i == 7 ? 3 : 0;
       r.operator_command = i == 7 ? 1 + static_cast<std::uint8_t>(OperatorCommand::kResume) : 0;
+      r.beam_withheld = i == 7 ? static_cast<std::uint8_t>(BeamWithheld::kApprovedStep) : 0;
       (*w)->append(r);
     }
   }
@@ -640,9 +641,11 @@ TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
   std::string csv;
   EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok())
       << "damage is an error, for scripts";
-  EXPECT_NE(csv.find(",hold_id,operator_command,operator_refused,operator_refusal\n"), std::string::npos)
+  EXPECT_NE(csv.find(",hold_id,operator_command,operator_refused,operator_refusal,beam_withheld\n"),
+            std::string::npos)
       << csv;
-  EXPECT_NE(csv.find(",3,\"resume\",0,\"\"\n"), std::string::npos) << csv;
+  EXPECT_NE(csv.find(",3,\"resume\",0,\"\",\"approved step beyond the step limit\"\n"), std::string::npos) << csv;
+  EXPECT_NE(csv.find(",0,\"\",0,\"\",\"\"\n"), std::string::npos) << "no beam withheld: an empty field" << csv;
   for (int i = 0; i < 20; ++i) {
     const std::string row = std::string("\n") + std::to_string(i) + ",0,0,0,TRACK";
     EXPECT_EQ(csv.find(row) == std::string::npos, i == 10) << i << csv;

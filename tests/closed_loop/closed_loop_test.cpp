@@ -55,6 +55,14 @@ TEST_F(ClosedLoop, TracksDriftAndBreathingWithoutAllocatingInThousandCycles) {
   EXPECT_EQ(first.command_sent, 1) << "the set-up move";
   EXPECT_NEAR(first.command[0], -3.0, 0.3);
   EXPECT_NEAR(first.command[2], -2.0, 0.3);
+  EXPECT_EQ(first.beam_permit, 0) << "the alignment's cycle";
+  EXPECT_EQ(first.beam_withheld, 0) << "ALIGN has no beam to withhold";
+  // The couch (0.1 s latency) has not begun the 3 mm set-up move at the next frame: the beam waits.
+  const JournalRecord& second = r.journal.records[1];
+  EXPECT_EQ(second.gate_decision, std::uint8_t(GateDecision::kApply));
+  EXPECT_EQ(second.beam_permit, 0);
+  EXPECT_EQ(second.beam_withheld, std::uint8_t(BeamWithheld::kActuatorTravelling));
+  EXPECT_GT(second.true_residual_mm, 2.0);
   int with_beam = 0;
   for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
     const JournalRecord& rec = r.journal.records[i];
@@ -129,6 +137,20 @@ TEST_F(ClosedLoop, SuddenShiftHoldsInOneCycleAndRecoversAfterResume) {
   EXPECT_EQ(records[resumed].command_sent, 1) << "the approved move of about 8 mm";
   EXPECT_NEAR(records[resumed].command[1], -8.0, 1.0);
   EXPECT_GT(records[resumed].true_residual_mm, 5.0);
+  // The beam waits for the patient: not with the approved move, nor while the couch (0.1 s
+  // latency, 40 mm/s) is still more than a step from its target at the read-back.
+  EXPECT_EQ(records[resumed].beam_permit, 0);
+  EXPECT_EQ(records[resumed].beam_withheld, std::uint8_t(BeamWithheld::kApprovedStep));
+  ASSERT_LT(resumed + 1, records.size());
+  EXPECT_EQ(records[resumed + 1].beam_permit, 0);
+  EXPECT_EQ(records[resumed + 1].beam_withheld, std::uint8_t(BeamWithheld::kActuatorTravelling));
+  int beam_after_resume = 0;
+  for (std::size_t i = resumed; i < records.size(); ++i) {
+    if (records[i].beam_permit == 0) continue;
+    ++beam_after_resume;
+    EXPECT_LT(records[i].true_residual_mm, 2.0) << "cycle " << i << ": the beam on with the patient out of place";
+  }
+  EXPECT_GT(beam_after_resume, 20) << "and then tracks with the beam";
   bool recovered = false;
   for (std::size_t i = resumed; i <= resumed + 5 && i < records.size(); ++i)
     recovered = recovered || records[i].true_residual_mm < 0.5;
@@ -330,7 +352,7 @@ TEST_F(ClosedLoop, ARefusedSetUpMoveIsAnAlignmentThatFailedAndTheResumeAlignsAga
   const JournalRecord& refused = records[0];
   EXPECT_EQ(refused.previous_state, std::uint8_t(TrackingState::kAlign));
   EXPECT_EQ(refused.state, std::uint8_t(TrackingState::kHold));
-  EXPECT_EQ(refused.gate_reason, std::uint8_t(GateReason::kActuatorFault));
+  EXPECT_EQ(refused.gate_reason, std::uint8_t(GateReason::kCommandRefused));
   EXPECT_EQ(refused.event, 1 + int(TrackingEvent::kAlignFailed));
   EXPECT_EQ(refused.command_sent, 0);
   EXPECT_EQ(refused.beam_permit, 0);

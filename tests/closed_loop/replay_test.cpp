@@ -57,6 +57,8 @@ TEST_F(ArchiveAndReplay, ReplayReproducesTheRecordedRegistrationsAndDecisions) {
     EXPECT_EQ(a.frame_sequence[0], b.frame_sequence[0]);
     EXPECT_EQ(a.gate_decision, b.gate_decision) << "cycle " << i;
     EXPECT_EQ(a.command_sent, b.command_sent) << "cycle " << i;
+    EXPECT_EQ(a.beam_permit, b.beam_permit) << "cycle " << i;
+    EXPECT_EQ(a.beam_withheld, b.beam_withheld) << "cycle " << i;
     for (int k = 0; k < 3; ++k) {
       worst_mm = std::max(worst_mm, std::abs(a.pose_delta[k] - b.pose_delta[k]));
       worst_rad = std::max(worst_rad, std::abs(a.pose_delta[3 + k] - b.pose_delta[3 + k]));

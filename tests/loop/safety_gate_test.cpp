@@ -85,7 +85,13 @@ const std::vector<GateCase> kCases = {
     {"NoReadback", [](GateInput& in) { in.readback_valid = false; }, GateDecision::kHold,
      GateReason::kActuatorFault},
     {"CommandRefusedByTheActuator", [](GateInput& in) { in.command_refused = true; }, GateDecision::kHold,
-     GateReason::kActuatorFault},
+     GateReason::kCommandRefused},
+    {"NoReadbackStandsBeforeARefusal",
+     [](GateInput& in) {
+       in.command_refused = true;
+       in.readback_valid = false;
+     },
+     GateDecision::kHold, GateReason::kActuatorFault},
     {"NoResult", [](GateInput& in) { in.registration_ok = false; }, GateDecision::kSkip,
      GateReason::kNoResult},
     {"RejectedByTheRegistrationVerdict",
@@ -184,7 +190,98 @@ TEST(Gate, ApplyResetsTheFailureCount) {
 
 TEST(Gate, EveryDecisionAndReasonHasAName) {
   for (int d = 0; d <= 3; ++d) EXPECT_STRNE(to_string(static_cast<GateDecision>(d)), "?");
-  for (int r = 0; r <= 9; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
+  for (int r = 0; r <= 16; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
+  for (int w = 0; w <= 2; ++w) EXPECT_STRNE(to_string(static_cast<BeamWithheld>(w)), "?");
+}
+
+// An APPLY sends its correction; the beam waits while the patient is still being moved into
+// place: the cycle of an approved step beyond the step limit (the move after a resume), and
+// every cycle whose read-back found the actuator more than one step limit from its target.
+struct BeamCase {
+  const char* name;
+  std::function<void(GateInput&)> change;
+  GateDecision decision;
+  BeamWithheld withheld;
+};
+
+const std::vector<BeamCase> kBeamCases = {
+    {"AllGood", [](GateInput&) {}, GateDecision::kApply, BeamWithheld::kNo},
+    {"ApprovedStepWithinTheLimit",
+     [](GateInput& in) {
+       in.step(1) = 2.0;
+       in.step_approved = true;
+     },
+     GateDecision::kApply, BeamWithheld::kNo},
+    {"ApprovedStepBeyondTheLimit",
+     [](GateInput& in) {
+       in.step(1) = 8.0;
+       in.step_approved = true;
+     },
+     GateDecision::kApply, BeamWithheld::kApprovedStep},
+    {"ApprovedRotationBeyondTheLimit",
+     [](GateInput& in) {
+       in.step(5) = tracking::deg_to_rad(-3.0);
+       in.step_approved = true;
+     },
+     GateDecision::kApply, BeamWithheld::kApprovedStep},
+    // The good input's step is 0.5 / -0.3 / 0.2 mm: what is still to go is the travel left plus it.
+    {"TravelLeftAndStepAtTheLimit", [](GateInput& in) { in.travel_left(0) = 1.5; }, GateDecision::kApply,
+     BeamWithheld::kNo},
+    {"TravelLeftAndStepBeyondTheLimit", [](GateInput& in) { in.travel_left(2) = 1.81; }, GateDecision::kApply,
+     BeamWithheld::kActuatorTravelling},
+    {"TravelLeftTheStepTakesBack", [](GateInput& in) { in.travel_left(0) = -2.3; }, GateDecision::kApply,
+     BeamWithheld::kNo},
+    {"RotationLeftBeyondTheLimit",
+     [](GateInput& in) {
+       in.step.tail<3>().setZero();
+       in.travel_left(3) = tracking::deg_to_rad(1.5);
+       in.travel_left(4) = tracking::deg_to_rad(1.5);  // 2.12 degrees together
+     },
+     GateDecision::kApply, BeamWithheld::kActuatorTravelling},
+    {"ApprovedStepAndTravelling",
+     [](GateInput& in) {
+       in.step(0) = -6.0;
+       in.step_approved = true;
+       in.travel_left(0) = 5.0;
+     },
+     GateDecision::kApply, BeamWithheld::kApprovedStep},
+    {"NanTravelHolds", [](GateInput& in) { in.travel_left(1) = kNan; }, GateDecision::kHold, BeamWithheld::kNo},
+    {"InfiniteTravelHolds", [](GateInput& in) { in.travel_left(4) = -kInf; }, GateDecision::kHold,
+     BeamWithheld::kNo},
+    {"NothingWithheldWithoutAnApply",
+     [](GateInput& in) {
+       in.travel_left(0) = 5.0;
+       in.registration_ok = false;
+     },
+     GateDecision::kSkip, BeamWithheld::kNo},
+};
+
+class GateBeam : public ::testing::TestWithParam<BeamCase> {};
+
+TEST_P(GateBeam, WithholdsTheBeamUntilThePatientIsInPlace) {
+  GateInput in = good_input();
+  GetParam().change(in);
+  const GateOutput out = evaluate_gate(SafetyLimits{}, in);
+  EXPECT_EQ(out.decision, GetParam().decision) << to_string(out.decision);
+  EXPECT_EQ(out.beam_withheld, GetParam().withheld) << to_string(out.beam_withheld);
+  EXPECT_EQ(out.beam_allowed(), out.decision == GateDecision::kApply && GetParam().withheld == BeamWithheld::kNo);
+}
+
+INSTANTIATE_TEST_SUITE_P(Rules, GateBeam, ::testing::ValuesIn(kBeamCases),
+                         [](const ::testing::TestParamInfo<BeamCase>& p) { return std::string(p.param.name); });
+
+TEST(Gate, TheTravelLimitsAreTheStepLimits) {
+  SafetyLimits limits;
+  limits.max_step_mm = 0.5;
+  limits.max_step_deg = 0.25;
+  GateInput in = good_input();
+  in.step.setZero();
+  in.travel_left(1) = 0.6;
+  EXPECT_EQ(evaluate_gate(limits, in).beam_withheld, BeamWithheld::kActuatorTravelling);
+  in.travel_left(1) = 0.4;
+  EXPECT_TRUE(evaluate_gate(limits, in).beam_allowed());
+  in.travel_left(5) = tracking::deg_to_rad(0.3);
+  EXPECT_EQ(evaluate_gate(limits, in).beam_withheld, BeamWithheld::kActuatorTravelling);
 }
 
 }  // namespace

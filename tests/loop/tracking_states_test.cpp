@@ -30,6 +30,25 @@ TEST(TrackingStates, NormalLifeCycle) {
   EXPECT_STREQ(t.reason, "stale frame");
 }
 
+// An APPLY that withholds the beam (the patient still being moved into place) tracks on, with
+// the beam off; the next APPLY that allows it turns it on.
+TEST(TrackingStates, AnApplyThatWithholdsTheBeamTracksWithTheBeamOff) {
+  TrackingStateMachine m;
+  m.on(TrackingEvent::kStart);
+  m.on(TrackingEvent::kAligned);
+  for (BeamWithheld w : {BeamWithheld::kApprovedStep, BeamWithheld::kActuatorTravelling}) {
+    GateOutput g = gate(GateDecision::kApply);
+    g.beam_withheld = w;
+    const StateTransition t = m.on(TrackingEvent::kGate, g);
+    EXPECT_FALSE(t.changed());
+    EXPECT_EQ(m.state(), TrackingState::kTrack);
+    EXPECT_FALSE(m.beam_permit()) << to_string(w);
+    EXPECT_STREQ(t.reason, "applied, beam withheld");
+  }
+  m.on(TrackingEvent::kGate, gate(GateDecision::kApply));
+  EXPECT_TRUE(m.beam_permit());
+}
+
 TEST(TrackingStates, HoldNeedsTheOperator) {
   TrackingStateMachine m;
   m.on(TrackingEvent::kStart);

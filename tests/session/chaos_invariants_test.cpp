@@ -53,11 +53,13 @@ struct Harness {
     c.calls.target_after = target_;
     return c;
   }
-  // The ALIGN cycle's set-up move to `x_mm`.
+  // The ALIGN cycle's set-up move to `x_mm` (the beam off: the loop aligns without it).
   Cycle aligned(double x_mm) {
     Cycle c = applied(0, x_mm);
     c.record.previous_state = code(TrackingState::kAlign);
     c.record.event = 1 + static_cast<int>(TrackingEvent::kAligned);
+    c.record.beam_permit = 0;
+    c.calls.beam_permit = false;
     return c;
   }
   Cycle held(std::uint64_t index, std::uint32_t hold_id, TrackingState state = TrackingState::kHold) {
@@ -131,6 +133,45 @@ TEST(ChaosInvariants, TheBeamOnlyInTrackAfterApply) {
   EXPECT_TRUE(h.mentions(h.check(skip), "outside TRACK after APPLY"));
 }
 
+// The beam waits while the patient is moved into place: not in the cycle of an approved move
+// beyond the step limit, and not while the read-back found the actuator more than one step limit
+// from its target.
+TEST(ChaosInvariants, TheBeamWaitsUntilThePatientIsInPlace) {
+  Harness h;
+  ASSERT_TRUE(h.check(h.aligned(1)).empty());
+  ASSERT_TRUE(h.check(h.held(1, 417263)).empty());
+  Cycle resumed = h.applied(12, 3.0);  // approved, and the beam on with it
+  resumed.record.previous_state = code(TrackingState::kHold);
+  resumed.record.operator_command = 1 + static_cast<int>(OperatorCommand::kResume);
+  resumed.action = {true, 417263};
+  EXPECT_TRUE(h.mentions(h.check(resumed), "move beyond the step limit"));
+
+  Harness t;
+  ASSERT_TRUE(t.check(t.aligned(6)).empty());
+  Cycle travelling = t.applied(1, 0.5);
+  travelling.calls.have_readback = true;
+  travelling.calls.travel_left[1] = -4.0;  // the set-up move still under way
+  EXPECT_TRUE(t.mentions(t.check(travelling), "still 4.000000 mm / 0.000000 deg from the cycle's target"));
+  Cycle turning = t.applied(2, 0.5);
+  turning.calls.have_readback = true;
+  turning.calls.travel_left[5] = tracking::deg_to_rad(2.5);
+  EXPECT_TRUE(t.mentions(t.check(turning), "from the cycle's target"));
+  Cycle piling_up = t.applied(3, 1.0);
+  piling_up.calls.have_readback = true;
+  piling_up.calls.travel_left[0] = 1.5;  // each within a step, together 2.5 mm to go
+  EXPECT_TRUE(t.mentions(t.check(piling_up), "still 2.500000 mm"));
+  Cycle arrived = t.applied(4, 0.5);
+  arrived.calls.have_readback = true;
+  arrived.calls.travel_left[1] = -1.9;  // within a step: the beam may be on
+  EXPECT_TRUE(t.check(arrived).empty());
+  Cycle no_beam = t.applied(5, 0.5);
+  no_beam.record.beam_permit = 0;
+  no_beam.calls.beam_permit = false;
+  no_beam.calls.have_readback = true;
+  no_beam.calls.travel_left[0] = 8.0;
+  EXPECT_TRUE(t.check(no_beam).empty()) << "travelling with the beam off is no violation";
+}
+
 TEST(ChaosInvariants, NothingMovesAfterAHoldUntilAnAcceptedResumeOfThatHoldAfterASecond) {
   Harness h;
   ASSERT_TRUE(h.check(h.aligned(1)).empty());
@@ -163,6 +204,8 @@ TEST(ChaosInvariants, NothingMovesAfterAHoldUntilAnAcceptedResumeOfThatHoldAfter
   resumed.record.previous_state = code(TrackingState::kHold);
   resumed.record.operator_command = 1 + static_cast<int>(OperatorCommand::kResume);
   resumed.action = {true, 417263};
+  resumed.record.beam_permit = 0;  // and makes it without the beam
+  resumed.calls.beam_permit = false;
   EXPECT_TRUE(ok.check(resumed).empty());
   EXPECT_TRUE(h.mentions(ok.check(ok.applied(13, 3.0)), "step limit")) << "only the first move is approved";
 }

@@ -92,6 +92,16 @@ TEST(MonitorServer, ServesThePageAndTheStateOnlyForItsOwnHost) {
   EXPECT_NEAR(j["offset_mm_deg"][5].get<double>(), 0.5, 1e-6);
   EXPECT_EQ(j["counts"]["holds"], 1);
   EXPECT_EQ(j["transitions"].size(), 1u);
+  EXPECT_EQ(j["beam_permit"], false);
+  EXPECT_EQ(j["beam_withheld"], "") << "a HOLD's beam is off, not withheld";
+  // An applied cycle that kept the beam off says why.
+  FeedRecord withheld = record(42, TrackingState::kTrack, TrackingState::kTrack, 1.0, true);
+  withheld.record.gate_decision = static_cast<std::uint8_t>(GateDecision::kApply);
+  withheld.record.beam_withheld = static_cast<std::uint8_t>(BeamWithheld::kActuatorTravelling);
+  s.hub.publish(withheld);
+  const auto k = nlohmann::json::parse(s.client().Get("/api/state")->body);
+  EXPECT_EQ(k["cycle"], 42);
+  EXPECT_EQ(k["beam_withheld"], "actuator still travelling");
   EXPECT_EQ(s.client().Get("/nothing")->status, 404);
   // Another host name (a page elsewhere resolving its name to this host) is answered nothing.
   auto rebound = s.client().Get("/api/state", {{"Host", "attacker.example:" + std::to_string(s.server->port())}});

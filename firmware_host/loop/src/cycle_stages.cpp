@@ -92,6 +92,7 @@ void TrackingLoop::Impl::read_back(CycleState& c) {
       const Vector6d error = a.target - commanded_total;
       in.readback_error_mm = error.head<3>().cwiseAbs().maxCoeff();
       in.readback_error_deg = tracking::rad_to_deg(error.tail<3>().cwiseAbs().maxCoeff());
+      in.travel_left = a.target - a.position;  // still to go when the pair was exposed
       c.have_readback = true;
       c.readback = a.position;
     }

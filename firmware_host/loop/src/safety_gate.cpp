@@ -45,6 +45,8 @@ const char* to_string(GateReason r) {
       return "loop overruns";
     case GateReason::kOutsideEnvelope:
       return "registration outside the pose envelope";
+    case GateReason::kCommandRefused:
+      return "actuator refused the command";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -57,10 +59,22 @@ const char* to_string(GateReason r) {
   return "?";
 }
 
+const char* to_string(BeamWithheld w) {
+  switch (w) {
+    case BeamWithheld::kNo:
+      return "";
+    case BeamWithheld::kApprovedStep:
+      return "approved step beyond the step limit";
+    case BeamWithheld::kActuatorTravelling:
+      return "actuator still travelling";
+  }
+  return "?";
+}
+
 namespace {
 
 bool finite(const GateInput& in) {
-  if (!in.step.allFinite() || !in.total.allFinite()) return false;
+  if (!in.step.allFinite() || !in.total.allFinite() || !in.travel_left.allFinite()) return false;
   if (!std::isfinite(in.frame_age_ms) || !std::isfinite(in.pair_skew_ms)) return false;
   if (!std::isfinite(in.readback_error_mm) || !std::isfinite(in.readback_error_deg)) return false;
   for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
@@ -72,6 +86,10 @@ bool finite(const GateInput& in) {
 
 double angle_deg(const tracking::Vector6d& d) {
   return tracking::rad_to_deg(d.tail<3>().norm());
+}
+
+bool beyond_step_limit(const SafetyLimits& limits, const tracking::Vector6d& d) {
+  return d.head<3>().cwiseAbs().maxCoeff() > limits.max_step_mm || angle_deg(d) > limits.max_step_deg;
 }
 
 }  // namespace
@@ -94,16 +112,15 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   };
   // Safety violations first: they hold whatever else is true.
   if (!finite(in) || in.views < 0 || in.views > kMaxGateViews) return hold(GateReason::kNonFinite);
-  if (!in.readback_valid || in.command_refused) return hold(GateReason::kActuatorFault);
+  if (!in.readback_valid) return hold(GateReason::kActuatorFault);
+  if (in.command_refused) return hold(GateReason::kCommandRefused);
   if (!in.journal_ok) return hold(GateReason::kJournalFailed);
   if (in.consecutive_overruns >= limits.hold_after_overruns) return hold(GateReason::kOverruns);
   if (in.readback_error_mm > limits.readback_tolerance_mm ||
       in.readback_error_deg > limits.readback_tolerance_deg)
     return hold(GateReason::kReadbackMismatch);
   if (in.registration_ok) {
-    if (!in.step_approved && (in.step.head<3>().cwiseAbs().maxCoeff() > limits.max_step_mm ||
-                              angle_deg(in.step) > limits.max_step_deg))
-      return hold(GateReason::kStepTooLarge);
+    if (!in.step_approved && beyond_step_limit(limits, in.step)) return hold(GateReason::kStepTooLarge);
     if (in.total.head<3>().cwiseAbs().maxCoeff() > limits.max_total_mm ||
         angle_deg(in.total) > limits.max_total_deg)
       return hold(GateReason::kTotalTooLarge);
@@ -129,6 +146,12 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   out.decision = GateDecision::kApply;
   out.reason = GateReason::kOk;
   out.consecutive_failures = 0;
+  // The move goes out; the beam waits until the patient is within a step of where the
+  // corrections put them: from the position at the read-back to this cycle's target.
+  if (beyond_step_limit(limits, in.step))
+    out.beam_withheld = BeamWithheld::kApprovedStep;  // only approved steps get here
+  else if (beyond_step_limit(limits, in.travel_left + in.step))
+    out.beam_withheld = BeamWithheld::kActuatorTravelling;
   return out;
 }
 

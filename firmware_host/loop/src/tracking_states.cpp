@@ -79,8 +79,8 @@ StateTransition TrackingStateMachine::on(TrackingEvent event, const GateOutput& 
       if (event != TrackingEvent::kGate) return t;
       switch (gate.decision) {
         case GateDecision::kApply:
-          beam_permit_ = true;
-          t.reason = "applied";
+          beam_permit_ = gate.beam_allowed();
+          t.reason = beam_permit_ ? "applied" : "applied, beam withheld";
           return t;
         case GateDecision::kSkip:
           t.reason = to_string(gate.reason);

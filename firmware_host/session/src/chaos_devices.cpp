@@ -294,6 +294,10 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
     known_target_ = state->target;
     injector_->calls.target_after = known_target_;
   }
+  if (first && status == drivers::DeviceStatus::kOk) {  // the loop's read-back at the frames' exposure
+    injector_->calls.have_readback = true;
+    injector_->calls.travel_left = state->target - state->position;
+  }
   if (first && status != drivers::DeviceStatus::kOk) {
     injector_->injection.readback_fault = true;
     injector_->injection.what = "the actuator's own read-back failure";

@@ -26,6 +26,12 @@ double angle_deg(const tracking::Vector6d& v) {
   return tracking::rad_to_deg(v.tail<3>().norm());
 }
 
+// The gate's step limit, written again here: the checker shares no code with the loop's
+// decisions. NaN is beyond.
+bool beyond_step_limit(const SafetyLimits& limits, const tracking::Vector6d& v) {
+  return !(translation_mm(v) <= limits.max_step_mm + kTolerance) || !(angle_deg(v) <= limits.max_step_deg + kTolerance);
+}
+
 bool held(std::uint8_t state) {
   return state == code(TrackingState::kHold) || state == code(TrackingState::kFault);
 }
@@ -85,8 +91,7 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   if (calls.commands_accepted > 0) {
     const tracking::Vector6d& step = calls.last_command;
     if (!setup_move) {
-      if (!step_approved_ && (translation_mm(step) > limits_.max_step_mm + kTolerance ||
-                              angle_deg(step) > limits_.max_step_deg + kTolerance))
+      if (!step_approved_ && beyond_step_limit(limits_, step))
         fail("a step of " + std::to_string(translation_mm(step)) + " mm / " + std::to_string(angle_deg(step)) +
              " deg beyond the step limit");
       if (aligned_) {
@@ -102,9 +107,19 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
     step_approved_ = false;
   }
 
-  // 4. The beam only in TRACK after APPLY.
+  // 4. The beam only in TRACK after APPLY, and only once the patient is in place.
   if (beam && !(r.state == code(TrackingState::kTrack) && r.gate_decision == std::uint8_t(GateDecision::kApply)))
     fail("beam permit outside TRACK after APPLY");
+  if (beam && calls.commands_accepted > 0 && beyond_step_limit(limits_, calls.last_command))
+    fail("beam permit in the cycle of a " + std::to_string(translation_mm(calls.last_command)) + " mm / " +
+         std::to_string(angle_deg(calls.last_command)) + " deg move beyond the step limit");
+  if (beam && calls.have_readback) {
+    tracking::Vector6d to_go = calls.travel_left;  // from the position at the read-back
+    if (calls.commands_accepted > 0) to_go += calls.last_command;
+    if (beyond_step_limit(limits_, to_go))
+      fail("beam permit while the actuator was still " + std::to_string(translation_mm(to_go)) + " mm / " +
+           std::to_string(angle_deg(to_go)) + " deg from the cycle's target");
+  }
 
   // 5. No move and no beam between a HOLD or FAULT and the operator's answer.
   if (needs_operator_ && (sent || beam)) fail("moved or armed the beam after a HOLD without an operator decision");

@@ -169,7 +169,9 @@ class SegmentObserver final : public CycleObserver {
     const auto& pending = injector_->can_fault_pending();
     if (!pending) return;
     const bool held = r.state == std::uint8_t(TrackingState::kHold) || r.state == std::uint8_t(TrackingState::kFault);
-    if (held && r.gate_reason == std::uint8_t(GateReason::kActuatorFault)) {
+    const bool actuator_reason = r.gate_reason == std::uint8_t(GateReason::kActuatorFault) ||
+                                 r.gate_reason == std::uint8_t(GateReason::kCommandRefused);
+    if (held && actuator_reason) {
       injector_->clear_can_fault();
     } else if (std::int64_t(r.cycle) - pending->cycle > kCyclesToHoldOnCan &&
                std::chrono::steady_clock::now() - pending->wall > kWallToHoldOnCan) {

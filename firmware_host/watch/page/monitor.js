@@ -68,7 +68,8 @@ function showState(s) {
   $('state-reason').textContent = (s.state === 'HOLD' || s.state === 'FAULT') ? s.state_reason : '';
   $('cycle').textContent = s.cycle;
   $('hold-id').textContent = s.hold_id || '-';
-  $('beam').textContent = s.beam_permit ? 'on' : 'off';
+  // An applied cycle may keep the beam off while the patient is still being moved into place.
+  $('beam').textContent = s.beam_permit ? 'on' : s.beam_withheld ? 'off: ' + s.beam_withheld : 'off';
   $('gate-decision').textContent = s.gate.decision;
   $('gate-reason').textContent = s.gate.reason || '-';
   $('holds').textContent = s.counts.holds;

@@ -54,6 +54,7 @@ nlohmann::json state_json(const HubStatus& s, const HubOptions& options) {
             {"hold_id", r.hold_id},
             {"state_reason", state_reason(s)},
             {"beam_permit", r.beam_permit != 0},
+            {"beam_withheld", to_string(static_cast<BeamWithheld>(r.beam_withheld))},
             {"gate", {{"decision", to_string(static_cast<GateDecision>(r.gate_decision))},
                       {"reason", to_string(static_cast<GateReason>(r.gate_reason))}}},
             {"registered", s.last.registered},

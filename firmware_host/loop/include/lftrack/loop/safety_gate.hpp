@@ -10,6 +10,11 @@
 //   frame, frames too far apart to be a pair) SKIP the cycle (no command, no beam) and are
 //   counted: `hold_after_failures` in a row HOLD, `fault_after_failures` in a row STOP.
 // Only APPLY carries a correction and allows the beam, and only with a fresh valid result.
+// An APPLY still withholds the beam (BeamWithheld) while the patient is not yet where the
+// correction puts them: in a cycle whose step needed the operator's approval (beyond the step
+// limit: the move after a resume), and while the actuator, at the read-back, was further than one
+// step limit from where this cycle's step takes it (the travel it had left plus the step: an
+// earlier large move still under way, or steps that pile up faster than it moves).
 
 #include <array>
 #include <cstdint>
@@ -55,9 +60,17 @@ enum class GateReason : std::uint8_t {
   kJournalFailed,  // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
   kOverruns,       // hold_after_overruns cycles in a row overran their period
   kOutsideEnvelope,  // the registered pose left the scene's pose envelope (registration_verdict.hpp)
+  kCommandRefused,   // the actuator refused this cycle's command: it knows of a fault, nothing moved
+};
+// Why an APPLY kept the beam off; its correction is sent all the same.
+enum class BeamWithheld : std::uint8_t {
+  kNo = 0,
+  kApprovedStep,        // this cycle's step is beyond the step limit (the operator approved it)
+  kActuatorTravelling,  // at the read-back, the actuator was more than one step limit from this cycle's target
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
+const char* to_string(BeamWithheld withheld);
 
 inline constexpr int kMaxGateViews = 4;
 
@@ -82,8 +95,12 @@ struct GateInput {
   // The actuator refused this cycle's command (it knows of a fault; nothing was sent or moved):
   // the loop asks the gate again with this set, and it holds.
   bool command_refused = false;
-  double readback_error_mm = 0;  // actuator position against the last command
+  double readback_error_mm = 0;  // actuator target against the last command
   double readback_error_deg = 0;
+  // The actuator's position against its own target at the read-back: the travel it still had to
+  // make (0 without a read-back). With the step, where the patient still has to be moved in this
+  // cycle: travel_left + step, judged as the step is (per translation component, and the angle).
+  tracking::Vector6d travel_left = tracking::Vector6d::Zero();  // target - position (mm, rad)
   int consecutive_failures = 0;  // before this cycle
   // The operator approved this move (the set-up move after alignment, the first move after a
   // resume): the per-cycle step limit does not apply; every other check does.
@@ -94,7 +111,10 @@ struct GateOutput {
   GateDecision decision = GateDecision::kHold;
   GateReason reason = GateReason::kOk;
   int consecutive_failures = 0;  // after this cycle
+  BeamWithheld beam_withheld = BeamWithheld::kNo;  // set only with APPLY
   bool apply() const { return decision == GateDecision::kApply; }
+  // The correction goes out and the beam may be on (in TRACK: tracking_states.hpp).
+  bool beam_allowed() const { return apply() && beam_withheld == BeamWithheld::kNo; }
 };
 
 GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& input);

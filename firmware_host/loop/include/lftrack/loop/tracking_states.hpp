@@ -4,7 +4,8 @@
 // ALIGN runs the cold registration once; TRACK applies gated corrections; HOLD stops motion and
 // the beam until an operator resumes; FAULT is the safe stop (actuators held, beam off) that only
 // an operator reset leaves, to IDLE. Every transition has a reason for the journal. The beam
-// permit is on only in TRACK after an APPLY decision in the same cycle.
+// permit is on only in TRACK after an APPLY decision in the same cycle that does not withhold it
+// (GateOutput::beam_allowed: not while the patient is still being moved into place).
 
 #include <cstdint>
 
@@ -41,7 +42,7 @@ class TrackingStateMachine {
   // Applies an event (with the gate's output for kGate) and says what happened. Events that do
   // not apply in the current state leave it unchanged (reason says so).
   StateTransition on(TrackingEvent event, const GateOutput& gate = {});
-  // True only in TRACK after an APPLY in this cycle.
+  // True only in TRACK after an APPLY in this cycle that allows the beam.
   bool beam_permit() const { return beam_permit_; }
 
  private:

@@ -9,7 +9,9 @@
 //  3. No command beyond the limits: each step within safety.max_step_* unless approved (the
 //     set-up move of the ALIGN cycle; the first move after an accepted resume), and the total
 //     travel from the aligned target within safety.max_total_*.
-//  4. The beam permit only in TRACK, in a cycle whose gate decided APPLY.
+//  4. The beam permit only in TRACK, in a cycle whose gate decided APPLY, whose command (if
+//     any) is within the step limit (not an approved larger move), and whose read-back found the
+//     device within one step limit of the cycle's target (its target then plus the command).
 //  5. Nothing re-arms the beam or moves without a fresh operator decision: after a cycle that
 //     ends in HOLD or FAULT, no command and no beam until a cycle with an accepted resume or
 //     reset.
@@ -46,6 +48,10 @@ struct ActuatorCalls {
   // nothing to move.
   tracking::Vector6d target_after = tracking::Vector6d::Zero();
   bool beam_permit = false;   // the device's beam permit after the cycle
+  // The cycle's first read-back, the one at the frames' exposure, as the device answered it:
+  // whether there was one, and its target less its position (the travel still to make).
+  bool have_readback = false;
+  tracking::Vector6d travel_left = tracking::Vector6d::Zero();
 };
 
 // What the soak injected into one cycle (and that met the loop).
