@@ -56,12 +56,12 @@ TEST_F(ClosedLoop, TracksDriftAndBreathingWithoutAllocatingInThousandCycles) {
   EXPECT_NEAR(first.command[0], -3.0, 0.3);
   EXPECT_NEAR(first.command[2], -2.0, 0.3);
   EXPECT_EQ(first.beam_permit, 0) << "the alignment's cycle";
-  EXPECT_EQ(first.beam_withheld, 0) << "ALIGN has no beam to withhold";
-  // The couch (0.1 s latency) has not begun the 3 mm set-up move at the next frame: the beam waits.
+  EXPECT_EQ(first.beam_withheld, std::uint8_t(BeamWithheld::kAlignment));
+  // The couch (0.1 s latency) has not begun the set-up move at the next frame: the beam waits.
   const JournalRecord& second = r.journal.records[1];
   EXPECT_EQ(second.gate_decision, std::uint8_t(GateDecision::kApply));
   EXPECT_EQ(second.beam_permit, 0);
-  EXPECT_EQ(second.beam_withheld, std::uint8_t(BeamWithheld::kActuatorTravelling));
+  EXPECT_EQ(second.beam_withheld, std::uint8_t(BeamWithheld::kOutOfPlace));
   EXPECT_GT(second.true_residual_mm, 2.0);
   int with_beam = 0;
   for (std::size_t i = 0; i < r.journal.records.size(); ++i) {
@@ -143,7 +143,7 @@ TEST_F(ClosedLoop, SuddenShiftHoldsInOneCycleAndRecoversAfterResume) {
   EXPECT_EQ(records[resumed].beam_withheld, std::uint8_t(BeamWithheld::kApprovedStep));
   ASSERT_LT(resumed + 1, records.size());
   EXPECT_EQ(records[resumed + 1].beam_permit, 0);
-  EXPECT_EQ(records[resumed + 1].beam_withheld, std::uint8_t(BeamWithheld::kActuatorTravelling));
+  EXPECT_NE(records[resumed + 1].beam_withheld, 0) << "the couch has not arrived";
   int beam_after_resume = 0;
   for (std::size_t i = resumed; i < records.size(); ++i) {
     if (records[i].beam_permit == 0) continue;
@@ -157,6 +157,28 @@ TEST_F(ClosedLoop, SuddenShiftHoldsInOneCycleAndRecoversAfterResume) {
   EXPECT_TRUE(recovered) << "residual back under 0.5 mm within 5 cycles of the resume";
   EXPECT_EQ(r.summary.holds, 1);
   EXPECT_EQ(r.summary.faults, 0);
+}
+
+// An outside probe's case: a set-up error of 1.9 mm on each axis (each within the 2 mm step
+// limit) is 3.3 mm out of place, and the beam came on in the second cycle, before the couch (0.1 s
+// latency) had moved. The beam waits on the straight-line distance from the plan.
+TEST_F(ClosedLoop, ASetUpErrorWithinTheStepLimitOnEachAxisStillWaitsForTheCouch) {
+  const std::string motion = "motion:\n  setup_error: {translation_mm: [1.9, -1.9, 1.9], rotation_deg: [0, 0, 0]}\n";
+  const LoopRun r = run_loop(motion, 12, {}, kRayCastFrames);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 12u);
+  int withheld = 0, with_beam = 0;
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    const JournalRecord& rec = records[i];
+    SCOPED_TRACE("cycle " + std::to_string(i));
+    EXPECT_EQ(rec.state, std::uint8_t(TrackingState::kTrack));
+    withheld += rec.beam_withheld == std::uint8_t(BeamWithheld::kOutOfPlace);
+    if (rec.beam_permit == 0) continue;
+    ++with_beam;
+    EXPECT_LT(rec.true_residual_mm, 2.5) << "the beam on with the patient out of place";
+  }
+  EXPECT_GE(withheld, 1) << "the couch had not begun the set-up move at the second frame";
+  EXPECT_GE(with_beam, 8) << "and then the beam tracks";
 }
 
 // Issue 18, item 1: resumes sent while tracking once waited in the socket's queue and approved the

@@ -191,7 +191,7 @@ TEST(Gate, ApplyResetsTheFailureCount) {
 TEST(Gate, EveryDecisionAndReasonHasAName) {
   for (int d = 0; d <= 3; ++d) EXPECT_STRNE(to_string(static_cast<GateDecision>(d)), "?");
   for (int r = 0; r <= 16; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
-  for (int w = 0; w <= 2; ++w) EXPECT_STRNE(to_string(static_cast<BeamWithheld>(w)), "?");
+  for (int w = 0; w <= 4; ++w) EXPECT_STRNE(to_string(static_cast<BeamWithheld>(w)), "?");
 }
 
 // An APPLY sends its correction; the beam waits while the patient is still being moved into
@@ -204,11 +204,20 @@ struct BeamCase {
   BeamWithheld withheld;
 };
 
+// The step of the cases below is zero unless they set one. The beam waits while the registered
+// patient (offset_from_plan) or the actuator's travel still to make (travel_left) is beyond
+// beam_tolerance_mm (2 mm, straight-line) or beam_tolerance_deg (2 degrees).
+GateInput at_rest() {
+  GateInput in = good_input();
+  in.step.setZero();
+  return in;
+}
+
 const std::vector<BeamCase> kBeamCases = {
     {"AllGood", [](GateInput&) {}, GateDecision::kApply, BeamWithheld::kNo},
     {"ApprovedStepWithinTheLimit",
      [](GateInput& in) {
-       in.step(1) = 2.0;
+       in.step(1) = 1.5;
        in.step_approved = true;
      },
      GateDecision::kApply, BeamWithheld::kNo},
@@ -224,20 +233,40 @@ const std::vector<BeamCase> kBeamCases = {
        in.step_approved = true;
      },
      GateDecision::kApply, BeamWithheld::kApprovedStep},
-    // The good input's step is 0.5 / -0.3 / 0.2 mm: what is still to go is the travel left plus it.
-    {"TravelLeftAndStepAtTheLimit", [](GateInput& in) { in.travel_left(0) = 1.5; }, GateDecision::kApply,
+    {"OffsetAtTheTolerance", [](GateInput& in) { in.offset_from_plan(0) = -2.0; }, GateDecision::kApply,
      BeamWithheld::kNo},
-    {"TravelLeftAndStepBeyondTheLimit", [](GateInput& in) { in.travel_left(2) = 1.81; }, GateDecision::kApply,
-     BeamWithheld::kActuatorTravelling},
-    {"TravelLeftTheStepTakesBack", [](GateInput& in) { in.travel_left(0) = -2.3; }, GateDecision::kApply,
-     BeamWithheld::kNo},
-    {"RotationLeftBeyondTheLimit",
+    {"OffsetBeyondTheTolerance", [](GateInput& in) { in.offset_from_plan(2) = 2.01; }, GateDecision::kApply,
+     BeamWithheld::kOutOfPlace},
+    // An outside probe's case: a set-up error of 1.9 mm on each axis, each within the step limit,
+    // is 3.3 mm out of place.
+    {"DiagonalOffsetWithinTheStepLimitOnEachAxis",
+     [](GateInput& in) { in.offset_from_plan << 1.9, -1.9, 1.9, 0, 0, 0; }, GateDecision::kApply,
+     BeamWithheld::kOutOfPlace},
+    {"RotatedBeyondTheTolerance", [](GateInput& in) { in.offset_from_plan(3) = tracking::deg_to_rad(2.1); },
+     GateDecision::kApply, BeamWithheld::kOutOfPlace},
+    {"RotationsTogetherBeyondTheTolerance",
      [](GateInput& in) {
-       in.step.tail<3>().setZero();
-       in.travel_left(3) = tracking::deg_to_rad(1.5);
-       in.travel_left(4) = tracking::deg_to_rad(1.5);  // 2.12 degrees together
+       in.offset_from_plan(3) = tracking::deg_to_rad(1.5);
+       in.offset_from_plan(4) = tracking::deg_to_rad(1.5);  // 2.12 degrees together
+     },
+     GateDecision::kApply, BeamWithheld::kOutOfPlace},
+    {"TravelLeftAtTheTolerance", [](GateInput& in) { in.travel_left(1) = 2.0; }, GateDecision::kApply,
+     BeamWithheld::kNo},
+    {"TravelLeftBeyondTheTolerance",
+     [](GateInput& in) {
+       in.travel_left(0) = 1.5;
+       in.travel_left(1) = 1.5;  // 2.12 mm
      },
      GateDecision::kApply, BeamWithheld::kActuatorTravelling},
+    {"RotationLeftBeyondTheTolerance", [](GateInput& in) { in.travel_left(5) = tracking::deg_to_rad(2.1); },
+     GateDecision::kApply, BeamWithheld::kActuatorTravelling},
+    // Tracking: the couch follows the patient a step behind; this cycle's step is not judged.
+    {"TrackingStepsDoNotCount",
+     [](GateInput& in) {
+       in.step(0) = 1.9;
+       in.travel_left(0) = 1.5;
+     },
+     GateDecision::kApply, BeamWithheld::kNo},
     {"ApprovedStepAndTravelling",
      [](GateInput& in) {
        in.step(0) = -6.0;
@@ -245,12 +274,20 @@ const std::vector<BeamCase> kBeamCases = {
        in.travel_left(0) = 5.0;
      },
      GateDecision::kApply, BeamWithheld::kApprovedStep},
+    {"OutOfPlaceBeforeTravelling",
+     [](GateInput& in) {
+       in.offset_from_plan(0) = 3.0;
+       in.travel_left(0) = -3.0;
+     },
+     GateDecision::kApply, BeamWithheld::kOutOfPlace},
     {"NanTravelHolds", [](GateInput& in) { in.travel_left(1) = kNan; }, GateDecision::kHold, BeamWithheld::kNo},
     {"InfiniteTravelHolds", [](GateInput& in) { in.travel_left(4) = -kInf; }, GateDecision::kHold,
      BeamWithheld::kNo},
+    {"NanOffsetHolds", [](GateInput& in) { in.offset_from_plan(5) = kNan; }, GateDecision::kHold,
+     BeamWithheld::kNo},
     {"NothingWithheldWithoutAnApply",
      [](GateInput& in) {
-       in.travel_left(0) = 5.0;
+       in.offset_from_plan(0) = 5.0;
        in.registration_ok = false;
      },
      GateDecision::kSkip, BeamWithheld::kNo},
@@ -259,7 +296,7 @@ const std::vector<BeamCase> kBeamCases = {
 class GateBeam : public ::testing::TestWithParam<BeamCase> {};
 
 TEST_P(GateBeam, WithholdsTheBeamUntilThePatientIsInPlace) {
-  GateInput in = good_input();
+  GateInput in = at_rest();
   GetParam().change(in);
   const GateOutput out = evaluate_gate(SafetyLimits{}, in);
   EXPECT_EQ(out.decision, GetParam().decision) << to_string(out.decision);
@@ -270,15 +307,30 @@ TEST_P(GateBeam, WithholdsTheBeamUntilThePatientIsInPlace) {
 INSTANTIATE_TEST_SUITE_P(Rules, GateBeam, ::testing::ValuesIn(kBeamCases),
                          [](const ::testing::TestParamInfo<BeamCase>& p) { return std::string(p.param.name); });
 
-TEST(Gate, TheTravelLimitsAreTheStepLimits) {
+// The beam's tolerance is its own: a larger step limit does not let the beam on with the patient
+// further from place (an outside probe's case: max_step_mm 10, a 7.7 mm move after a resume, the
+// beam on at 7.7 mm).
+TEST(Gate, TheBeamToleranceIsNotTheStepLimit) {
   SafetyLimits limits;
-  limits.max_step_mm = 0.5;
-  limits.max_step_deg = 0.25;
-  GateInput in = good_input();
-  in.step.setZero();
-  in.travel_left(1) = 0.6;
+  limits.max_step_mm = 10;
+  limits.max_total_mm = 20;
+  GateInput in = at_rest();
+  in.step(1) = -7.7;
+  in.offset_from_plan(1) = 7.7;  // the frame shows the shift the move cancels
+  in.step_approved = true;
+  GateOutput out = evaluate_gate(limits, in);
+  EXPECT_EQ(out.decision, GateDecision::kApply);
+  EXPECT_EQ(out.beam_withheld, BeamWithheld::kOutOfPlace);
+  in = at_rest();
+  in.travel_left(1) = -7.0;  // the move under way, the next frame taken as it starts
+  in.offset_from_plan(1) = 1.0;
   EXPECT_EQ(evaluate_gate(limits, in).beam_withheld, BeamWithheld::kActuatorTravelling);
-  in.travel_left(1) = 0.4;
+  limits.beam_tolerance_mm = 0.5;
+  limits.beam_tolerance_deg = 0.25;
+  in = at_rest();
+  in.offset_from_plan(1) = 0.6;
+  EXPECT_EQ(evaluate_gate(limits, in).beam_withheld, BeamWithheld::kOutOfPlace);
+  in.offset_from_plan(1) = 0.4;
   EXPECT_TRUE(evaluate_gate(limits, in).beam_allowed());
   in.travel_left(5) = tracking::deg_to_rad(0.3);
   EXPECT_EQ(evaluate_gate(limits, in).beam_withheld, BeamWithheld::kActuatorTravelling);

@@ -151,25 +151,30 @@ TEST(ChaosInvariants, TheBeamWaitsUntilThePatientIsInPlace) {
   Cycle travelling = t.applied(1, 0.5);
   travelling.calls.have_readback = true;
   travelling.calls.travel_left[1] = -4.0;  // the set-up move still under way
-  EXPECT_TRUE(t.mentions(t.check(travelling), "still 4.000000 mm / 0.000000 deg from the cycle's target"));
+  EXPECT_TRUE(t.mentions(t.check(travelling), "still 4.000000 mm / 0.000000 deg from its target"));
   Cycle turning = t.applied(2, 0.5);
   turning.calls.have_readback = true;
   turning.calls.travel_left[5] = tracking::deg_to_rad(2.5);
-  EXPECT_TRUE(t.mentions(t.check(turning), "from the cycle's target"));
-  Cycle piling_up = t.applied(3, 1.0);
-  piling_up.calls.have_readback = true;
-  piling_up.calls.travel_left[0] = 1.5;  // each within a step, together 2.5 mm to go
-  EXPECT_TRUE(t.mentions(t.check(piling_up), "still 2.500000 mm"));
-  Cycle arrived = t.applied(4, 0.5);
-  arrived.calls.have_readback = true;
-  arrived.calls.travel_left[1] = -1.9;  // within a step: the beam may be on
-  EXPECT_TRUE(t.check(arrived).empty());
-  Cycle no_beam = t.applied(5, 0.5);
+  EXPECT_TRUE(t.mentions(t.check(turning), "from its target"));
+  Cycle diagonal = t.applied(3, 0.5);  // within a step on each axis, 3.3 mm from the plan
+  diagonal.record.pose_delta[0] = diagonal.record.pose_delta[2] = 1.9;
+  diagonal.record.pose_delta[1] = -1.9;
+  EXPECT_TRUE(t.mentions(t.check(diagonal), "registered patient 3.290897 mm / 0.000000 deg from the planned pose"));
+  Cycle rotated = t.applied(4, 0.5);
+  rotated.record.pose_delta[4] = tracking::deg_to_rad(2.2);
+  EXPECT_TRUE(t.mentions(t.check(rotated), "from the planned pose"));
+  Cycle tracking_cycle = t.applied(5, 1.5);
+  tracking_cycle.calls.have_readback = true;
+  tracking_cycle.calls.travel_left[1] = -1.9;  // a step behind the patient
+  tracking_cycle.record.pose_delta[1] = 0.4;
+  EXPECT_TRUE(t.check(tracking_cycle).empty()) << "tracking, in place";
+  Cycle no_beam = t.applied(6, 0.5);
   no_beam.record.beam_permit = 0;
   no_beam.calls.beam_permit = false;
   no_beam.calls.have_readback = true;
   no_beam.calls.travel_left[0] = 8.0;
-  EXPECT_TRUE(t.check(no_beam).empty()) << "travelling with the beam off is no violation";
+  no_beam.record.pose_delta[0] = 8.0;
+  EXPECT_TRUE(t.check(no_beam).empty()) << "out of place with the beam off is no violation";
 }
 
 TEST(ChaosInvariants, NothingMovesAfterAHoldUntilAnAcceptedResumeOfThatHoldAfterASecond) {

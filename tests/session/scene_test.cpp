@@ -158,6 +158,31 @@ TEST_P(BadScenes, FailAtLoadWithLineAndReason) {
 INSTANTIATE_TEST_SUITE_P(EveryClass, BadScenes, ::testing::ValuesIn(kBadScenes),
                          [](const auto& p) { return std::string(p.param.name); });
 
+// How far the patient may still be from place with the beam on: its own keys, not the step limit.
+TEST(Scene, TheBeamsTravelLimits) {
+  auto defaults = parse_scene(std::string(kValidScene), "s.yaml", "/");
+  ASSERT_TRUE(defaults.ok()) << defaults.status().message();
+  EXPECT_EQ(defaults->safety.beam_tolerance_mm, 2.0);
+  EXPECT_EQ(defaults->safety.beam_tolerance_deg, 2.0);
+  auto set = parse_scene(std::string(kValidScene) +
+                             "safety:\n  max_step_mm: 10\n  max_total_mm: 20\n  beam_tolerance_mm: 1.5\n"
+                             "  beam_tolerance_deg: 0.5\n",
+                         "s.yaml", "/");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_EQ(set->safety.max_step_mm, 10.0);
+  EXPECT_EQ(set->safety.beam_tolerance_mm, 1.5);
+  EXPECT_EQ(set->safety.beam_tolerance_deg, 0.5);
+  for (const char* bad : {"  beam_tolerance_mm: 0\n", "  beam_tolerance_mm: -1\n",
+                          "  beam_tolerance_mm: .nan\n", "  beam_tolerance_mm: .inf\n",
+                          "  beam_tolerance_mm: 11\n", "  beam_tolerance_deg: 1e12\n",
+                          "  beam_tolerance_deg: near\n"}) {
+    auto s = parse_scene(std::string(kValidScene) + "safety:\n" + bad, "s.yaml", "/");
+    ASSERT_FALSE(s.ok()) << bad;
+    EXPECT_EQ(s.status().message().rfind("s.yaml:18:", 0), 0u) << s.status().message();
+    EXPECT_NE(s.status().message().find("safety.beam_tolerance_"), std::string::npos) << s.status().message();
+  }
+}
+
 TEST(Scene, LightFieldSettings) {
   std::string text = kValidScene;
   text +=

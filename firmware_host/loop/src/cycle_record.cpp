@@ -49,10 +49,10 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
   }
   r.hold_id = c.hold_id;
   r.beam_permit = c.beam_permit ? 1 : 0;
-  // Where the state machine would have permitted the beam (an APPLY in TRACK: tracking_states.cpp)
-  // and the gate withheld it.
-  if (c.state == TrackingState::kTrack && c.state_after == TrackingState::kTrack && c.gate.apply())
-    r.beam_withheld = static_cast<std::uint8_t>(c.gate.beam_withheld);
+  // Why an applied cycle that ends in TRACK has the beam off: the alignment's (the state machine
+  // permits no beam as it aligns), or the gate's reason (tracking_states.cpp).
+  if (c.gate.apply() && c.state_after == TrackingState::kTrack && !c.beam_permit)
+    r.beam_withheld = static_cast<std::uint8_t>(c.aligning ? BeamWithheld::kAlignment : c.gate.beam_withheld);
   r.state = static_cast<std::uint8_t>(c.state_after);
   return r;
 }

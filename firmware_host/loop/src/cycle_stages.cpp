@@ -226,6 +226,7 @@ void TrackingLoop::Impl::control(CycleState& c) {
   c.desired = commanded_total;
   if (c.registered) {
     c.pose_delta = tracking::delta_between(nominal, result.T_room_from_ct, origin_room).as_vector();
+    in.offset_from_plan = c.pose_delta;
     for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
       in.similarity[std::size_t(v)] = result.view_similarity[std::size_t(v)];
     const Pose patient = motion_of(couch_position, origin_room).inverse() * result.T_room_from_ct;

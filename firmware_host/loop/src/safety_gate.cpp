@@ -67,6 +67,10 @@ const char* to_string(BeamWithheld w) {
       return "approved step beyond the step limit";
     case BeamWithheld::kActuatorTravelling:
       return "actuator still travelling";
+    case BeamWithheld::kAlignment:
+      return "alignment";
+    case BeamWithheld::kOutOfPlace:
+      return "patient out of place";
   }
   return "?";
 }
@@ -74,7 +78,9 @@ const char* to_string(BeamWithheld w) {
 namespace {
 
 bool finite(const GateInput& in) {
-  if (!in.step.allFinite() || !in.total.allFinite() || !in.travel_left.allFinite()) return false;
+  if (!in.step.allFinite() || !in.total.allFinite() || !in.travel_left.allFinite() ||
+      !in.offset_from_plan.allFinite())
+    return false;
   if (!std::isfinite(in.frame_age_ms) || !std::isfinite(in.pair_skew_ms)) return false;
   if (!std::isfinite(in.readback_error_mm) || !std::isfinite(in.readback_error_deg)) return false;
   for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
@@ -90,6 +96,11 @@ double angle_deg(const tracking::Vector6d& d) {
 
 bool beyond_step_limit(const SafetyLimits& limits, const tracking::Vector6d& d) {
   return d.head<3>().cwiseAbs().maxCoeff() > limits.max_step_mm || angle_deg(d) > limits.max_step_deg;
+}
+
+// Straight-line distance, not per component: 1.9 mm on each axis is 3.3 mm out of place.
+bool beyond_beam_tolerance(const SafetyLimits& limits, const tracking::Vector6d& d) {
+  return d.head<3>().norm() > limits.beam_tolerance_mm || angle_deg(d) > limits.beam_tolerance_deg;
 }
 
 }  // namespace
@@ -146,11 +157,12 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   out.decision = GateDecision::kApply;
   out.reason = GateReason::kOk;
   out.consecutive_failures = 0;
-  // The move goes out; the beam waits until the patient is within a step of where the
-  // corrections put them: from the position at the read-back to this cycle's target.
+  // The move goes out; the beam waits until the patient is in place and stays there.
   if (beyond_step_limit(limits, in.step))
     out.beam_withheld = BeamWithheld::kApprovedStep;  // only approved steps get here
-  else if (beyond_step_limit(limits, in.travel_left + in.step))
+  else if (beyond_beam_tolerance(limits, in.offset_from_plan))
+    out.beam_withheld = BeamWithheld::kOutOfPlace;
+  else if (beyond_beam_tolerance(limits, in.travel_left))
     out.beam_withheld = BeamWithheld::kActuatorTravelling;
   return out;
 }

@@ -26,10 +26,14 @@ double angle_deg(const tracking::Vector6d& v) {
   return tracking::rad_to_deg(v.tail<3>().norm());
 }
 
-// The gate's step limit, written again here: the checker shares no code with the loop's
-// decisions. NaN is beyond.
+// The gate's limits, written again here: the checker shares no code with the loop's decisions.
+// NaN is beyond.
 bool beyond_step_limit(const SafetyLimits& limits, const tracking::Vector6d& v) {
   return !(translation_mm(v) <= limits.max_step_mm + kTolerance) || !(angle_deg(v) <= limits.max_step_deg + kTolerance);
+}
+bool beyond_beam_tolerance(const SafetyLimits& limits, const tracking::Vector6d& v) {
+  return !(v.head<3>().norm() <= limits.beam_tolerance_mm + kTolerance) ||
+         !(angle_deg(v) <= limits.beam_tolerance_deg + kTolerance);
 }
 
 bool held(std::uint8_t state) {
@@ -113,13 +117,14 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   if (beam && calls.commands_accepted > 0 && beyond_step_limit(limits_, calls.last_command))
     fail("beam permit in the cycle of a " + std::to_string(translation_mm(calls.last_command)) + " mm / " +
          std::to_string(angle_deg(calls.last_command)) + " deg move beyond the step limit");
-  if (beam && calls.have_readback) {
-    tracking::Vector6d to_go = calls.travel_left;  // from the position at the read-back
-    if (calls.commands_accepted > 0) to_go += calls.last_command;
-    if (beyond_step_limit(limits_, to_go))
-      fail("beam permit while the actuator was still " + std::to_string(translation_mm(to_go)) + " mm / " +
-           std::to_string(angle_deg(to_go)) + " deg from the cycle's target");
-  }
+  if (beam && calls.have_readback && beyond_beam_tolerance(limits_, calls.travel_left))
+    fail("beam permit while the actuator was still " + std::to_string(calls.travel_left.head<3>().norm()) +
+         " mm / " + std::to_string(angle_deg(calls.travel_left)) + " deg from its target");
+  tracking::Vector6d offset;
+  for (int i = 0; i < 6; ++i) offset[i] = r.pose_delta[i];
+  if (beam && beyond_beam_tolerance(limits_, offset))
+    fail("beam permit with the registered patient " + std::to_string(offset.head<3>().norm()) + " mm / " +
+         std::to_string(angle_deg(offset)) + " deg from the planned pose");
 
   // 5. No move and no beam between a HOLD or FAULT and the operator's answer.
   if (needs_operator_ && (sent || beam)) fail("moved or armed the beam after a HOLD without an operator decision");

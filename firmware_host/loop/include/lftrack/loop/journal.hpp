@@ -63,7 +63,8 @@ struct JournalRecord {
   std::uint8_t operator_command = 0;   // 1 + OperatorCommand the loop acted on this cycle; 0: none
   std::uint8_t operator_refusal = 0;   // OperatorRefusal of the last command refused this cycle; 0: none
   std::uint16_t operator_refused = 0;  // commands refused or discarded this cycle (stale, wrong id, ...)
-  // BeamWithheld: why a TRACK cycle whose gate applied kept the beam off; 0: it did not. In
+  // BeamWithheld: why a cycle whose gate applied and that ends in TRACK kept the beam off (the
+  // alignment, or the patient not in place); 0: it did not. In
   // version 2 since 2026-11-27, in a byte that was reserved (zero) before.
   std::uint8_t beam_withheld = 0;
   std::uint8_t reserved[3] = {};

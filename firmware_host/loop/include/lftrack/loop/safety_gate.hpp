@@ -10,11 +10,12 @@
 //   frame, frames too far apart to be a pair) SKIP the cycle (no command, no beam) and are
 //   counted: `hold_after_failures` in a row HOLD, `fault_after_failures` in a row STOP.
 // Only APPLY carries a correction and allows the beam, and only with a fresh valid result.
-// An APPLY still withholds the beam (BeamWithheld) while the patient is not yet where the
-// correction puts them: in a cycle whose step needed the operator's approval (beyond the step
-// limit: the move after a resume), and while the actuator, at the read-back, was further than one
-// step limit from where this cycle's step takes it (the travel it had left plus the step: an
-// earlier large move still under way, or steps that pile up faster than it moves).
+// An APPLY still withholds the beam (BeamWithheld) while the patient is not in place: in a cycle
+// whose step needed the operator's approval (beyond the step limit: the move after a resume),
+// while the registered patient is further than beam_tolerance_* from the planned pose (a set-up
+// move not yet made), and while the actuator, at the read-back, still had further than
+// beam_tolerance_* to go to its target (an earlier large move under way, which takes the patient
+// elsewhere).
 
 #include <array>
 #include <cstdint>
@@ -35,6 +36,13 @@ struct SafetyLimits {
   double max_pair_skew_ms = 20;
   double readback_tolerance_mm = 0.5;
   double readback_tolerance_deg = 0.5;
+  // The beam is on only while the registered patient is within this of the planned pose, and the
+  // actuator within this of its target: straight-line distance, and rotation angle. Tracking
+  // breathing of 4.5 mm at 4 s through a couch of 0.1 s latency leaves about 0.3 mm from the plan
+  // and 0.8 mm to travel; the built-in scene's registration turns the couch back and forth by up
+  // to 1.3 degrees about its least-seen axis.
+  double beam_tolerance_mm = 2.0;
+  double beam_tolerance_deg = 2.0;
   int hold_after_failures = 3;
   int fault_after_failures = 10;
   // Overruns in a row before the loop holds: one is counted and its periods skipped; several
@@ -66,7 +74,9 @@ enum class GateReason : std::uint8_t {
 enum class BeamWithheld : std::uint8_t {
   kNo = 0,
   kApprovedStep,        // this cycle's step is beyond the step limit (the operator approved it)
-  kActuatorTravelling,  // at the read-back, the actuator was more than one step limit from this cycle's target
+  kActuatorTravelling,  // at the read-back, the actuator was further than beam_tolerance_* from its target
+  kAlignment,           // the alignment's cycle, which sends the set-up move (set by the loop, not the gate)
+  kOutOfPlace,          // the registered patient is further than beam_tolerance_* from the planned pose
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -98,9 +108,10 @@ struct GateInput {
   double readback_error_mm = 0;  // actuator target against the last command
   double readback_error_deg = 0;
   // The actuator's position against its own target at the read-back: the travel it still had to
-  // make (0 without a read-back). With the step, where the patient still has to be moved in this
-  // cycle: travel_left + step, judged as the step is (per translation component, and the angle).
-  tracking::Vector6d travel_left = tracking::Vector6d::Zero();  // target - position (mm, rad)
+  // make (0 without a read-back), and the registered patient's offset from the planned pose at
+  // the frames' exposure. Both judged against beam_tolerance_* (an APPLY's beam).
+  tracking::Vector6d travel_left = tracking::Vector6d::Zero();       // target - position (mm, rad)
+  tracking::Vector6d offset_from_plan = tracking::Vector6d::Zero();  // registered (mm, rad)
   int consecutive_failures = 0;  // before this cycle
   // The operator approved this move (the set-up move after alignment, the first move after a
   // resume): the per-cycle step limit does not apply; every other check does.

@@ -10,8 +10,9 @@
 //     set-up move of the ALIGN cycle; the first move after an accepted resume), and the total
 //     travel from the aligned target within safety.max_total_*.
 //  4. The beam permit only in TRACK, in a cycle whose gate decided APPLY, whose command (if
-//     any) is within the step limit (not an approved larger move), and whose read-back found the
-//     device within one step limit of the cycle's target (its target then plus the command).
+//     any) is within the step limit (not an approved larger move), whose registered patient (the
+//     record's pose_delta) is within safety.beam_tolerance_* of the planned pose, and whose
+//     read-back found the device within beam_tolerance_* of its target.
 //  5. Nothing re-arms the beam or moves without a fresh operator decision: after a cycle that
 //     ends in HOLD or FAULT, no command and no beam until a cycle with an accepted resume or
 //     reset.
