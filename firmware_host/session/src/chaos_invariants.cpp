@@ -28,12 +28,21 @@ double angle_deg(const tracking::Vector6d& v) {
 
 // The gate's limits, written again here: the checker shares no code with the loop's decisions.
 // NaN is beyond.
+bool beyond(double mm, double deg, double most_mm, double most_deg) {
+  return !(mm <= most_mm + kTolerance) || !(deg <= most_deg + kTolerance);
+}
 bool beyond_step_limit(const SafetyLimits& limits, const tracking::Vector6d& v) {
-  return !(translation_mm(v) <= limits.max_step_mm + kTolerance) || !(angle_deg(v) <= limits.max_step_deg + kTolerance);
+  return beyond(translation_mm(v), angle_deg(v), limits.max_step_mm, limits.max_step_deg);
+}
+// The beam's tolerance is a straight-line distance, not per component.
+double distance_mm(const tracking::Vector6d& v) {
+  return v.head<3>().norm();
 }
 bool beyond_beam_tolerance(const SafetyLimits& limits, const tracking::Vector6d& v) {
-  return !(v.head<3>().norm() <= limits.beam_tolerance_mm + kTolerance) ||
-         !(angle_deg(v) <= limits.beam_tolerance_deg + kTolerance);
+  return beyond(distance_mm(v), angle_deg(v), limits.beam_tolerance_mm, limits.beam_tolerance_deg);
+}
+std::string mm_deg(double mm, double deg) {
+  return std::to_string(mm) + " mm / " + std::to_string(deg) + " deg";
 }
 
 bool held(std::uint8_t state) {
@@ -96,14 +105,12 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
     const tracking::Vector6d& step = calls.last_command;
     if (!setup_move) {
       if (!step_approved_ && beyond_step_limit(limits_, step))
-        fail("a step of " + std::to_string(translation_mm(step)) + " mm / " + std::to_string(angle_deg(step)) +
-             " deg beyond the step limit");
+        fail("a step of " + mm_deg(translation_mm(step), angle_deg(step)) + " beyond the step limit");
       if (aligned_) {
         const tracking::Vector6d total = calls.target_after - aligned_target_;
-        if (translation_mm(total) > limits_.max_total_mm + kTolerance ||
-            angle_deg(total) > limits_.max_total_deg + kTolerance)
-          fail("a total of " + std::to_string(translation_mm(total)) + " mm / " +
-               std::to_string(angle_deg(total)) + " deg from the aligned pose, beyond the total limit");
+        if (beyond(translation_mm(total), angle_deg(total), limits_.max_total_mm, limits_.max_total_deg))
+          fail("a total of " + mm_deg(translation_mm(total), angle_deg(total)) +
+               " from the aligned pose, beyond the total limit");
       } else {
         fail("a command before any alignment");
       }
@@ -115,16 +122,15 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   if (beam && !(r.state == code(TrackingState::kTrack) && r.gate_decision == std::uint8_t(GateDecision::kApply)))
     fail("beam permit outside TRACK after APPLY");
   if (beam && calls.commands_accepted > 0 && beyond_step_limit(limits_, calls.last_command))
-    fail("beam permit in the cycle of a " + std::to_string(translation_mm(calls.last_command)) + " mm / " +
-         std::to_string(angle_deg(calls.last_command)) + " deg move beyond the step limit");
+    fail("beam permit in the cycle of a " + mm_deg(translation_mm(calls.last_command), angle_deg(calls.last_command)) +
+         " move beyond the step limit");
   if (beam && calls.have_readback && beyond_beam_tolerance(limits_, calls.travel_left))
-    fail("beam permit while the actuator was still " + std::to_string(calls.travel_left.head<3>().norm()) +
-         " mm / " + std::to_string(angle_deg(calls.travel_left)) + " deg from its target");
-  tracking::Vector6d offset;
-  for (int i = 0; i < 6; ++i) offset[i] = r.pose_delta[i];
+    fail("beam permit while the actuator was still " +
+         mm_deg(distance_mm(calls.travel_left), angle_deg(calls.travel_left)) + " from its target");
+  const Eigen::Map<const tracking::Vector6d> offset(r.pose_delta);  // the registered patient, from the plan
   if (beam && beyond_beam_tolerance(limits_, offset))
-    fail("beam permit with the registered patient " + std::to_string(offset.head<3>().norm()) + " mm / " +
-         std::to_string(angle_deg(offset)) + " deg from the planned pose");
+    fail("beam permit with the registered patient " + mm_deg(distance_mm(offset), angle_deg(offset)) +
+         " from the planned pose");
 
   // 5. No move and no beam between a HOLD or FAULT and the operator's answer.
   if (needs_operator_ && (sent || beam)) fail("moved or armed the beam after a HOLD without an operator decision");
