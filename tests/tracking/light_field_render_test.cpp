@@ -130,6 +130,19 @@ TEST_P(VectorisedKernel, MatchesScalar) {
   }
 }
 
+// The fixture's float field rendered by the portable kernel and by the best vectorised one the
+// CPU has, both through the source image or both per ray.
+std::pair<Result<std::unique_ptr<DrrRenderer>>, Result<std::unique_ptr<DrrRenderer>>> portable_and_best(
+    bool source_image) {
+  RendererOptions options;
+  options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
+  options.light_field_source_image = source_image;
+  options.simd = SimdLevel::kScalar;
+  auto portable = make_renderer("lightfield", nullptr, options);
+  options.simd = SimdLevel::kBest;
+  return {std::move(portable), make_renderer("lightfield", nullptr, options)};
+}
+
 // The AVX2 kernels skip the per-pixel field test on rows whose two end rays lie inside the field
 // with a margin (row_inside_field). Rows that graze the field's edge must keep the per-pixel
 // mask: the whole detector shifted and turned in small steps, so that the edge crosses rows and
@@ -138,13 +151,7 @@ TEST(VectorisedKernelRows, RowsGrazingTheFieldsEdgeKeepThePerPixelMask) {
   const XrayView detector = fixture_plan().view_room;
   const PixelWindow w = PixelWindow::full(detector.rows, detector.cols);
   for (const bool source_image : {false, true}) {
-    RendererOptions scalar_options, simd_options;
-    scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
-    scalar_options.simd = SimdLevel::kScalar;
-    simd_options.simd = SimdLevel::kBest;
-    scalar_options.light_field_source_image = simd_options.light_field_source_image = source_image;
-    auto scalar = make_renderer("lightfield", nullptr, scalar_options);
-    auto simd = make_renderer("lightfield", nullptr, simd_options);
+    auto [scalar, simd] = portable_and_best(source_image);
     ASSERT_TRUE(scalar.ok() && simd.ok());
     int partly_masked = 0;
     for (int step = 0; step < 40; ++step) {
@@ -172,13 +179,7 @@ TEST(VectorisedKernelRows, EveryTiltAcrossTheImageRowsMatchesThePortableKernel) 
   const XrayView detector = fixture_plan().view_room;
   const XrayView fine = detector.resampled(0, 0, detector.rows, detector.cols, 256, 256);
   const PixelWindow w = PixelWindow::full(fine.rows, fine.cols);
-  RendererOptions scalar_options, simd_options;
-  scalar_options.light_fields = simd_options.light_fields = {fixture_light_field(LightFieldStorage::kFloat32)};
-  scalar_options.simd = SimdLevel::kScalar;
-  simd_options.simd = SimdLevel::kBest;
-  scalar_options.light_field_source_image = simd_options.light_field_source_image = true;
-  auto scalar = make_renderer("lightfield", nullptr, scalar_options);
-  auto simd = make_renderer("lightfield", nullptr, simd_options);
+  auto [scalar, simd] = portable_and_best(true);
   ASSERT_TRUE(scalar.ok() && simd.ok());
   const Vector3d view_axis = (fine.source_mm - Vector3d::Zero()).normalized();
   double largest_difference = 0;
