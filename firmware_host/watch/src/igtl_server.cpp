@@ -118,6 +118,7 @@ void IgtlServer::run() {
   auto drop = [&](std::size_t i) {
     ::close(clients[i].fd);
     clients.erase(clients.begin() + static_cast<std::ptrdiff_t>(i));
+    clients_now_ = static_cast<std::int64_t>(clients.size());
     ++clients_dropped_;
   };
   // Queues `bytes` for every client and writes what each socket takes now.
@@ -152,6 +153,7 @@ void IgtlServer::run() {
       if (now.started) c.pending = status_message(now.last.record, state_reason);
       ++statuses_;
       clients.push_back(std::move(c));
+      clients_now_ = static_cast<std::int64_t>(clients.size());  // before the next accept counts in the total
     }
     // What clients send is read and ignored; an end of stream or an error is a disconnect.
     for (std::size_t i = clients.size(); i-- > 0;) {
@@ -210,7 +212,6 @@ void IgtlServer::run() {
         break;
       }
     }
-    clients_now_ = static_cast<std::int64_t>(clients.size());
   }
   for (Client& c : clients) ::close(c.fd);
   clients_now_ = 0;

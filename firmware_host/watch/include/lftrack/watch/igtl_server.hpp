@@ -32,6 +32,8 @@ struct IgtlOptions {
   int max_clients = 8;  // more are accepted and closed at once
 };
 
+// Each field is read on its own, not as one snapshot; clients_now changes with the list of clients,
+// so once clients_total counts a connection, clients_now already counts every one accepted before it.
 struct IgtlCounters {
   std::int64_t clients_now = 0, clients_total = 0, clients_dropped = 0;  // dropped: stalled or refused
   std::int64_t transforms_sent = 0, statuses_sent = 0;  // messages written, over all clients
