@@ -90,8 +90,14 @@ TEST_F(ClosedLoop, APageWithTenClientsAndOpenIgtlinkChangeNothingInTheCycle) {
     stalled.push_back(stalled_client(http, "GET /api/events HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(http) + "\r\n\r\n"));
     stalled.push_back(stalled_client(igtl_port, ""));
     reader = std::make_unique<IgtlReader>(igtl_port);
-    // Give the clients a moment to connect before the first cycle.
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    // Every client is connected before the first cycle (the 10 pages and the stalled one on the
+    // monitor; the stalled one and the reader on OpenIGTLink), or the test says which is not.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while ((session.monitor()->counters().event_clients < 11 || session.igtl()->counters().clients_now < 2) &&
+           std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_EQ(session.monitor()->counters().event_clients, 11);
+    EXPECT_EQ(session.igtl()->counters().clients_now, 2);
     return std::thread([] {});
   });
   // The page's clients were served while the loop ran; stop them, then compare.

@@ -91,6 +91,31 @@ TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
   EXPECT_EQ(first->error_name, "TRACK");
 }
 
+// A session that ends (LoopSession::run) lets the hub and the server catch up before the server
+// closes: a client gets every cycle the loop published, up to the last, then the end of stream.
+TEST(IgtlServer, CatchingUpBeforeClosingSendsTheLastCycles) {
+  HubOnFeed h;
+  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8});
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  IgtlClient client((*server)->port());
+  ASSERT_TRUE(client.connected());
+  ASSERT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 1; }));
+  EXPECT_FALSE((*server)->catch_up(1, std::chrono::milliseconds(20))) << "no cycle published yet";
+  constexpr int kCycles = 80;  // within the hub's history (100): nothing is skipped
+  for (int c = 0; c < kCycles; ++c)
+    h.feed.publish_record(record(std::uint64_t(c), TrackingState::kTrack, TrackingState::kTrack, 0.1, true).record,
+                          true);
+  const std::uint64_t seq = h.hub->catch_up(std::chrono::seconds(5));
+  EXPECT_EQ(seq, std::uint64_t(kCycles));
+  EXPECT_TRUE((*server)->catch_up(seq, std::chrono::seconds(5)));
+  server->reset();  // closes at once, as a session's end destroys it
+  int transforms = 0;
+  while (auto m = client.next(std::chrono::milliseconds(2000)))
+    if (m->type == "TRANSFORM") ++transforms;
+  EXPECT_EQ(transforms, 2 * kCycles) << "a pose and a correction for every cycle";
+  EXPECT_TRUE(client.closed());
+}
+
 TEST(IgtlServer, RasIsXAndYNegatedOnBothSides) {
   tracking::Pose T = tracking::Pose::Identity();
   T.translation() << 10, 20, 30;

@@ -500,6 +500,12 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
 Result<LoopSummary> LoopSession::run() {
   auto summary = parts_->loop->run();
   if (parts_->actuator) parts_->actuator->close();
+  // The room's other systems get the last cycles (the final pose, and the state the loop ended
+  // in) before the servers close; bounded, for a watcher that cannot keep up.
+  if (parts_->hub) {
+    const std::uint64_t seq = parts_->hub->catch_up(std::chrono::milliseconds(500));
+    if (parts_->igtl) parts_->igtl->catch_up(seq, std::chrono::milliseconds(500));
+  }
   if (parts_->journal) {
     if (Status s = parts_->journal->close(); !s.ok() && summary.ok()) summary->journal_error = s.message();
   }

@@ -165,6 +165,13 @@ bool CycleHub::wait_for_news(std::uint64_t seen_seq, std::uint64_t seen_images,
   }) && !stop_.load();
 }
 
+std::uint64_t CycleHub::catch_up(std::chrono::milliseconds timeout) const {
+  const std::uint64_t queued = feed_->queued_records();
+  std::unique_lock<std::mutex> lock(mutex_);
+  news_.wait_for(lock, timeout, [&] { return stop_.load() || status_.seq >= queued; });
+  return status_.seq;
+}
+
 HubStatus CycleHub::status() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return status_;

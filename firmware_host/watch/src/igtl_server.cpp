@@ -9,7 +9,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -107,6 +109,15 @@ IgtlServer::~IgtlServer() {
 IgtlCounters IgtlServer::counters() const {
   return {clients_now_.load(), clients_total_.load(), clients_dropped_.load(),
           transforms_.load(), statuses_.load(),     skipped_.load()};
+}
+
+bool IgtlServer::catch_up(std::uint64_t seq, std::chrono::milliseconds timeout) const {
+  const auto until = std::chrono::steady_clock::now() + timeout;
+  while (written_through_seq_.load() < seq) {
+    if (stop_.load() || std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return true;
 }
 
 void IgtlServer::run() {
@@ -212,6 +223,8 @@ void IgtlServer::run() {
         break;
       }
     }
+    if (std::all_of(clients.begin(), clients.end(), [](const Client& c) { return c.pending.empty(); }))
+      written_through_seq_ = after;
   }
   for (Client& c : clients) ::close(c.fd);
   clients_now_ = 0;

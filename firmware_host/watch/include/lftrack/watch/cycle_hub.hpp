@@ -119,6 +119,10 @@ class CycleHub {
   // Waits until the hub has absorbed a record after `seen_seq` or made new images after
   // `seen_images`, or `timeout`; returns at once when stopped. True when something is new.
   bool wait_for_news(std::uint64_t seen_seq, std::uint64_t seen_images, std::chrono::milliseconds timeout) const;
+  // When the loop has ended: waits until the hub has absorbed every record the feed had queued
+  // at the call, or `timeout`. Returns the hub's seq then (status().seq), so that a server can
+  // pass on the cycles up to it before it closes.
+  std::uint64_t catch_up(std::chrono::milliseconds timeout) const;
   HubStatus status() const;
   // Trace points of cycles after `after_cycle`, oldest first, at most `max`.
   std::vector<TracePoint> trace_after(std::int64_t after_cycle, std::size_t max) const;

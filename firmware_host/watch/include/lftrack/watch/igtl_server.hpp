@@ -19,6 +19,7 @@
 // connects, stalls or disconnects changes nothing in the cycle.
 
 #include <atomic>
+#include <chrono>
 #include <memory>
 #include <thread>
 
@@ -52,6 +53,10 @@ class IgtlServer {
   ~IgtlServer();
   int port() const { return port_; }
   IgtlCounters counters() const;
+  // When the loop has ended and the hub has caught up (CycleHub::catch_up): waits until the
+  // server has written every cycle up to the hub's `seq` to each client's socket (a stalled
+  // client is dropped as usual), or `timeout`. True when it has.
+  bool catch_up(std::uint64_t seq, std::chrono::milliseconds timeout) const;
 
  private:
   struct Client;
@@ -66,6 +71,7 @@ class IgtlServer {
   std::atomic<bool> stop_{false};
   std::atomic<std::int64_t> clients_now_{0}, clients_total_{0}, clients_dropped_{0}, transforms_{0}, statuses_{0};
   std::atomic<std::uint64_t> skipped_{0};
+  std::atomic<std::uint64_t> written_through_seq_{0};  // every client's socket took the cycles up to it
 };
 
 }  // namespace lftrack::host
