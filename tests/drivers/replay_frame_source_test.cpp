@@ -87,9 +87,11 @@ TEST_F(Replay, RealTimeKeepsTheRecordedPaceAndSkipsPairsALateLoopMissed) {
   source->request_exposure(start);
   ASSERT_EQ(source->acquire(&pair_, far()), DeviceStatus::kOk);
   EXPECT_EQ(pair_.frames[0].timestamp_ns, start);
-  // Asked again at once: pair 1 is not due for 20 ms; a deadline before then times out.
+  // Asked again: pair 1 is due 20 ms after the start; a deadline before then (10 ms after the
+  // start, however long the first pair took to read) times out at once.
   source->request_exposure(start);
-  EXPECT_EQ(source->acquire(&pair_, Clock::now() + std::chrono::milliseconds(2)), DeviceStatus::kTimeout);
+  EXPECT_EQ(source->acquire(&pair_, Clock::time_point(std::chrono::nanoseconds(start + kPeriodNs / 2))),
+            DeviceStatus::kTimeout);
   EXPECT_EQ(source->counters().late, 1);
   // With time to wait, pair 1 arrives when due.
   ASSERT_EQ(source->acquire(&pair_, far()), DeviceStatus::kOk);

@@ -186,7 +186,8 @@ TEST_F(ModbusCouchTest, ADroppedConnectionIsReconnectedOutsideTheCycleWithTheCou
   const DeviceStatus right_after = driver->command(shift(1), in_ms(100));
   EXPECT_TRUE(right_after == DeviceStatus::kDisconnected || right_after == DeviceStatus::kRefused)
       << static_cast<int>(right_after);
-  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.002);
+  // At once: well inside the 50 ms a request would wait for its reply (a loaded host may preempt).
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.025);
   const auto until = Clock::now() + std::chrono::seconds(5);
   while (!driver->connected() && Clock::now() < until)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));

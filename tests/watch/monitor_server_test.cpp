@@ -250,7 +250,9 @@ TEST(MonitorServer, EventStreamsAreLimited) {
   std::vector<std::thread> open;
   for (int i = 0; i < 2; ++i)
     open.emplace_back([&] { read_events(s.server->port(), [&](const std::string&) { return stop.load(); }); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  for (int i = 0; i < 5000 && s.server->counters().event_clients < 2; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(s.server->counters().event_clients, 2) << "both streams are open before the third asks";
   auto third = s.client().Get("/api/events");
   ASSERT_TRUE(third);
   EXPECT_EQ(third->status, 503);

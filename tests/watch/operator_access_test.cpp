@@ -202,7 +202,9 @@ TEST(PageOperator, AResumeSentBeforeTheHoldNeverActsOnIt) {
     EXPECT_EQ(v.outcome, PageOperator::Verdict::Outcome::kRefused);
     EXPECT_EQ(v.refusal, OperatorRefusal::kBeforeHold);
   });
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // queued, the loop has not polled
+  // Queued before the HOLD (however late the sender's thread runs), the loop has not polled.
+  for (int i = 0; i < 2000 && page.waiting() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(page.waiting(), 1);
   OperatorPoll at_hold;
   page.on_hold(hold_view(222222, 0), &at_hold);  // the loop enters HOLD 222222 now
   OperatorPoll poll;

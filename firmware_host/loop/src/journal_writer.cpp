@@ -145,11 +145,12 @@ void JournalWriter::run() {
         written_ += n;
         dirty = true;
       } else {
-        // Disk full or I/O error: cut the partial batch off, keep what was complete.
+        // Disk full or I/O error: the loop is told first (it holds at its next cycle), then the
+        // partial batch is cut off, keeping what was complete.
+        write_failed_.store(true, std::memory_order_release);
         (void)::ftruncate(fd_, good_bytes_);
         ::fdatasync(fd_);
         lost_ += n;
-        write_failed_.store(true, std::memory_order_release);
       }
     }
     const auto now = Clock::now();

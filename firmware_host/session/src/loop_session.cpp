@@ -165,7 +165,10 @@ Result<drivers::ActuatorSpec> hil_actuator_spec(const PreparedScene& p, const Lo
     parts->couch_server = std::move(server).value();
     drivers::ModbusActuatorSpec couch;
     couch.options.port = parts->couch_server->port();
-    couch.options.response_timeout_s = std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
+    // On the real clock a reply must come within the cycle; on the simulated clock the cycle has
+    // no wall-clock length, and the budget only has to outlast a loaded host's scheduling (a
+    // server thread preempted past 20 ms made a simulated run hold).
+    couch.options.response_timeout_s = o.simulated_clock ? 0.25 : std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
     driver_spec = couch;
   } else {
     auto link = sim::can_socket_pair();

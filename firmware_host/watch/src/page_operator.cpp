@@ -1,5 +1,7 @@
 #include "lftrack/watch/page_operator.hpp"
 
+#include <algorithm>
+
 namespace lftrack::host {
 
 int PageOperator::refusal_index(OperatorRefusal why) {
@@ -36,6 +38,12 @@ PageOperator::Verdict PageOperator::submit(const OperatorRequest& request, std::
   const Verdict verdict = slot->state == SlotState::kDecided ? slot->verdict : Verdict{};
   slot->state = SlotState::kFree;  // decided or withdrawn: it never acts later
   return verdict;
+}
+
+int PageOperator::waiting() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return static_cast<int>(std::count_if(slots_.begin(), slots_.end(),
+                                        [](const Slot& s) { return s.state == SlotState::kWaiting; }));
 }
 
 void PageOperator::poll(const OperatorView& view, OperatorPoll* out) {

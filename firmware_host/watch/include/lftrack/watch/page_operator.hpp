@@ -41,6 +41,8 @@ class PageOperator final : public OperatorInput {
   // A request the page's checks refused (kBadToken, kReplayed, kOrigin, kMalformed): journaled at
   // the next poll.
   void refused_before_loop(OperatorRefusal why);
+  // Any thread: requests queued and not yet decided by the loop.
+  int waiting() const;
 
   // The loop's thread.
   void poll(const OperatorView& view, OperatorPoll* out) override;
@@ -57,7 +59,7 @@ class PageOperator final : public OperatorInput {
   static constexpr int kRefusalKinds = 4;
   static int refusal_index(OperatorRefusal why);
 
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::condition_variable decided_;
   std::array<Slot, kSlots> slots_{};
   std::atomic<std::uint64_t> hold_epoch_{0};
