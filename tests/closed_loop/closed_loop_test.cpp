@@ -181,6 +181,43 @@ TEST_F(ClosedLoop, ASetUpErrorWithinTheStepLimitOnEachAxisStillWaitsForTheCouch)
   EXPECT_GE(with_beam, 8) << "and then the beam tracks";
 }
 
+// A couch that never arrives (0.05 mm/s for a 3 mm set-up move: a minute) keeps the beam off. After
+// safety.max_beam_withheld_s (here 2 s, 20 cycles) the loop holds and says why, and the couch
+// stops, instead of the move going out cycle after cycle with nobody told.
+TEST_F(ClosedLoop, ACouchThatNeverArrivesHoldsOnceTheBeamHasWaitedTheLongestItMay) {
+  edit_scene_ = [](Scene& scene) {
+    scene.actuator.couch.max_speed_mm_s = 0.05;
+    scene.safety.max_beam_withheld_s = 2.0;
+  };
+  const std::string motion = "motion:\n  setup_error: {translation_mm: [0, 3, 0], rotation_deg: [0, 0, 0]}\n";
+  const LoopRun r = run_loop(motion, 30, {}, kLightFieldFrames);
+  const auto& records = r.journal.records;
+  ASSERT_EQ(records.size(), 30u);
+  std::size_t held_at = records.size();
+  for (std::size_t i = 0; i < records.size() && held_at == records.size(); ++i)
+    if (records[i].state == std::uint8_t(TrackingState::kHold)) held_at = i;
+  ASSERT_LT(held_at, records.size()) << "the loop never held";
+  EXPECT_GE(held_at, 20u) << "not before the beam had waited 2 s (20 cycles of 100 ms)";
+  EXPECT_LE(held_at, 21u);
+  EXPECT_EQ(records[held_at].gate_decision, std::uint8_t(GateDecision::kHold));
+  EXPECT_EQ(records[held_at].gate_reason, std::uint8_t(GateReason::kNotInPlace))
+      << to_string(GateReason(records[held_at].gate_reason));
+  EXPECT_NE(records[held_at].hold_id, 0u) << "a HOLD the operator's resume must name";
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    SCOPED_TRACE("cycle " + std::to_string(i));
+    EXPECT_EQ(records[i].beam_permit, 0) << "the patient was never in place";
+    if (i < held_at) {
+      EXPECT_TRUE(records[i].state == std::uint8_t(TrackingState::kTrack) ||
+                  records[i].state == std::uint8_t(TrackingState::kAlign));
+      EXPECT_NE(records[i].beam_withheld, std::uint8_t(BeamWithheld::kNo));
+    } else {
+      EXPECT_EQ(records[i].state, std::uint8_t(TrackingState::kHold)) << "nothing resumes without the operator";
+      EXPECT_EQ(records[i].command_sent, 0) << "held: nothing sent";
+    }
+  }
+  EXPECT_EQ(r.summary.holds, 1);
+}
+
 // Issue 18, item 1: resumes sent while tracking once waited in the socket's queue and approved the
 // next HOLD. Now they are discarded (and journaled) when they arrive; the HOLD is left only by a
 // resume sent after it began that names its id.

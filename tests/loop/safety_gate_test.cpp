@@ -291,6 +291,44 @@ const std::vector<BeamCase> kBeamCases = {
        in.registration_ok = false;
      },
      GateDecision::kSkip, BeamWithheld::kNo},
+    // The beam kept off for max_beam_withheld_s (10 s): a couch that never arrives, a patient out
+    // of reach, is a HOLD (the operator is told), not a correction sent again and again.
+    {"WithheldJustShortOfTheLimit",
+     [](GateInput& in) {
+       in.travel_left(0) = 3.0;
+       in.beam_off_s = 9.99;
+     },
+     GateDecision::kApply, BeamWithheld::kActuatorTravelling},
+    {"WithheldAtTheLimitHolds",
+     [](GateInput& in) {
+       in.travel_left(0) = 3.0;
+       in.beam_off_s = 10.0;
+     },
+     GateDecision::kHold, BeamWithheld::kNo},
+    {"OutOfPlaceAtTheLimitHolds",
+     [](GateInput& in) {
+       in.offset_from_plan(0) = 3.0;
+       in.beam_off_s = 1e12;
+     },
+     GateDecision::kHold, BeamWithheld::kNo},
+    {"ApprovedStepAtTheLimitHolds",
+     [](GateInput& in) {
+       in.step(1) = 8.0;
+       in.step_approved = true;
+       in.beam_off_s = 10.0;
+     },
+     GateDecision::kHold, BeamWithheld::kNo},
+    {"InPlaceAfterALongWaitTreats", [](GateInput& in) { in.beam_off_s = 1e12; }, GateDecision::kApply,
+     BeamWithheld::kNo},
+    {"SkippedAfterALongWaitStaysASkip",
+     [](GateInput& in) {
+       in.registration_ok = false;
+       in.beam_off_s = 60;
+     },
+     GateDecision::kSkip, BeamWithheld::kNo},
+    {"NanBeamOffTimeHolds", [](GateInput& in) { in.beam_off_s = kNan; }, GateDecision::kHold, BeamWithheld::kNo},
+    {"InfiniteBeamOffTimeHolds", [](GateInput& in) { in.beam_off_s = kInf; }, GateDecision::kHold,
+     BeamWithheld::kNo},
 };
 
 class GateBeam : public ::testing::TestWithParam<BeamCase> {};
@@ -302,6 +340,26 @@ TEST_P(GateBeam, WithholdsTheBeamUntilThePatientIsInPlace) {
   EXPECT_EQ(out.decision, GetParam().decision) << to_string(out.decision);
   EXPECT_EQ(out.beam_withheld, GetParam().withheld) << to_string(out.beam_withheld);
   EXPECT_EQ(out.beam_allowed(), out.decision == GateDecision::kApply && GetParam().withheld == BeamWithheld::kNo);
+  if (in.beam_off_s >= 10 && std::isfinite(in.beam_off_s) && out.decision == GateDecision::kHold) {
+    EXPECT_EQ(out.reason, GateReason::kNotInPlace) << to_string(out.reason);
+  }
+}
+
+// The limit is the scene's: a shorter one holds sooner, and the reason names the patient.
+TEST(Gate, TheBeamOffTimeIsTheScenes) {
+  SafetyLimits limits;
+  limits.max_beam_withheld_s = 2.5;
+  GateInput in = at_rest();
+  in.offset_from_plan(2) = 4.0;
+  in.beam_off_s = 2.4;
+  EXPECT_EQ(evaluate_gate(limits, in).decision, GateDecision::kApply);
+  in.beam_off_s = 2.5;
+  const GateOutput out = evaluate_gate(limits, in);
+  EXPECT_EQ(out.decision, GateDecision::kHold);
+  EXPECT_EQ(out.reason, GateReason::kNotInPlace);
+  EXPECT_FALSE(out.beam_allowed());
+  EXPECT_EQ(out.consecutive_failures, 0) << "not a registration failure: it does not count towards FAULT";
+  EXPECT_STREQ(to_string(GateReason::kNotInPlace), "patient not in place: the beam withheld too long");
 }
 
 INSTANTIATE_TEST_SUITE_P(Rules, GateBeam, ::testing::ValuesIn(kBeamCases),

@@ -183,6 +183,23 @@ TEST(Scene, TheBeamsTravelLimits) {
   }
 }
 
+// How long the beam may be kept off before the loop holds (a couch that never arrives).
+TEST(Scene, TheLongestTheBeamIsWithheld) {
+  auto defaults = parse_scene(std::string(kValidScene), "s.yaml", "/");
+  ASSERT_TRUE(defaults.ok()) << defaults.status().message();
+  EXPECT_EQ(defaults->safety.max_beam_withheld_s, 10.0);
+  auto set = parse_scene(std::string(kValidScene) + "safety:\n  max_beam_withheld_s: 3.5\n", "s.yaml", "/");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_EQ(set->safety.max_beam_withheld_s, 3.5);
+  for (const char* bad : {"  max_beam_withheld_s: 0\n", "  max_beam_withheld_s: -1\n", "  max_beam_withheld_s: .nan\n",
+                          "  max_beam_withheld_s: .inf\n", "  max_beam_withheld_s: 601\n",
+                          "  max_beam_withheld_s: 1e12\n", "  max_beam_withheld_s: [1]\n"}) {
+    auto s = parse_scene(std::string(kValidScene) + "safety:\n" + bad, "s.yaml", "/");
+    ASSERT_FALSE(s.ok()) << bad;
+    EXPECT_NE(s.status().message().find("safety.max_beam_withheld_s"), std::string::npos) << s.status().message();
+  }
+}
+
 TEST(Scene, LightFieldSettings) {
   std::string text = kValidScene;
   text +=

@@ -247,6 +247,7 @@ void TrackingLoop::Impl::control(CycleState& c) {
   in.step = c.desired - commanded_total;
   in.total = c.desired - aligned_couch;
   in.consecutive_failures = consecutive_failures;
+  in.beam_off_s = beam_off_since_ns < 0 ? 0.0 : 1e-9 * static_cast<double>(c.start_ns - beam_off_since_ns);
   // Set-up and resumed moves are approved by the operator; in HOLD nothing moves, so only the
   // quality of the registration is judged (and counted towards FAULT).
   in.step_approved = c.aligning || approve_next_step || c.state == TrackingState::kHold;
@@ -339,6 +340,12 @@ void TrackingLoop::Impl::settle(CycleState& c) {
   }
   c.hold_id = hold_id;
   c.beam_permit = machine.beam_permit();
+  // The beam-off clock runs while TRACK or ALIGN keeps the beam off; it stops with the beam on, and
+  // in HOLD or FAULT (the operator's resume or reset approves the move anew).
+  if (c.beam_permit || (now != TrackingState::kTrack && now != TrackingState::kAlign))
+    beam_off_since_ns = -1;
+  else if (beam_off_since_ns < 0)
+    beam_off_since_ns = c.start_ns;
   if (parts.actuator != nullptr) parts.actuator->set_beam_permit(c.beam_permit);
   c.state_after = now;
 }

@@ -47,6 +47,8 @@ const char* to_string(GateReason r) {
       return "registration outside the pose envelope";
     case GateReason::kCommandRefused:
       return "actuator refused the command";
+    case GateReason::kNotInPlace:
+      return "patient not in place: the beam withheld too long";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -83,6 +85,7 @@ bool finite(const GateInput& in) {
     return false;
   if (!std::isfinite(in.frame_age_ms) || !std::isfinite(in.pair_skew_ms)) return false;
   if (!std::isfinite(in.readback_error_mm) || !std::isfinite(in.readback_error_deg)) return false;
+  if (!std::isfinite(in.beam_off_s)) return false;
   for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
     if (!std::isfinite(in.similarity[std::size_t(v)]) ||
         !std::isfinite(in.reference_similarity[std::size_t(v)]))
@@ -164,6 +167,12 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
     out.beam_withheld = BeamWithheld::kOutOfPlace;
   else if (beyond_beam_tolerance(limits, in.travel_left))
     out.beam_withheld = BeamWithheld::kActuatorTravelling;
+  // The move would go out again, and the beam stay off again: after long enough the operator is
+  // told (the couch stops; a resume approves the move again and the clock starts anew).
+  if (out.beam_withheld != BeamWithheld::kNo && in.beam_off_s >= limits.max_beam_withheld_s) {
+    out.beam_withheld = BeamWithheld::kNo;
+    return hold(GateReason::kNotInPlace);
+  }
   return out;
 }
 

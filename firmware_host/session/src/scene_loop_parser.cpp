@@ -121,7 +121,7 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
       {"max_step_mm", "max_step_deg", "max_total_mm", "max_total_deg", "min_similarity",
        "min_similarity_ratio", "max_ratio_disagreement", "max_frame_age_ms", "max_pair_skew_ms",
        "readback_tolerance_mm", "readback_tolerance_deg", "beam_tolerance_mm", "beam_tolerance_deg",
-       "hold_after_failures", "fault_after_failures"}));
+       "max_beam_withheld_s", "hold_after_failures", "fault_after_failures"}));
   // Each limit has a ceiling: a tracking correction beyond it is a new set-up for the therapist,
   // never a setting, so a value above it (a 1e9 typed for 10) is refused, not obeyed.
   struct Limit {
@@ -141,7 +141,9 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
       {"readback_tolerance_mm", &l->readback_tolerance_mm, 10, "a read-back 10 mm off is a couch fault"},
       {"readback_tolerance_deg", &l->readback_tolerance_deg, 5, "a read-back 5 degrees off is a couch fault"},
       {"beam_tolerance_mm", &l->beam_tolerance_mm, 10, "a patient 10 mm from place is not treated"},
-      {"beam_tolerance_deg", &l->beam_tolerance_deg, 5, "a patient 5 degrees from place is not treated"}};
+      {"beam_tolerance_deg", &l->beam_tolerance_deg, 5, "a patient 5 degrees from place is not treated"},
+      {"max_beam_withheld_s", &l->max_beam_withheld_s, 600,
+       "a patient out of place for 10 minutes is set up again, not tracked"}};
   for (const Limit& limit : limits)
     if (n[limit.key])
       LFTRACK_RETURN_IF_ERROR(

@@ -15,7 +15,8 @@
 // while the registered patient is further than beam_tolerance_* from the planned pose (a set-up
 // move not yet made), and while the actuator, at the read-back, still had further than
 // beam_tolerance_* to go to its target (an earlier large move under way, which takes the patient
-// elsewhere).
+// elsewhere). A patient not in place for max_beam_withheld_s (a couch that never arrives, a patient
+// who has moved out of reach of the corrections) HOLDs: the operator is told, and decides.
 
 #include <array>
 #include <cstdint>
@@ -43,6 +44,10 @@ struct SafetyLimits {
   // to 1.3 degrees about its least-seen axis.
   double beam_tolerance_mm = 2.0;
   double beam_tolerance_deg = 2.0;
+  // An APPLY that withholds the beam when the beam has been off this long, in TRACK or ALIGN (no
+  // beam since the first cycle that withheld it or skipped), HOLDs instead (kNotInPlace). A 10 mm
+  // set-up move at a slow couch's 2 mm/s takes 5 s.
+  double max_beam_withheld_s = 10.0;
   int hold_after_failures = 3;
   int fault_after_failures = 10;
   // Overruns in a row before the loop holds: one is counted and its periods skipped; several
@@ -69,6 +74,7 @@ enum class GateReason : std::uint8_t {
   kOverruns,       // hold_after_overruns cycles in a row overran their period
   kOutsideEnvelope,  // the registered pose left the scene's pose envelope (registration_verdict.hpp)
   kCommandRefused,   // the actuator refused this cycle's command: it knows of a fault, nothing moved
+  kNotInPlace,       // the beam was withheld for max_beam_withheld_s: the patient does not come into place
 };
 // Why an APPLY kept the beam off; its correction is sent all the same.
 enum class BeamWithheld : std::uint8_t {
@@ -113,6 +119,9 @@ struct GateInput {
   tracking::Vector6d travel_left = tracking::Vector6d::Zero();       // target - position (mm, rad)
   tracking::Vector6d offset_from_plan = tracking::Vector6d::Zero();  // registered (mm, rad)
   int consecutive_failures = 0;  // before this cycle
+  // How long the beam has been off in TRACK or ALIGN up to this cycle's start: from the first
+  // cycle since the last beam-on APPLY that withheld it or skipped (0: it was on in the last cycle).
+  double beam_off_s = 0;
   // The operator approved this move (the set-up move after alignment, the first move after a
   // resume): the per-cycle step limit does not apply; every other check does.
   bool step_approved = false;
