@@ -190,7 +190,9 @@ TEST(Gate, ApplyResetsTheFailureCount) {
 
 TEST(Gate, EveryDecisionAndReasonHasAName) {
   for (int d = 0; d <= 3; ++d) EXPECT_STRNE(to_string(static_cast<GateDecision>(d)), "?");
-  for (int r = 0; r <= 16; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
+  constexpr int kLastReason = static_cast<int>(GateReason::kNotInPlace);
+  for (int r = 0; r <= kLastReason; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
+  EXPECT_STREQ(to_string(static_cast<GateReason>(kLastReason + 1)), "?") << "a new reason: extend this test";
   for (int w = 0; w <= 4; ++w) EXPECT_STRNE(to_string(static_cast<BeamWithheld>(w)), "?");
 }
 

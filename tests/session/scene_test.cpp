@@ -193,7 +193,8 @@ TEST(Scene, TheLongestTheBeamIsWithheld) {
   EXPECT_EQ(set->safety.max_beam_withheld_s, 3.5);
   for (const char* bad : {"  max_beam_withheld_s: 0\n", "  max_beam_withheld_s: -1\n", "  max_beam_withheld_s: .nan\n",
                           "  max_beam_withheld_s: .inf\n", "  max_beam_withheld_s: 601\n",
-                          "  max_beam_withheld_s: 1e12\n", "  max_beam_withheld_s: [1]\n"}) {
+                          "  max_beam_withheld_s: 1e12\n", "  max_beam_withheld_s: [1]\n",
+                          "  max_beam_withheld_s: 0.05\n"}) {
     auto s = parse_scene(std::string(kValidScene) + "safety:\n" + bad, "s.yaml", "/");
     ASSERT_FALSE(s.ok()) << bad;
     EXPECT_NE(s.status().message().find("safety.max_beam_withheld_s"), std::string::npos) << s.status().message();

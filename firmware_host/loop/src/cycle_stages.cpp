@@ -340,9 +340,11 @@ void TrackingLoop::Impl::settle(CycleState& c) {
   }
   c.hold_id = hold_id;
   c.beam_permit = machine.beam_permit();
-  // The beam-off clock runs while TRACK or ALIGN keeps the beam off; it stops with the beam on, and
-  // in HOLD or FAULT (the operator's resume or reset approves the move anew).
-  if (c.beam_permit || (now != TrackingState::kTrack && now != TrackingState::kAlign))
+  // The beam-off clock runs while TRACK keeps the beam off, from the first cycle after the
+  // alignment's (whose cold registration has no time limit on the real clock, and whose set-up
+  // move goes out at its end); it stops with the beam on, and in HOLD or FAULT (the operator's
+  // resume or reset approves the move anew).
+  if (c.beam_permit || c.aligning || now != TrackingState::kTrack)
     beam_off_since_ns = -1;
   else if (beam_off_since_ns < 0)
     beam_off_since_ns = c.start_ns;

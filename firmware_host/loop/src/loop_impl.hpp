@@ -103,8 +103,8 @@ struct TrackingLoop::Impl {
   tracking::Vector6d couch_position = tracking::Vector6d::Zero();  // last read-back
   std::array<double, kMaxGateViews> reference_similarity{};
   int consecutive_failures = 0;
-  // The start of the first cycle, in TRACK or ALIGN, since the beam was last on (-1: it was on in
-  // the last cycle, or the loop is elsewhere): how long the gate has kept it off (beam_off_s).
+  // The start of the first TRACK cycle after the alignment, or since the beam was last on, that
+  // kept it off (-1: none; the beam was on, or the loop is elsewhere): the gate's beam_off_s.
   std::int64_t beam_off_since_ns = -1;
   bool approve_next_step = false;
   std::int64_t cycles_in_state = 0;

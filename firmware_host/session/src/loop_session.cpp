@@ -318,6 +318,22 @@ void warn_if_prediction_window_short(const LoopSettings& s) {
       MotionPredictor::kMaxNoiseGain, used, advice);
 }
 
+// The simulator's couch, where its largest allowed move (safety.max_total_mm at its speed, after its
+// latency) takes longer than the beam may wait: such a move would end in a HOLD "patient not in
+// place" before the couch arrives. A real couch's speed is its own, not the scene's.
+void warn_if_beam_wait_short(const Scene& scene) {
+  if (scene.actuator.type != "virtual") return;
+  const sim::VirtualCouchSpec& couch = scene.actuator.couch;
+  const double largest_move_s = scene.safety.max_total_mm / couch.max_speed_mm_s + couch.latency_s;
+  if (largest_move_s < scene.safety.max_beam_withheld_s) return;
+  spdlog::warn(
+      "safety: the couch's largest allowed move ({} mm at {} mm/s after {} s) takes {:.1f} s, not less than "
+      "safety.max_beam_withheld_s ({} s): a move that large ends in a HOLD \"patient not in place\" before it "
+      "is made; a longer max_beam_withheld_s or a smaller max_total_mm says so",
+      scene.safety.max_total_mm, couch.max_speed_mm_s, couch.latency_s, largest_move_s,
+      scene.safety.max_beam_withheld_s);
+}
+
 // The monitor page and the OpenIGTLink server, when asked for, on a hub fed by the loop.
 Status start_watchers(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts) {
   if (!o.monitor && !o.igtl) return {};
@@ -491,6 +507,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.status_line = o.status_line;
   settings.announce_holds = o.announce_holds;
   warn_if_prediction_window_short(settings);
+  warn_if_beam_wait_short(p.scene);
   auto verdict = verdict_limits(p.scene, p.scene.registration.similarity);
   if (!verdict.ok()) return verdict.status();
   settings.verdict = *verdict;

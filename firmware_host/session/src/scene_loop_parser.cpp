@@ -148,6 +148,9 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
     if (n[limit.key])
       LFTRACK_RETURN_IF_ERROR(
           positive_at_most(n[limit.key], std::string("safety.") + limit.key, limit.most, limit.why, limit.out));
+  if (l->max_beam_withheld_s < 1)
+    return error(n["max_beam_withheld_s"], "safety.max_beam_withheld_s must be at least 1 s (a couch's set-up move "
+                                           "takes seconds; shorter would hold after every alignment)");
   if (l->max_step_mm > l->max_total_mm) return error(n, "safety.max_step_mm must not exceed safety.max_total_mm");
   if (l->max_step_deg > l->max_total_deg) return error(n, "safety.max_step_deg must not exceed safety.max_total_deg");
   if (n["min_similarity"])

@@ -44,9 +44,11 @@ struct SafetyLimits {
   // to 1.3 degrees about its least-seen axis.
   double beam_tolerance_mm = 2.0;
   double beam_tolerance_deg = 2.0;
-  // An APPLY that withholds the beam when the beam has been off this long, in TRACK or ALIGN (no
-  // beam since the first cycle that withheld it or skipped), HOLDs instead (kNotInPlace). A 10 mm
-  // set-up move at a slow couch's 2 mm/s takes 5 s.
+  // An APPLY that withholds the beam when the beam has been off this long in TRACK (no beam since
+  // the first cycle after the alignment, or after the last beam-on APPLY, that withheld it or
+  // skipped) HOLDs instead (kNotInPlace). A 10 mm set-up move at a slow couch's 2 mm/s takes 5 s.
+  // Without an actuator (track and report) the same holds: a patient out of place that long is
+  // set up again by the therapist.
   double max_beam_withheld_s = 10.0;
   int hold_after_failures = 3;
   int fault_after_failures = 10;
@@ -119,8 +121,8 @@ struct GateInput {
   tracking::Vector6d travel_left = tracking::Vector6d::Zero();       // target - position (mm, rad)
   tracking::Vector6d offset_from_plan = tracking::Vector6d::Zero();  // registered (mm, rad)
   int consecutive_failures = 0;  // before this cycle
-  // How long the beam has been off in TRACK or ALIGN up to this cycle's start: from the first
-  // cycle since the last beam-on APPLY that withheld it or skipped (0: it was on in the last cycle).
+  // How long the beam has been off in TRACK up to this cycle's start: from the first cycle after
+  // the alignment, or after the last beam-on APPLY, that withheld it or skipped (0: none yet).
   double beam_off_s = 0;
   // The operator approved this move (the set-up move after alignment, the first move after a
   // resume): the per-cycle step limit does not apply; every other check does.

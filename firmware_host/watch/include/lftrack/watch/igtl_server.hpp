@@ -54,8 +54,9 @@ class IgtlServer {
   int port() const { return port_; }
   IgtlCounters counters() const;
   // When the loop has ended and the hub has caught up (CycleHub::catch_up): waits until the
-  // server has written every cycle up to the hub's `seq` to each client's socket (a stalled
-  // client is dropped as usual), or `timeout`. True when it has.
+  // server has written every cycle up to the hub's `seq` to each client's socket, or `timeout`.
+  // True when it has; a client that has stopped reading (but not yet queued enough to be
+  // dropped) keeps it false until the timeout, and the others get everything all the same.
   bool catch_up(std::uint64_t seq, std::chrono::milliseconds timeout) const;
 
  private:
