@@ -33,13 +33,26 @@ bool wait_until(const std::function<bool()>& condition) {
   return true;
 }
 
-TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
-  HubOnFeed h;
+// A server on `h`'s hub (up to 8 clients) and one client it has accepted.
+struct ServedClient {
+  std::unique_ptr<IgtlServer> server;
+  std::unique_ptr<IgtlClient> client;
+};
+void serve_one_client(HubOnFeed& h, ServedClient* out) {
   auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8});
   ASSERT_TRUE(server.ok()) << server.status().message();
-  IgtlClient client((*server)->port());
-  ASSERT_TRUE(client.connected());
-  ASSERT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 1; }));
+  out->server = std::move(server).value();
+  out->client = std::make_unique<IgtlClient>(out->server->port());
+  ASSERT_TRUE(out->client->connected());
+  ASSERT_TRUE(wait_until([&] { return out->server->counters().clients_now == 1; }));
+}
+
+TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
+  HubOnFeed h;
+  ServedClient s;
+  ASSERT_NO_FATAL_FAILURE(serve_one_client(h, &s));
+  IgtlServer* server = s.server.get();
+  IgtlClient& client = *s.client;
   h.publish(record(10, TrackingState::kTrack, TrackingState::kTrack, 1.5, true));
   h.publish(record(11, TrackingState::kTrack, TrackingState::kHold, 9.0, false, 123456));
   FeedRecord unregistered = record(12, TrackingState::kHold, TrackingState::kHold, 0, false, 123456);
@@ -83,7 +96,7 @@ TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
   EXPECT_EQ(got[6].error_name, "TRACK");
   EXPECT_FALSE(client.next(std::chrono::milliseconds(300))) << "nothing more";
   // A client that connects now is told the state at once.
-  IgtlClient late((*server)->port());
+  IgtlClient late(server->port());
   ASSERT_TRUE(late.connected());
   auto first = late.next();
   ASSERT_TRUE(first);
@@ -95,20 +108,19 @@ TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
 // closes: a client gets every cycle the loop published, up to the last, then the end of stream.
 TEST(IgtlServer, CatchingUpBeforeClosingSendsTheLastCycles) {
   HubOnFeed h;
-  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8});
-  ASSERT_TRUE(server.ok()) << server.status().message();
-  IgtlClient client((*server)->port());
-  ASSERT_TRUE(client.connected());
-  ASSERT_TRUE(wait_until([&] { return (*server)->counters().clients_now == 1; }));
-  EXPECT_FALSE((*server)->catch_up(1, std::chrono::milliseconds(20))) << "no cycle published yet";
+  ServedClient s;
+  ASSERT_NO_FATAL_FAILURE(serve_one_client(h, &s));
+  IgtlServer* server = s.server.get();
+  IgtlClient& client = *s.client;
+  EXPECT_FALSE(server->catch_up(1, std::chrono::milliseconds(20))) << "no cycle published yet";
   constexpr int kCycles = 80;  // within the hub's history (100): nothing is skipped
   for (int c = 0; c < kCycles; ++c)
     h.feed.publish_record(record(std::uint64_t(c), TrackingState::kTrack, TrackingState::kTrack, 0.1, true).record,
                           true);
   const std::uint64_t seq = h.hub->catch_up(std::chrono::seconds(5));
   EXPECT_EQ(seq, std::uint64_t(kCycles));
-  EXPECT_TRUE((*server)->catch_up(seq, std::chrono::seconds(5)));
-  server->reset();  // closes at once, as a session's end destroys it
+  EXPECT_TRUE(server->catch_up(seq, std::chrono::seconds(5)));
+  s.server.reset();  // closes at once, as a session's end destroys it
   int transforms = 0;
   while (auto m = client.next(std::chrono::milliseconds(2000)))
     if (m->type == "TRANSFORM") ++transforms;
