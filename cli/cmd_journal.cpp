@@ -14,6 +14,8 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <cstring>
+#include <string>
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
@@ -28,16 +30,23 @@
 namespace lftrack::host::cli {
 namespace {
 
-const char* state_name(std::uint8_t s) {
-  return to_string(static_cast<TrackingState>(s));
+// A code's name, or "unknown N" for a code this build does not know (a newer build's journal, or
+// damage the record's checksum did not catch): never a bare "?".
+template <class Enum>
+std::string code_name(std::uint8_t code, int offset = 0) {
+  const char* name = to_string(static_cast<Enum>(code - offset));
+  return std::strcmp(name, "?") == 0 ? "unknown " + std::to_string(unsigned{code}) : std::string(name);
+}
+std::string state_name(std::uint8_t s) {
+  return code_name<TrackingState>(s);
 }
 // The event that changed the state in a cycle ("" when none).
-const char* event_name(std::uint8_t e) {
-  return e == 0 ? "" : to_string(static_cast<TrackingEvent>(e - 1));
+std::string event_name(std::uint8_t e) {
+  return e == 0 ? "" : code_name<TrackingEvent>(e, 1);
 }
 // The operator command the loop acted on in a cycle ("" when none).
-const char* operator_command_name(std::uint8_t c) {
-  return c == 0 ? "" : to_string(static_cast<OperatorCommand>(c - 1));
+std::string operator_command_name(std::uint8_t c) {
+  return c == 0 ? "" : code_name<OperatorCommand>(c, 1);
 }
 
 void print_csv(const std::vector<JournalRecord>& records) {
@@ -50,18 +59,17 @@ void print_csv(const std::vector<JournalRecord>& records) {
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
-                state_name(r.state), state_name(r.previous_state),
-                to_string(static_cast<GateDecision>(r.gate_decision)),
-                to_string(static_cast<GateReason>(r.gate_reason)));
+                state_name(r.state).c_str(), state_name(r.previous_state).c_str(),
+                code_name<GateDecision>(r.gate_decision).c_str(), code_name<GateReason>(r.gate_reason).c_str());
     for (double v : r.pose_delta) std::printf(",%.6g", v);
     std::printf(",%.6g,%.6g,%u,%.3f,%d", r.similarity[0], r.similarity[1], r.evaluations, r.registration_ms,
                 r.command_sent);
     for (double v : r.command) std::printf(",%.6g", v);
     std::printf(",%d,%d,%u,%u,%.4f,\"%s\"", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
-                r.true_residual_mm, event_name(r.event));
-    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\"\n", r.hold_id, operator_command_name(r.operator_command),
-                unsigned{r.operator_refused}, to_string(static_cast<OperatorRefusal>(r.operator_refusal)),
-                to_string(static_cast<BeamWithheld>(r.beam_withheld)));
+                r.true_residual_mm, event_name(r.event).c_str());
+    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\"\n", r.hold_id, operator_command_name(r.operator_command).c_str(),
+                unsigned{r.operator_refused}, code_name<OperatorRefusal>(r.operator_refusal).c_str(),
+                code_name<BeamWithheld>(r.beam_withheld).c_str());
   }
 }
 
@@ -72,8 +80,8 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"frame_sequence", {r.frame_sequence[0], r.frame_sequence[1]}},
                      {"state", state_name(r.state)},
                      {"previous_state", state_name(r.previous_state)},
-                     {"gate", to_string(static_cast<GateDecision>(r.gate_decision))},
-                     {"reason", to_string(static_cast<GateReason>(r.gate_reason))},
+                     {"gate", code_name<GateDecision>(r.gate_decision)},
+                     {"reason", code_name<GateReason>(r.gate_reason)},
                      {"pose_delta", r.pose_delta},
                      {"similarity", r.similarity},
                      {"evaluations", r.evaluations},
@@ -90,8 +98,8 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"hold_id", r.hold_id},
                      {"operator_command", operator_command_name(r.operator_command)},
                      {"operator_refused", r.operator_refused},
-                     {"operator_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))},
-                     {"beam_withheld", to_string(static_cast<BeamWithheld>(r.beam_withheld))}};
+                     {"operator_refusal", code_name<OperatorRefusal>(r.operator_refusal)},
+                     {"beam_withheld", code_name<BeamWithheld>(r.beam_withheld)}};
     std::printf("%s\n", j.dump().c_str());
   }
 }
@@ -156,9 +164,9 @@ Status export_dicom(const ExportOptions& o, const JournalContents& contents) {
     if (o.cycle >= 0 && r.cycle == static_cast<std::uint64_t>(o.cycle)) {
       if (!applied)
         return failed_precondition("cycle " + std::to_string(o.cycle) + ": its registration was not applied (gate " +
-                                   to_string(static_cast<GateDecision>(r.gate_decision)) + ", reason " +
-                                   to_string(static_cast<GateReason>(r.gate_reason)) + ", the cycle ended in " +
-                                   to_string(static_cast<TrackingState>(r.state)) +
+                                   code_name<GateDecision>(r.gate_decision) + ", reason " +
+                                   code_name<GateReason>(r.gate_reason) + ", the cycle ended in " +
+                                   state_name(r.state) +
                                    "); export a cycle the gate applied that ended in TRACK");
       chosen = &r;
     }
