@@ -27,10 +27,7 @@ Status CycleFeed::allocate(const drivers::FramePair& pair, const std::vector<tra
 }
 
 void CycleFeed::publish_record(const JournalRecord& record, bool registered) {
-  if (records_.push(FeedRecord{record, registered}))
-    queued_.fetch_add(1, std::memory_order_release);
-  else
-    dropped_.fetch_add(1, std::memory_order_relaxed);
+  if (!records_.push(FeedRecord{record, registered})) dropped_.fetch_add(1, std::memory_order_relaxed);
 }
 
 bool CycleFeed::images_due(std::int64_t cycle_start_ns) const {

@@ -79,7 +79,7 @@ class CycleFeed {
   std::uint64_t dropped_records() const { return dropped_.load(std::memory_order_relaxed); }
   // Records queued for the watcher since the start (not those dropped); once the watcher has
   // taken this many, it has every record published before this call.
-  std::uint64_t queued_records() const { return queued_.load(std::memory_order_acquire); }
+  std::uint64_t queued_records() const { return records_.pushed(); }
   std::int64_t image_period_ns() const { return image_period_ns_; }
 
  private:
@@ -87,7 +87,6 @@ class CycleFeed {
 
   SpscQueue<FeedRecord> records_;
   std::atomic<std::uint64_t> dropped_{0};
-  std::atomic<std::uint64_t> queued_{0};
   std::int64_t image_period_ns_;
   std::array<FeedImages, 3> slots_;
   int back_ = 0;                // the loop's slot

@@ -42,6 +42,8 @@ class SpscQueue {
     return true;
   }
   bool empty() const { return tail_.load(std::memory_order_acquire) == head_.load(std::memory_order_acquire); }
+  // Any thread: items pushed since construction (not those refused when full).
+  std::size_t pushed() const { return head_.load(std::memory_order_acquire); }
 
  private:
   std::vector<T> slots_;
