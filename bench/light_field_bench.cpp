@@ -55,8 +55,9 @@ const Setup& setup() {
 // (0: portable, 1: AVX2 gathers, 2: AVX2 runs, each blending 16 samples at every pixel's ray;
 // 3: the source image, portable; 4: the source image, AVX2, the renderer's default) at a pose off
 // the nominal one (a tracked patient a little away from the set-up). With `cold_cache`, 48 MiB
-// (more than the L3 cache) are written between renders, untimed.
-void render_light_field_drr(benchmark::State& state, int image, int kernel, bool cold_cache) {
+// (more than the L3 cache) are written between renders, untimed. turn_deg turns the pose further
+// about the view's axis.
+void render_light_field_drr(benchmark::State& state, int image, int kernel, bool cold_cache, double turn_deg = 0) {
   const Setup& s = setup();
   tracking::XrayView view = s.view;
   tracking::PixelWindow window = s.window;
@@ -80,6 +81,9 @@ void render_light_field_drr(benchmark::State& state, int image, int kernel, bool
   tracking::PoseDelta d;
   d.translation_mm = {1.2, -0.7, 0.9};
   d.rotation_rad = {0.01, -0.015, 0.008};
+  // A turn about the view's axis (from the source through the isocentre, the room's origin)
+  // turns the image's pixel rows across the field's (s, t) rows.
+  d.rotation_rad += tracking::deg_to_rad(turn_deg) * (-s.view.source_mm).normalized();
   const tracking::Pose pose = tracking::apply_delta(s.pose, d, Eigen::Vector3d::Zero());
   std::vector<unsigned char> evict(cold_cache ? std::size_t(48) << 20 : 0);
   for (auto _ : state) {
@@ -104,6 +108,18 @@ void BM_LightFieldDrr(benchmark::State& state) {
 BENCHMARK(BM_LightFieldDrr)
     ->ArgsProduct({{0, 1, 2}, {0, 1, 2, 3, 4}})
     ->ArgNames({"image", "kernel"})
+    ->Unit(benchmark::kMicrosecond);
+
+// The 256 x 256 image at poses turned further about the view's axis (Arg 1, degrees), with the
+// AVX2 per-ray kernel with runs or the source image (Arg 0: 2 or 4 as above): how a kernel's cost
+// follows the turn, which lays the pixel rows across the field's rows (`bench drr`'s poses turn
+// by up to the envelope's rotation about each axis).
+void BM_LightFieldDrrTurned(benchmark::State& state) {
+  render_light_field_drr(state, 2, int(state.range(0)), false, double(state.range(1)));
+}
+BENCHMARK(BM_LightFieldDrrTurned)
+    ->ArgsProduct({{2, 4}, {0, 1, 2, 4, 8}})
+    ->ArgNames({"kernel", "turn_deg"})
     ->Unit(benchmark::kMicrosecond);
 
 // The renderer's default on the 256 x 256 image as a registration meets it after the pose or the

@@ -13,6 +13,14 @@
 // take the gather path with the same arithmetic. 16-bit samples are converted to float as they
 // are loaded and scaled once at the end (the scale commutes with the interpolation).
 //
+// The source-image render (the renderer's default) reads the image the same way, in runs of its
+// rows, where a chunk's pixels lie in one or two image rows. A pose turned about the view's axis
+// tilts the pixel rows across the image's rows; then more chunks straddle two rows, take the
+// slower runs or gathers and mispredict the branch between them. From a share of such chunks on
+// (kPairsFromShareAcrossRows) the render reads a copy of the image in row pairs
+// (SourceImage::pairs) instead: a pixel's four neighbours are one 16-byte load, the same work
+// in every chunk however the rows tilt (BENCHMARKS.md, "Row pairs").
+//
 // The results equal the scalar kernel's up to float rounding (fused multiply-adds). Compiled for
 // AVX2 + FMA through function target attributes and chosen at run time, so the binary still runs
 // on any x86-64 CPU.
@@ -357,6 +365,32 @@ LFTRACK_AVX2 int render_avx2(const Samples& f, const LightFieldGeometry& g, cons
   return masked;
 }
 
+// An image cell index clamped into 0 .. top (top: the image's rows or columns - 2).
+LFTRACK_AVX2 inline __m256i clamp_cell(__m256i index, __m256i top) {
+  return _mm256_max_epi32(_mm256_min_epi32(index, top), _mm256_setzero_si256());
+}
+
+// A row whose rays are all inside (row_inside_field) in the image's coordinates: s - image.s0 =
+// (ns0 + ns1 c) / (dn0 + dn1 c) at column c, likewise t - image.t0 with nt. The same as the map's
+// s = base + gain q1, q1 = d.e1 / d.n, with base, gain and the image's origin folded into the
+// numerator once a row: two multiply-adds and four integer additions fewer a chunk, and no
+// field test.
+struct ImageRow {
+  __m256 dn0, dn1, ns0, ns1, nt0, nt1;
+};
+
+LFTRACK_AVX2 inline ImageRow image_row(const LightFieldGeometry& g, const RayMap& m, const SourceImage& image, int r) {
+  const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
+  const double dn0 = d_row.dot(g.axis), dn1 = m.d_col.dot(g.axis);
+  const double s_off = double(m.base[2]) - image.s0, t_off = double(m.base[3]) - image.t0;
+  const double ns0 = s_off * dn0 + double(m.gain[2]) * d_row.dot(g.e1);
+  const double ns1 = s_off * dn1 + double(m.gain[2]) * m.d_col.dot(g.e1);
+  const double nt0 = t_off * dn0 + double(m.gain[3]) * d_row.dot(g.e2);
+  const double nt1 = t_off * dn1 + double(m.gain[3]) * m.d_col.dot(g.e2);
+  return {_mm256_set1_ps(float(dn0)), _mm256_set1_ps(float(dn1)), _mm256_set1_ps(float(ns0)),
+          _mm256_set1_ps(float(ns1)), _mm256_set1_ps(float(nt0)), _mm256_set1_ps(float(nt1))};
+}
+
 // The common case first, in fewer steps: every lane inside, in one image row and within 6
 // samples (nearly nine chunks in ten of a 256 x 256 render). s and t share a lane as two 16-bit
 // halves, st = is << 16 | it (the caller keeps the image at most 32,768 samples a side, so is and
@@ -386,11 +420,6 @@ LFTRACK_AVX2 inline __m256 sample_one_row_narrow(const FloatSamples& f, std::siz
   l.dt = run.dt;
   l.dt_next = _mm256_add_epi32(run.dt, _mm256_set1_epi32(1));
   return run_cell<FloatSamples, false>(f, run.run0, image_cols, 0, l, ws, wt);
-}
-
-// An image cell index clamped into 0 .. top (top: the image's rows or columns - 2).
-LFTRACK_AVX2 inline __m256i clamp_cell(__m256i index, __m256i top) {
-  return _mm256_max_epi32(_mm256_min_epi32(index, top), _mm256_setzero_si256());
 }
 
 // A source-image chunk's value from its cells (is, it) in the image and weights: its pixels' (s, t)
@@ -428,27 +457,6 @@ LFTRACK_AVX2 inline __m256 sample_image_chunk(const FloatSamples& f, const Sourc
   return gathered_cell(f, _mm256_add_epi32(_mm256_mullo_epi32(is, v_cols), it), v_cols, ws, wt);
 }
 
-// A row whose rays are all inside (row_inside_field) in the image's coordinates: s - image.s0 =
-// (ns0 + ns1 c) / (dn0 + dn1 c) at column c, likewise t - image.t0 with nt. The same as the map's
-// s = base + gain q1, q1 = d.e1 / d.n, with base, gain and the image's origin folded into the
-// numerator once a row: two multiply-adds and four integer additions fewer a chunk, and no
-// field test.
-struct ImageRow {
-  __m256 dn0, dn1, ns0, ns1, nt0, nt1;
-};
-
-LFTRACK_AVX2 inline ImageRow image_row(const LightFieldGeometry& g, const RayMap& m, const SourceImage& image, int r) {
-  const Eigen::Vector3d d_row = m.d00 + m.d_row * r;
-  const double dn0 = d_row.dot(g.axis), dn1 = m.d_col.dot(g.axis);
-  const double s_off = double(m.base[2]) - image.s0, t_off = double(m.base[3]) - image.t0;
-  const double ns0 = s_off * dn0 + double(m.gain[2]) * d_row.dot(g.e1);
-  const double ns1 = s_off * dn1 + double(m.gain[2]) * m.d_col.dot(g.e1);
-  const double nt0 = t_off * dn0 + double(m.gain[3]) * d_row.dot(g.e2);
-  const double nt1 = t_off * dn1 + double(m.gain[3]) * m.d_col.dot(g.e2);
-  return {_mm256_set1_ps(float(dn0)), _mm256_set1_ps(float(dn1)), _mm256_set1_ps(float(ns0)),
-          _mm256_set1_ps(float(ns1)), _mm256_set1_ps(float(nt0)), _mm256_set1_ps(float(nt1))};
-}
-
 // A chunk's cells in the image as st = is << 16 | it (one_row_narrow_run), and its weights.
 struct ImageCells {
   __m256i st;
@@ -471,8 +479,8 @@ LFTRACK_AVX2 inline ImageCells image_cells(const ImageRow& row, __m256 cf, __m25
 // Software-pipelined by one chunk: the next chunk's cells and run test are computed before this
 // chunk's samples are read, so that the two chunks' chains of dependent steps overlap. Needs an
 // image of at most 32,768 samples a side (one_row_narrow_run).
-LFTRACK_AVX2 inline int render_inside_row(const FloatSamples& f, const SourceImage& image, const ImageRow& row,
-                                          int cols, float* dst, unsigned char* ok_row) {
+LFTRACK_AVX2 inline int render_inside_row_runs(const FloatSamples& f, const SourceImage& image,
+                                               const ImageRow& row, int cols, float* dst, unsigned char* ok_row) {
   struct Planned {
     ImageCells cells;
     OneRowRun run;
@@ -511,12 +519,12 @@ LFTRACK_AVX2 inline int render_inside_row(const FloatSamples& f, const SourceIma
   return whole;
 }
 
-// The source-image path (light_field_kernels.hpp): rows whose rays are all inside in the image's
-// own coordinates (render_inside_row), the others (and a row's last partial chunk) as the
-// per-ray kernels do, each ray tested against the field.
-LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
-                                   ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
-                                   int r_end) {
+// The source-image path with runs (light_field_kernels.hpp): rows whose rays are all inside in
+// the image's own coordinates (render_inside_row_runs), the others (and a row's last partial
+// chunk) as the per-ray kernels do, each ray tested against the field.
+LFTRACK_AVX2 int render_image_runs_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                                        int r_end) {
   const FloatSamples f{image.values};
   const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
   const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
@@ -529,7 +537,7 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     const bool inside = all_inside || row_inside_field(g, m, r, cols);
     const int c_first = cells_fit_16_bits && inside
-                            ? render_inside_row(f, image, image_row(g, m, image, r), cols, dst, ok_row)
+                            ? render_inside_row_runs(f, image, image_row(g, m, image, r), cols, dst, ok_row)
                             : 0;
     if (c_first == cols) continue;
     const RowRays row = row_rays(g, m, r, inside);
@@ -547,6 +555,121 @@ LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeo
   return masked;
 }
 
+// A source-image chunk's value from its cells (is, it), clamped into the image, and weights. The
+// image's row pairs (SourceImage::pairs) hold a pixel's four neighbours I(is, it), I(is + 1, it),
+// I(is, it + 1), I(is + 1, it + 1) in the 16 bytes from pair (is, it): one load a pixel, the
+// same work wherever the pixels fall, however the pose turns the pixel rows across the image's
+// rows. The eight loads are turned into four registers of eight pixels each by a 4 x 4
+// transpose in each 128-bit half.
+LFTRACK_AVX2 inline __m256 sample_pairs_chunk(const float* pairs, __m256i pair_cols, __m256i is, __m256i it, __m256 ws,
+                                              __m256 wt) {
+  // Float offsets of the pixels' pairs: 2 (is cols + it) < 2^31 (render_source_image_avx2's bound).
+  alignas(32) std::int32_t at[8];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(at),
+                     _mm256_slli_epi32(_mm256_add_epi32(_mm256_mullo_epi32(is, pair_cols), it), 1));
+  // Read back from memory: one store and eight loads, where GCC would otherwise extract each
+  // lane with vpextrd (two micro-ops each on Zen 3).
+  __asm__("" : "+m"(at));
+  const auto quad = [pairs](std::int32_t offset) LFTRACK_AVX2 { return _mm_loadu_ps(pairs + offset); };
+  // Pixel k in the low half, pixel k + 4 in the high half; each half (a, c, b, d): top left,
+  // bottom left, top right, bottom right.
+  const __m256 p04 = _mm256_insertf128_ps(_mm256_castps128_ps256(quad(at[0])), quad(at[4]), 1);
+  const __m256 p15 = _mm256_insertf128_ps(_mm256_castps128_ps256(quad(at[1])), quad(at[5]), 1);
+  const __m256 p26 = _mm256_insertf128_ps(_mm256_castps128_ps256(quad(at[2])), quad(at[6]), 1);
+  const __m256 p37 = _mm256_insertf128_ps(_mm256_castps128_ps256(quad(at[3])), quad(at[7]), 1);
+  const __m256 ac01 = _mm256_unpacklo_ps(p04, p15), bd01 = _mm256_unpackhi_ps(p04, p15);  // a0 a1 c0 c1 | a4 a5 c4 c5
+  const __m256 ac23 = _mm256_unpacklo_ps(p26, p37), bd23 = _mm256_unpackhi_ps(p26, p37);
+  const __m256 a = _mm256_shuffle_ps(ac01, ac23, _MM_SHUFFLE(1, 0, 1, 0));  // a0 a1 a2 a3 | a4 a5 a6 a7
+  const __m256 c = _mm256_shuffle_ps(ac01, ac23, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 b = _mm256_shuffle_ps(bd01, bd23, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 d = _mm256_shuffle_ps(bd01, bd23, _MM_SHUFFLE(3, 2, 3, 2));
+  return blend_st(a, b, c, d, ws, wt);
+}
+
+// A render's image in row pairs, in lanes: the pairs, its columns (pairs a row) and its cells' bounds.
+struct PairImage {
+  const float* pairs;
+  __m256i cols, top_s, top_t;
+};
+
+// Renders the whole chunks of a row whose rays are all inside; returns the first column left.
+LFTRACK_AVX2 inline int render_inside_row_pairs(const PairImage& image, const ImageRow& row, int cols, float* dst,
+                                                unsigned char* ok_row) {
+  const __m256 step = _mm256_set1_ps(8.0f);
+  const std::uint64_t all_inside = kMaskBytes.bytes[0xff];
+  const int whole = cols - cols % 8;
+  __m256 cf = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+  for (int c = 0; c < whole; c += 8, cf = _mm256_add_ps(cf, step)) {
+    const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), _mm256_fmadd_ps(row.dn1, cf, row.dn0));
+    const __m256 cs = _mm256_mul_ps(_mm256_fmadd_ps(row.ns1, cf, row.ns0), inv);
+    const __m256 ct = _mm256_mul_ps(_mm256_fmadd_ps(row.nt1, cf, row.nt0), inv);
+    // Cells clamped into the image, as the per-ray kernels clamp them, and the weights measured
+    // from the clamped cell (an inside pixel's cell lies in the image, source_image_box, so the
+    // clamps only act on rounding at the image's last row or column).
+    const __m256i is = clamp_cell(_mm256_cvttps_epi32(cs), image.top_s);
+    const __m256i it = clamp_cell(_mm256_cvttps_epi32(ct), image.top_t);
+    const __m256 ws = _mm256_sub_ps(cs, _mm256_cvtepi32_ps(is)), wt = _mm256_sub_ps(ct, _mm256_cvtepi32_ps(it));
+    _mm256_storeu_ps(dst + c, sample_pairs_chunk(image.pairs, image.cols, is, it, ws, wt));
+    if (ok_row) std::memcpy(ok_row + c, &all_inside, 8);
+  }
+  return whole;
+}
+
+// The source-image path with row pairs (light_field_kernels.hpp): rows whose rays are all inside
+// in the image's own coordinates (render_inside_row_pairs), the others (and a row's last partial chunk) as the
+// per-ray kernels do, each ray tested against the field.
+LFTRACK_AVX2 int render_image_pairs_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                                         ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                                         int r_end) {
+  const PairImage pairs{image.pairs, _mm256_set1_epi32(image.cols), _mm256_set1_epi32(image.rows - 2),
+                        _mm256_set1_epi32(image.cols - 2)};
+  const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
+  const MapLanes map(m);
+  const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);  // else one test a row
+  int masked = 0;
+  for (int r = r_begin; r < r_end; ++r) {
+    float* dst = out.row_ptr(r);
+    unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
+    const bool inside = all_inside || row_inside_field(g, m, r, cols);
+    const int c_first = inside ? render_inside_row_pairs(pairs, image_row(g, m, image, r), cols, dst, ok_row) : 0;
+    if (c_first == cols) continue;
+    const RowRays row = row_rays(g, m, r, inside);
+    for (int c = c_first; c < cols; c += 8) {
+      const ChunkRays k = chunk_rays(row, map, c, cols);
+      // Image indices, clamped into it (inside pixels are already; the others' values are masked).
+      const __m256i is = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), pairs.top_s);
+      const __m256i it = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), pairs.top_t);
+      const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(_mm256_add_epi32(is, s0)));
+      const __m256 wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(_mm256_add_epi32(it, t0)));
+      masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
+      store_chunk(k, sample_pairs_chunk(pairs.pairs, pairs.cols, is, it, ws, wt), dst + c,
+                  ok_row ? ok_row + c : nullptr);
+    }
+  }
+  return masked;
+}
+
+// Rows [i_begin, i_end) of the image's row pairs from its rows i and i + 1.
+LFTRACK_AVX2 void pair_rows(const SourceImage& image, int i_begin, int i_end) {
+  const std::size_t cols = std::size_t(image.cols);
+  for (int i = i_begin; i < i_end; ++i) {
+    const float* top = image.values + std::size_t(i) * cols;
+    const float* bottom = top + cols;
+    float* pair = image.pairs + 2 * std::size_t(i) * cols;
+    std::size_t j = 0;
+    for (; j + 8 <= cols; j += 8) {
+      const __m256 t = _mm256_loadu_ps(top + j), b = _mm256_loadu_ps(bottom + j);
+      const __m256 lo = _mm256_unpacklo_ps(t, b), hi = _mm256_unpackhi_ps(t, b);  // t0 b0 t1 b1 | t4 b4 t5 b5
+      _mm256_storeu_ps(pair + 2 * j, _mm256_permute2f128_ps(lo, hi, 0x20));
+      _mm256_storeu_ps(pair + 2 * j + 8, _mm256_permute2f128_ps(lo, hi, 0x31));
+    }
+    for (; j < cols; ++j) {
+      pair[2 * j] = top[j];
+      pair[2 * j + 1] = bottom[j];
+    }
+  }
+}
+
 }  // namespace
 
 int render_float_avx2(const float* samples, const LightFieldGeometry& g, const RayMap& m, ImageView<float> out,
@@ -562,8 +685,11 @@ int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFiel
 
 int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
                              ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
-  return render_image_avx2(image, g, m, out, valid, cols, r_begin, r_end);
+  return image.pairs ? render_image_pairs_avx2(image, g, m, out, valid, cols, r_begin, r_end)
+                     : render_image_runs_avx2(image, g, m, out, valid, cols, r_begin, r_end);
 }
+
+void pair_source_image_avx2(const SourceImage& image, int i_begin, int i_end) { pair_rows(image, i_begin, i_end); }
 
 #else
 
@@ -580,6 +706,7 @@ int render_source_image_avx2(const SourceImage&, const LightFieldGeometry&, cons
                              ImageView<unsigned char>, int, int, int) {
   return 0;
 }
+void pair_source_image_avx2(const SourceImage&, int, int) {}
 
 #endif
 

@@ -264,7 +264,9 @@ class LightFieldRenderer final : public DrrRenderer {
     avx2_runs_ = simd != SimdLevel::kAvx2Gathers;
     for (const auto& f : fields_) {
       const auto& size = f.field->geometry().size;
-      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) + SourceImage::kTailFloats);
+      // The image and, for the AVX2 render, room for its row pairs: three floats a sample.
+      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) * (use_avx2_ ? 3 : 1) +
+                                                    SourceImage::kTailFloats);
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
     if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
@@ -401,7 +403,13 @@ class LightFieldRenderer final : public DrrRenderer {
     // of its own for the render.
     thread_local std::vector<float> kept;
     std::vector<float> own;
-    const std::size_t needed = std::size_t(image.rows) * std::size_t(image.cols) + SourceImage::kTailFloats;
+    // The AVX2 render reads row pairs where the pose tilts the pixel rows across the image's
+    // rows, else runs (light_field_kernel_avx2.cpp).
+    const std::size_t samples = std::size_t(image.rows) * std::size_t(image.cols);
+    const bool paired = use_avx2_ && long(samples) < kMaxPairedImageSamples &&
+                        chunks_across_image_rows(g, m, window.rows, window.cols) >= kPairsFromShareAcrossRows;
+    const std::size_t image_floats = samples + SourceImage::kTailFloats;
+    const std::size_t needed = image_floats + (paired ? 2 * (samples - std::size_t(image.cols)) : 0);
     if (needed > kMaxImageReserve) {
       own.resize(needed);
       image.values = own.data();
@@ -409,6 +417,7 @@ class LightFieldRenderer final : public DrrRenderer {
       if (kept.size() < needed) kept.resize(std::max(needed, image_reserve_));
       image.values = kept.data();
     }
+    if (paired) image.pairs = image.values + image_floats;
     const auto blend = [&](int i0, int i1) {
       if (storage == LightFieldStorage::kFloat32)
         blend_source_image_float(field.float_samples(), g, m, image, i0, i1);
@@ -416,6 +425,7 @@ class LightFieldRenderer final : public DrrRenderer {
         blend_source_image_fixed16(field.fixed_samples(), float(field.header().fixed_scale), g, m, image, i0, i1);
     };
     std::atomic<int> masked{0};
+    const auto pair = [&](int i0, int i1) { pair_source_image_avx2(image, i0, i1); };
     const auto rows = [&](int r0, int r1) {
       const int n = use_avx2_ ? render_source_image_avx2(image, g, m, out, extras->valid, window.cols, r0, r1)
                               : render_source_image(image, g, m, out, extras->valid, window.cols, r0, r1);
@@ -423,9 +433,11 @@ class LightFieldRenderer final : public DrrRenderer {
     };
     if (pool_) {
       pool_->parallel_for(image.rows, 8, blend);
+      if (paired) pool_->parallel_for(image.rows - 1, 8, pair);
       pool_->parallel_for(window.rows, 8, rows);
     } else {
       blend(0, image.rows);
+      if (paired) pair(0, image.rows - 1);
       rows(0, window.rows);
     }
     extras->masked_pixels = masked.load();

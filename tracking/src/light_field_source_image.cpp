@@ -139,6 +139,16 @@ bool source_image_box(const LightFieldGeometry& g, const RayMap& m, int rows, in
   return true;
 }
 
+double chunks_across_image_rows(const LightFieldGeometry& g, const RayMap& m, int rows, int cols) {
+  if (rows < 1 || cols < 2) return 0;
+  const auto s_at = [&](int c) {
+    const Eigen::Vector3d d = m.d00 + m.d_row * double(rows / 2) + m.d_col * double(c);
+    return double(m.base[2]) + double(m.gain[2]) * (d.dot(g.e1) / d.dot(g.axis));
+  };
+  const double rows_a_pixel = std::abs(s_at(cols - 1) - s_at(0)) / double(cols - 1);
+  return std::isfinite(rows_a_pixel) ? std::min(1.0, 7 * rows_a_pixel) : 1.0;
+}
+
 LFTRACK_HOT_CLONES
 void blend_source_image_float(const float* samples, const LightFieldGeometry& g, const RayMap& m,
                               const SourceImage& image, int i_begin, int i_end) {
