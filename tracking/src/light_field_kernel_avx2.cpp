@@ -519,41 +519,18 @@ LFTRACK_AVX2 inline int render_inside_row_runs(const FloatSamples& f, const Sour
   return whole;
 }
 
-// The source-image path with runs (light_field_kernels.hpp): rows whose rays are all inside in
-// the image's own coordinates (render_inside_row_runs), the others (and a row's last partial
-// chunk) as the per-ray kernels do, each ray tested against the field.
-LFTRACK_AVX2 int render_image_runs_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
-                                        ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
-                                        int r_end) {
-  const FloatSamples f{image.values};
-  const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
-  const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
-  const MapLanes map(m);
-  const bool cells_fit_16_bits = image.rows <= 32768 && image.cols <= 32768;  // render_inside_row's packed cells
-  const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);  // else one test a row
-  int masked = 0;
-  for (int r = r_begin; r < r_end; ++r) {
-    float* dst = out.row_ptr(r);
-    unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
-    const bool inside = all_inside || row_inside_field(g, m, r, cols);
-    const int c_first = cells_fit_16_bits && inside
-                            ? render_inside_row_runs(f, image, image_row(g, m, image, r), cols, dst, ok_row)
-                            : 0;
-    if (c_first == cols) continue;
-    const RowRays row = row_rays(g, m, r, inside);
-    for (int c = c_first; c < cols; c += 8) {
-      const ChunkRays k = chunk_rays(row, map, c, cols);
-      // Image indices, clamped into it (inside pixels are already).
-      const __m256i is = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), top_s);
-      const __m256i it = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), top_t);
-      const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(_mm256_add_epi32(is, s0)));
-      const __m256 wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(_mm256_add_epi32(it, t0)));
-      masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
-      store_chunk(k, sample_image_chunk(f, image, is, it, ws, wt, k.inside_bits), dst + c, ok_row ? ok_row + c : nullptr);
-    }
+// Reads the image in runs of its rows: render_inside_row_runs and sample_image_chunk.
+struct RunsReader {
+  const SourceImage& image;
+  FloatSamples f;
+  bool cells_fit_16_bits;  // render_inside_row_runs's packed cells
+  LFTRACK_AVX2 inline int inside_row(const ImageRow& row, int cols, float* dst, unsigned char* ok_row) const {
+    return cells_fit_16_bits ? render_inside_row_runs(f, image, row, cols, dst, ok_row) : 0;
   }
-  return masked;
-}
+  LFTRACK_AVX2 inline __m256 chunk(__m256i is, __m256i it, __m256 ws, __m256 wt, int inside_bits) const {
+    return sample_image_chunk(f, image, is, it, ws, wt, inside_bits);
+  }
+};
 
 // A source-image chunk's value from its cells (is, it), clamped into the image, and weights. The
 // image's row pairs (SourceImage::pairs) hold a pixel's four neighbours I(is, it), I(is + 1, it),
@@ -615,15 +592,26 @@ LFTRACK_AVX2 inline int render_inside_row_pairs(const PairImage& image, const Im
   return whole;
 }
 
-// The source-image path with row pairs (light_field_kernels.hpp): rows whose rays are all inside
-// in the image's own coordinates (render_inside_row_pairs), the others (and a row's last partial chunk) as the
-// per-ray kernels do, each ray tested against the field.
-LFTRACK_AVX2 int render_image_pairs_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
-                                         ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
-                                         int r_end) {
-  const PairImage pairs{image.pairs, _mm256_set1_epi32(image.cols), _mm256_set1_epi32(image.rows - 2),
-                        _mm256_set1_epi32(image.cols - 2)};
+// Reads the image's row pairs: render_inside_row_pairs and sample_pairs_chunk.
+struct PairsReader {
+  PairImage pairs;
+  LFTRACK_AVX2 inline int inside_row(const ImageRow& row, int cols, float* dst, unsigned char* ok_row) const {
+    return render_inside_row_pairs(pairs, row, cols, dst, ok_row);
+  }
+  LFTRACK_AVX2 inline __m256 chunk(__m256i is, __m256i it, __m256 ws, __m256 wt, int) const {
+    return sample_pairs_chunk(pairs.pairs, pairs.cols, is, it, ws, wt);
+  }
+};
+
+// The source-image path (light_field_kernels.hpp), reading the image as `Reader` does: rows
+// whose rays are all inside in the image's own coordinates (Reader::inside_row), the others (and
+// a row's last partial chunk) as the per-ray kernels do, each ray tested against the field.
+template <class Reader>
+LFTRACK_AVX2 int render_image_avx2(const Reader& reader, const SourceImage& image, const LightFieldGeometry& g,
+                                   const RayMap& m, ImageView<float> out, ImageView<unsigned char> valid, int cols,
+                                   int r_begin, int r_end) {
   const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
+  const __m256i top_s = _mm256_set1_epi32(image.rows - 2), top_t = _mm256_set1_epi32(image.cols - 2);
   const MapLanes map(m);
   const bool all_inside = rows_inside_field(g, m, r_begin, r_end - 1, cols);  // else one test a row
   int masked = 0;
@@ -631,22 +619,34 @@ LFTRACK_AVX2 int render_image_pairs_avx2(const SourceImage& image, const LightFi
     float* dst = out.row_ptr(r);
     unsigned char* ok_row = valid.data ? valid.row_ptr(r) : nullptr;
     const bool inside = all_inside || row_inside_field(g, m, r, cols);
-    const int c_first = inside ? render_inside_row_pairs(pairs, image_row(g, m, image, r), cols, dst, ok_row) : 0;
+    const int c_first = inside ? reader.inside_row(image_row(g, m, image, r), cols, dst, ok_row) : 0;
     if (c_first == cols) continue;
     const RowRays row = row_rays(g, m, r, inside);
     for (int c = c_first; c < cols; c += 8) {
       const ChunkRays k = chunk_rays(row, map, c, cols);
       // Image indices, clamped into it (inside pixels are already; the others' values are masked).
-      const __m256i is = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), pairs.top_s);
-      const __m256i it = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), pairs.top_t);
+      const __m256i is = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.cs), s0), top_s);
+      const __m256i it = clamp_cell(_mm256_sub_epi32(_mm256_cvttps_epi32(k.ct), t0), top_t);
       const __m256 ws = _mm256_sub_ps(k.cs, _mm256_cvtepi32_ps(_mm256_add_epi32(is, s0)));
       const __m256 wt = _mm256_sub_ps(k.ct, _mm256_cvtepi32_ps(_mm256_add_epi32(it, t0)));
       masked += k.lanes - __builtin_popcount(static_cast<unsigned>(k.inside_bits));
-      store_chunk(k, sample_pairs_chunk(pairs.pairs, pairs.cols, is, it, ws, wt), dst + c,
-                  ok_row ? ok_row + c : nullptr);
+      store_chunk(k, reader.chunk(is, it, ws, wt, k.inside_bits), dst + c, ok_row ? ok_row + c : nullptr);
     }
   }
   return masked;
+}
+
+// The source-image path: the image's row pairs where it has them, else runs of its rows.
+LFTRACK_AVX2 int render_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                                   ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                                   int r_end) {
+  if (image.pairs) {
+    const PairsReader pairs{{image.pairs, _mm256_set1_epi32(image.cols), _mm256_set1_epi32(image.rows - 2),
+                             _mm256_set1_epi32(image.cols - 2)}};
+    return render_image_avx2(pairs, image, g, m, out, valid, cols, r_begin, r_end);
+  }
+  const RunsReader runs{image, FloatSamples{image.values}, image.rows <= 32768 && image.cols <= 32768};
+  return render_image_avx2(runs, image, g, m, out, valid, cols, r_begin, r_end);
 }
 
 // Rows [i_begin, i_end) of the image's row pairs from its rows i and i + 1.
@@ -685,8 +685,7 @@ int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFiel
 
 int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
                              ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
-  return image.pairs ? render_image_pairs_avx2(image, g, m, out, valid, cols, r_begin, r_end)
-                     : render_image_runs_avx2(image, g, m, out, valid, cols, r_begin, r_end);
+  return render_image_avx2(image, g, m, out, valid, cols, r_begin, r_end);
 }
 
 void pair_source_image_avx2(const SourceImage& image, int i_begin, int i_end) { pair_rows(image, i_begin, i_end); }
