@@ -1,4 +1,4 @@
-// The source-image render's two AVX2 ways of reading the image (tracking/src/light_field_kernel_avx2.cpp,
+// The source-image render's two AVX2 ways of reading the image (tracking/src/light_field_source_image_avx2.cpp,
 // private to the renderer): runs of its rows, and its copy in row pairs. Both must give the
 // portable render's image, and the same image as each other to the bit, at every tilt of the
 // pixel rows across the image's rows; the share that chooses between them

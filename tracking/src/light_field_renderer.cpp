@@ -404,7 +404,7 @@ class LightFieldRenderer final : public DrrRenderer {
     thread_local std::vector<float> kept;
     std::vector<float> own;
     // The AVX2 render reads row pairs where the pose tilts the pixel rows across the image's
-    // rows, else runs (light_field_kernel_avx2.cpp).
+    // rows, else runs (light_field_source_image_avx2.cpp).
     const std::size_t samples = std::size_t(image.rows) * std::size_t(image.cols);
     const bool paired = use_avx2_ && long(samples) < kMaxPairedImageSamples &&
                         chunks_across_image_rows(g, m, window.rows, window.cols) >= kPairsFromShareAcrossRows;
