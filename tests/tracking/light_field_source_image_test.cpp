@@ -1,13 +1,14 @@
-// The source-image render's two AVX2 ways of reading the image (tracking/src/light_field_source_image_avx2.cpp,
-// private to the renderer): runs of its rows, and its copy in row pairs. Both must give the
-// portable render's image, and the same image as each other to the bit, at every tilt of the
-// pixel rows across the image's rows; the share that chooses between them
-// (chunks_across_image_rows) must follow the tilt.
+// The source image's row pairs (tracking/src/light_field_source_image*.cpp, private to the
+// renderer): blended straight from the field, they must hold the same floats as the image the
+// portable render reads, each sample beside the one below it; and the AVX2 render from them must
+// give the portable render's image at every tilt of the pixel rows across the image's rows, with
+// rays inside and outside the field, rows of every length.
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "../../tracking/src/light_field_kernels.hpp"
@@ -42,88 +43,184 @@ Case make_case(double spread, double tilt, int rows, int cols) {
 }
 
 // The image's values: smooth and different in every sample, so that a neighbour read from the
-// wrong row or column shows.
-void fill(SourceImage* image) {
+// wrong row or column shows; and its row pairs, made here from them.
+void fill(SourceImage* image, std::vector<float>* values, std::vector<float>* pairs) {
+  const std::size_t cols = std::size_t(image->cols);
+  values->assign(std::size_t(image->rows) * cols, 0.0f);
+  pairs->assign(2 * std::size_t(image->rows - 1) * cols, 0.0f);
   for (int i = 0; i < image->rows; ++i)
     for (int j = 0; j < image->cols; ++j)
-      image->values[std::size_t(i) * std::size_t(image->cols) + std::size_t(j)] =
+      (*values)[std::size_t(i) * cols + std::size_t(j)] =
           float(1 + 0.37 * i + 0.011 * j + 0.2 * std::sin(0.3 * i) * std::cos(0.17 * j));
-}
-
-TEST(SourceImageRowsAcross, FollowsTheTiltOfThePixelRows) {
-  // 180 samples over 256 pixels: 0.7 image rows a pixel at a right angle.
-  const Case straight = make_case(180, 0, 256, 256);
-  EXPECT_NEAR(chunks_across_image_rows(straight.g, straight.m, 256, 256), 0, 1e-9);
-  double before = -1;
-  for (double deg : {0.5, 1.0, 2.0, 4.0, 8.0}) {
-    const Case k = make_case(180, deg * M_PI / 180, 256, 256);
-    const double share = chunks_across_image_rows(k.g, k.m, 256, 256);
-    // Seven steps of 180 / 256 samples, tilted: 7 x 180 / 256 x sin(tilt) rows.
-    EXPECT_NEAR(share, std::min(1.0, 7 * 180.0 / 256 * std::sin(deg * M_PI / 180)), 1e-6) << deg;
-    EXPECT_GT(share, before) << deg;
-    before = share;
+  for (std::size_t p = 0; p + cols < values->size(); ++p) {
+    (*pairs)[2 * p] = (*values)[p];
+    (*pairs)[2 * p + 1] = (*values)[p + cols];
   }
-  const Case steep = make_case(180, 1.2, 256, 256);
-  EXPECT_EQ(chunks_across_image_rows(steep.g, steep.m, 256, 256), 1.0);
-  Case broken = make_case(180, 0.1, 256, 256);
-  broken.m.d00 = Eigen::Vector3d(NAN, 0, 1);
-  EXPECT_EQ(chunks_across_image_rows(broken.g, broken.m, 256, 256), 1.0) << "a map without numbers reads pairs";
-  EXPECT_EQ(chunks_across_image_rows(broken.g, broken.m, 256, 1), 0.0) << "a single column has no chunk across";
+  image->values = values->data();
+  image->pairs = pairs->data();
 }
 
-TEST(SourceImagePairs, HoldEachSampleAndTheOneBelowIt) {
-  if (!light_field_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 + FMA";
-  for (int cols : {2, 7, 8, 11, 24}) {
-    SourceImage image;
-    image.rows = 5;
-    image.cols = cols;
-    std::vector<float> values(std::size_t(image.rows * cols) + SourceImage::kTailFloats);
-    std::vector<float> pairs(std::size_t(2 * (image.rows - 1) * cols), -1.0f);
-    image.values = values.data();
-    image.pairs = pairs.data();
-    fill(&image);
-    pair_source_image_avx2(image, 0, image.rows - 1);
-    for (int i = 0; i + 1 < image.rows; ++i)
-      for (int j = 0; j < cols; ++j) {
-        const std::size_t at = 2 * (std::size_t(i) * std::size_t(cols) + std::size_t(j));
-        ASSERT_EQ(pairs[at], values[std::size_t(i * cols + j)]) << cols << " " << i << " " << j;
-        ASSERT_EQ(pairs[at + 1], values[std::size_t((i + 1) * cols + j)]) << cols << " " << i << " " << j;
-      }
-  }
-}
-
-TEST(SourceImagePairs, RunsAndPairsRenderThePortableImageAtEveryTilt) {
-  if (!light_field_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 + FMA";
-  const int rows = 61, cols = 77;  // a last partial chunk in every row
-  int read_as_pairs = 0, read_as_runs = 0;
-  for (int step = -40; step <= 40; ++step) {
-    const double tilt = 0.5 * step * M_PI / 180;
-    const Case k = make_case(60, tilt, rows, cols);
-    SourceImage image;
-    ASSERT_TRUE(source_image_box(k.g, k.m, rows, cols, 1L << 20, &image)) << step;
-    const std::size_t samples = std::size_t(image.rows) * std::size_t(image.cols);
-    std::vector<float> values(samples + SourceImage::kTailFloats), pairs(2 * samples);
-    image.values = values.data();
-    fill(&image);
-    (chunks_across_image_rows(k.g, k.m, rows, cols) >= kPairsFromShareAcrossRows ? read_as_pairs : read_as_runs)++;
-
-    Image<float> portable(rows, cols), runs(rows, cols), paired(rows, cols);
-    Image<unsigned char> valid(rows, cols);
-    ASSERT_EQ(render_source_image(image, k.g, k.m, portable.view(), valid.view(), cols, 0, rows), 0) << step;
-    ASSERT_EQ(render_source_image_avx2(image, k.g, k.m, runs.view(), valid.view(), cols, 0, rows), 0) << step;
-    image.pairs = pairs.data();
-    pair_source_image_avx2(image, 0, image.rows - 1);
-    ASSERT_EQ(render_source_image_avx2(image, k.g, k.m, paired.view(), valid.view(), cols, 0, rows), 0) << step;
-    for (std::size_t p = 0; p < portable.pixels().size(); ++p) {
-      const float want = portable.pixels()[p];
-      ASSERT_NEAR(runs.pixels()[p], want, 1e-5f * (1 + std::abs(want))) << "runs, tilt step " << step << " pixel " << p;
-      // The same blend of the same four samples: the same float.
-      ASSERT_EQ(paired.pixels()[p], runs.pixels()[p]) << "pairs against runs, tilt step " << step << " pixel " << p;
+// Renders the window both ways and compares them pixel by pixel: values to float rounding, the
+// mask and the masked count exactly. `label` names the case in failures.
+void expect_same_render(const SourceImage& image, const Case& k, int rows, int cols, bool with_mask,
+                        const std::string& label) {
+  Image<float> portable(rows, cols), vectorised(rows, cols);
+  Image<unsigned char> portable_ok(rows, cols), vectorised_ok(rows, cols);
+  ImageView<unsigned char> none;
+  const int masked = render_source_image(image, k.g, k.m, portable.view(), portable_ok.view(), cols, 0, rows);
+  // In two bands, as the renderer's threads render them.
+  const int split = rows / 3;
+  const int masked_avx2 =
+      render_source_image_avx2(image, k.g, k.m, vectorised.view(), with_mask ? vectorised_ok.view() : none, cols, 0,
+                               split) +
+      render_source_image_avx2(image, k.g, k.m, vectorised.view(), with_mask ? vectorised_ok.view() : none, cols,
+                               split, rows);
+  ASSERT_EQ(masked_avx2, masked) << label;
+  for (std::size_t p = 0; p < portable.pixels().size(); ++p) {
+    const float want = portable.pixels()[p];
+    ASSERT_NEAR(vectorised.pixels()[p], want, 1e-5f * (1 + std::abs(want))) << label << ", pixel " << p;
+    if (with_mask) {
+      ASSERT_EQ(vectorised_ok.pixels()[p], portable_ok.pixels()[p]) << label << ", pixel " << p;
     }
   }
-  // The sweep spans both of the renderer's choices.
-  EXPECT_GT(read_as_runs, 0);
-  EXPECT_GT(read_as_pairs, 0);
+}
+
+TEST(SourceImagePairs, RenderThePortableImageAtEveryTilt) {
+  if (!light_field_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 + FMA";
+  // Rows of 77 (four chunks of sixteen and a partial chunk), 16 (one step) and 8 (none): every
+  // row's last columns take the chunk-at-a-time path.
+  const int shapes[][2] = {{61, 77}, {23, 16}, {9, 8}};
+  for (const auto& shape : shapes) {
+    const int rows = shape[0], cols = shape[1];
+    for (int step = -40; step <= 40; ++step) {
+      const double tilt = 0.5 * step * M_PI / 180;
+      const Case k = make_case(60, tilt, rows, cols);
+      SourceImage image;
+      ASSERT_TRUE(source_image_box(k.g, k.m, rows, cols, 1L << 20, &image)) << step;
+      std::vector<float> values, pairs;
+      fill(&image, &values, &pairs);
+      const std::string label = std::to_string(rows) + " x " + std::to_string(cols) + ", tilt step " +
+                                std::to_string(step);
+      expect_same_render(image, k, rows, cols, step % 2 == 0, label);
+      if (::testing::Test::HasFatalFailure()) return;
+    }
+  }
+}
+
+TEST(SourceImagePairs, RenderThePortableImageWhereRaysLeaveTheField) {
+  if (!light_field_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 + FMA";
+  // 400 samples over a field of 256: the window's outer pixels miss it and are masked, rows
+  // partly inside take the per-ray path, and the box is clamped to the field.
+  const int rows = 70, cols = 90;
+  for (double deg : {0.0, 3.0, 17.0}) {
+    const Case k = make_case(400, deg * M_PI / 180, rows, cols);
+    SourceImage image;
+    ASSERT_TRUE(source_image_box(k.g, k.m, rows, cols, 1L << 20, &image)) << deg;
+    ASSERT_EQ(image.rows, 256) << "the box is clamped to the field";
+    std::vector<float> values, pairs;
+    fill(&image, &values, &pairs);
+    Image<float> out(rows, cols);
+    Image<unsigned char> ok(rows, cols);
+    const int masked = render_source_image(image, k.g, k.m, out.view(), ok.view(), cols, 0, rows);
+    EXPECT_GT(masked, 0) << deg;
+    EXPECT_LT(masked, rows * cols / 2) << deg;
+    expect_same_render(image, k, rows, cols, true, "turn " + std::to_string(deg));
+  }
+}
+
+// A small field whose samples differ everywhere, and a map whose (u, v) along the image stays
+// inside one u cell but crosses two v cells (and the field's v = 0 edge) along a row of more than
+// two blocks of columns.
+struct BlendCase {
+  LightFieldGeometry g;
+  RayMap m;
+  std::vector<float> samples;
+  std::vector<std::uint16_t> codes;
+};
+
+BlendCase make_blend_case() {
+  BlendCase k;
+  k.g.size = {4, 5, 14, 600};
+  const float base[4] = {1.3f, 0.9f, 7.0f, 300.0f}, gain[4] = {0.01f, 0.005f, 1.0f, 1.0f};
+  for (int a = 0; a < 4; ++a) {
+    k.m.base[a] = base[a];
+    k.m.gain[a] = gain[a];
+    k.m.limit[a] = float(k.g.size[a] - 1);
+  }
+  const std::size_t n = std::size_t(k.g.size[0]) * k.g.size[1] * k.g.size[2] * k.g.size[3];
+  k.samples.resize(n);
+  k.codes.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    k.codes[i] = std::uint16_t((i * 2654435761u) >> 17);
+    k.samples[i] = float(k.codes[i]) * 1e-3f;
+  }
+  return k;
+}
+
+TEST(SourceImagePairs, BlendedFromTheFieldHoldEachSampleAndTheOneBelowIt) {
+  const BlendCase k = make_blend_case();
+  for (int cols : {2, 7, 255, 256, 257, 520}) {
+    for (bool fixed16 : {false, true}) {
+      SourceImage image;
+      image.s0 = 2;
+      image.t0 = 3;
+      image.rows = 9;
+      image.cols = cols;
+      std::vector<float> values(std::size_t(image.rows * cols), -1.0f);
+      std::vector<float> pairs(std::size_t(2 * (image.rows - 1) * cols), -1.0f);
+      image.values = values.data();
+      image.pairs = pairs.data();
+      // The image in one piece; its pairs in two, as two threads blend them.
+      if (fixed16) {
+        blend_source_image_fixed16(k.codes.data(), 1e-3f, k.g, k.m, image, 0, image.rows);
+        blend_source_image_pairs_fixed16(k.codes.data(), 1e-3f, k.g, k.m, image, 0, 3);
+        blend_source_image_pairs_fixed16(k.codes.data(), 1e-3f, k.g, k.m, image, 3, image.rows - 1);
+      } else {
+        blend_source_image_float(k.samples.data(), k.g, k.m, image, 0, image.rows);
+        blend_source_image_pairs_float(k.samples.data(), k.g, k.m, image, 0, 3);
+        blend_source_image_pairs_float(k.samples.data(), k.g, k.m, image, 3, image.rows - 1);
+      }
+      for (int i = 0; i + 1 < image.rows; ++i)
+        for (int j = 0; j < cols; ++j) {
+          const std::size_t at = 2 * (std::size_t(i) * std::size_t(cols) + std::size_t(j));
+          const float top = values[std::size_t(i * cols + j)], bottom = values[std::size_t((i + 1) * cols + j)];
+          ASSERT_GE(top, 0.0f) << "every sample blended: " << cols << " " << i << " " << j;
+          ASSERT_EQ(pairs[at], top) << cols << " " << fixed16 << " " << i << " " << j;
+          ASSERT_EQ(pairs[at + 1], bottom) << cols << " " << fixed16 << " " << i << " " << j;
+        }
+    }
+  }
+}
+
+TEST(SourceImagePairs, BlendTheFieldAtEachSamplesOwnUv) {
+  // The image against the bilinear (u, v) blend written out here: u = base_u + (s - base_s)
+  // gain_u / gain_s, likewise v with t, clamped to the field.
+  const BlendCase k = make_blend_case();
+  SourceImage image;
+  image.s0 = 2;
+  image.t0 = 3;
+  image.rows = 4;
+  image.cols = 520;
+  std::vector<float> values(std::size_t(image.rows * image.cols));
+  image.values = values.data();
+  blend_source_image_float(k.samples.data(), k.g, k.m, image, 0, image.rows);
+  const auto& size = k.g.size;
+  const auto sample = [&](int iu, int iv, int s, int t) {
+    return double(k.samples[((std::size_t(iu) * size[1] + std::size_t(iv)) * size[2] + std::size_t(s)) * size[3] +
+                            std::size_t(t)]);
+  };
+  for (int i = 0; i < image.rows; ++i)
+    for (int j = 0; j < image.cols; ++j) {
+      const int s = image.s0 + i, t = image.t0 + j;
+      const double u = std::clamp(1.3 + (s - 7.0) * 0.01, 0.0, size[0] - 1.0);
+      const double v = std::clamp(0.9 + (t - 300.0) * 0.005, 0.0, size[1] - 1.0);
+      const int iu = std::min(int(u), size[0] - 2), iv = std::min(int(v), size[1] - 2);
+      const double wu = u - iu, wv = v - iv;
+      const double low = sample(iu, iv, s, t) * (1 - wv) + sample(iu, iv + 1, s, t) * wv;
+      const double high = sample(iu + 1, iv, s, t) * (1 - wv) + sample(iu + 1, iv + 1, s, t) * wv;
+      const double want = low * (1 - wu) + high * wu;
+      ASSERT_NEAR(values[std::size_t(i * image.cols + j)], want, 1e-4 * (1 + std::abs(want))) << i << " " << j;
+    }
 }
 
 }  // namespace

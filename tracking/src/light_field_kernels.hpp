@@ -42,16 +42,13 @@ bool light_field_avx2_available();
 // plane (the nominal pose), and a few thousandths of the difference between neighbouring (u, v)
 // samples at the envelope's edge.
 struct SourceImage {
-  // rows x cols, row-major: sample (s0 + i, t0 + j) at i * cols + j; then kTailFloats more that
-  // may be read but are never used, so that the AVX2 kernel's runs of 8 or 16 samples from any
-  // sample of the last row stay inside the buffer (without them the last 16 columns of every
-  // row fell back to gathers: 9 % of a 256 x 256 render's chunks).
-  static constexpr std::size_t kTailFloats = 16;
+  // The image as the portable render reads it: rows x cols, row-major, sample (s0 + i, t0 + j)
+  // at i * cols + j.
   float* values = nullptr;
-  // Where the AVX2 render reads row pairs instead of runs (chunks_across_image_rows), its copy
-  // of the image in row pairs: (rows - 1) x cols pairs, row-major, pair (i, j) = the samples
-  // (i, j) and (i + 1, j) at 2 (i cols + j). A pixel's four (s, t) neighbours are then the 16
-  // bytes from its cell's pair. Null: the render reads runs.
+  // The image as the AVX2 render reads it, in row pairs: (rows - 1) x cols pairs, row-major,
+  // pair (i, j) = the samples (i, j) and (i + 1, j) at 2 (i cols + j). A pixel's four (s, t)
+  // neighbours are then the 16 bytes from its cell's pair, one load a pixel wherever the pose
+  // lays the pixel rows across the image's rows.
   float* pairs = nullptr;
   int s0 = 0, t0 = 0, rows = 0, cols = 0;
 };
@@ -62,36 +59,30 @@ struct SourceImage {
 // altogether (the per-ray kernels mask them), or the box holds more than max_samples samples.
 bool source_image_box(const LightFieldGeometry& g, const RayMap& m, int rows, int cols, long max_samples,
                       SourceImage* box);
-// Fills rows [i_begin, i_end) of the image (its values must hold rows x cols + kTailFloats floats).
+// The largest box the renderer blends (rows x cols): the AVX2 render's pair offsets, 2 (i cols +
+// j), fit 31 bits. A window that would need more renders per ray.
+inline constexpr long kMaxSourceImageSamples = (1L << 30) - 1;
+// Fills rows [i_begin, i_end) of the image's values (rows x cols floats).
 void blend_source_image_float(const float* samples, const LightFieldGeometry& g, const RayMap& m,
                               const SourceImage& image, int i_begin, int i_end);
 void blend_source_image_fixed16(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
                                 const SourceImage& image, int i_begin, int i_end);
-// Renders rows [r_begin, r_end) of the window from the image, bilinearly in (s, t): the per-ray
-// kernels' mask (each pixel's own ray tested against the field) and pixel layout. Returns the
-// number of masked pixels. The AVX2 form equals the scalar one up to float rounding.
+// Fills pair rows [i_begin, i_end) (at most rows - 1) of the image's pairs (2 (rows - 1) cols
+// floats), blending image rows i_begin .. i_end once each: the same floats as the values above,
+// without the image itself.
+void blend_source_image_pairs_float(const float* samples, const LightFieldGeometry& g, const RayMap& m,
+                                    const SourceImage& image, int i_begin, int i_end);
+void blend_source_image_pairs_fixed16(const std::uint16_t* codes, float scale, const LightFieldGeometry& g,
+                                      const RayMap& m, const SourceImage& image, int i_begin, int i_end);
+// Renders rows [r_begin, r_end) of the window from the image's values, bilinearly in (s, t):
+// the per-ray kernels' mask (each pixel's own ray tested against the field) and pixel layout.
+// Returns the number of masked pixels.
 int render_source_image(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
                         ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
-// The AVX2 form reads the image's row pairs where it has them (pair_source_image_avx2, all of
-// them filled first; then rows x cols < kMaxPairedImageSamples), else runs of the image's rows
-// (at most 32,768 samples a side, or gathers), and needs light_field_avx2_available().
+// The same from the image's pairs, on AVX2 (light_field_avx2_available(); rows x cols at most
+// kMaxSourceImageSamples): equal to the portable render up to float rounding.
 int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
                              ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end);
-// Fills the image's row pairs [i_begin, i_end) (at most rows - 1) from its rows (blended first);
-// image.pairs must hold 2 (rows - 1) cols floats.
-void pair_source_image_avx2(const SourceImage& image, int i_begin, int i_end);
-// The largest image (rows x cols) render_source_image_avx2 reads in pairs: its pairs' float
-// offsets fit 31 bits.
-inline constexpr long kMaxPairedImageSamples = 1L << 30;
-// The share of a window's chunks of eight neighbouring pixels of a row whose (s, t) cells lie in
-// two image rows or more (0 .. 1), judged along the window's middle row: 7 times the rows its
-// cells cross a pixel. A pose turned about the view's axis tilts the pixel rows across the
-// image's rows and raises it; the runs are fast only where it is small.
-double chunks_across_image_rows(const LightFieldGeometry& g, const RayMap& m, int rows, int cols);
-// From this share on, the AVX2 render reads row pairs instead of runs: measured on a 256 x 256
-// render, the runs were as fast or faster at shares of 0 and 0.1, the pairs faster from 0.3
-// (BENCHMARKS.md, "Row pairs").
-inline constexpr double kPairsFromShareAcrossRows = 0.2;
 
 // Float storage, 8 pixels at a time in AVX2 lanes, reading runs of samples where eight pixels
 // share their (u, v) cells (with `runs`; otherwise, and where they do not, gathering them); the

@@ -264,9 +264,8 @@ class LightFieldRenderer final : public DrrRenderer {
     avx2_runs_ = simd != SimdLevel::kAvx2Gathers;
     for (const auto& f : fields_) {
       const auto& size = f.field->geometry().size;
-      // The image and, for the AVX2 render, room for its row pairs: three floats a sample.
-      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) * (use_avx2_ ? 3 : 1) +
-                                                    SourceImage::kTailFloats);
+      // The image, or for the AVX2 render its row pairs: two floats a sample.
+      image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) * (use_avx2_ ? 2 : 1));
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
     if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
@@ -395,7 +394,7 @@ class LightFieldRenderer final : public DrrRenderer {
     // A window reads about one (s, t) sample a pixel, or fewer; a box far larger means pixels far
     // coarser than the samples (without an averaged copy), where blending it all would cost more
     // than it saves.
-    const long max_samples = 4L * window.rows * window.cols + 4096;
+    const long max_samples = std::min(4L * window.rows * window.cols + 4096, kMaxSourceImageSamples);
     if (!source_image_box(g, m, window.rows, window.cols, max_samples, &image)) return false;
     // One buffer per thread, kept: sized for the largest field's (s, t) plane (at most 16 MiB) on
     // first use, so a registration allocates nothing after its first render on each thread. A
@@ -403,41 +402,43 @@ class LightFieldRenderer final : public DrrRenderer {
     // of its own for the render.
     thread_local std::vector<float> kept;
     std::vector<float> own;
-    // The AVX2 render reads row pairs where the pose tilts the pixel rows across the image's
-    // rows, else runs (light_field_source_image_avx2.cpp).
+    // The AVX2 render reads the image's row pairs, blended straight from the field; the portable
+    // one reads the image.
     const std::size_t samples = std::size_t(image.rows) * std::size_t(image.cols);
-    const bool paired = use_avx2_ && long(samples) < kMaxPairedImageSamples &&
-                        chunks_across_image_rows(g, m, window.rows, window.cols) >= kPairsFromShareAcrossRows;
-    const std::size_t image_floats = samples + SourceImage::kTailFloats;
-    const std::size_t needed = image_floats + (paired ? 2 * (samples - std::size_t(image.cols)) : 0);
+    const std::size_t needed = use_avx2_ ? 2 * (samples - std::size_t(image.cols)) : samples;
+    float* buffer = nullptr;
     if (needed > kMaxImageReserve) {
       own.resize(needed);
-      image.values = own.data();
+      buffer = own.data();
     } else {
       if (kept.size() < needed) kept.resize(std::max(needed, image_reserve_));
-      image.values = kept.data();
+      buffer = kept.data();
     }
-    if (paired) image.pairs = image.values + image_floats;
+    (use_avx2_ ? image.pairs : image.values) = buffer;
     const auto blend = [&](int i0, int i1) {
-      if (storage == LightFieldStorage::kFloat32)
+      const bool f32 = storage == LightFieldStorage::kFloat32;
+      const float scale = float(field.header().fixed_scale);
+      if (use_avx2_ && f32)
+        blend_source_image_pairs_float(field.float_samples(), g, m, image, i0, i1);
+      else if (use_avx2_)
+        blend_source_image_pairs_fixed16(field.fixed_samples(), scale, g, m, image, i0, i1);
+      else if (f32)
         blend_source_image_float(field.float_samples(), g, m, image, i0, i1);
       else
-        blend_source_image_fixed16(field.fixed_samples(), float(field.header().fixed_scale), g, m, image, i0, i1);
+        blend_source_image_fixed16(field.fixed_samples(), scale, g, m, image, i0, i1);
     };
     std::atomic<int> masked{0};
-    const auto pair = [&](int i0, int i1) { pair_source_image_avx2(image, i0, i1); };
     const auto rows = [&](int r0, int r1) {
       const int n = use_avx2_ ? render_source_image_avx2(image, g, m, out, extras->valid, window.cols, r0, r1)
                               : render_source_image(image, g, m, out, extras->valid, window.cols, r0, r1);
       masked.fetch_add(n, std::memory_order_relaxed);
     };
+    const int blended_rows = use_avx2_ ? image.rows - 1 : image.rows;  // pair rows, or rows
     if (pool_) {
-      pool_->parallel_for(image.rows, 8, blend);
-      if (paired) pool_->parallel_for(image.rows - 1, 8, pair);
+      pool_->parallel_for(blended_rows, 8, blend);
       pool_->parallel_for(window.rows, 8, rows);
     } else {
-      blend(0, image.rows);
-      if (paired) pair(0, image.rows - 1);
+      blend(0, blended_rows);
       rows(0, window.rows);
     }
     extras->masked_pixels = masked.load();

@@ -37,26 +37,29 @@ UvAlongSt uv_along_st(const RayMap& m, const SourceImage& image) {
           double(m.base[1]) + v_per_t * (image.t0 - double(m.base[3])), v_per_t};
 }
 
-// One image row: sample (s, t0 + j) of the four (u, v) cells around (u, v_j), blended, times
-// `scale`. `Load` reads a sample as a float at an offset into the field.
+// Columns [j_begin, j_end) of one image row: sample (s, t0 + j) of the four (u, v) cells around
+// (u, v_j), blended, times `scale`, into out[j - j_begin]. `Load` reads a sample as a float at an
+// offset into the field. A column's value does not depend on the range it is blended in.
 template <class Load>
 LFTRACK_INLINE void blend_row(const Load& load, const LightFieldGeometry& g, std::size_t row_offset, float cu,
-                              double v_at_t0, double v_per_t, float scale, float* out, int cols) {
+                              double v_at_t0, double v_per_t, float scale, int j_begin, int j_end, float* out) {
   const std::size_t su = std::size_t(g.size[1]) * g.size[2] * g.size[3], sv = std::size_t(g.size[2]) * g.size[3];
   const int top_u = g.size[0] - 2, top_v = g.size[1] - 2;
   const float limit_v = float(g.size[1] - 1);
   const int iu = std::min(int(cu), top_u);
   const float wu = cu - float(iu);
   const std::size_t u_offset = row_offset + std::size_t(iu) * su;
-  const auto v_cell = [&](double fv) { return std::min(int(std::clamp(float(fv), 0.0f, limit_v)), top_v); };
-  const int iv_first = v_cell(v_at_t0), iv_last = v_cell(v_at_t0 + v_per_t * (cols - 1));
   const float fv0 = float(v_at_t0), dv = float(v_per_t);
+  const auto cv_at = [&](int j) { return std::clamp(fv0 + dv * float(j), 0.0f, limit_v); };
+  const auto v_cell = [&](float cv) { return std::min(int(cv), top_v); };
+  const int iv_first = v_cell(cv_at(j_begin)), iv_last = v_cell(cv_at(j_end - 1));
+  out -= j_begin;
   if (iv_first == iv_last) {
-    // One (u, v) cell for the whole row (nearly always): four streams, vectorised.
+    // One (u, v) cell for the whole range (nearly always): four streams, vectorised.
     const std::size_t p00 = u_offset + std::size_t(iv_first) * sv, p01 = p00 + sv, p10 = p00 + su, p11 = p10 + sv;
     const float ivf = float(iv_first);
-    for (int j = 0; j < cols; ++j) {
-      const float wv = std::clamp(fv0 + dv * float(j), 0.0f, limit_v) - ivf;
+    for (int j = j_begin; j < j_end; ++j) {
+      const float wv = cv_at(j) - ivf;
       const float a = load(p00 + std::size_t(j)), b = load(p01 + std::size_t(j));
       const float c = load(p10 + std::size_t(j)), d = load(p11 + std::size_t(j));
       const float low = a + wv * (b - a), high = c + wv * (d - c);
@@ -64,9 +67,9 @@ LFTRACK_INLINE void blend_row(const Load& load, const LightFieldGeometry& g, std
     }
     return;
   }
-  for (int j = 0; j < cols; ++j) {
-    const float cv = std::clamp(fv0 + dv * float(j), 0.0f, limit_v);
-    const int iv = std::min(int(cv), top_v);
+  for (int j = j_begin; j < j_end; ++j) {
+    const float cv = cv_at(j);
+    const int iv = v_cell(cv);
     const float wv = cv - float(iv);
     const std::size_t p00 = u_offset + std::size_t(iv) * sv + std::size_t(j), p10 = p00 + su;
     const float a = load(p00), b = load(p00 + sv), c = load(p10), d = load(p10 + sv);
@@ -75,16 +78,47 @@ LFTRACK_INLINE void blend_row(const Load& load, const LightFieldGeometry& g, std
   }
 }
 
+// Image row i's columns [j_begin, j_end), blended into out.
+template <class Load>
+LFTRACK_INLINE void blend_image_row(const Load& load, float scale, const LightFieldGeometry& g, const UvAlongSt& uv,
+                                    const SourceImage& image, int i, int j_begin, int j_end, float* out) {
+  const float cu = std::clamp(float(uv.u_at_s0 + uv.u_per_s * i), 0.0f, float(g.size[0] - 1));
+  const std::size_t row_offset = std::size_t(image.s0 + i) * std::size_t(g.size[3]) + std::size_t(image.t0);
+  blend_row(load, g, row_offset, cu, uv.v_at_t0, uv.v_per_t, scale, j_begin, j_end, out);
+}
+
 template <class Load>
 LFTRACK_INLINE void blend_rows(const Load& load, float scale, const LightFieldGeometry& g, const RayMap& m,
                                const SourceImage& image, int i_begin, int i_end) {
   const UvAlongSt uv = uv_along_st(m, image);
-  const float limit_u = float(g.size[0] - 1);
-  for (int i = i_begin; i < i_end; ++i) {
-    const float cu = std::clamp(float(uv.u_at_s0 + uv.u_per_s * i), 0.0f, limit_u);
-    const std::size_t row_offset = std::size_t(image.s0 + i) * std::size_t(g.size[3]) + std::size_t(image.t0);
-    blend_row(load, g, row_offset, cu, uv.v_at_t0, uv.v_per_t, scale,
-              image.values + std::size_t(i) * std::size_t(image.cols), image.cols);
+  for (int i = i_begin; i < i_end; ++i)
+    blend_image_row(load, scale, g, uv, image, i, 0, image.cols,
+                    image.values + std::size_t(i) * std::size_t(image.cols));
+}
+
+// Pair rows [i_begin, i_end): image rows i_begin .. i_end, each blended once, a block of columns
+// at a time into two row buffers on the stack, each row interleaved with the one below it.
+template <class Load>
+LFTRACK_INLINE void blend_pair_rows(const Load& load, float scale, const LightFieldGeometry& g, const RayMap& m,
+                                    const SourceImage& image, int i_begin, int i_end) {
+  if (i_begin >= i_end) return;
+  const UvAlongSt uv = uv_along_st(m, image);
+  constexpr int kBlock = 256;
+  float rows[2][kBlock];
+  for (int j_begin = 0; j_begin < image.cols; j_begin += kBlock) {
+    const int j_end = std::min(image.cols, j_begin + kBlock), n = j_end - j_begin;
+    float* above = rows[0];
+    float* below = rows[1];
+    blend_image_row(load, scale, g, uv, image, i_begin, j_begin, j_end, above);
+    for (int i = i_begin; i < i_end; ++i) {
+      blend_image_row(load, scale, g, uv, image, i + 1, j_begin, j_end, below);
+      float* pair = image.pairs + 2 * (std::size_t(i) * std::size_t(image.cols) + std::size_t(j_begin));
+      for (int j = 0; j < n; ++j) {
+        pair[2 * j] = above[j];
+        pair[2 * j + 1] = below[j];
+      }
+      std::swap(above, below);
+    }
   }
 }
 
@@ -139,16 +173,6 @@ bool source_image_box(const LightFieldGeometry& g, const RayMap& m, int rows, in
   return true;
 }
 
-double chunks_across_image_rows(const LightFieldGeometry& g, const RayMap& m, int rows, int cols) {
-  if (rows < 1 || cols < 2) return 0;
-  const auto s_at = [&](int c) {
-    const Eigen::Vector3d d = m.d00 + m.d_row * double(rows / 2) + m.d_col * double(c);
-    return double(m.base[2]) + double(m.gain[2]) * (d.dot(g.e1) / d.dot(g.axis));
-  };
-  const double rows_a_pixel = std::abs(s_at(cols - 1) - s_at(0)) / double(cols - 1);
-  return std::isfinite(rows_a_pixel) ? std::min(1.0, 7 * rows_a_pixel) : 1.0;
-}
-
 LFTRACK_HOT_CLONES
 void blend_source_image_float(const float* samples, const LightFieldGeometry& g, const RayMap& m,
                               const SourceImage& image, int i_begin, int i_end) {
@@ -159,6 +183,18 @@ LFTRACK_HOT_CLONES
 void blend_source_image_fixed16(const std::uint16_t* codes, float scale, const LightFieldGeometry& g, const RayMap& m,
                                 const SourceImage& image, int i_begin, int i_end) {
   blend_rows(Fixed16Load{codes}, scale, g, m, image, i_begin, i_end);
+}
+
+LFTRACK_HOT_CLONES
+void blend_source_image_pairs_float(const float* samples, const LightFieldGeometry& g, const RayMap& m,
+                                    const SourceImage& image, int i_begin, int i_end) {
+  blend_pair_rows(FloatLoad{samples}, 1.0f, g, m, image, i_begin, i_end);
+}
+
+LFTRACK_HOT_CLONES
+void blend_source_image_pairs_fixed16(const std::uint16_t* codes, float scale, const LightFieldGeometry& g,
+                                      const RayMap& m, const SourceImage& image, int i_begin, int i_end) {
+  blend_pair_rows(Fixed16Load{codes}, scale, g, m, image, i_begin, i_end);
 }
 
 }  // namespace lftrack::tracking
