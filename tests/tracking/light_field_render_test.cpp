@@ -12,6 +12,7 @@
 #include "fixtures.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/light_field.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -73,6 +74,7 @@ struct KernelCase {
   LightFieldStorage storage;
   SimdLevel simd;
   bool source_image = false;  // both renderers blend (u, v) once per (s, t) sample
+  int threads = 1;             // the vectorised renderer's pool: its blend and rows in bands
 };
 class VectorisedKernel : public ::testing::TestWithParam<KernelCase> {};
 
@@ -100,6 +102,8 @@ TEST_P(VectorisedKernel, MatchesScalar) {
   scalar_options.simd = SimdLevel::kScalar;
   simd_options.simd = GetParam().simd;
   scalar_options.light_field_source_image = simd_options.light_field_source_image = GetParam().source_image;
+  ThreadPool pool(GetParam().threads);
+  if (GetParam().threads > 1) simd_options.pool = &pool;
   auto scalar = make_renderer("lightfield", nullptr, scalar_options);
   auto simd = make_renderer("lightfield", nullptr, simd_options);
   ASSERT_TRUE(scalar.ok() && simd.ok());
@@ -208,13 +212,16 @@ INSTANTIATE_TEST_SUITE_P(StorageModes, VectorisedKernel,
                                            KernelCase{LightFieldStorage::kFloat32, SimdLevel::kAvx2Gathers},
                                            KernelCase{LightFieldStorage::kFixed16, SimdLevel::kAvx2Gathers},
                                            KernelCase{LightFieldStorage::kFloat32, SimdLevel::kBest, true},
-                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kBest, true}),
+                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kBest, true},
+                                           KernelCase{LightFieldStorage::kFloat32, SimdLevel::kBest, true, 3},
+                                           KernelCase{LightFieldStorage::kFixed16, SimdLevel::kBest, true, 3}),
                          [](const auto& p) {
                            const char* simd = p.param.simd == SimdLevel::kBest   ? "_best"
                                               : p.param.simd == SimdLevel::kAvx2 ? "_avx2"
                                                                                  : "_avx2_gathers";
                            return std::string(to_string(p.param.storage)) + simd +
-                                  (p.param.source_image ? "_source_image" : "");
+                                  (p.param.source_image ? "_source_image" : "") +
+                                  (p.param.threads > 1 ? "_pooled" : "");
                          });
 
 // Two portable renderers of the fixture's field: the per-ray blend and the source image.

@@ -87,8 +87,9 @@ void expect_same_render(const SourceImage& image, const Case& k, int rows, int c
 
 TEST(SourceImagePairs, RenderThePortableImageAtEveryTilt) {
   if (!light_field_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 + FMA";
-  // Rows of 77 (four chunks of sixteen and a partial chunk), 16 (one step) and 8 (none): every
-  // row's last columns take the chunk-at-a-time path.
+  // Rows of 77 (four steps of sixteen, then a whole chunk of eight and a partial one of five
+  // through the chunk-at-a-time path), 16 (one step and nothing left) and 8 (no step: the
+  // chunk-at-a-time path alone).
   const int shapes[][2] = {{61, 77}, {23, 16}, {9, 8}};
   for (const auto& shape : shapes) {
     const int rows = shape[0], cols = shape[1];
@@ -128,9 +129,9 @@ TEST(SourceImagePairs, RenderThePortableImageWhereRaysLeaveTheField) {
   }
 }
 
-// A small field whose samples differ everywhere, and a map whose (u, v) along the image stays
-// inside one u cell but crosses two v cells (and the field's v = 0 edge) along a row of more than
-// two blocks of columns.
+// A small field whose samples differ everywhere, and a map whose v along the image crosses two v
+// cells and the field's v = 0 edge along a row of more than two blocks of columns; u stays inside
+// one u cell (u_per_s 0.01) or crosses the field's both u edges down the image's rows (1.0).
 struct BlendCase {
   LightFieldGeometry g;
   RayMap m;
@@ -138,10 +139,10 @@ struct BlendCase {
   std::vector<std::uint16_t> codes;
 };
 
-BlendCase make_blend_case() {
+BlendCase make_blend_case(float u_per_s = 0.01f) {
   BlendCase k;
   k.g.size = {4, 5, 14, 600};
-  const float base[4] = {1.3f, 0.9f, 7.0f, 300.0f}, gain[4] = {0.01f, 0.005f, 1.0f, 1.0f};
+  const float base[4] = {1.3f, 0.9f, 7.0f, 300.0f}, gain[4] = {u_per_s, 0.005f, 1.0f, 1.0f};
   for (int a = 0; a < 4; ++a) {
     k.m.base[a] = base[a];
     k.m.gain[a] = gain[a];
@@ -158,9 +159,10 @@ BlendCase make_blend_case() {
 }
 
 TEST(SourceImagePairs, BlendedFromTheFieldHoldEachSampleAndTheOneBelowIt) {
-  const BlendCase k = make_blend_case();
   for (int cols : {2, 7, 255, 256, 257, 520}) {
-    for (bool fixed16 : {false, true}) {
+    for (int variant = 0; variant < 4; ++variant) {
+      const bool fixed16 = variant % 2 == 1;
+      const BlendCase k = make_blend_case(variant < 2 ? 0.01f : 1.0f);
       SourceImage image;
       image.s0 = 2;
       image.t0 = 3;
@@ -195,32 +197,49 @@ TEST(SourceImagePairs, BlendedFromTheFieldHoldEachSampleAndTheOneBelowIt) {
 TEST(SourceImagePairs, BlendTheFieldAtEachSamplesOwnUv) {
   // The image against the bilinear (u, v) blend written out here: u = base_u + (s - base_s)
   // gain_u / gain_s, likewise v with t, clamped to the field.
-  const BlendCase k = make_blend_case();
+  for (double u_per_s : {0.01, 1.0}) {
+    const BlendCase k = make_blend_case(float(u_per_s));
+    SourceImage image;
+    image.s0 = 2;
+    image.t0 = 3;
+    image.rows = 9;  // u from -3.7 to 4.3 at 1.0 a row: both of the field's u edges
+    image.cols = 520;
+    std::vector<float> values(std::size_t(image.rows * image.cols));
+    image.values = values.data();
+    blend_source_image_float(k.samples.data(), k.g, k.m, image, 0, image.rows);
+    const auto& size = k.g.size;
+    const auto sample = [&](int iu, int iv, int s, int t) {
+      return double(k.samples[((std::size_t(iu) * size[1] + std::size_t(iv)) * size[2] + std::size_t(s)) * size[3] +
+                              std::size_t(t)]);
+    };
+    for (int i = 0; i < image.rows; ++i)
+      for (int j = 0; j < image.cols; ++j) {
+        const int s = image.s0 + i, t = image.t0 + j;
+        const double u = std::clamp(1.3 + (s - 7.0) * u_per_s, 0.0, size[0] - 1.0);
+        const double v = std::clamp(0.9 + (t - 300.0) * 0.005, 0.0, size[1] - 1.0);
+        const int iu = std::min(int(u), size[0] - 2), iv = std::min(int(v), size[1] - 2);
+        const double wu = u - iu, wv = v - iv;
+        const double low = sample(iu, iv, s, t) * (1 - wv) + sample(iu, iv + 1, s, t) * wv;
+        const double high = sample(iu + 1, iv, s, t) * (1 - wv) + sample(iu + 1, iv + 1, s, t) * wv;
+        const double want = low * (1 - wu) + high * wu;
+        ASSERT_NEAR(values[std::size_t(i * image.cols + j)], want, 1e-4 * (1 + std::abs(want)))
+            << u_per_s << " " << i << " " << j;
+      }
+  }
+}
+
+// A map whose (u, v) slope along the image overflows a float (the source all but on the (s, t)
+// plane) gets no source image: the blend would step (u, v) to NaN and read from NaN cells.
+TEST(SourceImagePairs, NoImageWhereTheUvSlopeOverflowsAFloat) {
+  Case k = make_case(60, 0.1, 40, 40);
   SourceImage image;
-  image.s0 = 2;
-  image.t0 = 3;
-  image.rows = 4;
-  image.cols = 520;
-  std::vector<float> values(std::size_t(image.rows * image.cols));
-  image.values = values.data();
-  blend_source_image_float(k.samples.data(), k.g, k.m, image, 0, image.rows);
-  const auto& size = k.g.size;
-  const auto sample = [&](int iu, int iv, int s, int t) {
-    return double(k.samples[((std::size_t(iu) * size[1] + std::size_t(iv)) * size[2] + std::size_t(s)) * size[3] +
-                            std::size_t(t)]);
-  };
-  for (int i = 0; i < image.rows; ++i)
-    for (int j = 0; j < image.cols; ++j) {
-      const int s = image.s0 + i, t = image.t0 + j;
-      const double u = std::clamp(1.3 + (s - 7.0) * 0.01, 0.0, size[0] - 1.0);
-      const double v = std::clamp(0.9 + (t - 300.0) * 0.005, 0.0, size[1] - 1.0);
-      const int iu = std::min(int(u), size[0] - 2), iv = std::min(int(v), size[1] - 2);
-      const double wu = u - iu, wv = v - iv;
-      const double low = sample(iu, iv, s, t) * (1 - wv) + sample(iu, iv + 1, s, t) * wv;
-      const double high = sample(iu + 1, iv, s, t) * (1 - wv) + sample(iu + 1, iv + 1, s, t) * wv;
-      const double want = low * (1 - wu) + high * wu;
-      ASSERT_NEAR(values[std::size_t(i * image.cols + j)], want, 1e-4 * (1 + std::abs(want))) << i << " " << j;
-    }
+  ASSERT_TRUE(source_image_box(k.g, k.m, 40, 40, 1L << 20, &image));
+  for (int a : {0, 1}) {
+    Case steep = k;
+    steep.m.gain[a] = 1e30f;
+    steep.m.gain[a + 2] = 1e-20f;
+    EXPECT_FALSE(source_image_box(steep.g, steep.m, 40, 40, 1L << 20, &image)) << a;
+  }
 }
 
 }  // namespace

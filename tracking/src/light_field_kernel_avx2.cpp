@@ -12,8 +12,8 @@
 // do not qualify (the field's edges, out-of-field pixels, a row's tail, a (u, v) cell boundary)
 // take the gather path with the same arithmetic. 16-bit samples are converted to float as they
 // are loaded and scaled once at the end (the scale commutes with the interpolation). The lanes,
-// runs and blends are in light_field_avx2_lanes.hpp, shared with the source image's AVX2 render
-// (light_field_source_image_avx2.cpp).
+// runs and blends are in light_field_avx2_lanes.hpp; the source image's AVX2 render
+// (light_field_source_image_avx2.cpp) shares its lanes, row rays and blend.
 //
 // The results equal the scalar kernel's up to float rounding (fused multiply-adds). Compiled for
 // AVX2 + FMA through function target attributes and chosen at run time, so the binary still runs

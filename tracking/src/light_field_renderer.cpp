@@ -396,10 +396,10 @@ class LightFieldRenderer final : public DrrRenderer {
     // than it saves.
     const long max_samples = std::min(4L * window.rows * window.cols + 4096, kMaxSourceImageSamples);
     if (!source_image_box(g, m, window.rows, window.cols, max_samples, &image)) return false;
-    // One buffer per thread, kept: sized for the largest field's (s, t) plane (at most 16 MiB) on
-    // first use, so a registration allocates nothing after its first render on each thread. A
-    // larger image (a window over most of a field of more than 2^22 (s, t) samples) gets a buffer
-    // of its own for the render.
+    // One buffer per thread, kept: sized on first use for the largest field's (s, t) plane (the
+    // image, or its row pairs at two floats a sample; at most 16 MiB), so a registration allocates
+    // nothing after its first render on each thread. A larger image (a window over most of a
+    // field of more than 2^21 (s, t) samples) gets a buffer of its own for the render.
     thread_local std::vector<float> kept;
     std::vector<float> own;
     // The AVX2 render reads the image's row pairs, blended straight from the field; the portable
@@ -435,7 +435,8 @@ class LightFieldRenderer final : public DrrRenderer {
     };
     const int blended_rows = use_avx2_ ? image.rows - 1 : image.rows;  // pair rows, or rows
     if (pool_) {
-      pool_->parallel_for(blended_rows, 8, blend);
+      // One band of rows a thread: a band of pair rows blends one image row more than it owns.
+      pool_->parallel_for(blended_rows, std::max(8, (blended_rows + pool_->size() - 1) / pool_->size()), blend);
       pool_->parallel_for(window.rows, 8, rows);
     } else {
       blend(0, blended_rows);

@@ -142,6 +142,11 @@ bool source_image_box(const LightFieldGeometry& g, const RayMap& m, int rows, in
     return false;
   for (int a = 0; a < 4; ++a)
     if (!std::isfinite(m.base[a])) return false;
+  // The blend steps (u, v) along the image in float (uv_along_st): a slope that overflows a float
+  // would make NaN coordinates there, and NaN cells.
+  if (!std::isfinite(float(double(m.gain[0]) / double(m.gain[2]))) ||
+      !std::isfinite(float(double(m.gain[1]) / double(m.gain[3]))))
+    return false;
   // The window's rays meet the (s, t) plane inside the quadrilateral of its corner rays (a plane
   // maps to a plane projectively; d.n is affine in the pixel, so positive at the corners means
   // positive throughout).
