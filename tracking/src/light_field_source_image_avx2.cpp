@@ -135,11 +135,14 @@ LFTRACK_AVX2 inline int render_inside_row(const PairImage& image, const ImageRow
   return whole;
 }
 
+}  // namespace
+
 // The source-image path (light_field_kernels.hpp): rows whose rays are all inside in the image's
 // own coordinates (render_inside_row), the others (and a row's last columns) as the per-ray
 // kernels do, each ray tested against the field.
-LFTRACK_AVX2 int render_pairs(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
-                              ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
+LFTRACK_AVX2 int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
+                                          ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin,
+                                          int r_end) {
   const PairImage pairs{image.pairs, _mm256_set1_epi32(image.cols), _mm256_set1_epi32(image.rows - 2),
                         _mm256_set1_epi32(image.cols - 2)};
   const __m256i s0 = _mm256_set1_epi32(image.s0), t0 = _mm256_set1_epi32(image.t0);
@@ -167,13 +170,6 @@ LFTRACK_AVX2 int render_pairs(const SourceImage& image, const LightFieldGeometry
     }
   }
   return masked;
-}
-
-}  // namespace
-
-int render_source_image_avx2(const SourceImage& image, const LightFieldGeometry& g, const RayMap& m,
-                             ImageView<float> out, ImageView<unsigned char> valid, int cols, int r_begin, int r_end) {
-  return render_pairs(image, g, m, out, valid, cols, r_begin, r_end);
 }
 
 #else
