@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -31,6 +32,52 @@ TEST(PreprocessFrame, LogOfOpenFieldOverCorrectedIntensity) {
   EXPECT_EQ(valid.at(0, 4), 0);
   EXPECT_EQ(p.at(1, 1), 0.f);
   EXPECT_EQ(valid.at(0, 0), 1);
+}
+
+// Every raw value a 16-bit detector can give, with and without dark and gain images: the float
+// log the cycle uses against p = ln(I0 / I) in double, and the same mask.
+TEST(PreprocessFrame, EveryRawValueMatchesTheFormulaInDouble) {
+  Image<std::uint16_t> raw(256, 256);
+  for (int i = 0; i < 65536; ++i) raw.at(i / 256, i % 256) = static_cast<std::uint16_t>(i);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> dark_of(-5.f, 60.f), gain_of(0.5f, 1.6f);
+  for (const bool corrected : {false, true}) {
+    DetectorCorrection c;
+    c.open_field_counts = 30000;
+    c.saturation_counts = 65000;
+    if (corrected) {
+      c.dark_counts = Image<float>(256, 256);
+      c.gain = Image<float>(256, 256);
+      for (float& d : c.dark_counts.pixels()) d = dark_of(rng);
+      for (float& g : c.gain.pixels()) g = gain_of(rng);
+      c.gain.at(7, 7) = 0.f;      // dead
+      c.gain.at(8, 8) = 1e38f;    // I0 / I past float's range: masked, not infinite
+      c.dark_counts.at(9, 9) = std::numeric_limits<float>::quiet_NaN();
+    }
+    Image<float> p(256, 256);
+    Image<unsigned char> valid(256, 256);
+    ASSERT_TRUE(preprocess_frame(raw.view(), c, {0, 0, 256, 256}, p.view(), valid.view()).ok());
+    int usable = 0;
+    for (int r = 0; r < 256; ++r)
+      for (int col = 0; col < 256; ++col) {
+        const double counts = raw.at(r, col);
+        const double dark = corrected ? c.dark_counts.at(r, col) : 0.0;
+        const double gain = corrected ? c.gain.at(r, col) : 1.0;
+        const double intensity = gain > 0 ? (counts - dark) / gain : 0.0;
+        const double expected = std::log(c.open_field_counts / intensity);
+        const bool ok = counts < c.saturation_counts && gain > 0 && intensity > 0 && std::isfinite(expected) &&
+                        c.open_field_counts / intensity < std::numeric_limits<float>::max();
+        ASSERT_EQ(valid.at(r, col), ok ? 1 : 0) << r << " " << col << " corrected " << corrected;
+        ASSERT_TRUE(std::isfinite(p.at(r, col)));
+        if (!ok) {
+          ASSERT_EQ(p.at(r, col), 0.f) << r << " " << col;
+          continue;
+        }
+        ++usable;
+        ASSERT_NEAR(p.at(r, col), expected, 1e-6 * std::max(1.0, std::abs(expected))) << r << " " << col;
+      }
+    EXPECT_GT(usable, 64000) << corrected;
+  }
 }
 
 TEST(PreprocessFrame, RefusesBadSizesAndLevels) {

@@ -1,5 +1,7 @@
 #include "lftrack/tracking/frame_preprocessing.hpp"
 
+#include <Eigen/Core>
+
 #include <algorithm>
 #include <cmath>
 
@@ -22,18 +24,38 @@ Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const Detecto
     return invalid_argument("preprocess: the open-field level I0 must be positive");
   const bool has_dark = !correction.dark_counts.pixels().empty();
   const bool has_gain = !correction.gain.pixels().empty();
+  const double open_field = correction.open_field_counts;
+  const int saturation = correction.saturation_counts;
   for (int r = 0; r < window.rows; ++r) {
     const int fr = window.row0 + r;
-    for (int c = 0; c < window.cols; ++c) {
-      const int fc = window.col0 + c;
-      const std::uint16_t counts = raw.at(fr, fc);
-      const double dark = has_dark ? correction.dark_counts.at(fr, fc) : 0.0;
-      const double gain = has_gain ? correction.gain.at(fr, fc) : 1.0;
-      const double intensity = gain > 0 ? (counts - dark) / gain : 0.0;
-      const bool ok = counts < correction.saturation_counts && gain > 0 && intensity > 0 && std::isfinite(intensity);
-      valid.at(r, c) = ok ? 1 : 0;
-      line_integral.at(r, c) = ok ? static_cast<float>(std::log(correction.open_field_counts / intensity)) : 0.f;
+    const std::uint16_t* counts = raw.row_ptr(fr) + window.col0;
+    float* ratio = line_integral.row_ptr(r);  // I0 / I, then its log in place
+    unsigned char* usable = valid.row_ptr(r);
+    if (!has_dark && !has_gain) {  // I = raw: branch-free, so that it vectorises
+      const float i0 = static_cast<float>(open_field);
+      for (int c = 0; c < window.cols; ++c) {
+        const bool ok = counts[c] > 0 && int{counts[c]} < saturation;
+        usable[c] = ok ? 1 : 0;
+        ratio[c] = ok ? i0 / static_cast<float>(counts[c]) : 1.f;
+      }
+    } else {
+      for (int c = 0; c < window.cols; ++c) {
+        const int fc = window.col0 + c;
+        const double dark = has_dark ? correction.dark_counts.at(fr, fc) : 0.0;
+        const double gain = has_gain ? correction.gain.at(fr, fc) : 1.0;
+        const double intensity = gain > 0 ? (counts[c] - dark) / gain : 0.0;
+        // A ratio past float's range (a gain of 1e38) is a broken calibration, not a value.
+        const float q = static_cast<float>(open_field / intensity);
+        const bool ok = counts[c] < saturation && gain > 0 && intensity > 0 && std::isfinite(intensity) &&
+                        std::isfinite(q);
+        usable[c] = ok ? 1 : 0;
+        ratio[c] = ok ? q : 1.f;
+      }
     }
+    // ln in float lanes (Eigen's, within a few ulp of the double one, about eight times faster
+    // than std::log in the cycle): masked pixels hold 1, whose log is the 0 the contract gives.
+    Eigen::Map<Eigen::ArrayXf> row(ratio, window.cols);
+    row = row.log();
   }
   return {};
 }

@@ -39,7 +39,10 @@ class Registration::Cost final : public CostFunction {
  private:
   static constexpr int kMaxBatch = 64;
 
-  // Spreads (candidate, view) pairs over the pool, so a batch of one still uses two threads.
+  // Spreads (candidate, view) pairs over the pool one at a time, so a batch of one still uses
+  // two threads and a worker that wakes late takes what is left rather than half the batch.
+  // Each thread scores with its own slot's scratch; every slot holds the same prepared
+  // references, so a score does not depend on which thread computed it.
   void evaluate(const Vector6d* xs, int n, double* out) {
     const int views = static_cast<int>(r_.setup_.views.size());
     const int slots = static_cast<int>(r_.slots_.size());
@@ -52,9 +55,9 @@ class Registration::Cost final : public CostFunction {
       for (int t = 0; t < tasks; ++t)
         view_scores_[t] = inside_[t / views] ? r_.view_score(0, measure_, level_, poses_[t / views], t % views) : 0.0;
     } else {
-      const int grain = (tasks + slots - 1) / slots;
-      r_.pool_->parallel_for(tasks, grain, [&](int begin, int end) {
-        const int slot = begin / grain;
+      ThreadPool& pool = *r_.pool_;
+      pool.parallel_for(tasks, 1, [&](int begin, int end) {
+        const int slot = pool.thread_index();
         for (int t = begin; t < end; ++t) {
           const int i = t / views;
           view_scores_[t] = inside_[i] ? r_.view_score(slot, measure_, level_, poses_[i], t % views) : 0.0;

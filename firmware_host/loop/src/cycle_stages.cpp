@@ -2,6 +2,7 @@
 //   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> settle.
 // Each writes its part of the CycleState; the record and the statistics come after.
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -142,21 +143,35 @@ bool TrackingLoop::Impl::acquire(CycleState& c) {
   return true;
 }
 
-// The image-quality gate, then each frame to line integrals in its ROI; the pair is archived
-// when it passed.
+// The image-quality gate, then each frame to line integrals in its ROI, the views side by side
+// on the pool; the pair is archived when it passed. The gate reports the first view that fails.
 void TrackingLoop::Impl::preprocess(CycleState& c) {
   quality_issue = tracking::FrameQualityIssue::kOk;
   c.frames_usable = false;
   if (c.frames_ok) {
-    c.frames_usable = true;
-    for (std::size_t v = 0; v < pair.frames.size() && c.frames_usable; ++v) {
-      const tracking::PixelWindow& w = parts.geometry.roi_windows[v];
-      quality_issue = tracking::assess_frame_quality(pair.frames[v].pixels.view(), w, parts.corrections[v],
-                                                     settings.image_quality);
-      c.frames_usable = quality_issue == tracking::FrameQualityIssue::kOk &&
-                        tracking::preprocess_frame(pair.frames[v].pixels.view(), parts.corrections[v], w,
-                                                   line_integral[v].view(), valid[v].view())
-                            .ok();
+    const int views = static_cast<int>(std::min(pair.frames.size(), view_issue.size()));
+    const auto one_view = [&](int begin, int end) {
+      for (int v = begin; v < end; ++v) {
+        const tracking::PixelWindow& w = parts.geometry.roi_windows[std::size_t(v)];
+        const drivers::Frame& frame = pair.frames[std::size_t(v)];
+        tracking::FrameQualityIssue& issue = view_issue[std::size_t(v)];
+        issue = tracking::assess_frame_quality(frame.pixels.view(), w, parts.corrections[std::size_t(v)],
+                                               settings.image_quality);
+        view_preprocessed[std::size_t(v)] =
+            issue == tracking::FrameQualityIssue::kOk &&
+            tracking::preprocess_frame(frame.pixels.view(), parts.corrections[std::size_t(v)], w,
+                                       line_integral[std::size_t(v)].view(), valid[std::size_t(v)].view())
+                .ok();
+      }
+    };
+    if (parts.pool != nullptr)
+      parts.pool->parallel_for(views, 1, one_view);
+    else
+      one_view(0, views);
+    c.frames_usable = views == static_cast<int>(pair.frames.size());
+    for (int v = 0; v < views && c.frames_usable; ++v) {
+      quality_issue = view_issue[std::size_t(v)];
+      c.frames_usable = view_preprocessed[std::size_t(v)] != 0;
     }
     c.frames_usable = c.frames_usable && parts.registration->set_frames(frame_views, mask_views).ok();
   }

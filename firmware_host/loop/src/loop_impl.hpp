@@ -85,6 +85,8 @@ struct TrackingLoop::Impl {
   std::vector<tracking::Image<unsigned char>> valid;
   std::vector<tracking::ImageView<const float>> frame_views;
   std::vector<tracking::ImageView<const unsigned char>> mask_views;
+  std::vector<tracking::FrameQualityIssue> view_issue;  // per view, this cycle's quality gate
+  std::vector<char> view_preprocessed;                  // per view: passed the gate and preprocessed
   std::vector<tracking::Image<float>> check_drr;            // per view: the DRR at the result
   std::vector<tracking::Image<unsigned char>> check_valid;  // and its valid pixels
   tracking::RegistrationResult result;

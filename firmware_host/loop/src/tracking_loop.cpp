@@ -79,6 +79,8 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
     impl->check_drr.emplace_back(w.rows, w.cols);
     impl->check_valid.emplace_back(w.rows, w.cols);
   }
+  impl->view_issue.assign(views, tracking::FrameQualityIssue::kOk);
+  impl->view_preprocessed.assign(views, 0);
   for (std::size_t v = 0; v < views; ++v) {
     impl->frame_views.push_back(impl->line_integral[v].view());
     impl->mask_views.push_back(impl->valid[v].view());

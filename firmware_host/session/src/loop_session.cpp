@@ -498,6 +498,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   lp.allocation_count = o.allocation_count;
   lp.observer = o.hooks.observer;
   lp.feed = parts->feed.get();
+  lp.pool = pool;
   LoopSettings settings;
   settings.loop = p.scene.loop;
   settings.limits = p.scene.safety;

@@ -22,6 +22,7 @@
 #include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/registration.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
 namespace lftrack::host {
@@ -80,6 +81,8 @@ struct LoopParts {
   // Watchers on other threads (the monitor page, OpenIGTLink): every record and, when due, the
   // images; sized by create(), published after each cycle, never waited for.
   CycleFeed* feed = nullptr;
+  // The registration's pool, also for the views' preprocessing; null: one view after the other.
+  tracking::ThreadPool* pool = nullptr;
 };
 
 struct LoopSettings {
