@@ -52,8 +52,8 @@ Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const Detecto
         ratio[c] = ok ? q : 1.f;
       }
     }
-    // ln in float lanes (Eigen's, within a few ulp of the double one, about eight times faster
-    // than std::log in the cycle): masked pixels hold 1, whose log is the 0 the contract gives.
+    // ln in float lanes (Eigen's, within 1e-6 of the double formula; the whole frame 2.4x
+    // faster than with std::log per pixel): masked pixels hold 1, whose log is the contract's 0.
     Eigen::Map<Eigen::ArrayXf> row(ratio, window.cols);
     row = row.log();
   }

@@ -8,11 +8,11 @@
 // parallel_for called from inside a job of the same pool (a renderer given the pool, called from
 // a registration's parallel candidates) runs inline on the calling thread.
 //
-// Hand-written rather than taken from a library: the real-time cycle needs a pool that never
-// allocates and whose threads inherit the cycle's SCHED_FIFO priority; Debian's TBB does
-// neither on request. Two measures keep a short job (a registration's one candidate: two views
-// of 10-20 us each) from paying a sleeping thread's wake-up (25-40 us on a virtual machine,
-// longer than the job) on every call:
+// Kept by hand rather than taken from a task scheduler (oneTBB manages threads of its own): the
+// cycle needs a pool that allocates nothing per job and whose threads are made after the
+// real-time set-up, so that they inherit its SCHED_FIFO priority and CPU mask. Two measures keep
+// a short job (a registration's one candidate: two views of 10-20 us each) from paying a
+// sleeping thread's wake-up (25-40 us on a virtual machine, longer than the job) on every call:
 // - a worker that finishes a job watches for the next one for kSpinNs before it sleeps, and the
 //   caller watches its joined workers finish for as long before it sleeps; both only when the
 //   pool has no more threads than the CPUs it may run on, so a spinning thread never holds up
@@ -42,7 +42,9 @@ class ThreadPool {
 
   // Calls body(begin, end) on disjoint chunks that cover [0, count), using every worker that
   // joins in time and the calling thread; returns when all chunks are done. `grain` is the chunk
-  // length. Which thread runs which chunk depends on timing.
+  // length. Which thread runs which chunk depends on timing. The body must not throw: an
+  // exception on a worker ends the process, and one on the caller would leave the workers on a
+  // body that is gone.
   template <class Body>
   void parallel_for(int count, int grain, const Body& body) {
     run(count, grain, &invoke<Body>, &body);
