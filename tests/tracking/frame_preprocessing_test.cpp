@@ -90,8 +90,33 @@ TEST(PreprocessFrame, RefusesBadSizesAndLevels) {
   c.dark_counts = Image<float>(3, 3, 0.f);
   EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 0, 4, 5}, p.view(), valid.view()).ok());
   c.dark_counts = {};
-  c.open_field_counts = 0;
-  EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 0, 4, 5}, p.view(), valid.view()).ok());
+  for (double i0 : {0.0, -1.0, 1e-300, 1e300, std::numeric_limits<double>::quiet_NaN(),
+                    std::numeric_limits<double>::infinity()}) {
+    c.open_field_counts = i0;  // in float, 1e-300 would give ln(0) and 1e300 ln(inf)
+    EXPECT_FALSE(preprocess_frame(raw.view(), c, {0, 0, 4, 5}, p.view(), valid.view()).ok()) << i0;
+  }
+}
+
+// Absurd corrections at the edges of float's range: the pixel is masked and p stays finite.
+TEST(PreprocessFrame, AbsurdGainsAndLevelsGiveNoInfiniteLineIntegral) {
+  Image<std::uint16_t> raw(2, 3, 65000);
+  raw.at(0, 0) = 1;
+  for (const double i0 : {1e-20, 1e30}) {
+    DetectorCorrection c;
+    c.open_field_counts = i0;
+    c.saturation_counts = 65535;
+    c.gain = Image<float>(2, 3, 1.f);
+    c.gain.at(0, 1) = 1e-38f;  // I0 / I underflows
+    c.gain.at(0, 2) = 1e38f;   // I0 / I overflows
+    Image<float> p(2, 3);
+    Image<unsigned char> valid(2, 3);
+    ASSERT_TRUE(preprocess_frame(raw.view(), c, {0, 0, 2, 3}, p.view(), valid.view()).ok()) << i0;
+    for (float v : p.pixels()) EXPECT_TRUE(std::isfinite(v)) << i0;
+    c.gain = {};  // and without a gain image, every raw value from 1 to the saturation
+    ASSERT_TRUE(preprocess_frame(raw.view(), c, {0, 0, 2, 3}, p.view(), valid.view()).ok()) << i0;
+    for (float v : p.pixels()) EXPECT_TRUE(std::isfinite(v)) << i0;
+    EXPECT_EQ(valid.at(0, 0), 1) << i0;
+  }
 }
 
 TEST(GaussianBlur, KeepsConstantsRespectsMasksAndCopiesAtZeroSigma) {

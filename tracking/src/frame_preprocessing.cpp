@@ -20,8 +20,8 @@ Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const Detecto
   };
   if (!fits(correction.dark_counts) || !fits(correction.gain))
     return invalid_argument("preprocess: the dark or gain image's size differs from the frame's");
-  if (!(correction.open_field_counts > 0) || !std::isfinite(correction.open_field_counts))
-    return invalid_argument("preprocess: the open-field level I0 must be positive");
+  if (!(correction.open_field_counts >= kMinOpenFieldCounts && correction.open_field_counts <= kMaxOpenFieldCounts))
+    return invalid_argument("preprocess: the open-field level I0 must be from 1e-20 to 1e30 counts");
   const bool has_dark = !correction.dark_counts.pixels().empty();
   const bool has_gain = !correction.gain.pixels().empty();
   const double open_field = correction.open_field_counts;
@@ -44,9 +44,10 @@ Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const Detecto
         const double dark = has_dark ? correction.dark_counts.at(fr, fc) : 0.0;
         const double gain = has_gain ? correction.gain.at(fr, fc) : 1.0;
         const double intensity = gain > 0 ? (counts[c] - dark) / gain : 0.0;
-        // A ratio past float's range (a gain of 1e38) is a broken calibration, not a value.
+        // A ratio outside float's range (a gain of 1e38 or 1e-38) is a broken calibration, not a
+        // value: masked, so that no infinite line integral reaches the registration.
         const float q = static_cast<float>(open_field / intensity);
-        const bool ok = counts[c] < saturation && gain > 0 && intensity > 0 && std::isfinite(intensity) &&
+        const bool ok = counts[c] < saturation && gain > 0 && intensity > 0 && std::isfinite(intensity) && q > 0 &&
                         std::isfinite(q);
         usable[c] = ok ? 1 : 0;
         ratio[c] = ok ? q : 1.f;

@@ -14,6 +14,8 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 
+#include "lftrack/tracking/frame_preprocessing.hpp"
+
 namespace lftrack::host {
 
 namespace {
@@ -327,7 +329,7 @@ Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& pat
   c.cols = int(m.integer("cols", 1, kMaxSide));
   c.dark_frames = int(m.integer("dark_frames", 2, 100000000));
   c.flood_frames = int(m.integer("flood_frames", 1, 100000000));
-  c.open_field_counts = m.number("open_field_counts", std::numeric_limits<double>::min(), 65535);
+  c.open_field_counts = m.number("open_field_counts", tracking::kMinOpenFieldCounts, 65535);
   c.saturation_counts = int(m.integer("saturation_counts", 1, 65535));
   c.saturation_source = m.text("saturation_source");
   if (error.ok() && c.saturation_source != "option" && c.saturation_source != "bits" && c.saturation_source != "observed")

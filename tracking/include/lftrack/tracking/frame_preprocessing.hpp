@@ -20,11 +20,18 @@ struct DetectorCorrection {
   int saturation_counts = 4095;     // raw values at or above this are saturated
 };
 
+// The open-field levels preprocess_frame accepts (counts): within them I0 / I, in float, is
+// positive and finite for every raw value with no dark or gain image.
+inline constexpr double kMinOpenFieldCounts = 1e-20;
+inline constexpr double kMaxOpenFieldCounts = 1e30;
+
 // Fills `line_integral` (window-sized) with p = ln(I0 / I), I = (raw - dark) / gain, for the
 // pixels of `window`, and `valid` with 1 where p is usable: 0 for saturated raw values, dead
 // pixels (gain <= 0) and photon-starved ones (I <= 0); masked pixels get p = 0. Fails, leaving
 // the outputs untouched, if the window is outside the frame, the outputs or the correction
-// images have the wrong size, or I0 is not positive.
+// images have the wrong size, or I0 is outside [1e-20, 1e30] counts (or not a number). A pixel
+// whose I0 / I falls outside float's range (an absurd dark or gain value) is masked: every p is
+// finite.
 Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const DetectorCorrection& correction,
                         const PixelWindow& window, ImageView<float> line_integral,
                         ImageView<unsigned char> valid);
