@@ -2,7 +2,6 @@
 //   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> settle.
 // Each writes its part of the CycleState; the record and the statistics come after.
 
-#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -149,7 +148,7 @@ void TrackingLoop::Impl::preprocess(CycleState& c) {
   quality_issue = tracking::FrameQualityIssue::kOk;
   c.frames_usable = false;
   if (c.frames_ok) {
-    const int views = static_cast<int>(std::min(pair.frames.size(), view_issue.size()));
+    const int views = static_cast<int>(pair.frames.size());  // create() sized view_issue to match
     const auto one_view = [&](int begin, int end) {
       for (int v = begin; v < end; ++v) {
         const tracking::PixelWindow& w = parts.geometry.roi_windows[std::size_t(v)];
@@ -168,7 +167,7 @@ void TrackingLoop::Impl::preprocess(CycleState& c) {
       parts.pool->parallel_for(views, 1, one_view);
     else
       one_view(0, views);
-    c.frames_usable = views == static_cast<int>(pair.frames.size());
+    c.frames_usable = true;
     for (int v = 0; v < views && c.frames_usable; ++v) {
       quality_issue = view_issue[std::size_t(v)];
       c.frames_usable = view_preprocessed[std::size_t(v)] != 0;
