@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <new>
+#include <thread>
 
 #include "fixtures.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
@@ -211,6 +212,37 @@ TEST_P(EveryRenderer, RenderAllocatesNothing) {
   const long before = g_allocations.load();
   for (int n = 0; n < 5; ++n) ASSERT_TRUE((*threaded)->render(pose_, view_, full, out.view()).ok());
   EXPECT_EQ(g_allocations.load() - before, 0);
+}
+
+// A thread that never rendered before (a pool worker that missed the warm-up, the simulator's
+// frame thread) renders without allocating, alone and while another does: a renderer's scratch
+// is made with it, not sized on each thread's first call.
+TEST_P(EveryRenderer, RenderFromThreadsThatNeverRenderedAllocatesNothing) {
+  ThreadPool pool(2);
+  auto threaded = make(GetParam(), &pool);
+  ASSERT_TRUE(threaded.ok());
+  const PixelWindow full = PixelWindow::full(view_.rows, view_.cols);
+  Image<float> out_a(view_.rows, view_.cols), out_b(view_.rows, view_.cols);
+  std::atomic<int> go{0};
+  std::atomic<int> finished{0};
+  std::atomic<int> failed_renders{0};
+  const auto renders = [&](Image<float>* out) {
+    while (go.load() == 0) std::this_thread::yield();
+    for (int n = 0; n < 5; ++n)
+      if (!(*threaded)->render(pose_, view_, full, out->view()).ok()) failed_renders.fetch_add(1);
+    finished.fetch_add(1);
+  };
+  std::thread a(renders, &out_a);
+  std::thread b(renders, &out_b);
+  const long before = g_allocations.load();
+  go.store(1);
+  while (finished.load() < 2) std::this_thread::yield();
+  const long allocations = g_allocations.load() - before;
+  a.join();
+  b.join();
+  EXPECT_EQ(allocations, 0);
+  EXPECT_EQ(failed_renders.load(), 0);
+  EXPECT_EQ(out_a.pixels(), out_b.pixels());
 }
 
 INSTANTIATE_TEST_SUITE_P(Factory, EveryRenderer, ::testing::ValuesIn(every_renderer()),

@@ -30,6 +30,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <vector>
 
 #include "cpu_dispatch.hpp"
@@ -37,6 +38,7 @@
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "light_field_kernels.hpp"
+#include "scratch_buffers.hpp"
 
 namespace lftrack::tracking {
 namespace {
@@ -268,6 +270,8 @@ class LightFieldRenderer final : public DrrRenderer {
       image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) * (use_avx2_ ? 2 : 1));
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
+    // One render a pool thread (a registration's candidates), and one from outside the pool.
+    if (source_image_) scratch_ = std::make_unique<ScratchBuffers>((pool_ ? pool_->size() : 1) + 1, image_reserve_);
     if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
       name_ += std::to_string(fields_.front().field->header().codebook_size);
     }
@@ -396,24 +400,15 @@ class LightFieldRenderer final : public DrrRenderer {
     // than it saves.
     const long max_samples = std::min(4L * window.rows * window.cols + 4096, kMaxSourceImageSamples);
     if (!source_image_box(g, m, window.rows, window.cols, max_samples, &image)) return false;
-    // One buffer per thread, kept: sized on first use for the largest field's (s, t) plane (the
-    // image, or its row pairs at two floats a sample; at most 16 MiB), so a registration allocates
-    // nothing after its first render on each thread. A larger image (a window over most of a
-    // field of more than 2^21 (s, t) samples) gets a buffer of its own for the render.
-    thread_local std::vector<float> kept;
-    std::vector<float> own;
     // The AVX2 render reads the image's row pairs, blended straight from the field; the portable
-    // one reads the image.
+    // one reads the image. The buffer is one of the renderer's own (scratch_), made at
+    // construction for the largest field's (s, t) plane, so a render allocates nothing; a larger
+    // image (a window over most of a field of more than 2^21 (s, t) samples), or more renders at
+    // once than the pool has threads plus one, gets a buffer of its own for the render.
     const std::size_t samples = std::size_t(image.rows) * std::size_t(image.cols);
     const std::size_t needed = use_avx2_ ? 2 * (samples - std::size_t(image.cols)) : samples;
-    float* buffer = nullptr;
-    if (needed > kMaxImageReserve) {
-      own.resize(needed);
-      buffer = own.data();
-    } else {
-      if (kept.size() < needed) kept.resize(std::max(needed, image_reserve_));
-      buffer = kept.data();
-    }
+    ScratchBuffers::Lease lease = scratch_->borrow(needed);
+    float* const buffer = lease.data();
     (use_avx2_ ? image.pairs : image.values) = buffer;
     const auto blend = [&](int i0, int i1) {
       const bool f32 = storage == LightFieldStorage::kFloat32;
@@ -446,13 +441,14 @@ class LightFieldRenderer final : public DrrRenderer {
     return true;
   }
 
-  // At most 16 MiB of source image a thread kept between renders.
+  // At most 16 MiB of source image in each of scratch_'s buffers.
   static constexpr std::size_t kMaxImageReserve = std::size_t{1} << 22;
 
   std::vector<FieldLevels> fields_;
   ThreadPool* pool_;
   bool source_image_;
   std::size_t image_reserve_ = 0;  // floats
+  std::unique_ptr<ScratchBuffers> scratch_;  // the source images' buffers; null without source_image_
   std::string name_;
   // Fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first choice; every
   // storage mode) or AVX2 + FMA (float and 16-bit).
