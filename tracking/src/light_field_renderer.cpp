@@ -256,7 +256,7 @@ double nominal_footprint_samples(const LightField::Header& h, const XrayView& vi
 class LightFieldRenderer final : public DrrRenderer {
  public:
   LightFieldRenderer(std::vector<FieldLevels> fields, ThreadPool* pool, SimdLevel simd, bool source_image)
-      : fields_(std::move(fields)), pool_(pool), source_image_(source_image) {
+      : fields_(std::move(fields)), pool_(pool) {
     name_ = std::string("lightfield-") + to_string(fields_.front().field->header().storage);
     bool indexable = true;  // the kernels index samples with 32-bit lanes
     for (const auto& f : fields_)
@@ -270,8 +270,10 @@ class LightFieldRenderer final : public DrrRenderer {
       image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) * (use_avx2_ ? 2 : 1));
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
-    // One render a pool thread (a registration's candidates), and one from outside the pool.
-    if (source_image_) scratch_ = std::make_unique<ScratchBuffers>((pool_ ? pool_->size() : 1) + 1, image_reserve_);
+    // One render a pool thread (a registration's candidates), and one from outside the pool; none
+    // for VQ fields, which the source image does not read.
+    if (source_image && fields_.front().field->header().storage != LightFieldStorage::kVq)
+      scratch_ = std::make_unique<ScratchBuffers>((pool_ ? pool_->size() : 1) + 1, image_reserve_);
     if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
       name_ += std::to_string(fields_.front().field->header().codebook_size);
     }
@@ -393,7 +395,7 @@ class LightFieldRenderer final : public DrrRenderer {
   bool render_from_source_image(const LightFieldGeometry& g, const RayMap& m, LightFieldStorage storage,
                                 const LightField& field, const PixelWindow& window, ImageView<float> out,
                                 RenderExtras* extras) const {
-    if (!source_image_ || storage == LightFieldStorage::kVq) return false;
+    if (!scratch_ || storage == LightFieldStorage::kVq) return false;
     SourceImage image;
     // A window reads about one (s, t) sample a pixel, or fewer; a box far larger means pixels far
     // coarser than the samples (without an averaged copy), where blending it all would cost more
@@ -446,9 +448,8 @@ class LightFieldRenderer final : public DrrRenderer {
 
   std::vector<FieldLevels> fields_;
   ThreadPool* pool_;
-  bool source_image_;
   std::size_t image_reserve_ = 0;  // floats
-  std::unique_ptr<ScratchBuffers> scratch_;  // the source images' buffers; null without source_image_
+  std::unique_ptr<ScratchBuffers> scratch_;  // the source images' buffers; null: source image off, or VQ
   std::string name_;
   // Fields of fewer than 2^31 samples, on a CPU with AVX-512 F + BW (first choice; every
   // storage mode) or AVX2 + FMA (float and 16-bit).
