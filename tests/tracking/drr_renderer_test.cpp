@@ -214,9 +214,9 @@ TEST_P(EveryRenderer, RenderAllocatesNothing) {
   EXPECT_EQ(g_allocations.load() - before, 0);
 }
 
-// A thread that never rendered before (a pool worker that missed the warm-up, the simulator's
-// frame thread) renders without allocating, alone and while another does: a renderer's scratch
-// is made with it, not sized on each thread's first call.
+// Threads that never rendered before (a pool worker that missed the warm-up, the simulator's
+// frame thread) render without allocating, two at once: a renderer's scratch is made with it, not
+// sized on each thread's first call.
 TEST_P(EveryRenderer, RenderFromThreadsThatNeverRenderedAllocatesNothing) {
   ThreadPool pool(2);
   auto threaded = make(GetParam(), &pool);

@@ -395,7 +395,7 @@ class LightFieldRenderer final : public DrrRenderer {
   bool render_from_source_image(const LightFieldGeometry& g, const RayMap& m, LightFieldStorage storage,
                                 const LightField& field, const PixelWindow& window, ImageView<float> out,
                                 RenderExtras* extras) const {
-    if (!scratch_ || storage == LightFieldStorage::kVq) return false;
+    if (!scratch_) return false;  // the source image is off, or the fields are VQ
     SourceImage image;
     // A window reads about one (s, t) sample a pixel, or fewer; a box far larger means pixels far
     // coarser than the samples (without an averaged copy), where blending it all would cost more
