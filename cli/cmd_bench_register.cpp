@@ -26,11 +26,15 @@ Command add_bench_register_command(CLI::App* parent) {
   app->add_option("--warm-plan", o->bench.warm_plan, "Warm registration plan (" + plans + ")")
       ->capture_default_str()
       ->check(CLI::IsMember(tracking::registration_plan_names()));
-  app->add_option("--cold", o->bench.cold_runs, "Cold registrations")->capture_default_str();
-  app->add_option("--warm", o->bench.warm_runs, "Warm (tracking) registrations")->capture_default_str();
+  // The cold runs make the problems, so at least one; --warm 0 times the cold runs alone.
+  app->add_option("--cold", o->bench.cold_runs, "Cold registrations")->capture_default_str()->check(CLI::Range(1, 100000));
+  app->add_option("--warm", o->bench.warm_runs, "Warm (tracking) registrations (0 skips)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
   app->add_option("--siddon-runs", o->bench.renderer_runs,
                   "Cold problems repeated with Siddon DRRs inside the registration (slow; 0 skips)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
   app->add_option("--seed", o->bench.seed, "Seed")->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o]() -> Status {
@@ -44,6 +48,10 @@ Command add_bench_register_command(CLI::App* parent) {
       return {};
     }
     auto line = [](const char* what, const TimedRegistrations& t) {
+      if (t.runs == 0) {
+        std::printf("%-28s %5d  not run\n", what, t.runs);
+        return;
+      }
       std::printf("%-28s %5d %9.1f %9.1f %9.1f %9.3f %9.3f %7.1f%% %7.0f\n", what, t.runs, t.median_ms, t.p95_ms,
                   t.max_ms, t.mean_tre_mm, t.max_tre_mm, 100 * t.success_rate, t.median_evaluations);
       for (std::size_t p = 0; p < t.passes.size(); ++p)

@@ -158,8 +158,19 @@ Status run(const RegisterOptions& o) {
     start = *s;
   }
 
+  // Each detector's correction as the loop takes it: the scene's detector calibration where it
+  // names one; otherwise the simulator's detector model (its imager's, for --sim frames with
+  // imaging physics), which a device detector's --frames may not use.
+  auto corrections = scene_detector_corrections(p, o.sim);
+  if (!corrections.ok()) return corrections.status();
+  for (const DetectorSpec& d : p.scene.detectors)
+    if (!d.calibration_file.empty())
+      spdlog::info("detector {}: raw counts corrected with its calibration {}", d.view.name, d.calibration_file);
+  const auto use_where_uncalibrated = [&](const tracking::DetectorCorrection& c) {
+    for (std::size_t v = 0; v < corrections->size(); ++v)
+      if (p.scene.detectors[v].calibration_file.empty()) (*corrections)[v] = c;
+  };
   std::vector<Image<std::uint16_t>> raw;
-  tracking::DetectorCorrection correction = sim::detector_correction(scene_detector_model(p));
   if (o.sim) {
     if (!gold) gold = p.nominal_T_room_from_ct;
     const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
@@ -172,7 +183,7 @@ Status run(const RegisterOptions& o) {
       auto frames = imager->expose(*patient, *gold, o.seed);
       if (!frames.ok()) return frames.status();
       raw = std::move(frames).value();
-      correction = imager->correction();
+      use_where_uncalibrated(imager->correction());
       spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(physics));
     } else {
       tracking::RendererOptions exact_options;
@@ -192,7 +203,8 @@ Status run(const RegisterOptions& o) {
       raw.push_back(std::move(frame).value());
     }
   }
-  if (o.i0_counts > 0) correction.open_field_counts = o.i0_counts;
+  if (o.i0_counts > 0)
+    for (tracking::DetectorCorrection& c : *corrections) c.open_field_counts = o.i0_counts;
   if (!o.save_frames.empty()) {
     std::filesystem::create_directories(o.save_frames);
     for (std::size_t i = 0; i < raw.size(); ++i) {
@@ -212,7 +224,7 @@ Status run(const RegisterOptions& o) {
   std::vector<tracking::FrameQualityStats> quality(raw.size());
   bool quality_ok = true;
   for (std::size_t v = 0; v < raw.size(); ++v) {
-    verdict_in.image_quality[v] = tracking::assess_frame_quality(raw[v].view(), p.roi_windows[v], correction,
+    verdict_in.image_quality[v] = tracking::assess_frame_quality(raw[v].view(), p.roi_windows[v], (*corrections)[v],
                                                                  tracking::FrameQualityLimits{}, &quality[v]);
     quality_ok = quality_ok && verdict_in.image_quality[v] == tracking::FrameQualityIssue::kOk;
   }
@@ -244,7 +256,7 @@ Status run(const RegisterOptions& o) {
     }
     return verdict_status(verdict, p);
   }
-  auto frames = preprocess_scene_frames(p, raw, correction);
+  auto frames = preprocess_scene_frames(p, raw, *corrections);
   if (!frames.ok()) return frames.status();
 
   auto renderer = make_scene_renderer(p, o.renderer, o.lf_dir, &pool);
@@ -364,7 +376,7 @@ Command add_register_command(CLI::App* parent) {
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
   app->add_flag("--fiducial", o->fiducial, "Add the scene's first fiducial (hybrid measure, paper 2)");
   app->add_option("--seed", o->seed, "Noise seed of synthetic frames")->capture_default_str();
-  app->add_option("--i0", o->i0_counts, "Open-field counts of --frames (default: the sim detector's)")
+  app->add_option("--i0", o->i0_counts, "Open-field counts of every detector's frames (default: its calibration's, else the sim detector's)")
       ->check(finite_in(0, 1e9, true));
   app->add_option("--save-frames", o->save_frames, "Write the raw frames as 16-bit TIFF into this folder");
   app->add_flag("--json", o->json, "Print the result as JSON");

@@ -182,6 +182,8 @@ Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& 
 
 nlohmann::json to_json(const RegistrationBenchReport& r) {
   auto timed = [](const TimedRegistrations& t) {
+    // None run (--warm 0): no figures, rather than zeros that read as measured.
+    if (t.runs == 0) return nlohmann::json{{"runs", 0}};
     return nlohmann::json{{"runs", t.runs},
                           {"median_ms", t.median_ms},
                           {"p95_ms", t.p95_ms},

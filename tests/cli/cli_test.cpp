@@ -72,6 +72,10 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
         {"register", "--i0", "0"},
         {"register", "--i0", "-1"},
         {"register", "--i0", "nan"},
+        {"bench", "register", "--cold", "0"},  // no run would be reported as zeros
+        {"bench", "register", "--cold", "-1"},
+        {"bench", "register", "--warm", "-1"},
+        {"bench", "register", "--siddon-runs", "-5"},
         {"drr", "--window", "nan,1"},
         {"drr", "--window", "0,inf"}}) {
     std::vector<std::string> argv = {lftrack_bin()};

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <random>
 #include <vector>
@@ -15,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lftrack/studies/plastimatch_peer.hpp"
+#include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"
@@ -189,6 +191,59 @@ TEST_F(RegisterCli, SwappedFramesAreRejectedWhateverTheMeasure) {
     EXPECT_EQ(v["reason"], "similarity below what the scene expects") << measure << ": " << v.dump();
     EXPECT_EQ(v["units"], "ncc") << measure << ": " << v.dump();
   }
+}
+
+// The scene's detector calibration corrects --frames as it corrects the loop's frames (register
+// used the simulator's model whatever the scene named): a flat calibration is accepted as the
+// model is, one whose dark level lies above every count leaves nothing to register, and one that
+// does not load is refused with the detector named.
+TEST_F(RegisterCli, TheScenesDetectorCalibrationCorrectsTheFrames) {
+  save_good_frames();
+  auto frame = tracking::read_tiff(frames_dir() / "frame_A.tif");
+  ASSERT_TRUE(frame.ok());
+  const float brightest = *std::max_element(frame->pixels().begin(), frame->pixels().end());
+  const auto write_calibration = [&](const std::string& name, float offset_counts) {
+    calib::DetectorCalibration c;
+    c.detector = "A";
+    c.rows = frame->rows();
+    c.cols = frame->cols();
+    c.dark_frames = c.flood_frames = 8;
+    c.offset_counts = tracking::Image<float>(c.rows, c.cols, offset_counts);
+    c.noise_counts = tracking::Image<float>(c.rows, c.cols, 1.f);
+    c.gain = tracking::Image<float>(c.rows, c.cols, 1.f);
+    c.defective = tracking::Image<unsigned char>(c.rows, c.cols, 0);
+    c.open_field_counts = 2.0 * brightest;
+    c.saturation_counts = 4095;
+    c.saturation_source = "bits";
+    c.content_hash = calib::detector_calibration_hash(c);
+    const fs::path file = dir_->path() / (name + ".tif");
+    EXPECT_TRUE(write_detector_calibration(file, c, true).ok());
+    return file;
+  };
+  const auto scene_with = [&](const std::string& name, const fs::path& calibration) {
+    std::ifstream in(scene_file());
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    const auto line_end = text.find('\n', text.find("  - name: A"));
+    text.insert(line_end + 1, "    calibration: " + calibration.string() + "\n");
+    const fs::path scene = dir_->path() / (name + ".yaml");
+    std::ofstream(scene) << text;
+    return scene;
+  };
+  const std::vector<std::string> good = {"--frames", (frames_dir() / "frame_A.tif").string(),
+                                         (frames_dir() / "frame_B.tif").string()};
+  std::string out;
+  EXPECT_TRUE(run_register(good, &out, scene_with("flat", write_calibration("flat", 0.f))).ok()) << out;
+  EXPECT_NE(out.find("verdict: ACCEPTED"), std::string::npos) << out;
+
+  EXPECT_FALSE(run_register(good, &out, scene_with("dark", write_calibration("dark", 2.f * brightest))).ok())
+      << "every pixel at or below its dark level: " << out;
+  EXPECT_EQ(out.find("verdict: ACCEPTED"), std::string::npos) << out;
+
+  const fs::path broken = write_calibration("broken", 0.f);
+  fs::resize_file(broken, fs::file_size(broken) / 2);
+  EXPECT_FALSE(run_register(good, &out, scene_with("broken", broken)).ok()) << out;
+  EXPECT_NE(out.find("detector A"), std::string::npos) << out;
+  EXPECT_EQ(out.find("verdict"), std::string::npos) << "refused before registering: " << out;
 }
 
 TEST_F(RegisterCli, OneDetectorIsRefusedUnlessTheSceneSaysSoAndThenTheBlindDirectionIsReported) {

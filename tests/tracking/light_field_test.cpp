@@ -327,6 +327,19 @@ TEST_F(LightFieldFile, AFifoOrFolderIsRefusedWithoutHanging) {
   EXPECT_FALSE(LightField::load(dir_.path() / "C.lf").ok());
 }
 
+// A save that cannot be put in place (a folder where the file goes) fails with the reason and
+// leaves no half-written copy beside it (each one was a whole field: 256 MB for the lumbar CT).
+TEST_F(LightFieldFile, AFailedSaveLeavesNothingBehind) {
+  const auto taken = dir_.path() / "D.lf";
+  std::filesystem::create_directories(taken / "inside");
+  const Status saved = field_->save(taken);
+  ASSERT_FALSE(saved.ok());
+  EXPECT_NE(saved.message().find("cannot rename into place"), std::string::npos) << saved.message();
+  for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
+    EXPECT_EQ(entry.path().string().find(".partial"), std::string::npos) << entry.path();
+  EXPECT_TRUE(std::filesystem::exists(taken / "inside"));
+}
+
 // Rewrites the payload at `offset` (from the payload's start) and makes both checksums valid
 // again, as a tool that writes bad values with good checksums would.
 void patch_file(const std::filesystem::path& file, std::size_t offset, const void* bytes, std::size_t n);

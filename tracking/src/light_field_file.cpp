@@ -230,11 +230,20 @@ Status LightField::save(const std::filesystem::path& file) const {
     if (!out) return io_error(file.string() + ": cannot open for writing");
     out.write(reinterpret_cast<const char*>(header), kHeaderBytes);
     out.write(reinterpret_cast<const char*>(payload), static_cast<std::streamsize>(payload_bytes_));
-    if (!out) return io_error(file.string() + ": write failed");
+    if (!out) {
+      out.close();
+      std::error_code ignored;
+      std::filesystem::remove(partial, ignored);  // a failed save leaves nothing behind
+      return io_error(file.string() + ": write failed");
+    }
   }
   std::error_code ec;
   std::filesystem::rename(partial, file, ec);  // a reader never sees a half-written file
-  if (ec) return io_error(file.string() + ": cannot rename into place: " + ec.message());
+  if (ec) {
+    std::error_code ignored;
+    std::filesystem::remove(partial, ignored);
+    return io_error(file.string() + ": cannot rename into place: " + ec.message());
+  }
   return {};
 }
 

@@ -237,32 +237,6 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
   return Spec(std::move(simulated));
 }
 
-// Per detector, how raw counts become line integrals: the scene's detector calibration file
-// where it names one; otherwise, for frames the simulator made (or archived from it), the
-// simulator's detector model. Device frames without a calibration are refused.
-Result<std::vector<tracking::DetectorCorrection>> detector_corrections(const PreparedScene& p, bool simulated) {
-  std::vector<tracking::DetectorCorrection> corrections;
-  for (const DetectorSpec& d : p.scene.detectors) {
-    if (!d.calibration_file.empty()) {
-      auto calibration = load_detector_calibration(d.calibration_file);
-      if (!calibration.ok()) return calibration.status().with_context("detector " + d.view.name);
-      if (calibration->rows != d.view.rows || calibration->cols != d.view.cols)
-        return failed_precondition("detector " + d.view.name + ": its calibration " + d.calibration_file + " is for " +
-                                   std::to_string(calibration->rows) + " x " + std::to_string(calibration->cols) +
-                                   " pixels, the detector has " + std::to_string(d.view.rows) + " x " +
-                                   std::to_string(d.view.cols));
-      corrections.push_back(calib::to_detector_correction(*calibration));
-      continue;
-    }
-    if (!simulated && !d.simulator_calibration && frames_from_device(d.frames))
-      return failed_precondition("detector " + d.view.name + " (" + describe_frames(d.frames) +
-                                 ") has no detector calibration: name one as detectors[].calibration "
-                                 "(lftrack calibrate detector --dark DIR --flood DIR)");
-    corrections.push_back(sim::detector_correction(scene_detector_model(p)));
-  }
-  return corrections;
-}
-
 }  // namespace
 
 LoopSession::LoopSession(std::unique_ptr<Parts> parts) : parts_(std::move(parts)) {}
@@ -476,7 +450,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   lp.check_renderer = parts->registration_renderer.get();
   lp.frames = o.hooks.wrap_frames ? o.hooks.wrap_frames(parts->frames.get()) : parts->frames.get();
   lp.archive = parts->archive.get();
-  auto corrections = detector_corrections(p, parts->room != nullptr);
+  auto corrections = scene_detector_corrections(p, parts->room != nullptr);
   if (!corrections.ok()) return corrections.status();
   lp.corrections = std::move(corrections).value();
   lp.actuator = parts->actuator.get();

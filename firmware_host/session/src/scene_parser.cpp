@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/similarity.hpp"
 #include "scene_yaml.hpp"
@@ -320,6 +321,16 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
   if (root["safety"]) {
     LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
     scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
+    // A floor at or below what unrelated images score turns the similarity check off.
+    const auto expected = similarity_expectation(scene.registration.similarity);
+    if (scene.min_similarity_given && expected.ok() && !(scene.safety.min_similarity > expected->no_information)) {
+      std::ostringstream why;
+      why << "safety.min_similarity " << scene.safety.min_similarity << " does not exceed what unrelated images score with "
+          << scene.registration.similarity << " (" << expected->no_information
+          << "): the floor would pass frames that match nothing (the measure's default is " << expected->min_similarity
+          << ")";
+      return error(root["safety"]["min_similarity"], why.str());
+    }
   }
   if (root["actuator"]) LFTRACK_RETURN_IF_ERROR(parse_actuator(root["actuator"], &scene.actuator));
   LFTRACK_RETURN_IF_ERROR(check_devices(root, scene));

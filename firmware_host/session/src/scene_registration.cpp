@@ -6,6 +6,8 @@
 #include <cmath>
 
 #include "lftrack/calib/marker_detection.hpp"
+#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -125,9 +127,15 @@ std::vector<ImageView<const unsigned char>> SceneFrames::masks() const {
 Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p,
                                             const std::vector<Image<std::uint16_t>>& raw,
                                             const tracking::DetectorCorrection& correction) {
-  if (raw.size() != p.scene.detectors.size())
-    return invalid_argument("expected " + std::to_string(p.scene.detectors.size()) + " frames, got " +
-                            std::to_string(raw.size()));
+  return preprocess_scene_frames(p, raw, std::vector<tracking::DetectorCorrection>(raw.size(), correction));
+}
+
+Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p,
+                                            const std::vector<Image<std::uint16_t>>& raw,
+                                            const std::vector<tracking::DetectorCorrection>& corrections) {
+  if (raw.size() != p.scene.detectors.size() || corrections.size() != raw.size())
+    return invalid_argument("expected " + std::to_string(p.scene.detectors.size()) + " frames and corrections, got " +
+                            std::to_string(raw.size()) + " and " + std::to_string(corrections.size()));
   SceneFrames out;
   for (std::size_t i = 0; i < raw.size(); ++i) {
     const auto& view = p.scene.detectors[i].view;
@@ -138,12 +146,35 @@ Result<SceneFrames> preprocess_scene_frames(const PreparedScene& p,
     const tracking::PixelWindow& w = p.roi_windows[i];
     out.line_integral.emplace_back(w.rows, w.cols);
     out.valid.emplace_back(w.rows, w.cols);
-    LFTRACK_RETURN_IF_ERROR(tracking::preprocess_frame(raw[i].view(), correction, w,
+    LFTRACK_RETURN_IF_ERROR(tracking::preprocess_frame(raw[i].view(), corrections[i], w,
                                                        out.line_integral.back().view(),
                                                        out.valid.back().view())
                                 .with_context("view " + view.name));
   }
   return out;
+}
+
+Result<std::vector<tracking::DetectorCorrection>> scene_detector_corrections(const PreparedScene& p, bool simulated) {
+  std::vector<tracking::DetectorCorrection> corrections;
+  for (const DetectorSpec& d : p.scene.detectors) {
+    if (!d.calibration_file.empty()) {
+      auto calibration = load_detector_calibration(d.calibration_file);
+      if (!calibration.ok()) return calibration.status().with_context("detector " + d.view.name);
+      if (calibration->rows != d.view.rows || calibration->cols != d.view.cols)
+        return failed_precondition("detector " + d.view.name + ": its calibration " + d.calibration_file + " is for " +
+                                   std::to_string(calibration->rows) + " x " + std::to_string(calibration->cols) +
+                                   " pixels, the detector has " + std::to_string(d.view.rows) + " x " +
+                                   std::to_string(d.view.cols));
+      corrections.push_back(calib::to_detector_correction(*calibration));
+      continue;
+    }
+    if (!simulated && !d.simulator_calibration && frames_from_device(d.frames))
+      return failed_precondition("detector " + d.view.name + " (" + describe_frames(d.frames) +
+                                 ") has no detector calibration: name one as detectors[].calibration "
+                                 "(lftrack calibrate detector --dark DIR --flood DIR)");
+    corrections.push_back(sim::detector_correction(scene_detector_model(p)));
+  }
+  return corrections;
 }
 
 sim::DetectorModel scene_detector_model(const PreparedScene& p) {

@@ -46,10 +46,22 @@ struct SceneFrames {
   std::vector<tracking::ImageView<const unsigned char>> masks() const;
 };
 
-// Raw frames (whole detectors) -> preprocessed ROI windows.
+// Raw frames (whole detectors) -> preprocessed ROI windows, each detector's with its own
+// correction, or all with one.
+Result<SceneFrames> preprocess_scene_frames(const PreparedScene& scene,
+                                            const std::vector<tracking::Image<std::uint16_t>>& raw,
+                                            const std::vector<tracking::DetectorCorrection>& corrections);
 Result<SceneFrames> preprocess_scene_frames(const PreparedScene& scene,
                                             const std::vector<tracking::Image<std::uint16_t>>& raw,
                                             const tracking::DetectorCorrection& correction);
+
+// Per detector, how raw counts become line integrals, as the loop and `lftrack register` correct
+// them: the scene's detector calibration file where it names one (refused if it does not load or
+// is for another size); otherwise, for frames the simulator made (`simulated`) or replayed and
+// simulated detectors, the simulator's detector model. A device detector's frames without a
+// calibration are refused.
+Result<std::vector<tracking::DetectorCorrection>> scene_detector_corrections(const PreparedScene& scene,
+                                                                             bool simulated);
 
 // The detector model of the scene's sim section.
 sim::DetectorModel scene_detector_model(const PreparedScene& scene);
