@@ -13,7 +13,6 @@
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/host/scene_verdict.hpp"
