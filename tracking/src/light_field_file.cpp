@@ -225,25 +225,22 @@ Status LightField::save(const std::filesystem::path& file) const {
   // Per process: two processes saving the same field (tasks of a job array) never share a
   // half-written file.
   const std::filesystem::path partial = file.string() + "." + std::to_string(getpid()) + ".partial";
+  const auto failed = [&](const std::string& why) {  // a failed save leaves nothing behind
+    std::error_code ignored;
+    std::filesystem::remove(partial, ignored);
+    return io_error(file.string() + ": " + why);
+  };
   {
     std::ofstream out(partial, std::ios::binary | std::ios::trunc);
     if (!out) return io_error(file.string() + ": cannot open for writing");
     out.write(reinterpret_cast<const char*>(header), kHeaderBytes);
     out.write(reinterpret_cast<const char*>(payload), static_cast<std::streamsize>(payload_bytes_));
-    if (!out) {
-      out.close();
-      std::error_code ignored;
-      std::filesystem::remove(partial, ignored);  // a failed save leaves nothing behind
-      return io_error(file.string() + ": write failed");
-    }
+    out.close();
+    if (!out) return failed("write failed");
   }
   std::error_code ec;
   std::filesystem::rename(partial, file, ec);  // a reader never sees a half-written file
-  if (ec) {
-    std::error_code ignored;
-    std::filesystem::remove(partial, ignored);
-    return io_error(file.string() + ": cannot rename into place: " + ec.message());
-  }
+  if (ec) return failed("cannot rename into place: " + ec.message());
   return {};
 }
 

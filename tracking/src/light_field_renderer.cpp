@@ -270,13 +270,12 @@ class LightFieldRenderer final : public DrrRenderer {
       image_reserve_ = std::max(image_reserve_, std::size_t(size[2]) * std::size_t(size[3]) * (use_avx2_ ? 2 : 1));
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
+    const bool vq = fields_.front().field->header().storage == LightFieldStorage::kVq;
     // One render a pool thread (a registration's candidates), and one from outside the pool; none
     // for VQ fields, which the source image does not read.
-    if (source_image && fields_.front().field->header().storage != LightFieldStorage::kVq)
+    if (source_image && !vq)
       scratch_ = std::make_unique<ScratchBuffers>((pool_ ? pool_->size() : 1) + 1, image_reserve_);
-    if (fields_.front().field->header().storage == LightFieldStorage::kVq) {
-      name_ += std::to_string(fields_.front().field->header().codebook_size);
-    }
+    if (vq) name_ += std::to_string(fields_.front().field->header().codebook_size);
   }
 
   std::string_view name() const override { return name_; }

@@ -59,7 +59,6 @@ class ScratchBuffers {
   }
 
   int buffers() const { return count_; }
-  std::size_t floats_each() const { return floats_each_; }
 
  private:
   struct Slot {

@@ -323,7 +323,7 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
     scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
     // A floor at or below what unrelated images score turns the similarity check off.
     const auto expected = similarity_expectation(scene.registration.similarity);
-    if (scene.min_similarity_given && expected.ok() && !(scene.safety.min_similarity > expected->no_information)) {
+    if (scene.min_similarity_given && expected.ok() && scene.safety.min_similarity <= expected->no_information) {
       std::ostringstream why;
       why << "safety.min_similarity " << scene.safety.min_similarity << " does not exceed what unrelated images score with "
           << scene.registration.similarity << " (" << expected->no_information
