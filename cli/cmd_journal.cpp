@@ -21,8 +21,10 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_states.hpp"
@@ -49,27 +51,44 @@ std::string operator_command_name(std::uint8_t c) {
   return c == 0 ? "" : code_name<OperatorCommand>(c, 1);
 }
 
+// The reason of a refusal ("" when none).
+std::string refusal_name(std::uint8_t code) {
+  return code == 0 ? "" : code_name<OperatorRefusal>(code);
+}
+nlohmann::json refusals_json(const JournalRecord& r) {
+  nlohmann::json j = nlohmann::json::object();
+  for (std::size_t i = 1; i < std::size(r.operator_refused_by_reason); ++i)
+    if (r.operator_refused_by_reason[i] > 0) j[refusal_name(std::uint8_t(i))] = r.operator_refused_by_reason[i];
+  return j;
+}
+// A journal 6-vector (mm, rad) as CSV columns in mm and degrees.
+void print_mm_deg(const double v[6]) {
+  for (int i = 0; i < 6; ++i) std::printf(",%.6g", i < 3 ? v[i] : tracking::rad_to_deg(v[i]));
+}
+
 void print_csv(const std::vector<JournalRecord>& records) {
   std::printf(
       "cycle,cycle_start_ns,frame_seq_a,frame_seq_b,state,previous_state,gate,reason,"
-      "tx_mm,ty_mm,tz_mm,rx_rad,ry_rad,rz_rad,similarity_a,similarity_b,evaluations,registration_ms,"
-      "command_sent,cmd_tx_mm,cmd_ty_mm,cmd_tz_mm,cmd_rx_rad,cmd_ry_rad,cmd_rz_rad,"
+      "tx_mm,ty_mm,tz_mm,rx_deg,ry_deg,rz_deg,similarity_a,similarity_b,evaluations,registration_ms,"
+      "command_sent,cmd_tx_mm,cmd_ty_mm,cmd_tz_mm,cmd_rx_deg,cmd_ry_deg,cmd_rz_deg,"
       "beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm,event,"
-      "hold_id,operator_command,operator_refused,operator_refusal,beam_withheld\n");
+      "hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
+      "operator_first_refusal,operator_refusals\n");
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
                 state_name(r.state).c_str(), state_name(r.previous_state).c_str(),
                 code_name<GateDecision>(r.gate_decision).c_str(), code_name<GateReason>(r.gate_reason).c_str());
-    for (double v : r.pose_delta) std::printf(",%.6g", v);
+    print_mm_deg(r.pose_delta);
     std::printf(",%.6g,%.6g,%u,%.3f,%d", r.similarity[0], r.similarity[1], r.evaluations, r.registration_ms,
                 r.command_sent);
-    for (double v : r.command) std::printf(",%.6g", v);
+    print_mm_deg(r.command);
     std::printf(",%d,%d,%u,%u,%.4f,\"%s\"", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
                 r.true_residual_mm, event_name(r.event).c_str());
-    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\"\n", r.hold_id, operator_command_name(r.operator_command).c_str(),
-                unsigned{r.operator_refused}, code_name<OperatorRefusal>(r.operator_refusal).c_str(),
-                code_name<BeamWithheld>(r.beam_withheld).c_str());
+    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\",\"%s\",\"%s\"\n", r.hold_id,
+                operator_command_name(r.operator_command).c_str(), unsigned{r.operator_refused},
+                refusal_name(r.operator_refusal).c_str(), code_name<BeamWithheld>(r.beam_withheld).c_str(),
+                refusal_name(r.operator_first_refusal).c_str(), refusals_text(r.operator_refused_by_reason).c_str());
   }
 }
 
@@ -82,13 +101,13 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"previous_state", state_name(r.previous_state)},
                      {"gate", code_name<GateDecision>(r.gate_decision)},
                      {"reason", code_name<GateReason>(r.gate_reason)},
-                     {"pose_delta", r.pose_delta},
+                     {"pose_delta", pose_delta_json(r.pose_delta)},
                      {"similarity", r.similarity},
                      {"evaluations", r.evaluations},
                      {"registration_ms", r.registration_ms},
                      {"command_sent", r.command_sent != 0},
-                     {"command", r.command},
-                     {"readback", r.readback},
+                     {"command", pose_delta_json(r.command)},
+                     {"readback", pose_delta_json(r.readback)},
                      {"beam_permit", r.beam_permit != 0},
                      {"overrun", r.overrun != 0},
                      {"skipped_periods", r.skipped_periods},
@@ -98,7 +117,9 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"hold_id", r.hold_id},
                      {"operator_command", operator_command_name(r.operator_command)},
                      {"operator_refused", r.operator_refused},
-                     {"operator_refusal", code_name<OperatorRefusal>(r.operator_refusal)},
+                     {"operator_refusal", refusal_name(r.operator_refusal)},
+                     {"operator_first_refusal", refusal_name(r.operator_first_refusal)},
+                     {"operator_refusals", refusals_json(r)},
                      {"beam_withheld", code_name<BeamWithheld>(r.beam_withheld)}};
     std::printf("%s\n", j.dump().c_str());
   }

@@ -13,6 +13,7 @@
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/tracking/frame_quality.hpp"
@@ -298,7 +299,7 @@ Status run(const RegisterOptions& o) {
     j["plan"] = plan->name;
     j["similarity"] = spec.similarity;
     j["renderer"] = o.renderer;
-    j["delta_from_nominal"] = delta;
+    j["delta_from_nominal"] = pose_delta_json(verdict_in.delta_from_nominal.data());
     j["T_room_from_ct"] = {{"translation_mm", {t.x(), t.y(), t.z()}},
                            {"euler_deg", {{"roll", tracking::rad_to_deg(euler.roll)},
                                           {"pitch", tracking::rad_to_deg(euler.pitch)},

@@ -103,8 +103,8 @@ void print_summary(const LoopSummary& s) {
     std::printf(", heap allocations per steady-state cycle %.3f", *s.allocations_per_cycle);
   std::printf("\n");
   if (s.operator_refused > 0)
-    std::printf("operator commands refused or discarded: %lld (journal: operator_refusal)\n",
-                static_cast<long long>(s.operator_refused));
+    std::printf("operator commands refused or discarded: %lld (%s; journal: operator_refusals)\n",
+                static_cast<long long>(s.operator_refused), refusals_text(s.operator_refused_by_reason).c_str());
   for (const LoopTransition& t : s.transitions)
     std::printf("  cycle %6lld  %-5s -> %-5s  %s\n", static_cast<long long>(t.cycle), to_string(t.from),
                 to_string(t.to), t.reason);

@@ -529,11 +529,13 @@ TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
   std::string csv;
   EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok())
       << "damage is an error, for scripts";
-  EXPECT_NE(csv.find(",hold_id,operator_command,operator_refused,operator_refusal,beam_withheld\n"),
+  EXPECT_NE(csv.find(",hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
+                     "operator_first_refusal,operator_refusals\n"),
             std::string::npos)
       << csv;
-  EXPECT_NE(csv.find(",3,\"resume\",0,\"\",\"approved step beyond the step limit\"\n"), std::string::npos) << csv;
-  EXPECT_NE(csv.find(",0,\"\",0,\"\",\"\"\n"), std::string::npos) << "no beam withheld: an empty field" << csv;
+  EXPECT_NE(csv.find(",3,\"resume\",0,\"\",\"approved step beyond the step limit\",\"\",\"\"\n"), std::string::npos)
+      << csv;
+  EXPECT_NE(csv.find(",0,\"\",0,\"\",\"\",\"\",\"\"\n"), std::string::npos) << "no beam withheld: an empty field" << csv;
   for (int i = 0; i < 20; ++i) {
     const std::string row = std::string("\n") + std::to_string(i) + ",0,0,0,TRACK";
     EXPECT_EQ(csv.find(row) == std::string::npos, i == 10) << i << csv;

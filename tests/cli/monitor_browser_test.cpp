@@ -214,6 +214,8 @@ TEST(MonitorPage, ShowsTheLoopLiveAndActsOnlyWithTheToken) {
   // A person looks before resuming: the loop counts a resume only once the HOLD has been shown
   // for a second of its clock (10 cycles).
   browser.wait_for("cycle", [&](const std::string& t) { return std::atoi(t.c_str()) > hold_seen_at + 15; });
+  EXPECT_EQ(browser.text("state"), "HOLD");
+  EXPECT_NE(browser.text("gate-decision"), "APPLY") << "nothing is applied in HOLD";
   browser.click("resume");
   const std::string accepted =
       browser.wait_for("action-result", [](const std::string& t) { return t.find("accepted") != std::string::npos; });

@@ -23,6 +23,7 @@
 #include <thread>
 
 #include "lftrack/loop/crc32c.hpp"
+#include "lftrack/loop/operator_input.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
@@ -57,7 +58,7 @@ void write_journal(const std::filesystem::path& file, std::uint64_t n) {
 
 // A journal's bytes, encoded here as a writer of format `version` would: the header, then one
 // frame per record whose payload (record_bytes long) holds the record's first `copied` bytes.
-std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 2,
+std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 3,
                                          std::uint32_t record_bytes = sizeof(JournalRecord),
                                          std::size_t copied = sizeof(JournalRecord)) {
   std::vector<unsigned char> bytes(32, 0);
@@ -312,7 +313,7 @@ TEST(Journal, ZerosOrGarbageInsertedInTheMiddleAreSkipped) {
 TEST(Journal, ReadsAVersionOneJournal) {
   test::TempDir dir;
   const auto file = dir.path() / "v1.journal";
-  constexpr std::uint32_t kV1Bytes = sizeof(JournalRecord) - 8;
+  constexpr std::uint32_t kV1Bytes = 256;
   std::vector<JournalRecord> records;
   for (std::uint64_t i = 0; i < 20; ++i) records.push_back(record(i));
   // Version 1's payload ended where hold_id starts, with 4 reserved bytes (zero).
@@ -342,10 +343,44 @@ TEST(Journal, ReadsAVersionOneJournal) {
       << j.status().message();
   write_file(file, v1_file(2, kV1Bytes));
   EXPECT_FALSE(read_journal(file).ok());
-  write_file(file, v1_file(3, kV1Bytes));
+  write_file(file, v1_file(4, kV1Bytes));
   j = read_journal(file);
   ASSERT_FALSE(j.ok());
-  EXPECT_NE(j.status().message().find("version 3"), std::string::npos) << j.status().message();
+  EXPECT_NE(j.status().message().find("version 4"), std::string::npos) << j.status().message();
+}
+
+// Version 2 (before the refusals by reason): 264-byte records, read with the new fields zero.
+TEST(Journal, ReadsAVersionTwoJournal) {
+  test::TempDir dir;
+  const auto file = dir.path() / "v2.journal";
+  std::vector<JournalRecord> records;
+  for (std::uint64_t i = 0; i < 20; ++i) {
+    JournalRecord r = record(i);
+    r.hold_id = 123456;
+    r.operator_refused = 3;
+    r.operator_refusal = std::uint8_t(OperatorRefusal::kTooSoon);
+    r.beam_withheld = 1;
+    r.operator_refused_by_reason[2] = 9;  // not in version 2: must not be read
+    records.push_back(r);
+  }
+  write_file(file, journal_bytes(records, 2, 264, 264));
+  auto j = read_journal(file);
+  ASSERT_TRUE(j.ok()) << j.status().message();
+  EXPECT_EQ(j->format_version, 2u);
+  ASSERT_EQ(j->records.size(), 20u);
+  EXPECT_FALSE(j->damaged());
+  for (const JournalRecord& r : j->records) {
+    EXPECT_EQ(r.hold_id, 123456u);
+    EXPECT_EQ(r.operator_refused, 3);
+    EXPECT_EQ(r.operator_refusal, std::uint8_t(OperatorRefusal::kTooSoon));
+    EXPECT_EQ(r.beam_withheld, 1);
+    EXPECT_EQ(r.operator_first_refusal, 0);
+    for (std::uint16_t n : r.operator_refused_by_reason) EXPECT_EQ(n, 0);
+  }
+  write_file(file, journal_bytes(records, 2, sizeof(JournalRecord), 264));
+  j = read_journal(file);
+  ASSERT_FALSE(j.ok());
+  EXPECT_NE(j.status().message().find("version 2 has records of 264 bytes"), std::string::npos) << j.status().message();
 }
 
 // The cycle counter goes up by 1 + skipped_periods: a record removed from the file is a gap, one

@@ -70,11 +70,15 @@ TEST(OperatorRequest, ActsOnlyOnTheStateAndTheHoldItAnswers) {
     EXPECT_EQ(judge_operator_request(resume3, in_state(s), true), OperatorRefusal::kNotApplicable) << to_string(s);
     EXPECT_EQ(judge_operator_request(bare, in_state(s), false), OperatorRefusal::kNotApplicable) << to_string(s);
   }
+  // The other stopped state's command is refused with the command it needs, not as "stale" (an
+  // outside probe's `resume <FAULT id>` was told "not in the state it answers (stale)").
   EXPECT_EQ(judge_operator_request(resume3, in_state(TrackingState::kFault, 3), true),
-            OperatorRefusal::kNotApplicable)
+            OperatorRefusal::kResumeInFault)
       << "a resume does not leave a FAULT";
+  EXPECT_NE(std::string(to_string(OperatorRefusal::kResumeInFault)).find("use reset"), std::string::npos);
   EXPECT_EQ(judge_operator_request(parsed("reset 3"), in_state(TrackingState::kHold, 3), true),
-            OperatorRefusal::kNotApplicable);
+            OperatorRefusal::kResetInHold);
+  EXPECT_NE(std::string(to_string(OperatorRefusal::kResetInHold)).find("use resume"), std::string::npos);
   EXPECT_EQ(judge_operator_request(parsed("reset 4"), in_state(TrackingState::kFault, 4), true),
             OperatorRefusal::kNone);
   EXPECT_EQ(judge_operator_request(parsed("stop"), in_state(TrackingState::kTrack), true), OperatorRefusal::kNone);
@@ -107,6 +111,32 @@ TEST(OperatorPoll, AStopWinsOverAResumeInTheSameCycle) {
   p.accept(OperatorCommand::kStop);
   p.accept(OperatorCommand::kResume);
   EXPECT_EQ(p.command, OperatorCommand::kStop);
+}
+
+// Several refusals in one cycle: each reason is counted, with the first and the last (an outside
+// probe's token failures were lost behind the last reason of their cycles).
+TEST(OperatorRefusals, KeepsEveryReasonWithTheFirstAndTheLast) {
+  OperatorPoll p;
+  p.refuse(OperatorRefusal::kNone);
+  p.refuse(OperatorRefusal::kReplayed, 0);
+  EXPECT_EQ(p.refused, 0) << "no reason, or none of them, counts nothing";
+  EXPECT_EQ(p.first_refusal, OperatorRefusal::kNone);
+  p.refuse(OperatorRefusal::kBadToken, 15);
+  p.refuse(OperatorRefusal::kTooSoon);
+  p.refuse(OperatorRefusal::kMalformed, 2);
+  EXPECT_EQ(p.refused, 18);
+  EXPECT_EQ(p.first_refusal, OperatorRefusal::kBadToken);
+  EXPECT_EQ(p.last_refusal, OperatorRefusal::kMalformed);
+  EXPECT_EQ(p.by_reason[std::size_t(OperatorRefusal::kBadToken)], 15);
+  EXPECT_EQ(p.by_reason[std::size_t(OperatorRefusal::kTooSoon)], 1);
+  EXPECT_EQ(p.by_reason[std::size_t(OperatorRefusal::kMalformed)], 2);
+  EXPECT_EQ(p.by_reason[std::size_t(OperatorRefusal::kReplayed)], 0);
+  p.refuse(OperatorRefusal::kBadToken, 4'000'000'000u);
+  EXPECT_EQ(p.refused, 0xFFFF) << "saturates";
+  EXPECT_EQ(p.by_reason[std::size_t(OperatorRefusal::kBadToken)], 0xFFFF);
+  EXPECT_EQ(p.last_refusal, OperatorRefusal::kBadToken);
+  for (std::size_t code = 1; code <= std::size_t(OperatorRefusal::kResetInHold); ++code)
+    EXPECT_LT(code, kOperatorRefusalCodes) << "every code has its count";
 }
 
 TEST(ScriptedOperator, ResumesTheCurrentHoldAfterItsTimeAndNeverAFault) {

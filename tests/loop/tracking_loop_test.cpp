@@ -9,7 +9,9 @@
 #include <stdexcept>
 
 #include "lftrack/loop/cycle_schedule.hpp"
+#include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
+#include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -89,7 +91,8 @@ struct LoopUnderTest {
   std::unique_ptr<TrackingLoop> loop;
 };
 
-LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator) {
+LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator, JournalWriter* journal = nullptr,
+                        OperatorInput* operator_input = nullptr) {
   LoopUnderTest t;
   tracking::RegistrationSetup setup;
   LoopParts parts;
@@ -111,6 +114,8 @@ LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuato
   parts.registration = t.registration.get();
   parts.frames = frames;
   parts.actuator = actuator;
+  parts.journal = journal;
+  parts.operator_input = operator_input;
   LoopSettings settings;
   settings.cycles = 20;
   settings.simulated_clock = true;
@@ -144,6 +149,45 @@ TEST(TrackingLoop, AnActuatorThatThrowsInTheCycleAndOnHoldStillLosesTheBeamPermi
   EXPECT_GE(actuator.holds, 1) << "a hold was attempted";
   EXPECT_FALSE(actuator.beam_permit) << "a hold that throws does not keep the beam on";
   EXPECT_EQ(actuator.commands, 0);
+}
+
+// An operator input whose every poll brings refusals of three reasons.
+class RefusedSeveralWays final : public OperatorInput {
+ public:
+  void poll(const OperatorView&, OperatorPoll* out) override {
+    out->refuse(OperatorRefusal::kBadToken, 15);
+    out->refuse(OperatorRefusal::kReplayed);
+    out->refuse(OperatorRefusal::kNotApplicable, 2);
+  }
+};
+
+// Every refusal of a cycle reaches its journal record and the run's summary by reason (an outside
+// probe's 15 token failures never appeared: each cycle kept only its last reason).
+TEST(TrackingLoop, EveryRefusalOfACycleIsJournaledByReason) {
+  test::TempDir dir;
+  auto journal = JournalWriter::open(dir.path() / "refusals.lfj");
+  ASSERT_TRUE(journal.ok()) << journal.status().message();
+  ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
+  RefusedSeveralWays refusing;
+  LoopUnderTest t = make_loop(&frames, nullptr, journal->get(), &refusing);
+  ASSERT_TRUE(t.loop);
+  auto summary = t.loop->run();
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  ASSERT_TRUE((*journal)->close().ok());
+  EXPECT_EQ(summary->operator_refused, 18 * summary->cycles);
+  EXPECT_EQ(summary->operator_refused_by_reason[std::size_t(OperatorRefusal::kBadToken)], 15 * summary->cycles);
+  EXPECT_EQ(summary->operator_refused_by_reason[std::size_t(OperatorRefusal::kReplayed)], summary->cycles);
+  auto read = read_journal(dir.path() / "refusals.lfj");
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  ASSERT_FALSE(read->records.empty());
+  for (const JournalRecord& r : read->records) {
+    EXPECT_EQ(r.operator_refused, 18);
+    EXPECT_EQ(r.operator_first_refusal, std::uint8_t(OperatorRefusal::kBadToken));
+    EXPECT_EQ(r.operator_refusal, std::uint8_t(OperatorRefusal::kNotApplicable));
+    EXPECT_EQ(r.operator_refused_by_reason[std::size_t(OperatorRefusal::kBadToken)], 15);
+    EXPECT_EQ(r.operator_refused_by_reason[std::size_t(OperatorRefusal::kReplayed)], 1);
+    EXPECT_EQ(r.operator_refused_by_reason[std::size_t(OperatorRefusal::kNotApplicable)], 2);
+  }
 }
 
 }  // namespace

@@ -25,6 +25,7 @@ struct IgtlMessage {
   int code = 0;
   std::int64_t subcode = 0;
   std::string error_name, status;
+  double timestamp_s = 0;  // the header's time stamp (seconds since 1970)
 };
 
 class IgtlClient {
@@ -47,6 +48,9 @@ class IgtlClient {
     IgtlMessage m;
     m.type = header->GetDeviceType();
     m.device = header->GetDeviceName();
+    igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
+    header->GetTimeStamp(stamp);
+    m.timestamp_s = stamp->GetTimeStamp();
     if (m.type == "TRANSFORM") {
       igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
       t->SetMessageHeader(header);

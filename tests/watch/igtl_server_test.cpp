@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <cstring>
@@ -102,6 +103,41 @@ TEST(IgtlServer, SendsEachCyclesPoseCorrectionAndStateChangesInRas) {
   ASSERT_TRUE(first);
   EXPECT_EQ(first->type, "STATUS");
   EXPECT_EQ(first->error_name, "TRACK");
+}
+
+double wall_now_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+// Every message carries the time of what it reports, STATUS too (an outside probe found STATUS
+// messages stamped 1989): a cycle's messages its newest frame's exposure, the state told to a
+// client on connecting the moment it connected.
+TEST(IgtlServer, EveryMessageCarriesTheTimeOfWhatItReports) {
+  HubOnFeed h;
+  ServedClient s;
+  ASSERT_NO_FATAL_FAILURE(serve_one_client(h, &s));
+  timespec mono{};
+  clock_gettime(CLOCK_MONOTONIC, &mono);
+  const std::int64_t exposure_ns = std::int64_t{mono.tv_sec} * 1'000'000'000 + mono.tv_nsec - 2'000'000'000;  // 2 s ago
+  FeedRecord held = record(20, TrackingState::kTrack, TrackingState::kHold, 9.0, true, 123456);
+  held.record.frame_time_ns[0] = exposure_ns - 5'000'000;
+  held.record.frame_time_ns[1] = exposure_ns;
+  const double published_at_s = wall_now_s();
+  h.publish(held);
+  for (const char* type : {"TRANSFORM", "TRANSFORM", "STATUS"}) {
+    auto m = s.client->next();
+    ASSERT_TRUE(m) << type;
+    EXPECT_EQ(m->type, type);
+    EXPECT_NEAR(m->timestamp_s, published_at_s - 2.0, 0.5) << m->type << " " << m->device << ": the exposure's time";
+  }
+  IgtlClient late(s.server->port());
+  ASSERT_TRUE(late.connected());
+  auto first = late.next();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->type, "STATUS");
+  EXPECT_NEAR(first->timestamp_s, wall_now_s(), 5.0) << "the state when the client connected";
 }
 
 // A session that ends (LoopSession::run) lets the hub and the server catch up before the server

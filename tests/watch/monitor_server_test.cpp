@@ -44,8 +44,9 @@ struct Served {
     c.set_read_timeout(5, 0);
     return c;
   }
+  // A nonce, asked for with the run's token (only the operator gets one).
   std::string nonce() const {
-    auto res = client().Get("/api/nonce");
+    auto res = client().Get("/api/nonce", {{"Authorization", "Bearer " + server->token()}});
     EXPECT_TRUE(res && res->status == 200);
     return res ? nlohmann::json::parse(res->body).value("nonce", "") : "";
   }
@@ -88,8 +89,8 @@ TEST(MonitorServer, ServesThePageAndTheStateOnlyForItsOwnHost) {
   EXPECT_EQ(j["state"], "HOLD");
   EXPECT_EQ(j["hold_id"], 123456);
   EXPECT_EQ(j["gate"]["reason"], to_string(GateReason::kStepTooLarge));
-  EXPECT_NEAR(j["offset_mm_deg"][0].get<double>(), 8.0, 1e-9);
-  EXPECT_NEAR(j["offset_mm_deg"][5].get<double>(), 0.5, 1e-6);
+  EXPECT_NEAR(j["offset"]["translation_mm"][0].get<double>(), 8.0, 1e-9);
+  EXPECT_NEAR(j["offset"]["rotation_deg"][2].get<double>(), 0.5, 1e-6);
   EXPECT_EQ(j["counts"]["holds"], 1);
   EXPECT_EQ(j["transitions"].size(), 1u);
   EXPECT_EQ(j["beam_permit"], false);
@@ -102,6 +103,19 @@ TEST(MonitorServer, ServesThePageAndTheStateOnlyForItsOwnHost) {
   const auto k = nlohmann::json::parse(s.client().Get("/api/state")->body);
   EXPECT_EQ(k["cycle"], 42);
   EXPECT_EQ(k["beam_withheld"], "actuator still travelling");
+  EXPECT_EQ(k["gate"]["shown"], "APPLY");
+  EXPECT_EQ(k["gate"]["applied"], true);
+  // In HOLD the gate still judges each registration; an APPLY there moves nothing, and the page's
+  // header must not read "APPLY: ok" (an outside probe saw it do so during a HOLD).
+  FeedRecord held = record(43, TrackingState::kHold, TrackingState::kHold, 1.0, false, 123456);
+  held.record.gate_decision = static_cast<std::uint8_t>(GateDecision::kApply);
+  held.record.gate_reason = static_cast<std::uint8_t>(GateReason::kOk);
+  s.hub.publish(held);
+  const auto h = nlohmann::json::parse(s.client().Get("/api/state")->body);
+  EXPECT_EQ(h["gate"]["decision"], "APPLY") << "the record as the loop wrote it";
+  EXPECT_EQ(h["gate"]["applied"], false);
+  EXPECT_EQ(h["gate"]["shown"], "none (HOLD)");
+  EXPECT_NE(h["gate"]["shown_reason"].get<std::string>().find("nothing is sent in HOLD"), std::string::npos);
   EXPECT_EQ(s.client().Get("/nothing")->status, 404);
   // Another host name (a page elsewhere resolving its name to this host) is answered nothing.
   auto rebound = s.client().Get("/api/state", {{"Host", "attacker.example:" + std::to_string(s.server->port())}});
@@ -180,6 +194,33 @@ TEST(MonitorServer, ActionsNeedTheTokenAFreshNonceAndThePagesOrigin) {
                               "application/json");
   ASSERT_TRUE(huge);
   EXPECT_NE(huge->status, 200);
+}
+
+// Nonces are the operator's: a client that may only watch gets none, so a flood of requests for
+// them cannot push the operator's nonce out of the book (an outside probe's 5,000 requests in half
+// a second left 19 of 20 operator actions refused as "nonce used already").
+TEST(MonitorServer, AClientWithoutTheTokenGetsNoNonceAndCannotBlockTheOperatorsStop) {
+  Served s;
+  OperatorView track;
+  track.state = TrackingState::kTrack;
+  PollingLoop loop(&s.page, track);
+  const std::string token = s.server->token();
+  std::string wrong = token;
+  wrong[0] = wrong[0] == 'a' ? 'b' : 'a';
+  EXPECT_EQ(s.client().Get("/api/nonce")->status, 401);
+  EXPECT_EQ(s.client().Get("/api/nonce", {{"Authorization", "Bearer " + wrong}})->status, 401);
+  const std::string operators = s.nonce();  // the operator takes a nonce, then a watcher floods
+  const std::int64_t refused_before = s.server->counters().requests_refused;
+  for (int i = 0; i < 4 * NonceBook::kNonces; ++i) {
+    auto res = s.client().Get("/api/nonce");
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 401);
+    EXPECT_EQ(nlohmann::json::parse(res->body).value("nonce", ""), "") << "no nonce without the token";
+  }
+  EXPECT_EQ(s.server->counters().requests_refused - refused_before, 4 * NonceBook::kNonces);
+  auto stop = s.act("stop", {{"nonce", operators}}, token);
+  EXPECT_EQ(stop.first, 200) << stop.second.dump();
+  EXPECT_EQ(stop.second["accepted"], true);
 }
 
 TEST(MonitorServer, WithoutALoopAnActionIsAnsweredAndWithdrawn) {

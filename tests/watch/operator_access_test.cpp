@@ -228,10 +228,16 @@ TEST(PageOperator, RefusalsBeforeTheLoopAreJournaledAtTheNextPoll) {
   for (int i = 0; i < 5; ++i) page.refused_before_loop(OperatorRefusal::kBadToken);
   page.refused_before_loop(OperatorRefusal::kReplayed);
   page.refused_before_loop(OperatorRefusal::kOrigin);
+  page.refused_before_loop(OperatorRefusal::kMalformed);
   OperatorPoll poll;
   page.poll(hold_view(1, 5), &poll);
-  EXPECT_EQ(poll.refused, 7);
+  EXPECT_EQ(poll.refused, 8);
   EXPECT_EQ(poll.command, OperatorCommand::kNone);
+  // Every kind counted, not only the last one polled.
+  EXPECT_EQ(poll.by_reason[std::size_t(OperatorRefusal::kBadToken)], 5);
+  EXPECT_EQ(poll.by_reason[std::size_t(OperatorRefusal::kReplayed)], 1);
+  EXPECT_EQ(poll.by_reason[std::size_t(OperatorRefusal::kOrigin)], 1);
+  EXPECT_EQ(poll.by_reason[std::size_t(OperatorRefusal::kMalformed)], 1);
   OperatorPoll next;
   page.poll(hold_view(1, 5), &next);
   EXPECT_EQ(next.refused, 0) << "each counted once";

@@ -7,10 +7,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 
 #include "loop_impl.hpp"
 
 namespace lftrack::host {
+
+static_assert(std::size(JournalRecord{}.operator_refused_by_reason) == kOperatorRefusalCodes,
+              "the journal keeps a count for every refusal code");
 
 namespace {
 constexpr std::size_t kMaxTransitions = 256;
@@ -21,8 +25,10 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
   r.cycle = static_cast<std::uint64_t>(c.index);
   r.cycle_start_ns = c.start_ns;
   r.previous_state = static_cast<std::uint8_t>(c.state_before);
-  r.operator_refused = c.operator_refused;
-  r.operator_refusal = static_cast<std::uint8_t>(c.operator_refusal);
+  r.operator_refused = c.operator_refusals.refused;
+  r.operator_refusal = static_cast<std::uint8_t>(c.operator_refusals.last_refusal);
+  r.operator_first_refusal = static_cast<std::uint8_t>(c.operator_refusals.first_refusal);
+  std::copy(c.operator_refusals.by_reason.begin(), c.operator_refusals.by_reason.end(), r.operator_refused_by_reason);
   if (c.operator_command != OperatorCommand::kNone)
     r.operator_command = static_cast<std::uint8_t>(1 + static_cast<int>(c.operator_command));
   if (c.changed_state) r.event = static_cast<std::uint8_t>(1 + static_cast<int>(c.event));
@@ -116,13 +122,11 @@ OperatorView TrackingLoop::Impl::operator_view(std::int64_t index) const {
 void TrackingLoop::Impl::entered_hold(CycleState& c) {
   if (parts.operator_input != nullptr) {
     OperatorPoll before;
-    before.refused = c.operator_refused;
-    before.last_refusal = c.operator_refusal;
+    static_cast<OperatorRefusals&>(before) = c.operator_refusals;
     parts.operator_input->on_hold(operator_view(c.index), &before);
     if (before.command == OperatorCommand::kStop || before.command == OperatorCommand::kQuit)
       stop_sent_before_hold = before.command;
-    c.operator_refused = before.refused;
-    c.operator_refusal = before.last_refusal;
+    c.operator_refusals = before;
   }
   if (settings.status_line || !settings.announce_holds) return;
   char line[256];

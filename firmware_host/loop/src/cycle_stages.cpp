@@ -48,8 +48,7 @@ bool TrackingLoop::Impl::take_operator_command(CycleState& c) {
     polled.accept(stop_sent_before_hold);
     stop_sent_before_hold = OperatorCommand::kNone;
     parts.operator_input->poll(operator_view(c.index), &polled);
-    c.operator_refused = polled.refused;
-    c.operator_refusal = polled.last_refusal;
+    c.operator_refusals = polled;
     const OperatorCommand command = polled.command;
     if (command != OperatorCommand::kNone && command != OperatorCommand::kStatus) c.operator_command = command;
     if (command == OperatorCommand::kQuit || command == OperatorCommand::kStop) {

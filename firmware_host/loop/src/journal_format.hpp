@@ -10,7 +10,8 @@
 namespace lftrack::host::journal_format {
 
 constexpr char kFileMagic[8] = {'L', 'F', 'T', 'J', 'R', 'N', 'L', '1'};
-constexpr std::uint32_t kFormatVersion = 2;  // 2: hold id and operator commands (8 bytes more)
+// 2: hold id and operator commands (8 bytes more); 3: the cycle's refusals by reason (32 more).
+constexpr std::uint32_t kFormatVersion = 3;
 constexpr std::uint32_t kFrameMagic = 0x4A52464C;  // "LFRJ"
 constexpr std::size_t kHeaderBytes = 32;
 constexpr std::size_t kFrameBytes = 8 + sizeof(JournalRecord) + 4;

@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <cstddef>
 #include <cstring>
+#include <iterator>
 #include <optional>
 #include <string>
 #include <vector>
@@ -24,11 +25,21 @@ using namespace journal_format;  // NOLINT(google-build-using-namespace): the fo
 
 namespace {
 
-// Version 1 records: the prefix of JournalRecord up to hold_id (its last 4 bytes were reserved).
+// Each version's records are a prefix of JournalRecord: `record_bytes` in the file, of which the
+// first `field_bytes` hold fields (version 1's last 4 bytes were reserved); the rest reads as zero.
+struct VersionLayout {
+  std::size_t record_bytes, field_bytes;
+};
 constexpr std::uint32_t kFirstFormatVersion = 1;
-constexpr std::size_t kV1RecordBytes = sizeof(JournalRecord) - 8;
-constexpr std::size_t kV1FieldBytes = offsetof(JournalRecord, hold_id);
-static_assert(kV1RecordBytes == 256 && kV1FieldBytes == 252, "the version 1 layout is fixed");
+constexpr VersionLayout kLayouts[] = {
+    {256, offsetof(JournalRecord, hold_id)},                // version 1
+    {264, offsetof(JournalRecord, operator_refused_by_reason)},  // version 2
+    {sizeof(JournalRecord), sizeof(JournalRecord)},         // version 3
+};
+static_assert(std::size(kLayouts) == kFormatVersion - kFirstFormatVersion + 1, "a layout for every version read");
+static_assert(kLayouts[0].field_bytes == 252 && kLayouts[1].field_bytes == 264 && sizeof(JournalRecord) == 296,
+              "the layouts of versions 1 to 3 are fixed");
+const VersionLayout& layout_of(std::uint32_t version) { return kLayouts[version - kFirstFormatVersion]; }
 constexpr std::size_t kReadWindowBytes = std::size_t{1} << 20;
 
 // A file read forward through a window of kReadWindowBytes: the bytes not yet consumed stay,
@@ -93,7 +104,7 @@ Result<std::size_t> read_header(ReadWindow* in, const std::string& name, std::ui
     return invalid_argument(name + ": journal format version " + std::to_string(*version) +
                             ", this lftrack reads versions " + std::to_string(kFirstFormatVersion) + " to " +
                             std::to_string(kFormatVersion));
-  const std::size_t expected = *version == 1 ? kV1RecordBytes : sizeof(JournalRecord);
+  const std::size_t expected = layout_of(*version).record_bytes;
   if (record_size != expected)
     return invalid_argument(name + ": journal format version " + std::to_string(*version) +
                             " has records of " + std::to_string(expected) + " bytes, this file says " +
@@ -216,7 +227,7 @@ std::string mib(std::uint64_t bytes) {
 void read_frames(ReadWindow* in, std::uint32_t version, std::size_t record_bytes,
                  const JournalReadLimits& limits, JournalContents* out) {
   const std::size_t frame_bytes = 8 + record_bytes + 4;
-  const std::size_t copy_bytes = version == 1 ? kV1FieldBytes : sizeof(JournalRecord);
+  const std::size_t copy_bytes = layout_of(version).field_bytes;
   std::optional<JournalBadSpan> span;  // the bad span being scanned, from span->offset to here
   // Where the last non-zero byte of `span` lies, from its start (0: none yet). A write cut short
   // leaves less than a frame of data, then at most zeros; a full frame of data that fails its

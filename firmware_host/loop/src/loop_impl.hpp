@@ -30,8 +30,7 @@ struct CycleState {
 
   // operator
   OperatorCommand operator_command = OperatorCommand::kNone;  // acted on (kNone: none)
-  std::uint16_t operator_refused = 0;
-  OperatorRefusal operator_refusal = OperatorRefusal::kNone;
+  OperatorRefusals operator_refusals;  // commands refused or discarded this cycle, by reason
   TrackingEvent event{};  // the last transition this cycle
   bool changed_state = false;
 

@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "lftrack/tracking/pose.hpp"
 #include "loop_impl.hpp"
 
 namespace lftrack::host {
@@ -38,6 +39,11 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   }
 }
 
+nlohmann::json pose_delta_json(const double d[6]) {
+  using tracking::rad_to_deg;
+  return {{"translation_mm", {d[0], d[1], d[2]}}, {"rotation_deg", {rad_to_deg(d[3]), rad_to_deg(d[4]), rad_to_deg(d[5])}}};
+}
+
 nlohmann::json to_json(const LoopSummary& s) {
   nlohmann::json j;
   j["cycles"] = s.cycles;
@@ -58,6 +64,11 @@ nlohmann::json to_json(const LoopSummary& s) {
   j["faults"] = s.faults;
   j["commands"] = s.commands;
   j["operator_commands_refused"] = s.operator_refused;
+  nlohmann::json refused_by_reason = nlohmann::json::object();
+  for (std::size_t i = 1; i < s.operator_refused_by_reason.size(); ++i)
+    if (s.operator_refused_by_reason[i] > 0)
+      refused_by_reason[to_string(static_cast<OperatorRefusal>(i))] = s.operator_refused_by_reason[i];
+  j["operator_commands_refused_by_reason"] = refused_by_reason;
   j["aligned"] = s.aligned;
   j["align_ms"] = s.align_ms;
   j["allocations_per_cycle"] = opt(s.allocations_per_cycle);

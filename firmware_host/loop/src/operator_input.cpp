@@ -62,6 +62,10 @@ const char* to_string(OperatorRefusal r) {
       return "replayed or stale request";
     case OperatorRefusal::kOrigin:
       return "from another origin or host";
+    case OperatorRefusal::kResumeInFault:
+      return "in FAULT: a resume answers a HOLD; use reset";
+    case OperatorRefusal::kResetInHold:
+      return "in HOLD: a reset answers a FAULT; use resume";
   }
   return "?";
 }
@@ -116,6 +120,11 @@ OperatorRefusal judge_operator_request(const OperatorRequest& q, const OperatorV
       answers = TrackingState::kFault;
       break;
   }
+  // The other stopped state's command: say which one it needs, not "stale".
+  if (view.hold_id != 0 && q.command == OperatorCommand::kResume && view.state == TrackingState::kFault)
+    return OperatorRefusal::kResumeInFault;
+  if (view.hold_id != 0 && q.command == OperatorCommand::kReset && view.state == TrackingState::kHold)
+    return OperatorRefusal::kResetInHold;
   if (view.state != answers || view.hold_id == 0) return OperatorRefusal::kNotApplicable;
   if (!q.names_hold && id_required) return OperatorRefusal::kNoHoldId;
   if (q.names_hold && q.hold_id != view.hold_id) return OperatorRefusal::kWrongHold;
@@ -146,8 +155,13 @@ void OperatorPoll::accept(OperatorCommand c) {
   if (precedence(c) > precedence(command)) command = c;
 }
 
-void OperatorPoll::refuse(OperatorRefusal why) {
-  if (refused < 0xFFFF) ++refused;
+void OperatorRefusals::refuse(OperatorRefusal why, std::uint32_t count) {
+  if (why == OperatorRefusal::kNone || count == 0) return;
+  const auto add = [count](std::uint16_t* n) { *n = static_cast<std::uint16_t>(std::min<std::uint32_t>(0xFFFF, *n + count)); };
+  add(&refused);
+  const auto code = static_cast<std::size_t>(why);
+  if (code < by_reason.size()) add(&by_reason[code]);
+  if (first_refusal == OperatorRefusal::kNone) first_refusal = why;
   last_refusal = why;
 }
 

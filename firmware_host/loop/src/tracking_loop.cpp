@@ -218,6 +218,8 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     if (!was_align) m.cycle_ms.add(ms_between(wall_start, wall_end));
     ++m.summary.cycles;
     m.summary.operator_refused += record.operator_refused;
+    for (std::size_t i = 0; i < m.summary.operator_refused_by_reason.size(); ++i)
+      m.summary.operator_refused_by_reason[i] += record.operator_refused_by_reason[i];
     // The next cycle: on the simulated clock always the next period; on the real one the next
     // period start not yet past (an overrun skips the periods it ran into).
     NextCycle next;

@@ -42,11 +42,16 @@ async function act(action) {
   result.className = '';
   result.textContent = action + '...';
   try {
-    const nonce = (await (await fetch('/api/nonce')).json()).nonce;
-    const body = { nonce };
-    if (action !== 'stop' && current && current.hold_id > 0) body.hold_id = current.hold_id;
     const headers = { 'Content-Type': 'application/json' };
     if (token) headers['Authorization'] = 'Bearer ' + token;
+    // A nonce is the operator's: it needs the token. Without one (or with a wrong one) the action
+    // goes without a nonce, and the server refuses it for the token, which the loop journals.
+    const body = { nonce: '' };
+    if (token) {
+      const issued = await fetch('/api/nonce', { headers: { 'Authorization': 'Bearer ' + token } });
+      if (issued.ok) body.nonce = (await issued.json()).nonce;
+    }
+    if (action !== 'stop' && current && current.hold_id > 0) body.hold_id = current.hold_id;
     const answer = await fetch('/api/' + action, { method: 'POST', headers, body: JSON.stringify(body) });
     const json = await answer.json();
     result.className = json.accepted ? 'accepted' : 'refused';
@@ -70,16 +75,17 @@ function showState(s) {
   $('hold-id').textContent = s.hold_id || '-';
   // An applied cycle may keep the beam off while the patient is still being moved into place.
   $('beam').textContent = s.beam_permit ? 'on' : s.beam_withheld ? 'off: ' + s.beam_withheld : 'off';
-  $('gate-decision').textContent = s.gate.decision;
-  $('gate-reason').textContent = s.gate.reason || '-';
+  $('gate-decision').textContent = s.gate.shown;
+  $('gate-reason').textContent = s.gate.shown_reason || '-';
   $('holds').textContent = s.counts.holds;
   $('faults').textContent = s.counts.faults;
   $('overruns').textContent = s.counts.overruns;
   $('refused').textContent = s.counts.operator_refused;
   $('dropped').textContent = s.counts.records_dropped;
   for (let i = 0; i < 6; i++) {
-    $('off' + i).textContent = s.registered ? fmt(s.offset_mm_deg[i], i < 3 ? 2 : 2) : '-';
-    $('cmd' + i).textContent = s.command_sent ? fmt(s.correction_mm_deg[i], 2) : '-';
+    const part = i < 3 ? 'translation_mm' : 'rotation_deg';
+    $('off' + i).textContent = s.registered ? fmt(s.offset[part][i % 3], 2) : '-';
+    $('cmd' + i).textContent = s.command_sent ? fmt(s.correction[part][i % 3], 2) : '-';
   }
   $('similarity').textContent = s.similarity.map((v) => fmt(v, 3)).join(' / ');
   $('registration-ms').textContent = fmt(s.registration_ms, 1);

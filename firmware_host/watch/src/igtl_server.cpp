@@ -39,6 +39,21 @@ std::string packed(igtl::MessageBase* message) {
   return {static_cast<const char*>(message->GetPackPointer()), std::size_t(message->GetPackSize())};
 }
 
+// Every message carries the time of what it reports (CLOCK_REALTIME, as OpenIGTLink's clients
+// read it): without one, a message says 1970, or whatever the library's default is.
+void stamp(igtl::MessageBase* message, std::int64_t wall_ns) {
+  igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
+  stamp->SetTime(static_cast<igtlUint32>(wall_ns / 1'000'000'000), static_cast<igtlUint32>(wall_ns % 1'000'000'000));
+  message->SetTimeStamp(stamp);
+}
+
+// When a cycle's record happened on the wall clock: the exposure of its newest frame, or the
+// cycle's start when it has no frame (CLOCK_MONOTONIC in the record).
+std::int64_t record_wall_ns(const JournalRecord& r, std::int64_t wall_minus_mono_ns) {
+  const std::int64_t newest_frame_ns = std::max(r.frame_time_ns[0], r.frame_time_ns[1]);
+  return (newest_frame_ns > 0 ? newest_frame_ns : r.cycle_start_ns) + wall_minus_mono_ns;
+}
+
 std::string transform_message(const char* device, const tracking::Pose& T, std::int64_t wall_ns) {
   const Eigen::Matrix4d ras = ras_from_lps(T.matrix());
   igtl::Matrix4x4 m;
@@ -47,9 +62,7 @@ std::string transform_message(const char* device, const tracking::Pose& T, std::
   igtl::TransformMessage::Pointer message = igtl::TransformMessage::New();
   message->SetDeviceName(device);
   message->SetMatrix(m);
-  igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
-  stamp->SetTime(static_cast<igtlUint32>(wall_ns / 1'000'000'000), static_cast<igtlUint32>(wall_ns % 1'000'000'000));
-  message->SetTimeStamp(stamp);
+  stamp(message.GetPointer(), wall_ns);
   return packed(message.GetPointer());
 }
 
@@ -69,7 +82,7 @@ int status_code(TrackingState state) {
   return igtl::StatusMessage::STATUS_UNKNOWN_ERROR;
 }
 
-std::string status_message(const JournalRecord& r, const std::string& reason) {
+std::string status_message(const JournalRecord& r, const std::string& reason, std::int64_t wall_ns) {
   igtl::StatusMessage::Pointer message = igtl::StatusMessage::New();
   message->SetDeviceName("lftrack");
   const auto state = static_cast<TrackingState>(r.state);
@@ -77,6 +90,7 @@ std::string status_message(const JournalRecord& r, const std::string& reason) {
   message->SetSubCode(static_cast<igtlInt64>(r.cycle));
   message->SetErrorName(to_string(state));
   message->SetStatusString(reason.c_str());
+  stamp(message.GetPointer(), wall_ns);
   return packed(message.GetPointer());
 }
 
@@ -161,7 +175,7 @@ void IgtlServer::run() {
       Client c;
       c.fd = fd;
       const HubStatus now = hub_->status();
-      if (now.started) c.pending = status_message(now.last.record, state_reason);
+      if (now.started) c.pending = status_message(now.last.record, state_reason, clock_ns(CLOCK_REALTIME));
       ++statuses_;
       clients.push_back(std::move(c));
       clients_now_ = static_cast<std::int64_t>(clients.size());  // before the next accept counts in the total
@@ -181,7 +195,7 @@ void IgtlServer::run() {
     const std::int64_t wall_minus_mono = clock_ns(CLOCK_REALTIME) - clock_ns(CLOCK_MONOTONIC);
     for (const FeedRecord& f : records) {
       const JournalRecord& r = f.record;
-      const std::int64_t wall_ns = std::max(r.frame_time_ns[0], r.frame_time_ns[1]) + wall_minus_mono;
+      const std::int64_t wall_ns = record_wall_ns(r, wall_minus_mono);
       Eigen::Map<const tracking::Vector6d> delta(r.pose_delta), command(r.command);
       if (f.registered && !clients.empty())
         send_all(transform_message("T_room_from_ct",
@@ -201,7 +215,7 @@ void IgtlServer::run() {
         state_reason = now.transitions.empty() ? "" : now.transitions.back().reason;
         for (const HubTransition& t : now.transitions)
           if (t.cycle == static_cast<std::int64_t>(r.cycle)) state_reason = t.reason;
-        if (!clients.empty()) send_all(status_message(r, state_reason), &statuses_);
+        if (!clients.empty()) send_all(status_message(r, state_reason, wall_ns), &statuses_);
       }
     }
     // Write what each socket takes; a stalled client (marked above) or a broken one goes.

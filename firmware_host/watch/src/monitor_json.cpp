@@ -2,9 +2,9 @@
 
 #include <openssl/evp.h>
 
+#include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
-#include "lftrack/tracking/pose.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -20,10 +20,23 @@ nlohmann::json grey_json(const GreyImage& image) {
   return {{"rows", image.rows}, {"cols", image.cols}, {"pixels", base64(image.pixels)}};
 }
 
-// (mm, mm, mm, deg, deg, deg) of a journal 6-vector (mm, rad).
-nlohmann::json mm_deg(const double v[6]) {
-  return nlohmann::json::array({v[0], v[1], v[2], tracking::rad_to_deg(v[3]), tracking::rad_to_deg(v[4]),
-                                tracking::rad_to_deg(v[5])});
+// The gate's line as a person reads it: in HOLD or FAULT the gate still judges each registration,
+// but an APPLY there moves nothing (only an operator's resume or reset leaves the state), so it is
+// not shown as one.
+nlohmann::json gate_json(const JournalRecord& r) {
+  const auto state = static_cast<TrackingState>(r.state);
+  const auto decision = static_cast<GateDecision>(r.gate_decision);
+  const bool stopped = state == TrackingState::kHold || state == TrackingState::kFault;
+  std::string shown = to_string(decision), why = to_string(static_cast<GateReason>(r.gate_reason));
+  if (stopped && decision == GateDecision::kApply) {
+    shown = std::string("none (") + to_string(state) + ")";
+    why = std::string("nothing is sent in ") + to_string(state) + "; the registration would pass";
+  }
+  return {{"decision", to_string(decision)},
+          {"reason", to_string(static_cast<GateReason>(r.gate_reason))},
+          {"applied", decision == GateDecision::kApply && (state == TrackingState::kTrack || state == TrackingState::kAlign)},
+          {"shown", shown},
+          {"shown_reason", why}};
 }
 
 // Why the loop is in its state: the reason of the transition into it ("" before any).
@@ -55,17 +68,18 @@ nlohmann::json state_json(const HubStatus& s, const HubOptions& options) {
             {"state_reason", state_reason(s)},
             {"beam_permit", r.beam_permit != 0},
             {"beam_withheld", to_string(static_cast<BeamWithheld>(r.beam_withheld))},
-            {"gate", {{"decision", to_string(static_cast<GateDecision>(r.gate_decision))},
-                      {"reason", to_string(static_cast<GateReason>(r.gate_reason))}}},
+            {"gate", gate_json(r)},
             {"registered", s.last.registered},
-            {"offset_mm_deg", mm_deg(r.pose_delta)},
+            {"offset", pose_delta_json(r.pose_delta)},
             {"command_sent", r.command_sent != 0},
-            {"correction_mm_deg", mm_deg(r.command)},
+            {"correction", pose_delta_json(r.command)},
             {"similarity", similarity},
             {"registration_ms", r.registration_ms},
             {"true_residual_mm", r.true_residual_mm},
             {"operator", {{"refused", r.operator_refused},
-                          {"last_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))}}},
+                          {"first_refusal", to_string(static_cast<OperatorRefusal>(r.operator_first_refusal))},
+                          {"last_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))},
+                          {"refusals", refusals_text(r.operator_refused_by_reason)}}},
             {"counts", {{"cycles", s.counts.cycles},
                         {"holds", s.counts.holds},
                         {"faults", s.counts.faults},

@@ -50,8 +50,7 @@ void PageOperator::poll(const OperatorView& view, OperatorPoll* out) {
   static const OperatorRefusal kinds[kRefusalKinds] = {OperatorRefusal::kBadToken, OperatorRefusal::kReplayed,
                                                       OperatorRefusal::kOrigin, OperatorRefusal::kMalformed};
   for (int k = 0; k < kRefusalKinds; ++k)
-    for (std::uint32_t n = refused_[std::size_t(k)].exchange(0, std::memory_order_relaxed); n > 0; --n)
-      out->refuse(kinds[k]);
+    out->refuse(kinds[k], refused_[std::size_t(k)].exchange(0, std::memory_order_relaxed));
   std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
   if (!lock.owns_lock()) return;  // a server thread is queueing: next cycle
   const std::uint64_t epoch = hold_epoch_.load(std::memory_order_acquire);

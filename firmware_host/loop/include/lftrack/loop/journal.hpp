@@ -5,8 +5,9 @@
 // File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size, the
 // scene's 16-byte fingerprint or zeros), then
 // one frame per record: u32 magic 0x4A52464C ("LFRJ"), u32 payload size, the payload (a
-// JournalRecord), u32 CRC-32C of the payload. Version 2 (written now) has 264-byte records;
-// version 1 (still read) had 256, the prefix of JournalRecord up to `hold_id`.
+// JournalRecord), u32 CRC-32C of the payload. Version 3 (written now) has 296-byte records;
+// version 2 (still read) had 264, the prefix up to `operator_refused_by_reason`, and version 1
+// 256, the prefix up to `hold_id`. Fields a version lacks read as zero.
 //
 // Durability: the writer write()s records within a few milliseconds of the push, so they are
 // in the kernel's page cache and survive the process being killed (kill -9) at any moment; it
@@ -62,12 +63,19 @@ struct JournalRecord {
   std::uint32_t hold_id = 0;
   std::uint8_t operator_command = 0;   // 1 + OperatorCommand the loop acted on this cycle; 0: none
   std::uint8_t operator_refusal = 0;   // OperatorRefusal of the last command refused this cycle; 0: none
-  std::uint16_t operator_refused = 0;  // commands refused or discarded this cycle (stale, wrong id, ...)
+  std::uint16_t operator_refused = 0;  // commands refused or discarded this cycle (stale, wrong id, ...),
+                                       // saturating at 65535
   // BeamWithheld: why a cycle whose gate applied and that ends in TRACK kept the beam off (the
   // alignment, or the patient not in place); 0: it did not. In
   // version 2 since 2026-11-27, in a byte that was reserved (zero) before.
   std::uint8_t beam_withheld = 0;
-  std::uint8_t reserved[3] = {};
+  // Format version 3 on (in version 2 a reserved byte, zero): the first reason refused this cycle
+  // (OperatorRefusal; 0: none).
+  std::uint8_t operator_first_refusal = 0;
+  std::uint8_t reserved[2] = {};
+  // Format version 3 on: how many commands were refused this cycle for each reason (index:
+  // OperatorRefusal; saturating at 65535), so that no reason is lost behind another.
+  std::uint16_t operator_refused_by_reason[16] = {};
 };
 static_assert(std::is_trivially_copyable_v<JournalRecord>);
 

@@ -4,12 +4,14 @@
 
 #include <array>
 #include <cstdint>
+#include <iterator>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
 namespace lftrack::host {
@@ -28,6 +30,7 @@ struct LoopSummary {
   std::int64_t faults = 0;                  // entries into FAULT
   std::int64_t commands = 0;                // corrections sent
   std::int64_t operator_refused = 0;        // operator commands refused or discarded (journal: per cycle)
+  std::array<std::int64_t, kOperatorRefusalCodes> operator_refused_by_reason{};  // index: OperatorRefusal
   std::array<std::int64_t, 5> states{};     // cycles ending in each TrackingState
   std::array<std::int64_t, 4> decisions{};  // per GateDecision
   bool aligned = false;
@@ -48,5 +51,25 @@ struct LoopSummary {
   std::string journal_error;  // set by LoopSession::run when the journal could not be written
 };
 nlohmann::json to_json(const LoopSummary& summary);
+
+// A pose delta or correction (tx, ty, tz in mm; a rotation vector in radians, as the journal
+// keeps it) as every report writes it: {"translation_mm": [x, y, z], "rotation_deg": [x, y, z]}
+// (DESIGN.md: radians inside, degrees at the edges; the unit in the key).
+nlohmann::json pose_delta_json(const double delta_mm_rad[6]);
+
+// "15 no operator token, or a wrong one; 2 replayed or stale request": the nonzero counts of
+// `by_reason` (an array indexed by OperatorRefusal) with their reasons, in code order ("unknown N"
+// for a code this build does not know); "" when all are zero.
+template <typename Counts>
+std::string refusals_text(const Counts& by_reason) {
+  std::string text;
+  for (std::size_t i = 1; i < std::size(by_reason); ++i) {
+    if (by_reason[i] == 0) continue;
+    const std::string name = to_string(static_cast<OperatorRefusal>(i));
+    if (!text.empty()) text += "; ";
+    text += std::to_string(by_reason[i]) + " " + (name == "?" ? "unknown " + std::to_string(i) : name);
+  }
+  return text;
+}
 
 }  // namespace lftrack::host

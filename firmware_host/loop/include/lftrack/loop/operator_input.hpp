@@ -21,8 +21,9 @@
 // typed or sent before that moment is discarded (on_hold); a resume or reset counts only once the
 // HOLD has been shown for kMinHoldBeforeResumeS; and on the terminal only a fresh key press counts
 // (a held or auto-repeating key never does). Every discarded or refused command is counted in the
-// cycle's journal record with the last reason.
+// cycle's journal record, by reason, with the first and the last reason (OperatorRefusals).
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -53,7 +54,12 @@ enum class OperatorRefusal : std::uint8_t {
   kBadToken,  // no operator token, or the wrong one
   kReplayed,  // a request already used, or too old (its single-use nonce)
   kOrigin,    // from a page of another origin, or for another host
+  // The command for the other stopped state (since 2026-11-29):
+  kResumeInFault,  // a resume while the loop is in FAULT: only a reset leaves a FAULT
+  kResetInHold,    // a reset while the loop is in HOLD: a HOLD is left by a resume
 };
+// Every OperatorRefusal value is below this (the journal keeps a count for each; room for more).
+inline constexpr std::size_t kOperatorRefusalCodes = 16;
 
 // How long a HOLD or FAULT must have been shown before a resume or reset counts (seconds on the
 // loop's clock): no person decides faster, so anything earlier is a script or a held key.
@@ -88,14 +94,22 @@ struct OperatorView {
 OperatorRefusal judge_operator_request(const OperatorRequest& request, const OperatorView& view,
                                        bool id_required);
 
-// One poll's outcome: the command to act on (the highest-precedence accepted one) and the count
-// of the others, refused or discarded, with the last reason.
-struct OperatorPoll {
-  OperatorCommand command = OperatorCommand::kNone;
+// The commands refused or discarded in one cycle: how many in all and for each reason (each count
+// saturating at 65535), and the first and the last reason. Plain data; never allocates.
+struct OperatorRefusals {
   std::uint16_t refused = 0;
+  OperatorRefusal first_refusal = OperatorRefusal::kNone;
   OperatorRefusal last_refusal = OperatorRefusal::kNone;
+  std::array<std::uint16_t, kOperatorRefusalCodes> by_reason{};  // index: OperatorRefusal
+  // Counts `count` commands refused for `why` (kNone counts nothing).
+  void refuse(OperatorRefusal why, std::uint32_t count = 1);
+};
+
+// One poll's outcome: the command to act on (the highest-precedence accepted one) and the others,
+// refused or discarded, by reason.
+struct OperatorPoll : OperatorRefusals {
+  OperatorCommand command = OperatorCommand::kNone;
   void accept(OperatorCommand c);
-  void refuse(OperatorRefusal why);
 };
 
 class OperatorInput {

@@ -7,7 +7,8 @@
 //   GET  /api/state        the current snapshot as JSON (monitor_json.hpp)
 //   GET  /api/events       server-sent events: "state" with the new trace rows at most
 //                          event_rate_hz, "images" when new display images are ready
-//   GET  /api/nonce        a single-use nonce for one action (operator_token.hpp)
+//   GET  /api/nonce        a single-use nonce for one action (operator_token.hpp); the token's
+//                          holder's only: header "Authorization: Bearer TOKEN" 
 //   POST /api/resume|stop|reset   an operator action: header "Authorization: Bearer TOKEN",
 //                          body {"nonce": "...", "hold_id": N} (hold_id for resume and reset)
 // Everything reads the cycle hub; nothing here touches the loop, which never waits for a page.
@@ -33,6 +34,7 @@
 
 namespace httplib {
 class Server;
+struct Request;
 }
 
 namespace lftrack::host {
@@ -79,6 +81,9 @@ class MonitorServer {
   MonitorServer() = default;
   void add_routes();
   bool host_allowed(const std::string& host) const;
+  // Why `req` may not act (no token, or a wrong one: "Authorization: Bearer TOKEN"); null when its
+  // token is the run's, compared in constant time.
+  const char* token_refusal(const httplib::Request& req) const;
   bool origin_allowed(const std::string& origin) const;
 
   CycleHub* hub_ = nullptr;
