@@ -332,8 +332,8 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
   app->add_flag("--json", o->json, "Print the summary as JSON");
   if (mode == SimOptions::Mode::kSim)
     app->add_flag("--fast", o->fast,
-                  "As fast as possible on a simulated clock that still counts each cycle's computing time "
-                  "(no real-time set-up)");
+                  "As fast as possible on a simulated clock, on which a cycle's work takes no time: the same "
+                  "seed gives the same run whatever the host's load (no real-time set-up)");
   if (mode == SimOptions::Mode::kReplay)
     app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
   if (mode == SimOptions::Mode::kRun)

@@ -3,10 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <memory>
 #include <new>
 #include <stdexcept>
+#include <thread>
 
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "lftrack/loop/journal.hpp"
@@ -22,11 +24,13 @@ using tracking::XrayView;
 // A smooth pattern that moves with the pose: enough for a Registration to be built.
 class PatternRenderer final : public tracking::DrrRenderer {
  public:
+  explicit PatternRenderer(std::chrono::microseconds per_render = {}) : per_render_(per_render) {}
   std::string_view name() const override { return "pattern"; }
 
  protected:
   Status do_render(const tracking::Pose& T, const XrayView&, const PixelWindow& window,
                    tracking::ImageView<float> out, tracking::RenderExtras* extras) const override {
+    if (per_render_.count() > 0) std::this_thread::sleep_for(per_render_);  // a slow host
     for (int r = 0; r < window.rows; ++r)
       for (int c = 0; c < window.cols; ++c) {
         out.at(r, c) = static_cast<float>(1.0 + std::sin(0.2 * c + T.translation().x()) * std::cos(0.15 * r));
@@ -34,15 +38,23 @@ class PatternRenderer final : public tracking::DrrRenderer {
       }
     return {};
   }
+
+ private:
+  std::chrono::microseconds per_render_;
 };
 
-// Frames of constant counts; throws what it is told to on the acquisition numbered `throw_at`.
+// Frames of a fixed pattern (anatomy enough for the image-quality gate); throws what it is told to
+// on the acquisition numbered `throw_at`.
 class ThrowingFrames final : public drivers::FrameSource {
  public:
   explicit ThrowingFrames(int throw_at, bool bad_alloc) : throw_at_(throw_at), bad_alloc_(bad_alloc) {}
   Status open(drivers::FramePair* pair) override {
     pair->frames.resize(2);
-    for (auto& f : pair->frames) f.pixels = tracking::Image<std::uint16_t>(48, 40, 2000);
+    for (auto& f : pair->frames) {
+      f.pixels = tracking::Image<std::uint16_t>(48, 40, 2000);
+      for (int r = 0; r < 48; ++r)
+        for (int c = 0; c < 40; ++c) f.pixels.at(r, c) = static_cast<std::uint16_t>(1000 + (7 * r + 13 * c) % 800);
+    }
     return {};
   }
   drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline) override {
@@ -91,8 +103,15 @@ struct LoopUnderTest {
   std::unique_ptr<TrackingLoop> loop;
 };
 
-LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator, JournalWriter* journal = nullptr,
-                        OperatorInput* operator_input = nullptr) {
+struct LoopOptions {
+  JournalWriter* journal = nullptr;
+  OperatorInput* operator_input = nullptr;
+  std::chrono::microseconds per_render{0};  // each render sleeps this long: a slow or loaded host
+  double max_frame_age_ms = 150;
+  std::int64_t cycles = 20;
+};
+
+LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator, const LoopOptions& o = {}) {
   LoopUnderTest t;
   tracking::RegistrationSetup setup;
   LoopParts parts;
@@ -107,17 +126,18 @@ LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuato
     parts.geometry.roi_windows.push_back(window);
     parts.corrections.emplace_back();
   }
-  auto registration = tracking::Registration::create(std::make_shared<PatternRenderer>(), setup, nullptr);
+  auto registration = tracking::Registration::create(std::make_shared<PatternRenderer>(o.per_render), setup, nullptr);
   EXPECT_TRUE(registration.ok()) << registration.status().message();
   if (!registration.ok()) return t;
   t.registration = std::move(registration).value();
   parts.registration = t.registration.get();
   parts.frames = frames;
   parts.actuator = actuator;
-  parts.journal = journal;
-  parts.operator_input = operator_input;
+  parts.journal = o.journal;
+  parts.operator_input = o.operator_input;
   LoopSettings settings;
-  settings.cycles = 20;
+  settings.cycles = o.cycles;
+  settings.limits.max_frame_age_ms = o.max_frame_age_ms;
   settings.simulated_clock = true;
   auto loop = TrackingLoop::create(parts, settings);
   EXPECT_TRUE(loop.ok()) << loop.status().message();
@@ -169,7 +189,10 @@ TEST(TrackingLoop, EveryRefusalOfACycleIsJournaledByReason) {
   ASSERT_TRUE(journal.ok()) << journal.status().message();
   ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
   RefusedSeveralWays refusing;
-  LoopUnderTest t = make_loop(&frames, nullptr, journal->get(), &refusing);
+  LoopOptions o;
+  o.journal = journal->get();
+  o.operator_input = &refusing;
+  LoopUnderTest t = make_loop(&frames, nullptr, o);
   ASSERT_TRUE(t.loop);
   auto summary = t.loop->run();
   ASSERT_TRUE(summary.ok()) << summary.status().message();
@@ -187,6 +210,35 @@ TEST(TrackingLoop, EveryRefusalOfACycleIsJournaledByReason) {
     EXPECT_EQ(r.operator_refused_by_reason[std::size_t(OperatorRefusal::kBadToken)], 15);
     EXPECT_EQ(r.operator_refused_by_reason[std::size_t(OperatorRefusal::kReplayed)], 1);
     EXPECT_EQ(r.operator_refused_by_reason[std::size_t(OperatorRefusal::kNotApplicable)], 2);
+  }
+}
+
+// On the simulated clock a cycle's work takes no time: however slow the host, a frame is as old at
+// the decision as the clock says, and a run repeats from its seed. (The host's computing time
+// used to count: a loaded run's frames went "stale" where an idle run's did not, and two runs of
+// one seed diverged: ClosedLoop.TwoRunsOfOneSeedOnTheSimulatedClockAreTheSameBitForBit.)
+TEST(TrackingLoop, OnTheSimulatedClockTheHostsComputingTimeNeverAgesAFrame) {
+  test::TempDir dir;
+  auto journal = JournalWriter::open(dir.path() / "slow.lfj");
+  ASSERT_TRUE(journal.ok()) << journal.status().message();
+  ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
+  LoopOptions o;
+  o.journal = journal->get();
+  o.per_render = std::chrono::microseconds(2000);  // a registration takes tens of milliseconds
+  o.max_frame_age_ms = 5;
+  o.cycles = 4;
+  LoopUnderTest t = make_loop(&frames, nullptr, o);
+  ASSERT_TRUE(t.loop);
+  auto summary = t.loop->run();
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  ASSERT_TRUE((*journal)->close().ok());
+  EXPECT_GT(summary->registration_p50_ms, 5.0) << "each registration took longer than the frame age limit";
+  auto read = read_journal(dir.path() / "slow.lfj");
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  ASSERT_EQ(read->records.size(), 4u);
+  for (const JournalRecord& r : read->records) {
+    EXPECT_NE(r.gate_reason, std::uint8_t(GateReason::kStaleFrame)) << "cycle " << r.cycle;
+    EXPECT_GT(r.evaluations, 0u) << "cycle " << r.cycle;
   }
 }
 

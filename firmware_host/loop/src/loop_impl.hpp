@@ -158,8 +158,10 @@ struct TrackingLoop::Impl {
   OperatorView operator_view(std::int64_t index) const;
   void entered_hold(CycleState& c);
   bool result_is_finite() const;
-  // Now on the loop's clock: the real one, or (simulated) the cycle's start plus the real time
-  // spent in the cycle so far.
+  // Now on the loop's clock: the real one; or, simulated, the cycle's start, whatever time the
+  // host took (the cycle's work takes no simulated time, so that a run repeats bit for bit from
+  // its seed under any load: counting the host's computing time made a loaded run's frames
+  // "stale" where an idle one's were not, and two runs of one seed diverged).
   std::int64_t now_ns(std::int64_t cycle_start_ns) const;
   // The cycle's record, and its images when due, to the watchers' feed (parts.feed).
   void publish_to_feed(const JournalRecord& record);

@@ -157,8 +157,7 @@ bool TrackingLoop::Impl::result_is_finite() const {
 }
 
 std::int64_t TrackingLoop::Impl::now_ns(std::int64_t cycle_start_ns) const {
-  const std::int64_t wall = monotonic_now_ns();
-  return settings.simulated_clock ? cycle_start_ns + (wall - cycle_wall_start_ns) : wall;
+  return settings.simulated_clock ? cycle_start_ns : monotonic_now_ns();
 }
 
 Result<LoopSummary> TrackingLoop::run() {

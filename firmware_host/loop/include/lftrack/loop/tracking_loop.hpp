@@ -21,8 +21,8 @@
 // Everything is allocated by create(); steady-state cycles allocate nothing (tested), take no
 // lock another thread holds for long, and wait only with a deadline. Overruns are counted and
 // the missed periods skipped. With `simulated_clock` the loop does not sleep: cycle k starts at
-// k periods on a virtual clock (tests, studies; a sim run's results are then independent of the
-// host's speed).
+// k periods on a virtual clock on which the cycle's work takes no time (tests, studies; a sim
+// run's results are then independent of the host's speed and load, bit for bit from its seed).
 
 #include <atomic>
 #include <memory>
