@@ -1,13 +1,13 @@
 // `lftrack serve detectors --scene FILE`: the scene's simulated detectors as GigE Vision cameras
-// of their own process (Aravis's fake GigE camera, sim/gige_fake_detector.hpp), whose frames are
-// the simulator's X-rays of the simulated patient (16-bit mono), where the served couch has moved
-// them (--room: its room link). `lftrack run` reads them through the real GigE driver.
+// of their own process (sim/gige_fake_detector.hpp), whose frames are the simulator's X-rays of
+// the simulated patient (16-bit mono), where the served couch has moved them (--room: its room
+// link). `lftrack run` reads them through the real GigE driver.
 //
 // One camera per detector, each on an IPv4 address of its own (GigE Vision's control port is
-// fixed; sim/gige_fake_detector.hpp): --address per detector, by default the host's first
-// addresses, 127.0.0.1 first. Each camera's trigger renders the pair at that moment (the second
-// camera's trigger within 5 ms shares it). The frames' truth (the residual of the simulated
-// patient) is summarised at the end.
+// fixed; sim/gige_fake_detector.hpp): --address per detector, by default 127.0.0.1, 127.0.0.2 and
+// so on. Each camera's trigger renders the pair at that moment (the second camera's trigger
+// within 5 ms shares it). The frames' truth (the residual of the simulated patient) is
+// summarised at the end.
 
 #include <spdlog/spdlog.h>
 
@@ -208,15 +208,11 @@ Status serve_detectors(const ServeOptions& o) {
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   const std::size_t views = scene->detectors.size();
+  // By default loopback addresses, one per detector (127.0.0.1, 127.0.0.2, ...: the loopback
+  // device answers the whole of 127.0.0.0/8): the cameras are reachable from this host only.
   std::vector<std::string> addresses = o.addresses;
-  if (addresses.empty()) {
-    addresses = sim::local_ipv4_addresses();
-    if (addresses.size() < views)
-      return failed_precondition("this host has " + std::to_string(addresses.size()) + " IPv4 address(es) up and the scene " +
-                                 std::to_string(views) + " detectors: a GigE camera needs an address of its own (add "
-                                 "one, e.g. ip addr add 127.0.0.2/8 dev lo, and give --address per detector)");
-    addresses.resize(views);
-  }
+  for (std::size_t k = 0; o.addresses.empty() && k < views; ++k)
+    addresses.push_back("127.0.0." + std::to_string(k + 1));
   if (addresses.size() != views)
     return invalid_argument("give one --address per detector (" + std::to_string(views) + ")");
   if (!o.loopback.empty() && o.loopback.size() != views)
@@ -284,11 +280,12 @@ Status serve_detectors(const ServeOptions& o) {
 Command add_serve_detectors_command(CLI::App* parent) {
   auto o = std::make_shared<ServeOptions>();
   CLI::App* app = parent->add_subcommand(
-      "detectors", "The scene's simulated detectors as GigE Vision cameras (Aravis fake camera), as their own process");
+      "detectors", "The scene's simulated detectors as GigE Vision cameras, as their own process");
   add_common(app, o.get());
-  app->add_option("--address", o->addresses,
-                  "IPv4 address (or interface) of each detector's camera, one per detector (default: the host's "
-                  "first addresses, 127.0.0.1 first)");
+  app->add_option(
+      "--address", o->addresses,
+      "IPv4 address (or interface) of each detector's camera, one per detector (default: 127.0.0.1, "
+      "127.0.0.2, ...: this host only)");
   app->add_option("--v4l2loopback", o->loopback,
                   "Instead of GigE: write each detector's frames into this v4l2loopback device (one per detector), "
                   "every period, for `run` to read through V4L2");

@@ -26,6 +26,7 @@
 
 #include "child_process.hpp"
 #include "gige_host_lock.hpp"
+#include "gvcp_probe.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "loop_fixture.hpp"
 #include "operator_client.hpp"
@@ -420,6 +421,43 @@ TEST_F(ServedDeviceFaults, PowerCycledGigeDetectorsHoldAndTheirFramesResume) {
   EXPECT_GE(cycles_without_a_pair(r.journal.records, out_stopped), 5u)
       << "a second without frames is journaled as cycles without a pair" << held_stretch(r.journal.records, out_stopped);
   EXPECT_NE(r.journal.records.back().frame_sequence[0], 0u) << "frames resumed";
+}
+
+// `lftrack serve detectors` on its default addresses (127.0.0.1 and 127.0.0.2), fed malformed GVCP
+// datagrams of many shapes by a raw UDP client (one killed the server once: Aravis's fake camera
+// read and wrote where a datagram's length fields said): each camera still answers a well-formed
+// read, and the server stops on request with its summary.
+TEST_F(ServedDeviceFaults, MalformedGvcpDatagramsLeaveTheDetectorServerServing) {
+  test::GigeHostLock gige_tests_one_at_a_time;
+  for (const char* address : {"127.0.0.1", "127.0.0.2"})
+    if (!sim::gvcp_port_free(address))
+      GTEST_SKIP() << "another program holds UDP port 3956 (GVCP) on " << address;
+  const std::filesystem::path dir = sockets_.path();
+  std::ofstream(dir / "room.yaml") << small_scene_text(kBreathing, kLightFieldFrames);
+  test::ChildProcess detectors({LFTRACK_BIN_PATH, "-q", "serve", "detectors", "--scene",
+                                (dir / "room.yaml").string(), "--lf-dir",
+                                small_scene_light_field_dir().string(), "--control",
+                                (dir / "detectors.ctl").string(), "--threads", "1"});
+  const std::optional<std::string> listening = detectors.read_line(120s);
+  ASSERT_TRUE(listening.has_value()) << "the detector server started";
+  EXPECT_NE(listening->find("gige 127.0.0.1 (256 x 256), 127.0.0.2 (256 x 256)"), std::string::npos)
+      << *listening;
+  const std::vector<std::vector<std::uint8_t>> malformed = test::malformed_gvcp_datagrams();
+  for (const char* address : {"127.0.0.1", "127.0.0.2"}) {
+    test::GvcpClient client(address);
+    // Each followed by a read of the camera's test register (0x1F0 holds 0x12345678).
+    for (std::size_t i = 0; i < malformed.size(); ++i) {
+      EXPECT_TRUE(client.send(malformed[i])) << address << ": " << malformed[i].size() << " bytes";
+      ASSERT_EQ(client.read_register(0x1F0, std::uint16_t(i), 5s).value_or(0), 0x12345678u)
+          << address << " no longer answers after datagram " << i << " (" << malformed[i].size() << " bytes)";
+    }
+  }
+  OperatorClient control(dir / "detectors.ctl", dir / "detectors-client.sock");
+  EXPECT_EQ(control.ask("stop", 10).rfind("stopping", 0), 0u);
+  const std::optional<std::string> summary = detectors.read_line(30s);
+  ASSERT_TRUE(summary.has_value()) << "the server's summary";
+  EXPECT_NE(summary->find("\"frames_served\""), std::string::npos) << *summary;
+  EXPECT_EQ(detectors.wait(10s), 0) << "a clean exit, not a crash";
 }
 
 // The loopback devices of the v4l2loopback module on this host, found by their driver's name.
