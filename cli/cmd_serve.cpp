@@ -13,11 +13,12 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
-#include "serve_common.hpp"
 #include "lftrack/sim/can_bridge_server.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/null_modem.hpp"
 #include "lftrack/sim/served_couch.hpp"
+#include "lftrack/watch/listen_address.hpp"
+#include "serve_common.hpp"
 
 namespace lftrack::host::cli {
 namespace {
@@ -94,6 +95,14 @@ Status serve_couch(const ServeOptions& o) {
   if (!couch.ok()) return couch.status();
   auto modbus = sim::ModbusCouchServer::start(couch->get(), server);
   if (!modbus.ok()) return modbus.status();
+  if (server.rtu_device.empty()) {
+    ListenAddress at;
+    at.address = server.address;
+    at.port = (*modbus)->port();
+    const std::string w =
+        reachable_warning(at, "the modbus couch server", "move the couch (Modbus has no authentication)");
+    if (!w.empty()) spdlog::warn("{}", w);
+  }
   if (server.rtu_device.empty())
     std::printf("lftrack serve couch: modbus tcp %s:%d", server.address.c_str(), (*modbus)->port());
   else

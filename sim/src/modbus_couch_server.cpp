@@ -1,14 +1,19 @@
 #include "lftrack/sim/modbus_couch_server.hpp"
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <modbus/modbus.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
+#include <cmath>
 #include <cstring>
+#include <vector>
 
 #include "lftrack/drivers/couch_register_map.hpp"
 
@@ -16,12 +21,34 @@ namespace lftrack::sim {
 
 namespace reg = drivers::couch_registers;
 
+namespace {
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+// A TCP client: its socket, the bytes of the request it is sending, when it last completed one.
+struct Connection {
+  int fd = -1;
+  std::uint8_t bytes[MODBUS_TCP_MAX_ADU_LENGTH] = {};
+  std::size_t have = 0;
+  std::int64_t heard_ns = 0;
+};
+
+}  // namespace
+
 ModbusCouchServer::ModbusCouchServer(drivers::Actuator* couch, const ModbusCouchServerOptions& options)
     : couch_(couch), options_(options) {}
 
 Result<std::unique_ptr<ModbusCouchServer>> ModbusCouchServer::start(drivers::Actuator* couch,
                                                                     const ModbusCouchServerOptions& options) {
   if (couch == nullptr) return invalid_argument("modbus couch server: no couch");
+  if (options.max_connections < 1 || options.max_connections > 64)
+    return invalid_argument("modbus couch server: max_connections must be 1 to 64");
+  if (!std::isfinite(options.idle_timeout_s) || options.idle_timeout_s <= 0 || options.idle_timeout_s > 3600)
+    return invalid_argument("modbus couch server: idle_timeout_s must be above 0 and at most 3600");
   std::unique_ptr<ModbusCouchServer> s(new ModbusCouchServer(couch, options));
   const bool rtu = !options.rtu_device.empty();
   const std::string where = rtu ? options.rtu_device : options.address + ":" + std::to_string(options.port);
@@ -35,9 +62,10 @@ Result<std::unique_ptr<ModbusCouchServer>> ModbusCouchServer::start(drivers::Act
     if (modbus_connect(s->ctx_) != 0)
       return io_error("modbus couch server: cannot open " + where + ": " + modbus_strerror(errno));
   } else {
-    s->listen_fd_ = modbus_tcp_listen(s->ctx_, 1);
+    s->listen_fd_ = modbus_tcp_listen(s->ctx_, options.max_connections);
     if (s->listen_fd_ < 0)
       return io_error("modbus couch server: cannot listen on " + where + ": " + modbus_strerror(errno));
+    ::fcntl(s->listen_fd_, F_SETFL, ::fcntl(s->listen_fd_, F_GETFL) | O_NONBLOCK);  // accept never waits
     sockaddr_in address{};
     socklen_t length = sizeof address;
     if (getsockname(s->listen_fd_, reinterpret_cast<sockaddr*>(&address), &length) != 0)
@@ -79,27 +107,79 @@ CouchServerFault ModbusCouchServer::take_fault(CouchRequestKind kind) {
 }
 
 void ModbusCouchServer::serve() {
-  std::uint8_t query[MODBUS_TCP_MAX_ADU_LENGTH];
-  while (!stop_) {
-    pollfd listening{listen_fd_, POLLIN, 0};
-    if (poll(&listening, 1, 20) <= 0) continue;
-    int fd = listen_fd_;
-    if (modbus_tcp_accept(ctx_, &fd) < 0) continue;
-    ++connections_;
-    while (!stop_) {
-      pollfd client{modbus_get_socket(ctx_), POLLIN, 0};
-      const int ready = poll(&client, 1, 20);
-      if (ready == 0) continue;
-      if (ready < 0 && errno == EINTR) continue;
-      const int length = modbus_receive(ctx_, query);
-      if (length < 0) break;  // the client went away
-      if (length == 0) continue;
-      ++requests_;
-      handle(query, length);
-      if (modbus_get_socket(ctx_) < 0) break;  // dropped on purpose
+  const auto idle_ns = static_cast<std::int64_t>(options_.idle_timeout_s * 1e9);
+  std::vector<Connection> clients;
+  std::vector<pollfd> fds;
+  // Reads what `c` has sent and answers each request it completes; false when the connection is
+  // to close (the client went away, sent what is not Modbus TCP, or a fault dropped it).
+  const auto take = [&](Connection& c) {
+    for (;;) {
+      const ssize_t n = ::recv(c.fd, c.bytes + c.have, sizeof c.bytes - c.have, MSG_DONTWAIT);
+      if (n == 0) return false;
+      if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
+      c.have += std::size_t(n);
+      // The MBAP header (7 bytes) says how long each request is.
+      while (c.have >= 7) {
+        const int protocol = (c.bytes[2] << 8) | c.bytes[3];
+        const std::size_t length = std::size_t((c.bytes[4] << 8) | c.bytes[5]);  // unit id and PDU
+        if (protocol != 0 || length < 2 || 6 + length > sizeof c.bytes) return false;
+        if (c.have < 6 + length) break;
+        // Zeros past the request: libmodbus reads a PDU as long as its function says, and never
+        // the next request's bytes for it.
+        std::uint8_t query[MODBUS_TCP_MAX_ADU_LENGTH] = {};
+        std::memcpy(query, c.bytes, 6 + length);
+        std::memmove(c.bytes, c.bytes + 6 + length, c.have - (6 + length));
+        c.have -= 6 + length;
+        c.heard_ns = now_ns();
+        ++requests_;
+        modbus_set_socket(ctx_, c.fd);
+        handle(query, static_cast<int>(6 + length));
+        const bool dropped = modbus_get_socket(ctx_) < 0;  // kDropConnection closed it
+        modbus_set_socket(ctx_, -1);
+        if (dropped) {
+          c.fd = -1;
+          return false;
+        }
+      }
     }
-    modbus_close(ctx_);
+  };
+  const auto close_connection = [&](Connection& c) {
+    if (c.fd >= 0) ::close(c.fd);
+    c.fd = -1;
+  };
+  while (!stop_) {
+    fds.assign(1, pollfd{listen_fd_, POLLIN, 0});
+    for (const Connection& c : clients) fds.push_back(pollfd{c.fd, POLLIN, 0});
+    if (poll(fds.data(), fds.size(), 20) > 0) {
+      for (std::size_t i = 0; i < clients.size(); ++i)
+        if (fds[i + 1].revents != 0 && !take(clients[i])) close_connection(clients[i]);
+      if (fds[0].revents & POLLIN) {
+        const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+        if (fd >= 0) {
+          ++connections_;
+          std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
+          if (clients.size() >= std::size_t(options_.max_connections)) {
+            auto idlest = std::min_element(
+                clients.begin(), clients.end(),
+                [](const Connection& a, const Connection& b) { return a.heard_ns < b.heard_ns; });
+            close_connection(*idlest);
+            ++idle_closed_;
+          }
+          clients.push_back(Connection{});
+          clients.back().fd = fd;
+          clients.back().heard_ns = now_ns();
+        }
+      }
+    }
+    const std::int64_t now = now_ns();
+    for (Connection& c : clients)
+      if (c.fd >= 0 && now - c.heard_ns > idle_ns) {
+        close_connection(c);
+        ++idle_closed_;
+      }
+    std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
   }
+  for (Connection& c : clients) close_connection(c);
 }
 
 void ModbusCouchServer::serve_rtu() {

@@ -1,17 +1,23 @@
 // The couch driver against the virtual couch served by libmodbus on loopback (TCP) and over a
-// pseudo-terminal null modem (RTU): the register map, dynamics through the protocol, and every
-// Modbus fault of the catalogue (docs/faults.md).
+// pseudo-terminal null modem (RTU): the register map, dynamics through the protocol, every
+// Modbus fault of the catalogue (docs/faults.md), and clients that connect and go silent.
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
 #include <modbus/modbus.h>
+#include <netinet/in.h>
 #include <poll.h>
 #include <pty.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <cstring>
 #include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "lftrack/drivers/couch_register_map.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
@@ -220,7 +226,6 @@ TEST_F(ModbusCouchTest, AReadBackThatDisagreesWithTheCommandIsReportedAsItIs) {
 TEST_F(ModbusCouchTest, AControlWordThatIsNeitherEnableNorHoldIsRefused) {
   ASSERT_EQ(driver->command(shift(5), in_ms(100)), DeviceStatus::kOk);
   couch->advance_to(0.2);  // 0.1 s of motion at 10 mm/s after the latency: 1 mm
-  driver->close();  // the server serves one client at a time
   modbus_t* raw = modbus_new_tcp("127.0.0.1", server->port());
   ASSERT_NE(raw, nullptr);
   ASSERT_EQ(modbus_connect(raw), 0) << modbus_strerror(errno);
@@ -250,6 +255,125 @@ TEST_F(ModbusCouchTest, AControlWordThatIsNeitherEnableNorHoldIsRefused) {
   EXPECT_TRUE(inputs[reg::kStatus] & reg::kStatusHolding);
   modbus_close(raw);
   modbus_free(raw);
+}
+
+// A plain TCP connection to the server that sends only `bytes` (none: silent).
+int connect_silently(int port, const std::string& bytes = "") {
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<std::uint16_t>(port));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&to), sizeof to), 0) << std::strerror(errno);
+  if (!bytes.empty()) {
+    EXPECT_EQ(::send(fd, bytes.data(), bytes.size(), 0), ssize_t(bytes.size()));
+  }
+  return fd;
+}
+
+// Whether the server closed `fd` (end of file) within `seconds`; `meanwhile` runs every 20 ms.
+template <class Meanwhile>
+bool closed_within(int fd, double seconds, Meanwhile meanwhile) {
+  for (const auto until = Clock::now() + std::chrono::duration<double>(seconds); Clock::now() < until;) {
+    pollfd p{fd, POLLIN, 0};
+    char c;
+    if (::poll(&p, 1, 20) > 0 && ::recv(fd, &c, 1, MSG_DONTWAIT) == 0) return true;
+    meanwhile();
+  }
+  return false;
+}
+
+// A libmodbus client that answers within `response_timeout_s`.
+modbus_t* modbus_client(int port, double response_timeout_s) {
+  modbus_t* raw = modbus_new_tcp("127.0.0.1", port);
+  EXPECT_NE(raw, nullptr);
+  modbus_set_response_timeout(raw, 0, static_cast<std::uint32_t>(response_timeout_s * 1e6));
+  EXPECT_EQ(modbus_connect(raw), 0) << modbus_strerror(errno);
+  return raw;
+}
+
+// A client that connects and sends nothing, and one that sends half a request and stops, keep no
+// one out: a real client beside them (the couch driver, and a plain libmodbus client) has every
+// reply within its response timeout. (Before, the server served one connection at a time and a
+// silent one kept every other client out for as long as it stayed.)
+TEST_F(ModbusCouchTest, ASilentClientKeepsNoOtherClientWaiting) {
+  driver->close();
+  const std::int64_t before = server->connections();  // the fixture's driver
+  const int silent = connect_silently(server->port());
+  const int half = connect_silently(server->port(), std::string("\x00\x01\x00\x00\x00\x06\x01", 7));
+  for (const auto until = Clock::now() + std::chrono::seconds(5);
+       server->connections() < before + 2 && Clock::now() < until;)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_EQ(server->connections(), before + 2) << "the server has accepted both";
+  open_driver(0.2);
+  if (HasFatalFailure()) return;
+  ActuatorState s;
+  EXPECT_EQ(driver->readback(&s, in_ms(500)), DeviceStatus::kOk);
+  EXPECT_EQ(driver->command(shift(1), in_ms(500)), DeviceStatus::kOk);
+  modbus_t* raw = modbus_client(server->port(), 0.5);
+  namespace reg = drivers::couch_registers;
+  std::uint16_t inputs[reg::kInputCount] = {};
+  EXPECT_EQ(modbus_read_input_registers(raw, 0, reg::kInputCount, inputs), reg::kInputCount)
+      << modbus_strerror(errno);
+  EXPECT_NEAR(reg::decode_travel(inputs + reg::kAcceptedTarget)(0), 1, 1e-3)
+      << "the driver's command, seen by a monitor";
+  EXPECT_EQ(driver->readback(&s, in_ms(500)), DeviceStatus::kOk) << "both served, in turn";
+  modbus_close(raw);
+  modbus_free(raw);
+  ::close(silent);
+  ::close(half);
+}
+
+// A connection that completes no request for idle_timeout_s is closed, a client that keeps asking
+// never is, and a connection beyond max_connections closes the one idle longest.
+TEST(ModbusCouchServerTcp, ClosesIdleConnectionsAndMakesRoomForANewClient) {
+  test::LockedCouch couch(sim::VirtualCouchSpec{});
+  sim::ModbusCouchServerOptions so;
+  so.idle_timeout_s = 0.3;
+  so.max_connections = 3;
+  auto server = sim::ModbusCouchServer::start(&couch, so);
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  const int port = (*server)->port();
+  namespace reg = drivers::couch_registers;
+  std::uint16_t inputs[reg::kInputCount] = {};
+  modbus_t* asking = modbus_client(port, 0.5);
+  const int silent = connect_silently(port);
+  const int half = connect_silently(port, std::string("\x00\x01\x00", 3));
+  int read_backs = 0, answered = 0;
+  const auto keep_asking = [&] {
+    ++read_backs;
+    answered += modbus_read_input_registers(asking, 0, reg::kInputCount, inputs) == reg::kInputCount;
+  };
+  EXPECT_TRUE(closed_within(silent, 5, keep_asking)) << "the silent connection is closed";
+  EXPECT_TRUE(closed_within(half, 5, keep_asking)) << "so is the one that stopped half-way";
+  EXPECT_EQ(answered, read_backs) << "the client that kept asking was answered every time";
+  EXPECT_GE((*server)->idle_closed(), 2);
+  ::close(silent);
+  ::close(half);
+  modbus_close(asking);
+  modbus_free(asking);
+
+  // Three slots, taken by silent connections (long idle timeout): a new client displaces the
+  // connection idle longest, and is answered.
+  so.idle_timeout_s = 60;
+  auto full = sim::ModbusCouchServer::start(&couch, so);
+  ASSERT_TRUE(full.ok());
+  std::vector<int> idle;
+  for (int i = 0; i < 3; ++i) {
+    idle.push_back(connect_silently((*full)->port()));
+    for (const auto until = Clock::now() + std::chrono::seconds(5);
+         (*full)->connections() < i + 1 && Clock::now() < until;)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ((*full)->connections(), 3);
+  modbus_t* late = modbus_client((*full)->port(), 0.5);
+  EXPECT_EQ(modbus_read_input_registers(late, 0, reg::kInputCount, inputs), reg::kInputCount)
+      << modbus_strerror(errno);
+  EXPECT_TRUE(closed_within(idle[0], 5, [] {})) << "the first, idle longest, made room";
+  EXPECT_EQ((*full)->idle_closed(), 1);
+  modbus_close(late);
+  modbus_free(late);
+  for (int fd : idle) ::close(fd);
 }
 
 TEST(ModbusCouch, OpeningWithNothingListeningSaysWhere) {

@@ -51,6 +51,19 @@ TEST(ListenAddress, ListensOnAFreePortAndRefusesABusyOne) {
   ::close(*fd);
 }
 
+TEST(ListenAddress, WarnsOfAServerOtherHostsCanReachAndOnlyThen) {
+  EXPECT_EQ(reachable_warning({"127.0.0.1", 8080}, "the monitor page", "watch the treatment"), "");
+  EXPECT_EQ(reachable_warning({"127.0.0.5", 8080}, "the monitor page", "watch the treatment"), "");
+  EXPECT_EQ(
+      reachable_warning({"192.0.2.7", 8080}, "the monitor page", "watch the treatment"),
+      "the monitor page listens on 192.0.2.7:8080: other hosts can reach it and watch the treatment; listen "
+      "on 127.0.0.1 unless another host must reach it");
+  EXPECT_NE(
+      reachable_warning({"0.0.0.0", 1502}, "the modbus couch server", "move the couch")
+          .find("listens on 0.0.0.0:1502 (every interface): other hosts can reach it and move the couch"),
+      std::string::npos);
+}
+
 TEST(OperatorToken, IsRandomHexComparedExactly) {
   std::set<std::string> tokens;
   for (int i = 0; i < 100; ++i) {

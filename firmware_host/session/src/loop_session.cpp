@@ -327,12 +327,19 @@ Status start_watchers(const PreparedScene& p, const LoopSessionOptions& o, LoopS
     auto monitor = MonitorServer::start(parts->hub.get(), parts->page_operator.get(), *o.monitor);
     if (!monitor.ok()) return monitor.status();
     parts->monitor = std::move(monitor).value();
+    if (const std::string w = reachable_warning(o.monitor->listen, "the monitor page", "watch the treatment");
+        !w.empty())
+      spdlog::warn("{}", w);
     parts->operators.add(std::make_unique<BorrowedOperator>(parts->page_operator.get()));
   }
   if (o.igtl) {
     auto igtl = IgtlServer::start(parts->hub.get(), *o.igtl);
     if (!igtl.ok()) return igtl.status();
     parts->igtl = std::move(igtl).value();
+    if (const std::string w =
+            reachable_warning(o.igtl->listen, "the OpenIGTLink server", "read the registered pose");
+        !w.empty())
+      spdlog::warn("{}", w);
   }
   return {};
 }

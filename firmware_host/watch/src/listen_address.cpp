@@ -15,6 +15,12 @@ bool ListenAddress::loopback() const { return address.rfind("127.", 0) == 0; }
 bool ListenAddress::wildcard() const { return address == "0.0.0.0"; }
 std::string ListenAddress::text() const { return address + ":" + std::to_string(port); }
 
+std::string reachable_warning(const ListenAddress& at, const std::string& server, const std::string& can) {
+  if (at.loopback()) return {};
+  return server + " listens on " + at.text() + (at.wildcard() ? " (every interface)" : "") +
+         ": other hosts can reach it and " + can + "; listen on 127.0.0.1 unless another host must reach it";
+}
+
 Result<ListenAddress> parse_listen_address(const std::string& text) {
   ListenAddress a;
   std::string port = text;

@@ -5,8 +5,14 @@
 //
 // The server fronts a device (an Actuator with the couch's dynamics: VirtualCouch, or the
 // simulated room's couch) and calls it from its own thread; the device must therefore be either
-// used by nobody else or safe to share (SimulatedRoom locks). One client at a time; a client
-// that goes away is replaced by the next to connect.
+// used by nobody else or safe to share (SimulatedRoom locks).
+//
+// Over TCP it serves several clients at once, as a couch controller serves a monitoring client
+// beside the one that commands it: each request is answered on its own connection, in the order
+// requests complete, and no client waits for another (a request is read as its bytes arrive,
+// never by waiting on one connection). A connection that completes no request for
+// idle_timeout_s is closed; one beyond max_connections closes the connection idle longest; one
+// whose bytes are not Modbus TCP (protocol id not 0, a length outside 2..254) is closed.
 //
 // Faults are injected for the next N requests: no reply at all, exception 4 (device failure) or
 // 6 (busy), a reply with the wrong unit id, a dropped connection, a read-back that disagrees
@@ -46,6 +52,8 @@ struct ModbusCouchServerOptions {
   std::string rtu_device;
   int unit_id = 1;
   double mismatch_mm = 2.0;
+  int max_connections = 4;     // TCP: clients served at once, 1 to 64
+  double idle_timeout_s = 30;  // TCP: a connection without a request for this long is closed; (0, 3600]
 };
 
 class ModbusCouchServer {
@@ -61,11 +69,12 @@ class ModbusCouchServer {
   // The next `requests` requests of `kind` meet `fault` (replacing any fault still pending).
   void inject(CouchServerFault fault, int requests = 1, CouchRequestKind kind = CouchRequestKind::kAny);
   std::int64_t requests() const { return requests_.load(); }
-  std::int64_t connections() const { return connections_.load(); }
+  std::int64_t connections() const { return connections_.load(); }  // TCP connections accepted
+  std::int64_t idle_closed() const { return idle_closed_.load(); }  // closed for idling or for a newer one
 
  private:
   ModbusCouchServer(drivers::Actuator* couch, const ModbusCouchServerOptions& options);
-  void serve();
+  void serve();  // TCP
   void serve_rtu();
   void handle(std::uint8_t* query, int length);
   CouchServerFault take_fault(CouchRequestKind kind);
@@ -81,7 +90,7 @@ class ModbusCouchServer {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<int> fault_{0}, fault_requests_{0}, fault_kind_{0};
-  std::atomic<std::int64_t> requests_{0}, connections_{0};
+  std::atomic<std::int64_t> requests_{0}, connections_{0}, idle_closed_{0};
   tracking::Vector6d accepted_target_ = tracking::Vector6d::Zero();
   std::uint16_t acknowledged_ = 0;
   std::uint16_t fault_word_ = 0;

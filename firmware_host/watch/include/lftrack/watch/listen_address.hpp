@@ -21,6 +21,12 @@ struct ListenAddress {
 
 Result<ListenAddress> parse_listen_address(const std::string& text);
 
+// For a server listening where other hosts reach it (any address outside 127.0.0.0/8), the
+// warning it gives at start: `server` listens on ADDRESS:PORT, other hosts can reach it and `can`
+// (what whoever reaches it may do); empty on loopback. The monitor page, the OpenIGTLink server
+// and `lftrack serve couch` give it.
+std::string reachable_warning(const ListenAddress& at, const std::string& server, const std::string& can);
+
 // Opens a TCP socket listening on `where` (SO_REUSEADDR, close-on-exec, non-blocking) and says
 // which port it took (`where.port` 0: the kernel's choice). The caller closes the descriptor.
 Result<int> open_listening_socket(const ListenAddress& where, int* port);
