@@ -270,7 +270,10 @@ Status run(const SimOptions& o) {
                   {"error_frames", c.error_frames},
                   {"timeouts", c.timeouts},
                   {"refused", c.refused},
-                  {"faults", drivers::describe_can_faults(robot->faults())}};
+                  {"disconnects", c.disconnects},
+                  {"reconnects", c.reconnects},
+                  {"faults", drivers::describe_can_faults(robot->faults())},             // at the end
+                  {"faults_seen", drivers::describe_can_faults(robot->faults_seen())}};  // during the run
     }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
@@ -300,11 +303,13 @@ Status run(const SimOptions& o) {
       const drivers::CanRobotCounters& c = robot->counters();
       std::printf(
           "hil: CAN robot, %lld frames out, %lld in (%lld heartbeats, %lld error frames); timeouts %lld, "
-          "refused %lld; faults now: %s\n",
+          "refused %lld, disconnects %lld, reconnects %lld; faults now: %s; seen: %s\n",
           static_cast<long long>(c.frames_out), static_cast<long long>(c.frames_in),
           static_cast<long long>(c.heartbeats), static_cast<long long>(c.error_frames),
           static_cast<long long>(c.timeouts), static_cast<long long>(c.refused),
-          drivers::describe_can_faults(robot->faults()).c_str());
+          static_cast<long long>(c.disconnects), static_cast<long long>(c.reconnects),
+          drivers::describe_can_faults(robot->faults()).c_str(),
+          drivers::describe_can_faults(robot->faults_seen()).c_str());
     }
     if (!journal.empty())
       std::printf("journal: %s (lftrack journal export %s)\n", journal.c_str(), journal.c_str());

@@ -94,8 +94,10 @@ Status CanRobot::open() {
     }
   }
   if (fd_ < 0) return failed_precondition(where + ": no socket");
+  link_up_ = true;
   const auto until = std::chrono::steady_clock::now() +
                      std::chrono::microseconds(static_cast<long long>(options_.open_timeout_s * 1e6));
+  const std::uint32_t seen_before = seen_;
   while (last_heartbeat_ns_ == 0 && std::chrono::steady_clock::now() < until) {
     pollfd p{fd_, POLLIN, 0};
     ::poll(&p, 1, 10);
@@ -104,7 +106,9 @@ Status CanRobot::open() {
   if (last_heartbeat_ns_ == 0)
     return io_error(where + ": no heartbeat from node " + std::to_string(options_.node_id) + " within " +
                     std::to_string(options_.open_timeout_s) + " s");
-  latched_ &= ~std::uint32_t(kCanRobotRestarted);  // a robot that has just booted is expected
+  // A robot that has just booted is expected: neither a fault now nor one seen.
+  latched_ &= ~std::uint32_t(kCanRobotRestarted);
+  seen_ = (seen_ & ~std::uint32_t(kCanRobotRestarted)) | (seen_before & kCanRobotRestarted);
   return {};
 }
 
@@ -128,12 +132,23 @@ Status CanRobot::connect_bridge() {
   return {};
 }
 
-void CanRobot::drop_link() {
-  if (fd_ < 0) return;
-  ::close(fd_);
-  fd_ = -1;
+void CanRobot::link_lost() {
+  if (!link_up_) return;  // counted once per loss
+  link_up_ = false;
   ++counters_.disconnects;
   enabled_ = false;
+  // A bridge is dialled again from the cycle; a given socket's peer is gone for good. A CAN_RAW
+  // socket stays: frames flow again when its interface is back.
+  if ((given_socket_ || !options_.bridge_path.empty()) && fd_ >= 0) {
+    ::close(fd_);
+    fd_ = -1;
+  }
+}
+
+void CanRobot::link_regained() {
+  if (link_up_) return;
+  link_up_ = true;
+  ++counters_.reconnects;
 }
 
 bool CanRobot::linked() {
@@ -141,9 +156,10 @@ bool CanRobot::linked() {
   if (options_.bridge_path.empty() || given_socket_) return false;
   if (double(now_ns() - last_connect_attempt_ns_) < options_.reconnect_interval_s * 1e9) return false;
   if (!connect_bridge().ok()) return false;
-  ++counters_.reconnects;
+  link_regained();
   // Whatever answers now has not seen our commands: treated as a restarted robot.
   latched_ |= kCanRobotRestarted;
+  seen_ |= kCanRobotRestarted;
   enabled_ = false;
   status_fresh_ = ack_fresh_ = false;
   return true;
@@ -152,16 +168,18 @@ bool CanRobot::linked() {
 void CanRobot::close() {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
+  link_up_ = false;  // closed on purpose: no loss to count
 }
 
 DeviceStatus CanRobot::send(const can_frame& frame) {
   if (::send(fd_, &frame, sizeof frame, MSG_DONTWAIT | MSG_NOSIGNAL) == ssize_t(sizeof frame)) {
     ++counters_.frames_out;
+    link_regained();  // a CAN_RAW interface that is back
     return DeviceStatus::kOk;
   }
   if (errno == EAGAIN || errno == ENOBUFS) return DeviceStatus::kTimeout;  // transmit queue full
-  if (!options_.bridge_path.empty() && !given_socket_) drop_link();       // the bridge went away
-  return DeviceStatus::kDisconnected;                                      // EPIPE, ENETDOWN, ENODEV...
+  link_lost();                                                             // EPIPE, ENETDOWN, ENODEV...
+  return DeviceStatus::kDisconnected;
 }
 
 void CanRobot::take(const can_frame& f) {
@@ -225,15 +243,18 @@ void CanRobot::pump() {
   for (int i = 0; i < kMaxFramesPerPump && fd_ >= 0; ++i) {
     const ssize_t n = ::recv(fd_, &f, sizeof f, MSG_DONTWAIT);
     if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
-      // End of file on a bridge's socket: the bridge (or its robot) went away.
-      if (!options_.bridge_path.empty() && !given_socket_) drop_link();
+      // End of file (the bridge, or the robot at a socket's other end, went away) or the
+      // interface's error.
+      link_lost();
       break;
     }
     if (n != ssize_t(sizeof f)) break;
+    link_regained();
     take(f);
   }
   if (last_heartbeat_ns_ != 0 && double(now_ns() - last_heartbeat_ns_) > options_.heartbeat_timeout_s * 1e9)
     latched_ |= kCanHeartbeatMissing;
+  seen_ |= faults();
 }
 
 std::uint32_t CanRobot::conditions() const {
@@ -301,6 +322,7 @@ DeviceStatus CanRobot::readback(ActuatorState* state, Deadline deadline) {
     return DeviceStatus::kTimeout;
   }
   if (status_fault_ != 0) latched_ |= kCanRobotFault;
+  seen_ |= faults();
   state->position = position_;
   state->target = target_;
   state->moving = (status_flags_ & can::kFlagMoving) != 0;

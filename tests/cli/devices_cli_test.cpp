@@ -1,10 +1,16 @@
-// `lftrack serve ...` as a user runs it: what a device server says at start.
+// `lftrack serve ...` and `lftrack sim --hil ...` as a user runs them: what a device server says
+// at start, and what a hardware-in-the-loop run reports of its link.
 
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
+#include "lftrack/host/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
+#include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -23,6 +29,34 @@ TEST(ServeCli, ACouchServerOnEveryInterfaceWarnsThatOtherHostsCanMoveTheCouch) {
       {LFTRACK_BIN_PATH, "serve", "couch", "--modbus", "tcp:127.0.0.1:0", "--duration", "0.2"}, &out);
   ASSERT_TRUE(local.ok()) << local.message() << "\n" << out;
   EXPECT_EQ(out.find("other hosts can reach it"), std::string::npos) << "no warning on loopback: " << out;
+}
+
+// The CAN block of `sim --hil can --json` carries the link's disconnects and reconnects (as the
+// Modbus block does) and the faults seen during the run beside the faults at its end.
+TEST(SimHilCli, TheCanBlockReportsTheLinkAndTheFaultsSeen) {
+  test::TempDir dir;
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  for (const std::string field :
+       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
+    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+  std::ofstream(dir.path() / "sim.yaml") << scene;
+  std::string out;
+  const Status s = run_process(
+      {LFTRACK_BIN_PATH, "-q", "sim", "--scene", (dir.path() / "sim.yaml").string(), "--fast", "--cycles",
+       "3", "--lf-dir", (dir.path() / "lf").string(), "--journal", "", "--hil", "can", "--json"},
+      &out);
+  ASSERT_TRUE(s.ok()) << s.message() << "\n" << out;
+  const nlohmann::json j = nlohmann::json::parse(out.substr(out.find("{\n")), nullptr, false);
+  ASSERT_FALSE(j.is_discarded()) << out;
+  ASSERT_TRUE(j.contains("hil")) << out;
+  const nlohmann::json& hil = j["hil"];
+  EXPECT_EQ(hil.value("protocol", ""), "can");
+  for (const char* key : {"disconnects", "reconnects"}) {
+    ASSERT_TRUE(hil.contains(key) && hil[key].is_number_integer()) << key << ": " << hil.dump();
+    EXPECT_EQ(hil[key].get<int>(), 0) << key;
+  }
+  EXPECT_EQ(hil.value("faults", ""), "none");
+  EXPECT_EQ(hil.value("faults_seen", ""), "none") << hil.dump();
 }
 
 }  // namespace

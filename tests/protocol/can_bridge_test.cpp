@@ -109,6 +109,10 @@ TEST_F(CanBridge, AnUnpluggedBridgeDisconnectsAndTheReplugIsARestartedRobot) {
   robot.hold();  // the operator's resume follows a hold
   EXPECT_EQ(robot.command(step, in(200ms)), DeviceStatus::kOk);
   EXPECT_EQ(couch_->commands(), 1);
+  EXPECT_EQ(robot.faults(), 0u);
+  EXPECT_NE(robot.faults_seen() & drivers::kCanRobotRestarted, 0u) << "still among the faults seen";
+  EXPECT_EQ(robot.counters().disconnects, 1);
+  EXPECT_EQ(robot.counters().reconnects, 1);
 }
 
 TEST(CanBridgeServer, NeverReplacesAFile) {

@@ -198,6 +198,30 @@ TEST_F(CanRobotTest, AnErrorFrameFloodIsAFaultAndDoesNotHoldTheCyclePastItsDeadl
   EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 0.5);
 }
 
+// What a run's summary reports: a restarted robot stays among the faults seen after the hold that
+// cleared it from the faults now, and a robot that goes away (its end of the link closed) is one
+// disconnect, however many calls meet it.
+TEST_F(CanRobotTest, FaultsSeenOutliveTheHoldAndALostLinkIsOneDisconnect) {
+  EXPECT_EQ(driver->faults_seen(), 0u) << "the boot-up heartbeat at open is expected, not a fault";
+  robot->inject(RobotFault::kRobotRestart);
+  EXPECT_EQ(readback_until(DeviceStatus::kFault), DeviceStatus::kFault);
+  driver->hold();
+  ActuatorState s;
+  ASSERT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kOk);
+  EXPECT_EQ(driver->faults(), 0u) << "cleared by the hold";
+  EXPECT_EQ(driver->faults_seen(), std::uint32_t(drivers::kCanRobotRestarted))
+      << drivers::describe_can_faults(driver->faults_seen());
+  EXPECT_EQ(driver->counters().disconnects, 0);
+
+  robot.reset();  // unplugged: the robot's end of the link closes
+  EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kDisconnected);
+  EXPECT_EQ(driver->command(shift(1), in_ms(50)), DeviceStatus::kDisconnected);
+  EXPECT_EQ(driver->readback(&s, in_ms(50)), DeviceStatus::kDisconnected);
+  EXPECT_EQ(driver->counters().disconnects, 1);
+  EXPECT_EQ(driver->counters().reconnects, 0) << "a socket pair is not dialled again";
+  EXPECT_EQ(driver->faults_seen(), std::uint32_t(drivers::kCanRobotRestarted));
+}
+
 TEST(CanRobot, NoHeartbeatNoRobotAndNoInterfaceAreClearErrors) {
   auto pair = sim::can_socket_pair();
   ASSERT_TRUE(pair.ok());

@@ -55,6 +55,9 @@ enum CanRobotFault : std::uint32_t {
 };
 std::string describe_can_faults(std::uint32_t faults);
 
+// disconnects: the link lost (end of file or an error on the socket: a bridge or a robot at a
+// socket's other end gone, a CAN interface down), once per loss; reconnects: a link made again
+// (a bridge dialled again, a CAN interface whose frames flow again). As the Modbus couch's.
 struct CanRobotCounters {
   std::int64_t frames_in = 0, frames_out = 0, error_frames = 0, heartbeats = 0, timeouts = 0, refused = 0,
                disconnects = 0, reconnects = 0;
@@ -78,7 +81,8 @@ class CanRobot final : public Actuator {
   void set_beam_permit(bool permit) override;
   void close() override;
 
-  std::uint32_t faults() const { return conditions() | latched_; }
+  std::uint32_t faults() const { return conditions() | latched_; }  // now
+  std::uint32_t faults_seen() const { return seen_; }               // every fault since construction
   const CanRobotCounters& counters() const { return counters_; }
 
  private:
@@ -91,7 +95,8 @@ class CanRobot final : public Actuator {
   DeviceStatus send(const can_frame& frame);
   std::int64_t now_ns() const;
   Status connect_bridge();  // bridge_path: a connected, non-blocking SOCK_SEQPACKET socket in fd_
-  void drop_link();         // the bridge went away: closed, counted, reconnected from the cycle
+  void link_lost();         // counted once per loss; a bridge's or a given socket's fd_ closed
+  void link_regained();     // counted where the link was lost
   bool linked();            // fd_ open, or (bridge) opened again now that the interval has passed
 
   CanRobotOptions options_;
@@ -100,6 +105,8 @@ class CanRobot final : public Actuator {
   std::int64_t last_connect_attempt_ns_ = 0;
   CanRobotCounters counters_;
   std::uint32_t latched_ = 0;
+  std::uint32_t seen_ = 0;  // faults() at every look, or-ed
+  bool link_up_ = false;
   bool bus_off_ = false, error_passive_ = false;
   std::int64_t last_heartbeat_ns_ = 0;
   std::uint8_t robot_state_ = 0;
