@@ -11,6 +11,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/loop_summary.hpp"
@@ -174,6 +175,7 @@ Status run(const RegisterOptions& o) {
   std::vector<Image<std::uint16_t>> raw;
   if (o.sim) {
     if (!gold) gold = p.nominal_T_room_from_ct;
+    spdlog::info("simulated detectors, {}", describe_exposure(p));
     const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
     if (!physics.ideal()) {
       // The scene's imaging physics (sim.physics): the simulated patient exposed by its imager.

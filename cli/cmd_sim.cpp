@@ -18,6 +18,7 @@
 #include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/preflight.hpp"
+#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -198,6 +199,8 @@ Status run(const SimOptions& o) {
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
+  if (o.mode == SimOptions::Mode::kSim || (o.mode == SimOptions::Mode::kRun && frames_are_simulated(prepared->scene)))
+    spdlog::info("{}: simulated detectors, {}", prepared->scene.name, describe_exposure(*prepared));
   if (o.mode == SimOptions::Mode::kRun) {
     // The start-up checks before the first beam: every reason at once, nothing built or moved.
     const PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");

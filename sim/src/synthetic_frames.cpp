@@ -20,15 +20,14 @@ DetectorCorrection detector_correction(const DetectorModel& model) {
 
 namespace {
 
-// More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it);
-// std::poisson_distribution, which drew the noise before, spun without end on means near 1e25
-// (an outside probe's `photons_per_pixel: 1e40` ignored SIGTERM).
-constexpr double kMaxPhotonsPerPixel = 1e9;
+// The open field at most a million times full scale (an AEC's dose behind a line integral of 14).
+constexpr double kMaxOpenFieldFraction = 1e6;
 
 Status check_model(const DetectorModel& model) {
   if (!(model.photons_per_pixel > 0 && model.photons_per_pixel <= kMaxPhotonsPerPixel) ||
-      !(model.open_field_fraction > 0 && model.open_field_fraction <= 1) || model.bits < 8 || model.bits > 16)
-    return invalid_argument("synthetic frame: photons in (0, 1e9], open-field fraction in (0, 1], 8-16 bits");
+      !(model.open_field_fraction > 0 && model.open_field_fraction <= kMaxOpenFieldFraction) || model.bits < 8 ||
+      model.bits > 16)
+    return invalid_argument("synthetic frame: photons in (0, 1e9], open-field fraction in (0, 1e6], 8-16 bits");
   return {};
 }
 
@@ -181,7 +180,9 @@ Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose&
       double counts = blurred_.at(r, c) * counts_per_photon;
       if (effects_) {
         counts *= gain_.at(r, c);
-        if (stuck_.at(r, c) > 0) counts = stuck_.at(r, c) * correction.open_field_counts;
+        // A stuck pixel reads its level of the detector's own open field, whatever the dose.
+        if (stuck_.at(r, c) > 0)
+          counts = stuck_.at(r, c) * std::min(correction.open_field_counts, double(correction.saturation_counts));
       }
       frame.at(window_.row0 + r, window_.col0 + c) = static_cast<std::uint16_t>(
           std::clamp(std::isfinite(counts) ? std::lround(counts) : 0L, 0L, long(correction.saturation_counts)));

@@ -70,6 +70,34 @@ TEST(FrameQuality, EachBadFrameGetsItsReason) {
   EXPECT_EQ(assess(f), FrameQualityIssue::kSaturated);
 }
 
+// Blank is judged on the detector's range, not on the open field: thick anatomy an automatic
+// exposure control exposed well passes even though it transmits a thousandth of the open field (the
+// old rule called a real abdomen's oblique view blank at any dose), a ROI near the bottom of the
+// range does not, and neither does a frame at the detector's dark level, however high that is.
+TEST(FrameQuality, BlankIsARoiAPersonSeesAsBlackNotThickAnatomy) {
+  DetectorCorrection aec = detector();
+  aec.open_field_counts = 400'000;  // the open field at 100 x full scale: it saturates
+  Image<std::uint16_t> thick = anatomy();
+  for (std::uint16_t& v : thick.pixels()) v = static_cast<std::uint16_t>(v / 10);  // ROI mean near 200 counts
+  const PixelWindow all{0, 0, thick.rows(), thick.cols()};
+  FrameQualityStats s;
+  EXPECT_EQ(assess_frame_quality(thick.view(), all, aec, {}, &s), FrameQualityIssue::kOk);
+  EXPECT_LT(s.mean_counts, 0.002 * aec.open_field_counts) << "well under the old open-field floor";
+  Image<std::uint16_t> starved = anatomy();
+  for (std::uint16_t& v : starved.pixels()) v = static_cast<std::uint16_t>(v / 150);  // a mean near 14 counts
+  EXPECT_EQ(assess_frame_quality(starved.view(), all, aec, {}, &s), FrameQualityIssue::kBlank);
+  EXPECT_LT(s.mean_counts, 0.01 * 4095);
+  // The tube off on a panel whose dark level is 300 counts: only the dark level, with read noise.
+  DetectorCorrection offset = detector();
+  offset.dark_counts = Image<float>(thick.rows(), thick.cols(), 300.f);
+  Image<std::uint16_t> dark(thick.rows(), thick.cols());
+  std::mt19937 rng(5);
+  std::normal_distribution<double> read_noise(300, 12);
+  for (std::uint16_t& v : dark.pixels()) v = static_cast<std::uint16_t>(std::lround(read_noise(rng)));
+  EXPECT_EQ(assess_frame_quality(dark.view(), all, offset, {}, &s), FrameQualityIssue::kBlank);
+  EXPECT_LT(std::abs(s.mean_counts), 5.0) << "the signal is what is above the dark level";
+}
+
 TEST(FrameQuality, OnlyTheWindowCountsAndAnEmptyWindowIsBlank) {
   Image<std::uint16_t> f = anatomy();
   for (int r = 0; r < f.rows(); ++r)

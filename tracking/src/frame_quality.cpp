@@ -34,6 +34,8 @@ FrameQualityIssue assess_frame_quality(const ImageView<const std::uint16_t>& raw
   std::int64_t saturated = 0, dead = 0;
   double sum = 0, sum_sq = 0;
   const auto saturation = static_cast<std::uint32_t>(std::max(1, detector.saturation_counts));
+  const bool dark = !detector.dark_counts.pixels().empty() && detector.dark_counts.rows() == raw.rows &&
+                    detector.dark_counts.cols() == raw.cols;
   for (int r = r0; r < r1; ++r) {
     const std::uint16_t* row = raw.row_ptr(r);
     double row_sum = 0, row_sq = 0;  // per row, so long sums keep their precision
@@ -41,8 +43,9 @@ FrameQualityIssue assess_frame_quality(const ImageView<const std::uint16_t>& raw
       const std::uint32_t v = row[c];
       saturated += v >= saturation;
       dead += v == 0;
-      row_sum += double(v);
-      row_sq += double(v) * double(v);
+      const double signal = double(v) - (dark ? double(detector.dark_counts.at(r, c)) : 0.0);
+      row_sum += signal;
+      row_sq += signal * signal;
     }
     sum += row_sum;
     sum_sq += row_sq;
@@ -55,7 +58,7 @@ FrameQualityIssue assess_frame_quality(const ImageView<const std::uint16_t>& raw
   s.relative_spread = s.mean_counts > 0 ? std::sqrt(variance) / s.mean_counts : 0;
   if (stats != nullptr) *stats = s;
   if (s.saturated_fraction > limits.max_saturated_fraction) return FrameQualityIssue::kSaturated;
-  if (s.mean_counts < limits.min_mean_of_open_field * detector.open_field_counts) return FrameQualityIssue::kBlank;
+  if (!(s.mean_counts >= limits.min_mean_of_full_scale * double(saturation))) return FrameQualityIssue::kBlank;
   if (s.dead_fraction > limits.max_dead_fraction) return FrameQualityIssue::kDeadPixels;
   if (s.relative_spread < limits.min_relative_spread) return FrameQualityIssue::kUniform;
   return FrameQualityIssue::kOk;

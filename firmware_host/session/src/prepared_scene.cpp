@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/volume_io.hpp"
@@ -191,6 +192,9 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
     if (!w.ok()) return w.status().with_context(out.scene.where("roi"));
     out.roi_windows.push_back(*w);
   }
+  auto exposure = scene_exposure(out);
+  if (!exposure.ok()) return exposure.status();
+  out.exposure = *exposure;
   return out;
 }
 

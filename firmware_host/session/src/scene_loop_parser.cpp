@@ -22,7 +22,16 @@ Status SceneParser::vec6(const YAML::Node& n, const std::string& what, const cha
 Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
   LFTRACK_RETURN_IF_ERROR(
       check_keys(n, "sim",
-                 {"photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed", "couch_link", "physics"}));
+                 {"exposure", "aec_level", "photons_per_pixel", "detector_blur_px", "renderer", "light_field", "seed",
+                  "couch_link", "physics"}));
+  if (n["exposure"]) LFTRACK_RETURN_IF_ERROR(one_of(n["exposure"], "sim.exposure", {"aec", "fixed"}, &sim->exposure));
+  if (n["aec_level"]) {
+    LFTRACK_RETURN_IF_ERROR(number(n["aec_level"], "sim.aec_level", &sim->aec_level));
+    if (!(sim->aec_level >= 0.01 && sim->aec_level <= 0.8))
+      return error(n["aec_level"],
+                   "sim.aec_level must be from 0.01 to 0.8 of the detector's full scale: below, the ROI is "
+                   "almost black; above, its brighter parts saturate");
+  }
   if (n["physics"]) LFTRACK_RETURN_IF_ERROR(parse_physics(n["physics"], sim));
   if (n["photons_per_pixel"])
     LFTRACK_RETURN_IF_ERROR(positive_at_most(n["photons_per_pixel"], "sim.photons_per_pixel", 1e9,

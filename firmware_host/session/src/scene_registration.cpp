@@ -179,7 +179,8 @@ Result<std::vector<tracking::DetectorCorrection>> scene_detector_corrections(con
 
 sim::DetectorModel scene_detector_model(const PreparedScene& p) {
   sim::DetectorModel m;
-  m.photons_per_pixel = p.scene.sim.photons_per_pixel;
+  m.photons_per_pixel = p.exposure.photons_per_pixel;
+  m.open_field_fraction = p.exposure.open_field_fraction;
   m.blur_sigma_px = p.scene.sim.detector_blur_px;
   m.bits = p.scene.detectors.empty() ? 12 : p.scene.detectors.front().bits;
   return m;

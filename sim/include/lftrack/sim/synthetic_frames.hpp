@@ -35,11 +35,18 @@
 
 namespace lftrack::sim {
 
+// More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it);
+// std::poisson_distribution, which drew the noise before, spun without end on means near 1e25
+// (an outside probe's `photons_per_pixel: 1e40` ignored SIGTERM).
+inline constexpr double kMaxPhotonsPerPixel = 1e9;
+
 struct DetectorModel {
   double photons_per_pixel = 10000;  // open field, per pixel and frame (the dose)
   double blur_sigma_px = 0.5;        // detector point-spread (scintillator), Gaussian
   int bits = 12;
-  double open_field_fraction = 0.85;  // open-field counts as a fraction of full scale
+  // Open-field counts as a fraction of full scale; above 1 the open field saturates (a dose an
+  // automatic exposure control set for thick anatomy).
+  double open_field_fraction = 0.85;
   bool noise = true;                  // false: expected values (no Poisson draw)
 };
 

@@ -108,7 +108,15 @@ struct RegistrationSpec {
 
 // sim: synthetic detector frames.
 struct SimFrameSpec {
-  double photons_per_pixel = 10000;  // open field, per pixel and frame
+  // sim.exposure: how the simulated detectors are exposed. "aec" (default), as an automatic
+  // exposure control does: one dose for the scene, set so that the ROI of the view that attenuates
+  // most reads `aec_level` of the detector's full scale at the nominal pose (the open field beyond
+  // the patient then saturates, as on a real panel). "fixed": photons_per_pixel in the open field.
+  std::string exposure = "aec";
+  double aec_level = 0.1;
+  // The detector's conversion: this many photons per pixel read 85 % of its full scale (the open
+  // field's level under `fixed`, which is then the dose).
+  double photons_per_pixel = 10000;
   double detector_blur_px = 0.5;
   // What renders the simulated loop's frames: "siddon" (exact, about 30 ms per view of a 512 x 512
   // detector's ROI on one core) or "lightfield" (a separate field of `light_field` resolution,
@@ -201,6 +209,16 @@ Result<Scene> load_scene(const std::string& file_or_builtin);
 // The YAML text of a built-in scene, or nothing.
 std::optional<std::string> builtin_scene_text(const std::string& name);
 
+// The simulated detectors' exposure, the same for every frame of a scene and for every detector
+// (an AEC sets one technique for the pair, through the view that attenuates most).
+struct SimExposure {
+  double photons_per_pixel = 10000;  // in the open field, per pixel and frame
+  double open_field_fraction = 0.85;  // the open field's counts / full scale; above 1 it saturates
+  // What the AEC measured: each view's ROI mean at the nominal pose (the primary, without noise)
+  // as a fraction of full scale at this exposure; empty under `fixed`.
+  std::vector<double> roi_mean_of_full_scale;
+};
+
 // A scene with its CT read and everything that depends on the CT resolved.
 struct PreparedScene {
   Scene scene;
@@ -213,6 +231,7 @@ struct PreparedScene {
   Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
   tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
   std::vector<tracking::PixelWindow> roi_windows;  // per detector: the ROI's projection
+  SimExposure exposure;  // the simulated detectors' dose (sim.exposure), set once for the scene
 
   Eigen::Vector3d registration_origin_room_mm() const {
     return nominal_T_room_from_ct * registration_origin_ct_mm;
