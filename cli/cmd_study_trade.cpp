@@ -45,6 +45,10 @@ void print_trade_front(const TradeStudy& study) {
   for (const auto& r : pareto_front(study.results))
     std::printf("%-22s %10.1f %10.1f %10.3f %10.3f %7.0f%% %10.2f\n", r.point.id.c_str(), r.median_ms,
                 r.p95_ms, r.mean_tre_mm, r.p95_tre_mm, 100 * r.success_rate, r.memory_bytes / 1e6);
+  for (const auto& r : study.results)
+    if (r.failed())
+      std::printf("FAILED %-15s %d of %d registrations failed: %s\n", r.point.id.c_str(), r.failed_runs, r.runs,
+                  r.failure.empty() ? "(reason not recorded)" : r.failure.c_str());
 }
 
 namespace {

@@ -445,11 +445,12 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
         ms.push_back(result->elapsed_ms);
       } else {
         spdlog::warn("point {}: {}", t.id, result.status().message());
+        if (res.failed_runs++ == 0) res.failure = result.status().message();
       }
       tre.push_back(final_tre);
       res.problem_tre_mm.push_back(final_tre);
       res.problem_ms.push_back(elapsed_ms);
-      ok += final_tre < 2.0;
+      ok += result.ok() && final_tre < 2.0;  // a failed registration is no success, wherever it started
       for (std::size_t v = 0; v < pr.siddon_drr.size(); ++v) {
         const tracking::PixelWindow& w = p.roi_windows[v];
         tracking::Image<float> drr(w.rows, w.cols);
@@ -466,15 +467,15 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
       if (progress) progress(done / steps, t.id);
     }
     res.runs = problem_count;
-    res.median_ms = quantile(ms, 0.5);
-    res.p95_ms = quantile(ms, 0.95);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    res.median_ms = ms.empty() ? nan : quantile(ms, 0.5);  // no registration ran: no time
+    res.p95_ms = ms.empty() ? nan : quantile(ms, 0.95);
     double sum = 0;
     for (double x : tre) sum += x;
     res.mean_tre_mm = sum / double(tre.size());
     res.p95_tre_mm = quantile(tre, 0.95);
     res.success_rate = double(ok) / problem_count;
     // Exact renderers give identical images (infinite PSNR); none rendered: unknown.
-    const double nan = std::numeric_limits<double>::quiet_NaN();
     res.ncc_vs_siddon = fidelity_n ? ncc_sum / fidelity_n : nan;
     res.psnr_db_vs_siddon = !fidelity_n ? nan
                             : psnr_n    ? psnr_sum / psnr_n

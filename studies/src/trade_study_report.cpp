@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -22,10 +23,22 @@ namespace {
 
 const char* const kRunsHeader = "id,problem,tre_mm,ms";
 
-const char* const kCsvHeader =
+// points.csv before failed registrations were recorded: its failed runs are the NaN times of
+// runs.csv, their reason unknown.
+const char* const kCsvHeaderWithoutFailures =
     "id,renderer,storage,vq_codebook,lf_u,lf_v,lf_s,lf_t,envelope_scale,octree_pivot,bin,similarity,plan,"
     "final_step_mm,budget_ms,runs,median_ms,p95_ms,mean_tre_mm,p95_tre_mm,success_rate,memory_bytes,"
     "precompute_s,ncc_vs_siddon,psnr_db_vs_siddon";
+const std::string kCsvHeader = std::string(kCsvHeaderWithoutFailures) + ",failed_runs,failure";
+
+// A free text as one CSV cell (no quoting: commas become ';') and one table cell (no '|').
+std::string text_cell(std::string text) {
+  for (char& c : text)
+    if (c == ',') c = ';';
+    else if (c == '|') c = '/';
+    else if (c == '\n' || c == '\r') c = ' ';
+  return text;
+}
 
 // How a point is set, in words.
 std::string describe(const TradePoint& t) {
@@ -56,11 +69,22 @@ std::string fixed(double v, int decimals) {
   return buf;
 }
 
+// "k of n registrations failed: reason".
+std::string failure_text(const TradeResult& r) {
+  return std::to_string(r.failed_runs) + " of " + std::to_string(r.runs) + " registrations failed: " +
+         (r.failure.empty() ? "(reason not recorded)" : text_cell(r.failure));
+}
+
+// A point whose every registration failed has no time, TRE or success to show: those cells say
+// "failed"; the renderer's memory, precompute and fidelity were measured and are shown.
 std::string table_row(const TradeResult& r) {
-  return "| " + r.point.id + " | " + fixed(r.median_ms, 1) + " | " + fixed(r.p95_ms, 1) + " | " +
-         fixed(r.mean_tre_mm, 3) + " | " + fixed(r.p95_tre_mm, 3) + " | " + fixed(100 * r.success_rate, 0) +
-         "% | " + mb(r.memory_bytes) + " | " + fixed(r.precompute_s, 1) + " | " +
-         fixed(r.psnr_db_vs_siddon, 1) + " | " + describe(r.point) + " |\n";
+  const bool none_ran = r.failed() && r.failed_runs >= r.runs;
+  const auto outcome = [&](double v, int decimals) { return none_ran ? std::string("failed") : fixed(v, decimals); };
+  return "| " + r.point.id + " | " + outcome(r.median_ms, 1) + " | " + outcome(r.p95_ms, 1) + " | " +
+         outcome(r.mean_tre_mm, 3) + " | " + outcome(r.p95_tre_mm, 3) + " | " +
+         (none_ran ? std::string("failed") : fixed(100 * r.success_rate, 0) + "%") + " | " + mb(r.memory_bytes) +
+         " | " + fixed(r.precompute_s, 1) + " | " + fixed(r.psnr_db_vs_siddon, 1) + " | " + describe(r.point) +
+         (r.failed() ? "; **FAILED**, " + failure_text(r) : std::string()) + " |\n";
 }
 
 const char* const kTableHeader =
@@ -121,12 +145,15 @@ Status read_trade_runs(const std::filesystem::path& file, TradeStudy* s) {
 }  // namespace
 
 std::vector<TradeResult> pareto_front(const std::vector<TradeResult>& results) {
+  const auto contends = [](const TradeResult& r) {
+    return !r.failed() && r.success_rate > 0 && std::isfinite(r.median_ms) && std::isfinite(r.mean_tre_mm);
+  };
   std::vector<TradeResult> front;
   for (const TradeResult& a : results) {
-    if (a.success_rate <= 0 || !std::isfinite(a.median_ms) || !std::isfinite(a.mean_tre_mm)) continue;
+    if (!contends(a)) continue;
     bool dominated = false;
     for (const TradeResult& b : results) {
-      if (b.success_rate <= 0) continue;
+      if (!contends(b)) continue;
       if (b.median_ms <= a.median_ms && b.mean_tre_mm <= a.mean_tre_mm &&
           (b.median_ms < a.median_ms || b.mean_tre_mm < a.mean_tre_mm)) {
         dominated = true;
@@ -143,7 +170,7 @@ std::vector<TradeResult> pareto_front(const std::vector<TradeResult>& results) {
 TradeRecommendations recommend(const std::vector<TradeResult>& results) {
   TradeRecommendations r;
   for (const TradeResult& x : results) {
-    if (x.success_rate < 0.95) continue;
+    if (x.success_rate < 0.95 || x.failed()) continue;
     if (x.mean_tre_mm <= 1.0 && (!r.has_fastest || x.median_ms < r.fastest_within_1mm.median_ms)) {
       r.fastest_within_1mm = x;
       r.has_fastest = true;
@@ -185,7 +212,8 @@ Status write_trade_data(const TradeStudy& study, const std::filesystem::path& di
         << t.plan << ',' << csv_number(t.final_step_mm) << ',' << csv_number(t.budget_ms) << ',' << r.runs << ','
         << csv_number(r.median_ms) << ',' << csv_number(r.p95_ms) << ',' << csv_number(r.mean_tre_mm) << ',' << csv_number(r.p95_tre_mm)
         << ',' << csv_number(r.success_rate) << ',' << csv_number(r.memory_bytes) << ',' << csv_number(r.precompute_s) << ','
-        << csv_number(r.ncc_vs_siddon) << ',' << csv_number(r.psnr_db_vs_siddon) << '\n';
+        << csv_number(r.ncc_vs_siddon) << ',' << csv_number(r.psnr_db_vs_siddon) << ',' << r.failed_runs << ','
+        << text_cell(r.failure) << '\n';
   }
   std::ostringstream runs;
   runs << kRunsHeader << '\n';
@@ -241,15 +269,18 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
   std::ifstream csv(file);
   if (!csv) return not_found(file.string() + ": no such file");
   std::string line;
-  if (!std::getline(csv, line) || line != kCsvHeader)
+  if (!std::getline(csv, line) || (line != kCsvHeader && line != kCsvHeaderWithoutFailures))
     return corrupt_data(file.string() + ": line 1 is not the trade study's header");
+  const bool records_failures = line == kCsvHeader;
+  const std::size_t fields = records_failures ? 27 : 25;
   int line_no = 1;
   while (std::getline(csv, line)) {
     ++line_no;
     if (line.empty()) continue;
     const auto c = split_csv_line(line);
     const std::string where = file.string() + ":" + std::to_string(line_no);
-    if (c.size() != 25) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 25");
+    if (c.size() != fields)
+      return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected " + std::to_string(fields));
     TradeResult r;
     TradePoint& t = r.point;
     std::size_t k = 0;
@@ -288,11 +319,18 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
          real(0, 1, false, &r.success_rate) && real(0, kBig, false, &r.memory_bytes) &&
          real(0, kBig, false, &r.precompute_s) && real(-1, 1, true, &r.ncc_vs_siddon) &&
          real(-kBig, kBig, true, &r.psnr_db_vs_siddon);
+    if (ok && records_failures) {
+      ok = integer(0, r.runs, &r.failed_runs);
+      r.failure = c[k++];
+    }
     if (!ok) return corrupt_data(where + ": field " + std::to_string(k) + " ('" + c[k - 1] + "') is not a valid value");
     if (t.id.empty()) return corrupt_data(where + ": empty point id");
     s.results.push_back(r);
   }
   LFTRACK_RETURN_IF_ERROR(read_trade_runs(dir / "runs.csv", &s));
+  if (!records_failures)
+    for (TradeResult& r : s.results)
+      r.failed_runs = int(std::count_if(r.problem_ms.begin(), r.problem_ms.end(), [](double ms) { return std::isnan(ms); }));
   return s;
 }
 
@@ -417,16 +455,23 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std
       p.psnr_db_vs_siddon += w * r->psnr_db_vs_siddon;
     }
     p.runs = int(p.problem_tre_mm.size());
+    p.failed_runs = 0;
+    p.failure.clear();
+    for (const TradeResult* r : same)
+      if (p.failure.empty() && !r->failure.empty()) p.failure = r->failure;
     std::vector<double> ms;
     double sum = 0;
     int ok = 0;
     for (std::size_t k = 0; k < p.problem_tre_mm.size(); ++k) {
-      if (!std::isnan(p.problem_ms[k])) ms.push_back(p.problem_ms[k]);
+      const bool ran = !std::isnan(p.problem_ms[k]);  // NaN: the registration failed
+      if (ran) ms.push_back(p.problem_ms[k]);
+      p.failed_runs += !ran;
       sum += p.problem_tre_mm[k];
-      ok += p.problem_tre_mm[k] < 2.0;
+      ok += ran && p.problem_tre_mm[k] < 2.0;
     }
-    p.median_ms = quantile(ms, 0.5);
-    p.p95_ms = quantile(ms, 0.95);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    p.median_ms = ms.empty() ? nan : quantile(ms, 0.5);
+    p.p95_ms = ms.empty() ? nan : quantile(ms, 0.95);
     p.mean_tre_mm = sum / double(p.runs);
     p.p95_tre_mm = quantile(p.problem_tre_mm, 0.95);
     p.success_rate = double(ok) / double(p.runs);
@@ -454,8 +499,8 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
   time_plot.x_label = "median registration time (ms, log scale)";
   time_plot.y_label = "mean TRE (mm)";
   time_plot.log_x = true;
-  for (const TradeResult& r : study.results)
-    time_plot.points.push_back({r.median_ms, r.mean_tre_mm, r.point.id});
+  for (const TradeResult& r : study.results)  // a failed point is listed under the front, not drawn
+    if (!r.failed()) time_plot.points.push_back({r.median_ms, r.mean_tre_mm, r.point.id});
   for (const TradeResult& r : front) time_plot.front.push_back({r.median_ms, r.mean_tre_mm, r.point.id});
   auto drawn = draw_scatter_plot(time_plot, dir / "tre_vs_time.png");
   if (!drawn.ok()) return drawn.status();
@@ -499,6 +544,13 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
      << "![TRE against time](tre_vs_time.png)\n\n## Pareto front (mean TRE against median time)\n\n"
      << kTableHeader;
   for (const TradeResult& r : front) md << table_row(r);
+  bool any_failed = false;
+  for (const TradeResult& r : study.results)
+    if (r.failed()) {
+      if (!any_failed) md << "\nFailed points (on no front, never recommended):\n\n";
+      any_failed = true;
+      md << "- `" << r.point.id << "`: " << failure_text(r) << "\n";
+    }
   md << "\n## Recommended defaults\n\n";
   auto line = [&](const char* what, bool has, const TradeResult& r) {
     md << "- **" << what << "**: ";
@@ -513,7 +565,7 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
   line("fastest within 1 mm mean TRE", rec.has_fastest, rec.fastest_within_1mm);
   line("most accurate within 100 ms p95 time", rec.has_accurate, rec.most_accurate_within_100ms);
   line("least memory within 0.5 mm mean TRE", rec.has_least_memory, rec.least_memory_within_half_mm);
-  md << "\n(Each also needs a success rate of at least 95 %.)\n\n![memory against "
+  md << "\n(Each also needs a success rate of at least 95 % and no failed registration.)\n\n![memory against "
         "fidelity](memory_vs_fidelity.png)\n\n"
      << "## Every point\n\n"
      << kTableHeader;

@@ -185,6 +185,34 @@ TEST(Cli, TradeStudyFieldsAreBuiltOnceAndShardsOnlyMapThem) {
   EXPECT_EQ(columns_of(dir.path() / "merged" / "runs.csv", 3), columns_of(dir.path() / "whole" / "runs.csv", 3));
 }
 
+// Issue 50: a point whose every registration fails (bin4: binning beyond the registration's 16)
+// was on the Pareto front as "0.0 ms, 67 %" (no time, and the starts' TREs counted as
+// successes). It is on no front and is reported failed, with the reason.
+TEST(Cli, ATradePointWhoseRegistrationsFailIsReportedFailedAndOnNoFront) {
+  test::TempDir dir;
+  const fs::path scene = patient_scene(dir.path(), "p1", 1);
+  std::string out;
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "study", "trade", "--scene", scene.string(), "--quick", "--problems",
+                           "3", "--points", "baseline,bin4", "--out", (dir.path() / "out").string()},
+                          &out)
+                  .ok())
+      << out;
+  EXPECT_EQ(out.find("\nbin4 "), std::string::npos) << "on the front: " << out;
+  EXPECT_NE(out.find("FAILED bin4"), std::string::npos) << out;
+  EXPECT_NE(out.find("3 of 3 registrations failed: registration: a level needs a blur"), std::string::npos) << out;
+  const std::string summary = read_text_file(dir.path() / "out" / "summary.md");
+  EXPECT_EQ(summary.substr(0, summary.find("## Recommended defaults")).find("| bin4 |"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("| bin4 | failed | failed |"), std::string::npos) << summary;
+  const std::string points = read_text_file(dir.path() / "out" / "points.csv");
+  std::istringstream row(points.substr(points.find("\nbin4,") + 1));
+  std::vector<std::string> cells;
+  for (std::string cell; cells.size() < 27 && std::getline(row, cell, ',');) cells.push_back(cell);
+  ASSERT_EQ(cells.size(), 27u) << points;
+  EXPECT_EQ(cells[16], "nan") << "no median time";
+  EXPECT_EQ(cells[20], "0") << "no success";
+  EXPECT_EQ(cells[25], "3") << "failed runs";
+}
+
 // The trade study on clinical frames (issue 21): the physics is recorded and named in the summary,
 // a folder of ideal frames is not overwritten by it, and a bad --physics is refused before work.
 TEST(Cli, TradeStudyOnClinicalFramesRecordsItsPhysics) {

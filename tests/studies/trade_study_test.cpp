@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <set>
 
 #include "test_data.hpp"
@@ -153,6 +154,83 @@ TEST(TradeStudy, OutputsNameTheFrontAndTheRecommendations) {
     EXPECT_GT(std::filesystem::file_size(dir.path() / "tre_vs_time.png"), 1000u);
     EXPECT_GT(std::filesystem::file_size(dir.path() / "memory_vs_fidelity.png"), 1000u);
   }
+}
+
+std::string text_of(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// A point whose registrations failed (issue 50: `bin4`, "a level needs a blur of 0 to 1000 mm
+// ...") was on the front as "0.0 ms, 67 %": no time (so 0) and the starts' TREs counted as
+// successes. A folder written then: its failed runs are the NaN times of runs.csv.
+TEST(TradeStudy, AFailedPointInAnEarlierFolderIsOnNoFront) {
+  test::TempDir dir;
+  std::ofstream(dir.path() / "study.json")
+      << R"({"study": "trade", "scene": "p", "seed": 1, "problems": 6, "quick": true, "shard": 1, "shards": 1,)"
+      << R"( "points_total": 2})";
+  const std::string settings = ",lightfield,float,0,16,16,128,128,1,0,";
+  std::ofstream(dir.path() / "points.csv")
+      << "id,renderer,storage,vq_codebook,lf_u,lf_v,lf_s,lf_t,envelope_scale,octree_pivot,bin,similarity,plan,"
+         "final_step_mm,budget_ms,runs,median_ms,p95_ms,mean_tre_mm,p95_tre_mm,success_rate,memory_bytes,"
+         "precompute_s,ncc_vs_siddon,psnr_db_vs_siddon\n"
+      << "baseline" << settings << "1,mi,warm,0.1,0,6,20,25,0.4,0.6,1,8000000,3,0.999,40\n"
+      << "bin4" << settings << "4,mi,warm,0.1,0,6,0,0,1.95,3.5,0.666666667,8000000,3,0.999,40\n";
+  std::ofstream runs(dir.path() / "runs.csv");
+  runs << "id,problem,tre_mm,ms\n";
+  for (int k = 0; k < 6; ++k) runs << "baseline," << k << ",0.4,20\n";
+  const double starts[6] = {1.5, 1.2, 1.9, 1.1, 3.5, 2.5};  // 4 under 2 mm
+  for (int k = 0; k < 6; ++k) runs << "bin4," << k << "," << starts[k] << ",nan\n";
+  runs.close();
+  auto study = read_trade_shard(dir.path());
+  ASSERT_TRUE(study.ok()) << study.status().message();
+  EXPECT_EQ(ids(pareto_front(study->results)), (std::set<std::string>{"baseline"}));
+  ASSERT_TRUE(write_trade_outputs(*study, dir.path() / "out").ok());
+  const std::string md = text_of(dir.path() / "out" / "summary.md");
+  EXPECT_EQ(md.find("| bin4 | 0.0"), std::string::npos) << md;
+  EXPECT_NE(md.find("- `bin4`: 6 of 6 registrations failed: (reason not recorded)"), std::string::npos) << md;
+}
+
+TEST(TradeStudy, AFailedPointIsOnNoFrontAndIsShownFailedWithItsReason) {
+  const std::string why =
+      "registration: a level needs a blur of 0 to 1000 mm, a binning of 1 to 16 and a high-pass of 0 to 1000 mm";
+  TradeResult bin4 = result("bin4", std::nan(""), 2.1, 4, 0.0);
+  bin4.p95_ms = std::nan("");
+  bin4.failed_runs = 4;
+  bin4.failure = why;
+  // Faster and more accurate than every point, but one of its registrations failed.
+  TradeResult partly = result("partly-failed", 5, 0.1, 1, 0.75);
+  partly.failed_runs = 1;
+  partly.failure = why;
+  auto results = sample();
+  results.push_back(bin4);
+  results.push_back(partly);
+  EXPECT_EQ(ids(pareto_front(results)), ids(pareto_front(sample()))) << "no failed point on it, none beaten by one";
+  const TradeRecommendations r = recommend(results);
+  EXPECT_EQ(r.fastest_within_1mm.point.id, "middle");
+  EXPECT_EQ(r.least_memory_within_half_mm.point.id, "tie-a");
+
+  // The failure survives the shard's files (its commas are not cells) and merging.
+  test::TempDir dir;
+  ASSERT_TRUE(write_trade_shard(shard_of(1, 1, results, 9), dir.path() / "shard").ok());
+  auto read = read_trade_shard(dir.path() / "shard");
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  EXPECT_EQ(read->results[7].failed_runs, 4);
+  EXPECT_TRUE(std::isnan(read->results[7].median_ms));
+  EXPECT_NE(read->results[7].failure.find("a level needs a blur of 0 to 1000 mm; a binning"), std::string::npos)
+      << read->results[7].failure;
+  EXPECT_EQ(read->results[8].failed_runs, 1);
+  EXPECT_EQ(read->results[0].failed_runs, 0);
+
+  ASSERT_TRUE(write_trade_outputs(*read, dir.path() / "out").ok());
+  const std::string md = text_of(dir.path() / "out" / "summary.md");
+  const std::string front = md.substr(0, md.find("## Recommended defaults"));
+  EXPECT_EQ(front.find("| bin4 |"), std::string::npos) << front;
+  EXPECT_EQ(front.find("| partly-failed |"), std::string::npos) << front;
+  EXPECT_NE(md.find("- `bin4`: 4 of 4 registrations failed: registration: a level needs a blur"), std::string::npos)
+      << md;
+  EXPECT_NE(md.find("| bin4 | failed | failed | failed | failed | failed | 4.00 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("**FAILED**, 1 of 4 registrations failed"), std::string::npos) << md;
 }
 
 }  // namespace

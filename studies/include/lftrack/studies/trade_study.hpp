@@ -9,7 +9,7 @@
 // envelope, each with its own noisy synthetic frames (Siddon on the scene's anatomy), and a start
 // at an initial mean TRE drawn uniformly in [1, 4] mm (a tracking step). A point records the
 // registration time (median, p95), TRE (mean, p95, over all problems), success rate (final
-// mean TRE < 2 mm, paper 1), memory (the renderer's data: fields, tree or volume), precompute
+// mean TRE < 2 mm, paper 1; a registration that returned an error is never a success), memory (the renderer's data: fields, tree or volume), precompute
 // time (building the fields or the tree, in this run), and the DRR fidelity against Siddon at
 // the gold poses.
 //
@@ -77,6 +77,13 @@ struct TradeResult {
   // Per problem, in the problems' order (runs.csv): final mean TRE, and the registration time
   // (NaN where the registration failed). Empty for results read from a folder without runs.csv.
   std::vector<double> problem_tre_mm, problem_ms;
+  // Registrations that returned an error instead of a pose (a setting the registration refuses,
+  // such as a binning beyond its levels): none is a success, their times are in neither median
+  // nor p95 (NaN when every one failed), and their TRE is the start's. A point with any is
+  // failed: on no front, never recommended, and reported as failed with `failure`.
+  int failed_runs = 0;
+  std::string failure;  // the first failed registration's reason (empty: not recorded)
+  bool failed() const { return failed_runs > 0; }
 };
 
 struct TradeStudy {
@@ -115,12 +122,14 @@ Result<TradeStudy> run_trade_study(const PreparedScene& scene, const TradeOption
                                    const std::function<void(double, const std::string&)>& progress = {});
 
 // The Pareto front of mean TRE against median time: points no other point beats on both (ties
-// kept), sorted by time. Points that never succeed are left out.
+// kept), sorted by time. Failed points and points that never succeed are left out, and beat no
+// other point.
 std::vector<TradeResult> pareto_front(const std::vector<TradeResult>& results);
 
 // The recommended defaults, each the best point under its condition (empty id if none meets it):
 // fastest median time within mean TRE 1 mm, most accurate within p95 time 100 ms, least memory
-// within mean TRE 0.5 mm; each also needs a success rate of at least 95 %.
+// within mean TRE 0.5 mm; each also needs a success rate of at least 95 % and no failed
+// registration.
 struct TradeRecommendations {
   TradeResult fastest_within_1mm, most_accurate_within_100ms, least_memory_within_half_mm;
   bool has_fastest = false, has_accurate = false, has_least_memory = false;
