@@ -193,10 +193,17 @@ Status serve_robot(const ServeOptions& o) {
 }  // namespace
 
 namespace serve {
-void add_common(CLI::App* app, ServeOptions* o) {
-  app->add_option("--scene", o->scene.scene, "Scene whose actuator section gives the couch's dynamics (default: built-in)");
-  app->add_option("--room", o->room, "Publish the couch's position in this room link file, for simulated detectors");
-  app->add_option("--fault", o->faults, "KIND[:COUNT][@SECONDS]: inject a fault SECONDS after start (repeatable)");
+std::string kind_list(const std::map<std::string, int>& kinds) {
+  std::string s;
+  for (const auto& [kind, value] : kinds) s += (s.empty() ? "" : ", ") + kind;
+  return s;
+}
+
+void add_common(CLI::App* app, ServeOptions* o, const ServeOptionTexts& texts) {
+  app->add_option("--scene", o->scene.scene, texts.scene);
+  app->add_option("--room", o->room, texts.room);
+  app->add_option("--fault", o->faults,
+                  "KIND[:COUNT][@SECONDS]: inject a fault SECONDS after start (repeatable); KIND: " + texts.fault_kinds);
   app->add_option("--control", o->control, "Control socket (datagrams: 'fault KIND[:COUNT]', 'status', 'stop'), mode 0600");
   app->add_option("--duration", o->duration_s, "Stop after this many seconds (0: until SIGINT/SIGTERM)")
       ->check(CLI::Range(0.0, 86400.0));
@@ -211,7 +218,11 @@ Command add_serve_couch_command(CLI::App* parent) {
                   "tcp:ADDRESS:PORT to listen on (port 0: any free port), rtu:DEVICE (a serial port; 115200 8E1), or "
                   "rtu:pty (a pseudo-terminal pair: the first line names the client's end)")
       ->default_val("tcp:127.0.0.1:1502");
-  add_common(app, o.get());
+  add_common(app, o.get(),
+             {"Scene whose actuator.couch section gives the couch's dynamics (default: the built-in scene's)",
+              "Publish the couch's position in this room link file, for simulated detectors in other processes "
+              "(serve detectors --room)",
+              kind_list(couch_fault_kinds())});
   CLI::Option* scene = app->get_option("--scene");
   return [o, scene] {
     o->scene_given = scene->count() > 0;
@@ -223,7 +234,11 @@ Command add_serve_robot_command(CLI::App* parent) {
   auto o = std::make_shared<ServeOptions>();
   CLI::App* app = parent->add_subcommand("robot", "The virtual robot behind a CAN bridge socket, as its own process");
   app->add_option("--socket", o->endpoint, "The bridge's socket path (SOCK_SEQPACKET of struct can_frame)")->required();
-  add_common(app, o.get());
+  add_common(app, o.get(),
+             {"Scene whose actuator.couch section gives the robot's dynamics (default: the built-in scene's)",
+              "Publish the robot's position in this room link file, for simulated detectors in other processes "
+              "(serve detectors --room)",
+              kind_list(robot_fault_kinds())});
   CLI::Option* scene = app->get_option("--scene");
   return [o, scene] {
     o->scene_given = scene->count() > 0;

@@ -281,7 +281,11 @@ Command add_serve_detectors_command(CLI::App* parent) {
   auto o = std::make_shared<ServeOptions>();
   CLI::App* app = parent->add_subcommand(
       "detectors", "The scene's simulated detectors as GigE Vision cameras, as their own process");
-  add_common(app, o.get());
+  add_common(app, o.get(),
+             {"Scene whose detectors are served: their geometry and frames, the simulated patient and its motion",
+              "Read where the served couch or robot has moved the patient from this room link file (theirs: serve "
+              "couch|robot --room); without it the patient stays where the scene's motion puts them",
+              kind_list(gige_fault_kinds()) + " (with --v4l2loopback: " + kind_list(loopback_fault_kinds()) + ")"});
   app->add_option(
       "--address", o->addresses,
       "IPv4 address (or interface) of each detector's camera, one per detector (default: 127.0.0.1, "
@@ -289,11 +293,14 @@ Command add_serve_detectors_command(CLI::App* parent) {
   app->add_option("--v4l2loopback", o->loopback,
                   "Instead of GigE: write each detector's frames into this v4l2loopback device (one per detector), "
                   "every period, for `run` to read through V4L2");
-  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
+  app->add_option("--lf-dir", o->lf_dir,
+                  "Light-field folder of the frames' fields, when the scene's sim.renderer is lightfield (in "
+                  "DIR/sim-frames; default out/lightfields/<scene>)");
   app->add_option("--settle", o->settle_s, "Summarise the residual of frames after this many seconds")
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
-  app->add_option("--threads", o->scene.threads, "Worker threads (0: all cores)")->check(CLI::Range(0, 256));
+  app->add_option("--threads", o->scene.threads, "Worker threads rendering the frames (0: all cores)")
+      ->check(CLI::Range(0, 256));
   CLI::Option* scene = app->get_option("--scene");
   scene->required();
   return [o] { return serve_detectors(*o); };

@@ -34,7 +34,7 @@ extern "C" inline void on_stop_signal(int) {
 }
 
 struct ServeOptions {
-  SceneOptions scene;  // the couch's dynamics: the scene's actuator section (default: builtin)
+  SceneOptions scene;  // couch, robot: the dynamics (actuator.couch; default: builtin); detectors: the room
   bool scene_given = false;
   std::string endpoint;  // couch: tcp:ADDRESS:PORT; robot: the bridge socket path
   std::vector<std::string> addresses;  // detectors: where the GigE cameras listen
@@ -227,7 +227,16 @@ Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, in
   return {};
 }
 
+// What the options every server takes do for one server: its own texts for --scene and --room,
+// and its fault kinds for --fault (a help that describes another server's options misleads).
+struct ServeOptionTexts {
+  std::string scene;  // --scene: what this server takes from the scene
+  std::string room;   // --room: what this server does with the room link file
+  std::string fault_kinds;  // the KINDs --fault takes, in words
+};
 // --scene, --room, --fault, --control, --duration, --json (cmd_serve.cpp).
-void add_common(CLI::App* app, ServeOptions* o);
+void add_common(CLI::App* app, ServeOptions* o, const ServeOptionTexts& texts);
+// The kinds of `kinds`, comma-separated.
+std::string kind_list(const std::map<std::string, int>& kinds);
 
 }  // namespace lftrack::host::cli::serve

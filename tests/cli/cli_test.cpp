@@ -103,6 +103,40 @@ TEST(Cli, UnknownViewAndRendererAreErrors) {
   EXPECT_NE(out.find("--window low,high needs low below high"), std::string::npos) << out;
 }
 
+// Issue 50: `serve detectors --help` gave its required --scene "(default: built-in)" and the
+// couch's texts for --scene and --room. Each server's help describes what its options do for it.
+TEST(Cli, EachServersHelpDescribesItsOwnOptions) {
+  const auto help = [](const std::string& server) {
+    std::string out;
+    EXPECT_TRUE(run_process({lftrack_bin(), "serve", server, "--help"}, &out).ok()) << out;
+    return out;
+  };
+  // An option's entry: from its name to the next option's.
+  const auto entry = [](const std::string& out, const std::string& option) {
+    const auto at = out.find("  " + option + " ");
+    EXPECT_NE(at, std::string::npos) << option << " in " << out;
+    return at == std::string::npos ? std::string() : out.substr(at, out.find("\n  -", at + 1) - at);
+  };
+  const std::string detectors = help("detectors");
+  const std::string scene = entry(detectors, "--scene");
+  EXPECT_NE(scene.find("REQUIRED"), std::string::npos) << scene;
+  EXPECT_EQ(scene.find("default"), std::string::npos) << "a required option has no default: " << scene;
+  EXPECT_NE(scene.find("detectors are served"), std::string::npos) << scene;
+  EXPECT_NE(entry(detectors, "--room").find("Read where the served couch or robot"), std::string::npos) << detectors;
+  EXPECT_NE(entry(detectors, "--fault").find("power-cycle"), std::string::npos) << detectors;
+  for (const char* other : {"couch's", "robot's", "no-reply", "bus-off"})
+    EXPECT_EQ(detectors.find(other), std::string::npos) << other << " in:\n" << detectors;
+  const std::string couch = help("couch");
+  EXPECT_NE(entry(couch, "--scene").find("the couch's dynamics"), std::string::npos) << couch;
+  EXPECT_NE(entry(couch, "--fault").find("no-reply"), std::string::npos) << couch;
+  const std::string robot = help("robot");
+  EXPECT_NE(entry(robot, "--scene").find("the robot's dynamics"), std::string::npos) << robot;
+  EXPECT_NE(entry(robot, "--room").find("the robot's position"), std::string::npos) << robot;
+  EXPECT_NE(entry(robot, "--fault").find("bus-off"), std::string::npos) << robot;
+  for (const char* other : {"couch's", "no-reply", "power-cycle"})
+    EXPECT_EQ(robot.find(other), std::string::npos) << other << " in:\n" << robot;
+}
+
 // The built-in phantom with small light fields, written next to the test's folder.
 std::filesystem::path small_light_field_scene(const std::filesystem::path& dir, const char* extra = "") {
   auto text = builtin_scene_text("builtin:phantom");
