@@ -11,9 +11,10 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <memory>
+#include <sstream>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/progress_bar.hpp"
@@ -39,6 +40,7 @@ struct RtCheckOptions {
   std::string plot_png;
   bool json = false;
   bool require_rt = false;
+  bool overwrite = false;  // replace existing --histogram and --plot files
 };
 
 std::atomic<bool> g_stop{false};
@@ -69,10 +71,43 @@ std::string cpus_text(const std::vector<int>& cpus) {
   return s;
 }
 
-// Writes the histograms: one row per 1 us bin up to the last non-empty one, one column per CPU.
-Status write_histogram_csv(const WakeupLatencyReport& r, const fs::path& file) {
-  std::ofstream out(file);
-  if (!out) return io_error(file.string() + ": cannot write");
+// Whether a report file may be written at `file`: its folder there, and nothing at it unless
+// `overwrite` (a regular file is data; a device or FIFO, such as /dev/stdout on a terminal, is
+// written to and replaces nothing). Checked before measuring, so a refusal costs no run.
+Status check_output_path(const fs::path& file, const char* option, bool overwrite) {
+  const fs::path parent = file.parent_path();
+  std::error_code ec;
+  if (!parent.empty() && !fs::is_directory(parent, ec))
+    return not_found(std::string(option) + " " + file.string() + ": the folder " + parent.string() + " does not exist");
+  const fs::file_status st = fs::status(file, ec);
+  if (fs::is_directory(st)) return invalid_argument(std::string(option) + " " + file.string() + " is a folder");
+  if (fs::exists(st) && fs::is_regular_file(st) && !overwrite)
+    return failed_precondition(std::string(option) + " " + file.string() + " exists; give --overwrite to replace it");
+  return {};
+}
+
+// Writes `text` to `file` and checks that every byte reached it (an I/O error, a full disk or
+// /dev/full, is an error with the reason). Without `overwrite` a regular file is created, never
+// replaced (one made since the check is refused, not overwritten).
+Status write_output_file(const fs::path& file, const std::string& text, bool overwrite) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(file, ec);
+  const bool stream = fs::exists(st) && !fs::is_regular_file(st);  // a device or FIFO: written to
+  std::FILE* f = std::fopen(file.c_str(), overwrite || stream ? "w" : "wx");
+  if (f == nullptr)
+    return errno == EEXIST ? failed_precondition(file.string() + " exists; give --overwrite to replace it")
+                           : io_error(file.string() + ": cannot write: " + std::strerror(errno));
+  const bool written = std::fwrite(text.data(), 1, text.size(), f) == text.size() && std::fflush(f) == 0;
+  const int write_errno = errno;
+  const bool closed = std::fclose(f) == 0;
+  if (!written || !closed)
+    return io_error(file.string() + ": write failed: " + std::strerror(written ? errno : write_errno));
+  return {};
+}
+
+// The histograms: one row per 1 us bin up to the last non-empty one, one column per CPU.
+std::string histogram_csv(const WakeupLatencyReport& r) {
+  std::ostringstream out;
   std::size_t last = 0;
   for (const auto& c : r.cpus)
     for (std::size_t i = 0; i < c.histogram.size(); ++i)
@@ -90,8 +125,7 @@ Status write_histogram_csv(const WakeupLatencyReport& r, const fs::path& file) {
   out << "# overflow (" << r.histogram_max_us << " us or later)";
   for (const auto& c : r.cpus) out << ',' << c.overflow;
   out << "\n";
-  if (!out) return io_error(file.string() + ": write failed");
-  return {};
+  return out.str();
 }
 
 std::string gp_string(const std::string& s) {
@@ -105,20 +139,25 @@ std::string shell_quoted(const std::string& s) {
   return out + "'";
 }
 
+// The plot's data and script beside its PNG: <stem>.dat, <stem>.gp.
+fs::path plot_side_file(const fs::path& png, const char* extension) {
+  return fs::path(png).replace_extension(extension);
+}
+
 // A log-scale histogram per CPU, drawn by gnuplot: <stem>.dat and <stem>.gp next to the PNG (as
 // the studies' plots do, so it can be restyled by hand). Both axes are logarithmic so that the
 // bulk (microseconds) and the tail (milliseconds) are both readable; an empty bin leaves a gap and
 // a lone wake-up a point. (The studies' LinePlot has no log y axis.)
-Status draw_histogram_plot(const WakeupLatencyReport& r, const KernelPreemption& kernel, const fs::path& png) {
-  const fs::path dat = fs::path(png).replace_extension(".dat");
-  const fs::path gp = fs::path(png).replace_extension(".gp");
+Status draw_histogram_plot(const WakeupLatencyReport& r, const KernelPreemption& kernel, const fs::path& png,
+                           bool overwrite) {
+  const fs::path dat = plot_side_file(png, ".dat");
+  const fs::path gp = plot_side_file(png, ".gp");
   std::size_t last = 0;
   for (const auto& c : r.cpus)
     for (std::size_t i = 0; i < c.histogram.size(); ++i)
       if (c.histogram[i] > 0) last = std::max(last, i);
   {
-    std::ofstream d(dat);
-    if (!d) return io_error(dat.string() + ": cannot write");
+    std::ostringstream d;
     d << "# latency_us (bin centre)";
     for (const auto& c : r.cpus) d << "\tcpu" << c.cpu;
     d << "\n";
@@ -127,12 +166,12 @@ Status draw_histogram_plot(const WakeupLatencyReport& r, const KernelPreemption&
       for (const auto& c : r.cpus) d << '\t' << (i < c.histogram.size() ? c.histogram[i] : 0);
       d << "\n";
     }
+    LFTRACK_RETURN_IF_ERROR(write_output_file(dat, d.str(), overwrite));
   }
   std::uint64_t overflow = 0;
   for (const auto& c : r.cpus) overflow += c.overflow;
   {
-    std::ofstream g(gp);
-    if (!g) return io_error(gp.string() + ": cannot write");
+    std::ostringstream g;
     // The x axis reaches the budget, so that the margin to it is seen.
     double x_max = 2.0 * double(last + 1);
     if (r.budget_us && *r.budget_us > 0.5) x_max = std::max(x_max, 1.5 * *r.budget_us);
@@ -165,6 +204,7 @@ Status draw_histogram_plot(const WakeupLatencyReport& r, const KernelPreemption&
         << k + 2 << ":1/0) with linespoints lw 1.5 pt 7 ps 0.5 title " << gp_string(name);
     }
     g << "\n";
+    LFTRACK_RETURN_IF_ERROR(write_output_file(gp, g.str(), overwrite));
   }
   if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) {
     spdlog::warn("gnuplot not found (scripts/setup.sh installs it); wrote {} and {} without drawing them",
@@ -244,14 +284,14 @@ Status run_rt_check(const RtCheckOptions& o) {
   w.load_note = o.load_note;
   w.enforce = o.require_rt;
   LFTRACK_RETURN_IF_ERROR(validate_wakeup_latency_options(w));
-  for (const auto& path : {o.histogram_csv, o.plot_png}) {
-    if (path.empty()) continue;
-    const fs::path parent = fs::path(path).parent_path();
-    if (!parent.empty() && !fs::is_directory(parent))
-      return not_found(path + ": the folder " + parent.string() + " does not exist");
+  if (!o.histogram_csv.empty())
+    LFTRACK_RETURN_IF_ERROR(check_output_path(o.histogram_csv, "--histogram", o.overwrite));
+  if (!o.plot_png.empty()) {
+    if (fs::path(o.plot_png).extension() != ".png")
+      return invalid_argument("--plot " + o.plot_png + ": must name a .png file");
+    for (const fs::path& file : {fs::path(o.plot_png), plot_side_file(o.plot_png, ".dat"), plot_side_file(o.plot_png, ".gp")})
+      LFTRACK_RETURN_IF_ERROR(check_output_path(file, "--plot", o.overwrite));
   }
-  if (!o.plot_png.empty() && fs::path(o.plot_png).extension() != ".png")
-    return invalid_argument("--plot " + o.plot_png + ": must name a .png file");
 
   const KernelPreemption kernel = read_kernel_preemption();
   const std::vector<int> cpus = w.cpus.empty() ? allowed_cpus() : w.cpus;
@@ -295,8 +335,9 @@ Status run_rt_check(const RtCheckOptions& o) {
                                             : "NOT real-time (SCHED_FIFO not in effect): not the latency a real-time loop would see",
                 kernel.summary().c_str());
 
-  if (!o.histogram_csv.empty()) LFTRACK_RETURN_IF_ERROR(write_histogram_csv(r, o.histogram_csv));
-  if (!o.plot_png.empty()) LFTRACK_RETURN_IF_ERROR(draw_histogram_plot(r, kernel, o.plot_png));
+  if (!o.histogram_csv.empty())
+    LFTRACK_RETURN_IF_ERROR(write_output_file(o.histogram_csv, histogram_csv(r), o.overwrite));
+  if (!o.plot_png.empty()) LFTRACK_RETURN_IF_ERROR(draw_histogram_plot(r, kernel, o.plot_png, o.overwrite));
 
   if (o.json) {
     nlohmann::json j = to_json(r);
@@ -358,8 +399,12 @@ Command add_rt_check_command(CLI::App* parent) {
   app->add_option("--histogram-max-us", o->histogram_max_us, "Histogram range in 1 us bins (later: overflow)")
       ->capture_default_str();
   app->add_option("--load-note", o->load_note, "What else ran during the measurement (echoed in the report)");
-  app->add_option("--histogram", o->histogram_csv, "Write the per-CPU histograms (1 us bins) to this CSV");
-  app->add_option("--plot", o->plot_png, "Draw a log-scale latency histogram per CPU to this PNG (gnuplot)");
+  app->add_option("--histogram", o->histogram_csv,
+                  "Write the per-CPU histograms (1 us bins) to this CSV (an existing file only with --overwrite)");
+  app->add_option("--plot", o->plot_png,
+                  "Draw a log-scale latency histogram per CPU to this PNG with gnuplot, beside it its .dat and .gp "
+                  "(existing files only with --overwrite)");
+  app->add_flag("--overwrite", o->overwrite, "Replace existing --histogram and --plot files");
   app->add_flag("--json", o->json, "Print the report as JSON");
   app->add_flag("--require-rt", o->require_rt,
                 "Refuse to measure (exit 1) unless mlockall, SCHED_FIFO and the pinning all succeed");

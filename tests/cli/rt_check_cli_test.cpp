@@ -162,5 +162,39 @@ TEST(RtCheckCli, RefusedOptionsExitOneWithTheReason) {
   }
 }
 
+std::string contents(const fs::path& file) {
+  std::ifstream in(file);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+
+// --histogram and --plot never replace a file without --overwrite (an outside probe saw a file
+// replaced), refused before measuring; and a write that fails is an error with its reason (the
+// probe saw success reported for /dev/full).
+TEST(RtCheckCli, ReportFilesAreReplacedOnlyWithOverwriteAndAFailedWriteIsAnError) {
+  test::TempDir dir;
+  const fs::path csv = dir.path() / "hist.csv", gp = dir.path() / "plot.gp";
+  std::ofstream(csv) << "someone's data\n";
+  std::ofstream(gp) << "someone's script\n";
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--histogram", csv.string()}, {"--plot", (dir.path() / "plot.png").string()}}) {
+    std::vector<std::string> argv = args;
+    argv.insert(argv.end(), {"--duration", "0.05"});
+    const CliRun r = rt_check(argv, dir.path());
+    EXPECT_EQ(r.exit_code, 1) << args[0] << ": " << r.out;
+    EXPECT_NE(r.out.find("exists; give --overwrite to replace it"), std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find("verdict"), std::string::npos) << "refused before measuring: " << r.out;
+  }
+  EXPECT_EQ(contents(csv), "someone's data\n");
+  EXPECT_EQ(contents(gp), "someone's script\n");
+  EXPECT_FALSE(fs::exists(dir.path() / "plot.png"));
+  const CliRun replaced = rt_check({"--duration", "0.05", "--histogram", csv.string(), "--overwrite"}, dir.path());
+  ASSERT_EQ(replaced.exit_code, 0) << replaced.out;
+  EXPECT_EQ(contents(csv).rfind("# lftrack rt-check", 0), 0u) << contents(csv);
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this host";
+  const CliRun full = rt_check({"--duration", "0.05", "--histogram", "/dev/full"}, dir.path());
+  EXPECT_EQ(full.exit_code, 1) << full.out;
+  EXPECT_NE(full.out.find("/dev/full: write failed: No space left on device"), std::string::npos) << full.out;
+}
+
 }  // namespace
 }  // namespace lftrack::host
