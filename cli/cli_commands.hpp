@@ -18,10 +18,11 @@ namespace lftrack::host::cli {
 
 using Command = std::function<Status()>;
 
-// A check of a number's text at parse time: a finite number in [lo, hi] (in (lo, hi] with
-// `lo_open`). NaN, infinities and text that is not a number are refused, which CLI11's Range and
-// PositiveNumber let through for NaN.
-CLI::Validator finite_in(double lo, double hi, bool lo_open = false);
+// A check of a number's text at parse time: a finite number in [lo, hi] (lo excluded with
+// `lo_open`, hi with `hi_open`). NaN, infinities and text that is not a number are refused, which
+// CLI11's Range and PositiveNumber let through for NaN. A value out of range is a usage error
+// (exit 2), never a refusal found after parsing (exit 1): check numbers here, not in the command.
+CLI::Validator finite_in(double lo, double hi, bool lo_open = false, bool hi_open = false);
 // Refuses an empty value (`--out ""`), which would otherwise read as "not given".
 CLI::Validator not_empty();
 

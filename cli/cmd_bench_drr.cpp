@@ -25,13 +25,19 @@ Command add_bench_drr_command(CLI::App* parent) {
   auto* app = parent->add_subcommand("drr", "Time every DRR renderer (and plastimatch) on the same poses");
   auto o = std::make_shared<BenchDrrOptions>();
   add_scene_options(app, &o->scene);
-  app->add_option("--size", o->bench.size, "DRR rows = cols (the ROI window resampled)")
+  app->add_option("--size", o->bench.size, "DRR rows = cols (the ROI window resampled), 8 to 4096")
+      ->check(CLI::Range(8, 4096))
       ->capture_default_str();
-  app->add_option("--poses", o->bench.poses, "Poses drawn across the envelope")->capture_default_str();
-  app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")->capture_default_str();
+  app->add_option("--poses", o->bench.poses, "Poses drawn across the envelope")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
+  app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
   app->add_option("--seed", o->bench.seed, "Pose sampling seed")->capture_default_str();
   app->add_flag("--no-peers", o->no_peers, "Skip plastimatch");
-  app->add_option("--render-threads", o->bench.render_threads, "Threads for the timed renders (default 1)")
+  app->add_option("--render-threads", o->bench.render_threads, "Threads for the timed renders, 1 to 256")
+      ->check(CLI::Range(1, 256))
       ->capture_default_str();
   app->add_flag("--no-light-fields", o->no_light_fields, "Skip building and timing light fields");
   app->add_option("--lf-dir", o->bench.light_field_dir,
@@ -41,8 +47,9 @@ Command add_bench_drr_command(CLI::App* parent) {
                 "Also build the float fields the other way (slices or the exact Siddon walk) beside the "
                 "scene's: both precomputes timed, both fields' DRRs against Siddon (the walk takes minutes "
                 "on a real CT)");
-  app->add_option("--vq-codebooks", o->bench.vq_codebooks, "VQ codebook sizes to time (comma-separated)")
-      ->delimiter(',');
+  app->add_option("--vq-codebooks", o->bench.vq_codebooks, "VQ codebook sizes to time, each 2 to 65536 (comma-separated)")
+      ->delimiter(',')
+      ->check(CLI::Range(2, 65536));
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o]() -> Status {
     tracking::ThreadPool pool(o->scene.threads);

@@ -64,10 +64,14 @@ Command add_bench_octree_command(CLI::App* parent) {
   add_scene_options(app, &o->scene);
   app->add_option("--pivots", o->bench.pivots, "Pivots P in [0, 1] (comma-separated)")
       ->delimiter(',')
-      ->check(CLI::Range(0.0, 1.0));
-  app->add_option("--size", o->bench.size, "DRR rows = cols")->capture_default_str();
-  app->add_option("--poses", o->bench.poses, "Poses per view")->capture_default_str();
-  app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")->capture_default_str();
+      ->check(finite_in(0, 1));
+  app->add_option("--size", o->bench.size, "DRR rows = cols, 8 to 4096")
+      ->check(CLI::Range(8, 4096))
+      ->capture_default_str();
+  app->add_option("--poses", o->bench.poses, "Poses per view")->check(CLI::Range(1, 1000000))->capture_default_str();
+  app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o]() { return run(*o); };
 }

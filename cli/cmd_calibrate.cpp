@@ -225,7 +225,9 @@ Command add_calibrate_views_command(CLI::App* parent) {
                 "Render the phantom at the scene's geometry, calibrate, print recovery errors");
   app->add_option("--seed", o->seed, "With --sim: placement, drawing errors and noise")
       ->capture_default_str();
-  app->add_option("--photons", o->photons, "With --sim: open-field quanta per pixel")->capture_default_str();
+  app->add_option("--photons", o->photons, "With --sim: open-field quanta per pixel, 0 (no noise) to 1e9")
+      ->check(finite_in(0, 1e9))
+      ->capture_default_str();
   app->add_option("--save-images", o->save_images,
                   "With --sim: write the phantom images (.pfm) to this folder");
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");

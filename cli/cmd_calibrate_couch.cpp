@@ -93,7 +93,8 @@ Command add_calibrate_couch_command(CLI::App* parent) {
       ->capture_default_str();
   app->add_option("--out", o->out,
                   "Write the couch calibration (YAML) here; a scene names it as actuator.calibration");
-  app->add_option("--photons", o->photons, "Open-field quanta per pixel of the phantom images")
+  app->add_option("--photons", o->photons, "Open-field quanta per pixel of the phantom images, 0 (no noise) to 1e9")
+      ->check(finite_in(0, 1e9))
       ->capture_default_str();
   app->add_option("--seed", o->seed, "Noise of the phantom images")->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");

@@ -234,23 +234,41 @@ Command add_calibrate_detector_command(CLI::App* parent) {
   app->add_option("--detector", o->detector, "The scene's name of the detector (checked when a scene uses the file)");
   app->add_flag("--overwrite", o->overwrite, "Replace an existing --out file");
   app->add_flag("--json", o->json, "Print the summary as JSON");
+  // Every number is checked here: a value out of range is a usage error (exit 2). The library checks
+  // them again for its other callers (check_detector_calibration_options).
   app->add_option("--bits", o->rule.bits,
                   "Bit depth 8..16: saturation at 2^bits - 1 (default: the smallest of 8, 10, 12, 14, 16 bits that "
-                  "holds every raw value seen)");
-  app->add_option("--saturation", o->rule.saturation_counts, "Saturation level in counts (overrides --bits)");
-  app->add_option("--min-frames", o->min_frames, "At least this many dark and this many flood frames")
+                  "holds every raw value seen)")
+      ->check(CLI::Range(8, 16));
+  app->add_option("--saturation", o->rule.saturation_counts,
+                  "Saturation level in counts, 1..65535 (overrides --bits)")
+      ->check(CLI::Range(1, 65535));
+  app->add_option("--min-frames", o->min_frames,
+                  "At least this many dark and this many flood frames, 2..100000 (a noise estimate needs 2)")
+      ->check(CLI::Range(2, 100000))
       ->capture_default_str();
-  app->add_option("--dark-sd", o->rule.dark_sd, "Defect: dark level beyond this many robust SDs of the median")
+  app->add_option("--dark-sd", o->rule.dark_sd, "Defect: dark level beyond this many robust SDs of the median (1..1000)")
+      ->check(finite_in(1, 1000))
       ->capture_default_str();
-  app->add_option("--noise-sd", o->rule.noise_sd, "Defect: temporal noise beyond this many robust SDs above the median")
+  app->add_option("--noise-sd", o->rule.noise_sd,
+                  "Defect: temporal noise beyond this many robust SDs above the median (1..1000)")
+      ->check(finite_in(1, 1000))
       ->capture_default_str();
-  app->add_option("--gain-low", o->rule.gain_low, "Defect: gain below this fraction of the median")->capture_default_str();
-  app->add_option("--gain-high", o->rule.gain_high, "Defect: gain above this multiple of the median")
+  app->add_option("--gain-low", o->rule.gain_low, "Defect: gain below this fraction of the median, in [0, 1)")
+      ->check(finite_in(0, 1, false, true))
       ->capture_default_str();
-  app->add_option("--line-low", o->rule.line_low, "Defective line: median gain below this")->capture_default_str();
-  app->add_option("--line-high", o->rule.line_high, "Defective line: median gain above this")->capture_default_str();
+  app->add_option("--gain-high", o->rule.gain_high, "Defect: gain above this multiple of the median, in (1, 100]")
+      ->check(finite_in(1, 100, true))
+      ->capture_default_str();
+  app->add_option("--line-low", o->rule.line_low, "Defective line: median gain below this, in [0, 1)")
+      ->check(finite_in(0, 1, false, true))
+      ->capture_default_str();
+  app->add_option("--line-high", o->rule.line_high, "Defective line: median gain above this, in (1, 100]")
+      ->check(finite_in(1, 100, true))
+      ->capture_default_str();
   app->add_option("--max-saturated", o->rule.max_saturated_fraction,
-                  "Refuse a flood with more than this fraction of its values saturated")
+                  "Refuse a flood with more than this fraction of its values saturated, in [0, 1]")
+      ->check(finite_in(0, 1))
       ->capture_default_str();
   return [o] { return run(*o); };
 }

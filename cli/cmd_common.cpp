@@ -15,16 +15,17 @@ CLI::Validator not_empty() {
       "");
 }
 
-CLI::Validator finite_in(double lo, double hi, bool lo_open) {
+CLI::Validator finite_in(double lo, double hi, bool lo_open, bool hi_open) {
   std::ostringstream range;
-  range << (lo_open ? "(" : "[") << lo << ", " << hi << "]";
+  range << (lo_open ? "(" : "[") << lo << ", " << hi << (hi_open ? ")" : "]");
   return CLI::Validator(
-      [lo, hi, lo_open, range = range.str()](const std::string& text) -> std::string {
+      [lo, hi, lo_open, hi_open, range = range.str()](const std::string& text) -> std::string {
         char* end = nullptr;
         const double v = std::strtod(text.c_str(), &end);
         if (text.empty() || end != text.c_str() + text.size()) return "'" + text + "' is not a number";
         if (!std::isfinite(v)) return "'" + text + "' is not finite";
-        if (v < lo || v > hi || (lo_open && v == lo)) return "'" + text + "' is outside " + range;
+        if (v < lo || v > hi || (lo_open && v == lo) || (hi_open && v == hi))
+          return "'" + text + "' is outside " + range;
         return {};
       },
       "NUMBER in " + range.str());

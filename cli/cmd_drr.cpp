@@ -139,7 +139,8 @@ Command add_drr_command(CLI::App* parent) {
                   "Pose change about the registration origin: tx,ty,tz (mm, room) and rx,ry,rz "
                   "(rotation vector, degrees); default 0,0,0,0,0,0")
       ->expected(6)
-      ->delimiter(',');
+      ->delimiter(',')
+      ->check(finite_in(-1e6, 1e6));
   app->add_option("--renderer", o->renderer,
                   "Renderer (siddon, trilinear, lightfield; default: the scene's)");
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");

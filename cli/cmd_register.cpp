@@ -369,8 +369,11 @@ Command add_register_command(CLI::App* parent) {
   app->add_flag("--sim", o->sim,
                 "Synthetic frames at --gold (exact ray casting, noise, blur, 12 bits; the scene's sim.physics)");
   const std::string pose_help = "tx,ty,tz (mm) and rx,ry,rz (rotation vector, deg) from the nominal pose";
-  app->add_option("--gold", o->gold, "Gold pose: " + pose_help)->expected(6)->delimiter(',');
-  app->add_option("--init", o->init, "Start pose: " + pose_help + " (default: nominal)")->expected(6)->delimiter(',');
+  app->add_option("--gold", o->gold, "Gold pose: " + pose_help)->expected(6)->delimiter(',')->check(finite_in(-1e6, 1e6));
+  app->add_option("--init", o->init, "Start pose: " + pose_help + " (default: nominal)")
+      ->expected(6)
+      ->delimiter(',')
+      ->check(finite_in(-1e6, 1e6));
   std::string plans;
   for (const auto& n : tracking::registration_plan_names()) plans += (plans.empty() ? "" : ", ") + n;
   app->add_option("--plan", o->plan, "Registration plan: " + plans + " (default: the scene's)");

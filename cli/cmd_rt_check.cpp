@@ -27,14 +27,17 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// Each number is checked when the options are parsed (a value out of range is a usage error,
+// exit 2); what depends on the host or on two values together (a CPU that is not there, a
+// duration shorter than one interval) is refused after (exit 1).
 struct RtCheckOptions {
   std::string scene = "builtin:phantom";
-  std::string duration = "10";  // text: parsed here, so that every refused value exits 1 with a reason
-  std::string interval_us = "1000";
-  std::string priority;  // default: the scene's loop.realtime.priority
-  std::string cpus;      // default: the scene's loop.realtime.cpus, else every CPU this process may use
-  std::string budget_us;  // default: the cycle's slack (period - acquire_timeout - registration_budget)
-  std::string histogram_max_us = "10000";
+  double duration_s = 10;
+  double interval_us = 1000;
+  int priority = 0;       // 0: the scene's loop.realtime.priority
+  std::string cpus;       // default: the scene's loop.realtime.cpus, else every CPU this process may use
+  double budget_us = -1;  // < 0: the cycle's slack (period - acquire_timeout - registration_budget)
+  int histogram_max_us = 10000;
   std::string load_note;
   std::string histogram_csv;
   std::string plot_png;
@@ -46,23 +49,14 @@ struct RtCheckOptions {
 std::atomic<bool> g_stop{false};
 void on_interrupt(int) { g_stop.store(true); }
 
-// A number from the whole of `text`; NaN and infinities pass (the library refuses them by name).
-Result<double> parse_number(const std::string& text, const std::string& option) {
-  const char* s = text.c_str();
-  char* end = nullptr;
-  errno = 0;
-  const double v = std::strtod(s, &end);
-  if (text.empty() || end == s || *end != '\0')
-    return invalid_argument(option + " '" + text + "' is not a number");
-  return v;
-}
-Result<int> parse_integer(const std::string& text, const std::string& option, int lo, int hi) {
-  auto v = parse_number(text, option);
-  if (!v.ok()) return v.status();
-  if (!std::isfinite(*v) || *v != std::floor(*v) || *v < lo || *v > hi)
-    return invalid_argument(option + " '" + text + "' must be a whole number from " + std::to_string(lo) + " to " +
-                            std::to_string(hi));
-  return static_cast<int>(*v);
+// --cpus: a list such as 0,2-3 (whether those CPUs are there is the host's to say, after parsing).
+CLI::Validator cpu_list() {
+  return CLI::Validator(
+      [](const std::string& text) -> std::string {
+        auto cpus = parse_cpu_list(text);
+        return cpus.ok() ? std::string() : cpus.status().message();
+      },
+      "CPUS");
 }
 
 std::string cpus_text(const std::vector<int>& cpus) {
@@ -241,18 +235,9 @@ Status run_rt_check(const RtCheckOptions& o) {
   const LoopSpec& loop = scene->loop;
 
   WakeupLatencyOptions w;
-  auto duration = parse_number(o.duration, "--duration");
-  if (!duration.ok()) return duration.status();
-  w.duration_s = *duration;
-  auto interval = parse_number(o.interval_us, "--interval-us");
-  if (!interval.ok()) return interval.status();
-  w.interval_us = *interval;
-  w.priority = loop.realtime.priority;
-  if (!o.priority.empty()) {
-    auto p = parse_integer(o.priority, "--priority", 1, 99);
-    if (!p.ok()) return p.status();
-    w.priority = *p;
-  }
+  w.duration_s = o.duration_s;
+  w.interval_us = o.interval_us;
+  w.priority = o.priority > 0 ? o.priority : loop.realtime.priority;
   w.cpus = loop.realtime.cpus;
   if (!o.cpus.empty()) {
     auto cpus = parse_cpu_list(o.cpus);
@@ -265,7 +250,7 @@ Status run_rt_check(const RtCheckOptions& o) {
   // The budget a wake-up may take: the cycle's slack beyond the acquisition and registration budgets.
   const double slack_ms = loop.period_ms - loop.acquire_timeout_ms - loop.registration_budget_ms;
   std::string budget_from;
-  if (o.budget_us.empty()) {
+  if (o.budget_us < 0) {
     w.budget_us = std::max(0.0, slack_ms * 1e3);
     char b[200];
     std::snprintf(b, sizeof b,
@@ -273,14 +258,10 @@ Status run_rt_check(const RtCheckOptions& o) {
                   loop.period_ms, loop.acquire_timeout_ms, loop.registration_budget_ms);
     budget_from = b;
   } else {
-    auto b = parse_number(o.budget_us, "--budget-us");
-    if (!b.ok()) return b.status();
-    w.budget_us = *b;
+    w.budget_us = o.budget_us;
     budget_from = "--budget-us";
   }
-  auto hist_max = parse_integer(o.histogram_max_us, "--histogram-max-us", 1, 1000000);
-  if (!hist_max.ok()) return hist_max.status();
-  w.histogram_max_us = *hist_max;
+  w.histogram_max_us = o.histogram_max_us;
   w.load_note = o.load_note;
   w.enforce = o.require_rt;
   LFTRACK_RETURN_IF_ERROR(validate_wakeup_latency_options(w));
@@ -387,16 +368,24 @@ Command add_rt_check_command(CLI::App* parent) {
   auto o = std::make_shared<RtCheckOptions>();
   app->add_option("--scene", o->scene, "Scene file, or builtin:phantom (priority, CPUs, cycle period)")
       ->capture_default_str();
-  app->add_option("--duration", o->duration, "Seconds to measure (more than 0, at most 3600)")->capture_default_str();
-  app->add_option("--interval-us", o->interval_us, "Wake-up interval in us (50 to 1000000)")->capture_default_str();
-  app->add_option("--priority", o->priority, "SCHED_FIFO priority 1..99 (default: the scene's loop.realtime.priority)");
+  app->add_option("--duration", o->duration_s, "Seconds to measure (more than 0, at most 3600)")
+      ->check(finite_in(0, 3600, true))
+      ->capture_default_str();
+  app->add_option("--interval-us", o->interval_us, "Wake-up interval in us (50 to 1000000)")
+      ->check(finite_in(50, 1e6))
+      ->capture_default_str();
+  app->add_option("--priority", o->priority, "SCHED_FIFO priority 1..99 (default: the scene's loop.realtime.priority)")
+      ->check(CLI::Range(1, 99));
   app->add_option("--cpus", o->cpus,
                   "CPUs to measure, one thread each, e.g. 0,2-3 (default: the scene's loop.realtime.cpus, else every "
-                  "CPU this process may use)");
+                  "CPU this process may use)")
+      ->check(cpu_list());
   app->add_option("--budget-us", o->budget_us,
-                  "Count wake-ups later than this (default: the cycle's slack, period - acquire_timeout - "
-                  "registration_budget)");
-  app->add_option("--histogram-max-us", o->histogram_max_us, "Histogram range in 1 us bins (later: overflow)")
+                  "Count wake-ups later than this, 0 to 3600 s in us (default: the cycle's slack, period - "
+                  "acquire_timeout - registration_budget)")
+      ->check(finite_in(0, 3.6e9));
+  app->add_option("--histogram-max-us", o->histogram_max_us, "Histogram range in 1 us bins, 1 to 1000000 (later: overflow)")
+      ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
   app->add_option("--load-note", o->load_note, "What else ran during the measurement (echoed in the report)");
   app->add_option("--histogram", o->histogram_csv,

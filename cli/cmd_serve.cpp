@@ -206,7 +206,7 @@ void add_common(CLI::App* app, ServeOptions* o, const ServeOptionTexts& texts) {
                   "KIND[:COUNT][@SECONDS]: inject a fault SECONDS after start (repeatable); KIND: " + texts.fault_kinds);
   app->add_option("--control", o->control, "Control socket (datagrams: 'fault KIND[:COUNT]', 'status', 'stop'), mode 0600");
   app->add_option("--duration", o->duration_s, "Stop after this many seconds (0: until SIGINT/SIGTERM)")
-      ->check(CLI::Range(0.0, 86400.0));
+      ->check(finite_in(0, 86400));
   app->add_flag("--json", o->json, "Print the closing summary as JSON");
 }
 }  // namespace serve

@@ -297,7 +297,7 @@ Command add_serve_detectors_command(CLI::App* parent) {
                   "Light-field folder of the frames' fields, when the scene's sim.renderer is lightfield (in "
                   "DIR/sim-frames; default out/lightfields/<scene>)");
   app->add_option("--settle", o->settle_s, "Summarise the residual of frames after this many seconds")
-      ->check(CLI::Range(0.0, 3600.0))
+      ->check(finite_in(0, 3600))
       ->capture_default_str();
   app->add_option("--threads", o->scene.threads, "Worker threads rendering the frames (0: all cores)")
       ->check(CLI::Range(0, 256));

@@ -156,7 +156,8 @@ Command add_study_sensitivity_command(CLI::App* parent) {
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   app->add_option("--plan", o->study.plan, "Registration plan")->capture_default_str();
-  app->add_option("--start-tre", o->study.start_tre_mm, "Initial mean TRE of the starts (mm)")
+  app->add_option("--start-tre", o->study.start_tre_mm, "Initial mean TRE of the starts (mm, more than 0, at most 100)")
+      ->check(finite_in(0, 100, true))
       ->capture_default_str();
   app->add_option("--seed", o->study.seed, "Seed of gold poses, starts and noise")->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");

@@ -1,6 +1,7 @@
 // `lftrack rt-check` as a user runs it: the JSON report's keys, the scene's priority and CPUs
 // taken by default, the histogram and plot files, and every refused option exiting 1 with the
-// reason. Runs are a fraction of a second; no latency bound is asserted.
+// reason (values out of range: exit 2, Cli/UsageError). Runs are a fraction of a second; no
+// latency bound is asserted.
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -127,28 +128,14 @@ TEST(RtCheckCli, TakesTheScenesPriorityAndCpusAndWritesTheHistogramAndPlot) {
   }
 }
 
+// What the parser cannot judge is refused after it with exit 1 and the reason: the host's CPUs,
+// two values together, the files. (Values out of range exit 2: Cli/UsageError.)
 TEST(RtCheckCli, RefusedOptionsExitOneWithTheReason) {
   test::TempDir dir;
   const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
-      {{"--duration", "0"}, "duration"},
-      {{"--duration", "-1"}, "duration"},
-      {{"--duration", "nan"}, "duration"},
-      {{"--duration", "inf"}, "duration"},
-      {{"--duration", "1e300"}, "duration"},
-      {{"--duration", "3601"}, "duration"},
-      {{"--duration", "ten"}, "--duration 'ten' is not a number"},
-      {{"--interval-us", "10"}, "interval"},
-      {{"--interval-us", "nan"}, "interval"},
-      {{"--interval-us", "2000000"}, "interval"},
-      {{"--priority", "0"}, "--priority"},
-      {{"--priority", "100"}, "--priority"},
-      {{"--priority", "50.5"}, "--priority"},
-      {{"--priority", "1e30"}, "--priority"},
+      {{"--duration", "0.0001", "--interval-us", "1000"}, "shorter than one interval"},
       {{"--cpus", "4000"}, "does not exist"},
       {{"--cpus", "0,0"}, "named twice"},
-      {{"--cpus", "x"}, "CPU list"},
-      {{"--budget-us", "-5"}, "budget"},
-      {{"--budget-us", "inf"}, "budget"},
       {{"--plot", (dir.path() / "plot.svg").string()}, ".png"},
       {{"--histogram", (dir.path() / "missing" / "h.csv").string()}, "does not exist"},
   };

@@ -1,0 +1,129 @@
+// Option values out of range are usage errors (README "Commands": exit 2, CLI11's reason naming
+// the option), refused when the options are parsed, before any work; a value checked only after
+// parsing exited 1 like a refusal (issue 50). One case per option value.
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cctype>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "test_data.hpp"
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct UsageCase {
+  std::vector<std::string> args;  // after `lftrack`
+  std::string option;             // the option the message names
+};
+
+// A failing case shows its command line.
+void PrintTo(const UsageCase& c, std::ostream* os) {
+  *os << "lftrack";
+  for (const auto& a : c.args) *os << ' ' << a;
+}
+
+std::string quoted(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+class UsageError : public ::testing::TestWithParam<UsageCase> {};
+
+// The cases carry options that keep the work short (missing folders, a short duration, one run),
+// so a value the parser lets through fails by its exit code rather than by a long run.
+TEST_P(UsageError, ExitsTwoNamingTheOption) {
+  test::TempDir dir;
+  std::string command = "cd " + quoted(dir.path().string()) + " && " + quoted(LFTRACK_BIN_PATH);
+  for (const auto& a : GetParam().args) command += " " + quoted(a);
+  const fs::path log = dir.path() / "out.txt";
+  command += " >" + quoted(log.string()) + " 2>&1";
+  const int status = std::system(command.c_str());
+  std::ifstream in(log);
+  const std::string out{std::istreambuf_iterator<char>(in), {}};
+  ASSERT_TRUE(status != -1 && WIFEXITED(status)) << out;
+  EXPECT_EQ(WEXITSTATUS(status), 2) << out;
+  EXPECT_NE(out.find(GetParam().option), std::string::npos) << out;
+}
+
+std::vector<UsageCase> detector(const std::string& option, const std::string& value) {
+  return {{{"calibrate", "detector", "--dark", "no-dark", "--flood", "no-flood", option, value}, option}};
+}
+std::vector<UsageCase> rt_check(const std::string& option, const std::string& value) {
+  std::vector<std::string> args{"rt-check", option, value};
+  if (option != "--duration") args.insert(args.end(), {"--duration", "0.01"});
+  return {{args, option}};
+}
+
+std::vector<UsageCase> cases() {
+  std::vector<UsageCase> all;
+  const auto add = [&](std::vector<UsageCase> c) { all.insert(all.end(), c.begin(), c.end()); };
+  // The cases the issue names.
+  add(detector("--bits", "17"));
+  add(detector("--min-frames", "0"));
+  add(detector("--dark-sd", "nan"));
+  add(rt_check("--interval-us", "0"));
+  add(rt_check("--priority", "100"));
+  // The rest of calibrate detector and rt-check.
+  add(detector("--bits", "7"));
+  add(detector("--saturation", "0"));
+  add(detector("--saturation", "65536"));
+  add(detector("--min-frames", "1"));
+  add(detector("--dark-sd", "0.5"));
+  add(detector("--noise-sd", "inf"));
+  add(detector("--gain-low", "1"));
+  add(detector("--gain-high", "1"));
+  add(detector("--line-low", "-0.1"));
+  add(detector("--line-high", "101"));
+  add(detector("--max-saturated", "2"));
+  add(rt_check("--duration", "0"));
+  add(rt_check("--duration", "nan"));
+  add(rt_check("--duration", "3601"));
+  add(rt_check("--interval-us", "2000000"));
+  add(rt_check("--priority", "0"));
+  add(rt_check("--priority", "50.5"));
+  add(rt_check("--budget-us", "-5"));
+  add(rt_check("--budget-us", "inf"));
+  add(rt_check("--histogram-max-us", "0"));
+  add(rt_check("--cpus", "x"));
+  // The sweep of every command's numbers.
+  add({{{"bench", "drr", "--size", "4", "--no-peers"}, "--size"},
+       {{"bench", "drr", "--poses", "0", "--no-peers"}, "--poses"},
+       {{"bench", "drr", "--repeats", "0", "--no-peers"}, "--repeats"},
+       {{"bench", "drr", "--render-threads", "0", "--no-peers"}, "--render-threads"},
+       {{"bench", "drr", "--vq-codebooks", "16,1", "--no-peers"}, "--vq-codebooks"},
+       {{"bench", "octree", "--size", "0"}, "--size"},
+       {{"bench", "octree", "--poses", "0"}, "--poses"},
+       {{"bench", "octree", "--pivots", "nan"}, "--pivots"},
+       {{"study", "sensitivity", "--runs", "1", "--start-tre", "nan"}, "--start-tre"},
+       {{"study", "sensitivity", "--runs", "1", "--start-tre", "0"}, "--start-tre"},
+       {{"calibrate", "views", "--sim", "--photons", "-1"}, "--photons"},
+       {{"calibrate", "couch", "--photons", "nan"}, "--photons"},
+       {{"serve", "couch", "--duration", "nan"}, "--duration"},
+       {{"serve", "detectors", "--scene", "builtin:phantom", "--settle", "nan", "--duration", "0.01"}, "--settle"},
+       {{"drr", "--pose", "nan,0,0,0,0,0", "-o", "drr"}, "--pose"},
+       {{"register", "--sim", "--gold", "0,0,0,inf,0,0"}, "--gold"},
+       {{"register", "--sim", "--init", "0,nan,0,0,0,0"}, "--init"}});
+  return all;
+}
+
+std::string case_name(const ::testing::TestParamInfo<UsageCase>& info) {
+  std::string name;
+  for (const auto& a : info.param.args)
+    for (char c : a) name += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+  return name + "_" + std::to_string(info.index);
+}
+
+INSTANTIATE_TEST_SUITE_P(Cli, UsageError, ::testing::ValuesIn(cases()), case_name);
+
+}  // namespace
+}  // namespace lftrack::host
