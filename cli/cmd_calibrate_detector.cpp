@@ -168,6 +168,8 @@ Status run(const DetectorOptions& o) {
   auto flood = read_frames(*flood_files, "flood", &size);
   if (!flood.ok()) return flood.status();
   spdlog::info("{} dark and {} flood frames of {} x {} pixels", dark->size(), flood->size(), size.cols, size.rows);
+  for (const fs::path& f : *dark_files) rule.dark_names.push_back(f.string());
+  for (const fs::path& f : *flood_files) rule.flood_names.push_back(f.string());
   auto calibration = calib::calibrate_detector(*dark, *flood, rule);
   if (!calibration.ok()) return calibration.status();
   calibration->detector = o.detector;

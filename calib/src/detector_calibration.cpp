@@ -62,7 +62,41 @@ Status check_frames(const std::vector<tracking::Image<std::uint16_t>>& frames, c
   return {};
 }
 
+// Refuses two identical frames, named by `names` (one per frame) or by their place (1-based).
+Status check_not_frozen(const std::vector<tracking::Image<std::uint16_t>>& frames, const char* what,
+                        const std::vector<std::string>& names) {
+  const auto same = identical_frames(frames);
+  if (!same) return {};
+  const bool named = names.size() == frames.size();
+  const auto name = [&](std::size_t i) { return named ? names[i] : std::to_string(i + 1); };
+  return invalid_argument(std::string(what) + " frames " + name(same->first) + " and " + name(same->second) +
+                          (named ? "" : " (of " + std::to_string(frames.size()) + ", in the order given)") +
+                          " are identical pixel for pixel: a detector's frames differ by their noise, so these are "
+                          "a frozen detector's or one file copied; take the frames again");
+}
+
 }  // namespace
+
+std::optional<std::pair<std::size_t, std::size_t>> identical_frames(
+    const std::vector<tracking::Image<std::uint16_t>>& frames) {
+  // FNV-1a of each frame, then a pixel-for-pixel comparison of those with equal hashes.
+  std::vector<std::uint64_t> hashes;
+  hashes.reserve(frames.size());
+  for (const auto& f : frames) {
+    std::uint64_t h = 1469598103934665603ull;
+    for (std::uint16_t p : f.pixels()) {
+      h ^= p;
+      h *= 1099511628211ull;
+    }
+    hashes.push_back(h);
+  }
+  for (std::size_t j = 1; j < frames.size(); ++j)
+    for (std::size_t i = 0; i < j; ++i)
+      if (hashes[i] == hashes[j] && frames[i].rows() == frames[j].rows() && frames[i].cols() == frames[j].cols() &&
+          frames[i].pixels() == frames[j].pixels())
+        return std::make_pair(i, j);
+  return std::nullopt;
+}
 
 const char* defect_rule_name(int rule) {
   static const char* kNames[kDefectRules] = {"dark", "noise", "gain", "saturated", "line"};
@@ -113,8 +147,14 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
   if (dark.empty()) return invalid_argument("no dark frames (at least " + std::to_string(o.min_dark_frames) + ")");
   const int rows = dark[0].rows(), cols = dark[0].cols();
   if (rows <= 0 || cols <= 0) return invalid_argument("the first dark frame is empty (0 pixels)");
+  if (rows < kMinDetectorSide || cols < kMinDetectorSide)
+    return invalid_argument(format("the frames are %d x %d pixels; a calibration needs at least %d x %d: the defect "
+                                   "rule judges each pixel against the median and spread of all pixels and each row "
+                                   "and column against the others, which a smaller frame has too few of",
+                                   cols, rows, kMinDetectorSide, kMinDetectorSide));
   LFTRACK_RETURN_IF_ERROR(check_frames(dark, "dark", o.min_dark_frames, rows, cols));
   LFTRACK_RETURN_IF_ERROR(check_frames(flood, "flood", o.min_flood_frames, rows, cols));
+  LFTRACK_RETURN_IF_ERROR(check_not_frozen(dark, "dark", o.dark_names));
   const std::size_t n = static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols);
   DetectorCalibration c;
   c.rows = rows;
@@ -122,6 +162,8 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
   c.dark_frames = static_cast<int>(dark.size());
   c.flood_frames = static_cast<int>(flood.size());
   c.rule = o;
+  c.rule.dark_names.clear();  // the thresholds, not the frames they judged
+  c.rule.flood_names.clear();
 
   // Dark frames, two passes: the mean (exact integer sums), then the spread about it.
   std::vector<float> offset(n), noise(n), signal(n);
@@ -189,6 +231,8 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
                  100 * saturated_fraction, c.saturation_counts,
                  c.saturation_source == "observed" ? "the largest raw value" : c.saturation_source == "bits" ? "--bits" : "--saturation",
                  100 * o.max_saturated_fraction));
+    // After the saturation check: a flood saturated everywhere is identical too, and says so.
+    LFTRACK_RETURN_IF_ERROR(check_not_frozen(flood, "flood", o.flood_names));
     const double nf = static_cast<double>(flood.size());
     for (std::size_t i = 0; i < n; ++i) signal[i] = static_cast<float>(static_cast<double>(sum[i]) / nf - offset[i]);
     c.defective = tracking::Image<unsigned char>(rows, cols, 0);
@@ -210,6 +254,11 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
   const Robust dark_level = robust(offset), noise_level = robust(noise);
   c.offset_median_counts = dark_level.median;
   c.noise_median_counts = noise_level.median;
+  // Frames that all differ, yet hold most pixels still: a detector frozen but for a few pixels.
+  if (!(noise_level.median > 0))
+    return invalid_argument("the dark frames have no temporal noise at most pixels (median 0 counts): a detector's "
+                            "dark frames differ by their noise, so these are a frozen detector's or copies; take the "
+                            "frames again");
   const double dark_limit = o.dark_sd * std::max(dark_level.sd, 1.0);
   const double noise_limit = o.noise_sd * std::max(noise_level.sd, 0.5);
   std::vector<unsigned char> bad(n, 0);

@@ -216,6 +216,43 @@ TEST(DetectorCalibration, RefusesTooFewOrMismatchedFrames) {
   EXPECT_TRUE(calibrate_detector(d.frames(2, 0), d.frames(2, 2000), two).ok()) << "the minimums are options";
 }
 
+// Issue 50: eight copies of one dark and one flood frame (temporal noise 0.00) and 1 x 1 frames
+// were calibrated.
+TEST(DetectorCalibration, RefusesIdenticalFramesAndFramesTooSmallToJudge) {
+  PlantedDetector d;
+  const auto dark = d.frames(8, 0), flood = d.frames(8, 2000);
+  expect_refused(calibrate_detector(std::vector<Frame>(8, dark[0]), std::vector<Frame>(8, flood[0]), {}),
+                 "dark frames 1 and 2 (of 8, in the order given) are identical pixel for pixel");
+  auto copied = flood;
+  copied[5] = copied[2];
+  expect_refused(calibrate_detector(dark, copied, {}), "flood frames 3 and 6 (of 8, in the order given) are identical");
+  DetectorCalibrationOptions named;
+  for (char c = 'a'; c < 'i'; ++c) named.dark_names.push_back(std::string(1, c) + ".tif");
+  auto copied_dark = dark;
+  copied_dark[7] = copied_dark[0];
+  expect_refused(calibrate_detector(copied_dark, flood, named), "dark frames a.tif and h.tif are identical");
+  // Frozen but for one pixel: every frame differs, the noise is 0 almost everywhere.
+  std::vector<Frame> nearly(8, dark[0]);
+  for (std::size_t i = 0; i < nearly.size(); ++i) nearly[i].at(0, 0) = std::uint16_t(100 + i);
+  expect_refused(calibrate_detector(nearly, flood, {}), "no temporal noise at most pixels (median 0 counts)");
+
+  std::mt19937 rng(3);
+  const auto frames = [&](int rows, int cols, int level) {
+    std::vector<Frame> v;
+    for (int i = 0; i < 8; ++i) {
+      Frame f(rows, cols);
+      for (auto& p : f.pixels()) p = std::uint16_t(level + int(rng() % 16));
+      v.push_back(std::move(f));
+    }
+    return v;
+  };
+  expect_refused(calibrate_detector(frames(1, 1, 100), frames(1, 1, 2100), {}),
+                 "the frames are 1 x 1 pixels; a calibration needs at least 8 x 8");
+  expect_refused(calibrate_detector(frames(7, 64, 100), frames(7, 64, 2100), {}), "needs at least 8 x 8");
+  const auto smallest = calibrate_detector(frames(8, 8, 100), frames(8, 8, 2100), {});
+  EXPECT_TRUE(smallest.ok()) << smallest.status().message();
+}
+
 TEST(DetectorCalibration, RefusesAFloodThatSaturatesOrIsNoBrighterThanTheDark) {
   PlantedDetector d;
   const auto dark = d.frames(8, 0), flood = d.frames(8, 2000);

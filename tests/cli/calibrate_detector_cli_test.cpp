@@ -282,5 +282,35 @@ TEST(CalibrateDetectorCli, RefusesBadInputWithAReasonAndWritesNothing) {
   EXPECT_TRUE(load_detector_calibration(out).ok());
 }
 
+// Issue 50: eight copies of one dark frame and one flood frame (temporal noise 0.00), and 1 x 1
+// frames, were calibrated. The copies are named by their files.
+TEST(CalibrateDetectorCli, RefusesCopiedFramesAndFramesTooSmall) {
+  test::TempDir dir;
+  const fs::path& d = dir.path();
+  write_frames(d / "dark", 8, 0);
+  write_frames(d / "flood", 8, 1500);
+  write_frames(d / "frozen", 1, 0);
+  for (int i = 1; i < 8; ++i)
+    fs::copy_file(d / "frozen" / "frame-000.tif", d / "frozen" / ("frame-00" + std::to_string(i) + ".tif"));
+  write_frames(d / "copied", 8, 1500);
+  fs::copy_file(d / "copied" / "frame-002.tif", d / "copied" / "frame-006.tif", fs::copy_options::overwrite_existing);
+  write_frames(d / "tiny-dark", 8, 0, 1, 1);
+  write_frames(d / "tiny-flood", 8, 1500, 1, 1);
+  const fs::path out = d / "out" / "cal.tif";
+  const auto refused = [&](const fs::path& dark, const fs::path& flood, const std::string& why) {
+    const CliRun r = calibrate_detector({"--dark", dark.string(), "--flood", flood.string(), "--out", out.string()}, d, d);
+    EXPECT_EQ(r.exit_code, 1) << why << ":\n" << r.out;
+    EXPECT_NE(r.out.find(why), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(out)) << why;
+  };
+  refused(d / "frozen", d / "flood",
+          "dark frames " + (d / "frozen" / "frame-000.tif").string() + " and " +
+              (d / "frozen" / "frame-001.tif").string() + " are identical pixel for pixel");
+  refused(d / "dark", d / "copied",
+          "flood frames " + (d / "copied" / "frame-002.tif").string() + " and " +
+              (d / "copied" / "frame-006.tif").string() + " are identical");
+  refused(d / "tiny-dark", d / "tiny-flood", "the frames are 1 x 1 pixels; a calibration needs at least 8 x 8");
+}
+
 }  // namespace
 }  // namespace lftrack::host

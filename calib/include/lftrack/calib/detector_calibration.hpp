@@ -27,7 +27,9 @@
 //
 // Refused, with the reason: options non-finite or out of range; fewer dark or flood frames than
 // the minimums (default 8 each; at least 2 dark frames for a noise estimate); an empty frame or
-// frames of different sizes (the frame's index is named); a flood of which more than
+// frames of different sizes (the frame's index is named); frames smaller than kMinDetectorSide
+// on a side; two dark or two flood frames identical pixel for pixel, or dark frames without
+// temporal noise at most pixels (a frozen detector, or one file copied: named); a flood of which more than
 // max_saturated_fraction of the pixel values (all flood frames) reach saturation; a flood no
 // brighter than the dark (median signal not above min_signal_counts, or more than
 // max_unlit_fraction of the pixels with mean flood at or below mean dark); more than half the
@@ -35,7 +37,9 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "lftrack/tracking/frame_preprocessing.hpp"
@@ -43,6 +47,12 @@
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::calib {
+
+// The smallest frame side calibrated: the defect rule judges each pixel against the median and
+// robust SD of all pixels, and each row and column against the median, so a frame needs enough
+// pixels and lines for a defect to be an outlier among them (a 1 x 1 frame is its own median:
+// nothing could ever be found defective, and its gain is 1 by construction).
+constexpr int kMinDetectorSide = 8;
 
 struct DetectorCalibrationOptions {
   int min_dark_frames = 8;           // 2 .. 100000
@@ -57,6 +67,9 @@ struct DetectorCalibrationOptions {
   double max_saturated_fraction = 0.01;     // [0, 1]
   double min_signal_counts = 50;            // [0, 65535]
   double max_unlit_fraction = 0.05;         // [0, 1]
+  // The frames' names (their files), one per frame, for the refusals that name frames; empty:
+  // frames are named by their place, from 1.
+  std::vector<std::string> dark_names, flood_names;
 };
 
 enum DefectRule : int { kDefectDark, kDefectNoise, kDefectGain, kDefectSaturated, kDefectLine, kDefectRules };
@@ -85,6 +98,12 @@ struct DetectorCalibration {
 
 // Checks the options (finite, ordered, in range); the calibration is refused with the reason.
 Status check_detector_calibration_options(const DetectorCalibrationOptions& options);
+
+// The first two of `frames` (0-based indices, in order) identical pixel for pixel, if any. A real
+// detector's frames always differ by their noise: identical ones are a frozen detector's, or one
+// file copied. O(pixels x frames).
+std::optional<std::pair<std::size_t, std::size_t>> identical_frames(
+    const std::vector<tracking::Image<std::uint16_t>>& frames);
 
 Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image<std::uint16_t>>& dark,
                                                const std::vector<tracking::Image<std::uint16_t>>& flood,
