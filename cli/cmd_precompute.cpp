@@ -1,4 +1,5 @@
-// `lftrack precompute`: builds each view's light field on all cores and writes one file per view.
+// `lftrack precompute`: builds each view's light field on all cores and writes one file per view,
+// named after what the field depends on (scene.hpp); a field already there is up to date and kept.
 
 #include <spdlog/spdlog.h>
 
@@ -38,17 +39,19 @@ Status run(const PrecomputeOptions& o) {
                    ? fmt::format(" of {:.2f} mm", tracking::light_field_slice_step_mm(*p.mu, spec.slice_step_mm))
                    : "",
                pool.size());
-  auto fields = build_light_fields(p, spec, &pool);
+  LightFieldCacheReport report;
+  auto fields = load_or_build_light_fields(p, *p.mu, spec, dir, &pool, &report);
   if (!fields.ok()) return fields.status();
-  for (const auto& field : *fields) {
+  if (!report.saved.ok()) return report.saved;
+  for (std::size_t i = 0; i < fields->size(); ++i) {
+    const auto& field = (*fields)[i];
     const auto& g = field->geometry();
-    const auto file = light_field_file(dir, g.view_name);
-    LFTRACK_RETURN_IF_ERROR(field->save(file));
-    spdlog::info(
-        "view {}: u {:.1f}..{:.1f}, v {:.1f}..{:.1f}, s {:.1f}..{:.1f}, t {:.1f}..{:.1f} mm; {:.1f} MB",
-        g.view_name, g.lo[0], g.hi[0], g.lo[1], g.hi[1], g.lo[2], g.hi[2], g.lo[3], g.hi[3],
-        double(field->payload_bytes()) / 1e6);
-    std::printf("%s\n", file.string().c_str());
+    if (report.built[i])
+      spdlog::info(
+          "view {}: u {:.1f}..{:.1f}, v {:.1f}..{:.1f}, s {:.1f}..{:.1f}, t {:.1f}..{:.1f} mm; {:.1f} MB",
+          g.view_name, g.lo[0], g.hi[0], g.lo[1], g.hi[1], g.lo[2], g.hi[2], g.lo[3], g.hi[3],
+          double(field->payload_bytes()) / 1e6);
+    std::printf("%s: %s\n", report.files[i].string().c_str(), report.built[i] ? "built" : "up to date");
   }
   return {};
 }
@@ -56,10 +59,12 @@ Status run(const PrecomputeOptions& o) {
 }  // namespace
 
 Command add_precompute_command(CLI::App* parent) {
-  auto* app = parent->add_subcommand("precompute", "Build the scene's light fields, one file per view");
+  auto* app = parent->add_subcommand(
+      "precompute", "Build the scene's light fields, one file per view (those up to date are kept, not rebuilt)");
   auto o = std::make_shared<PrecomputeOptions>();
   add_scene_options(app, &o->scene);
-  app->add_option("-o,--out", o->out_dir, "Output folder (default: out/lightfields/<scene>)");
+  app->add_option("-o,--out", o->out_dir,
+                  "Output folder, shared by any scenes (files VIEW-KEY.lf; default: out/lightfields/<scene>)");
   return [o] { return run(*o); };
 }
 

@@ -59,10 +59,9 @@ fi
 scene="$out/gige-$actuator.yaml"
 sed -e "s|\.\./\.\./out/hil/|$out/|g" "$scene_in" > "$scene"
 
-if [ ! -f "$lf/A.lf" ]; then
-  echo "hil-demo: building the tracking light fields in $lf (minutes, once)" >&2
-  "$lftrack" -q precompute --scene "$scene" -o "$lf" >&2
-fi
+# Built once (minutes); afterwards precompute finds them up to date and builds nothing.
+echo "hil-demo: the tracking light fields in $lf" >&2
+"$lftrack" -q precompute --scene "$scene" -o "$lf" >&2
 
 pids=()
 stop_servers() { for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; }

@@ -9,6 +9,7 @@
 #include <optional>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <fstream>
 #include <limits>
@@ -133,6 +134,20 @@ std::filesystem::path field_set_dir(const std::filesystem::path& field_dir, cons
 
 using Fields = std::vector<std::shared_ptr<const tracking::LightField>>;
 
+// The record of a field set's build time, named after its files (which are named after what
+// they depend on), so that scenes sharing a field folder keep their own.
+std::filesystem::path build_record(const std::vector<std::filesystem::path>& files) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (const auto& f : files)
+    for (char c : f.filename().string() + "/") {
+      h ^= static_cast<unsigned char>(c);
+      h *= 1099511628211ull;
+    }
+  char name[32];
+  std::snprintf(name, sizeof name, "build-%012llx.json", static_cast<unsigned long long>(h & 0xffffffffffffull));
+  return files.front().parent_path() / name;
+}
+
 // The float fields of one (resolution, envelope scale) set: built in memory (empty `dir`), or
 // loaded from `dir` with the build time recorded there, or built and saved there (unless
 // `prebuilt`, which refuses). `build_s` gets the time the build took, here or when saved.
@@ -147,9 +162,11 @@ Result<Fields> field_set(const PreparedScene& p, const std::array<int, 4>& resol
   spec.storage = tracking::LightFieldStorage::kFloat32;
   const std::string key = field_set_key(resolution, envelope_scale);
   std::string why_not_loaded;
+  const std::vector<std::filesystem::path> files =
+      dir.empty() ? std::vector<std::filesystem::path>() : light_field_files(scaled, dir, p.mu.get(), &spec);
   if (!dir.empty()) {
     auto loaded = load_light_fields(scaled, dir, p.mu.get(), &spec);
-    std::ifstream record(dir / "build.json");
+    std::ifstream record(build_record(files));
     double recorded_s = -1;
     try {
       if (record) recorded_s = nlohmann::json::parse(record).at("build_s").get<double>();
@@ -160,7 +177,7 @@ Result<Fields> field_set(const PreparedScene& p, const std::array<int, 4>& resol
       *build_s = recorded_s;
       return std::move(loaded).value();
     }
-    why_not_loaded = loaded.ok() ? (dir / "build.json").string() + " missing or unreadable"
+    why_not_loaded = loaded.ok() ? build_record(files).string() + " missing or unreadable"
                                  : loaded.status().message();
     if (prebuilt)
       return failed_precondition("light fields " + key + " are not built in " + dir.string() + " (" +
@@ -181,10 +198,9 @@ Result<Fields> field_set(const PreparedScene& p, const std::array<int, 4>& resol
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
-    for (std::size_t i = 0; i < fields.size(); ++i)
-      LFTRACK_RETURN_IF_ERROR(fields[i]->save(light_field_file(dir, p.scene.detectors[i].view.name)));
+    for (std::size_t i = 0; i < fields.size(); ++i) LFTRACK_RETURN_IF_ERROR(fields[i]->save(files[i]));
     LFTRACK_RETURN_IF_ERROR(write_file_atomically(
-        dir / "build.json", nlohmann::json{{"key", key}, {"build_s", *build_s}}.dump(2) + "\n"));
+        build_record(files), nlohmann::json{{"key", key}, {"build_s", *build_s}}.dump(2) + "\n"));
   }
   return fields;
 }

@@ -153,7 +153,13 @@ TEST(Cli, TradeStudyFieldsAreBuiltOnceAndShardsOnlyMapThem) {
   int sets = 0;
   for (const auto& e : fs::directory_iterator(lf)) {
     ++sets;
-    EXPECT_TRUE(fs::exists(e.path() / "A.lf") && fs::exists(e.path() / "build.json")) << e.path();
+    int fields = 0, records = 0;
+    for (const auto& f : fs::directory_iterator(e.path())) {
+      fields += f.path().extension() == ".lf";
+      records += f.path().filename().string().rfind("build-", 0) == 0 && f.path().extension() == ".json";
+    }
+    EXPECT_EQ(fields, 2) << e.path();
+    EXPECT_EQ(records, 1) << e.path();
   }
   EXPECT_EQ(sets, 2) << "baseline and bin2 share one field set, lf-st32 has its own";
   ASSERT_TRUE(run_process(with({"--out", (dir.path() / "whole").string()}), &out).ok()) << out;

@@ -307,6 +307,59 @@ TEST_F(LightFieldFile, WrongGeometry) {
   EXPECT_EQ(load_error(field_->header().ct_hash, plan_hash(fixture_plan(), spec)), "(loaded)");
 }
 
+// A file records the settings it was built with, so that a stale field names every one that
+// differs, the integration and slice step too (issue 50); a file written before they were
+// recorded says what it cannot tell.
+TEST_F(LightFieldFile, RecordsItsSettingsAndAStaleOneNamesEachThatDiffers) {
+  auto header = LightField::read_header(file_);
+  ASSERT_TRUE(header.ok()) << header.status().message();
+  EXPECT_TRUE(header->settings_recorded);
+  EXPECT_EQ(header->integration, LightFieldIntegration::kSiddon);
+  EXPECT_EQ(header->roi_window.cols, fixture_plan().roi_window.cols);
+  EXPECT_EQ(header->detector_hash, detector_geometry_hash(fixture_plan().view_room));
+  const std::uint64_t ct = field_->header().ct_hash;
+  LightFieldSpec spec;
+  spec.resolution = {12, 12, 64, 64};
+  spec.storage = LightFieldStorage::kFixed16;
+  EXPECT_TRUE(light_field_differences(*header, ct, fixture_plan(), spec).empty());
+
+  LightFieldSpec sliced = spec;
+  sliced.integration = LightFieldIntegration::kSlices;
+  sliced.slice_step_mm = 0.5;
+  sliced.resolution = {8, 8, 64, 64};
+  LightFieldPlanInput moved = fixture_plan();
+  moved.envelope.rotation_deg = 13;
+  moved.view_room.source_mm.x() += 1.0;
+  std::string all;
+  for (const std::string& d : light_field_differences(*header, ct ^ 1, moved, sliced)) all += d + "\n";
+  for (const char* named : {"CT (volume hash ", "detector geometry of view A", "envelope rotation_deg (12 in the file, 13 now)",
+                            "resolution (12x12x64x64 in the file, 8x8x64x64 now)",
+                            "integration (siddon in the file, slices now)",
+                            "slice_step_mm (0 (the CT's finest spacing) in the file, 0.5 now)"})
+    EXPECT_NE(all.find(named), std::string::npos) << named << " in:\n" << all;
+
+  // As an earlier lftrack wrote it: no settings (zeros), the header's checksum good.
+  {
+    std::fstream f(file_, std::ios::in | std::ios::out | std::ios::binary);
+    unsigned char bytes[1020];
+    f.read(reinterpret_cast<char*>(bytes), 1020);
+    std::memset(bytes + 492, 0, 60);
+    const auto crc = static_cast<std::uint32_t>(crc32(crc32(0L, Z_NULL, 0), bytes, 1020));
+    f.seekp(0);
+    f.write(reinterpret_cast<const char*>(bytes), 1020);
+    f.write(reinterpret_cast<const char*>(&crc), 4);
+  }
+  auto earlier = LightField::read_header(file_);
+  ASSERT_TRUE(earlier.ok()) << earlier.status().message();
+  EXPECT_FALSE(earlier->settings_recorded);
+  EXPECT_EQ(load_error(ct, field_->header().plan_hash), "(loaded)") << "an earlier file still loads";
+  LightFieldSpec margin = spec;
+  margin.margin_fraction = 0.05;
+  const auto d = light_field_differences(*earlier, ct, fixture_plan(), margin);
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_NE(d[0].find("a setting an older lftrack did not record"), std::string::npos) << d[0];
+}
+
 TEST_F(LightFieldFile, PaddedOrLyingAboutItsPayload) {
   const auto size = std::filesystem::file_size(file_);
   std::ofstream(file_, std::ios::app | std::ios::binary) << "trailing";

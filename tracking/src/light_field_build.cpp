@@ -80,6 +80,12 @@ Result<std::shared_ptr<const LightField>> LightField::build(const MuVolume& mu,
   h.envelope = input.envelope;
   h.ct_hash = volume_hash(mu);
   h.plan_hash = plan_hash(input, spec);
+  h.settings_recorded = true;
+  h.detector_hash = detector_geometry_hash(input.view_room);
+  h.roi_window = input.roi_window;
+  h.margin_fraction = spec.margin_fraction;
+  h.integration = spec.integration;
+  h.slice_step_mm = spec.slice_step_mm;
   const LightFieldGeometry& g = h.geometry;
   const auto count = static_cast<std::size_t>(g.sample_count());
   field->owned_.resize(count * sizeof(float));
@@ -149,6 +155,8 @@ Result<std::shared_ptr<const LightField>> LightField::convert(const LightField& 
     for (std::int64_t i = 0; i < training; ++i) sample.push_back(tile_at(pick(rng)));
     const Codebook book = train_codebook(sample, spec.vq_codebook_size, 8, spec.vq_seed, pool);
     field->header_.codebook_size = book.size();
+    field->header_.vq_training_tiles = spec.vq_training_tiles;
+    field->header_.vq_seed = spec.vq_seed;
     const std::size_t codebook_bytes = std::size_t(book.size()) * 16 * sizeof(float);
     field->owned_.resize(codebook_bytes + static_cast<std::size_t>(tile_count) * sizeof(std::uint16_t));
     auto* words = reinterpret_cast<float*>(field->owned_.data());

@@ -8,7 +8,12 @@
 //   224 f64 nominal T_room_from_ct[16] (column-major) | 352 f64 registration origin[3]
 //   376 f64 envelope translation mm | 384 f64 envelope rotation deg | 392 f64 fixed scale
 //   400 u64 CT hash | 408 u64 plan hash | 416 u64 payload bytes | 424 u32 payload CRC-32
-//   428 char view name[64] | ... zero ... | 1020 u32 CRC-32 of bytes 0..1019
+//   428 char view name[64]
+//   492 u32 settings recorded (1; 0 in files written before) | 496 u32 integration
+//   500 i32 ROI window row0, col0, rows, cols | 516 i32 VQ training tiles | 520 f64 margin fraction
+//   528 f64 slice step mm | 536 u64 detector hash | 544 u64 VQ seed
+//   ... zero ... | 1020 u32 CRC-32 of bytes 0..1019
+// (The settings at 492.. came later in the zero bytes of version 1: older readers skip them.)
 // Payload: float32 samples; or uint16 codes; or (VQ) the codebook (K x 16 float32) then one uint16
 // codeword index per tile. Samples are ordered [u][v][s][t], t fastest; tiles likewise.
 
@@ -220,6 +225,19 @@ Status LightField::save(const std::filesystem::path& file) const {
       mapping_ ? static_cast<const unsigned char*>(mapping_) + kHeaderBytes : owned_.data();
   w.at(424, crc_of(payload, payload_bytes_));
   std::strncpy(reinterpret_cast<char*>(header + 428), g.view_name.c_str(), 63);
+  if (header_.settings_recorded) {
+    w.at(492, std::uint32_t{1});
+    w.at(496, static_cast<std::uint32_t>(header_.integration));
+    w.at(500, static_cast<std::int32_t>(header_.roi_window.row0));
+    w.at(504, static_cast<std::int32_t>(header_.roi_window.col0));
+    w.at(508, static_cast<std::int32_t>(header_.roi_window.rows));
+    w.at(512, static_cast<std::int32_t>(header_.roi_window.cols));
+    w.at(516, static_cast<std::int32_t>(header_.vq_training_tiles));
+    w.at(520, header_.margin_fraction);
+    w.at(528, header_.slice_step_mm);
+    w.at(536, header_.detector_hash);
+    w.at(544, header_.vq_seed);
+  }
   w.at(1020, crc_of(header, 1020));
 
   // Per process: two processes saving the same field (tasks of a job array) never share a
@@ -244,38 +262,11 @@ Status LightField::save(const std::filesystem::path& file) const {
   return {};
 }
 
-Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem::path& file,
-                                                           std::optional<std::uint64_t> expected_ct_hash,
-                                                           std::optional<std::uint64_t> expected_plan_hash) {
-  const std::string name = file.string();
-  // Non-blocking: a FIFO or device named A.lf must not hang the program on open.
-  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-  if (fd < 0) return not_found(name + ": cannot open light-field file (run `lftrack precompute`)");
-  struct stat st {};
-  if (fstat(fd, &st) != 0) {
-    ::close(fd);
-    return io_error(name + ": cannot stat");
-  }
-  if (!S_ISREG(st.st_mode)) {
-    ::close(fd);
-    return corrupt_data(name + ": not a regular file (a FIFO, device or folder); a light field is a file written by "
-                        "`lftrack precompute`");
-  }
-  const auto bytes = static_cast<std::size_t>(st.st_size);
-  if (bytes < kHeaderBytes) {
-    ::close(fd);
-    return corrupt_data(name + ": truncated light-field file (" + std::to_string(bytes) +
-                        " bytes; the header alone is 1024)");
-  }
-  void* map = mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, fd, 0);
-  ::close(fd);
-  if (map == MAP_FAILED) return io_error(name + ": cannot memory-map");
-  std::shared_ptr<LightField> field(new LightField);
-  field->mapping_ = map;
-  field->mapping_bytes_ = bytes;
-  const auto* data = static_cast<const unsigned char*>(map);
-  const HeaderReader r(data);
+namespace {
 
+// Decodes and checks the 1024 header bytes at `data` (of the file `name`) into `h`.
+Status decode_header(const unsigned char* data, const std::string& name, LightField::Header* out) {
+  const HeaderReader r(data);
   if (std::memcmp(data, kMagic, 8) != 0) return corrupt_data(name + ": not a light-field file (bad magic)");
   const auto version = r.at<std::uint32_t>(8);
   if (version != kVersion) {
@@ -286,7 +277,7 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   if (r.at<std::uint32_t>(1020) != crc_of(data, 1020)) {
     return corrupt_data(name + ": header is corrupted (checksum mismatch)");
   }
-  Header& h = field->header_;
+  LightField::Header& h = *out;
   LightFieldGeometry& g = h.geometry;
   const auto storage = r.at<std::uint32_t>(16);
   if (storage > 2) return corrupt_data(name + ": unknown storage mode " + std::to_string(storage));
@@ -312,6 +303,18 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   char view_name[65] = {};
   std::memcpy(view_name, data + 428, 64);
   g.view_name = view_name;
+  h.settings_recorded = r.at<std::uint32_t>(492) == 1;
+  if (h.settings_recorded) {
+    const auto integration = r.at<std::uint32_t>(496);
+    if (integration > 1) return corrupt_data(name + ": unknown integration " + std::to_string(integration));
+    h.integration = static_cast<LightFieldIntegration>(integration);
+    h.roi_window = {r.at<std::int32_t>(500), r.at<std::int32_t>(504), r.at<std::int32_t>(508), r.at<std::int32_t>(512)};
+    h.vq_training_tiles = r.at<std::int32_t>(516);
+    h.margin_fraction = r.at<double>(520);
+    h.slice_step_mm = r.at<double>(528);
+    h.detector_hash = r.at<std::uint64_t>(536);
+    h.vq_seed = r.at<std::uint64_t>(544);
+  }
   if (Status s = g.validate(); !s.ok()) return s.with_context(name);
   // The pose and envelope the field was planned for: what the plan hash cannot vouch for when a
   // field is loaded without one (an outside probe loaded NaN envelopes and poses).
@@ -325,6 +328,67 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
   if (h.storage == LightFieldStorage::kVq && (h.codebook_size < 1 || h.codebook_size > 65536)) {
     return corrupt_data(name + ": bad codebook size");
   }
+  return {};
+}
+
+// Opens `file` for reading without blocking on a FIFO or device; refuses what is not a regular
+// file. `size` gets its bytes.
+Result<int> open_regular(const std::string& name, std::size_t* size) {
+  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) return not_found(name + ": cannot open light-field file (run `lftrack precompute`)");
+  struct stat st {};
+  if (fstat(fd, &st) != 0) {
+    ::close(fd);
+    return io_error(name + ": cannot stat");
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return corrupt_data(name + ": not a regular file (a FIFO, device or folder); a light field is a file written by "
+                        "`lftrack precompute`");
+  }
+  *size = static_cast<std::size_t>(st.st_size);
+  if (*size < kHeaderBytes) {
+    ::close(fd);
+    return corrupt_data(name + ": truncated light-field file (" + std::to_string(*size) +
+                        " bytes; the header alone is 1024)");
+  }
+  return fd;
+}
+
+}  // namespace
+
+Result<LightField::Header> LightField::read_header(const std::filesystem::path& file) {
+  const std::string name = file.string();
+  std::size_t bytes = 0;
+  auto fd = open_regular(name, &bytes);
+  if (!fd.ok()) return fd.status();
+  unsigned char data[kHeaderBytes];
+  const ssize_t got = ::pread(*fd, data, kHeaderBytes, 0);
+  ::close(*fd);
+  if (got != static_cast<ssize_t>(kHeaderBytes)) return io_error(name + ": cannot read the header");
+  Header h;
+  LFTRACK_RETURN_IF_ERROR(decode_header(data, name, &h));
+  return h;
+}
+
+Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem::path& file,
+                                                           std::optional<std::uint64_t> expected_ct_hash,
+                                                           std::optional<std::uint64_t> expected_plan_hash) {
+  const std::string name = file.string();
+  // Non-blocking: a FIFO or device named A.lf must not hang the program on open.
+  std::size_t bytes = 0;
+  auto fd = open_regular(name, &bytes);
+  if (!fd.ok()) return fd.status();
+  void* map = mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, *fd, 0);
+  ::close(*fd);
+  if (map == MAP_FAILED) return io_error(name + ": cannot memory-map");
+  std::shared_ptr<LightField> field(new LightField);
+  field->mapping_ = map;
+  field->mapping_bytes_ = bytes;
+  const auto* data = static_cast<const unsigned char*>(map);
+  const HeaderReader r(data);
+  LFTRACK_RETURN_IF_ERROR(decode_header(data, name, &field->header_));
+  Header& h = field->header_;
   const std::size_t payload = expected_payload(h);
   const std::uint64_t payload_field = r.at<std::uint64_t>(416);
   if (payload_field != payload) {

@@ -9,7 +9,6 @@
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/volume_io.hpp"
-#include "lftrack/host/progress_bar.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -52,57 +51,6 @@ tracking::LightFieldPlanInput PreparedScene::light_field_plan(int index) const {
   in.roi_centre_ct_mm = roi_centre_ct_mm;
   in.envelope = scene.envelope;
   return in;
-}
-
-std::filesystem::path default_light_field_dir(const Scene& scene) {
-  const std::string stem = scene.source.rfind("builtin:", 0) == 0
-                               ? "builtin-" + scene.source.substr(8)
-                               : std::filesystem::path(scene.source).stem().string();
-  return std::filesystem::path("out") / "lightfields" / stem;
-}
-
-std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name) {
-  return dir / (view_name + ".lf");
-}
-
-Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
-    const PreparedScene& p, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool,
-    const tracking::MuVolume* mu) {
-  if (mu == nullptr) mu = p.mu.get();
-  std::vector<std::shared_ptr<const tracking::LightField>> fields;
-  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
-    const std::string& name = p.scene.detectors[i].view.name;
-    ProgressBar bar("view " + name);
-    auto field = tracking::LightField::build(*mu, p.light_field_plan(int(i)), spec, pool,
-                                             [&](double f) { bar.update(f); });
-    if (!field.ok()) return field.status().with_context("view " + name);
-    bar.finish();
-    fields.push_back(*field);
-  }
-  return fields;
-}
-
-Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(
-    const PreparedScene& p, const std::filesystem::path& dir, const tracking::MuVolume* mu,
-    const tracking::LightFieldSpec* spec_or_null) {
-  const tracking::LightFieldSpec& spec = spec_or_null != nullptr ? *spec_or_null : p.scene.light_field;
-  const std::uint64_t ct_hash = tracking::volume_hash(mu != nullptr ? *mu : *p.mu);
-  std::vector<std::shared_ptr<const tracking::LightField>> fields;
-  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
-    const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
-    auto field =
-        tracking::LightField::load(file, ct_hash, tracking::plan_hash(p.light_field_plan(int(i)), spec));
-    if (!field.ok()) return field.status();
-    const auto& h = (*field)->header();
-    if (h.storage != spec.storage ||
-        (h.storage == tracking::LightFieldStorage::kVq && h.codebook_size != spec.vq_codebook_size)) {
-      return failed_precondition(file.string() + ": stores " + tracking::to_string(h.storage) +
-                                 ", the scene asks for " + tracking::to_string(spec.storage) +
-                                 "; run `lftrack precompute` again");
-    }
-    fields.push_back(*field);
-  }
-  return fields;
 }
 
 int PreparedScene::detector_index(const std::string& name) const {

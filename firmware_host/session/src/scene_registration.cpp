@@ -18,40 +18,6 @@ using tracking::Image;
 using tracking::ImageView;
 using tracking::Pose;
 
-namespace {
-
-// The fields of `spec` over `mu` from `dir`; missing or stale ones are built (as float, then
-// converted), saved and said so.
-Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_or_build_light_fields(
-    const PreparedScene& p, const tracking::MuVolume& mu, const tracking::LightFieldSpec& spec,
-    const std::filesystem::path& dir, tracking::ThreadPool* pool) {
-  auto fields = load_light_fields(p, dir, &mu, &spec);
-  if (fields.ok()) return fields;
-  spdlog::warn("light fields in {} not usable ({}); building them now", dir.string(),
-               fields.status().message());
-  tracking::LightFieldSpec float_spec = spec;
-  float_spec.storage = tracking::LightFieldStorage::kFloat32;
-  auto built = build_light_fields(p, float_spec, pool, &mu);
-  if (!built.ok()) return built.status();
-  std::error_code ec;
-  std::filesystem::create_directories(dir, ec);
-  std::vector<std::shared_ptr<const tracking::LightField>> stored;
-  for (std::size_t i = 0; i < built->size(); ++i) {
-    std::shared_ptr<const tracking::LightField> field = (*built)[i];
-    if (spec.storage != tracking::LightFieldStorage::kFloat32) {
-      auto converted = tracking::LightField::convert(*field, spec, pool);
-      if (!converted.ok()) return converted.status();
-      field = *converted;
-    }
-    const auto file = light_field_file(dir, p.scene.detectors[i].view.name);
-    if (auto s = field->save(file); !s.ok()) spdlog::warn("{}", s.message());
-    stored.push_back(field);
-  }
-  return stored;
-}
-
-}  // namespace
-
 Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const PreparedScene& p,
                                                                          const std::string& name,
                                                                          const std::filesystem::path& lf_dir,

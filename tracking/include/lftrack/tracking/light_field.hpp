@@ -125,6 +125,17 @@ class LightField {
     PoseEnvelope envelope;
     std::uint64_t ct_hash = 0;    // of the attenuation volume it was built from
     std::uint64_t plan_hash = 0;  // of the plan input and spec it was built for
+    // The settings it was built with beyond its geometry, so that a stale field can name what
+    // differs (light_field_differences). Files written before they were recorded have none:
+    // `settings_recorded` false.
+    bool settings_recorded = false;
+    std::uint64_t detector_hash = 0;  // detector_geometry_hash of the view it serves
+    PixelWindow roi_window;           // the detector pixels it serves
+    double margin_fraction = 0;
+    LightFieldIntegration integration = LightFieldIntegration::kSiddon;
+    double slice_step_mm = 0;   // as the spec gave it (0: the volume's finest spacing)
+    int vq_training_tiles = 0;  // VQ only
+    std::uint64_t vq_seed = 0;  // VQ only
   };
 
   ~LightField();
@@ -170,6 +181,9 @@ class LightField {
 
   // Writes a versioned, checksummed file.
   Status save(const std::filesystem::path& file) const;
+  // The header of a file, read alone (1024 bytes) and checked (magic, version, header checksum,
+  // geometry); the samples are not read.
+  static Result<Header> read_header(const std::filesystem::path& file);
   // Memory-maps a file and checks its version, size and checksums; then, if given, that it was
   // built for this CT and this plan. Each refusal says which check failed.
   static Result<std::shared_ptr<const LightField>> load(const std::filesystem::path& file,
@@ -202,5 +216,14 @@ std::uint64_t volume_hash(const MuVolume& mu);
 // own; fields walked by Siddon keep the hash they had before slices existed) and of the planning convention
 // (a file planned by an older lftrack is stale) for light-field files.
 std::uint64_t plan_hash(const LightFieldPlanInput& input, const LightFieldSpec& spec);
+// Identity of a detector's geometry: name, source, first pixel, axes, pitch and size.
+std::uint64_t detector_geometry_hash(const XrayView& view);
+
+// What differs between the field `header` describes and a field of `input` and `spec` over a
+// volume of hash `ct_hash`, one entry per setting, e.g. "integration (slices in the file, siddon
+// now)". A file that does not record its settings (written before they were recorded) whose plan
+// hash differs for no reason it records says so. Empty: the header describes that field.
+std::vector<std::string> light_field_differences(const LightField::Header& header, std::uint64_t ct_hash,
+                                                 const LightFieldPlanInput& input, const LightFieldSpec& spec);
 
 }  // namespace lftrack::tracking

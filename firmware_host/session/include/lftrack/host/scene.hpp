@@ -242,21 +242,46 @@ struct PreparedScene {
   tracking::LightFieldPlanInput light_field_plan(int index) const;
 };
 
-// Where light-field files of a scene live by default: out/lightfields/<scene file stem>
+// Light-field files (light_field_cache.cpp). A field depends on the attenuation volume it
+// samples, its plan (the view, ROI window, nominal pose, registration origin, envelope,
+// resolution, margin, integration and slice step) and its storage, and its file is named after
+// all of them: DIR/<view>-<key>.lf, the key 12 hex digits of their hash. Fields of scenes or
+// settings that differ never share a file: one folder (--lf-dir) keeps the fields of any number
+// of scenes, a field is never replaced by another's, and a stale field is left where it is (its
+// successor is written beside it). A file named <view>.lf, as lftrack named fields before, is
+// used where it is the field asked for.
+
+// The default folder of a scene's fields: out/lightfields/<scene file stem>
 // (out/lightfields/builtin-phantom for the built-in scene), relative to the working folder.
 std::filesystem::path default_light_field_dir(const Scene& scene);
-// The file of one view's field in `dir`.
-std::filesystem::path light_field_file(const std::filesystem::path& dir, const std::string& view_name);
+// The file of each view's field of `spec` (null: the scene's tracking.light_field) over `mu`
+// (null: the scene's CT) in `dir`, in the scene's order of detectors.
+std::vector<std::filesystem::path> light_field_files(const PreparedScene& scene, const std::filesystem::path& dir,
+                                                     const tracking::MuVolume* mu = nullptr,
+                                                     const tracking::LightFieldSpec* spec = nullptr);
 // Builds every view's field as `spec` says, on `pool`, with a progress bar per view on stderr,
 // from `mu` (null: the scene's CT).
 Result<std::vector<std::shared_ptr<const tracking::LightField>>> build_light_fields(
     const PreparedScene& scene, const tracking::LightFieldSpec& spec, tracking::ThreadPool* pool,
     const tracking::MuVolume* mu = nullptr);
-// Loads every view's field from `dir`, refusing files built for another volume (null: the
-// scene's CT), geometry or storage than `spec` (null: the scene's tracking.light_field).
+// Loads every view's field of `spec` (null: the scene's tracking.light_field) over `mu` (null:
+// the scene's CT) from `dir`. A field not there is refused (not found), naming every setting in
+// which the newest other field of that view in `dir` differs; a file that fails its checks is
+// refused with the reason.
 Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_light_fields(
     const PreparedScene& scene, const std::filesystem::path& dir, const tracking::MuVolume* mu = nullptr,
     const tracking::LightFieldSpec* spec = nullptr);
+// What load_or_build_light_fields did, per view.
+struct LightFieldCacheReport {
+  std::vector<std::filesystem::path> files;
+  std::vector<bool> built;  // built now; else loaded (up to date)
+  Status saved;             // the first save that failed (that field is used from memory)
+};
+// The fields of `spec` over `mu` from `dir`; those missing or unusable are built (as float, then
+// converted), saved beside any other and said so. A failed save is a warning (and in `report`).
+Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_or_build_light_fields(
+    const PreparedScene& scene, const tracking::MuVolume& mu, const tracking::LightFieldSpec& spec,
+    const std::filesystem::path& dir, tracking::ThreadPool* pool, LightFieldCacheReport* report = nullptr);
 
 // Reads the CT (or generates the phantom), converts it to attenuation, and resolves the ROI,
 // the registration origin, the nominal pose and each detector's ROI window. `ct_override`
