@@ -392,9 +392,11 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                 "Replace an existing --journal file, or an earlier lftrack archive in the --archive folder");
   app->add_option("--control", o->control,
                   "Control socket path, mode 0600 (datagrams: 'resume ID', 'reset ID', stop, quit, status)");
-  app->add_option("--auto-resume", o->auto_resume_s,
-                  "An unattended operator resumes this many seconds into each HOLD (0 to 3600)")
-      ->check(CLI::Validator(check_auto_resume_text, "SECONDS"));
+  // Not for `run`: in the room only a person ends a HOLD (the session refuses it there too).
+  if (mode != SimOptions::Mode::kRun)
+    app->add_option("--auto-resume", o->auto_resume_s,
+                    "An unattended operator resumes this many seconds into each HOLD (0 to 3600)")
+        ->check(CLI::Validator(check_auto_resume_text, "SECONDS"));
   app->add_option("--rt", o->rt,
                   "Real-time set-up: enforce or ignore (default: the scene's loop.realtime.mode)")
       ->check(CLI::IsMember({"enforce", "ignore"}));

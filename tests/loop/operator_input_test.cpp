@@ -151,6 +151,17 @@ TEST(ScriptedOperator, ResumesTheCurrentHoldAfterItsTimeAndNeverAFault) {
   EXPECT_EQ(fault.command, OperatorCommand::kNone) << "a FAULT needs a person";
 }
 
+// What a session on the room's devices refuses (LoopSession::create): an input that is no person,
+// alone or among others.
+TEST(ScriptedOperator, SaysItIsUnattendedAndSoDoInputsHoldingIt) {
+  EXPECT_TRUE(ScriptedOperator(10).unattended());
+  OperatorInputs people;
+  EXPECT_FALSE(people.unattended());
+  OperatorInputs with_a_script;
+  with_a_script.add(std::make_unique<ScriptedOperator>(10));
+  EXPECT_TRUE(with_a_script.unattended());
+}
+
 TEST(AutoResume, RefusesNonFiniteNegativeAndHugeValues) {
   for (double bad : {std::numeric_limits<double>::infinity(), std::nan(""), -1.0, -0.001, 1e12, 3600.5})
     EXPECT_FALSE(check_auto_resume_s(bad).ok()) << bad;

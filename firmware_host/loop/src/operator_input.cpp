@@ -280,4 +280,10 @@ void OperatorInputs::on_hold(const OperatorView& view, OperatorPoll* out) {
   for (auto& input : inputs_) input->on_hold(view, out);
 }
 
+bool OperatorInputs::unattended() const {
+  for (const auto& input : inputs_)
+    if (input->unattended()) return true;
+  return false;
+}
+
 }  // namespace lftrack::host

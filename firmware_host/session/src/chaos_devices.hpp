@@ -137,6 +137,7 @@ class ChaosOperator final : public OperatorInput {
  public:
   explicit ChaosOperator(Injector* injector) : injector_(injector) {}
   void poll(const OperatorView& view, OperatorPoll* out) override;
+  bool unattended() const override { return true; }
 
  private:
   Injector* injector_;

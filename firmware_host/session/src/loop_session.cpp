@@ -41,6 +41,7 @@ class BorrowedOperator final : public OperatorInput {
   explicit BorrowedOperator(OperatorInput* input) : input_(input) {}
   void poll(const OperatorView& view, OperatorPoll* out) override { input_->poll(view, out); }
   void on_hold(const OperatorView& view, OperatorPoll* out) override { input_->on_hold(view, out); }
+  bool unattended() const override { return input_->unattended(); }
 
  private:
   OperatorInput* input_;
@@ -373,11 +374,39 @@ Status check_session_options(const LoopSessionOptions& o) {
   return {};
 }
 
+// The real devices a session opens (the scene's V4L2 or GigE detectors, Modbus couch or CAN robot
+// under kScene), in words; empty when every device is simulated or replayed.
+static std::string real_devices(const PreparedScene& p, const LoopSessionOptions& o) {
+  if (o.devices != SessionDevices::kScene) return {};
+  std::string devices;
+  if (o.replay_sequence.empty() && !p.scene.detectors.empty() && frames_from_device(p.scene.detectors[0].frames))
+    devices = "detectors " + describe_frames(p.scene.detectors[0].frames) + (p.scene.detectors.size() > 1 ? ", ..." : "");
+  if (actuator_is_device(p.scene))
+    devices += (devices.empty() ? "" : "; ") + describe_actuator(p.scene.actuator);
+  return devices;
+}
+
+// In the room a HOLD ends only by a person's decision: a session on real devices takes no
+// unattended operator (auto_resume_s, or an unattended input among the hooks), whoever asks.
+static Status check_attended(const PreparedScene& p, const LoopSessionOptions& o) {
+  const std::string devices = real_devices(p, o);
+  if (devices.empty()) return {};
+  std::string unattended;
+  if (o.auto_resume_s) unattended = fmt::format("an automatic resume {} s into each HOLD", *o.auto_resume_s);
+  else if (o.hooks.operator_input != nullptr && o.hooks.operator_input->unattended())
+    unattended = "a scripted operator";
+  if (unattended.empty()) return {};
+  return failed_precondition("the room's devices (" + devices + ") take no unattended operator (" + unattended +
+                             "): a HOLD there ends only by a person's decision (the terminal, the control socket or "
+                             "the monitor page)");
+}
+
 Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p, const LoopSessionOptions& o,
                                                          tracking::ThreadPool* pool) {
   // Options first: a bad one is refused before minutes of light-field building, and before the
   // earlier archive is removed (--overwrite) or anything else is created.
   LFTRACK_RETURN_IF_ERROR(check_session_options(o));
+  LFTRACK_RETURN_IF_ERROR(check_attended(p, o));
   // One view cannot see depth along its central ray: tracked only when the scene says so.
   LFTRACK_RETURN_IF_ERROR(check_views_observable(p.scene));
   if (const auto blind = unobservable_direction_room(p.scene))

@@ -124,6 +124,10 @@ class OperatorInput {
     (void)view;
     (void)out;
   }
+  // True for an input that is no person: a script that answers HOLDs by itself. A session on the
+  // room's devices refuses it (LoopSession::create), so that only a person's decision ends a HOLD
+  // there.
+  virtual bool unattended() const { return false; }
 };
 
 // Tells a fresh key press from a held or auto-repeating key: a key counts only when the same key
@@ -201,6 +205,7 @@ class ScriptedOperator final : public OperatorInput {
  public:
   explicit ScriptedOperator(std::int64_t after_cycles) : after_cycles_(after_cycles) {}
   void poll(const OperatorView& view, OperatorPoll* out) override;
+  bool unattended() const override { return true; }
 
  private:
   std::int64_t after_cycles_;
@@ -213,6 +218,7 @@ class OperatorInputs final : public OperatorInput {
   bool empty() const { return inputs_.empty(); }
   void poll(const OperatorView& view, OperatorPoll* out) override;
   void on_hold(const OperatorView& view, OperatorPoll* out) override;
+  bool unattended() const override;  // any of them is
 
  private:
   std::vector<std::unique_ptr<OperatorInput>> inputs_;

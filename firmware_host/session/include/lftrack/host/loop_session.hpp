@@ -67,7 +67,9 @@ struct LoopSessionOptions {
   std::filesystem::path control_socket;   // empty: none
   bool terminal_operator = false;         // keys on a terminal's standard input
   std::optional<double> auto_resume_s;    // an unattended operator resumes this long into each HOLD
-                                          // (check_auto_resume_s: finite, 0 to kMaxAutoResumeS)
+                                          // (check_auto_resume_s: finite, 0 to kMaxAutoResumeS);
+                                          // refused, as is an unattended hooks.operator_input, where
+                                          // the session opens a real device (kScene)
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
   SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
   std::filesystem::path archive;          // empty: frames not archived

@@ -1,0 +1,85 @@
+// `lftrack run`, `replay` and `info` as a user runs them, on what issue 50's outside probe found:
+// an unattended operator offered for the treatment room, replays and archived frames that said
+// they moved a couch, a start-up check and an `ignore` scene that took real-time priority, and a
+// CT without a scene whose ROI was silently the volume centre. Each run is a few cycles of the
+// built-in scene with tiny light fields.
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/studies/plastimatch_peer.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+
+class RunCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    shared_ = new test::TempDir();
+    std::ofstream(shared_->path() / "sim.yaml") << scene_text();
+  }
+  static void TearDownTestSuite() { delete shared_; }
+
+  // The built-in scene with tiny light fields, `from` replaced by `to` where given.
+  static std::string scene_text(const std::string& from = "", const std::string& to = "") {
+    std::string scene = *builtin_scene_text(kBuiltinPhantom);
+    for (const std::string field : {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
+      scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+    if (!from.empty()) {
+      for (std::size_t at = scene.find(from); at != std::string::npos; at = scene.find(from, at + to.size()))
+        scene.replace(at, from.size(), to);
+    }
+    return scene;
+  }
+  static fs::path scene() { return shared_->path() / "sim.yaml"; }
+  static std::string lf_dir() { return (shared_->path() / "lf").string(); }
+
+  // `lftrack [-q] COMMAND --scene SCENE --lf-dir LF ARGS...`
+  static Status lftrack(const std::string& command, const fs::path& scene_file, const std::vector<std::string>& args,
+                        std::string* out, bool quiet = false) {
+    std::vector<std::string> argv = {LFTRACK_BIN_PATH};
+    if (quiet) argv.push_back("-q");
+    argv.insert(argv.end(), {command, "--scene", scene_file.string(), "--lf-dir", lf_dir()});
+    argv.insert(argv.end(), args.begin(), args.end());
+    return run_process(argv, out);
+  }
+
+  // The line of `out` that starts with `start` (empty if none).
+  static std::string line_starting(const std::string& out, const std::string& start) {
+    std::istringstream lines(out);
+    for (std::string line; std::getline(lines, line);)
+      if (line.rfind(start, 0) == 0) return line;
+    return {};
+  }
+
+  static inline test::TempDir* shared_ = nullptr;
+  test::TempDir dir_;
+};
+
+// Only a person ends a HOLD in the room: `run` has no unattended operator to offer (a usage
+// error, before anything is loaded); `sim` and `replay` keep it.
+TEST_F(RunCli, AutoResumeIsNoOptionOfRun) {
+  std::string out;
+  const Status s = lftrack("run", scene(), {"--auto-resume", "5", "--rt", "ignore"}, &out);
+  EXPECT_NE(s.message().find("(status 512)"), std::string::npos) << s.message() << "\n" << out;
+  EXPECT_NE(out.find("--auto-resume"), std::string::npos) << out;
+  EXPECT_EQ(out.find("pre-treatment checklist"), std::string::npos) << "refused before the checks: " << out;
+  ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "run", "--help"}, &out).ok()) << out;
+  EXPECT_EQ(out.find("--auto-resume"), std::string::npos) << out;
+  for (const char* command : {"sim", "replay"}) {
+    ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, command, "--help"}, &out).ok()) << out;
+    EXPECT_NE(out.find("--auto-resume"), std::string::npos) << command << ": " << out;
+  }
+}
+
+}  // namespace
+}  // namespace lftrack::host
