@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lftrack/host/sim_frame_source.hpp"
+#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "lftrack/sim/v4l2_loopback_writer.hpp"
@@ -230,7 +231,7 @@ Status serve_detectors(const ServeOptions& o) {
   for (std::size_t k = 0; k < addresses.size(); ++k) {
     sim::GigeFakeDetectorOptions c;
     c.interface = addresses[k];
-    c.serial = ("LFTRACK-" + scene->detectors[k].view.name).substr(0, 15);
+    c.serial = served_twin_id(scene->detectors[k].view.name);  // what the start-up checks expect of a twin
     c.rows = scene->detectors[k].view.rows;
     c.cols = scene->detectors[k].view.cols;
     auto render = [r, k](std::uint64_t, std::uint16_t* pixels, int rows, int cols) {

@@ -593,6 +593,11 @@ DeviceStatus GigeFrameSource::acquire(FramePair* pair, Deadline deadline) {
   return DeviceStatus::kOk;
 }
 
+DetectorIdentity GigeFrameSource::identity(std::size_t detector) const {
+  if (detector >= detectors_.size()) return {};
+  return {detectors_[detector]->camera(), detectors_[detector]->device_id()};
+}
+
 void GigeFrameSource::close() {
   stop_.store(true);
   if (reopener_.joinable()) reopener_.join();

@@ -78,6 +78,19 @@ TEST(SceneDevices, ReplayAndGigeResolveTheirSettings) {
   EXPECT_DOUBLE_EQ(g->detectors[0].frames.packet_timeout_ms, 40);
 }
 
+// The device id a GigE camera must answer with (the start-up checks compare it); written back.
+TEST(SceneDevices, AGigeCameraCanNameTheIdItMustAnswerWith) {
+  std::string gige = scene_with("{type: gige, camera: 10.0.0.5, id: PANEL-0001}");
+  gige.replace(gige.find("10.0.0.5", gige.find("10.0.0.5") + 1), 8, "10.0.0.6");
+  auto g = parse(gige);
+  ASSERT_TRUE(g.ok()) << g.status().message();
+  EXPECT_EQ(g->detectors[0].frames.id, "PANEL-0001");
+  EXPECT_EQ(frames_yaml(g->detectors[0].frames),
+            "{type: gige, camera: \"10.0.0.5\", buffers: 4, packet_timeout_ms: 20, id: \"PANEL-0001\"}");
+  EXPECT_EQ(served_twin_id("A"), "LFTRACK-A") << "how lftrack serve detectors names its cameras";
+  expect_refused(scene_with("{type: v4l2, device: /dev/video0, id: X}"), "unknown key 'id'");
+}
+
 TEST(SceneDevices, BadFrameSourcesAreRefusedWithTheLine) {
   expect_refused(scene_with("v4l2"), "v4l2 needs its device");
   expect_refused(scene_with("gige"), "gige needs its device");

@@ -63,6 +63,16 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
   }
 }
 
+// Detector `d` answered as `who`: what the scene expects of it is its frames.id where it names
+// one, else, for a camera that names itself as one of the simulator's served twins, this
+// detector's twin (empty: nothing to check against).
+std::string expected_id(const DetectorSpec& d, const drivers::DetectorIdentity& who) {
+  if (!d.frames.id.empty()) return d.frames.id;
+  return who.id.rfind(served_twin_id(""), 0) == 0 ? served_twin_id(d.view.name) : std::string();
+}
+
+// Opens and closes the detectors; each must answer as itself (a swapped pair of cables or
+// addresses is found here, not by a failed alignment).
 void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   std::string what = "detectors";
   for (const DetectorSpec& d : p.scene.detectors) what += " " + d.view.name;
@@ -82,13 +92,34 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
   if (!source.ok()) return add(r, what, CheckResult::kFail, source.status().message());
   drivers::FramePair pair;
   const Status opened = (*source)->open(&pair);
+  std::vector<drivers::DetectorIdentity> who(p.scene.detectors.size());
+  if (opened.ok())
+    for (std::size_t i = 0; i < who.size(); ++i) who[i] = (*source)->identity(i);
   (*source)->close();
   if (!opened.ok()) return add(r, what, CheckResult::kFail, opened.message());
+  CheckResult result = CheckResult::kPass;
   std::ostringstream found;
-  for (std::size_t i = 0; i < pair.frames.size(); ++i)
-    found << (i ? ", " : "") << p.scene.detectors[i].view.name << " " << pair.frames[i].pixels.rows() << " x "
-          << pair.frames[i].pixels.cols();
-  add(r, what, CheckResult::kPass, "opened and closed: " + found.str());
+  for (std::size_t i = 0; i < pair.frames.size(); ++i) {
+    const DetectorSpec& d = p.scene.detectors[i];
+    found << (i ? "; " : "") << d.view.name;
+    if (!who[i].address.empty()) found << " at " << who[i].address;
+    if (!who[i].id.empty()) found << " answered as " << who[i].id;
+    const std::string expected = expected_id(d, who[i]);
+    if (!expected.empty() && who[i].id != expected) {
+      found << ", not " << expected;
+      result = CheckResult::kFail;
+    } else if (expected.empty() && !who[i].id.empty()) {
+      found << " (unchecked: the scene names no frames.id)";
+      if (result == CheckResult::kPass) result = CheckResult::kWarn;
+    }
+    found << ", " << pair.frames[i].pixels.rows() << " x " << pair.frames[i].pixels.cols();
+  }
+  add(r, what, result,
+      "opened and closed: " + found.str() +
+          (result == CheckResult::kFail
+               ? ": each detector must answer as itself (cables or addresses swapped? frames.camera says where each "
+                 "is reached, frames.id what it must answer)"
+               : ""));
 }
 
 void check_detector_calibrations(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {

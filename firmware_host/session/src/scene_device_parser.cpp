@@ -59,9 +59,10 @@ Status SceneParser::parse_frames(const YAML::Node& n, const std::string& what, D
       f->trigger_value = static_cast<std::int32_t>(value);
     }
   } else {  // gige
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"type", "camera", "buffers", "packet_timeout_ms"}));
+    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"type", "camera", "buffers", "packet_timeout_ms", "id"}));
     LFTRACK_RETURN_IF_ERROR(need(n, "camera", what, &node));
     LFTRACK_RETURN_IF_ERROR(text(node, what + ".camera", &f->device));
+    if (n["id"]) LFTRACK_RETURN_IF_ERROR(text(n["id"], what + ".id", &f->id));
     if (n["buffers"]) LFTRACK_RETURN_IF_ERROR(integer(n["buffers"], what + ".buffers", 2, 64, &buffers));
     if (n["packet_timeout_ms"]) {
       LFTRACK_RETURN_IF_ERROR(positive(n["packet_timeout_ms"], what + ".packet_timeout_ms", &f->packet_timeout_ms));

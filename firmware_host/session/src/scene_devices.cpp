@@ -19,7 +19,9 @@ std::string frames_yaml(const DetectorFramesSpec& f) {
     y << "}";
   } else if (f.kind == "gige") {
     y << "{type: gige, camera: \"" << f.device << "\", buffers: " << f.buffers
-      << ", packet_timeout_ms: " << f.packet_timeout_ms << "}";
+      << ", packet_timeout_ms: " << f.packet_timeout_ms;
+    if (!f.id.empty()) y << ", id: \"" << f.id << "\"";
+    y << "}";
   } else if (f.kind == "replay" && !f.sequence.empty()) {
     y << "{type: replay, sequence: \"" << f.sequence << "\"}";
   } else {
@@ -47,6 +49,10 @@ std::string describe_actuator(const ActuatorSpec& a) {
     s << a.type;
   }
   return s.str();
+}
+
+std::string served_twin_id(const std::string& detector_name) {
+  return ("LFTRACK-" + detector_name).substr(0, 15);
 }
 
 bool frames_are_simulated(const Scene& scene) {

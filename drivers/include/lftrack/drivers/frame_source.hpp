@@ -31,6 +31,14 @@ struct FramePair {
   std::vector<Frame> frames;  // one per detector, in the scene's order
 };
 
+// Who answered as a detector: where it was reached (a GigE camera's address as given, a V4L2
+// device path) and the name the device gives itself (a GigE camera's device id, its serial
+// number). Either is empty where the source cannot tell.
+struct DetectorIdentity {
+  std::string address;
+  std::string id;
+};
+
 class FrameSource {
  public:
   virtual ~FrameSource() = default;
@@ -45,6 +53,12 @@ class FrameSource {
   // True once a finite source (an archived sequence) has delivered its last pair; the loop
   // then ends instead of counting the missing frames as faults.
   virtual bool exhausted() const { return false; }
+  // Once open() has succeeded, outside the cycle: who answered as detector `detector` (the
+  // scene's order). Empty where the source cannot tell (the default).
+  virtual DetectorIdentity identity(std::size_t detector) const {
+    (void)detector;
+    return {};
+  }
   virtual void close() = 0;
 };
 

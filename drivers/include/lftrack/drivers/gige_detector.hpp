@@ -187,6 +187,9 @@ class GigeFrameSource final : public FrameSource {
   Status open(FramePair* pair) override;
   void request_exposure(std::int64_t exposure_time_ns) override;
   DeviceStatus acquire(FramePair* pair, Deadline deadline) override;
+  // The camera as given (GigeDetectorOptions::camera) and the device id it named itself by at
+  // open (GenICam DeviceID: a fake camera's serial number).
+  DetectorIdentity identity(std::size_t detector) const override;
   void close() override;
   // Outside the cycle: reopens any detector that was marked gone (or never opened). Takes the
   // same lock as the source's own reopen thread, so the two never open one camera at once (two

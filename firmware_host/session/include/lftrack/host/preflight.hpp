@@ -5,7 +5,9 @@
 //   - the real-time set-up holds in enforce mode (or the operator waived it with --rt ignore);
 //   - the light fields are fresh for this CT and geometry (none is built at treatment time);
 //   - each detector opens and identifies itself (V4L2 or GigE format and size; a replayed
-//     sequence reads), then is closed again;
+//     sequence reads), then is closed again; a GigE camera must answer with the device id the
+//     scene's frames.id names, and a served twin (lftrack serve detectors) as its own detector's
+//     (served_twin_id), so swapped cables or addresses fail here, naming who answered where;
 //   - each device detector has its detector calibration, made for a detector of its name and
 //     size (the file's content hash is checked when it loads);
 //   - the couch or robot opens, answers a read-back (and, for CAN, its heartbeat), and is

@@ -58,7 +58,7 @@ struct RoiSpec {
 //   v4l2    a Video4Linux2 device: `device` (best a /dev/v4l/by-path or by-id link), `buffers`,
 //           an external trigger as a control id and value (0: free-running)
 //   gige    a GigE Vision camera through Aravis: `camera` (device id, serial or IP address),
-//           `buffers`, `packet_timeout_ms`
+//           `buffers`, `packet_timeout_ms`, `id` (the device id it must answer with)
 //   replay  an archived sequence folder (`sequence`; the same for every detector), so `run` can
 //           drive a real couch from archived frames; `lftrack replay --sequence` needs none here
 struct DetectorFramesSpec {
@@ -69,6 +69,10 @@ struct DetectorFramesSpec {
   std::int32_t trigger_value = 1;        // v4l2
   double packet_timeout_ms = 20;         // gige
   std::string sequence;                  // replay (absolute, or empty)
+  // gige `id`: the device id (serial number) the camera must answer with; the start-up checks
+  // refuse another. Empty: a served twin must answer as served_twin_id(name), another camera
+  // is reported unchecked.
+  std::string id;
 };
 
 struct DetectorSpec {

@@ -17,6 +17,11 @@ std::string frames_yaml(const DetectorFramesSpec& frames);
 // "modbus tcp 127.0.0.1:1502 unit 1", "can bridge /run/robot.sock node 1", "virtual", "none".
 std::string describe_actuator(const ActuatorSpec& actuator);
 
+// The device id (serial number) `lftrack serve detectors` gives the camera it serves as detector
+// `detector_name`, the simulator's twin of that detector: "LFTRACK-<name>", cut to the 15
+// characters a GigE Vision serial number holds.
+std::string served_twin_id(const std::string& detector_name);
+
 // What kind of device a scene names, asked by the session and the start-up checks, so that
 // device names are spelled here and in the parser only.
 bool frames_are_simulated(const Scene& scene);               // detectors' frames: sim
