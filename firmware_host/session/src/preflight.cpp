@@ -72,8 +72,10 @@ std::string expected_id(const DetectorSpec& d, const drivers::DetectorIdentity& 
 }
 
 // Opens and closes the detectors; each must answer as itself (a swapped pair of cables or
-// addresses is found here, not by a failed alignment).
-void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+// addresses is found here, not by a failed alignment). Sets (*twins)[i] when detector i answered
+// as the simulator's served twin of itself.
+void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r, std::vector<bool>* twins) {
+  twins->assign(p.scene.detectors.size(), false);
   std::string what = "detectors";
   for (const DetectorSpec& d : p.scene.detectors) what += " " + d.view.name;
   if (o.replay_sequence.empty() && frames_are_simulated(p.scene)) return add(r, what, CheckResult::kPass, "simulated (no device to open)");
@@ -112,6 +114,7 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
       found << " (unchecked: the scene names no frames.id)";
       if (result == CheckResult::kPass) result = CheckResult::kWarn;
     }
+    (*twins)[i] = !expected.empty() && who[i].id == expected && expected == served_twin_id(d.view.name);
     found << ", " << pair.frames[i].pixels.rows() << " x " << pair.frames[i].pixels.cols();
   }
   add(r, what, result,
@@ -122,14 +125,28 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
                : ""));
 }
 
-void check_detector_calibrations(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
-  for (const DetectorSpec& d : p.scene.detectors) {
+void check_detector_calibrations(const PreparedScene& p, const LoopSessionOptions& o, const std::vector<bool>& twins,
+                                 PreflightReport* r) {
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    const DetectorSpec& d = p.scene.detectors[i];
     const std::string what = "detector calibration of " + d.view.name;
     const bool device = o.replay_sequence.empty() && frames_from_device(d.frames);
+    if (d.simulator_calibration && device && !twins[i]) {
+      add(r, what, CheckResult::kFail,
+          "calibration: simulator on a device detector (" + describe_frames(d.frames) +
+              "): the simulator's detector model would correct a real panel's frames; name its detector calibration "
+              "as detectors[].calibration (lftrack calibrate detector --dark DIR --flood DIR). Only the simulator's "
+              "served twins take it (lftrack serve detectors, whose camera answers as " +
+              served_twin_id(d.view.name) + ")");
+      continue;
+    }
     if (d.simulator_calibration) {
       add(r, what, CheckResult::kWarn,
-          "calibration: simulator: the simulator's detector model corrects these frames (right only for frames "
-          "the simulator made, e.g. lftrack serve detectors)");
+          device ? "calibration: simulator: " + d.view.name + " answered as " + served_twin_id(d.view.name) +
+                       ", the simulator's served twin (lftrack serve detectors), whose frames its detector model "
+                       "corrects"
+                 : "calibration: simulator: the simulator's detector model corrects these frames (right only for "
+                   "frames the simulator made)");
       continue;
     }
     if (d.calibration_file.empty()) {
@@ -242,8 +259,9 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
   add(&r, "view geometry", CheckResult::kPass,
       "from the scene file " + p.scene.source + " (lftrack calibrate views writes it there)");
   check_light_fields(p, o, &r);
-  check_detectors(p, o, &r);
-  check_detector_calibrations(p, o, &r);
+  std::vector<bool> twins;
+  check_detectors(p, o, &r, &twins);
+  check_detector_calibrations(p, o, twins, &r);
   check_actuator(p, o, &r);
   check_couch_link(p, o, &r);
   return r;

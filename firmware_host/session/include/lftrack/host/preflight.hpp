@@ -9,7 +9,8 @@
 //     scene's frames.id names, and a served twin (lftrack serve detectors) as its own detector's
 //     (served_twin_id), so swapped cables or addresses fail here, naming who answered where;
 //   - each device detector has its detector calibration, made for a detector of its name and
-//     size (the file's content hash is checked when it loads);
+//     size (the file's content hash is checked when it loads); `calibration: simulator` only
+//     where the detector answered as the simulator's served twin of itself;
 //   - the couch or robot opens, answers a read-back (and, for CAN, its heartbeat), and is
 //     held and closed again: nothing moves;
 //   - the couch calibration, where named, loads; where not, a warning says that corrections

@@ -82,7 +82,8 @@ struct DetectorSpec {
   // detectors[i].calibration: a detector calibration file (`lftrack calibrate detector`;
   // absolute, or empty). Frames from devices are corrected with it; simulated frames use the
   // simulator's detector model. `calibration: simulator` says so for a device too (the device
-  // is the simulator's twin, e.g. `lftrack serve detectors`): the start-up checks warn.
+  // is the simulator's twin, e.g. `lftrack serve detectors`): the start-up checks warn where the
+  // device answered as the served twin of this detector, and refuse it on any other device.
   std::string calibration_file;
   bool simulator_calibration = false;
 };
