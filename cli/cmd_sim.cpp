@@ -217,8 +217,8 @@ Status run(const SimOptions& o) {
   auto session = LoopSession::create(*prepared, so, &pool);
   if (!session.ok()) return session.status();
   if (const drivers::ReplayFrameSource* replay = (*session)->replay())
-    spdlog::info("{}: replaying {} pairs from {}{}", prepared->scene.name, replay->pairs(), o.sequence,
-                 o.fast ? " as fast as possible" : " at the recorded pace");
+    spdlog::info("{}: replaying {} pairs from {}{}", prepared->scene.name, replay->pairs(),
+                 replay->sequence().directory.string(), o.fast ? " as fast as possible" : " at the recorded pace");
   else
     spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
                  o.fast ? " on a simulated clock" : "",
@@ -245,7 +245,7 @@ Status run(const SimOptions& o) {
     if (!journal.empty()) j["journal"] = journal;
     if (replay != nullptr) {
       const drivers::ReplayCounters& c = replay->counters();
-      j["replay"] = {{"sequence", o.sequence},
+      j["replay"] = {{"sequence", replay->sequence().directory.string()},
                      {"pairs", replay->pairs()},
                      {"pairs_delivered", c.pairs_delivered},
                      {"missing_frames", c.missing},

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cctype>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -53,6 +54,13 @@ class RunCli : public ::testing::Test {
     return run_process(argv, out);
   }
 
+  // Whether the summary in `out` says no correction was sent ("corrections sent 0", then no digit).
+  static bool says_none_sent(const std::string& out) {
+    const std::string said = "corrections sent 0";
+    const std::size_t at = out.find(said);
+    return at != std::string::npos && (at + said.size() == out.size() || !std::isdigit(static_cast<unsigned char>(out[at + said.size()])));
+  }
+
   // The line of `out` that starts with `start` (empty if none).
   static std::string line_starting(const std::string& out, const std::string& start) {
     std::istringstream lines(out);
@@ -79,6 +87,48 @@ TEST_F(RunCli, AutoResumeIsNoOptionOfRun) {
     ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, command, "--help"}, &out).ok()) << out;
     EXPECT_NE(out.find("--auto-resume"), std::string::npos) << command << ": " << out;
   }
+}
+
+// A replay moves nothing: its summary says no correction was sent. `run` on archived frames
+// cannot drive a real couch (refused at load, with the line); with no actuator it tracks and
+// reports, naming the sequence it replays.
+TEST_F(RunCli, ArchivedFramesMoveNothingAndSaySo) {
+  const fs::path sequence = dir_.path() / "seq";
+  std::string out;
+  ASSERT_TRUE(
+      lftrack("sim", scene(), {"--fast", "--cycles", "20", "--journal", "", "--archive", sequence.string()}, &out, true)
+          .ok())
+      << out;
+  ASSERT_TRUE(
+      lftrack("replay", scene(), {"--sequence", sequence.string(), "--fast", "--json", "--journal", ""}, &out, true)
+          .ok())
+      << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["cycles"].get<int>(), 20);
+  EXPECT_EQ(j["commands"].get<int>(), 0) << "nothing is sent in a replay";
+  ASSERT_TRUE(lftrack("replay", scene(), {"--sequence", sequence.string(), "--fast", "--journal", ""}, &out, true).ok())
+      << out;
+  EXPECT_TRUE(says_none_sent(out)) << out;
+
+  const std::string archived = "frames: {type: replay, sequence: " + sequence.string() + "}";
+  const fs::path couch = dir_.path() / "archive-couch.yaml";
+  std::string couch_text = scene_text("frames: sim", archived);
+  couch_text.replace(couch_text.find("  type: virtual\n"), 16,
+                     "  type: modbus\n  modbus: {tcp: {host: 127.0.0.1, port: 1}}\n");
+  std::ofstream(couch) << couch_text;
+  const Status refused = lftrack("run", couch, {"--rt", "ignore", "--journal", ""}, &out);
+  EXPECT_NE(refused.message().find("(status 256)"), std::string::npos) << refused.message() << "\n" << out;
+  EXPECT_NE(out.find(couch.string() + ":"), std::string::npos) << "at load, with the line: " << out;
+  EXPECT_NE(out.find("archived frames cannot move a patient"), std::string::npos) << out;
+  EXPECT_EQ(out.find("pre-treatment checklist"), std::string::npos) << out;
+
+  std::string none_text = scene_text("frames: sim", archived);
+  none_text.replace(none_text.find("  type: virtual\n"), 16, "  type: none\n");
+  const fs::path none = dir_.path() / "archive-none.yaml";
+  std::ofstream(none) << none_text;
+  ASSERT_TRUE(lftrack("run", none, {"--rt", "ignore", "--journal", ""}, &out).ok()) << out;
+  EXPECT_NE(out.find("replaying 20 pairs from " + sequence.string()), std::string::npos) << out;
+  EXPECT_TRUE(says_none_sent(out)) << out;
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
@@ -111,8 +112,9 @@ struct LoopOptions {
   std::int64_t cycles = 20;
 };
 
-LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator, const LoopOptions& o = {}) {
-  LoopUnderTest t;
+// The loop on `frames` and `actuator` (with t->registration made for it), or why create() refused.
+Result<std::unique_ptr<TrackingLoop>> create_loop(drivers::FrameSource* frames, drivers::Actuator* actuator,
+                                                  LoopUnderTest* t, const LoopOptions& o = {}) {
   tracking::RegistrationSetup setup;
   LoopParts parts;
   for (const char* name : {"A", "B"}) {
@@ -127,10 +129,9 @@ LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuato
     parts.corrections.emplace_back();
   }
   auto registration = tracking::Registration::create(std::make_shared<PatternRenderer>(o.per_render), setup, nullptr);
-  EXPECT_TRUE(registration.ok()) << registration.status().message();
-  if (!registration.ok()) return t;
-  t.registration = std::move(registration).value();
-  parts.registration = t.registration.get();
+  if (!registration.ok()) return registration.status();
+  t->registration = std::move(registration).value();
+  parts.registration = t->registration.get();
   parts.frames = frames;
   parts.actuator = actuator;
   parts.journal = o.journal;
@@ -139,7 +140,12 @@ LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuato
   settings.cycles = o.cycles;
   settings.limits.max_frame_age_ms = o.max_frame_age_ms;
   settings.simulated_clock = true;
-  auto loop = TrackingLoop::create(parts, settings);
+  return TrackingLoop::create(parts, settings);
+}
+
+LoopUnderTest make_loop(drivers::FrameSource* frames, drivers::Actuator* actuator, const LoopOptions& o = {}) {
+  LoopUnderTest t;
+  auto loop = create_loop(frames, actuator, &t, o);
   EXPECT_TRUE(loop.ok()) << loop.status().message();
   if (loop.ok()) t.loop = std::move(loop).value();
   return t;
@@ -240,6 +246,35 @@ TEST(TrackingLoop, OnTheSimulatedClockTheHostsComputingTimeNeverAgesAFrame) {
     EXPECT_NE(r.gate_reason, std::uint8_t(GateReason::kStaleFrame)) << "cycle " << r.cycle;
     EXPECT_GT(r.evaluations, 0u) << "cycle " << r.cycle;
   }
+// Frames from an archive (live() false) show a patient who is no longer there: the loop refuses
+// to drive an actuator that moves a patient by them (issue 50), and accepts one that does not.
+TEST(TrackingLoop, ArchivedFramesCannotDriveAnActuatorThatMovesAPatient) {
+  class ArchivedFrames final : public drivers::FrameSource {
+   public:
+    Status open(drivers::FramePair* pair) override { return frames_.open(pair); }
+    drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override {
+      return frames_.acquire(pair, deadline);
+    }
+    bool live() const override { return false; }
+    void close() override {}
+   private:
+    ThrowingFrames frames_{-1, false};
+  };
+  class RecordedReadbacks final : public drivers::ForwardingActuator {
+   public:
+    using ForwardingActuator::ForwardingActuator;
+    bool moves_patient() const override { return false; }
+  };
+  ArchivedFrames frames;
+  RecordingActuator couch;
+  LoopUnderTest t;
+  auto refused = create_loop(&frames, &couch, &t);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("archived frames cannot move a patient"), std::string::npos)
+      << refused.status().message();
+  RecordedReadbacks recorded(&couch);
+  LoopUnderTest accepted = make_loop(&frames, &recorded);
+  EXPECT_TRUE(accepted.loop);
 }
 
 }  // namespace

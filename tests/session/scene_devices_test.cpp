@@ -193,5 +193,15 @@ TEST(SceneDevices, SimulatedDetectorsCanNameACouchLink) {
   EXPECT_EQ(scene->sim.couch_link, "/srv/room/hil/room.link");
 }
 
+// Frames from an archive show a patient who is no longer there: a real couch or robot corrected
+// by them would move the patient in the room now for motion the archive shows (issue 50: `run`
+// accepted it, drove the recorded read-backs instead, and said the couch had answered).
+TEST(SceneDevices, ArchivedFramesWithARealCouchOrRobotAreRefused) {
+  expect_refused(scene_with("{type: replay, sequence: archive/day1}", "type: modbus\n  modbus: {tcp: {host: a}}"),
+                 "archived frames cannot move a patient");
+  expect_refused(scene_with("replay", "type: can\n  can: {interface: can0}"), "archived frames cannot move a patient");
+  EXPECT_TRUE(parse(scene_with("{type: replay, sequence: archive/day1}")).ok()) << "with no actuator: track and report";
+}
+
 }  // namespace
 }  // namespace lftrack::host

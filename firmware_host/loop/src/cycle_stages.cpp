@@ -333,8 +333,9 @@ DeviceStatus TrackingLoop::Impl::send_step(CycleState& c) {
   const DeviceStatus sent = parts.actuator->command(step, to_deadline(due_ns));
   if (sent == DeviceStatus::kOk) {
     commanded_total += step;
-    c.command = step;
-    c.command_sent = true;
+    // Recorded as sent only where it moves a patient (not the recorded read-backs of a replay).
+    c.command_sent = parts.actuator->moves_patient();
+    if (c.command_sent) c.command = step;
     approve_next_step = false;
   }
   return sent;
@@ -352,15 +353,17 @@ void TrackingLoop::Impl::settle(CycleState& c) {
     predictor.reset();
   }
   c.hold_id = hold_id;
-  c.beam_permit = machine.beam_permit();
+  const bool permitted = machine.beam_permit();
   // The beam-off clock runs while TRACK keeps the beam off, from the first cycle after the
   // alignment's (whose cold registration has no time limit on the real clock, and whose set-up
   // move goes out at its end); it stops with the beam on, and in HOLD or FAULT (the operator's
   // resume or reset approves the move anew).
-  if (c.beam_permit || c.aligning || now != TrackingState::kTrack)
+  if (permitted || c.aligning || now != TrackingState::kTrack)
     beam_off_since_ns = -1;
   else if (beam_off_since_ns < 0)
     beam_off_since_ns = c.start_ns;
+  // Frames that show no patient in the room now (a replay) permit no beam, whatever they show.
+  c.beam_permit = permitted && parts.frames->live();
   if (parts.actuator != nullptr) parts.actuator->set_beam_permit(c.beam_permit);
   c.state_after = now;
 }

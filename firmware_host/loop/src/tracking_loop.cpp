@@ -50,6 +50,10 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   if (parts.corrections.size() != views)
     return invalid_argument("tracking loop: one detector correction per detector");
   if (!(settings.loop.period_ms > 0)) return invalid_argument("tracking loop: the period must be positive");
+  if (!parts.frames->live() && parts.actuator != nullptr && parts.actuator->moves_patient())
+    return failed_precondition(
+        "tracking loop: archived frames cannot move a patient (they show one who is no longer there); track "
+        "and report them with no actuator, or with their recorded read-backs");
   auto impl = std::make_unique<Impl>();
   impl->parts = parts;
   impl->settings = settings;

@@ -104,6 +104,7 @@ class ChaosFrameSource final : public drivers::FrameSource {
   Status open(drivers::FramePair* pair) override { return inner_->open(pair); }
   void request_exposure(std::int64_t exposure_time_ns) override;
   drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override;
+  bool live() const override { return inner_->live(); }
   void close() override { inner_->close(); }
 
  private:

@@ -188,6 +188,12 @@ Status SceneParser::check_devices(const YAML::Node& root, const Scene& scene) co
   if (scene.actuator.type == "virtual" && !scene.detectors.empty() && scene.detectors[0].frames.kind != "sim")
     return error(root["actuator"], "actuator.type virtual is the simulator's couch: it moves a simulated patient, so "
                                    "the detectors must be simulated (frames: sim)");
+  const bool real_actuator = scene.actuator.type == "modbus" || scene.actuator.type == "can";
+  if (real_actuator && !scene.detectors.empty() && scene.detectors[0].frames.kind == "replay")
+    return error(root["actuator"], "archived frames cannot move a patient: detectors with frames from replay show "
+                                   "a patient who is no longer there, so the " + scene.actuator.type +
+                                   " actuator must not be driven by them (actuator.type none tracks and reports them; "
+                                   "lftrack replay --sequence replays any archive)");
   return {};
 }
 

@@ -34,6 +34,10 @@ class Actuator {
   // archived sequence): the loop then reads back after the frames. Otherwise it reads back at
   // the cycle's start, the frames' exposure time, before waiting for them.
   virtual bool readback_follows_frames() const { return false; }
+  // False for an actuator that moves no patient (the recorded read-backs of an archived
+  // sequence): the loop still tells it its corrections, for its read-back's target, but records
+  // none as sent.
+  virtual bool moves_patient() const { return true; }
   virtual void close() = 0;
 };
 

@@ -19,6 +19,7 @@ class ForwardingActuator : public Actuator {
   void hold() override { inner_->hold(); }
   void set_beam_permit(bool permit) override { inner_->set_beam_permit(permit); }
   bool readback_follows_frames() const override { return inner_->readback_follows_frames(); }
+  bool moves_patient() const override { return inner_->moves_patient(); }
   void close() override { inner_->close(); }
 
  protected:

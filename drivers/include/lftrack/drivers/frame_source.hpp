@@ -53,6 +53,9 @@ class FrameSource {
   // True once a finite source (an archived sequence) has delivered its last pair; the loop
   // then ends instead of counting the missing frames as faults.
   virtual bool exhausted() const { return false; }
+  // False for frames that show no patient in the room now (an archived sequence): the loop
+  // permits no beam on them, and no actuator that moves a patient may be driven by them.
+  virtual bool live() const { return true; }
   // Once open() has succeeded, outside the cycle: who answered as detector `detector` (the
   // scene's order). Empty where the source cannot tell (the default).
   virtual DetectorIdentity identity(std::size_t detector) const {

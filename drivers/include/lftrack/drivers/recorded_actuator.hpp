@@ -5,7 +5,8 @@
 // can only tell the patient's own motion from those corrections by the couch's read-back. This
 // actuator gives the loop that read-back: readback() returns the travel recorded for the pair
 // the replay source delivered last. Commands are accepted and reported (the read-back's target
-// follows them, so the loop's read-back check holds) but move nothing: the frames are fixed.
+// follows them, so the loop's read-back check holds) but move nothing: the frames are fixed, and
+// the loop records no command as sent (moves_patient).
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/drivers/replay_frame_source.hpp"
@@ -23,6 +24,7 @@ class RecordedActuator final : public Actuator {
   void hold() override {}
   void close() override {}
   bool readback_follows_frames() const override { return true; }
+  bool moves_patient() const override { return false; }
 
  private:
   const ReplayFrameSource* frames_;

@@ -50,6 +50,7 @@ class ReplayFrameSource final : public FrameSource {
   void request_exposure(std::int64_t exposure_time_ns) override;
   DeviceStatus acquire(FramePair* pair, Deadline deadline) override;
   bool exhausted() const override;
+  bool live() const override { return false; }  // recorded frames: the patient has gone
   void close() override;
 
   std::size_t pairs() const { return sequence_.pairs.size(); }

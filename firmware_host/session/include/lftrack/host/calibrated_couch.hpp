@@ -29,6 +29,7 @@ class CalibratedCouch final : public drivers::Actuator {
   drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
   void hold() override { couch_->hold(); }
   void set_beam_permit(bool permit) override { couch_->set_beam_permit(permit); }
+  bool moves_patient() const override { return couch_->moves_patient(); }
   void close() override { couch_->close(); }
 
   // The conversions, for tests and reports.

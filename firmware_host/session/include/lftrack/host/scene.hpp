@@ -59,8 +59,9 @@ struct RoiSpec {
 //           an external trigger as a control id and value (0: free-running)
 //   gige    a GigE Vision camera through Aravis: `camera` (device id, serial or IP address),
 //           `buffers`, `packet_timeout_ms`, `id` (the device id it must answer with)
-//   replay  an archived sequence folder (`sequence`; the same for every detector), so `run` can
-//           drive a real couch from archived frames; `lftrack replay --sequence` needs none here
+//   replay  an archived sequence folder (`sequence`; the same for every detector), which `run`
+//           tracks and reports (nothing sent, no beam; a modbus or can actuator is refused at
+//           load: archived frames cannot move a patient); `lftrack replay --sequence` needs none
 struct DetectorFramesSpec {
   std::string kind = "sim";
   std::string device;  // v4l2: device path; gige: the camera
