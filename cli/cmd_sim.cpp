@@ -183,12 +183,17 @@ Status run(const SimOptions& o) {
   // Real-time set-up first, so every thread made afterwards inherits the policy and affinity:
   // the registration's workers run at the cycle's priority; the simulated detectors drop one
   // level below it, the journal and archive writers to SCHED_OTHER (realtime_setup.hpp). Only
-  // for runs on the real clock: an offline run (--fast) on SCHED_FIFO would spin every core at
-  // real-time priority and starve the host, for no timing it needs.
+  // for runs on the real clock in enforce mode: an offline run (--fast) on SCHED_FIFO would spin
+  // every core at real-time priority and starve the host, for no timing it needs; ignore means
+  // none of it; and `run --check` applies nothing, it says whether the set-up could be applied.
   const bool real_clock = o.mode == SimOptions::Mode::kRun || !o.fast;
-  RealtimeReport offline;
-  offline.offline = true;
-  auto report = real_clock ? apply_realtime_setup(rt) : Result<RealtimeReport>(offline);
+  Result<RealtimeReport> report = realtime_not_applied("offline run on a simulated clock");
+  if (real_clock && !rt.enforce)
+    report = realtime_not_applied(o.rt == "ignore" ? "--rt ignore" : "loop.realtime.mode: ignore");
+  else if (real_clock && o.check)
+    report = check_realtime_setup(rt);
+  else if (real_clock)
+    report = apply_realtime_setup(rt);
   // `run` lists a failed set-up among its start-up checks; the others stop here.
   if (!report.ok() && o.mode != SimOptions::Mode::kRun) return report.status();
   if (report.ok()) {

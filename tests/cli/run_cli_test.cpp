@@ -131,5 +131,25 @@ TEST_F(RunCli, ArchivedFramesMoveNothingAndSaySo) {
   EXPECT_TRUE(says_none_sent(out)) << out;
 }
 
+// `ignore` applies no real-time set-up at all, and the summary says so; `run --check` applies
+// none either (it says whether the set-up could be applied). Asserted on what lftrack reports,
+// so the test holds with or without the privileges.
+TEST_F(RunCli, IgnoreAndTheStartUpChecksApplyNoRealtimeSetUp) {
+  std::string out;
+  ASSERT_TRUE(lftrack("sim", scene(), {"--cycles", "2", "--json", "--journal", ""}, &out, true).ok()) << out;
+  const auto j = nlohmann::json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(j["realtime"].get<std::string>().rfind("not applied (loop.realtime.mode: ignore)", 0), 0u) << j["realtime"];
+
+  const fs::path enforce = dir_.path() / "enforce.yaml";
+  std::ofstream(enforce) << scene_text("    mode: ignore          # a treatment-room host sets enforce and cpus\n",
+                                       "    mode: enforce\n    cpus: [0]\n");
+  (void)lftrack("run", enforce, {"--check"}, &out);  // other checks may fail; the real-time line is the point
+  const std::size_t at = out.find("real-time set-up:");
+  ASSERT_NE(at, std::string::npos) << out;
+  const std::string line = out.substr(at, out.find('\n', at) - at);
+  EXPECT_NE(line.find("nothing applied"), std::string::npos) << out;
+  EXPECT_EQ(line.find("memory locked"), std::string::npos) << line;
+}
+
 }  // namespace
 }  // namespace lftrack::host

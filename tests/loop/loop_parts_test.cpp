@@ -1,12 +1,15 @@
 // The loop's small parts: motion prediction, running statistics, real-time set-up.
 
 #include <gtest/gtest.h>
+#include <sched.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <tuple>
 #include <vector>
@@ -200,6 +203,45 @@ TEST(RealtimeSetup, IgnoreAlwaysStartsAndEnforceSaysWhy) {
   // Leave the test process as it was.
   sched_param normal{};
   pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+}
+
+// The memory this process has locked (VmLck in /proc/self/status), in kB.
+long locked_kb() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("VmLck:", 0) == 0) return std::strtol(line.c_str() + 6, nullptr, 10);
+  return -1;
+}
+
+// `lftrack run --check` asks whether the set-up could be applied, and applies none of it (issue
+// 50: the check ran at SCHED_FIFO 80 with its memory locked); with or without the privileges.
+TEST(RealtimeSetup, ACheckAppliesNothing) {
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  ASSERT_EQ(sched_getaffinity(0, sizeof allowed, &allowed), 0);
+  int cpu = 0;
+  while (!CPU_ISSET(cpu, &allowed)) ++cpu;
+  ASSERT_EQ(sched_getscheduler(0), SCHED_OTHER) << "the test starts under normal scheduling";
+  const long locked_before = locked_kb();
+  RealtimeSpec spec;
+  spec.enforce = true;
+  spec.priority = 80;
+  spec.cpus = {cpu};
+  auto checked = check_realtime_setup(spec);
+  EXPECT_EQ(sched_getscheduler(0), SCHED_OTHER) << "no SCHED_FIFO taken";
+  EXPECT_EQ(locked_kb(), locked_before) << "no memory locked";
+  if (checked.ok()) {
+    EXPECT_EQ(checked->summary().rfind("nothing applied (a check)", 0), 0u) << checked->summary();
+  } else {
+    EXPECT_NE(checked.status().message().find("nothing applied"), std::string::npos) << checked.status().message();
+  }
+  spec.cpus = {CPU_SETSIZE + 1};  // no such CPU: refused with the reason, whatever the privileges
+  auto outside = check_realtime_setup(spec);
+  ASSERT_FALSE(outside.ok());
+  EXPECT_NE(outside.status().message().find("not among this process's CPUs"), std::string::npos)
+      << outside.status().message();
+  EXPECT_EQ(realtime_not_applied("loop.realtime.mode: ignore").summary(),
+            "not applied (loop.realtime.mode: ignore): normal scheduling, memory not locked");
 }
 
 }  // namespace

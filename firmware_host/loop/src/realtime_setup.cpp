@@ -1,19 +1,92 @@
 #include "lftrack/loop/realtime_setup.hpp"
 
+#include <linux/capability.h>
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/resource.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
+#include <fstream>
 
 namespace lftrack::host {
 
 std::string RealtimeReport::summary() const {
-  if (offline) return "not applied (offline run on a simulated clock): normal scheduling, memory not locked";
+  if (checked)
+    return std::string("nothing applied (a check): memory ") + (memory_locked ? "can" : "cannot") + " be locked, " +
+           "SCHED_FIFO " + (fifo ? "can" : "cannot") + " be taken, " + (affinity ? "pinning allowed" : "not pinned");
+  if (!not_applied.empty()) return "not applied (" + not_applied + "): normal scheduling, memory not locked";
   std::string s = std::string("memory ") + (memory_locked ? "locked" : "not locked") + ", " +
                   (fifo ? "SCHED_FIFO" : "normal scheduling") + ", " + (affinity ? "pinned" : "not pinned");
   return s;
+}
+
+RealtimeReport realtime_not_applied(std::string why) {
+  RealtimeReport report;
+  report.not_applied = std::move(why);
+  return report;
+}
+
+namespace {
+
+// Whether the process holds `capability` in its effective set (/proc/self/status, CapEff).
+bool has_capability(int capability) {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);) {
+    if (line.rfind("CapEff:", 0) != 0) continue;
+    const unsigned long long mask = std::strtoull(line.c_str() + 7, nullptr, 16);
+    return ((mask >> capability) & 1ULL) != 0;
+  }
+  return false;
+}
+
+std::string limit_text(rlim_t limit) {
+  return limit == RLIM_INFINITY ? std::string("unlimited") : std::to_string(static_cast<unsigned long long>(limit));
+}
+
+}  // namespace
+
+Result<RealtimeReport> check_realtime_setup(const RealtimeSpec& spec) {
+  RealtimeReport report;
+  report.checked = true;
+  report.not_applied = "a check: nothing applied";
+  rlimit memlock{}, rtprio{};
+  ::getrlimit(RLIMIT_MEMLOCK, &memlock);
+  ::getrlimit(RLIMIT_RTPRIO, &rtprio);
+  report.memory_locked = has_capability(CAP_IPC_LOCK) || memlock.rlim_cur == RLIM_INFINITY;
+  if (!report.memory_locked)
+    report.warnings.push_back("mlockall would fail or run out: RLIMIT_MEMLOCK is " + limit_text(memlock.rlim_cur) +
+                              " bytes, not unlimited, and no CAP_IPC_LOCK");
+  report.fifo = has_capability(CAP_SYS_NICE) ||
+                (rtprio.rlim_cur == RLIM_INFINITY || rtprio.rlim_cur >= rlim_t(std::max(spec.priority, 0)));
+  if (!report.fifo)
+    report.warnings.push_back("SCHED_FIFO priority " + std::to_string(spec.priority) + " would be refused: RLIMIT_RTPRIO is " +
+                              limit_text(rtprio.rlim_cur) + " and no CAP_SYS_NICE");
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  const bool known = ::sched_getaffinity(0, sizeof allowed, &allowed) == 0;
+  std::string outside;
+  for (int cpu : spec.cpus)
+    if (!known || cpu < 0 || cpu >= CPU_SETSIZE || !CPU_ISSET(cpu, &allowed))
+      outside += (outside.empty() ? "" : ", ") + std::to_string(cpu);
+  report.affinity = !spec.cpus.empty() && outside.empty();
+  if (spec.cpus.empty())
+    report.warnings.push_back("loop.realtime.cpus names no CPU to pin the cycle to");
+  else if (!outside.empty())
+    report.warnings.push_back("CPU affinity would be refused: CPU " + outside + " not among this process's CPUs");
+  if (spec.enforce && !report.warnings.empty()) {
+    std::string reasons;
+    for (const std::string& w : report.warnings) reasons += (reasons.empty() ? "" : "; ") + w;
+    return failed_precondition("real-time set-up (loop.realtime.mode: enforce) could not be applied (a check: "
+                               "nothing applied): " +
+                               reasons +
+                               "; run with CAP_SYS_NICE and CAP_IPC_LOCK (or rtprio and memlock limits in "
+                               "/etc/security/limits.conf), or set loop.realtime.mode: ignore / --rt ignore");
+  }
+  return report;
 }
 
 Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
