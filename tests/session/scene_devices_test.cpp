@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <variant>
 
@@ -185,12 +186,36 @@ TEST(SceneDevices, ADetectorCalibrationMustExist) {
   EXPECT_TRUE(found->detectors[1].calibration_file.empty());
 }
 
-TEST(SceneDevices, SimulatedDetectorsCanNameACouchLink) {
-  std::string text = *builtin_scene_text(kBuiltinPhantom);
+// `frames` and `actuator` as scene_with, and sim.couch_link named.
+std::string with_couch_link(const std::string& frames, const std::string& actuator) {
+  std::string text = scene_with(frames, actuator);
   text.replace(text.find("detector_blur_px: 0.5"), 21, "detector_blur_px: 0.5\n  couch_link: hil/room.link");
-  auto scene = parse(text);
-  ASSERT_TRUE(scene.ok()) << scene.status().message();
-  EXPECT_EQ(scene->sim.couch_link, "/srv/room/hil/room.link");
+  return text;
+}
+
+TEST(SceneDevices, SimulatedDetectorsCanNameACouchLink) {
+  for (const char* served : {"type: modbus\n  modbus: {tcp: {host: 127.0.0.1}}", "type: can\n  can: {interface: can0}"}) {
+    auto scene = parse(with_couch_link("sim", served));
+    ASSERT_TRUE(scene.ok()) << scene.status().message();
+    EXPECT_EQ(scene->sim.couch_link, "/srv/room/hil/room.link");
+  }
+}
+
+// A room link that nothing would read or write is a mistake in the scene, not a quiet no-op
+// (issue 50): only simulated detectors read it, and only a served couch or robot writes it.
+TEST(SceneDevices, ACouchLinkNoDeviceCanUseIsRefusedWithTheLine) {
+  expect_refused(with_couch_link("sim", "type: none"), "sim.couch_link");
+  expect_refused(with_couch_link("sim", "type: none"), "actuator.type none");
+  expect_refused(with_couch_link("sim", "type: virtual"), "actuator.type virtual");
+  std::string gige = with_couch_link("{type: gige, camera: 10.0.0.5}", "type: modbus\n  modbus: {tcp: {host: a}}");
+  gige.replace(gige.find("10.0.0.5", gige.find("10.0.0.5") + 1), 8, "10.0.0.6");
+  expect_refused(gige, "simulated detectors");
+  auto line = parse(with_couch_link("sim", "type: none"));
+  ASSERT_FALSE(line.ok());
+  const std::string text = with_couch_link("sim", "type: none");
+  const int couch_link_line = int(std::count(text.begin(), text.begin() + long(text.find("couch_link")), '\n')) + 1;
+  EXPECT_EQ(line.status().message().rfind("room.yaml:" + std::to_string(couch_link_line) + ":", 0), 0u)
+      << "the couch_link's line: " << line.status().message();
 }
 
 // Frames from an archive show a patient who is no longer there: a real couch or robot corrected

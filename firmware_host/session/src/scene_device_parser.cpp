@@ -194,6 +194,19 @@ Status SceneParser::check_devices(const YAML::Node& root, const Scene& scene) co
                                    "a patient who is no longer there, so the " + scene.actuator.type +
                                    " actuator must not be driven by them (actuator.type none tracks and reports them; "
                                    "lftrack replay --sequence replays any archive)");
+  // A served couch's room link: written by that couch or robot, read by simulated detectors. A
+  // link that nothing in the scene would write or read is a mistake in the scene.
+  if (!scene.sim.couch_link.empty()) {
+    const YAML::Node at = root["sim"]["couch_link"];
+    if (!real_actuator)
+      return error(at, "sim.couch_link is a served couch's or robot's room link, and actuator.type " +
+                           scene.actuator.type + " is neither: nothing would write it (a modbus or can actuator "
+                           "served by lftrack serve couch|robot --room FILE does)");
+    if (!scene.detectors.empty() && scene.detectors[0].frames.kind != "sim")
+      return error(at, "sim.couch_link is read by simulated detectors, and these take their frames from " +
+                           scene.detectors[0].frames.kind +
+                           " (a detector server reads the link itself: lftrack serve detectors --room FILE)");
+  }
   return {};
 }
 
