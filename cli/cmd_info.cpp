@@ -10,7 +10,11 @@
 namespace lftrack::host::cli {
 
 Command add_info_command(CLI::App* parent) {
-  auto* app = parent->add_subcommand("info", "Print the scene's CT volume and X-ray geometry");
+  auto* app = parent->add_subcommand(
+      "info",
+      "Print the scene's CT volume and X-ray geometry. A CT given with --ct to a scene that names no "
+      "roi.centre_mm (e.g. the built-in one) has its ROI, and its registration origin unless the scene names "
+      "registration_origin_mm, at the volume centre; the output says so");
   auto options = std::make_shared<SceneOptions>();
   add_scene_options(app, options.get());
   return [options]() -> Status {
@@ -39,10 +43,13 @@ Command add_info_command(CLI::App* parent) {
     std::printf("  extent mm     %s\n", v3(g.extent_mm()).c_str());
     std::printf("  HU range      %.0f .. %.0f\n", double(lo), double(hi));
     std::printf("  mu_water      %.4f /mm\n", p.scene.ct.mu_water_per_mm);
-    std::printf("roi             centre %s mm, size %s mm (CT frame)\n", v3(p.roi_centre_ct_mm).c_str(),
-                v3(p.scene.roi.size_mm).c_str());
-    std::printf("registration    origin %s mm (CT) = %s mm (room)\n", v3(p.registration_origin_ct_mm).c_str(),
-                v3(p.registration_origin_room_mm()).c_str());
+    const char* volume_centre = ": the volume centre, as no scene names roi.centre_mm";
+    std::printf("roi             centre %s mm, size %s mm (CT frame)%s\n", v3(p.roi_centre_ct_mm).c_str(),
+                v3(p.scene.roi.size_mm).c_str(), p.roi_centre_is_volume_centre ? volume_centre : "");
+    const bool origin_is_volume_centre = p.roi_centre_is_volume_centre && !p.scene.registration_origin_ct_mm;
+    std::printf("registration    origin %s mm (CT) = %s mm (room)%s\n", v3(p.registration_origin_ct_mm).c_str(),
+                v3(p.registration_origin_room_mm()).c_str(),
+                origin_is_volume_centre ? ": the volume centre, as no scene names it (registration_origin_mm)" : "");
     std::printf("envelope        +-%.1f mm, +-%.1f deg\n", p.scene.envelope.translation_mm,
                 p.scene.envelope.rotation_deg);
     for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {

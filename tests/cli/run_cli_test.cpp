@@ -151,5 +151,19 @@ TEST_F(RunCli, IgnoreAndTheStartUpChecksApplyNoRealtimeSetUp) {
   EXPECT_EQ(line.find("memory locked"), std::string::npos) << line;
 }
 
+// `info --ct` on the built-in scene, which names no ROI centre for another CT: the ROI and the
+// registration origin are the volume centre, and the output says so on both lines.
+TEST_F(RunCli, InfoSaysWhenTheRoiAndOriginAreTheVolumeCentre) {
+  LFTRACK_REQUIRE_SHARED_DATA(test::totalseg_aorta());
+  std::string out;
+  ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "-q", "info", "--ct", test::totalseg_aorta().string()}, &out).ok()) << out;
+  EXPECT_NE(line_starting(out, "roi").find("the volume centre"), std::string::npos) << out;
+  EXPECT_NE(line_starting(out, "registration").find("the volume centre"), std::string::npos) << out;
+  ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "-q", "info"}, &out).ok()) << out;
+  EXPECT_EQ(out.find("volume centre"), std::string::npos) << "the built-in scene names its target: " << out;
+  ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "info", "--help"}, &out).ok()) << out;
+  EXPECT_NE(out.find("volume centre"), std::string::npos) << "--help says what --ct alone does: " << out;
+}
+
 }  // namespace
 }  // namespace lftrack::host

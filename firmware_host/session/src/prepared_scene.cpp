@@ -121,6 +121,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
     out.roi_centre_ct_mm = *phantom_target + Vector3d(0, 12, 0);
   } else {
     out.roi_centre_ct_mm = out.ct->geometry.centre_mm();
+    out.roi_centre_is_volume_centre = true;
     spdlog::warn("no ROI centre for {}; using the volume centre", out.scene.ct.path);
   }
   if (out.scene.registration_origin_ct_mm) {

@@ -235,6 +235,9 @@ struct PreparedScene {
   std::shared_ptr<const tracking::MuVolume> world_mu;
   Eigen::Vector3d registration_origin_ct_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
+  // Nothing named the ROI centre (a CT given with --ct to a scene without roi.centre_mm): it is
+  // the volume's centre, and so is the registration origin unless the scene names that.
+  bool roi_centre_is_volume_centre = false;
   tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
   std::vector<tracking::PixelWindow> roi_windows;  // per detector: the ROI's projection
   SimExposure exposure;  // the simulated detectors' dose (sim.exposure), set once for the scene
