@@ -134,10 +134,10 @@ void check_detector_calibrations(const PreparedScene& p, const LoopSessionOption
     if (d.simulator_calibration && device && !twins[i]) {
       add(r, what, CheckResult::kFail,
           "calibration: simulator on a device detector (" + describe_frames(d.frames) +
-              "): the simulator's detector model would correct a real panel's frames; name its detector calibration "
-              "as detectors[].calibration (lftrack calibrate detector --dark DIR --flood DIR). Only the simulator's "
-              "served twins take it (lftrack serve detectors, whose camera answers as " +
-              served_twin_id(d.view.name) + ")");
+              ") that did not answer as the simulator's served twin of " + d.view.name + " (" +
+              served_twin_id(d.view.name) +
+              ", lftrack serve detectors): the simulator's detector model would correct a real panel's frames; name "
+              "its detector calibration as detectors[].calibration (lftrack calibrate detector --dark DIR --flood DIR)");
       continue;
     }
     if (d.simulator_calibration) {
