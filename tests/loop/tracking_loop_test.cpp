@@ -246,6 +246,8 @@ TEST(TrackingLoop, OnTheSimulatedClockTheHostsComputingTimeNeverAgesAFrame) {
     EXPECT_NE(r.gate_reason, std::uint8_t(GateReason::kStaleFrame)) << "cycle " << r.cycle;
     EXPECT_GT(r.evaluations, 0u) << "cycle " << r.cycle;
   }
+}
+
 // Frames from an archive (live() false) show a patient who is no longer there: the loop refuses
 // to drive an actuator that moves a patient by them (issue 50), and accepts one that does not.
 TEST(TrackingLoop, ArchivedFramesCannotDriveAnActuatorThatMovesAPatient) {
