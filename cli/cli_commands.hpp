@@ -25,6 +25,9 @@ using Command = std::function<Status()>;
 CLI::Validator finite_in(double lo, double hi, bool lo_open = false, bool hi_open = false);
 // Refuses an empty value (`--out ""`), which would otherwise read as "not given".
 CLI::Validator not_empty();
+// A seed: decimal digits only, 0 to 18446744073709551615 (CLI11 took -1 and 2^64 as the largest
+// seed without a word; issue 50 probe).
+CLI::Validator seed_value();
 
 // Options every command that needs a scene shares.
 struct SceneOptions {

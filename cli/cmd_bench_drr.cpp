@@ -34,7 +34,7 @@ Command add_bench_drr_command(CLI::App* parent) {
   app->add_option("--repeats", o->bench.repeats, "Timed renders per pose and view")
       ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
-  app->add_option("--seed", o->bench.seed, "Pose sampling seed")->capture_default_str();
+  app->add_option("--seed", o->bench.seed, "Pose sampling seed")->check(seed_value())->capture_default_str();
   app->add_flag("--no-peers", o->no_peers, "Skip plastimatch");
   app->add_option("--render-threads", o->bench.render_threads, "Threads for the timed renders, 1 to 256")
       ->check(CLI::Range(1, 256))

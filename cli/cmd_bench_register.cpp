@@ -35,7 +35,7 @@ Command add_bench_register_command(CLI::App* parent) {
                   "Cold problems repeated with Siddon DRRs inside the registration (slow; 0 skips)")
       ->capture_default_str()
       ->check(CLI::Range(0, 100000));
-  app->add_option("--seed", o->bench.seed, "Seed")->capture_default_str();
+  app->add_option("--seed", o->bench.seed, "Seed")->check(seed_value())->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o]() -> Status {
     tracking::ThreadPool pool(o->scene.threads);

@@ -223,7 +223,7 @@ Command add_calibrate_views_command(CLI::App* parent) {
                 "Solve the pixel pitch, holding the source-to-detector distance at the nominal value");
   app->add_flag("--sim", o->sim,
                 "Render the phantom at the scene's geometry, calibrate, print recovery errors");
-  app->add_option("--seed", o->seed, "With --sim: placement, drawing errors and noise")
+  app->add_option("--seed", o->seed, "With --sim: placement, drawing errors and noise")->check(seed_value())
       ->capture_default_str();
   app->add_option("--photons", o->photons, "With --sim: open-field quanta per pixel, 0 (no noise) to 1e9")
       ->check(finite_in(0, 1e9))

@@ -96,7 +96,7 @@ Command add_calibrate_couch_command(CLI::App* parent) {
   app->add_option("--photons", o->photons, "Open-field quanta per pixel of the phantom images, 0 (no noise) to 1e9")
       ->check(finite_in(0, 1e9))
       ->capture_default_str();
-  app->add_option("--seed", o->seed, "Noise of the phantom images")->capture_default_str();
+  app->add_option("--seed", o->seed, "Noise of the phantom images")->check(seed_value())->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o] { return run(*o); };
 }

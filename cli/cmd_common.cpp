@@ -1,4 +1,5 @@
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -13,6 +14,19 @@ CLI::Validator not_empty() {
   return CLI::Validator(
       [](const std::string& text) -> std::string { return text.empty() ? "an empty value names nothing" : ""; },
       "");
+}
+
+CLI::Validator seed_value() {
+  return CLI::Validator(
+      [](const std::string& text) -> std::string {
+        const bool digits = !text.empty() && text.size() <= 20 &&
+                            text.find_first_not_of("0123456789") == std::string::npos;
+        errno = 0;
+        if (digits) (void)std::strtoull(text.c_str(), nullptr, 10);
+        if (!digits || errno == ERANGE) return "'" + text + "' is not a seed (a whole number from 0 to 18446744073709551615)";
+        return {};
+      },
+      "SEED");
 }
 
 CLI::Validator finite_in(double lo, double hi, bool lo_open, bool hi_open) {

@@ -1,4 +1,4 @@
-// `lftrack journal export FILE [--csv]`: every valid record of a journal, in file order, as JSON
+// `lftrack journal export FILE [--csv|--summary]`: every valid record of a journal, in file order, as JSON
 // lines (one object per cycle) or CSV on stdout. The reader resynchronises past damage, so a bad
 // frame loses only itself.
 //
@@ -27,6 +27,7 @@
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
 namespace lftrack::host::cli {
@@ -73,7 +74,8 @@ void print_csv(const std::vector<JournalRecord>& records) {
       "command_sent,cmd_tx_mm,cmd_ty_mm,cmd_tz_mm,cmd_rx_deg,cmd_ry_deg,cmd_rz_deg,"
       "beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm,event,"
       "hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
-      "operator_first_refusal,operator_refusals\n");
+      "operator_first_refusal,operator_refusals,"
+      "target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,target_ry_deg,target_rz_deg,command_acked_ns\n");
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
@@ -85,10 +87,12 @@ void print_csv(const std::vector<JournalRecord>& records) {
     print_mm_deg(r.command);
     std::printf(",%d,%d,%u,%u,%.4f,\"%s\"", r.beam_permit, r.overrun, r.skipped_periods, r.dropped_before,
                 r.true_residual_mm, event_name(r.event).c_str());
-    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\",\"%s\",\"%s\"\n", r.hold_id,
+    std::printf(",%u,\"%s\",%u,\"%s\",\"%s\",\"%s\",\"%s\"", r.hold_id,
                 operator_command_name(r.operator_command).c_str(), unsigned{r.operator_refused},
                 refusal_name(r.operator_refusal).c_str(), code_name<BeamWithheld>(r.beam_withheld).c_str(),
                 refusal_name(r.operator_first_refusal).c_str(), refusals_text(r.operator_refused_by_reason).c_str());
+    print_mm_deg(r.true_target_residual);
+    std::printf(",%lld\n", static_cast<long long>(r.command_acked_ns));
   }
 }
 
@@ -113,6 +117,8 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"skipped_periods", r.skipped_periods},
                      {"dropped_before", r.dropped_before},
                      {"true_residual_mm", r.true_residual_mm},
+                     {"true_target_residual", pose_delta_json(r.true_target_residual)},
+                     {"command_acked_ns", r.command_acked_ns},
                      {"event", event_name(r.event)},
                      {"hold_id", r.hold_id},
                      {"operator_command", operator_command_name(r.operator_command)},
@@ -164,10 +170,42 @@ std::string summary(const JournalContents& c) {
 struct ExportOptions {
   std::string file;
   bool csv = false;
+  bool summary = false;
   std::string dicom_sro;
   SceneOptions scene;
   std::int64_t cycle = -1;  // -1: the last cycle whose registration the gate applied
 };
+
+// `--summary`: the run's figures from its records, as the loop's summary computes them (one
+// accumulator, tracking_accuracy.hpp): cycles per state, the target residual per room axis and the
+// share of TRACK cycles beyond 1 and 2 mm (simulation), the exposure-to-acknowledgement latency.
+void print_summary_json(const JournalContents& contents) {
+  TrackingAccuracy accuracy(contents.format_version >= 4);
+  std::array<std::int64_t, 5> states{};
+  std::int64_t commands = 0, beam_on = 0;
+  for (const JournalRecord& r : contents.records) {
+    accuracy.add(r);
+    if (r.state < states.size()) ++states[r.state];
+    commands += r.command_sent != 0;
+    beam_on += r.beam_permit != 0;
+  }
+  nlohmann::json j;
+  j["format_version"] = contents.format_version;
+  j["records"] = contents.records.size();
+  nlohmann::json per_state;
+  for (std::size_t i = 0; i < states.size(); ++i) per_state[state_name(std::uint8_t(i))] = states[i];
+  j["states"] = per_state;
+  j["commands"] = commands;
+  j["beam_on_cycles"] = beam_on;
+  const auto target = accuracy.target_residual();
+  const auto latency = accuracy.latency();
+  j["target_residual"] = target ? to_json(*target) : nlohmann::json(nullptr);
+  j["latency_exposure_to_ack_ms"] = latency ? to_json(*latency) : nlohmann::json(nullptr);
+  if (contents.format_version < 4)
+    j["note"] = "journal format " + std::to_string(contents.format_version) +
+                " records no target residual per axis and no acknowledgement time";
+  std::printf("%s\n", j.dump(2).c_str());
+}
 
 // `--dicom-sro FILE`: one cycle's registered pose as a DICOM Spatial Registration object. Only a
 // registration the safety gate applied in a cycle that ended in TRACK is exported (a HOLD's or a
@@ -240,6 +278,12 @@ Command add_journal_command(CLI::App* parent) {
                                        "referencing the scene's planning CT (a DICOM series); needs --scene")
                            ->check(not_empty())
                            ->excludes(csv);
+  app->add_flag("--summary", o->summary,
+                "Print the run's figures instead of the records (JSON): cycles per state, commands, the "
+                "target's true residual per room axis with the share of TRACK cycles beyond 1 and 2 mm "
+                "(simulation), exposure-to-acknowledgement latency p50/p95/p99")
+      ->excludes(csv)
+      ->excludes(dicom);
   add_scene_options(app, &o->scene);
   app->add_option("--cycle", o->cycle, "With --dicom-sro: the cycle (default: the last one the gate applied)")
       ->check(CLI::Range(std::int64_t(0), std::int64_t(1) << 50))
@@ -252,7 +296,9 @@ Command add_journal_command(CLI::App* parent) {
       warn_each_problem(o->file, *contents);
       return export_dicom(*o, *contents);
     }
-    if (o->csv)
+    if (o->summary)
+      print_summary_json(*contents);
+    else if (o->csv)
       print_csv(contents->records);
     else
       print_json_lines(contents->records);

@@ -127,6 +127,12 @@ Status write_dicom_result(const RegisterOptions& o, const PreparedScene& p, cons
 Status run(const RegisterOptions& o) {
   if (o.sim == !o.frames.empty()) return invalid_argument("give either --frames A B or --sim");
   if (!o.dicom_sro.empty()) LFTRACK_RETURN_IF_ERROR(check_registration_path(o.dicom_sro).with_context("--dicom-sro"));
+  if (!o.save_frames.empty()) {  // a folder, or nothing yet: checked before the CT is loaded
+    std::error_code ec;
+    const auto status = std::filesystem::symlink_status(o.save_frames, ec);
+    if (!ec && std::filesystem::exists(status) && !std::filesystem::is_directory(status))
+      return failed_precondition("--save-frames " + o.save_frames + ": not a folder (the raw frames are written into one)");
+  }
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
@@ -209,7 +215,9 @@ Status run(const RegisterOptions& o) {
   if (o.i0_counts > 0)
     for (tracking::DetectorCorrection& c : *corrections) c.open_field_counts = o.i0_counts;
   if (!o.save_frames.empty()) {
-    std::filesystem::create_directories(o.save_frames);
+    std::error_code made;
+    std::filesystem::create_directories(o.save_frames, made);
+    if (made) return io_error("--save-frames " + o.save_frames + ": cannot create the folder: " + made.message());
     for (std::size_t i = 0; i < raw.size(); ++i) {
       Image<float> as_float(raw[i].rows(), raw[i].cols());
       for (std::size_t k = 0; k < raw[i].pixels().size(); ++k) as_float.pixels()[k] = raw[i].pixels()[k];
@@ -381,7 +389,7 @@ Command add_register_command(CLI::App* parent) {
   app->add_option("--renderer", o->renderer, "DRR renderer")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
   app->add_flag("--fiducial", o->fiducial, "Add the scene's first fiducial (hybrid measure, paper 2)");
-  app->add_option("--seed", o->seed, "Noise seed of synthetic frames")->capture_default_str();
+  app->add_option("--seed", o->seed, "Noise seed of synthetic frames")->check(seed_value())->capture_default_str();
   app->add_option("--i0", o->i0_counts, "Open-field counts of every detector's frames (default: its calibration's, else the sim detector's)")
       ->check(finite_in(0, 1e9, true));
   app->add_option("--save-frames", o->save_frames, "Write the raw frames as 16-bit TIFF into this folder");

@@ -91,6 +91,11 @@ Status serve_couch(const ServeOptions& o) {
   }
   auto dynamics = couch_dynamics(o);
   if (!dynamics.ok()) return dynamics.status();
+  if (o.scene_given) {  // the unit the scene's couch driver addresses (the server answers only it)
+    auto scene = load_scene(o.scene.scene);
+    if (!scene.ok()) return scene.status();
+    if (scene->actuator.type == "modbus") server.unit_id = scene->actuator.modbus.unit_id;
+  }
   auto couch = sim::ServedCouch::start(*dynamics, o.room);
   if (!couch.ok()) return couch.status();
   auto modbus = sim::ModbusCouchServer::start(couch->get(), server);

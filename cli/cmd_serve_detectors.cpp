@@ -218,6 +218,15 @@ Status serve_detectors(const ServeOptions& o) {
     return invalid_argument("give one --address per detector (" + std::to_string(views) + ")");
   if (!o.loopback.empty() && o.loopback.size() != views)
     return invalid_argument("give one --v4l2loopback device per detector (" + std::to_string(views) + ")");
+  // Each twin's id is what the start-up checks tell the detectors apart by: two alike would let
+  // swapped cameras pass.
+  for (std::size_t a = 0; a < views; ++a)
+    for (std::size_t b = a + 1; b < views; ++b)
+      if (served_twin_id(scene->detectors[a].view.name) == served_twin_id(scene->detectors[b].view.name))
+        return invalid_argument("detectors '" + scene->detectors[a].view.name + "' and '" +
+                                scene->detectors[b].view.name + "' would be served with one device id (" +
+                                served_twin_id(scene->detectors[a].view.name) +
+                                "), so a swap could not be told apart: rename one");
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();

@@ -91,6 +91,21 @@ void print_summary(const LoopSummary& s) {
   if (s.residual_mean_mm)
     std::printf("residual (true, TRACK cycles): mean %.3f mm, p95 %.3f mm, max %.3f mm\n",
                 *s.residual_mean_mm, *s.residual_p95_mm, *s.residual_max_mm);
+  if (const auto& t = s.target_residual) {
+    std::printf("target (true, TRACK cycles) mean +- SD: x %+.2f +- %.2f, y %+.2f +- %.2f, z %+.2f +- %.2f mm; "
+                "rotations %+.2f +- %.2f, %+.2f +- %.2f, %+.2f +- %.2f deg\n",
+                t->translation_mean_mm[0], t->translation_sd_mm[0], t->translation_mean_mm[1], t->translation_sd_mm[1],
+                t->translation_mean_mm[2], t->translation_sd_mm[2], t->rotation_mean_deg[0], t->rotation_sd_deg[0],
+                t->rotation_mean_deg[1], t->rotation_sd_deg[1], t->rotation_mean_deg[2], t->rotation_sd_deg[2]);
+    std::printf("target 3D error: mean %.2f mm, p95 %.2f mm; TRACK cycles beyond 1 mm %.1f %%, beyond 2 mm %.1f %% "
+                "(with the beam on: %.1f %%, %.1f %% of %lld)\n",
+                t->error_3d_mean_mm, t->error_3d_p95_mm, 100 * t->share_over_1mm, 100 * t->share_over_2mm,
+                100 * t->beam_on_share_over_1mm, 100 * t->beam_on_share_over_2mm,
+                static_cast<long long>(t->beam_on_cycles));
+  }
+  if (const auto& l = s.command_latency)
+    std::printf("exposure to actuator acknowledgement: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms (%lld commands)\n",
+                l->p50_ms, l->p95_ms, l->p99_ms, l->max_ms, static_cast<long long>(l->commands));
   std::printf(
       "cycle work: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms; overruns %lld (periods skipped "
       "%lld)\n",
@@ -258,6 +273,12 @@ Status run(const SimOptions& o) {
                      {"wrong_size_frames", c.wrong_size},
                      {"late_pairs", c.late}};
     }
+    if (const IgtlServer* igtl = (*session)->igtl()) {
+      const IgtlCounters c = igtl->counters();
+      j["igtl"] = {{"clients", c.clients_total},          {"clients_dropped", c.clients_dropped},
+                   {"transforms_sent", c.transforms_sent}, {"statuses_sent", c.statuses_sent},
+                   {"records_skipped", c.records_skipped}};  // cycles that never reached a client
+    }
     if (archive != nullptr)
       j["archive"] = {{"directory", o.archive},
                       {"pairs_written", archive->pairs_written()},
@@ -364,8 +385,8 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                             "Chaos soak: faults from the whole catalogue at random moments drawn from SEED, the "
                             "safety invariants checked every cycle, in segments on a simulated clock (--cycles: "
                             "in all, default 20000, 0 until Ctrl-C); exit 1 on any violation. The faults drawn "
-                            "follow from SEED; the states they lead to are not bit-for-bit reproducible (each "
-                            "registration has a wall-clock budget)")
+                            "follow from SEED; the states they lead to are not bit-for-bit reproducible (the "
+                            "Modbus time-outs, CAN heartbeats and injected stalls run on the real clock)")
                 ->check(CLI::Validator(
                     [](const std::string& text) {
                       const bool digits = !text.empty() && text.size() <= 18 &&

@@ -119,7 +119,7 @@ Command add_study_capture_range_command(CLI::App* parent) {
       ->capture_default_str();
   app->add_option("--renderer", o->renderer, "DRR renderer inside the registration")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
-  app->add_option("--seed", o->seed, "Seed of gold poses, starts and noise")->capture_default_str();
+  app->add_option("--seed", o->seed, "Seed of gold poses, starts and noise")->check(seed_value())->capture_default_str();
   app->add_option("--shard", o->shard, "Run only shard k of n (k/n) of the samples, for a job array; join with "
                                        "`study merge`")
       ->capture_default_str();
@@ -159,7 +159,7 @@ Command add_study_sensitivity_command(CLI::App* parent) {
   app->add_option("--start-tre", o->study.start_tre_mm, "Initial mean TRE of the starts (mm, more than 0, at most 100)")
       ->check(finite_in(0, 100, true))
       ->capture_default_str();
-  app->add_option("--seed", o->study.seed, "Seed of gold poses, starts and noise")->capture_default_str();
+  app->add_option("--seed", o->study.seed, "Seed of gold poses, starts and noise")->check(seed_value())->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
   return [o]() -> Status {
     tracking::ThreadPool pool(o->scene.threads);

@@ -128,7 +128,7 @@ Command add_study_realism_command(CLI::App* parent) {
       ->check(CLI::Range(1, 8));
   app->add_option("--renderer", o->renderer, "DRR renderer inside the registration")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
-  app->add_option("--seed", o->seed, "Seed of gold poses, starts, noise and anatomy")->capture_default_str();
+  app->add_option("--seed", o->seed, "Seed of gold poses, starts, noise and anatomy")->check(seed_value())->capture_default_str();
   app->add_option("--shard", o->shard, "Run only shard k of n (k/n) of the gold poses")->capture_default_str();
   app->add_option("--only", o->only, "Factor sets to run (ideal, spectrum, scatter, detector, soft_tissue, "
                                      "adjacent_vertebrae, breathing, clinical)")

@@ -156,7 +156,7 @@ Command add_study_trade_command(CLI::App* parent) {
   app->add_option("--shard", o->shard,
                   "Run only shard k of n (k/n), for a job array; join with `study merge`")
       ->capture_default_str();
-  app->add_option("--seed", o->seed, "Seed of the problems")->capture_default_str();
+  app->add_option("--seed", o->seed, "Seed of the problems")->check(seed_value())->capture_default_str();
   app->add_flag("--list", o->list, "Print the points' ids and exit");
   app->add_option("--points", o->points, "Run only these points (ids from --list, comma-separated)")
       ->delimiter(',');

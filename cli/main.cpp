@@ -3,7 +3,9 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 
 #include "cli_commands.hpp"
@@ -119,6 +121,13 @@ int main(int argc, char** argv) {
       status = rt_check();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
+      return 1;
+    }
+    // What a command printed must have reached its reader: a full disk or a closed pipe under
+    // standard output is a failure, not a success with nothing written (issue 50 probe:
+    // `journal export J > /dev/full` exited 0).
+    if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+      spdlog::error("cannot write standard output: {}", std::strerror(errno));
       return 1;
     }
   } catch (const std::exception& e) {

@@ -171,6 +171,46 @@ struct GigeFakeDetector::Server {
     return std::size_t(std::uint64_t(width) * height * (bits / 8));
   }
 
+  // Registers whose values the camera's own schedule depends on, and the values it accepts, as a
+  // panel's firmware bounds them (issue 50 probe: a frame period of 0 or a heartbeat timeout of
+  // 0xFFFFFFFF was taken as written: a frame loop with no period, a controller never expired).
+  struct Bounded {
+    std::uint32_t address, low, high;
+  };
+  static constexpr Bounded kBounded[] = {
+      {ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US, 1'000, 10'000'000},  // 1 kHz to 0.1 Hz
+      {kHeartbeatTimeoutMs, 500, 60'000},  // GigE Vision's least, to a minute
+  };
+  // The bootstrap registers a camera only reads out (GigE Vision: version, device mode, MAC and
+  // IP, names, serial, the GenICam URLs, capabilities), [begin, end) in bytes; the user-defined
+  // name (0x00E8), Aravis's fake-camera registers (0x0100-0x01FF and its trigger at 0x0300), the
+  // heartbeat, control, message and stream channel registers stay writable (issue 50 probe: one
+  // write of the first URL left every client unable to read the camera's description).
+  struct Range {
+    std::uint32_t begin, end;
+  };
+  static constexpr Range kReadOnly[] = {{0x0000, 0x00E8}, {0x0200, 0x0300}, {0x0400, 0x0900}, {0x0900, 0x0938}};
+  static bool overlaps(std::uint32_t address, std::uint32_t count, std::uint32_t begin, std::uint32_t end) {
+    return std::uint64_t(address) < end && begin < std::uint64_t(address) + count;
+  }
+  // kSuccess, or why a write of `value` at `address` is refused.
+  static gvcp::Status check_register_write(std::uint32_t address, std::uint32_t value) {
+    for (const Range& r : kReadOnly)
+      if (overlaps(address, 4, r.begin, r.end)) return gvcp::Status::kWriteProtect;
+    for (const Bounded& b : kBounded)
+      if (address == b.address && (value < b.low || value > b.high)) return gvcp::Status::kInvalidParameter;
+    return gvcp::Status::kSuccess;
+  }
+  // A memory write may not reach around those checks: one that touches a read-only or bounded
+  // register is refused (clients write registers with WRITEREG, memory for strings).
+  static bool touches_guarded(std::uint32_t address, std::uint32_t count) {
+    for (const Range& r : kReadOnly)
+      if (overlaps(address, count, r.begin, r.end)) return true;
+    for (const Bounded& b : kBounded)
+      if (overlaps(address, count, b.address, b.address + 4)) return true;
+    return false;
+  }
+
   void expire_controller(std::int64_t now) {
     if (have_controller &&
         now - controller_heard_us > std::int64_t(read_register(kHeartbeatTimeoutMs)) * 1000) {
@@ -215,20 +255,35 @@ struct GigeFakeDetector::Server {
             gvcp::write_be32(data + i, read_register(gvcp::read_be32(c.payload + i)));
           length = c.length;
           break;
-        case gvcp::Command::kWriteRegister:
-          for (std::size_t i = 0; i < c.length; i += 8)
-            arv_fake_camera_write_register(camera, gvcp::read_be32(c.payload + i),
-                                           gvcp::read_be32(c.payload + i + 4));
-          gvcp::write_be32(data, std::uint32_t(c.length / 8));  // reserved, then the registers written
+        case gvcp::Command::kWriteRegister: {
+          // All or nothing: every pair is checked before any is written; the acknowledgement's
+          // index says how many were written (GigE Vision: 0 when the first is refused).
+          for (std::size_t i = 0; i < c.length && status == gvcp::Status::kSuccess; i += 8)
+            status = check_register_write(gvcp::read_be32(c.payload + i), gvcp::read_be32(c.payload + i + 4));
+          std::uint32_t written = 0;
+          if (status == gvcp::Status::kSuccess) {
+            for (std::size_t i = 0; i < c.length; i += 8, ++written)
+              arv_fake_camera_write_register(camera, gvcp::read_be32(c.payload + i),
+                                             gvcp::read_be32(c.payload + i + 4));
+          } else {
+            owner->malformed_.fetch_add(1, std::memory_order_relaxed);
+          }
+          gvcp::write_be32(data, written);  // reserved, then the registers written
           length = 4;
           break;
+        }
         case gvcp::Command::kReadMemory:
           gvcp::write_be32(data, c.address);
           arv_fake_camera_read_memory(camera, c.address, c.count, data + 4);
           length = 4 + c.count;
           break;
         case gvcp::Command::kWriteMemory:
-          arv_fake_camera_write_memory(camera, c.address, c.count, c.payload + 4);
+          if (touches_guarded(c.address, c.count)) {
+            status = gvcp::Status::kWriteProtect;
+            owner->malformed_.fetch_add(1, std::memory_order_relaxed);
+          } else {
+            arv_fake_camera_write_memory(camera, c.address, c.count, c.payload + 4);
+          }
           gvcp::write_be32(data, c.address);
           length = 4;
           break;

@@ -35,7 +35,37 @@ struct Connection {
   std::uint8_t bytes[MODBUS_TCP_MAX_ADU_LENGTH] = {};
   std::size_t have = 0;
   std::int64_t heard_ns = 0;
+  std::int64_t accepted_ns = 0;
+  bool spoke = false;  // has completed a request
 };
+
+// A connection that has sent no request for this long after it was accepted may be closed to
+// make room for a new one (a client connects and sends within milliseconds).
+constexpr std::int64_t kSilentGraceNs = 1'000'000'000;
+
+// What a request must be before it touches the couch: a PDU as long as its function says (a
+// write of N registers carries 2N bytes), for this server's unit (or 0xFF, "this device", as
+// Modbus TCP allows). Returns the Modbus exception to answer (0: none), or -1 to drop it unanswered.
+int check_request(const std::uint8_t* query, int header, int length, int unit_id, bool tcp) {
+  const int pdu = length - header - (tcp ? 0 : 2);  // RTU: the CRC after it
+  if (pdu < 1) return -1;
+  const int unit = query[header - 1];
+  if (unit == 0) return -1;  // a broadcast: never answered, and no couch moves by one
+  if (unit != unit_id && !(tcp && unit == 0xFF)) return tcp ? MODBUS_EXCEPTION_GATEWAY_TARGET : -1;
+  const int function = query[header];
+  const int count = pdu >= 5 ? (query[header + 3] << 8) | query[header + 4] : -1;
+  switch (function) {
+    case MODBUS_FC_READ_HOLDING_REGISTERS:
+    case MODBUS_FC_READ_INPUT_REGISTERS:
+    case MODBUS_FC_WRITE_SINGLE_REGISTER:
+      return pdu == 5 ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+    case MODBUS_FC_WRITE_MULTIPLE_REGISTERS:
+      if (pdu < 6 || count < 1 || count > MODBUS_MAX_WRITE_REGISTERS) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+      return query[header + 5] == 2 * count && pdu == 6 + 2 * count ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+    default:
+      return 0;  // libmodbus answers what this couch does not implement (illegal function)
+  }
+}
 
 }  // namespace
 
@@ -131,6 +161,7 @@ void ModbusCouchServer::serve() {
         std::memmove(c.bytes, c.bytes + 6 + length, c.have - (6 + length));
         c.have -= 6 + length;
         c.heard_ns = now_ns();
+        c.spoke = true;
         ++requests_;
         modbus_set_socket(ctx_, c.fd);
         handle(query, static_cast<int>(6 + length));
@@ -158,24 +189,38 @@ void ModbusCouchServer::serve() {
         if (fd >= 0) {
           ++connections_;
           std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
+          const std::int64_t accepted = now_ns();
           if (clients.size() >= std::size_t(options_.max_connections)) {
-            auto idlest = std::min_element(
-                clients.begin(), clients.end(),
-                [](const Connection& a, const Connection& b) { return a.heard_ns < b.heard_ns; });
-            close_connection(*idlest);
-            ++idle_closed_;
+            // Room is made only by closing a connection that has said nothing since its grace
+            // ran out; a client that talks (the loop's) is never pushed out by newcomers, however
+            // many: they are turned away instead (issue 50: a connection flood evicted it).
+            auto silent = clients.end();
+            for (auto it = clients.begin(); it != clients.end(); ++it)
+              if (!it->spoke && accepted - it->accepted_ns > kSilentGraceNs &&
+                  (silent == clients.end() || it->accepted_ns < silent->accepted_ns))
+                silent = it;
+            if (silent != clients.end()) {
+              ++idle_closed_;  // counted before the client can see the close
+              close_connection(*silent);
+            }
           }
-          clients.push_back(Connection{});
-          clients.back().fd = fd;
-          clients.back().heard_ns = now_ns();
+          std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
+          if (clients.size() >= std::size_t(options_.max_connections)) {
+            ++turned_away_;
+            ::close(fd);
+          } else {
+            clients.push_back(Connection{});
+            clients.back().fd = fd;
+            clients.back().heard_ns = clients.back().accepted_ns = accepted;
+          }
         }
       }
     }
     const std::int64_t now = now_ns();
     for (Connection& c : clients)
       if (c.fd >= 0 && now - c.heard_ns > idle_ns) {
+        ++idle_closed_;  // counted before the client can see the close (a test waits on the close)
         close_connection(c);
-        ++idle_closed_;
       }
     std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
   }
@@ -220,9 +265,32 @@ void ModbusCouchServer::hold_where_it_is() {
 
 void ModbusCouchServer::handle(std::uint8_t* query, int length) {
   const int h = modbus_get_header_length(ctx_);
+  if (const int refused = check_request(query, h, length, options_.unit_id, options_.rtu_device.empty());
+      refused != 0) {
+    ++malformed_;
+    if (refused > 0) modbus_reply_exception(ctx_, query, unsigned(refused));
+    return;
+  }
   const std::uint8_t function = query[h];
   const int address = (query[h + 1] << 8) | query[h + 2];
   const int count = (query[h + 3] << 8) | query[h + 4];
+  // The couch acts on two writes only: the whole block (target, sequence, control word) and the
+  // control word alone. Any other write would land in the register table, be answered as done and
+  // not be carried out (issue 50 probe: a hold written another way was acknowledged, and the
+  // couch kept moving): refused, as a drive refuses what it does not implement.
+  const bool read = function == MODBUS_FC_READ_HOLDING_REGISTERS || function == MODBUS_FC_READ_INPUT_REGISTERS;
+  const bool block = function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS && address == reg::kTarget &&
+                     count == reg::kHoldingCount;
+  const bool control_word = function == MODBUS_FC_WRITE_SINGLE_REGISTER && address == reg::kControl;
+  if (!read && !block && !control_word) {
+    const bool a_write = function == MODBUS_FC_WRITE_SINGLE_REGISTER || function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS ||
+                         function == MODBUS_FC_WRITE_SINGLE_COIL || function == MODBUS_FC_WRITE_MULTIPLE_COILS ||
+                         function == MODBUS_FC_MASK_WRITE_REGISTER || function == MODBUS_FC_WRITE_AND_READ_REGISTERS;
+    ++malformed_;
+    modbus_reply_exception(ctx_, query,
+                           a_write ? MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS : MODBUS_EXCEPTION_ILLEGAL_FUNCTION);
+    return;
+  }
   bool mismatch = false;
   const CouchRequestKind kind =
       function == MODBUS_FC_READ_INPUT_REGISTERS ? CouchRequestKind::kReadback : CouchRequestKind::kCommand;
@@ -247,8 +315,7 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       mismatch = true;
       break;
   }
-  if (function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS && address == reg::kTarget &&
-      count == reg::kHoldingCount) {
+  if (block) {
     std::uint16_t holding[reg::kHoldingCount];
     for (int i = 0; i < reg::kHoldingCount; ++i)
       holding[i] = static_cast<std::uint16_t>((query[h + 6 + 2 * i] << 8) | query[h + 7 + 2 * i]);
@@ -272,7 +339,7 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       modbus_reply_exception(ctx_, query, reg::kExceptionIllegalValue);
       return;
     }
-  } else if (function == MODBUS_FC_WRITE_SINGLE_REGISTER && address == reg::kControl) {
+  } else if (control_word) {
     const int value = (query[h + 3] << 8) | query[h + 4];
     if (value != reg::kHold && value != reg::kEnable) {
       modbus_reply_exception(ctx_, query, reg::kExceptionIllegalValue);

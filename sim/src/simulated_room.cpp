@@ -99,6 +99,15 @@ double SimulatedRoom::residual_mm() const {
   return sum / 27.0;
 }
 
+tracking::Vector6d SimulatedRoom::target_residual() const {
+  std::lock_guard lock(mutex_);
+  const Pose truth = true_locked();
+  const Pose& plan = spec_.nominal_T_room_from_ct;
+  // delta_between: T_truth = Translation(t + c) * exp(omega) * Translation(-c) * T_plan about the
+  // registration origin c, so t is the origin's displacement and omega the rotation between them.
+  return tracking::delta_between(plan, truth, spec_.origin_room_mm).as_vector();
+}
+
 drivers::DeviceStatus SimulatedRoom::CouchActuator::command(const tracking::Vector6d& correction,
                                                             drivers::Deadline deadline) {
   std::lock_guard lock(room_.mutex_);

@@ -183,5 +183,19 @@ TEST(RtCheckCli, ReportFilesAreReplacedOnlyWithOverwriteAndAFailedWriteIsAnError
   EXPECT_NE(full.out.find("/dev/full: write failed: No space left on device"), std::string::npos) << full.out;
 }
 
+// A report on standard output that cannot be written is a failure (issue 50 probe: `rt-check
+// --json > /dev/full`, `journal export J > /dev/full` exited 0 with nothing written).
+TEST(RtCheckCli, AReportStandardOutputCannotTakeIsAFailure) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this host";
+  test::TempDir dir;
+  const std::string command = quoted(LFTRACK_BIN_PATH) + " -q rt-check --duration 0.05 --json >/dev/full 2>" +
+                              quoted((dir.path() / "err.txt").string());
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(status != -1 && WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_NE(contents(dir.path() / "err.txt").find("cannot write standard output"), std::string::npos)
+      << contents(dir.path() / "err.txt");
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -112,7 +112,12 @@ std::vector<UsageCase> cases() {
        {{"serve", "detectors", "--scene", "builtin:phantom", "--settle", "nan", "--duration", "0.01"}, "--settle"},
        {{"drr", "--pose", "nan,0,0,0,0,0", "-o", "drr"}, "--pose"},
        {{"register", "--sim", "--gold", "0,0,0,inf,0,0"}, "--gold"},
-       {{"register", "--sim", "--init", "0,nan,0,0,0,0"}, "--init"}});
+       {{"register", "--sim", "--init", "0,nan,0,0,0,0"}, "--init"},
+       // Seeds CLI11 took as the largest one without a word (issue 50 probe).
+       {{"register", "--sim", "--seed", "-1"}, "--seed"},
+       {{"register", "--sim", "--seed", "18446744073709551616"}, "--seed"},
+       {{"register", "--sim", "--seed", "99999999999999999999999"}, "--seed"},
+       {{"study", "trade", "--out", "x", "--seed", "1.5"}, "--seed"}});
   return all;
 }
 

@@ -83,6 +83,14 @@ TEST_P(RealCtLoop, AlignsThenTracksEveryCycleWithTheBeamOnTheTarget) {
   EXPECT_LE(p95, s.beam_on_p95_mm) << "true residual with the beam on, p95 (mm)";
   std::printf("%s: beam on from cycle %lld, true residual with the beam on: p95 %.3f mm, max %.3f mm\n", s.file,
               static_cast<long long>(first_beam), p95, beam_on_mm.back());
+  // The clinic's figures (tracking_accuracy.hpp): no treating cycle has the target 2 mm away.
+  ASSERT_TRUE(summary->target_residual.has_value());
+  EXPECT_EQ(summary->target_residual->cycles, kCycles);
+  EXPECT_EQ(summary->target_residual->beam_on_cycles, std::int64_t(beam_on_mm.size()));
+  EXPECT_EQ(summary->target_residual->beam_on_share_over_2mm, 0.0);
+  ASSERT_TRUE(summary->command_latency.has_value());
+  std::printf("%s: %s\n%s\n", s.file, to_json(*summary->target_residual).dump().c_str(),
+              to_json(*summary->command_latency).dump().c_str());
 }
 
 INSTANTIATE_TEST_SUITE_P(ShippedScenes, RealCtLoop,

@@ -58,7 +58,7 @@ void write_journal(const std::filesystem::path& file, std::uint64_t n) {
 
 // A journal's bytes, encoded here as a writer of format `version` would: the header, then one
 // frame per record whose payload (record_bytes long) holds the record's first `copied` bytes.
-std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 3,
+std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 4,
                                          std::uint32_t record_bytes = sizeof(JournalRecord),
                                          std::size_t copied = sizeof(JournalRecord)) {
   std::vector<unsigned char> bytes(32, 0);
@@ -343,10 +343,10 @@ TEST(Journal, ReadsAVersionOneJournal) {
       << j.status().message();
   write_file(file, v1_file(2, kV1Bytes));
   EXPECT_FALSE(read_journal(file).ok());
-  write_file(file, v1_file(4, kV1Bytes));
+  write_file(file, v1_file(5, kV1Bytes));
   j = read_journal(file);
   ASSERT_FALSE(j.ok());
-  EXPECT_NE(j.status().message().find("version 4"), std::string::npos) << j.status().message();
+  EXPECT_NE(j.status().message().find("version 5"), std::string::npos) << j.status().message();
 }
 
 // Version 2 (before the refusals by reason): 264-byte records, read with the new fields zero.
@@ -381,6 +381,36 @@ TEST(Journal, ReadsAVersionTwoJournal) {
   j = read_journal(file);
   ASSERT_FALSE(j.ok());
   EXPECT_NE(j.status().message().find("version 2 has records of 264 bytes"), std::string::npos) << j.status().message();
+}
+
+// Version 3 (before the target residual per axis and the acknowledgement time): 296-byte
+// records, read with those fields zero.
+TEST(Journal, ReadsAVersionThreeJournal) {
+  test::TempDir dir;
+  const auto file = dir.path() / "v3.journal";
+  std::vector<JournalRecord> records;
+  for (std::uint64_t i = 0; i < 20; ++i) {
+    JournalRecord r = record(i);
+    r.operator_refused_by_reason[2] = 9;
+    r.true_target_residual[0] = 1.5;  // not in version 3: must not be read
+    r.command_acked_ns = 77;
+    records.push_back(r);
+  }
+  write_file(file, journal_bytes(records, 3, 296, 296));
+  auto j = read_journal(file);
+  ASSERT_TRUE(j.ok()) << j.status().message();
+  EXPECT_EQ(j->format_version, 3u);
+  ASSERT_EQ(j->records.size(), 20u);
+  EXPECT_FALSE(j->damaged());
+  for (const JournalRecord& r : j->records) {
+    EXPECT_EQ(r.operator_refused_by_reason[2], 9);
+    for (double v : r.true_target_residual) EXPECT_EQ(v, 0.0);
+    EXPECT_EQ(r.command_acked_ns, 0);
+  }
+  write_file(file, journal_bytes(records, 3, sizeof(JournalRecord), 296));
+  j = read_journal(file);
+  ASSERT_FALSE(j.ok());
+  EXPECT_NE(j.status().message().find("version 3 has records of 296 bytes"), std::string::npos) << j.status().message();
 }
 
 // The cycle counter goes up by 1 + skipped_periods: a record removed from the file is a gap, one
@@ -542,6 +572,34 @@ TEST(Journal, AnExistingFileIsNeverOverwrittenUnlessAsked) {
   auto contents = read_journal(file);
   ASSERT_TRUE(contents.ok()) << contents.status().message();
   EXPECT_TRUE(contents->records.empty());
+}
+
+// Issue 50 probe: --overwrite truncated the journal a running lftrack was still writing, and that
+// run reported nothing wrong. A writer holds its file's lock while it runs; --overwrite (and the
+// early check of the options) refuses a journal that is locked, and replaces it once it is not.
+TEST(Journal, OverwriteNeverReplacesAJournalThatIsStillBeingWritten) {
+  test::TempDir dir;
+  const auto file = dir.path() / "live.lfj";
+  auto live = JournalWriter::open(file);
+  ASSERT_TRUE(live.ok()) << live.status().message();
+  for (std::uint64_t i = 0; i < 5; ++i) ASSERT_TRUE((*live)->append(record(i)));
+  JournalOptions overwrite;
+  overwrite.overwrite = true;
+  const Status early = check_journal_path(file, true);
+  EXPECT_FALSE(early.ok());
+  EXPECT_NE(early.message().find("running lftrack"), std::string::npos) << early.message();
+  auto second = JournalWriter::open(file, overwrite);
+  ASSERT_FALSE(second.ok());
+  EXPECT_NE(second.status().message().find("running lftrack"), std::string::npos) << second.status().message();
+  ASSERT_TRUE((*live)->close().ok());
+  auto kept = read_journal(file);
+  ASSERT_TRUE(kept.ok()) << kept.status().message();
+  EXPECT_EQ(kept->records.size(), 5u) << "the live run's records are all there";
+  EXPECT_FALSE(kept->damaged());
+  EXPECT_TRUE(check_journal_path(file, true).ok()) << "a finished journal may be replaced";
+  auto replaced = JournalWriter::open(file, overwrite);
+  ASSERT_TRUE(replaced.ok()) << replaced.status().message();
+  ASSERT_TRUE((*replaced)->close().ok());
 }
 
 TEST(Journal, RefusesWhatIsNotAJournalOfThisVersion) {

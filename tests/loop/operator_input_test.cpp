@@ -9,11 +9,15 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <limits>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "lftrack/loop/operator_input.hpp"
@@ -216,6 +220,35 @@ TEST(ControlSocket, ResumesSentOutsideAHoldAreDiscardedNotKeptForTheNextHold) {
   (*socket)->poll(in_state(TrackingState::kHold, 1), &held);
   EXPECT_EQ(held.command, OperatorCommand::kNone) << "nothing sent during TRACK resumes HOLD 1";
   EXPECT_EQ(held.refused, 0);
+}
+
+// Issue 50 probe: the cycle read the control socket until it was empty, so a sender writing as
+// fast as the loop read (the kernel queues only a few datagrams, and each read frees room for the
+// next) could hold the cycle there. A poll takes at most 64 datagrams; the rest are judged by the
+// next polls, none lost.
+TEST(ControlSocket, AFloodIsTakenASliceAPollAndNothingIsLost) {
+  test::TempDir dir;
+  auto socket = ControlSocket::open(dir.path() / "control.sock");
+  ASSERT_TRUE(socket.ok()) << socket.status().message();
+  constexpr int kSent = 2000;
+  std::atomic<int> sent{0};
+  std::thread flood([&] {
+    Client client(dir.path() / "control.sock", {});
+    while (sent.load() < kSent)
+      if (client.send("resume 1")) ++sent;  // a full queue times out after a second: send again
+  });
+  int refused = 0, largest = 0;
+  for (const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+       refused < kSent && std::chrono::steady_clock::now() < until;) {
+    OperatorPoll p;
+    (*socket)->poll(in_state(TrackingState::kTrack), &p);
+    refused += p.refused;
+    largest = std::max(largest, int(p.refused));
+    if (p.refused == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  flood.join();
+  EXPECT_EQ(refused, kSent) << "every datagram judged";
+  EXPECT_LE(largest, 64) << "no poll took more than its slice";
 }
 
 TEST(ControlSocket, WhatWasSentBeforeTheHoldIsDiscardedWhenItBegins) {

@@ -171,5 +171,62 @@ TEST(GigeFakeCamera, SurvivesMalformedDatagramsAndStillServesAClient) {
   detector.close();
 }
 
+// Issue 50 probe: register writes were taken as written, a frame period of 0, a heartbeat
+// timeout of 0xFFFFFFFF (a client that took control and left held the camera for 49 days) and the
+// GenICam URL among them. Values outside what a panel's firmware accepts are refused
+// (invalid parameter), a multi-register write is all or nothing, and a memory write cannot reach
+// around the check; the camera keeps its schedule and serves on.
+TEST(GigeFakeCamera, RefusesAbsurdRegisterValuesAndKeepsItsSchedule) {
+  test::GigeHostLock lock;
+  if (!sim::gvcp_port_free("127.0.0.1"))
+    GTEST_SKIP() << "another program holds UDP port 3956 (GVCP) on 127.0.0.1";
+  sim::GigeFakeDetectorOptions o;
+  o.serial = "LFGV-BOUNDS";
+  o.rows = 48;
+  o.cols = 64;
+  o.frame_rate_hz = 100;
+  sim::GigeFakeDetector camera(o, [](std::uint64_t, std::uint16_t* pixels, int rows, int cols) {
+    for (int i = 0; i < rows * cols; ++i) pixels[i] = 7;
+  });
+  ASSERT_TRUE(camera.start().ok());
+  test::GvcpClient client("127.0.0.1");
+  constexpr std::uint32_t kFramePeriodUs = 0x138;  // arvfakecamera.h: ACQUISITION_FRAME_PERIOD_US
+  constexpr std::uint32_t kHeartbeatMs = 0x0938;
+  const std::uint32_t heartbeat = client.read_register(kHeartbeatMs, 1, 2000ms).value_or(0);
+  ASSERT_EQ(client.read_register(kFramePeriodUs, 2, 2000ms).value_or(0), 10'000u);
+  std::uint16_t id = 0x0500;
+  // The acknowledgement's status of `datagram` (sent with a fresh id), or -1 without one.
+  const auto status_of = [&](std::vector<std::uint8_t> datagram) {
+    ++id;
+    datagram[6] = std::uint8_t(id >> 8);
+    datagram[7] = std::uint8_t(id & 0xFF);
+    if (!client.send(datagram)) return -1;
+    for (auto ack = client.receive(2000ms); ack; ack = client.receive(2000ms))
+      if (ack->size() >= 8 && (*ack)[6] == std::uint8_t(id >> 8) && (*ack)[7] == std::uint8_t(id & 0xFF))
+        return ((*ack)[0] << 8) | (*ack)[1];
+    return -1;
+  };
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kFramePeriodUs, 0})), 0x8002) << "frame period 0";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kFramePeriodUs, 1})), 0x8002) << "1 us";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kHeartbeatMs, 0xFFFFFFFFu})), 0x8002) << "a heartbeat of 50 days";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kHeartbeatMs, 0})), 0x8002) << "no heartbeat";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 16, {0x1F0, 1, kFramePeriodUs, 0})), 0x8002)
+      << "a good pair before a bad one";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0086, 8, {kFramePeriodUs & ~3u, 0})), 0x8004) << "memory over the register";
+  const std::uint32_t url = client.read_register(0x0200, 7, 2000ms).value_or(0);
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {0x0200, 0xFFFFFFFFu})), 0x8004) << "the GenICam URL is read-only";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0086, 8, {0x0000, 0xFFFFFFFFu})), 0x8004) << "so is the bootstrap's version";
+  EXPECT_EQ(client.read_register(0x0200, 8, 2000ms).value_or(0), url);
+  EXPECT_EQ(client.read_register(0x1F0, 3, 2000ms).value_or(0), 0x12345678u) << "all or nothing";
+  EXPECT_EQ(client.read_register(kFramePeriodUs, 4, 2000ms).value_or(0), 10'000u);
+  EXPECT_EQ(client.read_register(kHeartbeatMs, 5, 2000ms).value_or(0), heartbeat);
+  EXPECT_EQ(camera.malformed(), 8u);
+  // What a panel accepts is written.
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kFramePeriodUs, 20'000})), 0x0000);
+  EXPECT_EQ(client.read_register(kFramePeriodUs, 6, 2000ms).value_or(0), 20'000u);
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kHeartbeatMs, 1000})), 0x0000);
+  EXPECT_TRUE(camera.running());
+}
+
 }  // namespace
 }  // namespace lftrack

@@ -353,8 +353,8 @@ TEST(ModbusCouchServerTcp, ClosesIdleConnectionsAndMakesRoomForANewClient) {
   modbus_close(asking);
   modbus_free(asking);
 
-  // Three slots, taken by silent connections (long idle timeout): a new client displaces the
-  // connection idle longest, and is answered.
+  // Three slots, taken by silent connections (long idle timeout): once they have said nothing
+  // for their second of grace, a new client displaces the oldest, and is answered.
   so.idle_timeout_s = 60;
   auto full = sim::ModbusCouchServer::start(&couch, so);
   ASSERT_TRUE(full.ok());
@@ -366,6 +366,7 @@ TEST(ModbusCouchServerTcp, ClosesIdleConnectionsAndMakesRoomForANewClient) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
   ASSERT_EQ((*full)->connections(), 3);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // past the silent ones' grace
   modbus_t* late = modbus_client((*full)->port(), 0.5);
   EXPECT_EQ(modbus_read_input_registers(late, 0, reg::kInputCount, inputs), reg::kInputCount)
       << modbus_strerror(errno);
@@ -374,6 +375,158 @@ TEST(ModbusCouchServerTcp, ClosesIdleConnectionsAndMakesRoomForANewClient) {
   modbus_close(late);
   modbus_free(late);
   for (int fd : idle) ::close(fd);
+}
+
+// Issue 50 probe: a flood of new connections pushed the loop's own connection out (the idlest
+// was closed for each newcomer, and a client asking every 100 ms was often the idlest). A client
+// that talks is never displaced: newcomers beyond the slots are turned away, or displace only a
+// connection that has said nothing for its grace.
+TEST(ModbusCouchServerTcp, AConnectionFloodNeverPushesOutAClientThatTalks) {
+  test::LockedCouch couch(sim::VirtualCouchSpec{});
+  sim::ModbusCouchServerOptions so;
+  so.max_connections = 2;
+  auto server = sim::ModbusCouchServer::start(&couch, so);
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  namespace reg = drivers::couch_registers;
+  std::uint16_t inputs[reg::kInputCount] = {};
+  modbus_t* loop = modbus_client((*server)->port(), 0.5);
+  ASSERT_EQ(modbus_read_input_registers(loop, 0, reg::kInputCount, inputs), reg::kInputCount);
+  std::vector<int> flood;
+  int asked = 0, answered = 0;
+  for (int i = 0; i < 40; ++i) {
+    flood.push_back(connect_silently((*server)->port()));
+    ++asked;
+    answered += modbus_read_input_registers(loop, 0, reg::kInputCount, inputs) == reg::kInputCount;
+  }
+  for (const auto until = Clock::now() + std::chrono::seconds(5);
+       (*server)->connections() < 41 && Clock::now() < until;)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ++asked;
+  answered += modbus_read_input_registers(loop, 0, reg::kInputCount, inputs) == reg::kInputCount;
+  EXPECT_EQ(answered, asked) << "the talking client kept its connection and every answer";
+  // One newcomer took the free slot; each of the other 39 was turned away, or (on a host slow
+  // enough for the flood to outlast a silent connection's second of grace) displaced a silent one.
+  EXPECT_EQ((*server)->turned_away() + (*server)->idle_closed(), 39);
+  EXPECT_GE((*server)->turned_away(), 1);
+  for (int fd : flood) ::close(fd);
+  modbus_close(loop);
+  modbus_free(loop);
+}
+
+// A raw Modbus TCP request on its own connection, and the reply's bytes (empty: none in 2 s).
+std::vector<std::uint8_t> raw_exchange(int port, const std::vector<std::uint8_t>& request) {
+  const int fd = connect_silently(port, std::string(request.begin(), request.end()));
+  std::vector<std::uint8_t> reply(260);
+  pollfd p{fd, POLLIN, 0};
+  const ssize_t n = ::poll(&p, 1, 2000) > 0 ? ::recv(fd, reply.data(), reply.size(), 0) : 0;
+  reply.resize(n > 0 ? std::size_t(n) : 0);
+  ::close(fd);
+  return reply;
+}
+
+// A "write the target and enable" request (function 16 at the target, all 14 registers).
+std::vector<std::uint8_t> enable_request(std::uint8_t unit, std::uint8_t byte_count, int registers_sent,
+                                         double x_mm) {
+  namespace reg = drivers::couch_registers;
+  std::uint16_t block[reg::kHoldingCount] = {};
+  tracking::Vector6d target = tracking::Vector6d::Zero();
+  target(0) = x_mm;
+  reg::encode_travel(target, block + reg::kTarget);
+  block[reg::kCommandSequence] = 7;
+  block[reg::kControl] = reg::kEnable;
+  std::vector<std::uint8_t> pdu = {0x10, 0, reg::kTarget, 0, reg::kHoldingCount, byte_count};
+  for (int i = 0; i < registers_sent; ++i) {
+    pdu.push_back(std::uint8_t(block[i] >> 8));
+    pdu.push_back(std::uint8_t(block[i] & 0xFF));
+  }
+  const std::size_t length = pdu.size() + 1;
+  std::vector<std::uint8_t> adu = {0, 1, 0, 0, std::uint8_t(length >> 8), std::uint8_t(length & 0xFF), unit};
+  adu.insert(adu.end(), pdu.begin(), pdu.end());
+  return adu;
+}
+
+// Issue 50 probe: the couch acted on a function-16 write before its byte count was checked, and
+// for any unit id. Such a request moves nothing and is answered with Modbus's exception.
+TEST(ModbusCouchServerTcp, AMalformedOrMisaddressedWriteMovesNothing) {
+  test::LockedCouch couch(sim::VirtualCouchSpec{});
+  auto server = sim::ModbusCouchServer::start(&couch, sim::ModbusCouchServerOptions{});
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  const int port = (*server)->port();
+  struct Case {
+    const char* what;
+    std::vector<std::uint8_t> request;
+    std::uint8_t exception;  // 0: no reply expected
+  };
+  const std::vector<Case> cases = {
+      {"byte count 0", enable_request(1, 0, 14, 5), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+      {"byte count odd", enable_request(1, 27, 14, 5), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+      {"byte count of 15 registers", enable_request(1, 30, 14, 5), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+      {"13 registers of 14 sent", enable_request(1, 28, 13, 5), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+      {"15 registers' bytes for 14", enable_request(1, 28, 14, 5), 0xFF},  // patched below
+      {"another unit", enable_request(7, 28, 14, 5), MODBUS_EXCEPTION_GATEWAY_TARGET},
+      {"unit 0 (a broadcast: no answer)", enable_request(0, 28, 14, 5), 0},
+  };
+  for (Case c : cases) {
+    SCOPED_TRACE(c.what);
+    if (c.exception == 0xFF) {  // two bytes more than the byte count says, the MBAP length counting them
+      c.request.push_back(0);
+      c.request.push_back(1);
+      c.request[5] = std::uint8_t(c.request[5] + 2);
+      c.exception = MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+    }
+    const auto reply = raw_exchange(port, c.request);
+    if (c.exception == 0) {
+      EXPECT_TRUE(reply.empty());
+    } else {
+      ASSERT_EQ(reply.size(), 9u) << "an exception reply";
+      EXPECT_EQ(reply[7], 0x90) << "function 16's exception";
+      EXPECT_EQ(reply[8], c.exception);
+    }
+    drivers::ActuatorState s;
+    ASSERT_EQ(couch.readback(&s, {}), DeviceStatus::kOk);
+    EXPECT_LT(s.target.norm(), 1e-9) << "the couch was not moved";
+  }
+  EXPECT_EQ((*server)->malformed(), std::int64_t(cases.size()));
+  // The same write, well formed for this unit (or 0xFF, "this device"), moves the couch.
+  const auto reply = raw_exchange(port, enable_request(0xFF, 28, 14, 5));
+  ASSERT_EQ(reply.size(), 12u);
+  EXPECT_EQ(reply[7], 0x10);
+  drivers::ActuatorState s;
+  ASSERT_EQ(couch.readback(&s, {}), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 5, 1e-3);
+
+  // Writes the couch does not act on are refused, not acknowledged and ignored (issue 50 probe:
+  // a hold written as function 16 of the control word alone, 22 or 23 was answered as done and
+  // the couch kept moving): exception 2 (illegal data address).
+  namespace reg = drivers::couch_registers;
+  const auto adu = [](std::vector<std::uint8_t> pdu) {
+    const std::size_t length = pdu.size() + 1;
+    std::vector<std::uint8_t> a = {0, 2, 0, 0, std::uint8_t(length >> 8), std::uint8_t(length & 0xFF), 1};
+    a.insert(a.end(), pdu.begin(), pdu.end());
+    return a;
+  };
+  const std::uint8_t hold = reg::kHold, control = reg::kControl;
+  const std::vector<std::pair<const char*, std::vector<std::uint8_t>>> ignored = {
+      {"function 16, the control word alone", adu({0x10, 0, control, 0, 1, 2, 0, hold})},
+      {"function 6 at a target register", adu({0x06, 0, 0, 0, 7})},
+      {"function 22 (mask write) at the control word", adu({0x16, 0, control, 0, 0, 0, hold})},
+      {"function 23 (write and read) at the control word", adu({0x17, 0, 0, 0, 1, 0, control, 0, 1, 2, 0, hold})},
+  };
+  const std::int64_t malformed_before = (*server)->malformed();
+  for (const auto& [what, request] : ignored) {
+    SCOPED_TRACE(what);
+    const auto r = raw_exchange(port, request);
+    ASSERT_EQ(r.size(), 9u) << "an exception reply";
+    EXPECT_EQ(r[7], request[7] | 0x80);
+    EXPECT_EQ(r[8], MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS);
+  }
+  EXPECT_EQ((*server)->malformed() - malformed_before, std::int64_t(ignored.size()));
+  ASSERT_EQ(couch.readback(&s, {}), DeviceStatus::kOk);
+  EXPECT_NEAR(s.target(0), 5, 1e-3) << "none of them changed the couch";
+  // The documented hold (function 6 at the control word) holds.
+  const auto held = raw_exchange(port, adu({0x06, 0, control, 0, hold}));
+  ASSERT_EQ(held.size(), 12u);
+  EXPECT_EQ(held[7], 0x06);
 }
 
 TEST(ModbusCouch, OpeningWithNothingListeningSaysWhere) {

@@ -89,6 +89,13 @@ TEST(SceneDevices, AGigeCameraCanNameTheIdItMustAnswerWith) {
   EXPECT_EQ(frames_yaml(g->detectors[0].frames),
             "{type: gige, camera: \"10.0.0.5\", buffers: 4, packet_timeout_ms: 20, id: \"PANEL-0001\"}");
   EXPECT_EQ(served_twin_id("A"), "LFTRACK-A") << "how lftrack serve detectors names its cameras";
+  // Issue 50 probe: ids cut to 15 characters made "lateral-left" and "lateral-right" one id, so a
+  // swap of their cameras passed the identity check.
+  EXPECT_NE(served_twin_id("lateral-left"), served_twin_id("lateral-right"));
+  EXPECT_EQ(served_twin_id("lateral-left").size(), 15u);
+  EXPECT_EQ(served_twin_id("lateral-left"), served_twin_id("lateral-left")) << "the same name, the same id";
+  EXPECT_EQ(served_twin_id("lateral").size(), 15u);
+  EXPECT_EQ(served_twin_id("lateral"), "LFTRACK-lateral");
   expect_refused(scene_with("{type: v4l2, device: /dev/video0, id: X}"), "unknown key 'id'");
 }
 

@@ -1,7 +1,10 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include "lftrack/host/scene.hpp"
 #include "test_data.hpp"
@@ -319,6 +322,40 @@ TEST(Scene, EmptyAndMissingFiles) {
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
   EXPECT_FALSE(load_scene("builtin:knee").ok());
+}
+
+// Issue 50 probe: a scene path naming /dev/zero took memory without end, and a FIFO blocked for
+// ever. A scene (and any YAML a person writes for lftrack) is a regular file of at most 1 MiB.
+TEST(Scene, AFileThatIsNoSceneFileIsRefusedAtOnce) {
+  test::TempDir dir;
+  const auto fifo = dir.path() / "scene.yaml";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const auto big = dir.path() / "big.yaml";
+  std::ofstream(big) << std::string((1 << 20) + 1, '#');
+  for (const std::string& path : {std::string("/dev/zero"), fifo.string(), dir.path().string(), big.string()}) {
+    auto scene = load_scene(path);
+    ASSERT_FALSE(scene.ok()) << path;
+    EXPECT_NE(scene.status().message().find(path), std::string::npos) << scene.status().message();
+  }
+  EXPECT_NE(load_scene(big.string()).status().message().find("1 MiB"), std::string::npos);
+}
+
+// Issue 50 probe: a detector named "../../escaped" wrote its light field two folders above
+// --lf-dir. A name is what `calibrate detector --detector` takes.
+TEST(Scene, ADetectorNameIsAFileNamePart) {
+  for (const std::string& bad : std::vector<std::string>{"../../escaped", "a/b", ".hidden", "with space",
+                                                          std::string(65, 'x'), "\xc3\xbc"}) {
+    std::string text = kValidScene;
+    const std::size_t at = text.find("  - name: A") + 10;
+    text.replace(at, 1, "\"" + bad + "\"");
+    auto scene = parse_scene(text, "names.yaml", "/");
+    ASSERT_FALSE(scene.ok()) << bad;
+    EXPECT_NE(scene.status().message().find("a detector name is 1 to 64"), std::string::npos)
+        << scene.status().message();
+  }
+  std::string text = kValidScene;
+  text.replace(text.find("  - name: A") + 10, 1, "lateral-left_2.0");
+  EXPECT_TRUE(parse_scene(text, "names.yaml", "/").ok());
 }
 
 TEST(Scene, ShippedExampleScenesParse) {

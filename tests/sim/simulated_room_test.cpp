@@ -34,5 +34,27 @@ TEST(SimulatedRoom, CouchThatCancelsTheOffsetLeavesNoResidual) {
   EXPECT_LT(room.residual_mm(), 1e-9);
 }
 
+// The target residual is the set-up error itself about the registration origin, per room axis
+// (the patient offset is a delta about that origin), and zero once the couch has cancelled it.
+TEST(SimulatedRoom, TheTargetResidualIsThePatientsOffsetAtTheOriginPerAxis) {
+  sim::SimulatedRoomSpec spec;
+  spec.origin_room_mm = {10, -20, 5};
+  spec.setup_error << 2, -1, 3, 0.01, 0.02, -0.01;
+  spec.couch.latency_s = 0;
+  spec.couch.max_speed_mm_s = 1000;
+  spec.couch.max_speed_deg_s = 1000;
+  sim::SimulatedRoom room(spec);
+  room.advance_to_ns(1'000'000'000);
+  const Vector6d before = room.target_residual();
+  for (int i = 0; i < 6; ++i) EXPECT_NEAR(before(i), spec.setup_error(i), 1e-9) << "axis " << i;
+  const Vector6d cancel =
+      tracking::delta_between(room.patient_T_room_from_ct(), spec.nominal_T_room_from_ct, spec.origin_room_mm)
+          .as_vector();
+  ASSERT_EQ(room.couch_actuator().command(cancel, drivers::Deadline(std::chrono::nanoseconds(1'000'000'000))),
+            drivers::DeviceStatus::kOk);
+  room.advance_to_ns(1'200'000'000);
+  EXPECT_LT(room.target_residual().norm(), 1e-9);
+}
+
 }  // namespace
 }  // namespace lftrack::sim

@@ -39,8 +39,8 @@ struct ServedClient {
   std::unique_ptr<IgtlServer> server;
   std::unique_ptr<IgtlClient> client;
 };
-void serve_one_client(HubOnFeed& h, ServedClient* out) {
-  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8});
+void serve_one_client(HubOnFeed& h, ServedClient* out, bool simulated_clock = false) {
+  auto server = IgtlServer::start(h.hub.get(), {{"127.0.0.1", 0}, 8, simulated_clock});
   ASSERT_TRUE(server.ok()) << server.status().message();
   out->server = std::move(server).value();
   out->client = std::make_unique<IgtlClient>(out->server->port());
@@ -138,6 +138,24 @@ TEST(IgtlServer, EveryMessageCarriesTheTimeOfWhatItReports) {
   ASSERT_TRUE(first);
   EXPECT_EQ(first->type, "STATUS");
   EXPECT_NEAR(first->timestamp_s, wall_now_s(), 5.0) << "the state when the client connected";
+}
+
+// Issue 50 probe: under `sim --fast` the stamps were the simulated exposure times carried onto the
+// wall clock, minutes ahead of it by the end of a run. On the simulated clock a message is
+// stamped with the wall time it is sent.
+TEST(IgtlServer, OnTheSimulatedClockMessagesCarryTheWallTimeTheyAreSent) {
+  HubOnFeed h;
+  ServedClient s;
+  ASSERT_NO_FATAL_FAILURE(serve_one_client(h, &s, /*simulated_clock=*/true));
+  timespec mono{};
+  clock_gettime(CLOCK_MONOTONIC, &mono);
+  const std::int64_t ahead_ns = std::int64_t{mono.tv_sec} * 1'000'000'000 + mono.tv_nsec + 300'000'000'000;
+  FeedRecord fast = record(3000, TrackingState::kTrack, TrackingState::kTrack, 1.0, true);
+  fast.record.frame_time_ns[0] = fast.record.frame_time_ns[1] = ahead_ns;  // 5 simulated minutes ahead
+  h.publish(fast);
+  auto m = s.client->next();
+  ASSERT_TRUE(m);
+  EXPECT_NEAR(m->timestamp_s, wall_now_s(), 5.0) << "sent now, not 300 s from now";
 }
 
 // A session that ends (LoopSession::run) lets the hub and the server catch up before the server

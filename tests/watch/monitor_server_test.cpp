@@ -8,11 +8,15 @@
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <fstream>
+#include <thread>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "test_data.hpp"
@@ -221,6 +225,73 @@ TEST(MonitorServer, AClientWithoutTheTokenGetsNoNonceAndCannotBlockTheOperatorsS
   auto stop = s.act("stop", {{"nonce", operators}}, token);
   EXPECT_EQ(stop.first, 200) << stop.second.dump();
   EXPECT_EQ(stop.second["accepted"], true);
+}
+
+std::string read_events(int port, const std::function<bool(const std::string&)>& done);
+
+// A client's socket to the server, its request started and never finished: it trickles a
+// header's bytes in, one at a time.
+int connect_raw(int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<std::uint16_t>(port));
+  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+  EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  return fd;
+}
+
+// Issue 50 probe: 16 event streams and 16 clients that trickle their request in (a byte a
+// second; no token needed) held every thread of the page, and the operator's nonce and Stop got
+// no answer. A request reaches a thread only once it has arrived whole; one that has not within
+// 3 s is dropped.
+TEST(MonitorServer, ClientsTricklingTheirRequestsHoldNoThreadTheOperatorNeeds) {
+  Served s;
+  OperatorView track;
+  track.state = TrackingState::kTrack;
+  PollingLoop loop(&s.page, track);
+  std::atomic<bool> stop_streams{false};
+  std::vector<std::thread> streams;
+  for (int i = 0; i < 16; ++i)
+    streams.emplace_back([&] { read_events(s.server->port(), [&](const std::string&) { return stop_streams.load(); }); });
+  for (int i = 0; i < 5000 && s.server->counters().event_clients < 16; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_EQ(s.server->counters().event_clients, 16) << "every event stream is open";
+  const std::string start = "GET /api/state HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(s.server->port()) +
+                            "\r\nX-Slow: ";
+  std::vector<int> slow;
+  for (int i = 0; i < 48; ++i) {
+    slow.push_back(connect_raw(s.server->port()));
+    ASSERT_EQ(::send(slow.back(), start.data(), start.size(), MSG_NOSIGNAL), ssize_t(start.size()));
+  }
+  std::atomic<bool> trickling{true};
+  std::thread trickle([&] {
+    while (trickling.load()) {
+      for (int fd : slow) (void)::send(fd, "a", 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+  });
+  const auto asked = std::chrono::steady_clock::now();
+  const std::string nonce = s.nonce();
+  auto stop = s.act("stop", {{"nonce", nonce}}, s.server->token());
+  EXPECT_EQ(stop.first, 200) << stop.second.dump();
+  EXPECT_EQ(stop.second["accepted"], true);
+  std::printf("the operator's nonce and stop answered in %.0f ms beside 16 streams and 48 trickling clients\n",
+              1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - asked).count());
+  // The trickling clients are dropped once their 3 s are up, however they trickle.
+  int closed = 0;
+  for (int fd : slow) {
+    char c;
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 10'000) > 0 && ::recv(fd, &c, 1, 0) <= 0) ++closed;
+  }
+  EXPECT_EQ(closed, 48) << "every trickling client was dropped";
+  trickling = false;
+  trickle.join();
+  for (int fd : slow) ::close(fd);
+  stop_streams = true;
+  s.hub.publish(record(1, TrackingState::kTrack, TrackingState::kTrack, 0, false));  // wakes the streams
+  for (auto& t : streams) t.join();
 }
 
 TEST(MonitorServer, WithoutALoopAnActionIsAnsweredAndWithdrawn) {

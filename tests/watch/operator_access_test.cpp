@@ -85,6 +85,25 @@ TEST(OperatorToken, IsRandomHexComparedExactly) {
   EXPECT_FALSE(token_matches(token, last));
 }
 
+// Issue 50 probe: a second run given a live run's token file replaced it with its own token and
+// removed it at its exit, leaving the live run's operator without one. A running lftrack's token
+// file is locked while it serves, and never replaced.
+TEST(OperatorToken, ALiveRunsTokenFileIsNeverTakenOver) {
+  test::TempDir dir;
+  const fs::path file = dir.path() / "monitor.token";
+  const std::string live_token(64, 'a');
+  auto live = TokenFile::write(file, live_token);
+  ASSERT_TRUE(live.ok()) << live.status().message();
+  auto second = TokenFile::write(file, std::string(64, 'b'));
+  ASSERT_FALSE(second.ok());
+  EXPECT_NE(second.status().message().find("running lftrack"), std::string::npos) << second.status().message();
+  std::string line;
+  std::getline(std::ifstream(file) >> std::ws, line);
+  EXPECT_EQ(line, live_token) << "the live run's token is still there";
+  live->reset();
+  EXPECT_FALSE(fs::exists(file)) << "removed by its own run";
+}
+
 TEST(OperatorToken, FileIsTheRunsOwnAndNeverReplacesAnotherFile) {
   test::TempDir dir;
   const fs::path file = dir.path() / "monitor.token";

@@ -132,7 +132,9 @@ void ControlSocket::take_waiting(const OperatorView& view, OperatorPoll* out, bo
   char text[64];
   char line[200];
   sockaddr_un from{};
-  for (;;) {
+  // A bounded share of the cycle: a sender that writes as fast as this reads (issue 50 probe)
+  // cannot keep the cycle here; what is left waits for the next cycle's poll, judged then.
+  for (int taken = 0; taken < kMaxDatagramsPerPoll; ++taken) {
     std::size_t length = 0;
     unsigned from_length = 0;
     bool sender_ok = false;

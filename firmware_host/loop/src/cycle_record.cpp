@@ -37,6 +37,8 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
     r.frame_sequence[v] = c.frame_sequence[v];
   }
   r.true_residual_mm = c.true_residual_mm;
+  if (c.true_residual_mm >= 0)
+    for (int i = 0; i < 6; ++i) r.true_target_residual[i] = c.true_target_residual(i);
   if (c.have_readback)
     for (int i = 0; i < 6; ++i) r.readback[i] = c.readback(i);
   if (c.registration_ran) {
@@ -52,6 +54,7 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
   if (c.command_sent) {
     for (int i = 0; i < 6; ++i) r.command[i] = c.command(i);
     r.command_sent = 1;
+    r.command_acked_ns = c.command_acked_ns;
   }
   r.hold_id = c.hold_id;
   r.beam_permit = c.beam_permit ? 1 : 0;
@@ -83,6 +86,7 @@ void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleSt
   if (r.command_sent) ++summary.commands;
   const auto state = static_cast<TrackingState>(r.state);
   if (parts.truth != nullptr && state == TrackingState::kTrack) residual_mm.add(r.true_residual_mm);
+  accuracy.add(r);
   ++summary.states[r.state];
 }
 

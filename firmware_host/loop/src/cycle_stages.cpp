@@ -98,7 +98,10 @@ void TrackingLoop::Impl::read_back(CycleState& c) {
   }
   c.readback_ms = ms_between(started, monotonic_now_ns());
   // The truth at the frame time, before this cycle's command moves the simulated room on.
-  if (parts.truth != nullptr) c.true_residual_mm = parts.truth->residual_mm();
+  if (parts.truth != nullptr) {
+    c.true_residual_mm = parts.truth->residual_mm();
+    c.true_target_residual = parts.truth->target_residual();
+  }
 }
 
 // The read-back, then the frame pair. The read-back comes first: the pair was exposed at the
@@ -335,7 +338,10 @@ DeviceStatus TrackingLoop::Impl::send_step(CycleState& c) {
     commanded_total += step;
     // Recorded as sent only where it moves a patient (not the recorded read-backs of a replay).
     c.command_sent = parts.actuator->moves_patient();
-    if (c.command_sent) c.command = step;
+    if (c.command_sent) {
+      c.command = step;
+      c.command_acked_ns = settings.simulated_clock ? due_ns : monotonic_now_ns();
+    }
     approve_next_step = false;
   }
   return sent;

@@ -34,11 +34,13 @@ constexpr std::uint32_t kFirstFormatVersion = 1;
 constexpr VersionLayout kLayouts[] = {
     {256, offsetof(JournalRecord, hold_id)},                // version 1
     {264, offsetof(JournalRecord, operator_refused_by_reason)},  // version 2
-    {sizeof(JournalRecord), sizeof(JournalRecord)},         // version 3
+    {296, offsetof(JournalRecord, true_target_residual)},   // version 3
+    {sizeof(JournalRecord), sizeof(JournalRecord)},         // version 4
 };
 static_assert(std::size(kLayouts) == kFormatVersion - kFirstFormatVersion + 1, "a layout for every version read");
-static_assert(kLayouts[0].field_bytes == 252 && kLayouts[1].field_bytes == 264 && sizeof(JournalRecord) == 296,
-              "the layouts of versions 1 to 3 are fixed");
+static_assert(kLayouts[0].field_bytes == 252 && kLayouts[1].field_bytes == 264 && kLayouts[2].field_bytes == 296 &&
+                  sizeof(JournalRecord) == 352,
+              "the layouts of versions 1 to 4 are fixed");
 const VersionLayout& layout_of(std::uint32_t version) { return kLayouts[version - kFirstFormatVersion]; }
 constexpr std::size_t kReadWindowBytes = std::size_t{1} << 20;
 

@@ -7,6 +7,7 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -71,9 +72,14 @@ Status check_journal_path(const std::filesystem::path& file, bool overwrite) {
   unsigned char magic[8] = {};
   const int fd = ::open(file.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
   const bool is_journal = fd >= 0 && ::read(fd, magic, 8) == 8 && std::memcmp(magic, kFileMagic, 8) == 0;
+  // A writer holds its journal's lock for as long as it runs (open(), below).
+  const bool in_use = fd >= 0 && ::flock(fd, LOCK_SH | LOCK_NB) != 0 && errno == EWOULDBLOCK;
   if (fd >= 0) ::close(fd);
   if (!is_journal)
     return failed_precondition(refused + " (it is not an lftrack journal: --overwrite replaces only a journal)");
+  if (in_use)
+    return failed_precondition(file.string() + ": a running lftrack is writing this journal; --overwrite replaces "
+                                               "only a finished one");
   return {};
 }
 
@@ -83,7 +89,19 @@ Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem
   int fd = -1;
   if (options.overwrite) {
     LFTRACK_RETURN_IF_ERROR(check_journal_path(file, true));
-    fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_NOFOLLOW | O_CLOEXEC, 0644);
+    // Locked before it is emptied: a journal a running lftrack writes (it holds the lock) is
+    // never truncated under it (issue 50 probe: --overwrite destroyed a live run's records).
+    fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_NOFOLLOW | O_CLOEXEC, 0644);
+    if (fd >= 0 && ::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      ::close(fd);
+      return failed_precondition(file.string() + ": a running lftrack is writing this journal; --overwrite "
+                                                 "replaces only a finished one");
+    }
+    if (fd >= 0 && ::ftruncate(fd, 0) != 0) {
+      const std::string why = std::strerror(errno);
+      ::close(fd);
+      return io_error(file.string() + ": cannot empty the earlier journal: " + why);
+    }
   } else {
     // Created and claimed in one step (O_EXCL), so two runs can never share a file; with
     // add_suffix, the next free name of -2, -3, ... is taken instead of refusing.
@@ -94,6 +112,7 @@ Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem
       file = stem + "-" + std::to_string(k) + ext;
     }
     if (fd < 0 && errno == EEXIST) return check_journal_path(file, false);
+    if (fd >= 0) (void)::flock(fd, LOCK_EX | LOCK_NB);  // new and ours alone: held while we write
   }
   if (fd < 0) return io_error(file.string() + ": cannot create journal: " + std::strerror(errno));
   unsigned char header[kHeaderBytes] = {};

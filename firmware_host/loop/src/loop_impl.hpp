@@ -16,6 +16,7 @@
 
 #include "lftrack/loop/histogram.hpp"
 #include "lftrack/loop/motion_predictor.hpp"
+#include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
 
 namespace lftrack::host {
@@ -42,6 +43,7 @@ struct CycleState {
   std::int64_t frame_time_ns[2] = {0, 0};
   std::uint32_t frame_sequence[2] = {0, 0};
   double true_residual_mm = -1;
+  tracking::Vector6d true_target_residual = tracking::Vector6d::Zero();
   bool have_readback = false;
   tracking::Vector6d readback = tracking::Vector6d::Zero();
 
@@ -63,6 +65,7 @@ struct CycleState {
   GateOutput gate;
   bool command_sent = false;
   tracking::Vector6d command = tracking::Vector6d::Zero();
+  std::int64_t command_acked_ns = 0;  // loop clock (simulated: the command's deadline)
 
   // after actuation
   std::uint32_t hold_id = 0;
@@ -124,6 +127,7 @@ struct TrackingLoop::Impl {
   Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
   Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
   Histogram readback_ms{0.001, 2000};  // the actuator's read-back (a protocol's round trip)
+  TrackingAccuracy accuracy;           // the target residual per axis, the command latency
   double evaluations_sum = 0;
   LoopSummary summary;
 

@@ -15,6 +15,8 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
     s.residual_p95_mm = residual_mm.quantile(0.95);
     s.residual_max_mm = residual_mm.max();
   }
+  s.target_residual = accuracy.target_residual();
+  s.command_latency = accuracy.latency();
   s.cycle_p50_ms = cycle_ms.quantile(0.5);
   s.cycle_p95_ms = cycle_ms.quantile(0.95);
   s.cycle_p99_ms = cycle_ms.quantile(0.99);
@@ -50,6 +52,8 @@ nlohmann::json to_json(const LoopSummary& s) {
   auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
   j["residual_mm"] = {
       {"mean", opt(s.residual_mean_mm)}, {"p95", opt(s.residual_p95_mm)}, {"max", opt(s.residual_max_mm)}};
+  j["target_residual"] = s.target_residual ? to_json(*s.target_residual) : nlohmann::json(nullptr);
+  j["latency_exposure_to_ack_ms"] = s.command_latency ? to_json(*s.command_latency) : nlohmann::json(nullptr);
   j["cycle_ms"] = {
       {"p50", s.cycle_p50_ms}, {"p95", s.cycle_p95_ms}, {"p99", s.cycle_p99_ms}, {"max", s.cycle_max_ms}};
   j["registration_ms"] = {

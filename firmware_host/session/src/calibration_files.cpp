@@ -13,12 +13,10 @@ namespace {
 
 // The YAML document in `file`, or a message naming the file (and line, for a syntax error).
 Result<YAML::Node> read_yaml(const std::string& file, const std::string& what) {
-  std::ifstream in(file);
-  if (!in) return not_found("cannot open " + what + " '" + file + "'");
-  std::stringstream text;
-  text << in.rdbuf();
+  auto text = read_yaml_text(file, what);
+  if (!text.ok()) return text.status();
   try {
-    return YAML::Load(text.str());
+    return YAML::Load(*text);
   } catch (const YAML::Exception& e) {
     return SceneParser(file, fs::path(file).parent_path()).error_at(e.mark, "not valid YAML: " + e.msg);
   }

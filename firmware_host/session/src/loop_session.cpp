@@ -30,6 +30,7 @@ class RoomTruth final : public SimulatedTruth {
  public:
   explicit RoomTruth(const sim::SimulatedRoom* room) : room_(room) {}
   double residual_mm() const override { return room_->residual_mm(); }
+  tracking::Vector6d target_residual() const override { return room_->target_residual(); }
 
  private:
   const sim::SimulatedRoom* room_;
@@ -334,7 +335,9 @@ Status start_watchers(const PreparedScene& p, const LoopSessionOptions& o, LoopS
     parts->operators.add(std::make_unique<BorrowedOperator>(parts->page_operator.get()));
   }
   if (o.igtl) {
-    auto igtl = IgtlServer::start(parts->hub.get(), *o.igtl);
+    IgtlOptions igtl_options = *o.igtl;
+    igtl_options.simulated_clock = o.simulated_clock;
+    auto igtl = IgtlServer::start(parts->hub.get(), igtl_options);
     if (!igtl.ok()) return igtl.status();
     parts->igtl = std::move(igtl).value();
     if (const std::string w =

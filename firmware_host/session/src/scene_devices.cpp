@@ -1,5 +1,7 @@
 #include "lftrack/host/scene_devices.hpp"
 
+#include <cstdint>
+#include <cstdio>
 #include <sstream>
 
 namespace lftrack::host {
@@ -52,7 +54,16 @@ std::string describe_actuator(const ActuatorSpec& a) {
 }
 
 std::string served_twin_id(const std::string& detector_name) {
-  return ("LFTRACK-" + detector_name).substr(0, 15);
+  const std::string whole = "LFTRACK-" + detector_name;
+  if (whole.size() <= 15) return whole;
+  // Cut to 15 characters, two names sharing their first 7 would get one id and a swap of their
+  // cameras would pass the identity check: the name's first two characters, then five hex digits
+  // of its FNV-1a hash (serve detectors refuses the rare scene whose ids still coincide).
+  std::uint32_t hash = 2166136261u;
+  for (unsigned char c : detector_name) hash = (hash ^ c) * 16777619u;
+  char digits[8];
+  std::snprintf(digits, sizeof digits, "%05x", hash & 0xFFFFFu);
+  return "LFTRACK-" + detector_name.substr(0, 2) + digits;
 }
 
 bool frames_are_simulated(const Scene& scene) {

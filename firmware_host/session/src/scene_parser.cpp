@@ -1,8 +1,15 @@
 // Scene YAML -> Scene, with every error located at file:line:col (yaml-cpp marks, 1-based here).
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <iomanip>
 #include <set>
@@ -146,6 +153,16 @@ Status SceneParser::parse_detector(const YAML::Node& n, int index, DetectorSpec*
   std::string name;
   LFTRACK_RETURN_IF_ERROR(need(n, "name", what, &node));
   LFTRACK_RETURN_IF_ERROR(text(node, what + ".name", &name));
+  // A detector's name becomes part of file names (its light field, its archive's frames, its
+  // calibration): the rule `calibrate detector --detector` has (issue 50 probe: a name with
+  // "../" wrote light fields outside --lf-dir).
+  const bool name_ok = !name.empty() && name.size() <= 64 && name.front() != '.' &&
+                       std::all_of(name.begin(), name.end(), [](unsigned char c) {
+                         return std::isalnum(c) || c == '_' || c == '-' || c == '.';
+                       });
+  if (!name_ok)
+    return error(node, what + ".name '" + name.substr(0, 80) +
+                           "': a detector name is 1 to 64 letters, digits, '_', '-' or '.' (not first)");
   if (n["frames"]) LFTRACK_RETURN_IF_ERROR(parse_frames(n["frames"], what + ".frames", &d->frames));
   if (n["calibration"]) {
     LFTRACK_RETURN_IF_ERROR(parse_detector_calibration(n["calibration"], what + ".calibration", &d->calibration_file));
@@ -407,6 +424,32 @@ Result<Scene> parse_scene(const std::string& yaml_text, const std::string& sourc
   }
 }
 
+Result<std::string> read_yaml_text(const std::string& file, const std::string& what) {
+  // O_NONBLOCK: opening a FIFO with no writer does not wait; fstat then refuses it.
+  const int fd = ::open(file.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return not_found("cannot open " + what + " '" + file + "': " + std::strerror(errno));
+  struct stat st {};
+  const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+  if (!regular || std::uint64_t(st.st_size) > kMaxYamlFileBytes) {
+    ::close(fd);
+    return invalid_argument(file + ": " +
+                            (regular ? "larger than the " + std::to_string(kMaxYamlFileBytes >> 20) + " MiB a " + what +
+                                           " may be"
+                                     : "not a regular file (a " + what + " is a YAML file)"));
+  }
+  std::string text(std::size_t(st.st_size), '\0');
+  std::size_t have = 0;
+  while (have < text.size()) {
+    const ssize_t n = ::read(fd, text.data() + have, text.size() - have);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    have += std::size_t(n);
+  }
+  ::close(fd);
+  text.resize(have);  // a file that shrank while read: what was there
+  return text;
+}
+
 Result<Scene> load_scene(const std::string& file_or_builtin) {
   if (auto text = builtin_scene_text(file_or_builtin)) {
     return parse_scene(*text, file_or_builtin, std::filesystem::current_path());
@@ -414,12 +457,10 @@ Result<Scene> load_scene(const std::string& file_or_builtin) {
   if (file_or_builtin.rfind("builtin:", 0) == 0) {
     return not_found("unknown built-in scene '" + file_or_builtin + "' (known: builtin:phantom, builtin:phantom-clinical)");
   }
-  std::ifstream in(file_or_builtin);
-  if (!in) return not_found(file_or_builtin + ": cannot open scene file");
-  std::stringstream buffer;
-  buffer << in.rdbuf();
+  auto text = read_yaml_text(file_or_builtin, "scene file");
+  if (!text.ok()) return text.status();
   const fs::path base = fs::absolute(fs::path(file_or_builtin)).parent_path();
-  return parse_scene(buffer.str(), file_or_builtin, base);
+  return parse_scene(*text, file_or_builtin, base);
 }
 
 }  // namespace lftrack::host

@@ -18,6 +18,13 @@ namespace lftrack::host {
 namespace fs = std::filesystem;
 using Eigen::Vector3d;
 
+// The text of a YAML file a person wrote (a scene, a calibration): a regular file of at most
+// kMaxYamlFileBytes, read whole. A FIFO, a device (/dev/zero), a folder or a larger file is
+// refused with `what` and the path, never read without end (issue 50 probe: /dev/zero as a scene
+// took 16 GB, a FIFO blocked for ever).
+inline constexpr std::size_t kMaxYamlFileBytes = std::size_t{1} << 20;
+Result<std::string> read_yaml_text(const std::string& file, const std::string& what);
+
 class SceneParser {
  public:
   SceneParser(std::string source, fs::path base_dir)

@@ -195,7 +195,8 @@ void IgtlServer::run() {
     const std::int64_t wall_minus_mono = clock_ns(CLOCK_REALTIME) - clock_ns(CLOCK_MONOTONIC);
     for (const FeedRecord& f : records) {
       const JournalRecord& r = f.record;
-      const std::int64_t wall_ns = record_wall_ns(r, wall_minus_mono);
+      const std::int64_t wall_ns =
+          options_.simulated_clock ? clock_ns(CLOCK_REALTIME) : record_wall_ns(r, wall_minus_mono);
       Eigen::Map<const tracking::Vector6d> delta(r.pose_delta), command(r.command);
       if (f.registered && !clients.empty())
         send_all(transform_message("T_room_from_ct",

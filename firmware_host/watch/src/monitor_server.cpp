@@ -13,6 +13,7 @@
 
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "fronted_server.hpp"
 #include "monitor_assets.hpp"
 #include "monitor_json.hpp"
 
@@ -145,16 +146,17 @@ Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageO
   s->page_ = page;
   s->options_ = options;
   s->token_ = *token;
-  s->server_ = std::make_unique<httplib::Server>();
-  httplib::Server& svr = *s->server_;
-  // Every event stream holds a thread; the rest serve the page, state and actions. One request per
-  // connection: an idle keep-alive connection (a refused event stream's, say) would hold a thread
-  // for nothing while others wait (an outside probe starved the actions with 32 event clients).
+  // Every event stream holds a thread; the rest serve the page, state and actions. A connection
+  // gets a thread only once its request has arrived whole (fronted_server.hpp: a client trickling
+  // its request in held a thread for ever, and 32 of them starved the operator's Stop), and serves
+  // one request: an idle keep-alive connection would hold a thread for nothing while others wait.
   const std::size_t threads = std::size_t(options.max_event_clients) + 16;
-  svr.new_task_queue = [threads] { return new WatcherTaskQueue(threads); };
+  FrontedServer::Limits limits;
+  limits.read_timeout_ms = 2000;
+  limits.write_timeout_ms = 2000;  // a client that stops reading loses its stream, nothing else
+  s->server_ = std::make_unique<FrontedServer>(limits, [threads] { return new WatcherTaskQueue(threads); });
+  httplib::Server& svr = *s->server_;
   svr.set_payload_max_length(4096);
-  svr.set_read_timeout(2, 0);
-  svr.set_write_timeout(2, 0);  // a client that stops reading loses its stream, nothing else
   svr.set_keep_alive_max_count(1);
   svr.set_keep_alive_timeout(1);
   // cpp-httplib's default sets SO_REUSEPORT, which lets a second server (another lftrack) bind the
@@ -191,10 +193,10 @@ Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageO
   s->thread_ = std::thread([server = s->server_.get()] {
     make_current_thread_best_effort();  // never above the cycle
     exclude_this_thread_from_allocation_count();
-    server->listen_after_bind();
+    server->serve();
   });
   // Serving before start() returns, so that stop() (the destructor) always finds it running.
-  for (int waited_ms = 0; !s->server_->is_running(); ++waited_ms) {
+  for (int waited_ms = 0; !s->server_->serving(); ++waited_ms) {
     if (waited_ms > 10000) return internal_error("monitor: the HTTP server did not start");
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
@@ -203,7 +205,7 @@ Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageO
 
 MonitorServer::~MonitorServer() {
   stopping_.store(true);
-  if (server_) server_->stop();
+  if (server_) server_->stop_serving();
   if (thread_.joinable()) thread_.join();
 }
 

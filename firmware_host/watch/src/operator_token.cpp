@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <openssl/crypto.h>
 #include <openssl/rand.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -56,21 +57,30 @@ Result<std::unique_ptr<TokenFile>> TokenFile::write(const std::filesystem::path&
   if (fd < 0 && errno == EEXIST) {
     if (!is_earlier_token_file(path))
       return failed_precondition(path.string() + " exists and is not an earlier lftrack token file; not replacing it");
+    // A running lftrack holds its token file's lock until it exits (issue 50 probe: a second run
+    // took a live run's token file over and removed it at its exit).
+    const int earlier = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+    const bool live = earlier >= 0 && ::flock(earlier, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+    if (earlier >= 0) ::close(earlier);
+    if (live)
+      return failed_precondition(path.string() + " is the token file of a running lftrack; give another "
+                                                 "--monitor-token-file or port");
     if (::unlink(path.c_str()) != 0) return io_error(path.string() + ": cannot remove the earlier token file");
     fd = ::open(path.c_str(), flags, 0600);
   }
   if (fd < 0) return io_error(path.string() + ": cannot create the token file: " + std::strerror(errno));
   const std::string line = token + "\n";
-  const bool written = ::fchmod(fd, 0600) == 0 &&
+  const bool written = ::flock(fd, LOCK_EX | LOCK_NB) == 0 && ::fchmod(fd, 0600) == 0 &&
                        ::write(fd, line.data(), line.size()) == static_cast<ssize_t>(line.size());
   struct stat st {};
   ::fstat(fd, &st);
-  ::close(fd);
   if (!written) {
+    ::close(fd);
     ::unlink(path.c_str());
     return io_error(path.string() + ": cannot write the token file");
   }
   std::unique_ptr<TokenFile> file(new TokenFile);
+  file->fd_ = fd;  // open, and locked, for as long as this run serves
   file->path_ = path;
   file->device_ = st.st_dev;
   file->inode_ = st.st_ino;
@@ -81,11 +91,15 @@ Result<std::unique_ptr<TokenFile>> TokenFile::write(const std::filesystem::path&
 TokenFile::~TokenFile() {
   // Still the file written (a file made since may reuse the inode: the text must match too).
   struct stat st {};
-  if (::lstat(path_.c_str(), &st) != 0 || st.st_dev != device_ || st.st_ino != inode_ || !S_ISREG(st.st_mode)) return;
+  if (::lstat(path_.c_str(), &st) != 0 || st.st_dev != device_ || st.st_ino != inode_ || !S_ISREG(st.st_mode)) {
+    if (fd_ >= 0) ::close(fd_);
+    return;
+  }
   std::ifstream in(path_);
   std::string line;
   std::getline(in, line);
   if (line == token_) ::unlink(path_.c_str());
+  if (fd_ >= 0) ::close(fd_);
 }
 
 Result<std::string> NonceBook::issue(Clock::time_point now) {

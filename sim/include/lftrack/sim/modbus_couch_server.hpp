@@ -11,8 +11,17 @@
 // beside the one that commands it: each request is answered on its own connection, in the order
 // requests complete, and no client waits for another (a request is read as its bytes arrive,
 // never by waiting on one connection). A connection that completes no request for
-// idle_timeout_s is closed; one beyond max_connections closes the connection idle longest; one
-// whose bytes are not Modbus TCP (protocol id not 0, a length outside 2..254) is closed.
+// idle_timeout_s is closed; one beyond max_connections is turned away unless a connection has
+// sent nothing for a second since it was accepted (that one is closed for it), so connections
+// that talk, the loop's among them, are never pushed out by a flood of new ones; one whose bytes
+// are not Modbus TCP (protocol id not 0, a length outside 2..254) is closed. A request is checked
+// before it touches the couch: a PDU shorter or longer than its function says, or a write whose
+// byte count is not twice its register count, is answered with exception 3 (illegal data value)
+// and moves nothing; one for another unit (TCP: not unit_id or 0xFF) with exception 11 (gateway
+// target failed to respond), over RTU not at all; a broadcast (unit 0) is never answered. The
+// couch acts on two writes only, the whole block (function 16 from the target, 14 registers) and
+// the control word alone (function 6); every other write is refused with exception 2, never
+// acknowledged and left undone.
 //
 // Faults are injected for the next N requests: no reply at all, exception 4 (device failure) or
 // 6 (busy), a reply with the wrong unit id, a dropped connection, a read-back that disagrees
@@ -71,6 +80,8 @@ class ModbusCouchServer {
   std::int64_t requests() const { return requests_.load(); }
   std::int64_t connections() const { return connections_.load(); }  // TCP connections accepted
   std::int64_t idle_closed() const { return idle_closed_.load(); }  // closed for idling or for a newer one
+  std::int64_t turned_away() const { return turned_away_.load(); }  // connections refused: every slot busy
+  std::int64_t malformed() const { return malformed_.load(); }      // requests refused before the couch
 
  private:
   ModbusCouchServer(drivers::Actuator* couch, const ModbusCouchServerOptions& options);
@@ -90,7 +101,7 @@ class ModbusCouchServer {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<int> fault_{0}, fault_requests_{0}, fault_kind_{0};
-  std::atomic<std::int64_t> requests_{0}, connections_{0}, idle_closed_{0};
+  std::atomic<std::int64_t> requests_{0}, connections_{0}, idle_closed_{0}, turned_away_{0}, malformed_{0};
   tracking::Vector6d accepted_target_ = tracking::Vector6d::Zero();
   std::uint16_t acknowledged_ = 0;
   std::uint16_t fault_word_ = 0;

@@ -57,6 +57,10 @@ class SimulatedRoom {
   // The true residual now: mean displacement of the 27 points of a 3 x 3 x 3 grid over the
   // residual box between where the anatomy is and where the plan has it (mm).
   double residual_mm() const;
+  // The target's true offset now, at the registration origin, in the room frame: where the
+  // anatomy has the origin minus where the plan has it (mm), then the rotation vector that takes
+  // the plan's orientation to the anatomy's (rad).
+  tracking::Vector6d target_residual() const;
 
   // The couch as the loop sees it in process: a command takes effect as if sent at its deadline
   // (the latest the cycle may send it), so a run is deterministic whatever the host's speed.

@@ -5,9 +5,9 @@
 // File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size, the
 // scene's 16-byte fingerprint or zeros), then
 // one frame per record: u32 magic 0x4A52464C ("LFRJ"), u32 payload size, the payload (a
-// JournalRecord), u32 CRC-32C of the payload. Version 3 (written now) has 296-byte records;
-// version 2 (still read) had 264, the prefix up to `operator_refused_by_reason`, and version 1
-// 256, the prefix up to `hold_id`. Fields a version lacks read as zero.
+// JournalRecord), u32 CRC-32C of the payload. Version 4 (written now) has 352-byte records;
+// version 3 (still read) had 296, the prefix up to `true_target_residual`, version 2 264, the
+// prefix up to `operator_refused_by_reason`, and version 1 256, the prefix up to `hold_id`. Fields a version lacks read as zero.
 //
 // Durability: the writer write()s records within a few milliseconds of the push, so they are
 // in the kernel's page cache and survive the process being killed (kill -9) at any moment; it
@@ -76,6 +76,14 @@ struct JournalRecord {
   // Format version 3 on: how many commands were refused this cycle for each reason (index:
   // OperatorRefusal; saturating at 65535), so that no reason is lost behind another.
   std::uint16_t operator_refused_by_reason[16] = {};
+  // Format version 4 on. Simulation only (zeros otherwise, and where true_residual_mm is -1): the
+  // target's true offset after correction, at the registration origin, room frame: where the
+  // anatomy has it minus where the plan has it (mm), and the rotation vector from the plan's
+  // orientation to the anatomy's (rad). tracking_accuracy.hpp reports it per axis.
+  double true_target_residual[6] = {};
+  // Format version 4 on: when the actuator acknowledged this cycle's command, on the loop's clock
+  // (its command() returned; simulated clock: the command's deadline); 0 when none was sent.
+  std::int64_t command_acked_ns = 0;
 };
 static_assert(std::is_trivially_copyable_v<JournalRecord>);
 

@@ -42,6 +42,9 @@ class SimulatedTruth {
  public:
   virtual ~SimulatedTruth() = default;
   virtual double residual_mm() const = 0;
+  // The target's true offset at the registration origin, room frame (mm, then a rotation vector
+  // in rad): JournalRecord::true_target_residual.
+  virtual tracking::Vector6d target_residual() const = 0;
 };
 
 // Watches the loop from its own thread (the chaos soak's invariant checks; a monitor): called

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lftrack/loop/operator_input.hpp"
+#include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
 namespace lftrack::host {
@@ -37,6 +38,11 @@ struct LoopSummary {
   double align_ms = 0;
   // Residual of the true patient offset after correction (simulation only), TRACK cycles.
   std::optional<double> residual_mean_mm, residual_p95_mm, residual_max_mm;
+  // The target's true offset per room axis and the share of TRACK cycles beyond 1 and 2 mm
+  // (simulation only), and exposure-to-acknowledgement latency of the commands sent
+  // (tracking_accuracy.hpp).
+  std::optional<TargetResidualReport> target_residual;
+  std::optional<CommandLatencyReport> command_latency;
   double cycle_p50_ms = 0, cycle_p95_ms = 0, cycle_p99_ms = 0, cycle_max_ms = 0;  // work, not sleep
   double registration_p50_ms = 0, registration_p95_ms = 0, registration_max_ms = 0;
   // Waiting for the pair (real clock: from the cycle's start; simulated: the copy only), and

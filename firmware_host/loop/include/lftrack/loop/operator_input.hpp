@@ -191,9 +191,10 @@ class ControlSocket final : public OperatorInput {
   bool receive(char* text, std::size_t capacity, std::size_t* text_length, bool* sender_ok,
                void* reply_to, unsigned* reply_to_length);
   void reply(const void* to, unsigned to_length, const char* line, std::size_t length);
-  // Takes every waiting datagram: judged against `view`, or, `before_hold`, refused as sent
-  // before the HOLD (a status is still answered). Replies to senders of this user that have an
-  // address.
+  // Takes the waiting datagrams, at most kMaxDatagramsPerPoll (the rest wait for the next
+  // poll): judged against `view`, or, `before_hold`, refused as sent before the HOLD (a status
+  // is still answered). Replies to senders of this user that have an address.
+  static constexpr int kMaxDatagramsPerPoll = 64;
   void take_waiting(const OperatorView& view, OperatorPoll* out, bool before_hold);
   int fd_ = -1;
   std::filesystem::path path_;

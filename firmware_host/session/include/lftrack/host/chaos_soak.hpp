@@ -12,8 +12,9 @@
 // ends at its cycle count, or early where the catalogue's safe state is final: an exception out
 // of a device (the loop holds the actuator, drops the beam and rethrows), a full disk (the loop
 // holds for good), an operator's reset of a FAULT (the loop goes IDLE and waits for a start).
-// Everything random is drawn from the seed, so a run's faults are reproducible; its registrations
-// are not bit-for-bit (each has a wall-clock budget), so neither are the states they lead to.
+// Everything random is drawn from the seed, so a run's faults are reproducible; the states they
+// lead to are not bit-for-bit (the Modbus driver's time-outs, the CAN heartbeats and the injected
+// disk and stall faults are timed on the real clock).
 //
 // Faults, per cycle with probability `fault_rate` (a kind drawn uniformly from those that fit
 // the segment): frames lost, late, stale, skewed, blank, saturated, torn, from a disconnected or

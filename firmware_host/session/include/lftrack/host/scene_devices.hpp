@@ -18,8 +18,9 @@ std::string frames_yaml(const DetectorFramesSpec& frames);
 std::string describe_actuator(const ActuatorSpec& actuator);
 
 // The device id (serial number) `lftrack serve detectors` gives the camera it serves as detector
-// `detector_name`, the simulator's twin of that detector: "LFTRACK-<name>", cut to the 15
-// characters a GigE Vision serial number holds.
+// `detector_name`, the simulator's twin of that detector: "LFTRACK-<name>" where that fits the 15
+// characters a GigE Vision serial number holds, else "LFTRACK-" + the name's first two
+// characters + five hex digits of its hash (names that share a prefix get different ids).
 std::string served_twin_id(const std::string& detector_name);
 
 // What kind of device a scene names, asked by the session and the start-up checks, so that

@@ -31,6 +31,10 @@ namespace lftrack::host {
 struct IgtlOptions {
   ListenAddress listen;
   int max_clients = 8;  // more are accepted and closed at once
+  // The loop runs on a simulated clock (sim --fast): its exposure times have no place on the wall
+  // clock (a fast run's ran minutes ahead of it; issue 50 probe), so a message is stamped with
+  // the wall time it is sent.
+  bool simulated_clock = false;
 };
 
 // Each field is read on its own, not as one snapshot; clients_now changes with the list of clients,

@@ -38,6 +38,7 @@ struct Request;
 }
 
 namespace lftrack::host {
+class FrontedServer;
 
 struct MonitorOptions {
   ListenAddress listen;
@@ -95,7 +96,7 @@ class MonitorServer {
   NonceBook nonces_;
   std::vector<std::string> hosts_;    // allowed Host header values
   std::vector<std::string> origins_;  // allowed Origin header values
-  std::unique_ptr<httplib::Server> server_;
+  std::unique_ptr<FrontedServer> server_;
   std::thread thread_;
   std::atomic<std::int64_t> event_clients_{0}, refused_{0}, accepted_{0};
   std::atomic<bool> stopping_{false};

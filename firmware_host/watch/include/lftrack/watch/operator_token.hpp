@@ -27,7 +27,8 @@ bool token_matches(const std::string& expected, const std::string& offered);
 
 // A token file that belongs to one run: created new with mode 0600 (never through a symbolic
 // link); an earlier run's file at that path (a regular file of this user holding only a token)
-// is replaced, anything else is refused. The file is removed when the object is destroyed, if it
+// is replaced unless a running lftrack holds it (the file is locked, flock, for as long as its
+// run serves), anything else is refused. The file is removed when the object is destroyed, if it
 // is still the one written.
 class TokenFile {
  public:
@@ -40,6 +41,7 @@ class TokenFile {
   std::filesystem::path path_;
   std::uint64_t device_ = 0, inode_ = 0;
   std::string token_;
+  int fd_ = -1;  // the file, locked while the run serves
 };
 
 // Nonces the server hands out (GET /api/nonce), each good for one request within kNonceLifetime.

@@ -1,0 +1,55 @@
+#pragma once
+// An httplib::Server whose connections reach a worker thread only once their request has arrived
+// whole (private to lftrack::watch).
+//
+// cpp-httplib gives each accepted connection a worker thread, which then reads the request with a
+// timeout per read: a client sending a byte a second holds that thread for as long as it likes,
+// and a few dozen such clients (no token needed) held every thread, so the operator's Stop got no
+// answer (issue 50 probe). Here one front thread accepts and waits on every connection with epoll,
+// peeking until the request line, headers and body (Content-Length, at most the payload limit)
+// are all in the socket's buffer; only then is the connection handed to a worker, which reads and
+// answers it at once. A request that has not arrived within `arrival_deadline` is dropped, and
+// when `max_waiting` connections are arriving the oldest is dropped for a new one: slow clients
+// cost a file descriptor each, never a worker.
+//
+// Workers are then held only by complete requests (answered in microseconds) and by the event
+// streams the monitor caps. Call bind_to_port() or bind_to_any_port() first, then serve() on the
+// server's own thread; stop_serving() (any thread) ends it.
+
+#include <httplib.h>
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <memory>
+
+namespace lftrack::host {
+
+class FrontedServer final : public httplib::Server {
+ public:
+  struct Limits {
+    std::size_t max_waiting = 256;                      // connections whose request is arriving
+    std::chrono::milliseconds arrival_deadline{3000};   // for the whole request, from its accept
+    std::size_t max_request_bytes = 8192 + 4096;        // headers and body; beyond: dropped
+    int read_timeout_ms = 2000, write_timeout_ms = 2000;  // a worker's socket reads and writes
+  };
+  FrontedServer(const Limits& limits, std::function<httplib::TaskQueue*()> make_workers);
+  ~FrontedServer() override;
+
+  // Accepts and watches connections until stop_serving(); false if there was no bound socket.
+  bool serve();
+  void stop_serving();
+  bool serving() const { return serving_.load(); }
+  std::uint64_t dropped() const { return dropped_.load(); }  // requests that never arrived whole
+
+ private:
+  // httplib's hook for one accepted connection, here a connection whose request has arrived.
+  bool process_and_close_socket(socket_t sock) override;
+
+  Limits limits_;
+  std::function<httplib::TaskQueue*()> make_workers_;
+  std::atomic<bool> serving_{false}, stop_{false};
+  std::atomic<std::uint64_t> dropped_{0};
+};
+
+}  // namespace lftrack::host
