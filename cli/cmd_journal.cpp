@@ -192,6 +192,12 @@ void print_summary_json(const JournalContents& contents) {
   nlohmann::json j;
   j["format_version"] = contents.format_version;
   j["records"] = contents.records.size();
+  // The figures are over the records that survived: say what did not (the details on stderr).
+  std::uint64_t missing = 0;
+  for (const JournalCycleGap& g : contents.gaps) missing += g.missing_cycles;
+  j["damaged"] = contents.damaged();
+  j["bad_spans"] = contents.bad_spans.size();
+  j["cycles_missing"] = missing;
   nlohmann::json per_state;
   for (std::size_t i = 0; i < states.size(); ++i) per_state[state_name(std::uint8_t(i))] = states[i];
   j["states"] = per_state;

@@ -122,11 +122,12 @@ Status serve_couch(const ServeOptions& o) {
     const tracking::Vector6d q = c->position();
     char line[256];
     std::snprintf(line, sizeof line,
-                  "requests %lld, connections %lld, commands %lld, holds %lld, beam permit %s, position mm "
-                  "(%.3f, %.3f, %.3f)",
-                  static_cast<long long>(s->requests()), static_cast<long long>(s->connections()),
-                  static_cast<long long>(c->commands()), static_cast<long long>(c->holds()),
-                  c->beam_permit() ? "on" : "off", q[0], q[1], q[2]);
+                  "requests %lld (refused %lld), connections %lld (turned away %lld, closed idle %lld), "
+                  "commands %lld, holds %lld, beam permit %s, position mm (%.3f, %.3f, %.3f)",
+                  static_cast<long long>(s->requests()), static_cast<long long>(s->malformed()),
+                  static_cast<long long>(s->connections()), static_cast<long long>(s->turned_away()),
+                  static_cast<long long>(s->idle_closed()), static_cast<long long>(c->commands()),
+                  static_cast<long long>(c->holds()), c->beam_permit() ? "on" : "off", q[0], q[1], q[2]);
     return std::string(line);
   };
   LFTRACK_RETURN_IF_ERROR(serve_until_stopped(
@@ -138,9 +139,15 @@ Status serve_couch(const ServeOptions& o) {
       describe));
   if (o.json) {
     const tracking::Vector6d q = c->position();
-    nlohmann::json j = {{"device", "couch"},          {"requests", s->requests()},
-                        {"connections", s->connections()}, {"commands", c->commands()},
-                        {"holds", c->holds()},        {"position", {q[0], q[1], q[2], q[3], q[4], q[5]}}};
+    nlohmann::json j = {{"device", "couch"},
+                        {"requests", s->requests()},
+                        {"requests_refused", s->malformed()},
+                        {"connections", s->connections()},
+                        {"connections_turned_away", s->turned_away()},
+                        {"connections_closed_idle", s->idle_closed()},
+                        {"commands", c->commands()},
+                        {"holds", c->holds()},
+                        {"position", {q[0], q[1], q[2], q[3], q[4], q[5]}}};
     std::printf("%s\n", j.dump().c_str());
   } else {
     std::printf("served: %s\n", describe().c_str());

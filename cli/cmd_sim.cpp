@@ -104,8 +104,9 @@ void print_summary(const LoopSummary& s) {
                 static_cast<long long>(t->beam_on_cycles));
   }
   if (const auto& l = s.command_latency)
-    std::printf("exposure to actuator acknowledgement: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms (%lld commands)\n",
-                l->p50_ms, l->p95_ms, l->p99_ms, l->max_ms, static_cast<long long>(l->commands));
+    std::printf("exposure to actuator acknowledgement: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms (%lld commands%s)\n",
+                l->p50_ms, l->p95_ms, l->p99_ms, l->max_ms, static_cast<long long>(l->commands),
+                s.simulated_clock ? "; simulated clock: the command deadline, not a measurement" : "");
   std::printf(
       "cycle work: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms; overruns %lld (periods skipped "
       "%lld)\n",

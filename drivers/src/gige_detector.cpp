@@ -214,7 +214,13 @@ Status GigeDetector::open() {
     return fail("keeps pixel format " + pixel_format_name_ + " when asked for another");
   bytes_per_pixel_ = chosen->bytes_per_pixel;
 
-  // The whole panel, as the scene says; never cropped to fit.
+  // The whole panel, as the scene says; never cropped to fit. Asked for first, so that a region
+  // another program left (or a stranger wrote while nobody held the camera) is not taken for the
+  // panel's size; what the camera then gives is checked.
+  if (arv_camera_is_feature_available(arv_->camera, "Width", nullptr)) {
+    arv_camera_set_region(arv_->camera, 0, 0, options_.cols, options_.rows, &error);
+    g_clear_error(&error);  // a camera that cannot is judged by what it gives, below
+  }
   gint x = 0, y = 0, width = 0, height = 0;
   arv_camera_get_region(arv_->camera, &x, &y, &width, &height, &error);
   if (error != nullptr) return fail("cannot read its image size: " + take_message(error, ""));

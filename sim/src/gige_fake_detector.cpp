@@ -180,6 +180,8 @@ struct GigeFakeDetector::Server {
   static constexpr Bounded kBounded[] = {
       {ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US, 1'000, 10'000'000},  // 1 kHz to 0.1 Hz
       {kHeartbeatTimeoutMs, 500, 60'000},  // GigE Vision's least, to a minute
+      {ARV_FAKE_CAMERA_REGISTER_BINNING_HORIZONTAL, 1, 1},  // the twin reads out every pixel
+      {ARV_FAKE_CAMERA_REGISTER_BINNING_VERTICAL, 1, 1},
   };
   // The bootstrap registers a camera only reads out (GigE Vision: version, device mode, MAC and
   // IP, names, serial, the GenICam URLs, capabilities), [begin, end) in bytes; the user-defined
@@ -193,13 +195,36 @@ struct GigeFakeDetector::Server {
   static bool overlaps(std::uint32_t address, std::uint32_t count, std::uint32_t begin, std::uint32_t end) {
     return std::uint64_t(address) < end && begin < std::uint64_t(address) + count;
   }
-  // kSuccess, or why a write of `value` at `address` is refused.
-  static gvcp::Status check_register_write(std::uint32_t address, std::uint32_t value) {
+  // kSuccess, or why a write of `value` at `address` is refused. The image registers take only
+  // what the panel can give (issue 50 probe: width 0 and a pixel format 0xDEADBEEF were
+  // acknowledged, and every client was refused the frame size until a restart): a width and an
+  // offset within the sensor's columns, a height and an offset within its rows, Mono8 or Mono16;
+  // the sensor's own size is read-only.
+  gvcp::Status check_register_write(std::uint32_t address, std::uint32_t value) const {
     for (const Range& r : kReadOnly)
       if (overlaps(address, 4, r.begin, r.end)) return gvcp::Status::kWriteProtect;
     for (const Bounded& b : kBounded)
       if (address == b.address && (value < b.low || value > b.high)) return gvcp::Status::kInvalidParameter;
-    return gvcp::Status::kSuccess;
+    const auto cols = std::uint32_t(owner->options_.cols), rows = std::uint32_t(owner->options_.rows);
+    const auto within = [](bool ok) { return ok ? gvcp::Status::kSuccess : gvcp::Status::kInvalidParameter; };
+    switch (address) {
+      case ARV_FAKE_CAMERA_REGISTER_SENSOR_WIDTH:
+      case ARV_FAKE_CAMERA_REGISTER_SENSOR_HEIGHT:
+        return gvcp::Status::kWriteProtect;
+      case ARV_FAKE_CAMERA_REGISTER_WIDTH:
+        return within(value >= 1 && value <= cols);
+      case ARV_FAKE_CAMERA_REGISTER_HEIGHT:
+        return within(value >= 1 && value <= rows);
+      case ARV_FAKE_CAMERA_REGISTER_X_OFFSET:
+        return within(value < cols);
+      case ARV_FAKE_CAMERA_REGISTER_Y_OFFSET:
+        return within(value < rows);
+      case ARV_FAKE_CAMERA_REGISTER_PIXEL_FORMAT:
+        return within(value == std::uint32_t(ARV_PIXEL_FORMAT_MONO_8) ||
+                      value == std::uint32_t(ARV_PIXEL_FORMAT_MONO_16));
+      default:
+        return gvcp::Status::kSuccess;
+    }
   }
   // A memory write may not reach around those checks: one that touches a read-only or bounded
   // register is refused (clients write registers with WRITEREG, memory for strings).
@@ -208,7 +233,7 @@ struct GigeFakeDetector::Server {
       if (overlaps(address, count, r.begin, r.end)) return true;
     for (const Bounded& b : kBounded)
       if (overlaps(address, count, b.address, b.address + 4)) return true;
-    return false;
+    return overlaps(address, count, ARV_FAKE_CAMERA_REGISTER_WIDTH, ARV_FAKE_CAMERA_REGISTER_Y_OFFSET + 4);
   }
 
   void expire_controller(std::int64_t now) {

@@ -36,11 +36,11 @@ struct Connection {
   std::size_t have = 0;
   std::int64_t heard_ns = 0;
   std::int64_t accepted_ns = 0;
-  bool spoke = false;  // has completed a request
+  bool commander = false;  // sent the last command the couch acted on (the loop's connection)
 };
 
-// A connection that has sent no request for this long after it was accepted may be closed to
-// make room for a new one (a client connects and sends within milliseconds).
+// A connection that has sent nothing for this long may be closed to make room for a new one: a
+// client connects and sends within milliseconds, and the loop asks every period.
 constexpr std::int64_t kSilentGraceNs = 1'000'000'000;
 
 // What a request must be before it touches the couch: a PDU as long as its function says (a
@@ -53,10 +53,19 @@ int check_request(const std::uint8_t* query, int header, int length, int unit_id
   if (unit == 0) return -1;  // a broadcast: never answered, and no couch moves by one
   if (unit != unit_id && !(tcp && unit == 0xFF)) return tcp ? MODBUS_EXCEPTION_GATEWAY_TARGET : -1;
   const int function = query[header];
+  const int address = pdu >= 3 ? (query[header + 1] << 8) | query[header + 2] : -1;
   const int count = pdu >= 5 ? (query[header + 3] << 8) | query[header + 4] : -1;
   switch (function) {
     case MODBUS_FC_READ_HOLDING_REGISTERS:
-    case MODBUS_FC_READ_INPUT_REGISTERS:
+    case MODBUS_FC_READ_INPUT_REGISTERS: {
+      // Checked here, never left to libmodbus: for a quantity out of range it sleeps its response
+      // timeout and flushes before answering, and this server's one thread serves every client
+      // (issue 50, second probe: six such reads put a running loop into FAULT).
+      if (pdu != 5 || count < 1 || count > MODBUS_MAX_READ_REGISTERS) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+      const int registers =
+          function == MODBUS_FC_READ_INPUT_REGISTERS ? drivers::couch_registers::kInputCount : drivers::couch_registers::kHoldingCount;
+      return address + count <= registers ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
+    }
     case MODBUS_FC_WRITE_SINGLE_REGISTER:
       return pdu == 5 ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
     case MODBUS_FC_WRITE_MULTIPLE_REGISTERS:
@@ -161,10 +170,13 @@ void ModbusCouchServer::serve() {
         std::memmove(c.bytes, c.bytes + 6 + length, c.have - (6 + length));
         c.have -= 6 + length;
         c.heard_ns = now_ns();
-        c.spoke = true;
         ++requests_;
         modbus_set_socket(ctx_, c.fd);
         handle(query, static_cast<int>(6 + length));
+        if (commanded_) {
+          for (Connection& other : clients) other.commander = false;
+          c.commander = true;
+        }
         const bool dropped = modbus_get_socket(ctx_) < 0;  // kDropConnection closed it
         modbus_set_socket(ctx_, -1);
         if (dropped) {
@@ -191,13 +203,15 @@ void ModbusCouchServer::serve() {
           std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
           const std::int64_t accepted = now_ns();
           if (clients.size() >= std::size_t(options_.max_connections)) {
-            // Room is made only by closing a connection that has said nothing since its grace
-            // ran out; a client that talks (the loop's) is never pushed out by newcomers, however
-            // many: they are turned away instead (issue 50: a connection flood evicted it).
+            // Room is made by closing the connection silent longest, once it has said nothing
+            // for a second, and never the one that sent the last command: a client that asks
+            // every period (the loop's) is not pushed out by a flood of newcomers (issue 50 probe),
+            // and connections that speak once in a while cannot keep the loop out (second probe:
+            // four of them held every slot). Otherwise the newcomer is turned away.
             auto silent = clients.end();
             for (auto it = clients.begin(); it != clients.end(); ++it)
-              if (!it->spoke && accepted - it->accepted_ns > kSilentGraceNs &&
-                  (silent == clients.end() || it->accepted_ns < silent->accepted_ns))
+              if (!it->commander && accepted - it->heard_ns > kSilentGraceNs &&
+                  (silent == clients.end() || it->heard_ns < silent->heard_ns))
                 silent = it;
             if (silent != clients.end()) {
               ++idle_closed_;  // counted before the client can see the close
@@ -212,6 +226,7 @@ void ModbusCouchServer::serve() {
             clients.push_back(Connection{});
             clients.back().fd = fd;
             clients.back().heard_ns = clients.back().accepted_ns = accepted;
+            clients.back().commander = false;
           }
         }
       }
@@ -264,6 +279,7 @@ void ModbusCouchServer::hold_where_it_is() {
 }
 
 void ModbusCouchServer::handle(std::uint8_t* query, int length) {
+  commanded_ = false;
   const int h = modbus_get_header_length(ctx_);
   if (const int refused = check_request(query, h, length, options_.unit_id, options_.rtu_device.empty());
       refused != 0) {
@@ -331,8 +347,10 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       acknowledged_ = holding[reg::kCommandSequence];
       fault_word_ = reg::kNoFault;
       holding_ = false;
+      commanded_ = true;
     } else if (holding[reg::kControl] == reg::kHold) {
       hold_where_it_is();
+      commanded_ = true;
     } else {
       // A control word that is neither enable nor hold is refused as a real drive refuses it
       // (exception 3), never echoed as if it were done.
@@ -346,6 +364,7 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       return;
     }
     if (value == reg::kHold) hold_where_it_is();
+    commanded_ = true;
   }
   refresh_inputs(mismatch);
   modbus_reply(ctx_, query, length, map_);

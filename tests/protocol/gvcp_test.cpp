@@ -217,10 +217,17 @@ TEST(GigeFakeCamera, RefusesAbsurdRegisterValuesAndKeepsItsSchedule) {
   EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {0x0200, 0xFFFFFFFFu})), 0x8004) << "the GenICam URL is read-only";
   EXPECT_EQ(status_of(gvcp_datagram(0x0086, 8, {0x0000, 0xFFFFFFFFu})), 0x8004) << "so is the bootstrap's version";
   EXPECT_EQ(client.read_register(0x0200, 8, 2000ms).value_or(0), url);
+  // The image registers take only what the panel gives (second probe: width 0 was acknowledged).
+  constexpr std::uint32_t kWidth = 0x100, kHeight = 0x104, kPixelFormat = 0x128, kSensorWidth = 0x11c;
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kWidth, 0})), 0x8002) << "width 0";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kHeight, 99999})), 0x8002) << "height beyond the rows";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kPixelFormat, 0xDEADBEEFu})), 0x8002) << "no such format";
+  EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kSensorWidth, 1})), 0x8004) << "the sensor's size";
+  EXPECT_EQ(client.read_register(kWidth, 9, 2000ms).value_or(0), 64u);
   EXPECT_EQ(client.read_register(0x1F0, 3, 2000ms).value_or(0), 0x12345678u) << "all or nothing";
   EXPECT_EQ(client.read_register(kFramePeriodUs, 4, 2000ms).value_or(0), 10'000u);
   EXPECT_EQ(client.read_register(kHeartbeatMs, 5, 2000ms).value_or(0), heartbeat);
-  EXPECT_EQ(camera.malformed(), 8u);
+  EXPECT_EQ(camera.malformed(), 12u);
   // What a panel accepts is written.
   EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kFramePeriodUs, 20'000})), 0x0000);
   EXPECT_EQ(client.read_register(kFramePeriodUs, 6, 2000ms).value_or(0), 20'000u);

@@ -413,6 +413,69 @@ TEST(ModbusCouchServerTcp, AConnectionFloodNeverPushesOutAClientThatTalks) {
   modbus_free(loop);
 }
 
+std::vector<std::uint8_t> raw_exchange(int port, const std::vector<std::uint8_t>& request);
+
+// Issue 50, second probe: four connections that each asked once, then once every 20 s, held every
+// slot, and a loop starting (or reconnecting) was turned away. A connection silent for a second
+// makes room for a newcomer, unless it sent the last command the couch acted on.
+TEST(ModbusCouchServerTcp, ConnectionsThatSpeakNowAndThenCannotKeepTheLoopOut) {
+  test::LockedCouch couch(sim::VirtualCouchSpec{});
+  sim::ModbusCouchServerOptions so;
+  so.max_connections = 2;
+  auto server = sim::ModbusCouchServer::start(&couch, so);
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  namespace reg = drivers::couch_registers;
+  std::uint16_t inputs[reg::kInputCount] = {};
+  modbus_t* commander = modbus_client((*server)->port(), 0.5);
+  ASSERT_EQ(modbus_write_register(commander, reg::kControl, reg::kHold), 1) << modbus_strerror(errno);
+  modbus_t* squatter = modbus_client((*server)->port(), 0.5);
+  ASSERT_EQ(modbus_read_input_registers(squatter, 0, reg::kInputCount, inputs), reg::kInputCount);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // both silent past the grace
+  modbus_t* loop = modbus_client((*server)->port(), 0.5);
+  EXPECT_EQ(modbus_read_input_registers(loop, 0, reg::kInputCount, inputs), reg::kInputCount)
+      << "the newcomer got the squatter's slot: " << modbus_strerror(errno);
+  EXPECT_EQ(modbus_write_register(commander, reg::kControl, reg::kHold), 1)
+      << "the connection that commanded kept its slot: " << modbus_strerror(errno);
+  EXPECT_EQ((*server)->idle_closed(), 1);
+  EXPECT_EQ((*server)->turned_away(), 0);
+  for (modbus_t* m : {commander, squatter, loop}) {
+    modbus_close(m);
+    modbus_free(m);
+  }
+}
+
+// Issue 50, second probe: a read of 0 or 2000 registers went to libmodbus, which sleeps its
+// response timeout before answering such a request, on the one thread that serves every client;
+// six of them put a running loop into FAULT. Refused at once, with the exception.
+TEST(ModbusCouchServerTcp, AnIllegalReadIsRefusedAtOnce) {
+  test::LockedCouch couch(sim::VirtualCouchSpec{});
+  auto server = sim::ModbusCouchServer::start(&couch, sim::ModbusCouchServerOptions{});
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  const auto read = [](std::uint8_t function, int address, int count) {
+    return std::vector<std::uint8_t>{0, 3, 0, 0, 0, 6, 1, function, std::uint8_t(address >> 8), std::uint8_t(address),
+                                     std::uint8_t(count >> 8), std::uint8_t(count)};
+  };
+  struct Case {
+    std::vector<std::uint8_t> request;
+    std::uint8_t exception;
+  };
+  for (const Case& c : {Case{read(0x04, 0, 0), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+                        Case{read(0x04, 0, 2000), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+                        Case{read(0x03, 0, 126), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE},
+                        Case{read(0x04, 20, 10), MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS},
+                        Case{read(0x03, 0xFFFF, 1), MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS}}) {
+    const auto started = Clock::now();
+    const auto reply = raw_exchange((*server)->port(), c.request);
+    const double ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+    ASSERT_EQ(reply.size(), 9u);
+    EXPECT_EQ(reply[7], c.request[7] | 0x80);
+    EXPECT_EQ(reply[8], c.exception);
+    std::printf("function %d, address %d: exception %d in %.1f ms\n", c.request[7], (c.request[8] << 8) | c.request[9],
+                reply[8], ms);
+  }
+  EXPECT_EQ((*server)->malformed(), 5);
+}
+
 // A raw Modbus TCP request on its own connection, and the reply's bytes (empty: none in 2 s).
 std::vector<std::uint8_t> raw_exchange(int port, const std::vector<std::uint8_t>& request) {
   const int fd = connect_silently(port, std::string(request.begin(), request.end()));

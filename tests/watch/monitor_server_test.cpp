@@ -294,6 +294,67 @@ TEST(MonitorServer, ClientsTricklingTheirRequestsHoldNoThreadTheOperatorNeeds) {
   for (auto& t : streams) t.join();
 }
 
+// The reply the server gives `request` on a connection of its own ("" if none within 5 s).
+std::string raw_reply(int port, const std::string& request) {
+  const int fd = connect_raw(port);
+  (void)::send(fd, request.data(), request.size(), MSG_NOSIGNAL);
+  std::string reply;
+  char buffer[512];
+  pollfd p{fd, POLLIN, 0};
+  while (::poll(&p, 1, 5000) > 0) {
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n <= 0) break;
+    reply.append(buffer, std::size_t(n));
+  }
+  ::close(fd);
+  return reply;
+}
+
+// Issue 50, second probe: requests whose body never finishes (a POST without a length, a length
+// beyond the limit, headers beyond it, a chunked body) still reached a worker, which waited on
+// them, and 32 such clients starved the operator's Stop again. The front answers them itself.
+TEST(MonitorServer, RequestsAWorkerWouldWaitOnAreAnsweredByTheFront) {
+  Served s;
+  const int port = s.server->port();
+  const std::string host = "Host: 127.0.0.1:" + std::to_string(port) + "\r\n";
+  const std::string big_header = "X-Pad: " + std::string(12000, 'p') + "\r\n";
+  const std::vector<std::pair<std::string, std::string>> refused = {
+      {"POST /api/stop HTTP/1.1\r\n" + host + "\r\n{", "411"},
+      {"POST /api/stop HTTP/1.1\r\n" + host + "Content-Length: 100000000\r\n\r\n{", "413"},
+      {"POST /api/stop HTTP/1.1\r\n" + host + big_header + "Content-Length: 4000\r\n\r\n{", "431"},
+      {"POST /api/stop HTTP/1.1\r\n" + host + "Transfer-Encoding : chunked\r\n\r\n1\r\n{", "411"},
+      {"POST /api/stop HTTP/1.1\r\n" + host + "Content-Length: 2\r\nContent-Length: 3\r\n\r\n{}", "400"},
+      {"POST /api/stop HTTP/1.1\r\n" + host + "Content-Length: -1\r\n\r\n{}", "400"},
+  };
+  for (const auto& [request, status] : refused) {
+    const std::string reply = raw_reply(port, request);
+    EXPECT_EQ(reply.rfind("HTTP/1.1 " + status, 0), 0u) << request.substr(0, 120) << "\n-> " << reply;
+  }
+  // 48 clients trickling each kind of body at once, beside 16 event streams: the operator acts.
+  OperatorView track;
+  track.state = TrackingState::kTrack;
+  PollingLoop loop(&s.page, track);
+  std::atomic<bool> stop_streams{false};
+  std::vector<std::thread> streams;
+  for (int i = 0; i < 16; ++i)
+    streams.emplace_back([&] { read_events(port, [&](const std::string&) { return stop_streams.load(); }); });
+  for (int i = 0; i < 5000 && s.server->counters().event_clients < 16; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  std::vector<int> slow;
+  for (int i = 0; i < 48; ++i) {
+    slow.push_back(connect_raw(port));
+    const std::string& start = refused[std::size_t(i) % 2].first;  // no length, or one too long
+    (void)::send(slow.back(), start.data(), start.size(), MSG_NOSIGNAL);
+  }
+  const std::string nonce = s.nonce();
+  auto stop = s.act("stop", {{"nonce", nonce}}, s.server->token());
+  EXPECT_EQ(stop.first, 200) << stop.second.dump();
+  for (int fd : slow) ::close(fd);
+  stop_streams = true;
+  s.hub.publish(record(1, TrackingState::kTrack, TrackingState::kTrack, 0, false));
+  for (auto& t : streams) t.join();
+}
+
 TEST(MonitorServer, WithoutALoopAnActionIsAnsweredAndWithdrawn) {
   Served s;
   auto answer = s.act("stop", {{"nonce", s.nonce()}}, s.server->token());

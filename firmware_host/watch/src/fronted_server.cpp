@@ -29,10 +29,15 @@ using Clock = std::chrono::steady_clock;
 // for one byte at a time), writes that never raise SIGPIPE.
 class SocketStream final : public httplib::Stream {
  public:
-  SocketStream(int fd, int read_timeout_ms, int write_timeout_ms)
-      : fd_(fd), read_ms_(read_timeout_ms), write_ms_(write_timeout_ms) {}
+  SocketStream(int fd, int read_timeout_ms, int write_timeout_ms, Clock::time_point read_deadline)
+      : fd_(fd), read_ms_(read_timeout_ms), write_ms_(write_timeout_ms), read_deadline_(read_deadline) {}
 
-  bool is_readable() const override { return wait(POLLIN, read_ms_); }
+  // Reads end at the deadline, whatever the per-read timeout: the request was whole when the
+  // worker got it, so a worker never waits on a client (belt and braces for the front's checks).
+  bool is_readable() const override {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(read_deadline_ - Clock::now()).count();
+    return left > 0 && wait(POLLIN, int(std::min<long long>(left, read_ms_)));
+  }
   bool is_writable() const override {
     if (!wait(POLLOUT, write_ms_)) return false;
     char c;
@@ -96,38 +101,90 @@ class SocketStream final : public httplib::Stream {
 
   int fd_;
   int read_ms_, write_ms_;
+  Clock::time_point read_deadline_;
   char buffer_[4096];
   std::size_t have_ = 0, used_ = 0;
 };
 
-enum class Arrival { kWaiting, kWhole, kDrop };
+// What the front makes of a connection's bytes so far: still arriving, whole (to a worker), or
+// answered here and closed with `status` (0: closed without an answer).
+struct Arrival {
+  enum Kind { kWaiting, kWhole, kRefuse } kind = kWaiting;
+  int status = 0;
+};
 
-// Whether the request waiting on `fd` has arrived whole: the headers' blank line, then as many
-// body bytes as Content-Length says. A request with no Content-Length has no body (GET); one
-// that sends its body in chunks, a body beyond the limit or a closed connection is dropped.
-Arrival arrival(int fd, std::vector<char>* peek, std::size_t max_bytes) {
+std::string trimmed_lower(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  std::string out(s);
+  std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return out;
+}
+
+// Whether the request waiting on `fd` has arrived whole: the headers' blank line, then exactly as
+// many body bytes as Content-Length says. Refused here, never handed to a worker to wait on (issue
+// 50 probe: each such request held a worker for as long as its sender trickled): a request whose
+// head outgrows the limit (431), a body in chunks (411), a POST, PUT or PATCH without a length
+// (411), a length that is not a number or two that differ (400), a body beyond the limit (413).
+Arrival arrival(int fd, std::vector<char>* peek, std::size_t max_head_bytes, std::size_t max_body_bytes) {
   const ssize_t n = ::recv(fd, peek->data(), peek->size(), MSG_PEEK | MSG_DONTWAIT);
-  if (n == 0) return Arrival::kDrop;
-  if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR ? Arrival::kWaiting : Arrival::kDrop;
+  if (n == 0) return {Arrival::kRefuse, 0};
+  if (n < 0)
+    return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR ? Arrival{} : Arrival{Arrival::kRefuse, 0};
   const std::string_view text(peek->data(), std::size_t(n));
   const std::size_t end = text.find("\r\n\r\n");
-  if (end == std::string_view::npos) return std::size_t(n) >= max_bytes ? Arrival::kDrop : Arrival::kWaiting;
-  std::string head(text.substr(0, end));
-  std::transform(head.begin(), head.end(), head.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  if (head.find("\r\ntransfer-encoding:") != std::string::npos) return Arrival::kDrop;
-  std::size_t body = 0;
-  if (const std::size_t at = head.find("\r\ncontent-length:"); at != std::string::npos) {
-    const char* digits = head.c_str() + at + 17;
-    while (*digits == ' ' || *digits == '\t') ++digits;
-    char* stop = nullptr;
-    const unsigned long long length = std::strtoull(digits, &stop, 10);
-    if (stop == digits) return Arrival::kDrop;
-    if (length > max_bytes) return Arrival::kWhole;  // httplib answers 413 from the headers alone
-    body = std::size_t(length);
+  if (end == std::string_view::npos)
+    return std::size_t(n) >= max_head_bytes ? Arrival{Arrival::kRefuse, 431} : Arrival{};
+  if (end + 4 > max_head_bytes) return {Arrival::kRefuse, 431};
+  const std::string_view head = text.substr(0, end);
+  const std::size_t line_end = head.find("\r\n");
+  const std::string method(head.substr(0, head.find(' ')));
+  bool has_length = false;
+  unsigned long long length = 0;
+  for (std::size_t at = line_end; at != std::string_view::npos && at < head.size();) {
+    const std::size_t next = head.find("\r\n", at + 2);
+    const std::string_view line = head.substr(at + 2, next == std::string_view::npos ? std::string_view::npos : next - at - 2);
+    at = next;
+    const std::size_t colon = line.find(':');
+    if (colon == std::string_view::npos) continue;
+    const std::string name = trimmed_lower(line.substr(0, colon));
+    if (name == "transfer-encoding") return {Arrival::kRefuse, 411};
+    if (name != "content-length") continue;
+    const std::string value = trimmed_lower(line.substr(colon + 1));
+    if (value.empty() || value.size() > 19 || value.find_first_not_of("0123456789") != std::string::npos)
+      return {Arrival::kRefuse, 400};
+    const unsigned long long this_length = std::strtoull(value.c_str(), nullptr, 10);
+    if (has_length && this_length != length) return {Arrival::kRefuse, 400};
+    has_length = true;
+    length = this_length;
   }
-  const std::size_t whole = end + 4 + body;
-  if (whole > max_bytes) return Arrival::kWhole;  // the same: refused by its length
-  return std::size_t(n) >= whole ? Arrival::kWhole : Arrival::kWaiting;
+  if (!has_length && (method == "POST" || method == "PUT" || method == "PATCH")) return {Arrival::kRefuse, 411};
+  if (length > max_body_bytes) return {Arrival::kRefuse, 413};
+  return std::size_t(n) >= end + 4 + std::size_t(length) ? Arrival{Arrival::kWhole, 0} : Arrival{};
+}
+
+// The front's own answer to a refused request, sent without waiting (the socket is non-blocking),
+// then the sending side shut: the client reads the answer, then the end of the stream.
+void answer(int fd, int status) {
+  const char* reason = status == 400   ? "Bad Request"
+                       : status == 411 ? "Length Required"
+                       : status == 413 ? "Payload Too Large"
+                                       : "Request Header Fields Too Large";
+  const std::string reply = "HTTP/1.1 " + std::to_string(status) + " " + reason +
+                            "\r\nContent-Length: 0\r\nConnection: close\r\n\r\n";
+  (void)::send(fd, reply.data(), reply.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+  ::shutdown(fd, SHUT_WR);
+}
+
+// Reads and discards what the client still sends; false once it has closed (or failed).
+bool drain(int fd) {
+  char sink[16384];
+  for (int i = 0; i < 64; ++i) {
+    const ssize_t n = ::recv(fd, sink, sizeof sink, MSG_DONTWAIT);
+    if (n == 0) return false;
+    if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
+  }
+  return true;
 }
 
 }  // namespace
@@ -155,12 +212,23 @@ bool FrontedServer::serve() {
   listen_event.data.fd = listen_fd;
   ::epoll_ctl(ep, EPOLL_CTL_ADD, listen_fd, &listen_event);
   std::map<int, Clock::time_point> arriving;  // fd -> accepted at
-  std::vector<char> peek(limits_.max_request_bytes + 1);
-  const auto drop = [&](int fd) {
+  // Refused with an answer: what the client still sends (a body it was told is too large) is read
+  // and discarded for a second before the close, so that the close does not reset the connection
+  // and take the answer with it ("lingering close").
+  std::map<int, Clock::time_point> closing;  // fd -> close by
+  std::vector<char> peek(limits_.max_head_bytes + limits_.max_body_bytes + 1);
+  const auto close_now = [&](int fd) {
     ::epoll_ctl(ep, EPOLL_CTL_DEL, fd, nullptr);
     ::close(fd);
     arriving.erase(fd);
+    closing.erase(fd);
+  };
+  const auto drop = [&](int fd, int status = 0) {
     dropped_.fetch_add(1);
+    if (status == 0 || closing.size() >= limits_.max_waiting) return close_now(fd);
+    answer(fd, status);
+    arriving.erase(fd);
+    closing[fd] = Clock::now() + std::chrono::seconds(1);
   };
   serving_.store(true);
   epoll_event events[64];
@@ -189,12 +257,17 @@ bool FrontedServer::serve() {
         }
         continue;
       }
+      if (closing.count(fd) != 0) {
+        if (!drain(fd)) close_now(fd);
+        continue;
+      }
       if (arriving.count(fd) == 0) continue;
-      switch (arrival(fd, &peek, limits_.max_request_bytes)) {
+      const Arrival a = arrival(fd, &peek, limits_.max_head_bytes, limits_.max_body_bytes);
+      switch (a.kind) {
         case Arrival::kWaiting:
           break;
-        case Arrival::kDrop:
-          drop(fd);
+        case Arrival::kRefuse:
+          drop(fd, a.status);
           break;
         case Arrival::kWhole:
           ::epoll_ctl(ep, EPOLL_CTL_DEL, fd, nullptr);
@@ -210,12 +283,15 @@ bool FrontedServer::serve() {
       ++it;
       if (late) drop(fd);
     }
+    for (auto it = closing.begin(); it != closing.end();) {
+      const int fd = it->first;
+      const bool due = now > it->second;
+      ++it;
+      if (due) close_now(fd);
+    }
   }
-  for (auto it = arriving.begin(); it != arriving.end();) {
-    const int fd = it->first;
-    ++it;
-    drop(fd);
-  }
+  while (!arriving.empty()) close_now(arriving.begin()->first);
+  while (!closing.empty()) close_now(closing.begin()->first);
   ::close(ep);
   const int sock = svr_sock_.exchange(-1);
   if (sock >= 0) {
@@ -228,7 +304,8 @@ bool FrontedServer::serve() {
 }
 
 bool FrontedServer::process_and_close_socket(socket_t sock) {
-  SocketStream stream(sock, limits_.read_timeout_ms, limits_.write_timeout_ms);
+  SocketStream stream(sock, limits_.read_timeout_ms, limits_.write_timeout_ms,
+                      Clock::now() + std::chrono::milliseconds(limits_.worker_read_deadline_ms));
   bool closed = false;
   const bool ok = process_request(stream, /*close_connection=*/true, closed, [](httplib::Request&) {});
   ::shutdown(sock, SHUT_RDWR);

@@ -6,11 +6,14 @@
 // timeout per read: a client sending a byte a second holds that thread for as long as it likes,
 // and a few dozen such clients (no token needed) held every thread, so the operator's Stop got no
 // answer (issue 50 probe). Here one front thread accepts and waits on every connection with epoll,
-// peeking until the request line, headers and body (Content-Length, at most the payload limit)
-// are all in the socket's buffer; only then is the connection handed to a worker, which reads and
-// answers it at once. A request that has not arrived within `arrival_deadline` is dropped, and
-// when `max_waiting` connections are arriving the oldest is dropped for a new one: slow clients
-// cost a file descriptor each, never a worker.
+// peeking until the request line, headers and body (exactly Content-Length bytes, at most the
+// body limit) are all in the socket's buffer; only then is the connection handed to a worker,
+// which reads and answers it at once, and reads nothing after worker_read_deadline_ms. What a
+// worker would have to wait on is answered by the front and closed: a head beyond its limit
+// (431), a chunked body or a POST without a length (411), a bad length (400), a body beyond the
+// limit (413). A request that has not arrived within `arrival_deadline` is dropped, and when
+// `max_waiting` connections are arriving the oldest is dropped for a new one: slow clients cost a
+// file descriptor each, never a worker.
 //
 // Workers are then held only by complete requests (answered in microseconds) and by the event
 // streams the monitor caps. Call bind_to_port() or bind_to_any_port() first, then serve() on the
@@ -30,8 +33,10 @@ class FrontedServer final : public httplib::Server {
   struct Limits {
     std::size_t max_waiting = 256;                      // connections whose request is arriving
     std::chrono::milliseconds arrival_deadline{3000};   // for the whole request, from its accept
-    std::size_t max_request_bytes = 8192 + 4096;        // headers and body; beyond: dropped
+    std::size_t max_head_bytes = 8192;                  // request line and headers; beyond: 431
+    std::size_t max_body_bytes = 4096;                  // Content-Length; beyond: 413
     int read_timeout_ms = 2000, write_timeout_ms = 2000;  // a worker's socket reads and writes
+    int worker_read_deadline_ms = 500;                  // a worker reads nothing after this
   };
   FrontedServer(const Limits& limits, std::function<httplib::TaskQueue*()> make_workers);
   ~FrontedServer() override;

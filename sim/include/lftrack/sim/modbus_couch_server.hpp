@@ -11,9 +11,11 @@
 // beside the one that commands it: each request is answered on its own connection, in the order
 // requests complete, and no client waits for another (a request is read as its bytes arrive,
 // never by waiting on one connection). A connection that completes no request for
-// idle_timeout_s is closed; one beyond max_connections is turned away unless a connection has
-// sent nothing for a second since it was accepted (that one is closed for it), so connections
-// that talk, the loop's among them, are never pushed out by a flood of new ones; one whose bytes
+// idle_timeout_s is closed; one beyond max_connections closes the connection that has been
+// silent longest, if that has sent nothing for a second and did not send the last command the
+// couch acted on, else it is turned away: the loop's connection (it asks every period and
+// commands) is never pushed out by a flood of new ones, and connections that speak now and then
+// cannot keep it out; one whose bytes
 // are not Modbus TCP (protocol id not 0, a length outside 2..254) is closed. A request is checked
 // before it touches the couch: a PDU shorter or longer than its function says, or a write whose
 // byte count is not twice its register count, is answered with exception 3 (illegal data value)
@@ -102,6 +104,7 @@ class ModbusCouchServer {
   std::atomic<bool> stop_{false};
   std::atomic<int> fault_{0}, fault_requests_{0}, fault_kind_{0};
   std::atomic<std::int64_t> requests_{0}, connections_{0}, idle_closed_{0}, turned_away_{0}, malformed_{0};
+  bool commanded_ = false;  // the request handle() just answered was a command the couch acted on
   tracking::Vector6d accepted_target_ = tracking::Vector6d::Zero();
   std::uint16_t acknowledged_ = 0;
   std::uint16_t fault_word_ = 0;

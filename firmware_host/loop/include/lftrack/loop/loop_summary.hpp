@@ -43,6 +43,7 @@ struct LoopSummary {
   // (tracking_accuracy.hpp).
   std::optional<TargetResidualReport> target_residual;
   std::optional<CommandLatencyReport> command_latency;
+  bool simulated_clock = false;  // then the latency is the modelled one: one command deadline
   double cycle_p50_ms = 0, cycle_p95_ms = 0, cycle_p99_ms = 0, cycle_max_ms = 0;  // work, not sleep
   double registration_p50_ms = 0, registration_p95_ms = 0, registration_max_ms = 0;
   // Waiting for the pair (real clock: from the cycle's start; simulated: the copy only), and
