@@ -229,6 +229,27 @@ TEST(MonitorServer, AClientWithoutTheTokenGetsNoNonceAndCannotBlockTheOperatorsS
 
 std::string read_events(int port, const std::function<bool(const std::string&)>& done);
 
+// `n` event streams held open on threads of their own until the object goes (the hub is then
+// woken so that each stream sees its end at once).
+struct OpenStreams {
+  Served& served;
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> threads;
+  OpenStreams(Served& s, int n) : served(s) {
+    for (int i = 0; i < n; ++i)
+      threads.emplace_back([this] {
+        read_events(served.server->port(), [this](const std::string&) { return stop.load(); });
+      });
+    for (int i = 0; i < 5000 && served.server->counters().event_clients < n; ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ~OpenStreams() {
+    stop = true;
+    served.hub.publish(record(1, TrackingState::kTrack, TrackingState::kTrack, 0, false));
+    for (auto& t : threads) t.join();
+  }
+};
+
 // A client's socket to the server, its request started and never finished: it trickles a
 // header's bytes in, one at a time.
 int connect_raw(int port) {
@@ -250,12 +271,7 @@ TEST(MonitorServer, ClientsTricklingTheirRequestsHoldNoThreadTheOperatorNeeds) {
   OperatorView track;
   track.state = TrackingState::kTrack;
   PollingLoop loop(&s.page, track);
-  std::atomic<bool> stop_streams{false};
-  std::vector<std::thread> streams;
-  for (int i = 0; i < 16; ++i)
-    streams.emplace_back([&] { read_events(s.server->port(), [&](const std::string&) { return stop_streams.load(); }); });
-  for (int i = 0; i < 5000 && s.server->counters().event_clients < 16; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  OpenStreams streams(s, 16);
   ASSERT_EQ(s.server->counters().event_clients, 16) << "every event stream is open";
   const std::string start = "GET /api/state HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(s.server->port()) +
                             "\r\nX-Slow: ";
@@ -289,9 +305,6 @@ TEST(MonitorServer, ClientsTricklingTheirRequestsHoldNoThreadTheOperatorNeeds) {
   trickling = false;
   trickle.join();
   for (int fd : slow) ::close(fd);
-  stop_streams = true;
-  s.hub.publish(record(1, TrackingState::kTrack, TrackingState::kTrack, 0, false));  // wakes the streams
-  for (auto& t : streams) t.join();
 }
 
 // The reply the server gives `request` on a connection of its own ("" if none within 5 s).
@@ -334,12 +347,7 @@ TEST(MonitorServer, RequestsAWorkerWouldWaitOnAreAnsweredByTheFront) {
   OperatorView track;
   track.state = TrackingState::kTrack;
   PollingLoop loop(&s.page, track);
-  std::atomic<bool> stop_streams{false};
-  std::vector<std::thread> streams;
-  for (int i = 0; i < 16; ++i)
-    streams.emplace_back([&] { read_events(port, [&](const std::string&) { return stop_streams.load(); }); });
-  for (int i = 0; i < 5000 && s.server->counters().event_clients < 16; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  OpenStreams streams(s, 16);
   std::vector<int> slow;
   for (int i = 0; i < 48; ++i) {
     slow.push_back(connect_raw(port));
@@ -350,9 +358,6 @@ TEST(MonitorServer, RequestsAWorkerWouldWaitOnAreAnsweredByTheFront) {
   auto stop = s.act("stop", {{"nonce", nonce}}, s.server->token());
   EXPECT_EQ(stop.first, 200) << stop.second.dump();
   for (int fd : slow) ::close(fd);
-  stop_streams = true;
-  s.hub.publish(record(1, TrackingState::kTrack, TrackingState::kTrack, 0, false));
-  for (auto& t : streams) t.join();
 }
 
 TEST(MonitorServer, WithoutALoopAnActionIsAnsweredAndWithdrawn) {
