@@ -81,6 +81,28 @@ TEST(Cli, SaveFramesOnAFileAndASceneThatIsNoFileAreRefusedAtOnce) {
   EXPECT_NE(out.find("not a regular file"), std::string::npos) << out;
 }
 
+// Issue 50 probe: a light-field folder that is a file, a sequence that is not there and a token
+// file that is someone's notes were refused only after the CT load (and, for the folder, minutes
+// of building fields nowhere). Refused with the other options, before the CT is read.
+TEST(Cli, BadFoldersAndTokenFilesAreRefusedBeforeTheCtLoad) {
+  test::TempDir dir;
+  const auto notes = dir.path() / "notes.txt";
+  std::ofstream(notes) << "kept\n";
+  const std::vector<std::vector<std::string>> runs = {
+      {lftrack_bin(), "sim", "--fast", "--cycles", "1", "--journal", "", "--lf-dir", notes.string()},
+      {lftrack_bin(), "replay", "--sequence", (dir.path() / "nothing").string(), "--journal", ""},
+      {lftrack_bin(), "sim", "--fast", "--cycles", "1", "--journal", "", "--monitor", "127.0.0.1:0",
+       "--monitor-token-file", notes.string()},
+  };
+  for (const auto& argv : runs) {
+    std::string out;
+    EXPECT_FALSE(run_process(argv, &out).ok()) << argv[1] << ": " << out;
+    EXPECT_EQ(out.find("CT builtin"), std::string::npos) << "refused before the CT load: " << out;
+  }
+  std::ifstream in(notes);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), "kept\n");
+}
+
 TEST(Cli, UnknownViewAndRendererAreErrors) {
   test::TempDir dir;
   std::string out;

@@ -20,6 +20,7 @@
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/room_clocked_actuator.hpp"
+#include "lftrack/watch/operator_token.hpp"
 
 namespace lftrack::host {
 
@@ -374,6 +375,17 @@ Status check_session_options(const LoopSessionOptions& o) {
   if (!o.journal.empty() && !o.journal_options.add_suffix)
     LFTRACK_RETURN_IF_ERROR(check_journal_path(o.journal, o.journal_options.overwrite));
   if (!o.archive.empty()) LFTRACK_RETURN_IF_ERROR(check_archive_directory(o.archive, o.overwrite_archive));
+  // What would otherwise be found only after the CT load and minutes of light-field building
+  // (issue 50 probe): a light-field folder that is a file, a sequence that is not there, a token
+  // file that is another's.
+  std::error_code ec;
+  if (!o.light_field_dir.empty() && std::filesystem::exists(o.light_field_dir, ec) &&
+      !std::filesystem::is_directory(o.light_field_dir, ec))
+    return failed_precondition("--lf-dir " + o.light_field_dir.string() + ": not a folder");
+  if (!o.replay_sequence.empty() && !std::filesystem::is_directory(o.replay_sequence, ec))
+    return not_found(o.replay_sequence.string() + ": no such sequence directory");
+  if (o.monitor && !o.monitor->token_file.empty())
+    LFTRACK_RETURN_IF_ERROR(TokenFile::check(o.monitor->token_file).with_context("--monitor-token-file"));
   return {};
 }
 

@@ -51,20 +51,27 @@ bool is_earlier_token_file(const std::filesystem::path& path) {
 
 }  // namespace
 
+Status TokenFile::check(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) return {};  // nothing there
+  if (!is_earlier_token_file(path))
+    return failed_precondition(path.string() + " exists and is not an earlier lftrack token file; not replacing it");
+  // A running lftrack holds its token file's lock until it exits (issue 50 probe: a second run
+  // took a live run's token file over and removed it at its exit).
+  const int earlier = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+  const bool live = earlier >= 0 && ::flock(earlier, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  if (earlier >= 0) ::close(earlier);
+  if (live)
+    return failed_precondition(path.string() + " is the token file of a running lftrack; give another "
+                                               "--monitor-token-file or port");
+  return {};
+}
+
 Result<std::unique_ptr<TokenFile>> TokenFile::write(const std::filesystem::path& path, const std::string& token) {
   const int flags = O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC;
   int fd = ::open(path.c_str(), flags, 0600);
   if (fd < 0 && errno == EEXIST) {
-    if (!is_earlier_token_file(path))
-      return failed_precondition(path.string() + " exists and is not an earlier lftrack token file; not replacing it");
-    // A running lftrack holds its token file's lock until it exits (issue 50 probe: a second run
-    // took a live run's token file over and removed it at its exit).
-    const int earlier = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
-    const bool live = earlier >= 0 && ::flock(earlier, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
-    if (earlier >= 0) ::close(earlier);
-    if (live)
-      return failed_precondition(path.string() + " is the token file of a running lftrack; give another "
-                                                 "--monitor-token-file or port");
+    LFTRACK_RETURN_IF_ERROR(check(path));
     if (::unlink(path.c_str()) != 0) return io_error(path.string() + ": cannot remove the earlier token file");
     fd = ::open(path.c_str(), flags, 0600);
   }

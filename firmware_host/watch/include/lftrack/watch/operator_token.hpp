@@ -33,6 +33,9 @@ bool token_matches(const std::string& expected, const std::string& offered);
 class TokenFile {
  public:
   static Result<std::unique_ptr<TokenFile>> write(const std::filesystem::path& path, const std::string& token);
+  // Whether write() would take `path`: nothing there, or an earlier run's token file no running
+  // lftrack holds. For checking options before the CT is loaded; write() checks again.
+  static Status check(const std::filesystem::path& path);
   ~TokenFile();
   const std::filesystem::path& path() const { return path_; }
 
