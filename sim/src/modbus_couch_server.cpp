@@ -36,12 +36,13 @@ struct Connection {
   std::size_t have = 0;
   std::int64_t heard_ns = 0;
   std::int64_t accepted_ns = 0;
+  std::int64_t requests = 0;
   bool commander = false;  // sent the last command the couch acted on (the loop's connection)
 };
 
-// A connection that has sent nothing for this long may be closed to make room for a new one: a
-// client connects and sends within milliseconds, and the loop asks every period.
-constexpr std::int64_t kSilentGraceNs = 1'000'000'000;
+// A connection younger than this is not closed to make room for a new one (it has had no time
+// to show how often it asks); an older one may be, the one asking least often first.
+constexpr std::int64_t kGraceNs = 1'000'000'000;
 
 // What a request must be before it touches the couch: a PDU as long as its function says (a
 // write of N registers carries 2N bytes), for this server's unit (or 0xFF, "this device", as
@@ -170,6 +171,7 @@ void ModbusCouchServer::serve() {
         std::memmove(c.bytes, c.bytes + 6 + length, c.have - (6 + length));
         c.have -= 6 + length;
         c.heard_ns = now_ns();
+        ++c.requests;
         ++requests_;
         modbus_set_socket(ctx_, c.fd);
         handle(query, static_cast<int>(6 + length));
@@ -203,15 +205,20 @@ void ModbusCouchServer::serve() {
           std::erase_if(clients, [](const Connection& c) { return c.fd < 0; });
           const std::int64_t accepted = now_ns();
           if (clients.size() >= std::size_t(options_.max_connections)) {
-            // Room is made by closing the connection silent longest, once it has said nothing
-            // for a second, and never the one that sent the last command: a client that asks
-            // every period (the loop's) is not pushed out by a flood of newcomers (issue 50 probe),
-            // and connections that speak once in a while cannot keep the loop out (second probe:
-            // four of them held every slot). Otherwise the newcomer is turned away.
+            // Room is made by closing, of the connections older than a second, the one that has
+            // asked least often (requests per second since its accept), never the one that sent
+            // the last command: the loop asks every period, so a flood of newcomers cannot push
+            // it out (issue 50 probe), and connections that ask now and then cannot keep a
+            // starting loop out (second and third probes: four asking every 20 s, then every
+            // 0.5 s, held every slot); to hold a slot against the loop, a client must ask as
+            // often as it does. Otherwise the newcomer is turned away.
             auto silent = clients.end();
+            const auto rate = [accepted](const Connection& c) {
+              return double(c.requests) / (1e-9 * double(accepted - c.accepted_ns));
+            };
             for (auto it = clients.begin(); it != clients.end(); ++it)
-              if (!it->commander && accepted - it->heard_ns > kSilentGraceNs &&
-                  (silent == clients.end() || it->heard_ns < silent->heard_ns))
+              if (!it->commander && accepted - it->accepted_ns > kGraceNs &&
+                  (silent == clients.end() || rate(*it) < rate(*silent)))
                 silent = it;
             if (silent != clients.end()) {
               ++idle_closed_;  // counted before the client can see the close

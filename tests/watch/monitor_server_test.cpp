@@ -337,6 +337,7 @@ TEST(MonitorServer, RequestsAWorkerWouldWaitOnAreAnsweredByTheFront) {
       {"POST /api/stop HTTP/1.1\r\n" + host + big_header + "Content-Length: 4000\r\n\r\n{", "431"},
       {"POST /api/stop HTTP/1.1\r\n" + host + "Transfer-Encoding : chunked\r\n\r\n1\r\n{", "411"},
       {"POST /api/stop HTTP/1.1\r\n" + host + "Content-Length: 2\r\nContent-Length: 3\r\n\r\n{}", "400"},
+      {"DELETE /api/stop HTTP/1.1\r\n" + host + "\r\n", "405"},
       {"POST /api/stop HTTP/1.1\r\n" + host + "Content-Length: -1\r\n\r\n{}", "400"},
   };
   for (const auto& [request, status] : refused) {
@@ -358,6 +359,37 @@ TEST(MonitorServer, RequestsAWorkerWouldWaitOnAreAnsweredByTheFront) {
   auto stop = s.act("stop", {{"nonce", nonce}}, s.server->token());
   EXPECT_EQ(stop.first, 200) << stop.second.dump();
   for (int fd : slow) ::close(fd);
+}
+
+// Issue 50, third probe: a PRI request and a length hidden behind a bare LF each held a worker for
+// its read deadline, and 300 such connections delayed the operator's Stop by 8 s. The front
+// refuses both at once; the operator's requests (the run's token) go ahead of strangers' waiting.
+TEST(MonitorServer, TheOperatorsRequestsGoAheadOfAStrangersFlood) {
+  Served s;
+  const int port = s.server->port();
+  const std::string host = "Host: 127.0.0.1:" + std::to_string(port);
+  EXPECT_EQ(raw_reply(port, "PRI /api/state HTTP/1.1\r\n" + host + "\r\n\r\n").rfind("HTTP/1.1 405", 0), 0u);
+  EXPECT_EQ(raw_reply(port, "GET /api/state HTTP/1.1\n" + host + "\n\n").rfind("HTTP/1.1 400", 0), 0u)
+      << "bare LF lines: answered, not reset after 3 s";
+  EXPECT_EQ(raw_reply(port, "POST /api/stop HTTP/1.1\r\n" + host + "\r\nX: a\nContent-Length: 4000\r\n"
+                            "Content-Length: 0\r\n\r\n")
+                .rfind("HTTP/1.1 400", 0),
+            0u)
+      << "a length hidden behind a bare LF";
+  OperatorView track;
+  track.state = TrackingState::kTrack;
+  PollingLoop loop(&s.page, track);
+  OpenStreams streams(s, 16);
+  const std::string get = "GET /api/state HTTP/1.1\r\n" + host + "\r\n\r\n";
+  std::vector<int> flood;
+  for (int i = 0; i < 300; ++i) {
+    flood.push_back(connect_raw(port));
+    (void)::send(flood.back(), get.data(), get.size(), MSG_NOSIGNAL);
+  }
+  const std::string nonce = s.nonce();
+  auto stop = s.act("stop", {{"nonce", nonce}}, s.server->token());
+  EXPECT_EQ(stop.first, 200) << stop.second.dump();
+  for (int fd : flood) ::close(fd);
 }
 
 TEST(MonitorServer, WithoutALoopAnActionIsAnsweredAndWithdrawn) {

@@ -111,6 +111,7 @@ class SocketStream final : public httplib::Stream {
 struct Arrival {
   enum Kind { kWaiting, kWhole, kRefuse } kind = kWaiting;
   int status = 0;
+  std::size_t head_bytes = 0;  // kWhole: the request line and headers, with the blank line
 };
 
 std::string trimmed_lower(std::string_view s) {
@@ -133,12 +134,25 @@ Arrival arrival(int fd, std::vector<char>* peek, std::size_t max_head_bytes, std
     return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR ? Arrival{} : Arrival{Arrival::kRefuse, 0};
   const std::string_view text(peek->data(), std::size_t(n));
   const std::size_t end = text.find("\r\n\r\n");
+  // A line ended by a bare LF, seen as soon as it arrives: a request whose lines all end so
+  // would otherwise wait for a blank CR LF line that never comes (third probe: reset at 3 s).
+  const std::string_view scanned = end == std::string_view::npos ? text : text.substr(0, end);
+  for (std::size_t i = 0; i < scanned.size(); ++i)
+    if (scanned[i] == '\n' && (i == 0 || scanned[i - 1] != '\r')) return {Arrival::kRefuse, 400};
   if (end == std::string_view::npos)
     return std::size_t(n) >= max_head_bytes ? Arrival{Arrival::kRefuse, 431} : Arrival{};
   if (end + 4 > max_head_bytes) return {Arrival::kRefuse, 431};
   const std::string_view head = text.substr(0, end);
+  // Every line ends in CR LF, and nowhere else is there a CR or LF: a bare LF splits a line for
+  // cpp-httplib that this reader would take as one (second probe: a length hidden that way made a
+  // worker wait for a body).
+  for (std::size_t i = 0; i < head.size(); ++i)
+    if ((head[i] == '\r' && (i + 1 >= head.size() || head[i + 1] != '\n')) ||
+        (head[i] == '\n' && (i == 0 || head[i - 1] != '\r')))
+      return {Arrival::kRefuse, 400};
   const std::size_t line_end = head.find("\r\n");
   const std::string method(head.substr(0, head.find(' ')));
+  if (method != "GET" && method != "HEAD" && method != "POST") return {Arrival::kRefuse, 405};
   bool has_length = false;
   unsigned long long length = 0;
   for (std::size_t at = line_end; at != std::string_view::npos && at < head.size();) {
@@ -160,13 +174,14 @@ Arrival arrival(int fd, std::vector<char>* peek, std::size_t max_head_bytes, std
   }
   if (!has_length && (method == "POST" || method == "PUT" || method == "PATCH")) return {Arrival::kRefuse, 411};
   if (length > max_body_bytes) return {Arrival::kRefuse, 413};
-  return std::size_t(n) >= end + 4 + std::size_t(length) ? Arrival{Arrival::kWhole, 0} : Arrival{};
+  return std::size_t(n) >= end + 4 + std::size_t(length) ? Arrival{Arrival::kWhole, 0, end + 4} : Arrival{};
 }
 
 // The front's own answer to a refused request, sent without waiting (the socket is non-blocking),
 // then the sending side shut: the client reads the answer, then the end of the stream.
 void answer(int fd, int status) {
   const char* reason = status == 400   ? "Bad Request"
+                       : status == 405 ? "Method Not Allowed"
                        : status == 411 ? "Length Required"
                        : status == 413 ? "Payload Too Large"
                                        : "Request Header Fields Too Large";
@@ -189,7 +204,7 @@ bool drain(int fd) {
 
 }  // namespace
 
-FrontedServer::FrontedServer(const Limits& limits, std::function<httplib::TaskQueue*()> make_workers)
+FrontedServer::FrontedServer(const Limits& limits, std::function<WorkerQueue*()> make_workers)
     : limits_(limits), make_workers_(std::move(make_workers)) {}
 
 FrontedServer::~FrontedServer() {
@@ -203,7 +218,7 @@ void FrontedServer::stop_serving() {
 bool FrontedServer::serve() {
   const int listen_fd = svr_sock_.load();
   if (listen_fd < 0) return false;
-  std::unique_ptr<httplib::TaskQueue> workers(make_workers_());
+  std::unique_ptr<WorkerQueue> workers(make_workers_());
   const int ep = ::epoll_create1(EPOLL_CLOEXEC);
   if (ep < 0) return false;
   ::fcntl(listen_fd, F_SETFL, ::fcntl(listen_fd, F_GETFL) | O_NONBLOCK);
@@ -273,7 +288,10 @@ bool FrontedServer::serve() {
           ::epoll_ctl(ep, EPOLL_CTL_DEL, fd, nullptr);
           arriving.erase(fd);
           ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
-          workers->enqueue([this, fd] { process_and_close_socket(fd); });
+          if (limits_.urgent && limits_.urgent(std::string_view(peek.data(), a.head_bytes)))
+            workers->enqueue_first([this, fd] { process_and_close_socket(fd); });
+          else
+            workers->enqueue([this, fd] { process_and_close_socket(fd); });
           break;
       }
     }

@@ -9,9 +9,10 @@
 // peeking until the request line, headers and body (exactly Content-Length bytes, at most the
 // body limit) are all in the socket's buffer; only then is the connection handed to a worker,
 // which reads and answers it at once, and reads nothing after worker_read_deadline_ms. What a
-// worker would have to wait on is answered by the front and closed: a head beyond its limit
-// (431), a chunked body or a POST without a length (411), a bad length (400), a body beyond the
-// limit (413). A request that has not arrived within `arrival_deadline` is dropped, and when
+// worker would have to wait on, or could read otherwise than the front, is answered by the front
+// and closed: a head beyond its limit (431), a method other than GET, HEAD and POST (405), a line
+// not ended by CR LF (400: the front and cpp-httplib would split it differently), a chunked body
+// or a POST without a length (411), a bad length (400), a body beyond the limit (413). A request that has not arrived within `arrival_deadline` is dropped, and when
 // `max_waiting` connections are arriving the oldest is dropped for a new one: slow clients cost a
 // file descriptor each, never a worker.
 //
@@ -25,8 +26,17 @@
 #include <chrono>
 #include <functional>
 #include <memory>
+#include <string_view>
 
 namespace lftrack::host {
+
+// The workers a FrontedServer hands whole requests to. A request the server's `urgent` test
+// picks (the operator's: it carries the run's token) goes ahead of every request waiting, so
+// however many strangers queue, the operator's Stop waits only for a worker to come free.
+class WorkerQueue : public httplib::TaskQueue {
+ public:
+  virtual void enqueue_first(std::function<void()> job) = 0;
+};
 
 class FrontedServer final : public httplib::Server {
  public:
@@ -37,8 +47,10 @@ class FrontedServer final : public httplib::Server {
     std::size_t max_body_bytes = 4096;                  // Content-Length; beyond: 413
     int read_timeout_ms = 2000, write_timeout_ms = 2000;  // a worker's socket reads and writes
     int worker_read_deadline_ms = 500;                  // a worker reads nothing after this
+    // Given a whole request's head (request line and headers), whether it goes first.
+    std::function<bool(std::string_view head)> urgent;
   };
-  FrontedServer(const Limits& limits, std::function<httplib::TaskQueue*()> make_workers);
+  FrontedServer(const Limits& limits, std::function<WorkerQueue*()> make_workers);
   ~FrontedServer() override;
 
   // Accepts and watches connections until stop_serving(); false if there was no bound socket.
@@ -52,7 +64,7 @@ class FrontedServer final : public httplib::Server {
   bool process_and_close_socket(socket_t sock) override;
 
   Limits limits_;
-  std::function<httplib::TaskQueue*()> make_workers_;
+  std::function<WorkerQueue*()> make_workers_;
   std::atomic<bool> serving_{false}, stop_{false};
   std::atomic<std::uint64_t> dropped_{0};
 };

@@ -11,11 +11,11 @@
 // beside the one that commands it: each request is answered on its own connection, in the order
 // requests complete, and no client waits for another (a request is read as its bytes arrive,
 // never by waiting on one connection). A connection that completes no request for
-// idle_timeout_s is closed; one beyond max_connections closes the connection that has been
-// silent longest, if that has sent nothing for a second and did not send the last command the
-// couch acted on, else it is turned away: the loop's connection (it asks every period and
-// commands) is never pushed out by a flood of new ones, and connections that speak now and then
-// cannot keep it out; one whose bytes
+// idle_timeout_s is closed; one beyond max_connections closes, of the connections older than a
+// second, the one that asks least often, never the one that sent the last command the couch
+// acted on, else it is turned away: the loop's connection (it asks every period and commands) is
+// never pushed out by a flood of new ones, and connections that ask less often than a loop cannot
+// keep one out; one whose bytes
 // are not Modbus TCP (protocol id not 0, a length outside 2..254) is closed. A request is checked
 // before it touches the couch: a PDU shorter or longer than its function says, or a write whose
 // byte count is not twice its register count, is answered with exception 3 (illegal data value)
