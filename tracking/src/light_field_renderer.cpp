@@ -271,10 +271,14 @@ class LightFieldRenderer final : public DrrRenderer {
     }
     image_reserve_ = std::min<std::size_t>(image_reserve_, kMaxImageReserve);
     const bool vq = fields_.front().field->header().storage == LightFieldStorage::kVq;
-    // One render a pool thread (a registration's candidates), and one from outside the pool; none
-    // for VQ fields, which the source image does not read.
+    // One render a pool thread (a registration's candidates), one from the thread that calls
+    // the registration, and one from a watcher outside the loop (the monitor's overlay renders
+    // with the registration's renderer on the hub's thread: with only one outside the pool, the
+    // overlay's render sometimes took the cycle's buffer, and the cycle then allocated one, in
+    // ClosedLoop.APageWithTenClientsAndOpenIgtlinkChangeNothingInTheCycle); none for VQ fields,
+    // which the source image does not read.
     if (source_image && !vq)
-      scratch_ = std::make_unique<ScratchBuffers>((pool_ ? pool_->size() : 1) + 1, image_reserve_);
+      scratch_ = std::make_unique<ScratchBuffers>((pool_ ? pool_->size() : 1) + 2, image_reserve_);
     if (vq) name_ += std::to_string(fields_.front().field->header().codebook_size);
   }
 
