@@ -114,11 +114,7 @@ Result<std::vector<tracking::Image<std::uint16_t>>> read_frames(const std::vecto
 
 Status check_detector_name(const std::string& name) {
   if (name.empty()) return {};
-  const bool ok = name.size() <= 64 && name.front() != '.' &&
-                  std::all_of(name.begin(), name.end(), [](unsigned char c) {
-                    return std::isalnum(c) || c == '_' || c == '-' || c == '.';
-                  });
-  if (!ok)
+  if (!is_detector_name(name))
     return invalid_argument("--detector '" + name +
                             "': a detector name is 1 to 64 letters, digits, '_', '-' or '.' (not first)");
   return {};

@@ -156,11 +156,7 @@ Status SceneParser::parse_detector(const YAML::Node& n, int index, DetectorSpec*
   // A detector's name becomes part of file names (its light field, its archive's frames, its
   // calibration): the rule `calibrate detector --detector` has (issue 50 probe: a name with
   // "../" wrote light fields outside --lf-dir).
-  const bool name_ok = !name.empty() && name.size() <= 64 && name.front() != '.' &&
-                       std::all_of(name.begin(), name.end(), [](unsigned char c) {
-                         return std::isalnum(c) || c == '_' || c == '-' || c == '.';
-                       });
-  if (!name_ok)
+  if (!is_detector_name(name))
     return error(node, what + ".name '" + name.substr(0, 80) +
                            "': a detector name is 1 to 64 letters, digits, '_', '-' or '.' (not first)");
   if (n["frames"]) LFTRACK_RETURN_IF_ERROR(parse_frames(n["frames"], what + ".frames", &d->frames));
@@ -422,6 +418,12 @@ Result<Scene> parse_scene(const std::string& yaml_text, const std::string& sourc
   } catch (const YAML::Exception& e) {  // shapes the checks above did not foresee, e.g. a list as a key
     return parser.error_at(e.mark, "unexpected YAML structure: " + e.msg);
   }
+}
+
+bool is_detector_name(const std::string& name) {
+  return !name.empty() && name.size() <= 64 && name.front() != '.' &&
+         std::all_of(name.begin(), name.end(),
+                     [](unsigned char c) { return std::isalnum(c) || c == '_' || c == '-' || c == '.'; });
 }
 
 Result<std::string> read_yaml_text(const std::string& file, const std::string& what) {

@@ -114,12 +114,10 @@ struct Arrival {
   std::size_t head_bytes = 0;  // kWhole: the request line and headers, with the blank line
 };
 
-std::string trimmed_lower(std::string_view s) {
+std::string_view trimmed(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
   while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
-  std::string out(s);
-  std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  return out;
+  return s;
 }
 
 // Whether the request waiting on `fd` has arrived whole: the headers' blank line, then exactly as
@@ -150,28 +148,25 @@ Arrival arrival(int fd, std::vector<char>* peek, std::size_t max_head_bytes, std
     if ((head[i] == '\r' && (i + 1 >= head.size() || head[i + 1] != '\n')) ||
         (head[i] == '\n' && (i == 0 || head[i - 1] != '\r')))
       return {Arrival::kRefuse, 400};
-  const std::size_t line_end = head.find("\r\n");
   const std::string method(head.substr(0, head.find(' ')));
   if (method != "GET" && method != "HEAD" && method != "POST") return {Arrival::kRefuse, 405};
   bool has_length = false;
   unsigned long long length = 0;
-  for (std::size_t at = line_end; at != std::string_view::npos && at < head.size();) {
-    const std::size_t next = head.find("\r\n", at + 2);
-    const std::string_view line = head.substr(at + 2, next == std::string_view::npos ? std::string_view::npos : next - at - 2);
-    at = next;
-    const std::size_t colon = line.find(':');
-    if (colon == std::string_view::npos) continue;
-    const std::string name = trimmed_lower(line.substr(0, colon));
-    if (name == "transfer-encoding") return {Arrival::kRefuse, 411};
-    if (name != "content-length") continue;
-    const std::string value = trimmed_lower(line.substr(colon + 1));
-    if (value.empty() || value.size() > 19 || value.find_first_not_of("0123456789") != std::string::npos)
-      return {Arrival::kRefuse, 400};
-    const unsigned long long this_length = std::strtoull(value.c_str(), nullptr, 10);
-    if (has_length && this_length != length) return {Arrival::kRefuse, 400};
+  int refused = 0;
+  for_each_header(head, [&](const std::string& name, std::string_view value) {
+    if (name == "transfer-encoding") refused = 411;
+    if (name != "content-length") return refused == 0;
+    if (value.empty() || value.size() > 19 || value.find_first_not_of("0123456789") != std::string_view::npos) {
+      refused = 400;
+      return false;
+    }
+    const unsigned long long this_length = std::strtoull(std::string(value).c_str(), nullptr, 10);
+    if (has_length && this_length != length) refused = 400;
     has_length = true;
     length = this_length;
-  }
+    return refused == 0;
+  });
+  if (refused != 0) return {Arrival::kRefuse, refused};
   if (!has_length && (method == "POST" || method == "PUT" || method == "PATCH")) return {Arrival::kRefuse, 411};
   if (length > max_body_bytes) return {Arrival::kRefuse, 413};
   return std::size_t(n) >= end + 4 + std::size_t(length) ? Arrival{Arrival::kWhole, 0, end + 4} : Arrival{};
@@ -203,6 +198,20 @@ bool drain(int fd) {
 }
 
 }  // namespace
+
+void for_each_header(std::string_view head,
+                     const std::function<bool(const std::string& name, std::string_view value)>& each) {
+  for (std::size_t at = head.find("\r\n"); at != std::string_view::npos && at + 2 < head.size();) {
+    const std::size_t next = head.find("\r\n", at + 2);
+    const std::string_view line = head.substr(at + 2, next == std::string_view::npos ? std::string_view::npos : next - at - 2);
+    at = next;
+    const std::size_t colon = line.find(':');
+    if (colon == std::string_view::npos) continue;
+    std::string name(trimmed(line.substr(0, colon)));
+    std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    if (!each(name, trimmed(line.substr(colon + 1)))) return;
+  }
+}
 
 FrontedServer::FrontedServer(const Limits& limits, std::function<WorkerQueue*()> make_workers)
     : limits_(limits), make_workers_(std::move(make_workers)) {}

@@ -38,6 +38,11 @@ class WorkerQueue : public httplib::TaskQueue {
   virtual void enqueue_first(std::function<void()> job) = 0;
 };
 
+// Calls `each(name, value)` for each header of a request head (the request line, then lines ended
+// by CR LF), the name lowercased and the value without surrounding blanks, until `each` returns
+// false. The front's reading of a head, and the monitor's of its token, are this one.
+void for_each_header(std::string_view head, const std::function<bool(const std::string& name, std::string_view value)>& each);
+
 class FrontedServer final : public httplib::Server {
  public:
   struct Limits {

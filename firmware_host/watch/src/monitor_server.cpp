@@ -166,21 +166,14 @@ Result<std::unique_ptr<MonitorServer>> MonitorServer::start(CycleHub* hub, PageO
   // The operator's requests (the run's token in Authorization) go ahead of strangers' (second
   // outside probe: 300 view-only connections delayed the operator's Stop by 8 s).
   limits.urgent = [token = *token](std::string_view head) {
-    for (std::size_t at = head.find("\r\n"); at != std::string_view::npos && at + 2 < head.size();) {
-      const std::size_t next = head.find("\r\n", at + 2);
-      const std::string_view line = head.substr(at + 2, next == std::string_view::npos ? std::string_view::npos : next - at - 2);
-      at = next;
-      const std::size_t colon = line.find(':');
-      if (colon == std::string_view::npos || colon != 13) continue;
-      std::string name(line.substr(0, colon));
-      for (char& c : name) c = char(std::tolower(static_cast<unsigned char>(c)));
-      if (name != "authorization") continue;
-      std::string_view value = line.substr(colon + 1);
-      while (!value.empty() && value.front() == ' ') value.remove_prefix(1);
+    bool operators = false;
+    for_each_header(head, [&](const std::string& name, std::string_view value) {
+      if (name != "authorization") return true;
       const std::string_view bearer = "Bearer ";
-      return value.substr(0, bearer.size()) == bearer && token_matches(token, std::string(value.substr(bearer.size())));
-    }
-    return false;
+      operators = value.substr(0, bearer.size()) == bearer && token_matches(token, std::string(value.substr(bearer.size())));
+      return false;
+    });
+    return operators;
   };
   s->server_ = std::make_unique<FrontedServer>(limits, [threads] { return new WatcherTaskQueue(threads); });
   httplib::Server& svr = *s->server_;

@@ -212,6 +212,11 @@ Result<Scene> parse_scene(const std::string& yaml_text, const std::string& sourc
                           const std::filesystem::path& base_dir);
 // Loads "builtin:phantom" or a scene file.
 Result<Scene> load_scene(const std::string& file_or_builtin);
+
+// A detector name, which becomes part of file names (its light field, its archived frames, its
+// calibration): 1 to 64 letters, digits, '_', '-' or '.', not starting with '.'. The one rule of
+// scenes and `calibrate detector --detector`.
+bool is_detector_name(const std::string& name);
 // The YAML text of a built-in scene, or nothing.
 std::optional<std::string> builtin_scene_text(const std::string& name);
 
