@@ -1,12 +1,12 @@
 # The README's two commands, and the steps they are made of.
 #   make demo   install what is missing, build, run the closed loop on the default scene
-#   make check  install what is missing, build, run every test
+#   make check  install what is missing, build, run the fast tier of the tests (check-full: all)
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 LFTRACK := $(BUILD_DIR)/bin/lftrack
 
-.PHONY: all setup configure build demo check check-asan check-tsan check-sanitized fuzz-build bench fuzz clean
+.PHONY: all setup configure build demo check check-slow check-full check-asan check-tsan check-sanitized fuzz-build bench fuzz clean
 
 all: build
 
@@ -22,7 +22,14 @@ build: configure
 demo: build
 	@$(LFTRACK) sim --scene builtin:phantom --cycles 300
 
+# Test tiers (issue 54; tests/CMakeLists.txt labels each test): `check` runs the fast tier (unit,
+# cross-implementation, protocol and simulated-clock closed-loop tests); `check-slow` the slow and
+# real-clock tiers (studies, soaks, devices in other processes, the browser); `check-full` both.
 check: build
+	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900 -L '^fast$$'
+check-slow: build
+	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900 -L '^(slow|realclock)$$'
+check-full: build
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
 
 # The suite under sanitizers (issue 23), each in a build folder of its own: AddressSanitizer with

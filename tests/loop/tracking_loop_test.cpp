@@ -9,6 +9,8 @@
 #include <new>
 #include <stdexcept>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/loop/cycle_schedule.hpp"
@@ -175,6 +177,78 @@ TEST(TrackingLoop, AnActuatorThatThrowsInTheCycleAndOnHoldStillLosesTheBeamPermi
   EXPECT_GE(actuator.holds, 1) << "a hold was attempted";
   EXPECT_FALSE(actuator.beam_permit) << "a hold that throws does not keep the beam on";
   EXPECT_EQ(actuator.commands, 0);
+}
+
+// A couch that takes each correction as its new target and whose link drops on the read-backs
+// numbered in `drops` (0: the loop's first, before its first cycle): that read-back and the next
+// fail, and the couch comes back held where it stood, short of the last command (a couch stopped
+// mid-move) and somewhere new each time.
+class CouchThatDropsItsLink final : public drivers::Actuator {
+ public:
+  explicit CouchThatDropsItsLink(std::vector<int> drops) : drops_(std::move(drops)) {}
+  Status open() override { return {}; }
+  drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline) override {
+    target_ += correction;
+    return drivers::DeviceStatus::kOk;
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline) override {
+    const int n = readbacks_++;
+    for (int d : drops_) {
+      if (n == d || n == d + 1) return drivers::DeviceStatus::kDisconnected;
+      if (n == d + 2) target_ += (tracking::Vector6d() << 2.5, -1.5, 0.5, 0, 0, 0).finished();
+    }
+    *state = {};
+    state->target = state->position = target_;
+    return drivers::DeviceStatus::kOk;
+  }
+  void hold() override {}
+  void set_beam_permit(bool) override {}
+  void close() override {}
+
+ private:
+  std::vector<int> drops_;
+  int readbacks_ = 0;
+  tracking::Vector6d target_ = tracking::Vector6d::Zero();
+};
+
+// A link dropped on a read-back holds the loop (HOLD: the read-back failed), and the couch that
+// comes back held short of the last command is where the loop now holds it, not a disagreement
+// with a command (read-back mismatch) that counts the hold up into a FAULT: ClosedLoop's
+// DroppedConnection case did so whenever the couch was still moving at the drop (a loaded CI
+// host). The second drop comes while held. (This harness's pattern does not track for long: its
+// own failures reach fault_after_failures after ten cycles, so the run is shorter than that.)
+TEST(TrackingLoop, ACouchHeldWhereItStoodAfterADroppedLinkIsHeldThereNotAMismatch) {
+  test::TempDir dir;
+  auto journal = JournalWriter::open(dir.path() / "dropped.lfj");
+  ASSERT_TRUE(journal.ok()) << journal.status().message();
+  ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
+  // Read-backs: 0 before the loop, 1 in cycle 0, 2 in cycle 1 (TRACK, dropped), 3 on the hold.
+  CouchThatDropsItsLink couch({2, 6});
+  LoopOptions o;
+  o.journal = journal->get();
+  o.cycles = 9;
+  LoopUnderTest t = make_loop(&frames, &couch, o);
+  ASSERT_TRUE(t.loop);
+  auto summary = t.loop->run();
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  ASSERT_TRUE((*journal)->close().ok());
+  EXPECT_EQ(summary->faults, 0);
+  EXPECT_EQ(summary->holds, 1);
+  auto read = read_journal(dir.path() / "dropped.lfj");
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  ASSERT_EQ(read->records.size(), 9u);
+  EXPECT_EQ(read->records[0].state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_EQ(read->records[1].state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(read->records[1].gate_reason, std::uint8_t(GateReason::kActuatorFault));
+  int relinked = 0;
+  for (std::size_t i = 1; i < read->records.size(); ++i) {
+    const JournalRecord& r = read->records[i];
+    EXPECT_EQ(r.state, std::uint8_t(TrackingState::kHold)) << "cycle " << i;
+    EXPECT_NE(r.gate_reason, std::uint8_t(GateReason::kReadbackMismatch)) << "cycle " << i;
+    EXPECT_EQ(r.command_sent, 0) << "held: nothing sent, cycle " << i;
+    relinked += r.gate_reason != std::uint8_t(GateReason::kActuatorFault) && r.readback[0] != 0;
+  }
+  EXPECT_GT(relinked, 0) << "the couch came back and was read";
 }
 
 // An operator input whose every poll brings refusals of three reasons.

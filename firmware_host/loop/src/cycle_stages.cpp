@@ -88,12 +88,18 @@ void TrackingLoop::Impl::read_back(CycleState& c) {
     in.readback_valid = rb == DeviceStatus::kOk && !a.fault && a.position.allFinite() && a.target.allFinite();
     if (in.readback_valid) {
       couch_position = a.position;
+      if (target_unknown) {  // held where it stood when the link came back
+        commanded_total = a.target;
+        target_unknown = false;
+      }
       const Vector6d error = a.target - commanded_total;
       in.readback_error_mm = error.head<3>().cwiseAbs().maxCoeff();
       in.readback_error_deg = tracking::rad_to_deg(error.tail<3>().cwiseAbs().maxCoeff());
       in.travel_left = a.target - a.position;  // still to go when the pair was exposed
       c.have_readback = true;
       c.readback = a.position;
+    } else {
+      target_unknown = true;
     }
   }
   c.readback_ms = ms_between(started, monotonic_now_ns());

@@ -135,9 +135,12 @@ void TrackingLoop::Impl::hold_actuator(std::int64_t deadline_ns) {
   if (parts.actuator == nullptr) return;
   parts.actuator->hold();
   drivers::ActuatorState state;
-  if (parts.actuator->readback(&state, to_deadline(deadline_ns)) == DeviceStatus::kOk) {
+  target_unknown = true;
+  if (parts.actuator->readback(&state, to_deadline(deadline_ns)) == DeviceStatus::kOk && !state.fault &&
+      state.target.allFinite() && state.position.allFinite()) {
     commanded_total = state.target;
     couch_position = state.position;
+    target_unknown = false;
   }
 }
 
