@@ -36,7 +36,8 @@ std::map<std::string, int> couch_fault_kinds() {
   using F = sim::CouchServerFault;
   return {{"no-reply", int(F::kNoReply)}, {"exception4", int(F::kException4)},
           {"busy", int(F::kException6)},   {"wrong-unit", int(F::kWrongUnit)},
-          {"drop", int(F::kDropConnection)}, {"mismatch", int(F::kReadbackMismatch)}};
+          {"drop", int(F::kDropConnection)}, {"mismatch", int(F::kReadbackMismatch)},
+          {"late", int(F::kLateReply)}};
 }
 
 std::map<std::string, int> robot_fault_kinds() {

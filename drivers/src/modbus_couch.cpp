@@ -1,8 +1,10 @@
 #include "lftrack/drivers/modbus_couch.hpp"
 
 #include <modbus/modbus.h>
+#include <poll.h>
 #include <sys/socket.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -95,17 +97,50 @@ void ModbusCouch::close() {
   connected_ = false;
 }
 
-bool ModbusCouch::set_timeout(Deadline deadline) {
+bool ModbusCouch::set_timeout(Deadline deadline, bool drain) {
+  if (flush_before_next_) {
+    // A reply that came after its timeout must not answer the next request.
+    if (options_.transport == ModbusCouchOptions::Transport::kRtu) {
+      if (!drain) {
+        modbus_flush(ctx_);  // what has come so far; the next request drains the line
+        return set_response_timeout(deadline);
+      }
+      if (!drain_line(deadline)) return false;
+    } else {
+      modbus_flush(ctx_);  // TCP: a stale reply left over is also refused by its transaction id
+    }
+    flush_before_next_ = false;
+  }
+  return set_response_timeout(deadline);
+}
+
+bool ModbusCouch::set_response_timeout(Deadline deadline) {
   const double remaining_s = std::chrono::duration<double>(deadline - Clock::now()).count();
   const double timeout_s = std::min(options_.response_timeout_s, remaining_s);
   if (timeout_s < 1e-4) return false;
   const auto us = static_cast<std::uint32_t>(std::llround(timeout_s * 1e6));
   modbus_set_response_timeout(ctx_, us / 1000000u, us % 1000000u);
-  if (flush_before_next_) {
-    modbus_flush(ctx_);  // a reply that came after its timeout must not answer the next request
-    flush_before_next_ = false;
-  }
   return true;
+}
+
+bool ModbusCouch::drain_line(Deadline deadline) {
+  const auto quiet = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(options_.response_timeout_s));
+  for (;;) {
+    const auto now = Clock::now();
+    const auto until = std::min<Clock::time_point>(line_quiet_at_, deadline);
+    pollfd line{modbus_get_socket(ctx_), POLLIN, 0};
+    const auto wait_ms = until > now ? std::chrono::ceil<std::chrono::milliseconds>(until - now).count() : 0;
+    const int ready = ::poll(&line, 1, static_cast<int>(wait_ms));
+    if (ready > 0) {  // bytes still arriving: discard them and wait for a silence again
+      modbus_flush(ctx_);
+      line_quiet_at_ = Clock::now() + quiet;
+      continue;
+    }
+    if (ready < 0 && errno != EINTR) return false;
+    if (Clock::now() >= line_quiet_at_) return true;
+    if (Clock::now() >= deadline) return false;  // not quiet yet: the request waits for a later cycle
+  }
 }
 
 void ModbusCouch::mark_disconnected() {
@@ -115,9 +150,15 @@ void ModbusCouch::mark_disconnected() {
 }
 
 DeviceStatus ModbusCouch::classify_failure(int error) {
+  // On a serial line a late reply or the rest of a bad one may still come: quiet a timeout from now.
+  const auto quiet_from_now = [this] {
+    line_quiet_at_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(options_.response_timeout_s));
+  };
   if (error == ETIMEDOUT) {
     ++timeouts_;
     flush_before_next_ = true;
+    quiet_from_now();
     return DeviceStatus::kTimeout;
   }
   if (error > MODBUS_ENOBASE && error <= EMBXGTAR) {
@@ -129,6 +170,7 @@ DeviceStatus ModbusCouch::classify_failure(int error) {
       error == EMBBADSLAVE || error == EMBUNKEXC) {
     ++bad_replies_;
     flush_before_next_ = true;
+    quiet_from_now();
     return DeviceStatus::kFault;
   }
   mark_disconnected();  // ECONNRESET, EPIPE, EBADF, ENOTCONN, EIO...
@@ -257,7 +299,9 @@ void ModbusCouch::hold() {
   // Hold has no cycle deadline: it gets the full response timeout.
   const auto timeout =
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.response_timeout_s));
-  if (!set_timeout(Clock::now() + timeout)) return;
+  // No drain: the hold goes out now; its reply may be refused as another's (the next request
+  // drains the line), but the couch has it.
+  if (!set_timeout(Clock::now() + timeout, /*drain=*/false)) return;
   (void)write_control(reg::kHold);  // a failure is counted; the read-back that follows tells the loop
 }
 

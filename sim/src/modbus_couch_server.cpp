@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <thread>
 #include <vector>
 
 #include "lftrack/drivers/couch_register_map.hpp"
@@ -314,7 +315,7 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
                            a_write ? MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS : MODBUS_EXCEPTION_ILLEGAL_FUNCTION);
     return;
   }
-  bool mismatch = false;
+  bool mismatch = false, late = false;
   const CouchRequestKind kind =
       function == MODBUS_FC_READ_INPUT_REGISTERS ? CouchRequestKind::kReadback : CouchRequestKind::kCommand;
   switch (take_fault(kind)) {
@@ -336,6 +337,9 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
       return;
     case CouchServerFault::kReadbackMismatch:
       mismatch = true;
+      break;
+    case CouchServerFault::kLateReply:
+      late = true;
       break;
   }
   if (block) {
@@ -374,6 +378,7 @@ void ModbusCouchServer::handle(std::uint8_t* query, int length) {
     commanded_ = true;
   }
   refresh_inputs(mismatch);
+  if (late) std::this_thread::sleep_for(std::chrono::duration<double>(options_.late_reply_s));
   modbus_reply(ctx_, query, length, map_);
 }
 

@@ -654,5 +654,48 @@ TEST(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTaken
   driver.close();
 }
 
+// A reply that comes after its timeout on a serial line has no transaction id to tell it from the
+// next request's: a late read-back reply has exactly its shape. The driver drains the line until
+// it is quiet before it asks again, so the late reply never answers a later request (issue 54:
+// without the drain, the next read-back took it, a cycle stale, and every later one too).
+TEST(ModbusCouchRtu, ALateReplyNeverAnswersTheNextRequest) {
+  NullModem line;
+  ASSERT_TRUE(line.ok()) << "no pseudo-terminals";
+  sim::VirtualCouchSpec spec;
+  spec.latency_s = 0;
+  LockedCouch couch(spec);
+  sim::ModbusCouchServerOptions so;
+  so.rtu_device = line.end(1);
+  so.late_reply_s = 0.3;
+  auto server = sim::ModbusCouchServer::start(&couch, so);
+  ASSERT_TRUE(server.ok()) << server.status().message();
+  drivers::ModbusCouchOptions o;
+  o.transport = drivers::ModbusCouchOptions::Transport::kRtu;
+  o.serial_device = line.end(0);
+  o.response_timeout_s = 0.2;
+  ModbusCouch driver(o);
+  const Status opened = driver.open();
+  ASSERT_TRUE(opened.ok()) << opened.message();
+  ASSERT_EQ(driver.command(shift(4, 0), in_ms(500)), DeviceStatus::kOk);
+  ActuatorState s;
+  ASSERT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kOk);
+  ASSERT_LT(s.position(0), 1.0) << "the couch has not moved yet";
+  // The late reply carries the couch where it was; then the couch arrives.
+  (*server)->inject(CouchServerFault::kLateReply, 1, sim::CouchRequestKind::kReadback);
+  EXPECT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kTimeout);
+  couch.advance_to(5.0);
+  // Each read-back now says where the couch is, never the late reply's old position. A read-back
+  // may find the line not yet quiet (kTimeout, nothing sent); the deadline is generous.
+  for (int i = 0; i < 3; ++i) {
+    DeviceStatus status = DeviceStatus::kTimeout;
+    for (int tries = 0; tries < 20 && status == DeviceStatus::kTimeout; ++tries)
+      status = driver.readback(&s, in_ms(500));
+    ASSERT_EQ(status, DeviceStatus::kOk) << "read-back " << i;
+    EXPECT_NEAR(s.position(0), 4, 1e-3) << "read-back " << i << " was answered by the late reply";
+  }
+  EXPECT_EQ(driver.counters().timeouts, 1);
+  driver.close();
+}
+
 }  // namespace
 }  // namespace lftrack

@@ -81,7 +81,16 @@ class ModbusCouch final : public Actuator {
   // (function code first) into `reply_pdu`.
   DeviceStatus tcp_transact(const std::uint8_t* pdu, int pdu_length, std::uint8_t* reply_pdu,
                             int expected_pdu_length);
-  bool set_timeout(Deadline deadline);
+  // Sets the response timeout for a request due by `deadline`; false (send nothing) when no time
+  // is left, or when an RTU line is not yet quiet after a timeout (drain_line; `drain` false: a
+  // hold, which goes out at once after a flush and leaves the draining to the next request).
+  bool set_timeout(Deadline deadline, bool drain = true);
+  bool set_response_timeout(Deadline deadline);
+  // RTU after a timeout or a bad reply: discards what arrives until the line has been silent for a
+  // response timeout (line_quiet_at_), waiting no later than `deadline`; true once it is quiet. A
+  // read-back's reply has no transaction id on a serial line, and a late one has exactly the shape
+  // of the next: without this, one late reply would answer every later request a cycle stale.
+  bool drain_line(Deadline deadline);
   void reconnect_thread();
   void mark_disconnected();
 
@@ -99,6 +108,7 @@ class ModbusCouch final : public Actuator {
   std::uint16_t sequence_ = 0;
   std::uint16_t transaction_ = 0;   // TCP transaction id of the last request
   bool flush_before_next_ = false;  // a late reply may be waiting after a timeout
+  std::chrono::steady_clock::time_point line_quiet_at_{};  // RTU: silent from then on, if nothing arrives
 
   std::atomic<std::int64_t> requests_{0}, timeouts_{0}, exceptions_{0}, bad_replies_{0}, disconnects_{0},
       reconnects_{0};

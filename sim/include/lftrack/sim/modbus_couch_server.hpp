@@ -51,6 +51,7 @@ enum class CouchServerFault : int {
   kWrongUnit,
   kDropConnection,
   kReadbackMismatch,
+  kLateReply,  // the reply (the state when the request came) goes out late_reply_s later
 };
 
 // Which requests an injected fault meets.
@@ -63,6 +64,7 @@ struct ModbusCouchServerOptions {
   std::string rtu_device;
   int unit_id = 1;
   double mismatch_mm = 2.0;
+  double late_reply_s = 0.3;  // kLateReply: how late; the server answers nothing else meanwhile
   int max_connections = 4;     // TCP: clients served at once, 1 to 64
   double idle_timeout_s = 30;  // TCP: a connection without a request for this long is closed; (0, 3600]
 };
