@@ -174,24 +174,33 @@ void PrintTo(const CanFaultCase& c, std::ostream* os) {
 
 class HilCanFault : public ClosedLoop, public ::testing::WithParamInterface<CanFaultCase> {};
 
+// The loop runs until the robot has lost the beam permit (the loop's HOLD), then a while more,
+// and is stopped: on the simulated clock it outruns the wall clock, and a fault that shows after a
+// real-time timeout (a heartbeat missing for 0.3 s) came after the last of a fixed number of
+// cycles on a quiet host, where the loop never held (the robot's permit then dropped only with
+// the end of the run).
 TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
   const CanFaultCase& c = GetParam();
   LoopSessionOptions options;
   options.hil = HilProtocol::kCan;
   bool beam_before = false, beam_after = true;
-  const LoopRun r = run_loop(kBreathing, 80, options, kLightFieldFrames, [&](LoopSession& session) {
+  const LoopRun r = run_loop(kBreathing, 0, options, kLightFieldFrames, [&](LoopSession& session) {
     sim::VirtualRobot* robot = session.virtual_robot();
-    return std::thread([robot, &c, &beam_before, &beam_after] {
-      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-      while (robot->corrections() < 15 && std::chrono::steady_clock::now() < until)
+    return std::thread([&session, robot, &c, &beam_before, &beam_after] {
+      using std::chrono::steady_clock;
+      const auto until = steady_clock::now() + std::chrono::seconds(60);
+      while (robot->corrections() < 15 && steady_clock::now() < until)
         std::this_thread::sleep_for(std::chrono::microseconds(200));
       beam_before = robot->beam_permit();
       for (RobotFault f : c.faults) robot->inject(f);
-      // The loop holds within a cycle or two (a missing heartbeat: after its 0.3 s timeout).
-      const auto hold_until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
-      while (robot->beam_permit() && std::chrono::steady_clock::now() < hold_until)
+      // The loop holds within a cycle or two of seeing the fault (a missing heartbeat: its 0.3 s).
+      const auto hold_until = steady_clock::now() + std::chrono::seconds(30);
+      while (robot->beam_permit() && steady_clock::now() < hold_until)
         std::this_thread::sleep_for(std::chrono::milliseconds(1));
       beam_after = robot->beam_permit();
+      // Cycles after the hold, in which nothing may resume by itself.
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      session.request_stop();
     });
   });
   const LoopSummary& s = r.summary;
@@ -200,7 +209,6 @@ TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
   EXPECT_FALSE(beam_after) << "the robot lost it on the fault";
   EXPECT_EQ(s.holds, 1);
   EXPECT_LE(s.faults, 1) << "a condition that lasts escalates from HOLD to FAULT (the gate's STOP)";
-  ASSERT_EQ(r.journal.records.size(), 80u);
   const std::size_t held_at = first_cycle_out_of_track(r.journal.records);
   ASSERT_GT(held_at, 10u);
   EXPECT_EQ(r.journal.records[held_at].state, std::uint8_t(TrackingState::kHold));
