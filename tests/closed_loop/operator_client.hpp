@@ -65,6 +65,27 @@ class OperatorClient {
     }
     return {};
   }
+  // Waits until the loop is held or stopped (HOLD or FAULT); the reply, or empty after `timeout`.
+  std::string wait_for_safe(std::chrono::milliseconds timeout) {
+    const auto until = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < until) {
+      const std::string reply = ask("status");
+      if (reply.rfind("HOLD", 0) == 0 || reply.rfind("FAULT", 0) == 0) return reply;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return {};
+  }
+  // Waits until the loop's status names cycle `at_least` or later, in any state; that cycle, or
+  // -1 after `timeout`.
+  long long wait_for_cycle(long long at_least, std::chrono::milliseconds timeout) {
+    const auto until = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < until) {
+      const long long c = cycle_of(ask("status"));
+      if (c >= at_least) return c;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return -1;
+  }
   // Brings the loop back to TRACK as an operator would, one command per state it shows; true
   // once it tracks.
   bool bring_back_to_track(std::chrono::milliseconds timeout) {
