@@ -14,6 +14,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstring>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -621,23 +622,41 @@ namespace {
 
 using sim::NullModem;
 
-TEST(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTakenAsTheAnswer) {
-  NullModem line;
-  ASSERT_TRUE(line.ok()) << "no pseudo-terminals";
-  sim::VirtualCouchSpec spec;
-  spec.latency_s = 0;
-  LockedCouch couch(spec);
-  sim::ModbusCouchServerOptions so;
-  so.rtu_device = line.end(1);
-  auto server = sim::ModbusCouchServer::start(&couch, so);
-  ASSERT_TRUE(server.ok()) << server.status().message();
-  drivers::ModbusCouchOptions o;
-  o.transport = drivers::ModbusCouchOptions::Transport::kRtu;
-  o.serial_device = line.end(0);
-  o.response_timeout_s = 0.2;
-  ModbusCouch driver(o);
-  const Status opened = driver.open();
-  ASSERT_TRUE(opened.ok()) << opened.message();
+// The couch served over Modbus RTU on one end of a null modem, the driver on the other (a 0.2 s
+// response timeout), the couch without latency.
+class ModbusCouchRtu : public ::testing::Test {
+ protected:
+  // Starts the server with `so` (its device set here) and opens the driver.
+  void start(sim::ModbusCouchServerOptions so = {}) {
+    ASSERT_TRUE(line_.ok()) << "no pseudo-terminals";
+    so.rtu_device = line_.end(1);
+    auto server = sim::ModbusCouchServer::start(&couch_, so);
+    ASSERT_TRUE(server.ok()) << server.status().message();
+    server_ = std::move(server).value();
+    drivers::ModbusCouchOptions o;
+    o.transport = drivers::ModbusCouchOptions::Transport::kRtu;
+    o.serial_device = line_.end(0);
+    o.response_timeout_s = 0.2;
+    driver_ = std::make_unique<ModbusCouch>(o);
+    const Status opened = driver_->open();
+    ASSERT_TRUE(opened.ok()) << opened.message();
+  }
+  static sim::VirtualCouchSpec without_latency() {
+    sim::VirtualCouchSpec spec;
+    spec.latency_s = 0;
+    return spec;
+  }
+  NullModem line_;
+  LockedCouch couch_{without_latency()};
+  std::unique_ptr<sim::ModbusCouchServer> server_;
+  std::unique_ptr<ModbusCouch> driver_;
+};
+
+TEST_F(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTakenAsTheAnswer) {
+  ASSERT_NO_FATAL_FAILURE(start());
+  ModbusCouch& driver = *driver_;
+  LockedCouch& couch = couch_;
+  auto* server = &server_;
   ASSERT_EQ(driver.command(shift(4, 0.02), in_ms(500)), DeviceStatus::kOk);
   couch.advance_to(5.0);
   ActuatorState s;
@@ -658,24 +677,13 @@ TEST(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTaken
 // next request's: a late read-back reply has exactly its shape. The driver drains the line until
 // it is quiet before it asks again, so the late reply never answers a later request (issue 54:
 // without the drain, the next read-back took it, a cycle stale, and every later one too).
-TEST(ModbusCouchRtu, ALateReplyNeverAnswersTheNextRequest) {
-  NullModem line;
-  ASSERT_TRUE(line.ok()) << "no pseudo-terminals";
-  sim::VirtualCouchSpec spec;
-  spec.latency_s = 0;
-  LockedCouch couch(spec);
+TEST_F(ModbusCouchRtu, ALateReplyNeverAnswersTheNextRequest) {
   sim::ModbusCouchServerOptions so;
-  so.rtu_device = line.end(1);
   so.late_reply_s = 0.3;
-  auto server = sim::ModbusCouchServer::start(&couch, so);
-  ASSERT_TRUE(server.ok()) << server.status().message();
-  drivers::ModbusCouchOptions o;
-  o.transport = drivers::ModbusCouchOptions::Transport::kRtu;
-  o.serial_device = line.end(0);
-  o.response_timeout_s = 0.2;
-  ModbusCouch driver(o);
-  const Status opened = driver.open();
-  ASSERT_TRUE(opened.ok()) << opened.message();
+  ASSERT_NO_FATAL_FAILURE(start(so));
+  ModbusCouch& driver = *driver_;
+  LockedCouch& couch = couch_;
+  auto* server = &server_;
   ASSERT_EQ(driver.command(shift(4, 0), in_ms(500)), DeviceStatus::kOk);
   ActuatorState s;
   ASSERT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kOk);
