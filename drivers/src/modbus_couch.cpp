@@ -132,9 +132,12 @@ bool ModbusCouch::drain_line(Deadline deadline) {
     pollfd line{modbus_get_socket(ctx_), POLLIN, 0};
     const auto wait_ms = until > now ? std::chrono::ceil<std::chrono::milliseconds>(until - now).count() : 0;
     const int ready = ::poll(&line, 1, static_cast<int>(wait_ms));
+    // A line in error or hung up (an adapter unplugged, a peer gone) is never quiet: no request.
+    if (ready > 0 && (line.revents & (POLLERR | POLLHUP | POLLNVAL)) != 0) return false;
     if (ready > 0) {  // bytes still arriving: discard them and wait for a silence again
       modbus_flush(ctx_);
       line_quiet_at_ = Clock::now() + quiet;
+      if (Clock::now() >= deadline) return false;  // a line that never falls silent: bounded
       continue;
     }
     if (ready < 0 && errno != EINTR) return false;

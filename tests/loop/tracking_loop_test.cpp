@@ -251,6 +251,58 @@ TEST(TrackingLoop, ACouchHeldWhereItStoodAfterADroppedLinkIsHeldThereNotAMismatc
   EXPECT_GT(relinked, 0) << "the couch came back and was read";
 }
 
+// An operator who resumes a HOLD in the cycle numbered `at` (a scripted input for the loop alone).
+class ResumesAtCycle final : public OperatorInput {
+ public:
+  explicit ResumesAtCycle(std::int64_t at) : at_(at) {}
+  void poll(const OperatorView& view, OperatorPoll* out) override {
+    if (view.cycle == at_ && view.state == TrackingState::kHold) out->accept(OperatorCommand::kResume);
+  }
+
+ private:
+  std::int64_t at_;
+};
+
+// The operator resumes in the very cycle the couch comes back, held somewhere the loop has not
+// read: the decision was taken without that target, so the read-back is compared as always, holds
+// (read-back mismatch) and moves nothing; that hold's read-back is the target for the next
+// decision (review of the fix above: adopting it in the resume's cycle would have sent a command
+// from a target nobody had seen, with the step limit waived).
+TEST(TrackingLoop, AResumeBeforeTheHeldCouchWasReadMovesNothing) {
+  test::TempDir dir;
+  auto journal = JournalWriter::open(dir.path() / "resumed.lfj");
+  ASSERT_TRUE(journal.ok()) << journal.status().message();
+  ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
+  // Read-backs: 0 before the loop, 1 in cycle 0, 2 in cycle 1 (dropped), 3 on the hold (fails),
+  // 4 in cycle 2: the couch is back, moved, in the cycle of the resume.
+  CouchThatDropsItsLink couch({2});
+  ResumesAtCycle resume(2);
+  LoopOptions o;
+  o.journal = journal->get();
+  o.operator_input = &resume;
+  o.cycles = 5;
+  LoopUnderTest t = make_loop(&frames, &couch, o);
+  ASSERT_TRUE(t.loop);
+  auto summary = t.loop->run();
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  ASSERT_TRUE((*journal)->close().ok());
+  auto read = read_journal(dir.path() / "resumed.lfj");
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  ASSERT_EQ(read->records.size(), 5u);
+  EXPECT_EQ(read->records[1].state, std::uint8_t(TrackingState::kHold));
+  const JournalRecord& resumed = read->records[2];
+  EXPECT_NE(resumed.operator_command, 0) << "the resume was taken";
+  EXPECT_EQ(resumed.state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(resumed.gate_reason, std::uint8_t(GateReason::kReadbackMismatch));
+  EXPECT_EQ(resumed.command_sent, 0) << "nothing sent on a target the operator had not seen";
+  EXPECT_EQ(resumed.beam_permit, 0);
+  for (std::size_t i = 3; i < read->records.size(); ++i) {
+    EXPECT_EQ(read->records[i].command_sent, 0) << "held again, cycle " << i;
+    EXPECT_NE(read->records[i].gate_reason, std::uint8_t(GateReason::kReadbackMismatch))
+        << "the second hold read the target, cycle " << i;
+  }
+}
+
 // An operator input whose every poll brings refusals of three reasons.
 class RefusedSeveralWays final : public OperatorInput {
  public:

@@ -622,12 +622,13 @@ namespace {
 
 using sim::NullModem;
 
-// The couch served over Modbus RTU on one end of a null modem, the driver on the other (a 0.2 s
-// response timeout), the couch without latency.
+// The couch served over Modbus RTU on one end of a null modem, the driver on the other, the couch
+// without latency.
 class ModbusCouchRtu : public ::testing::Test {
  protected:
-  // Starts the server with `so` (its device set here) and opens the driver.
-  void start(sim::ModbusCouchServerOptions so = {}) {
+  // Starts the server with `so` (its device set here) and opens the driver with a response
+  // timeout of `response_timeout_s`.
+  void start(sim::ModbusCouchServerOptions so = {}, double response_timeout_s = 0.2) {
     ASSERT_TRUE(line_.ok()) << "no pseudo-terminals";
     so.rtu_device = line_.end(1);
     auto server = sim::ModbusCouchServer::start(&couch_, so);
@@ -636,7 +637,7 @@ class ModbusCouchRtu : public ::testing::Test {
     drivers::ModbusCouchOptions o;
     o.transport = drivers::ModbusCouchOptions::Transport::kRtu;
     o.serial_device = line_.end(0);
-    o.response_timeout_s = 0.2;
+    o.response_timeout_s = response_timeout_s;
     driver_ = std::make_unique<ModbusCouch>(o);
     const Status opened = driver_->open();
     ASSERT_TRUE(opened.ok()) << opened.message();
@@ -678,9 +679,11 @@ TEST_F(ModbusCouchRtu, CommandsAndReadBackOverASerialLineAndAWrongUnitIsNeverTak
 // it is quiet before it asks again, so the late reply never answers a later request (issue 54:
 // without the drain, the next read-back took it, a cycle stale, and every later one too).
 TEST_F(ModbusCouchRtu, ALateReplyNeverAnswersTheNextRequest) {
+  // The reply comes half a timeout after the timeout, and the driver waits for a silence of one
+  // timeout: 0.2 s of margin on either side for a loaded host.
   sim::ModbusCouchServerOptions so;
-  so.late_reply_s = 0.3;
-  ASSERT_NO_FATAL_FAILURE(start(so));
+  so.late_reply_s = 0.6;
+  ASSERT_NO_FATAL_FAILURE(start(so, /*response_timeout_s=*/0.4));
   ModbusCouch& driver = *driver_;
   LockedCouch& couch = couch_;
   auto* server = &server_;
@@ -690,14 +693,14 @@ TEST_F(ModbusCouchRtu, ALateReplyNeverAnswersTheNextRequest) {
   ASSERT_LT(s.position(0), 1.0) << "the couch has not moved yet";
   // The late reply carries the couch where it was; then the couch arrives.
   (*server)->inject(CouchServerFault::kLateReply, 1, sim::CouchRequestKind::kReadback);
-  EXPECT_EQ(driver.readback(&s, in_ms(500)), DeviceStatus::kTimeout);
+  EXPECT_EQ(driver.readback(&s, in_ms(1000)), DeviceStatus::kTimeout);
   couch.advance_to(5.0);
   // Each read-back now says where the couch is, never the late reply's old position. A read-back
   // may find the line not yet quiet (kTimeout, nothing sent); the deadline is generous.
   for (int i = 0; i < 3; ++i) {
     DeviceStatus status = DeviceStatus::kTimeout;
     for (int tries = 0; tries < 20 && status == DeviceStatus::kTimeout; ++tries)
-      status = driver.readback(&s, in_ms(500));
+      status = driver.readback(&s, in_ms(1000));
     ASSERT_EQ(status, DeviceStatus::kOk) << "read-back " << i;
     EXPECT_NEAR(s.position(0), 4, 1e-3) << "read-back " << i << " was answered by the late reply";
   }

@@ -88,7 +88,11 @@ void TrackingLoop::Impl::read_back(CycleState& c) {
     in.readback_valid = rb == DeviceStatus::kOk && !a.fault && a.position.allFinite() && a.target.allFinite();
     if (in.readback_valid) {
       couch_position = a.position;
-      if (target_unknown) {  // held where it stood when the link came back
+      // Held where it stood when the link came back: the target, while the loop is held. In a
+      // cycle that an operator's resume or reset has just taken out of HOLD or FAULT, the target
+      // is compared as always: the operator decided without it, so a moved one holds again, and
+      // that hold's read-back is the target for the next decision.
+      if (target_unknown && (c.state == TrackingState::kHold || c.state == TrackingState::kFault)) {
         commanded_total = a.target;
         target_unknown = false;
       }

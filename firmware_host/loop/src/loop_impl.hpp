@@ -101,10 +101,11 @@ struct TrackingLoop::Impl {
   tracking::Vector6d couch_at_last_registration = tracking::Vector6d::Zero();
   bool have_registration = false;
   tracking::Vector6d commanded_total = tracking::Vector6d::Zero();  // what the actuator was last told, as travel
-  // Since a hold or a failed read-back (a dropped link), until a valid read-back: an actuator that
-  // comes back holds where it stands (a couch stopped mid-move has a new target), so that read-back
-  // is the target, not a disagreement with the last command. The loop is held meanwhile (a failed
-  // read-back holds), and nothing moves until the operator resumes from the target read.
+  // Since a hold or a failed read-back (a dropped link), until a valid read-back in HOLD or FAULT:
+  // an actuator that comes back holds where it stands (a couch stopped mid-move has a new target),
+  // so that read-back is the target, not a disagreement with the last command. The loop is held
+  // meanwhile (a failed read-back holds); a resume before the target is known meets the usual
+  // comparison (read_back), so no operator decision is taken on a target the loop had not read.
   bool target_unknown = false;
   tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;  // this cycle's frames
   int consecutive_overruns = 0;                          // cycles in a row that overran, up to the last

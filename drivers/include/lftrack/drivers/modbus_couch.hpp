@@ -90,6 +90,9 @@ class ModbusCouch final : public Actuator {
   // response timeout (line_quiet_at_), waiting no later than `deadline`; true once it is quiet. A
   // read-back's reply has no transaction id on a serial line, and a late one has exactly the shape
   // of the next: without this, one late reply would answer every later request a cycle stale.
+  // Limit: a reply later than its timeout plus one more response timeout can still answer the
+  // next request (the loop's read-back check then sees the stale target after a command). False
+  // also for a line in error or hung up.
   bool drain_line(Deadline deadline);
   void reconnect_thread();
   void mark_disconnected();
