@@ -123,9 +123,11 @@ bool ModbusCouch::set_response_timeout(Deadline deadline) {
   return true;
 }
 
+Clock::duration ModbusCouch::response_timeout() const {
+  return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.response_timeout_s));
+}
+
 bool ModbusCouch::drain_line(Deadline deadline) {
-  const auto quiet = std::chrono::duration_cast<Clock::duration>(
-      std::chrono::duration<double>(options_.response_timeout_s));
   for (;;) {
     const auto now = Clock::now();
     const auto until = std::min<Clock::time_point>(line_quiet_at_, deadline);
@@ -136,7 +138,7 @@ bool ModbusCouch::drain_line(Deadline deadline) {
     if (ready > 0 && (line.revents & (POLLERR | POLLHUP | POLLNVAL)) != 0) return false;
     if (ready > 0) {  // bytes still arriving: discard them and wait for a silence again
       modbus_flush(ctx_);
-      line_quiet_at_ = Clock::now() + quiet;
+      line_quiet_at_ = Clock::now() + response_timeout();
       if (Clock::now() >= deadline) return false;  // a line that never falls silent: bounded
       continue;
     }
@@ -154,14 +156,10 @@ void ModbusCouch::mark_disconnected() {
 
 DeviceStatus ModbusCouch::classify_failure(int error) {
   // On a serial line a late reply or the rest of a bad one may still come: quiet a timeout from now.
-  const auto quiet_from_now = [this] {
-    line_quiet_at_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                        std::chrono::duration<double>(options_.response_timeout_s));
-  };
   if (error == ETIMEDOUT) {
     ++timeouts_;
     flush_before_next_ = true;
-    quiet_from_now();
+    line_quiet_at_ = Clock::now() + response_timeout();
     return DeviceStatus::kTimeout;
   }
   if (error > MODBUS_ENOBASE && error <= EMBXGTAR) {
@@ -173,7 +171,7 @@ DeviceStatus ModbusCouch::classify_failure(int error) {
       error == EMBBADSLAVE || error == EMBUNKEXC) {
     ++bad_replies_;
     flush_before_next_ = true;
-    quiet_from_now();
+    line_quiet_at_ = Clock::now() + response_timeout();
     return DeviceStatus::kFault;
   }
   mark_disconnected();  // ECONNRESET, EPIPE, EBADF, ENOTCONN, EIO...
@@ -300,11 +298,9 @@ void ModbusCouch::hold() {
   resync_ = true;
   if (!connected_.load(std::memory_order_acquire)) return;  // the reconnect thread holds first
   // Hold has no cycle deadline: it gets the full response timeout.
-  const auto timeout =
-      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.response_timeout_s));
   // No drain: the hold goes out now; its reply may be refused as another's (the next request
   // drains the line), but the couch has it.
-  if (!set_timeout(Clock::now() + timeout, /*drain=*/false)) return;
+  if (!set_timeout(Clock::now() + response_timeout(), /*drain=*/false)) return;
   (void)write_control(reg::kHold);  // a failure is counted; the read-back that follows tells the loop
 }
 

@@ -179,6 +179,33 @@ TEST(TrackingLoop, AnActuatorThatThrowsInTheCycleAndOnHoldStillLosesTheBeamPermi
   EXPECT_EQ(actuator.commands, 0);
 }
 
+// A run of the loop on `frames` and `actuator` with a journal: its summary and the records read
+// back (empty where the run or the journal failed, which the expectations inside say).
+struct JournaledRun {
+  LoopSummary summary;
+  std::vector<JournalRecord> records;
+};
+
+JournaledRun run_journaled(drivers::FrameSource* frames, drivers::Actuator* actuator, LoopOptions o) {
+  JournaledRun out;
+  test::TempDir dir;
+  auto journal = JournalWriter::open(dir.path() / "run.lfj");
+  EXPECT_TRUE(journal.ok()) << journal.status().message();
+  if (!journal.ok()) return out;
+  o.journal = journal->get();
+  LoopUnderTest t = make_loop(frames, actuator, o);
+  if (!t.loop) return out;
+  auto summary = t.loop->run();
+  EXPECT_TRUE(summary.ok()) << summary.status().message();
+  EXPECT_TRUE((*journal)->close().ok());
+  if (!summary.ok()) return out;
+  out.summary = *summary;
+  auto read = read_journal(dir.path() / "run.lfj");
+  EXPECT_TRUE(read.ok()) << read.status().message();
+  if (read.ok()) out.records = read->records;
+  return out;
+}
+
 // A couch that takes each correction as its new target and whose link drops on the read-backs
 // numbered in `drops` (0: the loop's first, before its first cycle): that read-back and the next
 // fail, and the couch comes back held where it stood, short of the last command (a couch stopped
@@ -218,31 +245,22 @@ class CouchThatDropsItsLink final : public drivers::Actuator {
 // host). The second drop comes while held. (This harness's pattern does not track for long: its
 // own failures reach fault_after_failures after ten cycles, so the run is shorter than that.)
 TEST(TrackingLoop, ACouchHeldWhereItStoodAfterADroppedLinkIsHeldThereNotAMismatch) {
-  test::TempDir dir;
-  auto journal = JournalWriter::open(dir.path() / "dropped.lfj");
-  ASSERT_TRUE(journal.ok()) << journal.status().message();
   ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
   // Read-backs: 0 before the loop, 1 in cycle 0, 2 in cycle 1 (TRACK, dropped), 3 on the hold.
   CouchThatDropsItsLink couch({2, 6});
   LoopOptions o;
-  o.journal = journal->get();
   o.cycles = 9;
-  LoopUnderTest t = make_loop(&frames, &couch, o);
-  ASSERT_TRUE(t.loop);
-  auto summary = t.loop->run();
-  ASSERT_TRUE(summary.ok()) << summary.status().message();
-  ASSERT_TRUE((*journal)->close().ok());
-  EXPECT_EQ(summary->faults, 0);
-  EXPECT_EQ(summary->holds, 1);
-  auto read = read_journal(dir.path() / "dropped.lfj");
-  ASSERT_TRUE(read.ok()) << read.status().message();
-  ASSERT_EQ(read->records.size(), 9u);
-  EXPECT_EQ(read->records[0].state, std::uint8_t(TrackingState::kTrack));
-  EXPECT_EQ(read->records[1].state, std::uint8_t(TrackingState::kHold));
-  EXPECT_EQ(read->records[1].gate_reason, std::uint8_t(GateReason::kActuatorFault));
+  const JournaledRun run = run_journaled(&frames, &couch, o);
+  EXPECT_EQ(run.summary.faults, 0);
+  EXPECT_EQ(run.summary.holds, 1);
+  const std::vector<JournalRecord>& records = run.records;
+  ASSERT_EQ(records.size(), 9u);
+  EXPECT_EQ(records[0].state, std::uint8_t(TrackingState::kTrack));
+  EXPECT_EQ(records[1].state, std::uint8_t(TrackingState::kHold));
+  EXPECT_EQ(records[1].gate_reason, std::uint8_t(GateReason::kActuatorFault));
   int relinked = 0;
-  for (std::size_t i = 1; i < read->records.size(); ++i) {
-    const JournalRecord& r = read->records[i];
+  for (std::size_t i = 1; i < records.size(); ++i) {
+    const JournalRecord& r = records[i];
     EXPECT_EQ(r.state, std::uint8_t(TrackingState::kHold)) << "cycle " << i;
     EXPECT_NE(r.gate_reason, std::uint8_t(GateReason::kReadbackMismatch)) << "cycle " << i;
     EXPECT_EQ(r.command_sent, 0) << "held: nothing sent, cycle " << i;
@@ -269,36 +287,26 @@ class ResumesAtCycle final : public OperatorInput {
 // decision (review of the fix above: adopting it in the resume's cycle would have sent a command
 // from a target nobody had seen, with the step limit waived).
 TEST(TrackingLoop, AResumeBeforeTheHeldCouchWasReadMovesNothing) {
-  test::TempDir dir;
-  auto journal = JournalWriter::open(dir.path() / "resumed.lfj");
-  ASSERT_TRUE(journal.ok()) << journal.status().message();
   ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
   // Read-backs: 0 before the loop, 1 in cycle 0, 2 in cycle 1 (dropped), 3 on the hold (fails),
   // 4 in cycle 2: the couch is back, moved, in the cycle of the resume.
   CouchThatDropsItsLink couch({2});
   ResumesAtCycle resume(2);
   LoopOptions o;
-  o.journal = journal->get();
   o.operator_input = &resume;
   o.cycles = 5;
-  LoopUnderTest t = make_loop(&frames, &couch, o);
-  ASSERT_TRUE(t.loop);
-  auto summary = t.loop->run();
-  ASSERT_TRUE(summary.ok()) << summary.status().message();
-  ASSERT_TRUE((*journal)->close().ok());
-  auto read = read_journal(dir.path() / "resumed.lfj");
-  ASSERT_TRUE(read.ok()) << read.status().message();
-  ASSERT_EQ(read->records.size(), 5u);
-  EXPECT_EQ(read->records[1].state, std::uint8_t(TrackingState::kHold));
-  const JournalRecord& resumed = read->records[2];
+  const std::vector<JournalRecord> records = run_journaled(&frames, &couch, o).records;
+  ASSERT_EQ(records.size(), 5u);
+  EXPECT_EQ(records[1].state, std::uint8_t(TrackingState::kHold));
+  const JournalRecord& resumed = records[2];
   EXPECT_NE(resumed.operator_command, 0) << "the resume was taken";
   EXPECT_EQ(resumed.state, std::uint8_t(TrackingState::kHold));
   EXPECT_EQ(resumed.gate_reason, std::uint8_t(GateReason::kReadbackMismatch));
   EXPECT_EQ(resumed.command_sent, 0) << "nothing sent on a target the operator had not seen";
   EXPECT_EQ(resumed.beam_permit, 0);
-  for (std::size_t i = 3; i < read->records.size(); ++i) {
-    EXPECT_EQ(read->records[i].command_sent, 0) << "held again, cycle " << i;
-    EXPECT_NE(read->records[i].gate_reason, std::uint8_t(GateReason::kReadbackMismatch))
+  for (std::size_t i = 3; i < records.size(); ++i) {
+    EXPECT_EQ(records[i].command_sent, 0) << "held again, cycle " << i;
+    EXPECT_NE(records[i].gate_reason, std::uint8_t(GateReason::kReadbackMismatch))
         << "the second hold read the target, cycle " << i;
   }
 }
@@ -316,26 +324,17 @@ class RefusedSeveralWays final : public OperatorInput {
 // Every refusal of a cycle reaches its journal record and the run's summary by reason (an outside
 // probe's 15 token failures never appeared: each cycle kept only its last reason).
 TEST(TrackingLoop, EveryRefusalOfACycleIsJournaledByReason) {
-  test::TempDir dir;
-  auto journal = JournalWriter::open(dir.path() / "refusals.lfj");
-  ASSERT_TRUE(journal.ok()) << journal.status().message();
   ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
   RefusedSeveralWays refusing;
   LoopOptions o;
-  o.journal = journal->get();
   o.operator_input = &refusing;
-  LoopUnderTest t = make_loop(&frames, nullptr, o);
-  ASSERT_TRUE(t.loop);
-  auto summary = t.loop->run();
-  ASSERT_TRUE(summary.ok()) << summary.status().message();
-  ASSERT_TRUE((*journal)->close().ok());
-  EXPECT_EQ(summary->operator_refused, 18 * summary->cycles);
-  EXPECT_EQ(summary->operator_refused_by_reason[std::size_t(OperatorRefusal::kBadToken)], 15 * summary->cycles);
-  EXPECT_EQ(summary->operator_refused_by_reason[std::size_t(OperatorRefusal::kReplayed)], summary->cycles);
-  auto read = read_journal(dir.path() / "refusals.lfj");
-  ASSERT_TRUE(read.ok()) << read.status().message();
-  ASSERT_FALSE(read->records.empty());
-  for (const JournalRecord& r : read->records) {
+  const JournaledRun run = run_journaled(&frames, nullptr, o);
+  const LoopSummary& summary = run.summary;
+  EXPECT_EQ(summary.operator_refused, 18 * summary.cycles);
+  EXPECT_EQ(summary.operator_refused_by_reason[std::size_t(OperatorRefusal::kBadToken)], 15 * summary.cycles);
+  EXPECT_EQ(summary.operator_refused_by_reason[std::size_t(OperatorRefusal::kReplayed)], summary.cycles);
+  ASSERT_FALSE(run.records.empty());
+  for (const JournalRecord& r : run.records) {
     EXPECT_EQ(r.operator_refused, 18);
     EXPECT_EQ(r.operator_first_refusal, std::uint8_t(OperatorRefusal::kBadToken));
     EXPECT_EQ(r.operator_refusal, std::uint8_t(OperatorRefusal::kNotApplicable));
@@ -350,25 +349,15 @@ TEST(TrackingLoop, EveryRefusalOfACycleIsJournaledByReason) {
 // used to count: a loaded run's frames went "stale" where an idle run's did not, and two runs of
 // one seed diverged: ClosedLoop.TwoRunsOfOneSeedOnTheSimulatedClockAreTheSameBitForBit.)
 TEST(TrackingLoop, OnTheSimulatedClockTheHostsComputingTimeNeverAgesAFrame) {
-  test::TempDir dir;
-  auto journal = JournalWriter::open(dir.path() / "slow.lfj");
-  ASSERT_TRUE(journal.ok()) << journal.status().message();
   ThrowingFrames frames(/*throw_at=*/-1, /*bad_alloc=*/false);
   LoopOptions o;
-  o.journal = journal->get();
   o.per_render = std::chrono::microseconds(2000);  // a registration takes tens of milliseconds
   o.max_frame_age_ms = 5;
   o.cycles = 4;
-  LoopUnderTest t = make_loop(&frames, nullptr, o);
-  ASSERT_TRUE(t.loop);
-  auto summary = t.loop->run();
-  ASSERT_TRUE(summary.ok()) << summary.status().message();
-  ASSERT_TRUE((*journal)->close().ok());
-  EXPECT_GT(summary->registration_p50_ms, 5.0) << "each registration took longer than the frame age limit";
-  auto read = read_journal(dir.path() / "slow.lfj");
-  ASSERT_TRUE(read.ok()) << read.status().message();
-  ASSERT_EQ(read->records.size(), 4u);
-  for (const JournalRecord& r : read->records) {
+  const JournaledRun run = run_journaled(&frames, nullptr, o);
+  EXPECT_GT(run.summary.registration_p50_ms, 5.0) << "each registration took longer than the frame age limit";
+  ASSERT_EQ(run.records.size(), 4u);
+  for (const JournalRecord& r : run.records) {
     EXPECT_NE(r.gate_reason, std::uint8_t(GateReason::kStaleFrame)) << "cycle " << r.cycle;
     EXPECT_GT(r.evaluations, 0u) << "cycle " << r.cycle;
   }

@@ -86,6 +86,7 @@ class ModbusCouch final : public Actuator {
   // hold, which goes out at once after a flush and leaves the draining to the next request).
   bool set_timeout(Deadline deadline, bool drain = true);
   bool set_response_timeout(Deadline deadline);
+  std::chrono::steady_clock::duration response_timeout() const;  // options_.response_timeout_s
   // RTU after a timeout or a bad reply: discards what arrives until the line has been silent for a
   // response timeout (line_quiet_at_), waiting no later than `deadline`; true once it is quiet. A
   // read-back's reply has no transaction id on a serial line, and a late one has exactly the shape
