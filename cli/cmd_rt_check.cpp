@@ -47,7 +47,7 @@ struct RtCheckOptions {
 };
 
 std::atomic<bool> g_stop{false};
-void on_interrupt(int) { g_stop.store(true); }
+void on_rt_check_interrupt(int) { g_stop.store(true); }
 
 // --cpus: a list such as 0,2-3 (whether those CPUs are there is the host's to say, after parsing).
 CLI::Validator cpu_list() {
@@ -61,7 +61,10 @@ CLI::Validator cpu_list() {
 
 std::string cpus_text(const std::vector<int>& cpus) {
   std::string s;
-  for (std::size_t i = 0; i < cpus.size(); ++i) s += (i ? "," : "") + std::to_string(cpus[i]);
+  for (std::size_t i = 0; i < cpus.size(); ++i) {
+    if (i) s += ',';
+    s += std::to_string(cpus[i]);
+  }
   return s;
 }
 
@@ -288,7 +291,7 @@ Status run_rt_check(const RtCheckOptions& o) {
   g_stop.store(false);
   w.stop = &g_stop;
   struct sigaction action {}, old_int{}, old_term{};
-  action.sa_handler = on_interrupt;
+  action.sa_handler = on_rt_check_interrupt;
   sigaction(SIGINT, &action, &old_int);
   sigaction(SIGTERM, &action, &old_term);
   auto measured = measure_wakeup_latency(w);

@@ -27,7 +27,7 @@ struct FormatChoice {
 };
 // Preferred formats, best first: 16 bits, then 14, 12 and 10 bits in 16-bit containers (the
 // unpacked PFNC formats; packed Mono12p/Mono10p are not read), then 8 bits.
-constexpr FormatChoice kFormats[] = {{ARV_PIXEL_FORMAT_MONO_16, 2},
+constexpr FormatChoice kPixelFormats[] = {{ARV_PIXEL_FORMAT_MONO_16, 2},
                                      {ARV_PIXEL_FORMAT_MONO_14, 2},
                                      {ARV_PIXEL_FORMAT_MONO_12, 2},
                                      {ARV_PIXEL_FORMAT_MONO_10, 2},
@@ -189,7 +189,7 @@ Status GigeDetector::open() {
   if (offered == nullptr)
     return fail("cannot list its pixel formats (" + take_message(error, "no PixelFormat") + ")");
   const FormatChoice* chosen = nullptr;
-  for (const FormatChoice& f : kFormats) {
+  for (const FormatChoice& f : kPixelFormats) {
     if (std::find(offered, offered + n_formats, gint64(f.format)) != offered + n_formats) {
       chosen = &f;
       break;

@@ -6,7 +6,7 @@ namespace lftrack::sim {
 
 namespace {
 
-std::int64_t monotonic_ns() {
+std::int64_t served_clock_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
@@ -16,7 +16,7 @@ std::int64_t monotonic_ns() {
 Result<std::unique_ptr<ServedCouch>> ServedCouch::start(const VirtualCouchSpec& spec,
                                                         const std::filesystem::path& room_link) {
   std::unique_ptr<ServedCouch> couch(new ServedCouch(spec));
-  couch->epoch_ns_ = monotonic_ns();
+  couch->epoch_ns_ = served_clock_ns();
   if (!room_link.empty()) {
     auto link = RoomLinkWriter::create(room_link);
     if (!link.ok()) return link.status();
@@ -34,7 +34,7 @@ ServedCouch::~ServedCouch() {
 }
 
 void ServedCouch::advance_locked() const {
-  couch_.advance_to(1e-9 * static_cast<double>(monotonic_ns() - epoch_ns_));
+  couch_.advance_to(1e-9 * static_cast<double>(served_clock_ns() - epoch_ns_));
 }
 
 void ServedCouch::publish_loop() {

@@ -17,7 +17,7 @@
 namespace lftrack::host {
 namespace {
 
-const char* const kRunsHeader =
+const char* const kCaptureRunsHeader =
     "method,bin_lo_mm,bin_hi_mm,sample,initial_tre_mm,tre_mean_mm,tre_max_mm,success_2mm,success_2_5mm,"
     "evaluations,ms";
 
@@ -94,7 +94,7 @@ Status write_capture_range_shard(const CaptureRangeReport& report, const std::fi
   if (ec) return io_error((dir / "study.json").string() + ": cannot remove the earlier description");
   const CaptureRangeOptions& o = report.options;
   std::ostringstream csv;
-  csv << kRunsHeader << '\n';
+  csv << kCaptureRunsHeader << '\n';
   for (const CaptureRangeRun& r : report.runs)
     csv << r.method << ',' << csv_number(r.bin * o.bin_width_mm) << ',' << csv_number((r.bin + 1) * o.bin_width_mm) << ','
         << r.sample << ',' << csv_number(r.initial_tre_mm) << ',' << csv_number(r.tre_mean_mm) << ',' << csv_number(r.tre_max_mm)
@@ -172,7 +172,7 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
   std::ifstream csv(file);
   if (!csv) return not_found(file.string() + ": no such file");
   std::string line;
-  if (!std::getline(csv, line) || line != kRunsHeader)
+  if (!std::getline(csv, line) || line != kCaptureRunsHeader)
     return corrupt_data(file.string() + ": line 1 is not the capture-range header");
   int line_no = 1;
   std::set<std::tuple<int, int, std::string>> seen;

@@ -12,14 +12,13 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/tracking/image_io.hpp"
+#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
 
-std::string lftrack_bin() {
-  return LFTRACK_BIN_PATH;
-}
+using test::lftrack_bin;
 
 // The built-in scene with `extra` appended to its actuator section.
 std::string builtin_with_actuator_lines(const std::string& extra) {

@@ -14,10 +14,15 @@
 
 #include "lftrack/drivers/frame_files.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
+#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
+
+using test::quoted;
+using test::CliRun;
+using test::contents;
 
 namespace fs = std::filesystem;
 
@@ -74,17 +79,6 @@ void write_8bit_png(const fs::path& path, int rows, int cols) {
                                                chunk("IEND", "");
 }
 
-std::string quoted(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
-struct CliRun {
-  int exit_code = -1;
-  std::string out;  // stdout and stderr
-};
-
 // `lftrack calibrate detector ARGS` in `cwd`, its exit code and output.
 CliRun calibrate_detector(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& log_dir) {
   std::string command = "cd ";
@@ -106,11 +100,6 @@ CliRun calibrate_detector(const std::vector<std::string>& args, const fs::path& 
   std::ifstream in(log);
   r.out.assign(std::istreambuf_iterator<char>(in), {});
   return r;
-}
-
-std::string contents(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
 }
 
 TEST(CalibrateDetectorCli, WritesTheCalibrationAndNeverOverwritesIt) {

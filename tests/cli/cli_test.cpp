@@ -13,14 +13,13 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/trade_study.hpp"
 #include "lftrack/tracking/image_io.hpp"
+#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
 
-std::string lftrack_bin() {
-  return LFTRACK_BIN_PATH;
-}
+using test::lftrack_bin;
 
 // Whether `dir` holds a light field of `view` (files VIEW-KEY.lf, scene.hpp).
 bool has_light_field(const std::filesystem::path& dir, const std::string& view) {

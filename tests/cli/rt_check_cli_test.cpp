@@ -16,23 +16,17 @@
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/loop/wakeup_latency.hpp"
+#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
 
+using test::CliRun;
+using test::quoted;
+using test::contents;
+
 namespace fs = std::filesystem;
-
-struct CliRun {
-  int exit_code = -1;
-  std::string out;  // stdout and stderr
-};
-
-std::string quoted(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
 
 // `lftrack -q rt-check ARGS`, its exit code and output.
 CliRun rt_check(const std::vector<std::string>& args, const fs::path& dir) {
@@ -147,11 +141,6 @@ TEST(RtCheckCli, RefusedOptionsExitOneWithTheReason) {
     EXPECT_NE(r.out.find(says), std::string::npos) << args[0] << " " << args[1] << ": " << r.out;
     EXPECT_EQ(r.out.find("verdict"), std::string::npos) << "nothing measured: " << r.out;
   }
-}
-
-std::string contents(const fs::path& file) {
-  std::ifstream in(file);
-  return {std::istreambuf_iterator<char>(in), {}};
 }
 
 // --histogram and --plot never replace a file without --overwrite (an outside probe saw a file

@@ -15,14 +15,15 @@
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
+#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
 
-namespace fs = std::filesystem;
+using test::lftrack_bin;
 
-std::string lftrack_bin() { return LFTRACK_BIN_PATH; }
+namespace fs = std::filesystem;
 
 // The built-in phantom with a tiny 16-bit light field, named `name` (one "patient" per name).
 fs::path patient_scene(const fs::path& dir, const std::string& name, int phantom_seed) {

@@ -13,10 +13,13 @@
 #include <string>
 #include <vector>
 
+#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
+
+using test::quoted;
 
 namespace fs = std::filesystem;
 
@@ -29,12 +32,6 @@ struct UsageCase {
 void PrintTo(const UsageCase& c, std::ostream* os) {
   *os << "lftrack";
   for (const auto& a : c.args) *os << ' ' << a;
-}
-
-std::string quoted(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
 }
 
 class UsageError : public ::testing::TestWithParam<UsageCase> {};

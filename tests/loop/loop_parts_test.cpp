@@ -32,14 +32,14 @@ Vector6d along(double x) {
   return v;
 }
 
-constexpr std::int64_t kMs = 1'000'000;  // ns
+constexpr std::int64_t kNsPerMs = 1'000'000;
 
 TEST(MotionPredictor, ExtrapolatesLinesAndParabolasExactly) {
   MotionPredictor line(4, 1, 0.2), parabola(8, 2, 0.2);
   for (int k = 0; k < 8; ++k) {
     const double t = 0.1 * k;
-    line.add(100 * kMs * k, along(1.0 + 2.0 * t));
-    parabola.add(100 * kMs * k, along(1.0 + 2.0 * t - 3.0 * t * t));
+    line.add(100 * kNsPerMs * k, along(1.0 + 2.0 * t));
+    parabola.add(100 * kNsPerMs * k, along(1.0 + 2.0 * t - 3.0 * t * t));
   }
   const double t = 0.7 + 0.2;
   EXPECT_NEAR(line.predict()(2), 1.0 + 2.0 * t, 1e-9);
@@ -74,7 +74,7 @@ TEST(MotionPredictor, NeverMultipliesTheEstimatesNoiseByMoreThanTwoAndAHalf) {
     std::vector<std::int64_t> times_ns;
     for (int k = 0; k < rate.window; ++k) {
       // Frames a little late now and then, as on a loaded host.
-      times_ns.push_back(std::llround(1e9 * rate.period_s * k) + (k % 3 == 2 ? 7 * kMs : 0));
+      times_ns.push_back(std::llround(1e9 * rate.period_s * k) + (k % 3 == 2 ? 7 * kNsPerMs : 0));
       const double gain = noise_gain(rate.window, 2, rate.lookahead_s, times_ns);
       EXPECT_LE(gain, MotionPredictor::kMaxNoiseGain + 1e-9) << rate.window << " cycles, after " << k + 1;
       EXPECT_GE(gain, k == 0 ? 1.0 - 1e-12 : 0.3) << "one estimate is predicted as itself";
@@ -132,13 +132,13 @@ TEST(MotionPredictor, TellsWhatAFullWindowPredictsWith) {
 // one seed must agree (with seconds as doubles they drifted apart from the third cycle on).
 TEST(MotionPredictor, ThePredictionDoesNotDependOnTheClocksOrigin) {
   const std::int64_t origins[] = {0, 11'532'174'319'670, -5'000'000'000'000,
-                                  std::numeric_limits<std::int64_t>::max() - 2000 * kMs};
+                                  std::numeric_limits<std::int64_t>::max() - 2000 * kNsPerMs};
   std::vector<Vector6d> predictions;
   for (const std::int64_t origin : origins) {
     MotionPredictor p(6, 2, 0.137);
     for (int k = 0; k < 9; ++k) {
       const double t = 0.0333 * k;
-      p.add(origin + 33 * kMs * k + 300'000 * (k % 3), along(0.3 + std::sin(7.1 * t) + 0.001 * k * k));
+      p.add(origin + 33 * kNsPerMs * k + 300'000 * (k % 3), along(0.3 + std::sin(7.1 * t) + 0.001 * k * k));
     }
     predictions.push_back(p.predict());
   }
@@ -157,20 +157,20 @@ TEST(MotionPredictor, FewEstimatesResetAndNoPrediction) {
   EXPECT_TRUE(p.predict().isZero());
   p.add(0, along(1.0));
   EXPECT_NEAR(p.predict()(2), 1.0, 1e-12) << "one estimate: itself";
-  p.add(100 * kMs, along(2.0));
+  p.add(100 * kNsPerMs, along(2.0));
   EXPECT_NEAR(p.predict()(2), 2.0, 1e-12) << "two, 0.2 s ahead: a line would multiply their noise by 3.6";
-  p.add(200 * kMs, along(3.0));
+  p.add(200 * kNsPerMs, along(3.0));
   EXPECT_NEAR(p.predict()(2), 5.0, 1e-9) << "three: a line (noise gain 2.2)";
   p.reset();
-  p.add(5000 * kMs, along(-1.0));
+  p.add(5000 * kNsPerMs, along(-1.0));
   EXPECT_NEAR(p.predict()(2), -1.0, 1e-12) << "nothing extrapolates across a reset";
   MotionPredictor none(1, 2, 0.2);
   none.add(0, along(0.0));
-  none.add(100 * kMs, along(1.0));
+  none.add(100 * kNsPerMs, along(1.0));
   EXPECT_NEAR(none.predict()(2), 1.0, 1e-12);
   MotionPredictor same_time(4, 2, 0.2);
-  same_time.add(1000 * kMs, along(1.0));
-  same_time.add(1000 * kMs, along(3.0));
+  same_time.add(1000 * kNsPerMs, along(1.0));
+  same_time.add(1000 * kNsPerMs, along(3.0));
   EXPECT_TRUE(same_time.predict().allFinite()) << "a singular fit falls back, never NaN";
 }
 

@@ -16,6 +16,7 @@
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
+#include "loop_doubles.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
@@ -52,12 +53,7 @@ class ThrowingFrames final : public drivers::FrameSource {
  public:
   explicit ThrowingFrames(int throw_at, bool bad_alloc) : throw_at_(throw_at), bad_alloc_(bad_alloc) {}
   Status open(drivers::FramePair* pair) override {
-    pair->frames.resize(2);
-    for (auto& f : pair->frames) {
-      f.pixels = tracking::Image<std::uint16_t>(48, 40, 2000);
-      for (int r = 0; r < 48; ++r)
-        for (int c = 0; c < 40; ++c) f.pixels.at(r, c) = static_cast<std::uint16_t>(1000 + (7 * r + 13 * c) % 800);
-    }
+    test::open_pattern_pair(pair);
     return {};
   }
   drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline) override {
@@ -103,6 +99,7 @@ class RecordingActuator final : public drivers::Actuator {
 
 struct LoopUnderTest {
   std::unique_ptr<tracking::Registration> registration;
+  std::unique_ptr<PlannedRegistration> planned;
   std::unique_ptr<TrackingLoop> loop;
 };
 
@@ -117,23 +114,16 @@ struct LoopOptions {
 // The loop on `frames` and `actuator` (with t->registration made for it), or why create() refused.
 Result<std::unique_ptr<TrackingLoop>> create_loop(drivers::FrameSource* frames, drivers::Actuator* actuator,
                                                   LoopUnderTest* t, const LoopOptions& o = {}) {
+  LoopParts parts = test::pattern_loop_parts();
+  EXPECT_EQ(parts.geometry.views.size(), 2u);
   tracking::RegistrationSetup setup;
-  LoopParts parts;
-  for (const char* name : {"A", "B"}) {
-    const double s = name[0] == 'A' ? 1.0 : -1.0;
-    auto view = XrayView::isocentric(name, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.7071, s * 0.7071, 0),
-                                     Eigen::Vector3d(0, 0, 1), 1000, 1400, 48, 40, 0.8);
-    EXPECT_TRUE(view.ok()) << view.status().message();
-    const PixelWindow window = PixelWindow::full(view->rows, view->cols);
-    setup.views.push_back({*view, window});
-    parts.geometry.views.push_back(*view);
-    parts.geometry.roi_windows.push_back(window);
-    parts.corrections.emplace_back();
-  }
+  for (std::size_t v = 0; v < parts.geometry.views.size(); ++v)
+    setup.views.push_back({parts.geometry.views[v], parts.geometry.roi_windows[v]});
   auto registration = tracking::Registration::create(std::make_shared<PatternRenderer>(o.per_render), setup, nullptr);
   if (!registration.ok()) return registration.status();
   t->registration = std::move(registration).value();
-  parts.registration = t->registration.get();
+  t->planned = std::make_unique<PlannedRegistration>(t->registration.get());
+  parts.registration = t->planned.get();
   parts.frames = frames;
   parts.actuator = actuator;
   parts.journal = o.journal;

@@ -20,13 +20,13 @@ namespace {
 // A field of 16 x 16 x 256 x 256 samples, axis z, and the map of a rows x cols window whose rays
 // from a source 1,000 mm before the (s, t) plane spread over `spread` samples of it, turned by
 // `tilt` radians about the axis.
-struct Case {
+struct SourceImageCase {
   LightFieldGeometry g;
   RayMap m;
 };
 
-Case make_case(double spread, double tilt, int rows, int cols) {
-  Case k;
+SourceImageCase make_case(double spread, double tilt, int rows, int cols) {
+  SourceImageCase k;
   k.g.size = {16, 16, 256, 256};
   for (int a = 0; a < 4; ++a) {
     k.m.base[a] = a < 2 ? 7.5f : 127.5f;
@@ -62,7 +62,7 @@ void fill(SourceImage* image, std::vector<float>* values, std::vector<float>* pa
 
 // Renders the window both ways and compares them pixel by pixel: values to float rounding, the
 // mask and the masked count exactly. `label` names the case in failures.
-void expect_same_render(const SourceImage& image, const Case& k, int rows, int cols, bool with_mask,
+void expect_same_render(const SourceImage& image, const SourceImageCase& k, int rows, int cols, bool with_mask,
                         const std::string& label) {
   Image<float> portable(rows, cols), vectorised(rows, cols);
   Image<unsigned char> portable_ok(rows, cols), vectorised_ok(rows, cols);
@@ -95,7 +95,7 @@ TEST(SourceImagePairs, RenderThePortableImageAtEveryTilt) {
     const int rows = shape[0], cols = shape[1];
     for (int step = -40; step <= 40; ++step) {
       const double tilt = 0.5 * step * M_PI / 180;
-      const Case k = make_case(60, tilt, rows, cols);
+      const SourceImageCase k = make_case(60, tilt, rows, cols);
       SourceImage image;
       ASSERT_TRUE(source_image_box(k.g, k.m, rows, cols, 1L << 20, &image)) << step;
       std::vector<float> values, pairs;
@@ -114,7 +114,7 @@ TEST(SourceImagePairs, RenderThePortableImageWhereRaysLeaveTheField) {
   // partly inside take the per-ray path, and the box is clamped to the field.
   const int rows = 70, cols = 90;
   for (double deg : {0.0, 3.0, 17.0}) {
-    const Case k = make_case(400, deg * M_PI / 180, rows, cols);
+    const SourceImageCase k = make_case(400, deg * M_PI / 180, rows, cols);
     SourceImage image;
     ASSERT_TRUE(source_image_box(k.g, k.m, rows, cols, 1L << 20, &image)) << deg;
     ASSERT_EQ(image.rows, 256) << "the box is clamped to the field";
@@ -231,11 +231,11 @@ TEST(SourceImagePairs, BlendTheFieldAtEachSamplesOwnUv) {
 // A map whose (u, v) slope along the image overflows a float (the source all but on the (s, t)
 // plane) gets no source image: the blend would step (u, v) to NaN and read from NaN cells.
 TEST(SourceImagePairs, NoImageWhereTheUvSlopeOverflowsAFloat) {
-  Case k = make_case(60, 0.1, 40, 40);
+  SourceImageCase k = make_case(60, 0.1, 40, 40);
   SourceImage image;
   ASSERT_TRUE(source_image_box(k.g, k.m, 40, 40, 1L << 20, &image));
   for (int a : {0, 1}) {
-    Case steep = k;
+    SourceImageCase steep = k;
     steep.m.gain[a] = 1e30f;
     steep.m.gain[a + 2] = 1e-20f;
     EXPECT_FALSE(source_image_box(steep.g, steep.m, 40, 40, 1L << 20, &image)) << a;

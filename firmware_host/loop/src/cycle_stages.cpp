@@ -208,8 +208,8 @@ void TrackingLoop::Impl::register_pair(CycleState& c) {
   // whatever the host's load, a tracking registration is not cut short either: a search cut at a
   // load-dependent moment made two runs of one seed diverge (ClosedLoop.TwoRunsOfOneSeed...).
   const double budget_ms = c.aligning || settings.simulated_clock ? 1e12 : settings.loop.registration_budget_ms;
-  c.registered = parts.registration->run(start, c.aligning ? align_plan : track_plan, budget_ms, &result).ok() &&
-                 result_is_finite();
+  const RegistrationStage stage = c.aligning ? RegistrationStage::kAlign : RegistrationStage::kTrack;
+  c.registered = parts.registration->run(start, stage, budget_ms, &result).ok() && result_is_finite();
   c.registration_ran = true;
   c.evaluations = static_cast<std::uint32_t>(result.evaluations);
   c.registration_ms = result.elapsed_ms;

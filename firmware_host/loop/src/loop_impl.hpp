@@ -76,7 +76,6 @@ struct CycleState {
 struct TrackingLoop::Impl {
   LoopParts parts;
   LoopSettings settings;
-  tracking::PreparedPlan align_plan, track_plan;
   std::int64_t period_ns = 0;
   Eigen::Vector3d origin_room = Eigen::Vector3d::Zero();
   tracking::Pose nominal = tracking::Pose::Identity();

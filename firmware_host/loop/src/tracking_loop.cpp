@@ -64,12 +64,7 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   if (!align.ok()) return align.status();
   auto track = tracking::registration_plan(settings.loop.track_plan);
   if (!track.ok()) return track.status();
-  auto align_prepared = parts.registration->prepare_plan(*align);
-  if (!align_prepared.ok()) return align_prepared.status().with_context("align plan");
-  auto track_prepared = parts.registration->prepare_plan(*track);
-  if (!track_prepared.ok()) return track_prepared.status().with_context("track plan");
-  impl->align_plan = std::move(align_prepared).value();
-  impl->track_plan = std::move(track_prepared).value();
+  LFTRACK_RETURN_IF_ERROR(parts.registration->prepare(*align, *track));
   impl->predictor = MotionPredictor(settings.loop.prediction_cycles, settings.loop.prediction_order,
                                     prediction_lookahead_s(settings));
 

@@ -70,6 +70,7 @@ Eigen::Isometry3d couch_mounting(const CouchMountingSpec& m, const PreparedScene
 struct LoopSession::Parts {
   std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
   std::unique_ptr<tracking::Registration> registration;
+  std::unique_ptr<PlannedRegistration> planned_registration;  // the loop's view of `registration`
   std::unique_ptr<sim::SimulatedRoom> room;  // simulated detectors only
   // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
   // through its hooks.
@@ -435,6 +436,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   auto registration = make_scene_registration(p, parts->registration_renderer, p.scene.registration, pool);
   if (!registration.ok()) return registration.status();
   parts->registration = std::move(registration).value();
+  parts->planned_registration = std::make_unique<PlannedRegistration>(parts->registration.get());
 
   std::vector<drivers::DetectorShape> shapes;
   for (const DetectorSpec& d : p.scene.detectors) shapes.push_back({d.view.name, d.view.rows, d.view.cols});
@@ -496,7 +498,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
 
   LoopParts lp;
   lp.geometry = loop_geometry(p);
-  lp.registration = parts->registration.get();
+  lp.registration = parts->planned_registration.get();
   lp.check_renderer = parts->registration_renderer.get();
   lp.frames = o.hooks.wrap_frames ? o.hooks.wrap_frames(parts->frames.get()) : parts->frames.get();
   lp.archive = parts->archive.get();

@@ -13,6 +13,7 @@
 #include "lftrack/loop/cycle_feed.hpp"
 #include "lftrack/loop/frame_archive.hpp"
 #include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/loop_registration.hpp"
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
@@ -68,7 +69,7 @@ class CycleObserver {
 // no allocation counter (allocations_per_cycle is then not reported).
 struct LoopParts {
   LoopGeometry geometry;
-  tracking::Registration* registration = nullptr;
+  LoopRegistration* registration = nullptr;  // the product's: PlannedRegistration
   drivers::FrameSource* frames = nullptr;
   std::vector<tracking::DetectorCorrection> corrections;  // per detector
   drivers::Actuator* actuator = nullptr;
