@@ -19,7 +19,7 @@ Status V4l2LoopbackWriter::open(const std::string& device, int rows, int cols) {
   if (rows <= 0 || cols <= 0 || rows > 16384 || cols > 16384)
     return invalid_argument("v4l2loopback " + device + ": rows and cols must be 1 to 16384");
   const std::string how =
-      " (load the module: sudo modprobe v4l2loopback devices=2 exclusive_caps=0; see README, Tests)";
+      " (load the module: sudo modprobe v4l2loopback devices=2 exclusive_caps=0; see docs/testing.md)";
   fd_ = ::open(device.c_str(), O_RDWR | O_CLOEXEC);
   if (fd_ < 0) return not_found("v4l2loopback " + device + ": " + std::strerror(errno) + how);
   v4l2_capability cap{};

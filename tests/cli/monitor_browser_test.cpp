@@ -204,7 +204,10 @@ TEST(MonitorPage, ShowsTheLoopLiveAndActsOnlyWithTheToken) {
   EXPECT_NE(refused.find("no operator token"), std::string::npos) << refused;
   // Still held some cycles later (a wait on the page's cycle, not on the clock).
   const int refused_at = std::atoi(browser.text("cycle").c_str());
-  browser.wait_for("cycle", [&](const std::string& t) { return std::atoi(t.c_str()) > refused_at + 3; });
+  EXPECT_GT(std::atoi(browser.wait_for("cycle", [&](const std::string& t) { return std::atoi(t.c_str()) > refused_at + 3; })
+                          .c_str()),
+            refused_at + 3)
+      << "the page kept showing new cycles";
   EXPECT_EQ(browser.text("state"), "HOLD");
   // With the token (taken from the address, then removed from it): accepted, the loop tracks.
   browser.go(url + "#token=" + token);
@@ -229,10 +232,13 @@ TEST(MonitorPage, ShowsTheLoopLiveAndActsOnlyWithTheToken) {
   browser.command("POST", "/execute/sync", {{"script", "document.getElementById('overlay').value = 'edges';"
                                                       "document.getElementById('overlay').dispatchEvent(new Event('change'));"},
                                            {"args", nlohmann::json::array()}});
-  // The screenshot shows a cycle's images drawn after the overlay changed: the next one.
+  // The overlay is drawn at once (the change handler); the screenshot is taken once a newer
+  // cycle's images have been drawn with it as well.
   const auto image_cycle = [](const std::string& t) { return t.rfind("(cycle ", 0) == 0 ? std::atoi(t.c_str() + 7) : -1; };
   const int overlaid_at = image_cycle(browser.text("image-cycle"));
-  browser.wait_for("image-cycle", [&](const std::string& t) { return image_cycle(t) > overlaid_at; });
+  EXPECT_GT(image_cycle(browser.wait_for("image-cycle", [&](const std::string& t) { return image_cycle(t) > overlaid_at; })),
+            overlaid_at)
+      << "new images kept arriving";
   const std::string png = browser.screenshot_png();
   EXPECT_GT(png.size(), 20000u);
   EXPECT_EQ(png.substr(1, 3), "PNG");

@@ -117,7 +117,7 @@ TEST(MotionPredictor, TellsWhatAFullWindowPredictsWith) {
     }
     EXPECT_FALSE(std::isnan(w.gain_configured));
   }
-  // The window of 6 at 10 Hz, the README's example: a parabola would multiply noise by 3.06.
+  // The window of 6 at 10 Hz, docs/scenes.md's example: a parabola would multiply noise by 3.06.
   EXPECT_NEAR(MotionPredictor::full_window(6, 2, 0.1, 0.2).gain_configured, 3.06, 0.01);
   // No prediction, and absurd periods: the newest estimate, gain 1.
   for (const double period_s : {0.0, -1.0, std::nan("")})

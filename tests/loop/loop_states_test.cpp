@@ -191,7 +191,8 @@ TEST(LoopStates, APatientWhoDriftsIsFollowedCycleByCycle) {
   // 0.3 mm a cycle along x after the alignment: each cycle's command cancels the newest offset.
   Harness h([](int n) { return still_at(translation(0.3 * n, 0, 0)); });
   (void)h.run();
-  ASSERT_EQ(h.couch.commands.size(), 19u) << "one command each cycle after the set-up move";
+  // The patient is on the plan at the alignment (no set-up move), then drifts: a command each cycle.
+  ASSERT_EQ(h.couch.commands.size(), 19u) << "one command in each of the 19 cycles after the alignment";
   for (std::size_t i = 0; i < h.couch.commands.size(); ++i)
     EXPECT_LT((h.couch.commands[i] - translation(-0.3, 0, 0)).norm(), 1e-9) << "command " << i;
   EXPECT_LT((h.couch.target - translation(-0.3 * 19, 0, 0)).norm(), 1e-9);
@@ -312,7 +313,11 @@ TEST(LoopStates, ARefusedSetUpMoveHoldsAndTheResumeAlignsAgain) {
   EXPECT_EQ(h.state(0), TrackingState::kHold);
   EXPECT_EQ(h.records.all[0].command_sent, 0);
   EXPECT_EQ(s.holds, 1);
+  ASSERT_GE(h.registration->stages.size(), 5u);
+  EXPECT_EQ(h.registration->stages[4], RegistrationStage::kAlign) << "the resume aligns again";
   EXPECT_EQ(h.state(4), TrackingState::kTrack) << "resumed: the set-up move is made now";
+  EXPECT_EQ(h.records.all[4].beam_permit, 0) << "no beam in an alignment's cycle";
+  EXPECT_TRUE(s.aligned);
   ASSERT_EQ(h.couch.commands.size(), 1u);
   EXPECT_LT((h.couch.target + translation(1, 1, 0)).norm(), 1e-9);
 }
@@ -323,9 +328,11 @@ TEST(LoopStates, AStopHoldsTheCouchAndEndsTheRun) {
   h.operator_input = &operator_input;
   const LoopSummary s = h.run();
   EXPECT_EQ(s.ended, "operator stop");
-  EXPECT_LE(h.records.all.size(), 7u);
+  ASSERT_EQ(h.records.all.size(), 7u) << "the stop's cycle is recorded, and is the last";
+  EXPECT_EQ(h.state(6), TrackingState::kIdle);
   EXPECT_EQ(h.registration->stages.size(), 6u) << "the stop's cycle registers nothing";
-  EXPECT_GE(h.couch.holds, 1);
+  EXPECT_EQ(h.couch.holds, 2) << "held at the stop, and again at the run's end";
+  EXPECT_EQ(h.records.all[6].beam_permit, 0);
   EXPECT_FALSE(h.couch.beam_permit);
 }
 

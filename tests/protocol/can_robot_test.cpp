@@ -242,10 +242,10 @@ TEST(CanRobot, NoHeartbeatNoRobotAndNoInterfaceAreClearErrors) {
   EXPECT_EQ(nowhere.readback(&state, in_ms(10)), DeviceStatus::kDisconnected);
 }
 
-// The same driver on real SocketCAN: needs a vcan0 interface (README, "CAN tests on a host with
+// The same driver on real SocketCAN: needs a vcan0 interface (docs/testing.md, "CAN tests on a host with
 // vcan") and the virtual robot attached to it. Skipped here: this kernel has no CAN support.
 TEST(CanRobotOnVcan, OpensVcan0WithErrorFramesEnabled) {
-  if (if_nametoindex("vcan0") == 0) GTEST_SKIP() << "no vcan0 interface on this host (see README)";
+  if (if_nametoindex("vcan0") == 0) GTEST_SKIP() << "no vcan0 interface on this host (see docs/testing.md)";
   drivers::CanRobotOptions o;
   o.interface = "vcan0";
   o.open_timeout_s = 0.2;

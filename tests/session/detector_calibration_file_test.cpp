@@ -50,7 +50,7 @@ std::string message_of(const fs::path& file) {
   return loaded.ok() ? std::string("(loaded)") : loaded.status().message();
 }
 
-void expect_refused(const fs::path& file, const std::string& why) {
+void expect_file_refused(const fs::path& file, const std::string& why) {
   const std::string message = message_of(file);
   EXPECT_NE(message.find(why), std::string::npos) << "expected '" << why << "', got: " << message;
 }
@@ -205,24 +205,24 @@ TEST(DetectorCalibrationFile, RefusesDamagedOrLyingFiles) {
   const auto good = dir.path() / "good.tif";
   ASSERT_TRUE(write_detector_calibration(good, small_calibration(), false).ok());
   ASSERT_TRUE(load_detector_calibration(good).ok());
-  expect_refused(dir.path() / "absent.tif", "no such detector calibration file");
-  expect_refused(dir.path(), "not a regular file");
+  expect_file_refused(dir.path() / "absent.tif", "no such detector calibration file");
+  expect_file_refused(dir.path(), "not a regular file");
   std::ofstream(dir.path() / "text.tif") << "not an image";
-  expect_refused(dir.path() / "text.tif", "not a readable TIFF");
+  expect_file_refused(dir.path() / "text.tif", "not a readable TIFF");
   std::ofstream(dir.path() / "empty.tif");
-  expect_refused(dir.path() / "empty.tif", "not a readable TIFF");
+  expect_file_refused(dir.path() / "empty.tif", "not a readable TIFF");
 
   // A flipped bit in a map: the hash no longer matches (the lowest mantissa byte of gain(0, 0)).
   const auto flipped = dir.path() / "flipped.tif";
   fs::copy_file(good, flipped);
   set_byte(flipped, page_data_offset(flipped, 1), 0x01);
-  expect_refused(flipped, "the maps do not match their hash");
+  expect_file_refused(flipped, "the maps do not match their hash");
   // A byte that makes a value infinite (the exponent of offset(0, 0): 0x7f800000).
   const auto infinite = dir.path() / "infinite.tif";
   fs::copy_file(good, infinite);
   set_byte(infinite, page_data_offset(infinite, 0) + 2, 0x80);
   set_byte(infinite, page_data_offset(infinite, 0) + 3, 0x7f);
-  expect_refused(infinite, "page 1 (offset_counts) holds a non-finite value at row 1, column 1");
+  expect_file_refused(infinite, "page 1 (offset_counts) holds a non-finite value at row 1, column 1");
 
   // Truncated anywhere, to every length short of the whole: refused, never a crash.
   std::ifstream in(good, std::ios::binary);
@@ -238,7 +238,7 @@ TEST(DetectorCalibrationFile, RefusesDamagedOrLyingFiles) {
   }
   EXPECT_EQ(loaded, 0);
   std::ofstream(cut_file, std::ios::binary | std::ios::trunc).write(bytes.data(), std::streamsize(bytes.size() - 1));
-  expect_refused(cut_file, "runs past the end of the file");
+  expect_file_refused(cut_file, "runs past the end of the file");
 }
 
 TEST(DetectorCalibrationFile, RefusesWrongPagesAndMetadata) {
@@ -260,19 +260,19 @@ TEST(DetectorCalibrationFile, RefusesWrongPagesAndMetadata) {
   RawFile three = raw, five = raw;
   three.pages = 3;
   five.pages = 5;
-  expect_refused(made("three.tif", meta, three), "3 page(s); a detector calibration has 4");
-  expect_refused(made("five.tif", meta, five), "5 page(s); a detector calibration has 4");
+  expect_file_refused(made("three.tif", meta, three), "3 page(s); a detector calibration has 4");
+  expect_file_refused(made("five.tif", meta, five), "5 page(s); a detector calibration has 4");
   // Every key is needed.
   for (const auto& [key, value] : meta.items()) {
     json missing = meta;
     missing.erase(key);
-    expect_refused(made("missing-" + key + ".tif", missing, raw), "metadata key '" + key + "' is missing");
+    expect_file_refused(made("missing-" + key + ".tif", missing, raw), "metadata key '" + key + "' is missing");
   }
   for (const char* group : {"defect_rule", "defects"})
     for (const auto& [key, value] : meta[group].items()) {
       json missing = meta;
       missing[group].erase(key);
-      expect_refused(made(std::string("missing-") + group + "-" + key + ".tif", missing, raw),
+      expect_file_refused(made(std::string("missing-") + group + "-" + key + ".tif", missing, raw),
                      std::string("metadata key '") + group + "." + key + "' is missing");
     }
   // Wrong types and values.
@@ -281,47 +281,47 @@ TEST(DetectorCalibrationFile, RefusesWrongPagesAndMetadata) {
     m[key] = value;
     return m;
   };
-  expect_refused(made("rows-text.tif", with("rows", "six"), raw), "metadata key 'rows' is not an integer");
-  expect_refused(made("rows-float.tif", with("rows", 6.5), raw), "metadata key 'rows' is not an integer");
-  expect_refused(made("rows-huge.tif", with("rows", 1e300), raw), "metadata key 'rows' is not an integer");
-  expect_refused(made("rows-negative.tif", with("rows", -3), raw), "metadata key 'rows' is -3, outside [1, 16384]");
-  expect_refused(made("open-field.tif", with("open_field_counts", -1), raw), "metadata key 'open_field_counts' is -1");
-  expect_refused(made("source.tif", with("saturation_source", "guess"), raw), "not option, bits or observed");
-  expect_refused(made("hash.tif", with("content_hash", "xyz"), raw), "'content_hash' is not 16 hex digits");
-  expect_refused(made("format.tif", with("format", "something else"), raw), "metadata format is not");
-  expect_refused(made("renamed.tif", with("detector", "B"), raw), "the maps do not match their hash");  // name in the hash
-  expect_refused(made("saturation.tif", with("saturation_counts", 65535), raw), "the maps do not match their hash");
-  expect_refused(made("version.tif", with("version", 1), raw), "version 1 (this build reads version 2");
+  expect_file_refused(made("rows-text.tif", with("rows", "six"), raw), "metadata key 'rows' is not an integer");
+  expect_file_refused(made("rows-float.tif", with("rows", 6.5), raw), "metadata key 'rows' is not an integer");
+  expect_file_refused(made("rows-huge.tif", with("rows", 1e300), raw), "metadata key 'rows' is not an integer");
+  expect_file_refused(made("rows-negative.tif", with("rows", -3), raw), "metadata key 'rows' is -3, outside [1, 16384]");
+  expect_file_refused(made("open-field.tif", with("open_field_counts", -1), raw), "metadata key 'open_field_counts' is -1");
+  expect_file_refused(made("source.tif", with("saturation_source", "guess"), raw), "not option, bits or observed");
+  expect_file_refused(made("hash.tif", with("content_hash", "xyz"), raw), "'content_hash' is not 16 hex digits");
+  expect_file_refused(made("format.tif", with("format", "something else"), raw), "metadata format is not");
+  expect_file_refused(made("renamed.tif", with("detector", "B"), raw), "the maps do not match their hash");  // name in the hash
+  expect_file_refused(made("saturation.tif", with("saturation_counts", 65535), raw), "the maps do not match their hash");
+  expect_file_refused(made("version.tif", with("version", 1), raw), "version 1 (this build reads version 2");
   json rule = meta;
   rule["defect_rule"]["gain_low"] = 1.0;
-  expect_refused(made("rule.tif", rule, raw), "metadata defect_rule: the gain limits");
+  expect_file_refused(made("rule.tif", rule, raw), "metadata defect_rule: the gain limits");
   json masked = meta;
   masked["defects"]["masked"] = 2;
-  expect_refused(made("masked.tif", masked, raw), "the defect page masks 1 pixels, the metadata says 2");
-  expect_refused(made("no-metadata.tif", json(), raw), "no metadata");
+  expect_file_refused(made("masked.tif", masked, raw), "the defect page masks 1 pixels, the metadata says 2");
+  expect_file_refused(made("no-metadata.tif", json(), raw), "no metadata");
   json array = json::array({1, 2});
-  expect_refused(made("array.tif", array, raw), "not a JSON object");
+  expect_file_refused(made("array.tif", array, raw), "not a JSON object");
   {
     const auto path = dir.path() / "not-json.tif";
     raw.write(path, "{\"format\": ");
-    expect_refused(path, "not a JSON object");
+    expect_file_refused(path, "not a JSON object");
   }
   {
     const auto path = dir.path() / "huge-description.tif";
     raw.write(path, meta.dump() + std::string(std::size_t(2) << 20, ' '));
-    expect_refused(path, "metadata of more than 1 MiB");
+    expect_file_refused(path, "metadata of more than 1 MiB");
   }
   // A tiny file that claims a huge detector: refused before memory is given to it.
   json huge = meta;
   huge["rows"] = huge["cols"] = 16000;
-  expect_refused(made("huge.tif", huge, raw), "cannot hold four 16000 x 16000 float maps");
+  expect_file_refused(made("huge.tif", huge, raw), "cannot hold four 16000 x 16000 float maps");
   // Pages that disagree with the metadata, or are not float32.
   json smaller = meta;
   smaller["rows"] = 5;
-  expect_refused(made("smaller.tif", smaller, raw), "page 1 (offset_counts) is 5 x 6 pixels, the metadata says 5 x 5");
+  expect_file_refused(made("smaller.tif", smaller, raw), "page 1 (offset_counts) is 5 x 6 pixels, the metadata says 5 x 5");
   RawFile doubles = raw;
   doubles.bits = 64;
-  expect_refused(made("doubles.tif", meta, doubles), "is not one-sample 32-bit float");
+  expect_file_refused(made("doubles.tif", meta, doubles), "is not one-sample 32-bit float");
   // Values the loop cannot use, with a hash that matches them.
   calib::DetectorCalibration negative = c;
   negative.gain.at(0, 0) = -0.5f;
@@ -329,10 +329,10 @@ TEST(DetectorCalibrationFile, RefusesWrongPagesAndMetadata) {
   negative_meta["content_hash"] = calib::detector_calibration_hash(negative);
   RawFile negative_raw = raw;
   negative_raw.values = pages_of(negative);
-  expect_refused(made("negative.tif", negative_meta, negative_raw), "a negative gain");
+  expect_file_refused(made("negative.tif", negative_meta, negative_raw), "a negative gain");
   RawFile half = raw;
   half.values[3][0] = 0.5f;
-  expect_refused(made("half.tif", meta, half), "the defect page holds 0.5");
+  expect_file_refused(made("half.tif", meta, half), "the defect page holds 0.5");
 }
 
 // Random damage anywhere in a good file: the loader answers (mostly refusals), never crashes.

@@ -32,7 +32,7 @@ Result<Scene> parse(const std::string& text) {
   return parse_scene(text, "room.yaml", "/srv/room");
 }
 
-void expect_refused(const std::string& text, const std::string& expect) {
+void expect_scene_refused(const std::string& text, const std::string& expect) {
   auto s = parse(text);
   ASSERT_FALSE(s.ok()) << "accepted:\n" << text;
   EXPECT_NE(s.status().message().find(expect), std::string::npos) << s.status().message();
@@ -96,33 +96,33 @@ TEST(SceneDevices, AGigeCameraCanNameTheIdItMustAnswerWith) {
   EXPECT_EQ(served_twin_id("lateral-left"), served_twin_id("lateral-left")) << "the same name, the same id";
   EXPECT_EQ(served_twin_id("lateral").size(), 15u);
   EXPECT_EQ(served_twin_id("lateral"), "LFTRACK-lateral");
-  expect_refused(scene_with("{type: v4l2, device: /dev/video0, id: X}"), "unknown key 'id'");
+  expect_scene_refused(scene_with("{type: v4l2, device: /dev/video0, id: X}"), "unknown key 'id'");
 }
 
 TEST(SceneDevices, BadFrameSourcesAreRefusedWithTheLine) {
-  expect_refused(scene_with("v4l2"), "v4l2 needs its device");
-  expect_refused(scene_with("gige"), "gige needs its device");
-  expect_refused(scene_with("{type: v4l2}"), "needs 'device'");
-  expect_refused(scene_with("{type: v4l2, device: video0}"), "absolute path");
-  expect_refused(scene_with("{type: v4l2, device: /dev/video0, buffers: 1}"), "buffers must be in 2..32");
-  expect_refused(scene_with("{type: v4l2, device: /dev/video0, buffers: 1e12}"), "buffers");
-  expect_refused(scene_with("{type: v4l2, device: /dev/video0, speed: 3}"), "unknown key 'speed'");
-  expect_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: .nan}"), "must be finite");
-  expect_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: -1}"), "must be positive");
-  expect_refused(scene_with("{type: replay}"), "needs 'sequence'");
-  expect_refused(scene_with("{type: firewire}"), "firewire");
-  expect_refused(scene_with("[sim]"), "a kind (sim, replay) or a mapping");
-  expect_refused(scene_with("{type: v4l2, device: /dev/video0}"), "two detectors name the same device");
+  expect_scene_refused(scene_with("v4l2"), "v4l2 needs its device");
+  expect_scene_refused(scene_with("gige"), "gige needs its device");
+  expect_scene_refused(scene_with("{type: v4l2}"), "needs 'device'");
+  expect_scene_refused(scene_with("{type: v4l2, device: video0}"), "absolute path");
+  expect_scene_refused(scene_with("{type: v4l2, device: /dev/video0, buffers: 1}"), "buffers must be in 2..32");
+  expect_scene_refused(scene_with("{type: v4l2, device: /dev/video0, buffers: 1e12}"), "buffers");
+  expect_scene_refused(scene_with("{type: v4l2, device: /dev/video0, speed: 3}"), "unknown key 'speed'");
+  expect_scene_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: .nan}"), "must be finite");
+  expect_scene_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: -1}"), "must be positive");
+  expect_scene_refused(scene_with("{type: replay}"), "needs 'sequence'");
+  expect_scene_refused(scene_with("{type: firewire}"), "firewire");
+  expect_scene_refused(scene_with("[sim]"), "a kind (sim, replay) or a mapping");
+  expect_scene_refused(scene_with("{type: v4l2, device: /dev/video0}"), "two detectors name the same device");
   std::string mixed = *builtin_scene_text(kBuiltinPhantom);
   mixed.replace(mixed.find("frames: sim"), 11, "frames: {type: v4l2, device: /dev/video0}");
-  expect_refused(mixed, "a pair comes from one source");
+  expect_scene_refused(mixed, "a pair comes from one source");
   std::string two_sequences = scene_with("{type: replay, sequence: a}");
   two_sequences.replace(two_sequences.rfind("sequence: a"), 11, "sequence: b");
-  expect_refused(two_sequences, "two sequences");
+  expect_scene_refused(two_sequences, "two sequences");
   // The simulator's couch moves a simulated patient only.
   std::string virtual_couch = scene_with("{type: v4l2, device: /dev/video0}", "type: virtual");
   virtual_couch.replace(virtual_couch.rfind("/dev/video0"), 11, "/dev/video1");
-  expect_refused(virtual_couch, "actuator.type virtual is the simulator's couch");
+  expect_scene_refused(virtual_couch, "actuator.type virtual is the simulator's couch");
 }
 
 TEST(SceneDevices, ModbusAndCanActuatorsParse) {
@@ -156,26 +156,26 @@ TEST(SceneDevices, ModbusAndCanActuatorsParse) {
 }
 
 TEST(SceneDevices, BadActuatorsAreRefusedWithTheLine) {
-  expect_refused(scene_with("sim", "type: modbus"), "needs actuator.modbus");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {}"), "needs its link");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 0}}"), "port must be in 1..65535");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 70000}}"), "1..65535");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, rtu: {device: b}}"), "both tcp and rtu");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {rtu: {device: /dev/ttyS0, baud: 12345}}"), "standard rate");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 300}"), "unit_id must be in 1..247");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 0}"), "unit_id must be in 1..247");
+  expect_scene_refused(scene_with("sim", "type: modbus"), "needs actuator.modbus");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {}"), "needs its link");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 0}}"), "port must be in 1..65535");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a, port: 70000}}"), "1..65535");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, rtu: {device: b}}"), "both tcp and rtu");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {rtu: {device: /dev/ttyS0, baud: 12345}}"), "standard rate");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 300}"), "unit_id must be in 1..247");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, unit_id: 0}"), "unit_id must be in 1..247");
   // A key written twice: YAML would keep the first; refused with the second's line.
   std::string twice = scene_with("sim");
   twice.replace(twice.find("  max_step_mm: 2\n"), 16, "  max_step_mm: 20\n  max_step_mm: 2\n");
-  expect_refused(twice, "'max_step_mm' appears twice in safety");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: .inf}"), "finite");
-  expect_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: 0}"), "positive");
-  expect_refused(scene_with("sim", "type: can"), "needs actuator.can");
-  expect_refused(scene_with("sim", "type: can\n  can: {node_id: 2}"), "an interface (e.g. can0) or a bridge");
-  expect_refused(scene_with("sim", "type: can\n  can: {interface: can0, bridge: x}"), "both interface and bridge");
-  expect_refused(scene_with("sim", "type: can\n  can: {interface: can0, node_id: 16}"), "node_id must be in 1..15");
-  expect_refused(scene_with("sim", "type: can\n  can: {bridge: " + std::string(120, 'x') + "}"), "at most 107 bytes");
-  expect_refused(scene_with("sim", "type: virtual\n  can: {interface: can0}"), "actuator.can is for actuator.type can");
+  expect_scene_refused(twice, "'max_step_mm' appears twice in safety");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: .inf}"), "finite");
+  expect_scene_refused(scene_with("sim", "type: modbus\n  modbus: {tcp: {host: a}, response_timeout_ms: 0}"), "positive");
+  expect_scene_refused(scene_with("sim", "type: can"), "needs actuator.can");
+  expect_scene_refused(scene_with("sim", "type: can\n  can: {node_id: 2}"), "an interface (e.g. can0) or a bridge");
+  expect_scene_refused(scene_with("sim", "type: can\n  can: {interface: can0, bridge: x}"), "both interface and bridge");
+  expect_scene_refused(scene_with("sim", "type: can\n  can: {interface: can0, node_id: 16}"), "node_id must be in 1..15");
+  expect_scene_refused(scene_with("sim", "type: can\n  can: {bridge: " + std::string(120, 'x') + "}"), "at most 107 bytes");
+  expect_scene_refused(scene_with("sim", "type: virtual\n  can: {interface: can0}"), "actuator.can is for actuator.type can");
 }
 
 TEST(SceneDevices, ADetectorCalibrationMustExist) {
@@ -211,12 +211,12 @@ TEST(SceneDevices, SimulatedDetectorsCanNameACouchLink) {
 // A room link that nothing would read or write is a mistake in the scene, not a quiet no-op
 // (issue 50): only simulated detectors read it, and only a served couch or robot writes it.
 TEST(SceneDevices, ACouchLinkNoDeviceCanUseIsRefusedWithTheLine) {
-  expect_refused(with_couch_link("sim", "type: none"), "sim.couch_link");
-  expect_refused(with_couch_link("sim", "type: none"), "actuator.type none");
-  expect_refused(with_couch_link("sim", "type: virtual"), "actuator.type virtual");
+  expect_scene_refused(with_couch_link("sim", "type: none"), "sim.couch_link");
+  expect_scene_refused(with_couch_link("sim", "type: none"), "actuator.type none");
+  expect_scene_refused(with_couch_link("sim", "type: virtual"), "actuator.type virtual");
   std::string gige = with_couch_link("{type: gige, camera: 10.0.0.5}", "type: modbus\n  modbus: {tcp: {host: a}}");
   gige.replace(gige.find("10.0.0.5", gige.find("10.0.0.5") + 1), 8, "10.0.0.6");
-  expect_refused(gige, "simulated detectors");
+  expect_scene_refused(gige, "simulated detectors");
   auto line = parse(with_couch_link("sim", "type: none"));
   ASSERT_FALSE(line.ok());
   const std::string text = with_couch_link("sim", "type: none");
@@ -229,9 +229,9 @@ TEST(SceneDevices, ACouchLinkNoDeviceCanUseIsRefusedWithTheLine) {
 // by them would move the patient in the room now for motion the archive shows (issue 50: `run`
 // accepted it, drove the recorded read-backs instead, and said the couch had answered).
 TEST(SceneDevices, ArchivedFramesWithARealCouchOrRobotAreRefused) {
-  expect_refused(scene_with("{type: replay, sequence: archive/day1}", "type: modbus\n  modbus: {tcp: {host: a}}"),
+  expect_scene_refused(scene_with("{type: replay, sequence: archive/day1}", "type: modbus\n  modbus: {tcp: {host: a}}"),
                  "archived frames cannot move a patient");
-  expect_refused(scene_with("replay", "type: can\n  can: {interface: can0}"), "archived frames cannot move a patient");
+  expect_scene_refused(scene_with("replay", "type: can\n  can: {interface: can0}"), "archived frames cannot move a patient");
   EXPECT_TRUE(parse(scene_with("{type: replay, sequence: archive/day1}")).ok()) << "with no actuator: track and report";
 }
 
