@@ -19,6 +19,7 @@
 #include <fstream>
 #include <cmath>
 #include <cstring>
+#include <iostream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -156,12 +157,27 @@ TEST_P(EveryActuatorKind, ASuddenShiftHoldsAndMovesNothingAfter) {
   const std::string motion =
       "motion:\n  breathing: {amplitude_mm: [0, 1, 2], period_s: 4}\n"
       "  shifts: [{time_s: 3.0, translation_mm: [0, 8, 0]}]\n";
-  const LoopRun r = run_with_kind(motion, 50);
-  const auto& records = r.journal.records;
-  ASSERT_EQ(records.size(), 50u);
+  // On the real clock a loaded host can starve a cycle past its period, and the read-back the
+  // cycle's deadline cut holds the loop before the shift (rightly: stress-ng --cpu 2 did so once
+  // in 12 such runs). That run cannot show the shift, so it is run again, three runs at most;
+  // only a HOLD with both marks of a starved host (the read-back failed in a cycle that overran)
+  // is taken for one.
+  LoopRun r;
   std::size_t held = 0;
-  for (std::size_t i = 0; i < records.size() && held == 0; ++i)
-    if (records[i].state == std::uint8_t(TrackingState::kHold)) held = i;
+  for (int run = 0; run < 3; ++run) {
+    r = run_with_kind(motion, 50);
+    ASSERT_EQ(r.journal.records.size(), 50u);
+    held = 0;
+    for (std::size_t i = 0; i < r.journal.records.size() && held == 0; ++i)
+      if (r.journal.records[i].state == std::uint8_t(TrackingState::kHold)) held = i;
+    const JournalRecord& first = r.journal.records[held];
+    const bool starved = held > 0 && held < 25 && first.gate_reason == std::uint8_t(GateReason::kActuatorFault) &&
+                         first.overrun != 0;
+    if (!starved) break;
+    std::cerr << "run " << run + 1 << ": held at cycle " << held
+              << " on a read-back the cycle's deadline cut (the cycle overran): run again\n";
+  }
+  const auto& records = r.journal.records;
   // Every cycle up to the hold and two beyond, for a failure's message: registered pose and
   // command sent (translation, mm).
   auto mm3 = [](const double* v) {
