@@ -6,7 +6,6 @@
 // its overruns and its resumes are tested in milliseconds, without images worth registering.
 
 #include <cstdint>
-#include <memory>
 #include <vector>
 
 #include "lftrack/tracking/image.hpp"
