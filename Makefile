@@ -61,7 +61,7 @@ fuzz-build: setup
 	@cmake --build build-fuzz -j $(JOBS) --target lftrack_fuzzers $(UNIT_AND_PROTOCOL_SUITES)
 fuzz: build fuzz-build
 	@bash scripts/fuzz-seeds.sh $(LFTRACK)
-	@bash scripts/fuzz-run.sh $(FUZZ_SECONDS) build-fuzz
+	@bash scripts/fuzz-run.sh $(FUZZ_SECONDS) build-fuzz $(JOBS)
 
 # What CI runs after `make check` (issue 23): the unit and protocol suites under ASan and UBSan,
 # then every fuzz target for CI_FUZZ_SECONDS on its seeds. Fails on any test failure, sanitizer
@@ -75,7 +75,7 @@ check-sanitized: build fuzz-build
 	    ctest --output-on-failure -j $(JOBS) --timeout 900 -L '^($(subst $() ,|,$(UNIT_AND_PROTOCOL_SUITES)))$$' \
 	    -E '$(SANITIZED_SKIP)'
 	@bash scripts/fuzz-seeds.sh $(LFTRACK)
-	@bash scripts/fuzz-run.sh $(CI_FUZZ_SECONDS) build-fuzz
+	@bash scripts/fuzz-run.sh $(CI_FUZZ_SECONDS) build-fuzz $(JOBS)
 
 bench: build
 	@$(LFTRACK) bench drr --size 256

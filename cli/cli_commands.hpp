@@ -69,6 +69,7 @@ Command add_bench_drr_command(CLI::App* parent);
 Command add_register_command(CLI::App* parent);
 Command add_bench_register_command(CLI::App* parent);
 Command add_bench_octree_command(CLI::App* parent);
+Command add_bench_frames_command(CLI::App* parent);
 Command add_journal_command(CLI::App* parent);
 Command add_study_capture_range_command(CLI::App* parent);
 Command add_study_sensitivity_command(CLI::App* parent);

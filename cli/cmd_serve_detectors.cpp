@@ -36,7 +36,7 @@ class DetectorRoom {
   static Result<std::unique_ptr<DetectorRoom>> start(const PreparedScene& p, const ServeOptions& o,
                                                      tracking::ThreadPool* pool) {
     std::unique_ptr<DetectorRoom> r(new DetectorRoom(p));
-    auto patient = make_scene_patient(p, pool);  // realistic physics (null: ideal frames)
+    auto patient = make_scene_patient(p, o.lf_dir, pool);  // realistic physics (null: ideal frames)
     if (!patient.ok()) return patient.status();
     if (!*patient) {
       auto renderer = make_sim_frame_renderer(p, o.lf_dir, pool);

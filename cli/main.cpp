@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   const Command bench_drr = add_bench_drr_command(bench);
   const Command bench_register = add_bench_register_command(bench);
   const Command bench_octree = add_bench_octree_command(bench);
+  const Command bench_frames = add_bench_frames_command(bench);
   const Command register_frames = add_register_command(&app);
   CLI::App* study = app.add_subcommand("study", "Studies: many registrations, a CSV, a plot and a summary");
   study->require_subcommand(1);
@@ -81,6 +82,8 @@ int main(int argc, char** argv) {
       status = bench_register();
     else if (bench->got_subcommand("octree"))
       status = bench_octree();
+    else if (bench->got_subcommand("frames"))
+      status = bench_frames();
     else if (app.got_subcommand("register"))
       status = register_frames();
     else if (study->got_subcommand("capture-range"))

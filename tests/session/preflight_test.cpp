@@ -4,10 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
 
 #include "lftrack/host/preflight.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
+#include "test_data.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -65,6 +68,45 @@ TEST(Preflight, TheSimulatorsCalibrationOnSimulatedFramesWarns) {
   const PreflightItem* i = item(r, "detector calibration of A");
   ASSERT_NE(i, nullptr) << r.checklist();
   EXPECT_EQ(i->result, CheckResult::kWarn) << i->detail;
+}
+
+// Simulated frames of the clinical preset from light fields (issue 51): preflight checks the fields
+// of the day's water and bone, built by nothing but a session; missing, each fails and says what
+// builds it, and nothing is written; once a session has built them, each passes.
+TEST(Preflight, TheWaterAndBoneFieldsOfRealisticFramesAreCheckedNotBuilt) {
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  const std::string field = "  light_field:\n    resolution: [24, 24, 192, 192]\n";
+  ASSERT_NE(text.find(field), std::string::npos) << "the built-in scene's sim.light_field changed";
+  text.replace(text.find(field), field.size(), "  light_field:\n    resolution: [4, 4, 64, 64]\n  physics: clinical\n");
+  auto scene = parse_scene(text, "room.yaml", "/srv/room");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  tracking::ThreadPool pool(2);
+  auto p = prepare_scene(*scene, "", &pool);
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  test::TempDir dir;
+  LoopSessionOptions options;
+  options.light_field_dir = dir.path();
+  const auto sim_frames = dir.path() / "sim-frames";
+  const PreflightReport before = run_preflight(*p, options, RealtimeReport{}, true);
+  for (const char* material : {"water", "bone"}) {
+    const PreflightItem* i =
+        item(before, "light fields (simulated frames, " + std::string(material) + ") in " + (sim_frames / material).string());
+    ASSERT_NE(i, nullptr) << before.checklist();
+    EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
+    EXPECT_NE(i->detail.find("lftrack sim"), std::string::npos) << "says what builds them: " << i->detail;
+  }
+  EXPECT_EQ(item(before, "light fields (simulated frames, attenuation) in " + (sim_frames / "attenuation").string()),
+            nullptr)
+      << "a spectrum images water and bone only";
+  EXPECT_FALSE(std::filesystem::exists(sim_frames)) << "preflight builds nothing";
+  ASSERT_TRUE(make_scene_patient(*p, dir.path(), &pool).ok());
+  const PreflightReport after = run_preflight(*p, options, RealtimeReport{}, true);
+  for (const char* material : {"water", "bone"}) {
+    const PreflightItem* i =
+        item(after, "light fields (simulated frames, " + std::string(material) + ") in " + (sim_frames / material).string());
+    ASSERT_NE(i, nullptr) << after.checklist();
+    EXPECT_EQ(i->result, CheckResult::kPass) << i->detail;
+  }
 }
 
 }  // namespace

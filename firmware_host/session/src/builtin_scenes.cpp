@@ -17,7 +17,8 @@ std::string phantom_scene_text();
 }  // namespace
 
 // builtin:phantom-clinical: the same room with X-rays that differ from the planning CT the way real
-// ones do (sim.physics: clinical, issue 21), rendered by Siddon, registered by the robust plans.
+// ones do (sim.physics: clinical, issue 21), rendered by Siddon (exact, and no fields to build
+// for the tests and studies that use it), registered by the robust plans.
 std::optional<std::string> builtin_scene_text(const std::string& name) {
   if (name == kBuiltinPhantom) return phantom_scene_text();
   if (name != kBuiltinPhantomClinical) return std::nullopt;
@@ -29,7 +30,8 @@ std::optional<std::string> builtin_scene_text(const std::string& name) {
   swap("name: builtin spine phantom\n", "name: builtin spine phantom, clinical X-rays\n");
   swap("  renderer: lightfield    # frames from a separate, finer field of the anatomy\n  light_field:\n"
        "    resolution: [24, 24, 192, 192]\n",
-       "  renderer: siddon        # realistic physics renders water and bone with Siddon\n  physics: clinical\n");
+       "  renderer: siddon        # exact frames; lightfield renders them faster, from fields of water and bone\n"
+       "  physics: clinical\n");
   // The plans that hold up on such frames (registration.hpp: robust, warm-robust).
   swap("  plan: quadratic\n", "  plan: robust\n");
   swap("  align_plan: quadratic\n", "  align_plan: robust\n");

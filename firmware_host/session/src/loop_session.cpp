@@ -137,7 +137,7 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
     return device_frame_source_spec(p.scene);
   drivers::SimulatedSourceSpec simulated;
   simulated.make = [&p, &o, pool, parts]() -> Result<std::unique_ptr<drivers::FrameSource>> {
-    auto patient = make_scene_patient(p, pool);  // realistic physics (null: ideal frames)
+    auto patient = make_scene_patient(p, o.light_field_dir, pool);  // realistic physics (null: ideal frames)
     if (!patient.ok()) return patient.status();
     if (!*patient) {
       auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);

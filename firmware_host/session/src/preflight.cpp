@@ -6,6 +6,7 @@
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/room_link.hpp"
 
 namespace lftrack::host {
@@ -55,7 +56,25 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
                           " -o " + dir.string());
   }
   const bool simulated_frames = o.replay_sequence.empty() && frames_are_simulated(p.scene);
-  if (simulated_frames && p.scene.sim.renderer == "lightfield") {
+  if (simulated_frames && p.scene.sim.renderer == "lightfield" && !p.scene.sim.physics.ideal()) {
+    // Fields of the day's volumes (water and bone, or attenuation): those volumes are made again
+    // from the CT (the anatomy draw; seconds), and their fields loaded, not built.
+    const std::filesystem::path sim_dir = scene_patient_fields_dir(p, o.light_field_dir);
+    auto patient = simulated_patient_volumes(p, p.scene.sim.physics, scene_anatomy_seed(p), nullptr);
+    if (!patient.ok()) {
+      add(r, "light fields (simulated frames) in " + sim_dir.string(), CheckResult::kFail,
+          patient.status().message());
+      return;
+    }
+    for (const auto& [name, volume] : {std::pair{"attenuation", patient->attenuation},
+                                       std::pair{"water", patient->water}, std::pair{"bone", patient->bone}}) {
+      if (!volume) continue;
+      auto fields = load_light_fields(p, sim_dir / name, volume.get(), &p.scene.sim.light_field);
+      add(r, "light fields (simulated frames, " + std::string(name) + ") in " + (sim_dir / name).string(),
+          fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+          fields.ok() ? "fresh" : fields.status().message() + "; `lftrack sim` on this scene builds them");
+    }
+  } else if (simulated_frames && p.scene.sim.renderer == "lightfield") {
     auto fields = load_light_fields(p, dir / "sim-frames", p.world_mu.get(), &p.scene.sim.light_field);
     add(r, "light fields (simulated frames) in " + (dir / "sim-frames").string(),
         fields.ok() ? CheckResult::kPass : CheckResult::kFail,

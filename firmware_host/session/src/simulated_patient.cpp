@@ -15,63 +15,79 @@ sim::PatientRenderers SimulatedPatient::renderers() const {
   return r;
 }
 
-Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
-                                                std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
-                                                tracking::ThreadPool* render_pool) {
+Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
+                                                   std::uint64_t anatomy_seed, tracking::ThreadPool* pool) {
   LFTRACK_RETURN_IF_ERROR(sim::check_physics(physics));
   SimulatedPatient patient;
-  auto siddon = [&](std::shared_ptr<const tracking::MuVolume> v) -> Result<std::shared_ptr<const tracking::DrrRenderer>> {
+  if (!physics.anatomy && !physics.spectrum) {
+    patient.attenuation = p.mu;
+    return patient;
+  }
+  // The day's anatomy (the CT already shows the markers, clipped).
+  std::shared_ptr<const tracking::CtVolume> ct = p.ct;
+  if (physics.anatomy) {
+    const sim::AnatomyDeformation draw(*physics.anatomy, p.registration_origin_ct_mm, anatomy_seed);
+    auto moved = sim::deform_ct(*p.ct, draw, pool);
+    if (!moved.ok()) return moved.status().with_context("the simulated patient's anatomy");
+    ct = std::make_shared<const tracking::CtVolume>(std::move(moved).value());
+  }
+  if (physics.spectrum) {
+    auto split = sim::decompose_ct(*ct, physics.spectrum->ct_effective_kev, pool);
+    if (!split.ok()) return split.status().with_context("the simulated patient's water and bone");
+    patient.water = std::make_shared<const tracking::MuVolume>(std::move(split->water));
+    patient.bone = std::make_shared<const tracking::MuVolume>(std::move(split->bone));
+  } else {
+    patient.attenuation =
+        std::make_shared<const tracking::MuVolume>(tracking::to_attenuation(*ct, p.scene.ct.mu_water_per_mm));
+  }
+  return patient;
+}
+
+Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
+                                                std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
+                                                tracking::ThreadPool* render_pool,
+                                                const std::filesystem::path* frame_fields_dir) {
+  auto made = simulated_patient_volumes(p, physics, anatomy_seed, pool);
+  if (!made.ok()) return made.status();
+  SimulatedPatient patient = std::move(made).value();
+  // Volume `v` (called `name`) as Siddon renders it, or as its light fields do.
+  auto renderer = [&](std::shared_ptr<const tracking::MuVolume> v,
+                      const char* name) -> Result<std::shared_ptr<const tracking::DrrRenderer>> {
     tracking::RendererOptions options;
     options.pool = render_pool;
-    auto r = tracking::make_renderer("siddon", std::move(v), options);
+    if (frame_fields_dir != nullptr) {
+      options.light_field_mips = false;  // whole-detector frames: no coarse pixels to average
+      auto fields = load_or_build_light_fields(p, *v, p.scene.sim.light_field, *frame_fields_dir / name, pool);
+      if (!fields.ok()) return fields.status().with_context(std::string("the simulated patient's ") + name + " fields");
+      options.light_fields = *fields;
+    }
+    auto r = tracking::make_renderer(frame_fields_dir != nullptr ? "lightfield" : "siddon", std::move(v), options);
     if (!r.ok()) return r.status();
     return std::shared_ptr<const tracking::DrrRenderer>(std::move(r).value());
   };
   // The scene's markers as the spheres they are (sphere_markers.hpp), added to the renderers
   // below, not written into the voxels: in 3 mm slices a voxel marker sits at its slice's centre.
-  // The planning CT's own clipped image of a marker stays, as it would in a patient's CT.
+  // The planning CT's own clipped image of a marker stays, as it would in a patient's CT. Steel in
+  // the attenuation volume; with a spectrum, its bone equivalent in the bone volume.
   const auto& f = p.scene.fiducials;
-  auto markers = [&](double value_per_mm) {
-    std::vector<sim::SphereMarker> out;
-    if (f.insert)
-      for (const Eigen::Vector3d& c : f.positions_ct_mm) out.push_back({c, f.radius_mm, value_per_mm});
-    return out;
-  };
-  double marker_value_per_mm = sim::kSteelMuPerMm;  // in the attenuation volume; bone-equivalent below
-  if (!physics.anatomy && !physics.spectrum) {
-    patient.attenuation = p.mu;
-  } else {
-    // The day's anatomy (the CT already shows the markers, clipped).
-    std::shared_ptr<const tracking::CtVolume> ct = p.ct;
-    if (physics.anatomy) {
-      const sim::AnatomyDeformation draw(*physics.anatomy, p.registration_origin_ct_mm, anatomy_seed);
-      auto moved = sim::deform_ct(*p.ct, draw, pool);
-      if (!moved.ok()) return moved.status().with_context("the simulated patient's anatomy");
-      ct = std::make_shared<const tracking::CtVolume>(std::move(moved).value());
-    }
-    if (physics.spectrum) {
-      auto split = sim::decompose_ct(*ct, physics.spectrum->ct_effective_kev, pool);
-      if (!split.ok()) return split.status().with_context("the simulated patient's water and bone");
-      marker_value_per_mm = sim::bone_equivalent_of(sim::kSteelMuPerMm, physics.spectrum->ct_effective_kev);
-      patient.water = std::make_shared<const tracking::MuVolume>(std::move(split->water));
-      patient.bone = std::make_shared<const tracking::MuVolume>(std::move(split->bone));
-    } else {
-      patient.attenuation =
-          std::make_shared<const tracking::MuVolume>(tracking::to_attenuation(*ct, p.scene.ct.mu_water_per_mm));
-    }
-  }
+  const double marker_value_per_mm =
+      physics.spectrum ? sim::bone_equivalent_of(sim::kSteelMuPerMm, physics.spectrum->ct_effective_kev)
+                       : double(sim::kSteelMuPerMm);
+  std::vector<sim::SphereMarker> markers;
+  if (f.insert)
+    for (const Eigen::Vector3d& c : f.positions_ct_mm) markers.push_back({c, f.radius_mm, marker_value_per_mm});
   if (patient.attenuation) {
-    auto r = siddon(patient.attenuation);
+    auto r = renderer(patient.attenuation, "attenuation");
     if (!r.ok()) return r.status();
-    auto with = sim::with_sphere_markers(*r, markers(marker_value_per_mm));
+    auto with = sim::with_sphere_markers(*r, markers);
     if (!with.ok()) return with.status().with_context("the simulated patient's markers");
     patient.attenuation_renderer = *with;
   } else {
-    auto w = siddon(patient.water);
+    auto w = renderer(patient.water, "water");
     if (!w.ok()) return w.status();
-    auto b = siddon(patient.bone);
+    auto b = renderer(patient.bone, "bone");
     if (!b.ok()) return b.status();
-    auto with = sim::with_sphere_markers(*b, markers(marker_value_per_mm));
+    auto with = sim::with_sphere_markers(*b, markers);
     if (!with.ok()) return with.status().with_context("the simulated patient's markers");
     patient.water_renderer = *w;
     patient.bone_renderer = *with;
@@ -79,15 +95,22 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
   return patient;
 }
 
+std::uint64_t scene_anatomy_seed(const PreparedScene& p) {
+  return p.scene.sim.physics.anatomy ? p.scene.sim.physics.anatomy->seed : 1;
+}
+
+std::filesystem::path scene_patient_fields_dir(const PreparedScene& p, const std::filesystem::path& light_field_dir) {
+  return (light_field_dir.empty() ? default_light_field_dir(p.scene) : light_field_dir) / "sim-frames";
+}
+
 Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& p,
+                                                                   const std::filesystem::path& light_field_dir,
                                                                    tracking::ThreadPool* pool) {
   const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
   if (physics.ideal()) return std::shared_ptr<const SimulatedPatient>();
-  if (p.scene.sim.renderer == "lightfield")
-    return failed_precondition(
-        "sim.physics other than ideal renders frames with Siddon (water and bone, scatter); light-field frames of "
-        "realistic physics are not built yet: set sim.renderer: siddon");
-  auto patient = make_simulated_patient(p, physics, physics.anatomy ? physics.anatomy->seed : 1, pool);
+  const std::filesystem::path fields = scene_patient_fields_dir(p, light_field_dir);
+  auto patient = make_simulated_patient(p, physics, scene_anatomy_seed(p), pool, nullptr,
+                                        p.scene.sim.renderer == "lightfield" ? &fields : nullptr);
   if (!patient.ok()) return patient.status();
   return std::make_shared<const SimulatedPatient>(std::move(patient).value());
 }

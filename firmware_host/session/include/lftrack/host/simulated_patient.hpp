@@ -5,6 +5,7 @@
 // scene's detectors exposing it with the rest of sim.physics.
 
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <vector>
 
@@ -22,17 +23,33 @@ struct SimulatedPatient {
   sim::PatientRenderers renderers() const;
 };
 
-// Builds the patient for `physics` (the scene's own or a study's) with anatomy draw
-// `anatomy_seed`, on `pool`; Siddon renderers over the volumes, rendering on `render_pool` (null:
-// the caller's thread). Ideal physics reuses the scene's world anatomy without a copy.
+// The patient's volumes for `physics` with anatomy draw `anatomy_seed` (attenuation, or with a
+// spectrum water and bone), built on `pool`, without renderers. Ideal physics reuses the scene's
+// attenuation volume without a copy.
+Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
+                                                   std::uint64_t anatomy_seed, tracking::ThreadPool* pool);
+
+// The patient's volumes (above) with their renderers, the scene's markers added to them as exact
+// spheres: Siddon, rendering on `render_pool` (null: the caller's thread); or with
+// `frame_fields_dir` light fields of the scene's sim.light_field, one per view and volume in
+// <frame_fields_dir>/<volume> (attenuation, water, bone), loaded where up to date and built (and
+// saved) where not.
 Result<SimulatedPatient> make_simulated_patient(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
-                                                tracking::ThreadPool* render_pool = nullptr);
+                                                tracking::ThreadPool* render_pool = nullptr,
+                                                const std::filesystem::path* frame_fields_dir = nullptr);
 
-// The patient of the scene's own sim.physics for the simulated loop (draw sim.physics.anatomy.seed),
-// or null where the physics is ideal (the loop's frame renderer then renders the world anatomy).
-// Realistic physics renders through Siddon: with sim.renderer lightfield it is refused.
+// The scene's own patient: anatomy draw sim.physics.anatomy.seed (1 without anatomy), frame
+// fields in <light_field_dir>/sim-frames (`light_field_dir` empty: the scene's default folder).
+std::uint64_t scene_anatomy_seed(const PreparedScene& scene);
+std::filesystem::path scene_patient_fields_dir(const PreparedScene& scene, const std::filesystem::path& light_field_dir);
+
+// The patient of the scene's own sim.physics for the simulated loop, or null where the physics is
+// ideal (the loop's frame renderer then renders the world anatomy). Rendered as sim.renderer
+// says: Siddon, or with `lightfield` from light fields of the day's volumes in
+// scene_patient_fields_dir()/{attenuation,water,bone}, built before the first frame where missing.
 Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& scene,
+                                                                   const std::filesystem::path& light_field_dir,
                                                                    tracking::ThreadPool* pool);
 
 // The scene's detectors with `physics`: one frame synthesizer per detector over its ROI window
