@@ -53,7 +53,7 @@ struct SimulatedDetectors {
   static Result<SimulatedDetectors> create(const PreparedScene& p, const FrameRenderers& renderers,
                                            const sim::DetectorModel& model) {
     SimulatedDetectors d;
-    const int margin_px = p.scene.sim.renderer == "lightfield" ? 0 : 16;
+    const int margin_px = sim_frame_margin_px(p);
     for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
       const auto& view = p.scene.detectors[i].view;
       const tracking::PixelWindow window = sim_frame_window(p, int(i), margin_px);

@@ -6,6 +6,7 @@
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
+#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/room_link.hpp"
 
@@ -59,7 +60,7 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
   if (simulated_frames && p.scene.sim.renderer == "lightfield" && !p.scene.sim.physics.ideal()) {
     // Fields of the day's volumes (water and bone, or attenuation): those volumes are made again
     // from the CT (the anatomy draw; seconds), and their fields loaded, not built.
-    const std::filesystem::path sim_dir = scene_patient_fields_dir(p, o.light_field_dir);
+    const std::filesystem::path sim_dir = sim_frame_fields_dir(p, o.light_field_dir);
     auto patient = simulated_patient_volumes(p, p.scene.sim.physics, scene_anatomy_seed(p), nullptr);
     if (!patient.ok()) {
       add(r, "light fields (simulated frames) in " + sim_dir.string(), CheckResult::kFail,
@@ -75,8 +76,9 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
           fields.ok() ? "fresh" : fields.status().message() + "; `lftrack sim` on this scene builds them");
     }
   } else if (simulated_frames && p.scene.sim.renderer == "lightfield") {
-    auto fields = load_light_fields(p, dir / "sim-frames", p.world_mu.get(), &p.scene.sim.light_field);
-    add(r, "light fields (simulated frames) in " + (dir / "sim-frames").string(),
+    const std::filesystem::path sim_dir = sim_frame_fields_dir(p, o.light_field_dir);
+    auto fields = load_light_fields(p, sim_dir, p.world_mu.get(), &p.scene.sim.light_field);
+    add(r, "light fields (simulated frames) in " + sim_dir.string(),
         fields.ok() ? CheckResult::kPass : CheckResult::kFail,
         fields.ok() ? "fresh" : fields.status().message() + "; `lftrack sim` on this scene builds them");
   }

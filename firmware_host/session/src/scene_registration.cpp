@@ -35,14 +35,19 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(const P
   return std::shared_ptr<const tracking::DrrRenderer>(std::move(renderer).value());
 }
 
+int sim_frame_margin_px(const PreparedScene& p) { return p.scene.sim.renderer == "lightfield" ? 0 : 16; }
+
+std::filesystem::path sim_frame_fields_dir(const PreparedScene& p, const std::filesystem::path& light_field_dir) {
+  return (light_field_dir.empty() ? default_light_field_dir(p.scene) : light_field_dir) / "sim-frames";
+}
+
 Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
     const PreparedScene& p, const std::filesystem::path& lf_dir, tracking::ThreadPool* pool) {
   tracking::RendererOptions options;
   options.light_field_mips = false;  // whole-detector frames: no coarse pixels to average
   if (p.scene.sim.renderer == "lightfield") {
-    const std::filesystem::path dir =
-        (lf_dir.empty() ? default_light_field_dir(p.scene) : lf_dir) / "sim-frames";
-    auto fields = load_or_build_light_fields(p, *p.world_mu, p.scene.sim.light_field, dir, pool);
+    auto fields = load_or_build_light_fields(p, *p.world_mu, p.scene.sim.light_field, sim_frame_fields_dir(p, lf_dir),
+                                             pool);
     if (!fields.ok()) return fields.status().with_context("the simulator's frame fields");
     options.light_fields = *fields;
   }

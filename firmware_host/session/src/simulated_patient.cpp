@@ -99,16 +99,12 @@ std::uint64_t scene_anatomy_seed(const PreparedScene& p) {
   return p.scene.sim.physics.anatomy ? p.scene.sim.physics.anatomy->seed : 1;
 }
 
-std::filesystem::path scene_patient_fields_dir(const PreparedScene& p, const std::filesystem::path& light_field_dir) {
-  return (light_field_dir.empty() ? default_light_field_dir(p.scene) : light_field_dir) / "sim-frames";
-}
-
 Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& p,
                                                                    const std::filesystem::path& light_field_dir,
                                                                    tracking::ThreadPool* pool) {
   const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
   if (physics.ideal()) return std::shared_ptr<const SimulatedPatient>();
-  const std::filesystem::path fields = scene_patient_fields_dir(p, light_field_dir);
+  const std::filesystem::path fields = sim_frame_fields_dir(p, light_field_dir);
   auto patient = make_simulated_patient(p, physics, scene_anatomy_seed(p), pool, nullptr,
                                         p.scene.sim.renderer == "lightfield" ? &fields : nullptr);
   if (!patient.ok()) return patient.status();

@@ -70,6 +70,14 @@ sim::DetectorModel scene_detector_model(const PreparedScene& scene);
 // (clipped to the detector).
 tracking::PixelWindow sim_frame_window(const PreparedScene& scene, int detector, int margin_px);
 
+// The margin the simulated detectors expose around each ROI window: none for light-field frames
+// (a field covers the ROI only), 16 pixels for Siddon's.
+int sim_frame_margin_px(const PreparedScene& scene);
+
+// The folder of the simulator's frame fields: <light_field_dir>/sim-frames (`light_field_dir`
+// empty: the scene's default folder).
+std::filesystem::path sim_frame_fields_dir(const PreparedScene& scene, const std::filesystem::path& light_field_dir);
+
 // Synthetic raw frames at `gold`, rendered exactly (Siddon on the scene's world anatomy, markers
 // included) over each ROI window grown by a margin; the rest of each detector is unexposed.
 Result<std::vector<tracking::Image<std::uint16_t>>> synthesize_scene_frames(

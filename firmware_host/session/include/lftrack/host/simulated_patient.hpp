@@ -39,15 +39,13 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& scene, cons
                                                 tracking::ThreadPool* render_pool = nullptr,
                                                 const std::filesystem::path* frame_fields_dir = nullptr);
 
-// The scene's own patient: anatomy draw sim.physics.anatomy.seed (1 without anatomy), frame
-// fields in <light_field_dir>/sim-frames (`light_field_dir` empty: the scene's default folder).
+// The scene's own patient's anatomy draw: sim.physics.anatomy.seed (1 without anatomy).
 std::uint64_t scene_anatomy_seed(const PreparedScene& scene);
-std::filesystem::path scene_patient_fields_dir(const PreparedScene& scene, const std::filesystem::path& light_field_dir);
 
 // The patient of the scene's own sim.physics for the simulated loop, or null where the physics is
 // ideal (the loop's frame renderer then renders the world anatomy). Rendered as sim.renderer
 // says: Siddon, or with `lightfield` from light fields of the day's volumes in
-// scene_patient_fields_dir()/{attenuation,water,bone}, built before the first frame where missing.
+// sim_frame_fields_dir()/{attenuation,water,bone}, built before the first frame where missing.
 Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& scene,
                                                                    const std::filesystem::path& light_field_dir,
                                                                    tracking::ThreadPool* pool);
