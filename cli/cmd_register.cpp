@@ -12,6 +12,7 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/scene_exposure.hpp"
+#include "lftrack/host/sim_detectors.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/loop_summary.hpp"
@@ -183,25 +184,30 @@ Status run(const RegisterOptions& o) {
     if (!gold) gold = p.nominal_T_room_from_ct;
     spdlog::info("simulated detectors, {}", describe_exposure(p));
     const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
+    // The simulated detectors as the loop's (SimDetectors): each ROI window exact (Siddon, with a
+    // 16-pixel margin), the rest of each detector coarser. The scene's imaging physics
+    // (sim.physics): the simulated patient; ideal: the world anatomy.
+    std::shared_ptr<const SimulatedPatient> patient;
+    std::shared_ptr<const tracking::DrrRenderer> exact;
     if (!physics.ideal()) {
-      // The scene's imaging physics (sim.physics): the simulated patient exposed by its imager.
-      auto patient = make_simulated_patient(p, physics, physics.anatomy ? physics.anatomy->seed : 1, &pool, &pool);
-      if (!patient.ok()) return patient.status();
-      auto imager = SceneImager::create(p, physics);
-      if (!imager.ok()) return imager.status();
-      auto frames = imager->expose(*patient, *gold, o.seed);
-      if (!frames.ok()) return frames.status();
-      raw = std::move(frames).value();
-      use_where_uncalibrated(imager->correction());
-      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(physics));
+      auto made = make_simulated_patient(p, physics, scene_anatomy_seed(p), &pool, &pool, nullptr, true);
+      if (!made.ok()) return made.status();
+      patient = std::make_shared<const SimulatedPatient>(std::move(made).value());
     } else {
       tracking::RendererOptions exact_options;
       exact_options.pool = &pool;
-      auto exact = tracking::make_renderer("siddon", p.world_mu, exact_options);
-      if (!exact.ok()) return exact.status();
-      auto frames = synthesize_scene_frames(p, **exact, *gold, o.seed);
-      if (!frames.ok()) return frames.status();
-      raw = std::move(frames).value();
+      auto siddon = tracking::make_renderer("siddon", p.world_mu, exact_options);
+      if (!siddon.ok()) return siddon.status();
+      exact = std::move(siddon).value();
+    }
+    const sim::DetectorModel model = scene_detector_model(p);
+    auto detectors = SimDetectors::create(p, exact, patient, model);
+    if (!detectors.ok()) return detectors.status();
+    raw = detectors->make_frames();
+    LFTRACK_RETURN_IF_ERROR(detectors->expose(*gold, o.seed * 7919, &raw));  // view i: seed * 7919 + i, as before
+    if (patient) {
+      use_where_uncalibrated(sim::detector_correction(model));
+      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(physics));
     }
   } else {
     if (o.frames.size() != p.scene.detectors.size())

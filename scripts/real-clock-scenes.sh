@@ -93,12 +93,16 @@ for r in runs:
     except (OSError, ValueError) as e:
         print(f"| {r} | no summary: {e} |")
         continue
-    t = d["target_residual"]
-    on = t.get("beam_on", {})
-    lat = d["latency_exposure_to_ack_ms"]
+    # A run that never tracked has none of some figures (null in the JSON): '-' for those.
+    def fig(v, f):
+        return "-" if v is None else format(v, f)
+    t = d.get("target_residual") or {}
+    on = t.get("beam_on") or {}
+    lat = d.get("latency_exposure_to_ack_ms") or {}
+    err = (t.get("error_3d_mm") or {}).get("p95")
     print(f"| {r} | {d['period_ms']:.1f} | {d['states'].get('TRACK', 0)} of {d['cycles']} | {d['overruns']} "
-          f"| {d['skipped_periods']} | {t['error_3d_mm']['p95']:.3f} ({on.get('share_over_1mm', 0):.1%} / "
-          f"{on.get('share_over_2mm', 0):.1%} of {on.get('cycles', 0)}) | {d['cycle_ms']['p99']:.2f} "
-          f"| {d['registration_ms']['p95']:.2f} | {lat.get('p50', float('nan')):.1f} / {lat.get('p99', float('nan')):.1f} "
-          f"| {d['allocations_per_cycle']} |")
+          f"| {d['skipped_periods']} | {fig(err, '.3f')} ({on.get('share_over_1mm', 0):.1%} / "
+          f"{on.get('share_over_2mm', 0):.1%} of {on.get('cycles', 0)}) | {fig((d.get('cycle_ms') or {}).get('p99'), '.2f')} "
+          f"| {fig((d.get('registration_ms') or {}).get('p95'), '.2f')} | {fig(lat.get('p50'), '.1f')} / {fig(lat.get('p99'), '.1f')} "
+          f"| {d.get('allocations_per_cycle')} |")
 EOF

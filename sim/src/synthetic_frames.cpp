@@ -23,7 +23,9 @@ namespace {
 // The open field at most a million times full scale (an AEC's dose behind a line integral of 14).
 constexpr double kMaxOpenFieldFraction = 1e6;
 
-Status check_model(const DetectorModel& model) {
+}  // namespace
+
+Status check_detector_model(const DetectorModel& model) {
   if (!(model.photons_per_pixel > 0 && model.photons_per_pixel <= kMaxPhotonsPerPixel) ||
       !(model.open_field_fraction > 0 && model.open_field_fraction <= kMaxOpenFieldFraction) || model.bits < 8 ||
       model.bits > 16)
@@ -31,7 +33,28 @@ Status check_model(const DetectorModel& model) {
   return {};
 }
 
-}  // namespace
+DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std::uint64_t detector_seed) {
+  DetectorEffectsSpec e = effects;
+  e.pattern_seed = e.pattern_seed * 1000003ull + detector_seed;
+  return e;
+}
+
+void primary_and_thickness(const PolyenergeticTable* table, ImageView<const float> line, ImageView<const float> bone,
+                           ImageView<float> primary, ImageView<float> thickness_cm) {
+  const double mu_water_per_cm = 10 * kDefaultMuWaterPerMm;
+  for (int r = 0; r < line.rows; ++r)
+    for (int c = 0; c < line.cols; ++c) {
+      if (table != nullptr) {
+        const float w = line.at(r, c), b = bone.at(r, c);
+        primary.at(r, c) = float(std::exp(-double(table->log_attenuation(w, b))));
+        thickness_cm.at(r, c) = std::max(0.f, w) + std::max(0.f, b);  // g/cm^2 ~ cm of water
+      } else {
+        const double p = line.at(r, c);
+        primary.at(r, c) = float(std::exp(-p));
+        thickness_cm.at(r, c) = float(std::max(0.0, p) / mu_water_per_cm);
+      }
+    }
+}
 
 FrameSynthesizer::FrameSynthesizer(const PixelWindow& window, const DetectorModel& model)
     : window_(window),
@@ -53,7 +76,7 @@ Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWi
                                                                    const XrayPhysicsSpec& physics, int rows,
                                                                    int cols, double pitch_mm,
                                                                    std::uint64_t pattern_seed) {
-  LFTRACK_RETURN_IF_ERROR(check_model(model));
+  LFTRACK_RETURN_IF_ERROR(check_detector_model(model));
   LFTRACK_RETURN_IF_ERROR(check_physics(physics));
   if (!window.inside(rows, cols)) return invalid_argument("synthetic frame: the window must lie inside the detector");
   if (!(pitch_mm > 0 && std::isfinite(pitch_mm))) return invalid_argument("synthetic frame: pitch must be positive");
@@ -69,8 +92,7 @@ Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWi
   }
   if (physics.scatter) s->scatter_ = std::make_unique<ScatterModel>(wr, wc, pitch_mm, *physics.scatter);
   if (physics.detector) {
-    DetectorEffectsSpec effects = *physics.detector;
-    effects.pattern_seed = effects.pattern_seed * 1000003ull + pattern_seed;
+    const DetectorEffectsSpec effects = effects_of_detector(*physics.detector, pattern_seed);
     s->effects_ = effects;
     const DetectorPattern pattern(effects, rows, cols);
     if (effects.glare_fraction > 0)
@@ -95,7 +117,7 @@ Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWi
 
 Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose& gold, const XrayView& view,
                                     std::uint64_t seed, ImageView<std::uint16_t> frame) {
-  LFTRACK_RETURN_IF_ERROR(check_model(model_));
+  LFTRACK_RETURN_IF_ERROR(check_detector_model(model_));
   if (frame.rows != view.rows || frame.cols != view.cols || !window_.inside(view.rows, view.cols))
     return invalid_argument("synthetic frame: the frame must be the whole detector, the window inside it");
   const bool physics = table_ || scatter_ || effects_;
@@ -127,22 +149,11 @@ Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose&
   if (table_) {
     LFTRACK_RETURN_IF_ERROR(patient.water->render(gold, view, window_, line_integral_.view()));
     LFTRACK_RETURN_IF_ERROR(patient.bone->render(gold, view, window_, bone_integral_.view()));
-    for (int r = 0; r < window_.rows; ++r)
-      for (int c = 0; c < window_.cols; ++c) {
-        const float w = line_integral_.at(r, c), b = bone_integral_.at(r, c);
-        primary_.at(r, c) = float(std::exp(-double(table_->log_attenuation(w, b))));
-        thickness_cm_.at(r, c) = std::max(0.f, w) + std::max(0.f, b);  // g/cm^2 ~ cm of water
-      }
   } else {
     LFTRACK_RETURN_IF_ERROR(patient.attenuation->render(gold, view, window_, line_integral_.view()));
-    const double mu_water_per_cm = 10 * kDefaultMuWaterPerMm;
-    for (int r = 0; r < window_.rows; ++r)
-      for (int c = 0; c < window_.cols; ++c) {
-        const double p = line_integral_.at(r, c);
-        primary_.at(r, c) = float(std::exp(-p));
-        thickness_cm_.at(r, c) = float(std::max(0.0, p) / mu_water_per_cm);
-      }
   }
+  primary_and_thickness(table_ ? &*table_ : nullptr, line_integral_.view(), bone_integral_.view(), primary_.view(),
+                        thickness_cm_.view());
   if (scatter_) {
     LFTRACK_RETURN_IF_ERROR(scatter_->add_scatter(primary_.view(), thickness_cm_.view(), total_.view()));
   } else {
@@ -193,7 +204,7 @@ Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose&
 Result<Image<std::uint16_t>> synthesize_frame(const DrrRenderer& exact, const Pose& gold,
                                               const XrayView& view, const PixelWindow& window,
                                               const DetectorModel& model, std::uint64_t seed) {
-  LFTRACK_RETURN_IF_ERROR(check_model(model));
+  LFTRACK_RETURN_IF_ERROR(check_detector_model(model));
   Image<std::uint16_t> frame(view.rows, view.cols, 0);
   FrameSynthesizer synthesizer(window, model);
   LFTRACK_RETURN_IF_ERROR(synthesizer.synthesize(exact, gold, view, seed, frame.view()));

@@ -6,8 +6,10 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <optional>
 
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/sim_detectors.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/studies/drr_benchmark.hpp"
@@ -42,45 +44,24 @@ struct FrameRenderers {
   }
 };
 
-// The simulated detectors as SimFrameSource::open makes them: one synthesizer per view over its
-// ROI window grown by the loop's margin for this renderer (16 pixels for Siddon, none for a light
-// field, which covers the ROI only), and the whole-detector frames they write.
-struct SimulatedDetectors {
-  std::vector<std::unique_ptr<sim::FrameSynthesizer>> synthesizers;
+// The simulated detectors as SimFrameSource::open makes them (SimDetectors), and their frames.
+struct BenchDetectors {
+  std::optional<SimDetectors> detectors;
   std::vector<tracking::Image<std::uint16_t>> frames;
-  int exposed_pixels = 0;  // all views
 
-  static Result<SimulatedDetectors> create(const PreparedScene& p, const FrameRenderers& renderers,
-                                           const sim::DetectorModel& model) {
-    SimulatedDetectors d;
-    const int margin_px = sim_frame_margin_px(p);
-    for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
-      const auto& view = p.scene.detectors[i].view;
-      const tracking::PixelWindow window = sim_frame_window(p, int(i), margin_px);
-      d.exposed_pixels += window.rows * window.cols;
-      if (renderers.patient) {
-        auto s = sim::FrameSynthesizer::create(window, model, p.scene.sim.physics, view.rows, view.cols,
-                                               0.5 * (view.pitch_col_mm + view.pitch_row_mm), i + 1);
-        if (!s.ok()) return s.status().with_context("detector " + view.name);
-        d.synthesizers.push_back(std::move(s).value());
-      } else {
-        d.synthesizers.push_back(std::make_unique<sim::FrameSynthesizer>(window, model));
-      }
-      d.frames.emplace_back(view.rows, view.cols, 0);
-    }
-    return d;
+  static Result<BenchDetectors> create(const PreparedScene& p, const FrameRenderers& r, const sim::DetectorModel& model,
+                                       bool whole_detector) {
+    SimDetectorsOptions options;
+    options.margin_px = sim_frame_margin_px(p);
+    options.whole_detector = whole_detector;
+    auto d = SimDetectors::create(p, r.ideal, r.patient, model, options);
+    if (!d.ok()) return d.status();
+    BenchDetectors b;
+    b.detectors = std::move(d).value();
+    b.frames = b.detectors->make_frames();
+    return b;
   }
-
-  Status expose(const PreparedScene& p, const FrameRenderers& r, const tracking::Pose& pose, std::uint64_t seed) {
-    for (std::size_t v = 0; v < synthesizers.size(); ++v) {
-      const auto& view = p.scene.detectors[v].view;
-      LFTRACK_RETURN_IF_ERROR(
-          (r.patient ? synthesizers[v]->synthesize(r.patient->renderers(), pose, view, seed + v, frames[v].view())
-                     : synthesizers[v]->synthesize(*r.ideal, pose, view, seed + v, frames[v].view()))
-              .with_context("view " + view.name));
-    }
-    return {};
-  }
+  Status expose(const tracking::Pose& pose, std::uint64_t seed) { return detectors->expose(pose, seed, &frames); }
 };
 
 // The counts of `frame` inside `window`, as floats.
@@ -98,12 +79,12 @@ Result<std::vector<std::vector<tracking::Image<float>>>> expected_frames(const P
                                                                         const std::vector<tracking::Pose>& poses) {
   sim::DetectorModel model = scene_detector_model(p);
   model.noise = false;
-  auto detectors = SimulatedDetectors::create(p, renderers, model);
+  auto detectors = BenchDetectors::create(p, renderers, model, false);
   if (!detectors.ok()) return detectors.status();
   std::vector<std::vector<tracking::Image<float>>> out;
   for (const tracking::Pose& pose : poses) {
-    for (auto& s : detectors->synthesizers) s->forget_previous_frame();
-    LFTRACK_RETURN_IF_ERROR(detectors->expose(p, renderers, pose, 1));
+    detectors->detectors->forget_previous_frames();
+    LFTRACK_RETURN_IF_ERROR(detectors->expose(pose, 1));
     out.emplace_back();
     for (std::size_t v = 0; v < detectors->frames.size(); ++v)
       out.back().push_back(window_counts(detectors->frames[v], p.roi_windows[v]));
@@ -135,19 +116,31 @@ Result<FrameBenchReport> run_frame_benchmark(const PreparedScene& scene, const F
     auto renderers = FrameRenderers::create(p, o.light_field_dir, pool);
     if (!renderers.ok()) return renderers.status().with_context(std::string("the ") + name + " frames");
     fig.setup_s = seconds_from(t0);
-    auto detectors = SimulatedDetectors::create(p, *renderers, scene_detector_model(p));
-    if (!detectors.ok()) return detectors.status();
-    fig.exposed_pixels = detectors->exposed_pixels;
-    LFTRACK_RETURN_IF_ERROR(detectors->expose(p, *renderers, poses[0], o.seed));  // warm: first touches of the data
-    std::vector<double> ms;
+    // The ROI windows alone, and the whole detectors (the windows and the rest, coarser), timed
+    // pose by pose side by side.
+    auto windows = BenchDetectors::create(p, *renderers, scene_detector_model(p), false);
+    if (!windows.ok()) return windows.status();
+    auto whole = BenchDetectors::create(p, *renderers, scene_detector_model(p), true);
+    if (!whole.ok()) return whole.status();
+    fig.exposed_pixels = int(windows->detectors->written_pixels());
+    fig.whole_detector_pixels = whole->detectors->written_pixels();
+    LFTRACK_RETURN_IF_ERROR(windows->expose(poses[0], o.seed));  // warm: first touches of the data
+    LFTRACK_RETURN_IF_ERROR(whole->expose(poses[0], o.seed));
+    std::vector<double> ms, whole_ms;
     for (std::size_t k = 0; k < poses.size(); ++k) {
-      const auto t = Clock::now();
-      LFTRACK_RETURN_IF_ERROR(detectors->expose(p, *renderers, poses[k], o.seed * 1000003ull + k * 7919ull));
+      const std::uint64_t seed = o.seed * 1000003ull + k * 7919ull;
+      auto t = Clock::now();
+      LFTRACK_RETURN_IF_ERROR(windows->expose(poses[k], seed));
       ms.push_back(1e3 * seconds_from(t));
+      t = Clock::now();
+      LFTRACK_RETURN_IF_ERROR(whole->expose(poses[k], seed));
+      whole_ms.push_back(1e3 * seconds_from(t));
     }
     fig.pair_ms_median = quantile(ms, 0.5);
     fig.pair_ms_p95 = quantile(ms, 0.95);
     fig.pair_ms_min = *std::min_element(ms.begin(), ms.end());
+    fig.whole_pair_ms_median = quantile(whole_ms, 0.5);
+    fig.whole_pair_ms_p95 = quantile(whole_ms, 0.95);
     auto expected = expected_frames(p, *renderers, check_poses);
     if (!expected.ok()) return expected.status();
     if (siddon_expected.empty()) {  // the reference itself
@@ -179,6 +172,8 @@ nlohmann::json to_json(const FrameBenchReport& r) {
     renderers.push_back({{"renderer", f.renderer},
                          {"setup_s", f.setup_s},
                          {"exposed_pixels", f.exposed_pixels},
+                         {"whole_detector_pixels", f.whole_detector_pixels},
+                         {"whole_pair_ms", {{"median", f.whole_pair_ms_median}, {"p95", f.whole_pair_ms_p95}}},
                          {"pair_ms", {{"median", f.pair_ms_median}, {"p95", f.pair_ms_p95}, {"min", f.pair_ms_min}}},
                          {"speedup_vs_siddon", f.speedup_vs_siddon},
                          {"ncc_vs_siddon", f.ncc_vs_siddon},

@@ -60,6 +60,9 @@ TEST(BenchFramesCli, ClinicalFramesFromLightFieldsAreSiddonsFramesAndBothAreTime
     EXPECT_GT(r["pair_ms"]["median"].get<double>(), 0.0) << r["renderer"];
     EXPECT_LE(r["pair_ms"]["min"].get<double>(), r["pair_ms"]["median"].get<double>()) << r["renderer"];
     EXPECT_LE(r["pair_ms"]["median"].get<double>(), r["pair_ms"]["p95"].get<double>()) << r["renderer"];
+    // The whole detectors: more pixels than the windows, each pair timed beside the windows'.
+    EXPECT_GT(r["whole_detector_pixels"].get<std::int64_t>(), r["exposed_pixels"].get<std::int64_t>()) << r["renderer"];
+    EXPECT_GT(r["whole_pair_ms"]["median"].get<double>(), 0.0) << r["renderer"];
     EXPECT_GT(r["speedup_vs_siddon"].get<double>(), 0.0) << r["renderer"];
   }
   // Siddon exposes a margin around each ROI, a light field the ROI alone.

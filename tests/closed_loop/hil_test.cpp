@@ -176,7 +176,7 @@ class HilCanFault : public ClosedLoop, public ::testing::WithParamInterface<CanF
 
 // The loop runs until the robot has lost the beam permit (the loop's HOLD), then a while more,
 // and is stopped: on the simulated clock it outruns the wall clock, and a fault that shows after a
-// real-time timeout (a heartbeat missing for 0.3 s) came after the last of a fixed number of
+// real-time timeout (a heartbeat missing for 1 s on the simulated clock) came after the last of a fixed number of
 // cycles on a quiet host, where the loop never held (the robot's permit then dropped only with
 // the end of the run).
 TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
@@ -193,7 +193,7 @@ TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
         std::this_thread::sleep_for(std::chrono::microseconds(200));
       beam_before = robot->beam_permit();
       for (RobotFault f : c.faults) robot->inject(f);
-      // The loop holds within a cycle or two of seeing the fault (a missing heartbeat: its 0.3 s).
+      // The loop holds within a cycle or two of seeing the fault (a missing heartbeat: its 1 s on the simulated clock).
       const auto hold_until = steady_clock::now() + std::chrono::seconds(30);
       while (robot->beam_permit() && steady_clock::now() < hold_until)
         std::this_thread::sleep_for(std::chrono::milliseconds(1));

@@ -114,6 +114,32 @@ TEST_F(ArchiveAndReplay, AReplayWithoutRecordedReadbacksPermitsNoBeam) {
     EXPECT_EQ(replayed.journal.records[i].beam_permit, 0) << "cycle " << i;
 }
 
+// A simulated frame covers the whole detector, as a real panel's does (issue 51): every pixel
+// outside the ROI window is exposed, at the level of the window's pixels next to it.
+TEST_F(ArchiveAndReplay, TheArchivedFramesCoverTheWholeDetector) {
+  record();
+  for (std::size_t v = 0; v < scene_->scene.detectors.size(); ++v) {
+    const auto& view = scene_->scene.detectors[v].view;
+    tracking::Image<std::uint16_t> frame(view.rows, view.cols);
+    const std::string name = std::string("000020-") + view.name + ".tif";
+    ASSERT_TRUE(drivers::read_frame_file((dir_.path() / "sequence" / "frames" / name).c_str(), frame.view()).ok());
+    const tracking::PixelWindow& w = scene_->roi_windows[v];
+    ASSERT_GT(w.row0, 4) << "the window leaves room around it";
+    int unexposed = 0;
+    for (int r = 0; r < view.rows; ++r)
+      for (int c = 0; c < view.cols; ++c) unexposed += frame.at(r, c) == 0 ? 1 : 0;
+    EXPECT_EQ(unexposed, 0) << "view " << view.name;
+    // The rows just above the window and its own first rows, over the window's columns.
+    double outside = 0, inside = 0;
+    for (int c = w.col0; c < w.col0 + w.cols; ++c)
+      for (int k = 1; k <= 3; ++k) {
+        outside += frame.at(w.row0 - k, c);
+        inside += frame.at(w.row0 + k - 1, c);
+      }
+    EXPECT_NEAR(outside / inside, 1.0, 0.1) << "no step at the window's edge, view " << view.name;
+  }
+}
+
 TEST_F(ArchiveAndReplay, BadFramesInTheArchiveAreJournaledStatusesNotCrashes) {
   record();
   const auto frames = dir_.path() / "sequence" / "frames";

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+
 #include "lftrack/drivers/frame_files.hpp"
 #include "lftrack/drivers/frame_sequence.hpp"
 #include "test_data.hpp"
@@ -81,6 +83,25 @@ TEST(FrameArchive, AFullArchiveDropsAndCountsInsteadOfBlocking) {
   EXPECT_EQ(sequence->pairs.size(), std::size_t(accepted)) << "the index lists exactly what was written";
   // A pair of another shape is dropped, not written half.
   EXPECT_FALSE((*archive)->append(99, make_pair(8, 8, 2)));
+}
+
+// What the simulated clock does before each cycle: wait for a free slot instead of dropping.
+// Two slots and a hundred pairs appended as fast as the wait allows: not one is dropped.
+TEST(FrameArchive, WaitingForASlotKeepsEveryPair) {
+  test::TempDir dir;
+  FrameArchiveOptions options;
+  options.slots = 2;
+  auto archive = FrameArchive::open(dir.path() / "seq", {{"AP", 64, 64}, {"LAT", 64, 64}}, options);
+  ASSERT_TRUE(archive.ok()) << archive.status().message();
+  const drivers::FramePair pair = make_pair(64, 64, 1);
+  for (int k = 0; k < 100; ++k) {
+    ASSERT_TRUE((*archive)->wait_for_slot(std::chrono::seconds(30))) << "pair " << k;
+    ASSERT_TRUE((*archive)->append(k, pair)) << "pair " << k;
+  }
+  ASSERT_TRUE((*archive)->close().ok());
+  EXPECT_EQ((*archive)->pairs_written(), 100u);
+  EXPECT_EQ((*archive)->pairs_dropped(), 0u);
+  EXPECT_FALSE((*archive)->wait_for_slot(std::chrono::seconds(1))) << "a closed archive has no slot to wait for";
 }
 
 TEST(FrameArchive, BadSetUpsAreRefused) {

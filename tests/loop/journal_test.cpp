@@ -181,6 +181,45 @@ TEST(Journal, ADiskThatFillsUpKeepsEveryRecordWrittenBeforeAndSaysSo) {
   for (std::uint64_t i = 0; i < 100; ++i) EXPECT_EQ(j->records[i].cycle, i);
 }
 
+// A disk that takes its time: each write waits 300 ms; the header's and
+// the first record's succeed, later ones fail (ENOSPC).
+std::atomic<int> g_slow_writes{0};
+ssize_t slow_then_full_write(int fd, const void* data, std::size_t bytes) {
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  if (++g_slow_writes > 2) {
+    errno = ENOSPC;
+    return -1;
+  }
+  return ::write(fd, data, bytes);
+}
+
+// wait_taken: once it returns true, every record appended before is written or known lost, and
+// failed() tells which; with a short limit it returns false while the writer still works.
+TEST(Journal, WaitTakenReturnsOnceTheWriterHasFinishedWithEveryRecord) {
+  test::TempDir dir;
+  g_slow_writes = 0;
+  JournalOptions options;
+  options.write_call = &slow_then_full_write;
+  auto w = JournalWriter::open(dir.path() / "j", options);
+  ASSERT_TRUE(w.ok()) << w.status().message();
+  EXPECT_TRUE((*w)->wait_taken(std::chrono::milliseconds(0))) << "nothing appended: nothing to wait for";
+  ASSERT_TRUE((*w)->append(record(0)));
+  EXPECT_EQ((*w)->appended(), 1u);
+  EXPECT_FALSE((*w)->wait_taken(std::chrono::milliseconds(1))) << "the write takes 300 ms";
+  ASSERT_TRUE((*w)->wait_taken(std::chrono::seconds(30)));
+  EXPECT_EQ((*w)->taken(), 1u);
+  EXPECT_EQ((*w)->written(), 1u);
+  EXPECT_FALSE((*w)->failed());
+  ASSERT_TRUE((*w)->append(record(1)));
+  ASSERT_TRUE((*w)->append(record(2)));
+  ASSERT_TRUE((*w)->wait_taken(std::chrono::seconds(30)));
+  EXPECT_EQ((*w)->taken(), 3u);
+  EXPECT_TRUE((*w)->failed()) << "the second write failed, and the wait saw it";
+  EXPECT_EQ((*w)->written(), 1u);
+  EXPECT_EQ((*w)->lost(), 2u);
+  EXPECT_FALSE((*w)->close().ok());
+}
+
 TEST(Journal, ATornTailIsIgnoredAndIsNotDamage) {
   test::TempDir dir;
   const auto file = dir.path() / "cycles.journal";

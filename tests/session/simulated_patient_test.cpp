@@ -53,6 +53,12 @@ TEST(SimulatedPatient, RealisticPhysicsRendersWaterAndBoneFromLightFieldsBuiltOn
   ASSERT_TRUE(*from_fields);
   ASSERT_TRUE((*from_fields)->water_renderer && (*from_fields)->bone_renderer);
   EXPECT_FALSE((*from_fields)->attenuation_renderer) << "a spectrum images water and bone";
+  // The loop's patient renders the rest of each detector too, by Siddon (the fields cover the ROI).
+  ASSERT_TRUE((*from_fields)->surround_water && (*from_fields)->surround_bone);
+  EXPECT_EQ((*from_fields)->surround_water->name(), "siddon");
+  auto without = make_simulated_patient(*fields, fields->scene.sim.physics, 1, &pool);
+  ASSERT_TRUE(without.ok()) << without.status().message();
+  EXPECT_FALSE(without->surround_water || without->surround_bone) << "made only when asked for";
   const auto water = files_of(dir.path() / "sim-frames" / "water");
   const auto bone = files_of(dir.path() / "sim-frames" / "bone");
   EXPECT_EQ(water.size(), fields->scene.detectors.size()) << "one field per view";

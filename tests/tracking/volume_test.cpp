@@ -91,6 +91,34 @@ TEST(VolumeGeometry, ValidateRejectsEachBadClass) {
   }
 }
 
+TEST(BlockAveraged, MeansOverBlocksWithAirBeyondTheLastVoxelAndTheSameCorner) {
+  MuVolume mu;
+  mu.geometry = oblique_geometry();
+  mu.geometry.size = {5, 4, 3};
+  mu.values.resize(60);
+  for (std::size_t i = 0; i < mu.values.size(); ++i) mu.values[i] = 0.001f * float(i);
+  const MuVolume coarse = block_averaged(mu, {2, 2, 2});
+  EXPECT_EQ(coarse.geometry.size, Eigen::Vector3i(3, 2, 2));
+  EXPECT_TRUE(coarse.geometry.spacing_mm.isApprox(2 * mu.geometry.spacing_mm));
+  // Block (0,0,0)'s centre is the mean of its eight voxels' centres.
+  const Eigen::Vector3d centre = mu.geometry.ct_from_index() * Eigen::Vector3d(0.5, 0.5, 0.5);
+  EXPECT_LT((coarse.geometry.ct_from_index() * Eigen::Vector3d::Zero() - centre).norm(), 1e-9);
+  float block = 0;
+  for (int k = 0; k < 2; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) block += mu.at(i, j, k);
+  EXPECT_FLOAT_EQ(coarse.at(0, 0, 0), block / 8);
+  // The last block along i has one voxel of five: the other half is air.
+  EXPECT_FLOAT_EQ(coarse.at(2, 0, 0), (mu.at(4, 0, 0) + mu.at(4, 1, 0) + mu.at(4, 0, 1) + mu.at(4, 1, 1)) / 8);
+  // The integral of mu over the volume is kept.
+  double fine_sum = 0, coarse_sum = 0;
+  for (float v : mu.values) fine_sum += v;
+  for (float v : coarse.values) coarse_sum += 8.0 * v;
+  EXPECT_NEAR(coarse_sum, fine_sum, 1e-4);
+  EXPECT_TRUE(check_attenuation_volume(coarse).ok());
+  EXPECT_EQ(block_averaged(mu, {1, 1, 1}).values, mu.values) << "a factor of one is a copy";
+}
+
 TEST(Attenuation, FollowsTheDesignFormulaAndClampsAtZero) {
   CtVolume ct;
   ct.geometry.size = {4, 1, 1};

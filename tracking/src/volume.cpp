@@ -63,6 +63,26 @@ Status VolumeGeometry::validate() const {
   return {};
 }
 
+MuVolume block_averaged(const MuVolume& mu, const Eigen::Vector3i& factor) {
+  const Eigen::Vector3i f = factor.cwiseMax(1).cwiseMin(64);
+  const VolumeGeometry& g = mu.geometry;
+  MuVolume out;
+  out.geometry = g;
+  for (int a = 0; a < 3; ++a) {
+    out.geometry.size[a] = (g.size[a] + f[a] - 1) / f[a];
+    out.geometry.spacing_mm[a] = g.spacing_mm[a] * f[a];
+  }
+  // The first new voxel's centre: the old grid's corner plus half a new voxel.
+  const Eigen::Vector3d shift = 0.5 * (f.cast<double>() - Eigen::Vector3d::Ones()).cwiseProduct(g.spacing_mm);
+  out.geometry.origin_mm = g.origin_mm + g.direction * shift;
+  out.values.assign(std::size_t(out.geometry.voxel_count()), 0.f);
+  const float share = 1.f / float(f.x() * f.y() * f.z());
+  for (int k = 0; k < g.size.z(); ++k)
+    for (int j = 0; j < g.size.y(); ++j)
+      for (int i = 0; i < g.size.x(); ++i) out.at(i / f.x(), j / f.y(), k / f.z()) += share * mu.at(i, j, k);
+  return out;
+}
+
 MuVolume to_attenuation(const CtVolume& ct, double mu_water_per_mm) {
   MuVolume mu;
   mu.geometry = ct.geometry;

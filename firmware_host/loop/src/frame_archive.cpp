@@ -127,6 +127,16 @@ bool FrameArchive::append(std::int64_t pair_index, const drivers::FramePair& pai
   return true;
 }
 
+bool FrameArchive::wait_for_slot(std::chrono::nanoseconds limit) const {
+  if (closed_) return false;
+  const auto until = std::chrono::steady_clock::now() + limit;
+  while (free_.empty()) {
+    if (std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+  return true;
+}
+
 Status FrameArchive::write_slot(const Slot& slot) {
   char relative[256];
   char path[4096];

@@ -142,6 +142,16 @@ bool JournalWriter::append(const JournalRecord& record) {
     return false;
   }
   dropped_since_last_ = 0;
+  ++appended_;
+  return true;
+}
+
+bool JournalWriter::wait_taken(std::chrono::nanoseconds limit) const {
+  const auto until = std::chrono::steady_clock::now() + limit;
+  while (taken_.load(std::memory_order_acquire) < appended_) {
+    if (std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
   return true;
 }
 
@@ -172,6 +182,8 @@ void JournalWriter::run() {
         lost_ += n;
       }
     }
+    // After write_failed_: a waiter that sees the records taken sees the failure too.
+    if (n > 0) taken_.fetch_add(n, std::memory_order_release);
     const auto now = Clock::now();
     if (dirty && now - last_sync >= std::chrono::milliseconds(options_.fsync_interval_ms)) {
       ::fdatasync(fd_);

@@ -197,10 +197,22 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
   }
   m.parts.frames->request_exposure(start_ns);
   const char* ended = "cycle count reached";
+  bool wait_for_writers = true;  // simulated clock: below
   for (std::int64_t executed = 0; m.settings.cycles <= 0 || executed < m.settings.cycles; ++executed) {
     if (stop_.load(std::memory_order_relaxed)) {
       ended = "stop requested";
       break;
+    }
+    // On the simulated clock cycles follow each other without the period between them in
+    // which, on the real one, the journal's and the archive's writers catch up. The cycle waits
+    // for them instead: a disk that failed is seen at this cycle's gate, and no pair is dropped
+    // for want of a slot, whatever the writer threads' scheduling. A writer stuck on its disk for
+    // 10 s ends the waiting for the rest of the run (the queues then absorb it, as on the real
+    // clock), so a stalled disk slows a simulation once, not every cycle.
+    if (simulated && wait_for_writers) {
+      constexpr std::chrono::seconds kWriterWait{10};
+      wait_for_writers = (m.parts.journal == nullptr || m.parts.journal->wait_taken(kWriterWait)) &&
+                         (m.parts.archive == nullptr || m.parts.archive->wait_for_slot(kWriterWait));
     }
     std::int64_t wall_start = monotonic_now_ns();
     m.cycle_wall_start_ns = wall_start;

@@ -179,7 +179,12 @@ Result<drivers::ActuatorSpec> hil_actuator_spec(const PreparedScene& p, const Lo
     auto robot = sim::VirtualRobot::start(&parts->room->couch_device(), (*link)[1]);
     if (!robot.ok()) return robot.status();
     parts->robot = std::move(robot).value();
-    driver_spec = drivers::CanActuatorSpec{drivers::CanRobotOptions{}, (*link)[0]};
+    drivers::CanRobotOptions can_options;
+    // As the Modbus reply's budget above: on the simulated clock the heartbeat's wall-clock
+    // timeout only has to outlast a loaded host's scheduling of the robot's thread (0.3 s, six
+    // heartbeats, is the real clock's).
+    if (o.simulated_clock) can_options.heartbeat_timeout_s = 1.0;
+    driver_spec = drivers::CanActuatorSpec{can_options, (*link)[0]};
     endpoint = "CAN node 1 over a socket pair";
   }
   auto driver = drivers::make_actuator(std::move(driver_spec));

@@ -37,21 +37,16 @@ Status SimFrameSource::open(drivers::FramePair* pair) {
   if (thread_.joinable()) return failed_precondition("sim frames: already open");
   const std::size_t views = scene_.scene.detectors.size();
   pair->frames.assign(views, {});
-  synthesizers_.clear();
-  rendered_.clear();
+  SimDetectorsOptions detector_options;
+  detector_options.margin_px = options_.margin_px;
+  detector_options.whole_detector = options_.whole_detector;
+  auto detectors = SimDetectors::create(scene_, renderer_, patient_, model_, detector_options);
+  if (!detectors.ok()) return detectors.status().with_context("sim frames");
+  detectors_ = std::move(detectors).value();
+  rendered_ = detectors_->make_frames();
   for (std::size_t i = 0; i < views; ++i) {
     const auto& view = scene_.scene.detectors[i].view;
     pair->frames[i].pixels = tracking::Image<std::uint16_t>(view.rows, view.cols, 0);
-    rendered_.emplace_back(view.rows, view.cols, 0);
-    const tracking::PixelWindow window = sim_frame_window(scene_, int(i), options_.margin_px);
-    if (patient_) {  // realistic physics: the detector's own fixed pattern, lag kept between frames
-      auto s = sim::FrameSynthesizer::create(window, model_, scene_.scene.sim.physics, view.rows, view.cols,
-                                             0.5 * (view.pitch_col_mm + view.pitch_row_mm), i + 1);
-      if (!s.ok()) return s.status().with_context("sim frames, detector " + view.name);
-      synthesizers_.push_back(std::move(s).value());
-    } else {
-      synthesizers_.push_back(std::make_unique<sim::FrameSynthesizer>(window, model_));
-    }
   }
   stopping_ = false;
   has_pending_ = has_rendered_ = rendering_ = false;
@@ -104,14 +99,8 @@ void SimFrameSource::render_loop() {
       }
       job.pose = room_->true_T_room_from_ct();
     }
-    Status status;
-    for (std::size_t v = 0; v < synthesizers_.size() && status.ok(); ++v) {
-      const std::uint64_t seed = scene_.scene.sim.seed * 1000003ull + std::uint64_t(job.index) * 7919ull + v;
-      status = patient_ ? synthesizers_[v]->synthesize(patient_->renderers(), job.pose,
-                                                       scene_.scene.detectors[v].view, seed, rendered_[v].view())
-                        : synthesizers_[v]->synthesize(*renderer_, job.pose, scene_.scene.detectors[v].view, seed,
-                                                       rendered_[v].view());
-    }
+    Status status =
+        detectors_->expose(job.pose, scene_.scene.sim.seed * 1000003ull + std::uint64_t(job.index) * 7919ull, &rendered_);
     {
       std::lock_guard lock(mutex_);
       rendering_ = false;
@@ -144,7 +133,9 @@ DeviceStatus SimFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline
   if (!render_status_.ok()) return DeviceStatus::kFault;
   for (std::size_t v = 0; v < rendered_.size(); ++v) {
     drivers::Frame& frame = pair->frames[v];
-    const tracking::PixelWindow& w = synthesizers_[v]->window();
+    const tracking::PixelWindow w = detectors_->whole_detector()
+                                        ? tracking::PixelWindow::full(frame.pixels.rows(), frame.pixels.cols())
+                                        : detectors_->window(v);
     for (int r = w.row0; r < w.row0 + w.rows; ++r)
       std::memcpy(&frame.pixels.at(r, w.col0), &rendered_[v].at(r, w.col0),
                   sizeof(std::uint16_t) * std::size_t(w.cols));

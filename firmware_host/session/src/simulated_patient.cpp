@@ -4,6 +4,7 @@
 #include "lftrack/sim/anatomy_deformation.hpp"
 #include "lftrack/sim/material_decomposition.hpp"
 #include "lftrack/sim/sphere_markers.hpp"
+#include "lftrack/sim/surround_frames.hpp"
 
 namespace lftrack::host {
 
@@ -12,6 +13,14 @@ sim::PatientRenderers SimulatedPatient::renderers() const {
   r.attenuation = attenuation_renderer.get();
   r.water = water_renderer.get();
   r.bone = bone_renderer.get();
+  return r;
+}
+
+sim::PatientRenderers SimulatedPatient::surround_renderers() const {
+  sim::PatientRenderers r;
+  r.attenuation = surround_attenuation.get();
+  r.water = surround_water.get();
+  r.bone = surround_bone.get();
   return r;
 }
 
@@ -46,22 +55,25 @@ Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p, const
 Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool,
-                                                const std::filesystem::path* frame_fields_dir) {
+                                                const std::filesystem::path* frame_fields_dir, bool with_surround) {
   auto made = simulated_patient_volumes(p, physics, anatomy_seed, pool);
   if (!made.ok()) return made.status();
   SimulatedPatient patient = std::move(made).value();
-  // Volume `v` (called `name`) as Siddon renders it, or as its light fields do.
-  auto renderer = [&](std::shared_ptr<const tracking::MuVolume> v,
-                      const char* name) -> Result<std::shared_ptr<const tracking::DrrRenderer>> {
+  // Volume `v` (called `name`) as Siddon renders it, or (`from_fields`) as its light fields do;
+  // while `surround`, Siddon over its coarse copy (surround_frames.hpp).
+  bool surround = false;
+  auto renderer = [&](std::shared_ptr<const tracking::MuVolume> v, const char* name,
+                      bool from_fields) -> Result<std::shared_ptr<const tracking::DrrRenderer>> {
+    if (surround) v = std::make_shared<const tracking::MuVolume>(sim::surround_volume(*v));
     tracking::RendererOptions options;
     options.pool = render_pool;
-    if (frame_fields_dir != nullptr) {
+    if (from_fields) {
       options.light_field_mips = false;  // whole-detector frames: no coarse pixels to average
       auto fields = load_or_build_light_fields(p, *v, p.scene.sim.light_field, *frame_fields_dir / name, pool);
       if (!fields.ok()) return fields.status().with_context(std::string("the simulated patient's ") + name + " fields");
       options.light_fields = *fields;
     }
-    auto r = tracking::make_renderer(frame_fields_dir != nullptr ? "lightfield" : "siddon", std::move(v), options);
+    auto r = tracking::make_renderer(from_fields ? "lightfield" : "siddon", std::move(v), options);
     if (!r.ok()) return r.status();
     return std::shared_ptr<const tracking::DrrRenderer>(std::move(r).value());
   };
@@ -76,21 +88,33 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
   std::vector<sim::SphereMarker> markers;
   if (f.insert)
     for (const Eigen::Vector3d& c : f.positions_ct_mm) markers.push_back({c, f.radius_mm, marker_value_per_mm});
-  if (patient.attenuation) {
-    auto r = renderer(patient.attenuation, "attenuation");
-    if (!r.ok()) return r.status();
-    auto with = sim::with_sphere_markers(*r, markers);
-    if (!with.ok()) return with.status().with_context("the simulated patient's markers");
-    patient.attenuation_renderer = *with;
-  } else {
-    auto w = renderer(patient.water, "water");
+  // The frames' renderers (fields: from light fields), the marked volume's with the markers.
+  auto set = [&](bool fields, std::shared_ptr<const tracking::DrrRenderer>* attenuation,
+                 std::shared_ptr<const tracking::DrrRenderer>* water,
+                 std::shared_ptr<const tracking::DrrRenderer>* bone) -> Status {
+    if (patient.attenuation) {
+      auto r = renderer(patient.attenuation, "attenuation", fields);
+      if (!r.ok()) return r.status();
+      auto with = sim::with_sphere_markers(*r, markers);
+      if (!with.ok()) return with.status().with_context("the simulated patient's markers");
+      *attenuation = *with;
+      return {};
+    }
+    auto w = renderer(patient.water, "water", fields);
     if (!w.ok()) return w.status();
-    auto b = renderer(patient.bone, "bone");
+    auto b = renderer(patient.bone, "bone", fields);
     if (!b.ok()) return b.status();
     auto with = sim::with_sphere_markers(*b, markers);
     if (!with.ok()) return with.status().with_context("the simulated patient's markers");
-    patient.water_renderer = *w;
-    patient.bone_renderer = *with;
+    *water = *w;
+    *bone = *with;
+    return {};
+  };
+  LFTRACK_RETURN_IF_ERROR(
+      set(frame_fields_dir != nullptr, &patient.attenuation_renderer, &patient.water_renderer, &patient.bone_renderer));
+  if (with_surround) {
+    surround = true;
+    LFTRACK_RETURN_IF_ERROR(set(false, &patient.surround_attenuation, &patient.surround_water, &patient.surround_bone));
   }
   return patient;
 }
@@ -106,7 +130,7 @@ Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const Prepare
   if (physics.ideal()) return std::shared_ptr<const SimulatedPatient>();
   const std::filesystem::path fields = sim_frame_fields_dir(p, light_field_dir);
   auto patient = make_simulated_patient(p, physics, scene_anatomy_seed(p), pool, nullptr,
-                                        p.scene.sim.renderer == "lightfield" ? &fields : nullptr);
+                                        p.scene.sim.renderer == "lightfield" ? &fields : nullptr, true);
   if (!patient.ok()) return patient.status();
   return std::make_shared<const SimulatedPatient>(std::move(patient).value());
 }

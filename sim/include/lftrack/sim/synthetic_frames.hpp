@@ -53,6 +53,21 @@ struct DetectorModel {
 // What preprocess_frame() needs to undo the model: I0 in counts and the saturation level.
 tracking::DetectorCorrection detector_correction(const DetectorModel& model);
 
+// Photons in (0, 1e9], an open-field fraction in (0, 1e6], 8 to 16 bits.
+Status check_detector_model(const DetectorModel& model);
+
+// The effects of detector number `detector_seed` (each its own fixed pattern) from the scene's.
+DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std::uint64_t detector_seed);
+
+class PolyenergeticTable;
+// Per pixel, the primary's transmission and the ray's water-equivalent thickness (cm): with a
+// spectrum (`table`) from the water and bone mass thicknesses, else from the attenuation line
+// integral in `line` (bone unused). The frame synthesizer's window and the surround's coarse
+// grid both use it, so that the two meet at the same levels.
+void primary_and_thickness(const PolyenergeticTable* table, tracking::ImageView<const float> line,
+                           tracking::ImageView<const float> bone, tracking::ImageView<float> primary,
+                           tracking::ImageView<float> thickness_cm);
+
 // Renders `window` of `view` with `exact` at `gold` and returns a whole-detector frame of raw
 // counts; pixels outside the window are left at 0 (unexposed, which preprocessing masks).
 // Same seed, same frame.

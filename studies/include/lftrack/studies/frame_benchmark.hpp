@@ -5,7 +5,8 @@
 // detector's fixed pattern), one thread (the detectors' render thread), both views one after the
 // other. Speed is the time of a whole pair; fidelity is each light-field frame's expected counts
 // (no photon noise) against Siddon's at the same pose, over the ROI window, each exposed as the
-// loop exposes it.
+// loop exposes it. Each pair is timed twice, side by side: the ROI windows alone, and the whole
+// detectors the loop now exposes (the rest of each detector rendered coarser, by Siddon).
 
 #include <cstdint>
 #include <filesystem>
@@ -35,6 +36,11 @@ struct FrameRendererFigures {
   double pair_ms_median = 0;    // one frame pair, both views
   double pair_ms_p95 = 0;
   double pair_ms_min = 0;
+  // The whole detectors as the loop exposes them: the windows above and the rest of each
+  // detector, coarser (surround_frames.hpp); pixels written per pair, and the pair's time.
+  std::int64_t whole_detector_pixels = 0;
+  double whole_pair_ms_median = 0;
+  double whole_pair_ms_p95 = 0;
   double speedup_vs_siddon = 0; // Siddon's median pair time / this one's
   // Expected counts over the ROI windows against Siddon's, each as the loop exposes them (its
   // margin: scatter and glare see the exposed window); mean over poses and views, and the worst

@@ -64,6 +64,9 @@ struct PixelWindow {
     return row0 >= 0 && col0 >= 0 && rows > 0 && cols > 0 && row0 + rows <= detector_rows &&
            col0 + cols <= detector_cols;
   }
+  bool contains(int row, int col) const {
+    return row >= row0 && row < row0 + rows && col >= col0 && col < col0 + cols;
+  }
 };
 
 }  // namespace lftrack::tracking

@@ -74,6 +74,13 @@ inline constexpr double kDefaultMuWaterPerMm = 0.0193;
 // readers refuse them; this is the last line of defence) gives mu = 0, so no NaN reaches a DRR.
 MuVolume to_attenuation(const CtVolume& ct, double mu_water_per_mm = kDefaultMuWaterPerMm);
 
+// The volume on a grid `factor` times coarser along each axis (each factor 1..64): each new voxel
+// is the mean of the factor.x x factor.y x factor.z voxels it covers, voxels beyond the last
+// counting as air (0), so that line integrals through it keep their value on average. The new
+// grid starts at the same corner as the old; for a ray caster drawing a coarse image, where the
+// volume's own voxels are much finer than the image's pixels.
+MuVolume block_averaged(const MuVolume& mu, const Eigen::Vector3i& factor);
+
 // Checks what every renderer and light-field build needs of an attenuation volume: a valid
 // geometry, as many values as voxels, and every value finite and >= 0.
 Status check_attenuation_volume(const MuVolume& mu);

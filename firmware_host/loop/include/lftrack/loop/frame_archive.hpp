@@ -11,6 +11,7 @@
 // frame is whole (a torn last index line is ignored by the reader).
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -51,6 +52,11 @@ class FrameArchive {
   // counts the pair dropped, when no slot is free.
   bool append(std::int64_t pair_index, const drivers::FramePair& pair,
               const tracking::Vector6d* actuator_travel = nullptr);
+  // Waits (polling, allocating nothing) until a slot is free for the next append, or `limit` has
+  // passed; returns whether one is. The simulated clock calls it before each cycle: there the
+  // cycles come without the period in which the writer empties slots on the real one, and a
+  // starved writer must not cost the archive pairs that the real clock would have kept.
+  bool wait_for_slot(std::chrono::nanoseconds limit) const;
   // Writes what is queued and closes the index. Called by the destructor too.
   Status close();
   std::uint64_t pairs_written() const { return written_.load(); }

@@ -24,6 +24,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -124,6 +125,15 @@ class JournalWriter {
   // Drains the queue, syncs and closes. Called by the destructor too.
   Status close();
   std::uint64_t written() const { return written_.load(); }
+  // Records the queue accepted (append returned true), and records the writer has taken from
+  // it and finished with (written, or lost after a failure). Both from the cycle's thread.
+  std::uint64_t appended() const { return appended_; }
+  std::uint64_t taken() const { return taken_.load(std::memory_order_acquire); }
+  // Waits (polling, allocating nothing) until the writer has finished with every record
+  // appended so far, or `limit` has passed; returns whether it has. Once it has, failed() says
+  // whether any of them failed. The simulated clock calls it before each cycle, so that a disk
+  // that fills up is seen at the next cycle's gate however the writer thread was scheduled.
+  bool wait_taken(std::chrono::nanoseconds limit) const;
   const std::filesystem::path& path() const { return path_; }
   // True once a write has failed (disk full, I/O error). The writer then truncates the file to
   // its last complete record and writes nothing more, so everything written before stays
@@ -143,6 +153,8 @@ class JournalWriter {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> written_{0};
+  std::uint64_t appended_ = 0;
+  std::atomic<std::uint64_t> taken_{0};
   std::atomic<bool> write_failed_{false};
   std::atomic<std::uint64_t> lost_{0};
   off_t good_bytes_ = 0;  // the file's length up to the last complete write

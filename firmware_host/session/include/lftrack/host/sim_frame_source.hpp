@@ -1,7 +1,8 @@
 #pragma once
 // The simulator's detectors: a FrameSource whose frames show the simulated room's anatomy at the
-// requested exposure time (true pose from the room, rendered by the scene's sim renderer, with
-// photon noise, detector blur and quantisation).
+// requested exposure time (true pose from the room; SimDetectors: each ROI window rendered by the
+// scene's sim renderer with photon noise, detector blur and quantisation, the rest of the
+// detector coarser).
 //
 // Rendering runs on a thread of its own, started by request_exposure() (on the loop's thread,
 // which reads the room's true pose then) and collected by acquire(), so frame k+1 renders while
@@ -16,11 +17,13 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
 #include "lftrack/drivers/frame_source.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/sim_detectors.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
@@ -32,6 +35,9 @@ struct SimFrameSourceOptions {
   // nothing about the wall clock); otherwise acquire() gives up at its deadline.
   bool wait_for_frames = false;
   int margin_px = 16;  // exposed border around each ROI window (0 for light-field frames)
+  // The rest of each detector too, coarser, as a real panel reads out every pixel; false leaves
+  // it at 0 (unexposed).
+  bool whole_detector = true;
   // Fault injection: exposures whose index is in [drop_from, drop_to) never arrive (kTimeout).
   std::int64_t drop_from = -1, drop_to = -1;
   double skew_ms = 0;  // added to the second view's timestamp
@@ -72,8 +78,8 @@ class SimFrameSource final : public drivers::FrameSource {
   sim::SimulatedRoom* room_;
   SimFrameSourceOptions options_;
   sim::DetectorModel model_;
-  std::vector<std::unique_ptr<sim::FrameSynthesizer>> synthesizers_;  // per view
-  std::vector<tracking::Image<std::uint16_t>> rendered_;              // per view, whole detector
+  std::optional<SimDetectors> detectors_;
+  std::vector<tracking::Image<std::uint16_t>> rendered_;  // per view, whole detector
 
   std::thread thread_;
   std::mutex mutex_;

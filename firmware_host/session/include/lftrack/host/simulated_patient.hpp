@@ -20,7 +20,12 @@ struct SimulatedPatient {
   // Set: attenuation (mono-energetic frames), or water and bone (a spectrum).
   std::shared_ptr<const tracking::MuVolume> attenuation, water, bone;
   std::shared_ptr<const tracking::DrrRenderer> attenuation_renderer, water_renderer, bone_renderer;
+  // The same volumes (block-averaged: sim::surround_volume) and markers by Siddon, for the
+  // detector outside the ROI windows (surround_frames.hpp), which light fields made for the
+  // windows do not cover. Made only when asked for (make_simulated_patient's `with_surround`).
+  std::shared_ptr<const tracking::DrrRenderer> surround_attenuation, surround_water, surround_bone;
   sim::PatientRenderers renderers() const;
+  sim::PatientRenderers surround_renderers() const;
 };
 
 // The patient's volumes for `physics` with anatomy draw `anatomy_seed` (attenuation, or with a
@@ -33,11 +38,12 @@ Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& scene, c
 // spheres: Siddon, rendering on `render_pool` (null: the caller's thread); or with
 // `frame_fields_dir` light fields of the scene's sim.light_field, one per view and volume in
 // <frame_fields_dir>/<volume> (attenuation, water, bone), loaded where up to date and built (and
-// saved) where not.
+// saved) where not. `with_surround`: the surround renderers too, for whole-detector frames.
 Result<SimulatedPatient> make_simulated_patient(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool = nullptr,
-                                                const std::filesystem::path* frame_fields_dir = nullptr);
+                                                const std::filesystem::path* frame_fields_dir = nullptr,
+                                                bool with_surround = false);
 
 // The scene's own patient's anatomy draw: sim.physics.anatomy.seed (1 without anatomy).
 std::uint64_t scene_anatomy_seed(const PreparedScene& scene);
