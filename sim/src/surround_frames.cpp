@@ -128,20 +128,9 @@ Status SurroundSynthesizer::synthesize(const PatientRenderers& exact, const Pose
   geometry_.rows = view.rows;
   geometry_.cols = view.cols;
   const XrayView coarse = geometry_.resampled(0, 0, rows_, cols_, cr, cc);
-  const PixelWindow all{0, 0, cr, cc};
-  if (table_) {
-    LFTRACK_RETURN_IF_ERROR(exact.water->render(gold, coarse, all, line_integral_.view()));
-    LFTRACK_RETURN_IF_ERROR(exact.bone->render(gold, coarse, all, bone_integral_.view()));
-  } else {
-    LFTRACK_RETURN_IF_ERROR(exact.attenuation->render(gold, coarse, all, line_integral_.view()));
-  }
-  primary_and_thickness(table_ ? &*table_ : nullptr, line_integral_.view(), bone_integral_.view(), primary_.view(),
-                        thickness_cm_.view());
-  if (scatter_) {
-    LFTRACK_RETURN_IF_ERROR(scatter_->add_scatter(primary_.view(), thickness_cm_.view(), total_.view()));
-  } else {
-    total_.pixels() = primary_.pixels();
-  }
+  LFTRACK_RETURN_IF_ERROR(transmitted_signal(
+      exact, table_ ? &*table_ : nullptr, scatter_.get(), gold, coarse, PixelWindow{0, 0, cr, cc},
+      {line_integral_.view(), bone_integral_.view(), primary_.view(), thickness_cm_.view(), total_.view()}));
   // The same photon and count levels as the window's (FrameSynthesizer::synthesize): the ideal
   // model has no grid; physics scales by the grid's primary transmission.
   const double photons_open = model_.photons_per_pixel * (scatter_ ? scatter_->photon_fraction() : 1.0);

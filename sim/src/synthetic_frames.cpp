@@ -39,21 +39,31 @@ DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std:
   return e;
 }
 
-void primary_and_thickness(const PolyenergeticTable* table, ImageView<const float> line, ImageView<const float> bone,
-                           ImageView<float> primary, ImageView<float> thickness_cm) {
+Status transmitted_signal(const PatientRenderers& patient, const PolyenergeticTable* table, ScatterModel* scatter,
+                          const Pose& gold, const XrayView& view, const PixelWindow& window, const SignalBuffers& b) {
+  if (table != nullptr) {
+    LFTRACK_RETURN_IF_ERROR(patient.water->render(gold, view, window, b.line));
+    LFTRACK_RETURN_IF_ERROR(patient.bone->render(gold, view, window, b.bone));
+  } else {
+    LFTRACK_RETURN_IF_ERROR(patient.attenuation->render(gold, view, window, b.line));
+  }
   const double mu_water_per_cm = 10 * kDefaultMuWaterPerMm;
-  for (int r = 0; r < line.rows; ++r)
-    for (int c = 0; c < line.cols; ++c) {
+  for (int r = 0; r < window.rows; ++r)
+    for (int c = 0; c < window.cols; ++c) {
       if (table != nullptr) {
-        const float w = line.at(r, c), b = bone.at(r, c);
-        primary.at(r, c) = float(std::exp(-double(table->log_attenuation(w, b))));
-        thickness_cm.at(r, c) = std::max(0.f, w) + std::max(0.f, b);  // g/cm^2 ~ cm of water
+        const float w = b.line.at(r, c), bone = b.bone.at(r, c);
+        b.primary.at(r, c) = float(std::exp(-double(table->log_attenuation(w, bone))));
+        b.thickness_cm.at(r, c) = std::max(0.f, w) + std::max(0.f, bone);  // g/cm^2 ~ cm of water
       } else {
-        const double p = line.at(r, c);
-        primary.at(r, c) = float(std::exp(-p));
-        thickness_cm.at(r, c) = float(std::max(0.0, p) / mu_water_per_cm);
+        const double p = b.line.at(r, c);
+        b.primary.at(r, c) = float(std::exp(-p));
+        b.thickness_cm.at(r, c) = float(std::max(0.0, p) / mu_water_per_cm);
       }
     }
+  if (scatter != nullptr) return scatter->add_scatter(b.primary, b.thickness_cm, b.total);
+  for (int r = 0; r < window.rows; ++r)
+    for (int c = 0; c < window.cols; ++c) b.total.at(r, c) = b.primary.at(r, c);
+  return {};
 }
 
 FrameSynthesizer::FrameSynthesizer(const PixelWindow& window, const DetectorModel& model)
@@ -145,20 +155,10 @@ Status FrameSynthesizer::synthesize(const PatientRenderers& patient, const Pose&
             std::lround(blurred_.at(r, c) * counts_per_photon), 0L, long(correction.saturation_counts)));
     return {};
   }
-  // The primary's transmission and each ray's water-equivalent thickness (cm).
-  if (table_) {
-    LFTRACK_RETURN_IF_ERROR(patient.water->render(gold, view, window_, line_integral_.view()));
-    LFTRACK_RETURN_IF_ERROR(patient.bone->render(gold, view, window_, bone_integral_.view()));
-  } else {
-    LFTRACK_RETURN_IF_ERROR(patient.attenuation->render(gold, view, window_, line_integral_.view()));
-  }
-  primary_and_thickness(table_ ? &*table_ : nullptr, line_integral_.view(), bone_integral_.view(), primary_.view(),
-                        thickness_cm_.view());
-  if (scatter_) {
-    LFTRACK_RETURN_IF_ERROR(scatter_->add_scatter(primary_.view(), thickness_cm_.view(), total_.view()));
-  } else {
-    total_.pixels() = primary_.pixels();
-  }
+  // The primary's transmission, each ray's water-equivalent thickness (cm), the scatter.
+  LFTRACK_RETURN_IF_ERROR(transmitted_signal(
+      patient, table_ ? &*table_ : nullptr, scatter_.get(), gold, view, window_,
+      {line_integral_.view(), bone_integral_.view(), primary_.view(), thickness_cm_.view(), total_.view()}));
   // Photons reaching the detector: the heel's intensity, the grid's share.
   const double photon_fraction = scatter_ ? scatter_->photon_fraction() : 1.0;
   const double photons_open = model_.photons_per_pixel * photon_fraction;

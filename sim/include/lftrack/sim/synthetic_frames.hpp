@@ -59,14 +59,22 @@ Status check_detector_model(const DetectorModel& model);
 // The effects of detector number `detector_seed` (each its own fixed pattern) from the scene's.
 DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std::uint64_t detector_seed);
 
+struct PatientRenderers;
 class PolyenergeticTable;
-// Per pixel, the primary's transmission and the ray's water-equivalent thickness (cm): with a
-// spectrum (`table`) from the water and bone mass thicknesses, else from the attenuation line
-// integral in `line` (bone unused). The frame synthesizer's window and the surround's coarse
-// grid both use it, so that the two meet at the same levels.
-void primary_and_thickness(const PolyenergeticTable* table, tracking::ImageView<const float> line,
-                           tracking::ImageView<const float> bone, tracking::ImageView<float> primary,
-                           tracking::ImageView<float> thickness_cm);
+class ScatterModel;
+// Images of one window's size for transmitted_signal().
+struct SignalBuffers {
+  tracking::ImageView<float> line, bone, primary, thickness_cm, total;
+};
+// The signal relative to the open field (1 = open) at each pixel of `window` of `view`: the line
+// integrals by `patient`'s renderers (with a spectrum, `table`, the water and bone mass
+// thicknesses into line and bone; else the attenuation into line), the primary's transmission
+// and the ray's water-equivalent thickness (cm), then `scatter` on top where set, into total.
+// The frame synthesizer's window and the surround's coarse grid both use it, so that the two
+// meet at the same levels. Allocates nothing.
+Status transmitted_signal(const PatientRenderers& patient, const PolyenergeticTable* table, ScatterModel* scatter,
+                          const tracking::Pose& gold_T_room_from_ct, const tracking::XrayView& view,
+                          const tracking::PixelWindow& window, const SignalBuffers& buffers);
 
 // Renders `window` of `view` with `exact` at `gold` and returns a whole-detector frame of raw
 // counts; pixels outside the window are left at 0 (unexposed, which preprocessing masks).
