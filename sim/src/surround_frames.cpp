@@ -84,9 +84,7 @@ Result<std::unique_ptr<SurroundSynthesizer>> SurroundSynthesizer::create(const P
   s->thickness_cm_ = Image<float>(cr, cc);
   s->total_ = Image<float>(cr, cc);
   if (physics.spectrum) {
-    auto spectrum = make_spectrum(physics.spectrum->spectrum);
-    if (!spectrum.ok()) return spectrum.status();
-    auto table = PolyenergeticTable::create(*spectrum);
+    auto table = beam_attenuation_table(*physics.spectrum);
     if (!table.ok()) return table.status();
     s->table_ = std::move(table).value();
     s->bone_integral_ = Image<float>(cr, cc);

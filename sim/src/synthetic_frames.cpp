@@ -39,6 +39,12 @@ DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std:
   return e;
 }
 
+Result<PolyenergeticTable> beam_attenuation_table(const BeamSpec& beam) {
+  auto spectrum = make_spectrum(beam.spectrum);
+  if (!spectrum.ok()) return spectrum.status();
+  return PolyenergeticTable::create(*spectrum);
+}
+
 Status transmitted_signal(const PatientRenderers& patient, const PolyenergeticTable* table, ScatterModel* scatter,
                           const Pose& gold, const XrayView& view, const PixelWindow& window, const SignalBuffers& b) {
   if (table != nullptr) {
@@ -93,9 +99,7 @@ Result<std::unique_ptr<FrameSynthesizer>> FrameSynthesizer::create(const PixelWi
   auto s = std::make_unique<FrameSynthesizer>(window, model);
   const int wr = window.rows, wc = window.cols;
   if (physics.spectrum) {
-    auto spectrum = make_spectrum(physics.spectrum->spectrum);
-    if (!spectrum.ok()) return spectrum.status();
-    auto table = PolyenergeticTable::create(*spectrum);
+    auto table = beam_attenuation_table(*physics.spectrum);
     if (!table.ok()) return table.status();
     s->table_ = std::move(table).value();
     s->bone_integral_ = Image<float>(wr, wc);

@@ -59,8 +59,10 @@ Status check_detector_model(const DetectorModel& model);
 // The effects of detector number `detector_seed` (each its own fixed pattern) from the scene's.
 DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std::uint64_t detector_seed);
 
+// The attenuation table of `beam`'s spectrum (make_spectrum, PolyenergeticTable::create).
+Result<PolyenergeticTable> beam_attenuation_table(const BeamSpec& beam);
+
 struct PatientRenderers;
-class PolyenergeticTable;
 class ScatterModel;
 // Images of one window's size for transmitted_signal().
 struct SignalBuffers {
