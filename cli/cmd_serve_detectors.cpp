@@ -60,7 +60,7 @@ class DetectorRoom {
     r->room_ = std::make_unique<sim::SimulatedRoom>(room);
     SimFrameSourceOptions frames;
     frames.wait_for_frames = false;
-    frames.margin_px = sim_frame_margin_px(p);
+    frames.detectors.margin_px = sim_frame_margin_px(p);
     r->frames_ = std::make_unique<SimFrameSource>(p, r->renderer_, r->room_.get(), frames, *patient);
     LFTRACK_RETURN_IF_ERROR(r->frames_->open(&r->pair_));
     return r;

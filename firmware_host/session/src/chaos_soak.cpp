@@ -337,7 +337,7 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
     // The invariants read the ROI windows, the gate and the journal, never the rest of a
     // detector: frames of the windows alone (the rest of the built-in detectors costs about
     // 4 ms a pair, 80 s of a 20,000-cycle soak).
-    so.frames.whole_detector = false;
+    so.frames.detectors.whole_detector = false;
     chaos::set_disk_full(false);
 
     // The wrappers are made when the session asks for them (it builds the devices they wrap);

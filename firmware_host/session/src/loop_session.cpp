@@ -149,7 +149,7 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
     parts->room = std::move(room).value();
     SimFrameSourceOptions frame_options = o.frames;
     frame_options.wait_for_frames = o.simulated_clock;
-    frame_options.margin_px = sim_frame_margin_px(p);
+    frame_options.detectors.margin_px = sim_frame_margin_px(p);
     return std::unique_ptr<drivers::FrameSource>(
         new SimFrameSource(p, parts->frame_renderer, parts->room.get(), frame_options, *patient));
   };

@@ -37,10 +37,7 @@ Status SimFrameSource::open(drivers::FramePair* pair) {
   if (thread_.joinable()) return failed_precondition("sim frames: already open");
   const std::size_t views = scene_.scene.detectors.size();
   pair->frames.assign(views, {});
-  SimDetectorsOptions detector_options;
-  detector_options.margin_px = options_.margin_px;
-  detector_options.whole_detector = options_.whole_detector;
-  auto detectors = SimDetectors::create(scene_, renderer_, patient_, model_, detector_options);
+  auto detectors = SimDetectors::create(scene_, renderer_, patient_, model_, options_.detectors);
   if (!detectors.ok()) return detectors.status().with_context("sim frames");
   detectors_ = std::move(detectors).value();
   rendered_ = detectors_->make_frames();

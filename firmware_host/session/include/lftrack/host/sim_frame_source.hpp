@@ -34,10 +34,9 @@ struct SimFrameSourceOptions {
   // Wait for each frame however long it takes (a loop on a simulated clock, whose deadlines say
   // nothing about the wall clock); otherwise acquire() gives up at its deadline.
   bool wait_for_frames = false;
-  int margin_px = 16;  // exposed border around each ROI window (0 for light-field frames)
-  // The rest of each detector too, coarser, as a real panel reads out every pixel; false leaves
-  // it at 0 (unexposed).
-  bool whole_detector = true;
+  // The ROI windows' margin (0 for light-field frames) and whether the rest of each detector is
+  // exposed too.
+  SimDetectorsOptions detectors;
   // Fault injection: exposures whose index is in [drop_from, drop_to) never arrive (kTimeout).
   std::int64_t drop_from = -1, drop_to = -1;
   double skew_ms = 0;  // added to the second view's timestamp
