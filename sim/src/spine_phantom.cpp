@@ -251,7 +251,7 @@ double hashed_gaussian(std::uint64_t seed, std::uint64_t key) {
 
 }  // namespace
 
-Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& o, tracking::ThreadPool* pool) {
+Result<SpinePhantom> spine_phantom_layout(const SpinePhantomOptions& o) {
   tracking::VolumeGeometry g;
   g.size = o.size;
   g.spacing_mm = o.spacing_mm;
@@ -264,8 +264,16 @@ Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& o, tracking::
   const Anatomy anatomy = make_anatomy(o, g);
   for (const Vertebra& v : anatomy.vertebrae) phantom.vertebral_body_centres_mm.push_back(v.body_centre);
   phantom.target_vertebra = static_cast<int>(anatomy.vertebrae.size()) / 2;
-
   phantom.ct.geometry = g;
+  return phantom;
+}
+
+Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& o, tracking::ThreadPool* pool) {
+  auto layout = spine_phantom_layout(o);
+  if (!layout.ok()) return layout.status();
+  SpinePhantom phantom = std::move(layout).value();
+  const tracking::VolumeGeometry& g = phantom.ct.geometry;
+  const Anatomy anatomy = make_anatomy(o, g);
   phantom.ct.values.resize(static_cast<std::size_t>(g.voxel_count()));
   const double vox = g.spacing_mm.minCoeff();
   auto slices = [&](int k_begin, int k_end) {

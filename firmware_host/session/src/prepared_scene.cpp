@@ -4,6 +4,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "lftrack/host/phantom_cache.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
@@ -84,7 +85,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   if (out.scene.ct.is_builtin_phantom()) {
     sim::SpinePhantomOptions options;
     options.seed = out.scene.ct.phantom_seed;
-    auto phantom = sim::make_spine_phantom(options, pool);
+    auto phantom = cached_spine_phantom(options, cache_dir_from_environment(), pool);
     if (!phantom.ok()) return phantom.status();
     phantom_target = phantom->vertebral_body_centres_mm[static_cast<std::size_t>(phantom->target_vertebra)];
     out.ct = std::make_shared<const tracking::CtVolume>(std::move(phantom->ct));

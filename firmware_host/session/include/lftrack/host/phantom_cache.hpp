@@ -1,0 +1,55 @@
+#pragma once
+// The built-in phantom's CT, generated once per program build and kept in a cache folder.
+//
+// The phantom (sim::make_spine_phantom) is 26 million voxels of analytic anatomy and noise: about
+// 3 s of CPU, the largest part of every short `lftrack sim` and of every closed-loop test. It is
+// a pure function of its options and of the code that draws it, so a copy made by the same build
+// of the same program can stand for it. A cached copy is used only when
+//   - the folder is given (cached_spine_phantom's `dir`, or LFTRACK_CACHE_DIR for the program),
+//   - its file names the same options and the same program build (the ELF build ID of the running
+//     executable, which changes with any change of the code linked into it), and
+//   - its header repeats both and its voxels pass their CRC-32.
+// Anything else (no build ID, a damaged, truncated or foreign file, a folder that cannot be read
+// or written) falls back to generating the phantom, which is always correct; the cache never fails
+// a run. A new copy is written to a temporary file and renamed into place, so processes sharing
+// the folder see a whole file or none. Files are never pruned: delete the folder at any time.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/tracking/status.hpp"
+
+namespace lftrack::tracking {
+class ThreadPool;
+}
+
+namespace lftrack::host {
+
+// The environment variable naming the program's cache folder (unset or empty: no cache). The
+// test suite sets it for every test (tests/CMakeLists.txt), so its processes share one phantom.
+inline constexpr const char* kCacheDirVariable = "LFTRACK_CACHE_DIR";
+
+// The running executable's GNU build ID in hex, or nothing when the linker wrote none.
+std::optional<std::string> program_build_id();
+
+// What happened to the cache in one call, for the log and the tests.
+enum class PhantomCacheUse {
+  kOff,        // no folder, or no build ID: generated
+  kLoaded,     // read from the folder
+  kGenerated,  // not in the folder (or not usable): generated and written there
+  kUnwritten,  // generated, and the folder would not take the copy (logged once per call)
+};
+
+// The phantom for `options`: from `dir` when it holds this build's copy, else generated (with
+// `pool`) and written there. An empty `dir` turns the cache off. Fails only as
+// sim::make_spine_phantom fails (invalid options). `use`, if given, says which path was taken.
+Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& options,
+                                               const std::filesystem::path& dir, tracking::ThreadPool* pool,
+                                               PhantomCacheUse* use = nullptr);
+
+// The folder LFTRACK_CACHE_DIR names, or an empty path.
+std::filesystem::path cache_dir_from_environment();
+
+}  // namespace lftrack::host

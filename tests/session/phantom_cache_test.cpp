@@ -1,0 +1,157 @@
+// The built-in phantom's cache (host/phantom_cache.hpp): a copy is used only when it is this
+// build's copy of the same phantom, bit for bit; anything else is made anew, and the cache never
+// fails a run.
+
+#include "lftrack/host/phantom_cache.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::host {
+namespace {
+
+namespace fs = std::filesystem;
+
+sim::SpinePhantomOptions small() {
+  sim::SpinePhantomOptions o;
+  o.size = {128, 128, 40};
+  o.spacing_mm = {2.0, 2.0, 2.0};
+  o.centre_mm = {0, 20, -350};
+  return o;
+}
+
+class PhantomCache : public ::testing::Test {
+ protected:
+  // The phantom from the cache folder, with which path the call took.
+  sim::SpinePhantom cached(const sim::SpinePhantomOptions& o, PhantomCacheUse expected_use) {
+    PhantomCacheUse use = PhantomCacheUse::kOff;
+    auto p = cached_spine_phantom(o, dir_.path() / "cache", &pool_, &use);
+    EXPECT_TRUE(p.ok()) << p.status().message();
+    EXPECT_EQ(use, expected_use);
+    return p.ok() ? *std::move(p) : sim::SpinePhantom{};
+  }
+  void expect_same(const sim::SpinePhantom& a, const sim::SpinePhantom& b) {
+    EXPECT_TRUE(a.ct.values == b.ct.values) << "the voxels differ";
+    EXPECT_EQ(a.ct.geometry.size, b.ct.geometry.size);
+    EXPECT_EQ(a.ct.geometry.origin_mm, b.ct.geometry.origin_mm);
+    EXPECT_EQ(a.ct.geometry.spacing_mm, b.ct.geometry.spacing_mm);
+    EXPECT_EQ(a.vertebral_body_centres_mm, b.vertebral_body_centres_mm);
+    EXPECT_EQ(a.target_vertebra, b.target_vertebra);
+  }
+  // The one file in the cache folder.
+  fs::path the_file() {
+    std::vector<fs::path> files;
+    for (const auto& e : fs::directory_iterator(dir_.path() / "cache")) files.push_back(e.path());
+    EXPECT_EQ(files.size(), 1u);
+    return files.empty() ? fs::path() : files.front();
+  }
+  void overwrite_at(const fs::path& file, std::streamoff at, const std::string& bytes) {
+    std::fstream f(file, std::ios::binary | std::ios::in | std::ios::out);
+    f.seekp(at);
+    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  }
+
+  tracking::ThreadPool pool_{2};
+  test::TempDir dir_;
+};
+
+TEST(ProgramBuildId, TheTestProgramHasOne) {
+  const auto id = program_build_id();
+  ASSERT_TRUE(id.has_value()) << "linked without --build-id: the cache would be off";
+  EXPECT_GE(id->size(), 16u);
+  EXPECT_EQ(id->find_first_not_of("0123456789abcdef"), std::string::npos) << *id;
+  EXPECT_EQ(program_build_id(), id);
+}
+
+TEST(SpinePhantomLayout, IsTheGeneratedPhantomWithoutItsVoxels) {
+  auto layout = sim::spine_phantom_layout(small());
+  auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(layout.ok() && made.ok());
+  EXPECT_TRUE(layout->ct.values.empty());
+  EXPECT_EQ(layout->ct.geometry.origin_mm, made->ct.geometry.origin_mm);
+  EXPECT_EQ(layout->vertebral_body_centres_mm, made->vertebral_body_centres_mm);
+  EXPECT_EQ(layout->target_vertebra, made->target_vertebra);
+  sim::SpinePhantomOptions tiny = small();
+  tiny.size = {10, 10, 10};
+  EXPECT_FALSE(sim::spine_phantom_layout(tiny).ok());
+}
+
+TEST_F(PhantomCache, TheSecondCallReadsBackTheFirstCallsPhantomBitForBit) {
+  const auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(made.ok());
+  const sim::SpinePhantom first = cached(small(), PhantomCacheUse::kGenerated);
+  const sim::SpinePhantom second = cached(small(), PhantomCacheUse::kLoaded);
+  expect_same(first, *made);
+  expect_same(second, *made);
+  // Other options are another phantom and another file, never this one's voxels.
+  sim::SpinePhantomOptions other = small();
+  other.seed = 2;
+  const sim::SpinePhantom reseeded = cached(other, PhantomCacheUse::kGenerated);
+  EXPECT_FALSE(reseeded.ct.values == made->ct.values);
+  other.noise_hu = 12.000000000000002;  // the options are named to the last bit
+  cached(other, PhantomCacheUse::kGenerated);
+}
+
+TEST_F(PhantomCache, ADamagedCopyIsMadeAnewAndReplaced) {
+  const auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(made.ok());
+  cached(small(), PhantomCacheUse::kGenerated);
+  const fs::path file = the_file();
+  const auto size = fs::file_size(file);
+  overwrite_at(file, static_cast<std::streamoff>(size / 2), "\x7f\x7f\x7f\x7f");  // a voxel, not the header
+  expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+  expect_same(cached(small(), PhantomCacheUse::kLoaded), *made);
+
+  fs::resize_file(the_file(), size - 4);  // cut short
+  expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+  { std::ofstream(the_file(), std::ios::app) << "x"; }  // one byte too many
+  expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+  fs::resize_file(the_file(), 100);  // the header cut short
+  expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+  EXPECT_EQ(fs::file_size(the_file()), size);
+}
+
+TEST_F(PhantomCache, ACopyWhoseHeaderNamesAnotherBuildIsNotUsed) {
+  const auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(made.ok());
+  cached(small(), PhantomCacheUse::kGenerated);
+  const fs::path file = the_file();
+  std::string header(64, '\0');
+  std::ifstream(file, std::ios::binary).read(header.data(), 64);
+  const auto build = header.find("build ");
+  ASSERT_NE(build, std::string::npos) << header;
+  overwrite_at(file, static_cast<std::streamoff>(build + 6), "zz");  // as if renamed from another build
+  expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+  expect_same(cached(small(), PhantomCacheUse::kLoaded), *made);
+}
+
+TEST_F(PhantomCache, AFolderThatCannotBeWrittenStillGivesThePhantom) {
+  const auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(made.ok());
+  { std::ofstream(dir_.path() / "cache") << "a file, not a folder"; }
+  expect_same(cached(small(), PhantomCacheUse::kUnwritten), *made);
+  EXPECT_EQ(fs::file_size(dir_.path() / "cache"), 20u) << "the file in its way is left as it was";
+}
+
+TEST_F(PhantomCache, NoFolderIsNoCacheAndBadOptionsFailAsWithout) {
+  PhantomCacheUse use = PhantomCacheUse::kLoaded;
+  auto p = cached_spine_phantom(small(), fs::path(), &pool_, &use);
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(use, PhantomCacheUse::kOff);
+  sim::SpinePhantomOptions bad = small();
+  bad.spacing_mm.x() = -1;
+  auto refused = cached_spine_phantom(bad, dir_.path() / "cache", &pool_, &use);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().message(), sim::make_spine_phantom(bad).status().message());
+  EXPECT_FALSE(fs::exists(dir_.path() / "cache")) << "nothing written for options that make no phantom";
+}
+
+}  // namespace
+}  // namespace lftrack::host
