@@ -5,6 +5,7 @@
 #include "lftrack/host/phantom_cache.hpp"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <fstream>
 #include <string>
@@ -138,6 +139,23 @@ TEST_F(PhantomCache, AFolderThatCannotBeWrittenStillGivesThePhantom) {
   { std::ofstream(dir_.path() / "cache") << "a file, not a folder"; }
   expect_same(cached(small(), PhantomCacheUse::kUnwritten), *made);
   EXPECT_EQ(fs::file_size(dir_.path() / "cache"), 20u) << "the file in its way is left as it was";
+}
+
+TEST_F(PhantomCache, AFifoOrFolderInTheCopysPlaceIsNotOpened) {
+  const auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(made.ok());
+  cached(small(), PhantomCacheUse::kGenerated);
+  const fs::path file = the_file();
+  fs::remove(file);
+  ASSERT_EQ(::mkfifo(file.c_str(), 0600), 0);
+  // Opening the FIFO for reading would wait for a writer forever; the copy is made and renamed
+  // over it instead.
+  expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+  EXPECT_TRUE(fs::is_regular_file(file));
+  fs::remove(file);
+  fs::create_directories(file / "inside");
+  expect_same(cached(small(), PhantomCacheUse::kUnwritten), *made);
+  EXPECT_TRUE(fs::is_directory(file / "inside")) << "a folder in the way is left as it was";
 }
 
 TEST_F(PhantomCache, NoFolderIsNoCacheAndBadOptionsFailAsWithout) {

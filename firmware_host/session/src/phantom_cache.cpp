@@ -63,8 +63,13 @@ fs::path cache_file(const sim::SpinePhantomOptions& o, const fs::path& dir, cons
 
 // The voxels of `file` into `phantom` (whose geometry is set), or why not.
 Status read_cached(const fs::path& file, const std::string& header, sim::SpinePhantom* phantom) {
+  std::error_code ec;
+  const fs::file_status status = fs::status(file, ec);
+  if (!fs::exists(status)) return not_found("no cached copy");
+  // Opened only as a plain file: a FIFO would block the open until someone wrote to it.
+  if (!fs::is_regular_file(status)) return corrupt_data("it is not a plain file");
   std::ifstream in(file, std::ios::binary);
-  if (!in) return not_found("no cached copy");
+  if (!in) return io_error("it cannot be read");
   std::string head(kHeaderBytes, '\0');
   if (!in.read(head.data(), static_cast<std::streamsize>(head.size())))
     return corrupt_data("its header is cut short");
