@@ -53,12 +53,11 @@ check-tsan: setup
 # The same build folder holds the unit and protocol test suites compiled the same way (clang,
 # ASan, UBSan), for check-sanitized.
 FUZZ_SECONDS ?= 60
-UNIT_AND_PROTOCOL_SUITES := tracking_tests calib_tests drivers_tests sim_tests loop_tests protocol_tests
 fuzz-build: setup
 	@bash scripts/setup.sh --fuzz
 	@CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFTRACK_FUZZ=ON \
 	    -DLFTRACK_BUILD_TESTS=ON -DLFTRACK_BUILD_BENCH=OFF >/dev/null
-	@cmake --build build-fuzz -j $(JOBS) --target lftrack_fuzzers $(UNIT_AND_PROTOCOL_SUITES)
+	@cmake --build build-fuzz -j $(JOBS) --target lftrack_fuzzers lftrack_sanitized_suites
 fuzz: build fuzz-build
 	@bash scripts/fuzz-seeds.sh $(LFTRACK)
 	@bash scripts/fuzz-run.sh $(FUZZ_SECONDS) build-fuzz $(JOBS)

@@ -6,7 +6,8 @@
 // frame.
 //
 // Every fake camera needs UDP port 3956 on its own address, so these tests hold a file lock
-// for their whole run: under `ctest -j` (one process per test) they take turns. The pair runs on
+// for their whole run: under `ctest -j` (one process per test, or a shard of the suite in the
+// sanitized build) they take turns. The pair runs on
 // 127.0.0.1 and 127.0.0.2 (the loopback device answers the whole of 127.0.0.0/8).
 
 #include "lftrack/drivers/gige_detector.hpp"

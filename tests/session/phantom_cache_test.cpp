@@ -7,10 +7,13 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <cstdlib>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "lftrack/host/scene.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
@@ -156,6 +159,59 @@ TEST_F(PhantomCache, AFifoOrFolderInTheCopysPlaceIsNotOpened) {
   fs::create_directories(file / "inside");
   expect_same(cached(small(), PhantomCacheUse::kUnwritten), *made);
   EXPECT_TRUE(fs::is_directory(file / "inside")) << "a folder in the way is left as it was";
+}
+
+TEST_F(PhantomCache, TheFileNamesThisBuildAndFourWritersAtOnceLeaveOneWholeCopy) {
+  const auto made = sim::make_spine_phantom(small());
+  ASSERT_TRUE(made.ok());
+  std::vector<sim::SpinePhantom> got(4);
+  std::vector<std::thread> writers;
+  for (auto& g : got)
+    writers.emplace_back([&g, this] { g = *cached_spine_phantom(small(), dir_.path() / "cache", nullptr); });
+  for (auto& w : writers) w.join();
+  for (const auto& g : got) expect_same(g, *made);
+  const std::string name = the_file().filename().string();  // one file, no temporary left
+  EXPECT_NE(name.find("-" + program_build_id().value_or("?") + "-"), std::string::npos) << name;
+  EXPECT_EQ(name.substr(name.size() - 3), ".ct");
+}
+
+TEST_F(PhantomCache, ANewCopyReplacesOtherBuildsCopiesAndOldTemporaryFiles) {
+  cached(small(), PhantomCacheUse::kGenerated);
+  const fs::path file = the_file();
+  const std::string name = file.filename().string();
+  const std::string prefix = name.substr(0, name.find(program_build_id().value()));
+  const fs::path other_build = file.parent_path() / (prefix + "0123456789abcdef-00000000.ct");
+  const fs::path other_phantom = file.parent_path() / "spine-phantom-00000000-00000000-0123456789abcdef-0.ct";
+  const fs::path old_temporary = file.parent_path() / (name + ".tmp-AbCdEf");
+  const fs::path new_temporary = file.parent_path() / (name + ".tmp-GhIjKl");
+  for (const fs::path& f : {other_build, other_phantom, old_temporary, new_temporary}) std::ofstream(f) << "x";
+  fs::last_write_time(old_temporary, fs::file_time_type::clock::now() - std::chrono::hours(2));
+  fs::remove(file);
+  cached(small(), PhantomCacheUse::kGenerated);
+  EXPECT_TRUE(fs::exists(file));
+  EXPECT_FALSE(fs::exists(other_build)) << "another build's copy of this phantom by this program";
+  EXPECT_FALSE(fs::exists(old_temporary)) << "a temporary file two hours old";
+  EXPECT_TRUE(fs::exists(other_phantom)) << "another phantom's copy is kept";
+  EXPECT_TRUE(fs::exists(new_temporary)) << "a temporary file another process may be writing is kept";
+}
+
+TEST_F(PhantomCache, PrepareSceneUsesTheFolderTheEnvironmentNames) {
+  const char* before = std::getenv(kCacheDirVariable);
+  const std::string restore = before != nullptr ? before : "";
+  ASSERT_EQ(::setenv(kCacheDirVariable, (dir_.path() / "from-env").c_str(), 1), 0);
+  EXPECT_EQ(cache_dir_from_environment(), dir_.path() / "from-env");
+  auto scene = load_scene("builtin:phantom");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  auto prepared = prepare_scene(*scene, "", &pool_);
+  ASSERT_TRUE(prepared.ok()) << prepared.status().message();
+  std::size_t copies = 0;
+  for (const auto& e : fs::directory_iterator(dir_.path() / "from-env"))
+    copies += e.path().extension() == ".ct" ? 1 : 0;
+  EXPECT_EQ(copies, 1u) << "prepare_scene wrote the built-in phantom's copy where LFTRACK_CACHE_DIR says";
+  ASSERT_EQ(::setenv(kCacheDirVariable, "", 1), 0);
+  EXPECT_TRUE(cache_dir_from_environment().empty());
+  if (before != nullptr) ::setenv(kCacheDirVariable, restore.c_str(), 1);
+  else ::unsetenv(kCacheDirVariable);
 }
 
 TEST_F(PhantomCache, NoFolderIsNoCacheAndBadOptionsFailAsWithout) {

@@ -1,18 +1,23 @@
 #include "lftrack/host/phantom_cache.hpp"
 
 #include <elf.h>
+#include <fcntl.h>
+#include <gnu/libc-version.h>
 #include <link.h>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <cerrno>
 #include <cstring>
+#include <chrono>
 #include <fstream>
-#include <random>
 #include <sstream>
+#include <mutex>
 #include <system_error>
 
 namespace lftrack::host {
@@ -21,7 +26,8 @@ namespace {
 namespace fs = std::filesystem;
 
 // The file: a text header padded with NULs to kHeaderBytes, then the voxels as the host's float32
-// in the CT's storage order. The header's first lines must equal expected_header() exactly; the
+// in the CT's storage order. The header's first lines (magic, code key, options, voxel count) must
+// equal those cached_spine_phantom expects exactly; the
 // last line gives the voxels' CRC-32.
 constexpr std::size_t kHeaderBytes = 4096;
 constexpr const char* kMagic = "lftrack spine phantom cache 1";
@@ -40,6 +46,9 @@ std::uint32_t payload_crc(const std::vector<float>& values) {
 }
 
 // The options, every double to the last bit (%.17g), as the header and the file name hold them.
+// Every field of SpinePhantomOptions must be here, or two phantoms would share a file: a field
+// added to the struct changes its size and stops the build until it is added below.
+static_assert(sizeof(sim::SpinePhantomOptions) == 80, "a new phantom option: add it to options_text");
 std::string options_text(const sim::SpinePhantomOptions& o) {
   char text[512];
   std::snprintf(text, sizeof text, "seed=%llu size=%dx%dx%d spacing_mm=%.17g,%.17g,%.17g centre_mm=%.17g,%.17g,%.17g noise_hu=%.17g",
@@ -48,21 +57,41 @@ std::string options_text(const sim::SpinePhantomOptions& o) {
   return text;
 }
 
-std::string expected_header(const sim::SpinePhantomOptions& o, const std::string& build_id, std::size_t voxels) {
-  return std::string(kMagic) + "\nbuild " + build_id + "\noptions " + options_text(o) + "\nvoxels " +
-         std::to_string(voxels) + "\n";
-}
-
-fs::path cache_file(const sim::SpinePhantomOptions& o, const fs::path& dir, const std::string& build_id) {
-  const std::string text = options_text(o);
+std::string crc_hex(const std::string& text) {
   const auto crc = crc32(0L, reinterpret_cast<const Bytef*>(text.data()), static_cast<uInt>(text.size()));
-  char name[128];
-  std::snprintf(name, sizeof name, "spine-phantom-%08lx-%s.ct", static_cast<unsigned long>(crc), build_id.c_str());
-  return dir / name;
+  char hex[16];
+  std::snprintf(hex, sizeof hex, "%08lx", static_cast<unsigned long>(crc));
+  return hex;
 }
 
-// The voxels of `file` into `phantom` (whose geometry is set), or why not.
-Status read_cached(const fs::path& file, const std::string& header, sim::SpinePhantom* phantom) {
+// Files of one phantom made by one program (wherever it was built) share this prefix; the code
+// key follows it. An older build's copy under the same prefix is deleted once a new one is in.
+std::string file_prefix(const sim::SpinePhantomOptions& o) {
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  return "spine-phantom-" + crc_hex(options_text(o)) + "-" + crc_hex(ec ? std::string("?") : exe.string()) + "-";
+}
+
+// The cache's housekeeping after `kept` was written: other builds' copies of the same phantom by
+// the same program, and temporary files an hour old (left by a process killed while writing).
+void prune(const fs::path& dir, const std::string& prefix, const fs::path& kept) {
+  std::error_code ec;
+  const auto now = fs::file_time_type::clock::now();
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind("spine-phantom-", 0) != 0) continue;
+    std::error_code e;
+    const bool stale_copy = name.rfind(prefix, 0) == 0 && name.size() > 3 &&
+                            name.compare(name.size() - 3, 3, ".ct") == 0 && it->path() != kept;
+    const bool old_temporary = name.find(".tmp-") != std::string::npos &&
+                               now - fs::last_write_time(it->path(), e) > std::chrono::hours(1) && !e;
+    if (stale_copy || old_temporary) fs::remove(it->path(), e);
+  }
+}
+
+// The voxels of `file` into `phantom` (whose geometry is set), or why not (`phantom->ct.values`
+// then empty).
+Status read_voxels(const fs::path& file, const std::string& header, sim::SpinePhantom* phantom) {
   std::error_code ec;
   const fs::file_status status = fs::status(file, ec);
   if (!fs::exists(status)) return not_found("no cached copy");
@@ -85,7 +114,14 @@ Status read_cached(const fs::path& file, const std::string& header, sim::SpinePh
   return {};
 }
 
-// Writes `phantom` to `file` through a temporary file in the same folder, renamed into place.
+Status read_cached(const fs::path& file, const std::string& header, sim::SpinePhantom* phantom) {
+  Status read = read_voxels(file, header, phantom);
+  if (!read.ok()) std::vector<float>().swap(phantom->ct.values);  // not held while the phantom is made
+  return read;
+}
+
+// Writes `phantom` to `file` through a temporary file in the same folder (mkstemp: a name of its
+// own, created exclusively), renamed into place.
 Status write_cached(const fs::path& file, const std::string& header, const sim::SpinePhantom& phantom) {
   std::error_code ec;
   fs::create_directories(file.parent_path(), ec);
@@ -95,68 +131,115 @@ Status write_cached(const fs::path& file, const std::string& header, const sim::
   std::snprintf(crc, sizeof crc, "%08x\n", static_cast<unsigned>(payload_crc(phantom.ct.values)));
   head += crc;
   head.resize(kHeaderBytes, '\0');
-  std::random_device entropy;
-  const fs::path temporary =
-      file.string() + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(entropy());
-  {
-    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write(head.data(), static_cast<std::streamsize>(head.size()));
-    out.write(reinterpret_cast<const char*>(phantom.ct.values.data()),
-              static_cast<std::streamsize>(phantom.ct.values.size() * sizeof(float)));
-    out.close();
-    if (!out) {
-      fs::remove(temporary, ec);
-      return io_error("cannot write " + temporary.string());
+  std::string temporary = file.string() + ".tmp-XXXXXX";
+  const int fd = ::mkstemp(temporary.data());
+  if (fd < 0) return io_error("cannot create a file in " + file.parent_path().string() + ": " + std::strerror(errno));
+  ::fchmod(fd, 0644);
+  bool written = true;
+  const auto write_all = [&](const char* bytes, std::size_t size) {
+    while (written && size > 0) {
+      const ssize_t n = ::write(fd, bytes, size);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        written = false;
+        break;
+      }
+      bytes += n;
+      size -= static_cast<std::size_t>(n);
     }
-  }
-  fs::rename(temporary, file, ec);
-  if (ec) {
+  };
+  write_all(head.data(), head.size());
+  write_all(reinterpret_cast<const char*>(phantom.ct.values.data()), phantom.ct.values.size() * sizeof(float));
+  const int write_errno = errno;
+  if (::close(fd) != 0) written = false;
+  if (!written) {
     fs::remove(temporary, ec);
-    return io_error("cannot rename into " + file.string() + ": " + ec.message());
+    return io_error("cannot write " + temporary + ": " + std::strerror(write_errno));
+  }
+  std::error_code renamed;
+  fs::rename(temporary, file, renamed);
+  if (renamed) {
+    fs::remove(temporary, ec);
+    return io_error("cannot rename into " + file.string() + ": " + renamed.message());
   }
   return {};
 }
 
-// dl_iterate_phdr visits the main program first (its name is empty); its PT_NOTE segments hold the
-// NT_GNU_BUILD_ID note when the linker wrote one (--build-id, Debian's default).
-int find_build_id(dl_phdr_info* info, std::size_t, void* data) {
-  auto* id = static_cast<std::optional<std::string>*>(data);
+// The GNU build ID of one loaded object in hex (its PT_NOTE segments hold NT_GNU_BUILD_ID when
+// the linker wrote one: --build-id, Debian's default), or empty. Notes are padded to the
+// segment's alignment (4 or 8). An ID under 8 bytes is taken as none.
+std::string build_id_of(const dl_phdr_info* info) {
   for (int s = 0; s < info->dlpi_phnum; ++s) {
     const ElfW(Phdr)& segment = info->dlpi_phdr[s];
     if (segment.p_type != PT_NOTE) continue;
+    const std::size_t align = segment.p_align == 8 ? 8 : 4;
+    const auto pad = [align](std::size_t n) { return (n + align - 1) & ~(align - 1); };
     const auto* at = reinterpret_cast<const unsigned char*>(info->dlpi_addr + segment.p_vaddr);
-    const unsigned char* end = at + segment.p_memsz;
-    while (at + sizeof(ElfW(Nhdr)) <= end) {
+    std::size_t left = segment.p_memsz;
+    while (left >= sizeof(ElfW(Nhdr))) {
       ElfW(Nhdr) note;
       std::memcpy(&note, at, sizeof note);
+      const std::size_t name_bytes = pad(note.n_namesz), desc_bytes = pad(note.n_descsz);
+      if (name_bytes > left - sizeof note || desc_bytes > left - sizeof note - name_bytes) break;
       const unsigned char* name = at + sizeof note;
-      const unsigned char* desc = name + ((note.n_namesz + 3u) & ~3u);
-      if (desc + note.n_descsz > end) break;
+      const unsigned char* desc = name + name_bytes;
       if (note.n_type == NT_GNU_BUILD_ID && note.n_namesz == 4 && std::memcmp(name, "GNU", 4) == 0) {
+        if (note.n_descsz < 8) return {};
         std::string hex;
         char digits[3];
         for (unsigned i = 0; i < note.n_descsz; ++i) {
           std::snprintf(digits, sizeof digits, "%02x", desc[i]);
           hex += digits;
         }
-        *id = hex;
-        return 1;
+        return hex;
       }
-      at = desc + ((note.n_descsz + 3u) & ~3u);
+      at = desc + desc_bytes;
+      left -= sizeof note + name_bytes + desc_bytes;
     }
   }
-  return 1;  // only the main program
+  return {};
 }
+
+// The code a phantom's voxels depend on: the program (first object dl_iterate_phdr visits, its
+// name empty), lftrack's own libraries when built shared, and libm and libc (glibc picks cos and
+// log by CPU at run time, and an upgrade may change them), plus whether this CPU has FMA.
+struct CodeIdentity {
+  std::string program;  // the program's build ID; empty: none, and no cache
+  std::string others;   // the rest, as text
+};
+
+int collect_identity(dl_phdr_info* info, std::size_t, void* data) {
+  auto* identity = static_cast<CodeIdentity*>(data);
+  const std::string name = info->dlpi_name != nullptr ? info->dlpi_name : "";
+  if (name.empty() && identity->program.empty() && identity->others.empty()) {
+    identity->program = build_id_of(info);
+    identity->others = "?";  // the program has been seen
+    return 0;
+  }
+  const std::string file = fs::path(name).filename().string();
+  if (file.rfind("libm.so", 0) == 0 || file.rfind("libc.so", 0) == 0 || file.rfind("liblftrack", 0) == 0)
+    identity->others += file + "=" + build_id_of(info) + ";";
+  return 0;
+}
+
+const CodeIdentity& code_identity() {
+  static const CodeIdentity identity = [] {
+    CodeIdentity found;
+    dl_iterate_phdr(collect_identity, &found);
+    found.others += std::string("glibc ") + gnu_get_libc_version() + (__builtin_cpu_supports("fma") ? " fma" : "");
+    return found;
+  }();
+  return identity;
+}
+
+// The key in the file's name and header: the program's build ID and a digest of the rest.
+std::string code_key() { return code_identity().program + "-" + crc_hex(code_identity().others); }
 
 }  // namespace
 
 std::optional<std::string> program_build_id() {
-  static const std::optional<std::string> id = [] {
-    std::optional<std::string> found;
-    dl_iterate_phdr(find_build_id, &found);
-    return found;
-  }();
-  return id;
+  const std::string& id = code_identity().program;
+  return id.empty() ? std::nullopt : std::optional<std::string>(id);
 }
 
 fs::path cache_dir_from_environment() {
@@ -169,15 +252,24 @@ Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& o
   PhantomCacheUse ignored;
   if (use == nullptr) use = &ignored;
   *use = PhantomCacheUse::kOff;
-  const std::optional<std::string> build_id = program_build_id();
-  if (dir.empty() || !build_id) return sim::make_spine_phantom(options, pool);
+  if (dir.empty()) return sim::make_spine_phantom(options, pool);
+  if (!program_build_id()) {
+    static std::once_flag said;
+    std::call_once(said, [&] {
+      spdlog::info("phantom cache {}: this program has no build ID, so no copy can be told apart; not used",
+                   dir.string());
+    });
+    return sim::make_spine_phantom(options, pool);
+  }
 
   auto layout = sim::spine_phantom_layout(options);
   if (!layout.ok()) return layout.status();
   sim::SpinePhantom phantom = std::move(layout).value();
-  const fs::path file = cache_file(options, dir, *build_id);
+  const std::string prefix = file_prefix(options);
+  const fs::path file = dir / (prefix + code_key() + ".ct");
   const std::string header =
-      expected_header(options, *build_id, static_cast<std::size_t>(phantom.ct.geometry.voxel_count()));
+      std::string(kMagic) + "\nbuild " + code_key() + "\noptions " + options_text(options) + "\nvoxels " +
+      std::to_string(phantom.ct.geometry.voxel_count()) + "\n";
   const Status read = read_cached(file, header, &phantom);
   if (read.ok()) {
     *use = PhantomCacheUse::kLoaded;
@@ -190,7 +282,11 @@ Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& o
   if (!made.ok()) return made.status();
   const Status written = write_cached(file, header, *made);
   *use = written.ok() ? PhantomCacheUse::kGenerated : PhantomCacheUse::kUnwritten;
-  if (!written.ok()) spdlog::warn("phantom cache: {} (the phantom is made anew each run)", written.message());
+  if (written.ok()) {
+    prune(dir, prefix, file);
+  } else {
+    spdlog::warn("phantom cache: {} (the phantom is made anew each run)", written.message());
+  }
   return made;
 }
 

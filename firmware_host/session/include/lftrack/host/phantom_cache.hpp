@@ -6,13 +6,18 @@
 // a pure function of its options and of the code that draws it, so a copy made by the same build
 // of the same program can stand for it. A cached copy is used only when
 //   - the folder is given (cached_spine_phantom's `dir`, or LFTRACK_CACHE_DIR for the program),
-//   - its file names the same options and the same program build (the ELF build ID of the running
-//     executable, which changes with any change of the code linked into it), and
-//   - its header repeats both and its voxels pass their CRC-32.
-// Anything else (no build ID, a damaged, truncated or foreign file, a folder that cannot be read
-// or written) falls back to generating the phantom, which is always correct; the cache never fails
-// a run. A new copy is written to a temporary file and renamed into place, so processes sharing
-// the folder see a whole file or none. Files are never pruned: delete the folder at any time.
+//   - its file names the same options and the same code: the ELF build ID of the running
+//     executable (which changes with any change of the code linked into it), of lftrack's own
+//     libraries where they are shared, of libm and libc (glibc picks cos and log by CPU at run
+//     time), and whether the CPU has FMA,
+//   - its header repeats both, and its voxels pass their CRC-32.
+// Anything else (no build ID, a damaged, truncated or foreign file, a FIFO or folder in its place,
+// a folder that cannot be read or written) falls back to generating the phantom, which is always
+// correct; the cache never fails a run. A new copy is written to a temporary file of its own and
+// renamed into place, so processes sharing the folder see a whole file or none. Once it is in,
+// the same program's copies from other builds of the same phantom are deleted (one copy per
+// program and phantom, about 100 MB), and temporary files an hour old. Delete the folder at any
+// time.
 
 #include <filesystem>
 #include <optional>
