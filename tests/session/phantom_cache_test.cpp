@@ -144,7 +144,7 @@ TEST_F(PhantomCache, AFolderThatCannotBeWrittenStillGivesThePhantom) {
   EXPECT_EQ(fs::file_size(dir_.path() / "cache"), 20u) << "the file in its way is left as it was";
 }
 
-TEST_F(PhantomCache, AFifoOrFolderInTheCopysPlaceIsNotOpened) {
+TEST_F(PhantomCache, AFifoLinkOrFolderInTheCopysPlaceIsNeverRead) {
   const auto made = sim::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
   cached(small(), PhantomCacheUse::kGenerated);
@@ -155,6 +155,15 @@ TEST_F(PhantomCache, AFifoOrFolderInTheCopysPlaceIsNotOpened) {
   // over it instead.
   expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
   EXPECT_TRUE(fs::is_regular_file(file));
+  // Links to what claims to be a plain file of no size and blocks on read (/proc), to a device
+  // that never ends, to nothing, and to themselves: never read, replaced by a copy.
+  for (const fs::path& target : {fs::path("/proc/self/status"), fs::path("/dev/zero"),
+                                file.parent_path() / "nowhere", file}) {
+    fs::remove(file);
+    fs::create_symlink(target, file);
+    expect_same(cached(small(), PhantomCacheUse::kGenerated), *made);
+    EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(file))) << target;
+  }
   fs::remove(file);
   fs::create_directories(file / "inside");
   expect_same(cached(small(), PhantomCacheUse::kUnwritten), *made);
@@ -185,6 +194,11 @@ TEST_F(PhantomCache, ANewCopyReplacesOtherBuildsCopiesAndOldTemporaryFiles) {
   const fs::path old_temporary = file.parent_path() / (name + ".tmp-AbCdEf");
   const fs::path new_temporary = file.parent_path() / (name + ".tmp-GhIjKl");
   for (const fs::path& f : {other_build, other_phantom, old_temporary, new_temporary}) std::ofstream(f) << "x";
+  fs::last_write_time(old_temporary, fs::file_time_type::clock::now() - std::chrono::hours(2));
+  cached(small(), PhantomCacheUse::kLoaded);
+  EXPECT_FALSE(fs::exists(old_temporary)) << "a temporary file two hours old, when the copy is read back";
+  EXPECT_FALSE(fs::exists(other_build)) << "another build's copy, when the copy is read back";
+  for (const fs::path& f : {other_build, old_temporary}) std::ofstream(f) << "x";
   fs::last_write_time(old_temporary, fs::file_time_type::clock::now() - std::chrono::hours(2));
   fs::remove(file);
   cached(small(), PhantomCacheUse::kGenerated);

@@ -10,13 +10,11 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <cerrno>
 #include <cstring>
-#include <chrono>
-#include <fstream>
-#include <sstream>
 #include <mutex>
 #include <system_error>
 
@@ -72,8 +70,8 @@ std::string file_prefix(const sim::SpinePhantomOptions& o) {
   return "spine-phantom-" + crc_hex(options_text(o)) + "-" + crc_hex(ec ? std::string("?") : exe.string()) + "-";
 }
 
-// The cache's housekeeping after `kept` was written: other builds' copies of the same phantom by
-// the same program, and temporary files an hour old (left by a process killed while writing).
+// The cache's housekeeping once `kept` was read or written: other builds' copies of the same
+// phantom by the same program, and temporary files an hour old (a process killed while writing).
 void prune(const fs::path& dir, const std::string& prefix, const fs::path& kept) {
   std::error_code ec;
   const auto now = fs::file_time_type::clock::now();
@@ -89,27 +87,54 @@ void prune(const fs::path& dir, const std::string& prefix, const fs::path& kept)
   }
 }
 
-// The voxels of `file` into `phantom` (whose geometry is set), or why not (`phantom->ct.values`
-// then empty).
+// Reads exactly `size` bytes from `fd`; false on an error or the end of the file before them.
+bool read_all(int fd, char* bytes, std::size_t size) {
+  while (size > 0) {
+    const ssize_t n = ::read(fd, bytes, size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return false;
+    bytes += n;
+    size -= static_cast<std::size_t>(n);
+  }
+  return true;
+}
+
+// The file descriptor of `file`, closed when it goes.
+struct OpenFile {
+  int fd = -1;
+  ~OpenFile() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+// The voxels of `file` into `phantom` (whose geometry is set), or why not.
 Status read_voxels(const fs::path& file, const std::string& header, sim::SpinePhantom* phantom) {
   std::error_code ec;
-  const fs::file_status status = fs::status(file, ec);
-  if (!fs::exists(status)) return not_found("no cached copy");
-  // Opened only as a plain file: a FIFO would block the open until someone wrote to it.
-  if (!fs::is_regular_file(status)) return corrupt_data("it is not a plain file");
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return io_error("it cannot be read");
+  if (!fs::exists(fs::symlink_status(file, ec))) return not_found("no cached copy");
+  // Opened without blocking (a FIFO would block the open until someone wrote to it), then judged
+  // by what was opened, not by the name: a plain file of exactly the header and the voxels.
+  // Anything else (a FIFO, a device, a folder, a link that loops or leads nowhere, /proc's
+  // files of size 0, a sparse file grown past the voxels) is never read.
+  OpenFile in;
+  in.fd = ::open(file.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (in.fd < 0) return corrupt_data(std::string("it cannot be opened (") + std::strerror(errno) + ")");
+  struct stat st {};
+  if (::fstat(in.fd, &st) != 0 || !S_ISREG(st.st_mode)) return corrupt_data("it is not a plain file");
+  std::vector<float>& values = phantom->ct.values;
+  const std::size_t voxels = static_cast<std::size_t>(phantom->ct.geometry.voxel_count());
+  const std::size_t expected = kHeaderBytes + voxels * sizeof(float);
+  if (static_cast<std::uint64_t>(st.st_size) < kHeaderBytes) return corrupt_data("its header is cut short");
+  if (static_cast<std::uint64_t>(st.st_size) < expected) return corrupt_data("its voxels are cut short");
+  if (static_cast<std::uint64_t>(st.st_size) > expected) return corrupt_data("it is longer than its voxels");
+  ::fcntl(in.fd, F_SETFL, ::fcntl(in.fd, F_GETFL) & ~O_NONBLOCK);
   std::string head(kHeaderBytes, '\0');
-  if (!in.read(head.data(), static_cast<std::streamsize>(head.size())))
-    return corrupt_data("its header is cut short");
+  if (!read_all(in.fd, head.data(), head.size())) return corrupt_data("its header is cut short");
   if (head.compare(0, header.size(), header) != 0) return corrupt_data("its header names another phantom or build");
   unsigned long crc = 0;
   if (std::sscanf(head.c_str() + header.size(), "crc32 %lx", &crc) != 1) return corrupt_data("its header has no CRC");
-  std::vector<float>& values = phantom->ct.values;
-  values.resize(static_cast<std::size_t>(phantom->ct.geometry.voxel_count()));
-  const auto bytes = static_cast<std::streamsize>(values.size() * sizeof(float));
-  if (!in.read(reinterpret_cast<char*>(values.data()), bytes)) return corrupt_data("its voxels are cut short");
-  if (in.peek() != std::char_traits<char>::eof()) return corrupt_data("it is longer than its voxels");
+  values.resize(voxels);
+  if (!read_all(in.fd, reinterpret_cast<char*>(values.data()), voxels * sizeof(float)))
+    return corrupt_data("its voxels are cut short");
   if (payload_crc(values) != crc) return corrupt_data("its voxels fail their CRC-32");
   return {};
 }
@@ -131,6 +156,12 @@ Status write_cached(const fs::path& file, const std::string& header, const sim::
   std::snprintf(crc, sizeof crc, "%08x\n", static_cast<unsigned>(payload_crc(phantom.ct.values)));
   head += crc;
   head.resize(kHeaderBytes, '\0');
+  // Not written into the last of a disk: the copy is a convenience, the disk may be the journals'.
+  const std::uintmax_t copy_bytes = head.size() + phantom.ct.values.size() * sizeof(float);
+  const fs::space_info space = fs::space(file.parent_path(), ec);
+  if (!ec && space.available < 2 * copy_bytes + (std::uintmax_t{1} << 30))
+    return io_error("only " + std::to_string(space.available >> 20) + " MB free in " + file.parent_path().string() +
+                    " (a copy is " + std::to_string(copy_bytes >> 20) + " MB; it is written only with 1 GB to spare)");
   std::string temporary = file.string() + ".tmp-XXXXXX";
   const int fd = ::mkstemp(temporary.data());
   if (fd < 0) return io_error("cannot create a file in " + file.parent_path().string() + ": " + std::strerror(errno));
@@ -150,8 +181,11 @@ Status write_cached(const fs::path& file, const std::string& header, const sim::
   };
   write_all(head.data(), head.size());
   write_all(reinterpret_cast<const char*>(phantom.ct.values.data()), phantom.ct.values.size() * sizeof(float));
-  const int write_errno = errno;
-  if (::close(fd) != 0) written = false;
+  int write_errno = written ? 0 : errno;
+  if (::close(fd) != 0 && written) {
+    written = false;
+    write_errno = errno;
+  }
   if (!written) {
     fs::remove(temporary, ec);
     return io_error("cannot write " + temporary + ": " + std::strerror(write_errno));
@@ -270,19 +304,24 @@ Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& o
   const std::string header =
       std::string(kMagic) + "\nbuild " + code_key() + "\noptions " + options_text(options) + "\nvoxels " +
       std::to_string(phantom.ct.geometry.voxel_count()) + "\n";
+  std::error_code ec;
+  const fs::path shown = fs::absolute(file, ec);
   const Status read = read_cached(file, header, &phantom);
   if (read.ok()) {
     *use = PhantomCacheUse::kLoaded;
+    spdlog::info("built-in phantom read from {}", shown.string());
+    prune(dir, prefix, file);  // temporaries left by a writer that was killed
     return phantom;
   }
   if (read.code() != StatusCode::kNotFound)
-    spdlog::info("cached phantom {} not used ({}); making it anew", file.string(), read.message());
+    spdlog::warn("cached phantom {} not used ({}); making it anew", shown.string(), read.message());
 
   auto made = sim::make_spine_phantom(options, pool);
   if (!made.ok()) return made.status();
   const Status written = write_cached(file, header, *made);
   *use = written.ok() ? PhantomCacheUse::kGenerated : PhantomCacheUse::kUnwritten;
   if (written.ok()) {
+    spdlog::info("built-in phantom kept in {} for later runs of this build", shown.string());
     prune(dir, prefix, file);
   } else {
     spdlog::warn("phantom cache: {} (the phantom is made anew each run)", written.message());
