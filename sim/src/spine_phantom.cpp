@@ -249,9 +249,13 @@ double hashed_gaussian(std::uint64_t seed, std::uint64_t key) {
   return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
 }
 
-}  // namespace
+// The phantom without its voxels, and the anatomy its voxels are drawn from.
+struct Layout {
+  SpinePhantom phantom;
+  Anatomy anatomy;
+};
 
-Result<SpinePhantom> spine_phantom_layout(const SpinePhantomOptions& o) {
+Result<Layout> make_layout(const SpinePhantomOptions& o) {
   tracking::VolumeGeometry g;
   g.size = o.size;
   g.spacing_mm = o.spacing_mm;
@@ -260,20 +264,29 @@ Result<SpinePhantom> spine_phantom_layout(const SpinePhantomOptions& o) {
   if (g.extent_mm().z() < 30.0 || g.extent_mm().x() < 120.0 || g.extent_mm().y() < 120.0) {
     return invalid_argument("spine phantom: the grid must span at least 120 x 120 x 30 mm");
   }
-  SpinePhantom phantom;
-  const Anatomy anatomy = make_anatomy(o, g);
-  for (const Vertebra& v : anatomy.vertebrae) phantom.vertebral_body_centres_mm.push_back(v.body_centre);
-  phantom.target_vertebra = static_cast<int>(anatomy.vertebrae.size()) / 2;
-  phantom.ct.geometry = g;
-  return phantom;
+  Layout layout;
+  layout.anatomy = make_anatomy(o, g);
+  for (const Vertebra& v : layout.anatomy.vertebrae)
+    layout.phantom.vertebral_body_centres_mm.push_back(v.body_centre);
+  layout.phantom.target_vertebra = static_cast<int>(layout.anatomy.vertebrae.size()) / 2;
+  layout.phantom.ct.geometry = g;
+  return layout;
+}
+
+}  // namespace
+
+Result<SpinePhantom> spine_phantom_layout(const SpinePhantomOptions& o) {
+  auto layout = make_layout(o);
+  if (!layout.ok()) return layout.status();
+  return std::move(layout->phantom);
 }
 
 Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& o, tracking::ThreadPool* pool) {
-  auto layout = spine_phantom_layout(o);
+  auto layout = make_layout(o);
   if (!layout.ok()) return layout.status();
-  SpinePhantom phantom = std::move(layout).value();
+  SpinePhantom phantom = std::move(layout->phantom);
+  const Anatomy& anatomy = layout->anatomy;
   const tracking::VolumeGeometry& g = phantom.ct.geometry;
-  const Anatomy anatomy = make_anatomy(o, g);
   phantom.ct.values.resize(static_cast<std::size_t>(g.voxel_count()));
   const double vox = g.spacing_mm.minCoeff();
   auto slices = [&](int k_begin, int k_end) {

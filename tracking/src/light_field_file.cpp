@@ -21,13 +21,13 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include <zlib.h>
 
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <sstream>
 
+#include "lftrack/tracking/checksum.hpp"
 #include "lftrack/tracking/light_field.hpp"
 
 namespace lftrack::tracking {
@@ -36,17 +36,6 @@ namespace {
 constexpr char kMagic[8] = {'L', 'F', 'T', 'R', 'K', 'L', 'F', '\0'};
 constexpr std::uint32_t kVersion = 1;
 constexpr std::size_t kHeaderBytes = 1024;
-
-std::uint32_t crc_of(const unsigned char* data, std::size_t bytes) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  while (bytes > 0) {
-    const auto chunk = static_cast<uInt>(std::min<std::size_t>(bytes, 1u << 30));
-    crc = crc32(crc, data, chunk);
-    data += chunk;
-    bytes -= chunk;
-  }
-  return static_cast<std::uint32_t>(crc);
-}
 
 class HeaderWriter {
  public:
@@ -223,7 +212,7 @@ Status LightField::save(const std::filesystem::path& file) const {
   w.at(416, static_cast<std::uint64_t>(payload_bytes_));
   const unsigned char* payload =
       mapping_ ? static_cast<const unsigned char*>(mapping_) + kHeaderBytes : owned_.data();
-  w.at(424, crc_of(payload, payload_bytes_));
+  w.at(424, crc32_of(payload, payload_bytes_));
   std::strncpy(reinterpret_cast<char*>(header + 428), g.view_name.c_str(), 63);
   if (header_.settings_recorded) {
     w.at(492, std::uint32_t{1});
@@ -238,7 +227,7 @@ Status LightField::save(const std::filesystem::path& file) const {
     w.at(536, header_.detector_hash);
     w.at(544, header_.vq_seed);
   }
-  w.at(1020, crc_of(header, 1020));
+  w.at(1020, crc32_of(header, 1020));
 
   // Per process: two processes saving the same field (tasks of a job array) never share a
   // half-written file.
@@ -274,7 +263,7 @@ Status decode_header(const unsigned char* data, const std::string& name, LightFi
                        " (this build reads version " + std::to_string(kVersion) +
                        "); run `lftrack precompute` again");
   }
-  if (r.at<std::uint32_t>(1020) != crc_of(data, 1020)) {
+  if (r.at<std::uint32_t>(1020) != crc32_of(data, 1020)) {
     return corrupt_data(name + ": header is corrupted (checksum mismatch)");
   }
   LightField::Header& h = *out;
@@ -401,7 +390,7 @@ Result<std::shared_ptr<const LightField>> LightField::load(const std::filesystem
                         std::to_string(bytes) + " bytes, the 1024-byte header and its " + std::to_string(payload) +
                         "-byte payload make " + std::to_string(kHeaderBytes + payload));
   }
-  if (r.at<std::uint32_t>(424) != crc_of(data + kHeaderBytes, payload)) {
+  if (r.at<std::uint32_t>(424) != crc32_of(data + kHeaderBytes, payload)) {
     return corrupt_data(name + ": sample data is corrupted (checksum mismatch)");
   }
   if (Status s = check_payload(h, data + kHeaderBytes); !s.ok()) return s.with_context(name);

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 
+#include "lftrack/tracking/checksum.hpp"
 #include "lftrack/tracking/light_field.hpp"
 
 namespace lftrack::tracking {
@@ -187,15 +188,7 @@ std::uint64_t volume_hash(const MuVolume& mu) {
   feed_vector(&geometry, g.spacing_mm);
   feed_vector(&geometry, g.origin_mm);
   for (int i = 0; i < 9; ++i) feed(&geometry, g.direction.data()[i]);
-  uLong data = crc32(0L, Z_NULL, 0);
-  const auto* bytes = reinterpret_cast<const Bytef*>(mu.values.data());
-  std::size_t left = mu.values.size() * sizeof(float);
-  while (left > 0) {  // zlib takes 32-bit lengths
-    const auto chunk = static_cast<uInt>(std::min<std::size_t>(left, 1u << 30));
-    data = crc32(data, bytes, chunk);
-    bytes += chunk;
-    left -= chunk;
-  }
+  const uLong data = crc32_of(mu.values.data(), mu.values.size() * sizeof(float));
   return combine(geometry, data);
 }
 

@@ -7,7 +7,6 @@
 #include <spdlog/spdlog.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -18,6 +17,8 @@
 #include <mutex>
 #include <system_error>
 
+#include "lftrack/tracking/checksum.hpp"
+
 namespace lftrack::host {
 namespace {
 
@@ -25,22 +26,12 @@ namespace fs = std::filesystem;
 
 // The file: a text header padded with NULs to kHeaderBytes, then the voxels as the host's float32
 // in the CT's storage order. The header's first lines (magic, code key, options, voxel count) must
-// equal those cached_spine_phantom expects exactly; the
-// last line gives the voxels' CRC-32.
+// equal those cached_spine_phantom expects exactly; the last line gives the voxels' CRC-32.
 constexpr std::size_t kHeaderBytes = 4096;
 constexpr const char* kMagic = "lftrack spine phantom cache 1";
 
 std::uint32_t payload_crc(const std::vector<float>& values) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  const auto* bytes = reinterpret_cast<const Bytef*>(values.data());
-  std::size_t left = values.size() * sizeof(float);
-  while (left > 0) {  // zlib takes 32-bit lengths
-    const auto chunk = static_cast<uInt>(std::min<std::size_t>(left, 1u << 30));
-    crc = crc32(crc, bytes, chunk);
-    bytes += chunk;
-    left -= chunk;
-  }
-  return static_cast<std::uint32_t>(crc);
+  return tracking::crc32_of(values.data(), values.size() * sizeof(float));
 }
 
 // The options, every double to the last bit (%.17g), as the header and the file name hold them.
@@ -56,14 +47,13 @@ std::string options_text(const sim::SpinePhantomOptions& o) {
 }
 
 std::string crc_hex(const std::string& text) {
-  const auto crc = crc32(0L, reinterpret_cast<const Bytef*>(text.data()), static_cast<uInt>(text.size()));
   char hex[16];
-  std::snprintf(hex, sizeof hex, "%08lx", static_cast<unsigned long>(crc));
+  std::snprintf(hex, sizeof hex, "%08x", static_cast<unsigned>(tracking::crc32_of(text.data(), text.size())));
   return hex;
 }
 
 // Files of one phantom made by one program (wherever it was built) share this prefix; the code
-// key follows it. An older build's copy under the same prefix is deleted once a new one is in.
+// key follows it. Other builds' copies under the same prefix are pruned.
 std::string file_prefix(const sim::SpinePhantomOptions& o) {
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
@@ -300,9 +290,10 @@ Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& o
   if (!layout.ok()) return layout.status();
   sim::SpinePhantom phantom = std::move(layout).value();
   const std::string prefix = file_prefix(options);
-  const fs::path file = dir / (prefix + code_key() + ".ct");
+  const std::string key = code_key();
+  const fs::path file = dir / (prefix + key + ".ct");
   const std::string header =
-      std::string(kMagic) + "\nbuild " + code_key() + "\noptions " + options_text(options) + "\nvoxels " +
+      std::string(kMagic) + "\nbuild " + key + "\noptions " + options_text(options) + "\nvoxels " +
       std::to_string(phantom.ct.geometry.voxel_count()) + "\n";
   std::error_code ec;
   const fs::path shown = fs::absolute(file, ec);

@@ -15,8 +15,8 @@
 // link to one in its place, a folder that cannot be read or written, or has less than twice a
 // copy plus 1 GB free) falls back to generating the phantom, which is always correct; the cache
 // never fails a run and never blocks on what it opens. The log says where a copy was read or
-// kept (info), and why one was not used or could not be written (warning). A new copy is written to a temporary file of its own and
-// renamed into place, so processes sharing the folder see a whole file or none. Each time a copy
+// kept (info), and why one was not used or could not be written (warning). A new copy is written
+// to a temporary file of its own and renamed into place, so processes sharing the folder see a whole file or none. Each time a copy
 // is read or written, the same program's copies from other builds of the same phantom are deleted
 // (one copy per program and phantom, about 100 MB), and temporary files an hour old (a writer
 // killed mid-copy). Delete the folder at any time.
