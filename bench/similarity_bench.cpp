@@ -38,6 +38,7 @@ void BM_Similarity(benchmark::State& state, const char* name) {
 BENCHMARK_CAPTURE(BM_Similarity, mi, "mi")->Args({144, 316})->Args({36, 79})->Args({18, 39})->Unit(benchmark::kMicrosecond);
 BENCHMARK_CAPTURE(BM_Similarity, nmi, "nmi")->Args({144, 316})->Unit(benchmark::kMicrosecond);
 BENCHMARK_CAPTURE(BM_Similarity, ncc, "ncc")->Args({144, 316})->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_Similarity, rncc, "rncc")->Args({144, 316})->Unit(benchmark::kMicrosecond);
 BENCHMARK_CAPTURE(BM_Similarity, gc, "gc")->Args({144, 316})->Unit(benchmark::kMicrosecond);
 BENCHMARK_CAPTURE(BM_Similarity, pi, "pi")->Args({144, 316})->Unit(benchmark::kMicrosecond);
 BENCHMARK_CAPTURE(BM_Similarity, gd, "gd")->Args({144, 316})->Unit(benchmark::kMicrosecond);

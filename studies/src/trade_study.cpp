@@ -337,9 +337,11 @@ std::vector<TradePoint> trade_points(const PreparedScene& p, bool quick) {
   for (const auto& m : quick ? std::vector<std::string>{"ncc"} : tracking::similarity_names())
     if (m != base.similarity) add("sim-" + m, [&](TradePoint& t) { t.similarity = m; });
   // warm-robust: the tracking plan that holds up on realistic frames (issue 21), against the
-  // baseline's warm on the same problems.
+  // baseline's warm on the same problems; warm-robust-ncc: the same with plain NCC, cheaper a
+  // probe (issue 57).
   for (const auto& plan : quick ? std::vector<std::string>{"quadratic", "warm-robust"}
-                                : std::vector<std::string>{"quadratic", "decoupled", "papers", "cmaes", "warm-robust"})
+                                : std::vector<std::string>{"quadratic", "decoupled", "papers", "cmaes", "warm-robust",
+                                                           "warm-robust-ncc"})
     add("plan-" + plan, [&](TradePoint& t) { t.plan = plan; });
   // Final step and time budget.
   for (double step : quick ? std::vector<double>{0.25} : std::vector<double>{0.05, 0.25, 0.5})

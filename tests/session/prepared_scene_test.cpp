@@ -168,13 +168,7 @@ INSTANTIATE_TEST_SUITE_P(PreparedScene, ShippedScenes,
                                            ShippedScene{"lumbar-ct-clinical.yaml", false, true},
                                            ShippedScene{"thoracic-ct.yaml", true, false},
                                            ShippedScene{"thoracic-ct-clinical.yaml", true, true}),
-                         [](const ::testing::TestParamInfo<ShippedScene>& param) {
-                           std::string name = param.param.file;
-                           name = name.substr(0, name.find('.'));
-                           for (char& c : name)
-                             if (c == '-') c = '_';
-                           return name;
-                         });
+                         [](const ::testing::TestParamInfo<ShippedScene>& param) { return test::scene_test_name(param.param.file); });
 
 }  // namespace
 }  // namespace lftrack::host

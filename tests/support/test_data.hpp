@@ -38,6 +38,15 @@ inline bool data_required() {
 // stale entry is rebuilt, never trusted.
 inline std::filesystem::path test_cache_dir() { return std::filesystem::path(LFTRACK_TEST_CACHE_DIR); }
 
+// A GoogleTest parameter name for a shipped scene file: "lumbar-ct-clinical.yaml" gives
+// "lumbar_ct_clinical".
+inline std::string scene_test_name(std::string file) {
+  file = file.substr(0, file.find('.'));
+  for (char& c : file)
+    if (c == '-') c = '_';
+  return file;
+}
+
 // A fresh, empty temporary folder named after the running test; removed by the destructor.
 class TempDir {
  public:

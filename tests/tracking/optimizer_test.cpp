@@ -30,6 +30,25 @@ class Bowl : public CostFunction {
   Vector6d target_;
 };
 
+// A cold set-up's first pass (the robust plan's): the translations move to their best with the
+// rotations held where they started, untouched.
+TEST(Optimizer, QuadraticNeighbourWithTranslationsOnlyHoldsTheRotations) {
+  Vector6d target;
+  target << 3.3, -2.1, 1.7, -2.6, 0.9, 2.2;
+  Bowl bowl(target);
+  OptimizerSettings s;
+  s.initial_step_mm = 2;
+  s.final_step_mm = 0.01;
+  s.translations_only = true;
+  const OptimizerResult r = (*make_optimizer("quadratic-neighbour", s))->minimize(bowl, Vector6d::Zero(), {});
+  EXPECT_EQ(r.stop, OptimizerStop::kConverged);
+  EXPECT_EQ(r.x.tail<3>().cwiseAbs().maxCoeff(), 0.0) << r.x.transpose();
+  // With x(3..5) = 0 the bowl's couplings move the best x(0) and x(1): d0 = -0.3 d4, d1 = -0.4 d5 / 3.
+  EXPECT_NEAR(r.x(0), 3.3 + 0.3 * 0.9, 0.05) << r.x.transpose();
+  EXPECT_NEAR(r.x(1), -2.1 + 0.4 * 2.2 / 3, 0.05) << r.x.transpose();
+  EXPECT_NEAR(r.x(2), 1.7, 0.05) << r.x.transpose();
+}
+
 class EveryOptimizer : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(EveryOptimizer, RecoversAKnownOffset) {
@@ -237,6 +256,10 @@ TEST(Optimizer, RefusesBadSettingsAndNames) {
   s.final_step_mm = 3;
   EXPECT_FALSE(make_optimizer("best-neighbour", s).ok());
   EXPECT_FALSE(make_optimizer("simplex", {}).ok());
+  s = {};
+  s.translations_only = true;
+  EXPECT_TRUE(make_optimizer("quadratic-neighbour", s).ok());
+  for (const char* other : {"best-neighbour", "decoupled", "cmaes"}) EXPECT_FALSE(make_optimizer(other, s).ok()) << other;
 }
 
 }  // namespace

@@ -231,6 +231,33 @@ TEST(Registration, RobustPlanHoldsAgainstASmoothTrendThatPullsMutualInformation)
   EXPECT_NEAR(-(robust.view_similarity[0] + robust.view_similarity[1]), reg->cost_at(robust.T_room_from_ct), 1e-9);
 }
 
+// A sharp structure in the frames that the CT does not hold (an organ edge that moved with
+// breathing, a gas pocket), kept by the high-pass because it is sharp: plain NCC's final pass
+// pulls the vertebra's edges towards it; robust NCC (rncc, the robust plan's) leaves its pixels
+// out once they stand beyond the residual's spread. When written: robust-ncc 1.31 mm, robust
+// 0.20 mm.
+TEST(Registration, RobustPlanIsNotPulledByASharpStructureTheCtDoesNotHold) {
+  const RegistrationSetup setup = two_view_setup("mi");
+  ThreadPool pool(2);
+  auto reg = std::move(Registration::create(light_field_renderer(), setup, &pool)).value();
+  const Pose gold = gold_pose();
+  Frames f = frames_at(setup, gold);
+  for (Image<float>& image : f.images) {
+    float lo = image.at(0, 0), hi = lo;
+    for (float v : image.pixels()) lo = std::min(lo, v), hi = std::max(hi, v);
+    // A block of a fifth of the view, a little off its centre, as bright as the view's range.
+    const int r0 = image.rows() / 2 - image.rows() / 10, c0 = image.cols() / 2 + image.cols() / 20;
+    for (int r = r0; r < r0 + image.rows() / 5; ++r)
+      for (int c = c0; c < c0 + image.cols() / 5; ++c) image.at(r, c) += hi - lo;
+  }
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  const double ncc_tre = tre_mm(reg->run(phantom().nominal, *registration_plan("robust-ncc"))->T_room_from_ct, gold);
+  const double rncc_tre = tre_mm(reg->run(phantom().nominal, *registration_plan("robust"))->T_room_from_ct, gold);
+  EXPECT_GT(ncc_tre, 0.8) << "the block no longer pulls plain NCC; the test shows nothing";
+  EXPECT_LT(rncc_tre, 0.3) << "robust-ncc " << ncc_tre << " mm";
+  EXPECT_LT(rncc_tre, 0.25 * ncc_tre);
+}
+
 TEST(Registration, FiducialTermPullsTowardsTheMarker) {
   const RegistrationSetup setup = two_view_setup("mi");
   std::shared_ptr<const DrrRenderer> renderer = light_field_renderer();
@@ -271,6 +298,29 @@ TEST(Registration, StaysInsideTheSearchRegion) {
   ASSERT_TRUE(result.ok());
   const Vector6d d = delta_between(phantom().nominal, result->T_room_from_ct, Vector3d::Zero()).as_vector();
   EXPECT_LE(d.head<3>().cwiseAbs().maxCoeff(), 4 + 1e-9);
+  EXPECT_LT(tre_mm(result->T_room_from_ct, gold_pose()), 0.5);
+}
+
+// The robust plan's first pass moves the translations alone. From a start whose rotation lies
+// outside the search region every shift costs +infinity; that pass then finds nothing, and the
+// passes after it, which move the rotations too, still run from the start.
+TEST(Registration, ARobustPlanFromARotationOutsideTheSearchRegionStillRegisters) {
+  RegistrationSetup setup = two_view_setup("mi");
+  setup.search_rotation_deg = 3;
+  auto reg = std::move(Registration::create(light_field_renderer(), setup, nullptr)).value();
+  const Frames f = frames_at(setup, gold_pose());  // gold: 3 mm, 2 degrees from nominal
+  ASSERT_TRUE(reg->set_frames(f.views(), {}).ok());
+  PoseDelta start_delta;
+  start_delta.rotation_rad = {deg_to_rad(3.5), 0, 0};
+  const Pose start = apply_delta(phantom().nominal, start_delta, Vector3d::Zero());
+  EXPECT_TRUE(std::isinf(reg->cost_at(start)));
+  const auto plan = *registration_plan("robust");
+  ASSERT_TRUE(plan.passes.front().translations_only);
+  auto result = reg->run(start, plan);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  ASSERT_EQ(result->passes.size(), plan.passes.size()) << "a pass that found nothing ended the plan";
+  EXPECT_EQ(result->passes.front().stop, OptimizerStop::kNonFinite);
+  EXPECT_NE(result->stop, OptimizerStop::kNonFinite);
   EXPECT_LT(tre_mm(result->T_room_from_ct, gold_pose()), 0.5);
 }
 
@@ -431,7 +481,7 @@ TEST(Registration, RefusesMisuse) {
   zero_bin.passes[0].bin = 0;
   EXPECT_FALSE(reg->run(phantom().nominal, zero_bin).ok());
   RegistrationPlan unknown_measure = *registration_plan("robust");
-  unknown_measure.passes[1].similarity = "entropy";
+  unknown_measure.passes.back().similarity = "entropy";
   EXPECT_FALSE(reg->run(phantom().nominal, unknown_measure).ok());
   RegistrationResult ignored;
   PreparedPlan tampered = std::move(reg->prepare_plan(*registration_plan("warm"))).value();

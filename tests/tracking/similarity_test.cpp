@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 #include "fixtures.hpp"
@@ -125,12 +126,85 @@ TEST(Similarity, UnknownNameIsRefusedWithTheKnownOnes) {
 }
 
 TEST(Similarity, NccAndGcIgnoreALinearIntensityMap) {
-  for (const char* name : {"ncc", "gc"}) {
+  for (const char* name : {"ncc", "rncc", "gc"}) {
     auto s = std::move(make_similarity(name)).value();
     ASSERT_TRUE(s->prepare(fixture_drr().view(), {}).ok());
     Image<float> mapped = fixture_drr();
     for (float& v : mapped.pixels()) v = 3.f * v + 7.f;
     EXPECT_NEAR(s->score(mapped.view()), 1.0, 1e-6) << name;
+  }
+}
+
+// The fixture with a bright block (`rows` x `cols` px, top left at row r0, column c0) added: an
+// organ that is somewhere else in the frame than in the planning CT.
+Image<float> with_block(const Image<float>& in, int r0, int c0, int rows, int cols, float amplitude) {
+  Image<float> out = in;
+  for (int r = r0; r < r0 + rows; ++r)
+    for (int c = c0; c < c0 + cols; ++c)
+      if (r >= 0 && c >= 0 && r < out.rows() && c < out.cols()) out.at(r, c) += amplitude;
+  return out;
+}
+
+// The shift along x (0.1 px steps within +-3 px) at which `name` scores the frame highest, where
+// the frame is the fixture with a block at column 30 and noise of 2 % of its range, and the DRR at
+// shift dx is the shifted fixture with the block at column 24 + dx (the block moved 6 px since the
+// CT; the rest did not).
+double best_shift_with_a_moved_block(const char* name) {
+  const Image<float>& f = fixture_drr();
+  float lo = f.at(0, 0), hi = lo;
+  for (float v : f.pixels()) lo = std::min(lo, v), hi = std::max(hi, v);
+  const float amplitude = 0.5f * (hi - lo);
+  auto s = std::move(make_similarity(name)).value();
+  Image<float> frame = with_block(f, 6, 30, 8, 8, amplitude);
+  std::uint32_t state = 12345;  // a fixed linear congruential sequence: the same noise every run
+  for (float& v : frame.pixels()) {
+    state = state * 1664525u + 1013904223u;
+    v += 0.02f * (hi - lo) * (static_cast<float>(state >> 8) / 16777216.f - 0.5f);
+  }
+  EXPECT_TRUE(s->prepare(frame.view(), {}).ok());
+  double best = -1e300, best_dx = 0;
+  for (int i = -30; i <= 30; ++i) {
+    const double dx = 0.1 * i;
+    const Image<float> drr = shifted(with_block(f, 6, 24, 8, 8, amplitude), dx, 0);
+    const double score = s->score(drr.view());
+    if (score > best) best = score, best_dx = dx;
+  }
+  return best_dx;
+}
+
+TEST(Similarity, RobustNccIsNotPulledByAStructureThatMovedWhereNccIs) {
+  const double ncc = best_shift_with_a_moved_block("ncc");
+  const double rncc = best_shift_with_a_moved_block("rncc");
+  EXPECT_GE(std::abs(ncc), 0.5) << "the fixture no longer pulls plain NCC; the test shows nothing";
+  EXPECT_LE(std::abs(rncc), 0.15) << "plain NCC's optimum: " << ncc << " px";
+}
+
+TEST(Similarity, RobustNccWithAFarCutOffIsNcc) {
+  SimilarityOptions far;
+  far.tukey_c = 100;
+  auto rncc = std::move(make_similarity("rncc", far)).value();
+  auto ncc = std::move(make_similarity("ncc")).value();
+  ASSERT_TRUE(rncc->prepare(fixture_drr().view(), {}).ok());
+  ASSERT_TRUE(ncc->prepare(fixture_drr().view(), {}).ok());
+  for (double shift : {0.3, 1.0, 2.5}) {
+    const Image<float> moved = shifted(fixture_drr(), shift, -0.4 * shift);
+    const double plain = ncc->score(moved.view());
+    EXPECT_LT(plain, 0.999) << "no residual to weigh at a shift of " << shift << " px";
+    EXPECT_NEAR(rncc->score(moved.view()), plain, 2e-3 * (1 - plain)) << shift;
+  }
+}
+
+TEST(Similarity, RobustNccCutOffOutsideItsRangeIsRefused) {
+  for (double c : {0.0, 0.5, -1.0, 101.0, std::numeric_limits<double>::quiet_NaN(),
+                   std::numeric_limits<double>::infinity()}) {
+    SimilarityOptions options;
+    options.tukey_c = c;
+    EXPECT_FALSE(make_similarity("rncc", options).ok()) << c;
+  }
+  for (double c : {1.0, 100.0}) {
+    SimilarityOptions options;
+    options.tukey_c = c;
+    EXPECT_TRUE(make_similarity("rncc", options).ok()) << c;
   }
 }
 

@@ -250,14 +250,16 @@ class QuadraticNeighbour final : public Optimizer {
     if (!evaluate_start(search, &centre, &centre_cost)) return search.finish(OptimizerStop::kConverged);
     std::array<Vector6d, 12> neighbours;
     std::array<double, 12> costs;
+    const int axes = settings_.translations_only ? 3 : 6;  // translations are x(0..2)
+    const int probes = 2 * axes;
     for (double step = settings_.initial_step_mm; step >= settings_.final_step_mm * (1 - 1e-9);) {
       make_neighbours(centre, step, &neighbours);
-      if (!search.can_evaluate(13)) return search.finish(OptimizerStop::kConverged);
-      search.evaluate(neighbours.data(), 12, costs.data());
+      if (!search.can_evaluate(probes + 1)) return search.finish(OptimizerStop::kConverged);
+      search.evaluate(neighbours.data(), probes, costs.data());
       // Per-axis parabola through (-step, 0, +step): Newton step on the diagonal model.
       Vector6d jump = centre;
-      for (int i = 0; i < 6; ++i) {
-        const double plus = costs[2 * i], minus = costs[2 * i + 1];
+      for (int i = 0; i < axes; ++i) {
+        const double plus = costs[std::size_t(2 * i)], minus = costs[std::size_t(2 * i + 1)];
         const double slope = (plus - minus) / (2 * step);
         const double curvature = (plus + minus - 2 * centre_cost) / (step * step);
         double move = 0;
@@ -269,7 +271,7 @@ class QuadraticNeighbour final : public Optimizer {
       }
       double jump_cost = std::numeric_limits<double>::infinity();
       if (jump != centre) search.evaluate(&jump, 1, &jump_cost);
-      const int best = int(std::min_element(costs.begin(), costs.end()) - costs.begin());
+      const int best = int(std::min_element(costs.begin(), costs.begin() + probes) - costs.begin());
       search.checkpoint();
       const bool jump_wins = jump_cost <= costs[best];
       const double candidate_cost = jump_wins ? jump_cost : costs[best];
@@ -407,6 +409,9 @@ Result<std::unique_ptr<Optimizer>> make_optimizer(std::string_view name, const O
   if (!std::isfinite(settings.tolerance_mm) || settings.tolerance_mm < 0 ||
       settings.tolerance_mm > settings.initial_step_mm)
     return invalid_argument("optimizer: the tolerance must be from 0 (off) to the initial step");
+  if (settings.translations_only && name != "quadratic-neighbour")
+    return invalid_argument("optimizer: only quadratic-neighbour moves the translations alone, not " +
+                            std::string(name));
   if (name == "best-neighbour") return std::unique_ptr<Optimizer>(new BestNeighbour(settings));
   if (name == "quadratic-neighbour") return std::unique_ptr<Optimizer>(new QuadraticNeighbour(settings));
   if (name == "decoupled") return std::unique_ptr<Optimizer>(new Decoupled(settings));

@@ -125,6 +125,7 @@ Result<PreparedPlan> Registration::prepare_plan(const RegistrationPlan& plan, bo
     settings.initial_step_mm = pass.initial_step_mm;
     settings.final_step_mm = pass.final_step_mm;
     settings.tolerance_mm = pass.tolerance_mm;
+    settings.translations_only = pass.translations_only;
     settings.record_trace = record_trace;
     auto optimizer = make_optimizer(pass.optimizer, settings);
     if (!optimizer.ok()) return optimizer.status();
@@ -220,7 +221,12 @@ Status Registration::run(const Pose& start, const PreparedPlan& prepared, double
       q.x = delta_between(start, cost.pose(point.x), setup_.origin_room_mm).as_vector();
       result->trace.push_back(q);
     }
-    if (r.stop == OptimizerStop::kTimeBudget || r.stop == OptimizerStop::kNonFinite) break;
+    // A pass that found nothing finite ends the plan, except a translations-only pass: from a start
+    // whose rotation lies outside the search region every shift costs +infinity, and the next
+    // pass, which moves the rotations too, starts from the unchanged pose.
+    if (r.stop == OptimizerStop::kTimeBudget ||
+        (r.stop == OptimizerStop::kNonFinite && !prepared.plan.passes[p].translations_only))
+      break;
   }
   result->T_room_from_ct = orthonormalized(current);
   result->delta_from_start = delta_between(start, result->T_room_from_ct, setup_.origin_room_mm);

@@ -95,6 +95,89 @@ class Ncc final : public Similarity {
   FixedImage fixed_;
 };
 
+// NCC with Tukey's biweight on the residual of the standardised images (one reweighting step):
+// r = (f - mean f) / sd f - (m - mean m) / sd m over the usable pixels, whose RMS is
+// sqrt(2 (1 - ncc)); a pixel's weight is (1 - (r / c)^2)^2 below c = tukey_c * RMS and 0 above,
+// and the score is the weighted NCC. Pixels that the DRR cannot explain at this pose (an organ edge
+// that moved with breathing, a rib, a gas pocket) stop pulling it, while the weights stay a smooth
+// function of the pose. By Chebyshev at most 1 / tukey_c^2 of the pixels get weight 0, so the
+// measure cannot reach a high score by discarding most of the image. Constant images give 0.
+class RobustNcc final : public Similarity {
+ public:
+  explicit RobustNcc(double tukey_c) : tukey_c_(tukey_c) {}
+  std::string_view name() const override { return "rncc"; }
+  double worst_score() const override { return -1; }
+  Status prepare(const ImageView<const float>& f, const ImageView<const unsigned char>& v) override {
+    return fixed_.set(f, v);
+  }
+  double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
+    if (!fixed_.fits(m, mv)) return worst_score();
+    // Pass 1: the plain sums, row by row without a branch per pixel (a pixel that is not usable
+    // in both images adds zeros).
+    CorrelationSums s;
+    for (int r = 0; r < fixed_.rows; ++r) {
+      const float* f_row = &fixed_.values[fixed_.index(r, 0)];
+      const unsigned char* usable_row = &fixed_.usable[fixed_.index(r, 0)];
+      const float* m_row = m.row_ptr(r);
+      const unsigned char* mv_row = mv.empty() ? nullptr : mv.row_ptr(r);
+      for (int c = 0; c < fixed_.cols; ++c) {
+        const bool ok = usable_row[c] && std::isfinite(m_row[c]) && (mv_row == nullptr || mv_row[c] != 0);
+        const double fv = ok ? f_row[c] : 0.0, mvv = ok ? m_row[c] : 0.0;
+        s.n += ok;
+        s.a += fv;
+        s.b += mvv;
+        s.aa += fv * fv;
+        s.bb += mvv * mvv;
+        s.ab += fv * mvv;
+      }
+    }
+    if (s.n < kMinPixels) return worst_score();
+    const double mean_f = s.a / s.n, mean_m = s.b / s.n;
+    const double var_f = s.aa / s.n - mean_f * mean_f, var_m = s.bb / s.n - mean_m * mean_m;
+    if (!(var_f > 0) || !(var_m > 0) || !std::isfinite(var_f * var_m)) return 0;
+    const double rms = std::sqrt(std::max(0.0, 2 * (1 - s.value())));
+    // Below this the residual is rounding (pass 2's weights are formed in float): nothing to
+    // reweight, and the plain NCC is the answer.
+    if (!(rms > 1e-5)) return s.value();
+    // Pass 2: the weighted sums of the standardised images. A pixel is standardised in double
+    // (a standardised value is at most sqrt(n), so it fits a float whatever the image's range)
+    // and weighted in float (the weights need no more); the sums are in double.
+    const double inv_sd_f = 1 / std::sqrt(var_f), inv_sd_m = 1 / std::sqrt(var_m);
+    const float inv_c2 = static_cast<float>(1 / (tukey_c_ * tukey_c_ * rms * rms));
+    double w_sum = 0, wf = 0, wm = 0, wff = 0, wmm = 0, wfm = 0;
+    for (int r = 0; r < fixed_.rows; ++r) {
+      const float* f_row = &fixed_.values[fixed_.index(r, 0)];
+      const unsigned char* usable_row = &fixed_.usable[fixed_.index(r, 0)];
+      const float* m_row = m.row_ptr(r);
+      const unsigned char* mv_row = mv.empty() ? nullptr : mv.row_ptr(r);
+      for (int c = 0; c < fixed_.cols; ++c) {
+        const bool ok = usable_row[c] && std::isfinite(m_row[c]) && (mv_row == nullptr || mv_row[c] != 0);
+        const float fv = ok ? static_cast<float>((f_row[c] - mean_f) * inv_sd_f) : 0.f;
+        const float mvv = ok ? static_cast<float>((m_row[c] - mean_m) * inv_sd_m) : 0.f;
+        const float u = std::min((fv - mvv) * (fv - mvv) * inv_c2, 1.f);
+        const float w = ok ? (1 - u) * (1 - u) : 0.f;
+        const float w_f = w * fv, w_m = w * mvv;
+        w_sum += w;
+        wf += w_f;
+        wm += w_m;
+        wff += w_f * fv;
+        wmm += w_m * mvv;
+        wfm += w_f * mvv;
+      }
+    }
+    if (!(w_sum > 0)) return 0;
+    const double cov = wfm - wf * wm / w_sum;
+    const double denom = std::sqrt(std::max(wff - wf * wf / w_sum, 0.0) * std::max(wmm - wm * wm / w_sum, 0.0));
+    if (!(denom > 1e-300) || !std::isfinite(denom)) return 0;
+    return std::clamp(cov / denom, -1.0, 1.0);
+  }
+  std::unique_ptr<Similarity> clone() const override { return std::make_unique<RobustNcc>(*this); }
+
+ private:
+  double tukey_c_;
+  FixedImage fixed_;
+};
+
 class GradientCorrelation final : public Similarity {
  public:
   std::string_view name() const override { return "gc"; }
@@ -248,7 +331,7 @@ class GradientDifference final : public Similarity {
 }  // namespace
 
 std::vector<std::string> similarity_names() {
-  return {"mi", "nmi", "ncc", "gc", "pi", "gd"};
+  return {"mi", "nmi", "ncc", "rncc", "gc", "pi", "gd"};
 }
 
 Result<std::unique_ptr<Similarity>> make_similarity(std::string_view name, const SimilarityOptions& options) {
@@ -258,6 +341,12 @@ Result<std::unique_ptr<Similarity>> make_similarity(std::string_view name, const
   if (name == "mi") return make_mutual_information(options.histogram_bins, false, options.vector_lanes);
   if (name == "nmi") return make_mutual_information(options.histogram_bins, true, options.vector_lanes);
   if (name == "ncc") return std::unique_ptr<Similarity>(new Ncc());
+  if (name == "rncc") {
+    if (!(options.tukey_c >= 1 && options.tukey_c <= 100))
+      return out_of_range("rncc: Tukey's c must be in 1..100 (times the residual's RMS), not " +
+                          std::to_string(options.tukey_c));
+    return std::unique_ptr<Similarity>(new RobustNcc(options.tukey_c));
+  }
   if (name == "gc") return std::unique_ptr<Similarity>(new GradientCorrelation());
   if (name == "pi")
     return std::unique_ptr<Similarity>(

@@ -27,7 +27,14 @@ namespace {
 //   gc       0.269     0.113            0.005    0.007     0.263    0.034          0.05
 //   pi       0.303     (not run)        0.129    (not run) 0.266    (not run)      0.16
 //   gd       1.353     (not run)        1.429    (not run) 1.350    (not run)      0.5
+//   rncc     0.998     0.998            0.283    0.274     0.655    0.966          0.76
 //
+// rncc was measured on 2026-11-30 with the simulator of that day (`lftrack register --frames` of
+// `--save-frames` pairs, gold 2,-1,1.5,1,-0.5,1), beside ncc on the same frames: ncc good 0.996 /
+// 0.995, noise 0.011 / 0.012, swapped 0.461 / 0.917. Its weights favour the pixels where the two
+// images happen to agree, so unrelated images score about 0.27, not 0: that is its no-information
+// value for the views' agreement, as pi's 0.13 is. Its floor is ncc's, between noise and good
+// frames with a wide margin on both sides.
 // The floor sits between good frames and noise with a margin on both sides (about half the lowest
 // good value's excess over the no-information value). It does not separate swapped frames for
 // mi, nmi, gc, pi or gd (a mirrored spine still scores like a plausible registration), nor noise
@@ -37,7 +44,7 @@ namespace {
 // phantom frames exposed everywhere: mi 0.60 / check NCC 0.49, gc 0.25 at 4.6 deg / 0.25), and the
 // pose envelope (the lumbar CT's swapped pairs end 9 to 18 mm or 8 to 9 deg off, outside it).
 constexpr SimilarityExpectation kExpectations[] = {
-    {"mi", 0.3, 0.0},  {"nmi", 1.04, 1.0}, {"ncc", 0.76, 0.0},
+    {"mi", 0.3, 0.0},  {"nmi", 1.04, 1.0}, {"ncc", 0.76, 0.0}, {"rncc", 0.76, 0.27},
     {"gc", 0.05, 0.0}, {"pi", 0.16, 0.13},  {"gd", 0.5, 0.0},
 };
 

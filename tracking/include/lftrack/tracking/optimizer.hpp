@@ -67,6 +67,10 @@ struct OptimizerSettings {
   // than this (projected mm) and nothing beats the jump, however large the step still is: the
   // model then puts the minimum within this of the centre. 0: off (halve down to the final step).
   double tolerance_mm = 0;
+  // quadratic-neighbour: probe the three translations only; the rotations stay at the start's
+  // (a cold set-up's first pass: a shift far along one axis is found before a rotation can
+  // imitate part of it). make_optimizer refuses it for the other optimizers.
+  bool translations_only = false;
   // cmaes: population (0: 4 + 3 ln 6 rounded up to even), and the RNG seed.
   int population = 0;
   std::uint64_t seed = 1;

@@ -89,6 +89,8 @@ struct RegistrationPass {
   // quadratic-neighbour: stop once the parabola jump is this short (projected mm; 0: off, halve
   // down to the final step). OptimizerSettings::tolerance_mm.
   double tolerance_mm = 0;
+  // quadratic-neighbour: move the translations only (OptimizerSettings::translations_only).
+  bool translations_only = false;
 };
 
 struct RegistrationPlan {
@@ -115,14 +117,22 @@ struct RegistrationPlan {
 //              the lumbar CT). The 8 x 8 pass does the travelling at a quarter of the 4 x 4 pass's
 //              cost a probe: the binned passes took 2.8 instead of 4.3 ms, at the same mean TRE
 //              (BENCHMARKS.md, "Tracking at 30 Hz")
-//   robust     quadratic's first pass (the setup's measure, for range), then NCC of frames and
-//              DRRs high-passed at 7 mm (BoxHighPass), 2 -> 0.1 mm: what varies slowly across
-//              the image (scatter, soft tissue and neighbours that moved, flat-field residue)
-//              no longer pulls the pose. On the lumbar CT's clinical frames it quarters the
-//              mean TRE; on ideal frames it costs about 0.01 mm (BENCHMARKS.md)
-//   warm-robust  tracking clinical frames: quadratic-neighbour with robust's high-passed NCC on
+//   robust     the translations alone (rotations held) on quadratic's first level high-passed at
+//              7 mm with rncc (5 -> 1 mm), then quadratic's first pass with the setup's measure
+//              (for range), then robust NCC (rncc:
+//              Tukey's biweight on the residual) of frames and DRRs high-passed at 7 mm
+//              (BoxHighPass), 2 -> 0.1 mm: what varies slowly across the image (scatter, soft
+//              tissue and neighbours that moved, flat-field residue) no longer pulls the pose, nor
+//              do the sharp edges the high-pass keeps but the CT cannot explain (the heart and
+//              aorta after breathing). On the lumbar CT's clinical frames the high-pass took
+//              MI's mean TRE from 0.55 to 0.30 mm; on the thoracic CT with 8 mm breathing rncc
+//              halves plain NCC's (0.54 to 0.26 mm), and costs about 30 % more a registration
+//              (BENCHMARKS.md, "Follow the target")
+//   warm-robust  tracking clinical frames: quadratic-neighbour with robust's high-passed rncc on
 //              2 x 2 binned originals (1 -> 0.25 mm), then at full resolution with probes of
 //              0.25 and 0.125 mm
+//   robust-ncc, warm-robust-ncc  the same with plain NCC in the high-passed passes (the plans
+//              before rncc): cheaper a probe, pulled by edges that moved
 //   pyramid    the cold set-up at half quadratic's time: quadratic-neighbour on 4 x 4 binned
 //              references blurred 1.5 mm (5 -> 0.5 mm), on 4 x 4 binned originals (1 -> 0.25 mm),
 //              then a single full-resolution iteration (0.25 mm), as warm's last pass

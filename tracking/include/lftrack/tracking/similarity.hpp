@@ -27,6 +27,7 @@ struct SimilarityOptions {
   int histogram_bins = 64;     // mi, nmi: bins per axis of the joint histogram, 2..1024
   int pattern_radius_px = 3;   // pi: neighbourhood radius
   double pattern_sigma = 0.1;  // pi: in units of the difference image's standard deviation
+  double tukey_c = 2.5;        // rncc: the biweight's cut-off, times the residual's RMS, 1..100
   // mi, nmi: per-pixel passes in AVX2 lanes where the CPU has them (the same scores bit for bit);
   // false: the portable loops.
   bool vector_lanes = true;
@@ -56,6 +57,9 @@ class Similarity {
 //        moving image; constant images give 0.
 //   nmi  normalised mutual information (H(F) + H(M)) / H(F, M), in [1, 2]; constant images give 1.
 //   ncc  normalised cross-correlation in [-1, 1]; a constant image gives 0.
+//   rncc ncc with Tukey's biweight on the standardised residual (one reweighting step, cut-off
+//        tukey_c times the residual's RMS): pixels the DRR cannot explain stop pulling the pose;
+//        in [-1, 1], a constant image gives 0.
 //   gc   gradient correlation: mean of the NCCs of the row and column gradients, in [-1, 1].
 //   pi   pattern intensity (Weese) of the difference of the two standardised images, in [0, 1]
 //        (1: identical up to a linear intensity map).
