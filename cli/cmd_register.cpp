@@ -391,7 +391,10 @@ Command add_register_command(CLI::App* parent) {
   std::string plans;
   for (const auto& n : tracking::registration_plan_names()) plans += (plans.empty() ? "" : ", ") + n;
   app->add_option("--plan", o->plan, "Registration plan: " + plans + " (default: the scene's)");
-  app->add_option("--similarity", o->similarity, "Similarity: mi, nmi, ncc, rncc, gc, pi, gd (default: the scene's)");
+  std::string measures;
+  for (const auto& m : tracking::similarity_names()) measures += (measures.empty() ? "" : ", ") + m;
+  app->add_option("--similarity", o->similarity, "Similarity: " + measures + " (default: the scene's)")
+      ->check(CLI::IsMember(tracking::similarity_names()));
   app->add_option("--renderer", o->renderer, "DRR renderer")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");
   app->add_flag("--fiducial", o->fiducial, "Add the scene's first fiducial (hybrid measure, paper 2)");

@@ -114,6 +114,9 @@ std::vector<UsageCase> cases() {
        {{"register", "--sim", "--seed", "-1"}, "--seed"},
        {{"register", "--sim", "--seed", "18446744073709551616"}, "--seed"},
        {{"register", "--sim", "--seed", "99999999999999999999999"}, "--seed"},
+       // A measure that is not one (the outside probe of 2026-11-30: "no similarity expectation").
+       {{"register", "--sim", "--similarity", "RNCC"}, "--similarity"},
+       {{"register", "--sim", "--similarity", ""}, "--similarity"},
        {{"study", "trade", "--out", "x", "--seed", "1.5"}, "--seed"}});
   return all;
 }
