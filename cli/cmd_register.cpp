@@ -388,12 +388,15 @@ Command add_register_command(CLI::App* parent) {
       ->expected(6)
       ->delimiter(',')
       ->check(finite_in(-1e6, 1e6));
-  std::string plans;
-  for (const auto& n : tracking::registration_plan_names()) plans += (plans.empty() ? "" : ", ") + n;
-  app->add_option("--plan", o->plan, "Registration plan: " + plans + " (default: the scene's)");
-  std::string measures;
-  for (const auto& m : tracking::similarity_names()) measures += (measures.empty() ? "" : ", ") + m;
-  app->add_option("--similarity", o->similarity, "Similarity: " + measures + " (default: the scene's)")
+  const auto listed = [](const std::vector<std::string>& names) {
+    std::string text;
+    for (const auto& n : names) text += (text.empty() ? "" : ", ") + n;
+    return text;
+  };
+  app->add_option("--plan", o->plan,
+                  "Registration plan: " + listed(tracking::registration_plan_names()) + " (default: the scene's)");
+  app->add_option("--similarity", o->similarity,
+                  "Similarity: " + listed(tracking::similarity_names()) + " (default: the scene's)")
       ->check(CLI::IsMember(tracking::similarity_names()));
   app->add_option("--renderer", o->renderer, "DRR renderer")->capture_default_str();
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)");

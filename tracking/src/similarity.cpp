@@ -67,13 +67,27 @@ inline bool gradient_at(const FixedImage& f, const ImageView<const float>& m,
   return true;
 }
 
-// Correlation sums of the pixels usable in both images.
+// Correlation sums of the pixels usable in both images, row by row without a branch per pixel: a
+// pixel that is not usable in both adds zeros, which leaves every sum as it was.
 CorrelationSums pixel_sums(const FixedImage& f, const ImageView<const float>& m,
                            const ImageView<const unsigned char>& mv) {
   CorrelationSums s;
-  for (int r = 0; r < f.rows; ++r)
-    for (int c = 0; c < f.cols; ++c)
-      if (f.both(m, mv, r, c)) s.add(f.values[f.index(r, c)], m.at(r, c));
+  for (int r = 0; r < f.rows; ++r) {
+    const float* f_row = &f.values[f.index(r, 0)];
+    const unsigned char* usable_row = &f.usable[f.index(r, 0)];
+    const float* m_row = m.row_ptr(r);
+    const unsigned char* mv_row = mv.empty() ? nullptr : mv.row_ptr(r);
+    for (int c = 0; c < f.cols; ++c) {
+      const bool ok = usable_row[c] && std::isfinite(m_row[c]) && (mv_row == nullptr || mv_row[c] != 0);
+      const double fv = ok ? f_row[c] : 0.0, mvv = ok ? m_row[c] : 0.0;
+      s.n += ok;
+      s.a += fv;
+      s.b += mvv;
+      s.aa += fv * fv;
+      s.bb += mvv * mvv;
+      s.ab += fv * mvv;
+    }
+  }
   return s;
 }
 
@@ -112,33 +126,16 @@ class RobustNcc final : public Similarity {
   }
   double score(const ImageView<const float>& m, const ImageView<const unsigned char>& mv) override {
     if (!fixed_.fits(m, mv)) return worst_score();
-    // Pass 1: the plain sums, row by row without a branch per pixel (a pixel that is not usable
-    // in both images adds zeros).
-    CorrelationSums s;
-    for (int r = 0; r < fixed_.rows; ++r) {
-      const float* f_row = &fixed_.values[fixed_.index(r, 0)];
-      const unsigned char* usable_row = &fixed_.usable[fixed_.index(r, 0)];
-      const float* m_row = m.row_ptr(r);
-      const unsigned char* mv_row = mv.empty() ? nullptr : mv.row_ptr(r);
-      for (int c = 0; c < fixed_.cols; ++c) {
-        const bool ok = usable_row[c] && std::isfinite(m_row[c]) && (mv_row == nullptr || mv_row[c] != 0);
-        const double fv = ok ? f_row[c] : 0.0, mvv = ok ? m_row[c] : 0.0;
-        s.n += ok;
-        s.a += fv;
-        s.b += mvv;
-        s.aa += fv * fv;
-        s.bb += mvv * mvv;
-        s.ab += fv * mvv;
-      }
-    }
+    const CorrelationSums s = pixel_sums(fixed_, m, mv);  // pass 1: the plain sums
     if (s.n < kMinPixels) return worst_score();
     const double mean_f = s.a / s.n, mean_m = s.b / s.n;
     const double var_f = s.aa / s.n - mean_f * mean_f, var_m = s.bb / s.n - mean_m * mean_m;
     if (!(var_f > 0) || !(var_m > 0) || !std::isfinite(var_f * var_m)) return 0;
-    const double rms = std::sqrt(std::max(0.0, 2 * (1 - s.value())));
+    const double ncc = s.value();
+    const double rms = std::sqrt(std::max(0.0, 2 * (1 - ncc)));
     // Below this the residual is rounding (pass 2's weights are formed in float): nothing to
     // reweight, and the plain NCC is the answer.
-    if (!(rms > 1e-5)) return s.value();
+    if (!(rms > 1e-5)) return ncc;
     // Pass 2: the weighted sums of the standardised images. A pixel is standardised in double
     // (a standardised value is at most sqrt(n), so it fits a float whatever the image's range)
     // and weighted in float (the weights need no more); the sums are in double.
