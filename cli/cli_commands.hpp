@@ -88,5 +88,7 @@ Command add_calibrate_views_command(CLI::App* parent);
 Command add_calibrate_couch_command(CLI::App* parent);
 Command add_calibrate_detector_command(CLI::App* parent);
 Command add_rt_check_command(CLI::App* parent);
+// `lftrack commission` records its own command line in the file it writes.
+Command add_commission_command(CLI::App* parent, int argc, char** argv);
 
 }  // namespace lftrack::host::cli

@@ -11,6 +11,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/host/sim_detectors.hpp"
 #include "lftrack/host/simulated_patient.hpp"
@@ -87,23 +88,6 @@ Status verdict_status(const RegistrationVerdict& v, const PreparedScene& p) {
   return failed_precondition("registration " + verdict_text(v, view_names(p)));
 }
 
-// Each view's NCC of the preprocessed frame against the DRR at `pose` (the verdict's check).
-Status check_ncc_at(const PreparedScene& p, const tracking::DrrRenderer& renderer, const SceneFrames& frames,
-                    const Pose& pose, VerdictInput* in) {
-  for (std::size_t v = 0; v < p.scene.detectors.size(); ++v) {
-    const tracking::PixelWindow& w = p.roi_windows[v];
-    Image<float> drr(w.rows, w.cols);
-    Image<unsigned char> valid(w.rows, w.cols);
-    tracking::RenderExtras extras;
-    extras.valid = valid.view();
-    LFTRACK_RETURN_IF_ERROR(renderer.render(pose, p.scene.detectors[v].view, w, drr.view(), &extras));
-    in->check_ncc[v] =
-        masked_ncc(frames.line_integral[v].view(), frames.valid[v].view(), drr.view(), valid.view());
-  }
-  in->has_check_ncc = true;
-  return {};
-}
-
 // --dicom-sro: the result, if the verdict accepts it, as a DICOM Spatial Registration object (a
 // rejected registration is not one of record: nothing is written, and the verdict's status says
 // why). Reports on stderr with --json, which keeps stdout for the JSON.
@@ -148,7 +132,8 @@ Status run(const RegisterOptions& o) {
   const std::optional<Eigen::Vector3d> unobservable = unobservable_direction_room(p.scene);
   RegistrationSpec spec = p.scene.registration;
   if (!o.similarity.empty()) spec.similarity = o.similarity;
-  auto limits = verdict_limits(p.scene, spec.similarity);
+  std::string floors_from;
+  auto limits = scene_verdict_limits(p, spec.similarity, &floors_from);
   if (!limits.ok()) return limits.status();
   if (!o.plan.empty()) spec.plan = o.plan;
   auto plan = tracking::registration_plan(spec.plan);
@@ -183,31 +168,13 @@ Status run(const RegisterOptions& o) {
   if (o.sim) {
     if (!gold) gold = p.nominal_T_room_from_ct;
     spdlog::info("simulated detectors, {}", describe_exposure(p));
-    const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
-    // The simulated detectors as the loop's (SimDetectors): each ROI window exact (Siddon, with a
-    // 16-pixel margin), the rest of each detector coarser. The scene's imaging physics
-    // (sim.physics): the simulated patient; ideal: the world anatomy.
-    std::shared_ptr<const SimulatedPatient> patient;
-    std::shared_ptr<const tracking::DrrRenderer> exact;
-    if (!physics.ideal()) {
-      auto made = make_simulated_patient(p, physics, scene_anatomy_seed(p), &pool, &pool, nullptr, true);
-      if (!made.ok()) return made.status();
-      patient = std::make_shared<const SimulatedPatient>(std::move(made).value());
-    } else {
-      tracking::RendererOptions exact_options;
-      exact_options.pool = &pool;
-      auto siddon = tracking::make_renderer("siddon", p.world_mu, exact_options);
-      if (!siddon.ok()) return siddon.status();
-      exact = std::move(siddon).value();
-    }
-    const sim::DetectorModel model = scene_detector_model(p);
-    auto detectors = SimDetectors::create(p, exact, patient, model);
-    if (!detectors.ok()) return detectors.status();
-    raw = detectors->make_frames();
-    LFTRACK_RETURN_IF_ERROR(detectors->expose(*gold, o.seed * 7919, &raw));  // view i: seed * 7919 + i, as before
-    if (patient) {
-      use_where_uncalibrated(sim::detector_correction(model));
-      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(physics));
+    auto simulated = make_scene_sim_detectors(p, &pool);
+    if (!simulated.ok()) return simulated.status();
+    raw = simulated->detectors.make_frames();
+    LFTRACK_RETURN_IF_ERROR(simulated->detectors.expose(*gold, o.seed * 7919, &raw));  // view i: seed * 7919 + i, as before
+    if (simulated->correction) {
+      use_where_uncalibrated(*simulated->correction);
+      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(p.scene.sim.physics));
     }
   } else {
     if (o.frames.size() != p.scene.detectors.size())
@@ -234,19 +201,24 @@ Status run(const RegisterOptions& o) {
       spdlog::info("wrote {}", file.string());
     }
   }
-  if (static_cast<int>(raw.size()) > kMaxVerdictViews) return invalid_argument("more views than the verdict holds");
-  // The image-quality gate, as the loop runs it: the raw frame over its ROI window.
-  VerdictInput verdict_in;
-  verdict_in.views = static_cast<int>(raw.size());
-  std::vector<tracking::FrameQualityStats> quality(raw.size());
-  bool quality_ok = true;
-  for (std::size_t v = 0; v < raw.size(); ++v) {
-    verdict_in.image_quality[v] = tracking::assess_frame_quality(raw[v].view(), p.roi_windows[v], (*corrections)[v],
-                                                                 tracking::FrameQualityLimits{}, &quality[v]);
-    quality_ok = quality_ok && verdict_in.image_quality[v] == tracking::FrameQualityIssue::kOk;
-  }
-  if (!quality_ok) {  // such frames are not registered (frame_quality.hpp), here as in the loop
-    const RegistrationVerdict verdict = judge_registration(*limits, verdict_in);
+  auto renderer = make_scene_renderer(p, o.renderer, o.lf_dir, &pool);
+  if (!renderer.ok()) return renderer.status();
+  auto judge = RegistrationJudge::create(p, *renderer, spec, *corrections, *limits, &pool);
+  if (!judge.ok()) return judge.status();
+  std::optional<LocatedFiducial> fiducial;
+  const auto add_fiducial = [&](const SceneFrames& frames, tracking::Registration* registration) -> Status {
+    auto located = locate_fiducial(p, frames, start, spec.gamma_per_mm);
+    if (!located.ok()) return located.status();
+    fiducial = *located;
+    registration->set_fiducial(located->term);
+    return {};
+  };
+  auto judged = (*judge)->judge(raw, start, *plan, o.fiducial ? RegistrationJudge::BeforeRun(add_fiducial) : nullptr);
+  if (!judged.ok()) return judged.status();
+  const VerdictInput& verdict_in = judged->input;
+  const RegistrationVerdict& verdict = judged->verdict;
+  if (!judged->registered) {  // a frame failed the image-quality gate: not registered, here as in the loop
+    const std::vector<tracking::FrameQualityStats>& quality = judged->quality;
     if (o.json) {
       nlohmann::json j;
       j["scene"] = p.scene.source;
@@ -273,35 +245,8 @@ Status run(const RegisterOptions& o) {
     }
     return verdict_status(verdict, p);
   }
-  auto frames = preprocess_scene_frames(p, raw, *corrections);
-  if (!frames.ok()) return frames.status();
-
-  auto renderer = make_scene_renderer(p, o.renderer, o.lf_dir, &pool);
-  if (!renderer.ok()) return renderer.status();
-  auto registration = make_scene_registration(p, *renderer, spec, &pool);
-  if (!registration.ok()) return registration.status();
-  LFTRACK_RETURN_IF_ERROR((*registration)->set_frames(frames->frames(), frames->masks()));
-  std::optional<LocatedFiducial> fiducial;
-  if (o.fiducial) {
-    auto located = locate_fiducial(p, *frames, start, spec.gamma_per_mm);
-    if (!located.ok()) return located.status();
-    fiducial = *located;
-    (*registration)->set_fiducial(located->term);
-  }
-  auto result = (*registration)->run(start, *plan);
-  if (!result.ok()) return result.status();
-
+  const tracking::RegistrationResult* result = &judged->result;
   const std::vector<double> delta = nominal_delta_of(p, result->T_room_from_ct);
-  verdict_in.stop = result->stop;
-  verdict_in.pose_finite = result->T_room_from_ct.matrix().allFinite();
-  for (std::size_t v = 0; v < result->view_similarity.size() && v < verdict_in.similarity.size(); ++v)
-    verdict_in.similarity[v] = result->view_similarity[v];
-  verdict_in.delta_from_nominal =
-      tracking::delta_between(p.nominal_T_room_from_ct, result->T_room_from_ct, p.registration_origin_room_mm())
-          .as_vector();
-  if (verdict_in.pose_finite)
-    LFTRACK_RETURN_IF_ERROR(check_ncc_at(p, **renderer, *frames, result->T_room_from_ct, &verdict_in));
-  const RegistrationVerdict verdict = judge_registration(*limits, verdict_in);
   const auto euler = tracking::euler_from_rotation(result->T_room_from_ct.linear());
   const Eigen::Vector3d t = result->T_room_from_ct.translation();
   std::optional<tracking::Tre> tre, initial_tre;
@@ -341,6 +286,7 @@ Status run(const RegisterOptions& o) {
       j["tre_mm"] = {{"mean", tre->mean_mm}, {"max", tre->max_mm}, {"points", tre->points}};
     }
     j["verdict"] = verdict_json(verdict, p);
+    j["verdict"]["floors_from"] = floors_from;
     if (dicom_ct && verdict.ok) j["dicom_sro"] = o.dicom_sro;
     std::printf("%s\n", j.dump(2).c_str());
     LFTRACK_RETURN_IF_ERROR(write_dicom_result(o, p, dicom_ct, result->T_room_from_ct, verdict,
@@ -368,6 +314,7 @@ Status run(const RegisterOptions& o) {
     std::printf("  TRE: mean %.3f mm, max %.3f mm (initial mean %.3f mm) over %d points\n", tre->mean_mm, tre->max_mm,
                 initial_tre->mean_mm, tre->points);
   std::printf("  verdict: %s\n", verdict_text(verdict, view_names(p)).c_str());
+  std::printf("  verdict floors: %s\n", floors_from.c_str());
   LFTRACK_RETURN_IF_ERROR(
       write_dicom_result(o, p, dicom_ct, result->T_room_from_ct, verdict, plan->name + ", " + spec.similarity));
   return verdict_status(verdict, p);

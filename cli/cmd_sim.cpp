@@ -114,6 +114,10 @@ void print_summary(const LoopSummary& s) {
       static_cast<long long>(s.skipped_periods));
   std::printf("registration: p50 %.1f ms, p95 %.1f ms, %.0f evaluations on average; alignment %.0f ms\n",
               s.registration_p50_ms, s.registration_p95_ms, s.evaluations_mean, s.align_ms);
+  if (s.verdict_checks > 0)
+    std::printf("verdict's NCC check in tracking cycles: %lld checks, p50 %.2f ms, p95 %.2f ms, max %.2f ms\n",
+                static_cast<long long>(s.verdict_checks), s.verdict_check_p50_ms, s.verdict_check_p95_ms,
+                s.verdict_check_max_ms);
   std::printf("holds %lld, faults %lld, corrections sent %lld", static_cast<long long>(s.holds),
               static_cast<long long>(s.faults), static_cast<long long>(s.commands));
   if (s.allocations_per_cycle)

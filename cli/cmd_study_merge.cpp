@@ -120,7 +120,7 @@ Status merge_capture_range(const std::vector<std::string>& dirs, const std::file
   if (!merged.ok()) return merged.status();
   if (merged->size() == 1) {
     LFTRACK_RETURN_IF_ERROR(write_capture_range_outputs(merged->front(), out));
-    std::printf("merged %zu shards, %zu runs; wrote %s/{runs.csv,summary.json,capture_range.png}\n", shards.size(),
+    std::printf("merged %zu shards, %zu runs; wrote %s/{runs.csv,summary.json,capture_range.png,verdict.png}\n", shards.size(),
                 merged->front().runs.size(), out.c_str());
     return {};
   }
@@ -145,7 +145,7 @@ Status merge_realism(const std::vector<std::string>& dirs, const std::filesystem
   if (merged->size() == 1) {
     LFTRACK_RETURN_IF_ERROR(write_realism_outputs(merged->front(), out));
     print_realism_table(merged->front());
-    std::printf("merged %zu shards; wrote %s/{summary.json,realism.csv,realism.png} and a capture-range study per "
+    std::printf("merged %zu shards; wrote %s/{summary.json,realism.csv,realism_tre.png,realism_rates.png} and a capture-range study per "
                 "factor set\n",
                 shards.size(), out.c_str());
     return {};

@@ -36,11 +36,12 @@ void print_realism_table(const RealismReport& report) {
               report.options.image_max_mm,
               report.hybrid_method.empty() ? "" : ("; hybrid " + report.hybrid_method).c_str());
   const bool hybrid = !report.hybrid_method.empty();  // without a fiducial: no hybrid columns
-  std::printf("%-20s %10s %10s %9s %9s", "factor set", "mean TRE", "p95 TRE", "success", "median");
+  std::printf("%-20s %10s %10s %9s %9s %8s %8s", "factor set", "mean TRE", "p95 TRE", "success", "median", "fls.acc",
+              "fls.rej");
   std::printf(hybrid ? " %9s %10s\n" : "\n", "hybrid", "hybrid TRE");
   for (const RealismFactorSummary& f : report.factors) {
-    std::printf("%-20s %7.3f mm %7.3f mm %8.1f%% %6.0f ms", f.name.c_str(), f.mean_tre_mm, f.p95_tre_mm,
-                100 * f.success_rate, f.median_ms);
+    std::printf("%-20s %7.3f mm %7.3f mm %8.1f%% %6.0f ms %8d %8d", f.name.c_str(), f.mean_tre_mm, f.p95_tre_mm,
+                100 * f.success_rate, f.median_ms, f.accepted_wrong, f.rejected_right);
     if (hybrid)
       std::printf(" %8.1f%% %7.3f mm\n", 100 * f.hybrid_success_rate, f.hybrid_mean_tre_mm);
     else
@@ -99,7 +100,7 @@ Status run(const RealismCliOptions& o) {
       return {};
     }
     print_realism_table(*report);
-    std::printf("wrote %s/{summary.json,realism.csv,realism.png} and a capture-range study per factor set\n",
+    std::printf("wrote %s/{summary.json,realism.csv,realism_tre.png,realism_rates.png} and a capture-range study per factor set\n",
                 o.out_dir.c_str());
     return {};
   };

@@ -58,6 +58,7 @@ int main(int argc, char** argv) {
   const Command calibrate_couch = add_calibrate_couch_command(calibrate);
   const Command calibrate_detector = add_calibrate_detector_command(calibrate);
   const Command rt_check = add_rt_check_command(&app);
+  const Command commission = add_commission_command(&app, argc, argv);
 
   try {
     app.parse(argc, argv);
@@ -122,6 +123,8 @@ int main(int argc, char** argv) {
       status = calibrate_detector();
     else if (app.got_subcommand("rt-check"))
       status = rt_check();
+    else if (app.got_subcommand("commission"))
+      status = commission();
     if (!status.ok()) {
       spdlog::error("{}", status.message());
       return 1;

@@ -23,10 +23,13 @@ fi
 out=out/exp/real-clock
 mkdir -p "$out"
 
-# The 30 Hz variant of the lumbar scene, next to nothing in scenes/: the CT path made absolute.
+# The 30 Hz variant of the lumbar scene, next to nothing in scenes/: the CT's and the
+# commissioning file's paths made absolute (the loop's period is not what the floors depend on).
 data=$(cd scenes && realpath -m ../../shared/data)
 lumbar30="$out/lumbar-ct-30hz.yaml"
+commissioning=$(realpath scenes/commissioning)
 sed -e "s|path: ../../shared/data|path: $data|" \
+    -e "s|commissioning: commissioning/|commissioning: $commissioning/|" \
     -e 's|^name: .*|name: pancreas CT, lumbar vertebra, tracked at 30 Hz|' \
     -e 's|^  period_ms: 100$|  period_ms: 33.333|' \
     -e 's|^  registration_budget_ms: 50$|  registration_budget_ms: 20|' \

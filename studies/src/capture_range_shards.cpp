@@ -19,7 +19,7 @@ namespace {
 
 const char* const kCaptureRunsHeader =
     "method,bin_lo_mm,bin_hi_mm,sample,initial_tre_mm,tre_mean_mm,tre_max_mm,success_2mm,success_2_5mm,"
-    "evaluations,ms";
+    "evaluations,ms,accepted,verdict_reason";
 
 nlohmann::json options_json(const CaptureRangeOptions& o) {
   nlohmann::json methods = nlohmann::json::array();
@@ -52,13 +52,13 @@ std::string shard_name(const CaptureRangeReport& r) {
 
 Status parse_run(const std::vector<std::string>& c, const CaptureRangeOptions& o, const std::string& where,
                  CaptureRangeRun* run) {
-  if (c.size() != 11) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 11");
+  if (c.size() != 13) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 13");
   run->method = c[0];
   if (std::none_of(o.methods.begin(), o.methods.end(),
                    [&](const RegistrationMethod& m) { return m.label == run->method; }))
     return corrupt_data(where + ": method '" + run->method + "' is not in study.json");
-  double values[10];
-  for (int i = 0; i < 10; ++i) {
+  double values[12];
+  for (int i = 0; i < 12; ++i) {
     char* end = nullptr;
     values[i] = std::strtod(c[std::size_t(i) + 1].c_str(), &end);
     if (end == c[std::size_t(i) + 1].c_str() || *end || !std::isfinite(values[i]) || values[i] < 0)
@@ -79,6 +79,10 @@ Status parse_run(const std::vector<std::string>& c, const CaptureRangeOptions& o
     return corrupt_data(where + ": evaluations or bin edges out of range");
   run->evaluations = int(values[8]);
   run->ms = values[9];
+  if ((values[10] != 0 && values[10] != 1) || values[11] != std::floor(values[11]) || values[11] > 255)
+    return corrupt_data(where + ": accepted or verdict_reason out of range");
+  run->accepted = values[10] != 0;
+  run->verdict_reason = int(values[11]);
   return {};
 }
 
@@ -99,7 +103,7 @@ Status write_capture_range_shard(const CaptureRangeReport& report, const std::fi
     csv << r.method << ',' << csv_number(r.bin * o.bin_width_mm) << ',' << csv_number((r.bin + 1) * o.bin_width_mm) << ','
         << r.sample << ',' << csv_number(r.initial_tre_mm) << ',' << csv_number(r.tre_mean_mm) << ',' << csv_number(r.tre_max_mm)
         << ',' << int(r.success) << ',' << int(r.success_loose) << ',' << r.evaluations << ',' << csv_number(r.ms)
-        << '\n';
+        << ',' << int(r.accepted) << ',' << r.verdict_reason << '\n';
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", csv.str()));
   return describe ? write_capture_range_description(report, dir) : Status{};
 }

@@ -10,7 +10,9 @@
 
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/studies/study_shard.hpp"
+#include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -86,6 +88,7 @@ std::vector<CaptureRangeSummary> summarize_capture_range(const CaptureRangeOptio
       ms.push_back(r.ms);
       bin_runs[std::size_t(r.bin)]++;
       if (r.success_loose) ++ok_loose;
+      (r.accepted ? (r.success ? s.accepted_right : s.accepted_wrong) : (r.success ? s.rejected_right : s.rejected_wrong))++;
       if (!r.success) continue;
       ++ok;
       bin_ok[std::size_t(r.bin)]++;
@@ -146,6 +149,7 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
   // One Registration per method (each holds its measure's prepared frames).
   std::vector<std::unique_ptr<tracking::Registration>> registrations;
   std::vector<tracking::RegistrationPlan> plans;
+  std::vector<VerdictLimits> verdicts;  // per method: the scene's verdict for its measure
   for (const RegistrationMethod& m : o.methods) {
     if (m.fiducial && p.scene.fiducials.positions_ct_mm.empty())
       return failed_precondition("method " + m.label + " needs a fiducial; the scene names none");
@@ -155,6 +159,9 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
     if (!r.ok()) return r.status();
     registrations.push_back(std::move(r).value());
     plans.push_back(*tracking::registration_plan(m.plan));
+    auto limits = scene_verdict_limits(p, m.similarity);
+    if (!limits.ok()) return limits.status().with_context("method " + m.label);
+    verdicts.push_back(*limits);
   }
   std::mt19937_64 rng(o.seed);
   std::uniform_real_distribution<double> unit(-1, 1);
@@ -192,6 +199,10 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
     }
     auto raw = imager->expose(**patient, gold, o.seed * 100003 + std::uint64_t(k));
     if (!raw.ok()) return raw.status();
+    std::vector<tracking::FrameQualityIssue> quality;  // the image-quality gate, as the loop runs it
+    for (std::size_t v = 0; v < raw->size(); ++v)
+      quality.push_back(tracking::assess_frame_quality((*raw)[v].view(), p.roi_windows[v], imager->correction(),
+                                                       tracking::FrameQualityLimits{}));
     auto frames = preprocess_scene_frames(p, *raw, imager->correction());
     if (!frames.ok()) return frames.status();
     for (auto& r : registrations) LFTRACK_RETURN_IF_ERROR(r->set_frames(frames->frames(), frames->masks()));
@@ -227,8 +238,14 @@ Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& p, const
           run.tre_max_mm = tre.max_mm;
           run.evaluations = result->evaluations;
           run.ms = result->elapsed_ms;
+          auto judged = verdict_input_of(p, **renderer, *frames, quality, *result);
+          if (!judged.ok()) return judged.status();
+          const RegistrationVerdict verdict = judge_registration(verdicts[m], *judged);
+          run.accepted = verdict.ok;
+          run.verdict_reason = int(verdict.reason);
         } else {
           run.tre_mean_mm = run.tre_max_mm = initial;
+          run.verdict_reason = int(VerdictReason::kNoResult);
         }
         run.success = run.tre_mean_mm < o.success_mm;
         run.success_loose = run.tre_mean_mm < o.success_loose_mm;
@@ -263,6 +280,10 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
                             {"capture_range_mm", s.capture_range_mm},
                             {"median_ms", s.median_ms},
                             {"p95_ms", s.p95_ms},
+                            {"verdict", {{"accepted_right", s.accepted_right},
+                                         {"false_accepts", s.accepted_wrong},
+                                         {"false_rejects", s.rejected_right},
+                                         {"rejected_wrong", s.rejected_wrong}}},
                             {"bin_success_rate", s.bin_success_rate}});
   }
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "summary.json", j.dump(2) + "\n"));
@@ -280,6 +301,32 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
   }
   auto drawn = draw_line_plot(plot, dir / "capture_range.png");
   if (!drawn.ok()) return drawn.status();
+  // What the loop would do with the results: the verdict's four outcomes per method, with their
+  // 95 % intervals and the count of runs.
+  GroupedBarChart verdict;
+  verdict.title = "Capture range: the registration verdict against the truth (right: final TRE < " +
+                  std::to_string(o.success_mm).substr(0, 3) + " mm)";
+  verdict.y_label = "runs (%)";
+  verdict.y_min = 0;
+  verdict.y_max = 105;
+  BarSeries outcomes[4] = {{"accepted, right", {}, {}, {}},
+                           {"accepted, wrong (false accept)", {}, {}, {}},
+                           {"rejected, right (false reject)", {}, {}, {}},
+                           {"rejected, wrong", {}, {}, {}}};
+  for (const CaptureRangeSummary& s : report.summaries) {
+    const int counts[4] = {s.accepted_right, s.accepted_wrong, s.rejected_right, s.rejected_wrong};
+    const int n = counts[0] + counts[1] + counts[2] + counts[3];
+    verdict.categories.push_back(s.name + " (n=" + std::to_string(n) + ")");
+    for (int k = 0; k < 4; ++k) {
+      const auto [lo, hi] = wilson_interval(counts[k], n);
+      outcomes[k].value.push_back(n ? 100.0 * counts[k] / n : 0);
+      outcomes[k].low.push_back(100 * lo);
+      outcomes[k].high.push_back(100 * hi);
+    }
+  }
+  verdict.series.assign(std::begin(outcomes), std::end(outcomes));
+  auto verdict_drawn = draw_grouped_bars(verdict, dir / "verdict.png");
+  if (!verdict_drawn.ok()) return verdict_drawn.status();
   return write_capture_range_description(report, dir);  // last: the folder is now a complete result
 }
 

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <sstream>
 
 namespace lftrack::host {
 
@@ -130,6 +131,110 @@ Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::p
     g.flush();
     if (!g) return io_error(gp.string() + ": write failed (disk full?)");
   }
+  return run_gnuplot(gp);
+}
+
+Result<bool> draw_grouped_scatter(const GroupedScatterPlot& plot, const std::filesystem::path& png) {
+  const auto dat = std::filesystem::path(png).replace_extension(".dat");
+  const auto gp = std::filesystem::path(png).replace_extension(".gp");
+  {
+    std::ofstream d(dat);
+    if (!d) return io_error(dat.string() + ": cannot write");
+    d.precision(8);
+    for (const PointGroup& g : plot.groups) {  // gnuplot's `index` counts blocks two blank lines apart
+      d << "# " << g.name << "\n# x\ty\n";
+      bool any = false;
+      for (std::size_t i = 0; i < g.x.size() && i < g.y.size(); ++i)
+        if (std::isfinite(g.x[i]) && std::isfinite(g.y[i])) d << g.x[i] << '\t' << g.y[i] << '\n', any = true;
+      if (!any) d << "nan\tnan\n";
+      d << "\n\n";
+    }
+    d.flush();
+    if (!d) return io_error(dat.string() + ": write failed (disk full?)");
+  }
+  std::ofstream g(gp);
+  if (!g) return io_error(gp.string() + ": cannot write");
+  g << "set terminal pngcairo size 1000,750 enhanced font 'DejaVu Sans,11'\n"
+    << "set output " << gp_string(png.filename().string()) << "\n"
+    << "set title " << gp_string(plot.title) << " noenhanced\n"
+    << "set xlabel " << gp_string(plot.x_label) << " noenhanced\nset ylabel " << gp_string(plot.y_label)
+    << " noenhanced\nset grid\nset key " << plot.key_position << " box opaque noenhanced\n";
+  std::string parts;
+  for (std::size_t i = 0; i < plot.groups.size(); ++i)
+    parts += std::string(parts.empty() ? "" : ", \\\n     ") + gp_string(dat.filename().string()) + " index " +
+             std::to_string(i) + " using 1:2 with points pt 7 ps 0.8 title " + gp_string(plot.groups[i].name);
+  for (const ReferenceLine& line : plot.lines) {
+    std::ostringstream at;
+    at.precision(8);
+    at << line.at;
+    const std::string style = std::string(" with lines lw 2 dt ") + (line.dashed ? "2" : "1") + " lc rgb '#202020'";
+    if (line.vertical) {  // a parametric-free vertical line: two points at the y range's ends
+      g << "set arrow from " << at.str() << ", graph 0 to " << at.str() << ", graph 1 nohead lw 2 dt "
+        << (line.dashed ? "2" : "1") << " lc rgb '#202020'\n"
+        << "set label " << gp_string(line.name) << " at " << at.str() << ", graph 0.98 left offset 0.5,0 font ',9' noenhanced\n";
+    } else {
+      parts += ", \\\n     " + at.str() + style + " title " + gp_string(line.name);
+    }
+  }
+  g << "plot " << parts << "\n";
+  g.flush();
+  if (!g) return io_error(gp.string() + ": write failed (disk full?)");
+  g.close();
+  return run_gnuplot(gp);
+}
+
+std::pair<double, double> wilson_interval(int successes, int n) {
+  if (n <= 0) return {0.0, 1.0};
+  const double z = 1.959964, p = double(successes) / n, z2n = z * z / n;
+  const double centre = (p + z2n / 2) / (1 + z2n);
+  const double half = z * std::sqrt(p * (1 - p) / n + z2n / (4.0 * n)) / (1 + z2n);
+  return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
+}
+
+Result<bool> draw_grouped_bars(const GroupedBarChart& chart, const std::filesystem::path& png) {
+  const auto dat = std::filesystem::path(png).replace_extension(".dat");
+  const auto gp = std::filesystem::path(png).replace_extension(".gp");
+  {
+    std::ofstream d(dat);
+    if (!d) return io_error(dat.string() + ": cannot write");
+    d.precision(8);
+    d << "# category";
+    for (const BarSeries& s : chart.series) d << '\t' << gp_string(s.name) << " value low high";
+    d << '\n';
+    for (std::size_t c = 0; c < chart.categories.size(); ++c) {
+      d << gp_string(chart.categories[c]);
+      for (const BarSeries& s : chart.series) {
+        const auto at = [&](const std::vector<double>& v) { return c < v.size() && std::isfinite(v[c]) ? v[c] : 0.0; };
+        const double value = at(s.value);
+        d << '\t' << value << '\t' << (c < s.low.size() ? at(s.low) : value) << '\t'
+          << (c < s.high.size() ? at(s.high) : value);
+      }
+      d << '\n';
+    }
+    d.flush();
+    if (!d) return io_error(dat.string() + ": write failed (disk full?)");
+  }
+  std::ofstream g(gp);
+  if (!g) return io_error(gp.string() + ": cannot write");
+  g << "set terminal pngcairo size 1100,650 enhanced font 'DejaVu Sans,11'\n"
+    << "set output " << gp_string(png.filename().string()) << "\n"
+    << "set title " << gp_string(chart.title) << " noenhanced\n"
+    << "set ylabel " << gp_string(chart.y_label) << " noenhanced\n"
+    << "set grid ytics\nset key " << chart.key_position << " box opaque noenhanced\n"
+    << "set style data histogram\nset style histogram errorbars gap 1 lw 1.5\n"
+    << "set style fill solid 0.7 border -1\nset boxwidth 0.9\nset xtics noenhanced\n";
+  if (chart.y_max > chart.y_min) g << "set yrange [" << chart.y_min << ":" << chart.y_max << "]\n";
+  else g << "set yrange [0:*]\n";
+  g << "plot ";
+  for (std::size_t i = 0; i < chart.series.size(); ++i) {
+    const std::size_t col = 2 + 3 * i;
+    g << (i ? ", \\\n     " : "") << gp_string(dat.filename().string()) << " using " << col << ':' << col + 1 << ':'
+      << col + 2 << (i == 0 ? ":xtic(1)" : "") << " title " << gp_string(chart.series[i].name);
+  }
+  g << "\n";
+  g.flush();
+  if (!g) return io_error(gp.string() + ": write failed (disk full?)");
+  g.close();
   return run_gnuplot(gp);
 }
 

@@ -93,6 +93,7 @@ RealismFactorSummary summarize_realism_factor(const RealismOptions& o, const Cap
     if (r.method == image_method && r.initial_tre_mm <= o.image_max_mm) {
       ++image_runs;
       ms.push_back(r.ms);
+      (r.accepted ? (r.success ? s.accepted_right : s.accepted_wrong) : (r.success ? s.rejected_right : s.rejected_wrong))++;
       if (r.success) {
         ++image_ok;
         tre.push_back(r.tre_mean_mm);
@@ -110,6 +111,10 @@ RealismFactorSummary summarize_realism_factor(const RealismOptions& o, const Cap
   double sum = 0;
   for (double t : tre) sum += t;
   s.mean_tre_mm = tre.empty() ? 0 : sum / double(tre.size());
+  double squares = 0;
+  for (double t : tre) squares += (t - s.mean_tre_mm) * (t - s.mean_tre_mm);
+  s.sd_tre_mm = tre.size() > 1 ? std::sqrt(squares / double(tre.size() - 1)) : 0;
+  s.successes = image_ok;
   s.p95_tre_mm = quantile(tre, 0.95);
   s.median_ms = quantile(ms, 0.5);
   if (!hybrid_method.empty()) {
@@ -216,7 +221,12 @@ Status write_realism_outputs(const RealismReport& report, const std::filesystem:
                         {"p95_tre_mm", f.p95_tre_mm},
                         {"success_rate", f.success_rate},
                         {"median_ms", f.median_ms},
-                        {"runs", f.runs}};
+                        {"runs", f.runs},
+                        {"sd_tre_mm", f.sd_tre_mm},
+                        {"verdict", {{"accepted_right", f.accepted_right},
+                                     {"false_accepts", f.accepted_wrong},
+                                     {"false_rejects", f.rejected_right},
+                                     {"rejected_wrong", f.rejected_wrong}}}};
     if (f.hybrid_success_rate >= 0) {
       e["hybrid_success_rate"] = f.hybrid_success_rate;
       e["hybrid_mean_tre_mm"] = f.hybrid_mean_tre_mm;
@@ -229,28 +239,43 @@ Status write_realism_outputs(const RealismReport& report, const std::filesystem:
     csv += line;
   }
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "realism.csv", csv));
-  LinePlot plot;
-  plot.title = report.scene + ": " + report.image_method + " per physics factor (starts <= " +
-               std::to_string(int(o.image_max_mm)) + " mm)";
-  plot.x_label = "factor set";
-  plot.y_label = "TRE (mm) / failure rate";
-  plot.key_position = "top left";
-  plot.y_min = 0;
-  PlotSeries tre{"mean TRE of successes (mm)", {}}, p95{"p95 TRE of successes (mm)", {}},
-      failures{"failure rate (1 = all)", {}}, hybrid{"hybrid: mean TRE (mm), starts <= " +
-                                                          std::to_string(int(o.hybrid_max_mm)) + " mm", {}};
-  for (std::size_t i = 0; i < report.factors.size(); ++i) {
-    const RealismFactorSummary& f = report.factors[i];
-    plot.x.push_back(double(i + 1));
-    plot.x_tick_labels.push_back(f.name);
-    tre.y.push_back(f.mean_tre_mm);
-    p95.y.push_back(f.p95_tre_mm);
-    failures.y.push_back(1 - f.success_rate);
-    hybrid.y.push_back(f.hybrid_success_rate > 0 ? f.hybrid_mean_tre_mm : NAN);  // no successes: no point
+  // Categories as bars, millimetres and rates each on an axis of their own, with their spread
+  // and the count of runs.
+  const std::string starts = " (starts <= " + std::to_string(int(o.image_max_mm)) + " mm)";
+  GroupedBarChart tre_chart, rate_chart;
+  tre_chart.title = report.scene + ": " + report.image_method + " TRE of successes per physics factor" + starts;
+  tre_chart.y_label = "mean TRE of successes (mm), bars +- 1 SD";
+  rate_chart.title = report.scene + ": " + report.image_method + " per physics factor" + starts;
+  rate_chart.y_label = "runs (%), bars: 95 % interval";
+  rate_chart.y_min = 0;
+  rate_chart.y_max = 105;
+  BarSeries tre{"image only", {}, {}, {}}, hybrid{"hybrid (one fiducial), starts <= " +
+                                                      std::to_string(int(o.hybrid_max_mm)) + " mm (mean only)", {}, {}, {}};
+  BarSeries success{"success (TRE < 2 mm)", {}, {}, {}}, false_accepts{"verdict: false accepts", {}, {}, {}},
+      false_rejects{"verdict: false rejects", {}, {}, {}};
+  for (const RealismFactorSummary& f : report.factors) {
+    const std::string category = f.name + " (n=" + std::to_string(f.runs) + ")";
+    tre_chart.categories.push_back(category);
+    rate_chart.categories.push_back(category);
+    tre.value.push_back(f.mean_tre_mm);
+    tre.low.push_back(std::max(0.0, f.mean_tre_mm - f.sd_tre_mm));
+    tre.high.push_back(f.mean_tre_mm + f.sd_tre_mm);
+    hybrid.value.push_back(f.hybrid_success_rate > 0 ? f.hybrid_mean_tre_mm : 0);
+    const auto add = [&](BarSeries* s, int k) {
+      const auto [lo, hi] = wilson_interval(k, f.runs);
+      s->value.push_back(f.runs ? 100.0 * k / f.runs : 0);
+      s->low.push_back(100 * lo);
+      s->high.push_back(100 * hi);
+    };
+    add(&success, f.successes);
+    add(&false_accepts, f.accepted_wrong);
+    add(&false_rejects, f.rejected_right);
   }
-  plot.series = {tre, p95, failures};
-  if (!report.hybrid_method.empty()) plot.series.push_back(hybrid);
-  if (auto drawn = draw_line_plot(plot, dir / "realism.png"); !drawn.ok()) return drawn.status();
+  tre_chart.series = {tre};
+  if (!report.hybrid_method.empty()) tre_chart.series.push_back(hybrid);
+  rate_chart.series = {success, false_accepts, false_rejects};
+  if (auto drawn = draw_grouped_bars(tre_chart, dir / "realism_tre.png"); !drawn.ok()) return drawn.status();
+  if (auto drawn = draw_grouped_bars(rate_chart, dir / "realism_rates.png"); !drawn.ok()) return drawn.status();
   return write_file_atomically(dir / "summary.json", j.dump(2) + "\n");  // last: the folder is complete
 }
 

@@ -294,10 +294,7 @@ namespace {
 // The built-in scene with a coarse light field (built in a moment) for command tests.
 std::filesystem::path small_light_field_scene(const test::TempDir& dir) {
   const auto file = dir.path() / "phantom-small-lf.yaml";
-  std::string scene = *builtin_scene_text(kBuiltinPhantom);
-  const std::string field = "    resolution: [16, 16, 128, 128]\n";
-  scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
-  std::ofstream(file) << scene;
+  std::ofstream(file) << test::coarse_phantom_scene_text();
   return file;
 }
 

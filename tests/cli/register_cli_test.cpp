@@ -15,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_text.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene.hpp"
@@ -32,9 +33,7 @@ class RegisterCli : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = std::make_unique<test::TempDir>();
-    std::string scene = *builtin_scene_text(kBuiltinPhantom);
-    const std::string field = "    resolution: [16, 16, 128, 128]\n";
-    scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
+    const std::string scene = test::coarse_phantom_scene_text();
     std::ofstream(scene_file()) << scene;
     // The same scene with detector A only, with and without the key that allows it.
     std::string one = scene;

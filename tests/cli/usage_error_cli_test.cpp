@@ -117,6 +117,14 @@ std::vector<UsageCase> cases() {
        // A measure that is not one (the outside probe of 2026-11-30: "no similarity expectation").
        {{"register", "--sim", "--similarity", "RNCC"}, "--similarity"},
        {{"register", "--sim", "--similarity", ""}, "--similarity"},
+       {{"commission", "--good", "-1"}, "--good"},
+       {{"commission", "--bad", "nan"}, "--bad"},
+       {{"commission", "--tolerance-mm", "0"}, "--tolerance-mm"},
+       {{"commission", "--tolerance-mm", "inf"}, "--tolerance-mm"},
+       {{"commission", "--level-mm", "1e12"}, "--level-mm"},
+       {{"commission", "--max-false-rejects", "2"}, "--max-false-rejects"},
+       {{"commission", "--out", ""}, "--out"},
+       {{"commission", "--seed", "-1"}, "--seed"},
        {{"study", "trade", "--out", "x", "--seed", "1.5"}, "--seed"}});
   return all;
 }

@@ -63,6 +63,7 @@ struct Answer {
   Vector6d patient = Vector6d::Zero();  // the patient's offset from the plan, on the couch
   bool fails = false;                   // run() returns an error
   bool non_finite = false;              // run() succeeds with a NaN in the pose
+  double similarity = 0.9;              // every view's, at the result
 };
 
 // Answers run number n (from 0) with script(n); what the loop asked is kept.
@@ -86,7 +87,7 @@ class ScriptedRegistration final : public LoopRegistration {
     const Vector6d couch = couch_ != nullptr ? couch_->target : Vector6d::Zero();
     result->T_room_from_ct = motion(couch) * motion(a.patient);
     if (a.non_finite) result->T_room_from_ct.translation().x() = std::numeric_limits<double>::quiet_NaN();
-    result->view_similarity.assign(2, 0.9);
+    result->view_similarity.assign(2, a.similarity);
     result->evaluations = 1;
     result->elapsed_ms = 1;
     result->stop = tracking::OptimizerStop::kConverged;
@@ -161,7 +162,7 @@ struct Harness {
   TrackingState state(std::size_t cycle) const { return static_cast<TrackingState>(records.all.at(cycle).state); }
 };
 
-Answer still_at(const Vector6d& patient) { return {patient, false, false}; }
+Answer still_at(const Vector6d& patient) { return {patient, false, false, 0.9}; }
 
 TEST(LoopStates, AlignsThenTracksAndTheSetUpMoveCancelsThePatientsOffset) {
   const Vector6d offset = translation(1.5, -1.0, 0.5);
@@ -334,6 +335,40 @@ TEST(LoopStates, AStopHoldsTheCouchAndEndsTheRun) {
   EXPECT_EQ(h.couch.holds, 2) << "held at the stop, and again at the run's end";
   EXPECT_EQ(h.records.all[6].beam_permit, 0);
   EXPECT_FALSE(h.couch.beam_permit);
+}
+
+// A commissioned scene's verdict judges tracking cycles too (issue 52): a result whose similarity
+// falls below the floor, though above the gate's ratio to the alignment (0.75 / 0.9 = 0.83 >
+// 0.7), is no result: skipped, nothing moves. Without judge_tracking the gate alone applies it.
+TEST(LoopStates, ATrackingResultBelowTheVerdictsFloorIsSkippedWhenTrackingIsJudged) {
+  VerdictLimits limits;
+  limits.measure = "ncc";
+  limits.min_similarity = 0.8;
+  limits.min_view_ratio = 0.5;
+  limits.envelope = {10, 5};
+  for (const bool judged : {true, false}) {
+    SCOPED_TRACE(judged ? "tracking judged" : "alignment judged only");
+    Harness h([](int n) {
+      Answer a = still_at(translation(0.3 * n, 0, 0));
+      if (n == 5) a.similarity = 0.75;
+      return a;
+    });
+    h.settings.verdict = limits;
+    h.settings.judge_tracking = judged;
+    (void)h.run();
+    ASSERT_EQ(h.records.all.size(), 20u);
+    const JournalRecord& r = h.records.all[5];
+    if (judged) {
+      EXPECT_EQ(r.gate_decision, std::uint8_t(GateDecision::kSkip));
+      EXPECT_EQ(r.gate_reason, std::uint8_t(GateReason::kLowSimilarity));
+      EXPECT_EQ(r.command_sent, 0);
+      EXPECT_EQ(h.couch.commands.size(), 18u) << "every tracking cycle moves but the one judged wrong";
+    } else {
+      EXPECT_EQ(r.gate_decision, std::uint8_t(GateDecision::kApply));
+      EXPECT_EQ(h.couch.commands.size(), 19u);
+    }
+    EXPECT_EQ(h.state(6), TrackingState::kTrack) << "one skip is no hold";
+  }
 }
 
 TEST(LoopStates, ALoopWhosePlansCannotBeReadiedIsRefused) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <sstream>
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_registration.hpp"
@@ -74,6 +75,37 @@ TEST(PreparedScene, ErrorsAfterLoadingNameTheScenesLine) {
   const std::string ct_at = "missing.yaml:" + std::to_string(line_of(missing, "  path: no-such-ct")) + ":3: ct.path: ";
   EXPECT_NE(p.status().message().find(ct_at), std::string::npos) << p.status().message();
   EXPECT_NE(p.status().message().find("no-such-ct.nii.gz"), std::string::npos) << p.status().message();
+}
+
+// A registration origin outside the ROI box is refused at load, with both positions (issue 52:
+// one 46 mm outside was tracked without a word); one on the box's face is inside.
+TEST(PreparedScene, RegistrationOriginOutsideTheRoiIsRefused) {
+  test::TempDir dir;
+  tracking::ThreadPool pool(2);
+  auto builtin = load_scene("builtin:phantom");
+  ASSERT_TRUE(builtin.ok());
+  auto phantom = prepare_scene(*builtin, "", &pool);
+  ASSERT_TRUE(phantom.ok()) << phantom.status().message();
+  const Eigen::Vector3d c = phantom->roi_centre_ct_mm;
+  const auto scene_with_origin_dz = [&](double dz_mm) {
+    const std::string roi = "  size_mm: [64, 64, 40]\n";
+    std::string text = *builtin_scene_text("builtin:phantom");
+    std::ostringstream centre;
+    centre << "  centre_mm: [" << c.x() << ", " << c.y() << ", " << c.z() << "]\n" << roi
+           << "registration_origin_mm: [" << c.x() << ", " << c.y() << ", " << c.z() + dz_mm << "]\n";
+    text.replace(text.find(roi), roi.size(), centre.str());
+    const auto file = dir.path() / ("origin" + std::to_string(int(dz_mm)) + ".yaml");
+    std::ofstream(file) << text;
+    auto scene = load_scene(file.string());
+    EXPECT_TRUE(scene.ok()) << scene.status().message();
+    return prepare_scene(*scene, "", &pool);
+  };
+  auto far = scene_with_origin_dz(46);
+  ASSERT_FALSE(far.ok());
+  EXPECT_NE(far.status().message().find("the registration origin"), std::string::npos) << far.status().message();
+  EXPECT_NE(far.status().message().find("lies outside the ROI box"), std::string::npos) << far.status().message();
+  EXPECT_TRUE(scene_with_origin_dz(20).ok());  // on the box's face (size 40 mm in z)
+  EXPECT_FALSE(scene_with_origin_dz(-20.5).ok());
 }
 
 TEST(PreparedScene, RealCtSceneResolves) {

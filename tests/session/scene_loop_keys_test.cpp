@@ -39,5 +39,29 @@ TEST(SceneLoopKeys, ParseAndRejectWithLocation) {
   EXPECT_FALSE(parse_scene(actuator, "b.yaml", ".").ok());
 }
 
+// loop.judge_tracking (unset: follow the scene's commissioning).
+TEST(SceneLoopKeys, TheVerdictOnTrackingCycles) {
+  const std::string base = *builtin_scene_text(kBuiltinPhantom);
+  auto scene = parse_scene(base, "b.yaml", ".");
+  ASSERT_TRUE(scene.ok());
+  EXPECT_FALSE(scene->loop.judge_tracking.has_value());
+  const auto with = [&](const std::string& keys) {
+    std::string text = base;
+    text.replace(text.find("loop:\n"), 6, "loop:\n" + keys);
+    return parse_scene(text, "b.yaml", ".");
+  };
+  auto set = with("  judge_tracking: true\n");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_EQ(set->loop.judge_tracking, std::optional<bool>(true));
+  for (const char* bad : {"  judge_tracking: yes\n", "  judge_tracking: 1\n", "  judge_tracking: ''\n",
+                          "  judge_tracking: [true]\n", "  verdict_check_every: 5\n"}) {
+    auto refused = with(bad);
+    EXPECT_FALSE(refused.ok()) << bad;
+    if (!refused.ok()) {
+      EXPECT_NE(refused.status().message().find("b.yaml:"), std::string::npos) << bad;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace lftrack::host

@@ -1,13 +1,24 @@
 #pragma once
 // Small helpers the command-line tests share: the program's path, a shell-quoted argument, a
-// file's whole text, and a finished run's exit code and output.
+// file's whole text, a finished run's exit code and output, and the built-in scene with a coarse
+// light field.
 
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <string>
 
+#include "lftrack/host/scene.hpp"
+
 namespace lftrack::test {
+
+// The built-in scene's text with a coarse light field (built in a few seconds), for command tests.
+inline std::string coarse_phantom_scene_text() {
+  std::string scene = *host::builtin_scene_text(host::kBuiltinPhantom);
+  const std::string field = "    resolution: [16, 16, 128, 128]\n";
+  scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
+  return scene;
+}
 
 #ifdef LFTRACK_BIN_PATH
 // The `lftrack` program this build made (each suite's LFTRACK_BIN_PATH).

@@ -73,6 +73,7 @@ void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleSt
     acquire_ms.add(ms_between(c.acquire_started_ns, c.acquired_ns));
     if (parts.actuator != nullptr) readback_ms.add(c.readback_ms);
     if (c.frames_ok) preprocess_ms.add(ms_between(c.acquired_ns, c.preprocessed_ns));
+    if (c.verdict_checked) verdict_check_ms.add(c.verdict_check_ms);
   }
   if (c.registration_ran) {
     if (c.aligning) {

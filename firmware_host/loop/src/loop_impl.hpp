@@ -55,6 +55,8 @@ struct CycleState {
   std::uint32_t evaluations = 0;
   double registration_ms = 0;
   bool registration_ran = false;
+  bool verdict_checked = false;  // the NCC check ran (a DRR per view at the result)
+  double verdict_check_ms = 0;   // its wall time: render and compare, every view
 
   // control
   tracking::Vector6d pose_delta = tracking::Vector6d::Zero();  // registered pose, from nominal
@@ -132,6 +134,7 @@ struct TrackingLoop::Impl {
   Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
   Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
   Histogram readback_ms{0.001, 2000};  // the actuator's read-back (a protocol's round trip)
+  Histogram verdict_check_ms{0.001, 2000};  // the verdict's NCC check in tracking cycles
   TrackingAccuracy accuracy;           // the target residual per axis, the command latency
   double evaluations_sum = 0;
   LoopSummary summary;

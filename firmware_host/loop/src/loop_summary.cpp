@@ -31,6 +31,10 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   s.readback_p99_ms = readback_ms.quantile(0.99);
   s.preprocess_p95_ms = preprocess_ms.quantile(0.95);
   s.preprocess_max_ms = preprocess_ms.max();
+  s.verdict_checks = verdict_check_ms.count();
+  s.verdict_check_p50_ms = verdict_check_ms.quantile(0.5);
+  s.verdict_check_p95_ms = verdict_check_ms.quantile(0.95);
+  s.verdict_check_max_ms = verdict_check_ms.max();
   s.evaluations_mean =
       registration_ms.count() > 0 ? evaluations_sum / double(registration_ms.count()) : 0;
   if (parts.allocation_count != nullptr && aligned_at >= 0) {
@@ -64,6 +68,10 @@ nlohmann::json to_json(const LoopSummary& s) {
       {"p50", s.registration_p50_ms}, {"p95", s.registration_p95_ms}, {"max", s.registration_max_ms}};
   j["acquire_ms"] = {{"p95", s.acquire_p95_ms}, {"max", s.acquire_max_ms}};
   j["preprocess_ms"] = {{"p95", s.preprocess_p95_ms}, {"max", s.preprocess_max_ms}};
+  j["verdict_check_ms"] = {{"checks", s.verdict_checks},
+                           {"p50", s.verdict_check_p50_ms},
+                           {"p95", s.verdict_check_p95_ms},
+                           {"max", s.verdict_check_max_ms}};
   j["readback_ms"] = {{"p50", s.readback_p50_ms}, {"p99", s.readback_p99_ms}};
   j["evaluations_mean"] = s.evaluations_mean;
   j["overruns"] = s.overruns;

@@ -29,14 +29,6 @@ constexpr int kMaxSide = 16384;
 constexpr std::size_t kMaxDescription = std::size_t(1) << 20;
 const char* const kPageNames[kPages] = {"offset_counts", "gain", "noise_counts", "defects"};
 
-std::string utc_now() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char text[32];
-  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return text;
-}
 
 json metadata(const calib::DetectorCalibration& c, const std::string& hash, const std::string& created) {
   const calib::DetectorCalibrationOptions& o = c.rule;
@@ -424,6 +416,15 @@ Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& pat
     return corrupt_data(where + ": the maps do not match their hash (" + hash + " against " + c.content_hash +
                         "): damaged or edited");
   return c;
+}
+
+std::string utc_now() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
 }
 
 }  // namespace lftrack::host

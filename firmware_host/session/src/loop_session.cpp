@@ -540,8 +540,12 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.announce_holds = o.announce_holds;
   warn_if_prediction_window_short(settings);
   warn_if_beam_wait_short(p.scene);
-  auto verdict = verdict_limits(p.scene, p.scene.registration.similarity);
+  std::string floors_from;
+  auto verdict = scene_verdict_limits(p, p.scene.registration.similarity, &floors_from);
   if (!verdict.ok()) return verdict.status();
+  settings.judge_tracking = p.scene.loop.judge_tracking.value_or(!p.scene.commissioning_file.empty());
+  spdlog::info("registration verdict floors: {}; judging {}", floors_from,
+               settings.judge_tracking ? "the alignment and every tracking cycle" : "the alignment only");
   settings.verdict = *verdict;
   auto loop = TrackingLoop::create(lp, settings);
   if (!loop.ok()) return loop.status();

@@ -75,6 +75,26 @@ Status check_roi_inside_ct(const Scene& scene, const tracking::CtVolume& ct) {
   return invalid_argument(m.str());
 }
 
+// The registration origin must lie inside the ROI box: the pose is registered, and the envelope,
+// the step limits and the TRE are measured, about it, while only what the ROI holds is seen. An
+// origin outside it tracks a point the registration cannot see (issue 52: one 46 mm outside was
+// accepted without a word).
+Status check_origin_inside_roi(const PreparedScene& p) {
+  const Vector3d offset = p.registration_origin_ct_mm - p.roi_centre_ct_mm;
+  const Vector3d half = p.scene.roi.size_mm / 2;
+  bool inside = true;
+  for (int a = 0; a < 3; ++a) inside = inside && std::abs(offset[a]) <= half[a] * (1 + 1e-9);
+  if (inside) return {};
+  const Vector3d o = p.registration_origin_ct_mm, c = p.roi_centre_ct_mm;
+  std::ostringstream m;
+  m << p.scene.where("roi") << ": the registration origin (" << o.x() << ", " << o.y() << ", " << o.z()
+    << ") mm lies outside the ROI box (centre (" << c.x() << ", " << c.y() << ", " << c.z() << ") mm, size "
+    << p.scene.roi.size_mm.x() << " x " << p.scene.roi.size_mm.y() << " x " << p.scene.roi.size_mm.z()
+    << " mm, CT frame): the registration would track a point it cannot see; move registration_origin_mm "
+       "into the ROI or grow roi.size_mm";
+  return invalid_argument(m.str());
+}
+
 Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_override,
                                     tracking::ThreadPool* pool) {
   PreparedScene out;
@@ -137,6 +157,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
     out.nominal_T_room_from_ct = tracking::Pose::Identity();
     out.nominal_T_room_from_ct.translation() = -out.registration_origin_ct_mm;
   }
+  LFTRACK_RETURN_IF_ERROR(check_origin_inside_roi(out));
   for (const DetectorSpec& d : out.scene.detectors) {
     auto w = roi_window(d.view, out.nominal_T_room_from_ct, out.roi_centre_ct_mm, out.scene.roi.size_mm);
     if (!w.ok()) return w.status().with_context(out.scene.where("roi"));

@@ -63,7 +63,13 @@ Status SceneParser::parse_loop(const YAML::Node& n, LoopSpec* loop) const {
   LFTRACK_RETURN_IF_ERROR(
       check_keys(n, "loop",
                  {"period_ms", "registration_budget_ms", "acquire_timeout_ms", "align_plan", "track_plan",
-                  "lookahead_s", "prediction_cycles", "prediction_order", "realtime"}));
+                  "lookahead_s", "prediction_cycles", "prediction_order", "realtime", "judge_tracking"}));
+  if (n["judge_tracking"]) {
+    bool judge = false;
+    LFTRACK_RETURN_IF_ERROR(boolean(n["judge_tracking"], "loop.judge_tracking", &judge));
+    loop->judge_tracking = judge;
+  }
+
   if (n["period_ms"]) {
     LFTRACK_RETURN_IF_ERROR(positive(n["period_ms"], "loop.period_ms", &loop->period_ms));
     if (loop->period_ms < 1 || loop->period_ms > 10000)
@@ -130,7 +136,7 @@ Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
       {"max_step_mm", "max_step_deg", "max_total_mm", "max_total_deg", "min_similarity",
        "min_similarity_ratio", "max_ratio_disagreement", "max_frame_age_ms", "max_pair_skew_ms",
        "readback_tolerance_mm", "readback_tolerance_deg", "beam_tolerance_mm", "beam_tolerance_deg",
-       "max_beam_withheld_s", "hold_after_failures", "fault_after_failures"}));
+       "max_beam_withheld_s", "hold_after_failures", "fault_after_failures", "commissioning"}));
   // Each limit has a ceiling: a tracking correction beyond it is a new set-up for the therapist,
   // never a setting, so a value above it (a 1e9 typed for 10) is refused, not obeyed.
   struct Limit {

@@ -334,6 +334,17 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
   if (root["safety"]) {
     LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
     scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
+    if (const YAML::Node c = root["safety"]["commissioning"]) {
+      std::string file;
+      LFTRACK_RETURN_IF_ERROR(text(c, "safety.commissioning", &file));
+      if (file.empty()) return error(c, "safety.commissioning: an empty file name");
+      if (scene.min_similarity_given)
+        return error(root["safety"]["min_similarity"],
+                     "safety.min_similarity and safety.commissioning both set the floor; a commissioned scene takes "
+                     "its floors from its commissioning file");
+      const fs::path path(file);
+      scene.commissioning_file = (path.is_absolute() ? path : base_dir_ / path).lexically_normal().string();
+    }
     // A floor at or below what unrelated images score turns the similarity check off.
     const auto expected = similarity_expectation(scene.registration.similarity);
     if (scene.min_similarity_given && expected.ok() && scene.safety.min_similarity <= expected->no_information) {

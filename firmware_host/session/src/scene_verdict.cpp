@@ -1,5 +1,9 @@
 #include "lftrack/host/scene_verdict.hpp"
 
+#include "lftrack/host/commissioning_file.hpp"
+
+#include <algorithm>
+
 #include <cstdio>
 
 namespace lftrack::host {
@@ -14,6 +18,37 @@ Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& meas
   if (scene.min_similarity_given && measure == scene.registration.similarity)
     limits.min_similarity = scene.safety.min_similarity;
   limits.envelope = scene.envelope;
+  return limits;
+}
+
+Result<VerdictLimits> scene_verdict_limits(const PreparedScene& p, const std::string& measure,
+                                           std::string* floors_from) {
+  auto limits = verdict_limits(p.scene, measure);
+  if (!limits.ok()) return limits.status();
+  const std::string& file = p.scene.commissioning_file;
+  if (file.empty()) {
+    if (floors_from) *floors_from = "the measure's defaults (the scene is not commissioned: lftrack commission)";
+    return limits;
+  }
+  auto record = read_commissioning_file(file);
+  if (!record.ok()) {
+    const std::string how = " (safety.commissioning; make it with: lftrack commission --scene " + p.scene.source + ")";
+    return Status(record.status().code(), record.status().message() + how);
+  }
+  LFTRACK_RETURN_IF_ERROR(check_commissioning_current(p, *record, file));
+  // The two floors were chosen together: with another measure (register --similarity, a study's
+  // method) the commissioned check floor alone may be lower than the default, so the higher holds.
+  if (measure == record->measure) {
+    limits->min_similarity = record->min_similarity;
+    limits->min_check_ncc = record->min_check_ncc;
+  } else {
+    limits->min_check_ncc = std::max(limits->min_check_ncc, record->min_check_ncc);
+  }
+  if (floors_from)
+    *floors_from = file + (measure == record->measure
+                               ? ""
+                               : " (commissioned for " + record->measure + ": " + measure +
+                                     " at its default floor, the check NCC at the higher of the two)");
   return limits;
 }
 

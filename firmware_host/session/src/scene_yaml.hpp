@@ -112,6 +112,14 @@ class SceneParser {
     return {};
   }
 
+  // true or false, written so (not yes/no/on: a scene says what it means).
+  Status boolean(const YAML::Node& n, const std::string& what, bool* out) const {
+    if (!n.IsScalar() || (n.Scalar() != "true" && n.Scalar() != "false"))
+      return error(n, what + " must be true or false");
+    *out = n.Scalar() == "true";
+    return {};
+  }
+
   Status text(const YAML::Node& n, const std::string& what, std::string* out) const {
     if (!n.IsScalar() || n.Scalar().empty()) return error(n, what + " must be a non-empty string");
     *out = n.Scalar();

@@ -89,4 +89,27 @@ void SimDetectors::forget_previous_frames() {
   for (auto& s : synthesizers_) s->forget_previous_frame();
 }
 
+Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& p, tracking::ThreadPool* pool) {
+  const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
+  std::shared_ptr<const SimulatedPatient> patient;
+  std::shared_ptr<const tracking::DrrRenderer> exact;
+  if (!physics.ideal()) {
+    auto made = make_simulated_patient(p, physics, scene_anatomy_seed(p), pool, pool, nullptr, true);
+    if (!made.ok()) return made.status();
+    patient = std::make_shared<const SimulatedPatient>(std::move(made).value());
+  } else {
+    tracking::RendererOptions exact_options;
+    exact_options.pool = pool;
+    auto siddon = tracking::make_renderer("siddon", p.world_mu, exact_options);
+    if (!siddon.ok()) return siddon.status();
+    exact = std::move(siddon).value();
+  }
+  const sim::DetectorModel model = scene_detector_model(p);
+  auto detectors = SimDetectors::create(p, exact, patient, model);
+  if (!detectors.ok()) return detectors.status();
+  SceneSimDetectors out{std::move(detectors).value(), std::nullopt};
+  if (patient) out.correction = sim::detector_correction(model);
+  return out;
+}
+
 }  // namespace lftrack::host

@@ -1,7 +1,10 @@
 #pragma once
 // The capture-range study (PAPERS.md, papers 1 and 2): start poses in bins of initial TRE
 // (0-2, 2-4, ... mm), the same starts for every method, success when the final TRE is below
-// 2.0 mm (paper 1) and 2.5 mm (paper 2).
+// 2.0 mm (paper 1) and 2.5 mm (paper 2). Every result is also judged by the registration verdict
+// the loop and `register` use (the scene's, commissioned or default, for the method's measure),
+// so the study reports what the loop would do with it: accepted and right, accepted but wrong
+// (false accepts), rejected but right (false rejects), rejected and wrong.
 //
 // Gold poses are drawn inside the scene's envelope (one per sample index, with its own noisy
 // synthetic frames); sample k of every bin starts from gold pose k perturbed along a random
@@ -67,6 +70,8 @@ struct CaptureRangeRun {
   double tre_max_mm = 0;
   bool success = false;        // tre_mean < success_mm
   bool success_loose = false;  // tre_mean < success_loose_mm
+  bool accepted = false;       // the registration verdict accepted it
+  int verdict_reason = 0;      // VerdictReason's value (0: accepted)
   int evaluations = 0;
   double ms = 0;
 };
@@ -81,6 +86,8 @@ struct CaptureRangeSummary {
   double median_ms = 0;
   double p95_ms = 0;
   std::vector<double> bin_success_rate;
+  // The verdict against success (right: TRE < success_mm), counts over every run.
+  int accepted_right = 0, accepted_wrong = 0, rejected_right = 0, rejected_wrong = 0;
 };
 
 struct CaptureRangeReport {

@@ -47,4 +47,46 @@ struct ScatterPlot {
 // Writes <png stem>.dat, <png stem>_front.dat and <png stem>.gp and runs gnuplot.
 Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::path& png);
 
+// Bars in groups, as categorical results are published: one group per category (a method, a
+// factor), one bar per series in each group, each bar with its error bar (low, high; equal to the
+// value: none). The categories name the axis (put the count n in them).
+struct BarSeries {
+  std::string name;
+  std::vector<double> value, low, high;  // one per category
+};
+struct GroupedBarChart {
+  std::string title, y_label;
+  std::vector<std::string> categories;
+  std::vector<BarSeries> series;
+  double y_min = 0, y_max = 0;  // equal: automatic
+  std::string key_position = "top right";
+};
+// Writes <png stem>.dat and <png stem>.gp and runs gnuplot.
+Result<bool> draw_grouped_bars(const GroupedBarChart& chart, const std::filesystem::path& png);
+
+// The 95 % Wilson score interval of a proportion: `successes` of `n` (n = 0: [0, 1]).
+std::pair<double, double> wilson_interval(int successes, int n);
+
+// Points in named groups (a colour and a key entry each), with reference lines across the plot
+// (thresholds): vertical at x = `at`, or horizontal at y = `at`.
+struct PointGroup {
+  std::string name;
+  std::vector<double> x, y;  // one point per pair; non-finite pairs are left out
+};
+struct ReferenceLine {
+  bool vertical = true;
+  double at = 0;
+  std::string name;
+  bool dashed = false;
+};
+struct GroupedScatterPlot {
+  std::string title, x_label, y_label;
+  std::vector<PointGroup> groups;
+  std::vector<ReferenceLine> lines;
+  std::string key_position = "bottom right";
+};
+
+// Writes <png stem>.dat (one block per group) and <png stem>.gp and runs gnuplot.
+Result<bool> draw_grouped_scatter(const GroupedScatterPlot& plot, const std::filesystem::path& png);
+
 }  // namespace lftrack::host

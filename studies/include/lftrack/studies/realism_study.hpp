@@ -47,6 +47,10 @@ struct RealismFactorSummary {
   double success_rate = 0;  // image-only, starts <= image_max_mm
   double median_ms = 0;     // image-only
   double p95_tre_mm = 0;    // image-only successes
+  double sd_tre_mm = 0;     // image-only successes: their standard deviation
+  // Image-only runs judged by the registration verdict against success (capture_range_study.hpp).
+  int accepted_right = 0, accepted_wrong = 0, rejected_right = 0, rejected_wrong = 0;
+  int successes = 0;
   double hybrid_success_rate = -1;  // starts <= hybrid_max_mm; -1 without a fiducial
   double hybrid_mean_tre_mm = 0;
   int runs = 0;
@@ -75,7 +79,8 @@ RealismFactorSummary summarize_realism_factor(const RealismOptions& options, con
                                               const std::string& image_method, const std::string& hybrid_method);
 // DIR/<set>/ (each set's capture-range outputs, or its shard), and for a whole study
 // DIR/summary.json (`factors`: name, mean_tre_mm, success_rate, median_ms, ...), DIR/realism.csv,
-// DIR/realism.png; for a shard, DIR/study.json (see write_realism_description).
+// DIR/realism_tre.png (TRE per set, mean and SD) and DIR/realism_rates.png (success and the
+// verdict's false accepts and false rejects per set, with 95 % intervals); for a shard, DIR/study.json (see write_realism_description).
 Status write_realism_outputs(const RealismReport& report, const std::filesystem::path& dir);
 
 // ---- Shards (issue 25; realism_shards.cpp) ----

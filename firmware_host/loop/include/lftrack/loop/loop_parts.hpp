@@ -104,6 +104,8 @@ struct LoopSettings {
   // envelope); a rejected alignment is no result, with the verdict's reason: HOLD, nothing
   // moves. Unset: not judged.
   std::optional<VerdictLimits> verdict;
+  // Tracking cycles judged too, as the alignment is (the NCC check included).
+  bool judge_tracking = false;
 };
 
 // The loop's period in integer nanoseconds, and the motion predictor's look-ahead (s): the scene's

@@ -28,6 +28,9 @@ struct LoopSpec {
   std::optional<double> lookahead_s;
   int prediction_cycles = 8;
   int prediction_order = 2;
+  // The registration verdict on tracking cycles (issue 52): unset follows the scene (judged where
+  // the scene is commissioned: its floors were measured on tracking registrations).
+  std::optional<bool> judge_tracking;
   RealtimeSpec realtime;
 };
 

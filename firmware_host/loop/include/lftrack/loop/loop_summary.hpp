@@ -49,6 +49,9 @@ struct LoopSummary {
   // Waiting for the pair (real clock: from the cycle's start; simulated: the copy only), and
   // preprocessing it; TRACK/HOLD cycles.
   double acquire_p95_ms = 0, acquire_max_ms = 0, preprocess_p95_ms = 0, preprocess_max_ms = 0;
+  // The verdict's NCC check in tracking cycles (judge_tracking): how many ran, and their time.
+  std::int64_t verdict_checks = 0;
+  double verdict_check_p50_ms = 0, verdict_check_p95_ms = 0, verdict_check_max_ms = 0;
   double readback_p50_ms = 0, readback_p99_ms = 0;  // the actuator's read-back: a protocol's round trip
   double evaluations_mean = 0;
   std::optional<double> allocations_per_cycle;

@@ -40,4 +40,7 @@ Status write_detector_calibration(const std::filesystem::path& path, const calib
                                   bool overwrite);
 Result<calib::DetectorCalibration> load_detector_calibration(const std::filesystem::path& path);
 
+// The time a file of record is stamped with: UTC, ISO 8601 to the second ("2026-11-30T12:00:00Z").
+std::string utc_now();
+
 }  // namespace lftrack::host

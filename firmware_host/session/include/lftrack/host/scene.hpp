@@ -202,6 +202,9 @@ struct Scene {
   // Whether the scene names safety.min_similarity (in its tracking.similarity's units); without
   // it the registration verdict takes the measure's default floor (registration_verdict.hpp).
   bool min_similarity_given = false;
+  // safety.commissioning: the scene's commissioning file (commissioning_file.hpp; absolute), whose
+  // floors the verdict takes; empty: the measure's default floors, the scene not commissioned.
+  std::string commissioning_file;
   ActuatorSpec actuator;
   MotionSpec motion;
 };

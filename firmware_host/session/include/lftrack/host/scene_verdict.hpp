@@ -18,6 +18,15 @@ namespace lftrack::host {
 // measure's units), else the measure's default; the envelope is the scene's.
 Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& measure);
 
+// The limits the loop and `lftrack register` judge with: verdict_limits(), and where the scene
+// names a commissioning file (safety.commissioning) its floors: min_check_ncc always, and
+// min_similarity where `measure` is the one commissioned. A named file that is missing, malformed
+// or measured on another CT, room, registration or imaging (commissioning_file.hpp) is an error
+// that says how to commission the scene again. `floors_from` (when given) receives where the
+// floors came from, for people: the file, or "the measure's defaults (not commissioned)".
+Result<VerdictLimits> scene_verdict_limits(const PreparedScene& scene, const std::string& measure,
+                                           std::string* floors_from = nullptr);
+
 // Depth along a view's central ray is unobservable from that view alone. The unit vector of
 // detector `index`'s central ray (from the source to the detector's centre), room frame.
 Eigen::Vector3d central_ray_direction_room(const Scene& scene, int index);

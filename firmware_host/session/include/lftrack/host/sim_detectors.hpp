@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "lftrack/host/scene.hpp"
@@ -51,5 +52,16 @@ class SimDetectors {
   std::vector<std::unique_ptr<sim::FrameSynthesizer>> synthesizers_;
   std::vector<std::unique_ptr<sim::SurroundSynthesizer>> surrounds_;
 };
+
+// The simulated detectors as `lftrack register --sim` and `lftrack commission` expose them: each
+// ROI window exact (Siddon, a 16-pixel margin), the rest of each detector coarser; the scene's
+// imaging physics (sim.physics) on its simulated patient, or the world anatomy where the physics
+// is ideal. `correction` is how such frames are corrected on a detector without a calibration
+// file of its own (realistic physics: the simulator's detector model), or empty.
+struct SceneSimDetectors {
+  SimDetectors detectors;
+  std::optional<tracking::DetectorCorrection> correction;
+};
+Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& scene, tracking::ThreadPool* pool);
 
 }  // namespace lftrack::host

@@ -1,0 +1,67 @@
+#pragma once
+// One registration judged end to end, as `lftrack register` and `lftrack commission` judge it and
+// as the loop judges its alignment (cycle_stages.cpp): the image-quality gate on each raw frame
+// over its ROI window, preprocessing, the plan from a start pose, each view's check NCC (the
+// frame against the DRR at the result), and the registration verdict (registration_verdict.hpp).
+// Frames the gate refuses are not registered; their verdict says which view and why.
+
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/tracking/frame_quality.hpp"
+#include "lftrack/tracking/registration.hpp"
+
+namespace lftrack::host {
+
+struct JudgedRegistration {
+  bool registered = false;  // false: a frame failed the image-quality gate; nothing was registered
+  VerdictInput input;       // what the verdict judged
+  RegistrationVerdict verdict;
+  std::vector<tracking::FrameQualityStats> quality;  // per view
+  tracking::RegistrationResult result;               // when registered
+};
+
+// What the verdict judges of one result over frames already through the quality gate and
+// preprocessing (`quality` per view): the stop, finiteness, each view's similarity, the delta from
+// the nominal pose, and each view's check NCC against `renderer`'s DRR at the result (when the
+// pose is finite). The studies judge their registrations with it; RegistrationJudge does too.
+Result<VerdictInput> verdict_input_of(const PreparedScene& scene, const tracking::DrrRenderer& renderer,
+                                      const SceneFrames& frames,
+                                      const std::vector<tracking::FrameQualityIssue>& quality,
+                                      const tracking::RegistrationResult& result);
+
+class RegistrationJudge {
+ public:
+  // Called with the preprocessed frames once the registration holds them, before the plan runs
+  // (`lftrack register --fiducial` adds its term there).
+  using BeforeRun = std::function<Status(const SceneFrames& frames, tracking::Registration* registration)>;
+
+  // `renderer` renders both the registration's DRRs and the check's; `corrections` one per
+  // detector, as scene_detector_corrections() gives them. The scene outlives the judge.
+  static Result<std::unique_ptr<RegistrationJudge>> create(const PreparedScene& scene,
+                                                           std::shared_ptr<const tracking::DrrRenderer> renderer,
+                                                           const RegistrationSpec& spec,
+                                                           std::vector<tracking::DetectorCorrection> corrections,
+                                                           const VerdictLimits& limits, tracking::ThreadPool* pool);
+
+  // Registers `raw` (whole-detector frames, one per view) from `start` with `plan` and judges it.
+  Result<JudgedRegistration> judge(const std::vector<tracking::Image<std::uint16_t>>& raw, const tracking::Pose& start,
+                                   const tracking::RegistrationPlan& plan, const BeforeRun& before_run = {});
+
+  const VerdictLimits& limits() const { return limits_; }
+  const std::vector<tracking::DetectorCorrection>& corrections() const { return corrections_; }
+
+ private:
+  RegistrationJudge() = default;
+  const PreparedScene* scene_ = nullptr;
+  std::shared_ptr<const tracking::DrrRenderer> renderer_;
+  std::unique_ptr<tracking::Registration> registration_;
+  std::vector<tracking::DetectorCorrection> corrections_;
+  VerdictLimits limits_;
+};
+
+}  // namespace lftrack::host

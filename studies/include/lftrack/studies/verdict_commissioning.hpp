@@ -1,0 +1,98 @@
+#pragma once
+// Commissioning the registration verdict for one scene (issue 52), as a physicist commissions a
+// system: registrations of simulated frames the verdict must accept (the patient anywhere in the
+// envelope, registered cold from the nominal pose as the alignment does, or warm from near the
+// patient as tracking does) and of frames it must refuse (the views swapped, the frames mirrored,
+// the patient beyond the envelope or one vertebral level off, another patient's anatomy, noise,
+// flat frames); the floors that refuse every wrong result and keep as many right ones as can be;
+// and, per kind, how often the verdict accepts wrong results (false accepts: what can hurt a
+// patient) and rejects right ones (false rejects: lost treatment time), at the measure's default
+// floors and at the commissioned ones.
+//
+// A result is right when its mean TRE over the scene's box is under the tolerance (the scene's
+// safety.beam_tolerance_mm unless given) for a good case; every bad case must be refused.
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host {
+
+enum class CommissionCase : std::uint8_t {
+  kAlign,           // good: cold, from the nominal pose, the patient anywhere in the envelope
+  kTrack,           // good: warm, from within 1 mm / 0.5 deg per axis of the patient (the track plan)
+  kSwappedViews,    // bad: the frames of the first two views exchanged
+  kMirrored,        // bad: every frame mirrored left to right
+  kBeyondEnvelope,  // bad: the patient 1.2 to 2.5 envelopes away
+  kWrongLevel,      // bad: the patient one vertebral level along the room's z, either way
+  kOtherPatient,    // bad: frames of another patient (another scene's CT, its own room)
+  kNoise,           // bad: uniform noise over the detector's range
+  kBlank,           // bad: flat frames
+};
+inline constexpr int kCommissionCaseKinds = 9;
+const char* to_string(CommissionCase kind);
+bool must_refuse(CommissionCase kind);
+
+struct CommissionOptions {
+  int good_cases = 100;  // half alignments, half tracking
+  int bad_cases = 1000;  // spread over the bad kinds that apply
+  std::uint64_t seed = 1;
+  double tolerance_mm = 0;  // 0: the scene's safety.beam_tolerance_mm
+  double level_mm = 30;     // one vertebral level (lumbar about 35 mm, thoracic about 25 mm)
+  const PreparedScene* other_patient = nullptr;  // null: no other-patient cases
+  std::string renderer = "lightfield";
+  std::string light_field_dir;  // empty: the scene's default folder
+  tracking::ThreadPool* pool = nullptr;
+  std::function<void(int done, int total)> progress;
+};
+
+struct CommissionCaseResult {
+  CommissionCase kind = CommissionCase::kAlign;
+  tracking::Vector6d gold_delta = tracking::Vector6d::Zero();  // the patient, from the nominal pose: mm, rad
+  bool registered = false;  // false: the image-quality gate refused the frames
+  VerdictInput input;       // what the verdict judges (re-judged with any floors)
+  double tre_mean_mm = 0;   // against the gold pose; NaN where there is none (no registration, another CT)
+  double ms = 0;            // the registration's time
+};
+
+// The cases, in a fixed order drawn from options.seed; the same options give the same cases.
+Result<std::vector<CommissionCaseResult>> run_commission_cases(const PreparedScene& scene,
+                                                               const CommissionOptions& options);
+
+struct CommissionTally {
+  int cases = 0;
+  int accepted_right = 0, accepted_wrong = 0;  // accepted_wrong: the false accepts
+  int rejected_right = 0, rejected_wrong = 0;  // rejected_right: the false rejects
+};
+// Per kind (index: the enum's value) and, last, all kinds together; each case judged with `limits`.
+std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(const std::vector<CommissionCaseResult>& cases,
+                                                                       const VerdictLimits& limits,
+                                                                       double tolerance_mm);
+
+// The floors chosen from `cases`: every wrong result the other checks accept is refused by one of
+// them, and as many right ones as can be are kept; each floor sits halfway between the values it
+// separates. Neither goes below halfway between what unrelated images score and the measure's
+// default (the defaults in `defaults`).
+struct ChosenFloors {
+  double min_similarity = 0, min_check_ncc = 0;
+  // The lowest view's values either side of each floor: the wrong result nearest below it (NaN:
+  // none needed it) and the right result nearest above it (NaN: none kept).
+  double wrong_similarity_below = 0, right_similarity_above = 0;
+  double wrong_check_below = 0, right_check_above = 0;
+};
+ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+                           double tolerance_mm);
+
+// The lowest view's similarity and check NCC of a judged case (the check: NaN where it did not
+// run; a case the quality gate refused holds no similarity: look at `registered` first).
+double lowest_view_similarity(const VerdictInput& input);
+double lowest_view_check_ncc(const VerdictInput& input);
+
+}  // namespace lftrack::host

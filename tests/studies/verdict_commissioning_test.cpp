@@ -1,0 +1,128 @@
+// The commissioning's arithmetic on cases made up here (verdict_commissioning.hpp): the tally's
+// four outcomes per kind, and floors that refuse every wrong result and keep the right ones,
+// each halfway between what it separates, never below its lower bound.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "lftrack/studies/verdict_commissioning.hpp"
+
+namespace lftrack::host {
+namespace {
+
+// A registered two-view case whose lowest view scores `s` (the measure) and `c` (check NCC).
+CommissionCaseResult judged(CommissionCase kind, double s, double c, double tre_mm = 0.3) {
+  CommissionCaseResult r;
+  r.kind = kind;
+  r.registered = true;
+  r.tre_mean_mm = tre_mm;
+  r.input.views = 2;
+  r.input.pose_finite = true;
+  r.input.similarity = {s, s + 0.01};
+  r.input.has_check_ncc = true;
+  r.input.check_ncc = {c, c + 0.01};
+  return r;
+}
+
+VerdictLimits ncc_defaults() {
+  VerdictLimits limits;
+  limits.measure = "ncc";
+  limits.min_similarity = 0.76;
+  limits.no_information_similarity = 0;
+  limits.min_check_ncc = 0.76;
+  limits.min_view_ratio = 0.5;
+  limits.envelope = {10, 5};
+  return limits;
+}
+
+TEST(VerdictCommissioning, TallyCountsTheFourOutcomesPerKindAndInAll) {
+  const VerdictLimits limits = ncc_defaults();
+  std::vector<CommissionCaseResult> cases = {
+      judged(CommissionCase::kAlign, 0.95, 0.95),        // accepted, right
+      judged(CommissionCase::kAlign, 0.95, 0.95, 4.0),   // accepted, wrong (a false accept)
+      judged(CommissionCase::kTrack, 0.70, 0.95),        // rejected, right (a false reject)
+      judged(CommissionCase::kSwappedViews, 0.5, 0.5),   // rejected, wrong
+      judged(CommissionCase::kWrongLevel, 0.9, 0.9),     // accepted, wrong: a bad kind is never right
+  };
+  CommissionCaseResult blank;  // the quality gate refused it: never registered
+  blank.kind = CommissionCase::kBlank;
+  blank.input.views = 2;
+  blank.input.image_quality[0] = tracking::FrameQualityIssue::kUniform;
+  blank.tre_mean_mm = std::nan("");
+  cases.push_back(blank);
+  const auto t = tally_commission(cases, limits, 2.0);
+  const CommissionTally& align = t[int(CommissionCase::kAlign)];
+  EXPECT_EQ(align.cases, 2);
+  EXPECT_EQ(align.accepted_right, 1);
+  EXPECT_EQ(align.accepted_wrong, 1);
+  EXPECT_EQ(t[int(CommissionCase::kTrack)].rejected_right, 1);
+  EXPECT_EQ(t[int(CommissionCase::kSwappedViews)].rejected_wrong, 1);
+  EXPECT_EQ(t[int(CommissionCase::kWrongLevel)].accepted_wrong, 1);
+  EXPECT_EQ(t[int(CommissionCase::kBlank)].rejected_wrong, 1);
+  const CommissionTally& all = t[kCommissionCaseKinds];
+  EXPECT_EQ(all.cases, 6);
+  EXPECT_EQ(all.accepted_right, 1);
+  EXPECT_EQ(all.accepted_wrong, 2);
+  EXPECT_EQ(all.rejected_right, 1);
+  EXPECT_EQ(all.rejected_wrong, 2);
+}
+
+// Right results score 0.90-0.99 on both checks; swapped views 0.40-0.60; one wrong level scores
+// like a right result on the measure (0.95) and passes the default check floor (0.76) at 0.80: the check's floor must
+// refuse it, and both floors sit in the middle of their gaps.
+TEST(VerdictCommissioning, FloorsRefuseEveryWrongResultAndKeepTheRightOnes) {
+  std::vector<CommissionCaseResult> cases;
+  for (int i = 0; i < 20; ++i) cases.push_back(judged(CommissionCase::kAlign, 0.90 + 0.0045 * i, 0.90 + 0.0045 * i));
+  for (int i = 0; i < 10; ++i) cases.push_back(judged(CommissionCase::kSwappedViews, 0.40 + 0.02 * i, 0.40 + 0.02 * i));
+  cases.push_back(judged(CommissionCase::kWrongLevel, 0.95, 0.80));
+  const VerdictLimits defaults = ncc_defaults();
+  const ChosenFloors floors = choose_floors(cases, defaults, 2.0);
+  VerdictLimits chosen = defaults;
+  chosen.min_similarity = floors.min_similarity;
+  chosen.min_check_ncc = floors.min_check_ncc;
+  const CommissionTally all = tally_commission(cases, chosen, 2.0)[kCommissionCaseKinds];
+  EXPECT_EQ(all.accepted_wrong, 0);
+  EXPECT_EQ(all.accepted_right, 20);
+  EXPECT_NEAR(floors.min_check_ncc, 0.5 * (0.80 + 0.90), 1e-9);  // the wrong level's 0.80 and the lowest right
+  EXPECT_NEAR(floors.min_similarity, 0.5 * (0.58 + 0.90), 1e-9);  // the highest swapped 0.58 and the lowest right
+  EXPECT_NEAR(floors.wrong_check_below, 0.80, 1e-9);
+  EXPECT_NEAR(floors.right_check_above, 0.90, 1e-9);
+  // The defaults (0.76 both) let the wrong level by: this is what commissioning is for.
+  EXPECT_EQ(tally_commission(cases, defaults, 2.0)[kCommissionCaseKinds].accepted_wrong, 1);
+}
+
+// A wrong result that scores above most right ones on both checks: no floors keep every right
+// result, and the chosen ones still accept nothing wrong, losing as few right ones as they can.
+TEST(VerdictCommissioning, AWrongResultAmongTheRightOnesCostsRightOnesNotSafety) {
+  std::vector<CommissionCaseResult> cases;
+  for (int i = 0; i < 10; ++i) cases.push_back(judged(CommissionCase::kAlign, 0.90 + 0.01 * i, 0.90 + 0.01 * i));
+  cases.push_back(judged(CommissionCase::kOtherPatient, 0.955, 0.955));
+  const ChosenFloors floors = choose_floors(cases, ncc_defaults(), 2.0);
+  VerdictLimits chosen = ncc_defaults();
+  chosen.min_similarity = floors.min_similarity;
+  chosen.min_check_ncc = floors.min_check_ncc;
+  const CommissionTally all = tally_commission(cases, chosen, 2.0)[kCommissionCaseKinds];
+  EXPECT_EQ(all.accepted_wrong, 0);
+  EXPECT_EQ(all.accepted_right, 4);  // 0.96 .. 0.99
+}
+
+// With nothing wrong to separate, a floor is not lowered past halfway between what unrelated
+// images score and the measure's default.
+TEST(VerdictCommissioning, FloorsDoNotFallBelowHalfwayToTheDefault) {
+  std::vector<CommissionCaseResult> cases;
+  for (int i = 0; i < 10; ++i) cases.push_back(judged(CommissionCase::kAlign, 0.10 + 0.01 * i, 0.10 + 0.01 * i));
+  const ChosenFloors floors = choose_floors(cases, ncc_defaults(), 2.0);
+  EXPECT_GE(floors.min_similarity, 0.38 - 1e-12);
+  EXPECT_GE(floors.min_check_ncc, 0.38 - 1e-12);
+}
+
+TEST(VerdictCommissioning, OnlyTheGoodKindsMayBeAccepted) {
+  EXPECT_FALSE(must_refuse(CommissionCase::kAlign));
+  EXPECT_FALSE(must_refuse(CommissionCase::kTrack));
+  for (int k = 2; k < kCommissionCaseKinds; ++k) EXPECT_TRUE(must_refuse(CommissionCase(k))) << to_string(CommissionCase(k));
+}
+
+}  // namespace
+}  // namespace lftrack::host
