@@ -1,14 +1,15 @@
 // The files a scene names besides the CT: a couch calibration (YAML), a detector calibration
-// (four-page float TIFF with JSON) and a calibration phantom (YAML). The first input byte picks
-// the reader.
+// (four-page float TIFF with JSON), a calibration phantom (YAML) and a commissioning file (YAML).
+// The first input byte picks the reader.
 #include "fuzz_input.hpp"
 #include "lftrack/host/calibration_files.hpp"
+#include "lftrack/host/commissioning_file.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace lftrack;
   if (size < 1) return 0;
-  switch (data[0] % 3) {
+  switch (data[0] % 4) {
     case 0: {
       auto c = host::read_couch_calibration(fuzz::write_input("couch.yaml", data + 1, size - 1).string());
       if (!c.ok()) fuzz::expect_reason(c.status());
@@ -19,8 +20,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       if (!c.ok()) fuzz::expect_reason(c.status());
       break;
     }
-    default: {
+    case 2: {
       auto c = host::load_calibration_phantom(fuzz::write_input("phantom.yaml", data + 1, size - 1).string());
+      if (!c.ok()) fuzz::expect_reason(c.status());
+      break;
+    }
+    default: {
+      auto c = host::read_commissioning_file(fuzz::write_input("commissioning.yaml", data + 1, size - 1));
       if (!c.ok()) fuzz::expect_reason(c.status());
       break;
     }

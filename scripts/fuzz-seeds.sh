@@ -75,6 +75,7 @@ markers_mm:
   - [-20, 10, 25]
 YAML
 prefix "$work/phantom.yaml" 2 "$seeds/fuzz_calibration_files/phantom"
+for f in scenes/commissioning/*.yaml; do prefix "$f" 3 "$seeds/fuzz_calibration_files/commissioning-$(basename "$f" .yaml)"; done
 
 # CT: small NIfTI-1 volumes (int16 and float32, with sform), and one real DICOM slice.
 python3 - "$work" <<'PY'

@@ -121,9 +121,9 @@ Result<CommissioningRecord> read_commissioning_file(const fs::path& file) {
   const auto bad = [&](const std::string& why) {
     return invalid_argument(file.string() + ": " + why + " (write it with `lftrack commission`, not by hand)");
   };
-  if (!root.IsMap() || !root["lftrack_commissioning"]) return bad("not an lftrack commissioning file");
   CommissioningRecord r;
-  try {
+  try {  // every look into the document: a complex key or a node of the wrong kind throws
+    if (!root.IsMap() || !root["lftrack_commissioning"]) return bad("not an lftrack commissioning file");
     if (root["lftrack_commissioning"].as<int>() != 1) return bad("an unknown commissioning file version");
     const YAML::Node fingerprint = root["fingerprint"], floors = root["floors"];
     if (!fingerprint.IsMap() || !floors.IsMap()) return bad("no fingerprint or floors");
