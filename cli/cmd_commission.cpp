@@ -40,6 +40,33 @@ struct CommissionCliOptions {
   std::string command_line;
 };
 
+// Where the commissioning file may go: not a folder, a device, a link, the scene itself or into the
+// report folder; an existing file only with --replace, and only when it is a commissioning file
+// (a replace never destroys anything else).
+Status check_output_file(const fs::path& out, bool replace, const std::string& scene, const fs::path& report) {
+  std::error_code ec;
+  const fs::file_status status = fs::symlink_status(out, ec);
+  if (fs::is_directory(status)) return invalid_argument(out.string() + ": a folder; --out names the commissioning file");
+  if (fs::exists(status) && !fs::is_regular_file(status))
+    return invalid_argument(out.string() + ": not a regular file (a link, a device or a pipe); the commissioning file "
+                                           "is written as a file of its own");
+  const fs::path out_abs = fs::weakly_canonical(out, ec);
+  if (out_abs == fs::weakly_canonical(scene, ec))
+    return invalid_argument(out.string() + ": the scene itself; the commissioning file goes beside it");
+  const fs::path report_abs = fs::weakly_canonical(report, ec);
+  if (out_abs.parent_path() == report_abs)
+    return invalid_argument(out.string() + ": inside the report folder " + report.string() +
+                            ", whose files a run rewrites; put it elsewhere");
+  if (!fs::exists(status)) return {};
+  if (!replace) return failed_precondition(out.string() + ": exists; say --replace to commission the scene again over it");
+  std::ifstream in(out);
+  std::string first_lines, line;
+  for (int i = 0; i < 8 && std::getline(in, line); ++i) first_lines += line + '\n';
+  if (first_lines.find("\nlftrack_commissioning: ") == std::string::npos)
+    return failed_precondition(out.string() + ": not a commissioning file; --replace replaces only one of those");
+  return {};
+}
+
 // A file can be made in `folder` (made and removed at once).
 Status check_writable(const fs::path& folder, const std::string& what) {
   const fs::path probe = folder / (".lftrack-write-probe-" + std::to_string(::getpid()));
@@ -61,6 +88,10 @@ std::string rate(int n, int of) {
 }
 
 using Tallies = std::array<CommissionTally, kCommissionCaseKinds + 1>;
+
+// The least evidence a commissioning file is written from.
+constexpr int kMinGoodToWrite = 10;
+constexpr int kMinBadToWrite = 70;
 
 // SplitMix64's finaliser of `index`: which half of the held-out split a case falls in.
 bool in_fit_half(std::uint64_t index) {
@@ -94,7 +125,7 @@ std::string tally_yaml(const Tallies& t, const char* indent) {
 }
 
 std::string number(double v) {
-  if (!std::isfinite(v)) return ".nan";
+  if (!std::isfinite(v)) return ".nan";  // YAML's not-a-number (the file); printed as "none" (margin_text)
   std::ostringstream s;
   s.precision(6);
   s << v;
@@ -189,8 +220,10 @@ Status check_scene_verdict(const PreparedScene& p, const std::vector<CommissionC
 }
 
 Status run(const CommissionCliOptions& o) {
-  if (o.check && (o.replace || !o.out.empty() || o.dry_run))
-    return invalid_argument("--check writes nothing: it takes no --out, --replace or --dry-run");
+  if (!o.check && !o.dry_run && (o.good < kMinGoodToWrite || o.bad < kMinBadToWrite))
+    return invalid_argument("a commissioning file is measured from at least " + std::to_string(kMinGoodToWrite) +
+                            " good and " + std::to_string(kMinBadToWrite) +
+                            " bad cases (10 of each bad kind); fewer is a --dry-run or a --check");
   if (o.scene.scene.rfind("builtin:", 0) == 0 && o.out.empty() && !o.dry_run && !o.check)
     return invalid_argument("a built-in scene names no commissioning file: give --out FILE (or --dry-run)");
   tracking::ThreadPool pool(o.scene.threads);
@@ -205,14 +238,12 @@ Status run(const CommissionCliOptions& o) {
   if (out.empty())
     out = fs::path(p.scene.source).parent_path() / (fs::path(p.scene.source).stem().string() + ".commissioning.yaml");
   std::error_code ec;
-  if (!o.dry_run && !o.check && fs::is_directory(out, ec))
-    return invalid_argument(out.string() + ": a folder; --out names the commissioning file");
-  if (!o.dry_run && !o.check && !o.replace && fs::exists(fs::symlink_status(out, ec)))
-    return failed_precondition(out.string() + ": exists; say --replace to commission the scene again over it");
+  // --check's cases go beside the commissioning's report, never over it.
+  const std::string report_name = fs::path(p.scene.source).stem().string() + (o.check ? "-check" : "");
+  const fs::path report = o.report_dir.empty() ? fs::path("out/commission") / report_name : fs::path(o.report_dir);
+  if (!o.dry_run && !o.check) LFTRACK_RETURN_IF_ERROR(check_output_file(out, o.replace, p.scene.source, report));
   // The report folder and the file's folder before the cases: minutes of work are not lost to a
   // folder that cannot be made or written.
-  const fs::path report = o.report_dir.empty() ? fs::path("out/commission") / fs::path(p.scene.source).stem()
-                                               : fs::path(o.report_dir);
   fs::create_directories(report, ec);
   if (ec || !fs::is_directory(report, ec))
     return io_error(report.string() + ": cannot create the report folder" + (ec ? ": " + ec.message() : ""));
@@ -229,6 +260,9 @@ Status run(const CommissionCliOptions& o) {
     other_options.ct.clear();
     auto loaded = load_prepared_scene(other_options, &pool);
     if (!loaded.ok()) return loaded.status().with_context("--other-scene");
+    if (commissioning_fingerprint(*loaded).ct == commissioning_fingerprint(p).ct)
+      return invalid_argument("--other-scene " + o.other_scene +
+                              ": the same CT as the scene; another patient's frames need another patient's CT");
     other.emplace(std::move(loaded).value());
   }
   auto defaults = verdict_limits(p.scene, p.scene.registration.similarity);
@@ -238,6 +272,9 @@ Status run(const CommissionCliOptions& o) {
                             number(p.scene.safety.beam_tolerance_mm) +
                             " mm): results that far off would count as right and loosen the floors");
   const double tolerance = o.tolerance_mm > 0 ? o.tolerance_mm : p.scene.safety.beam_tolerance_mm;
+  if (o.level_mm < 2 * tolerance)
+    return invalid_argument("--level-mm " + number(o.level_mm) + " is under twice the tolerance (" + number(tolerance) +
+                            " mm): a result one such level off is nearly right, not a wrong level");
 
   CommissionOptions options;
   options.good_cases = o.good;
@@ -296,10 +333,12 @@ Status run(const CommissionCliOptions& o) {
               rate(all_after.accepted_wrong, wrong(all_after)).c_str(), wrong(all_after),
               rate(all_after.rejected_right, right(all_after)).c_str(), right(all_after),
               p.scene.registration.similarity.c_str(), floors.min_similarity, floors.min_check_ncc);
+  const auto margin_text = [](double v) { return std::isfinite(v) ? number(v) : std::string("none"); };
   std::printf("  margins: %s floor %.4f between wrong %s and right %s; check NCC floor %.4f between wrong %s and right %s\n",
-              p.scene.registration.similarity.c_str(), floors.min_similarity, number(floors.wrong_similarity_below).c_str(),
-              number(floors.right_similarity_above).c_str(), floors.min_check_ncc,
-              number(floors.wrong_check_below).c_str(), number(floors.right_check_above).c_str());
+              p.scene.registration.similarity.c_str(), floors.min_similarity,
+              margin_text(floors.wrong_similarity_below).c_str(), margin_text(floors.right_similarity_above).c_str(),
+              floors.min_check_ncc, margin_text(floors.wrong_check_below).c_str(),
+              margin_text(floors.right_check_above).c_str());
   std::printf("held out (floors chosen from half the cases, judged on the other half): false accepts %s of %d, false "
               "rejects %s of %d\n",
               rate(all_held.accepted_wrong, wrong(all_held)).c_str(), wrong(all_held),
@@ -318,6 +357,12 @@ Status run(const CommissionCliOptions& o) {
     return failed_precondition("no good case registered right (TRE under " + number(tolerance) +
                                " mm): there is nothing to set floors against; nothing written (--good 0, or a scene "
                                "whose registration fails: see the report)");
+  const int held_right = right(all_held);
+  if (held_right > 0 && double(all_held.rejected_right) / held_right > o.max_false_reject_rate)
+    return failed_precondition("floors chosen from half the cases rejected " +
+                               rate(all_held.rejected_right, held_right) + " of the other half's right results (allowed " +
+                               rate(int(std::lround(o.max_false_reject_rate * 1000)), 1000) +
+                               "): they do not generalise; nothing written. Run more cases (--good, --bad)");
   if (all_held.accepted_wrong > 0)
     return failed_precondition(
         "floors chosen from half the cases accepted " + std::to_string(all_held.accepted_wrong) +
@@ -370,15 +415,20 @@ Command add_commission_command(CLI::App* parent, int argc, char** argv) {
   for (int i = 0; i < argc; ++i)
     o->command_line += std::string(i ? " " : "") + (i == 0 ? fs::path(argv[0]).filename().string() : argv[i]);
   add_scene_options(app, &o->scene);
-  app->add_option("--out", o->out,
-                  "The commissioning file (default: the scene's safety.commissioning, else <scene>.commissioning.yaml "
-                  "beside it)")
-      ->check(not_empty());
-  app->add_flag("--replace", o->replace, "Replace an existing commissioning file");
-  app->add_flag("--dry-run", o->dry_run, "Measure and report; write no commissioning file");
+  auto* out = app->add_option("--out", o->out,
+                               "The commissioning file (default: the scene's safety.commissioning, else "
+                               "<scene>.commissioning.yaml beside it)")
+                   ->check(not_empty());
+  auto* replace =
+      app->add_flag("--replace", o->replace, "Replace an existing commissioning file (only a commissioning file)");
+  auto* dry_run = app->add_flag("--dry-run", o->dry_run, "Measure and report; write no commissioning file");
   app->add_flag("--check", o->check,
-                "Judge the cases with the scene's verdict as it stands (its commissioning file): fail on any false "
-                "accept; write nothing");
+                "Judge new cases with the scene's verdict as it stands (its commissioning file): fail on any false "
+                "accept, or on more false rejects than allowed; no commissioning file is written (the cases go to "
+                "out/commission/<scene stem>-check)")
+      ->excludes(out)
+      ->excludes(replace)
+      ->excludes(dry_run);
   app->add_option("--good", o->good, "Known-good cases (half alignments, half tracking)")
       ->check(CLI::Range(0, 100000))
       ->capture_default_str();
@@ -399,7 +449,8 @@ Command add_commission_command(CLI::App* parent, int argc, char** argv) {
                   "The largest fraction of right results the floors may reject before nothing is written")
       ->check(finite_in(0, 1))
       ->capture_default_str();
-  app->add_option("--report", o->report_dir, "Report folder (default: out/commission/<scene stem>)")->check(not_empty());
+  app->add_option("--report", o->report_dir, "Report folder (default: out/commission/<scene stem>, -check for --check)")
+      ->check(not_empty());
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default: out/lightfields/<scene>)")->check(not_empty());
   return [o] { return run(*o); };
 }

@@ -57,7 +57,7 @@ class CommissionCli : public ::testing::Test {
     return prepared.ok() ? commissioning_fingerprint(*prepared) : CommissioningFingerprint{};
   }
   static std::vector<std::string> commission(const std::string& scene, std::vector<std::string> more,
-                                             const std::string& good = "4", const std::string& bad = "10") {
+                                             const std::string& good = "10", const std::string& bad = "70") {
     std::vector<std::string> args = {"commission", "--scene", (dir() / scene).string(), "--lf-dir",
                                      (dir() / "lf").string(), "--good", good, "--bad", bad,
                                      "--report", (dir() / "report").string(),
@@ -90,9 +90,9 @@ TEST_F(CommissionCli, CommissionsTheSceneAndRegisterJudgesWithItsFloors) {
   EXPECT_EQ(record->measure, "mi");
   EXPECT_EQ(record->fingerprint, commissioning_fingerprint_of_test_scene()) << "made for the scene it names";
   EXPECT_NE(out.find("false accepts 0.00 %"), std::string::npos) << out;
-  // Every case in the report: a header and 14 rows (4 good, 10 bad).
+  // Every case in the report: a header and 80 rows (10 good, 70 bad).
   const std::string csv = test::contents(dir() / "report" / "cases.csv");
-  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 15) << csv;
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 81) << csv;
   for (const char* kind : {"align", "track", "swapped views", "mirrored", "beyond the envelope", "wrong level", "noise",
                            "blank"})
     EXPECT_NE(csv.find(std::string("\n") + kind + ","), std::string::npos) << kind;
@@ -122,7 +122,7 @@ TEST_F(CommissionCli, CommissionsTheSceneAndRegisterJudgesWithItsFloors) {
   EXPECT_NE(out.find("the room"), std::string::npos) << out;
 
   // New cases (another seed) judged by the commissioned verdict: nothing wrong accepted.
-  ASSERT_TRUE(lftrack(commission("phantom.yaml", {"--check", "--seed", "5"}), &out).ok()) << out;
+  ASSERT_TRUE(lftrack(commission("phantom.yaml", {"--check", "--seed", "5"}, "4", "14"), &out).ok()) << out;
   EXPECT_NE(out.find("at the scene's floors"), std::string::npos) << out;
   EXPECT_EQ(test::contents(file), first);  // --check writes nothing
 }
@@ -134,7 +134,30 @@ TEST_F(CommissionCli, NoCasesOrACheckThatWouldWriteIsRefused) {
   EXPECT_FALSE(lftrack(commission("phantom.yaml", {"--dry-run"}, "0", "0"), &out).ok());
   EXPECT_NE(out.find("no cases"), std::string::npos) << out;
   EXPECT_FALSE(lftrack(commission("phantom.yaml", {"--check", "--replace"}), &out).ok());
-  EXPECT_NE(out.find("--check writes nothing"), std::string::npos) << out;
+  EXPECT_NE(out.find("excludes"), std::string::npos) << out;
+  // Too few cases to write a file from.
+  EXPECT_FALSE(lftrack(commission("phantom.yaml", {"--out", (dir() / "few.yaml").string()}, "4", "10"), &out).ok());
+  EXPECT_NE(out.find("at least 10 good and 70 bad"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir() / "few.yaml"));
+}
+
+// --replace replaces a commissioning file and nothing else: not the scene, not another file, not
+// a link; and the commissioning file never goes into the report folder.
+TEST_F(CommissionCli, ReplaceReplacesOnlyACommissioningFile) {
+  std::string out;
+  const fs::path scene = dir() / "phantom.yaml";
+  const std::string scene_text = test::contents(scene);
+  const fs::path notes = dir() / "notes.txt";
+  std::ofstream(notes) << "my notes\n";
+  fs::create_symlink(notes, dir() / "link.yaml");
+  for (const fs::path& target : {scene, notes, dir() / "link.yaml", dir() / "report" / "c.yaml"}) {
+    SCOPED_TRACE(target.string());
+    EXPECT_FALSE(lftrack(commission("phantom.yaml", {"--out", target.string(), "--replace"}), &out).ok());
+    EXPECT_EQ(out.find(" cases in "), std::string::npos) << "refused before any case ran: " << out;
+  }
+  EXPECT_EQ(test::contents(scene), scene_text);
+  EXPECT_EQ(test::contents(notes), "my notes\n");
+  EXPECT_TRUE(fs::is_symlink(dir() / "link.yaml"));
 }
 
 }  // namespace

@@ -141,6 +141,9 @@ TEST_F(CommissioningFile, MalformedFilesAreRefusedWithTheirName) {
       {"version 2", variant("lftrack_commissioning: 1", "lftrack_commissioning: 2")},
       {"a floor edited by hand", variant("min_similarity: 0.9 ", "min_similarity: 0.5 ")},
       {"no seal", variant("seal: ", "sealed: ")},
+      {"the record edited", variant("scene: \"builtin:phantom\"", "scene: \"another\"")},
+      {"a key added", variant("measure: mi\n", "measure: mi\nextra: 1\n")},
+      {"a floor given twice", variant("  min_check_ncc: 0.85", "  min_check_ncc: 0.85\n  min_check_ncc: 0.40")},
       {"empty", ""},
   };
   for (const auto& [what, content] : bad) {

@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -52,12 +53,29 @@ std::string exact(double v) {
   return error == std::errc() ? std::string(text, end) : "nan";
 }
 
-// A digest of what the file decides with: the measure, the floors, the fingerprint. A file edited
-// by hand no longer matches it.
-std::string seal_of(const CommissioningRecord& r) {
-  return digest("lftrack commissioning seal\n" + r.measure + ' ' + exact(r.min_similarity) + ' ' +
-                exact(r.min_check_ncc) + ' ' + r.fingerprint.ct + ' ' + r.fingerprint.geometry + ' ' +
-                r.fingerprint.registration + ' ' + r.fingerprint.imaging);
+// The seal: a digest of the whole file but its own line ("seal: ..." at the start of a line), so
+// that any edit by hand (a floor, a figure, a key added or repeated) no longer matches it.
+constexpr const char* kSealKey = "seal: ";
+std::string seal_of_text(const std::string& text_without_seal) {
+  return digest("lftrack commissioning seal\n" + text_without_seal);
+}
+// `text` without its one seal line, and that line's value; false when there is not exactly one.
+bool split_seal(const std::string& text, std::string* rest, std::string* seal) {
+  std::size_t at = std::string::npos, count = 0;
+  for (std::size_t line = 0; line < text.size();) {
+    if (text.compare(line, std::strlen(kSealKey), kSealKey) == 0) at = line, ++count;
+    const std::size_t end = text.find('\n', line);
+    if (end == std::string::npos) break;
+    line = end + 1;
+  }
+  if (count != 1) return false;
+  const std::size_t end = text.find('\n', at);
+  const std::size_t stop = end == std::string::npos ? text.size() : end + 1;
+  *rest = text.substr(0, at) + text.substr(stop);
+  std::string value = text.substr(at + std::strlen(kSealKey), stop - at - std::strlen(kSealKey));
+  const auto quote = value.find('"'), close = value.find('"', quote + 1);
+  *seal = quote == std::string::npos || close == std::string::npos ? "" : value.substr(quote + 1, close - quote - 1);
+  return true;
 }
 
 const char* kWhatPartHolds[] = {
@@ -108,19 +126,29 @@ CommissioningFingerprint commissioning_fingerprint(const PreparedScene& p) {
 
 Result<CommissioningRecord> read_commissioning_file(const fs::path& file) {
   std::error_code ec;
+  if (!fs::exists(file, ec)) return not_found(file.string() + ": no commissioning file");
   if (!fs::is_regular_file(file, ec))
-    return not_found(file.string() + ": no commissioning file");
+    return invalid_argument(file.string() + ": not a regular file (a folder, a device or a pipe)");
   const auto size = fs::file_size(file, ec);
   if (ec || size > (1 << 20)) return invalid_argument(file.string() + ": not a commissioning file (over 1 MiB)");
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(file.string());
-  } catch (const YAML::Exception& e) {
-    return invalid_argument(file.string() + ": not YAML: " + e.what());
+  std::string text;
+  {
+    std::ifstream in(file, std::ios::binary);
+    std::ostringstream bytes;
+    bytes << in.rdbuf();
+    text = bytes.str();
   }
   const auto bad = [&](const std::string& why) {
     return invalid_argument(file.string() + ": " + why + " (write it with `lftrack commission`, not by hand)");
   };
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception&) {
+    return bad("not YAML");
+  }
+  std::string unsealed, seal;
+  if (!split_seal(text, &unsealed, &seal)) return bad("not one seal line");
   CommissioningRecord r;
   try {  // every look into the document: a complex key or a node of the wrong kind throws
     if (!root.IsMap() || !root["lftrack_commissioning"]) return bad("not an lftrack commissioning file");
@@ -136,9 +164,8 @@ Result<CommissioningRecord> read_commissioning_file(const fs::path& file) {
     r.measure = root["measure"].as<std::string>();
     r.min_similarity = floors["min_similarity"].as<double>();
     r.min_check_ncc = floors["min_check_ncc"].as<double>();
-    if (!root["seal"]) return bad("no seal");
-    if (root["seal"].as<std::string>() != seal_of(r))
-      return bad("edited by hand: its seal does not match its measure, floors and fingerprint");
+    if (!root["seal"] || root["seal"].as<std::string>() != seal || seal != seal_of_text(unsealed))
+      return bad("edited by hand: its seal does not match its text");
     if (root["scene"]) r.scene = root["scene"].as<std::string>();
     if (root["made_utc"]) r.made_utc = root["made_utc"].as<std::string>();
     if (root["command"]) r.command = root["command"].as<std::string>();
@@ -181,10 +208,11 @@ Status write_commissioning_file(const fs::path& file, const CommissioningRecord&
   out << "measure: " << r.measure << "\n"
       << "floors:                    # per view, at the registration's result\n"
       << "  min_similarity: " << exact(r.min_similarity) << "   # " << r.measure << "\n"
-      << "  min_check_ncc: " << exact(r.min_check_ncc) << "    # NCC of the frame against the DRR\n"
-      << "seal: \"" << seal_of(r) << "\"   # of the measure, floors and fingerprint: a hand edit breaks it\n"
-      << measured_yaml;
-  const std::string text = out.str();
+      << "  min_check_ncc: " << exact(r.min_check_ncc) << "    # NCC of the frame against the DRR\n";
+  const std::string head = out.str();
+  const std::string sealed = head + measured_yaml;
+  const std::string text = head + kSealKey + "\"" + seal_of_text(sealed) +
+                           "\"   # of every other line: an edit by hand breaks it\n" + measured_yaml;
   const fs::path temp = file.string() + ".partial-" + std::to_string(::getpid());
   {
     std::ofstream f(temp, std::ios::trunc);

@@ -32,7 +32,9 @@ Result<VerdictLimits> scene_verdict_limits(const PreparedScene& p, const std::st
   }
   auto record = read_commissioning_file(file);
   if (!record.ok()) {
-    const std::string how = " (safety.commissioning; make it with: lftrack commission --scene " + p.scene.source + ")";
+    const bool there = record.status().code() != StatusCode::kNotFound;
+    const std::string how = " (safety.commissioning; make it with: lftrack commission --scene " + p.scene.source +
+                            (there ? " --replace" : "") + ")";
     return Status(record.status().code(), record.status().message() + how);
   }
   LFTRACK_RETURN_IF_ERROR(check_commissioning_current(p, *record, file));
