@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -170,12 +171,13 @@ Status draw_plot(const fs::path& png, const std::vector<CommissionCaseResult>& c
   wrong_good.name = "good start, wrong result";
   std::array<PointGroup, kCommissionCaseKinds> bad;
   for (int k = 0; k < kCommissionCaseKinds; ++k) bad[std::size_t(k)].name = to_string(CommissionCase(k));
-  VerdictLimits open = defaults;  // no floors: what image quality, agreement and the envelope let by
-  open.min_similarity = open.min_check_ncc = -std::numeric_limits<double>::infinity();
+  const VerdictLimits open = without_floors(defaults);
   for (const CommissionCaseResult& c : cases) {
     if (!c.registered || !judge_registration(open, c.input).ok) continue;
     const double x = lowest_view_similarity(c.input), y = lowest_view_check_ncc(c.input);
-    PointGroup* g = must_refuse(c.kind) ? &bad[std::size_t(c.kind)] : c.tre_mean_mm < tolerance_mm ? &right : &wrong_good;
+    PointGroup* g = must_refuse(c.kind)                     ? &bad[std::size_t(c.kind)]
+                    : is_right_result(c, tolerance_mm) ? &right
+                                                            : &wrong_good;
     g->x.push_back(x);
     g->y.push_back(y);
   }
@@ -195,12 +197,10 @@ Status draw_plot(const fs::path& png, const std::vector<CommissionCaseResult>& c
 
 // --check: the cases judged by the verdict as the scene has it (its commissioning file's floors,
 // or the defaults): no wrong result may be accepted, and no more right ones rejected than allowed.
-Status check_scene_verdict(const PreparedScene& p, const std::vector<CommissionCaseResult>& cases, double tolerance,
+Status check_scene_verdict(const PreparedScene& p, const VerdictLimits& limits, const std::string& floors_from,
+                           const std::vector<CommissionCaseResult>& cases, double tolerance,
                            double max_false_reject_rate, double seconds) {
-  std::string floors_from;
-  auto limits = scene_verdict_limits(p, p.scene.registration.similarity, &floors_from);
-  if (!limits.ok()) return limits.status();
-  const Tallies t = tally_commission(cases, *limits, tolerance);
+  const Tallies t = tally_commission(cases, limits, tolerance);
   const CommissionTally& all = t[kCommissionCaseKinds];
   const int right = all.accepted_right + all.rejected_right, wrong = all.accepted_wrong + all.rejected_wrong;
   std::printf("checked %s: %zu cases in %.0f s (%s, tolerance %.2f mm); floors: %s\n", p.scene.source.c_str(),
@@ -208,7 +208,7 @@ Status check_scene_verdict(const PreparedScene& p, const std::vector<CommissionC
   print_tallies("at the scene's floors", t);
   std::printf("  false accepts %s of %d wrong, false rejects %s of %d right (floors %s %.4f, check NCC %.4f)\n",
               rate(all.accepted_wrong, wrong).c_str(), wrong, rate(all.rejected_right, right).c_str(), right,
-              p.scene.registration.similarity.c_str(), limits->min_similarity, limits->min_check_ncc);
+              p.scene.registration.similarity.c_str(), limits.min_similarity, limits.min_check_ncc);
   if (all.accepted_wrong > 0)
     return failed_precondition("the scene's verdict accepted " + std::to_string(all.accepted_wrong) +
                                " wrong result(s): commission it again, or do not treat with it");
@@ -230,9 +230,14 @@ Status run(const CommissionCliOptions& o) {
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
   const PreparedScene& p = *prepared;
-  if (o.check) {  // a stale or missing commissioning file fails now, not after the cases
-    auto limits = scene_verdict_limits(p, p.scene.registration.similarity);
+  // --check judges with the scene's verdict: a stale or missing commissioning file fails now,
+  // not after the cases.
+  std::optional<VerdictLimits> scene_limits;
+  std::string floors_from;
+  if (o.check) {
+    auto limits = scene_verdict_limits(p, p.scene.registration.similarity, &floors_from);
     if (!limits.ok()) return limits.status();
+    scene_limits = *limits;
   }
   fs::path out = o.out.empty() ? fs::path(p.scene.commissioning_file) : fs::path(o.out);
   if (out.empty())
@@ -292,12 +297,10 @@ Status run(const CommissionCliOptions& o) {
   if (!cases.ok()) return cases.status();
   const double seconds = bar.finish();
 
-  if (o.check) {
-    auto defaults_for_csv = verdict_limits(p.scene, p.scene.registration.similarity);
-    if (!defaults_for_csv.ok()) return defaults_for_csv.status();
-    LFTRACK_RETURN_IF_ERROR(write_cases_csv(report / "cases.csv", *cases, *defaults_for_csv));
+  if (scene_limits) {
+    LFTRACK_RETURN_IF_ERROR(write_cases_csv(report / "cases.csv", *cases, *defaults));
     std::printf("report: %s (cases.csv)\n", report.string().c_str());
-    return check_scene_verdict(p, *cases, tolerance, o.max_false_reject_rate, seconds);
+    return check_scene_verdict(p, *scene_limits, floors_from, *cases, tolerance, o.max_false_reject_rate, seconds);
   }
   const ChosenFloors floors = choose_floors(*cases, *defaults, tolerance);
   VerdictLimits commissioned = *defaults;

@@ -249,11 +249,14 @@ double lowest_view_check_ncc(const VerdictInput& in) {
   return low;
 }
 
-namespace {
-bool is_right(const CommissionCaseResult& c, double tolerance_mm) {
+bool is_right_result(const CommissionCaseResult& c, double tolerance_mm) {
   return !must_refuse(c.kind) && c.registered && c.tre_mean_mm < tolerance_mm;
 }
-}  // namespace
+
+VerdictLimits without_floors(VerdictLimits limits) {
+  limits.min_similarity = limits.min_check_ncc = -std::numeric_limits<double>::infinity();
+  return limits;
+}
 
 std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(const std::vector<CommissionCaseResult>& cases,
                                                                        const VerdictLimits& limits,
@@ -261,7 +264,7 @@ std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(const std
   std::array<CommissionTally, kCommissionCaseKinds + 1> t{};
   for (const CommissionCaseResult& c : cases) {
     const bool accepted = judge_registration(limits, c.input).ok;
-    const bool right = is_right(c, tolerance_mm);
+    const bool right = is_right_result(c, tolerance_mm);
     for (CommissionTally* k : {&t[std::size_t(c.kind)], &t[kCommissionCaseKinds]}) {
       ++k->cases;
       (accepted ? (right ? k->accepted_right : k->accepted_wrong) : (right ? k->rejected_right : k->rejected_wrong))++;
@@ -272,10 +275,7 @@ std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(const std
 
 ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
                            double tolerance_mm) {
-  // What the other checks (image quality, finite, view agreement, envelope) accept with no floors.
-  VerdictLimits open = defaults;
-  open.min_similarity = -std::numeric_limits<double>::infinity();
-  open.min_check_ncc = -std::numeric_limits<double>::infinity();
+  const VerdictLimits open = without_floors(defaults);
   struct Point {
     double s, c;
   };
@@ -284,7 +284,7 @@ ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const
     if (!judge_registration(open, k.input).ok) continue;
     const Point pt{lowest_view_similarity(k.input), lowest_view_check_ncc(k.input)};
     if (!std::isfinite(pt.s) || !std::isfinite(pt.c)) continue;
-    (is_right(k, tolerance_mm) ? right : wrong).push_back(pt);
+    (is_right_result(k, tolerance_mm) ? right : wrong).push_back(pt);
   }
   const double s_lowest = defaults.no_information_similarity +
                           0.5 * (defaults.min_similarity - defaults.no_information_similarity);

@@ -90,6 +90,14 @@ struct ChosenFloors {
 ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
                            double tolerance_mm);
 
+// A right result: a good case registered to within the tolerance (mean TRE). Every other case is
+// wrong, whatever it scores: a bad case must be refused.
+bool is_right_result(const CommissionCaseResult& c, double tolerance_mm);
+
+// `limits` with both floors open: what image quality, finiteness, agreement and the envelope let
+// by, which is what the floors decide.
+VerdictLimits without_floors(VerdictLimits limits);
+
 // The lowest view's similarity and check NCC of a judged case (the check: NaN where it did not
 // run; a case the quality gate refused holds no similarity: look at `registered` first).
 double lowest_view_similarity(const VerdictInput& input);
