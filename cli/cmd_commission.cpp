@@ -379,7 +379,7 @@ Status run(const CommissionCliOptions& o) {
         "); nothing written. The plot shows where they overlap; a plan or ROI that registers this anatomy better "
         "comes first");
   if (o.dry_run) {
-    std::printf("dry run: %s not written\n", out.string().c_str());
+    std::printf("dry run: no commissioning file written\n");
     return {};
   }
   CommissioningRecord record;

@@ -21,6 +21,14 @@ std::string gp_string(const std::string& s) {
   return out + "\"";
 }
 
+// A script's first lines: a PNG of `width` x `height` pixels at `png` (beside the script), titled.
+std::string gp_preamble(int width, int height, const std::filesystem::path& png, const std::string& title,
+                        bool enhanced_title) {
+  return "set terminal pngcairo size " + std::to_string(width) + "," + std::to_string(height) +
+         " enhanced font 'DejaVu Sans,11'\nset output " + gp_string(png.filename().string()) + "\nset title " +
+         gp_string(title) + (enhanced_title ? "" : " noenhanced") + "\n";
+}
+
 // Runs gnuplot on `gp` in its folder; false (with a warning) where gnuplot is not installed.
 Result<bool> run_gnuplot(const std::filesystem::path& gp) {
   if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) {
@@ -67,9 +75,7 @@ Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& p
   {
     std::ofstream g(gp);
     if (!g) return io_error(gp.string() + ": cannot write");
-    g << "set terminal pngcairo size 900,600 enhanced font 'DejaVu Sans,11'\n"
-      << "set output " << gp_string(png.filename().string()) << "\n"
-      << "set title " << gp_string(plot.title) << "\n"
+    g << gp_preamble(900, 600, png, plot.title, true)
       << "set xlabel " << gp_string(plot.x_label) << "\nset ylabel " << gp_string(plot.y_label) << "\n"
       << "set grid\nset key " << plot.key_position << " box opaque\nset datafile missing 'NaN'\n";
     if (plot.log_x) g << "set logscale x\n";
@@ -114,9 +120,7 @@ Result<bool> draw_scatter_plot(const ScatterPlot& plot, const std::filesystem::p
     std::ofstream g(gp);
     if (!g) return io_error(gp.string() + ": cannot write");
     const std::string front_name = std::filesystem::path(front).filename().string();
-    g << "set terminal pngcairo size 1000,700 enhanced font 'DejaVu Sans,11'\n"
-      << "set output " << gp_string(png.filename().string()) << "\n"
-      << "set title " << gp_string(plot.title) << " noenhanced\n"
+    g << gp_preamble(1000, 700, png, plot.title, false)
       << "set xlabel " << gp_string(plot.x_label) << "\nset ylabel " << gp_string(plot.y_label) << "\n"
       << "set grid\nset key " << plot.key_position << " box opaque\n";
     if (plot.log_x) g << "set logscale x\n";
@@ -154,9 +158,7 @@ Result<bool> draw_grouped_scatter(const GroupedScatterPlot& plot, const std::fil
   }
   std::ofstream g(gp);
   if (!g) return io_error(gp.string() + ": cannot write");
-  g << "set terminal pngcairo size 1000,750 enhanced font 'DejaVu Sans,11'\n"
-    << "set output " << gp_string(png.filename().string()) << "\n"
-    << "set title " << gp_string(plot.title) << " noenhanced\n"
+  g << gp_preamble(1000, 750, png, plot.title, false)
     << "set xlabel " << gp_string(plot.x_label) << " noenhanced\nset ylabel " << gp_string(plot.y_label)
     << " noenhanced\nset grid\nset key " << plot.key_position << " box opaque noenhanced\n";
   std::string parts;
@@ -216,9 +218,7 @@ Result<bool> draw_grouped_bars(const GroupedBarChart& chart, const std::filesyst
   }
   std::ofstream g(gp);
   if (!g) return io_error(gp.string() + ": cannot write");
-  g << "set terminal pngcairo size 1100,650 enhanced font 'DejaVu Sans,11'\n"
-    << "set output " << gp_string(png.filename().string()) << "\n"
-    << "set title " << gp_string(chart.title) << " noenhanced\n"
+  g << gp_preamble(1100, 650, png, chart.title, false)
     << "set ylabel " << gp_string(chart.y_label) << " noenhanced\n"
     << "set grid ytics\nset key " << chart.key_position << " box opaque noenhanced\n"
     << "set style data histogram\nset style histogram errorbars gap 1 lw 1.5\n"

@@ -30,15 +30,24 @@ class Bowl : public CostFunction {
   Vector6d target_;
 };
 
-// A cold set-up's first pass (the robust plan's): the translations move to their best with the
-// rotations held where they started, untouched.
-TEST(Optimizer, QuadraticNeighbourWithTranslationsOnlyHoldsTheRotations) {
+// The offset the bowl's minimum sits at (mm, and rotation-like units), and steps from 2 mm to 0.01.
+Vector6d known_offset() {
   Vector6d target;
   target << 3.3, -2.1, 1.7, -2.6, 0.9, 2.2;
-  Bowl bowl(target);
+  return target;
+}
+OptimizerSettings two_mm_to_a_hundredth() {
   OptimizerSettings s;
   s.initial_step_mm = 2;
   s.final_step_mm = 0.01;
+  return s;
+}
+
+// A cold set-up's first pass (the robust plan's): the translations move to their best with the
+// rotations held where they started, untouched.
+TEST(Optimizer, QuadraticNeighbourWithTranslationsOnlyHoldsTheRotations) {
+  Bowl bowl(known_offset());
+  OptimizerSettings s = two_mm_to_a_hundredth();
   s.translations_only = true;
   const OptimizerResult r = (*make_optimizer("quadratic-neighbour", s))->minimize(bowl, Vector6d::Zero(), {});
   EXPECT_EQ(r.stop, OptimizerStop::kConverged);
@@ -52,12 +61,9 @@ TEST(Optimizer, QuadraticNeighbourWithTranslationsOnlyHoldsTheRotations) {
 class EveryOptimizer : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(EveryOptimizer, RecoversAKnownOffset) {
-  Vector6d target;
-  target << 3.3, -2.1, 1.7, -2.6, 0.9, 2.2;
+  const Vector6d target = known_offset();
   Bowl bowl(target);
-  OptimizerSettings s;
-  s.initial_step_mm = 2;
-  s.final_step_mm = 0.01;
+  OptimizerSettings s = two_mm_to_a_hundredth();
   s.record_trace = true;
   auto optimizer = make_optimizer(GetParam(), s);
   ASSERT_TRUE(optimizer.ok()) << optimizer.status().message();
