@@ -55,6 +55,10 @@ Result<StudyPhysics> study_physics(const std::string& option, const PreparedScen
 Result<bool> study_light_fields(const PreparedScene& scene, const std::string& study, const std::string& renderer,
                                 const std::string& lf_dir, bool build, bool prebuilt, tracking::ThreadPool* pool);
 
+// Loads or builds the scene's light fields into `out_dir` ("": its default folder), saying which
+// were built and which were up to date (`lftrack precompute`, `lftrack scene new --precompute`).
+Status precompute_light_fields(const PreparedScene& scene, const std::string& out_dir, tracking::ThreadPool* pool);
+
 // The tables a study prints when it is whole (its own command, or `study merge`).
 void print_trade_front(const TradeStudy& study);
 void print_realism_table(const RealismReport& report);
@@ -65,6 +69,7 @@ Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options,
 Command add_info_command(CLI::App* parent);
 Command add_drr_command(CLI::App* parent);
 Command add_precompute_command(CLI::App* parent);
+Command add_scene_new_command(CLI::App* parent, int argc, char** argv);
 Command add_bench_drr_command(CLI::App* parent);
 Command add_register_command(CLI::App* parent);
 Command add_bench_register_command(CLI::App* parent);

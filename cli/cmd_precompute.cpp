@@ -22,9 +22,15 @@ Status run(const PrecomputeOptions& o) {
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
-  const PreparedScene& p = *prepared;
+  return precompute_light_fields(*prepared, o.out_dir, &pool);
+}
+
+}  // namespace
+
+Status precompute_light_fields(const PreparedScene& p, const std::string& out_dir, tracking::ThreadPool* pool_ptr) {
+  tracking::ThreadPool& pool = *pool_ptr;
   const std::filesystem::path dir =
-      o.out_dir.empty() ? default_light_field_dir(p.scene) : std::filesystem::path(o.out_dir);
+      out_dir.empty() ? default_light_field_dir(p.scene) : std::filesystem::path(out_dir);
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
@@ -55,8 +61,6 @@ Status run(const PrecomputeOptions& o) {
   }
   return {};
 }
-
-}  // namespace
 
 Command add_precompute_command(CLI::App* parent) {
   auto* app = parent->add_subcommand(

@@ -26,6 +26,9 @@ int main(int argc, char** argv) {
   const Command info = add_info_command(&app);
   const Command drr = add_drr_command(&app);
   const Command precompute = add_precompute_command(&app);
+  CLI::App* scene = app.add_subcommand("scene", "A patient's scene: set up from the treatment plan");
+  scene->require_subcommand(1);
+  const Command scene_new = add_scene_new_command(scene, argc, argv);
   CLI::App* bench = app.add_subcommand("bench", "Benchmarks measured side by side in one run");
   bench->require_subcommand(1);
   const Command bench_drr = add_bench_drr_command(bench);
@@ -77,6 +80,8 @@ int main(int argc, char** argv) {
       status = drr();
     else if (app.got_subcommand("precompute"))
       status = precompute();
+    else if (scene->got_subcommand("new"))
+      status = scene_new();
     else if (bench->got_subcommand("drr"))
       status = bench_drr();
     else if (bench->got_subcommand("register"))

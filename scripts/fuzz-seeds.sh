@@ -14,7 +14,7 @@ work=out/fuzz/work
 rm -rf "$seeds" "$work"
 mkdir -p "$work"
 for t in fuzz_scene fuzz_calibration_files fuzz_light_field fuzz_images fuzz_sequence fuzz_journal fuzz_ct fuzz_commands \
-    fuzz_modbus fuzz_v4l2; do
+    fuzz_modbus fuzz_v4l2 fuzz_rt_objects; do
   mkdir -p "$seeds/$t"
 done
 # prefix FILE BYTE OUT: OUT is BYTE (a selector, 0..255) followed by FILE.
@@ -106,6 +106,12 @@ cp "$work/int16" "$seeds/fuzz_ct/nifti-int16"
 cp "$work/float32" "$seeds/fuzz_ct/nifti-float32"
 slice=$(find "${LFTRACK_DATA_DIR:-../shared/data}" -type f -iname '*.dcm' 2>/dev/null | sort | head -1 || true)
 [ -n "$slice" ] && prefix "$slice" 1 "$seeds/fuzz_ct/dicom-slice"
+
+# RT Plans and Structure Sets: Debian's python3-pydicom ships some (another patient's, as a user
+# might hand them over).
+pydicom=/usr/lib/python3/dist-packages/pydicom/data/test_files
+[ -f "$pydicom/rtplan.dcm" ] && prefix "$pydicom/rtplan.dcm" 0 "$seeds/fuzz_rt_objects/rtplan"
+[ -f "$pydicom/rtstruct.dcm" ] && prefix "$pydicom/rtstruct.dcm" 1 "$seeds/fuzz_rt_objects/rtstruct"
 
 # Operator commands.
 for c in "resume 417263" "stop" "reset 1" "status" "quit" "resume"; do printf '%s\n' "$c" > "$seeds/fuzz_commands/$(echo "$c" | tr ' ' _)"; done

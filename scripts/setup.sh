@@ -22,7 +22,8 @@ packages=(
   slurmctld slurmd slurm-client munge   # a local Slurm cluster for job-array studies (scripts/slurm-local.sh)
   libcpp-httplib-dev                    # the monitor page's embedded HTTP server
   libopenigtlink-dev                    # OpenIGTLink server for navigation software (3D Slicer, PLUS)
-  dicom3tools                           # dciodvfy: validates the exported DICOM registration
+  dicom3tools                           # dciodvfy: validates the exported DICOM registration and test RT objects
+  python3-pydicom                       # its RT Plan / Structure Set test files: foreign input in tests
   chromium chromium-driver              # the monitor page tested in a real headless browser
 )
 # `scripts/setup.sh --fuzz` (make fuzz) adds clang with libFuzzer and its sanitizer runtimes.

@@ -78,6 +78,38 @@ Status write_png16(const fs::path& file, const ImageView<const float>& image, co
   return {};
 }
 
+}  // namespace
+
+Status write_rgb_png(const fs::path& file, const RgbImage& image) {
+  if (image.rows <= 0 || image.cols <= 0 || image.rgb.size() != std::size_t(image.rows) * std::size_t(image.cols) * 3)
+    return invalid_argument(file.string() + ": an RGB picture of " + std::to_string(image.rows) + " x " +
+                            std::to_string(image.cols) + " pixels with " + std::to_string(image.rgb.size()) + " bytes");
+  std::unique_ptr<std::FILE, FileCloser> fp(std::fopen(file.c_str(), "wb"));
+  if (!fp) return io_error(file.string() + ": cannot open for writing");
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  png_infop info = png ? png_create_info_struct(png) : nullptr;
+  if (!info) {
+    png_destroy_write_struct(&png, nullptr);
+    return internal_error("libpng: out of memory");
+  }
+  if (setjmp(png_jmpbuf(png))) {
+    png_destroy_write_struct(&png, &info);
+    return io_error(file.string() + ": libpng write failed");
+  }
+  png_init_io(png, fp.get());
+  png_set_IHDR(png, info, static_cast<png_uint_32>(image.cols), static_cast<png_uint_32>(image.rows), 8,
+               PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(png, info);
+  for (int r = 0; r < image.rows; ++r)
+    png_write_row(png, &image.rgb[std::size_t(r) * std::size_t(image.cols) * 3]);
+  png_write_end(png, nullptr);
+  png_destroy_write_struct(&png, &info);
+  if (std::fflush(fp.get()) != 0) return io_error(file.string() + ": write failed");
+  return {};
+}
+
+namespace {
+
 Status write_tiff(const fs::path& file, const ImageView<const float>& image, const ImageWriteOptions& o) {
   TIFFSetWarningHandler(nullptr);
   TIFF* tif = TIFFOpen(file.c_str(), "w");

@@ -238,7 +238,7 @@ Status SceneParser::parse_detector(const YAML::Node& n, int index, DetectorSpec*
   return {};
 }
 
-Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
+Result<Scene> SceneParser::parse(const std::string& yaml_text) {
   YAML::Node root;
   try {
     root = YAML::Load(yaml_text);
@@ -248,15 +248,19 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) const {
   if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
   LFTRACK_RETURN_IF_ERROR(
       check_keys(root, "the scene",
-                 {"version", "name", "ct", "roi", "registration_origin_mm", "nominal_pose", "detectors",
+                 {"version", "name", "room", "ct", "roi", "registration_origin_mm", "nominal_pose", "detectors",
                   "envelope", "tracking", "fiducials", "sim", "loop", "safety", "actuator", "motion"}));
   Scene scene;
   scene.source = source_;
+  if (root["room"]) LFTRACK_RETURN_IF_ERROR(merge_room(root, &scene));
   YAML::Node node;
   long version = 0;
   LFTRACK_RETURN_IF_ERROR(need(root, "version", "the scene", &node));
   LFTRACK_RETURN_IF_ERROR(integer(node, "version", 1, 1, &version));
   if (root["name"]) LFTRACK_RETURN_IF_ERROR(text(root["name"], "name", &scene.name));
+  if (!root["ct"] && root["detectors"] && !root["room"])
+    return error(root, "the scene needs 'ct': this looks like a room file, which a patient's scene names under "
+                       "`room:` (docs/scenes.md, \"Room files\")");
   LFTRACK_RETURN_IF_ERROR(need(root, "ct", "the scene", &node));
   LFTRACK_RETURN_IF_ERROR(parse_ct(node, &scene.ct));
   scene.lines["ct"] = where(node);
@@ -423,7 +427,7 @@ Status SceneParser::parse_fiducials(const YAML::Node& n, FiducialSpec* f) const 
 
 Result<Scene> parse_scene(const std::string& yaml_text, const std::string& source_name,
                           const std::filesystem::path& base_dir) {
-  const SceneParser parser(source_name, base_dir);
+  SceneParser parser(source_name, base_dir);
   try {
     return parser.parse(yaml_text);
   } catch (const YAML::Exception& e) {  // shapes the checks above did not foresee, e.g. a list as a key

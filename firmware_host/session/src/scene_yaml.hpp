@@ -37,13 +37,15 @@ class SceneParser {
     s << ": " << message;
     return invalid_argument(s.str());
   }
+  // An error at `node`, named by the file it was written in: the scene, or its room file.
   Status error(const YAML::Node& node, const std::string& message) const {
+    if (from_room(node)) return SceneParser(room_source_, base_dir_).error_at(node.Mark(), message);
     return error_at(node.Mark(), message);
   }
   // "FILE:LINE:COLUMN" of a node (FILE alone where it has no mark).
   std::string where(const YAML::Node& node) const {
     std::ostringstream s;
-    s << source_;
+    s << (from_room(node) ? room_source_ : source_);
     if (!node.Mark().is_null()) s << ':' << node.Mark().line + 1 << ':' << node.Mark().column + 1;
     return s.str();
   }
@@ -157,7 +159,14 @@ class SceneParser {
                 std::string* out) const;
   Status parse_registration(const YAML::Node& t, RegistrationSpec* r) const;
   Status parse_fiducials(const YAML::Node& n, FiducialSpec* f) const;
-  Result<Scene> parse(const std::string& yaml_text) const;
+  Result<Scene> parse(const std::string& yaml_text);
+  // The scene's `room: FILE` (scene_room.cpp): the room file's sections (detectors, tracking, sim,
+  // loop, safety limits, actuator) taken into `root`. What one file sets is taken whole; mappings
+  // in both merge key by key, at every depth; a value set in both files is refused (a room never
+  // overrides a patient's value unseen, nor the reverse). Errors in what came from the room name
+  // the room file and its line.
+  Status merge_room(YAML::Node& root, Scene* scene);
+  Status merge_room_entry(YAML::Node& here, const YAML::Node& key, const YAML::Node& value, const std::string& within);
   // The host-loop sections (scene_loop_parser.cpp).
   Status parse_sim(const YAML::Node& n, SimFrameSpec* sim) const;
   Status parse_physics(const YAML::Node& n, SimFrameSpec* sim) const;
@@ -177,8 +186,14 @@ class SceneParser {
               const char* rotation_key, tracking::Vector6d* out) const;
 
  private:
+  // Whether `node` is one the room file wrote (a walk of its sections: small files, and only on
+  // an error).
+  bool from_room(const YAML::Node& node) const;
+
   std::string source_;
   fs::path base_dir_;
+  std::string room_source_;             // the room file as the scene names it, resolved
+  std::vector<YAML::Node> room_nodes_;  // the room file's sections, as merged
 };
 
 }  // namespace lftrack::host

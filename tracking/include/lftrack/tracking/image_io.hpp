@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <vector>
 
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
@@ -31,6 +32,25 @@ struct ImageWriteOptions {
 // Writes by extension (.png, .tif/.tiff, .pfm); any other extension is an error.
 Status write_image(const std::filesystem::path& file, const ImageView<const float>& image,
                    const ImageWriteOptions& options);
+
+// An 8-bit RGB picture, top row first, 3 bytes a pixel: what a person looks at (a set-up picture
+// with its overlays), never data.
+struct RgbImage {
+  int rows = 0;
+  int cols = 0;
+  std::vector<std::uint8_t> rgb;  // rows * cols * 3
+  RgbImage() = default;
+  RgbImage(int r, int c) : rows(r), cols(c), rgb(std::size_t(r) * std::size_t(c) * 3, 0) {}
+  // Sets a pixel; one outside the picture is ignored (overlays may leave it).
+  void set(int row, int col, std::uint8_t red, std::uint8_t green, std::uint8_t blue) {
+    if (row < 0 || col < 0 || row >= rows || col >= cols) return;
+    std::uint8_t* p = &rgb[(std::size_t(row) * std::size_t(cols) + std::size_t(col)) * 3];
+    p[0] = red;
+    p[1] = green;
+    p[2] = blue;
+  }
+};
+Status write_rgb_png(const std::filesystem::path& file, const RgbImage& image);
 
 // Every reader checks the size its header claims before allocating: at most kMaxImageSide
 // pixels a side, and no more data than the file can hold (uncompressed: the pixels' bytes;

@@ -185,6 +185,7 @@ struct Scene {
     return it != lines.end() ? it->second : source;
   }
   std::string name;
+  std::string room_file;  // `room:`, resolved: the room's views, detectors and devices came from it ("" none)
   CtSpec ct;
   RoiSpec roi;
   std::optional<Eigen::Vector3d> registration_origin_ct_mm;  // unset: ROI centre (phantom: body centre)

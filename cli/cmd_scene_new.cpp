@@ -1,0 +1,199 @@
+// `lftrack scene new`: a new patient's scene from the CT, the treatment plan's isocentre, the
+// structure set's target and a room file (issue 53); with a picture to confirm it before the
+// first beam. The scene is written only when it loads as any scene does, and never over a file.
+
+#include <fcntl.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+
+#include "cli_commands.hpp"
+#include "lftrack/host/patient_setup.hpp"
+#include "lftrack/host/setup_picture.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "lftrack/tracking/volume_io.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct SceneNewOptions {
+  std::string ct, room, out, rtplan, beam, rtstruct, target, name;
+  std::vector<double> isocentre;
+  double roi_margin_mm = 10;
+  bool list_structures = false;
+  bool precompute = false;
+  int threads = 0;
+  std::string command_line;
+};
+
+// The scene's file: a new .yaml in a folder that exists; never a file that is there.
+Status check_scene_path(const fs::path& out) {
+  if (out.extension() != ".yaml") return invalid_argument(out.string() + ": a scene is a .yaml file");
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(out, ec)))
+    return failed_precondition(out.string() + ": already there; a scene is never written over (choose another name, or "
+                                         "remove it first)");
+  const fs::path folder = out.parent_path().empty() ? fs::path(".") : out.parent_path();
+  if (!fs::is_directory(folder, ec)) return invalid_argument(out.string() + ": no folder " + folder.string());
+  return {};
+}
+
+// Writes `text` to `file` only if no file is there (O_EXCL: two runs at once cannot both write).
+Status write_new_file(const fs::path& file, const std::string& text) {
+  const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0)
+    return errno == EEXIST ? failed_precondition(file.string() + ": already there; a scene is never written over")
+                           : io_error(file.string() + ": cannot create: " + std::strerror(errno));
+  std::size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const std::string why = std::strerror(errno);
+      ::close(fd);
+      ::unlink(file.c_str());
+      return io_error(file.string() + ": write failed: " + why);
+    }
+    done += std::size_t(n);
+  }
+  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+    ::unlink(file.c_str());
+    return io_error(file.string() + ": write failed");
+  }
+  return {};
+}
+
+Status list_structures(const SceneNewOptions& o) {
+  auto set = read_rt_structure_set(o.rtstruct);
+  if (!set.ok()) return set.status();
+  std::printf("%s: structure set '%s', %zu structures\n%s", o.rtstruct.c_str(), set->label.c_str(),
+              set->structures.size(), structure_list(*set).c_str());
+  return {};
+}
+
+Status run(const SceneNewOptions& o) {
+  if (o.list_structures) return list_structures(o);
+  if (o.ct.empty() || o.room.empty() || o.out.empty())
+    return invalid_argument("scene new needs --ct DIR|FILE, --room FILE and -o FILE (or --rtstruct FILE --list-structures)");
+  const fs::path out(o.out);
+  LFTRACK_RETURN_IF_ERROR(check_scene_path(out));
+  const fs::path picture_file = out.parent_path() / (out.stem().string() + "-setup.png");
+
+  NewSceneRequest request;
+  request.ct = o.ct;
+  request.room = o.room;
+  request.output = out;
+  request.rtplan = o.rtplan;
+  request.beam = o.beam;
+  request.rtstruct = o.rtstruct;
+  request.target = o.target;
+  if (!o.isocentre.empty()) request.isocentre_ct_mm = Eigen::Vector3d(o.isocentre[0], o.isocentre[1], o.isocentre[2]);
+  request.roi_margin_mm = o.roi_margin_mm;
+  request.name = o.name;
+  request.command_line = o.command_line;
+
+  auto ct = tracking::read_ct(o.ct);
+  if (!ct.ok()) return ct.status();
+  NewSceneCt scene_ct;
+  scene_ct.volume = &*ct;
+  std::error_code ec;
+  if (fs::is_directory(o.ct, ec)) {
+    auto identity = read_ct_dicom_identity(o.ct);
+    if (!identity.ok()) return identity.status();
+    scene_ct.identity = *identity;
+  }
+  auto setup = compose_new_scene(request, scene_ct);
+  if (!setup.ok()) return setup.status();
+
+  // The scene must load and prepare as any scene does before it is written.
+  const fs::path folder = fs::absolute(out).parent_path();
+  auto scene = parse_scene(setup->yaml, out.string(), folder);
+  if (!scene.ok()) return Status(scene.status().code(), "the new scene does not load: " + scene.status().message());
+  tracking::ThreadPool pool(o.threads);
+  auto prepared = prepare_scene(*scene, "", &pool);
+  if (!prepared.ok()) return prepared.status();
+
+  SetupMarks marks;
+  marks.isocentre_ct_mm = setup->isocentre_ct_mm;
+  marks.roi_centre_ct_mm = setup->roi_centre_ct_mm;
+  marks.roi_size_mm = setup->roi_size_mm;
+  marks.target_polygons = setup->target_polygons;
+  marks.target = setup->target ? &*setup->target : nullptr;
+  auto picture = setup_picture(*prepared, marks, &pool);
+  if (!picture.ok()) return picture.status();
+  const fs::path picture_tmp = picture_file.string() + ".tmp";
+  LFTRACK_RETURN_IF_ERROR(tracking::write_rgb_png(picture_tmp, *picture));
+  fs::rename(picture_tmp, picture_file, ec);
+  if (ec) return io_error(picture_file.string() + ": " + ec.message());
+  LFTRACK_RETURN_IF_ERROR(write_new_file(out, setup->yaml));
+
+  const Eigen::Vector3d& iso = setup->isocentre_ct_mm;
+  std::printf("scene       %s\n", out.c_str());
+  std::printf("isocentre   (%.2f, %.2f, %.2f) mm (CT frame), from %s\n", iso.x(), iso.y(), iso.z(),
+              setup->isocentre_from.c_str());
+  std::printf("patient     %s\n", setup->patient_position.c_str());
+  std::printf("roi         centre (%.1f, %.1f, %.1f) mm, size (%.1f, %.1f, %.1f) mm", setup->roi_centre_ct_mm.x(),
+              setup->roi_centre_ct_mm.y(), setup->roi_centre_ct_mm.z(), setup->roi_size_mm.x(), setup->roi_size_mm.y(),
+              setup->roi_size_mm.z());
+  if (setup->target)
+    std::printf(", about target '%s' (%.1f cc)", setup->target_name.c_str(), setup->target->volume_cc());
+  std::printf("\npicture     %s (top: each view's DRR; bottom: axial, coronal, sagittal; green the isocentre, "
+              "yellow the ROI, red the target)\n",
+              picture_file.c_str());
+  for (const std::string& w : setup->warnings) spdlog::warn("{}", w);
+  if (o.precompute) LFTRACK_RETURN_IF_ERROR(precompute_light_fields(*prepared, "", &pool));
+  std::printf("next        look at the picture, then:\n");
+  if (!o.precompute) std::printf("              build/bin/lftrack precompute --scene %s\n", out.c_str());
+  std::printf("              build/bin/lftrack commission --scene %s   (the verdict's floors)\n", out.c_str());
+  std::printf("              build/bin/lftrack register --scene %s --sim\n", out.c_str());
+  std::printf("              build/bin/lftrack sim --scene %s\n", out.c_str());
+  return {};
+}
+
+}  // namespace
+
+Command add_scene_new_command(CLI::App* parent, int argc, char** argv) {
+  auto* app = parent->add_subcommand(
+      "new", "A new patient's scene from the CT, the plan's isocentre, the target's contours and a room file");
+  auto o = std::make_shared<SceneNewOptions>();
+  // The command as a user types it, for the scene's header: the program by its name.
+  for (int i = 0; i < argc; ++i)
+    o->command_line += std::string(i ? " " : "") + (i == 0 ? fs::path(argv[0]).filename().string() : argv[i]);
+  app->add_option("--ct", o->ct, "The planning CT: a DICOM series' folder or a NIfTI file")->check(not_empty());
+  app->add_option("--room", o->room, "The room file: views, detectors, couch, imaging (scenes/room/*.yaml)")
+      ->check(not_empty());
+  app->add_option("-o,--out", o->out, "The scene to write (.yaml; never over a file); its picture goes beside it")
+      ->check(not_empty());
+  auto* plan = app->add_option("--rtplan", o->rtplan, "DICOM RT Plan: its isocentre, patient position, tolerances")
+                   ->check(not_empty());
+  app->add_option("--beam", o->beam, "The plan's beam whose isocentre to take (number or name; default: all beams, "
+                                     "which must share one)")
+      ->needs(plan)
+      ->check(not_empty());
+  auto* rtstruct =
+      app->add_option("--rtstruct", o->rtstruct, "DICOM RT Structure Set: the target's contours")->check(not_empty());
+  app->add_option("--target", o->target, "The target's structure name (--list-structures lists them)")
+      ->needs(rtstruct)
+      ->check(not_empty());
+  app->add_flag("--list-structures", o->list_structures, "List the structure set's structures and exit")
+      ->needs(rtstruct);
+  app->add_option("--isocentre", o->isocentre, "The isocentre X,Y,Z in mm, CT frame (a CT without a plan)")
+      ->expected(3)
+      ->delimiter(',')
+      ->check(finite_in(-10000, 10000))
+      ->excludes(plan);
+  app->add_option("--roi-margin-mm", o->roi_margin_mm, "Margin around the target's box, each side (default 10)")
+      ->check(finite_in(0, 100));
+  app->add_option("--name", o->name, "The scene's name (default: the file's)")->check(not_empty());
+  app->add_flag("--precompute", o->precompute, "Build the light fields at once");
+  app->add_option("--threads", o->threads, "Threads (0: all cores)")->check(CLI::Range(0, 1024));
+  return [o] { return run(*o); };
+}
+
+}  // namespace lftrack::host::cli

@@ -1,0 +1,415 @@
+#include "lftrack/host/dicom_rt.hpp"
+
+#include <dcmtk/dcmdata/dcdeftag.h>
+#include <dcmtk/dcmdata/dcfilefo.h>
+#include <dcmtk/dcmdata/dcuid.h>
+#include <dcmtk/dcmrt/drtplan.h>
+#include <dcmtk/dcmrt/drtstrct.h>
+#include <dcmtk/oflog/oflog.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <set>
+#include <sstream>
+
+namespace lftrack::host {
+namespace {
+namespace rt {  // named: these files compile in unity batches beside other DICOM code
+
+namespace fs = std::filesystem;
+
+// dcmrt logs every attribute of the whole IOD that it finds missing or malformed, most of which
+// these readers never use, and dcmdata logs parse errors: the Status returned carries what matters,
+// with the file's name.
+void quiet_dcmtk() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    OFLog::getLogger("dcmtk.dcmrt").setLogLevel(OFLogger::OFF_LOG_LEVEL);
+    OFLog::getLogger("dcmtk.dcmdata").setLogLevel(OFLogger::FATAL_LOG_LEVEL);
+  });
+}
+
+std::string trimmed(const OFString& value) {
+  const std::string s = value.c_str();
+  const auto first = s.find_first_not_of(' ');
+  if (first == std::string::npos) return {};
+  return s.substr(first, s.find_last_not_of(' ') - first + 1);
+}
+
+std::string text_of(DcmItem& item, const DcmTagKey& tag) {
+  OFString value;
+  if (item.findAndGetOFStringArray(tag, value).bad()) return {};
+  return trimmed(value);
+}
+
+// One value of a dcmrt getter (`get` is called with an OFString and the position), trimmed.
+template <class Get>
+std::string text_from(Get get) {
+  OFString value;
+  if (get(value).bad()) return {};
+  return trimmed(value);
+}
+
+std::string point_text(const Eigen::Vector3d& p) {
+  std::ostringstream s;
+  s.precision(10);
+  s << '(' << p.x() << ", " << p.y() << ", " << p.z() << ')';
+  return s.str();
+}
+
+// A DS value (decimal numbers separated by '\'): each number whole (no trailing text, no hex) and
+// finite. Returns false otherwise.
+bool parse_decimals(const std::string& text, std::vector<double>* out) {
+  out->clear();
+  if (text.find_first_not_of(' ') == std::string::npos) return true;
+  const char* p = text.data();
+  const char* const end = p + text.size();
+  while (true) {
+    const char* stop = std::find(p, end, '\\');
+    while (p < stop && *p == ' ') ++p;
+    const char* last = stop;
+    while (last > p && last[-1] == ' ') --last;
+    if (p < last && *p == '+') ++p;
+    double v = 0;
+    const auto [ptr, ec] = std::from_chars(p, last, v);
+    if (p == last || ec != std::errc() || ptr != last || !std::isfinite(v)) return false;
+    out->push_back(v);
+    if (stop == end) return true;
+    p = stop + 1;
+  }
+}
+
+Status load(const fs::path& file, DcmFileFormat* format, const DcmTagKey& stop_at = DCM_UndefinedTagKey) {
+  quiet_dcmtk();
+  std::error_code ec;
+  if (!fs::exists(file, ec)) return not_found(file.string() + ": no such file");
+  if (!fs::is_regular_file(file, ec)) return invalid_argument(file.string() + ": not a regular file");
+  if (fs::file_size(file, ec) == 0) return corrupt_data(file.string() + ": an empty file, not DICOM");
+  const OFCondition c = format->loadFileUntilTag(file.c_str(), EXS_Unknown, EGL_noChange, DCM_MaxReadLength,
+                                                 ERM_autoDetect, stop_at);
+  if (c.bad())
+    return corrupt_data(file.string() + ": not a DICOM file, or a damaged one (DCMTK: " + c.text() + ")");
+  return {};
+}
+
+// Whether `ds` is of `sop_class`; a dataset without a SOP Class UID but of `modality` is taken as
+// one, and given the SOP Class UID (dcmrt's read() refuses a dataset without it).
+Status check_kind(DcmDataset& ds, const fs::path& file, const char* sop_class, const char* modality,
+                  const std::string& what) {
+  const std::string sop = text_of(ds, DCM_SOPClassUID), mod = text_of(ds, DCM_Modality);
+  if (sop == sop_class) return {};
+  if (sop.empty() && mod == modality && ds.putAndInsertString(DCM_SOPClassUID, sop_class).good()) return {};
+  return invalid_argument(file.string() + ": not " + what + " (SOP Class UID '" + sop + "', Modality '" +
+                          mod + "')");
+}
+
+// ---- RT Plan ----
+
+const std::set<std::string>& known_patient_positions() {
+  static const std::set<std::string> known{"HFS", "FFS", "HFP", "FFP", "HFDL", "HFDR", "FFDL", "FFDR"};
+  return known;
+}
+
+std::string beam_text(const RtPlanBeam& b) {
+  return "beam " + std::to_string(b.number) + " '" + b.name + "'";
+}
+
+std::string beam_list(const std::vector<RtPlanBeam>& beams) {
+  std::string list;
+  for (const RtPlanBeam& b : beams) {
+    if (!list.empty()) list += ", ";
+    list += std::to_string(b.number) + " '" + b.name + "'";
+  }
+  return list;
+}
+
+Result<RtPlanBeam> read_beam(DRTBeamSequence::Item& item, std::size_t index, const std::string& where) {
+  RtPlanBeam beam;
+  beam.name = text_from([&](OFString& v) { return item.getBeamName(v); });
+  Sint32 number = 0;
+  if (item.getBeamNumber(number).bad())
+    return corrupt_data(where + ": beam " + std::to_string(index + 1) +
+                        " of the Beam Sequence has no Beam Number");
+  beam.number = number;
+  DRTControlPointSequence& points = item.getControlPointSequence();
+  if (points.getNumberOfItems() == 0)
+    return corrupt_data(where + ": " + beam_text(beam) + " has no control point");
+  const std::string iso =
+      text_from([&](OFString& v) { return points.getItem(0).getIsocenterPosition(v, -1); });
+  std::vector<double> xyz;
+  if (iso.empty())
+    return corrupt_data(where + ": " + beam_text(beam) +
+                        " has no Isocenter Position (300A,012C) in its first control point");
+  if (!parse_decimals(iso, &xyz) || xyz.size() != 3)
+    return corrupt_data(where + ": " + beam_text(beam) +
+                        "'s Isocenter Position (300A,012C) is not 3 finite numbers: '" + iso + "'");
+  beam.isocentre_ct_mm = {xyz[0], xyz[1], xyz[2]};
+  return beam;
+}
+
+// The patient position of the setup the beam references ("" if none); refused when the reference
+// leads nowhere or the position is unknown.
+Result<std::string> patient_position(DRTPlanIOD& plan, DRTBeamSequence::Item& item, const RtPlanBeam& beam,
+                                     const std::string& where) {
+  DRTPatientSetupSequence& setups = plan.getPatientSetupSequence();
+  Sint32 wanted = 0;
+  const bool references = item.getReferencedPatientSetupNumber(wanted).good();
+  DRTPatientSetupSequence::Item* setup = nullptr;
+  if (!references && setups.getNumberOfItems() == 1) setup = &setups.getItem(0);
+  for (std::size_t i = 0; references && !setup && i < setups.getNumberOfItems(); ++i) {
+    Sint32 number = 0;
+    if (setups.getItem(i).getPatientSetupNumber(number).good() && number == wanted)
+      setup = &setups.getItem(i);
+  }
+  if (references && !setup)
+    return corrupt_data(where + ": " + beam_text(beam) + " references patient setup " +
+                        std::to_string(wanted) + ", which the plan does not have");
+  if (!setup) return std::string();
+  const std::string position = text_from([&](OFString& v) { return setup->getPatientPosition(v); });
+  if (!position.empty() && known_patient_positions().count(position) == 0)
+    return unsupported(where + ": " + beam_text(beam) + "'s patient setup gives the patient position '" +
+                       position +
+                       "', which lftrack does not know (HFS, FFS, HFP, FFP, HFDL, HFDR, FFDL, FFDR)");
+  return position;
+}
+
+Result<TableTopTolerances> tolerances(DRTPlanIOD& plan, DRTBeamSequence::Item& item, const RtPlanBeam& beam,
+                                      const std::string& where) {
+  TableTopTolerances t;
+  Sint32 wanted = 0;
+  if (item.getReferencedToleranceTableNumber(wanted).bad()) return t;
+  DRTToleranceTableSequence& tables = plan.getToleranceTableSequence();
+  for (std::size_t i = 0; i < tables.getNumberOfItems(); ++i) {
+    DRTToleranceTableSequence::Item& table = tables.getItem(i);
+    Sint32 number = 0;
+    if (table.getToleranceTableNumber(number).bad() || number != wanted) continue;
+    t.table_number = number;
+    // A tolerance the table gives (DS or FL, by its VR), which must be finite.
+    using Table = DRTToleranceTableSequence::Item;
+    bool finite = true;
+    auto take = [&](auto get, auto value, std::optional<double>* out) {
+      if ((table.*get)(value, 0).bad()) return;
+      *out = static_cast<double>(value);
+      finite = finite && std::isfinite(**out);
+    };
+    auto decimal = [&](OFCondition (Table::*get)(Float64&, unsigned long) const, std::optional<double>* out) {
+      take(get, Float64(0), out);
+    };
+    auto single = [&](OFCondition (Table::*get)(Float32&, unsigned long) const, std::optional<double>* out) {
+      take(get, Float32(0), out);
+    };
+    decimal(&Table::getTableTopLateralPositionTolerance, &t.lateral_mm);
+    decimal(&Table::getTableTopLongitudinalPositionTolerance, &t.longitudinal_mm);
+    decimal(&Table::getTableTopVerticalPositionTolerance, &t.vertical_mm);
+    single(&Table::getTableTopPitchAngleTolerance, &t.pitch_deg);
+    single(&Table::getTableTopRollAngleTolerance, &t.roll_deg);
+    decimal(&Table::getPatientSupportAngleTolerance, &t.patient_support_deg);
+    if (!finite)
+      return corrupt_data(where + ": tolerance table " + std::to_string(number) +
+                          " holds a non-finite tolerance");
+    return t;
+  }
+  return corrupt_data(where + ": " + beam_text(beam) + " references tolerance table " +
+                      std::to_string(wanted) + ", which the plan does not have");
+}
+
+// ContourData's text, taken from the dataset's own item rather than from dcmrt: dcmrt's string
+// getter assembles a multi-valued DS value by value, each found from the start (DCMTK 3.6.7:
+// 7 s for 60,000 points), and its number getter reads "3abc" as 3 and "0x10" as 0.
+std::string contour_data_text(DcmDataset& ds, std::size_t roi_contour, std::size_t contour) {
+  DcmItem* roi_item = nullptr;
+  DcmItem* contour_item = nullptr;
+  const char* text = nullptr;
+  Uint32 length = 0;
+  if (ds.findAndGetSequenceItem(DCM_ROIContourSequence, roi_item, static_cast<signed long>(roi_contour))
+          .bad() ||
+      roi_item->findAndGetSequenceItem(DCM_ContourSequence, contour_item, static_cast<signed long>(contour))
+          .bad() ||
+      contour_item->findAndGetString(DCM_ContourData, text, length).bad() || text == nullptr)
+    return {};
+  return std::string(text, length);
+}
+
+}  // namespace rt
+}  // namespace
+
+Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::string& beam) {
+  const std::string where = file.string();
+  DcmFileFormat format;
+  LFTRACK_RETURN_IF_ERROR(rt::load(file, &format));
+  DcmDataset& ds = *format.getDataset();
+  if (rt::text_of(ds, DCM_SOPClassUID) == UID_RTIonPlanStorage || ds.tagExists(DCM_IonBeamSequence))
+    return unsupported(where +
+                       ": an RT Ion Plan; ion plans are not supported (photon and electron RT Plans are)");
+  LFTRACK_RETURN_IF_ERROR(rt::check_kind(ds, file, UID_RTPlanStorage, "RTPLAN", "an RT Plan"));
+  DRTPlanIOD plan;
+  if (const OFCondition c = plan.read(ds); c.bad())
+    return corrupt_data(where + ": DCMTK cannot read it as an RT Plan: " + c.text());
+
+  RtPlanSetup setup;
+  setup.file = where;
+  setup.label = rt::text_from([&](OFString& v) { return plan.getRTPlanLabel(v); });
+  setup.frame_of_reference_uid = rt::text_from([&](OFString& v) { return plan.getFrameOfReferenceUID(v); });
+  if (setup.frame_of_reference_uid.empty())
+    return failed_precondition(where +
+                               ": the plan has no Frame of Reference UID (0020,0052); its isocentre "
+                               "cannot be placed in the CT");
+  DRTBeamSequence& items = plan.getBeamSequence();
+  if (items.getNumberOfItems() == 0) return failed_precondition(where + ": the plan has no beam");
+  for (std::size_t i = 0; i < items.getNumberOfItems(); ++i) {
+    auto b = rt::read_beam(items.getItem(i), i, where);
+    if (!b.ok()) return b.status();
+    setup.beams.push_back(*b);
+  }
+
+  // The chosen beams: the one named, or every beam (which must then agree).
+  std::vector<std::size_t> chosen;
+  if (beam.empty()) {
+    for (std::size_t i = 0; i < setup.beams.size(); ++i) chosen.push_back(i);
+    const Eigen::Vector3d& first = setup.beams.front().isocentre_ct_mm;
+    std::vector<Eigen::Vector3d> distinct{first};
+    for (const RtPlanBeam& b : setup.beams)
+      if (std::none_of(distinct.begin(), distinct.end(),
+                       [&](const Eigen::Vector3d& p) { return (p - b.isocentre_ct_mm).norm() <= 0.01; }))
+        distinct.push_back(b.isocentre_ct_mm);
+    if (distinct.size() > 1) {
+      std::string list;
+      for (const RtPlanBeam& b : setup.beams) {
+        if (!list.empty()) list += ", ";
+        list += rt::beam_text(b) + " at " + rt::point_text(b.isocentre_ct_mm);
+      }
+      return invalid_argument(where + ": the plan has " + std::to_string(distinct.size()) +
+                              " isocentres: " + list + ": name one with --beam");
+    }
+  } else {
+    int number = 0;
+    const auto [ptr, ec] = std::from_chars(beam.data(), beam.data() + beam.size(), number);
+    const bool is_number = ec == std::errc() && ptr == beam.data() + beam.size();
+    for (std::size_t i = 0; i < setup.beams.size() && chosen.empty(); ++i)
+      if (is_number && setup.beams[i].number == number) chosen.push_back(i);
+    for (std::size_t i = 0; i < setup.beams.size() && chosen.empty(); ++i)
+      if (setup.beams[i].name == beam) chosen.push_back(i);
+    if (chosen.empty())
+      return not_found(where + ": no beam '" + beam +
+                       "' in the plan; its beams: " + rt::beam_list(setup.beams));
+  }
+
+  setup.beam = setup.beams[chosen.front()];
+  DRTBeamSequence::Item& item = items.getItem(chosen.front());
+  for (std::size_t i : chosen) {
+    auto position = rt::patient_position(plan, items.getItem(i), setup.beams[i], where);
+    if (!position.ok()) return position.status();
+    if (i == chosen.front()) {
+      setup.patient_position = *position;
+    } else if (*position != setup.patient_position) {
+      return invalid_argument(where + ": " + rt::beam_text(setup.beam) + " (" + setup.patient_position +
+                              ") and " + rt::beam_text(setup.beams[i]) + " (" + *position +
+                              ") set the patient up differently: name one with --beam");
+    }
+  }
+  auto tolerances = rt::tolerances(plan, item, setup.beam, where);
+  if (!tolerances.ok()) return tolerances.status();
+  setup.tolerances = *tolerances;
+  return setup;
+}
+
+Result<RtStructureSet> read_rt_structure_set(const std::filesystem::path& file) {
+  const std::string where = file.string();
+  DcmFileFormat format;
+  LFTRACK_RETURN_IF_ERROR(rt::load(file, &format));
+  DcmDataset& ds = *format.getDataset();
+  LFTRACK_RETURN_IF_ERROR(
+      rt::check_kind(ds, file, UID_RTStructureSetStorage, "RTSTRUCT", "an RT Structure Set"));
+  DRTStructureSetIOD set;
+  if (const OFCondition c = set.read(ds); c.bad())
+    return corrupt_data(where + ": DCMTK cannot read it as an RT Structure Set: " + c.text());
+
+  RtStructureSet out;
+  out.file = where;
+  out.label = rt::text_from([&](OFString& v) { return set.getStructureSetLabel(v); });
+  DRTReferencedFrameOfReferenceSequence& frames = set.getReferencedFrameOfReferenceSequence();
+  for (std::size_t i = 0; i < frames.getNumberOfItems(); ++i) {
+    DRTReferencedFrameOfReferenceSequence::Item& frame = frames.getItem(i);
+    const std::string uid = rt::text_from([&](OFString& v) { return frame.getFrameOfReferenceUID(v); });
+    if (!uid.empty()) out.frame_of_reference_uids.push_back(uid);
+    DRTRTReferencedStudySequence& studies = frame.getRTReferencedStudySequence();
+    for (std::size_t s = 0; s < studies.getNumberOfItems(); ++s) {
+      DRTRTReferencedSeriesSequence& series = studies.getItem(s).getRTReferencedSeriesSequence();
+      for (std::size_t k = 0; k < series.getNumberOfItems(); ++k) {
+        const std::string series_uid =
+            rt::text_from([&](OFString& v) { return series.getItem(k).getSeriesInstanceUID(v); });
+        if (!series_uid.empty()) out.referenced_series_uids.push_back(series_uid);
+      }
+    }
+  }
+
+  std::map<int, std::size_t> by_number;
+  DRTStructureSetROISequence& rois = set.getStructureSetROISequence();
+  for (std::size_t i = 0; i < rois.getNumberOfItems(); ++i) {
+    DRTStructureSetROISequence::Item& roi = rois.getItem(i);
+    RtStructure s;
+    s.name = rt::text_from([&](OFString& v) { return roi.getROIName(v); });
+    Sint32 number = 0;
+    if (roi.getROINumber(number).bad())
+      return corrupt_data(where + ": structure " + std::to_string(i + 1) + " '" + s.name +
+                          "' has no ROI Number");
+    s.roi_number = number;
+    s.frame_of_reference_uid =
+        rt::text_from([&](OFString& v) { return roi.getReferencedFrameOfReferenceUID(v); });
+    if (!by_number.emplace(number, out.structures.size()).second)
+      return corrupt_data(where + ": two structures have ROI Number " + std::to_string(number));
+    out.structures.push_back(std::move(s));
+  }
+
+  std::size_t total_points = 0;
+  DRTROIContourSequence& roi_contours = set.getROIContourSequence();
+  for (std::size_t i = 0; i < roi_contours.getNumberOfItems(); ++i) {
+    DRTROIContourSequence::Item& roi_contour = roi_contours.getItem(i);
+    Sint32 number = 0;
+    if (roi_contour.getReferencedROINumber(number).bad()) continue;
+    const auto found = by_number.find(number);
+    if (found == by_number.end()) continue;
+    RtStructure& s = out.structures[found->second];
+    DRTContourSequence& contours = roi_contour.getContourSequence();
+    for (std::size_t k = 0; k < contours.getNumberOfItems(); ++k) {
+      DRTContourSequence::Item& contour = contours.getItem(k);
+      const std::string about = where + ": structure '" + s.name + "' (ROI " + std::to_string(number) +
+                                "), contour " + std::to_string(k + 1) + ": ";
+      const std::string data = rt::contour_data_text(ds, i, k);
+      const std::size_t values = data.find_first_not_of(' ') == std::string::npos
+                                     ? 0
+                                     : std::count(data.begin(), data.end(), '\\') + 1;
+      if (values % 3 != 0)
+        return corrupt_data(about + "ContourData (3006,0050) holds " + std::to_string(values) +
+                            " numbers, not a multiple of 3");
+      const std::size_t points = values / 3;
+      Sint32 stated = 0;
+      if (contour.getNumberOfContourPoints(stated).good() && (stated < 0 || std::size_t(stated) != points))
+        return corrupt_data(about + "NumberOfContourPoints (3006,0046) is " + std::to_string(stated) +
+                            " but ContourData holds " + std::to_string(points) + " points");
+      if (points > kMaxPointsPerContour)
+        return out_of_range(about + std::to_string(points) + " points; lftrack reads at most " +
+                            std::to_string(kMaxPointsPerContour) + " in one contour");
+      total_points += points;
+      if (total_points > kMaxPointsPerStructureSet)
+        return out_of_range(where + ": more than " + std::to_string(kMaxPointsPerStructureSet) +
+                            " contour points in all; lftrack reads no more");
+      std::vector<double> xyz;
+      if (!rt::parse_decimals(data, &xyz) || xyz.size() != values)
+        return corrupt_data(about +
+                            "ContourData (3006,0050) holds a value that is not a finite decimal number");
+      RtContour c;
+      c.geometric_type = rt::text_from([&](OFString& v) { return contour.getContourGeometricType(v); });
+      c.points_ct_mm.reserve(points);
+      for (std::size_t p = 0; p < points; ++p)
+        c.points_ct_mm.emplace_back(xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]);
+      s.contours.push_back(std::move(c));
+    }
+  }
+  return out;
+}
+
+}  // namespace lftrack::host

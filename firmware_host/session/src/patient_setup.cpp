@@ -1,0 +1,472 @@
+// A new patient's scene from the treatment plan (issue 53): see patient_setup.hpp.
+
+#include "lftrack/host/patient_setup.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <map>
+#include <sstream>
+
+namespace lftrack::host {
+
+namespace fs = std::filesystem;
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+
+namespace {
+
+std::string mm3(const Vector3d& v, int digits = 2) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(digits) << '(' << v.x() << ", " << v.y() << ", " << v.z() << ')';
+  return s.str();
+}
+
+// A YAML list [x, y, z], to 0.01 mm: the scene says what it means, not 17 digits.
+std::string yaml3(const Vector3d& v) {
+  std::ostringstream s;
+  const auto num = [&](double x) {
+    std::ostringstream n;
+    n << std::fixed << std::setprecision(2) << (std::abs(x) < 0.005 ? 0.0 : x);
+    std::string t = n.str();
+    while (t.back() == '0') t.pop_back();
+    if (t.back() == '.') t.pop_back();
+    return t;
+  };
+  s << '[' << num(v.x()) << ", " << num(v.y()) << ", " << num(v.z()) << ']';
+  return s.str();
+}
+
+// A string as a YAML double-quoted scalar: what a user or a DICOM file wrote can hold ':', '#' or
+// a line break, and none of it may turn into a key of the scene.
+std::string quoted(const std::string& text) {
+  std::string out = "\"";
+  for (unsigned char c : text) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += char(c);
+    } else if (c < 0x20 || c == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", c);
+      out += hex;
+    } else {
+      out += char(c);
+    }
+  }
+  return out + "\"";
+}
+
+// Text for a comment: one line, whatever a user or a DICOM file wrote.
+std::string comment(const std::string& text) {
+  std::string out;
+  for (unsigned char c : text) out += (c < 0x20 || c == 0x7f) ? '?' : char(c);
+  return out;
+}
+
+std::string relative_to(const fs::path& file, const fs::path& folder) {
+  std::error_code ec;
+  const fs::path target = fs::absolute(file, ec).lexically_normal();
+  const fs::path base = fs::absolute(folder.empty() ? fs::path(".") : folder, ec).lexically_normal();
+  const fs::path rel = target.lexically_relative(base);
+  // Relative where the two stay together (a scene beside its CT and room); absolute where the way
+  // between them climbs to the root, which no one reads or moves as one.
+  int up = 0;
+  for (const fs::path& part : rel) up += part == "..";
+  return rel.empty() || up > 2 ? target.string() : rel.string();
+}
+
+// The isocentre, where it came from, and what the plan adds (patient position, tolerances).
+struct Isocentre {
+  Vector3d ct_mm = Vector3d::Zero();
+  std::string from;
+  std::string patient_position;
+  std::optional<RtPlanSetup> plan;
+};
+
+Status need_identity(const NewSceneCt& ct, const fs::path& file, const char* what) {
+  if (ct.identity) return {};
+  return failed_precondition(file.string() + ": a " + what +
+                             " is tied to its CT by the Frame of Reference UID (0020,0052), and a NIfTI CT has none; "
+                             "set up from the DICOM series the plan was made on, or give --isocentre X,Y,Z read off the "
+                             "plan");
+}
+
+Result<Isocentre> choose_isocentre(const NewSceneRequest& r, const NewSceneCt& ct) {
+  Isocentre iso;
+  if (!r.rtplan.empty()) {
+    LFTRACK_RETURN_IF_ERROR(need_identity(ct, r.rtplan, "plan"));
+    auto plan = read_rt_plan(r.rtplan, r.beam);
+    if (!plan.ok()) return plan.status();
+    if (plan->frame_of_reference_uid != ct.identity->frame_of_reference_uid) {
+      return failed_precondition(r.rtplan.string() + ": the plan is in Frame of Reference " +
+                                 plan->frame_of_reference_uid + ", the CT in " + ct.identity->frame_of_reference_uid +
+                                 ": it was planned on another CT (or another patient)");
+    }
+    iso.ct_mm = plan->beam.isocentre_ct_mm;
+    iso.from = "plan '" + plan->label + "' (" + r.rtplan.filename().string() + "), beam " +
+               std::to_string(plan->beam.number) + " '" + plan->beam.name +
+               "': Isocenter Position (300A,012C) of its first control point";
+    iso.patient_position = plan->patient_position;
+    iso.plan = std::move(*plan);
+    return iso;
+  }
+  if (r.isocentre_ct_mm) {
+    if (!r.isocentre_ct_mm->allFinite()) return invalid_argument("--isocentre must be three finite numbers (mm)");
+    iso.ct_mm = *r.isocentre_ct_mm;
+    iso.from = "--isocentre (CT frame, mm)";
+    return iso;
+  }
+  return iso;  // from the target, or refused by the caller
+}
+
+Status check_inside_ct(const Vector3d& point, const tracking::VolumeGeometry& grid, const std::string& what) {
+  const Vector3d index = grid.index_from_ct() * point;
+  const Vector3d lo = grid.ct_from_index() * Vector3d(-0.5, -0.5, -0.5);
+  const Vector3d hi = grid.ct_from_index() * (grid.size.cast<double>() - Vector3d::Constant(0.5));
+  for (int a = 0; a < 3; ++a) {
+    if (!(index[a] >= -0.5 && index[a] <= grid.size[a] - 0.5)) {
+      return out_of_range(what + " " + mm3(point) + " mm lies outside the CT, which spans " + mm3(lo.cwiseMin(hi), 1) +
+                          " to " + mm3(lo.cwiseMax(hi), 1) + " mm (CT frame): it belongs to another CT, or its "
+                          "coordinates are not the CT's patient frame");
+    }
+  }
+  return {};
+}
+
+struct Target {
+  std::string name;
+  int roi_number = 0;
+  std::vector<TargetPolygon> polygons;
+  TargetMask mask;
+  TargetBox box;
+};
+
+Result<Target> read_target(const NewSceneRequest& r, const NewSceneCt& ct) {
+  LFTRACK_RETURN_IF_ERROR(need_identity(ct, r.rtstruct, "structure set"));
+  auto set = read_rt_structure_set(r.rtstruct);
+  if (!set.ok()) return set.status();
+  const std::string& for_uid = ct.identity->frame_of_reference_uid;
+  const std::string& series = ct.identity->series_uid;
+  const auto join = [](const std::vector<std::string>& v) {
+    std::string out;
+    for (const auto& s : v) out += (out.empty() ? "" : ", ") + s;
+    return out.empty() ? std::string("none") : out;
+  };
+  if (std::find(set->frame_of_reference_uids.begin(), set->frame_of_reference_uids.end(), for_uid) ==
+      set->frame_of_reference_uids.end()) {
+    return failed_precondition(r.rtstruct.string() + ": the structure set is in Frame of Reference " +
+                               join(set->frame_of_reference_uids) + ", the CT in " + for_uid +
+                               ": it was contoured on another CT (or another patient)");
+  }
+  if (std::find(set->referenced_series_uids.begin(), set->referenced_series_uids.end(), series) ==
+      set->referenced_series_uids.end()) {
+    return failed_precondition(r.rtstruct.string() + ": the structure set references series " +
+                               join(set->referenced_series_uids) + ", the CT is series " + series +
+                               ": it was contoured on another series of this Frame of Reference");
+  }
+  if (r.target.empty())
+    return invalid_argument("--rtstruct needs --target NAME; the structures are:\n" + structure_list(*set));
+  const auto it = std::find_if(set->structures.begin(), set->structures.end(),
+                               [&](const RtStructure& s) { return s.name == r.target; });
+  if (it == set->structures.end())
+    return not_found(r.rtstruct.string() + ": no structure named '" + r.target + "'; the structures are:\n" +
+                     structure_list(*set));
+  if (std::count_if(set->structures.begin(), set->structures.end(),
+                    [&](const RtStructure& s) { return s.name == r.target; }) > 1)
+    return failed_precondition(r.rtstruct.string() + ": more than one structure is named '" + r.target +
+                               "'; which is the target is not for lftrack to guess:\n" + structure_list(*set));
+  if (!it->frame_of_reference_uid.empty() && it->frame_of_reference_uid != for_uid) {
+    return failed_precondition(r.rtstruct.string() + ": structure '" + it->name + "' is in Frame of Reference " +
+                               it->frame_of_reference_uid + ", the CT in " + for_uid);
+  }
+  Target target;
+  target.name = it->name;
+  target.roi_number = it->roi_number;
+  std::map<std::string, int> other_types;
+  for (const RtContour& c : it->contours) {
+    if (c.geometric_type == "CLOSED_PLANAR")
+      target.polygons.push_back({c.points_ct_mm});
+    else
+      ++other_types[c.geometric_type.empty() ? "(no type)" : c.geometric_type];
+  }
+  if (target.polygons.empty()) {
+    std::string types;
+    for (const auto& [type, n] : other_types) types += (types.empty() ? "" : ", ") + std::to_string(n) + " " + type;
+    return failed_precondition(r.rtstruct.string() + ": target '" + it->name + "' has no closed planar contour" +
+                               (types.empty() ? "" : " (it has " + types + ")") +
+                               ": a target is a volume, contoured slice by slice");
+  }
+  LFTRACK_RETURN_IF_ERROR(check_target_polygons(target.polygons, target.name));
+  auto mask = rasterise_target(target.polygons, ct.volume->geometry, target.name);
+  if (!mask.ok()) return mask.status();
+  if (mask->voxels_inside == 0)
+    return failed_precondition(r.rtstruct.string() + ": target '" + target.name +
+                               "' covers no voxel of the CT: its contours lie beyond the scanned slices");
+  target.mask = std::move(*mask);
+  target.box = target_box(target.polygons);
+  return target;
+}
+
+// The envelope the plan's table-top tolerances allow: the smaller of ours and theirs.
+struct Envelope {
+  double translation_mm = 10;
+  double rotation_deg = 5;
+  std::string translation_from = "lftrack's default";
+  std::string rotation_from = "lftrack's default";
+};
+
+Envelope envelope_from(const std::optional<RtPlanSetup>& plan, std::vector<std::string>* warnings) {
+  Envelope e;
+  if (!plan || plan->tolerances.table_number == 0) return e;
+  const TableTopTolerances& t = plan->tolerances;
+  const std::string table = "tolerance table " + std::to_string(t.table_number) + " of the plan";
+  const auto bound = [&](const std::optional<double>& value, const char* what, double* out, std::string* from) {
+    if (!value) return;
+    if (!(*value > 0) || !std::isfinite(*value)) {
+      std::ostringstream m;
+      m << table << ": " << what << " tolerance " << *value << " is not a positive bound; lftrack's default kept";
+      warnings->push_back(m.str());
+      return;
+    }
+    if (*value < *out) {
+      *out = *value;
+      *from = table + ", " + what;
+    }
+  };
+  bound(t.lateral_mm, "table-top lateral position (300A,0053)", &e.translation_mm, &e.translation_from);
+  bound(t.longitudinal_mm, "table-top longitudinal position (300A,0052)", &e.translation_mm, &e.translation_from);
+  bound(t.vertical_mm, "table-top vertical position (300A,0051)", &e.translation_mm, &e.translation_from);
+  bound(t.pitch_deg, "table-top pitch angle (300A,004F)", &e.rotation_deg, &e.rotation_from);
+  bound(t.roll_deg, "table-top roll angle (300A,0050)", &e.rotation_deg, &e.rotation_from);
+  bound(t.patient_support_deg, "patient support angle (300A,004C)", &e.rotation_deg, &e.rotation_from);
+  return e;
+}
+
+}  // namespace
+
+Result<Matrix3d> room_from_patient_rotation(const std::string& position) {
+  const Matrix3d turn_y = Eigen::Vector3d(-1, 1, -1).asDiagonal();  // feet first: 180 degrees about vertical
+  Matrix3d left_down;                                                 // x (patient's left) to +y (the floor)
+  left_down << 0, -1, 0, 1, 0, 0, 0, 0, 1;
+  if (position == "HFS") return Matrix3d(Matrix3d::Identity());
+  if (position == "FFS") return turn_y;
+  if (position == "HFP") return Matrix3d(Eigen::Vector3d(-1, -1, 1).asDiagonal());
+  if (position == "FFP") return Matrix3d(Eigen::Vector3d(1, -1, -1).asDiagonal());
+  if (position == "HFDL") return left_down;
+  if (position == "HFDR") return Matrix3d(left_down.transpose());
+  if (position == "FFDL") return Matrix3d(turn_y * left_down);
+  if (position == "FFDR") return Matrix3d(turn_y * left_down.transpose());
+  return invalid_argument("patient position '" + position +
+                          "' is none of HFS, FFS, HFP, FFP, HFDL, HFDR, FFDL, FFDR (DICOM (0018,5100))");
+}
+
+std::string structure_list(const RtStructureSet& set) {
+  std::ostringstream s;
+  for (const RtStructure& st : set.structures) {
+    std::size_t points = 0, closed = 0;
+    for (const RtContour& c : st.contours) {
+      points += c.points_ct_mm.size();
+      closed += c.geometric_type == "CLOSED_PLANAR";
+    }
+    s << "  " << std::setw(4) << st.roi_number << "  " << std::left << std::setw(24) << ("'" + st.name + "'")
+      << std::right << ' ' << st.contours.size() << " contours (" << closed << " closed planar), " << points
+      << " points\n";
+  }
+  if (set.structures.empty()) s << "  (none)\n";
+  return s.str();
+}
+
+std::vector<std::string> ct_fitness_warnings(const tracking::CtVolume& ct, const Vector3d& isocentre_ct_mm,
+                                             const Vector3d& roi_centre_ct_mm, const Vector3d& roi_size_mm) {
+  std::vector<std::string> out;
+  const tracking::VolumeGeometry& g = ct.geometry;
+  std::ostringstream m;
+  m << std::fixed << std::setprecision(2);
+  const double slice = g.spacing_mm.z(), pixel = std::max(g.spacing_mm.x(), g.spacing_mm.y());
+  if (slice > 2.0) {
+    m << "the CT's slices are " << slice << " mm apart (radiosurgery plans on 1-1.5 mm): its DRRs are blurred along the "
+      << "slices' normal, and the simulator draws its frames from the same CT, so the accuracy it reports is "
+         "optimistic for this patient";
+    out.push_back(m.str());
+    m.str("");
+  }
+  if (pixel > 1.2) {
+    m << "the CT's pixels are " << pixel << " mm (radiosurgery plans on 1 mm or finer): fine bone edges are lost in "
+      << "the DRRs, and the simulator's frames share the loss, so the accuracy it reports is optimistic";
+    out.push_back(m.str());
+    m.str("");
+  }
+  // The ROI box (axis-aligned in the CT frame) in index space: its distance to the volume's edges.
+  const Eigen::Affine3d index_from_ct = g.index_from_ct();
+  Vector3d lo = Vector3d::Constant(1e300), hi = Vector3d::Constant(-1e300);
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vector3d c = roi_centre_ct_mm + 0.5 * Vector3d((corner & 1) ? 1 : -1, (corner & 2) ? 1 : -1,
+                                                          (corner & 4) ? 1 : -1).cwiseProduct(roi_size_mm);
+    const Vector3d index = index_from_ct * c;
+    lo = lo.cwiseMin(index);
+    hi = hi.cwiseMax(index);
+  }
+  const char* axis_names[] = {"i (columns)", "j (rows)", "k (slices)"};
+  for (int a = 0; a < 3; ++a) {
+    const double below_mm = (lo[a] + 0.5) * g.spacing_mm[a], above_mm = (g.size[a] - 0.5 - hi[a]) * g.spacing_mm[a];
+    const double nearest = std::min(below_mm, above_mm);
+    if (nearest < 0) {
+      m << "the ROI reaches " << -nearest << " mm beyond the CT along its " << axis_names[a]
+        << " axis: the DRRs see air where the frames see the patient";
+      out.push_back(m.str());
+      m.str("");
+    } else if (nearest < 10) {
+      m << "the ROI is " << nearest << " mm from the CT's edge along its " << axis_names[a]
+        << " axis: anatomy the X-rays cross beyond the scan is missing from every DRR";
+      out.push_back(m.str());
+      m.str("");
+    }
+  }
+  // Metal within 20 mm of the ROI: it streaks the CT and dominates both views.
+  constexpr double kMetalHu = 2500, kNearMm = 20;
+  std::int64_t metal = 0;
+  float hottest = -1e9f;
+  Vector3d hottest_ct = Vector3d::Zero();
+  const Vector3d pad(kNearMm / g.spacing_mm.x(), kNearMm / g.spacing_mm.y(), kNearMm / g.spacing_mm.z());
+  const Eigen::Vector3i i0 = (lo - pad).array().floor().cast<int>().max(0).matrix();
+  const Eigen::Vector3i i1 = (hi + pad).array().ceil().cast<int>().min((g.size.array() - 1)).matrix();
+  for (int k = i0.z(); k <= i1.z(); ++k)
+    for (int j = i0.y(); j <= i1.y(); ++j)
+      for (int i = i0.x(); i <= i1.x(); ++i) {
+        const float hu = ct.at(i, j, k);
+        if (hu < kMetalHu) continue;
+        ++metal;
+        if (hu > hottest) {
+          hottest = hu;
+          hottest_ct = g.ct_from_index() * Vector3d(i, j, k);
+        }
+      }
+  if (metal > 0) {
+    m << metal << " voxels above " << kMetalHu << " HU within " << kNearMm << " mm of the ROI (the densest "
+      << std::setprecision(0) << hottest << " HU at " << std::setprecision(1) << mm3(hottest_ct, 1)
+      << " mm): metal or dense contrast streaks the CT and dominates both views; look at the set-up picture, "
+         "and keep it out of the ROI where it is not the target";
+    out.push_back(m.str());
+    m.str("");
+  }
+  (void)isocentre_ct_mm;
+  return out;
+}
+
+Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& ct) {
+  if (!ct.volume) return invalid_argument("compose_new_scene: no CT");
+  if (!r.rtplan.empty() && r.isocentre_ct_mm)
+    return invalid_argument("--rtplan and --isocentre both give the isocentre; give one");
+  if (!r.target.empty() && r.rtstruct.empty()) return invalid_argument("--target names a structure of --rtstruct FILE");
+  if (!(r.roi_margin_mm >= 0 && r.roi_margin_mm <= 100))
+    return invalid_argument("the ROI margin must be in [0, 100] mm");
+  const tracking::VolumeGeometry& grid = ct.volume->geometry;
+  NewScene out;
+  auto iso = choose_isocentre(r, ct);
+  if (!iso.ok()) return iso.status();
+  std::optional<Target> target;
+  if (!r.rtstruct.empty()) {
+    auto t = read_target(r, ct);
+    if (!t.ok()) return t.status();
+    target = std::move(*t);
+  }
+  if (iso->from.empty()) {
+    if (!target)
+      return invalid_argument("no isocentre: give --rtplan FILE (its isocentre), --isocentre X,Y,Z (mm, CT frame), or "
+                              "--rtstruct FILE --target NAME (the target's centre)");
+    iso->ct_mm = target->box.centre_ct_mm();
+    iso->from = "the centre of target '" + target->name + "''s box (no plan and no --isocentre given)";
+  }
+  LFTRACK_RETURN_IF_ERROR(check_inside_ct(iso->ct_mm, grid, "the isocentre"));
+  out.isocentre_ct_mm = iso->ct_mm;
+  out.isocentre_from = iso->from;
+
+  if (target) {
+    out.roi_centre_ct_mm = target->box.centre_ct_mm();
+    out.roi_size_mm = target->box.size_mm() + Vector3d::Constant(2 * r.roi_margin_mm);
+    out.roi_size_mm = out.roi_size_mm.cwiseMax(Vector3d::Constant(10));  // a flat target still has a box
+    const Vector3d off = ((iso->ct_mm - out.roi_centre_ct_mm).cwiseAbs() - 0.5 * out.roi_size_mm).cwiseMax(0);
+    if (off.norm() > 0) {
+      std::ostringstream m;
+      m << std::fixed << std::setprecision(1) << "the isocentre " << mm3(iso->ct_mm) << " mm (" << iso->from
+        << ") lies " << off.norm() << " mm outside target '" << target->name << "''s box plus its "
+        << r.roi_margin_mm << " mm margin: the plan and the structure set disagree about where the target is "
+        << "(another target, or another plan?); a wider --roi-margin-mm takes both in";
+      return failed_precondition(m.str());
+    }
+    out.target_name = target->name;
+    out.target_polygons = target->polygons;
+    out.target = std::move(target->mask);
+  } else {
+    out.roi_centre_ct_mm = iso->ct_mm;
+    out.roi_size_mm = r.roi_size_without_target_mm;
+  }
+
+  out.patient_position = iso->patient_position.empty() ? "HFS" : iso->patient_position;
+  auto rotation = room_from_patient_rotation(out.patient_position);
+  if (!rotation.ok()) return Status(rotation.status().code(), r.rtplan.string() + ": " + rotation.status().message());
+  out.nominal_T_room_from_ct.linear() = *rotation;
+  out.nominal_T_room_from_ct.translation() = -(*rotation * iso->ct_mm);
+  if (iso->plan && iso->patient_position.empty())
+    out.warnings.push_back("the plan gives no patient position (0018,5100): head-first supine (HFS) assumed");
+  const Envelope envelope = envelope_from(iso->plan, &out.warnings);
+  for (const std::string& w : ct_fitness_warnings(*ct.volume, iso->ct_mm, out.roi_centre_ct_mm, out.roi_size_mm))
+    out.warnings.push_back(w);
+
+  // The scene, commented with where each value came from.
+  const fs::path folder = r.output.parent_path();
+  const std::string stem = r.output.stem().string();
+  std::ostringstream y;
+  y << "# A patient's scene, written by `lftrack scene new`";
+  if (!r.command_line.empty()) y << ":\n#   " << comment(r.command_line);
+  y << "\n# Look at " << comment(stem) << "-setup.png beside it before the first beam: each view's DRR with the isocentre's\n"
+    << "# cross, the target's outline and the ROI, and three slices through the isocentre. Then:\n"
+    << "#   lftrack precompute --scene " << comment(r.output.filename().string()) << "     (the light fields)\n"
+    << "#   lftrack commission --scene " << comment(r.output.filename().string())
+    << "     (the verdict's floors; the loop refuses the scene until then)\n";
+  for (const std::string& w : out.warnings) y << "# Warning: " << comment(w) << "\n";
+  y << std::defaultfloat << std::setprecision(6) << "version: 1\n";
+  y << "name: " << quoted(r.name.empty() ? stem : r.name) << "\n";
+  y << "room: " << quoted(relative_to(r.room, folder)) << "   # the views, detectors, couch, imaging and loop\n";
+  y << "ct:\n  path: " << quoted(relative_to(r.ct, folder)) << "   # " << grid.size.x() << " x " << grid.size.y() << " x "
+    << grid.size.z() << " voxels of " << std::fixed << std::setprecision(2) << grid.spacing_mm.x() << " x "
+    << grid.spacing_mm.y() << " x " << grid.spacing_mm.z() << " mm";
+  if (ct.identity)
+    y << "\n  # Frame of Reference " << comment(ct.identity->frame_of_reference_uid) << ", series "
+      << comment(ct.identity->series_uid);
+  y << "\nroi:                  # CT frame (patient LPS), mm\n";
+  if (target) {
+    y << "  centre_mm: " << yaml3(out.roi_centre_ct_mm) << "   # target '" << comment(target->name) << "' (ROI number "
+      << target->roi_number << " of " << comment(r.rtstruct.filename().string()) << "): the centre of its box\n";
+    y << "  size_mm: " << yaml3(out.roi_size_mm) << "   # its box " << yaml3(target->box.size_mm()) << " plus "
+      << r.roi_margin_mm << " mm on each side; " << std::setprecision(1) << target->mask.volume_cc()
+      << " cc on the CT's grid\n";
+  } else {
+    y << "  centre_mm: " << yaml3(out.roi_centre_ct_mm) << "   # on the isocentre (no structure set)\n";
+    y << "  size_mm: " << yaml3(out.roi_size_mm) << "   # lftrack's default box about a vertebra\n";
+  }
+  y << "registration_origin_mm: " << yaml3(iso->ct_mm) << "   # the isocentre: " << comment(iso->from) << "\n";
+  if (out.patient_position != "HFS") {
+    const auto euler = tracking::euler_from_rotation(*rotation);
+    y << "nominal_pose:          # patient position " << out.patient_position
+      << " (0018,5100): the room from the CT frame, the isocentre on the room's\n"
+      << "  rotation_deg: "
+      << yaml3(Vector3d(tracking::rad_to_deg(euler.roll), tracking::rad_to_deg(euler.pitch), tracking::rad_to_deg(euler.yaw)))
+      << "   # [roll, pitch, yaw]\n"
+      << "  translation_mm: " << yaml3(out.nominal_T_room_from_ct.translation()) << "\n";
+  } else {
+    y << "# Patient head-first supine (HFS): the CT frame is the room's, shifted to put the isocentre on the room's.\n";
+  }
+  y << std::defaultfloat << std::setprecision(6) << "envelope:\n"
+    << "  translation_mm: " << envelope.translation_mm << "   # " << comment(envelope.translation_from)
+    << "\n  rotation_deg: " << envelope.rotation_deg << "   # " << comment(envelope.rotation_from) << "\n";
+  y << "safety:\n  commissioning: " << quoted(stem + ".commissioning.yaml") << "   # written by: lftrack commission --scene "
+    << comment(r.output.filename().string()) << "\n";
+  y << "motion:                # the simulated patient (sim only): set up off the plan, then drifting\n"
+    << "  setup_error: {translation_mm: [3, -2, 2], rotation_deg: [1, -0.5, 1]}\n"
+    << "  drift: {translation_mm_per_s: [0.02, 0.01, -0.02]}\n";
+  out.yaml = y.str();
+  return out;
+}
+
+}  // namespace lftrack::host
