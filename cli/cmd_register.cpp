@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_exposure.hpp"
@@ -310,9 +311,12 @@ Status run(const RegisterOptions& o) {
                 result->fiducial_distance_mm, fiducial->gap_mm);
   std::printf("  %d evaluations in %.1f ms (%s)\n", result->evaluations, result->elapsed_ms,
               tracking::to_string(result->stop));
-  if (tre)
+  if (tre) {
     std::printf("  TRE: mean %.3f mm, max %.3f mm (initial mean %.3f mm) over %d points\n", tre->mean_mm, tre->max_mm,
                 initial_tre->mean_mm, tre->points);
+    if (const std::string caveat = simulated_accuracy_caveat(*p.ct); o.sim && !caveat.empty())
+      std::printf("  note: %s\n", caveat.c_str());
+  }
   std::printf("  verdict: %s\n", verdict_text(verdict, view_names(p)).c_str());
   std::printf("  verdict floors: %s\n", floors_from.c_str());
   LFTRACK_RETURN_IF_ERROR(

@@ -14,6 +14,7 @@
 #include <optional>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/patient_setup.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/host/loop_session.hpp"
@@ -264,6 +265,8 @@ Status run(const SimOptions& o) {
   if (o.json) {
     nlohmann::json j = to_json(*summary);
     j["scene"] = prepared->scene.name;
+    if (const std::string caveat = simulated_accuracy_caveat(*prepared->ct); !caveat.empty() && frames_are_simulated(prepared->scene))
+      j["accuracy_caveat"] = caveat;
     j["period_ms"] = prepared->scene.loop.period_ms;
     j["simulated_clock"] = o.fast;
     j["realtime"] = report->summary();
@@ -312,6 +315,8 @@ Status run(const SimOptions& o) {
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     print_summary(*summary);
+    if (const std::string caveat = simulated_accuracy_caveat(*prepared->ct); !caveat.empty() && frames_are_simulated(prepared->scene))
+      std::printf("note: %s\n", caveat.c_str());
     if (replay != nullptr) {
       const drivers::ReplayCounters& c = replay->counters();
       std::printf(

@@ -285,6 +285,16 @@ TEST_F(PatientSetup, ThePatientPositionTurnsTheRoomAboutTheIsocentre) {
   EXPECT_NE(refusal().find("SITTING"), std::string::npos);
 }
 
+TEST_F(PatientSetup, ASimulationOnACoarseCtSaysItsAccuracyIsOptimistic) {
+  const std::string caveat = simulated_accuracy_caveat(*ct_);
+  EXPECT_NE(caveat.find("1.07 x 1.07 x 3.00 mm"), std::string::npos) << caveat;
+  tracking::CtVolume fine;
+  fine.geometry.size = Eigen::Vector3i(4, 4, 4);
+  fine.geometry.spacing_mm = Vector3d(0.8, 0.8, 1.0);
+  fine.values.assign(64, 0.f);
+  EXPECT_EQ(simulated_accuracy_caveat(fine), "");
+}
+
 TEST(PatientPosition, EveryPositionIsARotationThatPutsThePatientWhereItSays) {
   for (const char* p : {"HFS", "FFS", "HFP", "FFP", "HFDL", "HFDR", "FFDL", "FFDR"}) {
     auto R = room_from_patient_rotation(p);

@@ -353,6 +353,16 @@ std::vector<std::string> ct_fitness_warnings(const tracking::CtVolume& ct, const
   return out;
 }
 
+std::string simulated_accuracy_caveat(const tracking::CtVolume& ct) {
+  const Vector3d& s = ct.geometry.spacing_mm;
+  if (!(s.z() > 2.0 || std::max(s.x(), s.y()) > 1.2)) return {};
+  std::ostringstream m;
+  m << std::fixed << std::setprecision(2) << "the CT's voxels are " << s.x() << " x " << s.y() << " x " << s.z()
+    << " mm and the simulated frames are drawn from the same CT: this accuracy is optimistic for a patient "
+       "(radiosurgery plans on 1-1.5 mm slices)";
+  return m.str();
+}
+
 Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& ct) {
   if (!ct.volume) return invalid_argument("compose_new_scene: no CT");
   if (!r.rtplan.empty() && r.isocentre_ct_mm)

@@ -71,6 +71,11 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& request, const NewScen
 std::vector<std::string> ct_fitness_warnings(const tracking::CtVolume& ct, const Eigen::Vector3d& isocentre_ct_mm,
                                              const Eigen::Vector3d& roi_centre_ct_mm, const Eigen::Vector3d& roi_size_mm);
 
+// Said beside a simulation's accuracy (sim, register --sim) when the CT is coarser than
+// radiosurgery plans on (slices over 2 mm apart or pixels over 1.2 mm): the simulator draws its
+// frames from the same CT, so the figures are optimistic for this patient. Empty otherwise.
+std::string simulated_accuracy_caveat(const tracking::CtVolume& ct);
+
 // The structures of a structure set, one line each: number, name, contours, points.
 std::string structure_list(const RtStructureSet& set);
 
