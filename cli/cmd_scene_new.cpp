@@ -26,6 +26,7 @@ struct SceneNewOptions {
   std::string ct, room, out, rtplan, beam, rtstruct, target, name;
   std::vector<double> isocentre;
   double roi_margin_mm = 10;
+  std::optional<double> roi_mask_margin_mm;
   bool list_structures = false;
   bool precompute = false;
   int threads = 0;
@@ -95,6 +96,7 @@ Status run(const SceneNewOptions& o) {
   request.target = o.target;
   if (!o.isocentre.empty()) request.isocentre_ct_mm = Eigen::Vector3d(o.isocentre[0], o.isocentre[1], o.isocentre[2]);
   request.roi_margin_mm = o.roi_margin_mm;
+  request.roi_mask_margin_mm = o.roi_mask_margin_mm;
   request.name = o.name;
   request.command_line = o.command_line;
 
@@ -189,7 +191,12 @@ Command add_scene_new_command(CLI::App* parent, int argc, char** argv) {
       ->check(finite_in(-10000, 10000))
       ->excludes(plan);
   app->add_option("--roi-margin-mm", o->roi_margin_mm, "Margin around the target's box, each side (default 10)")
-      ->check(finite_in(0, 100));
+      ->check(finite_in(0, 100))
+      ->needs(rtstruct);
+  app->add_option("--roi-mask-mm", o->roi_mask_margin_mm,
+                  "Register only the target and this margin around it in each view (roi.mask; default: the whole ROI)")
+      ->check(finite_in(0, 50))
+      ->needs(rtstruct);
   app->add_option("--name", o->name, "The scene's name (default: the file's)")->check(not_empty());
   app->add_flag("--precompute", o->precompute, "Build the light fields at once");
   app->add_option("--threads", o->threads, "Threads (0: all cores)")->check(CLI::Range(0, 1024));

@@ -108,6 +108,11 @@ Result<std::unique_ptr<Registration>> Registration::create(std::shared_ptr<const
   const int slots = pool != nullptr ? std::max(1, pool->size()) : 1;
   for (int s = 0; s < slots; ++s) r->slots_.push_back(std::make_unique<Slot>());
   for (const auto& view : r->setup_.views) {
+    const Image<unsigned char>& region = view.region;
+    if (!region.pixels().empty() && (region.rows() != view.window.rows || region.cols() != view.window.cols))
+      return invalid_argument("registration: view " + view.view.name + "'s region is " + std::to_string(region.rows()) +
+                              " x " + std::to_string(region.cols()) + ", its window " + std::to_string(view.window.rows) +
+                              " x " + std::to_string(view.window.cols));
     r->frames_.emplace_back(view.window.rows, view.window.cols);
     r->frame_masks_.emplace_back(view.window.rows, view.window.cols, 1);
   }
@@ -200,6 +205,10 @@ Status Registration::set_frames(const std::vector<ImageView<const float>>& frame
         std::fill(mask_row, mask_row + w.cols, static_cast<unsigned char>(1));
       else
         std::copy(valid[v].row_ptr(r), valid[v].row_ptr(r) + w.cols, mask_row);
+      if (const Image<unsigned char>& region = setup_.views[v].region; !region.pixels().empty()) {
+        const unsigned char* in_region = region.view().row_ptr(r);
+        for (int c = 0; c < w.cols; ++c) mask_row[c] = static_cast<unsigned char>(mask_row[c] && in_region[c]);
+      }
     }
   }
   for (auto& prepared : level_prepared_) std::fill(prepared.begin(), prepared.end(), 0);

@@ -95,6 +95,12 @@ CommissioningFingerprint commissioning_fingerprint(const PreparedScene& p) {
            << "\nroi " << p.roi_centre_ct_mm.transpose() << ' ' << s.roi.size_mm.transpose() << "\norigin "
            << p.registration_origin_ct_mm.transpose() << "\nenvelope " << s.envelope.translation_mm << ' '
            << s.envelope.rotation_deg;
+  // roi.mask: which pixels the measures look at (absent: the whole windows, as before it existed).
+  for (const tracking::Image<unsigned char>& mask : p.roi_masks) {
+    std::uint64_t h = 1469598103934665603ull;  // FNV-1a over the mask's pixels
+    for (unsigned char b : mask.pixels()) h = (h ^ b) * 1099511628211ull;
+    geometry << "\nroi mask " << mask.rows() << 'x' << mask.cols() << ' ' << h;
+  }
   const tracking::LightFieldSpec& lf = s.light_field;
   registration << "measure " << s.registration.similarity << " bins " << s.registration.histogram_bins << " plan "
                << s.registration.plan << " align " << s.loop.align_plan << " track " << s.loop.track_plan

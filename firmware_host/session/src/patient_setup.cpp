@@ -133,78 +133,14 @@ Status check_inside_ct(const Vector3d& point, const tracking::VolumeGeometry& gr
   return {};
 }
 
-struct Target {
-  std::string name;
-  int roi_number = 0;
-  std::vector<TargetPolygon> polygons;
-  TargetMask mask;
-  TargetBox box;
-};
-
-Result<Target> read_target(const NewSceneRequest& r, const NewSceneCt& ct) {
+Result<TargetContours> read_target(const NewSceneRequest& r, const NewSceneCt& ct) {
   LFTRACK_RETURN_IF_ERROR(need_identity(ct, r.rtstruct, "structure set"));
-  auto set = read_rt_structure_set(r.rtstruct);
-  if (!set.ok()) return set.status();
-  const std::string& for_uid = ct.identity->frame_of_reference_uid;
-  const std::string& series = ct.identity->series_uid;
-  const auto join = [](const std::vector<std::string>& v) {
-    std::string out;
-    for (const auto& s : v) out += (out.empty() ? "" : ", ") + s;
-    return out.empty() ? std::string("none") : out;
-  };
-  if (std::find(set->frame_of_reference_uids.begin(), set->frame_of_reference_uids.end(), for_uid) ==
-      set->frame_of_reference_uids.end()) {
-    return failed_precondition(r.rtstruct.string() + ": the structure set is in Frame of Reference " +
-                               join(set->frame_of_reference_uids) + ", the CT in " + for_uid +
-                               ": it was contoured on another CT (or another patient)");
-  }
-  if (std::find(set->referenced_series_uids.begin(), set->referenced_series_uids.end(), series) ==
-      set->referenced_series_uids.end()) {
-    return failed_precondition(r.rtstruct.string() + ": the structure set references series " +
-                               join(set->referenced_series_uids) + ", the CT is series " + series +
-                               ": it was contoured on another series of this Frame of Reference");
-  }
-  if (r.target.empty())
+  if (r.target.empty()) {
+    auto set = read_rt_structure_set(r.rtstruct);
+    if (!set.ok()) return set.status();
     return invalid_argument("--rtstruct needs --target NAME; the structures are:\n" + structure_list(*set));
-  const auto it = std::find_if(set->structures.begin(), set->structures.end(),
-                               [&](const RtStructure& s) { return s.name == r.target; });
-  if (it == set->structures.end())
-    return not_found(r.rtstruct.string() + ": no structure named '" + r.target + "'; the structures are:\n" +
-                     structure_list(*set));
-  if (std::count_if(set->structures.begin(), set->structures.end(),
-                    [&](const RtStructure& s) { return s.name == r.target; }) > 1)
-    return failed_precondition(r.rtstruct.string() + ": more than one structure is named '" + r.target +
-                               "'; which is the target is not for lftrack to guess:\n" + structure_list(*set));
-  if (!it->frame_of_reference_uid.empty() && it->frame_of_reference_uid != for_uid) {
-    return failed_precondition(r.rtstruct.string() + ": structure '" + it->name + "' is in Frame of Reference " +
-                               it->frame_of_reference_uid + ", the CT in " + for_uid);
   }
-  Target target;
-  target.name = it->name;
-  target.roi_number = it->roi_number;
-  std::map<std::string, int> other_types;
-  for (const RtContour& c : it->contours) {
-    if (c.geometric_type == "CLOSED_PLANAR")
-      target.polygons.push_back({c.points_ct_mm});
-    else
-      ++other_types[c.geometric_type.empty() ? "(no type)" : c.geometric_type];
-  }
-  if (target.polygons.empty()) {
-    std::string types;
-    for (const auto& [type, n] : other_types) types += (types.empty() ? "" : ", ") + std::to_string(n) + " " + type;
-    return failed_precondition(r.rtstruct.string() + ": target '" + it->name + "' has no closed planar contour" +
-                               (types.empty() ? "" : " (it has " + types + ")") +
-                               ": a target is a volume, contoured slice by slice");
-  }
-  LFTRACK_RETURN_IF_ERROR(check_target_polygons(target.polygons, target.name));
-  auto mask = rasterise_target(target.polygons, ct.volume->geometry, target.name);
-  if (!mask.ok()) return mask.status();
-  if (mask->voxels_inside == 0)
-    return failed_precondition(r.rtstruct.string() + ": target '" + target.name +
-                               "' covers no voxel of the CT: its contours lie beyond the scanned slices");
-  target.mask = std::move(*mask);
-  target.box = target_box(target.polygons);
-  return target;
+  return target_from_structure_set(r.rtstruct, r.target, *ct.identity, ct.volume->geometry);
 }
 
 // The envelope the plan's table-top tolerances allow: the smaller of ours and theirs.
@@ -243,6 +179,70 @@ Envelope envelope_from(const std::optional<RtPlanSetup>& plan, std::vector<std::
 }
 
 }  // namespace
+
+Result<TargetContours> target_from_structure_set(const fs::path& rtstruct, const std::string& name,
+                                                 const CtDicomIdentity& ct, const tracking::VolumeGeometry& grid) {
+  auto set = read_rt_structure_set(rtstruct);
+  if (!set.ok()) return set.status();
+  const std::string& for_uid = ct.frame_of_reference_uid;
+  const std::string& series = ct.series_uid;
+  const auto join = [](const std::vector<std::string>& v) {
+    std::string out;
+    for (const auto& s : v) out += (out.empty() ? "" : ", ") + s;
+    return out.empty() ? std::string("none") : out;
+  };
+  if (std::find(set->frame_of_reference_uids.begin(), set->frame_of_reference_uids.end(), for_uid) ==
+      set->frame_of_reference_uids.end()) {
+    return failed_precondition(rtstruct.string() + ": the structure set is in Frame of Reference " +
+                               join(set->frame_of_reference_uids) + ", the CT in " + for_uid +
+                               ": it was contoured on another CT (or another patient)");
+  }
+  if (std::find(set->referenced_series_uids.begin(), set->referenced_series_uids.end(), series) ==
+      set->referenced_series_uids.end()) {
+    return failed_precondition(rtstruct.string() + ": the structure set references series " +
+                               join(set->referenced_series_uids) + ", the CT is series " + series +
+                               ": it was contoured on another series of this Frame of Reference");
+  }
+  const auto it = std::find_if(set->structures.begin(), set->structures.end(),
+                               [&](const RtStructure& s) { return s.name == name; });
+  if (it == set->structures.end())
+    return not_found(rtstruct.string() + ": no structure named '" + name + "'; the structures are:\n" +
+                     structure_list(*set));
+  if (std::count_if(set->structures.begin(), set->structures.end(),
+                    [&](const RtStructure& s) { return s.name == name; }) > 1)
+    return failed_precondition(rtstruct.string() + ": more than one structure is named '" + name +
+                               "'; which is the target is not for lftrack to guess:\n" + structure_list(*set));
+  if (!it->frame_of_reference_uid.empty() && it->frame_of_reference_uid != for_uid) {
+    return failed_precondition(rtstruct.string() + ": structure '" + it->name + "' is in Frame of Reference " +
+                               it->frame_of_reference_uid + ", the CT in " + for_uid);
+  }
+  TargetContours target;
+  target.name = it->name;
+  target.roi_number = it->roi_number;
+  std::map<std::string, int> other_types;
+  for (const RtContour& c : it->contours) {
+    if (c.geometric_type == "CLOSED_PLANAR")
+      target.polygons.push_back({c.points_ct_mm});
+    else
+      ++other_types[c.geometric_type.empty() ? "(no type)" : c.geometric_type];
+  }
+  if (target.polygons.empty()) {
+    std::string types;
+    for (const auto& [type, n] : other_types) types += (types.empty() ? "" : ", ") + std::to_string(n) + " " + type;
+    return failed_precondition(rtstruct.string() + ": target '" + it->name + "' has no closed planar contour" +
+                               (types.empty() ? "" : " (it has " + types + ")") +
+                               ": a target is a volume, contoured slice by slice");
+  }
+  LFTRACK_RETURN_IF_ERROR(check_target_polygons(target.polygons, target.name));
+  auto mask = rasterise_target(target.polygons, grid, target.name);
+  if (!mask.ok()) return mask.status();
+  if (mask->voxels_inside == 0)
+    return failed_precondition(rtstruct.string() + ": target '" + target.name +
+                               "' covers no voxel of the CT: its contours lie beyond the scanned slices");
+  target.mask = std::move(*mask);
+  target.box = target_box(target.polygons);
+  return target;
+}
 
 Result<Matrix3d> room_from_patient_rotation(const std::string& position) {
   const Matrix3d turn_y = Eigen::Vector3d(-1, 1, -1).asDiagonal();  // feet first: 180 degrees about vertical
@@ -370,11 +370,14 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
   if (!r.target.empty() && r.rtstruct.empty()) return invalid_argument("--target names a structure of --rtstruct FILE");
   if (!(r.roi_margin_mm >= 0 && r.roi_margin_mm <= 100))
     return invalid_argument("the ROI margin must be in [0, 100] mm");
+  if (r.roi_mask_margin_mm && r.rtstruct.empty()) return invalid_argument("--roi-mask-mm needs --rtstruct and --target");
+  if (r.roi_mask_margin_mm && !(*r.roi_mask_margin_mm >= 0 && *r.roi_mask_margin_mm <= 50))
+    return invalid_argument("the ROI mask's margin must be in [0, 50] mm");
   const tracking::VolumeGeometry& grid = ct.volume->geometry;
   NewScene out;
   auto iso = choose_isocentre(r, ct);
   if (!iso.ok()) return iso.status();
-  std::optional<Target> target;
+  std::optional<TargetContours> target;
   if (!r.rtstruct.empty()) {
     auto t = read_target(r, ct);
     if (!t.ok()) return t.status();
@@ -451,6 +454,13 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
     y << "  size_mm: " << yaml3(out.roi_size_mm) << "   # its box " << yaml3(target->box.size_mm()) << " plus "
       << r.roi_margin_mm << " mm on each side; " << std::setprecision(1) << target->mask.volume_cc()
       << " cc on the CT's grid\n";
+    if (r.roi_mask_margin_mm) {
+      y << "  mask:                # the measures look only at the target and " << *r.roi_mask_margin_mm
+        << " mm around it, in each view\n"
+        << "    rtstruct: " << quoted(relative_to(r.rtstruct, folder)) << "\n"
+        << "    target: " << quoted(target->name) << "\n"
+        << "    margin_mm: " << *r.roi_mask_margin_mm << "\n";
+    }
   } else {
     y << "  centre_mm: " << yaml3(out.roi_centre_ct_mm) << "   # on the isocentre (no structure set)\n";
     y << "  size_mm: " << yaml3(out.roi_size_mm) << "   # lftrack's default box about a vertebra\n";

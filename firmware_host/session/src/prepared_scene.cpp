@@ -6,6 +6,7 @@
 
 #include "lftrack/host/phantom_cache.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/roi_mask.hpp"
 #include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/sim/spine_phantom.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
@@ -162,6 +163,11 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
     auto w = roi_window(d.view, out.nominal_T_room_from_ct, out.roi_centre_ct_mm, out.scene.roi.size_mm);
     if (!w.ok()) return w.status().with_context(out.scene.where("roi"));
     out.roi_windows.push_back(*w);
+  }
+  if (out.scene.roi.mask) {
+    auto masks = project_roi_mask(out);
+    if (!masks.ok()) return masks.status();
+    out.roi_masks = std::move(*masks);
   }
   auto exposure = scene_exposure(out);
   if (!exposure.ok()) return exposure.status();

@@ -49,7 +49,25 @@ Status SceneParser::parse_ct(const YAML::Node& n, CtSpec* ct) const {
 }
 
 Status SceneParser::parse_roi(const YAML::Node& n, bool builtin, RoiSpec* roi) const {
-  LFTRACK_RETURN_IF_ERROR(check_keys(n, "roi", {"centre_mm", "size_mm"}));
+  LFTRACK_RETURN_IF_ERROR(check_keys(n, "roi", {"centre_mm", "size_mm", "mask"}));
+  if (const YAML::Node m = n["mask"]) {
+    LFTRACK_RETURN_IF_ERROR(check_keys(m, "roi.mask", {"rtstruct", "target", "margin_mm"}));
+    RoiMaskSpec mask;
+    YAML::Node node;
+    LFTRACK_RETURN_IF_ERROR(need(m, "rtstruct", "roi.mask", &node));
+    LFTRACK_RETURN_IF_ERROR(text(node, "roi.mask.rtstruct", &mask.rtstruct));
+    const fs::path file(mask.rtstruct);
+    mask.rtstruct = (file.is_absolute() ? file : base_dir_ / file).lexically_normal().string();
+    LFTRACK_RETURN_IF_ERROR(need(m, "target", "roi.mask", &node));
+    LFTRACK_RETURN_IF_ERROR(text(node, "roi.mask.target", &mask.target));
+    if (m["margin_mm"]) {
+      LFTRACK_RETURN_IF_ERROR(number(m["margin_mm"], "roi.mask.margin_mm", &mask.margin_mm));
+      if (!(mask.margin_mm >= 0 && mask.margin_mm <= 50))
+        return error(m["margin_mm"], "roi.mask.margin_mm is the margin around the target's projection, in [0, 50] mm");
+    }
+    if (builtin) return error(m, "roi.mask needs a CT read from a DICOM series (its structure set's CT)");
+    roi->mask = mask;
+  }
   if (n["centre_mm"]) {
     Vector3d c;
     LFTRACK_RETURN_IF_ERROR(vec3(n["centre_mm"], "roi.centre_mm", &c));

@@ -70,8 +70,10 @@ Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
     }
     setup.levels.push_back({0.0, detector_binning});
   }
-  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i)
-    setup.views.push_back({p.scene.detectors[i].view, p.roi_windows[i]});
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    setup.views.push_back({p.scene.detectors[i].view, p.roi_windows[i], {}});
+    if (i < p.roi_masks.size()) setup.views.back().region = p.roi_masks[i];  // roi.mask
+  }
   setup.origin_room_mm = p.registration_origin_room_mm();
   setup.roi_centre_ct_mm = p.roi_centre_ct_mm;
   setup.roi_size_mm = p.scene.roi.size_mm;

@@ -18,6 +18,7 @@ using Rgb = std::array<std::uint8_t, 3>;
 constexpr Rgb kIsocentre{0, 255, 0};
 constexpr Rgb kRoi{255, 255, 0};
 constexpr Rgb kTarget{255, 0, 0};
+constexpr Rgb kMask{0, 255, 255};
 
 void put(tracking::RgbImage* image, double row, double col, const Rgb& c) {
   image->set(int(std::lround(row)), int(std::lround(col)), c[0], c[1], c[2]);
@@ -77,6 +78,19 @@ Result<tracking::RgbImage> view_panel(const PreparedScene& p, int index, const S
       const auto pb = project(polygon.points_ct_mm[(i + 1) % polygon.points_ct_mm.size()]);
       if (pa && pb) line(&image, *pa, *pb, kTarget);
     }
+  // roi.mask: the edge of what the measures look at (cyan), on the panel's pixels.
+  if (std::size_t(index) < p.roi_masks.size()) {
+    const tracking::Image<unsigned char>& mask = p.roi_masks[std::size_t(index)];
+    const tracking::PixelWindow& window = p.roi_windows[std::size_t(index)];
+    const auto looked_at = [&](int r, int c) {  // panel pixel -> detector pixel -> mask
+      const int dr = int((r + 0.5) / scale) - window.row0, dc = int((c + 0.5) / scale) - window.col0;
+      return dr >= 0 && dc >= 0 && dr < window.rows && dc < window.cols && mask.at(dr, dc) != 0;
+    };
+    for (int r = 1; r + 1 < rows; ++r)
+      for (int c = 1; c + 1 < cols; ++c)
+        if (looked_at(r, c) && !(looked_at(r - 1, c) && looked_at(r + 1, c) && looked_at(r, c - 1) && looked_at(r, c + 1)))
+          put(&image, r, c, kMask);
+  }
   if (const auto iso = project(marks.isocentre_ct_mm)) cross(&image, *iso, kIsocentre);
   return image;
 }

@@ -31,6 +31,10 @@ class ThreadPool;
 struct RegistrationView {
   XrayView view;       // room frame, the whole detector
   PixelWindow window;  // the ROI pixels that are registered
+  // Where in the window the measures may look (a scene's roi.mask: the target's neighbourhood
+  // projected): 1 to use a pixel, 0 to ignore it, the window's size; empty: the whole window.
+  // It is fixed on the detector; every frame's own validity mask is and-ed with it.
+  Image<unsigned char> region;
 };
 
 struct RegistrationSetup {

@@ -29,6 +29,7 @@ struct NewSceneRequest {
   std::string target;                                // a structure's name in rtstruct
   std::optional<Eigen::Vector3d> isocentre_ct_mm;    // given instead of a plan (a NIfTI CT)
   double roi_margin_mm = 10;                         // around the target's box, each side
+  std::optional<double> roi_mask_margin_mm;          // set: roi.mask (the target's neighbourhood only), this margin
   Eigen::Vector3d roi_size_without_target_mm{64, 64, 40};
   std::string name;          // the scene's name ("": from the output's file name)
   std::string command_line;  // for the scene's header comment
@@ -53,6 +54,19 @@ struct NewScene {
   std::optional<TargetMask> target;                 // on the CT's grid
   std::vector<std::string> warnings;                // fitness for tracking, each with its figure
 };
+
+// A target of a structure set, checked against the CT it must belong to: the set's Frame of
+// Reference and referenced series are the CT's, one structure has the name, its closed planar
+// contours are sound (target_contours.hpp) and cover voxels of the CT. Each refusal says why.
+struct TargetContours {
+  std::string name;
+  int roi_number = 0;
+  std::vector<TargetPolygon> polygons;  // CT frame
+  TargetMask mask;                      // on the CT's grid
+  TargetBox box;
+};
+Result<TargetContours> target_from_structure_set(const std::filesystem::path& rtstruct, const std::string& name,
+                                                 const CtDicomIdentity& ct, const tracking::VolumeGeometry& grid);
 
 // The room's axes from the patient's (the CT frame, LPS), for a DICOM Patient Position
 // (0018,5100). The room frame is the CT frame of a head-first supine patient (DESIGN.md, "Frames"):

@@ -46,9 +46,19 @@ struct CtSpec {
   bool is_builtin_phantom() const { return path == kBuiltinPhantom; }
 };
 
+// roi.mask: the similarity measures look only at the target's neighbourhood in each view (the
+// target's contours from an RT Structure Set of this CT, projected at the nominal pose and grown
+// by margin_mm on the detector, scaled to the isocentre), not at the whole ROI window.
+struct RoiMaskSpec {
+  std::string rtstruct;  // the structure set, resolved against the scene's folder
+  std::string target;    // a structure's name
+  double margin_mm = 10;
+};
+
 struct RoiSpec {
   std::optional<Eigen::Vector3d> centre_ct_mm;  // unset: the phantom's target vertebra
   Eigen::Vector3d size_mm{64, 64, 40};
+  std::optional<RoiMaskSpec> mask;
 };
 
 // detectors[i].frames: where a detector's frames come from, with the device's settings
@@ -249,6 +259,9 @@ struct PreparedScene {
   bool roi_centre_is_volume_centre = false;
   tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
   std::vector<tracking::PixelWindow> roi_windows;  // per detector: the ROI's projection
+  // Per detector, with roi.mask: where in its ROI window the measures look (1), the window's
+  // size (roi_mask.hpp); empty without roi.mask.
+  std::vector<tracking::Image<unsigned char>> roi_masks;
   SimExposure exposure;  // the simulated detectors' dose (sim.exposure), set once for the scene
 
   Eigen::Vector3d registration_origin_room_mm() const {

@@ -1,7 +1,8 @@
 #pragma once
 // The picture a physicist looks at before a new patient's first beam (issue 53), as every set-up
 // screen gives: each view's DRR at the nominal pose with the isocentre's cross (green), the ROI's
-// box (yellow) and the target's outline (red) projected on it, above an axial, a coronal and a
+// box (yellow), the target's outline (red) and, with roi.mask, the edge of what the measures look
+// at (cyan) projected on it, above an axial, a coronal and a
 // sagittal slice of the CT through the isocentre with the same marks. A mirrored or misplaced
 // target shows at once. One PNG; views left to right in the scene's order, then the slices.
 
