@@ -6,6 +6,10 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -33,41 +37,65 @@ struct SceneNewOptions {
   std::string command_line;
 };
 
-// The scene's file: a new .yaml in a folder that exists; never a file that is there.
-Status check_scene_path(const fs::path& out) {
+// The scene's file: a new .yaml in a folder that exists, not the CT's DICOM folder (every file
+// there is read as a slice); neither it nor its picture a file that is there.
+Status check_scene_path(const fs::path& out, const fs::path& picture, const fs::path& ct) {
   if (out.extension() != ".yaml") return invalid_argument(out.string() + ": a scene is a .yaml file");
   std::error_code ec;
-  if (fs::exists(fs::symlink_status(out, ec)))
-    return failed_precondition(out.string() + ": already there; a scene is never written over (choose another name, or "
-                                         "remove it first)");
+  for (const fs::path& file : {out, picture})
+    if (fs::exists(fs::symlink_status(file, ec)))
+      return failed_precondition(file.string() + ": already there; a scene and its picture are never written over "
+                                                 "(choose another name, or remove it first)");
   const fs::path folder = out.parent_path().empty() ? fs::path(".") : out.parent_path();
   if (!fs::is_directory(folder, ec)) return invalid_argument(out.string() + ": no folder " + folder.string());
+  if (fs::is_directory(ct, ec) && fs::equivalent(folder, ct, ec))
+    return invalid_argument(out.string() + ": in the CT's DICOM folder, where every file is read as a slice; write "
+                                           "the scene beside it");
   return {};
 }
 
-// Writes `text` to `file` only if no file is there (O_EXCL: two runs at once cannot both write).
-Status write_new_file(const fs::path& file, const std::string& text) {
-  const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0)
-    return errno == EEXIST ? failed_precondition(file.string() + ": already there; a scene is never written over")
-                           : io_error(file.string() + ": cannot create: " + std::strerror(errno));
+// `bytes` in a new file beside `beside` that no other run can have named.
+Result<fs::path> write_temporary(const fs::path& beside, const std::string& bytes) {
+  std::string name = ((beside.parent_path().empty() ? fs::path(".") : beside.parent_path()) / ".lftrack-scene-new-XXXXXX").string();
+  const int fd = ::mkstemp(name.data());
+  if (fd < 0) return io_error(beside.string() + ": cannot write in its folder: " + std::strerror(errno));
   std::size_t done = 0;
-  while (done < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const std::string why = std::strerror(errno);
-      ::close(fd);
-      ::unlink(file.c_str());
-      return io_error(file.string() + ": write failed: " + why);
-    }
+    if (n <= 0) break;
     done += std::size_t(n);
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
-    ::unlink(file.c_str());
-    return io_error(file.string() + ": write failed");
+  const bool written = done == bytes.size() && ::fsync(fd) == 0;
+  const std::string why = std::strerror(errno);
+  if (::close(fd) != 0 || !written) {
+    ::unlink(name.c_str());
+    return io_error(beside.string() + ": write failed: " + why);
   }
-  return {};
+  ::chmod(name.c_str(), 0644);
+  return fs::path(name);
+}
+
+// Gives `temporary` the name `file` unless a file has it (link(): atomic, never over a file).
+Status claim(const fs::path& temporary, const fs::path& file) {
+  const int rc = ::link(temporary.c_str(), file.c_str());
+  const int error = errno;
+  ::unlink(temporary.c_str());
+  if (rc == 0) return {};
+  return error == EEXIST ? failed_precondition(file.string() + ": already there (another run wrote it); a scene and "
+                                                               "its picture are never written over")
+                         : io_error(file.string() + ": cannot create: " + std::strerror(error));
+}
+
+// An argument as a shell takes it back: as it is when it is plain, else in single quotes.
+std::string shell_quoted(const std::string& arg) {
+  const bool plain = !arg.empty() && std::all_of(arg.begin(), arg.end(), [](unsigned char c) {
+    return std::isalnum(c) || std::strchr("_-./,=:+@%", c) != nullptr;
+  });
+  if (plain) return arg;
+  std::string out = "'";
+  for (char c : arg) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
 }
 
 Status list_structures(const SceneNewOptions& o) {
@@ -80,11 +108,9 @@ Status list_structures(const SceneNewOptions& o) {
 
 Status run(const SceneNewOptions& o) {
   if (o.list_structures) return list_structures(o);
-  if (o.ct.empty() || o.room.empty() || o.out.empty())
-    return invalid_argument("scene new needs --ct DIR|FILE, --room FILE and -o FILE (or --rtstruct FILE --list-structures)");
   const fs::path out(o.out);
-  LFTRACK_RETURN_IF_ERROR(check_scene_path(out));
   const fs::path picture_file = out.parent_path() / (out.stem().string() + "-setup.png");
+  LFTRACK_RETURN_IF_ERROR(check_scene_path(out, picture_file, o.ct));
 
   NewSceneRequest request;
   request.ct = o.ct;
@@ -115,7 +141,7 @@ Status run(const SceneNewOptions& o) {
 
   // The scene must load and prepare as any scene does before it is written.
   const fs::path folder = fs::absolute(out).parent_path();
-  auto scene = parse_scene(setup->yaml, out.string(), folder);
+  auto scene = parse_scene(setup->yaml, out.string() + " (not written)", folder);
   if (!scene.ok()) return Status(scene.status().code(), "the new scene does not load: " + scene.status().message());
   tracking::ThreadPool pool(o.threads);
   auto prepared = prepare_scene(*scene, "", &pool);
@@ -129,11 +155,28 @@ Status run(const SceneNewOptions& o) {
   marks.target = setup->target ? &*setup->target : nullptr;
   auto picture = setup_picture(*prepared, marks, &pool);
   if (!picture.ok()) return picture.status();
-  const fs::path picture_tmp = picture_file.string() + ".tmp";
-  LFTRACK_RETURN_IF_ERROR(tracking::write_rgb_png(picture_tmp, *picture));
-  fs::rename(picture_tmp, picture_file, ec);
-  if (ec) return io_error(picture_file.string() + ": " + ec.message());
-  LFTRACK_RETURN_IF_ERROR(write_new_file(out, setup->yaml));
+  // Both files are written under names no other run can have, then take their own names, the
+  // scene first: a run that finds the scene taken writes nothing, and the picture beside a scene
+  // is always that scene's.
+  auto picture_tmp = write_temporary(out, "");
+  if (!picture_tmp.ok()) return picture_tmp.status();
+  if (Status s = tracking::write_rgb_png(*picture_tmp, *picture); !s.ok()) {
+    ::unlink(picture_tmp->c_str());
+    return s;
+  }
+  auto scene_tmp = write_temporary(out, setup->yaml);
+  if (!scene_tmp.ok()) {
+    ::unlink(picture_tmp->c_str());
+    return scene_tmp.status();
+  }
+  if (Status s = claim(*scene_tmp, out); !s.ok()) {
+    ::unlink(picture_tmp->c_str());
+    return s;
+  }
+  if (Status s = claim(*picture_tmp, picture_file); !s.ok()) {
+    ::unlink(out.c_str());
+    return s;
+  }
 
   const Eigen::Vector3d& iso = setup->isocentre_ct_mm;
   std::printf("scene       %s\n", out.c_str());
@@ -166,7 +209,7 @@ Command add_scene_new_command(CLI::App* parent, int argc, char** argv) {
   auto o = std::make_shared<SceneNewOptions>();
   // The command as a user types it, for the scene's header: the program by its name.
   for (int i = 0; i < argc; ++i)
-    o->command_line += std::string(i ? " " : "") + (i == 0 ? fs::path(argv[0]).filename().string() : argv[i]);
+    o->command_line += std::string(i ? " " : "") + (i == 0 ? fs::path(argv[0]).filename().string() : shell_quoted(argv[i]));
   app->add_option("--ct", o->ct, "The planning CT: a DICOM series' folder or a NIfTI file")->check(not_empty());
   app->add_option("--room", o->room, "The room file: views, detectors, couch, imaging (scenes/room/*.yaml)")
       ->check(not_empty());
@@ -200,6 +243,13 @@ Command add_scene_new_command(CLI::App* parent, int argc, char** argv) {
   app->add_option("--name", o->name, "The scene's name (default: the file's)")->check(not_empty());
   app->add_flag("--precompute", o->precompute, "Build the light fields at once");
   app->add_option("--threads", o->threads, "Threads (0: all cores)")->check(CLI::Range(0, 1024));
+  // --ct, --room and -o are needed unless the structures are only listed: a usage error (exit 2).
+  app->callback([o] {
+    if (o->list_structures) return;
+    const std::pair<bool, const char*> needed[] = {{!o->ct.empty(), "--ct"}, {!o->room.empty(), "--room"}, {!o->out.empty(), "-o"}};
+    for (const auto& [given, name] : needed)
+      if (!given) throw CLI::RequiredError(std::string(name) + " is required (or --rtstruct FILE --list-structures)");
+  });
   return [o] { return run(*o); };
 }
 

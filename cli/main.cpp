@@ -131,7 +131,12 @@ int main(int argc, char** argv) {
     else if (app.got_subcommand("commission"))
       status = commission();
     if (!status.ok()) {
-      spdlog::error("{}", status.message());
+      // A message may quote what a file or a user wrote (a DICOM name, a path): control characters
+      // other than line breaks are shown as '?', never sent to the terminal.
+      std::string message = status.message();
+      for (char& ch : message)
+        if ((static_cast<unsigned char>(ch) < 0x20 && ch != '\n' && ch != '\t') || ch == 0x7f) ch = '?';
+      spdlog::error("{}", message);
       return 1;
     }
     // What a command printed must have reached its reader: a full disk or a closed pipe under

@@ -99,6 +99,20 @@ TEST_F(SceneNewCli, WritesTheSceneAndItsPictureAndNeverWritesOverEither) {
   EXPECT_FALSE(lftrack(scene_new("patient.yaml"), &out).ok());
   EXPECT_NE(out.find("never written over"), std::string::npos) << out;
   EXPECT_EQ(test::contents(scene), first);
+  // A picture already there (an earlier scene's) is never replaced: refused, nothing written.
+  std::ofstream(dir_.path() / "second-setup.png") << "an earlier picture";
+  EXPECT_FALSE(lftrack(scene_new("second.yaml"), &out).ok());
+  EXPECT_NE(out.find("second-setup.png: already there"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir_.path() / "second.yaml"));
+  EXPECT_EQ(test::contents(dir_.path() / "second-setup.png"), "an earlier picture");
+  for (const auto& entry : fs::directory_iterator(dir_.path()))
+    EXPECT_EQ(entry.path().filename().string().rfind(".lftrack-scene-new-", 0), std::string::npos)
+        << "a temporary file left: " << entry.path();
+  // Into the CT's DICOM folder (where every file is read as a slice): refused.
+  std::vector<std::string> into_ct = scene_new("x.yaml");
+  into_ct[3] = dir_.path().string();
+  EXPECT_FALSE(lftrack(into_ct, &out).ok());
+  EXPECT_NE(out.find("in the CT's DICOM folder"), std::string::npos) << out;
   // Not a .yaml, or in no folder: refused before anything is read.
   EXPECT_FALSE(lftrack(scene_new("patient.txt"), &out).ok());
   EXPECT_NE(out.find("a scene is a .yaml file"), std::string::npos) << out;
@@ -142,6 +156,10 @@ TEST_F(SceneNewCli, ConflictingOrAbsurdOptionsAreUsageErrors) {
            {"scene", "new", "--list-structures"},
            {"scene", "new", "--ct", "x", "--isocentre", "1,2"},
            {"scene", "new", "--ct", "x", "--isocentre", "inf,0,0"},
+           {"scene", "new", "--room", "r.yaml", "-o", "x.yaml", "--isocentre", "1,2,3"},  // no --ct
+           {"scene", "new", "--ct", "x", "-o", "x.yaml", "--isocentre", "1,2,3"},        // no --room
+           {"scene", "new", "--rtstruct", "s.dcm", "--target", "t", "--ct", "x", "-o", "y.yaml"},  // no --room
+           {"scene", "new", "--ct", "x", "--room", "r.yaml", "-o", "x.yaml", "--roi-mask-mm", "5"},  // no --rtstruct
            {"scene"}}) {
     const Status s = lftrack(args, &out);
     EXPECT_NE(s.message().find("(status 512)"), std::string::npos) << args.back() << ": " << s.message() << "\n" << out;

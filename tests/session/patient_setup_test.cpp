@@ -239,7 +239,28 @@ TEST_F(PatientSetup, ATargetThatEnclosesNothingOrIsNotThereIsRefused) {
   NewSceneRequest iso_given;
   iso_given.isocentre_ct_mm = kIsocentre;
   m = refusal(iso_given);
-  EXPECT_NE(m.find("covers no voxel of the CT"), std::string::npos) << m;
+  EXPECT_NE(m.find("reaches beyond the scanned slices (1 of its 1 contours lie outside the CT)"), std::string::npos) << m;
+  // Part of it beyond the last slice is as refused: the CT does not hold the whole target.
+  structures_.structures[1].contours = vertebral_body();
+  structures_.structures[1].contours.push_back({{0, 100, 900}, {20, 100, 900}, {20, 120, 900}});
+  m = refusal();
+  EXPECT_NE(m.find("(1 of its 12 contours lie outside the CT)"), std::string::npos) << m;
+  // A contour repeated on its slice: refused as what it is, with the file named.
+  structures_.structures[1].contours = vertebral_body();
+  structures_.structures[1].contours.push_back(structures_.structures[1].contours[3]);
+  m = refusal();
+  EXPECT_NE(m.find("structures.dcm: target 'L3 body', contour 12 repeats another contour of its slice"),
+            std::string::npos)
+      << m;
+  // Contours 1 mm off the CT's slices (3 mm apart): taken, and said.
+  structures_.structures[1].contours = vertebral_body();
+  for (auto& ring : structures_.structures[1].contours)
+    for (Vector3d& q : ring) q.z() += 1;
+  auto off = compose();
+  ASSERT_TRUE(off.ok()) << off.status().message();
+  ASSERT_FALSE(off->warnings.empty());
+  EXPECT_NE(off->warnings.front().find("a contour lies 1.00 mm from the CT slice"), std::string::npos)
+      << off->warnings.front();
 }
 
 TEST_F(PatientSetup, ANiftiCtTakesAGivenIsocentreButNeverAPlan) {

@@ -117,6 +117,20 @@ TEST_F(SceneRoom, AnErrorInTheRoomNamesTheRoomFileAndItsLine) {
       << scene.status().message();
 }
 
+TEST_F(SceneRoom, AKeyTwiceInTheRoomIsTheRoomsOwnErrorAndARoomWithoutDetectorsIsNamed) {
+  std::string room = kRoom;
+  room.replace(room.find("  max_step_mm: 1.5"), 18, "  max_step_mm: 1.5\n  max_step_mm: 2");
+  write("rooms/room.yaml", room);
+  auto scene = load(kPatient);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("room.yaml:22:3: 'max_step_mm' appears twice in safety"), std::string::npos)
+      << scene.status().message();
+  write("rooms/room.yaml", "version: 1\nsafety: {max_step_mm: 1}\n");
+  scene = load(kPatient);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("neither it nor its room file"), std::string::npos) << scene.status().message();
+}
+
 TEST_F(SceneRoom, ARoomFileHoldsOnlyTheRoom) {
   // A patient in the room file, a room in a room, a commissioning shared by every patient.
   for (const std::string& extra :

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -85,7 +86,7 @@ Status write_rgb_png(const fs::path& file, const RgbImage& image) {
     return invalid_argument(file.string() + ": an RGB picture of " + std::to_string(image.rows) + " x " +
                             std::to_string(image.cols) + " pixels with " + std::to_string(image.rgb.size()) + " bytes");
   std::unique_ptr<std::FILE, FileCloser> fp(std::fopen(file.c_str(), "wb"));
-  if (!fp) return io_error(file.string() + ": cannot open for writing");
+  if (!fp) return io_error(file.string() + ": cannot open for writing: " + std::strerror(errno));
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
   if (!info) {

@@ -92,6 +92,11 @@ Status load(const fs::path& file, DcmFileFormat* format, const DcmTagKey& stop_a
                                                  ERM_autoDetect, stop_at);
   if (c.bad())
     return corrupt_data(file.string() + ": not a DICOM file, or a damaged one (DCMTK: " + c.text() + ")");
+  // Names and labels as UTF-8 whatever Specific Character Set (0008,0005) the file declares, so
+  // that a name typed on the command line matches and the scene holds valid text.
+  if (const OFCondition u = format->convertToUTF8(); u.bad())
+    return unsupported(file.string() + ": its text cannot be read as UTF-8 from its Specific Character Set (0008,0005) (DCMTK: " +
+                       std::string(u.text()) + ")");
   return {};
 }
 
@@ -195,8 +200,17 @@ Result<TableTopTolerances> tolerances(DRTPlanIOD& plan, DRTBeamSequence::Item& i
       *out = static_cast<double>(value);
       finite = finite && std::isfinite(**out);
     };
-    auto decimal = [&](OFCondition (Table::*get)(Float64&, unsigned long) const, std::optional<double>* out) {
-      take(get, Float64(0), out);
+    // A DS tolerance from its text, parsed strictly (dcmrt's number getter reads "3abc" as 3).
+    bool well_formed = true;
+    auto decimal = [&](OFCondition (Table::*get)(OFString&, signed long) const, std::optional<double>* out) {
+      OFString text;
+      if ((table.*get)(text, 0).bad() || text.empty()) return;
+      std::vector<double> value;
+      if (!parse_decimals(trimmed(text), &value) || value.size() != 1) {
+        well_formed = false;
+        return;
+      }
+      *out = value[0];
     };
     auto single = [&](OFCondition (Table::*get)(Float32&, unsigned long) const, std::optional<double>* out) {
       take(get, Float32(0), out);
@@ -207,9 +221,9 @@ Result<TableTopTolerances> tolerances(DRTPlanIOD& plan, DRTBeamSequence::Item& i
     single(&Table::getTableTopPitchAngleTolerance, &t.pitch_deg);
     single(&Table::getTableTopRollAngleTolerance, &t.roll_deg);
     decimal(&Table::getPatientSupportAngleTolerance, &t.patient_support_deg);
-    if (!finite)
+    if (!finite || !well_formed)
       return corrupt_data(where + ": tolerance table " + std::to_string(number) +
-                          " holds a non-finite tolerance");
+                          " holds a tolerance that is not one finite decimal number");
     return t;
   }
   return corrupt_data(where + ": " + beam_text(beam) + " references tolerance table " +
@@ -262,6 +276,11 @@ Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::s
   for (std::size_t i = 0; i < items.getNumberOfItems(); ++i) {
     auto b = rt::read_beam(items.getItem(i), i, where);
     if (!b.ok()) return b.status();
+    for (const RtPlanBeam& other : setup.beams)
+      if (other.number == b->number)
+        return corrupt_data(where + ": two beams are numbered " + std::to_string(b->number) +
+                            " (Beam Number (300A,00C0) names one beam): " + rt::beam_text(other) + " and " +
+                            rt::beam_text(*b));
     setup.beams.push_back(*b);
   }
 
@@ -288,17 +307,21 @@ Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::s
     int number = 0;
     const auto [ptr, ec] = std::from_chars(beam.data(), beam.data() + beam.size(), number);
     const bool is_number = ec == std::errc() && ptr == beam.data() + beam.size();
-    for (std::size_t i = 0; i < setup.beams.size() && chosen.empty(); ++i)
-      if (is_number && setup.beams[i].number == number) chosen.push_back(i);
-    for (std::size_t i = 0; i < setup.beams.size() && chosen.empty(); ++i)
-      if (setup.beams[i].name == beam) chosen.push_back(i);
+    std::vector<std::size_t> by_number, by_name;
+    for (std::size_t i = 0; i < setup.beams.size(); ++i) {
+      if (is_number && setup.beams[i].number == number) by_number.push_back(i);
+      if (setup.beams[i].name == beam) by_name.push_back(i);
+    }
+    if (by_name.size() > 1 || (!by_number.empty() && !by_name.empty() && by_number != by_name))
+      return invalid_argument(where + ": --beam '" + beam + "' names more than one beam (by number or by name): " +
+                              rt::beam_list(setup.beams));
+    chosen = by_number.empty() ? by_name : by_number;
     if (chosen.empty())
       return not_found(where + ": no beam '" + beam +
                        "' in the plan; its beams: " + rt::beam_list(setup.beams));
   }
 
   setup.beam = setup.beams[chosen.front()];
-  DRTBeamSequence::Item& item = items.getItem(chosen.front());
   for (std::size_t i : chosen) {
     auto position = rt::patient_position(plan, items.getItem(i), setup.beams[i], where);
     if (!position.ok()) return position.status();
@@ -310,9 +333,25 @@ Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::s
                               ") set the patient up differently: name one with --beam");
     }
   }
-  auto tolerances = rt::tolerances(plan, item, setup.beam, where);
-  if (!tolerances.ok()) return tolerances.status();
-  setup.tolerances = *tolerances;
+  // Every chosen beam's tolerance table bounds the couch: the tightest of each tolerance.
+  for (std::size_t i : chosen) {
+    auto t = rt::tolerances(plan, items.getItem(i), setup.beams[i], where);
+    if (!t.ok()) return t.status();
+    if (t->table_number == 0) continue;
+    TableTopTolerances& all = setup.tolerances;
+    if (std::find(all.table_numbers.begin(), all.table_numbers.end(), t->table_number) == all.table_numbers.end())
+      all.table_numbers.push_back(t->table_number);
+    if (all.table_number == 0) all.table_number = t->table_number;
+    const auto tightest = [](std::optional<double>* into, const std::optional<double>& v) {
+      if (v && (!*into || *v < **into)) *into = v;
+    };
+    tightest(&all.lateral_mm, t->lateral_mm);
+    tightest(&all.longitudinal_mm, t->longitudinal_mm);
+    tightest(&all.vertical_mm, t->vertical_mm);
+    tightest(&all.pitch_deg, t->pitch_deg);
+    tightest(&all.roll_deg, t->roll_deg);
+    tightest(&all.patient_support_deg, t->patient_support_deg);
+  }
   return setup;
 }
 

@@ -18,7 +18,11 @@ namespace {
 
 std::string mm3(const Vector3d& v, int digits = 2) {
   std::ostringstream s;
-  s << std::fixed << std::setprecision(digits) << '(' << v.x() << ", " << v.y() << ", " << v.z() << ')';
+  if (v.cwiseAbs().maxCoeff() < 1e6)
+    s << std::fixed << std::setprecision(digits);
+  else
+    s << std::setprecision(6);  // 1e300 as 1e+300, not 300 digits
+  s << '(' << v.x() << ", " << v.y() << ", " << v.z() << ')';
   return s.str();
 }
 
@@ -64,9 +68,10 @@ std::string comment(const std::string& text) {
 }
 
 std::string relative_to(const fs::path& file, const fs::path& folder) {
+  // From the real folders: a link in either path must not make the way between them wrong.
   std::error_code ec;
-  const fs::path target = fs::absolute(file, ec).lexically_normal();
-  const fs::path base = fs::absolute(folder.empty() ? fs::path(".") : folder, ec).lexically_normal();
+  const fs::path target = fs::weakly_canonical(fs::absolute(file, ec), ec);
+  const fs::path base = fs::weakly_canonical(fs::absolute(folder.empty() ? fs::path(".") : folder, ec), ec);
   const fs::path rel = target.lexically_relative(base);
   // Relative where the two stay together (a scene beside its CT and room); absolute where the way
   // between them climbs to the root, which no one reads or moves as one.
@@ -155,7 +160,11 @@ Envelope envelope_from(const std::optional<RtPlanSetup>& plan, std::vector<std::
   Envelope e;
   if (!plan || plan->tolerances.table_number == 0) return e;
   const TableTopTolerances& t = plan->tolerances;
-  const std::string table = "tolerance table " + std::to_string(t.table_number) + " of the plan";
+  std::string numbers;
+  for (int n : t.table_numbers) numbers += (numbers.empty() ? "" : ", ") + std::to_string(n);
+  const std::string table =
+      (t.table_numbers.size() > 1 ? "tolerance tables " + numbers + " of the plan (the tightest)"
+                                  : "tolerance table " + std::to_string(t.table_number) + " of the plan");
   const auto bound = [&](const std::optional<double>& value, const char* what, double* out, std::string* from) {
     if (!value) return;
     if (!(*value > 0) || !std::isfinite(*value)) {
@@ -233,12 +242,25 @@ Result<TargetContours> target_from_structure_set(const fs::path& rtstruct, const
                                (types.empty() ? "" : " (it has " + types + ")") +
                                ": a target is a volume, contoured slice by slice");
   }
-  LFTRACK_RETURN_IF_ERROR(check_target_polygons(target.polygons, target.name));
+  if (Status s = check_target_polygons(target.polygons, target.name); !s.ok())
+    return Status(s.code(), rtstruct.string() + ": " + s.message());
   auto mask = rasterise_target(target.polygons, grid, target.name);
-  if (!mask.ok()) return mask.status();
+  if (!mask.ok()) return Status(mask.status().code(), rtstruct.string() + ": " + mask.status().message());
+  if (mask->contours_beyond_scan > 0)
+    return failed_precondition(rtstruct.string() + ": target '" + target.name + "' reaches beyond the scanned slices (" +
+                               std::to_string(mask->contours_beyond_scan) + " of its " +
+                               std::to_string(target.polygons.size()) +
+                               " contours lie outside the CT): it was contoured on another scan, or the CT is cut short");
   if (mask->voxels_inside == 0)
     return failed_precondition(rtstruct.string() + ": target '" + target.name +
-                               "' covers no voxel of the CT: its contours lie beyond the scanned slices");
+                               "' covers no voxel of the CT: its contours enclose no voxel centre");
+  if (mask->most_off_slice_mm > 0.25 * grid.spacing_mm.z()) {
+    std::ostringstream m;
+    m << std::fixed << std::setprecision(2) << "target '" << target.name << "': a contour lies "
+      << mask->most_off_slice_mm << " mm from the CT slice it is filled on (slices " << grid.spacing_mm.z()
+      << " mm apart): it was contoured on another grid; check the picture";
+    target.warnings.push_back(m.str());
+  }
   target.mask = std::move(*mask);
   target.box = target_box(target.polygons);
   return target;
@@ -268,7 +290,10 @@ std::string structure_list(const RtStructureSet& set) {
       points += c.points_ct_mm.size();
       closed += c.geometric_type == "CLOSED_PLANAR";
     }
-    s << "  " << std::setw(4) << st.roi_number << "  " << std::left << std::setw(24) << ("'" + st.name + "'")
+    std::string name = "'";  // (built in steps: GCC 12 warns of "'" + string, -Wrestrict)
+    name += comment(st.name);
+    name += '\'';
+    s << "  " << std::setw(4) << st.roi_number << "  " << std::left << std::setw(24) << name
       << std::right << ' ' << st.contours.size() << " contours (" << closed << " closed planar), " << points
       << " points\n";
   }
@@ -390,7 +415,7 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
     iso->ct_mm = target->box.centre_ct_mm();
     iso->from = "the centre of target '" + target->name + "''s box (no plan and no --isocentre given)";
   }
-  LFTRACK_RETURN_IF_ERROR(check_inside_ct(iso->ct_mm, grid, "the isocentre"));
+  LFTRACK_RETURN_IF_ERROR(check_inside_ct(iso->ct_mm, grid, "the isocentre (" + comment(iso->from) + ")"));
   out.isocentre_ct_mm = iso->ct_mm;
   out.isocentre_from = iso->from;
 
@@ -407,6 +432,7 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
         << "(another target, or another plan?); a wider --roi-margin-mm takes both in";
       return failed_precondition(m.str());
     }
+    for (const std::string& w : target->warnings) out.warnings.push_back(w);
     out.target_name = target->name;
     out.target_polygons = target->polygons;
     out.target = std::move(target->mask);

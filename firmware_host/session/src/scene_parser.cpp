@@ -299,6 +299,8 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
     scene.nominal_T_room_from_ct = pose;
   }
   YAML::Node detectors;
+  if (!root["detectors"] && !scene.room_file.empty())
+    return error(root, "the scene needs 'detectors', and neither it nor its room file " + scene.room_file + " gives them");
   LFTRACK_RETURN_IF_ERROR(need(root, "detectors", "the scene", &detectors));
   if (!detectors.IsSequence() || detectors.size() == 0 || detectors.size() > 4) {
     return error(detectors, "detectors must be a list of 1 to 4 detectors");

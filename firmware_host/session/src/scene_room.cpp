@@ -83,6 +83,24 @@ Status SceneParser::merge_room(YAML::Node& root, Scene* scene) {
                              "safety.commissioning belongs to the patient's scene: a room file is shared by "
                              "every patient, and each is commissioned on its own CT");
 
+  // A key written twice anywhere in the room file (YAML keeps the first) is the room's own error.
+  const std::function<Status(const YAML::Node&, const std::string&)> no_repeats =
+      [&](const YAML::Node& n, const std::string& within) -> Status {
+    if (n.IsSequence()) {
+      for (std::size_t i = 0; i < n.size(); ++i)
+        LFTRACK_RETURN_IF_ERROR(no_repeats(n[i], within + "[" + std::to_string(i) + "]"));
+    } else if (n.IsMap()) {
+      std::set<std::string> seen;
+      for (const auto& kv : n) {
+        if (!kv.first.IsScalar()) return room_parser.error(kv.first, "a key in " + within + " must be a plain name");
+        if (!seen.insert(kv.first.Scalar()).second)
+          return room_parser.error(kv.first, "'" + kv.first.Scalar() + "' appears twice in " + within);
+        LFTRACK_RETURN_IF_ERROR(no_repeats(kv.second, within.empty() ? kv.first.Scalar() : within + "." + kv.first.Scalar()));
+      }
+    }
+    return {};
+  };
+  LFTRACK_RETURN_IF_ERROR(no_repeats(room, ""));
   room_source_ = resolved;
   for (const auto& kv : room) {
     if (!kRoomSections.count(kv.first.Scalar())) continue;

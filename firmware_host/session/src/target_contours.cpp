@@ -173,10 +173,24 @@ Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons, 
                               " does not lie in one of the CT's slices (its plane is tilted from the slices by more than "
                               "2.5 degrees): contour the target on the planning CT's axial slices");
     }
-    const long k = std::lround((index_from_ct * p[0]).z());
-    if (k < 0 || k >= grid.size.z()) continue;  // beyond the scan: in the box, not in the mask
+    const double kf = (index_from_ct * p[0]).z();
+    const long k = std::lround(kf);
+    if (k < 0 || k >= grid.size.z()) {  // beyond the scan: in the box, not in the mask
+      ++mask.contours_beyond_scan;
+      continue;
+    }
+    mask.most_off_slice_mm = std::max(mask.most_off_slice_mm, std::abs(kf - double(k)) * grid.spacing_mm.z());
     std::vector<Vector2d> flat;
     for (const Vector3d& q : p) flat.push_back((index_from_ct * q).head<2>());
+    for (const auto& other : slices[int(k)]) {
+      if (other.size() != flat.size()) continue;
+      bool same = true;
+      for (std::size_t i = 0; i < flat.size() && same; ++i) same = (other[i] - flat[i]).norm() < 1e-6;
+      if (same)
+        return invalid_argument(contour_name(name, c) +
+                                " repeats another contour of its slice: two equal contours enclose nothing together "
+                                "(a contour inside another is a hole)");
+    }
     slices[int(k)].push_back(std::move(flat));
   }
   std::vector<double> crossings;

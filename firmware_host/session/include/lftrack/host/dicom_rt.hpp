@@ -23,7 +23,8 @@ namespace lftrack::host {
 struct TableTopTolerances {
   std::optional<double> lateral_mm, longitudinal_mm, vertical_mm;  // (300A,0053) (300A,0052) (300A,0051)
   std::optional<double> pitch_deg, roll_deg, patient_support_deg;  // (300A,004F) (300A,0050) (300A,004C)
-  int table_number = 0;                                            // 0: the beam references none
+  int table_number = 0;            // 0: the beam references none; else the first table taken
+  std::vector<int> table_numbers;  // every table taken (the chosen beams'), each tolerance the tightest of them
 };
 
 struct RtPlanBeam {

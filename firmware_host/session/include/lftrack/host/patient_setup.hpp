@@ -64,6 +64,7 @@ struct TargetContours {
   std::vector<TargetPolygon> polygons;  // CT frame
   TargetMask mask;                      // on the CT's grid
   TargetBox box;
+  std::vector<std::string> warnings;    // e.g. contours off the CT's slices, with the figure
 };
 Result<TargetContours> target_from_structure_set(const std::filesystem::path& rtstruct, const std::string& name,
                                                  const CtDicomIdentity& ct, const tracking::VolumeGeometry& grid);

@@ -38,10 +38,13 @@ TargetBox target_box(const std::vector<TargetPolygon>& polygons);
 // passes within half a slice of its centre, along the grid's k axis), it is inside an odd number of
 // polygons (holes are polygons inside polygons). Polygons not parallel to the grid's slices are
 // refused: a CT's structure set is contoured on its axial slices.
+// Refused too: a contour repeated on its slice (two equal polygons cancel each other).
 struct TargetMask {
   tracking::VolumeGeometry geometry;
   std::vector<std::uint8_t> inside;
   std::int64_t voxels_inside = 0;
+  int contours_beyond_scan = 0;    // contours whose plane lies beyond the first or last slice
+  double most_off_slice_mm = 0;    // the farthest a contour's plane lies from its slice's centre
   double volume_cc() const;
 };
 Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons,
