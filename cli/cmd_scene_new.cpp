@@ -72,7 +72,9 @@ Result<fs::path> write_temporary(const fs::path& beside, const std::string& byte
     ::unlink(name.c_str());
     return io_error(beside.string() + ": write failed: " + why);
   }
-  ::chmod(name.c_str(), 0644);
+  const mode_t mask = ::umask(0);  // mkstemp made it 0600: the mode any new file would have
+  ::umask(mask);
+  ::chmod(name.c_str(), 0666 & ~mask);
   return fs::path(name);
 }
 
@@ -192,7 +194,11 @@ Status run(const SceneNewOptions& o) {
               "yellow the ROI, red the target)\n",
               picture_file.c_str());
   for (const std::string& w : setup->warnings) spdlog::warn("{}", w);
-  if (o.precompute) LFTRACK_RETURN_IF_ERROR(precompute_light_fields(*prepared, "", &pool));
+  if (o.precompute) {
+    if (Status s = precompute_light_fields(*prepared, "", &pool); !s.ok())
+      return Status(s.code(), "the scene and its picture are written; its light fields are not (lftrack precompute "
+                              "--scene " + out.string() + " builds them): " + s.message());
+  }
   std::printf("next        look at the picture, then:\n");
   if (!o.precompute) std::printf("              build/bin/lftrack precompute --scene %s\n", out.c_str());
   std::printf("              build/bin/lftrack commission --scene %s   (the verdict's floors)\n", out.c_str());

@@ -118,7 +118,7 @@ Result<std::unique_ptr<TrackingLoop>> create_loop(drivers::FrameSource* frames, 
   EXPECT_EQ(parts.geometry.views.size(), 2u);
   tracking::RegistrationSetup setup;
   for (std::size_t v = 0; v < parts.geometry.views.size(); ++v)
-    setup.views.push_back({parts.geometry.views[v], parts.geometry.roi_windows[v]});
+    setup.views.push_back({parts.geometry.views[v], parts.geometry.roi_windows[v], {}});
   auto registration = tracking::Registration::create(std::make_shared<PatternRenderer>(o.per_render), setup, nullptr);
   if (!registration.ok()) return registration.status();
   t->registration = std::move(registration).value();

@@ -28,18 +28,7 @@ using Eigen::Vector3d;
 const Vector3d kIsocentre(6, 107, 183);
 constexpr double kFirstSliceZ = 85.91;
 
-std::vector<std::vector<Vector3d>> vertebral_body() {
-  std::vector<std::vector<Vector3d>> contours;
-  for (int k = 28; k <= 38; ++k) {
-    std::vector<Vector3d> ring;
-    for (int i = 0; i < 48; ++i) {
-      const double a = 2 * M_PI * i / 48;
-      ring.emplace_back(6 + 18 * std::cos(a), 107 + 14 * std::sin(a), kFirstSliceZ + 3 * k);
-    }
-    contours.push_back(ring);
-  }
-  return contours;
-}
+std::vector<std::vector<Vector3d>> vertebral_body() { return test::lumbar_ct_vertebral_body(); }
 
 class PatientSetup : public ::testing::Test {
  protected:

@@ -54,14 +54,7 @@ class RoiMask : public ::testing::Test {
     set.frame_of_reference_uid = ct->frame_of_reference_uid;
     set.series_uid = ct->series_uid;
     set.study_uid = ct->study_uid;
-    std::vector<std::vector<Vector3d>> body;
-    for (int k = 28; k <= 38; ++k) {
-      std::vector<Vector3d> ring;
-      for (int i = 0; i < 48; ++i)
-        ring.emplace_back(6 + 18 * std::cos(2 * M_PI * i / 48), 107 + 14 * std::sin(2 * M_PI * i / 48), 85.91 + 3 * k);
-      body.push_back(ring);
-    }
-    set.structures = {{1, "L3 body", body}};
+    set.structures = {{1, "L3 body", test::lumbar_ct_vertebral_body()}};
     test::write_rt_structure_set(dir_->path() / "structures.dcm", set);
   }
   static void TearDownTestSuite() { dir_.reset(); }

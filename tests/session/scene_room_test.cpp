@@ -131,6 +131,33 @@ TEST_F(SceneRoom, AKeyTwiceInTheRoomIsTheRoomsOwnErrorAndARoomWithoutDetectorsIs
   EXPECT_NE(scene.status().message().find("neither it nor its room file"), std::string::npos) << scene.status().message();
 }
 
+TEST_F(SceneRoom, AFileTheRoomNamesIsRelativeToTheRoomFile) {
+  std::string room = kRoom;
+  room.replace(room.find("  - name: A\n"), 12, "  - name: A\n    frames: {type: replay, sequence: archive}\n");
+  write("rooms/room.yaml", room);
+  auto scene = load(kPatient);
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->detectors[0].frames.sequence, (dir_.path() / "rooms/archive").string());
+}
+
+TEST_F(SceneRoom, ARoomThatRepeatsItselfWithoutEndIsRefused) {
+  // An alias inside its own anchor, and ten levels of aliases each ten times the last.
+  write("rooms/room.yaml", "version: 1\nsim: &a [*a]\n");
+  auto scene = load(kPatient);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("larger or deeper than a room is"), std::string::npos) << scene.status().message();
+  std::string laughs = "version: 1\nsafety:\n  l0: &l0 [1]\n";
+  for (int i = 1; i <= 10; ++i) {
+    laughs += "  l" + std::to_string(i) + ": &l" + std::to_string(i) + " [";
+    for (int k = 0; k < 10; ++k) laughs += std::string(k ? ", " : "") + "*l" + std::to_string(i - 1);
+    laughs += "]\n";
+  }
+  write("rooms/room.yaml", laughs);
+  scene = load(kPatient);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("larger or deeper than a room is"), std::string::npos) << scene.status().message();
+}
+
 TEST_F(SceneRoom, ARoomFileHoldsOnlyTheRoom) {
   // A patient in the room file, a room in a room, a commissioning shared by every patient.
   for (const std::string& extra :

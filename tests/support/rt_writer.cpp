@@ -4,6 +4,7 @@
 #include <dcmtk/dcmdata/dcfilefo.h>
 #include <dcmtk/dcmdata/dcuid.h>
 
+#include <cmath>
 #include <cstdio>
 #include <stdexcept>
 
@@ -247,6 +248,19 @@ void edit_dicom_value(const fs::path& file, std::uint16_t group, std::uint16_t e
     put(ds, tag, *value);
   }
   check(format.saveFile(file.c_str(), EXS_Unknown), "save " + file.string());
+}
+
+std::vector<std::vector<Eigen::Vector3d>> lumbar_ct_vertebral_body() {
+  std::vector<std::vector<Eigen::Vector3d>> contours;
+  for (int k = 28; k <= 38; ++k) {
+    std::vector<Eigen::Vector3d> ring;
+    for (int i = 0; i < 48; ++i) {
+      const double a = 2 * M_PI * i / 48;
+      ring.emplace_back(6 + 18 * std::cos(a), 107 + 14 * std::sin(a), 85.91 + 3 * k);
+    }
+    contours.push_back(ring);
+  }
+  return contours;
 }
 
 }  // namespace lftrack::test

@@ -48,6 +48,11 @@ struct RtStructSpec {
 };
 void write_rt_structure_set(const std::filesystem::path& file, const RtStructSpec& spec);
 
+// The shipped lumbar DICOM CT's L3 vertebral body (scenes/lumbar-ct.yaml's registration origin,
+// (6, 107, 183) mm, at its centre): an ellipse of 36 x 28 mm (48 points) on each of the 11 CT
+// slices from z 169.91 to 199.91 mm (the slices are 3 mm apart from 85.91 mm).
+std::vector<std::vector<Eigen::Vector3d>> lumbar_ct_vertebral_body();
+
 // Edits a DICOM file in place: the first element with tag (group, element), searched depth-first
 // through sequences, gets `value` (inserted at the top level when there is none), or is removed
 // when `value` is empty.

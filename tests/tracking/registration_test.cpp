@@ -51,7 +51,7 @@ RegistrationSetup two_view_setup(const std::string& similarity) {
                                            Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
   const XrayView b = *XrayView::isocentric("B", Vector3d::Zero(), Vector3d(-0.7071, -0.7071, 0),
                                            Vector3d(0, 0, 1), 1000, 1400, 80, 96, 0.8);
-  s.views = {{a, PixelWindow::full(a.rows, a.cols)}, {b, PixelWindow::full(b.rows, b.cols)}};
+  s.views = {{a, PixelWindow::full(a.rows, a.cols), {}}, {b, PixelWindow::full(b.rows, b.cols), {}}};
   s.roi_size_mm = {40, 40, 30};
   s.nominal_T_room_from_ct = phantom().nominal;
   s.similarity = similarity;

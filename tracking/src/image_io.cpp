@@ -5,6 +5,7 @@
 
 #include <png.h>
 #include <tiffio.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -105,7 +106,8 @@ Status write_rgb_png(const fs::path& file, const RgbImage& image) {
     png_write_row(png, &image.rgb[std::size_t(r) * std::size_t(image.cols) * 3]);
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
-  if (std::fflush(fp.get()) != 0) return io_error(file.string() + ": write failed");
+  if (std::fflush(fp.get()) != 0 || ::fsync(::fileno(fp.get())) != 0 || std::fclose(fp.release()) != 0)
+    return io_error(file.string() + ": write failed: " + std::strerror(errno));
   return {};
 }
 

@@ -132,6 +132,24 @@ Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
   if (const RegistrationView* small = view_too_small_for(l.bin))
     return invalid_argument("registration: binning " + std::to_string(l.bin) + " leaves view '" + small->view.name +
                             "' fewer than 4 x 4 pixels");
+  // A region (roi.mask) must leave the measures enough blocks at this binning (a block counts
+  // when most of it is in the region, as make_reference counts a frame's valid pixels): a level
+  // with fewer would score every pose the same.
+  for (const RegistrationView& v : setup_.views) {
+    if (v.region.pixels().empty()) continue;
+    int blocks = 0;
+    for (int r = 0; r + l.bin <= v.window.rows; r += l.bin)
+      for (int c = 0; c + l.bin <= v.window.cols; c += l.bin) {
+        int in = 0;
+        for (int dr = 0; dr < l.bin; ++dr)
+          for (int dc = 0; dc < l.bin; ++dc) in += v.region.at(r + dr, c + dc) != 0;
+        blocks += 2 * in > l.bin * l.bin;
+      }
+    if (blocks < Similarity::kMinPixels)
+      return invalid_argument("registration: view '" + v.view.name + "''s region leaves " + std::to_string(blocks) +
+                              " pixels at binning " + std::to_string(l.bin) + ", fewer than the " +
+                              std::to_string(Similarity::kMinPixels) + " a measure needs");
+  }
   LevelGeometry g;
   g.level = l;
   for (const RegistrationView& v : setup_.views) {

@@ -72,6 +72,10 @@ std::string relative_to(const fs::path& file, const fs::path& folder) {
   std::error_code ec;
   const fs::path target = fs::weakly_canonical(fs::absolute(file, ec), ec);
   const fs::path base = fs::weakly_canonical(fs::absolute(folder.empty() ? fs::path(".") : folder, ec), ec);
+  // A folder reached through a link: a reader joins the relative path to the folder as written,
+  // not as it really is, so the path is written whole.
+  const fs::path given = fs::absolute(folder.empty() ? fs::path(".") : folder, ec).lexically_normal();
+  if (given != base) return target.string();
   const fs::path rel = target.lexically_relative(base);
   // Relative where the two stay together (a scene beside its CT and room); absolute where the way
   // between them climbs to the root, which no one reads or moves as one.

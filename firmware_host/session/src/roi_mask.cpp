@@ -63,42 +63,76 @@ Result<std::vector<tracking::Image<unsigned char>>> project_roi_mask(const Prepa
   if (!target.ok()) return Status(target.status().code(), where + target.status().message());
   const tracking::VolumeGeometry& g = p.ct->geometry;
   const Eigen::Affine3d ct_from_index = g.ct_from_index();
+  // The target's voxels (their index box bounds the walk).
+  Eigen::Vector3i lo = g.size, hi = Eigen::Vector3i::Constant(-1);
+  for (int k = 0; k < g.size.z(); ++k)
+    for (int j = 0; j < g.size.y(); ++j)
+      for (int i = 0; i < g.size.x(); ++i)
+        if (target->mask.inside[std::size_t(i) + std::size_t(g.size.x()) * (std::size_t(j) + std::size_t(g.size.y()) * std::size_t(k))]) {
+          lo = lo.cwiseMin(Eigen::Vector3i(i, j, k));
+          hi = hi.cwiseMax(Eigen::Vector3i(i, j, k));
+        }
   std::vector<tracking::Image<unsigned char>> masks;
   for (std::size_t v = 0; v < p.scene.detectors.size(); ++v) {
     const tracking::XrayView& view = p.scene.detectors[v].view;
     const tracking::PixelWindow& w = p.roi_windows[v];
-    tracking::Image<unsigned char> mask(w.rows, w.cols, 0);
-    for (int k = 0; k < g.size.z(); ++k)
-      for (int j = 0; j < g.size.y(); ++j)
-        for (int i = 0; i < g.size.x(); ++i) {
-          if (!target->mask.inside[std::size_t(i) + std::size_t(g.size.x()) * (std::size_t(j) + std::size_t(g.size.y()) * std::size_t(k))])
-            continue;
-          double c0 = 1e300, c1 = -1e300, r0 = 1e300, r1 = -1e300;
-          for (int corner = 0; corner < 8; ++corner) {
-            const Vector3d index(i + ((corner & 1) ? 0.5 : -0.5), j + ((corner & 2) ? 0.5 : -0.5),
-                                 k + ((corner & 4) ? 0.5 : -0.5));
-            const auto px = view.project(p.nominal_T_room_from_ct * (ct_from_index * index));
-            if (!px) continue;
-            c0 = std::min(c0, px->x());
-            c1 = std::max(c1, px->x());
-            r0 = std::min(r0, px->y());
-            r1 = std::max(r1, px->y());
-          }
-          const int rr0 = std::max(0, int(std::floor(r0 + 0.5)) - w.row0),
-                    rr1 = std::min(w.rows - 1, int(std::ceil(r1 - 0.5)) - w.row0);
-          const int cc0 = std::max(0, int(std::floor(c0 + 0.5)) - w.col0),
-                    cc1 = std::min(w.cols - 1, int(std::ceil(c1 - 0.5)) - w.col0);
-          for (int r = rr0; r <= rr1; ++r)
-            for (int c = cc0; c <= cc1; ++c) mask.at(r, c) = 1;
-        }
-    if (std::none_of(mask.pixels().begin(), mask.pixels().end(), [](unsigned char b) { return b != 0; }))
-      return failed_precondition(where + "target '" + spec.target + "' projects outside view " + view.name +
-                                 "'s ROI window at the nominal pose");
-    // The margin, from millimetres at the isocentre to pixels on the detector.
+    // The margin, from millimetres at the isocentre to pixels on the detector; the target is drawn
+    // into the window padded by it, so what lies just beyond the window still grows into it.
     const Vector3d origin_room = p.registration_origin_room_mm();
     const double magnification =
         (view.detector_centre_mm() - view.source_mm).norm() / (origin_room - view.source_mm).norm();
-    grow(&mask, spec.margin_mm * magnification / std::min(view.pitch_row_mm, view.pitch_col_mm));
+    const double margin_px = spec.margin_mm * magnification / std::min(view.pitch_row_mm, view.pitch_col_mm);
+    const int pad = int(std::ceil(margin_px)) + 1;
+    const int rows = w.rows + 2 * pad, cols = w.cols + 2 * pad;
+    tracking::Image<unsigned char> padded(rows, cols, 0);
+    // One projection matrix for the view, the CT's index frame to pixels (col, row).
+    const tracking::Matrix34d P = view.projection() * (p.nominal_T_room_from_ct * ct_from_index).matrix();
+    const auto pixel = [&](const Vector3d& index, Eigen::Vector2d* out) {
+      const Vector3d h = P * index.homogeneous();
+      if (!(h.z() > 1e-9)) return false;  // at or behind the source
+      *out = h.head<2>() / h.z();
+      return out->allFinite();
+    };
+    for (int k = lo.z(); k <= hi.z(); ++k)
+      for (int j = lo.y(); j <= hi.y(); ++j)
+        for (int i = lo.x(); i <= hi.x(); ++i) {
+          if (!target->mask.inside[std::size_t(i) + std::size_t(g.size.x()) * (std::size_t(j) + std::size_t(g.size.y()) * std::size_t(k))])
+            continue;
+          double c0 = 1e300, c1 = -1e300, r0 = 1e300, r1 = -1e300;
+          bool seen = false;
+          for (int corner = 0; corner < 8; ++corner) {
+            Eigen::Vector2d px;
+            if (!pixel(Vector3d(i + ((corner & 1) ? 0.5 : -0.5), j + ((corner & 2) ? 0.5 : -0.5),
+                                k + ((corner & 4) ? 0.5 : -0.5)),
+                       &px))
+              continue;
+            seen = true;
+            c0 = std::min(c0, px.x());
+            c1 = std::max(c1, px.x());
+            r0 = std::min(r0, px.y());
+            r1 = std::max(r1, px.y());
+          }
+          if (!seen) continue;
+          // Clamped in double before any cast: a corner near the source plane projects far away.
+          const auto clamp_to = [](double x, int n) { return int(std::clamp(x, -1.0, double(n))); };
+          const int rr0 = std::max(0, clamp_to(std::floor(r0 + 0.5) - w.row0 + pad, rows)),
+                    rr1 = std::min(rows - 1, clamp_to(std::ceil(r1 - 0.5) - w.row0 + pad, rows));
+          const int cc0 = std::max(0, clamp_to(std::floor(c0 + 0.5) - w.col0 + pad, cols)),
+                    cc1 = std::min(cols - 1, clamp_to(std::ceil(c1 - 0.5) - w.col0 + pad, cols));
+          for (int r = rr0; r <= rr1; ++r)
+            for (int c = cc0; c <= cc1; ++c) padded.at(r, c) = 1;
+        }
+    grow(&padded, margin_px);
+    tracking::Image<unsigned char> mask(w.rows, w.cols, 0);
+    std::int64_t looked_at = 0;
+    for (int r = 0; r < w.rows; ++r)
+      for (int c = 0; c < w.cols; ++c) looked_at += (mask.at(r, c) = padded.at(r + pad, c + pad)) != 0;
+    if (looked_at < kMinRoiMaskPixels)
+      return failed_precondition(where + "target '" + spec.target + "' and its " + std::to_string(spec.margin_mm) +
+                                 " mm leave " + std::to_string(looked_at) + " pixels of view " + view.name +
+                                 "'s ROI window at the nominal pose, fewer than the " +
+                                 std::to_string(kMinRoiMaskPixels) +
+                                 " a registration needs (a wider margin_mm, or no mask)");
     masks.push_back(std::move(mask));
   }
   return masks;

@@ -36,7 +36,7 @@ Status SceneParser::parse_frames(const YAML::Node& n, const std::string& what, D
     LFTRACK_RETURN_IF_ERROR(need(n, "sequence", what, &node));
     std::string sequence;
     LFTRACK_RETURN_IF_ERROR(text(node, what + ".sequence", &sequence));
-    f->sequence = resolve(base_dir_, sequence).lexically_normal().string();
+    f->sequence = resolve(folder_of(node), sequence).lexically_normal().string();
     return {};
   }
   if (f->kind == "v4l2") {
@@ -81,7 +81,7 @@ Status SceneParser::parse_detector_calibration(const YAML::Node& n, const std::s
     file->clear();
     return {};
   }
-  const fs::path path = resolve(base_dir_, name);
+  const fs::path path = resolve(folder_of(n), name);
   std::error_code ec;
   if (!fs::is_regular_file(path, ec))
     return error(n, what + ": no detector calibration file " + path.string() +
@@ -153,7 +153,7 @@ Status SceneParser::parse_can(const YAML::Node& n, drivers::CanRobotOptions* c) 
   } else if (n["bridge"]) {
     std::string bridge;
     LFTRACK_RETURN_IF_ERROR(text(n["bridge"], "actuator.can.bridge", &bridge));
-    c->bridge_path = resolve(base_dir_, bridge).lexically_normal().string();
+    c->bridge_path = resolve(folder_of(n["bridge"]), bridge).lexically_normal().string();
     if (c->bridge_path.size() >= 108)
       return error(n["bridge"], "actuator.can.bridge: a socket path is at most 107 bytes; got " + c->bridge_path);
   } else {

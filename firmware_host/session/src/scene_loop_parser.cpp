@@ -49,7 +49,7 @@ Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
   if (n["couch_link"]) {
     std::string link;
     LFTRACK_RETURN_IF_ERROR(text(n["couch_link"], "sim.couch_link", &link));
-    sim->couch_link = (fs::path(link).is_absolute() ? fs::path(link) : base_dir_ / link).string();
+    sim->couch_link = (fs::path(link).is_absolute() ? fs::path(link) : folder_of(n["couch_link"]) / link).string();
   }
   if (n["seed"]) {
     long seed = 0;
@@ -239,7 +239,7 @@ Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
   if (const YAML::Node cal = n["calibration"]) {
     std::string file;
     LFTRACK_RETURN_IF_ERROR(text(cal, "actuator.calibration", &file));
-    const fs::path path = fs::path(file).is_absolute() ? fs::path(file) : base_dir_ / file;
+    const fs::path path = fs::path(file).is_absolute() ? fs::path(file) : folder_of(cal) / file;
     auto read = read_couch_calibration(path.string());
     if (!read.ok()) return error(cal, "actuator.calibration: " + read.status().message());
     a->calibration_file = path.string();

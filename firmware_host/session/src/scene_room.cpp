@@ -13,24 +13,32 @@ namespace {
 // simulated twin's imaging) and the site's registration and safety settings. The patient (CT,
 // ROI, origin, envelope, fiducials, motion) and its commissioning stay in the scene.
 const std::set<std::string> kRoomSections = {"detectors", "tracking", "sim", "loop", "safety", "actuator"};
+// What a room file may hold at most: a room of four detectors and every device is some hundreds of
+// values, ten levels deep.
+constexpr std::size_t kMaxRoomNodes = 20000;
+constexpr int kMaxRoomDepth = 32;
 
 }  // namespace
 
 bool SceneParser::from_room(const YAML::Node& node) const {
   if (room_nodes_.empty() || !node.IsDefined()) return false;
-  const std::function<bool(const YAML::Node&)> holds = [&](const YAML::Node& n) {
+  // Bounded: a room file that passed merge_room has at most kMaxRoomNodes nodes, no deeper than
+  // kMaxRoomDepth (aliases may make a graph of it; the walk stops at the bounds).
+  std::size_t visited = 0;
+  const std::function<bool(const YAML::Node&, int)> holds = [&](const YAML::Node& n, int depth) {
+    if (++visited > kMaxRoomNodes || depth > kMaxRoomDepth) return false;
     if (n.is(node)) return true;
     if (n.IsSequence()) {
       for (const YAML::Node& item : n)
-        if (holds(item)) return true;
+        if (holds(item, depth + 1)) return true;
     } else if (n.IsMap()) {
       for (const auto& kv : n)
-        if (kv.first.is(node) || holds(kv.second)) return true;
+        if (kv.first.is(node) || holds(kv.second, depth + 1)) return true;
     }
     return false;
   };
   for (const YAML::Node& section : room_nodes_)
-    if (holds(section)) return true;
+    if (holds(section, 0)) return true;
   return false;
 }
 
@@ -84,23 +92,29 @@ Status SceneParser::merge_room(YAML::Node& root, Scene* scene) {
                              "every patient, and each is commissioned on its own CT");
 
   // A key written twice anywhere in the room file (YAML keeps the first) is the room's own error.
-  const std::function<Status(const YAML::Node&, const std::string&)> no_repeats =
-      [&](const YAML::Node& n, const std::string& within) -> Status {
+  std::size_t nodes = 0;
+  const std::function<Status(const YAML::Node&, const std::string&, int)> no_repeats =
+      [&](const YAML::Node& n, const std::string& within, int depth) -> Status {
+    if (++nodes > kMaxRoomNodes || depth > kMaxRoomDepth)
+      return room_parser.error(n, "the room file is larger or deeper than a room is (at most " +
+                                      std::to_string(kMaxRoomNodes) + " values, " + std::to_string(kMaxRoomDepth) +
+                                      " levels; an alias may repeat a part of it without end)");
     if (n.IsSequence()) {
       for (std::size_t i = 0; i < n.size(); ++i)
-        LFTRACK_RETURN_IF_ERROR(no_repeats(n[i], within + "[" + std::to_string(i) + "]"));
+        LFTRACK_RETURN_IF_ERROR(no_repeats(n[i], within + "[" + std::to_string(i) + "]", depth + 1));
     } else if (n.IsMap()) {
       std::set<std::string> seen;
       for (const auto& kv : n) {
         if (!kv.first.IsScalar()) return room_parser.error(kv.first, "a key in " + within + " must be a plain name");
         if (!seen.insert(kv.first.Scalar()).second)
           return room_parser.error(kv.first, "'" + kv.first.Scalar() + "' appears twice in " + within);
-        LFTRACK_RETURN_IF_ERROR(no_repeats(kv.second, within.empty() ? kv.first.Scalar() : within + "." + kv.first.Scalar()));
+        LFTRACK_RETURN_IF_ERROR(
+            no_repeats(kv.second, within.empty() ? kv.first.Scalar() : within + "." + kv.first.Scalar(), depth + 1));
       }
     }
     return {};
   };
-  LFTRACK_RETURN_IF_ERROR(no_repeats(room, ""));
+  LFTRACK_RETURN_IF_ERROR(no_repeats(room, "", 0));
   room_source_ = resolved;
   for (const auto& kv : room) {
     if (!kRoomSections.count(kv.first.Scalar())) continue;

@@ -42,6 +42,11 @@ class SceneParser {
     if (from_room(node)) return SceneParser(room_source_, base_dir_).error_at(node.Mark(), message);
     return error_at(node.Mark(), message);
   }
+  // The folder a file named at `node` is relative to: the room file's for what the room wrote,
+  // else the scene's.
+  fs::path folder_of(const YAML::Node& node) const {
+    return from_room(node) ? fs::path(room_source_).parent_path() : base_dir_;
+  }
   // "FILE:LINE:COLUMN" of a node (FILE alone where it has no mark).
   std::string where(const YAML::Node& node) const {
     std::ostringstream s;

@@ -58,8 +58,12 @@ bool segments_meet(const Vector2d& a, const Vector2d& b, const Vector2d& c, cons
          (std::abs(d3) <= eps && between(c, d, a)) || (std::abs(d4) <= eps && between(c, d, b));
 }
 
-// The first pair of non-adjacent edges that meet, or (-1, -1). Edges are binned on a grid of
-// about n cells so that a contour of 100,000 points is checked in linear time on average.
+// The first pair of non-adjacent edges that meet, or (-1, -1); (-2, -2) when the contour is too
+// tangled to check within the bounds below (its edges span the contour many times over). Edges
+// are binned on a grid of about n cells so that a contour of 100,000 points is checked in linear
+// time on average.
+constexpr std::size_t kMaxBinnedEdges = 20'000'000;  // edge-cell entries
+constexpr std::size_t kMaxEdgePairs = 50'000'000;    // pairs tested
 std::pair<long, long> first_crossing(const std::vector<Vector2d>& p) {
   const long n = static_cast<long>(p.size());
   Vector2d lo = p[0], hi = p[0];
@@ -71,18 +75,22 @@ std::pair<long, long> first_crossing(const std::vector<Vector2d>& p) {
   const Vector2d cell = ((hi - lo) / double(cells)).cwiseMax(Vector2d::Constant(1e-9));
   std::map<std::pair<long, long>, std::vector<long>> bins;
   const auto cell_of = [&](double v, int axis) {
-    return std::clamp(static_cast<long>((v - lo[axis]) / cell[axis]), 0L, cells - 1);
+    return static_cast<long>(std::clamp((v - lo[axis]) / cell[axis], 0.0, double(cells - 1)));
   };
+  std::size_t binned = 0, tested = 0;
   for (long e = 0; e < n; ++e) {
     const Vector2d& a = p[std::size_t(e)];
     const Vector2d& b = p[std::size_t((e + 1) % n)];
     for (long x = cell_of(std::min(a.x(), b.x()), 0); x <= cell_of(std::max(a.x(), b.x()), 0); ++x)
-      for (long y = cell_of(std::min(a.y(), b.y()), 1); y <= cell_of(std::max(a.y(), b.y()), 1); ++y)
+      for (long y = cell_of(std::min(a.y(), b.y()), 1); y <= cell_of(std::max(a.y(), b.y()), 1); ++y) {
+        if (++binned > kMaxBinnedEdges) return {-2, -2};
         bins[{x, y}].push_back(e);
+      }
   }
   for (const auto& [key, edges] : bins) {
     for (std::size_t u = 0; u < edges.size(); ++u) {
       for (std::size_t v = u + 1; v < edges.size(); ++v) {
+        if (++tested > kMaxEdgePairs) return {-2, -2};
         const long e = std::min(edges[u], edges[v]), f = std::max(edges[u], edges[v]);
         if (f == e + 1 || (e == 0 && f == n - 1)) continue;  // neighbours share a corner
         if (segments_meet(p[std::size_t(e)], p[std::size_t((e + 1) % n)], p[std::size_t(f)], p[std::size_t((f + 1) % n)]))
@@ -129,7 +137,10 @@ Status check_target_polygons(const std::vector<TargetPolygon>& polygons, const s
     const Vector3d u = eigen.eigenvectors().col(2), v = unit.cross(u);
     std::vector<Vector2d> flat;
     for (const Vector3d& q : p) flat.emplace_back(u.dot(q - centre), v.dot(q - centre));
-    if (const auto [e, f] = first_crossing(flat); e >= 0) {
+    if (const auto [e, f] = first_crossing(flat); e == -2) {
+      return invalid_argument(contour_name(name, c) + " is too tangled to check (" + std::to_string(p.size()) +
+                              " points whose edges span the contour many times over): no target is drawn so");
+    } else if (e >= 0) {
       return invalid_argument(contour_name(name, c) + " crosses itself (edge " + std::to_string(e + 1) + " meets edge " +
                               std::to_string(f + 1) + "): a self-crossing contour has no inside");
     }
@@ -174,11 +185,11 @@ Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons, 
                               "2.5 degrees): contour the target on the planning CT's axial slices");
     }
     const double kf = (index_from_ct * p[0]).z();
-    const long k = std::lround(kf);
-    if (k < 0 || k >= grid.size.z()) {  // beyond the scan: in the box, not in the mask
+    if (!(kf > -0.5 && kf < grid.size.z() - 0.5)) {  // beyond the scan: in the box, not in the mask
       ++mask.contours_beyond_scan;
       continue;
     }
+    const long k = std::lround(kf);
     mask.most_off_slice_mm = std::max(mask.most_off_slice_mm, std::abs(kf - double(k)) * grid.spacing_mm.z());
     std::vector<Vector2d> flat;
     for (const Vector3d& q : p) flat.push_back((index_from_ct * q).head<2>());
@@ -201,7 +212,9 @@ Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons, 
         lo = std::min(lo, q.y());
         hi = std::max(hi, q.y());
       }
-    const int j0 = std::max(0, int(std::ceil(lo))), j1 = std::min(grid.size.y() - 1, int(std::floor(hi)));
+    // Clamped in double before the casts: a contour may reach far beyond the grid.
+    const int j0 = int(std::clamp(std::ceil(lo), 0.0, double(grid.size.y()))),
+              j1 = int(std::clamp(std::floor(hi), -1.0, double(grid.size.y() - 1)));
     for (int j = j0; j <= j1; ++j) {
       crossings.clear();
       for (const auto& poly : polys) {
@@ -214,8 +227,8 @@ Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons, 
       }
       std::sort(crossings.begin(), crossings.end());
       for (std::size_t m = 0; m + 1 < crossings.size(); m += 2) {
-        const int i0 = std::max(0, int(std::ceil(crossings[m]))),
-                  i1 = std::min(grid.size.x() - 1, int(std::floor(crossings[m + 1])));
+        const int i0 = int(std::clamp(std::ceil(crossings[m]), 0.0, double(grid.size.x()))),
+                  i1 = int(std::clamp(std::floor(crossings[m + 1]), -1.0, double(grid.size.x() - 1)));
         for (int i = i0; i <= i1; ++i) {
           std::uint8_t& voxel = mask.inside[std::size_t(i + std::int64_t{grid.size.x()} * (j + std::int64_t{grid.size.y()} * k))];
           if (!voxel) ++mask.voxels_inside;

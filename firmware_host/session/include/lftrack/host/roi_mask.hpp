@@ -6,6 +6,7 @@
 // mask is fixed on the detector: the target moves within it by the envelope, which the margin
 // should exceed.
 
+#include <cstdint>
 #include <vector>
 
 #include "lftrack/host/scene.hpp"
@@ -16,7 +17,10 @@ namespace lftrack::host {
 
 // One mask per detector, each its ROI window's size (1: look). Refused: no roi.mask in the
 // scene, a CT that is not a DICOM series, a structure set or target that does not belong to it
-// (target_from_structure_set), a target whose projection misses a view's window.
+// (target_from_structure_set), a mask of fewer than kMinRoiMaskPixels in a view's window (a 4 x 4
+// binned level keeps 16 blocks of it at best; the Registration refuses any level of a plan that
+// keeps fewer than a measure needs).
+inline constexpr std::int64_t kMinRoiMaskPixels = 256;
 Result<std::vector<tracking::Image<unsigned char>>> project_roi_mask(const PreparedScene& scene);
 
 }  // namespace lftrack::host
