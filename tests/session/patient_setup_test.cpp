@@ -111,6 +111,11 @@ TEST_F(PatientSetup, TheIsocentreFromThePlanAndTheRoiFromTheTargetMakeASceneThat
   EXPECT_EQ(scene->commissioning_file, (dir_.path() / "patient.commissioning.yaml").string());
   EXPECT_EQ(scene->detectors.size(), 2u) << "from the room";
   // Where each value came from is written beside it.
+  // The test's RT objects carry another patient ID than the CT: said, not refused (the UIDs decide).
+  EXPECT_NE(setup->yaml.find("the plan is for patient ID 'LFTRACK-TEST', the CT for 'Pancreas-CT-CB_001'"),
+            std::string::npos)
+      << setup->yaml;
+  EXPECT_NE(setup->yaml.find("the structure set is for patient ID 'LFTRACK-TEST'"), std::string::npos);
   for (const char* said : {"target 'L3 body' (ROI number 2", "tolerance table 1 of the plan", "Frame of Reference " ,
                            "the CT's slices are 3.00 mm apart"})
     EXPECT_NE(setup->yaml.find(said), std::string::npos) << said << "\n" << setup->yaml;

@@ -266,6 +266,7 @@ Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::s
   RtPlanSetup setup;
   setup.file = where;
   setup.label = rt::text_from([&](OFString& v) { return plan.getRTPlanLabel(v); });
+  setup.patient_id = rt::text_from([&](OFString& v) { return plan.getPatientID(v); });
   setup.frame_of_reference_uid = rt::text_from([&](OFString& v) { return plan.getFrameOfReferenceUID(v); });
   if (setup.frame_of_reference_uid.empty())
     return failed_precondition(where +
@@ -369,6 +370,7 @@ Result<RtStructureSet> read_rt_structure_set(const std::filesystem::path& file) 
   RtStructureSet out;
   out.file = where;
   out.label = rt::text_from([&](OFString& v) { return set.getStructureSetLabel(v); });
+  out.patient_id = rt::text_from([&](OFString& v) { return set.getPatientID(v); });
   DRTReferencedFrameOfReferenceSequence& frames = set.getReferencedFrameOfReferenceSequence();
   for (std::size_t i = 0; i < frames.getNumberOfItems(); ++i) {
     DRTReferencedFrameOfReferenceSequence::Item& frame = frames.getItem(i);

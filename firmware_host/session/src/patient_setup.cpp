@@ -89,6 +89,7 @@ struct Isocentre {
   Vector3d ct_mm = Vector3d::Zero();
   std::string from;
   std::string patient_position;
+  std::string patient_id;  // the plan's
   std::optional<RtPlanSetup> plan;
 };
 
@@ -116,6 +117,7 @@ Result<Isocentre> choose_isocentre(const NewSceneRequest& r, const NewSceneCt& c
                std::to_string(plan->beam.number) + " '" + plan->beam.name +
                "': Isocenter Position (300A,012C) of its first control point";
     iso.patient_position = plan->patient_position;
+    iso.patient_id = plan->patient_id;
     iso.plan = std::move(*plan);
     return iso;
   }
@@ -230,6 +232,7 @@ Result<TargetContours> target_from_structure_set(const fs::path& rtstruct, const
                                it->frame_of_reference_uid + ", the CT in " + for_uid);
   }
   TargetContours target;
+  target.patient_id = set->patient_id;
   target.name = it->name;
   target.roi_number = it->roi_number;
   std::map<std::string, int> other_types;
@@ -450,6 +453,18 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
   if (!rotation.ok()) return Status(rotation.status().code(), r.rtplan.string() + ": " + rotation.status().message());
   out.nominal_T_room_from_ct.linear() = *rotation;
   out.nominal_T_room_from_ct.translation() = -(*rotation * iso->ct_mm);
+  // One scan (one Frame of Reference) under two patient IDs: the CT, the plan or the structure set
+  // was renamed (anonymised) without the others. Said, with both IDs; the UIDs decide.
+  if (ct.identity && !ct.identity->patient_id.empty()) {
+    const auto differs = [&](const std::string& id, const std::string& what) {
+      if (!id.empty() && id != ct.identity->patient_id)
+        out.warnings.push_back(what + " is for patient ID '" + comment(id) + "', the CT for '" +
+                               comment(ct.identity->patient_id) +
+                               "' (the same scan by its Frame of Reference UID: renamed or anonymised apart?)");
+    };
+    differs(iso->patient_id, "the plan");
+    if (target) differs(target->patient_id, "the structure set");
+  }
   if (iso->plan && iso->patient_position.empty())
     out.warnings.push_back("the plan gives no patient position (0018,5100): head-first supine (HFS) assumed");
   const Envelope envelope = envelope_from(iso->plan, &out.warnings);

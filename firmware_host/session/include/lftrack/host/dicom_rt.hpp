@@ -36,6 +36,7 @@ struct RtPlanBeam {
 struct RtPlanSetup {
   std::string file;
   std::string label;                   // RTPlanLabel (300A,0002)
+  std::string patient_id;              // Patient ID (0010,0020), "" if absent
   std::string frame_of_reference_uid;  // (0020,0052)
   RtPlanBeam beam;                     // the chosen beam
   std::vector<RtPlanBeam> beams;       // every beam in the plan, in the plan's order
@@ -80,6 +81,7 @@ struct RtStructure {
 struct RtStructureSet {
   std::string file;
   std::string label;                                 // StructureSetLabel (3006,0002)
+  std::string patient_id;                            // Patient ID (0010,0020), "" if absent
   std::vector<std::string> frame_of_reference_uids;  // of ReferencedFrameOfReferenceSequence (3006,0010)
   // SeriesInstanceUID of every RTReferencedSeriesSequence item under them.
   std::vector<std::string> referenced_series_uids;

@@ -65,6 +65,7 @@ struct TargetContours {
   TargetMask mask;                      // on the CT's grid
   TargetBox box;
   std::vector<std::string> warnings;    // e.g. contours off the CT's slices, with the figure
+  std::string patient_id;               // the structure set's Patient ID (0010,0020)
 };
 Result<TargetContours> target_from_structure_set(const std::filesystem::path& rtstruct, const std::string& name,
                                                  const CtDicomIdentity& ct, const tracking::VolumeGeometry& grid);
