@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "cli_commands.hpp"
+#include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -46,6 +47,17 @@ Command add_info_command(CLI::App* parent) {
     const char* volume_centre = ": the volume centre, as no scene names roi.centre_mm";
     std::printf("roi             centre %s mm, size %s mm (CT frame)%s\n", v3(p.roi_centre_ct_mm).c_str(),
                 v3(p.scene.roi.size_mm).c_str(), p.roi_centre_is_volume_centre ? volume_centre : "");
+    if (const auto& mask = p.scene.roi.mask) {
+      std::printf("roi mask        target '%s' of %s, %g mm around it; pixels looked at per view:",
+                  printable(mask->target).c_str(), mask->rtstruct.c_str(), mask->margin_mm);
+      for (std::size_t v = 0; v < p.roi_masks.size(); ++v) {
+        std::int64_t n = 0;
+        for (unsigned char b : p.roi_masks[v].pixels()) n += b != 0;
+        std::printf(" %s %lld of %zu", p.scene.detectors[v].view.name.c_str(), static_cast<long long>(n),
+                    p.roi_masks[v].pixels().size());
+      }
+      std::printf("\n");
+    }
     const bool origin_is_volume_centre = p.roi_centre_is_volume_centre && !p.scene.registration_origin_ct_mm;
     std::printf("registration    origin %s mm (CT) = %s mm (room)%s\n", v3(p.registration_origin_ct_mm).c_str(),
                 v3(p.registration_origin_room_mm()).c_str(),

@@ -18,6 +18,9 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/setup_picture.hpp"
+#include "lftrack/tracking/registration.hpp"
+#include "lftrack/tracking/drr_renderer.hpp"
+#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 
@@ -149,6 +152,25 @@ Status run(const SceneNewOptions& o) {
   auto prepared = prepare_scene(*scene, "", &pool);
   if (!prepared.ok()) return prepared.status();
 
+  // roi.mask: the room's plans must be able to register what it keeps (every binned level).
+  if (!prepared->roi_masks.empty()) {
+    tracking::RendererOptions options;
+    options.pool = &pool;
+    auto renderer = tracking::make_renderer("siddon", prepared->mu, options);
+    if (!renderer.ok()) return renderer.status();
+    auto registration = make_scene_registration(*prepared, std::move(renderer).value(), prepared->scene.registration, &pool);
+    if (!registration.ok()) return Status(registration.status().code(), "roi.mask: " + registration.status().message());
+    for (const auto& [key, name] : {std::pair<const char*, std::string>{"loop.align_plan", prepared->scene.loop.align_plan},
+                                    {"loop.track_plan", prepared->scene.loop.track_plan}}) {
+      auto plan = tracking::registration_plan(name);
+      if (!plan.ok()) continue;  // the scene's own check names it
+      if (auto prepared_plan = (*registration)->prepare_plan(*plan); !prepared_plan.ok())
+        return Status(prepared_plan.status().code(), std::string("roi.mask: the room's ") + key + " '" + name +
+                                                         "' cannot register what the mask keeps: " +
+                                                         prepared_plan.status().message() +
+                                                         " (a wider --roi-mask-mm, or no mask)");
+    }
+  }
   SetupMarks marks;
   marks.isocentre_ct_mm = setup->isocentre_ct_mm;
   marks.roi_centre_ct_mm = setup->roi_centre_ct_mm;
@@ -183,15 +205,15 @@ Status run(const SceneNewOptions& o) {
   const Eigen::Vector3d& iso = setup->isocentre_ct_mm;
   std::printf("scene       %s\n", out.c_str());
   std::printf("isocentre   (%.2f, %.2f, %.2f) mm (CT frame), from %s\n", iso.x(), iso.y(), iso.z(),
-              setup->isocentre_from.c_str());
+              printable(setup->isocentre_from).c_str());
   std::printf("patient     %s\n", setup->patient_position.c_str());
   std::printf("roi         centre (%.1f, %.1f, %.1f) mm, size (%.1f, %.1f, %.1f) mm", setup->roi_centre_ct_mm.x(),
               setup->roi_centre_ct_mm.y(), setup->roi_centre_ct_mm.z(), setup->roi_size_mm.x(), setup->roi_size_mm.y(),
               setup->roi_size_mm.z());
   if (setup->target)
-    std::printf(", about target '%s' (%.1f cc)", setup->target_name.c_str(), setup->target->volume_cc());
+    std::printf(", about target '%s' (%.1f cc)", printable(setup->target_name).c_str(), setup->target->volume_cc());
   std::printf("\npicture     %s (top: each view's DRR; bottom: axial, coronal, sagittal; green the isocentre, "
-              "yellow the ROI, red the target)\n",
+              "yellow the ROI, red the target, cyan roi.mask's edge)\n",
               picture_file.c_str());
   for (const std::string& w : setup->warnings) spdlog::warn("{}", w);
   if (o.precompute) {
@@ -254,7 +276,7 @@ Command add_scene_new_command(CLI::App* parent, int argc, char** argv) {
     if (o->list_structures) return;
     const std::pair<bool, const char*> needed[] = {{!o->ct.empty(), "--ct"}, {!o->room.empty(), "--room"}, {!o->out.empty(), "-o"}};
     for (const auto& [given, name] : needed)
-      if (!given) throw CLI::RequiredError(std::string(name) + " is required (or --rtstruct FILE --list-structures)");
+      if (!given) throw CLI::RequiredError(std::string(name) + " (unless --rtstruct FILE --list-structures)");
   });
   return [o] { return run(*o); };
 }

@@ -113,6 +113,34 @@ TEST_F(SceneNewCli, WritesTheSceneAndItsPictureAndNeverWritesOverEither) {
   EXPECT_NE(out.find("no folder"), std::string::npos) << out;
 }
 
+TEST_F(SceneNewCli, TheMaskIsWrittenShownAndRefusedWhereTheRoomsPlansCannotUseIt) {
+  std::string out;
+  ASSERT_TRUE(lftrack(scene_new("masked.yaml", {"--roi-mask-mm", "12.345"}), &out).ok()) << out;
+  const std::string scene = test::contents(dir_.path() / "masked.yaml");
+  EXPECT_NE(scene.find("margin_mm: 12.345\n"), std::string::npos) << "the margin as asked: " << scene;
+  ASSERT_TRUE(lftrack({"info", "--scene", (dir_.path() / "masked.yaml").string()}, &out).ok()) << out;
+  EXPECT_NE(out.find("roi mask        target 'L3 body' of "), std::string::npos) << out;
+  // A margin within the envelope (the plan's 8 mm) is said.
+  ASSERT_TRUE(lftrack(scene_new("narrow.yaml", {"--roi-mask-mm", "5"}), &out).ok()) << out;
+  EXPECT_NE(out.find("roi.mask's margin (5 mm) does not exceed the envelope (8 mm)"), std::string::npos) << out;
+  // A 2 mm target with 2 mm around it: 21 x 21 pixels, which the room's warm tracking plan bins
+  // 8 x 8 into 6: refused before anything is written, naming the plan.
+  test::RtStructSpec tiny;
+  tiny.frame_of_reference_uid = ct_.frame_of_reference_uid;
+  tiny.series_uid = ct_.series_uid;
+  tiny.study_uid = ct_.study_uid;
+  tiny.structures = {{1, "tiny", {{{5, 106, 181.91}, {7, 106, 181.91}, {7, 108, 181.91}, {5, 108, 181.91}}}}};
+  test::write_rt_structure_set(dir_.path() / "tiny.dcm", tiny);
+  std::vector<std::string> args = scene_new("tiny.yaml", {"--roi-mask-mm", "2"});
+  args[11] = (dir_.path() / "tiny.dcm").string();
+  args[13] = "tiny";
+  EXPECT_FALSE(lftrack(args, &out).ok());
+  EXPECT_NE(out.find("roi.mask: the room's loop.track_plan 'warm' cannot register what the mask keeps"),
+            std::string::npos)
+      << out;
+  EXPECT_FALSE(fs::exists(dir_.path() / "tiny.yaml"));
+}
+
 TEST_F(SceneNewCli, ListsTheStructuresAndRefusesAnUnknownTargetListingThem) {
   std::string out;
   ASSERT_TRUE(lftrack({"scene", "new", "--rtstruct", (dir_.path() / "structures.dcm").string(), "--list-structures"},

@@ -300,6 +300,16 @@ TEST_F(PatientSetup, ThePatientPositionTurnsTheRoomAboutTheIsocentre) {
   EXPECT_NE(refusal().find("SITTING"), std::string::npos);
 }
 
+TEST_F(PatientSetup, AMaskedTargetMustHaveANameASceneCanCarry) {
+  structures_.structures[1].name = "L3\nbody";
+  NewSceneRequest r;
+  r.target = structures_.structures[1].name;
+  r.roi_mask_margin_mm = 12;
+  EXPECT_NE(refusal(r).find("holds a line break or a control character"), std::string::npos);
+  r.roi_mask_margin_mm.reset();
+  EXPECT_TRUE(compose(r).ok()) << "without the mask the name is only a comment";
+}
+
 TEST_F(PatientSetup, ASimulationOnACoarseCtSaysItsAccuracyIsOptimistic) {
   const std::string caveat = simulated_accuracy_caveat(*ct_);
   EXPECT_NE(caveat.find("1.07 x 1.07 x 3.00 mm"), std::string::npos) << caveat;

@@ -146,7 +146,7 @@ Result<int> Registration::level_for(const RegistrationSetup::Level& l) {
         blocks += 2 * in > l.bin * l.bin;
       }
     if (blocks < Similarity::kMinPixels)
-      return invalid_argument("registration: view '" + v.view.name + "''s region leaves " + std::to_string(blocks) +
+      return invalid_argument("registration: view " + v.view.name + "'s region (roi.mask) leaves " + std::to_string(blocks) +
                               " pixels at binning " + std::to_string(l.bin) + ", fewer than the " +
                               std::to_string(Similarity::kMinPixels) + " a measure needs");
   }

@@ -79,7 +79,7 @@ bool split_seal(const std::string& text, std::string* rest, std::string* seal) {
 }
 
 const char* kWhatPartHolds[] = {
-    "the CT (its voxels, the fiducials inserted)", "the room (detectors, nominal pose, ROI, origin, envelope)",
+    "the CT (its voxels, the fiducials inserted)", "the room (detectors, nominal pose, ROI and roi.mask, origin, envelope)",
     "the registration (measure, plans, renderer, light fields)", "the imaging (bits, dose, blur, physics)"};
 
 }  // namespace

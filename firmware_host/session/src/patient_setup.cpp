@@ -3,6 +3,7 @@
 #include "lftrack/host/patient_setup.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <iomanip>
 #include <map>
@@ -65,6 +66,13 @@ std::string comment(const std::string& text) {
   std::string out;
   for (unsigned char c : text) out += (c < 0x20 || c == 0x7f) ? '?' : char(c);
   return out;
+}
+
+// The shortest text that reads back as `x` (12.345, not 12.34500000000000064); -0 as 0.
+std::string shortest(double x) {
+  char text[32];
+  const auto [end, ec] = std::to_chars(text, text + sizeof text, x == 0 ? 0.0 : x);
+  return ec == std::errc() ? std::string(text, end) : std::to_string(x);
 }
 
 std::string relative_to(const fs::path& file, const fs::path& folder) {
@@ -395,6 +403,8 @@ std::string simulated_accuracy_caveat(const tracking::CtVolume& ct) {
   return m.str();
 }
 
+std::string printable(const std::string& text) { return comment(text); }
+
 Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& ct) {
   if (!ct.volume) return invalid_argument("compose_new_scene: no CT");
   if (!r.rtplan.empty() && r.isocentre_ct_mm)
@@ -440,6 +450,11 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
       return failed_precondition(m.str());
     }
     for (const std::string& w : target->warnings) out.warnings.push_back(w);
+    if (r.roi_mask_margin_mm &&
+        std::any_of(target->name.begin(), target->name.end(), [](unsigned char ch) { return ch < 0x20 || ch == 0x7f; }))
+      return invalid_argument("target '" + comment(target->name) +
+                              "' holds a line break or a control character: roi.mask names its target, and such a "
+                              "name is not one a scene should carry (rename the structure)");
     out.target_name = target->name;
     out.target_polygons = target->polygons;
     out.target = std::move(target->mask);
@@ -468,6 +483,12 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
   if (iso->plan && iso->patient_position.empty())
     out.warnings.push_back("the plan gives no patient position (0018,5100): head-first supine (HFS) assumed");
   const Envelope envelope = envelope_from(iso->plan, &out.warnings);
+  if (r.roi_mask_margin_mm && *r.roi_mask_margin_mm <= envelope.translation_mm) {
+    std::ostringstream m;
+    m << "roi.mask's margin (" << *r.roi_mask_margin_mm << " mm) does not exceed the envelope (" << envelope.translation_mm
+      << " mm): a patient that far off leaves the target's edge outside what the registration looks at";
+    out.warnings.push_back(m.str());
+  }
   for (const std::string& w : ct_fitness_warnings(*ct.volume, iso->ct_mm, out.roi_centre_ct_mm, out.roi_size_mm))
     out.warnings.push_back(w);
 
@@ -478,7 +499,8 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
   y << "# A patient's scene, written by `lftrack scene new`";
   if (!r.command_line.empty()) y << ":\n#   " << comment(r.command_line);
   y << "\n# Look at " << comment(stem) << "-setup.png beside it before the first beam: each view's DRR with the isocentre's\n"
-    << "# cross, the target's outline and the ROI, and three slices through the isocentre. Then:\n"
+    << "# cross (green), the ROI (yellow), the target (red) and roi.mask's edge (cyan), and three slices\n"
+    << "# through the isocentre. Then:\n"
     << "#   lftrack precompute --scene " << comment(r.output.filename().string()) << "     (the light fields)\n"
     << "#   lftrack commission --scene " << comment(r.output.filename().string())
     << "     (the verdict's floors; the loop refuses the scene until then)\n";
@@ -504,7 +526,7 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
         << " mm around it, in each view\n"
         << "    rtstruct: " << quoted(relative_to(r.rtstruct, folder)) << "\n"
         << "    target: " << quoted(target->name) << "\n"
-        << "    margin_mm: " << *r.roi_mask_margin_mm << "\n";
+        << "    margin_mm: " << shortest(*r.roi_mask_margin_mm) << "\n";
     }
   } else {
     y << "  centre_mm: " << yaml3(out.roi_centre_ct_mm) << "   # on the isocentre (no structure set)\n";

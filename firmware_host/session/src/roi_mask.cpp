@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/patient_setup.hpp"
@@ -46,6 +47,12 @@ void grow(tracking::Image<unsigned char>* mask, double radius_px) {
     }
   for (int r = 0; r < rows; ++r)
     for (int c = 0; c < cols; ++c) mask->at(r, c) = at(r, c) <= 3.0 * radius_px ? 1 : 0;
+}
+
+std::string margin_text(double mm) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", mm);
+  return text;
 }
 
 }  // namespace
@@ -128,7 +135,7 @@ Result<std::vector<tracking::Image<unsigned char>>> project_roi_mask(const Prepa
     for (int r = 0; r < w.rows; ++r)
       for (int c = 0; c < w.cols; ++c) looked_at += (mask.at(r, c) = padded.at(r + pad, c + pad)) != 0;
     if (looked_at < kMinRoiMaskPixels)
-      return failed_precondition(where + "target '" + spec.target + "' and its " + std::to_string(spec.margin_mm) +
+      return failed_precondition(where + "target '" + spec.target + "' and its " + margin_text(spec.margin_mm) +
                                  " mm leave " + std::to_string(looked_at) + " pixels of view " + view.name +
                                  "'s ROI window at the nominal pose, fewer than the " +
                                  std::to_string(kMinRoiMaskPixels) +

@@ -92,6 +92,10 @@ std::vector<std::string> ct_fitness_warnings(const tracking::CtVolume& ct, const
 // frames from the same CT, so the figures are optimistic for this patient. Empty otherwise.
 std::string simulated_accuracy_caveat(const tracking::CtVolume& ct);
 
+// `text` on one line for a terminal or a comment: every control character (line breaks, escape
+// sequences) shown as '?'. Names a DICOM file or a user wrote pass through it before they are printed.
+std::string printable(const std::string& text);
+
 // The structures of a structure set, one line each: number, name, contours, points.
 std::string structure_list(const RtStructureSet& set);
 
