@@ -17,6 +17,7 @@
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/tracking/light_field.hpp"
+#include "scene_yaml.hpp"
 
 namespace lftrack::host {
 namespace fs = std::filesystem;
@@ -34,9 +35,6 @@ std::string digest(const std::string& text) {
   }
   return hex;
 }
-
-// A YAML double-quoted scalar (JSON's string syntax is one).
-std::string quoted(const std::string& text) { return nlohmann::json(text).dump(); }
 
 constexpr const char* kParts[] = {"ct", "geometry", "registration", "imaging"};
 
@@ -205,9 +203,9 @@ Status write_commissioning_file(const fs::path& file, const CommissioningRecord&
       << "# Not to be edited: the loop and `lftrack register` refuse the scene once its CT, room,\n"
       << "# registration or imaging differ from the fingerprint below; commission it again then.\n"
       << "lftrack_commissioning: 1\n"
-      << "scene: " << quoted(r.scene) << "\n"
+      << "scene: " << yaml_quoted(r.scene) << "\n"
       << "made_utc: " << r.made_utc << "\n"
-      << "command: " << quoted(r.command) << "\n"
+      << "command: " << yaml_quoted(r.command) << "\n"
       << "fingerprint:\n";
   for (int i = 0; i < 4; ++i)
     out << "  " << kParts[i] << ": \"" << *part(const_cast<CommissioningFingerprint*>(&r.fingerprint), i) << "\"\n";

@@ -8,6 +8,7 @@
 #include <iomanip>
 #include <map>
 #include <sstream>
+#include "scene_yaml.hpp"
 
 namespace lftrack::host {
 
@@ -40,25 +41,6 @@ std::string yaml3(const Vector3d& v) {
   };
   s << '[' << num(v.x()) << ", " << num(v.y()) << ", " << num(v.z()) << ']';
   return s.str();
-}
-
-// A string as a YAML double-quoted scalar: what a user or a DICOM file wrote can hold ':', '#' or
-// a line break, and none of it may turn into a key of the scene.
-std::string quoted(const std::string& text) {
-  std::string out = "\"";
-  for (unsigned char c : text) {
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += char(c);
-    } else if (c < 0x20 || c == 0x7f) {
-      char hex[8];
-      std::snprintf(hex, sizeof hex, "\\x%02x", c);
-      out += hex;
-    } else {
-      out += char(c);
-    }
-  }
-  return out + "\"";
 }
 
 // Text for a comment: one line, whatever a user or a DICOM file wrote.
@@ -506,9 +488,9 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
     << "     (the verdict's floors; the loop refuses the scene until then)\n";
   for (const std::string& w : out.warnings) y << "# Warning: " << comment(w) << "\n";
   y << std::defaultfloat << std::setprecision(6) << "version: 1\n";
-  y << "name: " << quoted(r.name.empty() ? stem : r.name) << "\n";
-  y << "room: " << quoted(relative_to(r.room, folder)) << "   # the views, detectors, couch, imaging and loop\n";
-  y << "ct:\n  path: " << quoted(relative_to(r.ct, folder)) << "   # " << grid.size.x() << " x " << grid.size.y() << " x "
+  y << "name: " << yaml_quoted(r.name.empty() ? stem : r.name) << "\n";
+  y << "room: " << yaml_quoted(relative_to(r.room, folder)) << "   # the views, detectors, couch, imaging and loop\n";
+  y << "ct:\n  path: " << yaml_quoted(relative_to(r.ct, folder)) << "   # " << grid.size.x() << " x " << grid.size.y() << " x "
     << grid.size.z() << " voxels of " << std::fixed << std::setprecision(2) << grid.spacing_mm.x() << " x "
     << grid.spacing_mm.y() << " x " << grid.spacing_mm.z() << " mm";
   if (ct.identity)
@@ -524,8 +506,8 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
     if (r.roi_mask_margin_mm) {
       y << "  mask:                # the measures look only at the target and " << *r.roi_mask_margin_mm
         << " mm around it, in each view\n"
-        << "    rtstruct: " << quoted(relative_to(r.rtstruct, folder)) << "\n"
-        << "    target: " << quoted(target->name) << "\n"
+        << "    rtstruct: " << yaml_quoted(relative_to(r.rtstruct, folder)) << "\n"
+        << "    target: " << yaml_quoted(target->name) << "\n"
         << "    margin_mm: " << shortest(*r.roi_mask_margin_mm) << "\n";
     }
   } else {
@@ -547,7 +529,7 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
   y << std::defaultfloat << std::setprecision(6) << "envelope:\n"
     << "  translation_mm: " << envelope.translation_mm << "   # " << comment(envelope.translation_from)
     << "\n  rotation_deg: " << envelope.rotation_deg << "   # " << comment(envelope.rotation_from) << "\n";
-  y << "safety:\n  commissioning: " << quoted(stem + ".commissioning.yaml") << "   # written by: lftrack commission --scene "
+  y << "safety:\n  commissioning: " << yaml_quoted(stem + ".commissioning.yaml") << "   # written by: lftrack commission --scene "
     << comment(r.output.filename().string()) << "\n";
   y << "motion:                # the simulated patient (sim only): set up off the plan, then drifting\n"
     << "  setup_error: {translation_mm: [3, -2, 2], rotation_deg: [1, -0.5, 1]}\n"

@@ -4,6 +4,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <nlohmann/json.hpp>
+
 #include <cmath>
 #include <filesystem>
 #include <set>
@@ -17,6 +19,13 @@ namespace lftrack::host {
 
 namespace fs = std::filesystem;
 using Eigen::Vector3d;
+
+// `text` as a YAML double-quoted scalar (JSON's string syntax is one): what a user or a file wrote
+// can hold ':', '#', quotes or a line break, and none of it may turn into a key of a file lftrack
+// writes. Bytes that are not UTF-8 are written as U+FFFD.
+inline std::string yaml_quoted(const std::string& text) {
+  return nlohmann::json(text).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
 
 // The text of a YAML file a person wrote (a scene, a calibration): a regular file of at most
 // kMaxYamlFileBytes, read whole. A FIFO, a device (/dev/zero), a folder or a larger file is
