@@ -70,15 +70,8 @@ Result<std::vector<tracking::Image<unsigned char>>> project_roi_mask(const Prepa
   if (!target.ok()) return Status(target.status().code(), where + target.status().message());
   const tracking::VolumeGeometry& g = p.ct->geometry;
   const Eigen::Affine3d ct_from_index = g.ct_from_index();
-  // The target's voxels (their index box bounds the walk).
-  Eigen::Vector3i lo = g.size, hi = Eigen::Vector3i::Constant(-1);
-  for (int k = 0; k < g.size.z(); ++k)
-    for (int j = 0; j < g.size.y(); ++j)
-      for (int i = 0; i < g.size.x(); ++i)
-        if (target->mask.inside[std::size_t(i) + std::size_t(g.size.x()) * (std::size_t(j) + std::size_t(g.size.y()) * std::size_t(k))]) {
-          lo = lo.cwiseMin(Eigen::Vector3i(i, j, k));
-          hi = hi.cwiseMax(Eigen::Vector3i(i, j, k));
-        }
+  const Eigen::Vector3i& lo = target->mask.lo_index;  // the target's voxels: their box bounds the walk
+  const Eigen::Vector3i& hi = target->mask.hi_index;
   std::vector<tracking::Image<unsigned char>> masks;
   for (std::size_t v = 0; v < p.scene.detectors.size(); ++v) {
     const tracking::XrayView& view = p.scene.detectors[v].view;

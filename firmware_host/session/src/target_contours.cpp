@@ -231,7 +231,11 @@ Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons, 
                   i1 = int(std::clamp(std::floor(crossings[m + 1]), -1.0, double(grid.size.x() - 1)));
         for (int i = i0; i <= i1; ++i) {
           std::uint8_t& voxel = mask.inside[std::size_t(i + std::int64_t{grid.size.x()} * (j + std::int64_t{grid.size.y()} * k))];
-          if (!voxel) ++mask.voxels_inside;
+          if (!voxel) {
+            ++mask.voxels_inside;
+            mask.lo_index = mask.lo_index.cwiseMin(Eigen::Vector3i(i, j, k));
+            mask.hi_index = mask.hi_index.cwiseMax(Eigen::Vector3i(i, j, k));
+          }
           voxel = 1;
         }
       }

@@ -43,6 +43,9 @@ struct TargetMask {
   tracking::VolumeGeometry geometry;
   std::vector<std::uint8_t> inside;
   std::int64_t voxels_inside = 0;
+  // The index box of the voxels inside (lo > hi on an axis when none is).
+  Eigen::Vector3i lo_index = Eigen::Vector3i::Constant(1 << 30);
+  Eigen::Vector3i hi_index = Eigen::Vector3i::Constant(-1);
   int contours_beyond_scan = 0;    // contours whose plane lies beyond the first or last slice
   double most_off_slice_mm = 0;    // the farthest a contour's plane lies from its slice's centre
   double volume_cc() const;
