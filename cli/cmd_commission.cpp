@@ -6,6 +6,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -37,6 +38,7 @@ struct CommissionCliOptions {
   int good = 100, bad = 1000;
   std::uint64_t seed = 1;
   double tolerance_mm = 0, level_mm = 30, max_false_reject_rate = 0.05;
+  double min_margin = kDefaultFloorMarginFraction;
   bool replace = false, dry_run = false, check = false;
   std::string command_line;
 };
@@ -135,6 +137,83 @@ std::string number(double v) {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+// What the verdict's checks beyond the floors (the envelope's edge band, each view registered
+// alone) do at the measure's default floors, the floors an uncommissioned scene judges with: the
+// wrong results accepted without them, with the edge band, and with both; and what the view
+// check measured of right results and what it cost.
+struct OtherChecks {
+  int accepted_wrong_without = 0, accepted_wrong_edge = 0, accepted_wrong_both = 0;
+  int rejected_right_edge = 0, rejected_right_view = 0;  // right results each refused (alone)
+  int right_with_shift = 0;
+  double right_shift_median_mm = kNaN, right_shift_max_mm = kNaN;
+  double check_ms_median = kNaN, check_ms_p95 = kNaN;
+  bool view_check = false;
+};
+
+OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+                         double tolerance_mm) {
+  OtherChecks o;
+  o.view_check = judges_view_shift(defaults);
+  VerdictLimits edge_only = defaults, neither = defaults;
+  edge_only.max_view_shift_mm = neither.max_view_shift_mm = std::numeric_limits<double>::infinity();
+  neither.envelope_edge_mm = neither.envelope_edge_deg = 0;
+  std::vector<double> shifts, ms;
+  for (const CommissionCaseResult& c : cases) {
+    const bool right = is_right_result(c, tolerance_mm);
+    const bool ok_neither = judge_registration(neither, c.input).ok;
+    const bool ok_edge = judge_registration(edge_only, c.input).ok;
+    const bool ok_both = judge_registration(defaults, c.input).ok;
+    if (!right) {
+      o.accepted_wrong_without += ok_neither;
+      o.accepted_wrong_edge += ok_edge;
+      o.accepted_wrong_both += ok_both;
+    } else {
+      o.rejected_right_edge += ok_neither && !ok_edge;
+      o.rejected_right_view += ok_edge && !ok_both;
+      if (c.input.has_view_shift) shifts.push_back(largest_view_shift_mm(c.input));
+    }
+    if (c.input.has_view_shift) ms.push_back(c.view_check_ms);
+  }
+  const auto at = [](std::vector<double> v, double q) {
+    if (v.empty()) return kNaN;
+    std::sort(v.begin(), v.end());
+    return v[std::min(v.size() - 1, std::size_t(q * double(v.size())))];
+  };
+  o.right_with_shift = static_cast<int>(shifts.size());
+  o.right_shift_median_mm = at(shifts, 0.5);
+  o.right_shift_max_mm = at(shifts, 1.0);
+  o.check_ms_median = at(ms, 0.5);
+  o.check_ms_p95 = at(ms, 0.95);
+  return o;
+}
+
+void print_other_checks(const OtherChecks& o, const VerdictLimits& defaults) {
+  std::printf("the verdict's other checks, at the measure's default floors: false accepts %d without them, %d with "
+              "the envelope's edge band (%.3g mm, %.3g deg; it refused %d right)",
+              o.accepted_wrong_without, o.accepted_wrong_edge, defaults.envelope_edge_mm, defaults.envelope_edge_deg,
+              o.rejected_right_edge);
+  if (!o.view_check) {
+    std::printf("; no view check (safety.max_view_shift_mm: 0, or one view)\n");
+    return;
+  }
+  std::printf(", %d with the view check too\n", o.accepted_wrong_both);
+  std::printf("  view check (each view registered alone, at most %.3g mm across it): right results' largest shift "
+              "median %.3g mm, max %.3g mm (%d results; %d refused); %.1f ms median, %.1f ms p95 a result\n",
+              defaults.max_view_shift_mm, o.right_shift_median_mm, o.right_shift_max_mm, o.right_with_shift,
+              o.rejected_right_view, o.check_ms_median, o.check_ms_p95);
+}
+
+std::string other_checks_yaml(const OtherChecks& o, const std::string& indent) {
+  std::ostringstream y;
+  y << indent << "other_checks_at_defaults: {false_accepts_without: " << o.accepted_wrong_without
+    << ", with_edge_band: " << o.accepted_wrong_edge << ", with_view_check_too: " << o.accepted_wrong_both
+    << ", right_refused_by_edge_band: " << o.rejected_right_edge << ", right_refused_by_view_check: "
+    << o.rejected_right_view << ", right_largest_view_shift_mm: {median: " << number(o.right_shift_median_mm)
+    << ", max: " << number(o.right_shift_max_mm) << "}, view_check_ms: {median: " << number(o.check_ms_median)
+    << ", p95: " << number(o.check_ms_p95) << "}}\n";
+  return y.str();
+}
+
 // Every case: its kind, the patient's pose, the two checks, the TRE, the result's pose, and the
 // verdict at the measure's default floors.
 Status write_cases_csv(const fs::path& file, const std::vector<CommissionCaseResult>& cases,
@@ -143,7 +222,7 @@ Status write_cases_csv(const fs::path& file, const std::vector<CommissionCaseRes
   if (!f) return io_error(file.string() + ": cannot write");
   f << "kind,gold_tx_mm,gold_ty_mm,gold_tz_mm,gold_rx_deg,gold_ry_deg,gold_rz_deg,registered,lowest_similarity,"
        "lowest_check_ncc,tre_mean_mm,ms,result_tx_mm,result_ty_mm,result_tz_mm,result_rx_deg,result_ry_deg,"
-       "result_rz_deg,verdict_at_defaults\n";
+       "result_rz_deg,verdict_at_defaults,largest_view_shift_mm,view_check_ms\n";
   f.precision(6);
   for (const CommissionCaseResult& c : cases) {
     f << to_string(c.kind);
@@ -152,7 +231,8 @@ Status write_cases_csv(const fs::path& file, const std::vector<CommissionCaseRes
       << (c.registered ? lowest_view_check_ncc(c.input) : kNaN) << ',' << c.tre_mean_mm << ',' << c.ms;
     const tracking::Vector6d& d = c.input.delta_from_nominal;
     for (int i = 0; i < 6; ++i) f << ',' << (c.registered ? (i < 3 ? d[i] : tracking::rad_to_deg(d[i])) : kNaN);
-    f << ',' << to_string(judge_registration(defaults, c.input).reason) << '\n';
+    f << ',' << to_string(judge_registration(defaults, c.input).reason) << ',' << largest_view_shift_mm(c.input) << ','
+      << c.view_check_ms << '\n';
   }
   f.flush();
   if (!f) return io_error(file.string() + ": write failed (disk full?)");
@@ -302,10 +382,11 @@ Status run(const CommissionCliOptions& o) {
     std::printf("report: %s (cases.csv)\n", report.string().c_str());
     return check_scene_verdict(p, *scene_limits, floors_from, *cases, tolerance, o.max_false_reject_rate, seconds);
   }
-  const ChosenFloors floors = choose_floors(*cases, *defaults, tolerance);
+  const ChosenFloors floors = choose_floors(*cases, *defaults, tolerance, o.min_margin);
   VerdictLimits commissioned = *defaults;
   commissioned.min_similarity = floors.min_similarity;
   commissioned.min_check_ncc = floors.min_check_ncc;
+  commissioned.max_view_shift_mm = choose_view_shift_limit(*cases, *defaults, tolerance);
   const Tallies before = tally_commission(*cases, *defaults, tolerance);
   const Tallies after = tally_commission(*cases, commissioned, tolerance);
   // Held out: floors chosen from half the cases, judged on the other half. The halves are drawn
@@ -313,10 +394,11 @@ Status run(const CommissionCliOptions& o) {
   // level's up and down), and parity would put each direction in one half.
   std::vector<CommissionCaseResult> fit, held;
   for (std::size_t i = 0; i < cases->size(); ++i) (in_fit_half(i) ? fit : held).push_back((*cases)[i]);
-  const ChosenFloors fit_floors = choose_floors(fit, *defaults, tolerance);
+  const ChosenFloors fit_floors = choose_floors(fit, *defaults, tolerance, o.min_margin);
   VerdictLimits fit_limits = *defaults;
   fit_limits.min_similarity = fit_floors.min_similarity;
   fit_limits.min_check_ncc = fit_floors.min_check_ncc;
+  fit_limits.max_view_shift_mm = choose_view_shift_limit(fit, *defaults, tolerance);
   const Tallies held_out = tally_commission(held, fit_limits, tolerance);
 
   const CommissionTally& all_before = before[kCommissionCaseKinds];
@@ -336,16 +418,31 @@ Status run(const CommissionCliOptions& o) {
               rate(all_after.accepted_wrong, wrong(all_after)).c_str(), wrong(all_after),
               rate(all_after.rejected_right, right(all_after)).c_str(), right(all_after),
               p.scene.registration.similarity.c_str(), floors.min_similarity, floors.min_check_ncc);
+  if (judges_view_shift(commissioned)) {
+    const bool capped = commissioned.max_view_shift_mm >= defaults->max_view_shift_mm;
+    std::printf("  view check: each view alone moves the target at most %.3g mm (%s)\n", commissioned.max_view_shift_mm,
+                (capped ? std::string("the scene's safety.max_view_shift_mm")
+                        : "twice the right results' largest shift, and at least " + number(kMinViewShiftLimitMm) + " mm")
+                    .c_str());
+  }
   const auto margin_text = [](double v) { return std::isfinite(v) ? number(v) : std::string("none"); };
   std::printf("  margins: %s floor %.4f between wrong %s and right %s; check NCC floor %.4f between wrong %s and right %s\n",
               p.scene.registration.similarity.c_str(), floors.min_similarity,
               margin_text(floors.wrong_similarity_below).c_str(), margin_text(floors.right_similarity_above).c_str(),
               floors.min_check_ncc, margin_text(floors.wrong_check_below).c_str(),
               margin_text(floors.right_check_above).c_str());
+  const FloorMargins margins = floor_margins(*defaults, o.min_margin);
+  std::printf("  each wrong result refused by a floor by at least its margin: %s %s, check NCC %s (--min-margin %s)\n",
+              p.scene.registration.similarity.c_str(), number(margins.similarity).c_str(),
+              number(margins.check_ncc).c_str(), number(o.min_margin).c_str());
   std::printf("held out (floors chosen from half the cases, judged on the other half): false accepts %s of %d, false "
               "rejects %s of %d\n",
               rate(all_held.accepted_wrong, wrong(all_held)).c_str(), wrong(all_held),
               rate(all_held.rejected_right, right(all_held)).c_str(), right(all_held));
+  VerdictLimits defaults_with_view_limit = *defaults;
+  defaults_with_view_limit.max_view_shift_mm = commissioned.max_view_shift_mm;
+  const OtherChecks others = other_checks(*cases, defaults_with_view_limit, tolerance);
+  print_other_checks(others, defaults_with_view_limit);
 
   LFTRACK_RETURN_IF_ERROR(write_cases_csv(report / "cases.csv", *cases, *defaults));
   if (Status drawn = draw_plot(report / "verdict.png", *cases, tolerance, *defaults, floors, p.scene.source,
@@ -387,6 +484,7 @@ Status run(const CommissionCliOptions& o) {
   record.measure = p.scene.registration.similarity;
   record.min_similarity = floors.min_similarity;
   record.min_check_ncc = floors.min_check_ncc;
+  record.max_view_shift_mm = judges_view_shift(commissioned) ? commissioned.max_view_shift_mm : 0;
   record.scene = p.scene.source;
   record.made_utc = utc_now();
   record.command = o.command_line;
@@ -399,7 +497,10 @@ Status run(const CommissionCliOptions& o) {
            << ", right_above: " << number(floors.right_similarity_above) << "}\n    check_ncc: {wrong_below: "
            << number(floors.wrong_check_below) << ", right_above: " << number(floors.right_check_above)
            << "}\n  held_out:\n    floors: {min_similarity: " << number(fit_floors.min_similarity)
-           << ", min_check_ncc: " << number(fit_floors.min_check_ncc) << "}\n" << tally_yaml(held_out, "    ");
+           << ", min_check_ncc: " << number(fit_floors.min_check_ncc)
+           << ", max_view_shift_mm: " << number(fit_limits.max_view_shift_mm) << "}\n" << tally_yaml(held_out, "    ")
+           << "  min_margin: {fraction: " << number(o.min_margin) << ", similarity: " << number(margins.similarity)
+           << ", check_ncc: " << number(margins.check_ncc) << "}\n" << other_checks_yaml(others, "  ");
   LFTRACK_RETURN_IF_ERROR(write_commissioning_file(out, record, measured.str(), o.replace));
   std::printf("wrote %s\n", out.string().c_str());
   if (p.scene.commissioning_file.empty() || fs::weakly_canonical(p.scene.commissioning_file, ec) != fs::weakly_canonical(out, ec))
@@ -450,6 +551,11 @@ Command add_commission_command(CLI::App* parent, int argc, char** argv) {
       ->capture_default_str();
   app->add_option("--max-false-rejects", o->max_false_reject_rate,
                   "The largest fraction of right results the floors may reject before nothing is written")
+      ->check(finite_in(0, 1))
+      ->capture_default_str();
+  app->add_option("--min-margin", o->min_margin,
+                  "Each wrong result must lie below a floor by this fraction of the floor's default above what "
+                  "unrelated images score (mi: of 0.3; check NCC: of 0.76)")
       ->check(finite_in(0, 1))
       ->capture_default_str();
   app->add_option("--report", o->report_dir, "Report folder (default: out/commission/<scene stem>, -check for --check)")

@@ -272,6 +272,7 @@ Status run(const RegisterOptions& o) {
                              {"similarity", result->view_similarity[i]},
                              {"image_quality", tracking::to_string(verdict_in.image_quality[i])}};
       if (verdict_in.has_check_ncc) view["check_ncc"] = verdict_in.check_ncc[i];
+      if (verdict_in.has_view_shift) view["alone_moves_target_mm"] = verdict_in.view_shift_mm[i];
       views.push_back(view);
     }
     j["views"] = views;
@@ -300,9 +301,14 @@ Status run(const RegisterOptions& o) {
   std::printf("  T_room_from_ct: t = (%.3f, %.3f, %.3f) mm, Euler Rz*Ry*Rx roll %.3f pitch %.3f yaw %.3f deg\n",
               t.x(), t.y(), t.z(), tracking::rad_to_deg(euler.roll), tracking::rad_to_deg(euler.pitch),
               tracking::rad_to_deg(euler.yaw));
-  for (std::size_t i = 0; i < result->view_similarity.size(); ++i)
-    std::printf("  view %s: %s = %.4f, check NCC = %.4f\n", p.scene.detectors[i].view.name.c_str(),
+  for (std::size_t i = 0; i < result->view_similarity.size(); ++i) {
+    std::printf("  view %s: %s = %.4f, check NCC = %.4f", p.scene.detectors[i].view.name.c_str(),
                 spec.similarity.c_str(), result->view_similarity[i], verdict_in.check_ncc[i]);
+    if (verdict_in.has_view_shift)
+      std::printf(", registered alone it moves the target %.2f mm across it", verdict_in.view_shift_mm[i]);
+    std::printf("\n");
+  }
+  if (verdict_in.has_view_shift) std::printf("  view check: %.1f ms\n", judged->view_check_ms);
   if (unobservable)
     std::printf("  single view: depth along (%.3f, %.3f, %.3f) (room frame) is unobservable\n", unobservable->x(),
                 unobservable->y(), unobservable->z());

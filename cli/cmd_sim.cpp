@@ -119,6 +119,16 @@ void print_summary(const LoopSummary& s) {
     std::printf("verdict's NCC check in tracking cycles: %lld checks, p50 %.2f ms, p95 %.2f ms, max %.2f ms\n",
                 static_cast<long long>(s.verdict_checks), s.verdict_check_p50_ms, s.verdict_check_p95_ms,
                 s.verdict_check_max_ms);
+  if (s.view_check_every < 0) std::printf("verdict's view check: off (safety.max_view_shift_mm: 0, or one view)\n");
+  if (s.view_check_every >= 0) {
+    const std::string when = s.view_check_every > 0 ? "alignments and once every " +
+                                                          std::to_string(s.view_check_every) + " tracking cycles"
+                                                    : std::string("alignments only");
+    std::printf("verdict's view check (each view registered alone; %s): %lld checks, %lld refused, %lld due but out "
+                "of time in their cycle; p50 %.1f ms, max %.1f ms\n",
+                when.c_str(), static_cast<long long>(s.view_checks), static_cast<long long>(s.view_checks_refused),
+                static_cast<long long>(s.view_checks_out_of_time), s.view_check_p50_ms, s.view_check_max_ms);
+  }
   std::printf("holds %lld, faults %lld, corrections sent %lld", static_cast<long long>(s.holds),
               static_cast<long long>(s.faults), static_cast<long long>(s.commands));
   if (s.allocations_per_cycle)

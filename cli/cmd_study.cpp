@@ -3,6 +3,10 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <filesystem>
+#include <system_error>
+
+#include <unistd.h>
 
 #include "cli_commands.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
@@ -149,6 +153,7 @@ struct SensitivityCliOptions {
   SceneOptions scene;
   SensitivityOptions study;
   bool json = false;
+  std::string out_dir;
 };
 
 }  // namespace
@@ -167,21 +172,49 @@ Command add_study_sensitivity_command(CLI::App* parent) {
       ->capture_default_str();
   app->add_option("--seed", o->study.seed, "Seed of gold poses, starts and noise")->check(seed_value())->capture_default_str();
   app->add_flag("--json", o->json, "Print the report as JSON on stdout");
+  app->add_option("--out", o->out_dir,
+                  "Also write runs.csv, summary.json and verdict.png (the registration verdict per case) into this "
+                  "folder, new or empty (nothing in it is replaced)")
+      ->check(not_empty());
   return [o]() -> Status {
+    // The folder before the work: minutes of registrations are not lost to a folder that cannot
+    // be written, and nothing an earlier study wrote is replaced.
+    if (!o->out_dir.empty()) {
+      std::error_code ec;
+      const std::filesystem::path out(o->out_dir);
+      if (std::filesystem::exists(std::filesystem::symlink_status(out, ec)) && !std::filesystem::is_directory(out, ec))
+        return failed_precondition(o->out_dir + ": not a folder");
+      if (std::filesystem::exists(out, ec) && !std::filesystem::is_empty(out, ec))
+        return failed_precondition(o->out_dir + " is not empty; a sensitivity study writes into a new or empty folder");
+      std::filesystem::create_directories(out, ec);
+      if (ec || ::access(out.c_str(), W_OK) != 0)
+        return io_error(o->out_dir + ": cannot create or write the folder" + (ec ? ": " + ec.message() : ""));
+    }
     tracking::ThreadPool pool(o->scene.threads);
     auto prepared = load_prepared_scene(o->scene, &pool);
     if (!prepared.ok()) return prepared.status();
     auto report = run_geometry_sensitivity(*prepared, o->study, &pool);
     if (!report.ok()) return report.status();
+    // The report is printed before the files are written: a write that fails loses no figure.
+    const Status written = o->out_dir.empty() ? Status{} : write_sensitivity_outputs(*report, o->out_dir);
     if (o->json) {
       std::printf("%s\n", to_json(*report).dump(2).c_str());
-      return {};
+      return written;
     }
     std::printf("%-76s %10s %10s %12s\n", "model geometry", "TRE mm", "max mm", "added mm");
     for (const SensitivityCase& c : report->cases)
       std::printf("%-76s %10.3f %10.3f %12.3f\n", c.name.c_str(), c.mean_tre_mm, c.max_tre_mm,
                   c.mean_added_mm);
-    return {};
+    // What the loop would do with each result: the verdict against the truth.
+    std::printf("%-18s %9s %9s %9s %9s   (the registration verdict, %s; right: TRE < %.2f mm)\n", "case",
+                "acc.right", "FALSE ACC", "false rej", "rej.wrong", report->measure.c_str(),
+                report->verdict_tolerance_mm);
+    for (const SensitivityCase& c : report->cases)
+      std::printf("%-18s %9d %9d %9d %9d\n", c.key.c_str(), c.verdict.accepted_right, c.verdict.accepted_wrong,
+                  c.verdict.rejected_right, c.verdict.rejected_wrong);
+    if (!o->out_dir.empty() && written.ok())
+      std::printf("wrote %s/{runs.csv,summary.json,verdict.png}\n", o->out_dir.c_str());
+    return written;
   };
 }
 

@@ -88,8 +88,8 @@ Status merge_trade(const std::vector<std::string>& dirs, const std::filesystem::
   if (merged->size() == 1) {
     LFTRACK_RETURN_IF_ERROR(write_trade_outputs(merged->front(), out));
     print_trade_front(merged->front());
-    std::printf("merged %zu shards, %zu points; wrote %s/{points.csv,summary.md,tre_vs_time.png,"
-                "memory_vs_fidelity.png}\n",
+    std::printf("merged %zu shards, %zu points; wrote %s/{points.csv,runs.csv,summary.md,summary.json,"
+                "tre_vs_time.png,memory_vs_fidelity.png,verdict.png}\n",
                 shards.size(), merged->front().results.size(), out.c_str());
     return {};
   }

@@ -3,6 +3,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -49,6 +50,20 @@ void print_trade_front(const TradeStudy& study) {
     if (r.failed())
       std::printf("FAILED %-15s %d of %d registrations failed: %s\n", r.point.id.c_str(), r.failed_runs, r.runs,
                   r.failure.empty() ? "(reason not recorded)" : r.failure.c_str());
+  // What the loop would do with each point's results: the verdict against the truth.
+  if (std::none_of(study.results.begin(), study.results.end(), [](const TradeResult& r) { return r.judged(); }))
+    return;
+  char right[64];
+  if (study.verdict_tolerance_mm > 0)
+    std::snprintf(right, sizeof right, "TRE < %.2f mm", study.verdict_tolerance_mm);
+  else
+    std::snprintf(right, sizeof right, "TRE under each scene's tolerance");
+  std::printf("%-22s %9s %9s %9s %9s   (right: %s)\n", "Registration verdict", "acc.right", "FALSE ACC",
+              "false rej", "rej.wrong", right);
+  for (const auto& r : study.results)  // indented: a point named here is not on the front above
+    if (r.judged())
+      std::printf("  %-20s %9d %9d %9d %9d\n", r.point.id.c_str(), r.verdict.accepted_right,
+                  r.verdict.accepted_wrong, r.verdict.rejected_right, r.verdict.rejected_wrong);
 }
 
 namespace {
@@ -104,6 +119,7 @@ Status run_trade(const TradeCliOptions& o) {
   expected.points_total = points_total;
   expected.physics = options.physics_name;
   expected.physics_description = sim::describe(options.physics);
+  expected.verdict_tolerance_mm = prepared->scene.safety.beam_tolerance_mm;
   std::vector<std::string> ids;
   for (const TradePoint& t : *mine) ids.push_back(t.id);
   std::string said;
@@ -135,7 +151,9 @@ Status run_trade_points(const PreparedScene& prepared, const TradeOptions& optio
   }
   LFTRACK_RETURN_IF_ERROR(write_trade_outputs(*study, out_dir));
   print_trade_front(*study);
-  std::printf("wrote %s/{points.csv,summary.md,tre_vs_time.png,memory_vs_fidelity.png}\n", out_dir.c_str());
+  std::printf("wrote %s/{points.csv,runs.csv,summary.md,summary.json,tre_vs_time.png,memory_vs_fidelity.png,"
+              "verdict.png}\n",
+              out_dir.c_str());
   return {};
 }
 

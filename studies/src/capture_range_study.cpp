@@ -10,6 +10,7 @@
 
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/studies/study_shard.hpp"
+#include "lftrack/studies/verdict_outcomes.hpp"
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
@@ -303,28 +304,13 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
   if (!drawn.ok()) return drawn.status();
   // What the loop would do with the results: the verdict's four outcomes per method, with their
   // 95 % intervals and the count of runs.
-  GroupedBarChart verdict;
-  verdict.title = "Capture range: the registration verdict against the truth (right: final TRE < " +
-                  std::to_string(o.success_mm).substr(0, 3) + " mm)";
-  verdict.y_label = "runs (%)";
-  verdict.y_min = 0;
-  verdict.y_max = 105;
-  BarSeries outcomes[4] = {{"accepted, right", {}, {}, {}},
-                           {"accepted, wrong (false accept)", {}, {}, {}},
-                           {"rejected, right (false reject)", {}, {}, {}},
-                           {"rejected, wrong", {}, {}, {}}};
-  for (const CaptureRangeSummary& s : report.summaries) {
-    const int counts[4] = {s.accepted_right, s.accepted_wrong, s.rejected_right, s.rejected_wrong};
-    const int n = counts[0] + counts[1] + counts[2] + counts[3];
-    verdict.categories.push_back(s.name + " (n=" + std::to_string(n) + ")");
-    for (int k = 0; k < 4; ++k) {
-      const auto [lo, hi] = wilson_interval(counts[k], n);
-      outcomes[k].value.push_back(n ? 100.0 * counts[k] / n : 0);
-      outcomes[k].low.push_back(100 * lo);
-      outcomes[k].high.push_back(100 * hi);
-    }
-  }
-  verdict.series.assign(std::begin(outcomes), std::end(outcomes));
+  std::vector<VerdictGroup> groups;
+  for (const CaptureRangeSummary& s : report.summaries)
+    groups.push_back({s.name, {s.accepted_right, s.accepted_wrong, s.rejected_right, s.rejected_wrong}});
+  const GroupedBarChart verdict = verdict_outcome_chart(
+      "Capture range: the registration verdict against the truth (right: final TRE < " +
+          std::to_string(o.success_mm).substr(0, 3) + " mm)",
+      groups);
   auto verdict_drawn = draw_grouped_bars(verdict, dir / "verdict.png");
   if (!verdict_drawn.ok()) return verdict_drawn.status();
   return write_capture_range_description(report, dir);  // last: the folder is now a complete result

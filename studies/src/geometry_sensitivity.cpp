@@ -2,10 +2,16 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cmath>
+#include <cstdio>
 #include <functional>
 #include <random>
+#include <sstream>
 
+#include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
@@ -17,7 +23,7 @@ using tracking::XrayView;
 namespace {
 
 struct Perturbation {
-  std::string name;
+  std::string key, name;
   std::function<void(std::vector<DetectorSpec>&)> apply;
 };
 
@@ -44,18 +50,18 @@ void scale_pitch(XrayView& v, double factor) {
 std::vector<Perturbation> perturbations() {
   const double tenth_deg = tracking::deg_to_rad(0.1);
   return {
-      {"no error", [](std::vector<DetectorSpec>&) {}},
-      {"source of view 1 moved 1 mm along its beam",
+      {"no-error", "no error", [](std::vector<DetectorSpec>&) {}},
+      {"source-along", "source of view 1 moved 1 mm along its beam",
        [](std::vector<DetectorSpec>& d) { d[0].view.source_mm += beam_of(d[0].view); }},
-      {"source of view 1 moved 1 mm across its beam (along the detector columns)",
+      {"source-across", "source of view 1 moved 1 mm across its beam (along the detector columns)",
        [](std::vector<DetectorSpec>& d) { d[0].view.source_mm += d[0].view.col_axis; }},
-      {"detector of view 1 tilted 0.1 deg about its row axis",
+      {"detector-tilt", "detector of view 1 tilted 0.1 deg about its row axis",
        [=](std::vector<DetectorSpec>& d) { tilt_detector(d[0].view, d[0].view.row_axis, tenth_deg); }},
-      {"detector of view 1 rotated 0.1 deg in its plane",
+      {"detector-rotation", "detector of view 1 rotated 0.1 deg in its plane",
        [=](std::vector<DetectorSpec>& d) { tilt_detector(d[0].view, beam_of(d[0].view), tenth_deg); }},
-      {"detector of view 1 moved 0.1 mm in its plane (along the columns)",
+      {"detector-shift", "detector of view 1 moved 0.1 mm in its plane (along the columns)",
        [](std::vector<DetectorSpec>& d) { d[0].view.pixel00_mm += 0.1 * d[0].view.col_axis; }},
-      {"pitch of both detectors off by +0.1%",
+      {"pitch", "pitch of both detectors off by +0.1%",
        [](std::vector<DetectorSpec>& d) {
          for (auto& s : d) scale_pitch(s.view, 1.001);
        }},
@@ -80,6 +86,10 @@ Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& truth, c
   const std::shared_ptr<const tracking::DrrRenderer> inside = std::move(*made);
   const tracking::DetectorCorrection correction = sim::detector_correction(scene_detector_model(truth));
   const Eigen::Vector3d origin = truth.registration_origin_room_mm();
+  // The scene's verdict for its measure, resolved once from the true scene (a commissioning file
+  // describes the scene's geometry, not a perturbed model of it).
+  auto limits = scene_verdict_limits(truth, truth.scene.registration.similarity);
+  if (!limits.ok()) return limits.status();
 
   // Gold poses, starts and raw frames, shared by every case.
   struct Problem {
@@ -108,6 +118,8 @@ Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& truth, c
   report.scene = truth.scene.source;
   report.plan = o.plan;
   report.runs = o.runs;
+  report.measure = truth.scene.registration.similarity;
+  report.verdict_tolerance_mm = truth.scene.safety.beam_tolerance_mm;
   std::vector<Pose> error_free;
   const std::vector<Perturbation> cases = perturbations();
   ProgressBar bar("sensitivity");
@@ -118,9 +130,14 @@ Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& truth, c
     auto registration = make_scene_registration(model, inside, model.scene.registration, pool);
     if (!registration.ok()) return registration.status();
     SensitivityCase row;
+    row.key = c.key;
     row.name = c.name;
     for (std::size_t i = 0; i < problems.size(); ++i) {
-      // The system knows only the model geometry: it crops and corrects with it.
+      // The system knows only the model geometry: it gates, crops and corrects with it.
+      std::vector<tracking::FrameQualityIssue> quality;
+      for (std::size_t v = 0; v < problems[i].raw.size(); ++v)
+        quality.push_back(tracking::assess_frame_quality(problems[i].raw[v].view(), model.roi_windows[v],
+                                                         correction, tracking::FrameQualityLimits{}));
       auto frames = preprocess_scene_frames(model, problems[i].raw, correction);
       if (!frames.ok()) return frames.status();
       LFTRACK_RETURN_IF_ERROR((*registration)->set_frames(frames->frames(), frames->masks()));
@@ -129,12 +146,21 @@ Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& truth, c
       const double tre = scene_tre(truth, r->T_room_from_ct, problems[i].gold).mean_mm;
       row.mean_tre_mm += tre / double(problems.size());
       row.max_tre_mm = std::max(row.max_tre_mm, tre);
+      double added = 0;
       if (error_free.size() < problems.size()) {
         error_free.push_back(r->T_room_from_ct);
       } else {
-        row.mean_added_mm +=
-            scene_tre(truth, r->T_room_from_ct, error_free[i]).mean_mm / double(problems.size());
+        added = scene_tre(truth, r->T_room_from_ct, error_free[i]).mean_mm;
+        row.mean_added_mm += added / double(problems.size());
       }
+      auto judged = verdict_input_of(model, *inside, *frames, quality, *r);
+      if (!judged.ok()) return judged.status().with_context(c.name);
+      const RegistrationVerdict verdict = judge_registration(*limits, *judged);
+      row.verdict.add(verdict.ok, tre < report.verdict_tolerance_mm);
+      row.run_tre_mm.push_back(tre);
+      row.run_added_mm.push_back(added);
+      row.run_accepted.push_back(verdict.ok);
+      row.run_verdict_reason.push_back(int(verdict.reason));
       bar.update(double(++done) / double(cases.size() * problems.size()));
     }
     report.cases.push_back(row);
@@ -148,13 +174,44 @@ nlohmann::json to_json(const SensitivityReport& r) {
   j["scene"] = r.scene;
   j["plan"] = r.plan;
   j["runs"] = r.runs;
+  j["measure"] = r.measure;
+  j["verdict_tolerance_mm"] = r.verdict_tolerance_mm;
   for (const SensitivityCase& c : r.cases) {
-    j["cases"].push_back({{"name", c.name},
+    j["cases"].push_back({{"key", c.key},
+                          {"name", c.name},
                           {"mean_tre_mm", c.mean_tre_mm},
                           {"max_tre_mm", c.max_tre_mm},
-                          {"mean_added_mm", c.mean_added_mm}});
+                          {"mean_added_mm", c.mean_added_mm},
+                          {"verdict", verdict_outcomes_json(c.verdict)}});
   }
   return j;
+}
+
+Status write_sensitivity_outputs(const SensitivityReport& r, const std::filesystem::path& dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return io_error(dir.string() + ": cannot create folder: " + ec.message());
+  std::ostringstream csv;
+  csv.precision(9);
+  csv << "case,run,tre_mm,added_mm,accepted,verdict_reason\n";
+  for (const SensitivityCase& c : r.cases)
+    for (std::size_t k = 0; k < c.run_tre_mm.size(); ++k)
+      csv << c.key << ',' << k << ',' << c.run_tre_mm[k] << ',' << c.run_added_mm[k] << ','
+          << c.run_accepted[k] << ',' << c.run_verdict_reason[k] << '\n';
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", csv.str()));
+  std::vector<VerdictGroup> groups;
+  for (const SensitivityCase& c : r.cases) groups.push_back({c.key, c.verdict});
+  char right[48];
+  std::snprintf(right, sizeof right, "%.2f", r.verdict_tolerance_mm);
+  GroupedBarChart chart = verdict_outcome_chart(
+      "Calibration sensitivity: the registration verdict against the truth per case (right: TRE < " +
+          std::string(right) + " mm)",
+      groups);
+  chart.key_position = "outside right top";  // clear of the bars
+  chart.width = 1400;                         // seven cases
+  chart.slanted_categories = true;
+  if (auto drawn = draw_grouped_bars(chart, dir / "verdict.png"); !drawn.ok()) return drawn.status();
+  return write_file_atomically(dir / "summary.json", to_json(r).dump(2) + "\n");  // last: the folder is complete
 }
 
 }  // namespace lftrack::host

@@ -218,11 +218,12 @@ Result<bool> draw_grouped_bars(const GroupedBarChart& chart, const std::filesyst
   }
   std::ofstream g(gp);
   if (!g) return io_error(gp.string() + ": cannot write");
-  g << gp_preamble(1100, 650, png, chart.title, false)
+  g << gp_preamble(chart.width, 650, png, chart.title, false)
     << "set ylabel " << gp_string(chart.y_label) << " noenhanced\n"
     << "set grid ytics\nset key " << chart.key_position << " box opaque noenhanced\n"
     << "set style data histogram\nset style histogram errorbars gap 1 lw 1.5\n"
     << "set style fill solid 0.7 border -1\nset boxwidth 0.9\nset xtics noenhanced\n";
+  if (chart.slanted_categories) g << "set xtics rotate by -30\nset bmargin 9\n";
   if (chart.y_max > chart.y_min) g << "set yrange [" << chart.y_min << ":" << chart.y_max << "]\n";
   else g << "set yrange [0:*]\n";
   g << "plot ";

@@ -210,6 +210,20 @@ std::string study_scene_fingerprint(const PreparedScene& p) {
   mix_text(p.scene.sim.renderer);
   mix(std::uint64_t(std::llround(p.scene.sim.photons_per_pixel)));
   mix(std::uint64_t(std::llround(p.scene.sim.detector_blur_px * 1e6)));
+  // What judges the results: the verdict's floors (a commissioning file's bytes, or the scene's
+  // own floor), its edge band and view check, and the tolerance that says a result is right.
+  const auto micro = [](double x) { return std::uint64_t(std::llround(x * 1e6)); };
+  if (!p.scene.commissioning_file.empty()) {
+    std::ifstream in(p.scene.commissioning_file, std::ios::binary);
+    std::ostringstream bytes;
+    bytes << in.rdbuf();
+    mix_text(bytes.str());
+  }
+  mix(p.scene.min_similarity_given ? micro(p.scene.safety.min_similarity) : 0);
+  const VerdictChecksSpec& checks = p.scene.verdict_checks;
+  for (double x : {checks.envelope_edge_mm, checks.envelope_edge_deg, checks.max_view_shift_mm,
+                   p.scene.safety.beam_tolerance_mm})
+    mix(micro(x));
   char hex[17];
   std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
   return hex;

@@ -17,7 +17,9 @@
 #include <random>
 #include <set>
 
+#include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
@@ -51,6 +53,9 @@ struct Problem {
   Pose gold = Pose::Identity();
   Pose start = Pose::Identity();
   SceneFrames frames;
+  // Per view, the image-quality gate on the raw frame over its ROI window, as the loop runs it
+  // (what the verdict judges first).
+  std::vector<tracking::FrameQualityIssue> quality;
   std::vector<tracking::Image<float>> siddon_drr;  // per view, ROI window, at gold (fidelity reference)
 };
 
@@ -108,6 +113,9 @@ Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, st
     };
     auto raw = expose();
     if (!raw.ok()) return raw.status();
+    for (std::size_t v = 0; v < raw->size(); ++v)
+      pr.quality.push_back(tracking::assess_frame_quality((*raw)[v].view(), p.roi_windows[v], correction,
+                                                          tracking::FrameQualityLimits{}));
     auto frames = preprocess_scene_frames(p, *raw, correction);
     if (!frames.ok()) return frames.status();
     pr.frames = std::move(frames).value();
@@ -429,6 +437,7 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
   study.points_total = points_total;
   study.physics = o.physics_name;
   study.physics_description = sim::describe(o.physics);
+  study.verdict_tolerance_mm = p.scene.safety.beam_tolerance_mm;
   if (progress) progress(0, "making the problems");
   auto problems = make_problems(p, problem_count, o.seed, o.physics, pool);
   if (!problems.ok()) return problems.status();
@@ -448,6 +457,9 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
     if (!reg.ok()) return reg.status().with_context("point " + t.id);
     auto plan = point_plan(t);
     if (!plan.ok()) return plan.status().with_context("point " + t.id);
+    // The scene's verdict for the point's measure, as the loop would judge with it.
+    auto limits = scene_verdict_limits(p, t.similarity);
+    if (!limits.ok()) return limits.status().with_context("point " + t.id);
     std::vector<double> ms, tre;
     int ok = 0;
     double ncc_sum = 0, psnr_sum = 0;
@@ -457,14 +469,23 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
       auto result = (*reg)->run(pr.start, *plan);
       double final_tre = scene_tre(p, pr.start, pr.gold).mean_mm;
       double elapsed_ms = std::numeric_limits<double>::quiet_NaN();
+      bool accepted = false;  // a failed registration: nothing to judge, rejected
+      int verdict_reason = int(VerdictReason::kNoResult);
       if (result.ok()) {
         final_tre = scene_tre(p, result->T_room_from_ct, pr.gold).mean_mm;
         elapsed_ms = result->elapsed_ms;
         ms.push_back(result->elapsed_ms);
+        auto judged = verdict_input_of(p, **renderer, pr.frames, pr.quality, *result);
+        if (!judged.ok()) return judged.status().with_context("point " + t.id);
+        const RegistrationVerdict verdict = judge_registration(*limits, *judged);
+        accepted = verdict.ok;
+        verdict_reason = int(verdict.reason);
       } else {
         spdlog::warn("point {}: {}", t.id, result.status().message());
         if (res.failed_runs++ == 0) res.failure = result.status().message();
       }
+      res.problem_accepted.push_back(accepted);
+      res.problem_verdict_reason.push_back(verdict_reason);
       tre.push_back(final_tre);
       res.problem_tre_mm.push_back(final_tre);
       res.problem_ms.push_back(elapsed_ms);
@@ -485,6 +506,7 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
       if (progress) progress(done / steps, t.id);
     }
     res.runs = problem_count;
+    res.verdict = tally_trade_verdict(res, study.verdict_tolerance_mm);
     const double nan = std::numeric_limits<double>::quiet_NaN();
     res.median_ms = ms.empty() ? nan : quantile(ms, 0.5);  // no registration ran: no time
     res.p95_ms = ms.empty() ? nan : quantile(ms, 0.95);

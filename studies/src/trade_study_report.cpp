@@ -16,12 +16,16 @@
 #include "lftrack/studies/study_shard.hpp"
 #include "csv_cells.hpp"
 #include "lftrack/studies/trade_study.hpp"
+#include "lftrack/studies/verdict_outcomes.hpp"
 #include "quantile.hpp"
 
 namespace lftrack::host {
 namespace {
 
-const char* const kRunsHeader = "id,problem,tre_mm,ms";
+// runs.csv: before the verdict was recorded, and since (accepted and verdict_reason as
+// capture-range's runs.csv has them; empty cells: a point not judged).
+const char* const kRunsHeaderWithoutVerdict = "id,problem,tre_mm,ms";
+const std::string kRunsHeader = std::string(kRunsHeaderWithoutVerdict) + ",accepted,verdict_reason";
 
 // points.csv before failed registrations were recorded: its failed runs are the NaN times of
 // runs.csv, their reason unknown.
@@ -29,7 +33,10 @@ const char* const kCsvHeaderWithoutFailures =
     "id,renderer,storage,vq_codebook,lf_u,lf_v,lf_s,lf_t,envelope_scale,octree_pivot,bin,similarity,plan,"
     "final_step_mm,budget_ms,runs,median_ms,p95_ms,mean_tre_mm,p95_tre_mm,success_rate,memory_bytes,"
     "precompute_s,ncc_vs_siddon,psnr_db_vs_siddon";
-const std::string kCsvHeader = std::string(kCsvHeaderWithoutFailures) + ",failed_runs,failure";
+const std::string kCsvHeaderWithoutVerdict = std::string(kCsvHeaderWithoutFailures) + ",failed_runs,failure";
+// Since the verdict: its four outcomes per point (verdict_outcomes.hpp; all 0: not judged).
+const std::string kCsvHeader =
+    kCsvHeaderWithoutVerdict + ",accepted_right,false_accepts,false_rejects,rejected_wrong";
 
 // A free text as one CSV cell (no quoting: commas become ';') and one table cell (no '|').
 std::string text_cell(std::string text) {
@@ -104,6 +111,7 @@ nlohmann::json study_json(const TradeStudy& s) {
           {"points_total", s.points_total},
           {"physics", s.physics},
           {"physics_description", s.physics_description},
+          {"verdict_tolerance_mm", s.verdict_tolerance_mm},
           {"points", s.results.size()}};
 }
 
@@ -115,15 +123,17 @@ Status read_trade_runs(const std::filesystem::path& file, TradeStudy* s) {
   std::map<std::string, TradeResult*> by_id;
   for (TradeResult& r : s->results) by_id[r.point.id] = &r;
   std::string line;
-  if (!std::getline(in, line) || line != kRunsHeader)
+  if (!std::getline(in, line) || (line != kRunsHeader && line != kRunsHeaderWithoutVerdict))
     return corrupt_data(file.string() + ": line 1 is not the trade study's runs header");
+  const std::size_t columns = line == kRunsHeader ? 6 : 4;
   int line_no = 1;
   while (std::getline(in, line)) {
     ++line_no;
     if (line.empty()) continue;
     const auto c = split_csv_line(line);
     const std::string where = file.string() + ":" + std::to_string(line_no);
-    if (c.size() != 4) return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected 4");
+    if (c.size() != columns)
+      return corrupt_data(where + ": " + std::to_string(c.size()) + " fields, expected " + std::to_string(columns));
     auto it = by_id.find(c[0]);
     if (it == by_id.end()) return corrupt_data(where + ": point '" + c[0] + "' is not in points.csv");
     TradeResult& r = *it->second;
@@ -136,13 +146,42 @@ Status read_trade_runs(const std::filesystem::path& file, TradeStudy* s) {
     const double ms = std::strtod(c[3].c_str(), &end);
     if (*end || !(std::isnan(ms) || (std::isfinite(ms) && ms >= 0)))
       return corrupt_data(where + ": time '" + c[3] + "' is not a duration");
+    if (columns == 6 && !(c[4].empty() && c[5].empty())) {  // empty: this point was not judged
+      const long accepted = std::strtol(c[4].c_str(), &end, 10);
+      const bool accepted_ok = !c[4].empty() && !*end && (accepted == 0 || accepted == 1);
+      const long reason = std::strtol(c[5].c_str(), &end, 10);
+      if (!accepted_ok || c[5].empty() || *end || reason < 0 || reason > 255 ||
+          r.problem_accepted.size() != r.problem_tre_mm.size())
+        return corrupt_data(where + ": accepted or verdict_reason out of range");
+      r.problem_accepted.push_back(int(accepted));
+      r.problem_verdict_reason.push_back(int(reason));
+    }
     r.problem_tre_mm.push_back(tre);
     r.problem_ms.push_back(ms);
   }
   return {};
 }
 
+// The verdict's table in summary.md: one row per point.
+std::string verdict_row(const TradeResult& r) {
+  if (!r.judged()) return "| " + r.point.id + " | " + std::to_string(r.runs) + " | not judged | | | |\n";
+  const VerdictOutcomes& v = r.verdict;
+  return "| " + r.point.id + " | " + std::to_string(v.total()) + " | " + std::to_string(v.accepted_right) + " | " +
+         std::to_string(v.accepted_wrong) + " | " + std::to_string(v.rejected_right) + " | " +
+         std::to_string(v.rejected_wrong) + " |\n";
+}
+
 }  // namespace
+
+VerdictOutcomes tally_trade_verdict(const TradeResult& r, double tolerance_mm) {
+  VerdictOutcomes v;
+  if (r.problem_accepted.empty() || r.problem_accepted.size() != r.problem_tre_mm.size()) return v;
+  for (std::size_t k = 0; k < r.problem_tre_mm.size(); ++k) {
+    const bool ran = k < r.problem_ms.size() && !std::isnan(r.problem_ms[k]);  // NaN: the registration failed
+    v.add(r.problem_accepted[k] != 0, ran && r.problem_tre_mm[k] < tolerance_mm);
+  }
+  return v;
+}
 
 std::vector<TradeResult> pareto_front(const std::vector<TradeResult>& results) {
   const auto contends = [](const TradeResult& r) {
@@ -213,14 +252,22 @@ Status write_trade_data(const TradeStudy& study, const std::filesystem::path& di
         << csv_number(r.median_ms) << ',' << csv_number(r.p95_ms) << ',' << csv_number(r.mean_tre_mm) << ',' << csv_number(r.p95_tre_mm)
         << ',' << csv_number(r.success_rate) << ',' << csv_number(r.memory_bytes) << ',' << csv_number(r.precompute_s) << ','
         << csv_number(r.ncc_vs_siddon) << ',' << csv_number(r.psnr_db_vs_siddon) << ',' << r.failed_runs << ','
-        << text_cell(r.failure) << '\n';
+        << text_cell(r.failure) << ',' << r.verdict.accepted_right << ',' << r.verdict.accepted_wrong << ','
+        << r.verdict.rejected_right << ',' << r.verdict.rejected_wrong << '\n';
   }
   std::ostringstream runs;
   runs << kRunsHeader << '\n';
-  for (const TradeResult& r : study.results)
-    for (std::size_t k = 0; k < r.problem_tre_mm.size(); ++k)
+  for (const TradeResult& r : study.results) {
+    const bool judged = r.problem_accepted.size() == r.problem_tre_mm.size() &&
+                        r.problem_verdict_reason.size() == r.problem_tre_mm.size();
+    for (std::size_t k = 0; k < r.problem_tre_mm.size(); ++k) {
       runs << r.point.id << ',' << k << ',' << csv_number(r.problem_tre_mm[k]) << ','
-           << csv_number(k < r.problem_ms.size() ? r.problem_ms[k] : std::nan("")) << '\n';
+           << csv_number(k < r.problem_ms.size() ? r.problem_ms[k] : std::nan("")) << ',';
+      if (judged) runs << r.problem_accepted[k] << ',' << r.problem_verdict_reason[k];
+      else runs << ',';  // not judged: empty cells
+      runs << '\n';
+    }
+  }
   // study.json last: a folder without it is not a result (study_shard.hpp).
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "points.csv", csv.str()));
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "runs.csv", runs.str()));
@@ -251,6 +298,9 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
       s.quick = j.at("quick").get<bool>();
       s.physics = j.value("physics", std::string("ideal"));  // studies before issue 21: ideal frames
       s.physics_description = j.value("physics_description", std::string());
+      s.verdict_tolerance_mm = j.value("verdict_tolerance_mm", 2.0);  // studies before the verdict: the default
+      if (!std::isfinite(s.verdict_tolerance_mm) || s.verdict_tolerance_mm < 0)
+        return corrupt_data((dir / "study.json").string() + ": verdict_tolerance_mm out of range");
       const auto shard = j.at("shard").get<std::int64_t>();
       const auto shards = j.at("shards").get<std::int64_t>();
       const auto points_total = j.at("points_total").get<std::int64_t>();
@@ -269,10 +319,12 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
   std::ifstream csv(file);
   if (!csv) return not_found(file.string() + ": no such file");
   std::string line;
-  if (!std::getline(csv, line) || (line != kCsvHeader && line != kCsvHeaderWithoutFailures))
+  if (!std::getline(csv, line) ||
+      (line != kCsvHeader && line != kCsvHeaderWithoutVerdict && line != kCsvHeaderWithoutFailures))
     return corrupt_data(file.string() + ": line 1 is not the trade study's header");
-  const bool records_failures = line == kCsvHeader;
-  const std::size_t fields = records_failures ? 27 : 25;
+  const bool records_failures = line != kCsvHeaderWithoutFailures;
+  const bool records_verdict = line == kCsvHeader;
+  const std::size_t fields = records_verdict ? 31 : records_failures ? 27 : 25;
   int line_no = 1;
   while (std::getline(csv, line)) {
     ++line_no;
@@ -323,7 +375,13 @@ Result<TradeStudy> read_trade_shard(const std::filesystem::path& dir) {
       ok = integer(0, r.runs, &r.failed_runs);
       r.failure = c[k++];
     }
+    if (ok && records_verdict)
+      ok = integer(0, r.runs, &r.verdict.accepted_right) && integer(0, r.runs, &r.verdict.accepted_wrong) &&
+           integer(0, r.runs, &r.verdict.rejected_right) && integer(0, r.runs, &r.verdict.rejected_wrong);
     if (!ok) return corrupt_data(where + ": field " + std::to_string(k) + " ('" + c[k - 1] + "') is not a valid value");
+    if (r.judged() && r.verdict.total() != r.runs)
+      return corrupt_data(where + ": the verdict's outcomes count " + std::to_string(r.verdict.total()) + " of " +
+                          std::to_string(r.runs) + " runs");
     if (t.id.empty()) return corrupt_data(where + ": empty point id");
     s.results.push_back(r);
   }
@@ -345,7 +403,8 @@ Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards) {
     if (s.scene != first.scene || s.fingerprint != first.fingerprint || s.seed != first.seed ||
         s.problems != first.problems ||
         s.quick != first.quick || s.shards != first.shards || s.points_total != first.points_total ||
-        s.physics != first.physics || s.physics_description != first.physics_description)
+        s.physics != first.physics || s.physics_description != first.physics_description ||
+        s.verdict_tolerance_mm != first.verdict_tolerance_mm)
       return failed_precondition("merge: shard " + std::to_string(s.shard) + "/" + std::to_string(s.shards) +
                                  " is of another study (scene '" + s.scene + "', seed " +
                                  std::to_string(s.seed) + ", " + std::to_string(s.problems) + " problems)");
@@ -387,7 +446,8 @@ Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeS
       s->problems != expected.problems ||
       s->quick != expected.quick || s->shard != expected.shard || s->shards != expected.shards ||
       s->points_total != expected.points_total || s->physics != expected.physics ||
-      s->physics_description != expected.physics_description)
+      s->physics_description != expected.physics_description ||
+      s->verdict_tolerance_mm != expected.verdict_tolerance_mm)
     return failed_precondition(dir.string() + " holds another study (scene '" + s->scene + "', seed " +
                                std::to_string(s->seed) + ", " + std::to_string(s->problems) +
                                " problems, shard " + std::to_string(s->shard) + "/" + std::to_string(s->shards) +
@@ -401,6 +461,9 @@ Status check_trade_shard_complete(const std::filesystem::path& dir, const TradeS
       return corrupt_data(dir.string() + ": point '" + r.point.id + "' has " +
                           std::to_string(r.problem_tre_mm.size()) + " problem rows of " +
                           std::to_string(expected.problems));
+    if (!r.judged() || r.problem_accepted.size() != r.problem_tre_mm.size())
+      return corrupt_data(dir.string() + ": point '" + r.point.id +
+                          "' has no registration verdict (written before the verdict was recorded)");
   }
   if (found != ids) {
     std::string want;
@@ -430,13 +493,19 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std
   for (const TradeStudy& s : scenes) pooled.scene += (pooled.scene.empty() ? "" : " + ") + s.scene;
   pooled.problems = 0;
   for (const TradeStudy& s : scenes) pooled.problems += s.problems;
+  for (const TradeStudy& s : scenes)  // scenes of different tolerances: each its own (0)
+    if (s.verdict_tolerance_mm != pooled.verdict_tolerance_mm) pooled.verdict_tolerance_mm = 0;
   pooled.results.clear();
   std::set<std::string> dropped;
   for (const TradeResult& first : scenes[0].results) {
     std::vector<const TradeResult*> same;
+    std::vector<const TradeStudy*> scene_of;  // the scene of each of `same`
     for (const TradeStudy& s : scenes)
       for (const TradeResult& r : s.results)
-        if (r.point.id == first.point.id) same.push_back(&r);
+        if (r.point.id == first.point.id) {
+          same.push_back(&r);
+          scene_of.push_back(&s);
+        }
     if (same.size() != scenes.size()) {
       dropped.insert(first.point.id);
       continue;
@@ -444,10 +513,25 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes, std
     TradeResult p = first;
     p.problem_tre_mm.clear();
     p.problem_ms.clear();
+    p.problem_accepted.clear();
+    p.problem_verdict_reason.clear();
+    p.verdict = {};
+    // The verdict, where every scene judged the point: each scene's rows against its own tolerance.
+    const bool judged = std::all_of(same.begin(), same.end(), [](const TradeResult* r) {
+      return r->problem_accepted.size() == r->problem_tre_mm.size() &&
+             r->problem_verdict_reason.size() == r->problem_tre_mm.size() && !r->problem_accepted.empty();
+    });
     p.memory_bytes = p.precompute_s = p.ncc_vs_siddon = p.psnr_db_vs_siddon = 0;
-    for (const TradeResult* r : same) {
+    for (std::size_t i = 0; i < same.size(); ++i) {
+      const TradeResult* r = same[i];
       p.problem_tre_mm.insert(p.problem_tre_mm.end(), r->problem_tre_mm.begin(), r->problem_tre_mm.end());
       p.problem_ms.insert(p.problem_ms.end(), r->problem_ms.begin(), r->problem_ms.end());
+      if (judged) {
+        p.problem_accepted.insert(p.problem_accepted.end(), r->problem_accepted.begin(), r->problem_accepted.end());
+        p.problem_verdict_reason.insert(p.problem_verdict_reason.end(), r->problem_verdict_reason.begin(),
+                                        r->problem_verdict_reason.end());
+        p.verdict += tally_trade_verdict(*r, scene_of[i]->verdict_tolerance_mm);
+      }
       const double w = 1.0 / double(same.size());
       p.memory_bytes += w * r->memory_bytes;
       p.precompute_s += w * r->precompute_s;
@@ -530,6 +614,49 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
   auto drawn2 = draw_scatter_plot(memory_plot, dir / "memory_vs_fidelity.png");
   if (!drawn2.ok()) return drawn2.status();
 
+  // What the loop would do with each point's results: the verdict's four outcomes, as rates with
+  // their 95 % intervals and the count of results (an axis of rates alone).
+  const std::string right = study.verdict_tolerance_mm > 0
+                                ? "final mean TRE < " + fixed(study.verdict_tolerance_mm, 2) + " mm"
+                                : "final mean TRE under each scene's safety.beam_tolerance_mm";
+  std::vector<VerdictGroup> groups;
+  for (const TradeResult& r : study.results)
+    if (r.judged()) groups.push_back({r.point.id, r.verdict});
+  GroupedBarChart verdict_chart =
+      verdict_outcome_chart("Trade study, " + study.scene + ": the registration verdict against the truth (right: " +
+                                right + ")",
+                            groups);
+  verdict_chart.width = std::max(1100, 110 * int(groups.size()));
+  verdict_chart.slanted_categories = groups.size() > 6;
+  verdict_chart.key_position = "outside right top";  // clear of the bars, however many points
+  if (!groups.empty()) {
+    auto drawn3 = draw_grouped_bars(verdict_chart, dir / "verdict.png");
+    if (!drawn3.ok()) return drawn3.status();
+  }
+
+  nlohmann::json summary = {{"study", "trade"},
+                            {"scene", study.scene},
+                            {"problems", study.problems},
+                            {"physics", study.physics},
+                            {"success_threshold_mm", 2.0},
+                            {"verdict_tolerance_mm", study.verdict_tolerance_mm},
+                            {"points", nlohmann::json::array()}};
+  for (const TradeResult& r : study.results) {
+    const auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
+    summary["points"].push_back({{"id", r.point.id},
+                                 {"settings", describe(r.point)},
+                                 {"runs", r.runs},
+                                 {"failed_runs", r.failed_runs},
+                                 {"median_ms", number(r.median_ms)},
+                                 {"p95_ms", number(r.p95_ms)},
+                                 {"mean_tre_mm", number(r.mean_tre_mm)},
+                                 {"p95_tre_mm", number(r.p95_tre_mm)},
+                                 {"success_rate", r.success_rate},
+                                 {"memory_bytes", r.memory_bytes},
+                                 {"verdict", r.judged() ? verdict_outcomes_json(r.verdict) : nlohmann::json()}});
+  }
+  LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "summary.json", summary.dump(2) + "\n"));
+
   const TradeRecommendations rec = recommend(study.results);
   std::ostringstream md;
   md << "# Trade study: " << study.scene << "\n\n"
@@ -570,6 +697,14 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
      << "## Every point\n\n"
      << kTableHeader;
   for (const TradeResult& r : study.results) md << table_row(r);
+  md << "\n## The registration verdict\n\n"
+     << "What the loop would do with each result: the verdict `lftrack register` and the loop use (the scene's "
+        "limits for the point's measure, the check NCC against the point's renderer) against the truth (right: "
+     << right << "; a failed registration is rejected and never right).\n\n"
+     << (groups.empty() ? std::string() : "![the verdict per point](verdict.png)\n\n")
+     << "| point | n | accepted, right | accepted, wrong (false accepts) | rejected, right (false rejects) | "
+        "rejected, wrong |\n|---|---|---|---|---|---|\n";
+  for (const TradeResult& r : study.results) md << verdict_row(r);
   LFTRACK_RETURN_IF_ERROR(write_file_atomically(dir / "summary.md", md.str()));
   return write_trade_description(study, dir);  // last: the folder is now a complete result
 }

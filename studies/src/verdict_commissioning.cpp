@@ -179,7 +179,8 @@ Result<std::vector<CommissionCaseResult>> run_commission_cases(const PreparedSce
       if (p.scene.detectors[v].calibration_file.empty()) (*corrections)[v] = *simulated->correction;
   auto renderer = make_scene_renderer(p, o.renderer, o.light_field_dir, o.pool);
   if (!renderer.ok()) return renderer.status();
-  auto judge = RegistrationJudge::create(p, *renderer, p.scene.registration, *corrections, *limits, o.pool);
+  auto judge = RegistrationJudge::create(p, *renderer, p.scene.registration, *corrections, *limits, o.pool,
+                                         RegistrationJudge::ViewCheck::kAlways);
   if (!judge.ok()) return judge.status();
 
   std::vector<Image<std::uint16_t>> raw = simulated->detectors.make_frames();
@@ -227,6 +228,7 @@ Result<std::vector<CommissionCaseResult>> run_commission_cases(const PreparedSce
     r.registered = judged->registered;
     r.input = judged->input;
     r.ms = judged->registered ? judged->result.elapsed_ms : 0;
+    r.view_check_ms = judged->view_check_ms;
     r.tre_mean_mm = judged->registered && has_gold ? scene_tre(p, judged->result.T_room_from_ct, pose_of(p, c.gold)).mean_mm
                                                    : kNaN;
     results.push_back(r);
@@ -249,12 +251,31 @@ double lowest_view_check_ncc(const VerdictInput& in) {
   return low;
 }
 
+double largest_view_shift_mm(const VerdictInput& in) {
+  if (in.views < 1 || !in.has_view_shift) return kNaN;
+  double most = in.view_shift_mm[0];
+  for (int v = 1; v < in.views; ++v) most = std::max(most, in.view_shift_mm[std::size_t(v)]);
+  return most;
+}
+
+double choose_view_shift_limit(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+                               double tolerance_mm) {
+  if (!judges_view_shift(defaults)) return defaults.max_view_shift_mm;
+  double largest = -1;
+  for (const CommissionCaseResult& c : cases)
+    if (is_right_result(c, tolerance_mm) && c.input.has_view_shift)
+      largest = std::max(largest, largest_view_shift_mm(c.input));
+  if (!(largest >= 0)) return defaults.max_view_shift_mm;
+  return std::min(defaults.max_view_shift_mm, std::max(kMinViewShiftLimitMm, 2 * largest));
+}
+
 bool is_right_result(const CommissionCaseResult& c, double tolerance_mm) {
   return !must_refuse(c.kind) && c.registered && c.tre_mean_mm < tolerance_mm;
 }
 
 VerdictLimits without_floors(VerdictLimits limits) {
   limits.min_similarity = limits.min_check_ncc = -std::numeric_limits<double>::infinity();
+  limits.max_view_shift_mm = std::numeric_limits<double>::infinity();
   return limits;
 }
 
@@ -273,9 +294,15 @@ std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(const std
   return t;
 }
 
+FloorMargins floor_margins(const VerdictLimits& defaults, double min_margin_fraction) {
+  return {min_margin_fraction * (defaults.min_similarity - defaults.no_information_similarity),
+          min_margin_fraction * defaults.min_check_ncc};
+}
+
 ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
-                           double tolerance_mm) {
+                           double tolerance_mm, double min_margin_fraction) {
   const VerdictLimits open = without_floors(defaults);
+  const FloorMargins m = floor_margins(defaults, min_margin_fraction);
   struct Point {
     double s, c;
   };
@@ -301,14 +328,17 @@ ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const
   double best_s = s_lowest, best_c = c_lowest, best_margin = -1;
   int best_kept = -1;
   for (double s_floor : candidates) {
-    double c_needed = -std::numeric_limits<double>::infinity();  // the highest wrong check NCC the floor lets by
+    // The highest wrong check NCC that the similarity floor does not refuse by its margin.
+    double c_needed = -std::numeric_limits<double>::infinity();
     for (const Point& w : wrong)
-      if (w.s >= s_floor) c_needed = std::max(c_needed, w.c);
+      if (w.s > s_floor - m.similarity) c_needed = std::max(c_needed, w.c);
     double c_right_above = std::numeric_limits<double>::infinity();
     for (const Point& r : right)
-      if (r.s >= s_floor && r.c > c_needed) c_right_above = std::min(c_right_above, r.c);
+      if (r.s >= s_floor && r.c >= c_needed + m.check_ncc) c_right_above = std::min(c_right_above, r.c);
     double c_floor = c_lowest;
-    if (std::isfinite(c_needed)) c_floor = 0.5 * (c_needed + (std::isfinite(c_right_above) ? c_right_above : 1.0));
+    if (std::isfinite(c_needed))
+      c_floor = std::max(0.5 * (c_needed + (std::isfinite(c_right_above) ? c_right_above : 1.0)),
+                         c_needed + m.check_ncc);
     c_floor = std::max(c_floor, c_lowest);
     int kept = 0;
     for (const Point& r : right) kept += r.s >= s_floor && r.c >= c_floor;

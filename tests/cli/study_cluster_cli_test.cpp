@@ -213,11 +213,25 @@ TEST(Cli, ATradePointWhoseRegistrationsFailIsReportedFailedAndOnNoFront) {
   const std::string points = read_text_file(dir.path() / "out" / "points.csv");
   std::istringstream row(points.substr(points.find("\nbin4,") + 1));
   std::vector<std::string> cells;
-  for (std::string cell; cells.size() < 27 && std::getline(row, cell, ',');) cells.push_back(cell);
-  ASSERT_EQ(cells.size(), 27u) << points;
+  for (std::string cell; cells.size() < 31 && std::getline(row, cell, ',');) cells.push_back(cell);
+  ASSERT_EQ(cells.size(), 31u) << points;
   EXPECT_EQ(cells[16], "nan") << "no median time";
   EXPECT_EQ(cells[20], "0") << "no success";
   EXPECT_EQ(cells[25], "3") << "failed runs";
+  // The registration verdict: a failed registration is rejected (no result) and never right.
+  EXPECT_EQ(cells[27] + cells[28] + cells[29] + cells[30].substr(0, 1), "0003") << points;
+  const std::string runs = read_text_file(dir.path() / "out" / "runs.csv");
+  int bin4_rows = 0;
+  for (std::size_t at = runs.find("\nbin4,"); at != std::string::npos; at = runs.find("\nbin4,", at + 1)) {
+    const std::string line = runs.substr(at + 1, runs.find('\n', at + 1) - at - 1);
+    ++bin4_rows;
+    EXPECT_EQ(line.substr(line.size() - 4), ",0,1") << "accepted 0, VerdictReason::kNoResult: " << line;
+  }
+  EXPECT_EQ(bin4_rows, 3) << runs;
+  const std::size_t verdict_row = out.find("\n  bin4 ");
+  ASSERT_NE(verdict_row, std::string::npos) << "the verdict's table names it: " << out;
+  const std::string counts = out.substr(verdict_row + 7, out.find('\n', verdict_row + 1) - verdict_row - 7);
+  EXPECT_EQ(counts.substr(counts.find_first_not_of(' ')), "0         0         0         3") << out;
 }
 
 // The trade study on clinical frames (issue 21): the physics is recorded and named in the summary,

@@ -356,6 +356,30 @@ TEST_F(ClosedLoop, ARegistrationTheVerdictRejectsMovesNothing) {
   EXPECT_EQ(r.summary.commands, 0);
 }
 
+// The verdict's view check (each view registered alone from the result): at the alignment, and
+// in a judged scene on every Nth accepted tracking cycle; on the simulated clock it always fits.
+TEST_F(ClosedLoop, TheViewCheckRunsAtTheAlignmentAndEveryNthTrackingCycle) {
+  edit_scene_ = [](Scene& scene) {
+    scene.loop.judge_tracking = true;
+    scene.verdict_checks.view_check_every = 4;
+  };
+  const LoopRun judged = run_loop(kBreathing, 14, {}, kLightFieldFrames);
+  expect_tracks_every_cycle(judged.summary, 14);
+  EXPECT_EQ(judged.summary.view_check_every, 4);
+  EXPECT_EQ(judged.summary.view_checks, 1 + 13 / 4) << "the alignment and tracking cycles 4, 8 and 12";
+  EXPECT_EQ(judged.summary.view_checks_refused, 0);
+  EXPECT_EQ(judged.summary.view_checks_out_of_time, 0);
+  EXPECT_GT(judged.summary.view_check_max_ms, 0);
+  EXPECT_EQ(to_json(judged.summary)["view_check"]["checks"], 4);
+
+  edit_scene_ = [](Scene& scene) { scene.verdict_checks.view_check_every = 4; };  // tracking not judged
+  EXPECT_EQ(run_loop(kBreathing, 6, {}, kLightFieldFrames).summary.view_checks, 1) << "the alignment only";
+  edit_scene_ = [](Scene& scene) { scene.verdict_checks.max_view_shift_mm = 0; };  // no view check
+  const LoopSummary off = run_loop(kBreathing, 6, {}, kLightFieldFrames).summary;
+  EXPECT_EQ(off.view_check_every, -1);
+  EXPECT_EQ(off.view_checks, 0);
+}
+
 TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
   LoopSessionOptions options;
   options.frames.drop_from = 10;  // exposures 10.. never arrive

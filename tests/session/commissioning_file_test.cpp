@@ -211,6 +211,44 @@ TEST_F(CommissioningFile, TheVerdictTakesItsFloorsFromTheFileTheSceneNames) {
   EXPECT_FALSE(scene_verdict_limits(p, "mi").ok());
 }
 
+// The view check's commissioned limit: read back, taken by the verdict, never above the scene's
+// own safety.max_view_shift_mm, out-of-range values refused, and a scene whose own limit changed
+// is refused as another registration (the fingerprint holds it).
+TEST_F(CommissioningFile, TheViewChecksLimitIsTheFilesWithinTheScenes) {
+  const fs::path file = dir_.path() / "v.yaml";
+  CommissioningRecord r = record_of(*phantom_);
+  r.max_view_shift_mm = 0.35;
+  ASSERT_TRUE(write_commissioning_file(file, r, "", false).ok());
+  EXPECT_NE(read(file).find("max_view_shift_mm: 0.35"), std::string::npos) << read(file);
+  auto read_back = read_commissioning_file(file);
+  ASSERT_TRUE(read_back.ok()) << read_back.status().message();
+  EXPECT_DOUBLE_EQ(read_back->max_view_shift_mm, 0.35);
+  PreparedScene p = *phantom_;
+  p.scene.commissioning_file = file.string();
+  auto limits = scene_verdict_limits(p, "mi");
+  ASSERT_TRUE(limits.ok()) << limits.status().message();
+  EXPECT_DOUBLE_EQ(limits->max_view_shift_mm, 0.35);
+  // Written without one (a scene with no view check): the scene's own limit stands.
+  r.max_view_shift_mm = 0;
+  ASSERT_TRUE(write_commissioning_file(file, r, "", true).ok());
+  EXPECT_EQ(read(file).find("max_view_shift_mm"), std::string::npos);
+  EXPECT_DOUBLE_EQ(scene_verdict_limits(p, "mi")->max_view_shift_mm, 1.0);
+  for (double bad : {-0.1, 25.0}) {
+    r.max_view_shift_mm = bad;
+    ASSERT_TRUE(write_commissioning_file(file, r, "", true).ok());
+    auto refused = read_commissioning_file(file);
+    ASSERT_FALSE(refused.ok()) << bad;
+    EXPECT_NE(refused.status().message().find("max_view_shift_mm out of range"), std::string::npos)
+        << refused.status().message();
+  }
+  PreparedScene wider = *phantom_;
+  wider.scene.verdict_checks.max_view_shift_mm = 2;
+  EXPECT_NE(commissioning_fingerprint(wider).registration, commissioning_fingerprint(*phantom_).registration);
+  PreparedScene edge = *phantom_;
+  edge.scene.verdict_checks.envelope_edge_mm = 1;
+  EXPECT_NE(commissioning_fingerprint(edge).registration, commissioning_fingerprint(*phantom_).registration);
+}
+
 TEST_F(CommissioningFile, TheSceneNamesItBesideItselfAndNotWithAFloorOfItsOwn) {
   std::string text = *builtin_scene_text("builtin:phantom");
   const std::string safety = "safety:\n";

@@ -181,6 +181,84 @@ TEST(RegistrationVerdict, AgreementIsMeasuredAboveTheNoInformationValue) {
   EXPECT_TRUE(judge_registration(l, in).ok);
 }
 
+VerdictLimits with_checks() {
+  VerdictLimits l = mi_limits();
+  l.envelope_edge_mm = 0.5;
+  l.envelope_edge_deg = 1.0;
+  l.max_view_shift_mm = 1.0;
+  return l;
+}
+
+VerdictInput with_shifts(double a_mm, double b_mm) {
+  VerdictInput in = good_input();
+  in.has_view_shift = true;
+  in.view_shift_mm = {a_mm, b_mm, 0, 0};
+  return in;
+}
+
+TEST(RegistrationVerdictEdge, AResultInTheEdgeBandIsRefusedWithItsAxis) {
+  VerdictInput in = good_input();
+  in.delta_from_nominal(2) = -9.6;  // inside the envelope (10 mm), within 0.5 mm of its limit
+  const RegistrationVerdict edge = judge_registration(with_checks(), in);
+  EXPECT_EQ(edge.reason, VerdictReason::kEnvelopeEdge);
+  EXPECT_EQ(edge.axis, 2);
+  EXPECT_NEAR(edge.value, 9.6, 1e-12);
+  EXPECT_DOUBLE_EQ(edge.limit, 9.5);
+  EXPECT_NE(verdict_text(edge, {"A", "B"}).find("|tz| 9.600 mm > 9.500 mm, the envelope less its edge band"),
+            std::string::npos)
+      << verdict_text(edge, {"A", "B"});
+  in.delta_from_nominal(2) = -9.5;
+  EXPECT_TRUE(judge_registration(with_checks(), in).ok) << "the band's inner limit itself passes";
+  in.delta_from_nominal(2) = 0;
+  in.delta_from_nominal(4) = 4.2 * kDeg;
+  const RegistrationVerdict rot = judge_registration(with_checks(), in);
+  EXPECT_EQ(rot.reason, VerdictReason::kEnvelopeEdge);
+  EXPECT_EQ(rot.axis, 4);
+  EXPECT_STREQ(rot.units, "deg");
+  // Beyond the envelope is still "outside", not "at the edge"; without a band the edge passes.
+  in.delta_from_nominal(4) = 5.5 * kDeg;
+  EXPECT_EQ(judge_registration(with_checks(), in).reason, VerdictReason::kOutsideEnvelope);
+  in.delta_from_nominal(4) = 4.9 * kDeg;
+  EXPECT_TRUE(judge_registration(mi_limits(), in).ok);
+}
+
+TEST(RegistrationVerdictEdge, ANanBandRefuses) {
+  VerdictLimits l = with_checks();
+  l.envelope_edge_mm = kNan;
+  EXPECT_EQ(judge_registration(l, good_input()).reason, VerdictReason::kEnvelopeEdge);
+}
+
+TEST(RegistrationVerdictViews, AViewThatAloneMovesTheTargetIsRefused) {
+  EXPECT_TRUE(judge_registration(with_checks(), with_shifts(0.2, 0.99)).ok);
+  const RegistrationVerdict pulled = judge_registration(with_checks(), with_shifts(0.2, 1.6));
+  EXPECT_EQ(pulled.reason, VerdictReason::kViewsPullApart);
+  EXPECT_EQ(pulled.view, 1);
+  EXPECT_DOUBLE_EQ(pulled.value, 1.6);
+  EXPECT_NE(verdict_text(pulled, {"A", "B"}).find("view B registered alone moves the target 1.6 mm across it > 1 mm"),
+            std::string::npos)
+      << verdict_text(pulled, {"A", "B"});
+  // Shifts not given are not judged; limits without a view check never look at them.
+  VerdictInput not_given = with_shifts(5, 5);
+  not_given.has_view_shift = false;
+  EXPECT_TRUE(judge_registration(with_checks(), not_given).ok);
+  EXPECT_TRUE(judge_registration(mi_limits(), with_shifts(5, 5)).ok);
+  EXPECT_FALSE(judges_view_shift(mi_limits()));
+  EXPECT_TRUE(judges_view_shift(with_checks()));
+}
+
+TEST(RegistrationVerdictViews, ANonFiniteShiftIsNoResultAndTheCheapChecksComeFirst) {
+  const RegistrationVerdict nan = judge_registration(with_checks(), with_shifts(kNan, 0.1));
+  EXPECT_EQ(nan.reason, VerdictReason::kNonFinite);
+  EXPECT_EQ(nan.view, 0);
+  VerdictInput low = with_shifts(3, 3);
+  low.similarity[0] = 0.1;
+  EXPECT_EQ(judge_registration(with_checks(), low).reason, VerdictReason::kLowSimilarity);
+  VerdictLimits l = with_checks();
+  l.max_view_shift_mm = kNan;
+  EXPECT_EQ(judge_registration(l, with_shifts(0.1, 0.1)).reason, VerdictReason::kViewsPullApart)
+      << "a NaN limit refuses";
+}
+
 Scene scene_from(const std::string& text) {
   auto scene = parse_scene(text, "test.yaml", ".");
   EXPECT_TRUE(scene.ok()) << scene.status().message();

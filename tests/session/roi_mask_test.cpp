@@ -25,22 +25,11 @@ namespace {
 namespace fs = std::filesystem;
 using Eigen::Vector3d;
 
-// Two coarse views (1.6 mm pixels) of the lumbar CT's vertebral body, ray cast: quick to register.
+// The lumbar CT's vertebral body in two coarse views (test_data.hpp), looked at through roi.mask.
 std::string scene_text(const fs::path& rtstruct, double margin_mm) {
-  std::ostringstream s;
-  s << "version: 1\nct: {path: " << test::pancreas_dicom().string() << "}\n"
-    << "roi:\n  centre_mm: [6, 107, 184.91]\n  size_mm: [56, 48, 50]\n"
-    << "  mask: {rtstruct: " << rtstruct.string() << ", target: L3 body, margin_mm: " << margin_mm << "}\n"
-    << "registration_origin_mm: [6, 107, 183]\n"
-    << "detectors:\n";
-  for (const char* v : {"A: [0.70710678, -0.70710678, 0]", "B: [-0.70710678, -0.70710678, 0]"}) {
-    const std::string text(v);
-    s << "  - name: " << text.substr(0, 1) << "\n    rows: 128\n    cols: 128\n    pitch_mm: 1.6\n"
-      << "    isocentric: {source_direction: " << text.substr(3)
-      << ", up: [0, 0, 1], source_to_isocentre_mm: 1500, source_to_detector_mm: 2100}\n";
-  }
-  s << "tracking: {renderer: siddon}\n";
-  return s.str();
+  std::ostringstream mask;
+  mask << "  mask: {rtstruct: " << rtstruct.string() << ", target: L3 body, margin_mm: " << margin_mm << "}\n";
+  return test::lumbar_two_coarse_views_scene(mask.str());
 }
 
 class RoiMask : public ::testing::Test {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_verdict.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -39,22 +40,63 @@ TEST(SceneLoopKeys, ParseAndRejectWithLocation) {
   EXPECT_FALSE(parse_scene(actuator, "b.yaml", ".").ok());
 }
 
+// The built-in scene with `keys` (indented lines) added at the top of its `section`.
+Result<Scene> with_keys(const std::string& section, const std::string& keys) {
+  std::string text = *builtin_scene_text(kBuiltinPhantom);
+  const std::string head = section + ":\n";
+  text.replace(text.find(head), head.size(), head + keys);
+  return parse_scene(text, "b.yaml", ".");
+}
+
 // loop.judge_tracking (unset: follow the scene's commissioning).
 TEST(SceneLoopKeys, TheVerdictOnTrackingCycles) {
   const std::string base = *builtin_scene_text(kBuiltinPhantom);
   auto scene = parse_scene(base, "b.yaml", ".");
   ASSERT_TRUE(scene.ok());
   EXPECT_FALSE(scene->loop.judge_tracking.has_value());
-  const auto with = [&](const std::string& keys) {
-    std::string text = base;
-    text.replace(text.find("loop:\n"), 6, "loop:\n" + keys);
-    return parse_scene(text, "b.yaml", ".");
-  };
+  const auto with = [](const std::string& keys) { return with_keys("loop", keys); };
   auto set = with("  judge_tracking: true\n");
   ASSERT_TRUE(set.ok()) << set.status().message();
   EXPECT_EQ(set->loop.judge_tracking, std::optional<bool>(true));
   for (const char* bad : {"  judge_tracking: yes\n", "  judge_tracking: 1\n", "  judge_tracking: ''\n",
                           "  judge_tracking: [true]\n", "  verdict_check_every: 5\n"}) {
+    auto refused = with(bad);
+    EXPECT_FALSE(refused.ok()) << bad;
+    if (!refused.ok()) {
+      EXPECT_NE(refused.status().message().find("b.yaml:"), std::string::npos) << bad;
+    }
+  }
+}
+
+// safety's keys for the verdict's edge band and view check (registration_verdict.hpp).
+TEST(SceneLoopKeys, TheVerdictsEdgeBandAndViewCheck) {
+  const std::string base = *builtin_scene_text(kBuiltinPhantom);
+  auto scene = parse_scene(base, "b.yaml", ".");
+  ASSERT_TRUE(scene.ok());
+  EXPECT_DOUBLE_EQ(scene->verdict_checks.envelope_edge_mm, 0.5);
+  EXPECT_DOUBLE_EQ(scene->verdict_checks.envelope_edge_deg, 0);
+  EXPECT_DOUBLE_EQ(scene->verdict_checks.max_view_shift_mm, 1.0);
+  EXPECT_EQ(scene->verdict_checks.view_check_every, 10);
+  auto limits = verdict_limits(*scene, "mi");
+  ASSERT_TRUE(limits.ok());
+  EXPECT_DOUBLE_EQ(limits->envelope_edge_mm, 0.5);
+  EXPECT_TRUE(judges_view_shift(*limits));
+  const auto with = [](const std::string& keys) { return with_keys("safety", keys); };
+  auto set = with("  envelope_edge_mm: 1.5\n  envelope_edge_deg: 0.25\n  max_view_shift_mm: 0\n  view_check_every: 0\n");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_DOUBLE_EQ(set->verdict_checks.envelope_edge_mm, 1.5);
+  EXPECT_DOUBLE_EQ(set->verdict_checks.envelope_edge_deg, 0.25);
+  EXPECT_EQ(set->verdict_checks.view_check_every, 0);
+  auto off = verdict_limits(*set, "mi");
+  ASSERT_TRUE(off.ok());
+  EXPECT_FALSE(judges_view_shift(*off)) << "max_view_shift_mm: 0 turns the view check off";
+  EXPECT_DOUBLE_EQ(off->envelope_edge_deg, 0.25);
+  for (const char* bad :
+       {"  envelope_edge_mm: -0.1\n", "  envelope_edge_mm: 10\n", "  envelope_edge_mm: .nan\n",
+        "  envelope_edge_mm: 1e12\n", "  envelope_edge_deg: 5\n", "  envelope_edge_deg: -1\n",
+        "  max_view_shift_mm: -1\n", "  max_view_shift_mm: .inf\n", "  max_view_shift_mm: 21\n",
+        "  max_view_shift_mm: one\n", "  view_check_every: -1\n", "  view_check_every: 2.5\n",
+        "  view_check_every: 1e12\n"}) {
     auto refused = with(bad);
     EXPECT_FALSE(refused.ok()) << bad;
     if (!refused.ok()) {

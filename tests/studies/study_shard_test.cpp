@@ -11,6 +11,7 @@
 #include <iterator>
 #include <sstream>
 
+#include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/studies/slurm_job_array.hpp"
@@ -118,6 +119,12 @@ TradeResult point(const std::string& id, std::vector<double> tre, std::vector<do
   r.problem_ms = std::move(ms);
   r.mean_tre_mm = 1;
   r.memory_bytes = 1e6;
+  // Judged by the verdict (a shard's result records it): a registration that ran was accepted.
+  for (double t : r.problem_ms) {
+    r.problem_accepted.push_back(!std::isnan(t));
+    r.problem_verdict_reason.push_back(std::isnan(t) ? int(VerdictReason::kNoResult) : 0);
+  }
+  r.verdict = tally_trade_verdict(r, 2.0);
   return r;
 }
 

@@ -1,15 +1,21 @@
 // The trade study's pure parts: the Pareto front, the recommendations, shard files and merging,
-// the summary; and the point list. The runs themselves are exercised by Cli.TradeStudy*.
+// the summary; and the point list. The runs themselves are exercised by Cli.TradeStudy*; one small
+// run here (TradeStudyRun) checks the registration verdict judges every result.
 
 #include "lftrack/studies/trade_study.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <iterator>
+#include <nlohmann/json.hpp>
 #include <set>
 
+#include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "small_phantom.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
@@ -231,6 +237,156 @@ TEST(TradeStudy, AFailedPointIsOnNoFrontAndIsShownFailedWithItsReason) {
       << md;
   EXPECT_NE(md.find("| bin4 | failed | failed | failed | failed | failed | 4.00 |"), std::string::npos) << md;
   EXPECT_NE(md.find("**FAILED**, 1 of 4 registrations failed"), std::string::npos) << md;
+}
+
+
+// A point's verdict rows: whether each result was accepted, against whether it was right.
+TradeResult judged_result(const std::string& id, std::vector<double> tre, std::vector<double> ms,
+                          std::vector<int> accepted) {
+  TradeResult r = result(id, 20, 0.5, 4);
+  r.runs = int(tre.size());
+  r.problem_tre_mm = std::move(tre);
+  r.problem_ms = std::move(ms);
+  r.problem_accepted = accepted;
+  for (int a : accepted) r.problem_verdict_reason.push_back(a ? 0 : int(VerdictReason::kLowSimilarity));
+  for (double m : r.problem_ms) r.failed_runs += std::isnan(m);
+  return r;
+}
+
+TEST(TradeStudy, TheVerdictTallyCountsFourOutcomesAndAFailedRegistrationIsNeverRight) {
+  const double nan = std::nan("");
+  //                 right, accepted | wrong, accepted | right, rejected | wrong, rejected | failed (start 1.5 mm)
+  const TradeResult r =
+      judged_result("p", {0.4, 3.0, 0.5, 2.5, 1.5}, {10, 10, 10, 10, nan}, {1, 1, 0, 0, 0});
+  const VerdictOutcomes v = tally_trade_verdict(r, 2.0);
+  EXPECT_EQ(v.accepted_right, 1);
+  EXPECT_EQ(v.accepted_wrong, 1);
+  EXPECT_EQ(v.rejected_right, 1);
+  EXPECT_EQ(v.rejected_wrong, 2) << "a failed registration under the tolerance is not right";
+  EXPECT_EQ(v.total(), r.runs);
+  // The tolerance decides what is right: at 3.5 mm the accepted 3 mm result is right.
+  EXPECT_EQ(tally_trade_verdict(r, 3.5).accepted_right, 2);
+  EXPECT_FALSE(tally_trade_verdict(result("unjudged", 10, 0.4, 1), 2.0).total()) << "no rows, nothing counted";
+}
+
+TEST(TradeStudy, TheVerdictSurvivesTheFilesMergingAndPooling) {
+  const double nan = std::nan("");
+  TradeResult a = judged_result("baseline", {0.4, 3.0, 0.5, 1.0}, {10, 12, 11, nan}, {1, 1, 0, 0});
+  a.verdict = tally_trade_verdict(a, 2.0);
+  TradeResult b = judged_result("bin2", {0.3, 0.3, 0.3, 0.3}, {5, 5, 5, 5}, {1, 1, 1, 1});
+  b.verdict = tally_trade_verdict(b, 2.0);
+  test::TempDir dir;
+  ASSERT_TRUE(write_trade_shard(shard_of(1, 1, {a, b}, 2), dir.path() / "s").ok());
+  auto read = read_trade_shard(dir.path() / "s");
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  ASSERT_EQ(read->results.size(), 2u);
+  EXPECT_EQ(read->results[0].verdict, a.verdict);
+  EXPECT_EQ(read->results[0].problem_accepted, a.problem_accepted);
+  EXPECT_EQ(read->results[0].problem_verdict_reason, a.problem_verdict_reason);
+  EXPECT_EQ(read->verdict_tolerance_mm, 2.0);
+  const std::string runs = text_of(dir.path() / "s" / "runs.csv");
+  EXPECT_EQ(runs.substr(0, runs.find('\n')), "id,problem,tre_mm,ms,accepted,verdict_reason");
+  EXPECT_NE(runs.find("baseline,2,0.5,11,0," + std::to_string(int(VerdictReason::kLowSimilarity))), std::string::npos)
+      << runs;
+
+  // Two scenes pooled: each scene's rows against its own tolerance, counted together.
+  TradeStudy other = *read;
+  other.scene = "another scene";
+  other.verdict_tolerance_mm = 3.5;  // the accepted 3 mm result is right there
+  auto pooled = pool_trade_studies({*read, other});
+  ASSERT_TRUE(pooled.ok()) << pooled.status().message();
+  const TradeResult& p = pooled->results[0];
+  EXPECT_EQ(p.verdict.total(), 8);
+  EXPECT_EQ(p.verdict.accepted_right, 1 + 2);
+  EXPECT_EQ(p.verdict.accepted_wrong, 1 + 0);
+  EXPECT_EQ(p.problem_accepted.size(), 8u);
+  EXPECT_EQ(pooled->verdict_tolerance_mm, 0) << "scenes of different tolerances: each its own";
+
+  // The outputs: summary.json and summary.md give the four outcomes, verdict.gp draws them.
+  ASSERT_TRUE(write_trade_outputs(*read, dir.path() / "out").ok());
+  std::ifstream summary_file(dir.path() / "out" / "summary.json");
+  const auto summary = nlohmann::json::parse(summary_file);
+  ASSERT_EQ(summary["points"].size(), 2u);
+  EXPECT_EQ(summary["points"][0]["verdict"]["accepted_right"], 1);
+  EXPECT_EQ(summary["points"][0]["verdict"]["false_accepts"], 1);
+  EXPECT_EQ(summary["points"][0]["verdict"]["false_rejects"], 1);
+  EXPECT_EQ(summary["points"][0]["verdict"]["rejected_wrong"], 1);
+  EXPECT_EQ(summary["verdict_tolerance_mm"], 2.0);
+  const std::string md = text_of(dir.path() / "out" / "summary.md");
+  EXPECT_NE(md.find("## The registration verdict"), std::string::npos) << md;
+  EXPECT_NE(md.find("| baseline | 4 | 1 | 1 | 1 | 1 |"), std::string::npos) << md;
+  const std::string dat = text_of(dir.path() / "out" / "verdict.dat");
+  EXPECT_NE(dat.find("baseline (n=4)"), std::string::npos) << dat;
+  EXPECT_NE(dat.find("rejected, right (false reject)"), std::string::npos) << dat;
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_GT(std::filesystem::file_size(dir.path() / "out" / "verdict.png"), 1000u);
+  }
+}
+
+// A folder written before the verdict reads as not judged (and is no complete shard: its task
+// computes it again); its counts are refused when they do not add up to the runs.
+TEST(TradeStudy, AFolderWithoutTheVerdictReadsAsNotJudged) {
+  test::TempDir dir;
+  std::ofstream(dir.path() / "study.json")
+      << R"({"study": "trade", "scene": "p", "seed": 1, "problems": 2, "quick": true, "shard": 1, "shards": 1,)"
+      << R"( "points_total": 1})";
+  const std::string header =
+      "id,renderer,storage,vq_codebook,lf_u,lf_v,lf_s,lf_t,envelope_scale,octree_pivot,bin,similarity,plan,"
+      "final_step_mm,budget_ms,runs,median_ms,p95_ms,mean_tre_mm,p95_tre_mm,success_rate,memory_bytes,"
+      "precompute_s,ncc_vs_siddon,psnr_db_vs_siddon,failed_runs,failure";
+  const std::string row =
+      "baseline,lightfield,float,0,16,16,128,128,1,0,1,mi,warm,0.1,0,2,20,25,0.4,0.6,1,8000000,3,0.999,40,0,";
+  std::ofstream(dir.path() / "points.csv") << header << "\n" << row << "\n";
+  std::ofstream(dir.path() / "runs.csv") << "id,problem,tre_mm,ms\nbaseline,0,0.4,20\nbaseline,1,0.4,20\n";
+  auto old = read_trade_shard(dir.path());
+  ASSERT_TRUE(old.ok()) << old.status().message();
+  EXPECT_FALSE(old->results[0].judged());
+  EXPECT_TRUE(old->results[0].problem_accepted.empty());
+  TradeStudy expected = *old;
+  const Status incomplete = check_trade_shard_complete(dir.path(), expected, {"baseline"});
+  EXPECT_EQ(incomplete.code(), StatusCode::kCorruptData) << incomplete.message();
+  EXPECT_NE(incomplete.message().find("no registration verdict"), std::string::npos) << incomplete.message();
+
+  std::ofstream(dir.path() / "points.csv") << header << ",accepted_right,false_accepts,false_rejects,rejected_wrong\n"
+                                           << row << ",1,0,0,0\n";
+  auto short_counts = read_trade_shard(dir.path());
+  ASSERT_FALSE(short_counts.ok());
+  EXPECT_NE(short_counts.status().message().find("count 1 of 2 runs"), std::string::npos)
+      << short_counts.status().message();
+}
+
+// Every result of a trade point is judged by the scene's verdict: with a floor no registration can
+// reach (mutual information of 50), every one is rejected for its similarity, right or wrong, and
+// the four outcomes add up to the runs.
+TEST(TradeStudyRun, EveryResultIsJudgedByTheScenesVerdict) {
+  tracking::ThreadPool pool(2);
+  TradeOptions o;
+  o.quick = true;
+  o.problems = 2;
+  o.only = {"baseline"};
+  for (const double floor : {0.0, 50.0}) {
+    auto p = test::small_phantom(&pool, floor);
+    ASSERT_TRUE(p.ok()) << p.status().message();
+    auto study = run_trade_study(*p, o, &pool);
+    ASSERT_TRUE(study.ok()) << study.status().message();
+    ASSERT_EQ(study->results.size(), 1u);
+    const TradeResult& r = study->results[0];
+    EXPECT_EQ(study->verdict_tolerance_mm, p->scene.safety.beam_tolerance_mm);
+    EXPECT_TRUE(r.judged());
+    EXPECT_EQ(r.verdict.total(), r.runs) << "floor " << floor;
+    ASSERT_EQ(r.problem_accepted.size(), 2u);
+    int right = 0;
+    for (std::size_t k = 0; k < r.problem_tre_mm.size(); ++k)
+      right += !std::isnan(r.problem_ms[k]) && r.problem_tre_mm[k] < study->verdict_tolerance_mm;
+    EXPECT_EQ(r.verdict.accepted_right + r.verdict.rejected_right, right) << "floor " << floor;
+    std::printf("floor %g: accepted right %d, false accepts %d, false rejects %d, rejected wrong %d (TRE %.3f mm)\n",
+                floor, r.verdict.accepted_right, r.verdict.accepted_wrong, r.verdict.rejected_right,
+                r.verdict.rejected_wrong, r.mean_tre_mm);
+    if (floor > 0) {
+      EXPECT_EQ(r.verdict.accepted_right + r.verdict.accepted_wrong, 0) << "a floor of 50 accepts nothing";
+      for (int reason : r.problem_verdict_reason) EXPECT_EQ(reason, int(VerdictReason::kLowSimilarity));
+    }
+  }
 }
 
 }  // namespace

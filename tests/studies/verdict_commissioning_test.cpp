@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "lftrack/studies/verdict_commissioning.hpp"
@@ -99,13 +100,58 @@ TEST(VerdictCommissioning, AWrongResultAmongTheRightOnesCostsRightOnesNotSafety)
   std::vector<CommissionCaseResult> cases;
   for (int i = 0; i < 10; ++i) cases.push_back(judged(CommissionCase::kAlign, 0.90 + 0.01 * i, 0.90 + 0.01 * i));
   cases.push_back(judged(CommissionCase::kOtherPatient, 0.955, 0.955));
-  const ChosenFloors floors = choose_floors(cases, ncc_defaults(), 2.0);
-  VerdictLimits chosen = ncc_defaults();
-  chosen.min_similarity = floors.min_similarity;
-  chosen.min_check_ncc = floors.min_check_ncc;
+  for (const auto& [margin, kept] : {std::pair{0.0, 4}, std::pair{kDefaultFloorMarginFraction, 4}, std::pair{0.02, 2}}) {
+    const ChosenFloors floors = choose_floors(cases, ncc_defaults(), 2.0, margin);
+    VerdictLimits chosen = ncc_defaults();
+    chosen.min_similarity = floors.min_similarity;
+    chosen.min_check_ncc = floors.min_check_ncc;
+    const CommissionTally all = tally_commission(cases, chosen, 2.0)[kCommissionCaseKinds];
+    EXPECT_EQ(all.accepted_wrong, 0) << margin;
+    // Without a margin, and with the default one (0.0038), 0.96 .. 0.99; with 0.02 a floor at
+    // least 0.0152 above 0.955.
+    EXPECT_EQ(all.accepted_right, kept) << margin;
+  }
+}
+
+// The margin rule: a wrong result 0.005 below the lowest right one's check NCC. Without a margin
+// the check floor splits that gap and keeps every right result; with one, the floor that refuses
+// the wrong result sits at least the margin above it, and the right results inside the margin
+// are the price (never a wrong result accepted).
+TEST(VerdictCommissioning, EachWrongResultIsRefusedByAFloorWithItsMargin) {
+  std::vector<CommissionCaseResult> cases;
+  for (int i = 0; i < 10; ++i) cases.push_back(judged(CommissionCase::kAlign, 0.90 + 0.01 * i, 0.90 + 0.01 * i));
+  cases.push_back(judged(CommissionCase::kWrongLevel, 0.95, 0.895));
+  const VerdictLimits defaults = ncc_defaults();
+  const ChosenFloors thin = choose_floors(cases, defaults, 2.0, 0.0);
+  EXPECT_NEAR(thin.min_check_ncc, 0.8975, 1e-9);
+  const ChosenFloors wide = choose_floors(cases, defaults, 2.0, 0.02);
+  const FloorMargins m = floor_margins(defaults, 0.02);
+  EXPECT_NEAR(m.check_ncc, 0.0152, 1e-12);
+  EXPECT_NEAR(m.similarity, 0.0152, 1e-12);
+  EXPECT_GE(wide.min_check_ncc - 0.895, m.check_ncc - 1e-12);
+  VerdictLimits chosen = defaults;
+  chosen.min_similarity = wide.min_similarity;
+  chosen.min_check_ncc = wide.min_check_ncc;
   const CommissionTally all = tally_commission(cases, chosen, 2.0)[kCommissionCaseKinds];
   EXPECT_EQ(all.accepted_wrong, 0);
-  EXPECT_EQ(all.accepted_right, 4);  // 0.96 .. 0.99
+  EXPECT_EQ(all.accepted_right, 8);  // 0.92 .. 0.99: 0.90 and 0.91 lie within the margin
+}
+
+// The view check is a second line: the floors are chosen to refuse every wrong result without
+// it, since tracking cycles run it only every Nth cycle.
+TEST(VerdictCommissioning, TheFloorsDoNotLeanOnTheViewCheck) {
+  std::vector<CommissionCaseResult> cases;
+  for (int i = 0; i < 10; ++i) cases.push_back(judged(CommissionCase::kAlign, 0.90 + 0.01 * i, 0.90 + 0.01 * i));
+  CommissionCaseResult pulled = judged(CommissionCase::kWrongLevel, 0.95, 0.85);
+  pulled.input.has_view_shift = true;
+  pulled.input.view_shift_mm = {3.0, 0.2};
+  cases.push_back(pulled);
+  VerdictLimits defaults = ncc_defaults();
+  defaults.max_view_shift_mm = 1.0;
+  EXPECT_FALSE(judge_registration(defaults, pulled.input).ok) << "the view check refuses it";
+  const ChosenFloors floors = choose_floors(cases, defaults, 2.0, 0.0);
+  EXPECT_GT(floors.min_check_ncc, 0.85) << "and the check floor refuses it too";
+  EXPECT_NEAR(largest_view_shift_mm(pulled.input), 3.0, 1e-12);
 }
 
 // With nothing wrong to separate, a floor is not lowered past halfway between what unrelated

@@ -75,6 +75,11 @@ void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleSt
     if (c.frames_ok) preprocess_ms.add(ms_between(c.acquired_ns, c.preprocessed_ns));
     if (c.verdict_checked) verdict_check_ms.add(c.verdict_check_ms);
   }
+  if (c.view_checked) {
+    view_check_ms.add(c.view_check_ms);
+    if (!c.registered) ++view_checks_refused;
+  }
+  if (c.view_check_out_of_time) ++view_checks_out_of_time;
   if (c.registration_ran) {
     if (c.aligning) {
       summary.align_ms = r.registration_ms;

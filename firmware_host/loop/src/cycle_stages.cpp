@@ -29,8 +29,12 @@ GateReason gate_reason_of(VerdictReason r) {
       return GateReason::kLowSimilarity;
     case VerdictReason::kViewsDisagree:
       return GateReason::kViewsDisagree;
+    case VerdictReason::kViewsPullApart:
+      return GateReason::kViewsPullApart;
     case VerdictReason::kOutsideEnvelope:
       return GateReason::kOutsideEnvelope;
+    case VerdictReason::kEnvelopeEdge:
+      return GateReason::kEnvelopeEdge;
     case VerdictReason::kImageQuality:
       return GateReason::kImageQuality;
     default:
@@ -244,11 +248,52 @@ void TrackingLoop::Impl::register_pair(CycleState& c) {
     c.verdict_checked = true;
     c.verdict_check_ms = ms_between(check_started_ns, monotonic_now_ns());
   }
-  const RegistrationVerdict verdict = judge_registration(*settings.verdict, judged);
+  RegistrationVerdict verdict = judge_registration(*settings.verdict, judged);
+  if (verdict.ok) check_views(c, judged, verdict);
   if (!verdict.ok) {
     c.registered = false;
     c.gate_input.registration_failure = gate_reason_of(verdict.reason);
   }
+}
+
+// Each view registered alone from an accepted result (view_agreement.hpp): at every alignment,
+// whatever it takes (the set-up move is never made without it; an alignment that takes longer
+// than the frames' age limit is skipped by the gate and tried again with the next pair), and on
+// every Nth tracking cycle of a judged scene, within what is left of the cycle less a quarter
+// period for the stages after it (real clock). A tracking check that does not fit is not a
+// verdict: it is counted and stays due for the next cycle.
+void TrackingLoop::Impl::check_views(CycleState& c, VerdictInput& judged, RegistrationVerdict& verdict) {
+  if (parts.view_agreement == nullptr) return;
+  if (c.aligning) {
+    view_check_due = true;
+  } else {
+    if (!settings.judge_tracking) return;
+    if (settings.view_check_every > 0 && ++tracking_cycles_since_view_check >= settings.view_check_every)
+      view_check_due = true;
+  }
+  if (!view_check_due) return;
+  double budget_ms = 1e12;
+  if (!settings.simulated_clock && !c.aligning)
+    budget_ms = ms_between(monotonic_now_ns(), c.start_ns + period_ns) - 0.25 * settings.loop.period_ms;
+  const std::int64_t started_ns = monotonic_now_ns();
+  bool complete = false;
+  const int views = parts.view_agreement->views();
+  if (budget_ms >= 1 && parts.view_agreement->set_frames(frame_views, mask_views).ok() &&
+      parts.view_agreement->measure(result.T_room_from_ct, budget_ms / views, &judged.view_shift_mm, &complete).ok() &&
+      complete) {
+    judged.has_view_shift = true;
+    verdict = judge_registration(*settings.verdict, judged);
+    c.view_checked = true;
+    view_check_due = false;
+    tracking_cycles_since_view_check = 0;
+  } else {
+    c.view_check_out_of_time = true;  // stays due: tried again next cycle
+    if (c.aligning) {  // not for want of time: the set-up move is not made without the check
+      verdict.ok = false;
+      verdict.reason = VerdictReason::kNoResult;
+    }
+  }
+  c.view_check_ms = ms_between(started_ns, monotonic_now_ns());
 }
 
 // The patient's own offset, its prediction, and the couch move that cancels it; everything the

@@ -57,6 +57,9 @@ struct CycleState {
   bool registration_ran = false;
   bool verdict_checked = false;  // the NCC check ran (a DRR per view at the result)
   double verdict_check_ms = 0;   // its wall time: render and compare, every view
+  bool view_checked = false;     // each view was registered alone from the result, and judged
+  bool view_check_out_of_time = false;  // a view check was due but did not fit in the cycle
+  double view_check_ms = 0;      // its wall time (also when out of time)
 
   // control
   tracking::Vector6d pose_delta = tracking::Vector6d::Zero();  // registered pose, from nominal
@@ -135,6 +138,10 @@ struct TrackingLoop::Impl {
   Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
   Histogram readback_ms{0.001, 2000};  // the actuator's read-back (a protocol's round trip)
   Histogram verdict_check_ms{0.001, 2000};  // the verdict's NCC check in tracking cycles
+  Histogram view_check_ms{0.001, 5000};     // the verdict's view check, alignments and tracking cycles
+  std::int64_t view_checks_refused = 0, view_checks_out_of_time = 0;
+  std::int64_t tracking_cycles_since_view_check = 0;
+  bool view_check_due = false;  // set by an alignment and every Nth tracking cycle; cleared when one ran
   TrackingAccuracy accuracy;           // the target residual per axis, the command latency
   double evaluations_sum = 0;
   LoopSummary summary;
@@ -149,6 +156,9 @@ struct TrackingLoop::Impl {
   void read_back(CycleState& c);              // the actuator's read-back and the simulated truth
   void preprocess(CycleState& c);
   void register_pair(CycleState& c);
+  // The verdict's view check on the accepted result in `judged` when it is due and fits
+  // (LoopSettings::view_check_every); rejudges into `verdict`.
+  void check_views(CycleState& c, VerdictInput& judged, RegistrationVerdict& verdict);
   void control(CycleState& c);
   void gate(CycleState& c);
   void actuate(CycleState& c);

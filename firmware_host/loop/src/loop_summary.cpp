@@ -18,6 +18,8 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   s.target_residual = accuracy.target_residual();
   s.command_latency = accuracy.latency();
   s.simulated_clock = settings.simulated_clock;
+  s.view_check_every =
+      parts.view_agreement == nullptr ? -1 : (settings.judge_tracking ? settings.view_check_every : 0);
   s.cycle_p50_ms = cycle_ms.quantile(0.5);
   s.cycle_p95_ms = cycle_ms.quantile(0.95);
   s.cycle_p99_ms = cycle_ms.quantile(0.99);
@@ -35,6 +37,11 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   s.verdict_check_p50_ms = verdict_check_ms.quantile(0.5);
   s.verdict_check_p95_ms = verdict_check_ms.quantile(0.95);
   s.verdict_check_max_ms = verdict_check_ms.max();
+  s.view_checks = view_check_ms.count();
+  s.view_checks_refused = view_checks_refused;
+  s.view_checks_out_of_time = view_checks_out_of_time;
+  s.view_check_p50_ms = view_check_ms.quantile(0.5);
+  s.view_check_max_ms = view_check_ms.max();
   s.evaluations_mean =
       registration_ms.count() > 0 ? evaluations_sum / double(registration_ms.count()) : 0;
   if (parts.allocation_count != nullptr && aligned_at >= 0) {
@@ -72,6 +79,12 @@ nlohmann::json to_json(const LoopSummary& s) {
                            {"p50", s.verdict_check_p50_ms},
                            {"p95", s.verdict_check_p95_ms},
                            {"max", s.verdict_check_max_ms}};
+  j["view_check"] = {{"every_tracking_cycles", s.view_check_every},
+                     {"checks", s.view_checks},
+                     {"refused", s.view_checks_refused},
+                     {"out_of_time", s.view_checks_out_of_time},
+                     {"p50_ms", s.view_check_p50_ms},
+                     {"max_ms", s.view_check_max_ms}};
   j["readback_ms"] = {{"p50", s.readback_p50_ms}, {"p99", s.readback_p99_ms}};
   j["evaluations_mean"] = s.evaluations_mean;
   j["overruns"] = s.overruns;

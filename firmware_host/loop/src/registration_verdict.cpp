@@ -92,6 +92,10 @@ const char* to_string(VerdictReason reason) {
       return "views disagree";
     case VerdictReason::kOutsideEnvelope:
       return "outside the pose envelope";
+    case VerdictReason::kEnvelopeEdge:
+      return "at the pose envelope's edge";
+    case VerdictReason::kViewsPullApart:
+      return "a view alone moves the target";
   }
   return "unknown";
 }
@@ -109,7 +113,8 @@ RegistrationVerdict judge_registration(const VerdictLimits& limits, const Verdic
   if (in.stop == tracking::OptimizerStop::kNonFinite || !in.pose_finite || !finite_delta(in.delta_from_nominal))
     return fail(VerdictReason::kNonFinite);
   for (int v = 0; v < n; ++v)
-    if (!std::isfinite(in.similarity[v]) || (in.has_check_ncc && !std::isfinite(in.check_ncc[v])))
+    if (!std::isfinite(in.similarity[v]) || (in.has_check_ncc && !std::isfinite(in.check_ncc[v])) ||
+        (in.has_view_shift && !std::isfinite(in.view_shift_mm[v])))
       return fail(VerdictReason::kNonFinite, v);
 
   // Written so that a NaN limit fails too.
@@ -142,6 +147,21 @@ RegistrationVerdict judge_registration(const VerdictLimits& limits, const Verdic
     if (!(r_deg <= max_r_deg))
       return compared(VerdictReason::kOutsideEnvelope, -1, 3 + a, r_deg, limits.envelope.rotation_deg, "deg");
   }
+  // The edge band: inside the envelope, but not by the margin the scene asks (a NaN margin refuses).
+  const double edge_t = limits.envelope.translation_mm - limits.envelope_edge_mm;
+  const double edge_r_deg = limits.envelope.rotation_deg - limits.envelope_edge_deg;
+  for (int a = 0; a < 3; ++a) {
+    const double t = std::abs(in.delta_from_nominal[a]);
+    if (limits.envelope_edge_mm != 0 && !(t <= edge_t))
+      return compared(VerdictReason::kEnvelopeEdge, -1, a, t, edge_t, "mm");
+    const double r_deg = tracking::rad_to_deg(std::abs(in.delta_from_nominal[3 + a]));
+    if (limits.envelope_edge_deg != 0 && !(r_deg <= edge_r_deg))
+      return compared(VerdictReason::kEnvelopeEdge, -1, 3 + a, r_deg, edge_r_deg, "deg");
+  }
+  if (in.has_view_shift)
+    for (int v = 0; v < n; ++v)
+      if (!(in.view_shift_mm[v] <= limits.max_view_shift_mm))
+        return compared(VerdictReason::kViewsPullApart, v, -1, in.view_shift_mm[v], limits.max_view_shift_mm, "mm");
   RegistrationVerdict ok;
   ok.ok = true;
   ok.reason = VerdictReason::kOk;
@@ -197,6 +217,14 @@ std::string verdict_text(const RegistrationVerdict& v, const std::vector<std::st
     case VerdictReason::kOutsideEnvelope:
       std::snprintf(detail, sizeof detail, " (|%s| %.3f %s > %.3f %s)", kAxes[v.axis >= 0 && v.axis < 6 ? v.axis : 0],
                     v.value, v.units, v.limit, v.units);
+      break;
+    case VerdictReason::kEnvelopeEdge:
+      std::snprintf(detail, sizeof detail, " (|%s| %.3f %s > %.3f %s, the envelope less its edge band)",
+                    kAxes[v.axis >= 0 && v.axis < 6 ? v.axis : 0], v.value, v.units, v.limit, v.units);
+      break;
+    case VerdictReason::kViewsPullApart:
+      std::snprintf(detail, sizeof detail, " (view %s registered alone moves the target %.3g mm across it > %.3g mm)",
+                    view.c_str(), v.value, v.limit);
       break;
     default:
       break;

@@ -49,6 +49,10 @@ const char* to_string(GateReason r) {
       return "actuator refused the command";
     case GateReason::kNotInPlace:
       return "patient not in place: the beam withheld too long";
+    case GateReason::kEnvelopeEdge:
+      return "registration at the pose envelope's edge";
+    case GateReason::kViewsPullApart:
+      return "a view registered alone moves the target";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:

@@ -78,7 +78,7 @@ bool split_seal(const std::string& text, std::string* rest, std::string* seal) {
 
 const char* kWhatPartHolds[] = {
     "the CT (its voxels, the fiducials inserted)", "the room (detectors, nominal pose, ROI and roi.mask, origin, envelope)",
-    "the registration (measure, plans, renderer, light fields)", "the imaging (bits, dose, blur, physics)"};
+    "the registration (measure, plans, renderer, light fields, the verdict's other checks)", "the imaging (bits, dose, blur, physics)"};
 
 }  // namespace
 
@@ -108,6 +108,10 @@ CommissioningFingerprint commissioning_fingerprint(const PreparedScene& p) {
   registration << " margin " << lf.margin_fraction << " integration " << int(lf.integration) << " step "
                << lf.slice_step_mm << " storage " << int(lf.storage) << " codebook " << lf.vq_codebook_size << ' '
                << lf.vq_training_tiles << ' ' << lf.vq_seed;
+  // The verdict's other checks decide which wrong results the floors must refuse.
+  const VerdictChecksSpec& checks = s.verdict_checks;
+  registration << " edge " << checks.envelope_edge_mm << ' ' << checks.envelope_edge_deg << " view shift "
+               << checks.max_view_shift_mm;
   // The frames as the detectors make them and as they are corrected: the dose the simulator's AEC
   // set, each detector's calibration (its file's bytes), the physics.
   for (const DetectorSpec& d : s.detectors) {
@@ -168,6 +172,7 @@ Result<CommissioningRecord> read_commissioning_file(const fs::path& file) {
     r.measure = root["measure"].as<std::string>();
     r.min_similarity = floors["min_similarity"].as<double>();
     r.min_check_ncc = floors["min_check_ncc"].as<double>();
+    if (floors["max_view_shift_mm"]) r.max_view_shift_mm = floors["max_view_shift_mm"].as<double>();
     if (!root["seal"] || root["seal"].as<std::string>() != seal || seal != seal_of_text(unsealed))
       return bad("edited by hand: its seal does not match its text");
     if (root["scene"]) r.scene = root["scene"].as<std::string>();
@@ -179,6 +184,8 @@ Result<CommissioningRecord> read_commissioning_file(const fs::path& file) {
   if (!std::isfinite(r.min_similarity) || !std::isfinite(r.min_check_ncc) || r.min_check_ncc <= 0 ||
       r.min_check_ncc >= 1)
     return bad("floors out of range (min_check_ncc must lie in (0, 1), both finite)");
+  if (!(r.max_view_shift_mm >= 0 && r.max_view_shift_mm <= 20))
+    return bad("floors.max_view_shift_mm out of range (0 to 20 mm)");
   // No floor below what commissioning may choose: halfway between what unrelated images score
   // and the measure's default (a floor lower than that would switch the check off).
   const auto expected = similarity_expectation(r.measure);
@@ -213,6 +220,8 @@ Status write_commissioning_file(const fs::path& file, const CommissioningRecord&
       << "floors:                    # per view, at the registration's result\n"
       << "  min_similarity: " << exact(r.min_similarity) << "   # " << r.measure << "\n"
       << "  min_check_ncc: " << exact(r.min_check_ncc) << "    # NCC of the frame against the DRR\n";
+  if (r.max_view_shift_mm != 0)  // 0: the scene has no view check
+    out << "  max_view_shift_mm: " << exact(r.max_view_shift_mm) << "   # each view registered alone\n";
   const std::string head = out.str();
   const std::string sealed = head + measured_yaml;
   const std::string text = head + kSealKey + "\"" + seal_of_text(sealed) +

@@ -71,6 +71,7 @@ struct LoopSession::Parts {
   std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
   std::unique_ptr<tracking::Registration> registration;
   std::unique_ptr<PlannedRegistration> planned_registration;  // the loop's view of `registration`
+  std::unique_ptr<ViewAgreement> view_agreement;  // the verdict's view check; null: none
   std::unique_ptr<sim::SimulatedRoom> room;  // simulated detectors only
   // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
   // through its hooks.
@@ -547,6 +548,22 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   spdlog::info("registration verdict floors: {}; judging {}", floors_from,
                settings.judge_tracking ? "the alignment and every tracking cycle" : "the alignment only");
   settings.verdict = *verdict;
+  if (judges_view_shift(*verdict)) {
+    auto track_plan = tracking::registration_plan(p.scene.loop.track_plan);
+    if (!track_plan.ok()) return track_plan.status().with_context("loop.track_plan");
+    auto agreement = make_scene_view_agreement(p, parts->registration_renderer, p.scene.registration, *track_plan, pool);
+    if (!agreement.ok()) return agreement.status().with_context("the verdict's view check");
+    parts->view_agreement = std::move(agreement).value();
+    lp.view_agreement = parts->view_agreement.get();
+    settings.view_check_every = p.scene.verdict_checks.view_check_every;
+    spdlog::info("registration verdict: each view registered alone at every alignment{} (at most {:.3g} mm across it)",
+                 settings.judge_tracking && settings.view_check_every > 0
+                     ? " and once every " + std::to_string(settings.view_check_every) + " tracking cycles"
+                     : std::string(),
+                 verdict->max_view_shift_mm);
+  } else {
+    spdlog::info("registration verdict: no view check (safety.max_view_shift_mm: 0, or one view)");
+  }
   auto loop = TrackingLoop::create(lp, settings);
   if (!loop.ok()) return loop.status();
   parts->loop = std::move(loop).value();

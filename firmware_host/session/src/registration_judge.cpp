@@ -1,5 +1,7 @@
 #include "lftrack/host/registration_judge.hpp"
 
+#include <chrono>
+
 namespace lftrack::host {
 
 using tracking::Image;
@@ -39,7 +41,8 @@ Result<VerdictInput> verdict_input_of(const PreparedScene& p, const tracking::Dr
 
 Result<std::unique_ptr<RegistrationJudge>> RegistrationJudge::create(
     const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer, const RegistrationSpec& spec,
-    std::vector<tracking::DetectorCorrection> corrections, const VerdictLimits& limits, tracking::ThreadPool* pool) {
+    std::vector<tracking::DetectorCorrection> corrections, const VerdictLimits& limits, tracking::ThreadPool* pool,
+    ViewCheck view_check) {
   if (!renderer) return invalid_argument("registration judge: no renderer");
   if (corrections.size() != scene.scene.detectors.size())
     return invalid_argument("registration judge: one detector correction per detector");
@@ -53,6 +56,14 @@ Result<std::unique_ptr<RegistrationJudge>> RegistrationJudge::create(
   judge->registration_ = std::move(registration).value();
   judge->corrections_ = std::move(corrections);
   judge->limits_ = limits;
+  judge->view_check_ = view_check;
+  if (judges_view_shift(limits)) {
+    auto plan = tracking::registration_plan(scene.scene.loop.track_plan);
+    if (!plan.ok()) return plan.status().with_context("the view check's plan (loop.track_plan)");
+    auto agreement = make_scene_view_agreement(scene, judge->renderer_, spec, *plan, pool);
+    if (!agreement.ok()) return agreement.status();
+    judge->agreement_ = std::move(agreement).value();
+  }
   return judge;
 }
 
@@ -90,6 +101,18 @@ Result<JudgedRegistration> RegistrationJudge::judge(const std::vector<Image<std:
   if (!input.ok()) return input.status();
   out.input = *input;
   out.verdict = judge_registration(limits_, out.input);
+  const bool check_views = agreement_ && out.input.pose_finite &&
+                           (view_check_ == ViewCheck::kAlways || out.verdict.ok);
+  if (check_views) {
+    const auto started = std::chrono::steady_clock::now();
+    LFTRACK_RETURN_IF_ERROR(agreement_->set_frames(frames->frames(), frames->masks()));
+    bool complete = true;
+    LFTRACK_RETURN_IF_ERROR(
+        agreement_->measure(out.result.T_room_from_ct, 1e12, &out.input.view_shift_mm, &complete));
+    out.input.has_view_shift = true;
+    out.view_check_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
+    out.verdict = judge_registration(limits_, out.input);
+  }
   return out;
 }
 

@@ -358,6 +358,7 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
   if (root["safety"]) {
     LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
     scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
+    LFTRACK_RETURN_IF_ERROR(parse_verdict_checks(root["safety"], scene.envelope, &scene.verdict_checks));
     if (const YAML::Node c = root["safety"]["commissioning"]) {
       std::string file;
       LFTRACK_RETURN_IF_ERROR(text(c, "safety.commissioning", &file));
@@ -383,7 +384,42 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
   if (root["actuator"]) LFTRACK_RETURN_IF_ERROR(parse_actuator(root["actuator"], &scene.actuator));
   LFTRACK_RETURN_IF_ERROR(check_devices(root, scene));
   if (root["motion"]) LFTRACK_RETURN_IF_ERROR(parse_motion(root["motion"], &scene.motion));
+  if (!(root["safety"] && root["safety"]["envelope_edge_mm"]))
+    scene.verdict_checks.envelope_edge_mm = VerdictChecksSpec::kEnvelopeEdgeFraction * scene.envelope.translation_mm;
   return scene;
+}
+
+Status SceneParser::parse_verdict_checks(const YAML::Node& n, const PoseEnvelope& envelope,
+                                         VerdictChecksSpec* c) const {
+  const auto g = [](double x) {
+    std::ostringstream o;
+    o << x;
+    return o.str();
+  };
+  if (const YAML::Node e = n["envelope_edge_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(number(e, "safety.envelope_edge_mm", &c->envelope_edge_mm));
+    if (!(c->envelope_edge_mm >= 0 && c->envelope_edge_mm < envelope.translation_mm))
+      return error(e, "safety.envelope_edge_mm must be at least 0 and less than the envelope's translation_mm (" +
+                          g(envelope.translation_mm) + "): a band as wide refuses every result");
+  }
+  if (const YAML::Node e = n["envelope_edge_deg"]) {
+    LFTRACK_RETURN_IF_ERROR(number(e, "safety.envelope_edge_deg", &c->envelope_edge_deg));
+    if (!(c->envelope_edge_deg >= 0 && c->envelope_edge_deg < envelope.rotation_deg))
+      return error(e, "safety.envelope_edge_deg must be at least 0 and less than the envelope's rotation_deg (" +
+                          g(envelope.rotation_deg) + "): a band as wide refuses every result");
+  }
+  if (const YAML::Node m = n["max_view_shift_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(number(m, "safety.max_view_shift_mm", &c->max_view_shift_mm));
+    if (!(c->max_view_shift_mm >= 0 && c->max_view_shift_mm <= 20))
+      return error(m, "safety.max_view_shift_mm must be in [0, 20] (0: the views are not registered alone); two "
+                      "views 20 mm apart do not see one patient");
+  }
+  if (const YAML::Node e = n["view_check_every"]) {
+    long every = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(e, "safety.view_check_every", 0, 100000, &every));
+    c->view_check_every = static_cast<int>(every);
+  }
+  return {};
 }
 
 Status SceneParser::one_of(const YAML::Node& n, const std::string& what,

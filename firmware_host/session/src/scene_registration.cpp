@@ -56,11 +56,10 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
   return std::shared_ptr<const tracking::DrrRenderer>(std::move(renderer).value());
 }
 
-Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
-    const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> renderer,
-    const RegistrationSpec& spec, tracking::ThreadPool* pool, int detector_binning) {
-  if (detector_binning < 1 || detector_binning > 16)
-    return out_of_range("detector binning must be in [1, 16]");
+namespace {
+
+tracking::RegistrationSetup scene_registration_setup(const PreparedScene& p, const RegistrationSpec& spec,
+                                                     int detector_binning) {
   tracking::RegistrationSetup setup;
   if (detector_binning > 1) {
     const auto levels = setup.levels;
@@ -83,7 +82,35 @@ Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
   // Search within twice the envelope the light fields were planned for.
   setup.search_translation_mm = 2 * p.scene.envelope.translation_mm;
   setup.search_rotation_deg = 2 * p.scene.envelope.rotation_deg;
-  return tracking::Registration::create(std::move(renderer), std::move(setup), pool);
+  return setup;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
+    const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> renderer,
+    const RegistrationSpec& spec, tracking::ThreadPool* pool, int detector_binning) {
+  if (detector_binning < 1 || detector_binning > 16)
+    return out_of_range("detector binning must be in [1, 16]");
+  return tracking::Registration::create(std::move(renderer), scene_registration_setup(p, spec, detector_binning),
+                                        pool);
+}
+
+Result<std::unique_ptr<ViewAgreement>> make_scene_view_agreement(const PreparedScene& p,
+                                                                 std::shared_ptr<const tracking::DrrRenderer> renderer,
+                                                                 const RegistrationSpec& spec,
+                                                                 const tracking::RegistrationPlan& plan,
+                                                                 tracking::ThreadPool* pool) {
+  const tracking::RegistrationSetup joint = scene_registration_setup(p, spec, 1);
+  std::vector<ViewAgreement::View> views;
+  for (const tracking::RegistrationView& view : joint.views) {
+    tracking::RegistrationSetup alone = joint;
+    alone.views = {view};
+    auto registration = tracking::Registration::create(renderer, std::move(alone), pool);
+    if (!registration.ok()) return registration.status().with_context("view " + view.view.name + " alone");
+    views.push_back({std::move(registration).value(), view.view.source_mm});
+  }
+  return ViewAgreement::create(std::move(views), plan, joint.origin_room_mm);
 }
 
 std::vector<ImageView<const float>> SceneFrames::frames() const {

@@ -18,6 +18,11 @@ Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& meas
   if (scene.min_similarity_given && measure == scene.registration.similarity)
     limits.min_similarity = scene.safety.min_similarity;
   limits.envelope = scene.envelope;
+  limits.envelope_edge_mm = scene.verdict_checks.envelope_edge_mm;
+  limits.envelope_edge_deg = scene.verdict_checks.envelope_edge_deg;
+  // The view check compares views: with one there is nothing to compare.
+  if (scene.verdict_checks.max_view_shift_mm > 0 && scene.detectors.size() >= 2)
+    limits.max_view_shift_mm = scene.verdict_checks.max_view_shift_mm;
   return limits;
 }
 
@@ -40,6 +45,9 @@ Result<VerdictLimits> scene_verdict_limits(const PreparedScene& p, const std::st
   LFTRACK_RETURN_IF_ERROR(check_commissioning_current(p, *record, file));
   // The two floors were chosen together: with another measure (register --similarity, a study's
   // method) the commissioned check floor alone may be lower than the default, so the higher holds.
+  // The view check's commissioned limit, never above the scene's own (the fingerprint holds it).
+  if (judges_view_shift(*limits) && record->max_view_shift_mm > 0)
+    limits->max_view_shift_mm = std::min(limits->max_view_shift_mm, record->max_view_shift_mm);
   if (measure == record->measure) {
     limits->min_similarity = record->min_similarity;
     limits->min_check_ncc = record->min_check_ncc;

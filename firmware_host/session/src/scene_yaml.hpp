@@ -186,6 +186,8 @@ class SceneParser {
   Status parse_physics(const YAML::Node& n, SimFrameSpec* sim) const;
   Status parse_loop(const YAML::Node& n, LoopSpec* loop) const;
   Status parse_safety(const YAML::Node& n, SafetyLimits* limits) const;
+  // safety's keys for the verdict's own checks, within the scene's envelope (parsed before).
+  Status parse_verdict_checks(const YAML::Node& n, const PoseEnvelope& envelope, VerdictChecksSpec* checks) const;
   Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;
   Status parse_motion(const YAML::Node& n, MotionSpec* motion) const;
   Status check_motion(const YAML::Node& n, const std::string& what, const tracking::Vector6d& v, double mm,

@@ -5,12 +5,21 @@
 // noise serve every case, so the difference to the error-free case is the error's own effect.
 // DRRs inside the registration are ray-cast (Siddon): a light field would have to be rebuilt for
 // every perturbed geometry.
+//
+// Every result is also judged by the registration verdict the loop and `register` use (the
+// scene's limits for its measure, scene_verdict_limits; the image-quality gate, preprocessing and
+// the check NCC with the model geometry, all the system knows), as `study capture-range` judges
+// its runs: per case, the four outcomes against the truth (verdict_outcomes.hpp; right: mean TRE
+// against gold under the scene's safety.beam_tolerance_mm). A calibration error the verdict does
+// not see is a false accept once it costs more than the tolerance.
 
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/studies/verdict_outcomes.hpp"
 
 namespace lftrack::tracking {
 class ThreadPool;
@@ -26,15 +35,23 @@ struct SensitivityOptions {
 };
 
 struct SensitivityCase {
+  std::string key;         // short, for files and plots: "no-error", "source-across", ...
   std::string name;        // e.g. "source A +1 mm along the beam"
   double mean_tre_mm = 0;  // against gold
   double max_tre_mm = 0;
   double mean_added_mm = 0;  // mean TRE between this case's result and the error-free case's
+  VerdictOutcomes verdict;   // the registration verdict against the truth, over the case's runs
+  // Per run, in the problems' order: TRE against gold, TRE added (against the error-free case's
+  // result), whether the verdict accepted it and VerdictReason's value (0: accepted).
+  std::vector<double> run_tre_mm, run_added_mm;
+  std::vector<int> run_accepted, run_verdict_reason;
 };
 
 struct SensitivityReport {
   std::string scene, plan;
   int runs = 0;
+  std::string measure;              // the scene's similarity, whose verdict judges the results
+  double verdict_tolerance_mm = 2;  // right: TRE under this (the scene's safety.beam_tolerance_mm)
   std::vector<SensitivityCase> cases;  // first: no error
 };
 
@@ -42,5 +59,9 @@ Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& scene,
                                                    const SensitivityOptions& options,
                                                    tracking::ThreadPool* pool);
 nlohmann::json to_json(const SensitivityReport& report);
+// runs.csv (one row per case and run, with accepted and verdict_reason as capture-range's),
+// summary.json (to_json) and verdict.png (the verdict's four outcomes per case, 95 % intervals;
+// + .dat, .gp) in `dir`.
+Status write_sensitivity_outputs(const SensitivityReport& report, const std::filesystem::path& dir);
 
 }  // namespace lftrack::host

@@ -60,6 +60,8 @@ struct GroupedBarChart {
   std::vector<BarSeries> series;
   double y_min = 0, y_max = 0;  // equal: automatic
   std::string key_position = "top right";
+  int width = 1100;                 // pixels; many categories want more
+  bool slanted_categories = false;  // category names slanted (long names, many categories)
 };
 // Writes <png stem>.dat and <png stem>.gp and runs gnuplot.
 Result<bool> draw_grouped_bars(const GroupedBarChart& chart, const std::filesystem::path& png);

@@ -11,7 +11,11 @@
 // registration time (median, p95), TRE (mean, p95, over all problems), success rate (final
 // mean TRE < 2 mm, paper 1; a registration that returned an error is never a success), memory (the renderer's data: fields, tree or volume), precompute
 // time (building the fields or the tree, in this run), and the DRR fidelity against Siddon at
-// the gold poses.
+// the gold poses. Every result is also judged by the registration verdict the loop and `register`
+// use, with the scene's limits for the point's measure (scene_verdict_limits) and the check NCC
+// against the point's own renderer, as `study capture-range` judges its runs; a point records the
+// four outcomes against the truth (verdict_outcomes.hpp; right: final mean TRE under the scene's
+// safety.beam_tolerance_mm): accepted and right, false accepts, false rejects, rejected and wrong.
 //
 // The study is sharded for a cluster's job array: shard k of n runs the points whose index is
 // k-1 modulo n (every shard makes the same problems); `lftrack study merge` joins the shards'
@@ -32,6 +36,7 @@
 
 #include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/studies/verdict_outcomes.hpp"
 
 namespace lftrack::host {
 
@@ -84,6 +89,14 @@ struct TradeResult {
   int failed_runs = 0;
   std::string failure;  // the first failed registration's reason (empty: not recorded)
   bool failed() const { return failed_runs > 0; }
+  // The registration verdict on every problem's result (a failed registration: rejected, reason
+  // kNoResult, never right), counted against right = final mean TRE < the study's
+  // verdict_tolerance_mm. Per problem, in the problems' order (runs.csv): whether the verdict
+  // accepted it and VerdictReason's value (0: accepted). All empty and zero for a point not
+  // judged (read from a folder written before the verdict was recorded).
+  std::vector<int> problem_accepted, problem_verdict_reason;
+  VerdictOutcomes verdict;
+  bool judged() const { return verdict.total() > 0; }
 };
 
 struct TradeStudy {
@@ -96,8 +109,15 @@ struct TradeStudy {
   int points_total = 0;  // in the whole study, over every shard
   std::string physics = "ideal";    // the frames' physics (TradeOptions::physics_name)
   std::string physics_description;  // sim::describe of it
+  // Right for the verdict's tally: final mean TRE under this (the scene's
+  // safety.beam_tolerance_mm). Pooled over scenes of different tolerances: 0, each scene's own.
+  double verdict_tolerance_mm = 2.0;
   std::vector<TradeResult> results;
 };
+
+// A point's verdict tally from its per-problem rows, right meaning a registration that ran
+// (finite time) and ended under `tolerance_mm`; zero when the rows carry no verdict.
+VerdictOutcomes tally_trade_verdict(const TradeResult& result, double tolerance_mm);
 
 // The operating points of the study on `scene`, in a stable order.
 std::vector<TradePoint> trade_points(const PreparedScene& scene, bool quick);
@@ -155,7 +175,8 @@ Result<TradeStudy> merge_trade_shards(const std::vector<TradeStudy>& shards);
 // `left_out` (may be null) gets the ids some scene lacks.
 Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes,
                                       std::vector<std::string>* left_out = nullptr);
-// points.csv, study.json, tre_vs_time.png, memory_vs_fidelity.png (+ their .dat/.gp) and
+// points.csv, runs.csv, study.json, summary.json, tre_vs_time.png, memory_vs_fidelity.png,
+// verdict.png (the verdict's four outcomes per point, 95 % intervals; + their .dat/.gp) and
 // summary.md in `dir`.
 Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir);
 

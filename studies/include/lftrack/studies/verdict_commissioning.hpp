@@ -60,6 +60,7 @@ struct CommissionCaseResult {
   VerdictInput input;       // what the verdict judges (re-judged with any floors)
   double tre_mean_mm = 0;   // against the gold pose; NaN where there is none (no registration, another CT)
   double ms = 0;            // the registration's time
+  double view_check_ms = 0;  // the view check's (each view registered alone), when the scene has one
 };
 
 // The cases, in a fixed order drawn from options.seed; the same options give the same cases.
@@ -87,15 +88,43 @@ struct ChosenFloors {
   double wrong_similarity_below = 0, right_similarity_above = 0;
   double wrong_check_below = 0, right_check_above = 0;
 };
+//
+// The margin rule: every wrong result is refused by at least one floor by that floor's margin
+// (floor_margins: `min_margin_fraction` of the measure's default floor above its no-information
+// value, and of the default check NCC floor), not merely by being below it: where right and wrong
+// results nearly touch, a wrong result whose noise came out a little kinder would pass a floor
+// that sits just above the highest one seen. The rule costs right results, never safety.
+struct FloorMargins {
+  double similarity = 0;  // the measure's units
+  double check_ncc = 0;
+};
+FloorMargins floor_margins(const VerdictLimits& defaults, double min_margin_fraction);
+inline constexpr double kDefaultFloorMarginFraction = 0.005;
 ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
-                           double tolerance_mm);
+                           double tolerance_mm, double min_margin_fraction = kDefaultFloorMarginFraction);
+
+// The largest of the views' shifts when each is registered alone (view_agreement.hpp); NaN where
+// the check did not run.
+double largest_view_shift_mm(const VerdictInput& input);
+
+// The view check's limit for the scene (defaults.max_view_shift_mm where it has one): twice the
+// largest shift of the right results (each view registered alone from a right result moves the
+// target 0.1-0.3 mm), at least kMinViewShiftLimitMm, at most the scene's; the scene's when no
+// right result was checked, infinity when the scene has no view check. Chosen from the right
+// results alone: the floors refuse every wrong result without it (without_floors), so it can
+// cost right results, never let a wrong one by.
+inline constexpr double kMinViewShiftLimitMm = 0.25;
+double choose_view_shift_limit(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+                               double tolerance_mm);
 
 // A right result: a good case registered to within the tolerance (mean TRE). Every other case is
 // wrong, whatever it scores: a bad case must be refused.
 bool is_right_result(const CommissionCaseResult& c, double tolerance_mm);
 
-// `limits` with both floors open: what image quality, finiteness, agreement and the envelope let
-// by, which is what the floors decide.
+// `limits` with both floors open, and without the view check: what image quality, finiteness,
+// agreement, the envelope and its edge let by, which is what the floors decide. The view check
+// (each view registered alone) is not among them: tracking cycles run it only every Nth cycle,
+// so the floors must refuse every wrong result without it; it is a second line behind them.
 VerdictLimits without_floors(VerdictLimits limits);
 
 // The lowest view's similarity and check NCC of a judged case (the check: NaN where it did not

@@ -17,6 +17,7 @@
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/loop/view_agreement.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
@@ -80,6 +81,8 @@ struct LoopParts {
   // Renders the DRR at the alignment's result for the verdict's NCC check (the registration's
   // renderer); null: the check is not made.
   const tracking::DrrRenderer* check_renderer = nullptr;
+  // The verdict's view check (each view registered alone, view_agreement.hpp); null: not made.
+  ViewAgreement* view_agreement = nullptr;
   std::uint64_t (*allocation_count)() = nullptr;
   CycleObserver* observer = nullptr;
   // Watchers on other threads (the monitor page, OpenIGTLink): every record and, when due, the
@@ -106,6 +109,11 @@ struct LoopSettings {
   std::optional<VerdictLimits> verdict;
   // Tracking cycles judged too, as the alignment is (the NCC check included).
   bool judge_tracking = false;
+  // With a view agreement: every alignment's result is checked (whatever it takes), and with
+  // judge_tracking every Nth tracking cycle's (0: alignments only), within what is left of the
+  // cycle on the real clock; a tracking check that does not fit is counted and tried again the
+  // next cycle.
+  int view_check_every = 0;
 };
 
 // The loop's period in integer nanoseconds, and the motion predictor's look-ahead (s): the scene's

@@ -52,6 +52,12 @@ struct LoopSummary {
   // The verdict's NCC check in tracking cycles (judge_tracking): how many ran, and their time.
   std::int64_t verdict_checks = 0;
   double verdict_check_p50_ms = 0, verdict_check_p95_ms = 0, verdict_check_max_ms = 0;
+  // The verdict's view check (each view registered alone): at alignments and every Nth tracking
+  // cycle (view_check_every; -1: no view check); how many ran, refused a result, or were due but
+  // did not fit in their cycle (tried again the next), and their time.
+  int view_check_every = -1;
+  std::int64_t view_checks = 0, view_checks_refused = 0, view_checks_out_of_time = 0;
+  double view_check_p50_ms = 0, view_check_max_ms = 0;
   double readback_p50_ms = 0, readback_p99_ms = 0;  // the actuator's read-back: a protocol's round trip
   double evaluations_mean = 0;
   std::optional<double> allocations_per_cycle;

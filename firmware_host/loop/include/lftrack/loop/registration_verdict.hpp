@@ -19,6 +19,16 @@
 //   outside envelope the result, as a delta from the nominal pose, lies inside the scene's pose
 //                    envelope (light fields only hold the rays of poses inside it; beyond it the
 //                    registration has wandered off or the DRRs extrapolate)
+//   envelope edge    and not within `envelope_edge_mm` / `envelope_edge_deg` of its limits: a
+//                    start beyond the capture range ends wherever the search gave up, often short
+//                    of the limit, and commissioning only has evidence for right results up to 0.9
+//                    of the envelope (docs/commissioning.md)
+//   views pull apart when given (has_view_shift): each view registered alone from the result
+//                    moves the target at most `max_view_shift_mm` across that view (the shift
+//                    along its ray through the target, which one view cannot see, left out). Two
+//                    views that agree on the anatomy leave the joint result where it is; a result
+//                    that is a compromise between views that see different things does not hold
+//                    in either view alone (view_agreement.hpp)
 //
 // judge_registration() allocates nothing and takes no lock: the loop calls it every cycle.
 // Only at set-up (verdict_limits, check_views_observable, verdict_text) is anything allocated.
@@ -51,6 +61,8 @@ enum class VerdictReason : std::uint8_t {
   kLowSimilarity,    // a view's similarity below the measure's floor; `view`, value < limit
   kViewsDisagree,    // a view's excess similarity is below min_view_ratio of the best view's
   kOutsideEnvelope,  // a delta component outside the envelope; `axis`, |value| > limit
+  kEnvelopeEdge,     // a delta component within the edge band of its limit; `axis`, |value| > limit
+  kViewsPullApart,   // a view alone moves the target beyond max_view_shift_mm; `view`, value > limit
 };
 const char* to_string(VerdictReason reason);
 
@@ -64,6 +76,14 @@ struct VerdictLimits {
   double min_view_ratio = 0.5;
   double min_check_ncc = 0.76;  // per view, the NCC of frame and DRR at the result (when given)
   tracking::PoseEnvelope envelope;  // about the nominal pose: |t_i| <= translation_mm, |omega_i| <= rotation_deg
+  // The band inside the envelope's limits where a result is refused too (0: none): a result is
+  // accepted only while |t_i| <= translation_mm - envelope_edge_mm and |omega_i| <= rotation_deg -
+  // envelope_edge_deg.
+  double envelope_edge_mm = 0;
+  double envelope_edge_deg = 0;
+  // The most a view registered alone from the result may move the target across it (when the
+  // input has view shifts).
+  double max_view_shift_mm = std::numeric_limits<double>::infinity();
 };
 
 struct VerdictInput {
@@ -80,13 +100,17 @@ struct VerdictInput {
   // The result as a delta from the nominal pose about the registration origin: t [mm], omega
   // (rotation vector) [rad] (tracking::delta_between(nominal, result, origin_room)).
   tracking::Vector6d delta_from_nominal = tracking::Vector6d::Zero();
+  // Per view, when has_view_shift: how far that view registered alone from the result moves the
+  // target across it, mm at the target (view_agreement.hpp). Judged after everything else.
+  bool has_view_shift = false;
+  std::array<double, kMaxVerdictViews> view_shift_mm{};
 };
 
 struct RegistrationVerdict {
   bool ok = false;
   VerdictReason reason = VerdictReason::kNoResult;
-  int view = -1;  // the view at fault (image quality, non-finite similarity, low similarity, disagree)
-  int axis = -1;  // the delta component at fault (outside envelope): 0..2 t x, y, z; 3..5 omega x, y, z
+  int view = -1;  // the view at fault (image quality, non-finite similarity, low similarity, disagree, pull apart)
+  int axis = -1;  // the delta component at fault (outside envelope, edge): 0..2 t x, y, z; 3..5 omega x, y, z
   tracking::FrameQualityIssue quality_issue = tracking::FrameQualityIssue::kOk;
   // The numbers compared, where a comparison failed: similarity and floor (the measure's units),
   // ratio and min_view_ratio, |component| and envelope ("mm" or "deg"); NaN otherwise.
@@ -97,6 +121,12 @@ struct RegistrationVerdict {
 
 // Pure; allocates nothing. A default-constructed input fails (no views, pose not finite).
 RegistrationVerdict judge_registration(const VerdictLimits& limits, const VerdictInput& input);
+
+// Whether the limits judge per-view shifts at all (a finite max_view_shift_mm): callers compute
+// the shifts (a registration per view) only then, and only for a result everything else passed.
+inline bool judges_view_shift(const VerdictLimits& limits) {
+  return limits.max_view_shift_mm < std::numeric_limits<double>::infinity();
+}
 
 // The normalised cross-correlation of two images of the same size over the pixels where both
 // masks (empty: all valid) are 1 and both values are finite; 0 with fewer than 16 such pixels or

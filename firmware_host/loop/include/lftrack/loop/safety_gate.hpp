@@ -77,6 +77,8 @@ enum class GateReason : std::uint8_t {
   kOutsideEnvelope,  // the registered pose left the scene's pose envelope (registration_verdict.hpp)
   kCommandRefused,   // the actuator refused this cycle's command: it knows of a fault, nothing moved
   kNotInPlace,       // the beam was withheld for max_beam_withheld_s: the patient does not come into place
+  kEnvelopeEdge,     // the registered pose lies in the envelope's edge band (registration_verdict.hpp)
+  kViewsPullApart,   // a view registered alone moves the target beyond the verdict's limit
 };
 // Why an APPLY kept the beam off; its correction is sent all the same.
 enum class BeamWithheld : std::uint8_t {

@@ -31,6 +31,10 @@ struct CommissioningRecord {
   std::string measure;        // the scene's tracking.similarity: min_similarity's units
   double min_similarity = 0;  // per view, the measure's value at the result must reach this
   double min_check_ncc = 0;   // per view, the NCC of frame and DRR at the result must reach this
+  // The view check's limit measured for the scene (mm; 0: the scene has no view check): each view
+  // registered alone may move the target at most this across it. At most the scene's
+  // safety.max_view_shift_mm (which the fingerprint holds).
+  double max_view_shift_mm = 0;
   std::string scene;          // the scene file it was measured on, as given
   std::string made_utc;       // ISO 8601
   std::string command;        // the command line that measured it

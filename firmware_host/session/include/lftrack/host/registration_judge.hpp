@@ -20,6 +20,7 @@ namespace lftrack::host {
 struct JudgedRegistration {
   bool registered = false;  // false: a frame failed the image-quality gate; nothing was registered
   VerdictInput input;       // what the verdict judged
+  double view_check_ms = 0;  // the view check's wall time (both views registered alone), when it ran
   RegistrationVerdict verdict;
   std::vector<tracking::FrameQualityStats> quality;  // per view
   tracking::RegistrationResult result;               // when registered
@@ -40,13 +41,21 @@ class RegistrationJudge {
   // (`lftrack register --fiducial` adds its term there).
   using BeforeRun = std::function<Status(const SceneFrames& frames, tracking::Registration* registration)>;
 
+  // When the scene's view check (safety.max_view_shift_mm, view_agreement.hpp) runs: only for a
+  // result everything else accepted (register, the loop), or for every registered result
+  // (commission: the floors are chosen afterwards, knowing which wrong results the check refuses).
+  enum class ViewCheck { kWhenOthersAccept, kAlways };
+
   // `renderer` renders both the registration's DRRs and the check's; `corrections` one per
-  // detector, as scene_detector_corrections() gives them. The scene outlives the judge.
+  // detector, as scene_detector_corrections() gives them. The scene outlives the judge. With a
+  // view check (judges_view_shift(limits)) each view's registration alone is made here, with the
+  // scene's tracking plan.
   static Result<std::unique_ptr<RegistrationJudge>> create(const PreparedScene& scene,
                                                            std::shared_ptr<const tracking::DrrRenderer> renderer,
                                                            const RegistrationSpec& spec,
                                                            std::vector<tracking::DetectorCorrection> corrections,
-                                                           const VerdictLimits& limits, tracking::ThreadPool* pool);
+                                                           const VerdictLimits& limits, tracking::ThreadPool* pool,
+                                                           ViewCheck view_check = ViewCheck::kWhenOthersAccept);
 
   // Registers `raw` (whole-detector frames, one per view) from `start` with `plan` and judges it.
   Result<JudgedRegistration> judge(const std::vector<tracking::Image<std::uint16_t>>& raw, const tracking::Pose& start,
@@ -60,6 +69,8 @@ class RegistrationJudge {
   const PreparedScene* scene_ = nullptr;
   std::shared_ptr<const tracking::DrrRenderer> renderer_;
   std::unique_ptr<tracking::Registration> registration_;
+  std::unique_ptr<ViewAgreement> agreement_;  // null: the scene does not check its views alone
+  ViewCheck view_check_ = ViewCheck::kWhenOthersAccept;
   std::vector<tracking::DetectorCorrection> corrections_;
   VerdictLimits limits_;
 };

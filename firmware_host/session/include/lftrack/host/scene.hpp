@@ -184,6 +184,25 @@ struct MotionSpec {
   sim::PatientMotionSpec motion;
 };
 
+// The registration verdict's checks beyond its floors (registration_verdict.hpp), from safety's
+// keys. Measured on the shipped scenes' commissioning cases (BENCHMARKS.md, "One verdict").
+struct VerdictChecksSpec {
+  // safety.envelope_edge_mm / _deg: results this close to the envelope's limits are refused;
+  // unset, the outer kEnvelopeEdgeFraction of the envelope's translation_mm (0.5 mm of 10 mm:
+  // commissioning's good cases reach 0.9 of it). The translation band refused 20 wrong results
+  // the default floors accepted across six scenes and no right one; a rotation band refused
+  // right results the clinical presets bias outwards.
+  static constexpr double kEnvelopeEdgeFraction = 0.05;
+  double envelope_edge_mm = 0.5;
+  double envelope_edge_deg = 0;
+  // safety.max_view_shift_mm: the most a view registered alone from the result may move the
+  // target across it; 0: not checked.
+  double max_view_shift_mm = 1.0;
+  // safety.view_check_every: the view check runs at every alignment and on every Nth tracking
+  // cycle (0: alignments only): two single-view registrations cost about one registration.
+  int view_check_every = 10;
+};
+
 struct Scene {
   std::string source;  // the scene file, or "builtin:phantom"
   // Where sections checked after parsing were written ("ct", "roi"): "FILE:LINE:COLUMN", so an
@@ -216,6 +235,7 @@ struct Scene {
   // safety.commissioning: the scene's commissioning file (commissioning_file.hpp; absolute), whose
   // floors the verdict takes; empty: the measure's default floors, the scene not commissioned.
   std::string commissioning_file;
+  VerdictChecksSpec verdict_checks;  // safety's keys for the verdict's own checks
   ActuatorSpec actuator;
   MotionSpec motion;
 };

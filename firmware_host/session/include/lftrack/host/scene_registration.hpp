@@ -12,6 +12,7 @@
 
 #include "lftrack/calib/triangulation.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/loop/view_agreement.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/registration.hpp"
@@ -37,6 +38,14 @@ Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
 Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
     const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
     const RegistrationSpec& spec, tracking::ThreadPool* pool, int detector_binning = 1);
+
+// The verdict's view check for the scene (view_agreement.hpp): each view's registration alone, as
+// make_scene_registration() sets it up, with `plan` (the scene's tracking plan).
+Result<std::unique_ptr<ViewAgreement>> make_scene_view_agreement(const PreparedScene& scene,
+                                                                 std::shared_ptr<const tracking::DrrRenderer> renderer,
+                                                                 const RegistrationSpec& spec,
+                                                                 const tracking::RegistrationPlan& plan,
+                                                                 tracking::ThreadPool* pool);
 
 // One frame per detector, preprocessed to the ROI windows.
 struct SceneFrames {
