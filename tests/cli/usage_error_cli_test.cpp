@@ -125,6 +125,10 @@ std::vector<UsageCase> cases() {
        {{"commission", "--max-false-rejects", "2"}, "--max-false-rejects"},
        {{"commission", "--out", ""}, "--out"},
        {{"commission", "--seed", "-1"}, "--seed"},
+       {{"commission", "--min-margin", "nan"}, "--min-margin"},
+       {{"commission", "--min-margin", "-1"}, "--min-margin"},
+       {{"commission", "--min-margin", "1e12"}, "--min-margin"},
+       {{"study", "sensitivity", "--runs", "1", "--out", ""}, "--out"},
        {{"study", "trade", "--out", "x", "--seed", "1.5"}, "--seed"}});
   return all;
 }
@@ -137,6 +141,32 @@ std::string case_name(const ::testing::TestParamInfo<UsageCase>& info) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Cli, UsageError, ::testing::ValuesIn(cases()), case_name);
+
+// `study sensitivity --out` is checked before the scene loads: a folder with an earlier study's
+// files in it, or a file, is refused at once (exit 1), and nothing in it is replaced.
+TEST(StudySensitivityOut, AFolderThatIsNotNewOrEmptyIsRefusedBeforeAnyWork) {
+  test::TempDir dir;
+  const fs::path earlier = dir.path() / "earlier";
+  fs::create_directories(earlier);
+  { std::ofstream(earlier / "runs.csv") << "an earlier study\n"; }
+  std::ofstream(dir.path() / "afile") << "x\n";
+  for (const fs::path& out : {earlier, dir.path() / "afile"}) {
+    const fs::path log = dir.path() / "out.txt";
+    const std::string command = quoted(LFTRACK_BIN_PATH) + " study sensitivity --scene builtin:nothing --runs 1 --out " +
+                                quoted(out.string()) + " >" + quoted(log.string()) + " 2>&1";
+    const int status = std::system(command.c_str());
+    std::ifstream in(log);
+    const std::string text{std::istreambuf_iterator<char>(in), {}};
+    ASSERT_TRUE(status != -1 && WIFEXITED(status)) << text;
+    EXPECT_EQ(WEXITSTATUS(status), 1) << text;
+    EXPECT_TRUE(text.find("is not empty") != std::string::npos || text.find("not a folder") != std::string::npos)
+        << text;
+    EXPECT_EQ(text.find("builtin:nothing"), std::string::npos) << "refused before the scene is looked at: " << text;
+  }
+  std::ifstream kept(earlier / "runs.csv");
+  const std::string still{std::istreambuf_iterator<char>(kept), {}};
+  EXPECT_EQ(still, "an earlier study\n");
+}
 
 }  // namespace
 }  // namespace lftrack::host

@@ -82,6 +82,13 @@ TEST(SceneLoopKeys, TheVerdictsEdgeBandAndViewCheck) {
   EXPECT_DOUBLE_EQ(limits->envelope_edge_mm, 0.5);
   EXPECT_TRUE(judges_view_shift(*limits));
   const auto with = [](const std::string& keys) { return with_keys("safety", keys); };
+  // Unset, the band is the envelope's outer 5 %: a small envelope keeps most of itself.
+  std::string small = base;
+  const std::string ten = "envelope:\n  translation_mm: 10\n";
+  small.replace(small.find(ten), ten.size(), "envelope:\n  translation_mm: 1\n");
+  auto small_scene = parse_scene(small, "b.yaml", ".");
+  ASSERT_TRUE(small_scene.ok()) << small_scene.status().message();
+  EXPECT_NEAR(small_scene->verdict_checks.envelope_edge_mm, 0.05, 1e-12);
   auto set = with("  envelope_edge_mm: 1.5\n  envelope_edge_deg: 0.25\n  max_view_shift_mm: 0\n  view_check_every: 0\n");
   ASSERT_TRUE(set.ok()) << set.status().message();
   EXPECT_DOUBLE_EQ(set->verdict_checks.envelope_edge_mm, 1.5);

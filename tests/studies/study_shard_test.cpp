@@ -8,12 +8,15 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <sstream>
 
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
+#include "lftrack/tracking/thread_pool.hpp"
+#include "small_phantom.hpp"
 #include "lftrack/studies/slurm_job_array.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/studies/trade_study.hpp"
@@ -461,6 +464,30 @@ TEST(SlurmJobArray, SubmitChainsTheJobsAndRefusesAnotherStudysFolder) {
   const auto refused_record = submit_job_array(spec);
   setenv("PATH", old_path.c_str(), 1);
   EXPECT_EQ(refused_record.status().code(), StatusCode::kCorruptData) << refused_record.status().message();
+}
+
+// What judges a study's results is part of its identity: a shard made with other floors, another
+// edge band or view check, or another tolerance for "right" is another study, never reused.
+TEST(StudyShard, TheVerdictsSettingsArePartOfTheStudysIdentity) {
+  tracking::ThreadPool pool(2);
+  auto p = test::small_phantom(&pool);
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  const std::string base = study_scene_fingerprint(*p);
+  EXPECT_EQ(study_scene_fingerprint(*p), base);
+  const auto differs = [&](const std::function<void(PreparedScene&)>& change) {
+    PreparedScene q = *p;
+    change(q);
+    return study_scene_fingerprint(q) != base;
+  };
+  EXPECT_TRUE(differs([](PreparedScene& q) { q.scene.verdict_checks.envelope_edge_mm = 1.0; }));
+  EXPECT_TRUE(differs([](PreparedScene& q) { q.scene.verdict_checks.max_view_shift_mm = 0; }));
+  EXPECT_TRUE(differs([](PreparedScene& q) { q.scene.safety.beam_tolerance_mm = 1.0; }));
+  EXPECT_TRUE(differs([](PreparedScene& q) {
+    q.scene.min_similarity_given = true;
+    q.scene.safety.min_similarity = 50;
+  }));
+  EXPECT_FALSE(differs([](PreparedScene& q) { q.scene.verdict_checks.view_check_every = 3; }))
+      << "how often the loop runs the view check does not change a study's verdicts";
 }
 
 }  // namespace
