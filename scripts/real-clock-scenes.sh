@@ -23,21 +23,29 @@ fi
 out=out/exp/real-clock
 mkdir -p "$out"
 
-# The 30 Hz variant of the lumbar scene, next to nothing in scenes/: the CT's and the
-# commissioning file's paths made absolute (the loop's period is not what the floors depend on).
+# The 30 Hz variant of the lumbar scene, next to nothing in scenes/: its room file (which holds
+# the loop's settings, docs/scenes.md "Room files") copied with the 30 Hz loop, and the scene
+# naming that copy, with the CT's and the commissioning file's paths made absolute (the loop's
+# period is not what the floors depend on).
 data=$(cd scenes && realpath -m ../../shared/data)
 lumbar30="$out/lumbar-ct-30hz.yaml"
+room30="$out/oblique-pair-30hz.yaml"
 commissioning=$(realpath scenes/commissioning)
-sed -e "s|path: ../../shared/data|path: $data|" \
-    -e "s|commissioning: commissioning/|commissioning: $commissioning/|" \
-    -e 's|^name: .*|name: pancreas CT, lumbar vertebra, tracked at 30 Hz|' \
-    -e 's|^  period_ms: 100$|  period_ms: 33.333|' \
+room=$(sed -n 's|^room: \([^ ]*\).*|\1|p' scenes/lumbar-ct.yaml)
+[ -n "$room" ] && [ -f "scenes/$room" ] ||
+  { echo "real-clock-scenes: scenes/lumbar-ct.yaml names no room file; update the 30 Hz edit" >&2; exit 2; }
+sed -e 's|^  period_ms: 100$|  period_ms: 33.333|' \
     -e 's|^  registration_budget_ms: 50$|  registration_budget_ms: 20|' \
     -e 's|^  acquire_timeout_ms: 40$|  acquire_timeout_ms: 12\n  prediction_cycles: 24|' \
+    "scenes/$room" > "$room30"
+sed -e "s|path: ../../shared/data|path: $data|" \
+    -e "s|commissioning: commissioning/|commissioning: $commissioning/|" \
+    -e "s|^room: [^ ]*|room: $(realpath "$room30")|" \
+    -e 's|^name: .*|name: pancreas CT, lumbar vertebra, tracked at 30 Hz|' \
     scenes/lumbar-ct.yaml > "$lumbar30"
-grep -q 'period_ms: 33.333' "$lumbar30" && grep -q 'registration_budget_ms: 20' "$lumbar30" &&
-  grep -q 'prediction_cycles: 24' "$lumbar30" ||
-  { echo "real-clock-scenes: scenes/lumbar-ct.yaml's loop settings changed; update the 30 Hz edit" >&2; exit 2; }
+grep -q 'period_ms: 33.333' "$room30" && grep -q 'registration_budget_ms: 20' "$room30" &&
+  grep -q 'prediction_cycles: 24' "$room30" && grep -q "room: $(realpath "$room30")" "$lumbar30" ||
+  { echo "real-clock-scenes: scenes/$room's loop settings changed; update the 30 Hz edit" >&2; exit 2; }
 
 # stress-ng beside a run; stopped when the run ends, or when this script is stopped.
 stress_pid=
