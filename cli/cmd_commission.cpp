@@ -137,56 +137,6 @@ std::string number(double v) {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-// What the verdict's checks beyond the floors (the envelope's edge band, each view registered
-// alone) do at the measure's default floors, the floors an uncommissioned scene judges with: the
-// wrong results accepted without them, with the edge band, and with both; and what the view
-// check measured of right results and what it cost.
-struct OtherChecks {
-  int accepted_wrong_without = 0, accepted_wrong_edge = 0, accepted_wrong_both = 0;
-  int rejected_right_edge = 0, rejected_right_view = 0;  // right results each refused (alone)
-  int right_with_shift = 0;
-  double right_shift_median_mm = kNaN, right_shift_max_mm = kNaN;
-  double check_ms_median = kNaN, check_ms_p95 = kNaN;
-  bool view_check = false;
-};
-
-OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
-                         double tolerance_mm) {
-  OtherChecks o;
-  o.view_check = judges_view_shift(defaults);
-  VerdictLimits edge_only = defaults, neither = defaults;
-  edge_only.max_view_shift_mm = neither.max_view_shift_mm = std::numeric_limits<double>::infinity();
-  neither.envelope_edge_mm = neither.envelope_edge_deg = 0;
-  std::vector<double> shifts, ms;
-  for (const CommissionCaseResult& c : cases) {
-    const bool right = is_right_result(c, tolerance_mm);
-    const bool ok_neither = judge_registration(neither, c.input).ok;
-    const bool ok_edge = judge_registration(edge_only, c.input).ok;
-    const bool ok_both = judge_registration(defaults, c.input).ok;
-    if (!right) {
-      o.accepted_wrong_without += ok_neither;
-      o.accepted_wrong_edge += ok_edge;
-      o.accepted_wrong_both += ok_both;
-    } else {
-      o.rejected_right_edge += ok_neither && !ok_edge;
-      o.rejected_right_view += ok_edge && !ok_both;
-      if (c.input.has_view_shift) shifts.push_back(largest_view_shift_mm(c.input));
-    }
-    if (c.input.has_view_shift) ms.push_back(c.view_check_ms);
-  }
-  const auto at = [](std::vector<double> v, double q) {
-    if (v.empty()) return kNaN;
-    std::sort(v.begin(), v.end());
-    return v[std::min(v.size() - 1, std::size_t(q * double(v.size())))];
-  };
-  o.right_with_shift = static_cast<int>(shifts.size());
-  o.right_shift_median_mm = at(shifts, 0.5);
-  o.right_shift_max_mm = at(shifts, 1.0);
-  o.check_ms_median = at(ms, 0.5);
-  o.check_ms_p95 = at(ms, 0.95);
-  return o;
-}
-
 void print_other_checks(const OtherChecks& o, const VerdictLimits& defaults) {
   std::printf("the verdict's other checks, at the measure's default floors: false accepts %d without them, %d with "
               "the envelope's edge band (%.3g mm, %.3g deg; it refused %d right)",

@@ -9,6 +9,7 @@
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/host/sim_detectors.hpp"
+#include "quantile.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -267,6 +268,39 @@ double choose_view_shift_limit(const std::vector<CommissionCaseResult>& cases, c
       largest = std::max(largest, largest_view_shift_mm(c.input));
   if (!(largest >= 0)) return defaults.max_view_shift_mm;
   return std::min(defaults.max_view_shift_mm, std::max(kMinViewShiftLimitMm, 2 * largest));
+}
+
+OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+                         double tolerance_mm) {
+  OtherChecks o;
+  o.view_check = judges_view_shift(defaults);
+  VerdictLimits edge_only = defaults, neither = defaults;
+  edge_only.max_view_shift_mm = neither.max_view_shift_mm = std::numeric_limits<double>::infinity();
+  neither.envelope_edge_mm = neither.envelope_edge_deg = 0;
+  std::vector<double> shifts, ms;
+  for (const CommissionCaseResult& c : cases) {
+    const bool right = is_right_result(c, tolerance_mm);
+    const bool ok_neither = judge_registration(neither, c.input).ok;
+    const bool ok_edge = judge_registration(edge_only, c.input).ok;
+    const bool ok_both = judge_registration(defaults, c.input).ok;
+    if (!right) {
+      o.accepted_wrong_without += ok_neither;
+      o.accepted_wrong_edge += ok_edge;
+      o.accepted_wrong_both += ok_both;
+    } else {
+      o.rejected_right_edge += ok_neither && !ok_edge;
+      o.rejected_right_view += ok_edge && !ok_both;
+      if (c.input.has_view_shift) shifts.push_back(largest_view_shift_mm(c.input));
+    }
+    if (c.input.has_view_shift) ms.push_back(c.view_check_ms);
+  }
+  const auto at = [](const std::vector<double>& v, double q) { return v.empty() ? kNaN : quantile(v, q); };
+  o.right_with_shift = static_cast<int>(shifts.size());
+  o.right_shift_median_mm = at(shifts, 0.5);
+  o.right_shift_max_mm = at(shifts, 1.0);
+  o.check_ms_median = at(ms, 0.5);
+  o.check_ms_p95 = at(ms, 0.95);
+  return o;
 }
 
 bool is_right_result(const CommissionCaseResult& c, double tolerance_mm) {

@@ -15,6 +15,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -126,6 +127,23 @@ bool is_right_result(const CommissionCaseResult& c, double tolerance_mm);
 // (each view registered alone) is not among them: tracking cycles run it only every Nth cycle,
 // so the floors must refuse every wrong result without it; it is a second line behind them.
 VerdictLimits without_floors(VerdictLimits limits);
+
+// What the verdict's checks beyond the floors (the envelope's edge band, each view registered
+// alone) do at the measure's default floors, the floors an uncommissioned scene judges with: the
+// wrong results accepted without them, with the edge band, and with both; and what the view
+// check measured of right results and what it cost.
+struct OtherChecks {
+  int accepted_wrong_without = 0, accepted_wrong_edge = 0, accepted_wrong_both = 0;
+  int rejected_right_edge = 0, rejected_right_view = 0;  // right results each refused (alone)
+  int right_with_shift = 0;
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();  // the view check did not run
+  double right_shift_median_mm = kNone, right_shift_max_mm = kNone;
+  double check_ms_median = kNone, check_ms_p95 = kNone;
+  bool view_check = false;
+};
+
+OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+                         double tolerance_mm);
 
 // The lowest view's similarity and check NCC of a judged case (the check: NaN where it did not
 // run; a case the quality gate refused holds no similarity: look at `registered` first).
