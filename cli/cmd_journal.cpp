@@ -21,6 +21,8 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/records/journal_reader.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/loop/journal.hpp"

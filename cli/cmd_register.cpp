@@ -20,6 +20,7 @@
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -19,7 +19,7 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/progress_bar.hpp"
 #include "lftrack/host/scene.hpp"
-#include "lftrack/loop/wakeup_latency.hpp"
+#include "lftrack/rt_check/wakeup_latency.hpp"
 
 namespace lftrack::host::cli {
 

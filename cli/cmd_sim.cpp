@@ -22,6 +22,7 @@
 #include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {

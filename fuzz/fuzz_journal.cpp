@@ -1,6 +1,7 @@
 // Cycle journals (loop/journal.hpp read_journal): framing, CRC-32C, torn tails, record fields.
 #include "fuzz_input.hpp"
 #include "lftrack/loop/journal.hpp"
+#include "lftrack/records/journal_reader.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace lftrack;

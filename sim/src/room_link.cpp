@@ -17,16 +17,47 @@ namespace lftrack::sim {
 
 namespace {
 
-constexpr char kMagic[16] = "lftrack-room1";
+// Version 2 keeps the last kHistory samples, so that a detector that exposes at a given time sees
+// the couch where it was then, however late its thread gets to look (version 1 held the newest
+// only: a simulated detector's rendering thread, woken late on a loaded host, saw a couch that
+// had already moved on while the loop's read-back had seen it before the move, and the patient's
+// offset came out wrong by the move).
+constexpr char kMagic[16] = "lftrack-room2";
+constexpr std::uint64_t kHistory = 1024;  // about a second at the couch server's 1 kHz
 
-struct alignas(64) LinkFile {
-  char magic[16];
-  std::atomic<std::uint64_t> sequence;  // odd while a write is in progress
-  std::uint64_t writer_pid;
+// One sample under its own sequence lock: 2n + 1 while sample n is being written into it, 2n + 2
+// once it holds sample n. A reader that finds anything else there for the sample it wants lost
+// it (a write under way, or the writer lapped it).
+struct alignas(64) LinkSlot {
+  std::atomic<std::uint64_t> sequence;
   std::int64_t written_ns;
   double position[6];
 };
+
+struct alignas(64) LinkFile {
+  char magic[16];
+  std::atomic<std::uint64_t> published;  // samples written in all; sample n is in slot n % kHistory
+  std::uint64_t writer_pid;
+  LinkSlot slots[kHistory];
+};
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free);
+
+// Sample n, if its slot still holds it whole and its position is finite.
+bool read_slot(const LinkFile& file, std::uint64_t n, RoomLinkSample* out) {
+  const LinkSlot& slot = file.slots[n % kHistory];
+  const std::uint64_t want = 2 * n + 2;
+  if (slot.sequence.load(std::memory_order_acquire) != want) return false;
+  RoomLinkSample s;
+  for (int i = 0; i < 6; ++i) s.couch_position[i] = slot.position[i];
+  s.written_ns = slot.written_ns;
+  std::atomic_thread_fence(std::memory_order_acquire);
+  if (slot.sequence.load(std::memory_order_relaxed) != want) return false;
+  s.writer_pid = file.writer_pid;
+  *out = s;
+  return true;
+}
+
+bool finite(const RoomLinkSample& s) { return s.couch_position.allFinite(); }
 
 std::int64_t monotonic_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -37,7 +68,7 @@ std::int64_t monotonic_ns() {
 std::uint64_t link_writer(const std::filesystem::path& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return 0;
-  unsigned char bytes[sizeof(LinkFile)];
+  unsigned char bytes[offsetof(LinkFile, writer_pid) + sizeof(std::uint64_t)];
   const bool ok = ::read(fd, bytes, sizeof bytes) == ssize_t(sizeof bytes);
   ::close(fd);
   std::uint64_t pid = 0;
@@ -99,12 +130,14 @@ Result<std::unique_ptr<RoomLinkWriter>> RoomLinkWriter::create(const std::filesy
     RoomLinkSample last;
     if (reader.read(&last)) writer->resumed_ = last.couch_position;
     reader.map_ = nullptr;  // not the reader's to unmap
-    if (file->sequence.load() % 2 != 0) file->sequence.fetch_add(1);  // a writer killed mid-write
+    // A writer killed mid-write left that slot odd and `published` short of it: the next sample
+    // goes into the same slot and completes it.
     file->writer_pid = static_cast<std::uint64_t>(::getpid());
     return writer;
   }
   file->writer_pid = static_cast<std::uint64_t>(::getpid());
-  file->sequence.store(0, std::memory_order_relaxed);
+  file->published.store(0, std::memory_order_relaxed);
+  for (LinkSlot& slot : file->slots) slot.sequence.store(0, std::memory_order_relaxed);
   std::atomic_thread_fence(std::memory_order_release);
   std::memcpy(file->magic, kMagic, sizeof kMagic);  // last: a reader sees a link only when it is one
   return writer;
@@ -117,15 +150,19 @@ RoomLinkWriter::~RoomLinkWriter() {
   ::close(lock_fd_);  // after the removal: no second writer takes over a file about to go
 }
 
-void RoomLinkWriter::publish(const tracking::Vector6d& couch_position) {
+void RoomLinkWriter::publish(const tracking::Vector6d& couch_position) { publish(couch_position, monotonic_ns()); }
+
+void RoomLinkWriter::publish(const tracking::Vector6d& couch_position, std::int64_t at_ns) {
   auto* file = static_cast<LinkFile*>(map_);
-  const std::uint64_t s = file->sequence.load(std::memory_order_relaxed);
-  file->sequence.store(s + 1, std::memory_order_relaxed);
+  const std::uint64_t n = file->published.load(std::memory_order_relaxed);
+  LinkSlot& slot = file->slots[n % kHistory];
+  slot.sequence.store(2 * n + 1, std::memory_order_relaxed);
   std::atomic_thread_fence(std::memory_order_release);
-  for (int i = 0; i < 6; ++i) file->position[i] = couch_position[i];
-  file->written_ns = monotonic_ns();
+  for (int i = 0; i < 6; ++i) slot.position[i] = couch_position[i];
+  slot.written_ns = at_ns;
   std::atomic_thread_fence(std::memory_order_release);
-  file->sequence.store(s + 2, std::memory_order_release);
+  slot.sequence.store(2 * n + 2, std::memory_order_release);
+  file->published.store(n + 1, std::memory_order_release);
 }
 
 Result<std::unique_ptr<RoomLinkReader>> RoomLinkReader::open(const std::filesystem::path& path) {
@@ -147,19 +184,54 @@ RoomLinkReader::~RoomLinkReader() {
 bool RoomLinkReader::read(RoomLinkSample* sample) const {
   const auto* file = static_cast<const LinkFile*>(map_);
   for (int attempt = 0; attempt < 64; ++attempt) {
-    const std::uint64_t before = file->sequence.load(std::memory_order_acquire);
-    if (before == 0) return false;  // nothing written yet
-    if ((before & 1) != 0) continue;
+    const std::uint64_t n = file->published.load(std::memory_order_acquire);
+    if (n == 0) return false;  // nothing written yet
     RoomLinkSample s;
-    for (int i = 0; i < 6; ++i) s.couch_position[i] = file->position[i];
-    s.written_ns = file->written_ns;
-    s.writer_pid = file->writer_pid;
-    std::atomic_thread_fence(std::memory_order_acquire);
-    if (file->sequence.load(std::memory_order_relaxed) != before) continue;
-    bool finite = true;
-    for (int i = 0; i < 6; ++i) finite = finite && std::isfinite(s.couch_position[i]);
-    if (!finite) return false;
+    if (!read_slot(*file, n - 1, &s)) continue;  // lapped by the writer: the newest is newer
+    if (!finite(s)) return false;
     *sample = s;
+    return true;
+  }
+  return false;
+}
+
+bool RoomLinkReader::read_at(std::int64_t t_ns, RoomLinkSample* sample) const {
+  const auto* file = static_cast<const LinkFile*>(map_);
+  for (int attempt = 0; attempt < 64; ++attempt) {
+    const std::uint64_t n = file->published.load(std::memory_order_acquire);
+    if (n == 0) return false;
+    // From the newest back to the first sample written at or before t_ns.
+    RoomLinkSample later, s;
+    bool have_later = false, lapped = false;
+    const std::uint64_t oldest = n > kHistory ? n - kHistory : 0;
+    for (std::uint64_t j = n; j-- > oldest;) {
+      if (!read_slot(*file, j, &s)) {
+        lapped = true;
+        break;
+      }
+      if (!finite(s)) return false;
+      if (s.written_ns <= t_ns) break;
+      later = s;
+      have_later = true;
+      if (j == oldest) {  // t_ns is older than everything kept: the oldest is the nearest
+        *sample = later;
+        return true;
+      }
+    }
+    if (lapped) {
+      if (!have_later) continue;  // the newest went while we looked: start again
+      *sample = later;            // the history before `later` is gone: the nearest kept
+      return true;
+    }
+    if (!have_later || later.written_ns <= s.written_ns) {  // at or after the newest sample
+      *sample = s;
+      return true;
+    }
+    // Between two samples: the couch moves at a bounded speed, so a straight line between them.
+    const double f = double(t_ns - s.written_ns) / double(later.written_ns - s.written_ns);
+    sample->couch_position = s.couch_position + f * (later.couch_position - s.couch_position);
+    sample->written_ns = t_ns;
+    sample->writer_pid = s.writer_pid;
     return true;
   }
   return false;

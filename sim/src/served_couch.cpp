@@ -33,19 +33,23 @@ ServedCouch::~ServedCouch() {
   if (publisher_.joinable()) publisher_.join();
 }
 
-void ServedCouch::advance_locked() const {
-  couch_.advance_to(1e-9 * static_cast<double>(served_clock_ns() - epoch_ns_));
+void ServedCouch::advance_locked() const { advance_locked_to(served_clock_ns()); }
+
+void ServedCouch::advance_locked_to(std::int64_t t_ns) const {
+  couch_.advance_to(1e-9 * static_cast<double>(t_ns - epoch_ns_));
 }
 
 void ServedCouch::publish_loop() {
   while (!stop_.load()) {
     tracking::Vector6d position;
+    std::int64_t at_ns = 0;
     {
       std::lock_guard lock(mutex_);
-      advance_locked();
+      at_ns = served_clock_ns();  // under the lock: the couch's time never goes back
+      advance_locked_to(at_ns);
       position = couch_.position();
     }
-    link_->publish(position);
+    link_->publish(position, at_ns);  // where the couch is at that time, however late it is written
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
 }

@@ -80,8 +80,18 @@ Eigen::Isometry3d SimulatedRoom::T_room_from_couch() const {
   return ideal;
 }
 
-Pose SimulatedRoom::true_locked() const {
-  return calib::room_motion_of_couch(T_room_from_couch(), couch_position_locked()) * patient_locked();
+Pose SimulatedRoom::true_T_room_from_ct_at_exposure(std::int64_t exposure_ns) const {
+  std::lock_guard lock(mutex_);
+  if (!spec_.couch_link) return true_locked();
+  RoomLinkSample sample;
+  return true_locked_with(spec_.couch_link->read_at(exposure_ns, &sample) ? sample.couch_position
+                                                                          : tracking::Vector6d::Zero());
+}
+
+Pose SimulatedRoom::true_locked() const { return true_locked_with(couch_position_locked()); }
+
+Pose SimulatedRoom::true_locked_with(const tracking::Vector6d& couch_position) const {
+  return calib::room_motion_of_couch(T_room_from_couch(), couch_position) * patient_locked();
 }
 
 double SimulatedRoom::residual_mm() const {

@@ -15,6 +15,7 @@
 #include "../closed_loop/loop_fixture.hpp"
 #include "child_process.hpp"
 #include "lftrack/loop/journal.hpp"
+#include "lftrack/records/journal_reader.hpp"
 #include "lftrack/watch/igtl_server.hpp"
 #include "lftrack/watch/listen_address.hpp"
 #include "lftrack/tracking/status.hpp"

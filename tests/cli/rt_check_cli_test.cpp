@@ -15,7 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lftrack/host/scene.hpp"
-#include "lftrack/loop/wakeup_latency.hpp"
+#include "lftrack/rt_check/wakeup_latency.hpp"
 #include "cli_text.hpp"
 #include "test_data.hpp"
 

@@ -21,6 +21,8 @@
 #include <vector>
 
 #include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/records/journal_reader.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {

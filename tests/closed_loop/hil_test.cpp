@@ -14,6 +14,8 @@
 
 #include "loop_fixture.hpp"
 
+#include "lftrack/records/loop_json.hpp"
+
 namespace lftrack::host {
 namespace {
 

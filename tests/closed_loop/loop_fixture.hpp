@@ -14,6 +14,8 @@
 #include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/records/journal_reader.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"

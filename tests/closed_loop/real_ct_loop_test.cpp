@@ -12,6 +12,8 @@
 
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/records/journal_reader.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 

@@ -10,6 +10,7 @@
 #include "lftrack/drivers/frame_files.hpp"
 
 #include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {

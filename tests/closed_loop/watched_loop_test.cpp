@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "loop_fixture.hpp"
 // After Eigen: httplib.h brings in <resolv.h>, whose _res macro breaks Eigen's headers.
 #include <httplib.h>

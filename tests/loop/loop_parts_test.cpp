@@ -34,7 +34,7 @@ Vector6d along(double x) {
 
 constexpr std::int64_t kNsPerMs = 1'000'000;
 
-TEST(MotionPredictor, ExtrapolatesLinesAndParabolasExactly) {
+TEST(MotionPredictor, ExtrapolatesTranslationsOnLinesAndParabolasExactlyAndRotationsNot) {
   MotionPredictor line(4, 1, 0.2), parabola(8, 2, 0.2);
   for (int k = 0; k < 8; ++k) {
     const double t = 0.1 * k;
@@ -43,9 +43,15 @@ TEST(MotionPredictor, ExtrapolatesLinesAndParabolasExactly) {
   }
   const double t = 0.7 + 0.2;
   EXPECT_NEAR(line.predict()(2), 1.0 + 2.0 * t, 1e-9);
-  EXPECT_NEAR(line.predict()(3), 0.01 * (1.0 + 2.0 * t), 1e-11);
+  // Rotations are not extrapolated: the newest estimate's (at 0.7 s).
+  EXPECT_NEAR(line.predict()(3), 0.01 * (1.0 + 2.0 * 0.7), 1e-11);
+  EXPECT_NEAR(parabola.predict()(3), 0.01 * (1.0 + 2.0 * 0.7 - 3.0 * 0.49), 1e-11);
   EXPECT_NEAR(parabola.predict()(2), 1.0 + 2.0 * t - 3.0 * t * t, 1e-9);
   EXPECT_EQ(parabola.size(), 8) << "keeps its window";
+  // A scene that asks for it (loop.predict_rotations) has its rotations extrapolated too.
+  MotionPredictor rotating(4, 1, 0.2, /*predict_rotations=*/true);
+  for (int k = 0; k < 8; ++k) rotating.add(100 * kNsPerMs * k, along(1.0 + 2.0 * 0.1 * k));
+  EXPECT_NEAR(rotating.predict()(3), 0.01 * (1.0 + 2.0 * t), 1e-11);
 }
 
 // The prediction is linear in the estimates; its weights' norm is how much it multiplies

@@ -16,6 +16,7 @@
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
+#include "lftrack/records/journal_reader.hpp"
 #include "loop_doubles.hpp"
 #include "test_data.hpp"
 

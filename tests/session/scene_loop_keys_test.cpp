@@ -48,6 +48,20 @@ Result<Scene> with_keys(const std::string& section, const std::string& keys) {
   return parse_scene(text, "b.yaml", ".");
 }
 
+// loop.predict_rotations (false: only translations are extrapolated).
+TEST(SceneLoopKeys, RotationsArePredictedOnlyWhereASceneAsks) {
+  auto scene = parse_scene(*builtin_scene_text(kBuiltinPhantom), "b.yaml", ".");
+  ASSERT_TRUE(scene.ok());
+  EXPECT_FALSE(scene->loop.predict_rotations);
+  auto set = with_keys("loop", "  predict_rotations: true\n");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_TRUE(set->loop.predict_rotations);
+  for (const char* bad : {"  predict_rotations: yes\n", "  predict_rotations: 2\n", "  predict_rotations: ''\n"}) {
+    auto refused = with_keys("loop", bad);
+    EXPECT_FALSE(refused.ok()) << bad;
+  }
+}
+
 // loop.judge_tracking (unset: follow the scene's commissioning).
 TEST(SceneLoopKeys, TheVerdictOnTrackingCycles) {
   const std::string base = *builtin_scene_text(kBuiltinPhantom);

@@ -1,6 +1,7 @@
 // The room link between a served couch and simulated detectors in other processes
-// (sim/room_link.hpp): what is written is read, never torn; nothing that is not a link is
-// replaced; a live writer's link is refused; a killed writer's link is taken over in place.
+// (sim/room_link.hpp): what is written is read, never torn; the couch is read where it was at a
+// given time; nothing that is not a link is replaced; a live writer's link is refused; a killed
+// writer's link is taken over in place.
 
 #include <signal.h>
 #include <sys/wait.h>
@@ -41,6 +42,47 @@ TEST(RoomLink, WhatIsPublishedIsRead) {
   EXPECT_FALSE((*reader)->read(&s));
 }
 
+// A detector that exposed at t sees the couch where it was at t, however much later it asks: on
+// the straight line between the samples either side, the newest after the last, the oldest kept
+// before the first.
+TEST(RoomLink, ReadAtGivesTheCouchWhereItWasThen) {
+  test::TempDir dir;
+  auto writer = RoomLinkWriter::create(dir.path() / "room.link");
+  ASSERT_TRUE(writer.ok()) << writer.status().message();
+  auto reader = RoomLinkReader::open(dir.path() / "room.link");
+  ASSERT_TRUE(reader.ok()) << reader.status().message();
+  RoomLinkSample s;
+  EXPECT_FALSE((*reader)->read_at(1000, &s)) << "nothing written yet";
+  (*writer)->publish(filled(0), 1'000'000);
+  (*writer)->publish(filled(10), 2'000'000);
+  (*writer)->publish(filled(20), 3'000'000);
+  ASSERT_TRUE((*reader)->read_at(1'500'000, &s));
+  EXPECT_EQ(s.written_ns, 1'500'000);
+  for (int i = 0; i < 6; ++i) EXPECT_DOUBLE_EQ(s.couch_position[i], 5.0);
+  ASSERT_TRUE((*reader)->read_at(2'000'000, &s));
+  EXPECT_EQ(s.couch_position, filled(10));
+  ASSERT_TRUE((*reader)->read_at(2'750'000, &s));
+  EXPECT_DOUBLE_EQ(s.couch_position[2], 17.5);
+  ASSERT_TRUE((*reader)->read_at(9'000'000, &s));
+  EXPECT_EQ(s.couch_position, filled(20)) << "after the newest: the newest";
+  EXPECT_EQ(s.written_ns, 3'000'000);
+  ASSERT_TRUE((*reader)->read_at(500'000, &s));
+  EXPECT_EQ(s.couch_position, filled(0)) << "before the first: the oldest";
+  EXPECT_EQ(s.written_ns, 1'000'000) << "with its own time, so the caller sees how far off it is";
+  ASSERT_TRUE((*reader)->read(&s));
+  EXPECT_EQ(s.couch_position, filled(20)) << "read() is the newest";
+  // 3,000 samples more, 1 ms apart: about the last second is kept; older times get the oldest kept.
+  for (int k = 1; k <= 3000; ++k) (*writer)->publish(filled(20 + k), 3'000'000 + std::int64_t(k) * 1'000'000);
+  ASSERT_TRUE((*reader)->read_at(2'999'500'000, &s));
+  EXPECT_DOUBLE_EQ(s.couch_position[0], 20 + 2996.5);  // sample k (20 + k) at 3 + k ms
+  ASSERT_TRUE((*reader)->read_at(1'000'000, &s));
+  EXPECT_GT(s.written_ns, 1'900'000'000) << "the history holds about a second, not everything";
+  EXPECT_LT(s.written_ns, 2'100'000'000);
+  // A non-finite sample is never handed on, by time either.
+  (*writer)->publish(filled(std::numeric_limits<double>::quiet_NaN()), 3'004'000'000);
+  EXPECT_FALSE((*reader)->read_at(3'004'000'000, &s));
+}
+
 TEST(RoomLink, ReadsAreNeverTorn) {
   test::TempDir dir;
   auto writer = RoomLinkWriter::create(dir.path() / "room.link");
@@ -61,10 +103,13 @@ TEST(RoomLink, ReadsAreNeverTorn) {
   int torn = 0, reads = 0;
   const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
   while (reads < 5000 && std::chrono::steady_clock::now() < until) {
-    RoomLinkSample s;
+    RoomLinkSample s, then;
     if (!(*reader)->read(&s)) continue;
     ++reads;
     for (int k = 1; k < 6; ++k) torn += s.couch_position[k] != s.couch_position[0];
+    // Read by time too (between two samples, or the one at that time): every axis the same.
+    if ((*reader)->read_at(s.written_ns - 1000, &then))
+      for (int k = 1; k < 6; ++k) torn += then.couch_position[k] != then.couch_position[0];
   }
   stop.store(true);
   writing.join();

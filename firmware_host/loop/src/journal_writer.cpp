@@ -19,7 +19,7 @@
 #include <optional>
 
 #include "lftrack/loop/crc32c.hpp"
-#include "journal_format.hpp"
+#include "lftrack/loop/journal_format.hpp"
 
 namespace lftrack::host {
 

@@ -40,8 +40,11 @@ double noise_gain(const Eigen::Matrix3d& inverse, double h, int order) {
 
 }  // namespace
 
-MotionPredictor::MotionPredictor(int window, int order, double lookahead_s)
-    : window_(std::clamp(window, 0, kCapacity)), order_(std::clamp(order, 1, 2)), lookahead_s_(lookahead_s) {}
+MotionPredictor::MotionPredictor(int window, int order, double lookahead_s, bool predict_rotations)
+    : window_(std::clamp(window, 0, kCapacity)),
+      order_(std::clamp(order, 1, 2)),
+      lookahead_s_(lookahead_s),
+      predict_rotations_(predict_rotations) {}
 
 void MotionPredictor::add(std::int64_t t_ns, const tracking::Vector6d& offset) {
   const int keep = std::max(1, window_);
@@ -78,7 +81,8 @@ tracking::Vector6d MotionPredictor::predict() const {
     const Eigen::Matrix3d inverse = normal_of_order(normal2, order, &rhs).inverse();
     if (!inverse.allFinite()) continue;
     if (!(noise_gain(inverse, h, order) <= kMaxNoiseGain)) continue;
-    const tracking::Vector6d predicted = (evaluation_at(h, order).transpose() * (inverse * rhs)).transpose();
+    tracking::Vector6d predicted = (evaluation_at(h, order).transpose() * (inverse * rhs)).transpose();
+    if (!predict_rotations_) predicted.tail<3>() = newest.tail<3>();  // the header says why
     if (predicted.allFinite()) return predicted;
   }
   return newest;

@@ -68,21 +68,4 @@ std::optional<CommandLatencyReport> TrackingAccuracy::latency() const {
                               latency_ms_.quantile(0.99), latency_ms_.max()};
 }
 
-nlohmann::json to_json(const TargetResidualReport& r) {
-  return {{"cycles", r.cycles},
-          {"translation_mm", {{"mean", r.translation_mean_mm}, {"sd", r.translation_sd_mm}}},
-          {"rotation_deg", {{"mean", r.rotation_mean_deg}, {"sd", r.rotation_sd_deg}}},
-          {"error_3d_mm", {{"mean", r.error_3d_mean_mm}, {"p95", r.error_3d_p95_mm}, {"max", r.error_3d_max_mm}}},
-          {"share_over_1mm", r.share_over_1mm},
-          {"share_over_2mm", r.share_over_2mm},
-          {"beam_on",
-           {{"cycles", r.beam_on_cycles},
-            {"share_over_1mm", r.beam_on_share_over_1mm},
-            {"share_over_2mm", r.beam_on_share_over_2mm}}}};
-}
-
-nlohmann::json to_json(const CommandLatencyReport& r) {
-  return {{"commands", r.commands}, {"p50", r.p50_ms}, {"p95", r.p95_ms}, {"p99", r.p99_ms}, {"max", r.max_ms}};
-}
-
 }  // namespace lftrack::host

@@ -66,7 +66,7 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   if (!track.ok()) return track.status();
   LFTRACK_RETURN_IF_ERROR(parts.registration->prepare(*align, *track));
   impl->predictor = MotionPredictor(settings.loop.prediction_cycles, settings.loop.prediction_order,
-                                    prediction_lookahead_s(settings));
+                                    prediction_lookahead_s(settings), settings.loop.predict_rotations);
 
   LFTRACK_RETURN_IF_ERROR(parts.frames->open(&impl->pair).with_context("frame source"));
   if (impl->pair.frames.size() != views)

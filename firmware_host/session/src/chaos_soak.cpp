@@ -13,6 +13,7 @@
 
 #include "chaos_devices.hpp"
 #include "lftrack/host/loop_session.hpp"
+#include "lftrack/records/journal_reader.hpp"
 
 namespace lftrack::host {
 

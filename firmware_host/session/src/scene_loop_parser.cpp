@@ -63,7 +63,10 @@ Status SceneParser::parse_loop(const YAML::Node& n, LoopSpec* loop) const {
   LFTRACK_RETURN_IF_ERROR(
       check_keys(n, "loop",
                  {"period_ms", "registration_budget_ms", "acquire_timeout_ms", "align_plan", "track_plan",
-                  "lookahead_s", "prediction_cycles", "prediction_order", "realtime", "judge_tracking"}));
+                  "lookahead_s", "prediction_cycles", "prediction_order", "predict_rotations", "realtime",
+                  "judge_tracking"}));
+  if (n["predict_rotations"])
+    LFTRACK_RETURN_IF_ERROR(boolean(n["predict_rotations"], "loop.predict_rotations", &loop->predict_rotations));
   if (n["judge_tracking"]) {
     bool judge = false;
     LFTRACK_RETURN_IF_ERROR(boolean(n["judge_tracking"], "loop.judge_tracking", &judge));

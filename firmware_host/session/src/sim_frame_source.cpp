@@ -94,7 +94,10 @@ void SimFrameSource::render_loop() {
                         static_cast<long>(job.exposure_ns % 1'000'000'000)};
       while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &at, nullptr) == EINTR) {
       }
-      job.pose = room_->true_T_room_from_ct();
+      // Where the served couch was at the exposure, not when this low-priority thread woke: on a
+      // loaded host that can be tens of milliseconds later, after the couch has moved on while the
+      // loop's read-back at the cycle's start saw it before the move.
+      job.pose = room_->true_T_room_from_ct_at_exposure(job.exposure_ns);
     }
     Status status =
         detectors_->expose(job.pose, scene_.scene.sim.seed * 1000003ull + std::uint64_t(job.index) * 7919ull, &rendered_);

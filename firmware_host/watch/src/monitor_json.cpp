@@ -5,6 +5,7 @@
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/records/loop_json.hpp"
 
 namespace lftrack::host {
 namespace {

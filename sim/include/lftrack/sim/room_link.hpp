@@ -2,12 +2,13 @@
 // The room link: where a served couch (or robot) has moved the patient, shared with the
 // simulator's detectors in another process. It stands for the physics of the room, not for a
 // protocol: the controller never reads it. The couch server writes its position about every
-// millisecond; the detector server (or `lftrack run` on simulated frames) reads the newest.
+// millisecond; the detector server (or `lftrack run` on simulated frames) reads where the couch
+// was when a pair was exposed (read_at), or the newest.
 //
-// The link is a small file mapped shared (64 bytes of header and one record under a sequence
-// lock: an odd sequence is a write in progress). A reader never blocks the writer; a torn read
-// is retried. A link not written for `stale_after` seconds is reported stale: the couch stopped
-// where it was, as a couch whose controller died would.
+// The link is a small file mapped shared: 64 bytes of header, then the last 1,024 samples (about
+// a second), each under a sequence lock of its own (odd while it is being written). A reader never
+// blocks the writer; a torn read is retried. A link not written for `stale_after` seconds is
+// reported stale: the couch stopped where it was, as a couch whose controller died would.
 
 #include <cstdint>
 #include <filesystem>
@@ -43,7 +44,10 @@ class RoomLinkWriter {
   const tracking::Vector6d& resumed_position() const { return resumed_; }
   RoomLinkWriter(const RoomLinkWriter&) = delete;
   RoomLinkWriter& operator=(const RoomLinkWriter&) = delete;
-  void publish(const tracking::Vector6d& couch_position);  // never blocks; not thread-safe (one writer)
+  // Where the couch is at `at_ns` (CLOCK_MONOTONIC; now, without it). Never blocks; not
+  // thread-safe (one writer); times must not go backwards.
+  void publish(const tracking::Vector6d& couch_position);
+  void publish(const tracking::Vector6d& couch_position, std::int64_t at_ns);
   const std::filesystem::path& path() const { return path_; }
 
  private:
@@ -64,6 +68,10 @@ class RoomLinkReader {
   RoomLinkReader& operator=(const RoomLinkReader&) = delete;
   // The newest sample; false if none has been written yet (or every read was torn).
   bool read(RoomLinkSample* sample) const;
+  // Where the couch was at `t_ns` (CLOCK_MONOTONIC): on the straight line between the samples
+  // written either side of it (written_ns = t_ns), the newest if t_ns is after it, the oldest kept
+  // if before (their own written_ns: the caller sees how far off). False as read() is.
+  bool read_at(std::int64_t t_ns, RoomLinkSample* sample) const;
 
  private:
   friend class RoomLinkWriter;

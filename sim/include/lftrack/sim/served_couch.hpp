@@ -39,7 +39,8 @@ class ServedCouch final : public drivers::Actuator {
 
  private:
   explicit ServedCouch(const VirtualCouchSpec& spec) : couch_(spec) {}
-  void advance_locked() const;
+  void advance_locked() const;  // to now
+  void advance_locked_to(std::int64_t t_ns) const;
   void publish_loop();
 
   mutable std::mutex mutex_;

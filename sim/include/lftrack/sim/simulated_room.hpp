@@ -54,6 +54,10 @@ class SimulatedRoom {
   // The anatomy's pose now, and the patient's own offset (set-up error and motion) as one delta.
   tracking::Pose true_T_room_from_ct() const;
   tracking::Pose patient_T_room_from_ct() const;  // without the couch
+  // The anatomy's pose as a pair exposed at `exposure_ns` (CLOCK_MONOTONIC) shows it: the patient
+  // at the room's time (advance_to_ns(exposure_ns) first), the couch of a room link where it was
+  // at exposure_ns (however late this is asked), a couch in process where it is.
+  tracking::Pose true_T_room_from_ct_at_exposure(std::int64_t exposure_ns) const;
   // The true residual now: mean displacement of the 27 points of a 3 x 3 x 3 grid over the
   // residual box between where the anatomy is and where the plan has it (mm).
   double residual_mm() const;
@@ -94,6 +98,7 @@ class SimulatedRoom {
   void advance_locked(std::int64_t t_ns);
   void advance_for_command_locked(drivers::Deadline deadline);
   tracking::Pose true_locked() const;
+  tracking::Pose true_locked_with(const tracking::Vector6d& couch_position) const;
   tracking::Vector6d couch_position_locked() const;
   tracking::Pose patient_locked() const;
 

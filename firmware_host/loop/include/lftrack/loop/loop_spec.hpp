@@ -28,6 +28,10 @@ struct LoopSpec {
   std::optional<double> lookahead_s;
   int prediction_cycles = 8;
   int prediction_order = 2;
+  // Whether rotations are extrapolated too; by default only translations are, and a rotation is
+  // its newest estimate (motion_predictor.hpp says why). For a scene whose target really rotates
+  // with its breathing.
+  bool predict_rotations = false;
   // The registration verdict on tracking cycles (issue 52): unset follows the scene (judged where
   // the scene is commissioned: its floors were measured on tracking registrations).
   std::optional<bool> judge_tracking;

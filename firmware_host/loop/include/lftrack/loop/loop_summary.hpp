@@ -1,6 +1,7 @@
 #pragma once
 // What a TrackingLoop run reports: counts per state and gate decision, the transitions, timing
-// and (simulation) residual statistics, allocations per cycle.
+// and (simulation) residual statistics, allocations per cycle. Plain data: the loop links no JSON
+// (its JSON form is lftrack::records').
 
 #include <array>
 #include <cstdint>
@@ -8,8 +9,6 @@
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_accuracy.hpp"
@@ -66,12 +65,7 @@ struct LoopSummary {
   std::string ended;          // why the loop stopped
   std::string journal_error;  // set by LoopSession::run when the journal could not be written
 };
-nlohmann::json to_json(const LoopSummary& summary);
-
-// A pose delta or correction (tx, ty, tz in mm; a rotation vector in radians, as the journal
-// keeps it) as every report writes it: {"translation_mm": [x, y, z], "rotation_deg": [x, y, z]}
-// (DESIGN.md: radians inside, degrees at the edges; the unit in the key).
-nlohmann::json pose_delta_json(const double delta_mm_rad[6]);
+// Its JSON form (`sim --json`, the tests' traces): lftrack/records/loop_json.hpp.
 
 // "15 no operator token, or a wrong one; 2 replayed or stale request": the nonzero counts of
 // `by_reason` (an array indexed by OperatorRefusal) with their reasons, in code order ("unknown N"

@@ -7,6 +7,17 @@
 // where a line overshoots. A jump (a shift, a resumed HOLD) resets the history, so it never
 // extrapolates across one. Fixed capacity, allocates nothing.
 //
+// Translations only, unless `predict_rotations` (a scene's loop.predict_rotations): a rotation is
+// predicted as its newest estimate. Breathing moves the target
+// along the room's axes (the built-in scene's 0.2 degree of breathing rotation lags by about 0.05
+// degree unpredicted), while a registration's rotation is its noisiest part, and a registration
+// that over-reads a rotation (the small closed-loop scene reads about 1.3 to 2 times the true
+// rotation about y) closes a loop through the couch: extrapolated, the over-read grew into an
+// oscillation of about 5 cycles, the true rotation swinging by up to +-0.5 degree and the commands
+// by +-0.7 degree, until one step passed the gate's 2 degree limit and the loop held (a
+// served-couch breathing run in CI, at cycle 14). Unextrapolated, the same run swings by +-0.16
+// degree and commands +-0.25 degree: each correction leaves (1 - over-read) of the last.
+//
 // Extrapolation amplifies the estimates' noise, most where there are few of them: a parabola
 // through 4 estimates 0.1 s apart, evaluated 0.2 s ahead, weighs them so that independent noise
 // comes out 5.7 times larger (a line through 2 of them at 30 Hz, 0.13 s ahead: 6.4 times). After
@@ -37,7 +48,7 @@ class MotionPredictor {
   // window < 2: no prediction (the newest estimate is returned as it is). With fewer estimates
   // than order + 2 the order drops (a line from 2, the newest alone from 1), and it drops further
   // while the fit's noise gain is above kMaxNoiseGain.
-  MotionPredictor(int window, int order, double lookahead_s);
+  MotionPredictor(int window, int order, double lookahead_s, bool predict_rotations = false);
 
   void reset() { count_ = 0; }
   // The patient's offset (delta 6-vector, mm and rad) estimated at time t_ns.
@@ -61,6 +72,7 @@ class MotionPredictor {
   int window_;
   int order_;
   double lookahead_s_;
+  bool predict_rotations_;
   std::array<std::int64_t, kCapacity> t_ns_{};
   std::array<tracking::Vector6d, kCapacity> x_{};
   int count_ = 0;  // newest last

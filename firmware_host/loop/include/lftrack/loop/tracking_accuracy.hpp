@@ -22,8 +22,6 @@
 #include <cstdint>
 #include <optional>
 
-#include <nlohmann/json.hpp>
-
 #include "lftrack/loop/histogram.hpp"
 #include "lftrack/loop/journal.hpp"
 
@@ -66,11 +64,6 @@ class TrackingAccuracy {
   Histogram latency_ms_{0.01, 2000};
 };
 
-// {"cycles", "translation_mm": {"mean": [x,y,z], "sd": [...]}, "rotation_deg": {...},
-//  "error_3d_mm": {"mean", "p95", "max"}, "share_over_1mm", "share_over_2mm",
-//  "beam_on": {"cycles", "share_over_1mm", "share_over_2mm"}}
-nlohmann::json to_json(const TargetResidualReport& r);
-// {"commands", "p50", "p95", "p99", "max"} (ms)
-nlohmann::json to_json(const CommandLatencyReport& r);
+// Their JSON forms: lftrack/records/loop_json.hpp.
 
 }  // namespace lftrack::host

@@ -1,5 +1,7 @@
-// The journal's reader (journal.hpp): checks every frame, resynchronises after damage, and
+// The journal's reader (journal_reader.hpp): checks every frame, resynchronises after damage, and
 // reports bad spans, gaps and repeats instead of failing on the first bad byte.
+
+#include "lftrack/records/journal_reader.hpp"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -16,8 +18,7 @@
 #include <vector>
 
 #include "lftrack/loop/crc32c.hpp"
-#include "lftrack/loop/journal.hpp"
-#include "journal_format.hpp"
+#include "lftrack/loop/journal_format.hpp"
 
 namespace lftrack::host {
 

@@ -2,7 +2,7 @@
 // with themselves, every invalid option refused, and what was in effect read back honestly. No
 // latency bound is asserted: the machine running the tests is shared and noisy.
 
-#include "lftrack/loop/wakeup_latency.hpp"
+#include "lftrack/rt_check/wakeup_latency.hpp"
 
 #include <gtest/gtest.h>
 #include <pthread.h>

@@ -1,4 +1,4 @@
-#include "lftrack/loop/wakeup_latency.hpp"
+#include "lftrack/rt_check/wakeup_latency.hpp"
 
 #include <pthread.h>
 #include <sched.h>

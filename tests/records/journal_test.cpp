@@ -24,6 +24,7 @@
 
 #include "lftrack/loop/crc32c.hpp"
 #include "lftrack/loop/operator_input.hpp"
+#include "lftrack/records/journal_reader.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {

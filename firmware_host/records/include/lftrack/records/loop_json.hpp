@@ -1,0 +1,26 @@
+#pragma once
+// The JSON forms of what a run of the loop reports (loop_summary.hpp, tracking_accuracy.hpp), for
+// `sim --json`, `journal export`, the monitor and the tests. Outside the loop, which links no JSON.
+
+#include <nlohmann/json.hpp>
+
+#include "lftrack/loop/loop_summary.hpp"
+#include "lftrack/loop/tracking_accuracy.hpp"
+
+namespace lftrack::host {
+
+nlohmann::json to_json(const LoopSummary& summary);
+
+// A pose delta or correction (tx, ty, tz in mm; a rotation vector in radians, as the journal
+// keeps it) as every report writes it: {"translation_mm": [x, y, z], "rotation_deg": [x, y, z]}
+// (DESIGN.md: radians inside, degrees at the edges; the unit in the key).
+nlohmann::json pose_delta_json(const double delta_mm_rad[6]);
+
+// {"cycles", "translation_mm": {"mean": [x,y,z], "sd": [...]}, "rotation_deg": {...},
+//  "error_3d_mm": {"mean", "p95", "max"}, "share_over_1mm", "share_over_2mm",
+//  "beam_on": {"cycles", "share_over_1mm", "share_over_2mm"}}
+nlohmann::json to_json(const TargetResidualReport& r);
+// {"commands", "p50", "p95", "p99", "max"} (ms)
+nlohmann::json to_json(const CommandLatencyReport& r);
+
+}  // namespace lftrack::host
