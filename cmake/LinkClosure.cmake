@@ -1,7 +1,10 @@
 # What a target links, all the way down: its own link libraries and, recursively, every target's
 # interface link libraries (a static library's private dependencies are among them, as
-# $<LINK_ONLY:...>, because whoever links it must link them too). Aliases are resolved to the
-# targets they name; a name that is not a target (-lm, a path) is kept as it is written.
+# $<LINK_ONLY:...>, because whoever links it must link them too) and, for this project's own
+# targets, their link libraries too (so a shared build, whose private dependencies stay private,
+# is checked as strictly). Aliases are resolved to the targets they name; a name that is not a
+# target (-lm, a path) is kept as it is written, and so is any other generator expression, whole:
+# it matches no allowed name, so the check fails closed on what it cannot read.
 #
 # lftrack_link_closure(<target> <out-var>) sets <out-var> to the sorted list of names.
 # lftrack_require_link_closure(<target> ALLOWED <regex>... [WHY <text>]) fails the configure when
@@ -10,7 +13,7 @@
 # its end).
 
 function(_lftrack_link_name item out)
-  # $<LINK_ONLY:x> -> x; other generator expressions are kept whole (they name no target).
+  # $<LINK_ONLY:x> -> x; other generator expressions are kept whole.
   if(item MATCHES "^\\$<LINK_ONLY:(.+)>$")
     set(item "${CMAKE_MATCH_1}")
   endif()
@@ -25,9 +28,8 @@ endfunction()
 
 function(lftrack_link_closure target out)
   set(seen "")
-  set(came_from "")
   get_target_property(direct ${target} LINK_LIBRARIES)
-  if(NOT direct)
+  if(direct STREQUAL "direct-NOTFOUND")
     set(direct "")
   endif()
   set(queue "")
@@ -36,20 +38,33 @@ function(lftrack_link_closure target out)
     list(APPEND queue "${name}")
     set(via_${name} "${target}")
   endforeach()
-  while(queue)
+  list(LENGTH queue left)  # not if(queue): a list ending in X-NOTFOUND reads as false
+  while(left GREATER 0)
     list(POP_FRONT queue name)
+    list(LENGTH queue left)
     if(name IN_LIST seen OR name STREQUAL "")
       continue()
     endif()
     list(APPEND seen "${name}")
     if(TARGET "${name}")
-      get_target_property(type "${name}" TYPE)
       get_target_property(deps "${name}" INTERFACE_LINK_LIBRARIES)
-      if(deps)
+      if(deps STREQUAL "deps-NOTFOUND")
+        set(deps "")
+      endif()
+      get_target_property(imported "${name}" IMPORTED)
+      if(NOT imported)
+        get_target_property(own "${name}" LINK_LIBRARIES)
+        if(NOT own STREQUAL "own-NOTFOUND")
+          list(APPEND deps ${own})
+        endif()
+      endif()
+      list(LENGTH deps n_deps)
+      if(n_deps GREATER 0)
         foreach(item IN LISTS deps)
           _lftrack_link_name("${item}" dep)
           if(NOT dep IN_LIST seen)
             list(APPEND queue "${dep}")
+            list(LENGTH queue left)
             if(NOT DEFINED via_${dep})
               set(via_${dep} "${name}")
             endif()

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <string>
 
 namespace lftrack::sim {
 
@@ -89,6 +90,25 @@ bool is_room_link(const std::filesystem::path& path) {
   return ok;
 }
 
+// A room link of the first format (one sample, before the history), which this build cannot read.
+bool is_older_room_link(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
+  if (fd < 0) return false;
+  char magic[16] = {};
+  struct stat st {};
+  const bool ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) &&
+                  ::read(fd, magic, sizeof magic) == ssize_t(sizeof magic) &&
+                  std::memcmp(magic, "lftrack-room1", 14) == 0;
+  ::close(fd);
+  return ok;
+}
+
+std::string older_link_advice(const std::filesystem::path& path) {
+  return is_older_room_link(path) ? " (a room link from an older lftrack, which kept no history: remove it once "
+                                    "its server has stopped)"
+                                  : "";
+}
+
 }  // namespace
 
 Result<std::unique_ptr<RoomLinkWriter>> RoomLinkWriter::create(const std::filesystem::path& path) {
@@ -97,7 +117,7 @@ Result<std::unique_ptr<RoomLinkWriter>> RoomLinkWriter::create(const std::filesy
   if (existing) {
     if (!is_room_link(path))
       return failed_precondition("room link " + path.string() + ": a file that is not a room link is there; "
-                                 "refusing to replace it");
+                                 "refusing to replace it" + older_link_advice(path));
   }
   const int fd = existing ? ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK)
                           : ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0600);
@@ -167,8 +187,8 @@ void RoomLinkWriter::publish(const tracking::Vector6d& couch_position, std::int6
 
 Result<std::unique_ptr<RoomLinkReader>> RoomLinkReader::open(const std::filesystem::path& path) {
   if (!is_room_link(path))
-    return not_found("room link " + path.string() + ": missing or not a room link (start the couch with "
-                     "`lftrack serve couch --room " + path.string() + "`)");
+    return not_found("room link " + path.string() + ": missing or not a room link" + older_link_advice(path) +
+                     " (start the couch with `lftrack serve couch --room " + path.string() + "`)");
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return io_error("room link " + path.string() + ": " + std::strerror(errno));
   void* map = ::mmap(nullptr, sizeof(LinkFile), PROT_READ, MAP_SHARED, fd, 0);
@@ -228,8 +248,10 @@ bool RoomLinkReader::read_at(std::int64_t t_ns, RoomLinkSample* sample) const {
       return true;
     }
     // Between two samples: the couch moves at a bounded speed, so a straight line between them.
-    const double f = double(t_ns - s.written_ns) / double(later.written_ns - s.written_ns);
-    sample->couch_position = s.couch_position + f * (later.couch_position - s.couch_position);
+    const double f = double(t_ns - s.written_ns) / double(later.written_ns - s.written_ns);  // in [0, 1)
+    const tracking::Vector6d between = s.couch_position + f * (later.couch_position - s.couch_position);
+    if (!between.allFinite()) return false;  // finite ends, but far enough apart to overflow
+    sample->couch_position = between;
     sample->written_ns = t_ns;
     sample->writer_pid = s.writer_pid;
     return true;

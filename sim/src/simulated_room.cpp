@@ -81,11 +81,14 @@ Eigen::Isometry3d SimulatedRoom::T_room_from_couch() const {
 }
 
 Pose SimulatedRoom::true_T_room_from_ct_at_exposure(std::int64_t exposure_ns) const {
-  std::lock_guard lock(mutex_);
-  if (!spec_.couch_link) return true_locked();
+  // The link first, without the room's lock: the reader is lock-free, and walking its history
+  // under the lock would keep the loop's thread (which takes it too) waiting on this one.
   RoomLinkSample sample;
-  return true_locked_with(spec_.couch_link->read_at(exposure_ns, &sample) ? sample.couch_position
-                                                                          : tracking::Vector6d::Zero());
+  const bool linked = spec_.couch_link != nullptr;
+  const bool read = linked && spec_.couch_link->read_at(exposure_ns, &sample);
+  std::lock_guard lock(mutex_);
+  if (!linked) return true_locked();
+  return true_locked_with(read ? sample.couch_position : tracking::Vector6d::Zero());
 }
 
 Pose SimulatedRoom::true_locked() const { return true_locked_with(couch_position_locked()); }

@@ -137,6 +137,21 @@ TEST(RoomLink, RefusesWhatIsNotALinkAndALiveWriter) {
   auto second = RoomLinkWriter::create(dir.path() / "room.link");
   ASSERT_FALSE(second.ok()) << "this process still writes it";
   EXPECT_NE(second.status().message().find("still writing"), std::string::npos);
+  // A link of the first format (one sample, 128 bytes), left by an older lftrack: refused, and
+  // said to be one, never replaced.
+  const auto older = dir.path() / "older.link";
+  {
+    std::string bytes(128, '\0');
+    bytes.replace(0, 13, "lftrack-room1");
+    std::ofstream(older, std::ios::binary) << bytes;
+  }
+  auto over_older = RoomLinkWriter::create(older);
+  ASSERT_FALSE(over_older.ok());
+  EXPECT_NE(over_older.status().message().find("older lftrack"), std::string::npos) << over_older.status().message();
+  EXPECT_EQ(std::filesystem::file_size(older), 128u) << "left untouched";
+  auto read_older = RoomLinkReader::open(older);
+  ASSERT_FALSE(read_older.ok());
+  EXPECT_NE(read_older.status().message().find("older lftrack"), std::string::npos);
 }
 
 TEST(RoomLink, AKilledWritersLinkIsTakenOverInPlace) {

@@ -150,7 +150,8 @@ struct TrackingLoop::Impl {
   // end of an archived sequence: ended_by_source).
   bool cycle(std::int64_t index, std::int64_t start_ns, JournalRecord* record);
 
-  // The stages (cycle_stages.cpp), each on cycle_state.
+  // The stages (cycle_stages.cpp; register_pair and check_views in cycle_registration.cpp), each
+  // on cycle_state.
   bool take_operator_command(CycleState& c);  // false: stop or quit
   bool acquire(CycleState& c);                // false: an archived sequence has ended
   void read_back(CycleState& c);              // the actuator's read-back and the simulated truth

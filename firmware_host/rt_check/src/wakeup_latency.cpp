@@ -1,3 +1,7 @@
+// The wake-up latency measurement: one thread per CPU, woken on a fixed period like cyclictest.
+// The report's text and JSON: wakeup_latency_report.cpp; the host's CPUs and kernel:
+// host_facts.cpp.
+
 #include "lftrack/rt_check/wakeup_latency.hpp"
 
 #include <pthread.h>
@@ -21,8 +25,13 @@
 
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "rt_check_text.hpp"
 
 namespace lftrack::host {
+
+using rt_check_text::cpu_list_text;
+using rt_check_text::number_text;
+using rt_check_text::online_cpus;
 
 namespace {
 
@@ -31,24 +40,6 @@ constexpr double kMaxIntervalUs = 1e6;
 constexpr double kMaxDurationS = 3600;
 constexpr int kMaxHistogramUs = 1'000'000;
 constexpr std::size_t kOverflowKept = 65536;  // overflowed wake-ups kept exactly, for quantiles
-constexpr int kMaxCpuNumber = 4095;
-
-std::string number_text(double v) {
-  if (std::isnan(v)) return "NaN";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, "%g", v);
-  return buffer;
-}
-
-std::string cpu_list_text(const std::vector<int>& cpus) {
-  std::string s;
-  for (std::size_t i = 0; i < cpus.size(); ++i) {
-    if (i) s += ',';  // (GCC 12 -O3 warns falsely on `"," + std::to_string(...)`)
-    s += std::to_string(cpus[i]);
-  }
-  return s.empty() ? "none" : s;
-}
 
 std::string policy_name(int policy) {
   switch (policy) {
@@ -64,14 +55,6 @@ std::string policy_name(int policy) {
   }
 }
 
-// The first line of a small file, or nothing.
-std::optional<std::string> read_first_line(const char* path) {
-  std::ifstream in(path);
-  std::string line;
-  if (!in || !std::getline(in, line)) return std::nullopt;
-  return line;
-}
-
 // VmLck of this process in kB, or -1.
 long read_vmlck_kb() {
   std::ifstream in("/proc/self/status");
@@ -84,17 +67,6 @@ long read_vmlck_kb() {
     }
   }
   return -1;
-}
-
-// The online CPUs (/sys/devices/system/cpu/online), else 0 .. configured - 1.
-std::vector<int> online_cpus() {
-  if (auto line = read_first_line("/sys/devices/system/cpu/online")) {
-    if (auto list = parse_cpu_list(*line); list.ok()) return *list;
-  }
-  std::vector<int> cpus;
-  const long n = sysconf(_SC_NPROCESSORS_CONF);
-  for (long i = 0; i < n; ++i) cpus.push_back(static_cast<int>(i));
-  return cpus;
 }
 
 // One measuring thread's state: written by that thread only, read after it is joined.
@@ -264,52 +236,6 @@ void finish_stats(Worker* w) {
 
 }  // namespace
 
-Result<std::vector<int>> parse_cpu_list(const std::string& text) {
-  std::vector<int> cpus;
-  auto bad = [&](const std::string& why) -> Status {
-    return invalid_argument("CPU list '" + text + "': " + why + " (expected e.g. 0,2-3)");
-  };
-  auto number = [&](const std::string& item, int* value) -> bool {
-    if (item.empty() || item.size() > 6) return false;
-    for (char c : item)
-      if (c < '0' || c > '9') return false;
-    *value = std::stoi(item);
-    return true;
-  };
-  std::string s;
-  for (char c : text)
-    if (c != ' ' && c != '\n' && c != '\t') s += c;
-  if (s.empty()) return bad("names no CPU");
-  std::stringstream in(s);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    if (item.empty()) return bad("an empty item");
-    const auto dash = item.find('-');
-    int lo = 0, hi = 0;
-    if (dash == std::string::npos) {
-      if (!number(item, &lo)) return bad("'" + item + "' is not a CPU number");
-      hi = lo;
-    } else if (!number(item.substr(0, dash), &lo) || !number(item.substr(dash + 1), &hi)) {
-      return bad("'" + item + "' is not a range of CPU numbers");
-    }
-    if (hi < lo) return bad("'" + item + "' is a reversed range");
-    if (hi > kMaxCpuNumber) return bad("CPU " + std::to_string(hi) + " is over " + std::to_string(kMaxCpuNumber));
-    for (int c = lo; c <= hi; ++c) cpus.push_back(c);
-  }
-  if (s.back() == ',') return bad("an empty item");
-  return cpus;
-}
-
-std::vector<int> allowed_cpus() {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  std::vector<int> cpus;
-  if (sched_getaffinity(0, sizeof set, &set) != 0) return cpus;
-  for (int c = 0; c < CPU_SETSIZE; ++c)
-    if (CPU_ISSET(c, &set)) cpus.push_back(c);
-  return cpus;
-}
-
 Status validate_wakeup_latency_options(const WakeupLatencyOptions& o) {
   if (!std::isfinite(o.interval_us) || o.interval_us < kMinIntervalUs || o.interval_us > kMaxIntervalUs)
     return invalid_argument("interval " + number_text(o.interval_us) +
@@ -347,62 +273,6 @@ Status validate_wakeup_latency_options(const WakeupLatencyOptions& o) {
   }
   if (o.cpus.empty() && allowed.empty()) return failed_precondition("sched_getaffinity names no CPU");
   return {};
-}
-
-bool WakeupLatencyReport::fifo() const {
-  return !cpus.empty() && std::all_of(cpus.begin(), cpus.end(), [](const auto& c) { return c.fifo; });
-}
-bool WakeupLatencyReport::pinned() const {
-  return !cpus.empty() && std::all_of(cpus.begin(), cpus.end(), [](const auto& c) { return c.pinned; });
-}
-double WakeupLatencyReport::max_us() const {
-  double m = 0;
-  for (const auto& c : cpus)
-    if (c.samples > 0) m = std::max(m, c.max_us);
-  return m;
-}
-std::int64_t WakeupLatencyReport::samples() const {
-  std::int64_t n = 0;
-  for (const auto& c : cpus) n += c.samples;
-  return n;
-}
-std::int64_t WakeupLatencyReport::over_budget() const {
-  std::int64_t n = 0;
-  for (const auto& c : cpus) n += c.over_budget;
-  return n;
-}
-
-std::string WakeupLatencyReport::in_effect() const {
-  std::vector<int> all;
-  for (const auto& c : cpus) all.push_back(c.cpu);
-  std::string s;
-  if (fifo()) {
-    s = "SCHED_FIFO " + std::to_string(priority) + " on CPU" + (cpus.size() > 1 ? "s " : " ") + cpu_list_text(all);
-  } else {
-    s = "NOT real-time:";
-    for (const auto& c : cpus) {
-      if (c.fifo) continue;
-      s += " CPU " + std::to_string(c.cpu) + " ran " + c.policy +
-           (c.policy == "SCHED_FIFO" || c.policy == "SCHED_RR" ? " " + std::to_string(c.priority) : "");
-      for (const auto& w : c.warnings)
-        if (w.find("SCHED_FIFO") != std::string::npos) s += " (" + w + ")";
-      s += ";";
-    }
-    s.pop_back();
-  }
-  if (pinned()) {
-    s += ", pinned";
-  } else {
-    s += ", NOT pinned to";
-    for (const auto& c : cpus)
-      if (!c.pinned) s += " " + std::to_string(c.cpu);
-  }
-  if (memory_locked)
-    s += ", memory locked (VmLck " + std::to_string(vmlck_kb) + " kB)";
-  else
-    s += vmlck_kb < 0 ? ", memory lock unknown (/proc/self/status unreadable)"
-                      : ", memory NOT locked (VmLck " + std::to_string(vmlck_kb) + " kB)";
-  return s;
 }
 
 Result<WakeupLatencyReport> measure_wakeup_latency(const WakeupLatencyOptions& options) {
@@ -473,103 +343,6 @@ Result<WakeupLatencyReport> measure_wakeup_latency(const WakeupLatencyOptions& o
     report.cpus.push_back(std::move(w.result));
   }
   return report;
-}
-
-nlohmann::json to_json(const WakeupLatencyReport& r) {
-  nlohmann::json j;
-  j["interval_us"] = r.interval_us;
-  j["planned_s"] = r.planned_s;
-  j["elapsed_s"] = r.elapsed_s;
-  j["stopped_early"] = r.stopped_early;
-  j["priority"] = r.priority;
-  j["histogram_max_us"] = r.histogram_max_us;
-  j["budget_us"] = r.budget_us ? nlohmann::json(*r.budget_us) : nlohmann::json(nullptr);
-  j["load_note"] = r.load_note;
-  j["fifo"] = r.fifo();
-  j["pinned"] = r.pinned();
-  j["memory_locked"] = r.memory_locked;
-  j["vmlck_kb"] = r.vmlck_kb;
-  j["in_effect"] = r.in_effect();
-  j["samples"] = r.samples();
-  j["max_us"] = r.max_us();
-  j["over_budget"] = r.over_budget();
-  nlohmann::json cpus = nlohmann::json::array();
-  for (const auto& c : r.cpus) {
-    nlohmann::json h = nlohmann::json::array();
-    for (std::size_t i = 0; i < c.histogram.size(); ++i)
-      if (c.histogram[i] > 0) h.push_back({i, c.histogram[i]});
-    cpus.push_back({{"cpu", c.cpu},
-                    {"samples", c.samples},
-                    {"skipped_periods", c.skipped_periods},
-                    {"min_us", c.min_us},
-                    {"mean_us", c.mean_us},
-                    {"p50_us", c.p50_us},
-                    {"p99_us", c.p99_us},
-                    {"p999_us", c.p999_us},
-                    {"max_us", c.max_us},
-                    {"max_at_s", c.max_at_s},
-                    {"over_budget", c.over_budget},
-                    {"overflow", c.overflow},
-                    {"early", c.early},
-                    {"wrong_cpu", c.wrong_cpu},
-                    {"fifo", c.fifo},
-                    {"policy", c.policy},
-                    {"read_priority", c.priority},
-                    {"pinned", c.pinned},
-                    {"warnings", c.warnings},
-                    {"histogram", h}});
-  }
-  j["cpus"] = cpus;
-  return j;
-}
-
-std::string KernelPreemption::summary() const {
-  if (preempt_rt) return "PREEMPT_RT (" + release + ")";
-  return "without PREEMPT_RT (" + release + ", " + model + ")";
-}
-
-KernelPreemption read_kernel_preemption() {
-  KernelPreemption k;
-  utsname u{};
-  if (uname(&u) == 0) {
-    k.release = u.release;
-    k.version = u.version;
-  }
-  const auto realtime = read_first_line("/sys/kernel/realtime");
-  k.preempt_rt = (realtime && realtime->find('1') != std::string::npos) ||
-                 k.version.find("PREEMPT_RT") != std::string::npos ||
-                 k.version.find("PREEMPT RT") != std::string::npos;
-  if (k.preempt_rt) {
-    k.model = "PREEMPT_RT";
-  } else if (k.version.find("PREEMPT_DYNAMIC") != std::string::npos) {
-    // debugfs shows the current mode as "none voluntary (full) lazy" (root, debugfs mounted).
-    std::string mode = "mode not readable";
-    if (auto line = read_first_line("/sys/kernel/debug/sched/preempt")) {
-      const auto open = line->find('('), close = line->find(')');
-      if (open != std::string::npos && close > open) mode = line->substr(open + 1, close - open - 1);
-    } else if (auto cmdline = read_first_line("/proc/cmdline")) {
-      const auto at = cmdline->find("preempt=");
-      if (at != std::string::npos) mode = cmdline->substr(at, cmdline->find(' ', at) - at) + " on the command line";
-    }
-    k.model = "PREEMPT_DYNAMIC, " + mode;
-  } else if (k.version.find("PREEMPT_LAZY") != std::string::npos) {
-    k.model = "PREEMPT_LAZY";
-  } else if (k.version.find("PREEMPT") != std::string::npos) {
-    k.model = "PREEMPT (full)";
-  } else {
-    k.model = "no forced preemption (PREEMPT_NONE or PREEMPT_VOLUNTARY)";
-  }
-  auto read_long = [](const char* path, long* value) {
-    if (auto line = read_first_line(path)) {
-      try {
-        *value = std::stol(*line);
-      } catch (...) {
-      }
-    }
-  };
-  read_long("/proc/sys/kernel/sched_rt_runtime_us", &k.rt_runtime_us);
-  read_long("/proc/sys/kernel/sched_rt_period_us", &k.rt_period_us);
-  return k;
 }
 
 }  // namespace lftrack::host

@@ -7,8 +7,9 @@
 //
 // The link is a small file mapped shared: 64 bytes of header, then the last 1,024 samples (about
 // a second), each under a sequence lock of its own (odd while it is being written). A reader never
-// blocks the writer; a torn read is retried. A link not written for `stale_after` seconds is
-// reported stale: the couch stopped where it was, as a couch whose controller died would.
+// blocks the writer; a torn read is retried. A link no longer written (its server gone) keeps its
+// last position: the couch stopped where it was, as a couch whose controller died would; a
+// reader sees how old it is from written_ns.
 
 #include <cstdint>
 #include <filesystem>
@@ -21,7 +22,7 @@ namespace lftrack::sim {
 
 struct RoomLinkSample {
   tracking::Vector6d couch_position = tracking::Vector6d::Zero();  // couch coordinates (mm, rad)
-  std::int64_t written_ns = 0;  // CLOCK_MONOTONIC of the write
+  std::int64_t written_ns = 0;  // CLOCK_MONOTONIC: when the couch was there (read_at: the time asked)
   std::uint64_t writer_pid = 0;
 };
 

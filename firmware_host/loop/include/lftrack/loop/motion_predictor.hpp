@@ -14,8 +14,8 @@
 // that over-reads a rotation (the small closed-loop scene reads about 1.3 to 2 times the true
 // rotation about y) closes a loop through the couch: extrapolated, the over-read grew into an
 // oscillation of about 5 cycles, the true rotation swinging by up to +-0.5 degree and the commands
-// by +-0.7 degree, until one step passed the gate's 2 degree limit and the loop held (a
-// served-couch breathing run in CI, at cycle 14). Unextrapolated, the same run swings by +-0.16
+// by +-0.7 degree; one step past the gate's 2 degree limit holds the loop (most likely what a
+// served-couch breathing run in CI met at cycle 14). Unextrapolated, the same run swings by +-0.16
 // degree and commands +-0.25 degree: each correction leaves (1 - over-read) of the last.
 //
 // Extrapolation amplifies the estimates' noise, most where there are few of them: a parabola
