@@ -76,6 +76,8 @@ Status check_output_path(const fs::path& file, const char* option, bool overwrit
   std::error_code ec;
   if (!parent.empty() && !fs::is_directory(parent, ec))
     return not_found(std::string(option) + " " + file.string() + ": the folder " + parent.string() + " does not exist");
+  if (fs::is_symlink(fs::symlink_status(file, ec)))  // written through, it could land anywhere, or nowhere
+    return invalid_argument(std::string(option) + " " + file.string() + " is a symbolic link; name the file itself");
   const fs::file_status st = fs::status(file, ec);
   if (fs::is_directory(st)) return invalid_argument(std::string(option) + " " + file.string() + " is a folder");
   if (fs::exists(st) && fs::is_regular_file(st) && !overwrite)
@@ -273,8 +275,16 @@ Status run_rt_check(const RtCheckOptions& o) {
   if (!o.plot_png.empty()) {
     if (fs::path(o.plot_png).extension() != ".png")
       return invalid_argument("--plot " + o.plot_png + ": must name a .png file");
-    for (const fs::path& file : {fs::path(o.plot_png), plot_side_file(o.plot_png, ".dat"), plot_side_file(o.plot_png, ".gp")})
+    for (const fs::path& file : {fs::path(o.plot_png), plot_side_file(o.plot_png, ".dat"), plot_side_file(o.plot_png, ".gp")}) {
       LFTRACK_RETURN_IF_ERROR(check_output_path(file, "--plot", o.overwrite));
+      // One run writes each file once: --histogram h.dat beside --plot h.png would be replaced by
+      // the plot's data (or refused half-way, after measuring).
+      std::error_code a, b;
+      if (!o.histogram_csv.empty() &&
+          fs::weakly_canonical(file, a) == fs::weakly_canonical(fs::path(o.histogram_csv), b))
+        return invalid_argument("--histogram " + o.histogram_csv + " is a file --plot " + o.plot_png +
+                                " writes too (" + file.filename().string() + "); name another");
+    }
   }
 
   const KernelPreemption kernel = read_kernel_preemption();

@@ -165,8 +165,14 @@ Result<std::unique_ptr<RoomLinkWriter>> RoomLinkWriter::create(const std::filesy
 
 RoomLinkWriter::~RoomLinkWriter() {
   ::munmap(map_, sizeof(LinkFile));
-  std::error_code ec;
-  std::filesystem::remove(path_, ec);
+  // Only the file this writer holds: if its link was removed and another server made a new one
+  // at the same path, that one is the other server's.
+  struct stat ours {}, there {};
+  if (!leave_file_ && ::fstat(lock_fd_, &ours) == 0 && ::lstat(path_.c_str(), &there) == 0 && ours.st_dev == there.st_dev &&
+      ours.st_ino == there.st_ino) {
+    std::error_code ec;
+    std::filesystem::remove(path_, ec);
+  }
   ::close(lock_fd_);  // after the removal: no second writer takes over a file about to go
 }
 

@@ -163,6 +163,24 @@ TEST(RtCheckCli, ReportFilesAreReplacedOnlyWithOverwriteAndAFailedWriteIsAnError
   EXPECT_EQ(contents(csv), "someone's data\n");
   EXPECT_EQ(contents(gp), "someone's script\n");
   EXPECT_FALSE(fs::exists(dir.path() / "plot.png"));
+  // A symbolic link is no place to write to (a dangling one was refused only after measuring, or
+  // written through), and one file named twice would be written twice (refused half-way).
+  const fs::path link = dir.path() / "link.csv";
+  fs::create_symlink(dir.path() / "nowhere" / "h.csv", link);
+  const fs::path png = dir.path() / "h.png";
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--histogram", link.string()}, {"--histogram", link.string(), "--overwrite"},
+        {"--plot", png.string(), "--histogram", (dir.path() / "h.dat").string()},
+        {"--plot", png.string(), "--histogram", png.string()}}) {
+    std::vector<std::string> argv = args;
+    argv.insert(argv.end(), {"--duration", "0.05"});
+    const CliRun r = rt_check(argv, dir.path());
+    EXPECT_EQ(r.exit_code, 1) << args[0] << " " << args[1] << ": " << r.out;
+    EXPECT_TRUE(r.out.find("symbolic link") != std::string::npos || r.out.find("writes too") != std::string::npos)
+        << r.out;
+    EXPECT_EQ(r.out.find("verdict"), std::string::npos) << "refused before measuring: " << r.out;
+  }
+  EXPECT_FALSE(fs::exists(png));
   const CliRun replaced = rt_check({"--duration", "0.05", "--histogram", csv.string(), "--overwrite"}, dir.path());
   ASSERT_EQ(replaced.exit_code, 0) << replaced.out;
   EXPECT_EQ(contents(csv).rfind("# lftrack rt-check", 0), 0u) << contents(csv);

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "lftrack/sim/room_link.hpp"
+#include "lftrack/sim/served_couch.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::sim {
@@ -152,6 +153,55 @@ TEST(RoomLink, RefusesWhatIsNotALinkAndALiveWriter) {
   auto read_older = RoomLinkReader::open(older);
   ASSERT_FALSE(read_older.ok());
   EXPECT_NE(read_older.status().message().find("older lftrack"), std::string::npos);
+}
+
+// A link that was removed and made again by another server is that server's: the first one's
+// orderly end leaves it.
+TEST(RoomLink, AWriterRemovesOnlyItsOwnLink) {
+  test::TempDir dir;
+  const auto path = dir.path() / "room.link";
+  auto first = RoomLinkWriter::create(path);
+  ASSERT_TRUE(first.ok()) << first.status().message();
+  std::filesystem::remove(path);
+  auto second = RoomLinkWriter::create(path);
+  ASSERT_TRUE(second.ok()) << second.status().message();
+  first->reset();
+  EXPECT_TRUE(std::filesystem::exists(path)) << "the second server's link stays";
+  EXPECT_TRUE(RoomLinkReader::open(path).ok());
+  second->reset();
+  EXPECT_FALSE(std::filesystem::exists(path)) << "its own writer removes it";
+}
+
+// A served couch that takes over a killed server's link starts where that couch stopped, but
+// only within its own travel: a link left outside it is refused, named, and left in place.
+TEST(RoomLink, AServedCouchRefusesALinkLeftOutsideItsTravel) {
+  test::TempDir dir;
+  const auto leave_link_at = [](const std::filesystem::path& path, const tracking::Vector6d& at) {
+    const pid_t child = ::fork();
+    if (child == 0) {
+      auto writer = RoomLinkWriter::create(path);
+      if (!writer.ok()) _exit(1);
+      (*writer)->publish(at);
+      ::kill(::getpid(), SIGKILL);
+    }
+    int status = 0;
+    return ::waitpid(child, &status, 0) == child && WIFSIGNALED(status);
+  };
+  const auto far = dir.path() / "far.link";
+  ASSERT_TRUE(leave_link_at(far, filled(1e308)));
+  auto refused = ServedCouch::start(VirtualCouchSpec{}, far);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("outside this couch's travel"), std::string::npos)
+      << refused.status().message();
+  EXPECT_TRUE(RoomLinkReader::open(far).ok()) << "the link is left as it was";
+  const auto turned = dir.path() / "turned.link";
+  ASSERT_TRUE(leave_link_at(turned, (tracking::Vector6d() << 0, 0, 0, 0, 0, 0.5).finished()));  // 28.6 deg
+  EXPECT_FALSE(ServedCouch::start(VirtualCouchSpec{}, turned).ok());
+  const auto near = dir.path() / "near.link";
+  ASSERT_TRUE(leave_link_at(near, filled(0.01)));
+  auto resumed = ServedCouch::start(VirtualCouchSpec{}, near);
+  ASSERT_TRUE(resumed.ok()) << resumed.status().message();
+  EXPECT_TRUE((*resumed)->position().isApprox(filled(0.01))) << "it stands where the killed couch stopped";
 }
 
 TEST(RoomLink, AKilledWritersLinkIsTakenOverInPlace) {

@@ -43,6 +43,8 @@ class RoomLinkWriter {
   ~RoomLinkWriter();
   // The position found in a link taken over; zero for a new link.
   const tracking::Vector6d& resumed_position() const { return resumed_; }
+  // The destructor leaves the file where it is (a server that refused the link it took over).
+  void leave_file() { leave_file_ = true; }
   RoomLinkWriter(const RoomLinkWriter&) = delete;
   RoomLinkWriter& operator=(const RoomLinkWriter&) = delete;
   // Where the couch is at `at_ns` (CLOCK_MONOTONIC; now, without it). Never blocks; not
@@ -58,6 +60,7 @@ class RoomLinkWriter {
   void* map_;
   int lock_fd_;  // holds the flock that marks this writer alive
   tracking::Vector6d resumed_ = tracking::Vector6d::Zero();
+  bool leave_file_ = false;
 };
 
 class RoomLinkReader {
