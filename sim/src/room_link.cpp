@@ -77,30 +77,31 @@ std::uint64_t link_writer(const std::filesystem::path& path) {
   return pid;
 }
 
-bool is_room_link(const std::filesystem::path& path) {
+// The first 16 bytes of a regular file at `path` (never through a link, never blocking on a FIFO)
+// and its size; false if there is none to read.
+bool read_magic(const std::filesystem::path& path, char (&magic)[16], off_t* size) {
   struct stat link_stat {};
   if (::lstat(path.c_str(), &link_stat) != 0 || !S_ISREG(link_stat.st_mode)) return false;  // a FIFO never blocks us
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return false;
-  char magic[16] = {};
   struct stat st {};
-  const bool ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_size == sizeof(LinkFile) &&
-                  ::read(fd, magic, sizeof magic) == ssize_t(sizeof magic) && std::memcmp(magic, kMagic, 16) == 0;
+  const bool ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && ::read(fd, magic, 16) == 16;
   ::close(fd);
+  *size = st.st_size;
   return ok;
+}
+
+bool is_room_link(const std::filesystem::path& path) {
+  char magic[16] = {};
+  off_t size = 0;
+  return read_magic(path, magic, &size) && size == off_t(sizeof(LinkFile)) && std::memcmp(magic, kMagic, 16) == 0;
 }
 
 // A room link of the first format (one sample, before the history), which this build cannot read.
 bool is_older_room_link(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
-  if (fd < 0) return false;
   char magic[16] = {};
-  struct stat st {};
-  const bool ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) &&
-                  ::read(fd, magic, sizeof magic) == ssize_t(sizeof magic) &&
-                  std::memcmp(magic, "lftrack-room1", 14) == 0;
-  ::close(fd);
-  return ok;
+  off_t size = 0;
+  return read_magic(path, magic, &size) && std::memcmp(magic, "lftrack-room1", 14) == 0;
 }
 
 std::string older_link_advice(const std::filesystem::path& path) {

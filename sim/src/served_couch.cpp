@@ -2,17 +2,10 @@
 
 #include <chrono>
 #include <cstdio>
-#include <string>
 
 namespace lftrack::sim {
 
 namespace {
-
-std::string number(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%g", v);
-  return text;
-}
 
 std::int64_t served_clock_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -31,20 +24,19 @@ Result<std::unique_ptr<ServedCouch>> ServedCouch::start(const VirtualCouchSpec& 
     couch->link_ = std::move(link).value();
     // A restarted server: the couch stands where it stopped, which must be within this couch's
     // travel (a link left by a couch with a wider range, or damaged, is not a place to start from).
-    const tracking::Vector6d& resumed = couch->link_->resumed_position();
-    const bool within = resumed.head<3>().cwiseAbs().maxCoeff() <= spec.range_mm &&
-                        tracking::rad_to_deg(resumed.tail<3>().cwiseAbs().maxCoeff()) <= spec.range_deg;
-    if (!within) {
+    const tracking::Vector6d resumed = couch->link_->resumed_position();
+    if (!within_travel(spec, resumed)) {
       couch->link_->leave_file();  // refused, not consumed: the file stays for whoever looks at it
-      char where[200];
-      std::snprintf(where, sizeof where, "%g %g %g mm, %g %g %g deg", resumed[0], resumed[1], resumed[2],
-                    tracking::rad_to_deg(resumed[3]), tracking::rad_to_deg(resumed[4]), tracking::rad_to_deg(resumed[5]));
-      return failed_precondition("room link " + room_link.string() + ": the couch it left stands at " + where +
-                                 ", outside this couch's travel (" + number(spec.range_mm) + " mm, " +
-                                 number(spec.range_deg) + " deg per axis); remove the link to start at zero");
+      char why[320];
+      std::snprintf(why, sizeof why,
+                    ": the couch it left stands at %g %g %g mm, %g %g %g deg, outside this couch's travel (%g mm, "
+                    "%g deg per axis); remove the link to start at zero",
+                    resumed[0], resumed[1], resumed[2], tracking::rad_to_deg(resumed[3]),
+                    tracking::rad_to_deg(resumed[4]), tracking::rad_to_deg(resumed[5]), spec.range_mm, spec.range_deg);
+      return failed_precondition("room link " + room_link.string() + why);
     }
     couch->couch_.place_at(resumed);
-    couch->link_->publish(couch->link_->resumed_position());
+    couch->link_->publish(resumed);
     couch->publisher_ = std::thread([c = couch.get()] { c->publish_loop(); });
   }
   return couch;

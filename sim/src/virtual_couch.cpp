@@ -8,12 +8,15 @@ namespace lftrack::sim {
 using drivers::DeviceStatus;
 using tracking::Vector6d;
 
+bool within_travel(const VirtualCouchSpec& spec, const Vector6d& position) {
+  return position.head<3>().cwiseAbs().maxCoeff() <= spec.range_mm &&
+         tracking::rad_to_deg(position.tail<3>().cwiseAbs().maxCoeff()) <= spec.range_deg;
+}
+
 DeviceStatus VirtualCouch::command(const Vector6d& correction, drivers::Deadline) {
   if (!correction.allFinite()) return DeviceStatus::kFault;
   const Vector6d target = commanded_ + correction;
-  if (target.head<3>().cwiseAbs().maxCoeff() > spec_.range_mm ||
-      tracking::rad_to_deg(target.tail<3>().cwiseAbs().maxCoeff()) > spec_.range_deg)
-    return DeviceStatus::kFault;
+  if (!within_travel(spec_, target)) return DeviceStatus::kFault;
   if (pending_count_ == int(pending_.size()))
     return DeviceStatus::kFault;  // commands faster than it can take
   pending_[std::size_t(pending_count_++)] = {now_s_ + spec_.latency_s, target};

@@ -22,6 +22,10 @@ struct VirtualCouchSpec {
   double range_deg = 10;          // per rotation component, from zero
 };
 
+// Whether `position` (couch coordinates, mm and rad) is within the couch's travel: each
+// translation within range_mm of zero, each rotation component within range_deg.
+bool within_travel(const VirtualCouchSpec& spec, const tracking::Vector6d& position);
+
 class VirtualCouch final : public drivers::Actuator {
  public:
   explicit VirtualCouch(const VirtualCouchSpec& spec = {}) : spec_(spec) {}
