@@ -6,7 +6,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 LFTRACK := $(BUILD_DIR)/bin/lftrack
 
-.PHONY: all setup configure build demo check check-slow check-full check-asan check-tsan check-sanitized fuzz-build bench fuzz clean
+.PHONY: all setup configure build demo deb check check-slow check-full check-asan check-tsan check-sanitized fuzz-build bench fuzz clean
 
 all: build
 
@@ -21,6 +21,11 @@ build: configure
 
 demo: build
 	@$(LFTRACK) sim --scene builtin:phantom --cycles 300
+
+# The Debian package (issue 59) of the build `make check` tests: out/deb/lftrack_VERSION_amd64.deb,
+# checked by lintian (scripts/make-deb.sh; the README's "In the clinic").
+deb: build
+	@bash scripts/make-deb.sh $(BUILD_DIR) out/deb
 
 # Test tiers (issue 54; tests/CMakeLists.txt labels each test): `check` runs the fast tier (unit,
 # cross-implementation, protocol and simulated-clock closed-loop tests); `check-slow` the slow and

@@ -58,6 +58,10 @@ Result<bool> study_light_fields(const PreparedScene& scene, const std::string& s
 // Loads or builds the scene's light fields into `out_dir` ("": its default folder), saying which
 // were built and which were up to date (`lftrack precompute`, `lftrack scene new --precompute`).
 Status precompute_light_fields(const PreparedScene& scene, const std::string& out_dir, tracking::ThreadPool* pool);
+// The simulator's frame fields (<out_dir>/sim-frames) where the scene's frames are simulated from
+// light fields; nothing otherwise.
+Status precompute_sim_frame_fields(const PreparedScene& scene, const std::string& out_dir,
+                                   tracking::ThreadPool* pool);
 
 // The tables a study prints when it is whole (its own command, or `study merge`).
 void print_trade_front(const TradeStudy& study);

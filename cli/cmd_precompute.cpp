@@ -1,5 +1,8 @@
 // `lftrack precompute`: builds each view's light field on all cores and writes one file per view,
 // named after what the field depends on (scene.hpp); a field already there is up to date and kept.
+// A scene whose frames the simulator draws from light fields (detectors `frames: sim`,
+// sim.renderer: lightfield) gets the simulator's fields too, in <folder>/sim-frames, so that
+// `lftrack run` on it (a simulated room, the daily QA's phantom) finds everything it checks for.
 
 #include <spdlog/spdlog.h>
 
@@ -8,6 +11,9 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
@@ -22,7 +28,8 @@ Status run(const PrecomputeOptions& o) {
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
-  return precompute_light_fields(*prepared, o.out_dir, &pool);
+  LFTRACK_RETURN_IF_ERROR(precompute_light_fields(*prepared, o.out_dir, &pool));
+  return precompute_sim_frame_fields(*prepared, o.out_dir, &pool);
 }
 
 }  // namespace
@@ -62,9 +69,30 @@ Status precompute_light_fields(const PreparedScene& p, const std::string& out_di
   return {};
 }
 
+Status precompute_sim_frame_fields(const PreparedScene& p, const std::string& out_dir,
+                                   tracking::ThreadPool* pool) {
+  if (!frames_are_simulated(p.scene) || p.scene.sim.renderer != "lightfield") return {};
+  const std::filesystem::path dir = sim_frame_fields_dir(p, out_dir);
+  spdlog::info("the simulator's frame fields in {} (sim.light_field)", dir.string());
+  // The realistic patient's volumes (attenuation, or water and bone) where the scene's physics is
+  // not ideal, else the world's attenuation: loaded where up to date, built and saved where not,
+  // as `sim` and `run` would before their first frame.
+  auto patient = make_scene_patient(p, out_dir, pool);
+  if (!patient.ok()) return patient.status().with_context("the simulator's frame fields");
+  if (!*patient) {
+    auto renderer = make_sim_frame_renderer(p, out_dir, pool);
+    if (!renderer.ok()) return renderer.status();
+  }
+  std::printf("%s: ready\n", dir.string().c_str());
+  return {};
+}
+
 Command add_precompute_command(CLI::App* parent) {
-  auto* app = parent->add_subcommand(
-      "precompute", "Build the scene's light fields, one file per view (those up to date are kept, not rebuilt)");
+  auto* app =
+      parent->add_subcommand("precompute",
+                             "Build the scene's light fields, one file per view (those up to date are kept, "
+                             "not rebuilt); with simulated "
+                             "frames drawn from light fields, the simulator's too (in <folder>/sim-frames)");
   auto o = std::make_shared<PrecomputeOptions>();
   add_scene_options(app, &o->scene);
   app->add_option("-o,--out", o->out_dir,

@@ -25,6 +25,8 @@ packages=(
   dicom3tools                           # dciodvfy: validates the exported DICOM registration and test RT objects
   python3-pydicom                       # its RT Plan / Structure Set test files: foreign input in tests
   chromium chromium-driver              # the monitor page tested in a real headless browser
+  debhelper lintian help2man            # `make deb`: the Debian package, its checks, its man pages
+  rt-tests                              # cyclictest, beside `lftrack rt-check` (BENCHMARKS.md)
 )
 # `scripts/setup.sh --fuzz` (make fuzz) adds clang with libFuzzer and its sanitizer runtimes.
 if [ "${1:-}" = "--fuzz" ]; then

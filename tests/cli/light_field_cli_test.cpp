@@ -17,12 +17,20 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The built-in phantom with a small field; `from`, `to`: one line changed.
+// The built-in phantom with a small field; `from`, `to`: one line changed. Its simulated frames
+// are Siddon's (no fields of their own) unless `sim_fields`, which makes those small too.
 fs::path scene_file(const fs::path& dir, const std::string& name, const std::string& from = "",
-                    const std::string& to = "") {
+                    const std::string& to = "", bool sim_fields = false) {
   std::string scene = *builtin_scene_text(kBuiltinPhantom);
   const std::string field = "    resolution: [16, 16, 128, 128]\n";
   scene.replace(scene.find(field), field.size(), "    resolution: [4, 4, 48, 48]\n");
+  const std::string sim =
+      "  renderer: lightfield    # frames from a separate, finer field of the anatomy\n"
+      "  light_field:\n    resolution: [24, 24, 192, 192]\n";
+  EXPECT_NE(scene.find(sim), std::string::npos);
+  scene.replace(scene.find(sim), sim.size(),
+                sim_fields ? "  renderer: lightfield\n  light_field:\n    resolution: [4, 4, 64, 64]\n"
+                           : "  renderer: siddon\n");
   if (!from.empty()) {
     EXPECT_NE(scene.find(from), std::string::npos) << from;
     scene.replace(scene.find(from), from.size(), to);
@@ -78,6 +86,47 @@ TEST(Cli, ScenesSharingALightFieldFolderKeepTheirFieldsAndPrecomputeSkipsThoseUp
     EXPECT_EQ(count(out, ": built\n"), 0) << scene << ": " << out;
   }
   EXPECT_EQ(folder(lf), all);
+}
+
+// A scene whose simulated frames come from light fields: `precompute` builds the simulator's
+// fields too (in <folder>/sim-frames), so that `run` finds every field it checks for, and a
+// second precompute writes nothing.
+TEST(Cli, PrecomputeBuildsTheSimulatorsFrameFieldsWhereTheSceneDrawsFramesFromThem) {
+  test::TempDir dir;
+  const fs::path lf = dir.path() / "lf";
+  const fs::path scene = scene_file(dir.path(), "room", "", "", true);
+  std::string out;
+  auto check = [&] {
+    std::string checklist;
+    (void)run_process({LFTRACK_BIN_PATH, "run", "--check", "--rt", "ignore", "--scene", scene.string(),
+                       "--lf-dir", lf.string()},
+                      &checklist);
+    return checklist;
+  };
+  const std::string before = check();
+  EXPECT_NE(before.find("[FAIL] light fields (simulated frames) in " + (lf / "sim-frames").string()),
+            std::string::npos)
+      << before;
+  EXPECT_NE(
+      before.find("build them first: lftrack precompute --scene " + scene.string() + " -o " + lf.string()),
+      std::string::npos)
+      << before;
+  ASSERT_TRUE(
+      run_process({LFTRACK_BIN_PATH, "precompute", "--scene", scene.string(), "-o", lf.string()}, &out).ok())
+      << out;
+  EXPECT_EQ(count(out, ": built\n"), 2) << out;
+  EXPECT_NE(out.find((lf / "sim-frames").string() + ": ready"), std::string::npos) << out;
+  const auto fields = folder(lf / "sim-frames");
+  EXPECT_EQ(fields.size(), 2u) << "one field per view";
+  const std::string after = check();
+  EXPECT_NE(after.find("[ ok ] light fields (simulated frames) in " + (lf / "sim-frames").string()),
+            std::string::npos)
+      << after;
+  EXPECT_NE(after.find("[ ok ] light fields (tracking)"), std::string::npos) << after;
+  ASSERT_TRUE(
+      run_process({LFTRACK_BIN_PATH, "precompute", "--scene", scene.string(), "-o", lf.string()}, &out).ok())
+      << out;
+  EXPECT_EQ(folder(lf / "sim-frames"), fields) << "a second precompute rewrote the simulator's fields";
 }
 
 }  // namespace

@@ -47,24 +47,51 @@ std::string limit_text(rlim_t limit) {
   return limit == RLIM_INFINITY ? std::string("unlimited") : std::to_string(static_cast<unsigned long long>(limit));
 }
 
+// Which limit stands in the way of each step, for the messages: the operator must learn what to
+// grant, not read "Operation not permitted".
+bool memlock_granted(const rlimit& memlock) {
+  return has_capability(CAP_IPC_LOCK) || memlock.rlim_cur == RLIM_INFINITY;
+}
+std::string memlock_missing(const rlimit& memlock) {
+  return "RLIMIT_MEMLOCK is " + limit_text(memlock.rlim_cur) + " bytes, not unlimited, and no CAP_IPC_LOCK";
+}
+bool rtprio_granted(const rlimit& rtprio, int priority) {
+  return has_capability(CAP_SYS_NICE) ||
+         (rtprio.rlim_cur == RLIM_INFINITY || rtprio.rlim_cur >= rlim_t(std::max(priority, 0)));
+}
+std::string rtprio_missing(const rlimit& rtprio) {
+  return "RLIMIT_RTPRIO is " + limit_text(rtprio.rlim_cur) + " and no CAP_SYS_NICE";
+}
+rlimit current_limit(int resource) {
+  rlimit limit{};
+  ::getrlimit(resource, &limit);
+  return limit;
+}
+
+// What to change, named for each way a host grants it.
+std::string remedy(const RealtimeSpec& spec) {
+  const std::string p = std::to_string(spec.priority);
+  return "grant them: as the lftrack@.service unit does (LimitMEMLOCK=infinity, LimitRTPRIO=" + p +
+         " or more, CPUAffinity= including the scene's loop.realtime.cpus), or for a login in "
+         "/etc/security/limits.conf (memlock unlimited, rtprio " +
+         p + "), or CAP_IPC_LOCK and CAP_SYS_NICE; or set loop.realtime.mode: ignore / --rt ignore";
+}
+
 }  // namespace
 
 Result<RealtimeReport> check_realtime_setup(const RealtimeSpec& spec) {
   RealtimeReport report;
   report.checked = true;
   report.not_applied = "a check: nothing applied";
-  rlimit memlock{}, rtprio{};
-  ::getrlimit(RLIMIT_MEMLOCK, &memlock);
-  ::getrlimit(RLIMIT_RTPRIO, &rtprio);
-  report.memory_locked = has_capability(CAP_IPC_LOCK) || memlock.rlim_cur == RLIM_INFINITY;
+  const rlimit memlock = current_limit(RLIMIT_MEMLOCK);
+  const rlimit rtprio = current_limit(RLIMIT_RTPRIO);
+  report.memory_locked = memlock_granted(memlock);
   if (!report.memory_locked)
-    report.warnings.push_back("mlockall would fail or run out: RLIMIT_MEMLOCK is " + limit_text(memlock.rlim_cur) +
-                              " bytes, not unlimited, and no CAP_IPC_LOCK");
-  report.fifo = has_capability(CAP_SYS_NICE) ||
-                (rtprio.rlim_cur == RLIM_INFINITY || rtprio.rlim_cur >= rlim_t(std::max(spec.priority, 0)));
+    report.warnings.push_back("mlockall would fail or run out: " + memlock_missing(memlock));
+  report.fifo = rtprio_granted(rtprio, spec.priority);
   if (!report.fifo)
-    report.warnings.push_back("SCHED_FIFO priority " + std::to_string(spec.priority) + " would be refused: RLIMIT_RTPRIO is " +
-                              limit_text(rtprio.rlim_cur) + " and no CAP_SYS_NICE");
+    report.warnings.push_back("SCHED_FIFO priority " + std::to_string(spec.priority) +
+                              " would be refused: " + rtprio_missing(rtprio));
   cpu_set_t allowed;
   CPU_ZERO(&allowed);
   const bool known = ::sched_getaffinity(0, sizeof allowed, &allowed) == 0;
@@ -80,38 +107,49 @@ Result<RealtimeReport> check_realtime_setup(const RealtimeSpec& spec) {
   if (spec.enforce && !report.warnings.empty()) {
     std::string reasons;
     for (const std::string& w : report.warnings) reasons += (reasons.empty() ? "" : "; ") + w;
-    return failed_precondition("real-time set-up (loop.realtime.mode: enforce) could not be applied (a check: "
-                               "nothing applied): " +
-                               reasons +
-                               "; run with CAP_SYS_NICE and CAP_IPC_LOCK (or rtprio and memlock limits in "
-                               "/etc/security/limits.conf), or set loop.realtime.mode: ignore / --rt ignore");
+    return failed_precondition(
+        "real-time set-up (loop.realtime.mode: enforce) could not be applied (a check: "
+        "nothing applied): " +
+        reasons + "; " + remedy(spec));
   }
   return report;
 }
 
 Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
+  // Enforced: every missing grant named at once, before anything is applied (one start that
+  // fails tells the operator all there is to change); a step the limits allow may still fail
+  // below, and says so.
+  if (spec.enforce) LFTRACK_RETURN_IF_ERROR(check_realtime_setup(spec).status());
   RealtimeReport report;
   auto failed = [&](const std::string& what) -> Status {
     if (spec.enforce)
-      return failed_precondition(
-          "real-time set-up (loop.realtime.mode: enforce): " + what +
-          "; run with CAP_SYS_NICE and CAP_IPC_LOCK (or rtprio and memlock limits in "
-          "/etc/security/limits.conf), or set loop.realtime.mode: ignore / --rt ignore");
+      return failed_precondition("real-time set-up (loop.realtime.mode: enforce): " + what + "; " +
+                                 remedy(spec));
     report.warnings.push_back(what);
     return {};
   };
   if (::mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
     report.memory_locked = true;
   } else {
-    LFTRACK_RETURN_IF_ERROR(failed(std::string("mlockall failed: ") + std::strerror(errno)));
+    const int e = errno;
+    const rlimit memlock = current_limit(RLIMIT_MEMLOCK);
+    LFTRACK_RETURN_IF_ERROR(
+        failed(std::string("memory cannot be locked (mlockall: ") + std::strerror(e) + "): " +
+               (memlock_granted(memlock) ? "the limit allows it, so the host has too little memory to lock"
+                                         : memlock_missing(memlock))));
   }
   sched_param param{};
   param.sched_priority = spec.priority;
   if (const int e = ::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &param); e == 0) {
     report.fifo = true;
   } else {
-    LFTRACK_RETURN_IF_ERROR(
-        failed("SCHED_FIFO priority " + std::to_string(spec.priority) + " refused: " + std::strerror(e)));
+    const rlimit rtprio = current_limit(RLIMIT_RTPRIO);
+    LFTRACK_RETURN_IF_ERROR(failed(
+        "SCHED_FIFO priority " + std::to_string(spec.priority) + " refused (" + std::strerror(e) + "): " +
+        (rtprio_granted(rtprio, spec.priority)
+             ? std::string("the limit allows it, so the kernel's real-time budget refuses (the cgroup's "
+                           "cpu.rt_runtime_us, or kernel.sched_rt_runtime_us)")
+             : rtprio_missing(rtprio))));
   }
   if (!spec.cpus.empty()) {
     cpu_set_t set;
@@ -120,7 +158,9 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
     if (const int e = ::pthread_setaffinity_np(::pthread_self(), sizeof set, &set); e == 0) {
       report.affinity = true;
     } else {
-      LFTRACK_RETURN_IF_ERROR(failed(std::string("CPU affinity refused: ") + std::strerror(e)));
+      LFTRACK_RETURN_IF_ERROR(failed(std::string("CPU affinity refused (") + std::strerror(e) +
+                                     "): loop.realtime.cpus names a CPU this process may not use "
+                                     "(a service's CPUAffinity=, a cgroup's cpuset, or taskset)"));
     }
   } else if (spec.enforce) {
     return failed_precondition(

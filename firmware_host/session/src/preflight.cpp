@@ -73,14 +73,18 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
       auto fields = load_light_fields(p, sim_dir / name, volume.get(), &p.scene.sim.light_field);
       add(r, "light fields (simulated frames, " + std::string(name) + ") in " + (sim_dir / name).string(),
           fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-          fields.ok() ? "fresh" : fields.status().message() + "; `lftrack sim` on this scene builds them");
+          fields.ok() ? "fresh"
+                      : fields.status().message() + "; build them first: lftrack precompute --scene " +
+                            p.scene.source + " -o " + dir.string());
     }
   } else if (simulated_frames && p.scene.sim.renderer == "lightfield") {
     const std::filesystem::path sim_dir = sim_frame_fields_dir(p, o.light_field_dir);
     auto fields = load_light_fields(p, sim_dir, p.world_mu.get(), &p.scene.sim.light_field);
     add(r, "light fields (simulated frames) in " + sim_dir.string(),
         fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-        fields.ok() ? "fresh" : fields.status().message() + "; `lftrack sim` on this scene builds them");
+        fields.ok() ? "fresh"
+                    : fields.status().message() + "; build them first: lftrack precompute --scene " +
+                          p.scene.source + " -o " + dir.string());
   }
 }
 

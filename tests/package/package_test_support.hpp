@@ -1,0 +1,58 @@
+#pragma once
+// What the package tests share: a shell command's exit code and output, and the QA phantom's
+// light fields (scenes/qa-phantom.yaml, the room the package installs as configuration) built
+// once into the test cache and shared by every test that runs that room.
+
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+#include "cli_text.hpp"
+#include "test_data.hpp"
+
+namespace lftrack::test {
+
+// `command` run by /bin/sh in `dir`, stdout and stderr together into dir/LOG.
+inline CliRun shell(const std::string& command, const std::filesystem::path& dir,
+                    const std::string& log = "out.txt") {
+  const std::filesystem::path file = dir / log;
+  const std::string line =
+      "cd " + quoted(dir.string()) + " && { " + command + " ; } >" + quoted(file.string()) + " 2>&1";
+  CliRun r;
+  const int status = std::system(line.c_str());
+  if (status != -1 && WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
+  r.out = contents(file);
+  return r;
+}
+
+inline std::filesystem::path qa_phantom_scene() {
+  return std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml";
+}
+
+// The QA phantom's light fields (tracking and the simulator's), built by `program` where missing
+// or stale; a field is saved by rename, so two tests building at once never see half a file.
+inline std::filesystem::path qa_phantom_fields(const std::string& program, const std::filesystem::path& scene,
+                                               const std::filesystem::path& log_dir) {
+  const std::filesystem::path fields = test_cache_dir() / "qa-phantom-fields";
+  std::filesystem::create_directories(fields);
+  const CliRun r = shell(
+      quoted(program) + " -q precompute --scene " + quoted(scene.string()) + " -o " + quoted(fields.string()),
+      log_dir, "precompute.txt");
+  if (r.exit_code != 0) return {};
+  // Readable by the unprivileged user the service tests run as.
+  std::error_code ignored;
+  for (auto p = fields; p != p.root_path() && p != test_cache_dir().parent_path(); p = p.parent_path())
+    std::filesystem::permissions(p, std::filesystem::perms::others_read | std::filesystem::perms::others_exec,
+                                 std::filesystem::perm_options::add, ignored);
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(fields))
+    std::filesystem::permissions(
+        entry.path(),
+        std::filesystem::perms::others_read |
+            (entry.is_directory() ? std::filesystem::perms::others_exec : std::filesystem::perms::none),
+        std::filesystem::perm_options::add, ignored);
+  return fields;
+}
+
+}  // namespace lftrack::test
