@@ -14,14 +14,16 @@
 #include <optional>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/patient_setup.hpp"
-#include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/host/loop_session.hpp"
+#include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/preflight.hpp"
-#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/host/scene_devices.hpp"
+#include "lftrack/host/scene_exposure.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "lftrack/qa/qa_report.hpp"
 #include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
@@ -240,7 +242,18 @@ Status run(const SimOptions& o) {
     spdlog::info("{}: simulated detectors, {}", prepared->scene.name, describe_exposure(*prepared));
   if (o.mode == SimOptions::Mode::kRun) {
     // The start-up checks before the first beam: every reason at once, nothing built or moved.
-    const PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");
+    PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");
+    // Today's daily QA of this room (issue 59; any scene of the same detectors and actuator), in
+    // the QA folder beside out/run: a warning, not a refusal, when none has passed.
+    const std::string today = qa::today_utc();
+    if (auto passed =
+            qa::passed_daily_qa(qa::kDefaultQaFolder, to_hex(room_fingerprint(prepared->scene)), today))
+      checks.items.push_back({"daily QA", CheckResult::kPass, "passed today: " + passed->string()});
+    else
+      checks.items.push_back({"daily QA", CheckResult::kWarn,
+                              "none of this room passed today (" + today + " UTC) in " +
+                                  std::string(qa::kDefaultQaFolder) +
+                                  ": lftrack qa daily --scene <the room's phantom scene>"});
     if (o.check || !checks.passed()) std::printf("pre-treatment checklist, %s:\n%s", prepared->scene.name.c_str(),
                                                   checks.checklist().c_str());
     if (!checks.passed())

@@ -12,7 +12,7 @@
 #include <regex>
 #include <string>
 
-#include "package_test_support.hpp"
+#include "qa_phantom_support.hpp"
 
 namespace lftrack::test {
 namespace {

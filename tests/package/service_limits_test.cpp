@@ -13,7 +13,7 @@
 #include <fstream>
 #include <string>
 
-#include "package_test_support.hpp"
+#include "qa_phantom_support.hpp"
 
 namespace lftrack::test {
 namespace {

@@ -5,7 +5,20 @@
 #include <filesystem>
 #include <sstream>
 
+#include "lftrack/host/scene_devices.hpp"
+
 namespace lftrack::host {
+
+namespace {
+std::array<std::uint8_t, 16> first_16_of_sha256(const std::string& text) {
+  unsigned char hash[SHA256_DIGEST_LENGTH];
+  SHA256(reinterpret_cast<const unsigned char*>(text.data()), text.size(), hash);
+  std::array<std::uint8_t, 16> out{};
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = hash[i];
+  if (out == std::array<std::uint8_t, 16>{}) out[15] = 1;  // zeros are "not recorded" (odds 2^-128)
+  return out;
+}
+}  // namespace
 
 std::string room_geometry_text(const Scene& scene) {
   std::ostringstream geometry;
@@ -28,13 +41,12 @@ std::array<std::uint8_t, 16> scene_fingerprint(const Scene& scene) {
     const std::filesystem::path canonical = std::filesystem::weakly_canonical(scene.ct.path, ec);
     if (!ec) ct = canonical.string();
   }
-  const std::string text = "lftrack scene\nct " + ct + "\n" + room_geometry_text(scene);
-  unsigned char hash[SHA256_DIGEST_LENGTH];
-  SHA256(reinterpret_cast<const unsigned char*>(text.data()), text.size(), hash);
-  std::array<std::uint8_t, 16> out{};
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = hash[i];
-  if (out == std::array<std::uint8_t, 16>{}) out[15] = 1;  // zeros are "not recorded" (odds 2^-128)
-  return out;
+  return first_16_of_sha256("lftrack scene\nct " + ct + "\n" + room_geometry_text(scene));
+}
+
+std::array<std::uint8_t, 16> room_fingerprint(const Scene& scene) {
+  return first_16_of_sha256("lftrack room\nactuator " + describe_actuator(scene.actuator) + "\n" +
+                            room_geometry_text(scene));
 }
 
 std::string to_hex(const std::array<std::uint8_t, 16>& fingerprint) {

@@ -1,5 +1,5 @@
 #pragma once
-// What the package tests share: a shell command's exit code and output, and the QA phantom's
+// What the package and QA tests share: a shell command's exit code and output, and the QA phantom's
 // light fields (scenes/qa-phantom.yaml, the room the package installs as configuration) built
 // once into the test cache and shared by every test that runs that room.
 

@@ -1,0 +1,95 @@
+// `lftrack qa daily`: the room's daily QA on its phantom (lftrack/qa/daily_qa.hpp), each check
+// printed as it ends, then a dated report (JSON and HTML) in the QA folder. Exit 0: passed; 1:
+// a check failed (the reasons printed) or the QA could not run.
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "cli_commands.hpp"
+#include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/qa/qa_report.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+
+namespace lftrack::host::cli {
+namespace {
+
+struct QaDailyOptions {
+  SceneOptions scene;
+  std::string lf_dir;
+  std::string out = qa::kDefaultQaFolder;
+  double tolerance_mm = 0.5, tolerance_deg = 0.2;
+  int latency_cycles = 50;
+  double latency_ms = 0;
+};
+
+Status run_qa_daily(const QaDailyOptions& o) {
+  // Values first: nothing is loaded for a QA that could not be judged.
+  if (!(std::isfinite(o.tolerance_mm) && o.tolerance_mm > 0 && o.tolerance_mm <= 10))
+    return invalid_argument("--tolerance-mm must be above 0 and at most 10 mm");
+  if (!(std::isfinite(o.tolerance_deg) && o.tolerance_deg > 0 && o.tolerance_deg <= 5))
+    return invalid_argument("--tolerance-deg must be above 0 and at most 5 degrees");
+  if (!(std::isfinite(o.latency_ms) && o.latency_ms >= 0 && o.latency_ms <= 10000))
+    return invalid_argument("--latency-ms must be from 0 (the scene's period) to 10000 ms");
+  tracking::ThreadPool pool(o.scene.threads);
+  auto prepared = load_prepared_scene(o.scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  qa::DailyQaOptions options;
+  options.tolerance_mm = o.tolerance_mm;
+  options.tolerance_deg = o.tolerance_deg;
+  options.latency_cycles = o.latency_cycles;
+  options.latency_tolerance_ms = o.latency_ms;
+  options.light_field_dir = o.lf_dir;
+  options.progress = [](const std::string& line) {
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  };
+  spdlog::info("daily QA of {}: tolerance {} mm, {} deg", prepared->scene.name, o.tolerance_mm,
+               o.tolerance_deg);
+  // Each run of the loop says what it loads and judges; the QA's own lines are what to read.
+  const spdlog::level::level_enum level = spdlog::get_level();
+  if (level == spdlog::level::info) spdlog::set_level(spdlog::level::warn);
+  auto report = qa::run_daily_qa(*prepared, options, &pool);
+  spdlog::set_level(level);
+  if (!report.ok()) return report.status();
+  auto written = qa::write_daily_qa_report(*report, o.out);
+  if (!written.ok()) return written.status().with_context("the QA ran, but its report");
+  for (const std::string& n : report->not_checked) std::printf("not checked: %s\n", n.c_str());
+  std::printf("daily QA %s: %s, %s\n", report->passed() ? "PASSED" : "FAILED", written->html.c_str(),
+              written->json.c_str());
+  if (report->passed()) return {};
+  std::string why;
+  for (const qa::QaCheck& c : report->checks)
+    if (!c.passed) why += "\n  " + c.name + ": " + c.why;
+  return failed_precondition("daily QA failed:" + why);
+}
+
+}  // namespace
+
+Command add_qa_daily_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand(
+      "daily",
+      "The daily QA on the room's phantom (AAPM TG-135): the offset test, the beam-permit path, the latency "
+      "chain and "
+      "the control socket, each against its tolerance; a dated report (JSON, HTML) in --out");
+  auto o = std::make_shared<QaDailyOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");
+  app->add_option("--out", o->out, "Folder of the QA reports (never replaced; `lftrack run` looks here)")
+      ->capture_default_str();
+  app->add_option("--tolerance-mm", o->tolerance_mm, "Offset test: registration and couch, per shift (mm)")
+      ->capture_default_str();
+  app->add_option("--tolerance-deg", o->tolerance_deg, "Offset test: largest rotation (degrees)")
+      ->capture_default_str();
+  app->add_option("--latency-cycles", o->latency_cycles,
+                  "Real-clock cycles for the latency chain (0: not run, fails)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
+  app->add_option("--latency-ms", o->latency_ms,
+                  "Exposure to acknowledgement p99 tolerance (ms; 0: the scene's period)")
+      ->capture_default_str();
+  return [o] { return run_qa_daily(*o); };
+}
+
+}  // namespace lftrack::host::cli

@@ -1,0 +1,146 @@
+#include "daily_qa_runs.hpp"
+
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <thread>
+
+#include "lftrack/loop/tracking_states.hpp"
+
+namespace lftrack::qa {
+namespace {
+
+using host::JournalRecord;
+
+// Keeps every cycle's record (room reserved up front: the cycle allocates nothing), and passes it
+// on to an observer the caller's hooks named.
+class Recorder final : public host::CycleObserver {
+ public:
+  Recorder(std::size_t cycles, host::CycleObserver* next) : next_(next) { records_.reserve(cycles + 8); }
+  void on_cycle(const JournalRecord& record) override {
+    if (records_.size() < records_.capacity()) records_.push_back(record);
+    state_.store(record.state, std::memory_order_release);
+    if (next_ != nullptr) next_->on_cycle(record);
+  }
+  std::int64_t simulated_stall_ns(std::int64_t cycle) override {
+    return next_ != nullptr ? next_->simulated_stall_ns(cycle) : 0;
+  }
+  std::vector<JournalRecord> take() { return std::move(records_); }
+  std::uint8_t state() const { return state_.load(std::memory_order_acquire); }
+
+ private:
+  host::CycleObserver* next_;
+  std::vector<JournalRecord> records_;
+  std::atomic<std::uint8_t> state_{0};
+};
+
+host::PreparedScene standing_still(const host::PreparedScene& scene, const tracking::Vector6d& setup) {
+  host::PreparedScene still = scene;
+  still.scene.motion = host::MotionSpec{};
+  still.scene.motion.setup_error = setup;
+  return still;
+}
+
+host::LoopSessionOptions session_options(const DailyQaOptions& o, int cycles, bool simulated_clock) {
+  host::LoopSessionOptions so;
+  so.cycles = cycles;
+  so.simulated_clock = simulated_clock;
+  so.light_field_dir = o.light_field_dir;
+  so.hooks = o.hooks;
+  return so;
+}
+
+Result<RecordedRun> run(const host::PreparedScene& scene, host::LoopSessionOptions so,
+                        tracking::ThreadPool* pool, const std::function<void(Recorder&)>& beside = {}) {
+  Recorder recorder(static_cast<std::size_t>(so.cycles), so.hooks.observer);
+  so.hooks.observer = &recorder;
+  auto session = host::LoopSession::create(scene, so, pool);
+  if (!session.ok()) return session.status();
+  RecordedRun r;
+  std::thread helper;
+  if (beside) helper = std::thread([&] { beside(recorder); });
+  auto summary = (*session)->run();
+  if (helper.joinable()) helper.join();
+  if (!summary.ok()) return summary.status();
+  r.summary = *summary;
+  r.records = recorder.take();
+  return r;
+}
+
+// One datagram to the control socket at `path` from an address of our own, and its answer
+// (empty: none within a second).
+std::string ask_control_socket(const std::filesystem::path& path, const std::filesystem::path& self,
+                               const std::string& request) {
+  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return {};
+  sockaddr_un me{}, to{};
+  me.sun_family = to.sun_family = AF_UNIX;
+  std::strncpy(me.sun_path, self.c_str(), sizeof(me.sun_path) - 1);
+  std::strncpy(to.sun_path, path.c_str(), sizeof(to.sun_path) - 1);
+  std::string reply;
+  timeval timeout{1, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  if (::bind(fd, reinterpret_cast<const sockaddr*>(&me), sizeof me) == 0 &&
+      ::sendto(fd, request.data(), request.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) ==
+          static_cast<ssize_t>(request.size())) {
+    char buffer[256];
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n > 0) reply.assign(buffer, static_cast<std::size_t>(n));
+  }
+  ::close(fd);
+  ::unlink(self.c_str());
+  return reply;
+}
+
+}  // namespace
+
+Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
+                               const DailyQaOptions& options, tracking::ThreadPool* pool) {
+  return run(standing_still(scene, shift), session_options(options, cycles, true), pool);
+}
+
+Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,
+                                       int dark_to, const DailyQaOptions& options,
+                                       tracking::ThreadPool* pool) {
+  host::LoopSessionOptions so = session_options(options, cycles, true);
+  so.frames.drop_from = dark_from;
+  so.frames.drop_to = dark_to;
+  return run(standing_still(scene, tracking::Vector6d::Zero()), so, pool);
+}
+
+Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
+                                   const DailyQaOptions& options, tracking::ThreadPool* pool) {
+  std::error_code ec;
+  std::filesystem::path dir = options.work_dir;
+  if (dir.empty()) {
+    char name[] = "/tmp/lftrack-qa-XXXXXX";
+    if (::mkdtemp(name) == nullptr)
+      return io_error(std::string("a folder for the control socket: ") + std::strerror(errno));
+    dir = name;
+  }
+  std::filesystem::create_directories(dir, ec);
+  host::LoopSessionOptions so = session_options(options, cycles, false);
+  so.control_socket = dir / "control";
+  std::string reply;
+  // Once the loop tracks (or the run is over), the operator's console asks for the state.
+  auto ask = [&](Recorder& recorder) {
+    const auto give_up =
+        std::chrono::steady_clock::now() +
+        std::chrono::milliseconds(static_cast<std::int64_t>(cycles * scene.scene.loop.period_ms));
+    while (recorder.state() != static_cast<std::uint8_t>(host::TrackingState::kTrack) &&
+           std::chrono::steady_clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    reply = ask_control_socket(so.control_socket, dir / "console", "status");
+  };
+  auto r = run(standing_still(scene, tracking::Vector6d::Zero()), so, pool, ask);
+  if (options.work_dir.empty()) std::filesystem::remove_all(dir, ec);
+  if (!r.ok()) return r.status();
+  r->control_reply = reply;
+  return r;
+}
+
+}  // namespace lftrack::qa

@@ -1,0 +1,32 @@
+#pragma once
+// The loop runs the daily QA makes (daily_qa.cpp judges them): a session of the scene's room with
+// every cycle's record kept.
+
+#include <vector>
+
+#include "lftrack/host/loop_session.hpp"
+#include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/loop_summary.hpp"
+#include "lftrack/qa/daily_qa.hpp"
+
+namespace lftrack::qa {
+
+struct RecordedRun {
+  host::LoopSummary summary;
+  std::vector<host::JournalRecord> records;  // every cycle, in order
+  std::string control_reply;                 // the latency run: the control socket's answer
+};
+
+// `scene` with the phantom set up `shift` off (no drift or breathing), `cycles` on the simulated
+// clock.
+Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
+                               const DailyQaOptions& options, tracking::ThreadPool* pool);
+// `scene` standing still, `cycles` on the simulated clock, exposures [dark_from, dark_to) lost.
+Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,
+                                       int dark_to, const DailyQaOptions& options,
+                                       tracking::ThreadPool* pool);
+// `scene` standing still on the real clock with a control socket, asked `status` once it tracks.
+Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
+                                   const DailyQaOptions& options, tracking::ThreadPool* pool);
+
+}  // namespace lftrack::qa

@@ -1,0 +1,260 @@
+#include "lftrack/qa/qa_report.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <vector>
+
+namespace lftrack::qa {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr double kPi = 3.14159265358979323846;
+
+nlohmann::json pose_json(const tracking::Vector6d& v) {
+  return {{"translation_mm", {v(0), v(1), v(2)}},
+          {"rotation_deg", {v(3) * 180 / kPi, v(4) * 180 / kPi, v(5) * 180 / kPi}}};
+}
+
+nlohmann::json to_json(const DailyQaReport& r) {
+  nlohmann::json j;
+  j["kind"] = "lftrack daily QA";
+  j["scene"] = r.scene_name;
+  j["scene_file"] = r.scene_source;
+  j["room_fingerprint"] = r.room_fingerprint;
+  j["started_utc"] = r.started_utc;
+  j["date_utc"] = r.date_utc;
+  j["passed"] = r.passed();
+  j["tolerance"] = {{"mm", r.tolerance_mm}, {"deg", r.tolerance_deg}};
+  for (const QaCheck& c : r.checks)
+    j["checks"].push_back({{"name", c.name},
+                           {"passed", c.passed},
+                           {"tolerance", c.tolerance},
+                           {"measured", c.measured},
+                           {"why", c.why}});
+  for (const OffsetResult& o : r.offsets)
+    j["offsets"].push_back({{"shift", pose_json(o.shift)},
+                            {"registered", pose_json(o.registered)},
+                            {"couch_moved", pose_json(o.couch_moved)},
+                            {"registration_error_mm", o.registration_error_mm},
+                            {"registration_error_deg", o.registration_error_deg},
+                            {"couch_error_mm", o.couch_error_mm},
+                            {"couch_error_deg", o.couch_error_deg},
+                            {"final_offset_mm", o.final_offset_mm},
+                            {"aligned", o.aligned},
+                            {"passed", o.passed},
+                            {"why", o.why}});
+  j["not_checked"] = r.not_checked;
+  return j;
+}
+
+// The result cell of a check or a shift: "pass", or "FAIL: why" (escaped).
+std::string result_cell(bool passed, const std::string& why);
+
+std::string escaped(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+std::string result_cell(bool passed, const std::string& why) {
+  if (passed) return "<td class='pass'>pass</td>";
+  std::string cell = "<td class='fail'>FAIL: ";
+  cell += escaped(why);
+  cell += "</td>";
+  return cell;
+}
+
+// Each shift's registration and couch errors as bars, the tolerance as a line across them.
+std::string offset_picture(const DailyQaReport& r) {
+  const int bar = 14, gap = 10, width = 640, left = 40, height = 220, top = 20, bottom = 40;
+  double scale_mm = 2 * r.tolerance_mm;
+  for (const OffsetResult& o : r.offsets)
+    scale_mm =
+        std::max({scale_mm, std::min(o.registration_error_mm, 10.0), std::min(o.couch_error_mm, 10.0)});
+  const double plot = height - top - bottom;
+  auto y = [&](double mm) { return top + plot * (1 - std::min(mm, scale_mm) / scale_mm); };
+  std::ostringstream s;
+  s << "<svg xmlns='http://www.w3.org/2000/svg' width='" << width << "' height='" << height
+    << "' role='img' aria-label='offset test errors'>";
+  s << fmt::format("<line x1='{}' y1='{:.1f}' x2='{}' y2='{:.1f}' stroke='#c00' stroke-dasharray='4 3'/>",
+                   left, y(r.tolerance_mm), width - 10, y(r.tolerance_mm));
+  s << fmt::format("<text x='{}' y='{:.1f}' font-size='11' fill='#c00'>tolerance {} mm</text>", width - 130,
+                   y(r.tolerance_mm) - 4, r.tolerance_mm);
+  s << fmt::format("<text x='2' y='{}' font-size='11'>{:.2f} mm</text>", top + 4, scale_mm);
+  s << fmt::format("<line x1='{}' y1='{}' x2='{}' y2='{}' stroke='#333'/>", left, top + plot, width - 10,
+                   top + plot);
+  int x = left + gap;
+  for (std::size_t i = 0; i < r.offsets.size(); ++i) {
+    const OffsetResult& o = r.offsets[i];
+    s << fmt::format(
+        "<rect x='{}' y='{:.1f}' width='{}' height='{:.1f}' fill='{}'><title>alignment {:.3f} "
+        "mm</title></rect>",
+        x, y(o.registration_error_mm), bar, top + plot - y(o.registration_error_mm),
+        o.passed ? "#2a7" : "#c33", o.registration_error_mm);
+    s << fmt::format(
+        "<rect x='{}' y='{:.1f}' width='{}' height='{:.1f}' fill='{}'><title>couch {:.3f} mm</title></rect>",
+        x + bar, y(o.couch_error_mm), bar, top + plot - y(o.couch_error_mm), o.passed ? "#7bd" : "#e88",
+        o.couch_error_mm);
+    s << fmt::format("<text x='{}' y='{}' font-size='11'>{}</text>", x + 4, top + plot + 14, i + 1);
+    x += 2 * bar + gap;
+  }
+  s << fmt::format(
+      "<text x='{}' y='{}' font-size='11'>shift; bars: alignment error (left), couch error "
+      "(right)</text></svg>",
+      left, height - 6);
+  return s.str();
+}
+
+std::string to_html(const DailyQaReport& r) {
+  std::ostringstream h;
+  h << "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>lftrack daily QA "
+    << escaped(r.date_utc)
+    << "</title><style>body{font-family:sans-serif;margin:2em}td,th{padding:4px 8px;border-bottom:1px solid "
+       "#ddd;"
+       "text-align:left;vertical-align:top}.pass{color:#175}.fail{color:#b00;font-weight:bold}</style></"
+       "head><body>";
+  h << "<h1>Daily QA: <span class='" << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
+  h << "<p>" << escaped(r.scene_name) << " (" << escaped(r.scene_source) << "), started "
+    << escaped(r.started_utc) << "</p>";
+  h << "<table><tr><th>check</th><th>result</th><th>tolerance</th><th>measured</th></tr>";
+  for (const QaCheck& c : r.checks)
+    h << "<tr><td>" << escaped(c.name) << "</td>" << result_cell(c.passed, c.why) << "<td>"
+      << escaped(c.tolerance) << "</td><td>" << escaped(c.measured) << "</td></tr>";
+  h << "</table><h2>Offset test</h2>" << offset_picture(r);
+  h << "<table><tr><th>#</th><th>shift</th><th>alignment found</th><th>alignment error</th><th>couch "
+       "error</th>"
+       "<th>result</th></tr>";
+  for (std::size_t i = 0; i < r.offsets.size(); ++i) {
+    const OffsetResult& o = r.offsets[i];
+    auto pose = [](const tracking::Vector6d& v) {
+      return fmt::format("{:+.2f} {:+.2f} {:+.2f} mm; {:+.2f} {:+.2f} {:+.2f} deg", v(0), v(1), v(2),
+                         v(3) * 180 / kPi, v(4) * 180 / kPi, v(5) * 180 / kPi);
+    };
+    h << "<tr><td>" << i + 1 << "</td><td>" << pose(o.shift) << "</td><td>" << pose(o.registered)
+      << "</td><td>"
+      << fmt::format("{:.3f} mm, {:.3f} deg", o.registration_error_mm, o.registration_error_deg)
+      << "</td><td>" << fmt::format("{:.3f} mm, {:.3f} deg", o.couch_error_mm, o.couch_error_deg) << "</td>"
+      << result_cell(o.passed, o.why) << "</tr>";
+  }
+  h << "</table>";
+  if (!r.not_checked.empty()) {
+    h << "<h2>Not checked</h2><ul>";
+    for (const std::string& n : r.not_checked) h << "<li>" << escaped(n) << "</li>";
+    h << "</ul>";
+  }
+  h << "</body></html>\n";
+  return h.str();
+}
+
+// Creates `file` exclusively (never replacing anything) and writes `text`; false if it exists.
+Result<bool> write_new(const fs::path& file, const std::string& text) {
+  const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0644);
+  if (fd < 0) {
+    if (errno == EEXIST) return false;
+    return io_error(file.string() + ": cannot create: " + std::strerror(errno));
+  }
+  std::size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+    if (n <= 0) {
+      ::close(fd);
+      return io_error(file.string() + ": write failed: " + std::strerror(errno));
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fsync(fd) != 0 || ::close(fd) != 0)
+    return io_error(file.string() + ": cannot be saved: " + std::strerror(errno));
+  return true;
+}
+
+}  // namespace
+
+std::string today_utc() {
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm tm{};
+  ::gmtime_r(&now, &tm);
+  char text[16];
+  std::strftime(text, sizeof text, "%Y-%m-%d", &tm);
+  return text;
+}
+
+Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const fs::path& folder) {
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec) return io_error(folder.string() + ": cannot create the QA folder: " + ec.message());
+  std::string stamp = report.started_utc;  // 2026-11-30T23:50:01Z -> 20261130-235001
+  stamp.erase(
+      std::remove_if(stamp.begin(), stamp.end(), [](char c) { return c == '-' || c == ':' || c == 'Z'; }),
+      stamp.end());
+  std::replace(stamp.begin(), stamp.end(), 'T', '-');
+  const std::string json = to_json(report).dump(2) + "\n";
+  const std::string html = to_html(report);
+  for (int n = 1; n < 1000; ++n) {
+    const std::string base =
+        n == 1 ? fmt::format("qa-daily-{}", stamp) : fmt::format("qa-daily-{}-{}", stamp, n);
+    WrittenReport w{folder / (base + ".json"), folder / (base + ".html")};
+    if (fs::exists(w.html, ec) || fs::is_symlink(w.html, ec)) continue;
+    auto made = write_new(w.json, json);
+    if (!made.ok()) return made.status();
+    if (!*made) continue;
+    auto page = write_new(w.html, html);
+    if (!page.ok()) return page.status();
+    if (!*page) return io_error(w.html.string() + ": appeared while the QA report was written");
+    return w;
+  }
+  return io_error(folder.string() + ": a thousand QA reports for " + stamp + " already");
+}
+
+std::optional<fs::path> passed_daily_qa(const fs::path& folder, const std::string& fingerprint,
+                                        const std::string& date_utc) {
+  std::error_code ec;
+  std::optional<fs::path> newest;
+  std::string newest_start;
+  for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+    const fs::path& file = it->path();
+    if (file.extension() != ".json" || file.filename().string().rfind("qa-daily-", 0) != 0) continue;
+    if (!it->is_regular_file(ec) || it->file_size(ec) > (1u << 20)) continue;  // a report is a few kB
+    std::ifstream in(file);
+    const nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+    if (!j.is_object() || j.value("kind", "") != "lftrack daily QA") continue;
+    if (j.value("room_fingerprint", "") != fingerprint || j.value("date_utc", "") != date_utc) continue;
+    if (!j.value("passed", false)) continue;
+    const std::string start = j.value("started_utc", "");
+    if (!newest || start > newest_start) {
+      newest = file;
+      newest_start = start;
+    }
+  }
+  return newest;
+}
+
+}  // namespace lftrack::qa

@@ -1,0 +1,64 @@
+// `lftrack qa daily` as a physicist runs it (issue 59): on the shipped QA phantom it passes, the
+// latency chain and the control socket included (the real clock), writes its dated report, and
+// `lftrack run` then finds today's QA of the room; absurd values are refused before anything
+// is loaded.
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "qa_phantom_support.hpp"
+
+namespace lftrack::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(DailyQaCli, RefusesAbsurdValuesBeforeLoadingAnything) {
+  TempDir dir;
+  for (const char* bad :
+       {"--tolerance-mm 0", "--tolerance-mm -1", "--tolerance-mm nan", "--tolerance-mm inf",
+        "--tolerance-mm 1e12", "--tolerance-deg 0", "--latency-ms -5", "--latency-ms nan"}) {
+    const CliRun r = shell(
+        quoted(LFTRACK_BIN_PATH) + " qa daily --scene " + quoted(qa_phantom_scene().string()) + " " + bad,
+        dir.path());
+    EXPECT_EQ(r.exit_code, 1) << bad << ": " << r.out;
+    EXPECT_NE(r.out.find("must be"), std::string::npos) << bad << ": " << r.out;
+    EXPECT_EQ(r.out.find("CT builtin:phantom"), std::string::npos) << bad << ": loaded the CT first";
+  }
+  EXPECT_FALSE(fs::exists(dir.path() / "out" / "qa")) << "a refused QA wrote a report";
+  const CliRun missing = shell(quoted(LFTRACK_BIN_PATH) + " qa daily --scene no-such-room.yaml", dir.path());
+  EXPECT_EQ(missing.exit_code, 1) << missing.out;
+}
+
+TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
+  TempDir dir;
+  const fs::path fields = qa_phantom_fields(LFTRACK_BIN_PATH, qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << contents(dir.path() / "precompute.txt");
+  const std::string scene = quoted(qa_phantom_scene().string());
+  const std::string lf = " --lf-dir " + quoted(fields.string());
+  const CliRun before = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
+                              dir.path(), "before.txt");
+  EXPECT_NE(before.out.find("[warn] daily QA: none of this room passed today"), std::string::npos)
+      << before.out;
+
+  const CliRun qa = shell(quoted(LFTRACK_BIN_PATH) + " qa daily --scene " + scene + lf, dir.path(), "qa.txt");
+  ASSERT_EQ(qa.exit_code, 0) << qa.out;
+  for (const char* line :
+       {"beam: pass", "latency: pass", "not checked: ", "daily QA PASSED: out/qa/qa-daily-"})
+    EXPECT_NE(qa.out.find(line), std::string::npos) << line << " missing:\n" << qa.out;
+  int reports = 0;
+  for (const auto& e : fs::directory_iterator(dir.path() / "out" / "qa"))
+    reports += e.path().extension() == ".json" || e.path().extension() == ".html";
+  EXPECT_EQ(reports, 2);
+
+  // Any scene of the same room (the built-in patient on the same detectors and couch) now sees it.
+  const CliRun after = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
+                             dir.path(), "after.txt");
+  EXPECT_NE(after.out.find("[ ok ] daily QA: passed today: out/qa/qa-daily-"), std::string::npos)
+      << after.out;
+}
+
+}  // namespace
+}  // namespace lftrack::test
