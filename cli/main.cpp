@@ -62,10 +62,11 @@ int main(int argc, char** argv) {
   const Command calibrate_detector = add_calibrate_detector_command(calibrate);
   const Command rt_check = add_rt_check_command(&app);
   const Command commission = add_commission_command(&app, argc, argv);
-  CLI::App* qa =
-      app.add_subcommand("qa", "Quality assurance a physicist runs: the daily QA on the room's phantom");
+  CLI::App* qa = app.add_subcommand(
+      "qa", "Quality assurance a physicist runs: the daily QA and the end-to-end test on the room's phantom");
   qa->require_subcommand(1);
   const Command qa_daily = add_qa_daily_command(qa);
+  const Command qa_e2e = add_qa_e2e_command(qa);
 
   try {
     app.parse(argc, argv);
@@ -136,6 +137,8 @@ int main(int argc, char** argv) {
       status = commission();
     else if (qa->got_subcommand("daily"))
       status = qa_daily();
+    else if (qa->got_subcommand("e2e"))
+      status = qa_e2e();
     if (!status.ok()) {
       // A message may quote what a file or a user wrote (a DICOM name, a path): control characters
       // other than line breaks are shown as '?', never sent to the terminal.

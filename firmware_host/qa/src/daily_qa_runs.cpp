@@ -112,6 +112,11 @@ Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cyc
   return run(standing_still(scene, tracking::Vector6d::Zero()), so, pool);
 }
 
+Result<RecordedRun> run_tracking(const host::PreparedScene& scene, int cycles, const DailyQaOptions& options,
+                                 tracking::ThreadPool* pool) {
+  return run(scene, session_options(options, cycles, true), pool);
+}
+
 Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
                                    const DailyQaOptions& options, tracking::ThreadPool* pool) {
   std::error_code ec;

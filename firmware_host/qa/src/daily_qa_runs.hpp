@@ -25,6 +25,9 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
 Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,
                                        int dark_to, const DailyQaOptions& options,
                                        tracking::ThreadPool* pool);
+// `scene` as it is (its own set-up error and motion), `cycles` on the simulated clock.
+Result<RecordedRun> run_tracking(const host::PreparedScene& scene, int cycles, const DailyQaOptions& options,
+                                 tracking::ThreadPool* pool);
 // `scene` standing still on the real clock with a control socket, asked `status` once it tracks.
 Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
                                    const DailyQaOptions& options, tracking::ThreadPool* pool);

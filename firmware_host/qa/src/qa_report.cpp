@@ -29,7 +29,7 @@ nlohmann::json pose_json(const tracking::Vector6d& v) {
 
 nlohmann::json to_json(const DailyQaReport& r) {
   nlohmann::json j;
-  j["kind"] = "lftrack daily QA";
+  j["kind"] = r.kind == "e2e" ? "lftrack e2e QA" : "lftrack daily QA";
   j["scene"] = r.scene_name;
   j["scene_file"] = r.scene_source;
   j["room_fingerprint"] = r.room_fingerprint;
@@ -56,6 +56,7 @@ nlohmann::json to_json(const DailyQaReport& r) {
                             {"passed", o.passed},
                             {"why", o.why}});
   j["not_checked"] = r.not_checked;
+  if (r.kind == "e2e") j["marker_error_mm"] = r.marker_error_mm;
   return j;
 }
 
@@ -134,25 +135,60 @@ std::string offset_picture(const DailyQaReport& r) {
   return s.str();
 }
 
+// The hidden marker's error in each beam-on cycle, the tolerance as a line.
+std::string marker_picture(const DailyQaReport& r) {
+  const int width = 640, height = 220, left = 40, top = 20, bottom = 40;
+  double scale = 2 * r.tolerance_mm;
+  for (double e : r.marker_error_mm) scale = std::max(scale, std::min(e, 20.0));
+  const double plot_w = width - left - 10, plot_h = height - top - bottom;
+  auto y = [&](double mm) { return top + plot_h * (1 - std::min(mm, scale) / scale); };
+  std::ostringstream s;
+  s << "<svg xmlns='http://www.w3.org/2000/svg' width='" << width << "' height='" << height
+    << "' role='img' aria-label='hidden marker error'><polyline fill='none' stroke='#27a' points='";
+  const std::size_t n = r.marker_error_mm.size();
+  for (std::size_t i = 0; i < n; ++i)
+    s << fmt::format(
+        "{:.1f},{:.1f} ",
+        left + plot_w * static_cast<double>(i) / static_cast<double>(std::max<std::size_t>(n - 1, 1)),
+        y(r.marker_error_mm[i]));
+  s << "'/>";
+  s << fmt::format("<line x1='{}' y1='{:.1f}' x2='{}' y2='{:.1f}' stroke='#c00' stroke-dasharray='4 3'/>",
+                   left, y(r.tolerance_mm), width - 10, y(r.tolerance_mm));
+  s << fmt::format("<text x='{}' y='{:.1f}' font-size='11' fill='#c00'>tolerance {} mm</text>", width - 130,
+                   y(r.tolerance_mm) - 4, r.tolerance_mm);
+  s << fmt::format("<text x='2' y='{}' font-size='11'>{:.2f} mm</text>", top + 4, scale);
+  s << fmt::format("<line x1='{}' y1='{}' x2='{}' y2='{}' stroke='#333'/>", left, top + plot_h, width - 10,
+                   top + plot_h);
+  s << fmt::format(
+      "<text x='{}' y='{}' font-size='11'>beam-on cycles ({}); the hidden marker's error</text></svg>", left,
+      height - 6, n);
+  return s.str();
+}
+
 std::string to_html(const DailyQaReport& r) {
   std::ostringstream h;
-  h << "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>lftrack daily QA "
-    << escaped(r.date_utc)
+  const bool e2e = r.kind == "e2e";
+  h << "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>lftrack "
+    << (e2e ? "end-to-end" : "daily") << " QA " << escaped(r.date_utc)
     << "</title><style>body{font-family:sans-serif;margin:2em}td,th{padding:4px 8px;border-bottom:1px solid "
        "#ddd;"
        "text-align:left;vertical-align:top}.pass{color:#175}.fail{color:#b00;font-weight:bold}</style></"
        "head><body>";
-  h << "<h1>Daily QA: <span class='" << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
+  h << "<h1>" << (e2e ? "End-to-end" : "Daily") << " QA: <span class='"
+    << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
   h << "<p>" << escaped(r.scene_name) << " (" << escaped(r.scene_source) << "), started "
     << escaped(r.started_utc) << "</p>";
   h << "<table><tr><th>check</th><th>result</th><th>tolerance</th><th>measured</th></tr>";
   for (const QaCheck& c : r.checks)
     h << "<tr><td>" << escaped(c.name) << "</td>" << result_cell(c.passed, c.why) << "<td>"
       << escaped(c.tolerance) << "</td><td>" << escaped(c.measured) << "</td></tr>";
-  h << "</table><h2>Offset test</h2>" << offset_picture(r);
-  h << "<table><tr><th>#</th><th>shift</th><th>alignment found</th><th>alignment error</th><th>couch "
-       "error</th>"
-       "<th>result</th></tr>";
+  h << "</table>";
+  if (e2e) h << "<h2>The hidden marker</h2>" << marker_picture(r);
+  if (!r.offsets.empty()) h << "<h2>Offset test</h2>" << offset_picture(r);
+  if (!r.offsets.empty())
+    h << "<table><tr><th>#</th><th>shift</th><th>alignment found</th><th>alignment error</th><th>couch "
+         "error</th>"
+         "<th>result</th></tr>";
   for (std::size_t i = 0; i < r.offsets.size(); ++i) {
     const OffsetResult& o = r.offsets[i];
     auto pose = [](const tracking::Vector6d& v) {
@@ -165,7 +201,7 @@ std::string to_html(const DailyQaReport& r) {
       << "</td><td>" << fmt::format("{:.3f} mm, {:.3f} deg", o.couch_error_mm, o.couch_error_deg) << "</td>"
       << result_cell(o.passed, o.why) << "</tr>";
   }
-  h << "</table>";
+  if (!r.offsets.empty()) h << "</table>";
   if (!r.not_checked.empty()) {
     h << "<h2>Not checked</h2><ul>";
     for (const std::string& n : r.not_checked) h << "<li>" << escaped(n) << "</li>";
@@ -219,8 +255,9 @@ Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const f
   const std::string json = to_json(report).dump(2) + "\n";
   const std::string html = to_html(report);
   for (int n = 1; n < 1000; ++n) {
+    const std::string prefix = report.kind == "e2e" ? "qa-e2e" : "qa-daily";
     const std::string base =
-        n == 1 ? fmt::format("qa-daily-{}", stamp) : fmt::format("qa-daily-{}-{}", stamp, n);
+        n == 1 ? fmt::format("{}-{}", prefix, stamp) : fmt::format("{}-{}-{}", prefix, stamp, n);
     WrittenReport w{folder / (base + ".json"), folder / (base + ".html")};
     if (fs::exists(w.html, ec) || fs::is_symlink(w.html, ec)) continue;
     auto made = write_new(w.json, json);

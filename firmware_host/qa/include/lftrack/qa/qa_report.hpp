@@ -1,7 +1,8 @@
 #pragma once
 // The daily QA's dated report (issue 59): JSON for programs, HTML with a picture for the
 // physicist, both in the room's QA folder (out/qa by default, beside out/run's journals), named
-// qa-daily-DATE-TIME(.json|.html), never replacing an earlier one. `lftrack run` looks there for
+// qa-daily-DATE-TIME(.json|.html) (qa-e2e-... for the end-to-end test), never replacing an earlier
+// one. `lftrack run` looks there for
 // today's passed QA of its scene.
 
 #include <filesystem>
@@ -18,7 +19,8 @@ struct WrittenReport {
   std::filesystem::path json, html;
 };
 
-// Writes both files into `folder` (created); a name taken already gets -2, -3, ...
+// Writes both files into `folder` (created); a name taken already gets -2, -3, ... (daily and
+// end-to-end reports alike: report.kind).
 Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const std::filesystem::path& folder);
 
 // The newest report in `folder` for the room with `fingerprint` (host::room_fingerprint) dated `date_utc`
