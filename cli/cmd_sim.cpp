@@ -244,16 +244,17 @@ Status run(const SimOptions& o) {
     // The start-up checks before the first beam: every reason at once, nothing built or moved.
     PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");
     // Today's daily QA of this room (issue 59; any scene of the same detectors and actuator), in
-    // the QA folder beside out/run: a warning, not a refusal, when none has passed.
+    // the QA folder beside out/run: without it a warning, or a refusal where the scene sets
+    // safety.require_daily_qa.
     const std::string today = qa::today_utc();
     if (auto passed =
             qa::passed_daily_qa(qa::kDefaultQaFolder, to_hex(room_fingerprint(prepared->scene)), today))
       checks.items.push_back({"daily QA", CheckResult::kPass, "passed today: " + passed->string()});
     else
-      checks.items.push_back({"daily QA", CheckResult::kWarn,
-                              "none of this room passed today (" + today + " UTC) in " +
-                                  std::string(qa::kDefaultQaFolder) +
-                                  ": lftrack qa daily --scene <the room's phantom scene>"});
+      checks.items.push_back(
+          {"daily QA", prepared->scene.require_daily_qa ? CheckResult::kFail : CheckResult::kWarn,
+           "none of this room passed today (" + today + " UTC) in " + std::string(qa::kDefaultQaFolder) +
+               ": lftrack qa daily --scene <the room's phantom scene>"});
     if (o.check || !checks.passed()) std::printf("pre-treatment checklist, %s:\n%s", prepared->scene.name.c_str(),
                                                   checks.checklist().c_str());
     if (!checks.passed())

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "qa_phantom_support.hpp"
@@ -53,11 +54,36 @@ TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
     reports += e.path().extension() == ".json" || e.path().extension() == ".html";
   EXPECT_EQ(reports, 2);
 
-  // Any scene of the same room (the built-in patient on the same detectors and couch) now sees it.
+  // The room's start-up checks now see it (any scene of the same detectors and actuator would).
   const CliRun after = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
                              dir.path(), "after.txt");
   EXPECT_NE(after.out.find("[ ok ] daily QA: passed today: out/qa/qa-daily-"), std::string::npos)
       << after.out;
+}
+
+// safety.require_daily_qa: without today's QA of the room, `run` refuses to start, saying why.
+TEST(DailyQaCli, ASceneThatRequiresTheDailyQaIsRefusedWithoutIt) {
+  TempDir dir;
+  const fs::path fields = qa_phantom_fields(LFTRACK_BIN_PATH, qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << contents(dir.path() / "precompute.txt");
+  std::string text = contents(qa_phantom_scene());
+  const std::string safety = "safety:\n";
+  ASSERT_NE(text.find(safety), std::string::npos);
+  text.replace(text.find(safety), safety.size(), "safety:\n  require_daily_qa: true\n");
+  std::ofstream(dir.path() / "strict.yaml") << text;
+  const CliRun r =
+      shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene strict.yaml --lf-dir " +
+                quoted(fields.string()),
+            dir.path());
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("[FAIL] daily QA: none of this room passed today"), std::string::npos) << r.out;
+  std::string bad = text;
+  bad.replace(bad.find("require_daily_qa: true"), 22, "require_daily_qa: sometimes");
+  std::ofstream(dir.path() / "bad.yaml") << bad;
+  const CliRun refused =
+      shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --scene bad.yaml", dir.path(), "bad.txt");
+  EXPECT_EQ(refused.exit_code, 1) << refused.out;
+  EXPECT_NE(refused.out.find("require_daily_qa"), std::string::npos) << refused.out;
 }
 
 }  // namespace

@@ -136,11 +136,12 @@ Status SceneParser::parse_loop(const YAML::Node& n, LoopSpec* loop) const {
 Status SceneParser::parse_safety(const YAML::Node& n, SafetyLimits* l) const {
   LFTRACK_RETURN_IF_ERROR(check_keys(
       n, "safety",
-      {"max_step_mm", "max_step_deg", "max_total_mm", "max_total_deg", "min_similarity",
-       "min_similarity_ratio", "max_ratio_disagreement", "max_frame_age_ms", "max_pair_skew_ms",
-       "readback_tolerance_mm", "readback_tolerance_deg", "beam_tolerance_mm", "beam_tolerance_deg",
-       "max_beam_withheld_s", "hold_after_failures", "fault_after_failures", "commissioning", "envelope_edge_mm",
-       "envelope_edge_deg", "max_view_shift_mm", "view_check_every"}));
+      {"max_step_mm",        "max_step_deg",          "max_total_mm",           "max_total_deg",
+       "min_similarity",     "min_similarity_ratio",  "max_ratio_disagreement", "max_frame_age_ms",
+       "max_pair_skew_ms",   "readback_tolerance_mm", "readback_tolerance_deg", "beam_tolerance_mm",
+       "beam_tolerance_deg", "max_beam_withheld_s",   "hold_after_failures",    "fault_after_failures",
+       "commissioning",      "envelope_edge_mm",      "envelope_edge_deg",      "max_view_shift_mm",
+       "view_check_every",   "require_daily_qa"}));
   // Each limit has a ceiling: a tracking correction beyond it is a new set-up for the therapist,
   // never a setting, so a value above it (a 1e9 typed for 10) is refused, not obeyed.
   struct Limit {

@@ -359,6 +359,8 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
     LFTRACK_RETURN_IF_ERROR(parse_safety(root["safety"], &scene.safety));
     scene.min_similarity_given = static_cast<bool>(root["safety"]["min_similarity"]);
     LFTRACK_RETURN_IF_ERROR(parse_verdict_checks(root["safety"], scene.envelope, &scene.verdict_checks));
+    if (const YAML::Node q = root["safety"]["require_daily_qa"])
+      LFTRACK_RETURN_IF_ERROR(boolean(q, "safety.require_daily_qa", &scene.require_daily_qa));
     if (const YAML::Node c = root["safety"]["commissioning"]) {
       std::string file;
       LFTRACK_RETURN_IF_ERROR(text(c, "safety.commissioning", &file));

@@ -236,6 +236,9 @@ struct Scene {
   // floors the verdict takes; empty: the measure's default floors, the scene not commissioned.
   std::string commissioning_file;
   VerdictChecksSpec verdict_checks;  // safety's keys for the verdict's own checks
+  // safety.require_daily_qa: `lftrack run` refuses to start unless today's daily QA of the room
+  // passed (lftrack qa daily); false: it warns.
+  bool require_daily_qa = false;
   ActuatorSpec actuator;
   MotionSpec motion;
 };
