@@ -35,6 +35,9 @@ Status run_qa_daily(const QaDailyOptions& o) {
     return invalid_argument("--tolerance-deg must be above 0 and at most 5 degrees");
   if (!(std::isfinite(o.latency_ms) && o.latency_ms >= 0 && o.latency_ms <= 10000))
     return invalid_argument("--latency-ms must be from 0 (the scene's period) to 10000 ms");
+  if (o.latency_cycles > 0 && o.latency_cycles < 20)
+    return invalid_argument("--latency-cycles must be 0 (not run: the QA fails) or at least 20");
+  LFTRACK_RETURN_IF_ERROR(qa::check_report_folder(o.out));
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
@@ -93,6 +96,7 @@ Status run_qa_e2e(const QaE2eOptions& o) {
     std::printf("%s\n", line.c_str());
     std::fflush(stdout);
   };
+  LFTRACK_RETURN_IF_ERROR(qa::check_report_folder(o.out));
   tracking::ThreadPool pool(o.scene.threads);
   auto prepared = load_prepared_scene(o.scene, &pool);
   if (!prepared.ok()) return prepared.status();
@@ -125,7 +129,7 @@ Command add_qa_e2e_command(CLI::App* parent) {
       ->capture_default_str();
   app->add_option("--cycles", o->cycles, "Cycles tracked (simulated clock)")
       ->capture_default_str()
-      ->check(CLI::Range(20, 1000000));
+      ->check(CLI::Range(100, 100000));
   app->add_option("--marker-mm", o->marker_mm,
                   "The hidden marker: x y z from the registration origin (room, mm)")
       ->expected(3);

@@ -20,7 +20,6 @@
 #include "lftrack/host/preflight.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_exposure.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/qa/qa_report.hpp"
@@ -52,6 +51,7 @@ struct SimOptions {
   std::string monitor;   // --monitor [ADDRESS:]PORT: the operator's page
   std::vector<std::string> monitor_origins;
   std::string monitor_token_file;
+  bool monitor_token_quiet = false;  // the token in its file only, not on standard output
   std::string igtl;      // --igtl [ADDRESS:]PORT: the OpenIGTLink server
   std::optional<std::uint64_t> chaos_seed;  // `lftrack sim --chaos SEED`: the chaos soak instead
   ChaosOptions chaos;
@@ -147,12 +147,18 @@ void print_summary(const LoopSummary& s) {
 
 // Where the watchers listen, on standard output (standard error with --json, which keeps standard
 // output for the summary), flushed at once: a script or a test starting lftrack reads the port.
-void announce_watchers(const LoopSession& session, bool json) {
+// --monitor-token-quiet (a service, whose output goes to the system journal): the token is named
+// by its file only.
+void announce_watchers(const LoopSession& session, bool json, bool token_quiet) {
   FILE* to = json ? stderr : stdout;
   if (const MonitorServer* m = session.monitor()) {
     std::fprintf(to, "monitor: %s (view only)\n", m->url().c_str());
-    std::fprintf(to, "monitor: operator token %s (also in %s, mode 0600); to act, open %s#token=%s\n",
-                 m->token().c_str(), m->token_file().c_str(), m->url().c_str(), m->token().c_str());
+    if (token_quiet)
+      std::fprintf(to, "monitor: operator token in %s (mode 0600); to act, open %s#token=<the token>\n",
+                   m->token_file().c_str(), m->url().c_str());
+    else
+      std::fprintf(to, "monitor: operator token %s (also in %s, mode 0600); to act, open %s#token=%s\n",
+                   m->token().c_str(), m->token_file().c_str(), m->url().c_str(), m->token().c_str());
   }
   if (const IgtlServer* i = session.igtl())
     std::fprintf(to, "igtl: OpenIGTLink server on port %d (TRANSFORM T_room_from_ct and Correction, STATUS)\n",
@@ -243,18 +249,7 @@ Status run(const SimOptions& o) {
   if (o.mode == SimOptions::Mode::kRun) {
     // The start-up checks before the first beam: every reason at once, nothing built or moved.
     PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");
-    // Today's daily QA of this room (issue 59; any scene of the same detectors and actuator), in
-    // the QA folder beside out/run: without it a warning, or a refusal where the scene sets
-    // safety.require_daily_qa.
-    const std::string today = qa::today_utc();
-    if (auto passed =
-            qa::passed_daily_qa(qa::kDefaultQaFolder, to_hex(room_fingerprint(prepared->scene)), today))
-      checks.items.push_back({"daily QA", CheckResult::kPass, "passed today: " + passed->string()});
-    else
-      checks.items.push_back(
-          {"daily QA", prepared->scene.require_daily_qa ? CheckResult::kFail : CheckResult::kWarn,
-           "none of this room passed today (" + today + " UTC) in " + std::string(qa::kDefaultQaFolder) +
-               ": lftrack qa daily --scene <the room's phantom scene>"});
+    checks.items.push_back(qa::daily_qa_item(prepared->scene));  // today's QA of the room (issue 59)
     if (o.check || !checks.passed()) std::printf("pre-treatment checklist, %s:\n%s", prepared->scene.name.c_str(),
                                                   checks.checklist().c_str());
     if (!checks.passed())
@@ -274,7 +269,7 @@ Status run(const SimOptions& o) {
     spdlog::info("{}: {} cycles at {} ms{}{}", prepared->scene.name, o.cycles, prepared->scene.loop.period_ms,
                  o.fast ? " on a simulated clock" : "",
                  so.terminal_operator ? "; keys: r resume, s stop, q quit" : "");
-  announce_watchers(**session, o.json);
+  announce_watchers(**session, o.json, o.monitor_token_quiet);
   const std::string journal = (*session)->journal_path().string();  // the file written, suffix included
   g_session.store(session->get());
   struct sigaction action {};
@@ -476,6 +471,10 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                   "Where the token is stored, mode 0600 (default " + o->journal_folder +
                       "/monitor-ADDRESS-PORT.token); removed at exit")
       ->check(not_empty())
+      ->needs(monitor);
+  app->add_flag(
+         "--monitor-token-quiet", o->monitor_token_quiet,
+         "Name the token by its file only, never print it (a service whose output the system journal keeps)")
       ->needs(monitor);
   app->add_option("--igtl", o->igtl,
                   "Serve the registered pose over OpenIGTLink on [ADDRESS:]PORT (3D Slicer's OpenIGTLinkIF "

@@ -16,7 +16,9 @@ priority=80
 cpus=$(seq -s, 0 $(($(nproc) - 1)))
 threads=$(nproc)
 out=$(mktemp -d)
-trap 'kill "$load" 2>/dev/null || true; rm -rf "$out"' EXIT
+load=""
+cyclictest=""
+trap 'kill $load $cyclictest 2>/dev/null || true; rm -rf "$out"' EXIT
 command -v cyclictest >/dev/null || { echo "cyclictest is missing: scripts/setup.sh installs rt-tests" >&2; exit 1; }
 command -v stress-ng >/dev/null || { echo "stress-ng is missing: scripts/setup.sh installs it" >&2; exit 1; }
 

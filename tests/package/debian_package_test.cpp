@@ -37,14 +37,20 @@ class DebianPackage : public ::testing::Test {
     const fs::path build_dir = fs::path(LFTRACK_BIN_PATH).parent_path().parent_path();
     const fs::path out = test_cache_dir() / "deb";
     fs::create_directories(out);
-    const fs::path stamp = out / "made";
-    const std::string stale =
-        "[ ! -f " + quoted(stamp.string()) + " ] || [ -n \"$(find " + quoted(LFTRACK_BIN_PATH) + " " +
-        quoted((source / "debian").string()) + " " + quoted((source / "scripts").string()) + " " +
-        quoted((source / "scenes").string()) + " -newer " + quoted(stamp.string()) + " | head -n 1)\" ]";
-    const std::string make =
-        "rm -f " + quoted(stamp.string()) + " && bash " + quoted((source / "scripts/make-deb.sh").string()) +
-        " " + quoted(build_dir.string()) + " " + quoted(out.string()) + " && touch " + quoted(stamp.string());
+    // "making" is touched before the package is made and renamed "made" after: a program rebuilt
+    // while it was made is newer than the stamp, and the next test makes the package again.
+    const fs::path stamp = out / "made", making = out / "making";
+    std::string inputs;
+    for (const fs::path& p :
+         {fs::path(LFTRACK_BIN_PATH), source / "debian", source / "scripts", source / "scenes",
+          source / "docs", source / "CMakeLists.txt", source / "README.md"})
+      inputs += " " + quoted(p.string());
+    const std::string stale = "[ ! -f " + quoted(stamp.string()) + " ] || [ -n \"$(find" + inputs +
+                              " -newer " + quoted(stamp.string()) + " | head -n 1)\" ]";
+    const std::string make = "rm -f " + quoted(stamp.string()) + " && touch " + quoted(making.string()) +
+                             " && bash " + quoted((source / "scripts/make-deb.sh").string()) + " " +
+                             quoted(build_dir.string()) + " " + quoted(out.string()) + " && mv " +
+                             quoted(making.string()) + " " + quoted(stamp.string());
     make_ = new CliRun(shell("flock " + quoted((test_cache_dir() / "deb.lock").string()) + " sh -c " +
                                  quoted("if " + stale + "; then " + make + "; else echo reused; fi"),
                              dir_->path(), "make-deb.txt"));
@@ -109,7 +115,8 @@ TEST_F(DebianPackage, HoldsTheProgramScenesManPagesUnitsUserAndConfiguration) {
         "usr/share/man/man1/lftrack.1.gz", "usr/share/man/man1/lftrack-run.1.gz",
         "usr/share/man/man1/lftrack-rt-check.1.gz", "usr/share/doc/lftrack/copyright",
         "lib/systemd/system/lftrack@.service", "lib/systemd/system/lftrack-precompute@.service",
-        "usr/lib/sysusers.d/lftrack.conf", "usr/lib/tmpfiles.d/lftrack.conf", "etc/lftrack/qa-phantom.yaml"})
+        "lib/systemd/system/lftrack-qa@.service", "usr/lib/sysusers.d/lftrack.conf",
+        "usr/lib/tmpfiles.d/lftrack.conf", "etc/lftrack/qa-phantom.yaml"})
     EXPECT_TRUE(fs::exists(*root_ / file)) << file << " is not in the package";
   // The configuration is a conffile (an upgrade keeps the physicist's edits).
   const CliRun conffiles =
@@ -125,7 +132,7 @@ TEST_F(DebianPackage, TheUnitsVerifyAndCarryTheRealTimeAndHardeningSettings) {
   const std::string unit = contents(*root_ / "lib/systemd/system/lftrack@.service");
   for (const char* setting :
        {"User=lftrack", "CPUSchedulingPolicy=fifo", "LimitRTPRIO=99", "LimitMEMLOCK=infinity", "Restart=no",
-        "ProtectSystem=strict", "ReadWritePaths=/var/lib/lftrack", "NoNewPrivileges=yes",
+        "ProtectSystem=strict", "ReadWritePaths=/var/lib/lftrack/%i", "NoNewPrivileges=yes",
         "DevicePolicy=closed", "DeviceAllow=char-video4linux rw", "AF_CAN", "--scene /etc/lftrack/%i.yaml",
         "--control /run/lftrack/%i/"})
     EXPECT_NE(unit.find(setting), std::string::npos) << setting << " missing from lftrack@.service";
@@ -134,7 +141,7 @@ TEST_F(DebianPackage, TheUnitsVerifyAndCarryTheRealTimeAndHardeningSettings) {
   // it ignores, so any message it prints is a failure too.
   const fs::path units = dir_->path() / "units";
   fs::create_directories(units);
-  for (const char* name : {"lftrack@.service", "lftrack-precompute@.service"}) {
+  for (const char* name : {"lftrack@.service", "lftrack-precompute@.service", "lftrack-qa@.service"}) {
     std::string text = contents(*root_ / "lib/systemd/system" / name);
     text = std::regex_replace(text, std::regex("/usr/bin/lftrack"), (*root_ / "usr/bin/lftrack").string());
     std::ofstream(units / name) << text;

@@ -5,8 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <string>
 
 #include "qa_phantom_support.hpp"
@@ -41,18 +44,33 @@ TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
   const std::string lf = " --lf-dir " + quoted(fields.string());
   const CliRun before = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
                               dir.path(), "before.txt");
-  EXPECT_NE(before.out.find("[warn] daily QA: none of this room passed today"), std::string::npos)
-      << before.out;
+  EXPECT_NE(before.out.find("[warn] daily QA: none of this room today"), std::string::npos) << before.out;
 
-  const CliRun qa = shell(quoted(LFTRACK_BIN_PATH) + " qa daily --scene " + scene + lf, dir.path(), "qa.txt");
+  // The latency chain runs on the real clock with the scene's real-time set-up (enforce): root
+  // here, or the limits the unit grants.
+  if (::geteuid() != 0)
+    GTEST_SKIP() << "the QA's latency chain needs the real-time grants (root or the unit's limits)";
+  // A host starved by its neighbours can overrun a cycle (the latency check's reason); then the
+  // QA is run again, twice at most. Any other failure is the test's.
+  CliRun qa;
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    qa = shell(quoted(LFTRACK_BIN_PATH) + " qa daily --scene " + scene + lf, dir.path(), "qa.txt");
+    const bool starved =
+        qa.exit_code == 1 && qa.out.find("latency: FAIL") != std::string::npos &&
+        qa.out.find("offset: FAIL") == std::string::npos && qa.out.find("beam: FAIL") == std::string::npos &&
+        (qa.out.find("overran") != std::string::npos || qa.out.find("p99") != std::string::npos);
+    if (!starved) break;
+    std::cout << "starved host, the QA again: " << qa.out << "\n";
+  }
   ASSERT_EQ(qa.exit_code, 0) << qa.out;
   for (const char* line :
        {"beam: pass", "latency: pass", "not checked: ", "daily QA PASSED: out/qa/qa-daily-"})
     EXPECT_NE(qa.out.find(line), std::string::npos) << line << " missing:\n" << qa.out;
+  EXPECT_NE(qa.out.find("real-time set-up: memory locked, SCHED_FIFO, pinned"), std::string::npos) << qa.out;
   int reports = 0;
   for (const auto& e : fs::directory_iterator(dir.path() / "out" / "qa"))
     reports += e.path().extension() == ".json" || e.path().extension() == ".html";
-  EXPECT_EQ(reports, 2);
+  EXPECT_GE(reports, 2);
 
   // The room's start-up checks now see it (any scene of the same detectors and actuator would).
   const CliRun after = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
@@ -76,7 +94,7 @@ TEST(DailyQaCli, ASceneThatRequiresTheDailyQaIsRefusedWithoutIt) {
                 quoted(fields.string()),
             dir.path());
   EXPECT_EQ(r.exit_code, 1) << r.out;
-  EXPECT_NE(r.out.find("[FAIL] daily QA: none of this room passed today"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("[FAIL] daily QA: none of this room today"), std::string::npos) << r.out;
   std::string bad = text;
   bad.replace(bad.find("require_daily_qa: true"), 22, "require_daily_qa: sometimes");
   std::ofstream(dir.path() / "bad.yaml") << bad;

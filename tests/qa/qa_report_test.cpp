@@ -21,7 +21,9 @@ DailyQaReport a_report(bool passed, const std::string& room = "00112233445566778
   r.scene_source = "/etc/lftrack/qa-phantom.yaml";
   r.room_fingerprint = room;
   r.started_utc = "2026-11-30T06:30:00Z";
-  r.date_utc = "2026-11-30";
+  r.started_local = "2026-11-30T07:30:00+0100";
+  r.date = "2026-11-30";
+  r.standard = true;
   r.tolerance_mm = 0.5;
   r.tolerance_deg = 0.2;
   OffsetResult o;
@@ -54,7 +56,8 @@ TEST(QaReport, IsWrittenAsJsonAndHtmlBesideEarlierReportsNeverOverThem) {
   std::ifstream in(first->json);
   const nlohmann::json j = nlohmann::json::parse(in);
   EXPECT_EQ(j["passed"], true);
-  EXPECT_EQ(j["date_utc"], "2026-11-30");
+  EXPECT_EQ(j["date"], "2026-11-30");
+  EXPECT_EQ(j["standard"], true);
   EXPECT_DOUBLE_EQ(j["offsets"][0]["registration_error_mm"].get<double>(), 0.04);
   const std::string html = test::contents(first->html);
   EXPECT_NE(html.find("PASSED"), std::string::npos);
@@ -63,24 +66,49 @@ TEST(QaReport, IsWrittenAsJsonAndHtmlBesideEarlierReportsNeverOverThem) {
   EXPECT_EQ(html.find("QA phantom <b>"), std::string::npos);
 }
 
-TEST(QaReport, RunFindsOnlyAPassedReportOfItsRoomFromToday) {
+TEST(QaReport, RunCountsTheNewestStandardReportOfItsRoomFromToday) {
   test::TempDir dir;
   const fs::path qa = dir.path() / "qa";
   const std::string room = "00112233445566778899aabbccddeeff";
-  EXPECT_FALSE(passed_daily_qa(qa, room, "2026-11-30")) << "no folder: nothing";
+  auto status = [&](const std::string& date = "2026-11-30") { return daily_qa_status(qa, room, date); };
+  EXPECT_FALSE(status().passed) << "no folder: nothing";
+  EXPECT_NE(status().detail.find("none of this room today"), std::string::npos) << status().detail;
   ASSERT_TRUE(write_daily_qa_report(a_report(false), qa).ok());
-  EXPECT_FALSE(passed_daily_qa(qa, room, "2026-11-30")) << "a failed QA does not count";
-  ASSERT_TRUE(write_daily_qa_report(a_report(true, "ffffffffffffffffffffffffffffffff"), qa).ok());
-  EXPECT_FALSE(passed_daily_qa(qa, room, "2026-11-30")) << "another room's QA does not count";
+  EXPECT_FALSE(status().passed) << "a failed QA does not count";
+  DailyQaReport other = a_report(true, "ffffffffffffffffffffffffffffffff");
+  other.started_utc = "2026-11-30T06:40:00Z";
+  ASSERT_TRUE(write_daily_qa_report(other, qa).ok());
+  EXPECT_FALSE(status().passed) << "another room's QA does not count";
+  // Files that are no report of ours are skipped, not fatal: garbage, wrong types, a folder, a link.
   std::ofstream(qa / "qa-daily-garbage.json") << "{ not json";
   std::ofstream(qa / "qa-daily-array.json") << "[1, 2]";
-  auto good = write_daily_qa_report(a_report(true), qa);
+  std::ofstream(qa / "qa-daily-types.json") << R"({"kind": 1, "passed": "yes", "date": 20261130})";
+  fs::create_directories(qa / "qa-daily-folder.json");
+  DailyQaReport good_report = a_report(true);
+  good_report.started_utc = "2026-11-30T06:50:00Z";
+  auto good = write_daily_qa_report(good_report, qa);
   ASSERT_TRUE(good.ok());
-  const auto found = passed_daily_qa(qa, room, "2026-11-30");
-  ASSERT_TRUE(found.has_value());
-  EXPECT_EQ(*found, good->json);
-  EXPECT_FALSE(passed_daily_qa(qa, room, "2026-12-01")) << "yesterday's QA does not count today";
-  EXPECT_EQ(today_utc().size(), 10u);
+  fs::create_symlink(good->json, qa / "qa-daily-link.json");
+  EXPECT_TRUE(status().passed) << status().detail;
+  EXPECT_EQ(status().file, good->json);
+  EXPECT_FALSE(status("2026-12-01").passed) << "yesterday's QA does not count today";
+  // A pass with looser settings than the standard QA does not count.
+  DailyQaReport loose = a_report(true);
+  loose.started_utc = "2026-11-30T07:00:00Z";
+  loose.standard = false;
+  ASSERT_TRUE(write_daily_qa_report(loose, qa).ok());
+  EXPECT_FALSE(status().passed);
+  EXPECT_NE(status().detail.find("looser settings"), std::string::npos) << status().detail;
+  // The newest QA decides: a pass, then a failed re-run, is a failed day.
+  DailyQaReport again = a_report(true);
+  again.started_utc = "2026-11-30T08:00:00Z";
+  ASSERT_TRUE(write_daily_qa_report(again, qa).ok());
+  EXPECT_TRUE(status().passed) << status().detail;
+  DailyQaReport failed = a_report(false);
+  failed.started_utc = "2026-11-30T09:00:00Z";
+  ASSERT_TRUE(write_daily_qa_report(failed, qa).ok());
+  EXPECT_FALSE(status().passed) << "a newer failed QA overrides an earlier pass";
+  EXPECT_NE(status().detail.find("newest QA of the room today failed"), std::string::npos) << status().detail;
 }
 
 }  // namespace

@@ -37,20 +37,25 @@ inline std::filesystem::path qa_phantom_fields(const std::string& program, const
                                                const std::filesystem::path& log_dir) {
   const std::filesystem::path fields = test_cache_dir() / "qa-phantom-fields";
   std::filesystem::create_directories(fields);
-  const CliRun r = shell(
-      quoted(program) + " -q precompute --scene " + quoted(scene.string()) + " -o " + quoted(fields.string()),
-      log_dir, "precompute.txt");
+  // One builder at a time (several test programs want these fields at once); the others wait and
+  // find them up to date.
+  const CliRun r = shell("flock " + quoted((test_cache_dir() / "qa-phantom-fields.lock").string()) + " " +
+                             quoted(program) + " -q precompute --scene " + quoted(scene.string()) + " -o " +
+                             quoted(fields.string()),
+                         log_dir, "precompute.txt");
   if (r.exit_code != 0) return {};
   // Readable by the unprivileged user the service tests run as.
   std::error_code ignored;
   for (auto p = fields; p != p.root_path() && p != test_cache_dir().parent_path(); p = p.parent_path())
     std::filesystem::permissions(p, std::filesystem::perms::others_read | std::filesystem::perms::others_exec,
                                  std::filesystem::perm_options::add, ignored);
-  for (const auto& entry : std::filesystem::recursive_directory_iterator(fields))
+  std::error_code walk;
+  for (std::filesystem::recursive_directory_iterator it(fields, walk), end; !walk && it != end;
+       it.increment(walk))
     std::filesystem::permissions(
-        entry.path(),
+        it->path(),
         std::filesystem::perms::others_read |
-            (entry.is_directory() ? std::filesystem::perms::others_exec : std::filesystem::perms::none),
+            (it->is_directory(ignored) ? std::filesystem::perms::others_exec : std::filesystem::perms::none),
         std::filesystem::perm_options::add, ignored);
   return fields;
 }

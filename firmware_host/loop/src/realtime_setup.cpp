@@ -11,6 +11,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <string>
+#include <vector>
 
 namespace lftrack::host {
 
@@ -116,17 +118,27 @@ Result<RealtimeReport> check_realtime_setup(const RealtimeSpec& spec) {
 }
 
 Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
-  // Enforced: every missing grant named at once, before anything is applied (one start that
-  // fails tells the operator all there is to change); a step the limits allow may still fail
-  // below, and says so.
-  if (spec.enforce) LFTRACK_RETURN_IF_ERROR(check_realtime_setup(spec).status());
   RealtimeReport report;
+  // Enforced: every grant the limits refuse is named together, so one refused start tells the
+  // operator all there is to change. Memory is judged by trying: a finite RLIMIT_MEMLOCK may hold
+  // the whole process.
+  std::vector<std::string> refused;
+  if (spec.enforce) {
+    RealtimeSpec look = spec;
+    look.enforce = false;
+    if (auto check = check_realtime_setup(look); check.ok())
+      for (const std::string& w : check->warnings)
+        if (w.rfind("mlockall", 0) != 0) refused.push_back(w);
+  }
   auto failed = [&](const std::string& what) -> Status {
-    if (spec.enforce)
-      return failed_precondition("real-time set-up (loop.realtime.mode: enforce): " + what + "; " +
-                                 remedy(spec));
-    report.warnings.push_back(what);
-    return {};
+    if (!spec.enforce) {
+      report.warnings.push_back(what);
+      return {};
+    }
+    std::string all = what;
+    for (const std::string& r : refused) all += "; " + r;
+    return failed_precondition("real-time set-up (loop.realtime.mode: enforce): " + all + "; " +
+                               remedy(spec));
   };
   if (::mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
     report.memory_locked = true;
@@ -138,11 +150,21 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
                (memlock_granted(memlock) ? "the limit allows it, so the host has too little memory to lock"
                                          : memlock_missing(memlock))));
   }
+  if (!refused.empty()) {
+    const std::string first = refused.front();
+    refused.erase(refused.begin());
+    return failed(first);
+  }
   sched_param param{};
   param.sched_priority = spec.priority;
-  if (const int e = ::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &param); e == 0) {
+  // A process started with the reset-on-fork flag (systemd's CPUSchedulingResetOnFork=) keeps it:
+  // without CAP_SYS_NICE the kernel refuses a change that would clear it.
+  const int current = ::sched_getscheduler(0);
+  const int keep = current >= 0 ? (current & SCHED_RESET_ON_FORK) : 0;
+  if (::sched_setscheduler(0, SCHED_FIFO | keep, &param) == 0) {
     report.fifo = true;
   } else {
+    const int e = errno;
     const rlimit rtprio = current_limit(RLIMIT_RTPRIO);
     LFTRACK_RETURN_IF_ERROR(failed(
         "SCHED_FIFO priority " + std::to_string(spec.priority) + " refused (" + std::strerror(e) + "): " +
@@ -171,21 +193,22 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
 }
 
 bool lower_current_thread_priority(int below) {
-  int policy = 0;
+  const int policy = ::sched_getscheduler(0);
   sched_param param{};
-  if (pthread_getschedparam(pthread_self(), &policy, &param) != 0) return false;
-  if (policy != SCHED_FIFO && policy != SCHED_RR) return true;
+  if (policy < 0 || ::sched_getparam(0, &param) != 0) return false;
+  const int base = policy & ~SCHED_RESET_ON_FORK;
+  if (base != SCHED_FIFO && base != SCHED_RR) return true;
   param.sched_priority = std::max(1, param.sched_priority - below);
-  return pthread_setschedparam(pthread_self(), policy, &param) == 0;
+  return ::sched_setscheduler(0, policy, &param) == 0;  // the reset-on-fork flag kept (see above)
 }
 
 bool make_current_thread_best_effort() {
-  int policy = 0;
+  const int policy = ::sched_getscheduler(0);
+  if (policy < 0) return false;
+  if ((policy & ~SCHED_RESET_ON_FORK) == SCHED_OTHER) return true;
   sched_param param{};
-  if (pthread_getschedparam(pthread_self(), &policy, &param) != 0) return false;
-  if (policy == SCHED_OTHER) return true;
   param.sched_priority = 0;
-  return pthread_setschedparam(pthread_self(), SCHED_OTHER, &param) == 0;
+  return ::sched_setscheduler(0, SCHED_OTHER | (policy & SCHED_RESET_ON_FORK), &param) == 0;
 }
 
 }  // namespace lftrack::host

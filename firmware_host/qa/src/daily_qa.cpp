@@ -3,14 +3,15 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <ctime>
 
 #include "daily_qa_runs.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/loop/tracking_states.hpp"
+#include "lftrack/qa/qa_time.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::qa {
 namespace {
@@ -42,18 +43,6 @@ std::string shift_text(const Vector6d& v) {
                      degrees(v(3)), degrees(v(4)), degrees(v(5)));
 }
 
-// Now in UTC: the ISO 8601 time and the date it counts for.
-void utc_now(std::string* iso, std::string* date) {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  ::gmtime_r(&now, &tm);
-  char text[64];
-  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  *iso = text;
-  std::strftime(text, sizeof text, "%Y-%m-%d", &tm);
-  *date = text;
-}
-
 // One shift's run judged: the alignment's registration against the shift, the couch's read-back
 // against the move that undoes it, and the last registration against nothing left to correct.
 OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const DailyQaOptions& o) {
@@ -78,6 +67,7 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
   r.couch_error_mm = translation_mm(r.couch_moved - shift);
   r.couch_error_deg = largest_rotation_deg(r.couch_moved - shift);
   r.final_offset_mm = translation_mm(from(last.pose_delta));
+  const double final_offset_deg = largest_rotation_deg(from(last.pose_delta));
   const bool held = run.summary.holds > 0 || run.summary.faults > 0;
   if (r.registration_error_mm > o.tolerance_mm || r.registration_error_deg > o.tolerance_deg)
     r.why = fmt::format("the alignment found {} for a shift of {}: off by {:.2f} mm, {:.2f} deg",
@@ -87,8 +77,13 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
     r.why = fmt::format("the couch moved {} in {} cycles to undo {}: off by {:.2f} mm, {:.2f} deg",
                         shift_text(r.couch_moved), run.records.size(), shift_text(shift), r.couch_error_mm,
                         r.couch_error_deg);
+  // The phantom back in place: judged by the last registration's translation. Its rotation is
+  // reported, not judged: one tracking registration's rotation reading scatters by up to 0.25
+  // degree on the QA phantom (the rotations a vertebra constrains weakly: issue 57), and the
+  // alignment and the couch's read-back above already judge the rotations.
   else if (r.final_offset_mm > o.tolerance_mm)
-    r.why = fmt::format("after the couch's move the phantom is still {:.2f} mm off", r.final_offset_mm);
+    r.why = fmt::format("after the couch's move the phantom is still {:.2f} mm, {:.2f} deg off",
+                        r.final_offset_mm, final_offset_deg);
   else if (held)
     r.why = "the loop held: " + run.summary.ended;
   r.passed = r.why.empty();
@@ -119,37 +114,55 @@ QaCheck offset_check(const std::vector<OffsetResult>& offsets, const DailyQaOpti
   return c;
 }
 
-// The detectors dark in [dark_from, dark_to): a HOLD, the beam off in every HOLD cycle and, with
-// no operator, in every cycle after it; on before the fault (the permit path is live).
-QaCheck beam_check(const RecordedRun& run, int dark_from) {
+// The detectors dark in [dark_from, dark_to): the beam on while tracking before the fault (the
+// path is live), no HOLD before it, the beam off in every dark cycle, a HOLD within
+// `hold_after` lost pairs (the scene's safety.hold_after_failures), and the beam never on again
+// without an operator (none is given).
+QaCheck beam_check(const RecordedRun& run, int dark_from, int hold_after) {
   QaCheck c;
   c.name = "beam";
-  c.tolerance =
-      "the beam permitted while tracking, withheld in every HOLD cycle when the detectors go dark, and "
-      "never permitted again without an operator";
-  int permitted_before = 0, hold_cycles = 0, permitted_in_hold = 0, permitted_after = 0;
+  c.tolerance = fmt::format(
+      "the beam permitted while tracking, off in every cycle from the detectors going dark, a "
+      "HOLD within {} lost pairs, and never permitted again without an operator",
+      hold_after);
+  int permitted_before = 0, permitted_dark = 0, hold_cycles = 0, permitted_after = 0;
   std::int64_t first_hold = -1;
   for (const JournalRecord& r : run.records) {
-    const bool hold = r.state == static_cast<std::uint8_t>(TrackingState::kHold);
-    if (hold && first_hold < 0) first_hold = static_cast<std::int64_t>(r.cycle);
+    const auto cycle = static_cast<std::int64_t>(r.cycle);
+    const bool hold = r.state == static_cast<std::uint8_t>(TrackingState::kHold) ||
+                      r.state == static_cast<std::uint8_t>(TrackingState::kFault);
+    if (hold && first_hold < 0) first_hold = cycle;
     if (hold) ++hold_cycles;
-    if (hold && r.beam_permit) ++permitted_in_hold;
-    if (first_hold >= 0 && r.beam_permit) ++permitted_after;
-    if (first_hold < 0 && static_cast<std::int64_t>(r.cycle) < dark_from && r.beam_permit) ++permitted_before;
+    if (!r.beam_permit) continue;
+    if (first_hold >= 0)
+      ++permitted_after;
+    else if (cycle >= dark_from)
+      ++permitted_dark;
+    else
+      ++permitted_before;
   }
-  c.measured = first_hold < 0
-                   ? fmt::format("beam on in {} cycles before the fault; no HOLD in {} cycles",
-                                 permitted_before, run.records.size())
-                   : fmt::format(
-                         "beam on in {} cycles before the fault; HOLD from cycle {}, {} HOLD cycles, beam on "
-                         "in {} of them and in {} cycles after the first",
-                         permitted_before, first_hold, hold_cycles, permitted_in_hold, permitted_after);
+  c.measured =
+      first_hold < 0
+          ? fmt::format("beam on in {} cycles before the fault; no HOLD in {} cycles", permitted_before,
+                        run.records.size())
+          : fmt::format(
+                "beam on in {} cycles before the fault and {} dark cycles before the HOLD; HOLD from "
+                "cycle {} (dark from {}), {} HOLD or FAULT cycles, beam on in {} cycles after",
+                permitted_before, permitted_dark, first_hold, dark_from, hold_cycles, permitted_after);
   if (permitted_before == 0)
     c.why = "the beam was never permitted while tracking: the permit path is not live";
+  else if (first_hold >= 0 && first_hold < dark_from)
+    c.why =
+        fmt::format("the loop held at cycle {}, before the detectors went dark at {}", first_hold, dark_from);
   else if (first_hold < 0)
     c.why = "the detectors went dark and the loop did not HOLD";
-  else if (permitted_in_hold > 0 || permitted_after > 0)
-    c.why = "the beam was permitted in a HOLD or after it without an operator";
+  else if (first_hold > dark_from + hold_after)
+    c.why = fmt::format("the loop held {} cycles after the detectors went dark, beyond {}",
+                        first_hold - dark_from, hold_after);
+  else if (permitted_dark > 0)
+    c.why = fmt::format("the beam was permitted in {} cycles without frames", permitted_dark);
+  else if (permitted_after > 0)
+    c.why = "the beam was permitted after the HOLD without an operator";
   c.passed = c.why.empty();
   return c;
 }
@@ -171,7 +184,10 @@ QaCheck latency_check(const RecordedRun& run, double tolerance_ms, int cycles) {
                   run.control_reply.empty()
                       ? std::string("no answer")
                       : fmt::format("\"{}\"", run.control_reply.substr(0, run.control_reply.find('\n'))));
-  if (run.control_reply.rfind("TRACK", 0) != 0)
+  if (run.summary.cycles != cycles || run.summary.holds > 0 || run.summary.faults > 0)
+    c.why = fmt::format("the run did not track through: {} of {} cycles, {} holds, {} faults ({})",
+                        run.summary.cycles, cycles, run.summary.holds, run.summary.faults, run.summary.ended);
+  else if (run.control_reply.rfind("TRACK", 0) != 0)
     c.why = run.control_reply.empty()
                 ? std::string("the control socket did not answer `status`")
                 : fmt::format("the control socket answered `{}`, not TRACK",
@@ -218,11 +234,16 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
   if (!(o.tolerance_mm > 0 && std::isfinite(o.tolerance_mm) && o.tolerance_deg > 0 &&
         std::isfinite(o.tolerance_deg)))
     return invalid_argument("the QA's tolerances must be positive and finite");
+  if (o.latency_cycles < 0 || (o.latency_cycles > 0 && o.latency_cycles < 20))
+    return invalid_argument("the latency chain runs 0 (not at all: the QA fails) or at least 20 cycles");
   DailyQaReport report;
   report.scene_name = p.scene.name;
   report.scene_source = p.scene.source;
   report.room_fingerprint = host::to_hex(host::room_fingerprint(p.scene));
-  utc_now(&report.started_utc, &report.date_utc);
+  const QaTime now = qa_now();
+  report.started_utc = now.utc_iso;
+  report.started_local = now.local_iso;
+  report.date = now.local_date;
   report.tolerance_mm = o.tolerance_mm;
   report.tolerance_deg = o.tolerance_deg;
   report.not_checked = {
@@ -234,30 +255,51 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
   };
 
   const std::vector<Vector6d> shifts = o.shifts.empty() ? default_offset_shifts(p.scene) : o.shifts;
+  report.standard = o.shifts.empty() && o.tolerance_mm <= kStandardToleranceMm &&
+                    o.tolerance_deg <= kStandardToleranceDeg && o.latency_cycles >= kStandardLatencyCycles &&
+                    (o.latency_tolerance_ms <= 0 || o.latency_tolerance_ms <= p.scene.loop.period_ms);
   for (const Vector6d& shift : shifts) {
     auto run = run_offset(p, shift, o.offset_cycles, o, pool);
     if (!run.ok()) return run.status().with_context("offset test, shift " + shift_text(shift));
     report.offsets.push_back(judge_offset(shift, *run, o));
     const OffsetResult& r = report.offsets.back();
-    say(fmt::format("offset {}: {} (alignment off by {:.3f} mm, {:.3f} deg; couch {:.3f} mm){}",
+    say(fmt::format("offset {}: {} (alignment off by {:.3f} mm, {:.3f} deg; couch {:.3f} mm, {:.3f} deg){}",
                     shift_text(shift), r.passed ? "pass" : "FAIL", r.registration_error_mm,
-                    r.registration_error_deg, r.couch_error_mm, r.passed ? "" : ": " + r.why));
+                    r.registration_error_deg, r.couch_error_mm, r.couch_error_deg,
+                    r.passed ? "" : ": " + r.why));
   }
   report.checks.push_back(offset_check(report.offsets, o));
 
   constexpr int kDarkFrom = 15, kDarkTo = 25;
   auto dark = run_dark_detectors(p, std::max(o.beam_cycles, kDarkTo + 5), kDarkFrom, kDarkTo, o, pool);
   if (!dark.ok()) return dark.status().with_context("beam-permit test");
-  report.checks.push_back(beam_check(*dark, kDarkFrom));
+  report.checks.push_back(beam_check(*dark, kDarkFrom, p.scene.safety.hold_after_failures));
   say("beam: " + std::string(report.checks.back().passed ? "pass" : "FAIL: " + report.checks.back().why));
 
   if (o.latency_cycles > 0) {
     const double tolerance = o.latency_tolerance_ms > 0 ? o.latency_tolerance_ms : p.scene.loop.period_ms;
-    auto real = run_real_clock(p, o.latency_cycles, o, pool);
-    if (!real.ok()) return real.status().with_context("latency test");
-    report.checks.push_back(latency_check(*real, tolerance, o.latency_cycles));
-    say("latency: " +
-        std::string(report.checks.back().passed ? "pass" : "FAIL: " + report.checks.back().why));
+    // As the room runs: the scene's real-time set-up applied first (enforce), then a pool made
+    // after it, whose workers inherit the cycle's policy as the service's do. The QA's own thread
+    // keeps it to the end (the reports are written after).
+    Result<host::RealtimeReport> rt = host::realtime_not_applied("loop.realtime.mode: ignore");
+    if (p.scene.loop.realtime.enforce) rt = host::apply_realtime_setup(p.scene.loop.realtime);
+    if (!rt.ok()) {
+      QaCheck c;
+      c.name = "latency";
+      c.tolerance = "the scene's real-time set-up applied, then a real-clock run";
+      c.measured = "not run";
+      c.why = rt.status().message();
+      report.checks.push_back(c);
+    } else {
+      tracking::ThreadPool rt_pool(pool->size());
+      auto real = run_real_clock(p, o.latency_cycles, o, &rt_pool);
+      if (!real.ok()) return real.status().with_context("latency test");
+      report.checks.push_back(latency_check(*real, tolerance, o.latency_cycles));
+      report.checks.back().measured += "; real-time set-up: " + rt->summary();
+    }
+    const QaCheck& latency = report.checks.back();
+    say("latency: " + (latency.passed ? std::string("pass") : "FAIL: " + latency.why) + " (" +
+        latency.measured + ")");
   } else {
     QaCheck c;
     c.name = "latency";
@@ -265,6 +307,7 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
     c.measured = "not run";
     c.tolerance = "a real-clock run";
     report.checks.push_back(c);
+    say("latency: FAIL: not run (--latency-cycles 0)");
   }
   return report;
 }

@@ -4,6 +4,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -20,7 +21,10 @@ using host::JournalRecord;
 // on to an observer the caller's hooks named.
 class Recorder final : public host::CycleObserver {
  public:
-  Recorder(std::size_t cycles, host::CycleObserver* next) : next_(next) { records_.reserve(cycles + 8); }
+  // Room for `cycles` records (the QA's runs are at most 100,000 cycles: 40 MB).
+  Recorder(std::size_t cycles, host::CycleObserver* next) : next_(next) {
+    records_.reserve(std::min<std::size_t>(cycles, 100000) + 8);
+  }
   void on_cycle(const JournalRecord& record) override {
     if (records_.size() < records_.capacity()) records_.push_back(record);
     state_.store(record.state, std::memory_order_release);
@@ -62,6 +66,13 @@ Result<RecordedRun> run(const host::PreparedScene& scene, host::LoopSessionOptio
   if (!session.ok()) return session.status();
   RecordedRun r;
   std::thread helper;
+  // Joined however run() ends (an exception too): a joinable thread destroyed would terminate.
+  struct Joiner {
+    std::thread* t;
+    ~Joiner() {
+      if (t->joinable()) t->join();
+    }
+  } joiner{&helper};
   if (beside) helper = std::thread([&] { beside(recorder); });
   auto summary = (*session)->run();
   if (helper.joinable()) helper.join();
@@ -75,9 +86,11 @@ Result<RecordedRun> run(const host::PreparedScene& scene, host::LoopSessionOptio
 // (empty: none within a second).
 std::string ask_control_socket(const std::filesystem::path& path, const std::filesystem::path& self,
                                const std::string& request) {
+  sockaddr_un me{}, to{};
+  if (self.native().size() >= sizeof(me.sun_path) || path.native().size() >= sizeof(to.sun_path)) return {};
   const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd < 0) return {};
-  sockaddr_un me{}, to{};
+  ::unlink(self.c_str());  // a console address left by an earlier run
   me.sun_family = to.sun_family = AF_UNIX;
   std::strncpy(me.sun_path, self.c_str(), sizeof(me.sun_path) - 1);
   std::strncpy(to.sun_path, path.c_str(), sizeof(to.sun_path) - 1);

@@ -4,14 +4,13 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <ctime>
 
 #include "daily_qa_runs.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/qa/qa_time.hpp"
 
 namespace lftrack::qa {
 namespace {
@@ -48,23 +47,20 @@ Result<DailyQaReport> run_end_to_end_qa(const host::PreparedScene& p, const EndT
     return invalid_argument("the end-to-end tolerance must be positive and finite");
   if (!o.marker_offset_room_mm.allFinite() || o.marker_offset_room_mm.norm() > 200)
     return invalid_argument("the hidden marker must lie within 200 mm of the registration origin");
-  if (o.cycles < 20) return invalid_argument("the end-to-end test needs at least 20 cycles");
+  if (o.cycles < 100 || o.cycles > 100000)
+    return invalid_argument(
+        "the end-to-end test runs 100 to 100,000 cycles (its p95 needs a few dozen beam-on cycles)");
   DailyQaReport report;
   report.kind = "e2e";
   report.scene_name = p.scene.name;
   report.scene_source = p.scene.source;
   report.room_fingerprint = host::to_hex(host::room_fingerprint(p.scene));
-  {
-    const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-    std::tm tm{};
-    ::gmtime_r(&now, &tm);
-    char text[32];
-    std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
-    report.started_utc = text;
-    std::strftime(text, sizeof text, "%Y-%m-%d", &tm);
-    report.date_utc = text;
-  }
+  const QaTime now = qa_now();
+  report.started_utc = now.utc_iso;
+  report.started_local = now.local_iso;
+  report.date = now.local_date;
   report.tolerance_mm = o.tolerance_mm;
+  report.marker_offset_room_mm = o.marker_offset_room_mm;
   DailyQaOptions run_options;
   run_options.light_field_dir = o.light_field_dir;
   run_options.hooks = o.hooks;

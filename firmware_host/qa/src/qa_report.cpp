@@ -1,5 +1,8 @@
 #include "lftrack/qa/qa_report.hpp"
 
+#include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/qa/qa_time.hpp"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -34,9 +37,14 @@ nlohmann::json to_json(const DailyQaReport& r) {
   j["scene_file"] = r.scene_source;
   j["room_fingerprint"] = r.room_fingerprint;
   j["started_utc"] = r.started_utc;
-  j["date_utc"] = r.date_utc;
+  j["started_local"] = r.started_local;
+  j["date"] = r.date;
   j["passed"] = r.passed();
-  j["tolerance"] = {{"mm", r.tolerance_mm}, {"deg", r.tolerance_deg}};
+  j["standard"] = r.standard;
+  if (r.kind == "e2e")
+    j["tolerance"] = {{"mm", r.tolerance_mm}};
+  else
+    j["tolerance"] = {{"mm", r.tolerance_mm}, {"deg", r.tolerance_deg}};
   for (const QaCheck& c : r.checks)
     j["checks"].push_back({{"name", c.name},
                            {"passed", c.passed},
@@ -56,7 +64,11 @@ nlohmann::json to_json(const DailyQaReport& r) {
                             {"passed", o.passed},
                             {"why", o.why}});
   j["not_checked"] = r.not_checked;
-  if (r.kind == "e2e") j["marker_error_mm"] = r.marker_error_mm;
+  if (r.kind == "e2e") {
+    j["marker_offset_room_mm"] = {r.marker_offset_room_mm.x(), r.marker_offset_room_mm.y(),
+                                  r.marker_offset_room_mm.z()};
+    j["marker_error_mm"] = r.marker_error_mm;
+  }
   return j;
 }
 
@@ -169,7 +181,7 @@ std::string to_html(const DailyQaReport& r) {
   std::ostringstream h;
   const bool e2e = r.kind == "e2e";
   h << "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>lftrack "
-    << (e2e ? "end-to-end" : "daily") << " QA " << escaped(r.date_utc)
+    << (e2e ? "end-to-end" : "daily") << " QA " << escaped(r.date)
     << "</title><style>body{font-family:sans-serif;margin:2em}td,th{padding:4px 8px;border-bottom:1px solid "
        "#ddd;"
        "text-align:left;vertical-align:top}.pass{color:#175}.fail{color:#b00;font-weight:bold}</style></"
@@ -177,7 +189,8 @@ std::string to_html(const DailyQaReport& r) {
   h << "<h1>" << (e2e ? "End-to-end" : "Daily") << " QA: <span class='"
     << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
   h << "<p>" << escaped(r.scene_name) << " (" << escaped(r.scene_source) << "), started "
-    << escaped(r.started_utc) << "</p>";
+    << escaped(r.started_local)
+    << (r.kind == "daily" && !r.standard ? " (not the standard QA: looser settings)" : "") << "</p>";
   h << "<table><tr><th>check</th><th>result</th><th>tolerance</th><th>measured</th></tr>";
   for (const QaCheck& c : r.checks)
     h << "<tr><td>" << escaped(c.name) << "</td>" << result_cell(c.passed, c.why) << "<td>"
@@ -234,13 +247,20 @@ Result<bool> write_new(const fs::path& file, const std::string& text) {
 
 }  // namespace
 
-std::string today_utc() {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  ::gmtime_r(&now, &tm);
-  char text[16];
-  std::strftime(text, sizeof text, "%Y-%m-%d", &tm);
-  return text;
+Status check_report_folder(const fs::path& folder) {
+  if (folder.empty()) return invalid_argument("the QA folder (--out) is empty");
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec || !fs::is_directory(folder, ec))
+    return io_error(folder.string() + ": not a folder the QA reports can go in" +
+                    (ec ? ": " + ec.message() : ""));
+  const fs::path probe = folder / (".qa-write-check-" + std::to_string(::getpid()));
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0644);
+  if (fd < 0)
+    return io_error(folder.string() + ": QA reports cannot be written there: " + std::strerror(errno));
+  ::close(fd);
+  ::unlink(probe.c_str());
+  return {};
 }
 
 Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const fs::path& folder) {
@@ -252,46 +272,81 @@ Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const f
       std::remove_if(stamp.begin(), stamp.end(), [](char c) { return c == '-' || c == ':' || c == 'Z'; }),
       stamp.end());
   std::replace(stamp.begin(), stamp.end(), 'T', '-');
-  const std::string json = to_json(report).dump(2) + "\n";
+  // A name or path that is not UTF-8 is written with replacement characters, not refused after
+  // the QA has run.
+  const std::string json =
+      to_json(report).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
   const std::string html = to_html(report);
   for (int n = 1; n < 1000; ++n) {
     const std::string prefix = report.kind == "e2e" ? "qa-e2e" : "qa-daily";
     const std::string base =
         n == 1 ? fmt::format("{}-{}", prefix, stamp) : fmt::format("{}-{}-{}", prefix, stamp, n);
     WrittenReport w{folder / (base + ".json"), folder / (base + ".html")};
-    if (fs::exists(w.html, ec) || fs::is_symlink(w.html, ec)) continue;
-    auto made = write_new(w.json, json);
-    if (!made.ok()) return made.status();
-    if (!*made) continue;
+    if (fs::exists(w.json, ec) || fs::is_symlink(w.json, ec)) continue;
+    // The page first, the JSON last: `lftrack run` reads the JSON, so a report is complete when
+    // its JSON exists.
     auto page = write_new(w.html, html);
     if (!page.ok()) return page.status();
-    if (!*page) return io_error(w.html.string() + ": appeared while the QA report was written");
+    if (!*page) continue;
+    auto made = write_new(w.json, json);
+    if (!made.ok()) return made.status();
+    if (!*made) return io_error(w.json.string() + ": appeared while the QA report was written");
     return w;
   }
   return io_error(folder.string() + ": a thousand QA reports for " + stamp + " already");
 }
 
-std::optional<fs::path> passed_daily_qa(const fs::path& folder, const std::string& fingerprint,
-                                        const std::string& date_utc) {
+DailyQaStatus daily_qa_status(const fs::path& folder, const std::string& room, const std::string& date) {
+  DailyQaStatus status;
   std::error_code ec;
-  std::optional<fs::path> newest;
   std::string newest_start;
+  nlohmann::json newest;
   for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
     const fs::path& file = it->path();
     if (file.extension() != ".json" || file.filename().string().rfind("qa-daily-", 0) != 0) continue;
-    if (!it->is_regular_file(ec) || it->file_size(ec) > (1u << 20)) continue;  // a report is a few kB
+    if (it->is_symlink(ec) || !it->is_regular_file(ec) || it->file_size(ec) > (1u << 20))
+      continue;  // a few kB
     std::ifstream in(file);
     const nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
-    if (!j.is_object() || j.value("kind", "") != "lftrack daily QA") continue;
-    if (j.value("room_fingerprint", "") != fingerprint || j.value("date_utc", "") != date_utc) continue;
-    if (!j.value("passed", false)) continue;
-    const std::string start = j.value("started_utc", "");
-    if (!newest || start > newest_start) {
-      newest = file;
+    // Fields of the wrong type make the file no report of ours (value() would throw).
+    auto text = [&](const char* key) {
+      const auto f = j.find(key);
+      return f != j.end() && f->is_string() ? f->get<std::string>() : std::string();
+    };
+    auto flag = [&](const char* key) {
+      const auto f = j.find(key);
+      return f != j.end() && f->is_boolean() && f->get<bool>();
+    };
+    if (!j.is_object() || text("kind") != "lftrack daily QA") continue;
+    if (text("room_fingerprint") != room || text("date") != date) continue;
+    // The newest QA of the day decides: a pass followed by a failed re-run is a failed day.
+    const std::string start = text("started_utc");
+    if (status.file.empty() || start > newest_start) {
+      status.file = file;
       newest_start = start;
+      status.passed = flag("passed") && flag("standard");
+      status.detail = !flag("passed") ? "the newest QA of the room today failed: " + file.string()
+                      : !flag("standard")
+                          ? "the newest QA of the room today passed with looser settings than the "
+                            "standard QA: " +
+                                file.string()
+                          : "passed today: " + file.string();
     }
   }
-  return newest;
+  if (status.file.empty())
+    status.detail = "none of this room today (" + date + ") in " + folder.string() +
+                    ": lftrack qa daily --scene <the room's phantom scene>";
+  return status;
+}
+
+host::PreflightItem daily_qa_item(const host::Scene& scene, const fs::path& folder) {
+  const DailyQaStatus s =
+      daily_qa_status(folder, host::to_hex(host::room_fingerprint(scene)), qa_now().local_date);
+  return {"daily QA",
+          s.passed                 ? host::CheckResult::kPass
+          : scene.require_daily_qa ? host::CheckResult::kFail
+                                   : host::CheckResult::kWarn,
+          s.detail};
 }
 
 }  // namespace lftrack::qa

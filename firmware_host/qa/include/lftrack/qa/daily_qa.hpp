@@ -39,16 +39,20 @@ class ThreadPool;
 
 namespace lftrack::qa {
 
+inline constexpr double kStandardToleranceMm = 0.5;
+inline constexpr double kStandardToleranceDeg = 0.2;
+inline constexpr int kStandardLatencyCycles = 50;
+
 struct DailyQaOptions {
-  double tolerance_mm = 0.5;   // offset test: registration and couch, per shift (3D distance)
-  double tolerance_deg = 0.2;  // offset test: largest rotation component
+  double tolerance_mm = kStandardToleranceMm;    // offset test: registration and couch, per shift (3D)
+  double tolerance_deg = kStandardToleranceDeg;  // offset test: largest rotation component
   // The known shifts (mm, rad, about the registration origin); empty: default_offset_shifts().
   std::vector<tracking::Vector6d> shifts;
   int offset_cycles = 20;  // per shift: the alignment, then the couch's move (simulated clock)
   int beam_cycles = 40;    // beam-permit run: the detectors dark from cycle 15 to 25
   // Real-clock run for the latency chain and the control socket; 0: not run (the check is then
   // reported as not run and the QA does not pass).
-  int latency_cycles = 50;
+  int latency_cycles = kStandardLatencyCycles;
   double latency_tolerance_ms = 0;        // p99 exposure to acknowledgement; 0: the scene's period
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
   std::filesystem::path work_dir;         // the control socket; empty: a folder in /tmp
@@ -88,14 +92,21 @@ struct DailyQaReport {
   std::string scene_name, scene_source;
   std::string room_fingerprint;  // host::room_fingerprint, hex: whose room this QA was of
   std::string started_utc;       // ISO 8601
-  std::string date_utc;          // YYYY-MM-DD: the day it counts for
+  std::string started_local;     // ISO 8601 with the host's UTC offset
+  std::string date;              // YYYY-MM-DD, the host's local date: the clinic's day it counts for
   double tolerance_mm = 0, tolerance_deg = 0;
+  // The standard QA: the default shifts, tolerances no looser than the defaults (0.5 mm, 0.2
+  // degree), the latency chain run (at least 50 cycles) within the scene's period. Only a standard
+  // daily QA that passed counts for `lftrack run`.
+  bool standard = false;
   std::vector<OffsetResult> offsets;
   std::vector<QaCheck> checks;
   // What a daily QA asks for and this one does not check (detector image quality against its
   // calibration, for one): said in the report, never counted as passed.
   std::vector<std::string> not_checked;
-  // e2e: the hidden marker's error in each beam-on cycle (mm), for the report's picture.
+  // e2e: where the hidden marker is (from the registration origin, room frame) and its error in
+  // each beam-on cycle (mm), for the report's picture.
+  Eigen::Vector3d marker_offset_room_mm = Eigen::Vector3d::Zero();
   std::vector<double> marker_error_mm;
   bool passed() const;
 };
@@ -113,7 +124,7 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& scene, const Daily
 // truth, and its distance from where the plan puts it, in every cycle the beam is on, must stay
 // within the tolerance (p95; mean and max reported).
 struct EndToEndOptions {
-  int cycles = 300;
+  int cycles = 300;  // 100 to 100,000
   Eigen::Vector3d marker_offset_room_mm{0, 0, 20};
   double tolerance_mm = 1.0;
   std::filesystem::path light_field_dir;

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "lftrack/host/preflight.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 
 namespace lftrack::qa {
@@ -19,17 +20,29 @@ struct WrittenReport {
   std::filesystem::path json, html;
 };
 
+// Whether reports can be written into `folder` (created if missing; a file is created there and
+// removed): checked before a QA runs, so that its minutes are not lost to a folder that refuses.
+Status check_report_folder(const std::filesystem::path& folder);
+
 // Writes both files into `folder` (created); a name taken already gets -2, -3, ... (daily and
 // end-to-end reports alike: report.kind).
 Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const std::filesystem::path& folder);
 
-// The newest report in `folder` for the room with `fingerprint` (host::room_fingerprint) dated `date_utc`
-// (YYYY-MM-DD) that passed, if any; reports that do not parse are skipped.
-std::optional<std::filesystem::path> passed_daily_qa(const std::filesystem::path& folder,
-                                                     const std::string& fingerprint,
-                                                     const std::string& date_utc);
+// Today's daily QA of a room as `lftrack run` judges it: the newest daily report in `folder` for
+// the room (host::room_fingerprint, hex) dated `date` (the host's local date) decides; it counts
+// only if it passed and was the standard QA. Reports that do not parse, symbolic links and files
+// of the wrong types are skipped.
+struct DailyQaStatus {
+  bool passed = false;
+  std::filesystem::path file;  // the newest report of the day; empty: none
+  std::string detail;          // for the checklist: what was found
+};
+DailyQaStatus daily_qa_status(const std::filesystem::path& folder, const std::string& room,
+                              const std::string& date);
 
-// Today's date in UTC, YYYY-MM-DD (the day a report counts for).
-std::string today_utc();
+// `lftrack run`'s start-up check "daily QA" for `scene`'s room, today: ok when passed, else a
+// warning, or a failure where the scene sets safety.require_daily_qa.
+host::PreflightItem daily_qa_item(const host::Scene& scene,
+                                  const std::filesystem::path& folder = kDefaultQaFolder);
 
 }  // namespace lftrack::qa
