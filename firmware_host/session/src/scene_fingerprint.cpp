@@ -45,8 +45,13 @@ std::array<std::uint8_t, 16> scene_fingerprint(const Scene& scene) {
 }
 
 std::array<std::uint8_t, 16> room_fingerprint(const Scene& scene) {
-  return first_16_of_sha256("lftrack room\nactuator " + describe_actuator(scene.actuator) + "\n" +
-                            room_geometry_text(scene));
+  // The devices too: a scene with real detectors at the QA phantom's geometry is another room.
+  std::string devices = "actuator " + describe_actuator(scene.actuator) + " calibration " +
+                        scene.actuator.calibration_file + "\n";
+  for (const DetectorSpec& d : scene.detectors)
+    devices += "detector " + d.view.name + " " + describe_frames(d.frames) + " calibration " +
+               (d.simulator_calibration ? std::string("simulator") : d.calibration_file) + "\n";
+  return first_16_of_sha256("lftrack room\n" + devices + room_geometry_text(scene));
 }
 
 std::string to_hex(const std::array<std::uint8_t, 16>& fingerprint) {

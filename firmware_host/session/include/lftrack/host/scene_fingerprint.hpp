@@ -20,8 +20,9 @@ std::string room_geometry_text(const Scene& scene);
 // (zeros mean "not recorded" in a journal's header).
 std::array<std::uint8_t, 16> scene_fingerprint(const Scene& scene);
 
-// The room alone, whatever patient lies in it: its geometry and its actuator (kind and where it is
-// reached). The daily QA is the room's: `lftrack run` on any patient's scene in the room looks for
+// The room alone, whatever patient lies in it: its geometry, its actuator and detectors (kind,
+// where each is reached, the calibration file each names; not the files' contents, nor the
+// program's version). The daily QA is the room's: `lftrack run` on any patient's scene in the room looks for
 // today's passed QA by this fingerprint. Never all zeros.
 std::array<std::uint8_t, 16> room_fingerprint(const Scene& scene);
 
