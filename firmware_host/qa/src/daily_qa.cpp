@@ -7,10 +7,8 @@
 
 #include "daily_qa_runs.hpp"
 #include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/loop/tracking_states.hpp"
-#include "lftrack/qa/qa_time.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::qa {
@@ -236,14 +234,7 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
     return invalid_argument("the QA's tolerances must be positive and finite");
   if (o.latency_cycles < 0 || (o.latency_cycles > 0 && o.latency_cycles < 20))
     return invalid_argument("the latency chain runs 0 (not at all: the QA fails) or at least 20 cycles");
-  DailyQaReport report;
-  report.scene_name = p.scene.name;
-  report.scene_source = p.scene.source;
-  report.room_fingerprint = host::to_hex(host::room_fingerprint(p.scene));
-  const QaTime now = qa_now();
-  report.started_utc = now.utc_iso;
-  report.started_local = now.local_iso;
-  report.date = now.local_date;
+  DailyQaReport report = new_report(p, "daily");
   report.tolerance_mm = o.tolerance_mm;
   report.tolerance_deg = o.tolerance_deg;
   report.not_checked = {

@@ -10,7 +10,9 @@
 #include <cstring>
 #include <thread>
 
+#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/tracking_states.hpp"
+#include "lftrack/qa/qa_time.hpp"
 
 namespace lftrack::qa {
 namespace {
@@ -110,6 +112,19 @@ std::string ask_control_socket(const std::filesystem::path& path, const std::fil
 }
 
 }  // namespace
+
+DailyQaReport new_report(const host::PreparedScene& scene, const std::string& kind) {
+  DailyQaReport report;
+  report.kind = kind;
+  report.scene_name = scene.scene.name;
+  report.scene_source = scene.scene.source;
+  report.room_fingerprint = host::to_hex(host::room_fingerprint(scene.scene));
+  const QaTime now = qa_now();
+  report.started_utc = now.utc_iso;
+  report.started_local = now.local_iso;
+  report.date = now.local_date;
+  return report;
+}
 
 Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
                                const DailyQaOptions& options, tracking::ThreadPool* pool) {

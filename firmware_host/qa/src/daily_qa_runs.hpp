@@ -17,6 +17,10 @@ struct RecordedRun {
   std::string control_reply;                 // the latency run: the control socket's answer
 };
 
+// A report of `kind` ("daily", "e2e") for `scene`, started now: the scene, the room's fingerprint,
+// the times.
+DailyQaReport new_report(const host::PreparedScene& scene, const std::string& kind);
+
 // `scene` with the phantom set up `shift` off (no drift or breathing), `cycles` on the simulated
 // clock.
 Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,

@@ -8,9 +8,7 @@
 
 #include "daily_qa_runs.hpp"
 #include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/qa/daily_qa.hpp"
-#include "lftrack/qa/qa_time.hpp"
 
 namespace lftrack::qa {
 namespace {
@@ -50,15 +48,7 @@ Result<DailyQaReport> run_end_to_end_qa(const host::PreparedScene& p, const EndT
   if (o.cycles < 100 || o.cycles > 100000)
     return invalid_argument(
         "the end-to-end test runs 100 to 100,000 cycles (its p95 needs a few dozen beam-on cycles)");
-  DailyQaReport report;
-  report.kind = "e2e";
-  report.scene_name = p.scene.name;
-  report.scene_source = p.scene.source;
-  report.room_fingerprint = host::to_hex(host::room_fingerprint(p.scene));
-  const QaTime now = qa_now();
-  report.started_utc = now.utc_iso;
-  report.started_local = now.local_iso;
-  report.date = now.local_date;
+  DailyQaReport report = new_report(p, "e2e");
   report.tolerance_mm = o.tolerance_mm;
   report.marker_offset_room_mm = o.marker_offset_room_mm;
   DailyQaOptions run_options;

@@ -106,6 +106,18 @@ std::string result_cell(bool passed, const std::string& why) {
   return cell;
 }
 
+// A picture's frame: the tolerance as a dashed line, the scale's top value, the baseline.
+void svg_axes(std::ostringstream& s, double tolerance_mm, double scale_mm, double y_tolerance, int left,
+              int width, int top, double baseline) {
+  s << fmt::format("<line x1='{}' y1='{:.1f}' x2='{}' y2='{:.1f}' stroke='#c00' stroke-dasharray='4 3'/>",
+                   left, y_tolerance, width - 10, y_tolerance);
+  s << fmt::format("<text x='{}' y='{:.1f}' font-size='11' fill='#c00'>tolerance {} mm</text>", width - 130,
+                   y_tolerance - 4, tolerance_mm);
+  s << fmt::format("<text x='2' y='{}' font-size='11'>{:.2f} mm</text>", top + 4, scale_mm);
+  s << fmt::format("<line x1='{}' y1='{:.1f}' x2='{}' y2='{:.1f}' stroke='#333'/>", left, baseline,
+                   width - 10, baseline);
+}
+
 // Each shift's registration and couch errors as bars, the tolerance as a line across them.
 std::string offset_picture(const DailyQaReport& r) {
   const int bar = 14, gap = 10, width = 640, left = 40, height = 220, top = 20, bottom = 40;
@@ -118,13 +130,7 @@ std::string offset_picture(const DailyQaReport& r) {
   std::ostringstream s;
   s << "<svg xmlns='http://www.w3.org/2000/svg' width='" << width << "' height='" << height
     << "' role='img' aria-label='offset test errors'>";
-  s << fmt::format("<line x1='{}' y1='{:.1f}' x2='{}' y2='{:.1f}' stroke='#c00' stroke-dasharray='4 3'/>",
-                   left, y(r.tolerance_mm), width - 10, y(r.tolerance_mm));
-  s << fmt::format("<text x='{}' y='{:.1f}' font-size='11' fill='#c00'>tolerance {} mm</text>", width - 130,
-                   y(r.tolerance_mm) - 4, r.tolerance_mm);
-  s << fmt::format("<text x='2' y='{}' font-size='11'>{:.2f} mm</text>", top + 4, scale_mm);
-  s << fmt::format("<line x1='{}' y1='{}' x2='{}' y2='{}' stroke='#333'/>", left, top + plot, width - 10,
-                   top + plot);
+  svg_axes(s, r.tolerance_mm, scale_mm, y(r.tolerance_mm), left, width, top, top + plot);
   int x = left + gap;
   for (std::size_t i = 0; i < r.offsets.size(); ++i) {
     const OffsetResult& o = r.offsets[i];
@@ -164,13 +170,7 @@ std::string marker_picture(const DailyQaReport& r) {
         left + plot_w * static_cast<double>(i) / static_cast<double>(std::max<std::size_t>(n - 1, 1)),
         y(r.marker_error_mm[i]));
   s << "'/>";
-  s << fmt::format("<line x1='{}' y1='{:.1f}' x2='{}' y2='{:.1f}' stroke='#c00' stroke-dasharray='4 3'/>",
-                   left, y(r.tolerance_mm), width - 10, y(r.tolerance_mm));
-  s << fmt::format("<text x='{}' y='{:.1f}' font-size='11' fill='#c00'>tolerance {} mm</text>", width - 130,
-                   y(r.tolerance_mm) - 4, r.tolerance_mm);
-  s << fmt::format("<text x='2' y='{}' font-size='11'>{:.2f} mm</text>", top + 4, scale);
-  s << fmt::format("<line x1='{}' y1='{}' x2='{}' y2='{}' stroke='#333'/>", left, top + plot_h, width - 10,
-                   top + plot_h);
+  svg_axes(s, r.tolerance_mm, scale, y(r.tolerance_mm), left, width, top, top + plot_h);
   s << fmt::format(
       "<text x='{}' y='{}' font-size='11'>beam-on cycles ({}); the hidden marker's error</text></svg>", left,
       height - 6, n);
