@@ -16,6 +16,10 @@ for tool in dpkg-buildpackage dh lintian help2man fakeroot; do
 done
 program="$build_dir/bin/lftrack"
 [ -x "$program" ] || fail "no program at $program: build it first (make build)"
+[ -f "$build_dir/cmake_install.cmake" ] ||
+  fail "$build_dir is no CMake build folder (no cmake_install.cmake): configure and build it (make build)"
+[ ! -e "$out_dir" ] || [ -d "$out_dir" ] || fail "$out_dir exists and is not a folder"
+mkdir -p "$out_dir" 2>/dev/null && [ -w "$out_dir" ] || fail "$out_dir: cannot write the package there"
 
 # The package's version is the changelog's; it must be the program's (CMakeLists.txt project()).
 program_version=$("$program" --version | awk '{print $2}')

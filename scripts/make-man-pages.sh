@@ -15,7 +15,11 @@ mapfile -t commands < <("$bin" --help | awk '/^Subcommands:/ {on = 1; next} on &
 [ "${#commands[@]}" -gt 0 ] || { echo "make-man-pages: $bin --help lists no commands" >&2; exit 1; }
 
 include=$(mktemp)
-trap 'rm -f "$include"' EXIT
+# help2man runs the program through the shell, unquoted: it gets a name without spaces.
+link_dir=$(mktemp -d)
+trap 'rm -rf "$include" "$link_dir"' EXIT
+ln -s "$(realpath "$bin")" "$link_dir/lftrack"
+bin="$link_dir/lftrack"
 {
   echo '[SEE ALSO]'
   last=${commands[-1]}
@@ -25,15 +29,28 @@ trap 'rm -f "$include"' EXIT
 help2man --no-info --section 1 --include "$include" \
   --name "real-time patient tracking for image-guided radiosurgery" "$bin" >"$out/lftrack.1"
 
-for c in "${commands[@]}"; do
+# One page: `lftrack WORDS --help` as lftrack-WORDS(1) (WORDS: a command, or a command and its
+# subcommand, e.g. "qa daily" -> lftrack-qa-daily).
+pages=1
+page_of() {
+  local words="$1" name="lftrack-${1// /-}" see="$2"
+  local description page upper
   # The description up to its first full stop or parenthesis, as a man page's NAME line.
-  description=$("$bin" "$c" --help | head -n 1 | sed -e 's/ (.*//' -e 's/[.;:].*//')
-  page="$out/lftrack-$c.1"
-  printf '[SEE ALSO]\n.BR lftrack (1)\n' >"$include"
-  help2man --no-info --section 1 --include "$include" --help-option "$c --help" --version-option --version \
+  description=$("$bin" $words --help | head -n 1 | sed -e 's/ (.*//' -e 's/[.;:].*//')
+  page="$out/$name.1"
+  printf '[SEE ALSO]\n.BR %s (1)\n' "$see" >"$include"
+  help2man --no-info --section 1 --include "$include" --help-option "$words --help" --version-option --version \
     --name "$description" "$bin" >"$page"
   # help2man names the page after the program; this page is the command's.
-  upper=$(echo "lftrack-$c" | tr '[:lower:]' '[:upper:]')
-  sed -i -e "s/^\\.TH LFTRACK /.TH $upper /" -e "/^\\.SH NAME/{n;s/^lftrack /lftrack-$c /}" "$page"
+  upper=$(echo "$name" | tr '[:lower:]' '[:upper:]')
+  sed -i -e "s/^\\.TH LFTRACK /.TH $upper /" -e "/^\\.SH NAME/{n;s/^lftrack /$name /}" "$page"
+  pages=$((pages + 1))
+}
+for c in "${commands[@]}"; do
+  page_of "$c" lftrack
+  # A command with subcommands (qa daily, study trade, ...): a page for each, whose options the
+  # command's own page does not list.
+  mapfile -t subcommands < <("$bin" "$c" --help | awk '/^Subcommands:/ {on = 1; next} on && /^  [a-z]/ {print $1}')
+  for sub in "${subcommands[@]}"; do page_of "$c $sub" "lftrack-$c"; done
 done
-echo "make-man-pages: $((${#commands[@]} + 1)) pages in $out"
+echo "make-man-pages: $pages pages in $out"

@@ -113,10 +113,10 @@ TEST_F(DebianPackage, HoldsTheProgramScenesManPagesUnitsUserAndConfiguration) {
        {"usr/bin/lftrack", "usr/share/lftrack/scenes/lumbar-ct.yaml",
         "usr/share/lftrack/scenes/room/gige-modbus.yaml", "usr/share/lftrack/scenes/qa-phantom.yaml",
         "usr/share/man/man1/lftrack.1.gz", "usr/share/man/man1/lftrack-run.1.gz",
-        "usr/share/man/man1/lftrack-rt-check.1.gz", "usr/share/doc/lftrack/copyright",
-        "lib/systemd/system/lftrack@.service", "lib/systemd/system/lftrack-precompute@.service",
-        "lib/systemd/system/lftrack-qa@.service", "usr/lib/sysusers.d/lftrack.conf",
-        "usr/lib/tmpfiles.d/lftrack.conf", "etc/lftrack/qa-phantom.yaml"})
+        "usr/share/man/man1/lftrack-rt-check.1.gz", "usr/share/man/man1/lftrack-qa-daily.1.gz",
+        "usr/share/doc/lftrack/copyright", "lib/systemd/system/lftrack@.service",
+        "lib/systemd/system/lftrack-precompute@.service", "lib/systemd/system/lftrack-qa@.service",
+        "usr/lib/sysusers.d/lftrack.conf", "usr/lib/tmpfiles.d/lftrack.conf", "etc/lftrack/qa-phantom.yaml"})
     EXPECT_TRUE(fs::exists(*root_ / file)) << file << " is not in the package";
   // The configuration is a conffile (an upgrade keeps the physicist's edits).
   const CliRun conffiles =
