@@ -8,6 +8,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <set>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/scene.hpp"
@@ -73,6 +74,15 @@ Status precompute_sim_frame_fields(const PreparedScene& p, const std::string& ou
                                    tracking::ThreadPool* pool) {
   if (!frames_are_simulated(p.scene) || p.scene.sim.renderer != "lightfield") return {};
   const std::filesystem::path dir = sim_frame_fields_dir(p, out_dir);
+  // The fields there before, so that the line says whether any had to be built.
+  auto field_files = [&] {
+    std::set<std::filesystem::path> files;
+    std::error_code ec;
+    for (std::filesystem::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+      if (it->path().extension() == ".lf") files.insert(it->path());
+    return files;
+  };
+  const std::set<std::filesystem::path> before = field_files();
   spdlog::info("the simulator's frame fields in {} (sim.light_field)", dir.string());
   // The realistic patient's volumes (attenuation, or water and bone) where the scene's physics is
   // not ideal, else the world's attenuation: loaded where up to date, built and saved where not,
@@ -83,7 +93,12 @@ Status precompute_sim_frame_fields(const PreparedScene& p, const std::string& ou
     auto renderer = make_sim_frame_renderer(p, out_dir, pool);
     if (!renderer.ok()) return renderer.status();
   }
-  std::printf("%s: ready\n", dir.string().c_str());
+  std::size_t built = 0;
+  for (const auto& f : field_files()) built += before.count(f) == 0 ? 1 : 0;
+  if (built > 0)
+    std::printf("%s: %zu built\n", dir.string().c_str(), built);
+  else
+    std::printf("%s: up to date\n", dir.string().c_str());
   return {};
 }
 

@@ -115,7 +115,7 @@ TEST(Cli, PrecomputeBuildsTheSimulatorsFrameFieldsWhereTheSceneDrawsFramesFromTh
       run_process({LFTRACK_BIN_PATH, "precompute", "--scene", scene.string(), "-o", lf.string()}, &out).ok())
       << out;
   EXPECT_EQ(count(out, ": built\n"), 2) << out;
-  EXPECT_NE(out.find((lf / "sim-frames").string() + ": ready"), std::string::npos) << out;
+  EXPECT_NE(out.find((lf / "sim-frames").string() + ": 2 built"), std::string::npos) << out;
   const auto fields = folder(lf / "sim-frames");
   EXPECT_EQ(fields.size(), 2u) << "one field per view";
   const std::string after = check();
@@ -127,6 +127,7 @@ TEST(Cli, PrecomputeBuildsTheSimulatorsFrameFieldsWhereTheSceneDrawsFramesFromTh
       run_process({LFTRACK_BIN_PATH, "precompute", "--scene", scene.string(), "-o", lf.string()}, &out).ok())
       << out;
   EXPECT_EQ(folder(lf / "sim-frames"), fields) << "a second precompute rewrote the simulator's fields";
+  EXPECT_NE(out.find((lf / "sim-frames").string() + ": up to date"), std::string::npos) << out;
 }
 
 }  // namespace
