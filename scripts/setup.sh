@@ -25,7 +25,8 @@ packages=(
   dicom3tools                           # dciodvfy: validates the exported DICOM registration and test RT objects
   python3-pydicom                       # its RT Plan / Structure Set test files: foreign input in tests
   chromium chromium-driver              # the monitor page tested in a real headless browser
-  debhelper lintian help2man            # `make deb`: the Debian package, its checks, its man pages
+  debhelper lintian help2man fakeroot   # `make deb`: the Debian package, its checks, its man pages
+  systemd                               # systemd-analyze verify checks the package's units
   rt-tests                              # cyclictest, beside `lftrack rt-check` (BENCHMARKS.md)
 )
 # `scripts/setup.sh --fuzz` (make fuzz) adds clang with libFuzzer and its sanitizer runtimes.
