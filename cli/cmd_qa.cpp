@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -18,12 +19,48 @@
 namespace lftrack::host::cli {
 namespace {
 
+void print_line(const std::string& line) {
+  std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
+}
+
+// What both commands do once their values are judged: the scene loaded, `announce` logged (its {}
+// the scene's name), the QA
+// run with the loop's own log lines quieted (each run says what it loads; the QA's lines are what
+// to read), the report written and its files printed. Exit 1 with the failed checks' reasons.
+Status run_and_report(
+    const SceneOptions& scene, const std::string& out, const std::string& announce,
+    const std::function<Result<qa::DailyQaReport>(const PreparedScene&, tracking::ThreadPool*)>& run_qa) {
+  LFTRACK_RETURN_IF_ERROR(qa::check_report_folder(out));
+  tracking::ThreadPool pool(scene.threads);
+  auto prepared = load_prepared_scene(scene, &pool);
+  if (!prepared.ok()) return prepared.status();
+  if (!announce.empty()) spdlog::info("{}", fmt::format(fmt::runtime(announce), prepared->scene.name));
+  const spdlog::level::level_enum level = spdlog::get_level();
+  if (level == spdlog::level::info) spdlog::set_level(spdlog::level::warn);
+  auto report = run_qa(*prepared, &pool);
+  spdlog::set_level(level);
+  if (!report.ok()) return report.status();
+  auto written = qa::write_daily_qa_report(*report, out);
+  if (!written.ok()) return written.status().with_context("the QA ran, but its report");
+  for (const std::string& n : report->not_checked) std::printf("not checked: %s\n", n.c_str());
+  const bool e2e = report->kind == "e2e";
+  std::printf("%s QA %s: %s, %s\n", e2e ? "end-to-end" : "daily", report->passed() ? "PASSED" : "FAILED",
+              written->html.c_str(), written->json.c_str());
+  if (report->passed()) return {};
+  if (e2e) return failed_precondition("end-to-end QA failed: " + report->checks.front().why);
+  std::string why;
+  for (const qa::QaCheck& c : report->checks)
+    if (!c.passed) why += "\n  " + c.name + ": " + c.why;
+  return failed_precondition("daily QA failed:" + why);
+}
+
 struct QaDailyOptions {
   SceneOptions scene;
   std::string lf_dir;
   std::string out = qa::kDefaultQaFolder;
-  double tolerance_mm = 0.5, tolerance_deg = 0.2;
-  int latency_cycles = 50;
+  double tolerance_mm = qa::kStandardToleranceMm, tolerance_deg = qa::kStandardToleranceDeg;
+  int latency_cycles = qa::kStandardLatencyCycles;
   double latency_ms = 0;
 };
 
@@ -37,38 +74,17 @@ Status run_qa_daily(const QaDailyOptions& o) {
     return invalid_argument("--latency-ms must be from 0 (the scene's period) to 10000 ms");
   if (o.latency_cycles > 0 && o.latency_cycles < 20)
     return invalid_argument("--latency-cycles must be 0 (not run: the QA fails) or at least 20");
-  LFTRACK_RETURN_IF_ERROR(qa::check_report_folder(o.out));
-  tracking::ThreadPool pool(o.scene.threads);
-  auto prepared = load_prepared_scene(o.scene, &pool);
-  if (!prepared.ok()) return prepared.status();
   qa::DailyQaOptions options;
   options.tolerance_mm = o.tolerance_mm;
   options.tolerance_deg = o.tolerance_deg;
   options.latency_cycles = o.latency_cycles;
   options.latency_tolerance_ms = o.latency_ms;
   options.light_field_dir = o.lf_dir;
-  options.progress = [](const std::string& line) {
-    std::printf("%s\n", line.c_str());
-    std::fflush(stdout);
-  };
-  spdlog::info("daily QA of {}: tolerance {} mm, {} deg", prepared->scene.name, o.tolerance_mm,
-               o.tolerance_deg);
-  // Each run of the loop says what it loads and judges; the QA's own lines are what to read.
-  const spdlog::level::level_enum level = spdlog::get_level();
-  if (level == spdlog::level::info) spdlog::set_level(spdlog::level::warn);
-  auto report = qa::run_daily_qa(*prepared, options, &pool);
-  spdlog::set_level(level);
-  if (!report.ok()) return report.status();
-  auto written = qa::write_daily_qa_report(*report, o.out);
-  if (!written.ok()) return written.status().with_context("the QA ran, but its report");
-  for (const std::string& n : report->not_checked) std::printf("not checked: %s\n", n.c_str());
-  std::printf("daily QA %s: %s, %s\n", report->passed() ? "PASSED" : "FAILED", written->html.c_str(),
-              written->json.c_str());
-  if (report->passed()) return {};
-  std::string why;
-  for (const qa::QaCheck& c : report->checks)
-    if (!c.passed) why += "\n  " + c.name + ": " + c.why;
-  return failed_precondition("daily QA failed:" + why);
+  options.progress = print_line;
+  return run_and_report(
+      o.scene, o.out,
+      fmt::format("daily QA of {{}}: tolerance {} mm, {} deg", o.tolerance_mm, o.tolerance_deg),
+      [&](const PreparedScene& p, tracking::ThreadPool* pool) { return qa::run_daily_qa(p, options, pool); });
 }
 
 struct QaE2eOptions {
@@ -92,25 +108,10 @@ Status run_qa_e2e(const QaE2eOptions& o) {
   if (!options.marker_offset_room_mm.allFinite() || options.marker_offset_room_mm.norm() > 200)
     return invalid_argument("--marker-mm must be finite and within 200 mm of the registration origin");
   options.light_field_dir = o.lf_dir;
-  options.progress = [](const std::string& line) {
-    std::printf("%s\n", line.c_str());
-    std::fflush(stdout);
-  };
-  LFTRACK_RETURN_IF_ERROR(qa::check_report_folder(o.out));
-  tracking::ThreadPool pool(o.scene.threads);
-  auto prepared = load_prepared_scene(o.scene, &pool);
-  if (!prepared.ok()) return prepared.status();
-  const spdlog::level::level_enum level = spdlog::get_level();
-  if (level == spdlog::level::info) spdlog::set_level(spdlog::level::warn);
-  auto report = qa::run_end_to_end_qa(*prepared, options, &pool);
-  spdlog::set_level(level);
-  if (!report.ok()) return report.status();
-  auto written = qa::write_daily_qa_report(*report, o.out);
-  if (!written.ok()) return written.status().with_context("the QA ran, but its report");
-  std::printf("end-to-end QA %s: %s, %s\n", report->passed() ? "PASSED" : "FAILED", written->html.c_str(),
-              written->json.c_str());
-  if (report->passed()) return {};
-  return failed_precondition("end-to-end QA failed: " + report->checks.front().why);
+  options.progress = print_line;
+  return run_and_report(o.scene, o.out, "", [&](const PreparedScene& p, tracking::ThreadPool* pool) {
+    return qa::run_end_to_end_qa(p, options, pool);
+  });
 }
 
 }  // namespace

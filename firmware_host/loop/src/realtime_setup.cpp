@@ -70,6 +70,45 @@ rlimit current_limit(int resource) {
   return limit;
 }
 
+// What this process's limits, capabilities and CPUs grant `spec`, and each refused grant in
+// words: the memory's apart, since apply_realtime_setup judges memory by trying mlockall (a finite
+// RLIMIT_MEMLOCK may hold the whole process).
+struct Grants {
+  bool memory = false, fifo = false, affinity = false;
+  std::string memory_refused;        // empty: granted
+  std::vector<std::string> refused;  // the priority and the CPUs
+};
+Grants judge_grants(const RealtimeSpec& spec) {
+  Grants g;
+  const rlimit memlock = current_limit(RLIMIT_MEMLOCK);
+  const rlimit rtprio = current_limit(RLIMIT_RTPRIO);
+  g.memory = memlock_granted(memlock);
+  if (!g.memory) g.memory_refused = "mlockall would fail or run out: " + memlock_missing(memlock);
+  g.fifo = rtprio_granted(rtprio, spec.priority);
+  if (!g.fifo)
+    g.refused.push_back("SCHED_FIFO priority " + std::to_string(spec.priority) +
+                        " would be refused: " + rtprio_missing(rtprio));
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  const bool known = ::sched_getaffinity(0, sizeof allowed, &allowed) == 0;
+  std::string outside;
+  for (int cpu : spec.cpus)
+    if (!known || cpu < 0 || cpu >= CPU_SETSIZE || !CPU_ISSET(cpu, &allowed))
+      outside += (outside.empty() ? "" : ", ") + std::to_string(cpu);
+  g.affinity = !spec.cpus.empty() && outside.empty();
+  if (spec.cpus.empty())
+    g.refused.push_back("loop.realtime.cpus names no CPU to pin the cycle to");
+  else if (!outside.empty())
+    g.refused.push_back("CPU affinity would be refused: CPU " + outside + " not among this process's CPUs");
+  return g;
+}
+
+std::string joined(const std::vector<std::string>& reasons) {
+  std::string text;
+  for (const std::string& r : reasons) text += (text.empty() ? "" : "; ") + r;
+  return text;
+}
+
 // What to change, named for each way a host grants it.
 std::string remedy(const RealtimeSpec& spec) {
   const std::string p = std::to_string(spec.priority);
@@ -85,35 +124,17 @@ Result<RealtimeReport> check_realtime_setup(const RealtimeSpec& spec) {
   RealtimeReport report;
   report.checked = true;
   report.not_applied = "a check: nothing applied";
-  const rlimit memlock = current_limit(RLIMIT_MEMLOCK);
-  const rlimit rtprio = current_limit(RLIMIT_RTPRIO);
-  report.memory_locked = memlock_granted(memlock);
-  if (!report.memory_locked)
-    report.warnings.push_back("mlockall would fail or run out: " + memlock_missing(memlock));
-  report.fifo = rtprio_granted(rtprio, spec.priority);
-  if (!report.fifo)
-    report.warnings.push_back("SCHED_FIFO priority " + std::to_string(spec.priority) +
-                              " would be refused: " + rtprio_missing(rtprio));
-  cpu_set_t allowed;
-  CPU_ZERO(&allowed);
-  const bool known = ::sched_getaffinity(0, sizeof allowed, &allowed) == 0;
-  std::string outside;
-  for (int cpu : spec.cpus)
-    if (!known || cpu < 0 || cpu >= CPU_SETSIZE || !CPU_ISSET(cpu, &allowed))
-      outside += (outside.empty() ? "" : ", ") + std::to_string(cpu);
-  report.affinity = !spec.cpus.empty() && outside.empty();
-  if (spec.cpus.empty())
-    report.warnings.push_back("loop.realtime.cpus names no CPU to pin the cycle to");
-  else if (!outside.empty())
-    report.warnings.push_back("CPU affinity would be refused: CPU " + outside + " not among this process's CPUs");
-  if (spec.enforce && !report.warnings.empty()) {
-    std::string reasons;
-    for (const std::string& w : report.warnings) reasons += (reasons.empty() ? "" : "; ") + w;
+  const Grants g = judge_grants(spec);
+  report.memory_locked = g.memory;
+  report.fifo = g.fifo;
+  report.affinity = g.affinity;
+  if (!g.memory_refused.empty()) report.warnings.push_back(g.memory_refused);
+  report.warnings.insert(report.warnings.end(), g.refused.begin(), g.refused.end());
+  if (spec.enforce && !report.warnings.empty())
     return failed_precondition(
         "real-time set-up (loop.realtime.mode: enforce) could not be applied (a check: "
         "nothing applied): " +
-        reasons + "; " + remedy(spec));
-  }
+        joined(report.warnings) + "; " + remedy(spec));
   return report;
 }
 
@@ -122,23 +143,18 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
   // Enforced: every grant the limits refuse is named together, so one refused start tells the
   // operator all there is to change. Memory is judged by trying: a finite RLIMIT_MEMLOCK may hold
   // the whole process.
-  std::vector<std::string> refused;
-  if (spec.enforce) {
-    RealtimeSpec look = spec;
-    look.enforce = false;
-    if (auto check = check_realtime_setup(look); check.ok())
-      for (const std::string& w : check->warnings)
-        if (w.rfind("mlockall", 0) != 0) refused.push_back(w);
-  }
+  const std::vector<std::string> refused =
+      spec.enforce ? judge_grants(spec).refused : std::vector<std::string>{};
+  auto enforced = [&](const std::string& reasons) {
+    return failed_precondition("real-time set-up (loop.realtime.mode: enforce): " + reasons + "; " +
+                               remedy(spec));
+  };
   auto failed = [&](const std::string& what) -> Status {
     if (!spec.enforce) {
       report.warnings.push_back(what);
       return {};
     }
-    std::string all = what;
-    for (const std::string& r : refused) all += "; " + r;
-    return failed_precondition("real-time set-up (loop.realtime.mode: enforce): " + all + "; " +
-                               remedy(spec));
+    return enforced(refused.empty() ? what : what + "; " + joined(refused));
   };
   if (::mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
     report.memory_locked = true;
@@ -150,11 +166,7 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
                (memlock_granted(memlock) ? "the limit allows it, so the host has too little memory to lock"
                                          : memlock_missing(memlock))));
   }
-  if (!refused.empty()) {
-    const std::string first = refused.front();
-    refused.erase(refused.begin());
-    return failed(first);
-  }
+  if (!refused.empty()) return enforced(joined(refused));
   sched_param param{};
   param.sched_priority = spec.priority;
   // A process started with the reset-on-fork flag (systemd's CPUSchedulingResetOnFork=) keeps it:
@@ -184,11 +196,7 @@ Result<RealtimeReport> apply_realtime_setup(const RealtimeSpec& spec) {
                                      "): loop.realtime.cpus names a CPU this process may not use "
                                      "(a service's CPUAffinity=, a cgroup's cpuset, or taskset)"));
     }
-  } else if (spec.enforce) {
-    return failed_precondition(
-        "real-time set-up (loop.realtime.mode: enforce): loop.realtime.cpus names no CPU to pin the cycle "
-        "to");
-  }
+  }  // enforced without CPUs: refused above ("names no CPU to pin the cycle to")
   return report;
 }
 

@@ -18,16 +18,13 @@ using host::JournalRecord;
 using host::TrackingState;
 using tracking::Vector6d;
 
-constexpr double kPi = 3.14159265358979323846;
-double degrees(double rad) {
-  return rad * 180.0 / kPi;
-}
+using tracking::rad_to_deg;
 
 double translation_mm(const Vector6d& v) {
   return v.head<3>().norm();
 }
 double largest_rotation_deg(const Vector6d& v) {
-  return degrees(v.tail<3>().cwiseAbs().maxCoeff());
+  return rad_to_deg(v.tail<3>().cwiseAbs().maxCoeff());
 }
 
 Vector6d from(const double (&values)[6]) {
@@ -38,7 +35,7 @@ Vector6d from(const double (&values)[6]) {
 
 std::string shift_text(const Vector6d& v) {
   return fmt::format("({:+.1f}, {:+.1f}, {:+.1f}) mm, ({:+.2f}, {:+.2f}, {:+.2f}) deg", v(0), v(1), v(2),
-                     degrees(v(3)), degrees(v(4)), degrees(v(5)));
+                     rad_to_deg(v(3)), rad_to_deg(v(4)), rad_to_deg(v(5)));
 }
 
 // One shift's run judged: the alignment's registration against the shift, the couch's read-back
@@ -209,7 +206,7 @@ bool DailyQaReport::passed() const {
 
 std::vector<Vector6d> default_offset_shifts(const host::Scene& scene) {
   const double t = std::min(10.0, 0.9 * scene.envelope.translation_mm);
-  const double r = std::min(1.0, 0.9 * scene.envelope.rotation_deg) * kPi / 180.0;
+  const double r = tracking::deg_to_rad(std::min(1.0, 0.9 * scene.envelope.rotation_deg));
   std::vector<Vector6d> shifts;
   for (int axis = 0; axis < 6; ++axis) {
     Vector6d s = Vector6d::Zero();

@@ -2,13 +2,13 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
 #include "daily_qa_runs.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/tracking/pose.hpp"
 
 namespace lftrack::qa {
 namespace {
@@ -19,10 +19,7 @@ namespace {
 double marker_error_mm(const host::JournalRecord& r, const Eigen::Vector3d& offset) {
   const Eigen::Vector3d t(r.true_target_residual[0], r.true_target_residual[1], r.true_target_residual[2]);
   const Eigen::Vector3d w(r.true_target_residual[3], r.true_target_residual[4], r.true_target_residual[5]);
-  const double angle = w.norm();
-  const Eigen::Matrix3d rotation =
-      angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
-  return (rotation * offset + t - offset).norm();
+  return (tracking::rotation_exp(w) * offset + t - offset).norm();
 }
 
 double quantile(std::vector<double> v, double q) {

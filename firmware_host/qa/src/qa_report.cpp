@@ -23,11 +23,11 @@ namespace lftrack::qa {
 namespace {
 
 namespace fs = std::filesystem;
-constexpr double kPi = 3.14159265358979323846;
+using tracking::rad_to_deg;
 
 nlohmann::json pose_json(const tracking::Vector6d& v) {
   return {{"translation_mm", {v(0), v(1), v(2)}},
-          {"rotation_deg", {v(3) * 180 / kPi, v(4) * 180 / kPi, v(5) * 180 / kPi}}};
+          {"rotation_deg", {rad_to_deg(v(3)), rad_to_deg(v(4)), rad_to_deg(v(5))}}};
 }
 
 nlohmann::json to_json(const DailyQaReport& r) {
@@ -197,24 +197,24 @@ std::string to_html(const DailyQaReport& r) {
       << escaped(c.tolerance) << "</td><td>" << escaped(c.measured) << "</td></tr>";
   h << "</table>";
   if (e2e) h << "<h2>The hidden marker</h2>" << marker_picture(r);
-  if (!r.offsets.empty()) h << "<h2>Offset test</h2>" << offset_picture(r);
-  if (!r.offsets.empty())
-    h << "<table><tr><th>#</th><th>shift</th><th>alignment found</th><th>alignment error</th><th>couch "
-         "error</th>"
-         "<th>result</th></tr>";
-  for (std::size_t i = 0; i < r.offsets.size(); ++i) {
-    const OffsetResult& o = r.offsets[i];
+  if (!r.offsets.empty()) {
     auto pose = [](const tracking::Vector6d& v) {
       return fmt::format("{:+.2f} {:+.2f} {:+.2f} mm; {:+.2f} {:+.2f} {:+.2f} deg", v(0), v(1), v(2),
-                         v(3) * 180 / kPi, v(4) * 180 / kPi, v(5) * 180 / kPi);
+                         rad_to_deg(v(3)), rad_to_deg(v(4)), rad_to_deg(v(5)));
     };
-    h << "<tr><td>" << i + 1 << "</td><td>" << pose(o.shift) << "</td><td>" << pose(o.registered)
-      << "</td><td>"
-      << fmt::format("{:.3f} mm, {:.3f} deg", o.registration_error_mm, o.registration_error_deg)
-      << "</td><td>" << fmt::format("{:.3f} mm, {:.3f} deg", o.couch_error_mm, o.couch_error_deg) << "</td>"
-      << result_cell(o.passed, o.why) << "</tr>";
+    h << "<h2>Offset test</h2>" << offset_picture(r);
+    h << "<table><tr><th>#</th><th>shift</th><th>alignment found</th><th>alignment error</th><th>couch "
+         "error</th><th>result</th></tr>";
+    for (std::size_t i = 0; i < r.offsets.size(); ++i) {
+      const OffsetResult& o = r.offsets[i];
+      h << "<tr><td>" << i + 1 << "</td><td>" << pose(o.shift) << "</td><td>" << pose(o.registered)
+        << "</td><td>"
+        << fmt::format("{:.3f} mm, {:.3f} deg", o.registration_error_mm, o.registration_error_deg)
+        << "</td><td>" << fmt::format("{:.3f} mm, {:.3f} deg", o.couch_error_mm, o.couch_error_deg) << "</td>"
+        << result_cell(o.passed, o.why) << "</tr>";
+    }
+    h << "</table>";
   }
-  if (!r.offsets.empty()) h << "</table>";
   if (!r.not_checked.empty()) {
     h << "<h2>Not checked</h2><ul>";
     for (const std::string& n : r.not_checked) h << "<li>" << escaped(n) << "</li>";
