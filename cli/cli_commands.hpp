@@ -75,6 +75,7 @@ Command add_drr_command(CLI::App* parent);
 Command add_precompute_command(CLI::App* parent);
 Command add_qa_daily_command(CLI::App* parent);  // under `lftrack qa`
 Command add_qa_e2e_command(CLI::App* parent);    // under `lftrack qa`
+Command add_qa_detector_command(CLI::App* parent);  // under `lftrack qa`
 Command add_scene_new_command(CLI::App* parent, int argc, char** argv);
 Command add_bench_drr_command(CLI::App* parent);
 Command add_register_command(CLI::App* parent);

@@ -15,7 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
-#include "lftrack/drivers/frame_files.hpp"
+#include "frame_folders.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 
 namespace lftrack::host::cli {
@@ -29,88 +29,6 @@ struct DetectorOptions {
   int min_frames = 8;
   calib::DetectorCalibrationOptions rule;
 };
-
-constexpr std::size_t kMaxFrames = 5000;
-constexpr std::uint64_t kMaxBytes = std::uint64_t(4) << 30;  // frames held in memory at once
-
-bool is_frame_file(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  return ext == ".tif" || ext == ".tiff" || ext == ".png";
-}
-
-// The frame files of `dir` in name order; a folder that is missing, empty of frames or holds
-// anything else is refused.
-Result<std::vector<fs::path>> list_folder(const std::string& dir, const char* what) {
-  std::error_code ec;
-  const fs::file_status st = fs::status(dir, ec);
-  if (!fs::exists(st)) return not_found(std::string(what) + " folder " + dir + ": no such directory");
-  if (!fs::is_directory(st)) return invalid_argument(std::string(what) + " folder " + dir + " is not a directory");
-  std::vector<fs::path> files;
-  std::vector<std::string> others;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const fs::path& p = it->path();
-    if (p.filename().string().front() == '.') continue;
-    if (it->is_regular_file(ec) && is_frame_file(p))
-      files.push_back(p);
-    else
-      others.push_back(p.filename().string() + (it->is_directory(ec) ? "/" : ""));
-  }
-  if (ec) return io_error(std::string(what) + " folder " + dir + ": " + ec.message());
-  if (!others.empty()) {
-    std::sort(others.begin(), others.end());
-    std::string names;
-    for (std::size_t i = 0; i < others.size() && i < 3; ++i) names += (i ? ", " : "") + others[i];
-    if (others.size() > 3) names += " and " + std::to_string(others.size() - 3) + " more";
-    return invalid_argument(std::string(what) + " folder " + dir + " holds " + std::to_string(others.size()) +
-                            (others.size() == 1 ? " entry that is" : " entries that are") +
-                            " not a frame file (.tif, .tiff, .png): " + names +
-                            "; a calibration folder must hold only its frames");
-  }
-  if (files.empty())
-    return invalid_argument(std::string(what) + " folder " + dir + " holds no frames (.tif, .tiff or .png files)");
-  if (files.size() > kMaxFrames)
-    return invalid_argument(std::string(what) + " folder " + dir + " holds " + std::to_string(files.size()) +
-                            " frames; at most " + std::to_string(kMaxFrames) + " are used for a calibration");
-  std::sort(files.begin(), files.end());
-  return files;
-}
-
-struct FrameSize {
-  int rows = 0, cols = 0;
-  fs::path first;           // the file the size was taken from
-  std::uint64_t bytes = 0;  // of the frames read so far
-};
-
-// Reads `files`, all of the size in `size` (set from the first file when not yet set).
-Result<std::vector<tracking::Image<std::uint16_t>>> read_frames(const std::vector<fs::path>& files, const char* what,
-                                                                FrameSize* size) {
-  const auto describe = [](int rows, int cols) { return std::to_string(cols) + " x " + std::to_string(rows); };
-  for (const fs::path& f : files) {
-    int rows = 0, cols = 0;
-    if (Status s = drivers::frame_file_size(f.c_str(), &rows, &cols); !s.ok())
-      return s.with_context(std::string(what) + " frame");
-    if (size->rows == 0) {
-      size->rows = rows;
-      size->cols = cols;
-      size->first = f;
-    } else if (rows != size->rows || cols != size->cols) {
-      return invalid_argument(std::string(what) + " frame " + f.string() + " is " + describe(rows, cols) +
-                              " pixels; " + size->first.string() + " is " + describe(size->rows, size->cols) +
-                              ": all frames must be one size");
-    }
-  }
-  size->bytes += std::uint64_t(size->rows) * std::uint64_t(size->cols) * 2 * files.size();
-  if (size->bytes > kMaxBytes) return invalid_argument("the frames would take more than 4 GiB of memory; use fewer frames");
-  std::vector<tracking::Image<std::uint16_t>> frames;
-  frames.reserve(files.size());
-  for (const fs::path& f : files) {
-    frames.emplace_back(size->rows, size->cols);
-    if (Status s = drivers::read_frame_file(f.c_str(), frames.back().view()); !s.ok())
-      return s.with_context(std::string(what) + " frame");
-  }
-  return frames;
-}
 
 Status check_detector_name(const std::string& name) {
   if (name.empty()) return {};
@@ -150,18 +68,18 @@ Status run(const DetectorOptions& o) {
       return failed_precondition(out.string() + " is not a detector calibration (" + earlier.status().message() +
                                  "); --overwrite replaces only a calibration file; remove it yourself if it is yours");
   }
-  auto dark_files = list_folder(o.dark, "dark");
+  auto dark_files = list_frame_folder(o.dark, "dark");
   if (!dark_files.ok()) return dark_files.status();
-  auto flood_files = list_folder(o.flood, "flood");
+  auto flood_files = list_frame_folder(o.flood, "flood");
   if (!flood_files.ok()) return flood_files.status();
   if (int(dark_files->size()) < rule.min_dark_frames || int(flood_files->size()) < rule.min_flood_frames)
     return invalid_argument("too few frames: " + std::to_string(dark_files->size()) + " dark in " + o.dark + ", " +
                             std::to_string(flood_files->size()) + " flood in " + o.flood + " (at least " +
                             std::to_string(o.min_frames) + " of each; --min-frames)");
   FrameSize size;
-  auto dark = read_frames(*dark_files, "dark", &size);
+  auto dark = read_frame_files(*dark_files, "dark", &size);
   if (!dark.ok()) return dark.status();
-  auto flood = read_frames(*flood_files, "flood", &size);
+  auto flood = read_frame_files(*flood_files, "flood", &size);
   if (!flood.ok()) return flood.status();
   spdlog::info("{} dark and {} flood frames of {} x {} pixels", dark->size(), flood->size(), size.cols, size.rows);
   for (const fs::path& f : *dark_files) rule.dark_names.push_back(f.string());

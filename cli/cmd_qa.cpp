@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "cli_commands.hpp"
+#include "frame_folders.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 #include "lftrack/qa/qa_report.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -45,10 +46,16 @@ Status run_and_report(
   if (!written.ok()) return written.status().with_context("the QA ran, but its report");
   for (const std::string& n : report->not_checked) std::printf("not checked: %s\n", n.c_str());
   const bool e2e = report->kind == "e2e";
-  std::printf("%s QA %s: %s, %s\n", e2e ? "end-to-end" : "daily", report->passed() ? "PASSED" : "FAILED",
-              written->html.c_str(), written->json.c_str());
+  std::printf("%s QA %s: %s, %s\n", e2e ? "end-to-end" : report->kind.c_str(),
+              report->passed() ? "PASSED" : "FAILED", written->html.c_str(), written->json.c_str());
   if (report->passed()) return {};
   if (e2e) return failed_precondition("end-to-end QA failed: " + report->checks.front().why);
+  if (report->kind == "detector") {
+    std::string why;
+    for (const qa::QaCheck& c : report->checks)
+      if (!c.passed) why += "\n  " + c.name + ": " + c.why;
+    return failed_precondition("detector QA failed:" + why);
+  }
   std::string why;
   for (const qa::QaCheck& c : report->checks)
     if (!c.passed) why += "\n  " + c.name + ": " + c.why;
@@ -114,7 +121,91 @@ Status run_qa_e2e(const QaE2eOptions& o) {
   });
 }
 
+struct QaDetectorOptions {
+  SceneOptions scene;
+  std::string frames;
+  std::string out = qa::kDefaultQaFolder;
+  calib::DetectorQaTolerances tolerances;
+  double dark_drift_pct = 100 * calib::DetectorQaTolerances{}.max_dark_drift_fraction;
+  double nonuniformity_pct = 100 * calib::DetectorQaTolerances{}.max_nonuniformity;
+  double new_defects_pct = 100 * calib::DetectorQaTolerances{}.max_new_defect_fraction;
+};
+
+// Today's frames of every detector of `scene` from DIR/NAME/dark and DIR/NAME/flood.
+Result<std::vector<qa::DetectorFrames>> read_detector_frames(const Scene& scene, const std::string& dir,
+                                                             int min_frames) {
+  std::vector<qa::DetectorFrames> all;
+  for (const DetectorSpec& d : scene.detectors) {
+    qa::DetectorFrames f;
+    FrameSize size;
+    for (const bool flood : {false, true}) {
+      const char* what = flood ? "flood" : "dark";
+      const std::string folder = (std::filesystem::path(dir) / d.view.name / what).string();
+      auto files = list_frame_folder(folder, what);
+      if (!files.ok()) return files.status().with_context("detector " + d.view.name);
+      if (int(files->size()) < min_frames)
+        return invalid_argument(fmt::format("detector {}: {} holds {} frames; at least {} (--min-frames)",
+                                            d.view.name, folder, files->size(), min_frames));
+      auto frames = read_frame_files(*files, what, &size);
+      if (!frames.ok()) return frames.status().with_context("detector " + d.view.name);
+      (flood ? f.flood : f.dark) = std::move(frames).value();
+    }
+    all.push_back(std::move(f));
+  }
+  return all;
+}
+
+Status run_qa_detector(const QaDetectorOptions& o) {
+  qa::DetectorQaOptions options;
+  options.tolerances = o.tolerances;
+  options.tolerances.max_dark_drift_fraction = o.dark_drift_pct / 100;
+  options.tolerances.max_nonuniformity = o.nonuniformity_pct / 100;
+  options.tolerances.max_new_defect_fraction = o.new_defects_pct / 100;
+  LFTRACK_RETURN_IF_ERROR(calib::check_detector_qa_tolerances(options.tolerances));
+  std::error_code ec;
+  if (!o.frames.empty() && !std::filesystem::is_directory(o.frames, ec))
+    return invalid_argument("--frames " + o.frames +
+                            ": no such folder (it holds NAME/dark and NAME/flood for "
+                            "each detector NAME)");
+  return run_and_report(
+      o.scene, o.out, "", [&](const PreparedScene& p, tracking::ThreadPool*) -> Result<qa::DailyQaReport> {
+        if (!o.frames.empty()) {
+          auto frames = read_detector_frames(p.scene, o.frames, options.tolerances.min_frames);
+          if (!frames.ok()) return frames.status().with_context("--frames " + o.frames);
+          options.frames = std::move(frames).value();
+        }
+        return qa::run_detector_qa(p, options, print_line);
+      });
+}
+
 }  // namespace
+
+Command add_qa_detector_command(CLI::App* parent) {
+  auto* app = parent->add_subcommand(
+      "detector",
+      "The detectors' image quality against their calibration (dark drift, noise, flat-field uniformity, new "
+      "defects), on any room: today's frames from --frames DIR (DIR/NAME/dark, DIR/NAME/flood), or a "
+      "simulated "
+      "detector's own; a dated report (not a daily QA)");
+  auto o = std::make_shared<QaDetectorOptions>();
+  add_scene_options(app, &o->scene);
+  app->add_option("--frames", o->frames,
+                  "Folder of today's frames: NAME/dark and NAME/flood for each detector NAME (as calibrate "
+                  "detector reads them); needed for detectors that are devices");
+  app->add_option("--out", o->out, "Folder of the QA reports (never replaced)")->capture_default_str();
+  app->add_option("--max-dark-drift", o->dark_drift_pct, "Dark level drift, % of the open field")
+      ->capture_default_str();
+  app->add_option("--max-noise-ratio", o->tolerances.max_noise_ratio, "Temporal noise / the calibration's")
+      ->capture_default_str();
+  app->add_option("--max-nonuniformity", o->nonuniformity_pct, "Flat-field non-uniformity over blocks, %")
+      ->capture_default_str();
+  app->add_option("--max-new-defects", o->new_defects_pct,
+                  "Defects not in the calibration's map, % of the pixels")
+      ->capture_default_str();
+  app->add_option("--min-frames", o->tolerances.min_frames, "Dark and flood frames each, at least")
+      ->capture_default_str();
+  return [o] { return run_qa_detector(*o); };
+}
 
 Command add_qa_e2e_command(CLI::App* parent) {
   auto* app = parent->add_subcommand("e2e",
@@ -140,9 +231,10 @@ Command add_qa_e2e_command(CLI::App* parent) {
 Command add_qa_daily_command(CLI::App* parent) {
   auto* app = parent->add_subcommand(
       "daily",
-      "The daily QA on the room's phantom (AAPM TG-135): the offset test, the beam-permit path, the latency "
-      "chain and "
-      "the control socket, each against its tolerance; a dated report (JSON, HTML) in --out");
+      "The daily QA on the room's phantom (AAPM TG-135): the offset test, the detectors' image quality, the "
+      "beam-permit path, the latency chain and the control socket, each against its tolerance; a dated "
+      "report "
+      "(JSON, HTML) in --out");
   auto o = std::make_shared<QaDailyOptions>();
   add_scene_options(app, &o->scene);
   app->add_option("--lf-dir", o->lf_dir, "Light-field folder (default out/lightfields/<scene>)");

@@ -63,10 +63,13 @@ int main(int argc, char** argv) {
   const Command rt_check = add_rt_check_command(&app);
   const Command commission = add_commission_command(&app, argc, argv);
   CLI::App* qa = app.add_subcommand(
-      "qa", "Quality assurance a physicist runs: the daily QA and the end-to-end test on the room's phantom");
+      "qa",
+      "Quality assurance a physicist runs: the daily QA and the end-to-end test on the room's phantom, the "
+      "detectors' image quality");
   qa->require_subcommand(1);
   const Command qa_daily = add_qa_daily_command(qa);
   const Command qa_e2e = add_qa_e2e_command(qa);
+  const Command qa_detector = add_qa_detector_command(qa);
 
   try {
     app.parse(argc, argv);
@@ -139,6 +142,8 @@ int main(int argc, char** argv) {
       status = qa_daily();
     else if (qa->got_subcommand("e2e"))
       status = qa_e2e();
+    else if (qa->got_subcommand("detector"))
+      status = qa_detector();
     if (!status.ok()) {
       // A message may quote what a file or a user wrote (a DICOM name, a path): control characters
       // other than line breaks are shown as '?', never sent to the terminal.

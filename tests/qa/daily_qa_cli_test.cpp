@@ -63,9 +63,10 @@ TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
     std::cout << "starved host, the QA again: " << qa.out << "\n";
   }
   ASSERT_EQ(qa.exit_code, 0) << qa.out;
-  for (const char* line :
-       {"beam: pass", "latency: pass", "not checked: ", "daily QA PASSED: out/qa/qa-daily-"})
+  for (const char* line : {"detector A: pass", "detector B: pass", "beam: pass", "latency: pass",
+                           "daily QA PASSED: out/qa/qa-daily-"})
     EXPECT_NE(qa.out.find(line), std::string::npos) << line << " missing:\n" << qa.out;
+  EXPECT_EQ(qa.out.find("not checked"), std::string::npos) << "a simulated room's QA checks all it asks for";
   EXPECT_NE(qa.out.find("real-time set-up: memory locked, SCHED_FIFO, pinned"), std::string::npos) << qa.out;
   int reports = 0;
   for (const auto& e : fs::directory_iterator(dir.path() / "out" / "qa"))

@@ -197,6 +197,13 @@ QaCheck latency_check(const RecordedRun& run, double tolerance_ms, int cycles) {
   return c;
 }
 
+// Whether the detector tolerances `t` are no looser than `standard`'s.
+bool no_looser(const calib::DetectorQaTolerances& t, const calib::DetectorQaTolerances& standard) {
+  return t.max_dark_drift_fraction <= standard.max_dark_drift_fraction &&
+         t.max_noise_ratio <= standard.max_noise_ratio && t.max_nonuniformity <= standard.max_nonuniformity &&
+         t.max_new_defect_fraction <= standard.max_new_defect_fraction && t.min_frames >= standard.min_frames;
+}
+
 }  // namespace
 
 bool DailyQaReport::passed() const {
@@ -231,13 +238,10 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
     return invalid_argument("the QA's tolerances must be positive and finite");
   if (o.latency_cycles < 0 || (o.latency_cycles > 0 && o.latency_cycles < 20))
     return invalid_argument("the latency chain runs 0 (not at all: the QA fails) or at least 20 cycles");
+  LFTRACK_RETURN_IF_ERROR(check_detector_qa_options(p, o.detectors));
   DailyQaReport report = new_report(p, "daily");
   report.tolerance_mm = o.tolerance_mm;
   report.tolerance_deg = o.tolerance_deg;
-  report.not_checked = {
-      "the detectors' image quality against their calibration (dark level, gain uniformity, defect count "
-      "growth): "
-      "not built; simulated detectors have no calibration to drift from"};
   auto say = [&](const std::string& line) {
     if (o.progress) o.progress(line);
   };
@@ -245,6 +249,7 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
   const std::vector<Vector6d> shifts = o.shifts.empty() ? default_offset_shifts(p.scene) : o.shifts;
   report.standard = o.shifts.empty() && o.tolerance_mm <= kStandardToleranceMm &&
                     o.tolerance_deg <= kStandardToleranceDeg && o.latency_cycles >= kStandardLatencyCycles &&
+                    no_looser(o.detectors.tolerances, calib::DetectorQaTolerances{}) &&
                     (o.latency_tolerance_ms <= 0 || o.latency_tolerance_ms <= p.scene.loop.period_ms);
   for (const Vector6d& shift : shifts) {
     auto run = run_offset(p, shift, o.offset_cycles, o, pool);
@@ -257,6 +262,8 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
                     r.passed ? "" : ": " + r.why));
   }
   report.checks.push_back(offset_check(report.offsets, o));
+
+  for (QaCheck& c : detector_checks(p, o.detectors, o.progress)) report.checks.push_back(std::move(c));
 
   constexpr int kDarkFrom = 15, kDarkTo = 25;
   auto dark = run_dark_detectors(p, std::max(o.beam_cycles, kDarkTo + 5), kDarkFrom, kDarkTo, o, pool);

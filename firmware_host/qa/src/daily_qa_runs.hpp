@@ -21,6 +21,10 @@ struct RecordedRun {
 // the times.
 DailyQaReport new_report(const host::PreparedScene& scene, const std::string& kind);
 
+// The detector options judged against `scene` (detector_checks.cpp): tolerances in range, frames
+// for every detector or none.
+Status check_detector_qa_options(const host::PreparedScene& scene, const DetectorQaOptions& options);
+
 // `scene` with the phantom set up `shift` off (no drift or breathing), `cycles` on the simulated
 // clock.
 Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,

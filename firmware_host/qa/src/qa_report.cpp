@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -32,7 +33,7 @@ nlohmann::json pose_json(const tracking::Vector6d& v) {
 
 nlohmann::json to_json(const DailyQaReport& r) {
   nlohmann::json j;
-  j["kind"] = r.kind == "e2e" ? "lftrack e2e QA" : "lftrack daily QA";
+  j["kind"] = fmt::format("lftrack {} QA", r.kind);  // daily, e2e, detector
   j["scene"] = r.scene_name;
   j["scene_file"] = r.scene_source;
   j["room_fingerprint"] = r.room_fingerprint;
@@ -43,7 +44,7 @@ nlohmann::json to_json(const DailyQaReport& r) {
   j["standard"] = r.standard;
   if (r.kind == "e2e")
     j["tolerance"] = {{"mm", r.tolerance_mm}};
-  else
+  else if (r.kind == "daily")  // the detector QA's tolerances are its checks' own
     j["tolerance"] = {{"mm", r.tolerance_mm}, {"deg", r.tolerance_deg}};
   for (const QaCheck& c : r.checks)
     j["checks"].push_back({{"name", c.name},
@@ -180,14 +181,15 @@ std::string marker_picture(const DailyQaReport& r) {
 std::string to_html(const DailyQaReport& r) {
   std::ostringstream h;
   const bool e2e = r.kind == "e2e";
-  h << "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>lftrack "
-    << (e2e ? "end-to-end" : "daily") << " QA " << escaped(r.date)
+  const std::string title = e2e ? "end-to-end" : r.kind;
+  h << "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>lftrack " << title << " QA "
+    << escaped(r.date)
     << "</title><style>body{font-family:sans-serif;margin:2em}td,th{padding:4px 8px;border-bottom:1px solid "
        "#ddd;"
        "text-align:left;vertical-align:top}.pass{color:#175}.fail{color:#b00;font-weight:bold}</style></"
        "head><body>";
-  h << "<h1>" << (e2e ? "End-to-end" : "Daily") << " QA: <span class='"
-    << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
+  h << "<h1>" << char(std::toupper(static_cast<unsigned char>(title[0]))) << title.substr(1)
+    << " QA: <span class='" << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
   h << "<p>" << escaped(r.scene_name) << " (" << escaped(r.scene_source) << "), started "
     << escaped(r.started_local)
     << (r.kind == "daily" && !r.standard ? " (not the standard QA: looser settings)" : "") << "</p>";
@@ -278,7 +280,7 @@ Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const f
       to_json(report).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
   const std::string html = to_html(report);
   for (int n = 1; n < 1000; ++n) {
-    const std::string prefix = report.kind == "e2e" ? "qa-e2e" : "qa-daily";
+    const std::string prefix = "qa-" + report.kind;
     const std::string base =
         n == 1 ? fmt::format("{}-{}", prefix, stamp) : fmt::format("{}-{}-{}", prefix, stamp, n);
     WrittenReport w{folder / (base + ".json"), folder / (base + ".html")};

@@ -12,6 +12,7 @@
 //  beam        the beam-permit path: the detectors go dark for some cycles in TRACK; the loop must
 //              HOLD, withhold the beam in every HOLD cycle, and never permit it again without an
 //              operator (none is given).
+//  detector    one per detector: its image quality against its calibration (detector_checks below).
 //  latency     on the real clock: the loop runs its period with the room's devices, the control
 //              socket answers `status` with the loop's state, no cycle overruns, and the exposure
 //              to the actuator's acknowledgement stays within the tolerance (the period by
@@ -23,11 +24,13 @@
 // with real devices and says so.
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "lftrack/calib/detector_qa.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/pose.hpp"
@@ -43,6 +46,29 @@ inline constexpr double kStandardToleranceMm = 0.5;
 inline constexpr double kStandardToleranceDeg = 0.2;
 inline constexpr int kStandardLatencyCycles = 50;
 
+// Today's frames of one detector as a physicist acquires them for its check: dark (no beam) and
+// flood (open beam, nothing in it), each of the detector's full size.
+struct DetectorFrames {
+  std::vector<tracking::Image<std::uint16_t>> dark, flood;
+};
+
+// The detectors' image quality against their calibration (calib/detector_qa.hpp: dark drift,
+// noise, flat-field uniformity, new defects), one check per detector, named "detector NAME".
+//   baseline  the detector's calibration file (detectors[i].calibration); for a simulated detector
+//             without one, the calibration of its simulated panel (sim/panel_frames.hpp) made
+//             from its commissioning frames (16 dark, 16 flood, seed 1) as the QA starts.
+//   today     `frames[i]` where given; else a simulated detector's panel gives 8 dark and 8
+//             flood frames (seed 2). A detector with neither (a device, no frames given) fails
+//             its check, saying how to give them.
+// Floods are taken at half the detector's full scale (the scene's conversion of photons to
+// counts), as a calibration is: an open field that saturates calibrates nothing.
+struct DetectorQaOptions {
+  calib::DetectorQaTolerances tolerances;
+  std::vector<DetectorFrames> frames;  // empty, or one per detector in the scene's order
+  // Fault injection (tests): changes detector `index`'s frames of today before they are judged.
+  std::function<void(int index, DetectorFrames* today)> fault;
+};
+
 struct DailyQaOptions {
   double tolerance_mm = kStandardToleranceMm;    // offset test: registration and couch, per shift (3D)
   double tolerance_deg = kStandardToleranceDeg;  // offset test: largest rotation component
@@ -56,6 +82,7 @@ struct DailyQaOptions {
   double latency_tolerance_ms = 0;        // p99 exposure to acknowledgement; 0: the scene's period
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
   std::filesystem::path work_dir;         // the control socket; empty: a folder in /tmp
+  DetectorQaOptions detectors;
   // Fault injection (tests): wraps the devices of every run, as the chaos soak does.
   host::SessionHooks hooks;
   // Called with a line per step done (a progress display); may be empty.
@@ -88,7 +115,7 @@ struct QaCheck {
 };
 
 struct DailyQaReport {
-  std::string kind = "daily";  // "daily" (run_daily_qa) or "e2e" (run_end_to_end_qa)
+  std::string kind = "daily";  // "daily" (run_daily_qa), "e2e" (run_end_to_end_qa), "detector"
   std::string scene_name, scene_source;
   std::string room_fingerprint;  // host::room_fingerprint, hex: whose room this QA was of
   std::string started_utc;       // ISO 8601
@@ -96,13 +123,13 @@ struct DailyQaReport {
   std::string date;              // YYYY-MM-DD, the host's local date: the clinic's day it counts for
   double tolerance_mm = 0, tolerance_deg = 0;
   // The standard QA: the default shifts, tolerances no looser than the defaults (0.5 mm, 0.2
-  // degree), the latency chain run (at least 50 cycles) within the scene's period. Only a standard
-  // daily QA that passed counts for `lftrack run`.
+  // degree, the detector check's), the latency chain run (at least 50 cycles) within the scene's period. Only
+  // a standard daily QA that passed counts for `lftrack run`.
   bool standard = false;
   std::vector<OffsetResult> offsets;
   std::vector<QaCheck> checks;
-  // What a daily QA asks for and this one does not check (detector image quality against its
-  // calibration, for one): said in the report, never counted as passed.
+  // What a daily QA asks for and this one does not check: said in the report, never counted as
+  // passed.
   std::vector<std::string> not_checked;
   // e2e: where the hidden marker is (from the registration origin, room frame) and its error in
   // each beam-on cycle (mm), for the report's picture.
@@ -116,6 +143,15 @@ struct DailyQaReport {
 // in the report.
 Result<DailyQaReport> run_daily_qa(const host::PreparedScene& scene, const DailyQaOptions& options,
                                    tracking::ThreadPool* pool);
+
+// The detector checks alone, on any room (real devices too): a report of kind "detector". It is
+// not a daily QA (`lftrack run` does not count it); a real room runs it each morning with its
+// detectors' frames until its daily QA can move the room's own couch. Fails only for options out
+// of range; a detector that cannot be judged fails its check.
+std::vector<QaCheck> detector_checks(const host::PreparedScene& scene, const DetectorQaOptions& options,
+                                     const std::function<void(const std::string&)>& progress);
+Result<DailyQaReport> run_detector_qa(const host::PreparedScene& scene, const DetectorQaOptions& options,
+                                      const std::function<void(const std::string&)>& progress);
 
 // The hidden-target end-to-end test (AAPM TG-135's yearly E2E, MPPG 9.a: within 1.0 mm): the
 // room's phantom tracked as in treatment, with the scene's own set-up error and motion, on the

@@ -1,0 +1,147 @@
+// The daily QA's detector checks (daily_qa.hpp, DetectorQaOptions): each detector's frames of
+// today against the calibration the loop corrects it with.
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "daily_qa_runs.hpp"
+#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/sim/panel_frames.hpp"
+
+namespace lftrack::qa {
+namespace {
+
+constexpr int kCommissioningFrames = 16;
+constexpr int kTodayFrames = 8;
+constexpr std::uint64_t kCommissioningSeed = 1, kTodaySeed = 2;
+constexpr double kFloodOfFullScale = 0.5;
+// The simulator's conversion: this many photons per pixel read 85 % of full scale (SimFrameSpec).
+constexpr double kConversionOfFullScale = 0.85;
+
+// Detector `i`'s panel as the simulator models it (sim/panel_frames.hpp).
+sim::PanelSpec panel_of(const host::PreparedScene& p, std::size_t i) {
+  const host::DetectorSpec& d = p.scene.detectors[i];
+  sim::PanelSpec s;
+  s.rows = d.view.rows;
+  s.cols = d.view.cols;
+  s.bits = d.bits;
+  s.open_field_fraction = kFloodOfFullScale;
+  s.photons_per_pixel = p.scene.sim.photons_per_pixel * kFloodOfFullScale / kConversionOfFullScale;
+  // The same fixed pattern as the loop's frames of this detector (sim_detectors.cpp: seed i + 1).
+  if (p.scene.sim.physics.detector)
+    s.effects = sim::effects_of_detector(*p.scene.sim.physics.detector, i + 1);
+  return s;
+}
+
+Result<DetectorFrames> panel_frames(const sim::PanelSpec& panel, int count, std::uint64_t seed) {
+  DetectorFrames f;
+  auto dark = sim::simulate_panel_frames(panel, false, count, seed);
+  if (!dark.ok()) return dark.status();
+  auto flood = sim::simulate_panel_frames(panel, true, count, seed);
+  if (!flood.ok()) return flood.status();
+  f.dark = std::move(dark).value();
+  f.flood = std::move(flood).value();
+  return f;
+}
+
+// What detector `i` is judged against: its file, or its simulated panel's calibration.
+Result<calib::DetectorCalibration> baseline_of(const host::PreparedScene& p, std::size_t i, bool simulated,
+                                               std::string* source) {
+  const host::DetectorSpec& d = p.scene.detectors[i];
+  if (!d.calibration_file.empty()) {
+    *source = "calibration " + d.calibration_file;
+    return host::load_detector_calibration(d.calibration_file);
+  }
+  if (!simulated)
+    return failed_precondition(
+        "detector " + d.view.name +
+        " has no calibration file to judge it against (detectors[].calibration: lftrack "
+        "calibrate detector)");
+  *source = "its simulated panel's calibration";
+  auto frames = panel_frames(panel_of(p, i), kCommissioningFrames, kCommissioningSeed);
+  if (!frames.ok()) return frames.status();
+  calib::DetectorCalibrationOptions rule;
+  rule.bits = d.bits;
+  auto made = calib::calibrate_detector(frames->dark, frames->flood, rule);
+  if (made.ok()) made->detector = d.view.name;
+  return made;
+}
+
+Result<DetectorFrames> today_of(const host::PreparedScene& p, std::size_t i, bool simulated,
+                                const DetectorQaOptions& o, std::string* source) {
+  if (!o.frames.empty()) {
+    *source = "the frames given";
+    return o.frames[i];
+  }
+  if (!simulated)
+    return failed_precondition("no frames of today were given for detector " +
+                               p.scene.detectors[i].view.name + " (lftrack qa detector --frames DIR: DIR/" +
+                               p.scene.detectors[i].view.name + "/dark and DIR/" +
+                               p.scene.detectors[i].view.name + "/flood)");
+  *source = "its simulated panel's frames";
+  return panel_frames(panel_of(p, i), kTodayFrames, kTodaySeed);
+}
+
+std::string tolerance_text(const calib::DetectorQaTolerances& t) {
+  return fmt::format(
+      "dark drift within {} % of the open field, noise within x{}, flat-field non-uniformity within {} %, "
+      "new "
+      "defects within {} % of the pixels and no new defective line",
+      100 * t.max_dark_drift_fraction, t.max_noise_ratio, 100 * t.max_nonuniformity,
+      100 * t.max_new_defect_fraction);
+}
+
+}  // namespace
+
+std::vector<QaCheck> detector_checks(const host::PreparedScene& p, const DetectorQaOptions& o,
+                                     const std::function<void(const std::string&)>& progress) {
+  const bool simulated = host::frames_are_simulated(p.scene);
+  std::vector<QaCheck> checks;
+  for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
+    QaCheck c;
+    c.name = "detector " + p.scene.detectors[i].view.name;
+    c.tolerance = tolerance_text(o.tolerances);
+    std::string baseline_source, today_source;
+    auto judged = [&]() -> Result<calib::DetectorQaResult> {
+      auto baseline = baseline_of(p, i, simulated, &baseline_source);
+      if (!baseline.ok()) return baseline.status().with_context("the baseline");
+      auto today = today_of(p, i, simulated, o, &today_source);
+      if (!today.ok()) return today.status();
+      if (o.fault) o.fault(int(i), &*today);
+      return calib::check_detector_quality(*baseline, today->dark, today->flood, o.tolerances);
+    }();
+    if (judged.ok()) {
+      c.passed = judged->passed;
+      c.why = judged->why;
+      c.measured = fmt::format("{} (today: {}; against {})", judged->measured, today_source, baseline_source);
+    } else {
+      c.why = judged.status().message();
+      c.measured = "not judged";
+    }
+    if (progress) progress(c.name + ": " + (c.passed ? "pass (" + c.measured + ")" : "FAIL: " + c.why));
+    checks.push_back(std::move(c));
+  }
+  return checks;
+}
+
+Status check_detector_qa_options(const host::PreparedScene& p, const DetectorQaOptions& o) {
+  LFTRACK_RETURN_IF_ERROR(calib::check_detector_qa_tolerances(o.tolerances));
+  if (!o.frames.empty() && o.frames.size() != p.scene.detectors.size())
+    return invalid_argument(fmt::format("frames were given for {} detectors; the scene has {}",
+                                        o.frames.size(), p.scene.detectors.size()));
+  return {};
+}
+
+Result<DailyQaReport> run_detector_qa(const host::PreparedScene& p, const DetectorQaOptions& o,
+                                      const std::function<void(const std::string&)>& progress) {
+  LFTRACK_RETURN_IF_ERROR(check_detector_qa_options(p, o));
+  DailyQaReport report = new_report(p, "detector");
+  report.checks = detector_checks(p, o, progress);
+  report.not_checked = {"the offset test, the beam-permit path and the latency chain: lftrack qa daily"};
+  return report;
+}
+
+}  // namespace lftrack::qa
