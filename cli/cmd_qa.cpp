@@ -25,7 +25,7 @@ void print_line(const std::string& line) {
   std::fflush(stdout);
 }
 
-// What both commands do once their values are judged: the scene loaded, `announce` logged (its {}
+// What the commands do once their values are judged: the scene loaded, `announce` logged (its {}
 // the scene's name), the QA
 // run with the loop's own log lines quieted (each run says what it loads; the QA's lines are what
 // to read), the report written and its files printed. Exit 1 with the failed checks' reasons.
@@ -50,16 +50,10 @@ Status run_and_report(
               report->passed() ? "PASSED" : "FAILED", written->html.c_str(), written->json.c_str());
   if (report->passed()) return {};
   if (e2e) return failed_precondition("end-to-end QA failed: " + report->checks.front().why);
-  if (report->kind == "detector") {
-    std::string why;
-    for (const qa::QaCheck& c : report->checks)
-      if (!c.passed) why += "\n  " + c.name + ": " + c.why;
-    return failed_precondition("detector QA failed:" + why);
-  }
   std::string why;
   for (const qa::QaCheck& c : report->checks)
     if (!c.passed) why += "\n  " + c.name + ": " + c.why;
-  return failed_precondition("daily QA failed:" + why);
+  return failed_precondition(report->kind + " QA failed:" + why);
 }
 
 struct QaDailyOptions {
@@ -135,9 +129,11 @@ struct QaDetectorOptions {
 Result<std::vector<qa::DetectorFrames>> read_detector_frames(const Scene& scene, const std::string& dir,
                                                              int min_frames) {
   std::vector<qa::DetectorFrames> all;
+  std::uint64_t bytes = 0;  // of every detector's frames, all held at once
   for (const DetectorSpec& d : scene.detectors) {
     qa::DetectorFrames f;
     FrameSize size;
+    size.bytes = bytes;
     for (const bool flood : {false, true}) {
       const char* what = flood ? "flood" : "dark";
       const std::string folder = (std::filesystem::path(dir) / d.view.name / what).string();
@@ -150,6 +146,7 @@ Result<std::vector<qa::DetectorFrames>> read_detector_frames(const Scene& scene,
       if (!frames.ok()) return frames.status().with_context("detector " + d.view.name);
       (flood ? f.flood : f.dark) = std::move(frames).value();
     }
+    bytes = size.bytes;
     all.push_back(std::move(f));
   }
   return all;

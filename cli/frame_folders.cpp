@@ -3,6 +3,7 @@
 #include "frame_folders.hpp"
 
 #include <algorithm>
+#include <cctype>
 
 #include "lftrack/drivers/frame_files.hpp"
 
@@ -50,14 +51,14 @@ Result<std::vector<fs::path>> list_frame_folder(const std::string& dir, const ch
     return invalid_argument(std::string(what) + " folder " + dir + " holds " + std::to_string(others.size()) +
                             (others.size() == 1 ? " entry that is" : " entries that are") +
                             " not a frame file (.tif, .tiff, .png): " + names +
-                            "; a calibration folder must hold only its frames");
+                            "; a frame folder must hold only its frames");
   }
   if (files.empty())
     return invalid_argument(std::string(what) + " folder " + dir +
                             " holds no frames (.tif, .tiff or .png files)");
   if (files.size() > kMaxFrames)
     return invalid_argument(std::string(what) + " folder " + dir + " holds " + std::to_string(files.size()) +
-                            " frames; at most " + std::to_string(kMaxFrames) + " are used for a calibration");
+                            " frames; at most " + std::to_string(kMaxFrames) + " are read");
   std::sort(files.begin(), files.end());
   return files;
 }

@@ -9,6 +9,7 @@
 #include <exception>
 
 #include "cli_commands.hpp"
+#include "lftrack/tracking/version.hpp"
 
 int main(int argc, char** argv) {
   auto logger = spdlog::stderr_color_mt("lftrack");
@@ -17,7 +18,7 @@ int main(int argc, char** argv) {
 
   CLI::App app{"lftrack: real-time patient tracking for image-guided radiosurgery"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "lftrack 0.1.0");
+  app.set_version_flag("--version", std::string("lftrack ") + lftrack::kVersion);
   bool verbose = false, quiet = false;
   app.add_flag("-v,--verbose", verbose, "More log output");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");

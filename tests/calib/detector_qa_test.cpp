@@ -7,8 +7,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 
 #include "lftrack/sim/panel_frames.hpp"
 
@@ -96,6 +98,14 @@ TEST(DetectorQa, ADarkLevelThatDriftedFails) {
   EXPECT_FALSE(q->passed);
   EXPECT_NEAR(q->dark_drift_counts, 10.0, 1.0);
   EXPECT_NE(q->why.find("dark level drifted"), std::string::npos) << q->why;
+  // Downwards too.
+  Today down = today();
+  add(&down.dark, [](int, int) { return -10.0; });
+  add(&down.flood, [](int, int) { return -10.0; });
+  auto lower = check_detector_quality(b, down.dark, down.flood, {});
+  ASSERT_TRUE(lower.ok());
+  EXPECT_FALSE(lower->passed);
+  EXPECT_NEAR(lower->dark_drift_counts, -10.0, 1.0);
   // Half of that is within it.
   Today half = today();
   add(&half.dark, [](int, int) { return 3.0; });
@@ -117,6 +127,51 @@ TEST(DetectorQa, NoisierElectronicsFail) {
   EXPECT_FALSE(q->passed);
   EXPECT_GT(q->noise_ratio, 1.5);
   EXPECT_NE(q->why.find("temporal noise"), std::string::npos) << q->why;
+}
+
+TEST(DetectorQa, TheNoiseRatioDoesNotDependOnTheFrameCountAndACollapsedNoiseFails) {
+  const DetectorCalibration b = baseline();  // 16 frames of each
+  const sim::PanelSpec s = panel();
+  DetectorQaTolerances two;
+  two.min_frames = 2;
+  auto q = check_detector_quality(b, frames(s, false, 2, 7), frames(s, true, 2, 7), two);
+  ASSERT_TRUE(q.ok()) << q.status().message();
+  EXPECT_NEAR(q->noise_ratio, 1.0, 0.05) << "2 frames against 16: a variance is unbiased";
+
+  // Each frame mostly the mean of the day's eight (0.7 of it): a read-out that averages, whose
+  // noise is a third of the calibration's. (Frames all equal are refused as a frozen detector.)
+  Today t = today();
+  for (Frames* f : {&t.dark, &t.flood}) {
+    const Frames original = *f;
+    for (int r = 0; r < original.front().rows(); ++r)
+      for (int c = 0; c < original.front().cols(); ++c) {
+        double sum = 0;
+        for (const auto& frame : original) sum += frame.at(r, c);
+        const double mean = sum / double(original.size());
+        for (std::size_t i = 0; i < f->size(); ++i)
+          (*f)[i].at(r, c) = std::uint16_t(std::lround(0.7 * mean + 0.3 * original[i].at(r, c)));
+      }
+  }
+  auto collapsed = check_detector_quality(b, t.dark, t.flood, {});
+  ASSERT_TRUE(collapsed.ok()) << collapsed.status().message();
+  EXPECT_FALSE(collapsed->passed);
+  EXPECT_LT(collapsed->noise_ratio, 0.5);
+  EXPECT_NE(collapsed->why.find("no longer follows the signal"), std::string::npos) << collapsed->why;
+}
+
+TEST(DetectorQa, TheTubesOutputIsReportedNotJudged) {
+  const DetectorCalibration b = baseline();
+  // The flood's signal 20 % weaker everywhere (the tube's output, not the detector).
+  const sim::PanelSpec weaker = [] {
+    sim::PanelSpec s = panel();
+    s.photons_per_pixel *= 0.8;
+    s.open_field_fraction *= 0.8;
+    return s;
+  }();
+  auto q = check_detector_quality(b, frames(weaker, false, 8, 2), frames(weaker, true, 8, 2), {});
+  ASSERT_TRUE(q.ok()) << q.status().message();
+  EXPECT_TRUE(q->passed) << q->why;
+  EXPECT_NEAR(q->open_field_ratio, 0.8, 0.01);
 }
 
 TEST(DetectorQa, AGainThatDriftedAcrossThePanelFails) {
@@ -146,6 +201,15 @@ TEST(DetectorQa, NewDefectivePixelsAndANewLineFail) {
   EXPECT_EQ(q->new_defects, 3);
   EXPECT_EQ(q->new_defect_limit, 1);
   EXPECT_NE(q->why.find("3 pixels are defective"), std::string::npos) << q->why;
+
+  // One is within the limit.
+  Today one = today();
+  add(&one.dark, [](int r, int c) { return r == 20 && c == 30 ? 1500.0 : 0.0; });
+  add(&one.flood, [](int r, int c) { return r == 20 && c == 30 ? 1500.0 : 0.0; });
+  auto single = check_detector_quality(b, one.dark, one.flood, {});
+  ASSERT_TRUE(single.ok());
+  EXPECT_EQ(single->new_defects, 1);
+  EXPECT_TRUE(single->passed) << single->why;
 
   // A column whose read-out died: its flood reads the dark level.
   Today line = today();

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
+#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/qa/qa_report.hpp"
 #include "test_data.hpp"
 
@@ -40,7 +41,7 @@ DailyQaReport a_report(bool passed, const std::string& room = "00112233445566778
   c.passed = passed;
   c.why = o.why;
   r.checks.push_back(c);
-  r.not_checked = {"detector image quality"};
+  r.not_checked = {"a check not run"};
   return r;
 }
 
@@ -109,6 +110,40 @@ TEST(QaReport, RunCountsTheNewestStandardReportOfItsRoomFromToday) {
   ASSERT_TRUE(write_daily_qa_report(failed, qa).ok());
   EXPECT_FALSE(status().passed) << "a newer failed QA overrides an earlier pass";
   EXPECT_NE(status().detail.find("newest QA of the room today failed"), std::string::npos) << status().detail;
+}
+
+// The room a daily QA counts for: its calibrations by contents (a detector recalibrated since the
+// QA is another detector), not the patient's motion; a calibration that cannot be read gives
+// another room, not an error.
+TEST(RoomFingerprint, FollowsTheCalibrationsContentsNotThePatient) {
+  test::TempDir dir;
+  auto scene = host::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml").string());
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  const auto plain = host::room_fingerprint(*scene);
+  host::Scene moved = *scene;
+  moved.motion.setup_error(0) = 9;
+  EXPECT_EQ(host::room_fingerprint(moved), plain) << "another patient's set-up, the same room";
+
+  const fs::path file = dir.path() / "detector-A.tif";
+  auto write = [&](const std::string& bytes) {
+    std::ofstream(file, std::ios::binary | std::ios::trunc) << bytes;
+  };
+  write("calibration of Monday");
+  host::Scene calibrated = *scene;
+  calibrated.detectors[0].calibration_file = file.string();
+  const auto monday = host::room_fingerprint(calibrated);
+  EXPECT_NE(monday, plain);
+  EXPECT_EQ(host::room_fingerprint(calibrated), monday) << "the same file, the same room";
+  write("calibration of Tuesday");
+  const auto tuesday = host::room_fingerprint(calibrated);
+  EXPECT_NE(tuesday, monday) << "the same name, other contents: recalibrated";
+  write("calibration of Monday");
+  EXPECT_EQ(host::room_fingerprint(calibrated), monday);
+
+  fs::remove(file);
+  const auto missing = host::room_fingerprint(calibrated);
+  EXPECT_NE(missing, monday);
+  EXPECT_NE(missing, (std::array<std::uint8_t, 16>{}));
 }
 
 }  // namespace

@@ -264,6 +264,7 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
   report.checks.push_back(offset_check(report.offsets, o));
 
   for (QaCheck& c : detector_checks(p, o.detectors, o.progress)) report.checks.push_back(std::move(c));
+  if (auto note = simulated_detector_note(p, o.detectors)) report.not_checked.push_back(*note);
 
   constexpr int kDarkFrom = 15, kDarkTo = 25;
   auto dark = run_dark_detectors(p, std::max(o.beam_cycles, kDarkTo + 5), kDarkFrom, kDarkTo, o, pool);

@@ -2,6 +2,8 @@
 // The loop runs the daily QA makes (daily_qa.cpp judges them): a session of the scene's room with
 // every cycle's record kept.
 
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "lftrack/host/loop_session.hpp"
@@ -24,6 +26,10 @@ DailyQaReport new_report(const host::PreparedScene& scene, const std::string& ki
 // The detector options judged against `scene` (detector_checks.cpp): tolerances in range, frames
 // for every detector or none.
 Status check_detector_qa_options(const host::PreparedScene& scene, const DetectorQaOptions& options);
+// What the detector checks cannot judge in `scene`: simulated detectors without a calibration file
+// are judged against their panel's calibration made as the QA starts (no history, no drift).
+std::optional<std::string> simulated_detector_note(const host::PreparedScene& scene,
+                                                   const DetectorQaOptions& options);
 
 // `scene` with the phantom set up `shift` off (no drift or breathing), `cycles` on the simulated
 // clock.

@@ -12,8 +12,6 @@ namespace lftrack::host {
 
 namespace {
 
-// The open field's level at the detector's reference exposure (sim.photons_per_pixel photons).
-constexpr double kReferenceOpenFieldFraction = 0.85;
 // Every fourth pixel of a ROI window is enough for its mean.
 constexpr int kSampleStride = 4;
 

@@ -11,9 +11,12 @@
 // the open field in every frame, dark or flood. Values are quantised to the bit depth and
 // clipped at its full scale.
 //
-// The loop's simulated frames are this panel's after its offset correction (they carry no dark
-// level): the dark level and read noise exist here so that a calibration can be made and judged
-// (a noiseless dark frame is a frozen detector's, which calibrate_detector refuses).
+// A model for the QA alone. Here the fixed pattern is the raw panel's, which a calibration of
+// these frames removes; in the loop's simulated frames the same pattern is what is left after a
+// flat field (detector_effects.hpp), and those frames carry no dark level and are never corrected
+// with a calibration made from these. The dark level and read noise exist so that a calibration
+// can be made and judged (a noiseless dark frame is a frozen detector's, which calibrate_detector
+// refuses).
 
 #include <cstdint>
 #include <optional>

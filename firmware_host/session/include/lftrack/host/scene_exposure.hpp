@@ -21,6 +21,10 @@
 
 namespace lftrack::host {
 
+// The open field's level at the detector's reference exposure (sim.photons_per_pixel photons per
+// pixel read this fraction of the full scale).
+inline constexpr double kReferenceOpenFieldFraction = 0.85;
+
 // The exposure `scene`'s simulated detectors get (its CT, views and ROI windows resolved).
 Result<SimExposure> scene_exposure(const PreparedScene& scene);
 

@@ -21,9 +21,11 @@ std::string room_geometry_text(const Scene& scene);
 std::array<std::uint8_t, 16> scene_fingerprint(const Scene& scene);
 
 // The room alone, whatever patient lies in it: its geometry, its actuator and detectors (kind,
-// where each is reached, the calibration file each names; not the files' contents, nor the
-// program's version). The daily QA is the room's: `lftrack run` on any patient's scene in the room looks for
-// today's passed QA by this fingerprint. Never all zeros.
+// where each is reached, the calibration file each names and that file's contents, SHA-256) and
+// the program's version (lftrack::kVersion). The daily QA is the room's: `lftrack run` on any
+// patient's scene in the room looks for today's passed QA by this fingerprint, so a recalibrated
+// detector or couch, or an upgraded program, needs a QA of its own. Reads the calibration files
+// (a file that cannot be read gives another fingerprint, never an error). Never all zeros.
 std::array<std::uint8_t, 16> room_fingerprint(const Scene& scene);
 
 std::string to_hex(const std::array<std::uint8_t, 16>& fingerprint);
