@@ -56,6 +56,47 @@ Status run_and_report(
   return failed_precondition(report->kind + " QA failed:" + why);
 }
 
+// Today's frames of every detector of `scene` from DIR/NAME/dark and DIR/NAME/flood. A detector
+// whose folders cannot be read gets the reason (its check fails with it); the others are judged.
+std::vector<qa::DetectorFrames> read_detector_frames(const Scene& scene, const std::string& dir,
+                                                     int min_frames) {
+  std::vector<qa::DetectorFrames> all;
+  std::uint64_t bytes = 0;  // of every detector's frames, all held at once
+  for (const DetectorSpec& d : scene.detectors) {
+    qa::DetectorFrames f;
+    FrameSize size;
+    size.bytes = bytes;
+    for (const bool flood : {false, true}) {
+      const char* what = flood ? "flood" : "dark";
+      const std::string folder = (std::filesystem::path(dir) / d.view.name / what).string();
+      auto files = list_frame_folder(folder, what);
+      if (!files.ok()) {
+        f.unreadable = files.status().message();
+        break;
+      }
+      if (int(files->size()) < min_frames) {
+        f.unreadable = fmt::format("{} holds {} frame{}; at least {} (--min-frames)", folder, files->size(),
+                                   files->size() == 1 ? "" : "s", min_frames);
+        break;
+      }
+      auto frames = read_frame_files(*files, what, &size);
+      if (!frames.ok()) {
+        f.unreadable = frames.status().message();
+        break;
+      }
+      (flood ? f.flood : f.dark) = std::move(frames).value();
+    }
+    if (f.unreadable.empty()) {
+      bytes = size.bytes;
+    } else {
+      f.dark.clear();
+      f.flood.clear();
+    }
+    all.push_back(std::move(f));
+  }
+  return all;
+}
+
 struct QaDailyOptions {
   SceneOptions scene;
   std::string lf_dir;
@@ -63,6 +104,7 @@ struct QaDailyOptions {
   double tolerance_mm = qa::kStandardToleranceMm, tolerance_deg = qa::kStandardToleranceDeg;
   int latency_cycles = qa::kStandardLatencyCycles;
   double latency_ms = 0;
+  std::string detector_frames;
 };
 
 Status run_qa_daily(const QaDailyOptions& o) {
@@ -82,10 +124,19 @@ Status run_qa_daily(const QaDailyOptions& o) {
   options.latency_tolerance_ms = o.latency_ms;
   options.light_field_dir = o.lf_dir;
   options.progress = print_line;
+  std::error_code ec;
+  if (!o.detector_frames.empty() && !std::filesystem::is_directory(o.detector_frames, ec))
+    return invalid_argument("--detector-frames " + o.detector_frames +
+                            ": no such folder (it holds NAME/dark and NAME/flood for each detector NAME)");
   return run_and_report(
       o.scene, o.out,
       fmt::format("daily QA of {{}}: tolerance {} mm, {} deg", o.tolerance_mm, o.tolerance_deg),
-      [&](const PreparedScene& p, tracking::ThreadPool* pool) { return qa::run_daily_qa(p, options, pool); });
+      [&](const PreparedScene& p, tracking::ThreadPool* pool) {
+        if (!o.detector_frames.empty())
+          options.detectors.frames =
+              read_detector_frames(p.scene, o.detector_frames, options.detectors.tolerances.min_frames);
+        return qa::run_daily_qa(p, options, pool);
+      });
 }
 
 struct QaE2eOptions {
@@ -125,34 +176,20 @@ struct QaDetectorOptions {
   double new_defects_pct = 100 * calib::DetectorQaTolerances{}.max_new_defect_fraction;
 };
 
-// Today's frames of every detector of `scene` from DIR/NAME/dark and DIR/NAME/flood.
-Result<std::vector<qa::DetectorFrames>> read_detector_frames(const Scene& scene, const std::string& dir,
-                                                             int min_frames) {
-  std::vector<qa::DetectorFrames> all;
-  std::uint64_t bytes = 0;  // of every detector's frames, all held at once
-  for (const DetectorSpec& d : scene.detectors) {
-    qa::DetectorFrames f;
-    FrameSize size;
-    size.bytes = bytes;
-    for (const bool flood : {false, true}) {
-      const char* what = flood ? "flood" : "dark";
-      const std::string folder = (std::filesystem::path(dir) / d.view.name / what).string();
-      auto files = list_frame_folder(folder, what);
-      if (!files.ok()) return files.status().with_context("detector " + d.view.name);
-      if (int(files->size()) < min_frames)
-        return invalid_argument(fmt::format("detector {}: {} holds {} frames; at least {} (--min-frames)",
-                                            d.view.name, folder, files->size(), min_frames));
-      auto frames = read_frame_files(*files, what, &size);
-      if (!frames.ok()) return frames.status().with_context("detector " + d.view.name);
-      (flood ? f.flood : f.dark) = std::move(frames).value();
-    }
-    bytes = size.bytes;
-    all.push_back(std::move(f));
-  }
-  return all;
-}
-
 Status run_qa_detector(const QaDetectorOptions& o) {
+  // In the options' own units first (the library's ranges are fractions).
+  if (!(std::isfinite(o.dark_drift_pct) && o.dark_drift_pct > 0 && o.dark_drift_pct <= 10))
+    return invalid_argument("--max-dark-drift must be above 0 and at most 10 (% of the open field)");
+  if (!(std::isfinite(o.nonuniformity_pct) && o.nonuniformity_pct > 0 && o.nonuniformity_pct <= 50))
+    return invalid_argument("--max-nonuniformity must be above 0 and at most 50 (%)");
+  if (!(std::isfinite(o.new_defects_pct) && o.new_defects_pct >= 0 && o.new_defects_pct <= 10))
+    return invalid_argument("--max-new-defects must be from 0 to 10 (% of the pixels)");
+  if (!(std::isfinite(o.tolerances.max_noise_ratio) && o.tolerances.max_noise_ratio > 1 &&
+        o.tolerances.max_noise_ratio <= 10))
+    return invalid_argument("--max-noise-ratio must be above 1 and at most 10");
+  if (o.tolerances.min_frames < calib::kMinQaFrames || o.tolerances.min_frames > calib::kMaxQaFrames)
+    return invalid_argument(
+        fmt::format("--min-frames must be {} to {}", calib::kMinQaFrames, calib::kMaxQaFrames));
   qa::DetectorQaOptions options;
   options.tolerances = o.tolerances;
   options.tolerances.max_dark_drift_fraction = o.dark_drift_pct / 100;
@@ -162,17 +199,12 @@ Status run_qa_detector(const QaDetectorOptions& o) {
   std::error_code ec;
   if (!o.frames.empty() && !std::filesystem::is_directory(o.frames, ec))
     return invalid_argument("--frames " + o.frames +
-                            ": no such folder (it holds NAME/dark and NAME/flood for "
-                            "each detector NAME)");
-  return run_and_report(
-      o.scene, o.out, "", [&](const PreparedScene& p, tracking::ThreadPool*) -> Result<qa::DailyQaReport> {
-        if (!o.frames.empty()) {
-          auto frames = read_detector_frames(p.scene, o.frames, options.tolerances.min_frames);
-          if (!frames.ok()) return frames.status().with_context("--frames " + o.frames);
-          options.frames = std::move(frames).value();
-        }
-        return qa::run_detector_qa(p, options, print_line);
-      });
+                            ": no such folder (it holds NAME/dark and NAME/flood for each detector NAME)");
+  return run_and_report(o.scene, o.out, "", [&](const PreparedScene& p, tracking::ThreadPool*) {
+    if (!o.frames.empty())
+      options.frames = read_detector_frames(p.scene, o.frames, options.tolerances.min_frames);
+    return qa::run_detector_qa(p, options, print_line);
+  });
 }
 
 }  // namespace
@@ -190,16 +222,19 @@ Command add_qa_detector_command(CLI::App* parent) {
                   "Folder of today's frames: NAME/dark and NAME/flood for each detector NAME (as calibrate "
                   "detector reads them); needed for detectors that are devices");
   app->add_option("--out", o->out, "Folder of the QA reports (never replaced)")->capture_default_str();
-  app->add_option("--max-dark-drift", o->dark_drift_pct, "Dark level drift, % of the open field")
+  app->add_option("--max-dark-drift", o->dark_drift_pct, "Dark level drift, % of the open field, (0, 10]")
       ->capture_default_str();
-  app->add_option("--max-noise-ratio", o->tolerances.max_noise_ratio, "Temporal noise / the calibration's")
+  app->add_option("--max-noise-ratio", o->tolerances.max_noise_ratio,
+                  "Temporal noise / the calibration's, (1, 10]")
       ->capture_default_str();
-  app->add_option("--max-nonuniformity", o->nonuniformity_pct, "Flat-field non-uniformity over blocks, %")
+  app->add_option("--max-nonuniformity", o->nonuniformity_pct,
+                  "Flat-field non-uniformity over blocks, %, (0, 50]")
       ->capture_default_str();
   app->add_option("--max-new-defects", o->new_defects_pct,
-                  "Defects not in the calibration's map, % of the pixels")
+                  "Defects not in the calibration's map, % of the pixels, [0, 10]")
       ->capture_default_str();
-  app->add_option("--min-frames", o->tolerances.min_frames, "Dark and flood frames each, at least")
+  app->add_option("--min-frames", o->tolerances.min_frames,
+                  "Dark and flood frames each, at least (8 to 1000)")
       ->capture_default_str();
   return [o] { return run_qa_detector(*o); };
 }
@@ -248,6 +283,9 @@ Command add_qa_daily_command(CLI::App* parent) {
   app->add_option("--latency-ms", o->latency_ms,
                   "Exposure to acknowledgement p99 tolerance (ms; 0: the scene's period)")
       ->capture_default_str();
+  app->add_option("--detector-frames", o->detector_frames,
+                  "Folder of today's detector frames, NAME/dark and NAME/flood per detector (as qa detector "
+                  "--frames); needed where the detectors are devices");
   return [o] { return run_qa_daily(*o); };
 }
 

@@ -226,10 +226,14 @@ Result<DetectorCalibration> calibrate_detector(const std::vector<tracking::Image
         static_cast<double>(saturated_values) / (static_cast<double>(n) * static_cast<double>(flood.size()));
     if (saturated_fraction > o.max_saturated_fraction)
       return invalid_argument(
-          format("the flood saturates: %.2f %% of its pixel values are at or above %d counts (saturation from %s; at "
+          format("the flood saturates: %.2f %% of its pixel values are at or above %d counts (saturation "
+                 "from %s; at "
                  "most %.2f %% allowed); lower the tube current or the exposure time",
                  100 * saturated_fraction, c.saturation_counts,
-                 c.saturation_source == "observed" ? "the largest raw value" : c.saturation_source == "bits" ? "--bits" : "--saturation",
+                 !o.saturation_named.empty()         ? o.saturation_named.c_str()
+                 : c.saturation_source == "observed" ? "the largest raw value"
+                 : c.saturation_source == "bits"     ? "--bits"
+                                                     : "--saturation",
                  100 * o.max_saturated_fraction));
     // After the saturation check: a flood saturated everywhere is identical too, and says so.
     LFTRACK_RETURN_IF_ERROR(check_not_frozen(flood, "flood", o.flood_names));

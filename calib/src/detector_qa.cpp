@@ -93,8 +93,9 @@ Status check_detector_qa_tolerances(const DetectorQaTolerances& t) {
     return invalid_argument("detector QA: the non-uniformity limit must be in (0, 1]");
   if (!in(t.max_new_defect_fraction, 0, 1))
     return invalid_argument("detector QA: the new-defect limit must be in [0, 1] of the pixels");
-  if (t.min_frames < 2 || t.min_frames > 100000)
-    return invalid_argument("detector QA: the minimum of dark and flood frames must be 2 to 100000");
+  if (t.min_frames < kMinQaFrames || t.min_frames > kMaxQaFrames)
+    return invalid_argument(fmt::format("detector QA: the minimum of dark and flood frames must be {} to {}",
+                                        kMinQaFrames, kMaxQaFrames));
   return {};
 }
 
@@ -123,6 +124,7 @@ Result<DetectorQaResult> check_detector_quality(const DetectorCalibration& basel
   DetectorCalibrationOptions rule = baseline.rule;
   rule.min_dark_frames = rule.min_flood_frames = t.min_frames;
   rule.saturation_counts = baseline.saturation_counts;
+  rule.saturation_named = "the calibration's saturation level";
   rule.dark_names.clear();
   rule.flood_names.clear();
   auto today = calibrate_detector(dark, flood, rule);

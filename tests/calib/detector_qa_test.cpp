@@ -132,11 +132,18 @@ TEST(DetectorQa, NoisierElectronicsFail) {
 TEST(DetectorQa, TheNoiseRatioDoesNotDependOnTheFrameCountAndACollapsedNoiseFails) {
   const DetectorCalibration b = baseline();  // 16 frames of each
   const sim::PanelSpec s = panel();
-  DetectorQaTolerances two;
-  two.min_frames = 2;
-  auto q = check_detector_quality(b, frames(s, false, 2, 7), frames(s, true, 2, 7), two);
+  // Today's 8 frames against 96: a median of per-pixel SDs would read x0.96 (0.954 sigma from 8
+  // frames, 0.996 from 96); the root of the mean variance reads 1 within its noise.
+  DetectorCalibrationOptions rule;
+  rule.bits = 12;
+  auto many = calibrate_detector(frames(s, false, 96, 9), frames(s, true, 96, 9), rule);
+  ASSERT_TRUE(many.ok()) << many.status().message();
+  auto q = check_detector_quality(*many, frames(s, false, 8, 7), frames(s, true, 8, 7), {});
   ASSERT_TRUE(q.ok()) << q.status().message();
-  EXPECT_NEAR(q->noise_ratio, 1.0, 0.05) << "2 frames against 16: a variance is unbiased";
+  EXPECT_NEAR(q->noise_ratio, 1.0, 0.015) << "8 frames against 96: a variance is unbiased";
+  DetectorQaTolerances few;
+  few.min_frames = 7;
+  EXPECT_FALSE(check_detector_qa_tolerances(few).ok()) << "fewer than 8 flag pixels by their noise alone";
 
   // Each frame mostly the mean of the day's eight (0.7 of it): a read-out that averages, whose
   // noise is a third of the calibration's. (Frames all equal are refused as a frozen detector.)

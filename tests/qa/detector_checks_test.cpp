@@ -10,6 +10,7 @@
 #include <string>
 
 #include "lftrack/drivers/frame_files.hpp"
+#include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 #include "lftrack/sim/panel_frames.hpp"
@@ -89,6 +90,29 @@ TEST(DetectorChecks, APanelWithTheClinicalDetectorPatternPassesAndNewHotPixelsFa
       << faulty->checks[0].why;
 }
 
+TEST(DetectorChecks, ACalibrationMadeForAnotherDetectorFails) {
+  test::TempDir dir;
+  tracking::ThreadPool pool(2);
+  host::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
+  sim::PanelSpec panel;
+  panel.rows = panel.cols = 512;
+  auto dark = sim::simulate_panel_frames(panel, false, 8, 1);
+  auto flood = sim::simulate_panel_frames(panel, true, 8, 1);
+  ASSERT_TRUE(dark.ok() && flood.ok());
+  auto made = calib::calibrate_detector(*dark, *flood, {});
+  ASSERT_TRUE(made.ok()) << made.status().message();
+  made->detector = "B";
+  const fs::path file = dir.path() / "detector-B.tif";
+  ASSERT_TRUE(host::write_detector_calibration(file, *made, false).ok());
+  p.scene.detectors[0].calibration_file = file.string();  // detector A names B's calibration
+  auto report = run_detector_qa(p, {}, nullptr);
+  ASSERT_TRUE(report.ok()) << report.status().message();
+  EXPECT_FALSE(report->checks[0].passed);
+  EXPECT_NE(report->checks[0].why.find("was made for detector 'B', not 'A'"), std::string::npos)
+      << report->checks[0].why;
+  EXPECT_TRUE(report->checks[1].passed) << report->checks[1].why;
+}
+
 TEST(DetectorChecks, ARoomOfDevicesNeedsTodaysFramesAndACalibrationAndSaysSo) {
   tracking::ThreadPool pool(2);
   const host::PreparedScene room =
@@ -154,6 +178,16 @@ TEST(DetectorChecksCli, ReadsThePhysiciansFoldersAndWritesItsReport) {
   const test::CliRun bad = test::shell(qa + " --frames broken", dir.path(), "bad.txt");
   EXPECT_EQ(bad.exit_code, 1) << bad.out;
   EXPECT_NE(bad.out.find("detector B: new defective column 77"), std::string::npos) << bad.out;
+
+  // One detector's folders missing: its check fails with the reason, the other is judged, and the
+  // report is written.
+  write_frames(dir.path() / "half", "A", -1);
+  const test::CliRun half = test::shell(qa + " --frames half", dir.path(), "half.txt");
+  EXPECT_EQ(half.exit_code, 1) << half.out;
+  EXPECT_NE(half.out.find("detector A: pass"), std::string::npos) << half.out;
+  EXPECT_NE(half.out.find("detector B: FAIL: dark folder half/B/dark: no such directory"), std::string::npos)
+      << half.out;
+  EXPECT_NE(half.out.find("detector QA FAILED: reports/qa-detector-"), std::string::npos) << half.out;
 
   const test::CliRun missing = test::shell(qa + " --frames nowhere", dir.path(), "missing.txt");
   EXPECT_EQ(missing.exit_code, 1) << missing.out;

@@ -31,8 +31,15 @@ Status check_detector_qa_options(const host::PreparedScene& scene, const Detecto
 std::optional<std::string> simulated_detector_note(const host::PreparedScene& scene,
                                                    const DetectorQaOptions& options);
 
-// `scene` with the phantom set up `shift` off (no drift or breathing), `cycles` on the simulated
-// clock.
+// Whether `scene` is a room whose actuator is a device (modbus, can): its couch makes the shifts
+// and every run is on the real clock with the scene's devices (room_runs.hpp). Otherwise a
+// simulated room: the simulated patient's set-up error is the shift, and the runs that can be are
+// on the simulated clock.
+bool is_room(const host::PreparedScene& scene);
+
+// `scene` with the phantom `shift` off (no drift or breathing), `cycles` on the simulated
+// clock; in a room, the couch moved by `shift` first (an error when it does not get there) and
+// the real clock.
 Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
                                const DailyQaOptions& options, tracking::ThreadPool* pool);
 // `scene` standing still, `cycles` on the simulated clock, exposures [dark_from, dark_to) lost.

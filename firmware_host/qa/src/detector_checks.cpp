@@ -58,13 +58,18 @@ Result<calib::DetectorCalibration> baseline_of(const host::PreparedScene& p, std
   const host::DetectorSpec& d = p.scene.detectors[i];
   if (!d.calibration_file.empty()) {
     *source = "calibration " + d.calibration_file;
-    return host::load_detector_calibration(d.calibration_file);
+    auto loaded = host::load_detector_calibration(d.calibration_file);
+    if (loaded.ok() && !loaded->detector.empty() && loaded->detector != d.view.name)
+      return failed_precondition(fmt::format("{} was made for detector '{}', not '{}'", d.calibration_file,
+                                             loaded->detector, d.view.name));
+    return loaded;
   }
   if (!simulated)
     return failed_precondition(
-        "detector " + d.view.name +
-        " has no calibration file to judge it against (detectors[].calibration: lftrack "
-        "calibrate detector)");
+        "detector " + d.view.name + " has no calibration file to judge it against" +
+        (d.simulator_calibration ? " (`calibration: simulator` is the served twin's model, not a calibration)"
+                                 : "") +
+        ": name one as detectors[].calibration (lftrack calibrate detector)");
   *source = "its simulated panel's calibration, made now";
   auto frames = panel_frames(panel_of(p, i), kBaselineFramesPerToday * today_frames, kBaselineSeed);
   if (!frames.ok()) return frames.status();
@@ -79,13 +84,14 @@ Result<DetectorFrames> today_of(const host::PreparedScene& p, std::size_t i, boo
                                 const DetectorQaOptions& o, std::string* source) {
   if (!o.frames.empty()) {
     *source = "the frames given";
+    if (!o.frames[i].unreadable.empty()) return invalid_argument(o.frames[i].unreadable);
     return o.frames[i];
   }
   if (!simulated)
-    return failed_precondition("no frames of today were given for detector " +
-                               p.scene.detectors[i].view.name + " (lftrack qa detector --frames DIR: DIR/" +
-                               p.scene.detectors[i].view.name + "/dark and DIR/" +
-                               p.scene.detectors[i].view.name + "/flood)");
+    return failed_precondition(
+        "no frames of today were given for detector " + p.scene.detectors[i].view.name +
+        " (qa detector --frames DIR or qa daily --detector-frames DIR: DIR/" +
+        p.scene.detectors[i].view.name + "/dark and DIR/" + p.scene.detectors[i].view.name + "/flood)");
   *source = "its simulated panel's frames";
   return panel_frames(panel_of(p, i), frames_today(o), kTodaySeed);
 }

@@ -16,22 +16,6 @@ namespace {
 
 using drivers::DeviceStatus;
 
-const char* to_string(DeviceStatus s) {
-  switch (s) {
-    case DeviceStatus::kOk:
-      return "ok";
-    case DeviceStatus::kTimeout:
-      return "no answer in time";
-    case DeviceStatus::kFault:
-      return "the device reported a fault";
-    case DeviceStatus::kDisconnected:
-      return "disconnected";
-    case DeviceStatus::kRefused:
-      return "refused (a fault condition)";
-  }
-  return "?";
-}
-
 void add(PreflightReport* r, std::string what, CheckResult result, std::string detail) {
   r->items.push_back({std::move(what), result, std::move(detail)});
 }

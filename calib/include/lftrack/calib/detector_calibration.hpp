@@ -67,6 +67,9 @@ struct DetectorCalibrationOptions {
   double max_saturated_fraction = 0.01;     // [0, 1]
   double min_signal_counts = 50;            // [0, 65535]
   double max_unlit_fraction = 0.05;         // [0, 1]
+  // Where the saturation level came from, as a refusal names it; empty: the command line's option
+  // (--saturation, --bits) or "the largest raw value".
+  std::string saturation_named;
   // The frames' names (their files), one per frame, for the refusals that name frames; empty:
   // frames are named by their place, from 1.
   std::vector<std::string> dark_names, flood_names;

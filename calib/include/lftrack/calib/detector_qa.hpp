@@ -47,12 +47,18 @@
 
 namespace lftrack::calib {
 
+// Today's frames of each kind: at least 8 (fewer flag pixels by their noise alone: from 2 frames
+// 63 of a 512 x 512 panel's, from 4 frames 3, from 5 none; an outside probe's count), at most
+// 1,000 (what a simulated panel gives).
+inline constexpr int kMinQaFrames = 8;
+inline constexpr int kMaxQaFrames = 1000;
+
 struct DetectorQaTolerances {
   double max_dark_drift_fraction = 0.002;  // of the baseline's open field, (0, 1]
   double max_noise_ratio = 1.5;            // today's median temporal noise / the baseline's, > 1
   double max_nonuniformity = 0.02;         // (0, 1]
   double max_new_defect_fraction = 1e-4;   // of the pixels, [0, 1]
-  int min_frames = 8;                      // dark and flood each, 2 .. 100000
+  int min_frames = kMinQaFrames;           // dark and flood each, kMinQaFrames .. kMaxQaFrames
 };
 
 Status check_detector_qa_tolerances(const DetectorQaTolerances& tolerances);

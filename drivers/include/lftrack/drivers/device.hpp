@@ -19,6 +19,24 @@ enum class DeviceStatus {
   kRefused,       // refused before acting (a fault condition it knows of): nothing was sent or moved
 };
 
+// For people: "ok", "no answer in time", "the device reported a fault", "disconnected",
+// "refused (a fault condition)".
+inline const char* to_string(DeviceStatus s) {
+  switch (s) {
+    case DeviceStatus::kOk:
+      return "ok";
+    case DeviceStatus::kTimeout:
+      return "no answer in time";
+    case DeviceStatus::kFault:
+      return "the device reported a fault";
+    case DeviceStatus::kDisconnected:
+      return "disconnected";
+    case DeviceStatus::kRefused:
+      return "refused (a fault condition)";
+  }
+  return "?";
+}
+
 // An absolute point on CLOCK_MONOTONIC by which a cycle call must return.
 using Deadline = std::chrono::steady_clock::time_point;
 

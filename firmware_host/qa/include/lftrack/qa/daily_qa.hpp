@@ -18,10 +18,11 @@
 //              to the actuator's acknowledgement stays within the tolerance (the period by
 //              default) at p99.
 //
-// Runs in a simulated room (the scene's detectors `frames: sim`, a virtual actuator): the shifts
-// are the simulated patient's set-up error, not couch moves, so a real room's QA (shifts made by
-// its couch, frames from its detectors) is not what this runs; `run_daily_qa` refuses a scene
-// with real devices and says so.
+// Runs in a simulated room (the scene's detectors `frames: sim`, a virtual actuator), where the
+// shifts are the simulated patient's set-up error and the runs are on the simulated clock, or in
+// a room whose actuator is a device (modbus, can), where the room's couch makes each shift and
+// every run is on the real clock with the scene's devices (src/room_runs.hpp). A scene with
+// device detectors and no device actuator is refused: nothing would make the shifts.
 
 #include <Eigen/Core>
 #include <cstdint>
@@ -50,11 +51,13 @@ inline constexpr int kStandardLatencyCycles = 50;
 // flood (open beam, nothing in it), each of the detector's full size.
 struct DetectorFrames {
   std::vector<tracking::Image<std::uint16_t>> dark, flood;
+  std::string unreadable;  // why the frames could not be read (the detector's check fails with it)
 };
 
 // The detectors' image quality against their calibration (calib/detector_qa.hpp: dark drift,
 // noise, flat-field uniformity, new defects), one check per detector, named "detector NAME".
-//   baseline  the detector's calibration file (detectors[i].calibration); for a simulated detector
+//   baseline  the detector's calibration file (detectors[i].calibration; one made for another
+//             detector fails the check, as `lftrack run` refuses it); for a simulated detector
 //             without one, the calibration of its simulated panel (sim/panel_frames.hpp) made
 //             from its commissioning frames (16 dark, 16 flood, seed 1) as the QA starts.
 //   today     `frames[i]` where given; else a simulated detector's panel gives 8 dark and 8
@@ -139,8 +142,8 @@ struct DailyQaReport {
 };
 
 // Runs the checks on `scene` (prepared, with its light fields built). Fails only when a run
-// cannot be made at all (a scene with real devices, light fields missing); a check that fails is
-// in the report.
+// cannot be made at all (a room with nothing to make the shifts, light fields missing); a check
+// that fails is in the report, and so is a shift the room's couch could not make.
 Result<DailyQaReport> run_daily_qa(const host::PreparedScene& scene, const DailyQaOptions& options,
                                    tracking::ThreadPool* pool);
 

@@ -1,0 +1,49 @@
+#pragma once
+// The daily QA in a room whose actuator is a device (a Modbus couch, a CAN robot): the known
+// shifts are made by the room's own couch, and the loop runs on the real clock with the scene's
+// devices (daily_qa.hpp). With simulated detectors this is the hardware-in-the-loop room
+// (`lftrack serve couch|robot --room FILE` and sim.couch_link): the phantom moves with the couch.
+
+#include <string>
+
+#include "daily_qa_runs.hpp"
+#include "lftrack/drivers/frame_source.hpp"
+
+namespace lftrack::qa {
+
+// The couch moved by `shift` (mm, rad, the patient's pose change in the room frame) through the
+// scene's actuator, opened for it alone: commanded once, then read back until it stands within
+// 0.05 mm and 0.05 degree of where it was sent, or `timeout_s` has passed (an error that says where
+// it stood). The actuator is closed after; the loop opens its own.
+Status move_couch_by(const host::PreparedScene& scene, const tracking::Vector6d& shift, double timeout_s);
+
+// The time the couch is given for a shift: its travel at the scene's speeds, three times over,
+// plus its latency and 5 s.
+double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& shift);
+
+// Exposures [dark_from, dark_to) (counted from the first acquire) are taken from `inner` and
+// thrown away: the loop sees no frame, as if the detectors went dark. Everything else is
+// `inner`'s. Works on any frame source (a device's too), unlike the simulator's own drop option.
+class DarkenedFrames final : public drivers::FrameSource {
+ public:
+  DarkenedFrames(drivers::FrameSource* inner, std::int64_t dark_from, std::int64_t dark_to)
+      : inner_(inner), dark_from_(dark_from), dark_to_(dark_to) {}
+  Status open(drivers::FramePair* pair) override { return inner_->open(pair); }
+  void request_exposure(std::int64_t exposure_time_ns) override {
+    inner_->request_exposure(exposure_time_ns);
+  }
+  drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override;
+  bool exhausted() const override { return inner_->exhausted(); }
+  bool live() const override { return inner_->live(); }
+  drivers::DetectorIdentity identity(std::size_t detector) const override {
+    return inner_->identity(detector);
+  }
+  void close() override { inner_->close(); }
+
+ private:
+  drivers::FrameSource* inner_;
+  std::int64_t dark_from_, dark_to_;
+  std::int64_t exposure_ = 0;
+};
+
+}  // namespace lftrack::qa

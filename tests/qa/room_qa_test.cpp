@@ -1,0 +1,149 @@
+// The daily QA in a room whose couch is a device (issue 59): the couch served by `lftrack serve
+// couch` in a process of its own, on Modbus TCP, with the room link the simulated detectors read
+// (the hardware-in-the-loop room). The couch makes TG-135's known shifts, the loop on the real
+// clock finds and undoes each, the beam-permit path holds when the room's frames are thrown away,
+// and a couch that falls short of what it is told fails the offset test with the reason.
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "child_process.hpp"
+#include "lftrack/host/scene.hpp"
+#include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
+#include "qa_phantom_support.hpp"
+
+namespace lftrack::qa {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using tracking::Vector6d;
+
+// `lftrack serve couch` on a port of the kernel's choosing, writing `dir`/room.link, with the QA
+// room's couch dynamics (latency 0.1 s, 40 mm/s).
+struct ServedCouch {
+  std::unique_ptr<test::ChildProcess> process;
+  int port = 0;
+  explicit ServedCouch(const fs::path& dir) {
+    process = std::make_unique<test::ChildProcess>(std::vector<std::string>{
+        LFTRACK_BIN_PATH, "-q", "serve", "couch", "--modbus", "tcp:127.0.0.1:0", "--room",
+        (dir / "room.link").string(), "--scene", test::qa_phantom_scene().string()});
+    const std::optional<std::string> line =
+        process->read_line(10s);  // "... modbus tcp 127.0.0.1:PORT; room link ..."
+    if (line) port = std::atoi(line->c_str() + line->rfind(':', line->find(';')) + 1);
+  }
+};
+
+// The QA phantom's room with its couch served: the scene's actuator the Modbus couch, its
+// simulated detectors reading the couch's room link.
+host::PreparedScene served_room(const fs::path& dir, int port, tracking::ThreadPool* pool) {
+  auto scene = host::load_scene(test::qa_phantom_scene().string());
+  EXPECT_TRUE(scene.ok()) << scene.status().message();
+  scene->actuator.type = "modbus";
+  scene->actuator.modbus.host = "127.0.0.1";
+  scene->actuator.modbus.port = port;
+  scene->actuator.modbus.response_timeout_s = 0.02;
+  scene->actuator.modbus.reconnect_interval_s = 0.1;
+  scene->sim.couch_link = (dir / "room.link").string();
+  scene->loop.realtime.enforce = false;  // the latency chain is the CLI test's (daily_qa_cli_test.cpp)
+  auto p = host::prepare_scene(*scene, "", pool);
+  EXPECT_TRUE(p.ok()) << p.status().message();
+  return std::move(p).value();
+}
+
+DailyQaOptions room_options(const fs::path& fields) {
+  DailyQaOptions o;
+  o.light_field_dir = fields;
+  o.latency_cycles = 0;
+  return o;
+}
+
+const QaCheck* room_check(const DailyQaReport& r, const std::string& name) {
+  for (const QaCheck& c : r.checks)
+    if (c.name == name) return &c;
+  return nullptr;
+}
+
+TEST(RoomQa, TheServedCouchMakesTheShiftsAndTheLoopFindsAndUndoesEach) {
+  test::TempDir dir;
+  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
+  ServedCouch couch(dir.path());
+  ASSERT_GT(couch.port, 0);
+  tracking::ThreadPool pool(2);
+  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+  DailyQaOptions o = room_options(fields);
+  // The room's mechanics are under test here, not the registration's rotation precision: on the
+  // real clock the couch stands where the last tracking corrections left it, and the alignment's
+  // rotation error reached 0.183 degree of the standard 0.2 in one of four runs (BENCHMARKS.md);
+  // 0.3 degree keeps this test about the couch and the loop.
+  o.tolerance_deg = 0.3;
+  auto report = run_daily_qa(p, o, &pool);
+  ASSERT_TRUE(report.ok()) << report.status().message();
+  ASSERT_EQ(report->offsets.size(), 7u);
+  for (const OffsetResult& shift : report->offsets) {
+    EXPECT_TRUE(shift.passed) << shift.why;
+    EXPECT_LT(shift.registration_error_mm, 0.25);
+    EXPECT_LT(shift.couch_error_mm, 0.25) << "the couch's read-back moved back by the shift";
+  }
+  ASSERT_NE(room_check(*report, "beam"), nullptr);
+  EXPECT_TRUE(room_check(*report, "beam")->passed)
+      << room_check(*report, "beam")->why << "; " << room_check(*report, "beam")->measured;
+  EXPECT_TRUE(room_check(*report, "detector A")->passed) << room_check(*report, "detector A")->why;
+}
+
+// The loop's commands reach the couch at 40 % of their size: it falls short of every correction.
+class ShortCouch final : public drivers::Actuator {
+ public:
+  explicit ShortCouch(drivers::Actuator* inner) : inner_(inner) {}
+  Status open() override { return inner_->open(); }
+  drivers::DeviceStatus command(const Vector6d& correction, drivers::Deadline deadline) override {
+    return inner_->command(0.4 * correction, deadline);
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override {
+    return inner_->readback(state, deadline);
+  }
+  void hold() override { inner_->hold(); }
+  void close() override { inner_->close(); }
+
+ private:
+  drivers::Actuator* inner_;
+};
+
+TEST(RoomQa, ACouchThatFallsShortFailsTheOffsetTestWithTheReason) {
+  test::TempDir dir;
+  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty());
+  ServedCouch couch(dir.path());
+  ASSERT_GT(couch.port, 0);
+  tracking::ThreadPool pool(2);
+  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+  DailyQaOptions o = room_options(fields);
+  Vector6d shift = Vector6d::Zero();
+  shift(2) = 8;
+  o.shifts = {shift};
+  o.offset_cycles = 3;  // the alignment and two corrections: 40 % each leaves over 2 mm
+  std::unique_ptr<ShortCouch> short_couch;
+  o.hooks.wrap_actuator = [&](drivers::Actuator* inner) -> drivers::Actuator* {
+    short_couch = std::make_unique<ShortCouch>(inner);
+    return short_couch.get();
+  };
+  auto report = run_daily_qa(p, o, &pool);
+  ASSERT_TRUE(report.ok()) << report.status().message();
+  ASSERT_EQ(report->offsets.size(), 1u);
+  EXPECT_TRUE(report->offsets[0].aligned);
+  EXPECT_LT(report->offsets[0].registration_error_mm, 0.25) << "the alignment itself was right";
+  EXPECT_FALSE(report->offsets[0].passed);
+  EXPECT_NE(report->offsets[0].why.find("the couch moved"), std::string::npos) << report->offsets[0].why;
+  EXPECT_FALSE(room_check(*report, "offset")->passed);
+}
+
+}  // namespace
+}  // namespace lftrack::qa
