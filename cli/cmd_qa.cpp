@@ -56,6 +56,15 @@ Status run_and_report(
   return failed_precondition(report->kind + " QA failed:" + why);
 }
 
+// A folder of today's detector frames named by `flag`, checked before the scene is loaded (empty:
+// none given).
+Status check_frames_folder(const std::string& flag, const std::string& dir) {
+  std::error_code ec;
+  if (dir.empty() || std::filesystem::is_directory(dir, ec)) return {};
+  return invalid_argument(flag + " " + dir +
+                          ": no such folder (it holds NAME/dark and NAME/flood for each detector NAME)");
+}
+
 // Today's frames of every detector of `scene` from DIR/NAME/dark and DIR/NAME/flood. A detector
 // whose folders cannot be read gets the reason (its check fails with it); the others are judged.
 std::vector<qa::DetectorFrames> read_detector_frames(const Scene& scene, const std::string& dir,
@@ -124,10 +133,7 @@ Status run_qa_daily(const QaDailyOptions& o) {
   options.latency_tolerance_ms = o.latency_ms;
   options.light_field_dir = o.lf_dir;
   options.progress = print_line;
-  std::error_code ec;
-  if (!o.detector_frames.empty() && !std::filesystem::is_directory(o.detector_frames, ec))
-    return invalid_argument("--detector-frames " + o.detector_frames +
-                            ": no such folder (it holds NAME/dark and NAME/flood for each detector NAME)");
+  LFTRACK_RETURN_IF_ERROR(check_frames_folder("--detector-frames", o.detector_frames));
   return run_and_report(
       o.scene, o.out,
       fmt::format("daily QA of {{}}: tolerance {} mm, {} deg", o.tolerance_mm, o.tolerance_deg),
@@ -196,10 +202,7 @@ Status run_qa_detector(const QaDetectorOptions& o) {
   options.tolerances.max_nonuniformity = o.nonuniformity_pct / 100;
   options.tolerances.max_new_defect_fraction = o.new_defects_pct / 100;
   LFTRACK_RETURN_IF_ERROR(calib::check_detector_qa_tolerances(options.tolerances));
-  std::error_code ec;
-  if (!o.frames.empty() && !std::filesystem::is_directory(o.frames, ec))
-    return invalid_argument("--frames " + o.frames +
-                            ": no such folder (it holds NAME/dark and NAME/flood for each detector NAME)");
+  LFTRACK_RETURN_IF_ERROR(check_frames_folder("--frames", o.frames));
   return run_and_report(o.scene, o.out, "", [&](const PreparedScene& p, tracking::ThreadPool*) {
     if (!o.frames.empty())
       options.frames = read_detector_frames(p.scene, o.frames, options.tolerances.min_frames);
