@@ -146,13 +146,25 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
   // ALIGN plan), the couch waited for: the last run's tracking corrections leave the couch where
   // the tracking registrations' scatter sent it (up to 0.25 degree about a weak axis on this
   // phantom: issue 57). Then the room's couch makes the shift.
+  // A phantom the loop cannot align (beyond the envelope: a couch an interrupted QA left
+  // displaced) is not moved further: the shift is not made.
   const tracking::Vector6d none = tracking::Vector6d::Zero();
   auto aligned = run(standing_still(scene, none), session_options(scene, options, 1, false), pool);
   if (!aligned.ok()) return aligned.status().with_context("aligning the phantom before the shift");
-  LFTRACK_RETURN_IF_ERROR(move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none)));
-  LFTRACK_RETURN_IF_ERROR(move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift)));
-  return run(standing_still(scene, tracking::Vector6d::Zero()), session_options(scene, options, cycles, true),
-             pool);
+  if (aligned->records.empty() ||
+      aligned->records.front().state != static_cast<std::uint8_t>(host::TrackingState::kTrack))
+    return failed_precondition(
+        "the loop could not align the phantom before the shift (" +
+        (aligned->summary.ended.empty() ? std::string("no TRACK") : aligned->summary.ended) +
+        "): the couch was not moved; is the phantom within the envelope of where the plan "
+        "puts it?");
+  auto settled = move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none));
+  if (!settled.ok()) return settled.status();
+  auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift));
+  if (!before.ok()) return before.status();
+  auto judged = run(standing_still(scene, none), session_options(scene, options, cycles, true), pool);
+  if (judged.ok()) judged->couch_before = *before;
+  return judged;
 }
 
 Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,

@@ -17,6 +17,9 @@ struct RecordedRun {
   host::LoopSummary summary;
   std::vector<host::JournalRecord> records;  // every cycle, in order
   std::string control_reply;                 // the latency run: the control socket's answer
+  // A room: where the couch stood (its travel) before it made the shift, to send it back there
+  // when the shift fails.
+  std::optional<tracking::Vector6d> couch_before;
 };
 
 // A report of `kind` ("daily", "e2e") for `scene`, started now: the scene, the room's fingerprint,

@@ -1,10 +1,18 @@
 #include "room_runs.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <functional>
 #include <memory>
 #include <thread>
 
@@ -36,14 +44,20 @@ double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& 
   return 3 * travel_s + c.latency_s + 5;
 }
 
-Status move_couch_by(const host::PreparedScene& p, const tracking::Vector6d& shift, double timeout_s) {
+namespace {
+
+// Opens the scene's couch (through its calibration where the scene names one, as the loop drives
+// it: positions are the patient's, in the room's axes), reads it back, sends it to
+// `target_of(its state)` and waits for it there. Returns the position it stood at before.
+Result<tracking::Vector6d> move_couch(
+    const host::PreparedScene& p,
+    const std::function<tracking::Vector6d(const drivers::ActuatorState&)>& target_of,
+    const std::string& what, double timeout_s) {
   auto spec = host::device_actuator_spec(p.scene);
   if (!spec.ok()) return spec.status();
   auto made = drivers::make_actuator(std::move(spec).value());
   if (!made.ok()) return made.status();
   std::unique_ptr<drivers::Actuator> device = std::move(made).value();
-  // Through the couch's calibration where the scene names one, as the loop drives it: the shift
-  // is the patient's, in the room's axes.
   std::unique_ptr<host::CalibratedCouch> calibrated;
   drivers::Actuator* couch = device.get();
   if (p.scene.actuator.calibration) {
@@ -52,7 +66,7 @@ Status move_couch_by(const host::PreparedScene& p, const tracking::Vector6d& shi
         p.registration_origin_room_mm());
     couch = calibrated.get();
   }
-  LFTRACK_RETURN_IF_ERROR(couch->open().with_context("the couch, to make the QA's shift"));
+  LFTRACK_RETURN_IF_ERROR(couch->open().with_context("the couch, for " + what));
   struct Closer {
     drivers::Actuator* a;
     ~Closer() { a->close(); }
@@ -60,34 +74,82 @@ Status move_couch_by(const host::PreparedScene& p, const tracking::Vector6d& shi
   const auto deadline_of_call = [] { return Clock::now() + std::chrono::seconds(1); };
   drivers::ActuatorState state;
   DeviceStatus got = DeviceStatus::kTimeout;
-  // A driver that has just connected may answer its first read-back late: three tries.
-  for (int attempt = 0; attempt < 3 && got != DeviceStatus::kOk; ++attempt)
+  // A driver that has just connected may answer its first read-backs late, or a reply left over
+  // from an earlier client: a few tries.
+  for (int attempt = 0; attempt < 5 && got != DeviceStatus::kOk; ++attempt)
     got = couch->readback(&state, deadline_of_call());
   if (got != DeviceStatus::kOk)
-    return io_error(std::string("the couch's read-back before the QA's shift: ") + drivers::to_string(got));
-  const tracking::Vector6d target = state.target + shift;
-  got = couch->command(shift, deadline_of_call());
+    return io_error(fmt::format("the couch's read-back before {}: {}", what, drivers::to_string(got)));
+  if (state.fault) return io_error("the couch reports a fault before " + what);
+  const tracking::Vector6d before = state.position;
+  const tracking::Vector6d target = target_of(state);
+  got = couch->command(target - state.target, deadline_of_call());
   if (got != DeviceStatus::kOk)
-    return io_error(
-        fmt::format("the couch refused the QA's shift {}: {}", six(shift), drivers::to_string(got)));
+    return io_error(fmt::format("the couch refused {}: {}", what, drivers::to_string(got)));
   const auto give_up =
       Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
   while (true) {
     got = couch->readback(&state, deadline_of_call());
     if (got == DeviceStatus::kOk) {
-      if (state.fault) return io_error("the couch reports a fault while making the QA's shift " + six(shift));
+      if (state.fault) return io_error("the couch reports a fault during " + what);
       const tracking::Vector6d off = state.position - target;
       if (!state.moving && off.head<3>().norm() <= kArrivedMm &&
           tracking::rad_to_deg(off.tail<3>().cwiseAbs().maxCoeff()) <= kArrivedDeg)
-        return {};
+        return before;
     }
-    if (Clock::now() > give_up)
+    if (Clock::now() > give_up) {
+      // Not left on its way: sent back to where it stood before this move (not waited for).
+      drivers::ActuatorState now;
+      const bool read = couch->readback(&now, deadline_of_call()) == DeviceStatus::kOk;
+      const bool sent_back =
+          read && couch->command(before - now.target, deadline_of_call()) == DeviceStatus::kOk;
       return failed_precondition(fmt::format(
-          "the couch did not make the QA's shift {} within {:.1f} s: it stands at {}{}", six(shift),
-          timeout_s, six(state.position - (target - shift)),
-          got == DeviceStatus::kOk ? "" : std::string(" (read-back ") + drivers::to_string(got) + ")"));
+          "the couch did not make {} within {:.1f} s: it stood at {} of its travel, sent to {}{}; {}", what,
+          timeout_s, six(state.position), six(target),
+          got == DeviceStatus::kOk ? "" : std::string(" (read-back ") + drivers::to_string(got) + ")",
+          sent_back ? "sent back to " + six(before)
+                    : std::string("it could not be sent back: see where it stands")));
+    }
     std::this_thread::sleep_for(kPollInterval);
   }
+}
+
+}  // namespace
+
+Result<tracking::Vector6d> move_couch_by(const host::PreparedScene& p, const tracking::Vector6d& shift,
+                                         double timeout_s) {
+  return move_couch(
+      p, [&](const drivers::ActuatorState& s) { return tracking::Vector6d(s.target + shift); },
+      "the QA's shift " + six(shift), timeout_s);
+}
+
+Status move_couch_to(const host::PreparedScene& p, const tracking::Vector6d& position, double timeout_s) {
+  auto moved = move_couch(
+      p, [&](const drivers::ActuatorState&) { return position; },
+      "the return to " + six(position) + " of its travel", timeout_s);
+  return moved.ok() ? Status{} : moved.status();
+}
+
+Result<std::unique_ptr<CouchLock>> CouchLock::acquire(const host::Scene& scene) {
+  const std::string couch = host::describe_actuator(scene.actuator);
+  const std::string path = fmt::format("/tmp/lftrack-qa-couch-{:016x}.lock", std::hash<std::string>{}(couch));
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0666);
+  if (fd < 0)
+    return io_error(fmt::format("{}: cannot open the QA's couch lock: {}", path, std::strerror(errno)));
+  (void)::fchmod(fd, 0666);  // any user's QA of this couch may take it (the file's owner's umask aside)
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int error = errno;
+    ::close(fd);
+    if (error == EWOULDBLOCK)
+      return failed_precondition("another lftrack QA drives this couch (" + couch + ") now (" + path +
+                                 "): one QA at a time");
+    return io_error(fmt::format("{}: cannot lock: {}", path, std::strerror(error)));
+  }
+  return std::unique_ptr<CouchLock>(new CouchLock(fd));
+}
+
+CouchLock::~CouchLock() {
+  ::close(fd_);
 }
 
 drivers::DeviceStatus DarkenedFrames::acquire(drivers::FramePair* pair, drivers::Deadline deadline) {

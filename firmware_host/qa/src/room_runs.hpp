@@ -4,6 +4,7 @@
 // devices (daily_qa.hpp). With simulated detectors this is the hardware-in-the-loop room
 // (`lftrack serve couch|robot --room FILE` and sim.couch_link): the phantom moves with the couch.
 
+#include <memory>
 #include <string>
 
 #include "daily_qa_runs.hpp"
@@ -12,10 +13,30 @@
 namespace lftrack::qa {
 
 // The couch moved by `shift` (mm, rad, the patient's pose change in the room frame) through the
-// scene's actuator, opened for it alone: commanded once, then read back until it stands within
-// 0.05 mm and 0.05 degree of where it was sent, or `timeout_s` has passed (an error that says where
-// it stood). The actuator is closed after; the loop opens its own.
-Status move_couch_by(const host::PreparedScene& scene, const tracking::Vector6d& shift, double timeout_s);
+// scene's actuator, opened for it alone (through the couch calibration where the scene names
+// one): read back, commanded once, then read back until it stands within 0.05 mm and 0.05
+// degree of where it was sent, or `timeout_s` has passed (an error that says where it stood and
+// where it was sent). The actuator is closed after; the loop opens its own. Returns the position
+// (its travel, as the read-back gives it) it stood at before.
+Result<tracking::Vector6d> move_couch_by(const host::PreparedScene& scene, const tracking::Vector6d& shift,
+                                         double timeout_s);
+// The couch sent back to `position` of its travel (as move_couch_by returned it), and waited for.
+Status move_couch_to(const host::PreparedScene& scene, const tracking::Vector6d& position, double timeout_s);
+
+// One QA at a time on a couch: an exclusive lock (flock) on a file named after the scene's actuator
+// (its kind and where it is reached) in /tmp, held while the object lives. Another QA of the same
+// couch is refused with the reason; `lftrack run` does not take it.
+class CouchLock {
+ public:
+  static Result<std::unique_ptr<CouchLock>> acquire(const host::Scene& scene);
+  ~CouchLock();
+  CouchLock(const CouchLock&) = delete;
+  CouchLock& operator=(const CouchLock&) = delete;
+
+ private:
+  explicit CouchLock(int fd) : fd_(fd) {}
+  int fd_;
+};
 
 // The time the couch is given for a shift: its travel at the scene's speeds, three times over,
 // plus its latency and 5 s.

@@ -46,6 +46,8 @@ namespace lftrack::qa {
 inline constexpr double kStandardToleranceMm = 0.5;
 inline constexpr double kStandardToleranceDeg = 0.2;
 inline constexpr int kStandardLatencyCycles = 50;
+inline constexpr double kStandardShiftMm = 10;  // TG-135's daily offset shifts
+inline constexpr double kStandardShiftDeg = 1;
 
 // Today's frames of one detector as a physicist acquires them for its check: dark (no beam) and
 // flood (open beam, nothing in it), each of the detector's full size.
@@ -125,8 +127,9 @@ struct DailyQaReport {
   std::string started_local;     // ISO 8601 with the host's UTC offset
   std::string date;              // YYYY-MM-DD, the host's local date: the clinic's day it counts for
   double tolerance_mm = 0, tolerance_deg = 0;
-  // The standard QA: the default shifts, tolerances no looser than the defaults (0.5 mm, 0.2
-  // degree, the detector check's), the latency chain run (at least 50 cycles) within the scene's period. Only
+  // The standard QA: the default shifts, at least half of TG-135's 10 mm and 1 degree (a small
+  // envelope scales them down), tolerances no looser than the defaults (0.5 mm, 0.2 degree, the
+  // detector check's), the latency chain run (at least 50 cycles) within the scene's period. Only
   // a standard daily QA that passed counts for `lftrack run`.
   bool standard = false;
   std::vector<OffsetResult> offsets;
