@@ -4,11 +4,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <memory>
 
 #include "daily_qa_runs.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "room_runs.hpp"
@@ -50,8 +52,17 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
            c.state == static_cast<std::uint8_t>(TrackingState::kTrack);
   });
   if (align == run.records.end()) {
-    r.why = "the loop never aligned (" +
-            (run.summary.ended.empty() ? std::string("no TRACK") : run.summary.ended) + ")";
+    // What the loop did instead: its states' cycles and the gate's last reason.
+    std::map<std::string, int> states;
+    for (const JournalRecord& c : run.records) ++states[host::to_string(static_cast<TrackingState>(c.state))];
+    std::string seen;
+    for (const auto& [state, cycles] : states)
+      seen += fmt::format("{}{} {}", seen.empty() ? "" : ", ", state, cycles);
+    r.why = fmt::format("the loop never aligned in {} cycles ({}; {}; last gate: {})", run.records.size(),
+                        seen, run.summary.ended.empty() ? std::string("no TRACK") : run.summary.ended,
+                        run.records.empty()
+                            ? "none"
+                            : host::to_string(static_cast<host::GateReason>(run.records.back().gate_reason)));
     return r;
   }
   r.aligned = true;
@@ -232,8 +243,13 @@ bool DailyQaReport::passed() const {
 }
 
 std::vector<Vector6d> default_offset_shifts(const host::Scene& scene) {
-  const double t = std::min(kStandardShiftMm, 0.9 * scene.envelope.translation_mm);
-  const double r = tracking::deg_to_rad(std::min(kStandardShiftDeg, 0.9 * scene.envelope.rotation_deg));
+  // Within 90 % of the envelope and of the safety gate's total correction (safety.max_total_mm,
+  // _deg): a shift at the limit is refused by the gate whenever the registration reads it a hair
+  // long (a room's 10 mm shift under a 10 mm total: "the loop never aligned").
+  const double t =
+      std::min({kStandardShiftMm, 0.9 * scene.envelope.translation_mm, 0.9 * scene.safety.max_total_mm});
+  const double r = tracking::deg_to_rad(
+      std::min({kStandardShiftDeg, 0.9 * scene.envelope.rotation_deg, 0.9 * scene.safety.max_total_deg}));
   std::vector<Vector6d> shifts;
   for (int axis = 0; axis < 6; ++axis) {
     Vector6d s = Vector6d::Zero();

@@ -177,12 +177,10 @@ Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cyc
     return run(standing_still(scene, tracking::Vector6d::Zero()), so, pool);
   }
   // The room's detectors (devices, or simulated ones): their frames taken and thrown away.
-  std::unique_ptr<DarkenedFrames> dark;
+  DarkenedFrames dark(dark_from, dark_to, so.hooks.observer);
+  so.hooks.observer = &dark;
   const auto wrap = so.hooks.wrap_frames;
-  so.hooks.wrap_frames = [&](drivers::FrameSource* inner) -> drivers::FrameSource* {
-    dark = std::make_unique<DarkenedFrames>(wrap ? wrap(inner) : inner, dark_from, dark_to);
-    return dark.get();
-  };
+  so.hooks.wrap_frames = [&](drivers::FrameSource* inner) { return dark.wrap(wrap ? wrap(inner) : inner); };
   return run(standing_still(scene, tracking::Vector6d::Zero()), so, pool);
 }
 

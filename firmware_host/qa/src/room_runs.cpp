@@ -153,11 +153,15 @@ CouchLock::~CouchLock() {
 }
 
 drivers::DeviceStatus DarkenedFrames::acquire(drivers::FramePair* pair, drivers::Deadline deadline) {
-  const std::int64_t exposure = exposure_++;
+  const std::int64_t cycle = cycle_.load(std::memory_order_acquire);
   const drivers::DeviceStatus got = inner_->acquire(pair, deadline);
-  if (exposure >= dark_from_ && exposure < dark_to_ && got == DeviceStatus::kOk)
-    return DeviceStatus::kTimeout;
+  if (cycle >= dark_from_ && cycle < dark_to_ && got == DeviceStatus::kOk) return DeviceStatus::kTimeout;
   return got;
+}
+
+void DarkenedFrames::on_cycle(const host::JournalRecord& record) {
+  cycle_.store(static_cast<std::int64_t>(record.cycle) + 1, std::memory_order_release);
+  if (next_ != nullptr) next_->on_cycle(record);
 }
 
 }  // namespace lftrack::qa

@@ -4,6 +4,7 @@
 // devices (daily_qa.hpp). With simulated detectors this is the hardware-in-the-loop room
 // (`lftrack serve couch|robot --room FILE` and sim.couch_link): the phantom moves with the couch.
 
+#include <atomic>
 #include <memory>
 #include <string>
 
@@ -42,13 +43,20 @@ class CouchLock {
 // plus its latency and 5 s.
 double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& shift);
 
-// Exposures [dark_from, dark_to) (counted from the first acquire) are taken from `inner` and
-// thrown away: the loop sees no frame, as if the detectors went dark. Everything else is
-// `inner`'s. Works on any frame source (a device's too), unlike the simulator's own drop option.
-class DarkenedFrames final : public drivers::FrameSource {
+// The frames of cycles [dark_from, dark_to) (the loop's cycle index, as its records count it) are
+// taken from the wrapped source and thrown away: the loop sees no frame, as if the detectors went
+// dark. Everything else is the wrapped source's. Works on any frame source (a device's too),
+// unlike the simulator's own drop option. It learns the cycle as the loop's observer (set it as
+// the session's hooks.observer; it passes each record on to `next`), and is given its source by
+// the session's wrap_frames hook (wrap()).
+class DarkenedFrames final : public drivers::FrameSource, public host::CycleObserver {
  public:
-  DarkenedFrames(drivers::FrameSource* inner, std::int64_t dark_from, std::int64_t dark_to)
-      : inner_(inner), dark_from_(dark_from), dark_to_(dark_to) {}
+  DarkenedFrames(std::int64_t dark_from, std::int64_t dark_to, host::CycleObserver* next)
+      : dark_from_(dark_from), dark_to_(dark_to), next_(next) {}
+  drivers::FrameSource* wrap(drivers::FrameSource* inner) {
+    inner_ = inner;
+    return this;
+  }
   Status open(drivers::FramePair* pair) override { return inner_->open(pair); }
   void request_exposure(std::int64_t exposure_time_ns) override {
     inner_->request_exposure(exposure_time_ns);
@@ -60,11 +68,16 @@ class DarkenedFrames final : public drivers::FrameSource {
     return inner_->identity(detector);
   }
   void close() override { inner_->close(); }
+  void on_cycle(const host::JournalRecord& record) override;
+  std::int64_t simulated_stall_ns(std::int64_t cycle) override {
+    return next_ != nullptr ? next_->simulated_stall_ns(cycle) : 0;
+  }
 
  private:
-  drivers::FrameSource* inner_;
+  drivers::FrameSource* inner_ = nullptr;
   std::int64_t dark_from_, dark_to_;
-  std::int64_t exposure_ = 0;
+  host::CycleObserver* next_;
+  std::atomic<std::int64_t> cycle_{0};  // the cycle now running: the last record's + 1
 };
 
 }  // namespace lftrack::qa

@@ -95,8 +95,9 @@ struct DailyQaOptions {
 };
 
 // The default shifts: 10 mm along each room axis, 1 degree about each, and one of each kind at
-// once (5, -5, 5 mm with 0.5, -0.5, 0.5 degree), where the scene's envelope allows them (a shift
-// beyond 90 % of it is scaled to 90 %: the verdict refuses results at the envelope's edge).
+// once (5, -5, 5 mm with 0.5, -0.5, 0.5 degree), where the scene's envelope and its safety gate's
+// total correction (safety.max_total_mm, _deg) allow them: a shift beyond 90 % of either is scaled
+// to 90 % (the verdict refuses results at the envelope's edge, the gate a total a hair over).
 std::vector<tracking::Vector6d> default_offset_shifts(const host::Scene& scene);
 
 struct OffsetResult {
