@@ -21,9 +21,9 @@ constexpr int kBaselineFramesPerToday = 2;
 constexpr std::uint64_t kBaselineSeed = 1, kTodaySeed = 2;
 constexpr double kFloodOfFullScale = 0.5;
 
-// Frames a simulated panel gives today: 8, or the tolerances' minimum where that is more.
+// Frames a simulated panel gives today: the tolerances' minimum (at least calib::kMinQaFrames).
 int frames_today(const DetectorQaOptions& o) {
-  return std::max(8, o.tolerances.min_frames);
+  return std::max(calib::kMinQaFrames, o.tolerances.min_frames);
 }
 
 // Detector `i`'s panel as the simulator models it (sim/panel_frames.hpp).
@@ -99,9 +99,7 @@ Result<DetectorFrames> today_of(const host::PreparedScene& p, std::size_t i, boo
 std::string tolerance_text(const calib::DetectorQaTolerances& t) {
   return fmt::format(
       "dark drift within {} % of the open field, temporal noise within x{} (and above x1/{}), flat-field "
-      "non-uniformity within {} %, "
-      "new "
-      "defects within {} % of the pixels and no new defective line",
+      "non-uniformity within {} %, new defects within {} % of the pixels and no new defective line",
       100 * t.max_dark_drift_fraction, t.max_noise_ratio, t.max_noise_ratio, 100 * t.max_nonuniformity,
       100 * t.max_new_defect_fraction);
 }
