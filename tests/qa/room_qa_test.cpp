@@ -55,6 +55,11 @@ host::PreparedScene served_room(const fs::path& dir, int port, tracking::ThreadP
   scene->actuator.modbus.reconnect_interval_s = 0.1;
   scene->sim.couch_link = (dir / "room.link").string();
   scene->loop.realtime.enforce = false;  // the latency chain is the CLI test's (daily_qa_cli_test.cpp)
+  // The room's mechanics are under test, not the host's speed: on a host starved by its
+  // neighbours (CI's other tests) the cold alignment outlasted the gate's 150 ms frame age three
+  // times in a row ("the gate in ALIGN: stale frame, stale frame, stale frame"), and the loop held
+  // as it must. The frame-age rule has tests of its own (tracking_loop_test.cpp).
+  scene->safety.max_frame_age_ms = 1000;
   auto p = host::prepare_scene(*scene, "", pool);
   EXPECT_TRUE(p.ok()) << p.status().message();
   return std::move(p).value();

@@ -58,10 +58,17 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
     std::string seen;
     for (const auto& [state, cycles] : states)
       seen += fmt::format("{}{} {}", seen.empty() ? "" : ", ", state, cycles);
-    r.why = fmt::format("the loop never aligned in {} cycles ({}; {}; last gate: {})", run.records.size(),
-                        seen, run.summary.ended.empty() ? std::string("no TRACK") : run.summary.ended,
-                        run.records.empty()
-                            ? "none"
+    // The gate's reason in each ALIGN cycle: what kept the alignment from its set-up move.
+    std::string align_gates;
+    for (const JournalRecord& c : run.records)
+      if (c.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign))
+        align_gates += fmt::format("{}{}", align_gates.empty() ? "" : ", ",
+                                   host::to_string(static_cast<host::GateReason>(c.gate_reason)));
+    r.why = fmt::format(
+        "the loop never aligned in {} cycles ({}; {}; the gate in ALIGN: {}; last gate: {})",
+        run.records.size(), seen, run.summary.ended.empty() ? std::string("no TRACK") : run.summary.ended,
+        align_gates.empty() ? std::string("none") : align_gates,
+        run.records.empty() ? "none"
                             : host::to_string(static_cast<host::GateReason>(run.records.back().gate_reason)));
     return r;
   }

@@ -4,6 +4,8 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -13,6 +15,7 @@
 
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/qa/qa_time.hpp"
 #include "room_runs.hpp"
@@ -33,8 +36,14 @@ class Recorder final : public host::CycleObserver {
   void on_cycle(const JournalRecord& record) override {
     if (records_.size() < records_.capacity()) records_.push_back(record);
     state_.store(record.state, std::memory_order_release);
+    if (stop_when_aligned_ != nullptr &&
+        record.state != static_cast<std::uint8_t>(host::TrackingState::kAlign))
+      stop_when_aligned_->request_stop();
     if (next_ != nullptr) next_->on_cycle(record);
   }
+  // The run ends with the first cycle that leaves ALIGN: aligned (TRACK), or not (HOLD, FAULT).
+  // The loop's stop is a flag it reads before its next cycle.
+  void stop_when_aligned(host::LoopSession* session) { stop_when_aligned_ = session; }
   std::int64_t simulated_stall_ns(std::int64_t cycle) override {
     return next_ != nullptr ? next_->simulated_stall_ns(cycle) : 0;
   }
@@ -43,6 +52,7 @@ class Recorder final : public host::CycleObserver {
 
  private:
   host::CycleObserver* next_;
+  host::LoopSession* stop_when_aligned_ = nullptr;
   std::vector<JournalRecord> records_;
   std::atomic<std::uint8_t> state_{0};
 };
@@ -68,12 +78,16 @@ host::LoopSessionOptions session_options(const host::PreparedScene& scene, const
   return so;
 }
 
+enum class RunEnd { kCycleCount, kAlignmentDecided };
+
 Result<RecordedRun> run(const host::PreparedScene& scene, host::LoopSessionOptions so,
-                        tracking::ThreadPool* pool, const std::function<void(Recorder&)>& beside = {}) {
+                        tracking::ThreadPool* pool, const std::function<void(Recorder&)>& beside = {},
+                        RunEnd end = RunEnd::kCycleCount) {
   Recorder recorder(static_cast<std::size_t>(so.cycles), so.hooks.observer);
   so.hooks.observer = &recorder;
   auto session = host::LoopSession::create(scene, so, pool);
   if (!session.ok()) return session.status();
+  if (end == RunEnd::kAlignmentDecided) recorder.stop_when_aligned(session->get());
   RecordedRun r;
   std::thread helper;
   // Joined however run() ends (an exception too): a joinable thread destroyed would terminate.
@@ -142,22 +156,32 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
                                const DailyQaOptions& options, tracking::ThreadPool* pool) {
   if (!is_room(scene))
     return run(standing_still(scene, shift), session_options(scene, options, cycles, true), pool);
-  // The phantom first put where the plan puts it by the loop's alignment alone (one cycle, its
-  // ALIGN plan), the couch waited for: the last run's tracking corrections leave the couch where
-  // the tracking registrations' scatter sent it (up to 0.25 degree about a weak axis on this
-  // phantom: issue 57). Then the room's couch makes the shift.
+  // The phantom first put where the plan puts it by the loop's alignment alone (its ALIGN plan;
+  // the run ends with the set-up move), the couch waited for: the last run's tracking corrections
+  // leave the couch where the tracking registrations' scatter sent it (up to 0.25 degree about a
+  // weak axis on this phantom: issue 57). Then the room's couch makes the shift. The alignment
+  // gets the cycles the gate allows it (a pair skipped as late, or a first frame late, is tried
+  // again with the next: on a loaded host a cold alignment can outlast the frames' age limit).
   // A phantom the loop cannot align (beyond the envelope: a couch an interrupted QA left
   // displaced) is not moved further: the shift is not made.
   const tracking::Vector6d none = tracking::Vector6d::Zero();
-  auto aligned = run(standing_still(scene, none), session_options(scene, options, 1, false), pool);
+  const int align_cycles = std::max(1, scene.scene.safety.hold_after_failures) + 1;
+  auto aligned = run(standing_still(scene, none), session_options(scene, options, align_cycles, false), pool,
+                     {}, RunEnd::kAlignmentDecided);
   if (!aligned.ok()) return aligned.status().with_context("aligning the phantom before the shift");
-  if (aligned->records.empty() ||
-      aligned->records.front().state != static_cast<std::uint8_t>(host::TrackingState::kTrack))
-    return failed_precondition(
-        "the loop could not align the phantom before the shift (" +
-        (aligned->summary.ended.empty() ? std::string("no TRACK") : aligned->summary.ended) +
-        "): the couch was not moved; is the phantom within the envelope of where the plan "
-        "puts it?");
+  const bool tracked =
+      std::any_of(aligned->records.begin(), aligned->records.end(), [](const JournalRecord& c) {
+        return c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
+      });
+  if (!tracked)
+    return failed_precondition(fmt::format(
+        "the loop could not align the phantom before the shift in {} cycles ({}; the gate: {}): the couch "
+        "was not moved; is the phantom within the envelope of where the plan puts it?",
+        aligned->records.size(),
+        aligned->summary.ended.empty() ? std::string("no TRACK") : aligned->summary.ended,
+        aligned->records.empty()
+            ? std::string("no cycle")
+            : host::to_string(static_cast<host::GateReason>(aligned->records.back().gate_reason))));
   auto settled = move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none));
   if (!settled.ok()) return settled.status();
   auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift));
