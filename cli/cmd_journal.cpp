@@ -21,16 +21,17 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
-#include "lftrack/records/journal_reader.hpp"
-#include "lftrack/records/loop_json.hpp"
-#include "lftrack/tracking/pose.hpp"
-#include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_states.hpp"
+#include "lftrack/records/journal_reader.hpp"
+#include "lftrack/records/loop_json.hpp"
+#include "lftrack/tracking/pose.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
 namespace {
@@ -77,7 +78,8 @@ void print_csv(const std::vector<JournalRecord>& records) {
       "beam_permit,overrun,skipped_periods,dropped_before,true_residual_mm,event,"
       "hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
       "operator_first_refusal,operator_refusals,"
-      "target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,target_ry_deg,target_rz_deg,command_acked_ns\n");
+      "target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,target_ry_deg,target_rz_deg,command_acked_ns,"
+      "frames_arrived_ns,preprocessed_ns,registered_ns,gated_ns,command_written_ns\n");
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
@@ -94,7 +96,10 @@ void print_csv(const std::vector<JournalRecord>& records) {
                 refusal_name(r.operator_refusal).c_str(), code_name<BeamWithheld>(r.beam_withheld).c_str(),
                 refusal_name(r.operator_first_refusal).c_str(), refusals_text(r.operator_refused_by_reason).c_str());
     print_mm_deg(r.true_target_residual);
-    std::printf(",%lld\n", static_cast<long long>(r.command_acked_ns));
+    std::printf(",%lld,%lld,%lld,%lld,%lld,%lld\n", static_cast<long long>(r.command_acked_ns),
+                static_cast<long long>(r.frames_arrived_ns), static_cast<long long>(r.preprocessed_ns),
+                static_cast<long long>(r.registered_ns), static_cast<long long>(r.gated_ns),
+                static_cast<long long>(r.command_written_ns));
   }
 }
 
@@ -121,6 +126,11 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"true_residual_mm", r.true_residual_mm},
                      {"true_target_residual", pose_delta_json(r.true_target_residual)},
                      {"command_acked_ns", r.command_acked_ns},
+                     {"frames_arrived_ns", r.frames_arrived_ns},
+                     {"preprocessed_ns", r.preprocessed_ns},
+                     {"registered_ns", r.registered_ns},
+                     {"gated_ns", r.gated_ns},
+                     {"command_written_ns", r.command_written_ns},
                      {"event", event_name(r.event)},
                      {"hold_id", r.hold_id},
                      {"operator_command", operator_command_name(r.operator_command)},
@@ -183,10 +193,12 @@ struct ExportOptions {
 // share of TRACK cycles beyond 1 and 2 mm (simulation), the exposure-to-acknowledgement latency.
 void print_summary_json(const JournalContents& contents) {
   TrackingAccuracy accuracy(contents.format_version >= 4);
+  LatencyChain latency_chain;
   std::array<std::int64_t, 5> states{};
   std::int64_t commands = 0, beam_on = 0;
   for (const JournalRecord& r : contents.records) {
     accuracy.add(r);
+    latency_chain.add(r);
     if (r.state < states.size()) ++states[r.state];
     commands += r.command_sent != 0;
     beam_on += r.beam_permit != 0;
@@ -209,6 +221,8 @@ void print_summary_json(const JournalContents& contents) {
   const auto latency = accuracy.latency();
   j["target_residual"] = target ? to_json(*target) : nlohmann::json(nullptr);
   j["latency_exposure_to_ack_ms"] = latency ? to_json(*latency) : nlohmann::json(nullptr);
+  const auto chain = latency_chain.report();
+  j["latency_chain_ms"] = chain ? to_json(*chain) : nlohmann::json(nullptr);
   if (contents.format_version < 4)
     j["note"] = "journal format " + std::to_string(contents.format_version) +
                 " records no target residual per axis and no acknowledgement time";
@@ -286,10 +300,11 @@ Command add_journal_command(CLI::App* parent) {
                                        "referencing the scene's planning CT (a DICOM series); needs --scene")
                            ->check(not_empty())
                            ->excludes(csv);
-  app->add_flag("--summary", o->summary,
-                "Print the run's figures instead of the records (JSON): cycles per state, commands, the "
-                "target's true residual per room axis with the share of TRACK cycles beyond 1 and 2 mm "
-                "(simulation), exposure-to-acknowledgement latency p50/p95/p99")
+  app->add_flag(
+         "--summary", o->summary,
+         "Print the run's figures instead of the records (JSON): cycles per state, commands, the "
+         "target's true residual per room axis with the share of TRACK cycles beyond 1 and 2 mm "
+         "(simulation), exposure-to-acknowledgement latency p50/p95/p99, and link by link (real clock)")
       ->excludes(csv)
       ->excludes(dicom);
   add_scene_options(app, &o->scene);

@@ -111,6 +111,14 @@ void print_summary(const LoopSummary& s) {
     std::printf("exposure to actuator acknowledgement: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms (%lld commands%s)\n",
                 l->p50_ms, l->p95_ms, l->p99_ms, l->max_ms, static_cast<long long>(l->commands),
                 s.simulated_clock ? "; simulated clock: the command deadline, not a measurement" : "");
+  if (const auto& c = s.latency_chain) {
+    std::string links;
+    for (int i = 0; i < kLatencyLinks; ++i)
+      links += fmt::format("{}{} {:.2f} / {:.2f}", i == 0 ? "" : ", ", key_of(static_cast<LatencyLink>(i)),
+                           c->links[std::size_t(i)].p50_ms, c->links[std::size_t(i)].p99_ms);
+    std::printf("latency chain, p50 / p99 ms per link (%lld commands): %s\n",
+                static_cast<long long>(c->commands), links.c_str());
+  }
   std::printf(
       "cycle work: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms; overruns %lld (periods skipped "
       "%lld)\n",

@@ -43,6 +43,7 @@ int main(int argc, char** argv) {
   const Command sensitivity = add_study_sensitivity_command(study);
   const Command trade = add_study_trade_command(study);
   const Command realism = add_study_realism_command(study);
+  const Command latency = add_study_latency_command(study);
   const Command merge = add_study_merge_command(study);
   const Command submit = add_study_submit_command(study);
   const Command study_status = add_study_status_command(study);
@@ -109,6 +110,8 @@ int main(int argc, char** argv) {
       status = trade();
     else if (study->got_subcommand("realism"))
       status = realism();
+    else if (study->got_subcommand("latency"))
+      status = latency();
     else if (study->got_subcommand("merge"))
       status = merge();
     else if (study->got_subcommand("submit"))

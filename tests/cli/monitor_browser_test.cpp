@@ -192,6 +192,13 @@ TEST(MonitorPage, ShowsTheLoopLiveAndActsOnlyWithTheToken) {
   EXPECT_GT(std::atoi(browser.wait_for("trace-count", [&](const std::string& t) { return std::atoi(t.c_str()) > trace; }).c_str()), trace)
       << "the trace grows as cycles arrive";
   EXPECT_EQ(browser.text("token-status").rfind("view only", 0), 0u);
+  // The correction's latency chain: a --fast run's clock is simulated, and the page says so.
+  const std::string chain = browser.wait_for("latency-chain", [](const std::string& t) {
+    return t.find("simulated clock") != std::string::npos || t.find("no correction") != std::string::npos;
+  });
+  EXPECT_TRUE(chain.find("simulated clock") != std::string::npos ||
+              chain.find("no correction") != std::string::npos)
+      << chain;
   // The shift: HOLD, and the gate's reason.
   EXPECT_EQ(browser.wait_for("state", [](const std::string& t) { return t == "HOLD"; }, 60), "HOLD");
   const int hold_seen_at = std::atoi(browser.text("cycle").c_str());

@@ -113,6 +113,22 @@ TEST_F(HilDemoScript, TakesAFreePortWhereItsOldOneIsHeldListensOnLoopbackAndRepo
   EXPECT_GT(j["hil"].value("requests", 0), 0);
   ASSERT_TRUE(j.contains("served_frames")) << out;
   EXPECT_GT(j["served_frames"].value("frames_served", 0), 0) << j["served_frames"].dump();
+  // The latency chain across the processes (issue 56): every acknowledged command has one; the
+  // frames cross a GigE stream and the command a Modbus round trip, neither of which is free.
+  ASSERT_TRUE(j["latency_chain_ms"].is_object()) << out;
+  const int commands = j["latency_chain_ms"].value("commands", 0);
+  EXPECT_GT(commands, 0);
+  EXPECT_EQ(commands, j["latency_exposure_to_ack_ms"].value("commands", -1));
+  EXPECT_GT(j["latency_chain_ms"]["arrive"]["max"].get<double>(), 0.0) << j["latency_chain_ms"].dump();
+  EXPECT_GT(j["latency_chain_ms"]["acknowledge"]["max"].get<double>(), 0.0) << j["latency_chain_ms"].dump();
+  std::string table;
+  ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "study", "latency",
+                           (dir_.path() / "hil" / "journal-modbus.lfj").string(), "--out",
+                           (dir_.path() / "latency").string()},
+                          &table)
+                  .ok())
+      << table;
+  EXPECT_NE(table.find(std::to_string(commands) + " commands of "), std::string::npos) << table;
 }
 
 TEST_F(HilDemoScript, StopsWaitingAsSoonAsTheDetectorServerExits) {

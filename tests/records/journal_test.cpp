@@ -59,7 +59,7 @@ void write_journal(const std::filesystem::path& file, std::uint64_t n) {
 
 // A journal's bytes, encoded here as a writer of format `version` would: the header, then one
 // frame per record whose payload (record_bytes long) holds the record's first `copied` bytes.
-std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 4,
+std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 5,
                                          std::uint32_t record_bytes = sizeof(JournalRecord),
                                          std::size_t copied = sizeof(JournalRecord)) {
   std::vector<unsigned char> bytes(32, 0);
@@ -451,6 +451,31 @@ TEST(Journal, ReadsAVersionThreeJournal) {
   j = read_journal(file);
   ASSERT_FALSE(j.ok());
   EXPECT_NE(j.status().message().find("version 3 has records of 296 bytes"), std::string::npos) << j.status().message();
+}
+
+// Version 4 (before the latency chain's links): 352-byte records, read with the links zero.
+TEST(Journal, ReadsAVersionFourJournal) {
+  test::TempDir dir;
+  const auto file = dir.path() / "v4.journal";
+  std::vector<JournalRecord> records;
+  for (std::uint64_t i = 0; i < 20; ++i) {
+    JournalRecord r = record(i);
+    r.command_acked_ns = 77;
+    r.frames_arrived_ns = 5;  // not in version 4: must not be read
+    r.command_written_ns = 6;
+    records.push_back(r);
+  }
+  write_file(file, journal_bytes(records, 4, 352, 352));
+  auto j = read_journal(file);
+  ASSERT_TRUE(j.ok()) << j.status().message();
+  EXPECT_EQ(j->format_version, 4u);
+  ASSERT_EQ(j->records.size(), 20u);
+  EXPECT_FALSE(j->damaged());
+  for (const JournalRecord& r : j->records) {
+    EXPECT_EQ(r.command_acked_ns, 77);
+    EXPECT_EQ(r.frames_arrived_ns, 0);
+    EXPECT_EQ(r.command_written_ns, 0);
+  }
 }
 
 // The cycle counter goes up by 1 + skipped_periods: a record removed from the file is a gap, one

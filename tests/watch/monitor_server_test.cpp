@@ -109,6 +109,25 @@ TEST(MonitorServer, ServesThePageAndTheStateOnlyForItsOwnHost) {
   EXPECT_EQ(k["beam_withheld"], "actuator still travelling");
   EXPECT_EQ(k["gate"]["shown"], "APPLY");
   EXPECT_EQ(k["gate"]["applied"], true);
+  EXPECT_TRUE(k["latency_chain_ms"].is_null()) << "no chain recorded (the simulated clock)";
+  // A real-clock command: its chain link by link, exposure (the older frame) to acknowledgement.
+  FeedRecord chained = record(44, TrackingState::kTrack, TrackingState::kTrack, 1.0, true);
+  JournalRecord& c = chained.record;
+  c.command_sent = 1;
+  c.frame_time_ns[0] = c.frame_time_ns[1] = 1'000'000'000;
+  c.frames_arrived_ns = 1'002'000'000;
+  c.preprocessed_ns = 1'002'500'000;
+  c.registered_ns = 1'010'500'000;
+  c.gated_ns = 1'010'510'000;
+  c.command_written_ns = 1'010'520'000;
+  c.command_acked_ns = 1'010'620'000;
+  s.hub.publish(chained);
+  const auto l = nlohmann::json::parse(s.client().Get("/api/state")->body)["latency_chain_ms"];
+  ASSERT_TRUE(l.is_object());
+  EXPECT_NEAR(l["arrive"].get<double>(), 2.0, 1e-9);
+  EXPECT_NEAR(l["register"].get<double>(), 8.0, 1e-9);
+  EXPECT_NEAR(l["acknowledge"].get<double>(), 0.1, 1e-9);
+  EXPECT_NEAR(l["total"].get<double>(), 10.62, 1e-9);
   // In HOLD the gate still judges each registration; an APPLY there moves nothing, and the page's
   // header must not read "APPLY: ok" (an outside probe saw it do so during a HOLD).
   FeedRecord held = record(43, TrackingState::kHold, TrackingState::kHold, 1.0, false, 123456);

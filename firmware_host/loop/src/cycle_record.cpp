@@ -56,6 +56,13 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
     r.command_sent = 1;
     r.command_acked_ns = c.command_acked_ns;
   }
+  if (!settings.simulated_clock && c.frames_ok) {  // the latency chain (latency_chain.hpp)
+    r.frames_arrived_ns = c.acquired_ns;
+    r.preprocessed_ns = c.preprocessed_ns;
+    r.registered_ns = c.registered_ns;
+    r.gated_ns = c.gated_ns;
+    r.command_written_ns = c.command_written_ns;
+  }
   r.hold_id = c.hold_id;
   r.beam_permit = c.beam_permit ? 1 : 0;
   // Why an applied cycle that ends in TRACK has the beam off: the alignment's (the state machine
@@ -93,6 +100,7 @@ void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleSt
   const auto state = static_cast<TrackingState>(r.state);
   if (parts.truth != nullptr && state == TrackingState::kTrack) residual_mm.add(r.true_residual_mm);
   accuracy.add(r);
+  latency_chain.add(r);
   ++summary.states[r.state];
 }
 

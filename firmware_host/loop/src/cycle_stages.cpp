@@ -275,6 +275,7 @@ DeviceStatus TrackingLoop::Impl::send_step(CycleState& c) {
   // from now for its set-up move.
   const std::int64_t due_ns =
       c.aligning && !settings.simulated_clock ? std::max(c.start_ns, monotonic_now_ns()) + period_ns : c.start_ns + period_ns;
+  c.command_written_ns = monotonic_now_ns();
   const DeviceStatus sent = parts.actuator->command(step, to_deadline(due_ns));
   if (sent == DeviceStatus::kOk) {
     commanded_total += step;

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "lftrack/loop/histogram.hpp"
+#include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/loop/motion_predictor.hpp"
 #include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
@@ -71,6 +72,9 @@ struct CycleState {
   bool command_sent = false;
   tracking::Vector6d command = tracking::Vector6d::Zero();
   std::int64_t command_acked_ns = 0;  // loop clock (simulated: the command's deadline)
+  // The latency chain's links after the frames' (acquired_ns, preprocessed_ns): wall clock, which
+  // is the loop's on the real clock (the journal keeps them only there); 0: not reached.
+  std::int64_t registered_ns = 0, gated_ns = 0, command_written_ns = 0;
 
   // after actuation
   std::uint32_t hold_id = 0;
@@ -143,6 +147,7 @@ struct TrackingLoop::Impl {
   std::int64_t tracking_cycles_since_view_check = 0;
   bool view_check_due = false;  // set by an alignment and every Nth tracking cycle; cleared when one ran
   TrackingAccuracy accuracy;           // the target residual per axis, the command latency
+  LatencyChain latency_chain;          // the command latency link by link (real clock)
   double evaluations_sum = 0;
   LoopSummary summary;
 

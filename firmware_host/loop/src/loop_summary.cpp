@@ -15,6 +15,7 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   }
   s.target_residual = accuracy.target_residual();
   s.command_latency = accuracy.latency();
+  s.latency_chain = latency_chain.report();
   s.simulated_clock = settings.simulated_clock;
   s.view_check_every =
       parts.view_agreement == nullptr ? -1 : (settings.judge_tracking ? settings.view_check_every : 0);

@@ -107,8 +107,10 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   if (!acquire(c)) return false;  // an archived sequence has ended: not a cycle
   preprocess(c);
   register_pair(c);
+  c.registered_ns = monotonic_now_ns();
   control(c);
   gate(c);
+  c.gated_ns = monotonic_now_ns();
   actuate(c);
   settle(c);
   *record = record_of(c);

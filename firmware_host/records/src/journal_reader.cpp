@@ -33,15 +33,17 @@ struct VersionLayout {
 };
 constexpr std::uint32_t kFirstFormatVersion = 1;
 constexpr VersionLayout kLayouts[] = {
-    {256, offsetof(JournalRecord, hold_id)},                // version 1
+    {256, offsetof(JournalRecord, hold_id)},                     // version 1
     {264, offsetof(JournalRecord, operator_refused_by_reason)},  // version 2
-    {296, offsetof(JournalRecord, true_target_residual)},   // version 3
-    {sizeof(JournalRecord), sizeof(JournalRecord)},         // version 4
+    {296, offsetof(JournalRecord, true_target_residual)},        // version 3
+    {352, offsetof(JournalRecord, frames_arrived_ns)},           // version 4
+    {sizeof(JournalRecord), sizeof(JournalRecord)},              // version 5
 };
 static_assert(std::size(kLayouts) == kFormatVersion - kFirstFormatVersion + 1, "a layout for every version read");
-static_assert(kLayouts[0].field_bytes == 252 && kLayouts[1].field_bytes == 264 && kLayouts[2].field_bytes == 296 &&
-                  sizeof(JournalRecord) == 352,
-              "the layouts of versions 1 to 4 are fixed");
+static_assert(kLayouts[0].field_bytes == 252 && kLayouts[1].field_bytes == 264 &&
+                  kLayouts[2].field_bytes == 296 && kLayouts[3].field_bytes == 352 &&
+                  sizeof(JournalRecord) == 392,
+              "the layouts of versions 1 to 5 are fixed");
 const VersionLayout& layout_of(std::uint32_t version) { return kLayouts[version - kFirstFormatVersion]; }
 constexpr std::size_t kReadWindowBytes = std::size_t{1} << 20;
 

@@ -13,6 +13,18 @@ nlohmann::json pose_delta_json(const double d[6]) {
   return {{"translation_mm", {d[0], d[1], d[2]}}, {"rotation_deg", {rad_to_deg(d[3]), rad_to_deg(d[4]), rad_to_deg(d[5])}}};
 }
 
+nlohmann::json to_json(const LatencyChainReport& r) {
+  auto link = [](const LinkLatency& l) {
+    return nlohmann::json{{"p50", l.p50_ms}, {"p95", l.p95_ms}, {"p99", l.p99_ms}, {"max", l.max_ms}};
+  };
+  nlohmann::json j;
+  j["commands"] = r.commands;
+  for (int i = 0; i < kLatencyLinks; ++i)
+    j[key_of(static_cast<LatencyLink>(i))] = link(r.links[std::size_t(i)]);
+  j["total"] = link(r.total);
+  return j;
+}
+
 nlohmann::json to_json(const LoopSummary& s) {
   nlohmann::json j;
   j["cycles"] = s.cycles;
@@ -24,6 +36,7 @@ nlohmann::json to_json(const LoopSummary& s) {
   if (s.command_latency)  // on the simulated clock an acknowledgement is the command's deadline
     j["latency_exposure_to_ack_ms"]["clock"] = s.simulated_clock ? "simulated: the command deadline, not a measurement"
                                                                  : "real";
+  j["latency_chain_ms"] = s.latency_chain ? to_json(*s.latency_chain) : nlohmann::json(nullptr);
   j["cycle_ms"] = {
       {"p50", s.cycle_p50_ms}, {"p95", s.cycle_p95_ms}, {"p99", s.cycle_p99_ms}, {"max", s.cycle_max_ms}};
   j["registration_ms"] = {

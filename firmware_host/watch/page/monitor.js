@@ -89,6 +89,15 @@ function showState(s) {
   }
   $('similarity').textContent = s.similarity.map((v) => fmt(v, 3)).join(' / ');
   $('registration-ms').textContent = fmt(s.registration_ms, 1);
+  // The last correction from exposure to acknowledgement, link by link (the real clock only).
+  const chain = s.latency_chain_ms;
+  $('latency-chain').textContent = chain ?
+      ['arrive', 'preprocess', 'register', 'gate', 'write', 'acknowledge']
+              .map((k) => k + ' ' + fmt(chain[k], 2))
+              .join(' + ') +
+          ' = ' + fmt(chain.total, 2) + ' ms' :
+      s.command_sent ? 'n/a (simulated clock)' :
+                       '- (no correction sent this cycle)';
   $('residual').textContent = s.true_residual_mm >= 0 ? fmt(s.true_residual_mm, 3) + ' mm' : 'n/a (not simulated)';
   const table = $('transitions');
   while (table.rows.length > 1) table.deleteRow(1);

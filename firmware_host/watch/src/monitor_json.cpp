@@ -2,6 +2,7 @@
 
 #include <openssl/evp.h>
 
+#include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
@@ -48,6 +49,21 @@ std::string state_reason(const HubStatus& s) {
   return "";
 }
 
+// The last cycle's command, link by link from the exposure to the acknowledgement (ms), with the
+// total; null where the cycle sent none, or has no chain (the simulated clock).
+nlohmann::json latency_chain_json(const JournalRecord& r) {
+  const auto links = latency_links_ms(r);
+  if (!links) return nullptr;
+  nlohmann::json j;
+  double total = 0;
+  for (int i = 0; i < kLatencyLinks; ++i) {
+    j[key_of(static_cast<LatencyLink>(i))] = (*links)[std::size_t(i)];
+    total += (*links)[std::size_t(i)];
+  }
+  j["total"] = total;
+  return j;
+}
+
 }  // namespace
 
 nlohmann::json state_json(const HubStatus& s, const HubOptions& options) {
@@ -76,19 +92,22 @@ nlohmann::json state_json(const HubStatus& s, const HubOptions& options) {
             {"correction", pose_delta_json(r.command)},
             {"similarity", similarity},
             {"registration_ms", r.registration_ms},
+            {"latency_chain_ms", latency_chain_json(r)},
             {"true_residual_mm", r.true_residual_mm},
-            {"operator", {{"refused", r.operator_refused},
-                          {"first_refusal", to_string(static_cast<OperatorRefusal>(r.operator_first_refusal))},
-                          {"last_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))},
-                          {"refusals", refusals_text(r.operator_refused_by_reason)}}},
-            {"counts", {{"cycles", s.counts.cycles},
-                        {"holds", s.counts.holds},
-                        {"faults", s.counts.faults},
-                        {"overruns", s.counts.overruns},
-                        {"skipped_periods", s.counts.skipped_periods},
-                        {"commands", s.counts.commands},
-                        {"operator_refused", s.counts.operator_refused},
-                        {"records_dropped", s.counts.records_dropped}}},
+            {"operator",
+             {{"refused", r.operator_refused},
+              {"first_refusal", to_string(static_cast<OperatorRefusal>(r.operator_first_refusal))},
+              {"last_refusal", to_string(static_cast<OperatorRefusal>(r.operator_refusal))},
+              {"refusals", refusals_text(r.operator_refused_by_reason)}}},
+            {"counts",
+             {{"cycles", s.counts.cycles},
+              {"holds", s.counts.holds},
+              {"faults", s.counts.faults},
+              {"overruns", s.counts.overruns},
+              {"skipped_periods", s.counts.skipped_periods},
+              {"commands", s.counts.commands},
+              {"operator_refused", s.counts.operator_refused},
+              {"records_dropped", s.counts.records_dropped}}},
             {"transitions", transitions}});
   return j;
 }

@@ -9,7 +9,8 @@
 namespace lftrack::host {
 
 // The current snapshot: cycle, state, the gate's last decision and reason, the registered
-// offset and the correction sent, similarity, hold id, counts, recent transitions.
+// offset and the correction sent, similarity, the correction's latency chain (latency_chain.hpp;
+// null without one), hold id, counts, recent transitions.
 nlohmann::json state_json(const HubStatus& status, const HubOptions& options);
 // Trace points as rows: [cycle, registered, tx, ty, tz (mm), rx, ry, rz (deg), true residual
 // (mm, -1 outside simulation), similarity A, similarity B, registration ms, state, command sent].

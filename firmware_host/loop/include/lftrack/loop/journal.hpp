@@ -5,9 +5,10 @@
 // File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size, the
 // scene's 16-byte fingerprint or zeros), then
 // one frame per record: u32 magic 0x4A52464C ("LFRJ"), u32 payload size, the payload (a
-// JournalRecord), u32 CRC-32C of the payload. Version 4 (written now) has 352-byte records;
-// version 3 (still read) had 296, the prefix up to `true_target_residual`, version 2 264, the
-// prefix up to `operator_refused_by_reason`, and version 1 256, the prefix up to `hold_id`. Fields a version lacks read as zero.
+// JournalRecord), u32 CRC-32C of the payload. Version 5 (written now) has 392-byte records;
+// version 4 (still read) had 352, the prefix up to `frames_arrived_ns`, version 3 296, the prefix up to
+// `true_target_residual`, version 2 264, the prefix up to `operator_refused_by_reason`, and version 1 256,
+// the prefix up to `hold_id`. Fields a version lacks read as zero.
 //
 // Durability: the writer write()s records within a few milliseconds of the push, so they are
 // in the kernel's page cache and survive the process being killed (kill -9) at any moment; it
@@ -83,6 +84,15 @@ struct JournalRecord {
   // Format version 4 on: when the actuator acknowledged this cycle's command, on the loop's clock
   // (its command() returned; simulated clock: the command's deadline); 0 when none was sent.
   std::int64_t command_acked_ns = 0;
+  // Format version 5 on, the real clock only (zeros on the simulated clock, whose cycle work takes
+  // no time, in earlier journals, and for a link the cycle did not reach): the latency chain's
+  // links on the loop's clock, between the exposure (frame_time_ns) and the acknowledgement
+  // (command_acked_ns). latency_chain.hpp names the links.
+  std::int64_t frames_arrived_ns = 0;   // the pair complete on the host: the frame source returned it
+  std::int64_t preprocessed_ns = 0;     // both frames to line integrals
+  std::int64_t registered_ns = 0;       // the registration and its verdict done
+  std::int64_t gated_ns = 0;            // the control law and the safety gate decided
+  std::int64_t command_written_ns = 0;  // the command handed to the actuator's driver
 };
 static_assert(std::is_trivially_copyable_v<JournalRecord>);
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_states.hpp"
@@ -42,6 +43,8 @@ struct LoopSummary {
   // (tracking_accuracy.hpp).
   std::optional<TargetResidualReport> target_residual;
   std::optional<CommandLatencyReport> command_latency;
+  // The same commands' latency link by link (latency_chain.hpp): the real clock only.
+  std::optional<LatencyChainReport> latency_chain;
   bool simulated_clock = false;  // then the latency is the modelled one: one command deadline
   double cycle_p50_ms = 0, cycle_p95_ms = 0, cycle_p99_ms = 0, cycle_max_ms = 0;  // work, not sleep
   double registration_p50_ms = 0, registration_p95_ms = 0, registration_max_ms = 0;

@@ -22,5 +22,8 @@ nlohmann::json pose_delta_json(const double delta_mm_rad[6]);
 nlohmann::json to_json(const TargetResidualReport& r);
 // {"commands", "p50", "p95", "p99", "max"} (ms)
 nlohmann::json to_json(const CommandLatencyReport& r);
+// {"commands", "arrive": {"p50", "p95", "p99", "max"}, "preprocess", "register", "gate",
+//  "write", "acknowledge", "total"} (ms): latency_chain.hpp's links
+nlohmann::json to_json(const LatencyChainReport& r);
 
 }  // namespace lftrack::host

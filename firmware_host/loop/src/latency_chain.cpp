@@ -1,0 +1,83 @@
+#include "lftrack/loop/latency_chain.hpp"
+
+#include <algorithm>
+
+namespace lftrack::host {
+
+const char* to_string(LatencyLink link) {
+  switch (link) {
+    case LatencyLink::kArrive:
+      return "exposure to arrival";
+    case LatencyLink::kPreprocess:
+      return "preprocess";
+    case LatencyLink::kRegister:
+      return "register";
+    case LatencyLink::kGate:
+      return "gate";
+    case LatencyLink::kWrite:
+      return "write";
+    case LatencyLink::kAcknowledge:
+      return "acknowledge";
+  }
+  return "?";
+}
+
+const char* key_of(LatencyLink link) {
+  switch (link) {
+    case LatencyLink::kArrive:
+      return "arrive";
+    case LatencyLink::kPreprocess:
+      return "preprocess";
+    case LatencyLink::kRegister:
+      return "register";
+    case LatencyLink::kGate:
+      return "gate";
+    case LatencyLink::kWrite:
+      return "write";
+    case LatencyLink::kAcknowledge:
+      return "acknowledge";
+  }
+  return "?";
+}
+
+std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalRecord& r) {
+  if (r.command_sent == 0) return std::nullopt;
+  const std::int64_t exposed = std::min(r.frame_time_ns[0], r.frame_time_ns[1]);
+  const std::int64_t times[kLatencyLinks + 1] = {exposed,           r.frames_arrived_ns, r.preprocessed_ns,
+                                                 r.registered_ns,   r.gated_ns,          r.command_written_ns,
+                                                 r.command_acked_ns};
+  std::array<double, kLatencyLinks> links{};
+  for (int i = 0; i < kLatencyLinks; ++i) {
+    if (times[i] <= 0 || times[i + 1] < times[i]) return std::nullopt;
+    links[std::size_t(i)] = 1e-6 * double(times[i + 1] - times[i]);
+  }
+  return links;
+}
+
+void LatencyChain::add(const JournalRecord& r) {
+  const auto links = latency_links_ms(r);
+  if (!links) return;
+  double total = 0;
+  for (std::size_t i = 0; i < links->size(); ++i) {
+    links_[i].add((*links)[i]);
+    total += (*links)[i];
+  }
+  total_.add(total);
+}
+
+namespace {
+LinkLatency of(const Histogram& h) {
+  return {h.quantile(0.50), h.quantile(0.95), h.quantile(0.99), h.max()};
+}
+}  // namespace
+
+std::optional<LatencyChainReport> LatencyChain::report() const {
+  if (total_.count() == 0) return std::nullopt;
+  LatencyChainReport out;
+  out.commands = static_cast<std::int64_t>(total_.count());
+  for (std::size_t i = 0; i < links_.size(); ++i) out.links[i] = of(links_[i]);
+  out.total = of(total_);
+  return out;
+}
+
+}  // namespace lftrack::host
