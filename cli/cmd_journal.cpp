@@ -79,7 +79,8 @@ void print_csv(const std::vector<JournalRecord>& records) {
       "hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
       "operator_first_refusal,operator_refusals,"
       "target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,target_ry_deg,target_rz_deg,command_acked_ns,"
-      "frames_arrived_ns,preprocessed_ns,registered_ns,gated_ns,command_written_ns\n");
+      "frame_time_a_ns,frame_time_b_ns,frames_arrived_ns,preprocessed_ns,registered_ns,gated_ns,command_"
+      "written_ns\n");
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
@@ -96,7 +97,8 @@ void print_csv(const std::vector<JournalRecord>& records) {
                 refusal_name(r.operator_refusal).c_str(), code_name<BeamWithheld>(r.beam_withheld).c_str(),
                 refusal_name(r.operator_first_refusal).c_str(), refusals_text(r.operator_refused_by_reason).c_str());
     print_mm_deg(r.true_target_residual);
-    std::printf(",%lld,%lld,%lld,%lld,%lld,%lld\n", static_cast<long long>(r.command_acked_ns),
+    std::printf(",%lld,%lld,%lld,%lld,%lld,%lld,%lld,%lld\n", static_cast<long long>(r.command_acked_ns),
+                static_cast<long long>(r.frame_time_ns[0]), static_cast<long long>(r.frame_time_ns[1]),
                 static_cast<long long>(r.frames_arrived_ns), static_cast<long long>(r.preprocessed_ns),
                 static_cast<long long>(r.registered_ns), static_cast<long long>(r.gated_ns),
                 static_cast<long long>(r.command_written_ns));
@@ -126,6 +128,7 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"true_residual_mm", r.true_residual_mm},
                      {"true_target_residual", pose_delta_json(r.true_target_residual)},
                      {"command_acked_ns", r.command_acked_ns},
+                     {"frame_time_ns", {r.frame_time_ns[0], r.frame_time_ns[1]}},
                      {"frames_arrived_ns", r.frames_arrived_ns},
                      {"preprocessed_ns", r.preprocessed_ns},
                      {"registered_ns", r.registered_ns},

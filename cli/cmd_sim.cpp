@@ -111,6 +111,8 @@ void print_summary(const LoopSummary& s) {
     std::printf("exposure to actuator acknowledgement: p50 %.1f ms, p95 %.1f ms, p99 %.1f ms, max %.1f ms (%lld commands%s)\n",
                 l->p50_ms, l->p95_ms, l->p99_ms, l->max_ms, static_cast<long long>(l->commands),
                 s.simulated_clock ? "; simulated clock: the command deadline, not a measurement" : "");
+  if (s.simulated_clock && s.command_latency)
+    std::printf("latency chain: n/a (simulated clock: the cycle's work takes no simulated time)\n");
   if (const auto& c = s.latency_chain) {
     std::string links;
     for (int i = 0; i < kLatencyLinks; ++i)

@@ -37,9 +37,11 @@ Command add_study_latency_command(CLI::App* parent) {
     if (!study.ok()) return study.status();
     for (const std::string& note : study->notes) std::fprintf(stderr, "note: %s\n", note.c_str());
     const LatencyChainReport& r = study->report;
-    std::printf("%lld commands of %lld with a latency chain, from %zu journal(s)\n",
-                static_cast<long long>(r.commands), static_cast<long long>(study->commands),
-                study->journals.size());
+    if (r.commands == 0)
+      return failed_precondition("no command with a latency chain in the journals: nothing to measure");
+    std::printf(
+        "%lld commands of %lld with a latency chain, from %zu journal(s); quantiles by nearest rank\n",
+        static_cast<long long>(r.commands), static_cast<long long>(study->commands), study->journals.size());
     std::printf("%-28s %9s %9s %9s %9s\n", "link (ms)", "p50", "p95", "p99", "max");
     auto row = [](const char* name, const LinkLatency& l) {
       std::printf("%-28s %9.3f %9.3f %9.3f %9.3f\n", name, l.p50_ms, l.p95_ms, l.p99_ms, l.max_ms);
@@ -47,8 +49,11 @@ Command add_study_latency_command(CLI::App* parent) {
     for (int i = 0; i < kLatencyLinks; ++i)
       row(to_string(static_cast<LatencyLink>(i)), r.links[std::size_t(i)]);
     row("exposure to acknowledgement", r.total);
-    LFTRACK_RETURN_IF_ERROR(write_latency_study(*study, o->out_dir));
-    std::printf("wrote %s/{chain.csv,summary.json,latency_chain.png}\n", o->out_dir.c_str());
+    auto drawn = write_latency_study(*study, o->out_dir);
+    if (!drawn.ok()) return drawn.status();
+    std::printf(
+        "wrote %s/{chain.csv,summary.json%s}\n", o->out_dir.c_str(),
+        *drawn ? ",latency_chain.png" : ",latency_chain.dat,latency_chain.gp; no PNG: gnuplot is missing");
     return {};
   };
 }

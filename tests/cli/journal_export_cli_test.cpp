@@ -92,7 +92,7 @@ TEST(JournalExport, RefusalsByReasonAndPosesWithTheirUnits) {
   EXPECT_NE(csv.find(",0,0,-2,1,0,0,"), std::string::npos) << "the command in mm and degrees\n" << csv;
   EXPECT_NE(
       csv.find(",\"no operator token, or a wrong one\",\"15 no operator token, or a wrong one; 2 replayed or "
-               "stale request\",0,0,0,0,0,0,0,0,0,0,0,0\n"),
+               "stale request\",0,0,0,0,0,0,0,0,0,0,0,0,0,0\n"),
       std::string::npos)
       << csv;
   ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", file.string()}, &json).ok()) << json;

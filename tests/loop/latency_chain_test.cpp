@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 namespace lftrack::host {
 namespace {
@@ -56,6 +57,20 @@ TEST(LatencyChain, ARecordWithoutAWholeOrderedChainHasNone) {
   JournalRecord no_exposure = chained();
   no_exposure.frame_time_ns[1] = 0;
   EXPECT_FALSE(latency_links_ms(no_exposure));
+  // Each says why.
+  NoChain why = NoChain::kNoCommand;
+  EXPECT_FALSE(latency_links_ms(simulated, &why));
+  EXPECT_EQ(why, NoChain::kNotTimed);
+  EXPECT_FALSE(latency_links_ms(backwards, &why));
+  EXPECT_EQ(why, NoChain::kOutOfOrder);
+  EXPECT_FALSE(latency_links_ms(none, &why));
+  EXPECT_EQ(why, NoChain::kNoCommand);
+  JournalRecord forever = chained();  // an acknowledgement at the end of time: damage
+  forever.command_acked_ns = std::numeric_limits<std::int64_t>::max();
+  EXPECT_FALSE(latency_links_ms(forever, &why));
+  EXPECT_EQ(why, NoChain::kImplausible);
+  for (NoChain n : {NoChain::kNoCommand, NoChain::kNotTimed, NoChain::kOutOfOrder, NoChain::kImplausible})
+    EXPECT_STRNE(to_string(n), "?");
 }
 
 TEST(LatencyChain, TheReportGivesEachLinksQuantilesAndTheTotal) {

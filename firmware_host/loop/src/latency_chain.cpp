@@ -40,16 +40,38 @@ const char* key_of(LatencyLink link) {
   return "?";
 }
 
-std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalRecord& r) {
-  if (r.command_sent == 0) return std::nullopt;
+const char* to_string(NoChain why) {
+  switch (why) {
+    case NoChain::kNoCommand:
+      return "no command sent";
+    case NoChain::kNotTimed:
+      return "a link not timed (the simulated clock, a journal before format 5, or a link not reached)";
+    case NoChain::kOutOfOrder:
+      return "a link runs backwards (damage: one monotonic clock never does)";
+    case NoChain::kImplausible:
+      return "a link over a minute (damage)";
+  }
+  return "?";
+}
+
+std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalRecord& r, NoChain* why) {
+  auto none = [&](NoChain reason) -> std::optional<std::array<double, kLatencyLinks>> {
+    if (why != nullptr) *why = reason;
+    return std::nullopt;
+  };
+  if (r.command_sent == 0) return none(NoChain::kNoCommand);
   const std::int64_t exposed = std::min(r.frame_time_ns[0], r.frame_time_ns[1]);
   const std::int64_t times[kLatencyLinks + 1] = {exposed,           r.frames_arrived_ns, r.preprocessed_ns,
                                                  r.registered_ns,   r.gated_ns,          r.command_written_ns,
                                                  r.command_acked_ns};
+  for (std::int64_t t : times)
+    if (t <= 0) return none(NoChain::kNotTimed);
   std::array<double, kLatencyLinks> links{};
   for (int i = 0; i < kLatencyLinks; ++i) {
-    if (times[i] <= 0 || times[i + 1] < times[i]) return std::nullopt;
+    if (times[i + 1] < times[i]) return none(NoChain::kOutOfOrder);
+    // A difference of two positive int64 values cannot overflow.
     links[std::size_t(i)] = 1e-6 * double(times[i + 1] - times[i]);
+    if (links[std::size_t(i)] > kMaxLinkMs) return none(NoChain::kImplausible);
   }
   return links;
 }

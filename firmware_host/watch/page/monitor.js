@@ -96,7 +96,7 @@ function showState(s) {
               .map((k) => k + ' ' + fmt(chain[k], 2))
               .join(' + ') +
           ' = ' + fmt(chain.total, 2) + ' ms' :
-      s.command_sent ? 'n/a (simulated clock)' :
+      s.command_sent ? 'n/a (not timed: the simulated clock, or a link not reached)' :
                        '- (no correction sent this cycle)';
   $('residual').textContent = s.true_residual_mm >= 0 ? fmt(s.true_residual_mm, 3) + ' mm' : 'n/a (not simulated)';
   const table = $('transitions');

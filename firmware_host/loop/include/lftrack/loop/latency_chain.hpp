@@ -32,10 +32,20 @@ const char* to_string(LatencyLink link);
 // A short key for tables and JSON: "arrive", "preprocess", ..., "acknowledge".
 const char* key_of(LatencyLink link);
 
-// The links of the command `r` sent, in ms; none where it sent none, the record has no chain
-// (the simulated clock, a journal before format 5, a link not reached), or its timestamps are not
-// in order (they never are out of order on one monotonic clock: a damaged record).
-std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalRecord& r);
+// Why a record has no chain.
+enum class NoChain : int {
+  kNoCommand,    // it sent no command
+  kNotTimed,     // a timestamp is 0: the simulated clock, a journal before format 5, a link not reached
+  kOutOfOrder,   // a link runs backwards: never on one monotonic clock, so damage
+  kImplausible,  // a link longer than kMaxLinkMs: no cycle takes a minute, so damage
+};
+constexpr double kMaxLinkMs = 60'000;
+const char* to_string(NoChain why);
+
+// The links of the command `r` sent, in ms; none (and, where `why` is given, the reason) where
+// the record has no whole, ordered, plausible chain.
+std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalRecord& r,
+                                                                  NoChain* why = nullptr);
 
 struct LinkLatency {
   double p50_ms = 0, p95_ms = 0, p99_ms = 0, max_ms = 0;
