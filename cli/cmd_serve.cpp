@@ -109,12 +109,14 @@ Status serve_couch(const ServeOptions& o) {
         reachable_warning(at, "the modbus couch server", "move the couch (Modbus has no authentication)");
     if (!w.empty()) spdlog::warn("{}", w);
   }
-  if (server.rtu_device.empty())
-    std::printf("lftrack serve couch: modbus tcp %s:%d", server.address.c_str(), (*modbus)->port());
-  else
-    std::printf("lftrack serve couch: modbus rtu %s", serial_line ? client_end.c_str() : server.rtu_device.c_str());
-  std::printf("%s%s\n", o.room.empty() ? "" : "; room link ", o.room.c_str());
-  std::fflush(stdout);
+  const auto announce = [&] {
+    if (server.rtu_device.empty())
+      std::printf("lftrack serve couch: modbus tcp %s:%d", server.address.c_str(), (*modbus)->port());
+    else
+      std::printf("lftrack serve couch: modbus rtu %s",
+                  serial_line ? client_end.c_str() : server.rtu_device.c_str());
+    std::printf("%s%s\n", o.room.empty() ? "" : "; room link ", o.room.c_str());
+  };
   using F = sim::CouchServerFault;
   const std::map<std::string, int> kinds = couch_fault_kinds();
   sim::ModbusCouchServer* s = modbus->get();
@@ -137,7 +139,7 @@ Status serve_couch(const ServeOptions& o) {
         s->inject(static_cast<F>(kinds.at(f.kind)), f.count);
         return true;
       },
-      describe));
+      describe, announce));
   if (o.json) {
     const tracking::Vector6d q = c->position();
     nlohmann::json j = {{"device", "couch"},
@@ -164,9 +166,10 @@ Status serve_robot(const ServeOptions& o) {
   if (!device.ok()) return device.status();
   auto bridge = sim::CanBridgeServer::start(o.endpoint, device->get());
   if (!bridge.ok()) return bridge.status();
-  std::printf("lftrack serve robot: can bridge %s%s%s\n", o.endpoint.c_str(), o.room.empty() ? "" : "; room link ",
-              o.room.c_str());
-  std::fflush(stdout);
+  const auto announce = [&] {
+    std::printf("lftrack serve robot: can bridge %s%s%s\n", o.endpoint.c_str(),
+                o.room.empty() ? "" : "; room link ", o.room.c_str());
+  };
   using R = sim::RobotFault;
   const std::map<std::string, int> kinds = robot_fault_kinds();
   sim::CanBridgeServer* b = bridge->get();
@@ -192,7 +195,7 @@ Status serve_robot(const ServeOptions& o) {
         for (int i = 0; i < f.count; ++i) any = b->inject(static_cast<R>(kinds.at(f.kind))) || any;
         return any;
       },
-      describe));
+      describe, announce));
   if (o.json) {
     nlohmann::json j = {{"device", "robot"}, {"connections", b->connections()}, {"commands", c->commands()},
                         {"holds", c->holds()}};

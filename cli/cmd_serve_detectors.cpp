@@ -159,9 +159,10 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
   }
   std::string listening;
   for (const std::string& d : o.loopback) listening += (listening.empty() ? "" : ", ") + d;
-  std::printf("lftrack serve detectors: v4l2loopback %s%s%s\n", listening.c_str(), o.room.empty() ? "" : "; room link ",
-              o.room.c_str());
-  std::fflush(stdout);
+  const auto announce = [&] {
+    std::printf("lftrack serve detectors: v4l2loopback %s%s%s\n", listening.c_str(),
+                o.room.empty() ? "" : "; room link ", o.room.c_str());
+  };
   std::vector<tracking::Image<std::uint16_t>> copies;
   for (std::size_t i = 0; i < writers.size(); ++i)
     copies.emplace_back(scene.detectors[i].view.rows, scene.detectors[i].view.cols);
@@ -187,7 +188,11 @@ Status serve_v4l2_loopback(const Scene& scene, const ServeOptions& o, DetectorRo
         paused.store(f.kind == "stop");
         return true;
       },
-      [&] { return "frames written: " + std::to_string(writers[0]->frames()) + (paused.load() ? " (stopped)" : ""); });
+      [&] {
+        return "frames written: " + std::to_string(writers[0]->frames()) +
+               (paused.load() ? " (stopped)" : "");
+      },
+      announce);
   done.store(true);
   writer.join();
   LFTRACK_RETURN_IF_ERROR(served);
@@ -252,9 +257,10 @@ Status serve_detectors(const ServeOptions& o) {
     listening += (k ? ", " : "") + cameras.back()->address() + " (" + std::to_string(c.cols) + " x " +
                  std::to_string(c.rows) + ")";
   }
-  std::printf("lftrack serve detectors: gige %s%s%s\n", listening.c_str(), o.room.empty() ? "" : "; room link ",
-              o.room.c_str());
-  std::fflush(stdout);
+  const auto announce = [&] {
+    std::printf("lftrack serve detectors: gige %s%s%s\n", listening.c_str(),
+                o.room.empty() ? "" : "; room link ", o.room.c_str());
+  };
   const std::map<std::string, int> kinds = gige_fault_kinds();
   const auto describe = [&] {
     std::string s = "frames served:";
@@ -271,7 +277,7 @@ Status serve_detectors(const ServeOptions& o) {
         }
         return true;
       },
-      describe));
+      describe, announce));
   nlohmann::json j = r->truth();
   j["device"] = "detectors";
   std::uint64_t served = 0;

@@ -185,10 +185,13 @@ inline Result<std::vector<Fault>> check_serve_options(const ServeOptions& o, con
 }
 
 // Runs until a signal, --duration, or `stop` on the control socket: timed faults, control
-// datagrams. `inject` applies a fault; `status` describes the device now.
-template <class Inject, class Describe>
+// datagrams. `inject` applies a fault; `status` describes the device now; `announce` prints the
+// server's first line, which scripts and tests wait for: it is called once the control socket
+// is bound, so that whoever reads the line can use the socket at once (a test that read it and
+// sent `stop` before the bind, on a loaded host, found no socket there).
+template <class Inject, class Describe, class Announce>
 Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, int>& kinds, Inject&& inject,
-                           Describe&& status) {
+                           Describe&& status, Announce&& announce) {
   auto checked = check_serve_options(o, kinds);
   if (!checked.ok()) return checked.status();
   std::vector<Fault> timed = std::move(*checked);
@@ -198,6 +201,8 @@ Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, in
   action.sa_handler = on_stop_signal;
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+  announce();
+  std::fflush(stdout);
   const auto start = std::chrono::steady_clock::now();
   bool stop = false;
   while (!g_stop.load() && !stop) {
