@@ -226,6 +226,7 @@ void print_summary_json(const JournalContents& contents) {
   j["latency_exposure_to_ack_ms"] = latency ? to_json(*latency) : nlohmann::json(nullptr);
   const auto chain = latency_chain.report();
   j["latency_chain_ms"] = chain ? to_json(*chain) : nlohmann::json(nullptr);
+  if (contents.format_version == 4) j["note"] = "journal format 4 records no latency chain (format 5 on)";
   if (contents.format_version < 4)
     j["note"] = "journal format " + std::to_string(contents.format_version) +
                 " records no target residual per axis and no acknowledgement time";

@@ -1,5 +1,7 @@
 #include "lftrack/studies/latency_study.hpp"
 
+#include <sys/stat.h>
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -89,12 +91,6 @@ LinePlot histogram_plot(const LatencyStudy& s) {
   return plot;
 }
 
-// The file's identity, for a journal given twice (the same file by another path too).
-struct FileId {
-  std::uintmax_t device = 0, inode = 0;
-  bool operator<(const FileId& o) const { return device != o.device ? device < o.device : inode < o.inode; }
-};
-
 }  // namespace
 
 double CommandChain::total_ms() const {
@@ -108,11 +104,13 @@ Result<LatencyStudy> run_latency_study(const std::vector<fs::path>& journals) {
   LatencyStudy s;
   std::set<std::string> seen;
   for (const fs::path& file : journals) {
-    std::error_code ec;
-    const fs::path canonical = fs::canonical(file, ec);
-    const std::string key = ec ? file.string() : canonical.string();
+    // The same file by any path (a link too): its device and inode.
+    struct stat st {};
+    const std::string key =
+        ::stat(file.c_str(), &st) == 0 ? fmt::format("{}:{}", st.st_dev, st.st_ino) : file.string();
     if (!seen.insert(key).second)
-      return invalid_argument(file.string() + ": given twice (as " + key + "): each journal once");
+      return invalid_argument(file.string() +
+                              ": given twice (the same file by another path or link): each journal once");
     auto contents = read_journal(file);
     if (!contents.ok()) return contents.status();
     const int index = static_cast<int>(s.journals.size());

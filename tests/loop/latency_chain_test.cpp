@@ -55,7 +55,7 @@ TEST(LatencyChain, ARecordWithoutAWholeOrderedChainHasNone) {
   backwards.gated_ns = backwards.registered_ns - 1;
   EXPECT_FALSE(latency_links_ms(backwards));
   JournalRecord no_exposure = chained();
-  no_exposure.frame_time_ns[1] = 0;
+  no_exposure.frame_time_ns[0] = no_exposure.frame_time_ns[1] = 0;
   EXPECT_FALSE(latency_links_ms(no_exposure));
   // Each says why.
   NoChain why = NoChain::kNoCommand;
@@ -71,6 +71,16 @@ TEST(LatencyChain, ARecordWithoutAWholeOrderedChainHasNone) {
   EXPECT_EQ(why, NoChain::kImplausible);
   for (NoChain n : {NoChain::kNoCommand, NoChain::kNotTimed, NoChain::kOutOfOrder, NoChain::kImplausible})
     EXPECT_STRNE(to_string(n), "?");
+}
+
+TEST(LatencyChain, OneDetectorsFrameIsTheExposure) {
+  JournalRecord one = chained();  // one detector: the second frame time is not there
+  one.frame_time_ns[1] = 0;
+  EXPECT_EQ(exposure_ns(one), 101 * kNsPerMs);
+  const auto links = latency_links_ms(one);
+  ASSERT_TRUE(links.has_value());
+  EXPECT_NEAR((*links)[std::size_t(LatencyLink::kArrive)], 0.0, 1e-9);
+  EXPECT_EQ(exposure_ns(chained()), 100 * kNsPerMs) << "two: the older";
 }
 
 TEST(LatencyChain, TheReportGivesEachLinksQuantilesAndTheTotal) {

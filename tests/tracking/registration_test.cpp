@@ -194,7 +194,8 @@ TEST_P(PreparedRunByPlan, SetFramesAndAPreparedRunAllocateNothing) {
   EXPECT_TRUE(again.T_room_from_ct.isApprox(result.T_room_from_ct, 1e-12));
 }
 
-INSTANTIATE_TEST_SUITE_P(Registration, PreparedRunByPlan, ::testing::Values("warm", "warm-robust"),
+INSTANTIATE_TEST_SUITE_P(Registration, PreparedRunByPlan,
+                         ::testing::Values("warm", "warm-robust", "warm-robust-fast"),
                          [](const ::testing::TestParamInfo<std::string>& p) {
                            std::string name = p.param;
                            std::replace(name.begin(), name.end(), '-', '_');

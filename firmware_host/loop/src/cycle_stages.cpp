@@ -170,10 +170,10 @@ void TrackingLoop::Impl::preprocess(CycleState& c) {
     }
     c.frames_usable = c.frames_usable && parts.registration->set_frames(frame_views, mask_views).ok();
   }
-  c.preprocessed_ns = monotonic_now_ns();
   c.gate_input.image_quality_ok = quality_issue == tracking::FrameQualityIssue::kOk;
   if (c.frames_usable && parts.archive != nullptr)
     parts.archive->append(c.index, pair, c.gate_input.readback_valid ? &couch_position : nullptr);
+  c.preprocessed_ns = monotonic_now_ns();  // the archive's copy is this stage's, not the registration's
 }
 
 // The patient's own offset, its prediction, and the couch move that cancels it; everything the

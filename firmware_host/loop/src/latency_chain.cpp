@@ -54,13 +54,19 @@ const char* to_string(NoChain why) {
   return "?";
 }
 
+std::int64_t exposure_ns(const JournalRecord& r) {
+  const std::int64_t a = r.frame_time_ns[0], b = r.frame_time_ns[1];
+  if (a <= 0 || b <= 0) return std::max<std::int64_t>(std::max(a, b), 0);  // one detector (or none)
+  return std::min(a, b);
+}
+
 std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalRecord& r, NoChain* why) {
   auto none = [&](NoChain reason) -> std::optional<std::array<double, kLatencyLinks>> {
     if (why != nullptr) *why = reason;
     return std::nullopt;
   };
   if (r.command_sent == 0) return none(NoChain::kNoCommand);
-  const std::int64_t exposed = std::min(r.frame_time_ns[0], r.frame_time_ns[1]);
+  const std::int64_t exposed = exposure_ns(r);
   const std::int64_t times[kLatencyLinks + 1] = {exposed,           r.frames_arrived_ns, r.preprocessed_ns,
                                                  r.registered_ns,   r.gated_ns,          r.command_written_ns,
                                                  r.command_acked_ns};

@@ -2,6 +2,8 @@
 
 #include "lftrack/loop/tracking_accuracy.hpp"
 
+#include "lftrack/loop/latency_chain.hpp"
+
 #include <cmath>
 
 #include "lftrack/loop/tracking_states.hpp"
@@ -11,7 +13,7 @@ namespace lftrack::host {
 
 void TrackingAccuracy::add(const JournalRecord& r) {
   if (r.command_sent != 0 && r.command_acked_ns > 0) {
-    const std::int64_t exposed = std::min(r.frame_time_ns[0], r.frame_time_ns[1]);
+    const std::int64_t exposed = exposure_ns(r);
     if (exposed > 0 && r.command_acked_ns >= exposed) latency_ms_.add(1e-6 * double(r.command_acked_ns - exposed));
   }
   if (!per_axis_ || !(r.true_residual_mm >= 0) || static_cast<TrackingState>(r.state) != TrackingState::kTrack)

@@ -58,12 +58,14 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
     std::string seen;
     for (const auto& [state, cycles] : states)
       seen += fmt::format("{}{} {}", seen.empty() ? "" : ", ", state, cycles);
-    // The gate's reason in each ALIGN cycle: what kept the alignment from its set-up move.
-    std::string align_gates;
+    // The gate's reasons in the ALIGN cycles, counted: what kept the alignment from its set-up move.
+    std::map<std::string, int> reasons;
     for (const JournalRecord& c : run.records)
       if (c.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign))
-        align_gates += fmt::format("{}{}", align_gates.empty() ? "" : ", ",
-                                   host::to_string(static_cast<host::GateReason>(c.gate_reason)));
+        ++reasons[host::to_string(static_cast<host::GateReason>(c.gate_reason))];
+    std::string align_gates;
+    for (const auto& [reason, cycles] : reasons)
+      align_gates += fmt::format("{}{} x{}", align_gates.empty() ? "" : ", ", reason, cycles);
     r.why = fmt::format(
         "the loop never aligned in {} cycles ({}; {}; the gate in ALIGN: {}; last gate: {})",
         run.records.size(), seen, run.summary.ended.empty() ? std::string("no TRACK") : run.summary.ended,

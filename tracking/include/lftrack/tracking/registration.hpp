@@ -133,9 +133,12 @@ struct RegistrationPlan {
 //              halves plain NCC's (0.54 to 0.26 mm), and costs about 30 % more a registration
 //              (BENCHMARKS.md, "Follow the target")
 //   warm-robust  tracking clinical frames: quadratic-neighbour with robust's high-passed rncc on
-//              8 x 8 binned originals (1 -> 0.25 mm), then one iteration of 0.25 mm probes on
-//              2 x 2 binned ones (a full-resolution pass to 0.1 mm after a 2 x 2 binned one cost
-//              6.8 times as long at the same mean TRE on the lumbar clinical scene)
+//              2 x 2 binned originals (1 -> 0.25 mm), then at full resolution with probes of
+//              0.25 and 0.125 mm
+//   warm-robust-fast  the same measure on 8 x 8 binned originals (1 -> 0.25 mm), then 0.25 mm
+//              probes on 2 x 2 binned ones until they settle: a seventh of warm-robust's time at
+//              its mean TRE on the lumbar clinical scene, a larger largest error on the thoracic
+//              one; opt-in (its commissioning of the thoracic clinical scene did not generalise)
 //   robust-ncc, warm-robust-ncc  the same with plain NCC in the high-passed passes (the plans
 //              before rncc): cheaper a probe, pulled by edges that moved
 //   pyramid    the cold set-up at half quadratic's time: quadratic-neighbour on 4 x 4 binned

@@ -9,8 +9,10 @@
 //   preprocessed    both frames to line integrals in their ROIs
 //   registered      the registration and its verdict done
 //   gated           the control law and the safety gate decided
-//   written         the command handed to the actuator's driver
-//   acknowledged    the driver's command() returned (a Modbus reply, the robot's CAN answer)
+//   written         the command handed to the actuator's driver (its command() called)
+//   acknowledged    the driver's command() returned (a Modbus reply, the robot's CAN answer):
+//                   the write on the wire is in this link, not in "write", which is the
+//                   hand-over from the gate to the driver
 //
 // A link is the time between two neighbours; the links add up to exposure-to-acknowledgement.
 // Only the real clock has a chain: on the simulated clock the cycle's work takes no time (the
@@ -31,6 +33,11 @@ constexpr int kLatencyLinks = 6;
 const char* to_string(LatencyLink link);
 // A short key for tables and JSON: "arrive", "preprocess", ..., "acknowledge".
 const char* key_of(LatencyLink link);
+
+// The exposure a record's latency is counted from: the older of its frames' (one detector: its
+// frame's; the journal keeps the first two detectors' times, so with three or four the older of
+// those two). 0: none.
+std::int64_t exposure_ns(const JournalRecord& r);
 
 // Why a record has no chain.
 enum class NoChain : int {
