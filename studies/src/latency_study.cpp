@@ -13,6 +13,7 @@
 #include <set>
 
 #include "lftrack/records/journal_reader.hpp"
+#include "lftrack/records/loop_json.hpp"
 #include "lftrack/studies/plot.hpp"
 
 namespace lftrack::host {
@@ -38,10 +39,6 @@ LinkLatency quantiles(std::vector<double> ms) {
   l.p99_ms = nearest_rank(ms, 0.99);
   l.max_ms = ms.empty() ? 0 : ms.back();
   return l;
-}
-
-nlohmann::json link_json(const LinkLatency& l) {
-  return {{"p50", l.p50_ms}, {"p95", l.p95_ms}, {"p99", l.p99_ms}, {"max", l.max_ms}};
 }
 
 // Histograms on log-spaced bins, ten a decade from 0.1 us to 1 s (the write link is well under a
@@ -94,9 +91,7 @@ LinePlot histogram_plot(const LatencyStudy& s) {
 }  // namespace
 
 double CommandChain::total_ms() const {
-  double total = 0;
-  for (double v : links_ms) total += v;
-  return total;
+  return host::total_ms(links_ms);
 }
 
 Result<LatencyStudy> run_latency_study(const std::vector<fs::path>& journals) {
@@ -204,9 +199,9 @@ Result<bool> write_latency_study(const LatencyStudy& s, const fs::path& out_dir)
   j["quantiles"] = "nearest rank";
   nlohmann::json links;
   for (int i = 0; i < kLatencyLinks; ++i)
-    links[key_of(static_cast<LatencyLink>(i))] = link_json(s.report.links[std::size_t(i)]);
+    links[key_of(static_cast<LatencyLink>(i))] = to_json(s.report.links[std::size_t(i)]);
   j["links_ms"] = links;
-  j["exposure_to_acknowledgement_ms"] = link_json(s.report.total);
+  j["exposure_to_acknowledgement_ms"] = to_json(s.report.total);
   j["notes"] = s.notes;
   {
     std::ofstream out(out_dir / "summary.json");

@@ -4,40 +4,35 @@
 
 namespace lftrack::host {
 
+namespace {
+// Each link's name (tables, plots) and key (JSON, CSV), in LatencyLink's order.
+struct LinkNames {
+  const char* name;
+  const char* key;
+};
+constexpr LinkNames kLinkNames[kLatencyLinks] = {{"exposure to arrival", "arrive"},
+                                                 {"preprocess", "preprocess"},
+                                                 {"register", "register"},
+                                                 {"gate", "gate"},
+                                                 {"write", "write"},
+                                                 {"acknowledge", "acknowledge"}};
+bool known(LatencyLink link) {
+  return static_cast<int>(link) >= 0 && static_cast<int>(link) < kLatencyLinks;
+}
+}  // namespace
+
 const char* to_string(LatencyLink link) {
-  switch (link) {
-    case LatencyLink::kArrive:
-      return "exposure to arrival";
-    case LatencyLink::kPreprocess:
-      return "preprocess";
-    case LatencyLink::kRegister:
-      return "register";
-    case LatencyLink::kGate:
-      return "gate";
-    case LatencyLink::kWrite:
-      return "write";
-    case LatencyLink::kAcknowledge:
-      return "acknowledge";
-  }
-  return "?";
+  return known(link) ? kLinkNames[static_cast<int>(link)].name : "?";
 }
 
 const char* key_of(LatencyLink link) {
-  switch (link) {
-    case LatencyLink::kArrive:
-      return "arrive";
-    case LatencyLink::kPreprocess:
-      return "preprocess";
-    case LatencyLink::kRegister:
-      return "register";
-    case LatencyLink::kGate:
-      return "gate";
-    case LatencyLink::kWrite:
-      return "write";
-    case LatencyLink::kAcknowledge:
-      return "acknowledge";
-  }
-  return "?";
+  return known(link) ? kLinkNames[static_cast<int>(link)].key : "?";
+}
+
+double total_ms(const std::array<double, kLatencyLinks>& links_ms) {
+  double total = 0;
+  for (double v : links_ms) total += v;
+  return total;
 }
 
 const char* to_string(NoChain why) {
@@ -85,12 +80,8 @@ std::optional<std::array<double, kLatencyLinks>> latency_links_ms(const JournalR
 void LatencyChain::add(const JournalRecord& r) {
   const auto links = latency_links_ms(r);
   if (!links) return;
-  double total = 0;
-  for (std::size_t i = 0; i < links->size(); ++i) {
-    links_[i].add((*links)[i]);
-    total += (*links)[i];
-  }
-  total_.add(total);
+  for (std::size_t i = 0; i < links->size(); ++i) links_[i].add((*links)[i]);
+  total_.add(total_ms(*links));
 }
 
 namespace {

@@ -13,15 +13,16 @@ nlohmann::json pose_delta_json(const double d[6]) {
   return {{"translation_mm", {d[0], d[1], d[2]}}, {"rotation_deg", {rad_to_deg(d[3]), rad_to_deg(d[4]), rad_to_deg(d[5])}}};
 }
 
+nlohmann::json to_json(const LinkLatency& l) {
+  return {{"p50", l.p50_ms}, {"p95", l.p95_ms}, {"p99", l.p99_ms}, {"max", l.max_ms}};
+}
+
 nlohmann::json to_json(const LatencyChainReport& r) {
-  auto link = [](const LinkLatency& l) {
-    return nlohmann::json{{"p50", l.p50_ms}, {"p95", l.p95_ms}, {"p99", l.p99_ms}, {"max", l.max_ms}};
-  };
   nlohmann::json j;
   j["commands"] = r.commands;
   for (int i = 0; i < kLatencyLinks; ++i)
-    j[key_of(static_cast<LatencyLink>(i))] = link(r.links[std::size_t(i)]);
-  j["total"] = link(r.total);
+    j[key_of(static_cast<LatencyLink>(i))] = to_json(r.links[std::size_t(i)]);
+  j["total"] = to_json(r.total);
   return j;
 }
 

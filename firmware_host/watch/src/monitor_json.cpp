@@ -55,12 +55,8 @@ nlohmann::json latency_chain_json(const JournalRecord& r) {
   const auto links = latency_links_ms(r);
   if (!links) return nullptr;
   nlohmann::json j;
-  double total = 0;
-  for (int i = 0; i < kLatencyLinks; ++i) {
-    j[key_of(static_cast<LatencyLink>(i))] = (*links)[std::size_t(i)];
-    total += (*links)[std::size_t(i)];
-  }
-  j["total"] = total;
+  for (int i = 0; i < kLatencyLinks; ++i) j[key_of(static_cast<LatencyLink>(i))] = (*links)[std::size_t(i)];
+  j["total"] = total_ms(*links);
   return j;
 }
 

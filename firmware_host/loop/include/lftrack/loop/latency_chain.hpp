@@ -33,6 +33,8 @@ constexpr int kLatencyLinks = 6;
 const char* to_string(LatencyLink link);
 // A short key for tables and JSON: "arrive", "preprocess", ..., "acknowledge".
 const char* key_of(LatencyLink link);
+// The links' sum: exposure to acknowledgement.
+double total_ms(const std::array<double, kLatencyLinks>& links_ms);
 
 // The exposure a record's latency is counted from: the older of its frames' (one detector: its
 // frame's; the journal keeps the first two detectors' times, so with three or four the older of

@@ -25,5 +25,7 @@ nlohmann::json to_json(const CommandLatencyReport& r);
 // {"commands", "arrive": {"p50", "p95", "p99", "max"}, "preprocess", "register", "gate",
 //  "write", "acknowledge", "total"} (ms): latency_chain.hpp's links
 nlohmann::json to_json(const LatencyChainReport& r);
+// {"p50", "p95", "p99", "max"} (ms): one link's quantiles
+nlohmann::json to_json(const LinkLatency& l);
 
 }  // namespace lftrack::host
