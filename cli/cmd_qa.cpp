@@ -2,8 +2,11 @@
 // printed as it ends, then a dated report (JSON and HTML) in the QA folder. Exit 0: passed; 1:
 // a check failed (the reasons printed) or the QA could not run.
 
+#include <signal.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -19,6 +22,41 @@
 
 namespace lftrack::host::cli {
 namespace {
+
+// The operator's Ctrl-C (or SIGTERM) during a daily QA: the QA ends early and safely (its couch
+// sent back, its report written: DailyQaOptions::interrupted); a second one ends the program at
+// once (the handler is reset by the first).
+std::atomic<bool> g_qa_interrupted{false};
+extern "C" void on_qa_interrupt(int) {
+  g_qa_interrupted.store(true);
+  constexpr char kLine[] =
+      "\ninterrupted: the QA ends after this step (a room's couch goes back to where it stood before the "
+      "shift; Ctrl-C again quits at once, leaving it where it is)\n";
+  const ssize_t written = ::write(STDERR_FILENO, kLine, sizeof kLine - 1);
+  (void)written;
+}
+
+// Ctrl-C and SIGTERM set g_qa_interrupted while this lives (the earlier handlers back after).
+class QaInterruptHandler {
+ public:
+  QaInterruptHandler() {
+    struct sigaction action {};
+    action.sa_handler = on_qa_interrupt;
+    action.sa_flags = SA_RESETHAND;
+    sigaction(SIGINT, &action, &old_int_);
+    sigaction(SIGTERM, &action, &old_term_);
+  }
+  ~QaInterruptHandler() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+  QaInterruptHandler(const QaInterruptHandler&) = delete;
+  QaInterruptHandler& operator=(const QaInterruptHandler&) = delete;
+
+ private:
+  struct sigaction old_int_ {
+  }, old_term_{};
+};
 
 void print_line(const std::string& line) {
   std::printf("%s\n", line.c_str());
@@ -137,7 +175,9 @@ Status run_qa_daily(const QaDailyOptions& o) {
   options.latency_tolerance_ms = o.latency_ms;
   options.light_field_dir = o.lf_dir;
   options.progress = print_line;
+  options.interrupted = &g_qa_interrupted;
   LFTRACK_RETURN_IF_ERROR(check_frames_folder("--detector-frames", o.detector_frames));
+  const QaInterruptHandler interrupts;
   return run_and_report(
       o.scene, o.out,
       fmt::format("daily QA of {{}}: tolerance {} mm, {} deg", o.tolerance_mm, o.tolerance_deg),

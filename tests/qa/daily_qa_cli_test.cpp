@@ -5,13 +5,18 @@
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <chrono>
+#include <optional>
 
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <string>
 
+#include "child_process.hpp"
 #include "qa_phantom_support.hpp"
 
 namespace lftrack::test {
@@ -103,6 +108,32 @@ TEST(DailyQaCli, ASceneThatRequiresTheDailyQaIsRefusedWithoutIt) {
       shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --scene bad.yaml", dir.path(), "bad.txt");
   EXPECT_EQ(refused.exit_code, 1) << refused.out;
   EXPECT_NE(refused.out.find("require_daily_qa"), std::string::npos) << refused.out;
+}
+
+// Ctrl-C during the QA: it ends after the step in progress, says so, fails every check it did not
+// make, and writes its (failed) report; the program exits 1, not killed by the signal.
+TEST(DailyQaCli, CtrlCEndsTheQaAfterItsStepWithTheReportWritten) {
+  TempDir dir;
+  const fs::path fields = qa_phantom_fields(LFTRACK_BIN_PATH, qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << contents(dir.path() / "precompute.txt");
+  const fs::path reports = dir.path() / "qa";
+  ChildProcess qa({LFTRACK_BIN_PATH, "qa", "daily", "--scene", qa_phantom_scene().string(), "--lf-dir",
+                   fields.string(), "--out", reports.string(), "--latency-cycles", "0"});
+  std::optional<std::string> line;
+  while ((line = qa.read_line(std::chrono::minutes(2))) && line->rfind("offset", 0) != 0) {
+  }
+  ASSERT_TRUE(line.has_value()) << "the first shift's line";
+  qa.signal(SIGINT);
+  std::string rest;
+  while ((line = qa.read_line(std::chrono::minutes(2)))) rest += *line + "\n";
+  EXPECT_EQ(qa.wait(std::chrono::seconds(30)), 1) << rest;
+  EXPECT_NE(rest.find("offset (+5.0, -5.0, +5.0) mm, (+0.50, -0.50, +0.50) deg: not run"), std::string::npos)
+      << "the shifts after it are not run: " << rest;
+  EXPECT_NE(rest.find("daily QA FAILED"), std::string::npos) << rest;
+  std::string json;
+  for (const auto& entry : fs::directory_iterator(reports))
+    if (entry.path().extension() == ".json") json = contents(entry.path());
+  EXPECT_NE(json.find("interrupted by the operator"), std::string::npos) << "the report is written: " << json;
 }
 
 }  // namespace

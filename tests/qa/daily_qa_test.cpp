@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -247,6 +248,61 @@ TEST(DailyQa, RefusesARoomWithNothingToMakeTheShiftsAndAbsurdTolerances) {
       r.status().message().find("has actuator none and device detectors, so nothing would make the shifts"),
       std::string::npos)
       << r.status().message();
+}
+
+// Sets the QA's interruption at cycle `at` of the run in progress (as the operator's Ctrl-C would).
+class InterruptAtCycle final : public host::CycleObserver {
+ public:
+  InterruptAtCycle(std::atomic<bool>* flag, std::uint64_t at) : flag_(flag), at_(at) {}
+  void on_cycle(const host::JournalRecord& record) override {
+    if (record.cycle >= at_) flag_->store(true);
+  }
+
+ private:
+  std::atomic<bool>* flag_;
+  std::uint64_t at_;
+};
+
+// Ctrl-C during a QA: the run in progress stops before its next cycle, nothing after it is run,
+// and every check not made fails with the reason; the report is still made.
+TEST(DailyQa, AnInterruptedQaStopsAndFailsEveryCheckItDidNotMake) {
+  tracking::ThreadPool pool(2);
+  const host::PreparedScene p = qa_phantom(&pool);
+  const auto expect_the_rest_interrupted = [&](const DailyQaReport& r, std::size_t from_shift) {
+    ASSERT_EQ(r.offsets.size(), 7u) << "every shift reported";
+    for (std::size_t i = from_shift; i < r.offsets.size(); ++i)
+      EXPECT_EQ(r.offsets[i].why, std::string("not run: ") + kInterrupted) << i;
+    for (const char* name : {"offset", "detector A", "detector B", "beam", "latency"}) {
+      ASSERT_NE(check(r, name), nullptr) << name;
+      EXPECT_FALSE(check(r, name)->passed) << name;
+    }
+    for (const char* name : {"detector A", "detector B", "beam", "latency"})
+      EXPECT_EQ(check(r, name)->why, kInterrupted) << name;
+    EXPECT_FALSE(r.passed());
+  };
+
+  // Between shifts: the first is made and judged, the others are not run.
+  std::atomic<bool> stop{false};
+  DailyQaOptions o = fast_options();
+  o.interrupted = &stop;
+  o.progress = [&](const std::string& line) {
+    if (line.rfind("offset", 0) == 0) stop.store(true);
+  };
+  auto between = run_daily_qa(p, o, &pool);
+  ASSERT_TRUE(between.ok()) << between.status().message();
+  EXPECT_TRUE(between->offsets[0].passed) << between->offsets[0].why;
+  expect_the_rest_interrupted(*between, 1);
+
+  // During a shift's run: it stops at the next cycle and is not judged.
+  stop.store(false);
+  InterruptAtCycle at_cycle_5(&stop, 5);
+  o.progress = {};
+  o.hooks.observer = &at_cycle_5;
+  auto during = run_daily_qa(p, o, &pool);
+  ASSERT_TRUE(during.ok()) << during.status().message();
+  EXPECT_FALSE(during->offsets[0].passed);
+  EXPECT_EQ(during->offsets[0].why, kInterrupted);
+  expect_the_rest_interrupted(*during, 1);
 }
 
 }  // namespace

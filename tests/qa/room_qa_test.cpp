@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -14,6 +15,7 @@
 #include <optional>
 #include <string>
 
+#include "actuator_lock_holder.hpp"
 #include "child_process.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
@@ -116,17 +118,118 @@ TEST(RoomQa, TheServedCouchMakesTheShiftsAndTheLoopFindsAndUndoesEach) {
   EXPECT_TRUE(room_check(*report, "detector A")->passed) << room_check(*report, "detector A")->why;
 }
 
-// One QA at a time on a couch: a second is refused before it moves anything.
-TEST(RoomQa, ASecondQaOfTheSameCouchIsRefused) {
+// One program at a time drives a couch: while another process holds its lock (a treatment, a
+// second QA) the QA is refused before it moves anything, and so is a treatment's loop session.
+TEST(RoomQa, NoTwoProgramsDriveTheCouchAtOnce) {
   test::TempDir dir;
+  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
+  ServedCouch couch(dir.path());
+  ASSERT_GT(couch.port, 0);
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = served_room(dir.path(), 1, &pool);  // nothing listens: nothing may be reached
-  auto first = CouchLock::acquire(p.scene);
-  ASSERT_TRUE(first.ok()) << first.status().message();
-  auto second = run_daily_qa(p, room_options(dir.path()), &pool);
-  ASSERT_FALSE(second.ok());
-  EXPECT_NE(second.status().message().find("another lftrack QA drives this couch"), std::string::npos)
-      << second.status().message();
+  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+  test::ActuatorLockHolder other(p.scene);
+  ASSERT_TRUE(other.held());
+  const std::string holder = "pid " + std::to_string(other.pid());
+
+  auto qa = run_daily_qa(p, room_options(fields), &pool);
+  ASSERT_FALSE(qa.ok());
+  EXPECT_NE(qa.status().message().find("driven by another lftrack"), std::string::npos)
+      << qa.status().message();
+  EXPECT_NE(qa.status().message().find(holder), std::string::npos) << qa.status().message();
+
+  host::LoopSessionOptions treatment;
+  treatment.devices = host::SessionDevices::kScene;
+  treatment.light_field_dir = fields;
+  treatment.cycles = 5;
+  auto session = host::LoopSession::create(p, treatment, &pool);
+  ASSERT_FALSE(session.ok());
+  EXPECT_NE(session.status().message().find(holder), std::string::npos) << session.status().message();
+
+  other.end();
+  auto free = host::LoopSession::create(p, treatment, &pool);
+  EXPECT_TRUE(free.ok()) << free.status().message();
+}
+
+// A couch that takes the loop's commands and never moves (the loop's corrections never reach it).
+class DeafCouch final : public drivers::Actuator {
+ public:
+  explicit DeafCouch(drivers::Actuator* inner) : inner_(inner) {}
+  Status open() override { return inner_->open(); }
+  drivers::DeviceStatus command(const Vector6d&, drivers::Deadline) override {
+    return drivers::DeviceStatus::kOk;
+  }
+  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override {
+    return inner_->readback(state, deadline);
+  }
+  void hold() override { inner_->hold(); }
+  void close() override { inner_->close(); }
+
+ private:
+  drivers::Actuator* inner_;
+};
+
+// The operator's Ctrl-C in a room (DailyQaOptions::interrupted): a couch on its way to a shift,
+// or left at the shift by a loop that was stopped before it undid it, is sent back to where it
+// stood before the shift; the QA ends with every check not made failed.
+TEST(RoomQa, AnInterruptedShiftSendsTheCouchBackToWhereItStood) {
+  test::TempDir dir;
+  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
+  ServedCouch couch(dir.path());
+  ASSERT_GT(couch.port, 0);
+  tracking::ThreadPool pool(2);
+  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+  const Vector6d none = Vector6d::Zero();
+  auto start = move_couch_by(p, none, 10, nullptr);  // where the couch stands
+  ASSERT_TRUE(start.ok()) << start.status().message();
+
+  // On its way: told the shift, then at once sent back.
+  Vector6d shift = Vector6d::Zero();
+  shift << 6, -6, 6, 0, 0, 0;
+  std::atomic<bool> stop{true};
+  auto moving = move_couch_by(p, shift, couch_move_timeout_s(p.scene, shift), &stop);
+  ASSERT_FALSE(moving.ok());
+  EXPECT_NE(moving.status().message().find("interrupted during the QA's shift"), std::string::npos)
+      << moving.status().message();
+  EXPECT_NE(moving.status().message().find("is back at"), std::string::npos) << moving.status().message();
+  auto after_move = move_couch_by(p, none, 10, nullptr);
+  ASSERT_TRUE(after_move.ok()) << after_move.status().message();
+  EXPECT_LT((*after_move - *start).head<3>().norm(), 0.1) << "back where it stood";
+
+  // At the shift: the shift made, the loop (whose commands never move the couch) stopped after its
+  // first cycle; the QA sends the couch back.
+  stop.store(false);
+  DailyQaOptions o = room_options(fields);
+  o.tolerance_deg = 1.0;
+  shift << 0, 0, 8, 0, 0, 0;
+  o.shifts = {shift};
+  o.interrupted = &stop;
+  int sessions = 0;
+  std::unique_ptr<DeafCouch> deaf;
+  o.hooks.wrap_actuator = [&](drivers::Actuator* inner) -> drivers::Actuator* {
+    if (++sessions < 2) return inner;  // the alignment before the shift
+    stop.store(true);                  // the couch has made the shift: the operator's Ctrl-C
+    deaf = std::make_unique<DeafCouch>(inner);
+    return deaf.get();
+  };
+  auto report = run_daily_qa(p, o, &pool);
+  ASSERT_TRUE(report.ok()) << report.status().message();
+  ASSERT_EQ(sessions, 2) << "nothing ran after the interrupted shift";
+  ASSERT_EQ(report->offsets.size(), 1u);
+  EXPECT_FALSE(report->offsets[0].passed);
+  EXPECT_NE(report->offsets[0].why.find(kInterrupted), std::string::npos) << report->offsets[0].why;
+  EXPECT_NE(report->offsets[0].why.find("the couch is back where it stood before the shift"),
+            std::string::npos)
+      << report->offsets[0].why;
+  for (const char* name : {"beam", "latency"}) {
+    ASSERT_NE(room_check(*report, name), nullptr) << name;
+    EXPECT_EQ(room_check(*report, name)->why, kInterrupted) << name;
+  }
+  EXPECT_FALSE(report->passed());
+  auto end = move_couch_by(p, none, 10, nullptr);
+  ASSERT_TRUE(end.ok()) << end.status().message();
+  EXPECT_LT((*end - *after_move).head<3>().norm(), 0.5) << "not left 8 mm off";
 }
 
 // The loop's commands reach the couch at 40 % of their size: it falls short of every correction.

@@ -4,10 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 
+#include "actuator_lock_holder.hpp"
 #include "lftrack/host/preflight.hpp"
+#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
@@ -18,7 +21,8 @@ namespace {
 // The built-in scene with both detectors' `frames: sim` replaced by `frames` (a '#' in it by the
 // detector's number), each detector's `bits: 12` line preceded by `calibration` (a whole line, or
 // nothing), and no actuator.
-Result<PreparedScene> prepared(const std::string& frames, const std::string& calibration) {
+Result<PreparedScene> prepared(const std::string& frames, const std::string& calibration,
+                               const std::string& actuator = "type: none") {
   std::string text = *builtin_scene_text(kBuiltinPhantom);
   char number = '1';
   for (std::size_t at = text.find("frames: sim"); at != std::string::npos; at = text.find("frames: sim", at + 1)) {
@@ -31,7 +35,7 @@ Result<PreparedScene> prepared(const std::string& frames, const std::string& cal
     text.insert(at, calibration);
     at += calibration.size();
   }
-  text.replace(text.find("type: virtual"), 13, "type: none");
+  text.replace(text.find("type: virtual"), 13, actuator);
   auto scene = parse_scene(text, "room.yaml", "/srv/room");
   if (!scene.ok()) return scene.status();
   static tracking::ThreadPool pool(2);
@@ -109,6 +113,40 @@ TEST(Preflight, TheWaterAndBoneFieldsOfRealisticFramesAreCheckedNotBuilt) {
     ASSERT_NE(i, nullptr) << after.checklist();
     EXPECT_EQ(i->result, CheckResult::kPass) << i->detail;
   }
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+// The actuator check opens the couch and tells it to hold: never under another program driving
+// it (a treatment, a QA). Refused by the couch's lock, with the holder named, and not opened.
+TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
+  test::TempDir locks;
+  ::setenv("LFTRACK_LOCK_DIR", locks.path().c_str(), 1);
+  // Nothing listens on port 1: an opened couch fails with the connection's error instead.
+  auto p = prepared("sim", "", "type: modbus\n  modbus: {tcp: {host: 127.0.0.1, port: 1}}");
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  const std::string what = "actuator (" + describe_actuator(p->scene.actuator) + ")";
+  {
+    test::ActuatorLockHolder treatment(p->scene);
+    ASSERT_TRUE(treatment.held());
+    const PreflightReport r = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+    const PreflightItem* i = item(r, what);
+    ASSERT_NE(i, nullptr) << r.checklist();
+    EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
+    EXPECT_NE(i->detail.find("driven by another lftrack"), std::string::npos) << i->detail;
+    EXPECT_NE(i->detail.find("pid " + std::to_string(treatment.pid())), std::string::npos) << i->detail;
+    EXPECT_NE(i->detail.find("not opened"), std::string::npos) << i->detail;
+  }
+  const PreflightReport free = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+  const PreflightItem* i = item(free, what);
+  ASSERT_NE(i, nullptr) << free.checklist();
+  EXPECT_EQ(i->detail.find("driven by another lftrack"), std::string::npos)
+      << "the lock was let go: " << i->detail;
+  ::unsetenv("LFTRACK_LOCK_DIR");
 }
 
 }  // namespace

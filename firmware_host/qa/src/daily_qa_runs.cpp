@@ -29,21 +29,25 @@ using host::JournalRecord;
 // on to an observer the caller's hooks named.
 class Recorder final : public host::CycleObserver {
  public:
-  // Room for `cycles` records (the QA's runs are at most 100,000 cycles: 40 MB).
-  Recorder(std::size_t cycles, host::CycleObserver* next) : next_(next) {
+  // Room for `cycles` records (the QA's runs are at most 100,000 cycles: 40 MB). The run ends
+  // early when `*interrupted` is set (null: never).
+  Recorder(std::size_t cycles, host::CycleObserver* next, const std::atomic<bool>* interrupted)
+      : next_(next), interrupted_(interrupted) {
     records_.reserve(std::min<std::size_t>(cycles, 100000) + 8);
   }
   void on_cycle(const JournalRecord& record) override {
     if (records_.size() < records_.capacity()) records_.push_back(record);
     state_.store(record.state, std::memory_order_release);
-    if (stop_when_aligned_ != nullptr &&
-        record.state != static_cast<std::uint8_t>(host::TrackingState::kAlign))
-      stop_when_aligned_->request_stop();
+    const bool aligned =
+        stop_when_aligned_ && record.state != static_cast<std::uint8_t>(host::TrackingState::kAlign);
+    if (session_ != nullptr && (aligned || (interrupted_ != nullptr && interrupted_->load())))
+      session_->request_stop();
     if (next_ != nullptr) next_->on_cycle(record);
   }
+  // The session the recorder stops (a flag the loop reads before its next cycle).
+  void stops(host::LoopSession* session) { session_ = session; }
   // The run ends with the first cycle that leaves ALIGN: aligned (TRACK), or not (HOLD, FAULT).
-  // The loop's stop is a flag it reads before its next cycle.
-  void stop_when_aligned(host::LoopSession* session) { stop_when_aligned_ = session; }
+  void stop_when_aligned() { stop_when_aligned_ = true; }
   std::int64_t simulated_stall_ns(std::int64_t cycle) override {
     return next_ != nullptr ? next_->simulated_stall_ns(cycle) : 0;
   }
@@ -52,7 +56,9 @@ class Recorder final : public host::CycleObserver {
 
  private:
   host::CycleObserver* next_;
-  host::LoopSession* stop_when_aligned_ = nullptr;
+  const std::atomic<bool>* interrupted_;
+  host::LoopSession* session_ = nullptr;
+  bool stop_when_aligned_ = false;
   std::vector<JournalRecord> records_;
   std::atomic<std::uint8_t> state_{0};
 };
@@ -80,14 +86,16 @@ host::LoopSessionOptions session_options(const host::PreparedScene& scene, const
 
 enum class RunEnd { kCycleCount, kAlignmentDecided };
 
+// `interrupted`: DailyQaOptions::interrupted, which ends the run before its next cycle.
 Result<RecordedRun> run(const host::PreparedScene& scene, host::LoopSessionOptions so,
-                        tracking::ThreadPool* pool, const std::function<void(Recorder&)>& beside = {},
-                        RunEnd end = RunEnd::kCycleCount) {
-  Recorder recorder(static_cast<std::size_t>(so.cycles), so.hooks.observer);
+                        const std::atomic<bool>* interrupted, tracking::ThreadPool* pool,
+                        const std::function<void(Recorder&)>& beside = {}, RunEnd end = RunEnd::kCycleCount) {
+  Recorder recorder(static_cast<std::size_t>(so.cycles), so.hooks.observer, interrupted);
   so.hooks.observer = &recorder;
   auto session = host::LoopSession::create(scene, so, pool);
   if (!session.ok()) return session.status();
-  if (end == RunEnd::kAlignmentDecided) recorder.stop_when_aligned(session->get());
+  recorder.stops(session->get());
+  if (end == RunEnd::kAlignmentDecided) recorder.stop_when_aligned();
   RecordedRun r;
   std::thread helper;
   // Joined however run() ends (an exception too): a joinable thread destroyed would terminate.
@@ -155,7 +163,8 @@ bool is_room(const host::PreparedScene& scene) {
 Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
                                const DailyQaOptions& options, tracking::ThreadPool* pool) {
   if (!is_room(scene))
-    return run(standing_still(scene, shift), session_options(scene, options, cycles, true), pool);
+    return run(standing_still(scene, shift), session_options(scene, options, cycles, true),
+               options.interrupted, pool);
   // The phantom first put where the plan puts it by the loop's alignment alone (its ALIGN plan;
   // the run ends with the set-up move), the couch waited for: the last run's tracking corrections
   // leave the couch where the tracking registrations' scatter sent it (up to 0.25 degree about a
@@ -166,9 +175,11 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
   // displaced) is not moved further: the shift is not made.
   const tracking::Vector6d none = tracking::Vector6d::Zero();
   const int align_cycles = std::max(1, scene.scene.safety.hold_after_failures) + 1;
-  auto aligned = run(standing_still(scene, none), session_options(scene, options, align_cycles, false), pool,
-                     {}, RunEnd::kAlignmentDecided);
+  auto aligned = run(standing_still(scene, none), session_options(scene, options, align_cycles, false),
+                     options.interrupted, pool, {}, RunEnd::kAlignmentDecided);
   if (!aligned.ok()) return aligned.status().with_context("aligning the phantom before the shift");
+  if (options.interrupted != nullptr && options.interrupted->load())
+    return failed_precondition(std::string(kInterrupted) + " before the shift: the couch was not moved");
   const bool tracked =
       std::any_of(aligned->records.begin(), aligned->records.end(), [](const JournalRecord& c) {
         return c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
@@ -182,13 +193,21 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
         aligned->records.empty()
             ? std::string("no cycle")
             : host::to_string(static_cast<host::GateReason>(aligned->records.back().gate_reason))));
-  auto settled = move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none));
+  auto settled = move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none), options.interrupted);
   if (!settled.ok()) return settled.status();
-  auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift));
+  auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift), options.interrupted);
   if (!before.ok()) return before.status();
-  auto judged = run(standing_still(scene, none), session_options(scene, options, cycles, true), pool);
-  if (judged.ok()) judged->couch_before = *before;
-  return judged;
+  auto judged = run(standing_still(scene, none), session_options(scene, options, cycles, true),
+                    options.interrupted, pool);
+  if (judged.ok()) {
+    judged->couch_before = *before;
+    return judged;
+  }
+  // The loop could not run (a device failed): the couch is not left displaced by the shift.
+  const Status back = move_couch_to(scene, *before, couch_move_timeout_s(scene.scene, shift));
+  return failed_precondition(judged.status().message() +
+                             (back.ok() ? std::string("; the couch was sent back to where it stood")
+                                        : "; the couch could not be sent back: " + back.message()));
 }
 
 Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,
@@ -198,19 +217,19 @@ Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cyc
   if (!is_room(scene)) {
     so.frames.drop_from = dark_from;
     so.frames.drop_to = dark_to;
-    return run(standing_still(scene, tracking::Vector6d::Zero()), so, pool);
+    return run(standing_still(scene, tracking::Vector6d::Zero()), so, options.interrupted, pool);
   }
   // The room's detectors (devices, or simulated ones): their frames taken and thrown away.
   DarkenedFrames dark(dark_from, dark_to, so.hooks.observer);
   so.hooks.observer = &dark;
   const auto wrap = so.hooks.wrap_frames;
   so.hooks.wrap_frames = [&](drivers::FrameSource* inner) { return dark.wrap(wrap ? wrap(inner) : inner); };
-  return run(standing_still(scene, tracking::Vector6d::Zero()), so, pool);
+  return run(standing_still(scene, tracking::Vector6d::Zero()), so, options.interrupted, pool);
 }
 
 Result<RecordedRun> run_tracking(const host::PreparedScene& scene, int cycles, const DailyQaOptions& options,
                                  tracking::ThreadPool* pool) {
-  return run(scene, session_options(scene, options, cycles, true), pool);
+  return run(scene, session_options(scene, options, cycles, true), options.interrupted, pool);
 }
 
 Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
@@ -237,7 +256,7 @@ Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     reply = ask_control_socket(so.control_socket, dir / "console", "status");
   };
-  auto r = run(standing_still(scene, tracking::Vector6d::Zero()), so, pool, ask);
+  auto r = run(standing_still(scene, tracking::Vector6d::Zero()), so, options.interrupted, pool, ask);
   if (options.work_dir.empty()) std::filesystem::remove_all(dir, ec);
   if (!r.ok()) return r.status();
   r->control_reply = reply;

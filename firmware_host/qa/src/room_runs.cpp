@@ -16,6 +16,7 @@
 #include <memory>
 #include <thread>
 
+#include "lftrack/host/actuator_lock.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/scene_devices.hpp"
 
@@ -46,13 +47,20 @@ double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& 
 
 namespace {
 
+bool is_set(const std::atomic<bool>* flag) {
+  return flag != nullptr && flag->load(std::memory_order_acquire);
+}
+
 // Opens the scene's couch (through its calibration where the scene names one, as the loop drives
 // it: positions are the patient's, in the room's axes), reads it back, sends it to
-// `target_of(its state)` and waits for it there. Returns the position it stood at before.
+// `target_of(its state)` and waits for it there. Returns the position it stood at before. An
+// interruption (`*interrupted` set) sends it back to that position and waits for it there.
 Result<tracking::Vector6d> move_couch(
     const host::PreparedScene& p,
     const std::function<tracking::Vector6d(const drivers::ActuatorState&)>& target_of,
-    const std::string& what, double timeout_s) {
+    const std::string& what, double timeout_s, const std::atomic<bool>* interrupted) {
+  auto lock = host::ActuatorLock::acquire(p.scene);  // shared with the QA that holds it
+  if (!lock.ok()) return lock.status();
   auto spec = host::device_actuator_spec(p.scene);
   if (!spec.ok()) return spec.status();
   auto made = drivers::make_actuator(std::move(spec).value());
@@ -86,17 +94,39 @@ Result<tracking::Vector6d> move_couch(
   got = couch->command(target - state.target, deadline_of_call());
   if (got != DeviceStatus::kOk)
     return io_error(fmt::format("the couch refused {}: {}", what, drivers::to_string(got)));
-  const auto give_up =
+  auto give_up =
       Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
+  tracking::Vector6d goal = target;
+  bool returning = false;  // interrupted: on its way back to `before`
   while (true) {
     got = couch->readback(&state, deadline_of_call());
     if (got == DeviceStatus::kOk) {
       if (state.fault) return io_error("the couch reports a fault during " + what);
-      const tracking::Vector6d off = state.position - target;
+      const tracking::Vector6d off = state.position - goal;
       if (!state.moving && off.head<3>().norm() <= kArrivedMm &&
-          tracking::rad_to_deg(off.tail<3>().cwiseAbs().maxCoeff()) <= kArrivedDeg)
-        return before;
+          tracking::rad_to_deg(off.tail<3>().cwiseAbs().maxCoeff()) <= kArrivedDeg) {
+        if (!returning) return before;
+        return failed_precondition(
+            fmt::format("interrupted during {}: the couch is back at {} of its travel, where it stood", what,
+                        six(before)));
+      }
     }
+    if (!returning && is_set(interrupted) && got == DeviceStatus::kOk) {
+      // Sent back the way it came, and given the time that move needs.
+      returning = couch->command(before - state.target, deadline_of_call()) == DeviceStatus::kOk;
+      if (!returning)
+        return failed_precondition(
+            fmt::format("interrupted during {}: the couch could not be sent back to {}; see where it "
+                        "stands",
+                        what, six(before)));
+      goal = before;
+      give_up = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+                                   couch_move_timeout_s(p.scene, target - before)));
+    }
+    if (Clock::now() > give_up && returning)
+      return failed_precondition(
+          fmt::format("interrupted during {}: the couch did not get back to {} in time; it stood at {}", what,
+                      six(before), six(state.position)));
     if (Clock::now() > give_up) {
       // Not left on its way: sent back to where it stood before this move (not waited for).
       drivers::ActuatorState now;
@@ -117,39 +147,17 @@ Result<tracking::Vector6d> move_couch(
 }  // namespace
 
 Result<tracking::Vector6d> move_couch_by(const host::PreparedScene& p, const tracking::Vector6d& shift,
-                                         double timeout_s) {
+                                         double timeout_s, const std::atomic<bool>* interrupted) {
   return move_couch(
       p, [&](const drivers::ActuatorState& s) { return tracking::Vector6d(s.target + shift); },
-      "the QA's shift " + six(shift), timeout_s);
+      "the QA's shift " + six(shift), timeout_s, interrupted);
 }
 
 Status move_couch_to(const host::PreparedScene& p, const tracking::Vector6d& position, double timeout_s) {
   auto moved = move_couch(
       p, [&](const drivers::ActuatorState&) { return position; },
-      "the return to " + six(position) + " of its travel", timeout_s);
+      "the return to " + six(position) + " of its travel", timeout_s, nullptr);
   return moved.ok() ? Status{} : moved.status();
-}
-
-Result<std::unique_ptr<CouchLock>> CouchLock::acquire(const host::Scene& scene) {
-  const std::string couch = host::describe_actuator(scene.actuator);
-  const std::string path = fmt::format("/tmp/lftrack-qa-couch-{:016x}.lock", std::hash<std::string>{}(couch));
-  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0666);
-  if (fd < 0)
-    return io_error(fmt::format("{}: cannot open the QA's couch lock: {}", path, std::strerror(errno)));
-  (void)::fchmod(fd, 0666);  // any user's QA of this couch may take it (the file's owner's umask aside)
-  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
-    const int error = errno;
-    ::close(fd);
-    if (error == EWOULDBLOCK)
-      return failed_precondition("another lftrack QA drives this couch (" + couch + ") now (" + path +
-                                 "): one QA at a time");
-    return io_error(fmt::format("{}: cannot lock: {}", path, std::strerror(error)));
-  }
-  return std::unique_ptr<CouchLock>(new CouchLock(fd));
-}
-
-CouchLock::~CouchLock() {
-  ::close(fd_);
 }
 
 drivers::DeviceStatus DarkenedFrames::acquire(drivers::FramePair* pair, drivers::Deadline deadline) {

@@ -18,26 +18,14 @@ namespace lftrack::qa {
 // one): read back, commanded once, then read back until it stands within 0.05 mm and 0.05
 // degree of where it was sent, or `timeout_s` has passed (an error that says where it stood and
 // where it was sent). The actuator is closed after; the loop opens its own. Returns the position
-// (its travel, as the read-back gives it) it stood at before.
+// (its travel, as the read-back gives it) it stood at before. The couch's lock (actuator_lock.hpp)
+// is held while it is open. When `*interrupted` is set (the operator's Ctrl-C) before it arrives,
+// the couch is sent back to where it stood and waited for there, and the move fails saying so.
 Result<tracking::Vector6d> move_couch_by(const host::PreparedScene& scene, const tracking::Vector6d& shift,
-                                         double timeout_s);
-// The couch sent back to `position` of its travel (as move_couch_by returned it), and waited for.
+                                         double timeout_s, const std::atomic<bool>* interrupted);
+// The couch sent back to `position` of its travel (as move_couch_by returned it), and waited for
+// (an interruption does not stop it: this is where an interrupted QA leaves the couch).
 Status move_couch_to(const host::PreparedScene& scene, const tracking::Vector6d& position, double timeout_s);
-
-// One QA at a time on a couch: an exclusive lock (flock) on a file named after the scene's actuator
-// (its kind and where it is reached) in /tmp, held while the object lives. Another QA of the same
-// couch is refused with the reason; `lftrack run` does not take it.
-class CouchLock {
- public:
-  static Result<std::unique_ptr<CouchLock>> acquire(const host::Scene& scene);
-  ~CouchLock();
-  CouchLock(const CouchLock&) = delete;
-  CouchLock& operator=(const CouchLock&) = delete;
-
- private:
-  explicit CouchLock(int fd) : fd_(fd) {}
-  int fd_;
-};
 
 // The time the couch is given for a shift: its travel at the scene's speeds, three times over,
 // plus its latency and 5 s.

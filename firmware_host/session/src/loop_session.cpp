@@ -12,13 +12,14 @@
 
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/drivers/forwarding_actuator.hpp"
+#include "lftrack/host/actuator_lock.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/motion_predictor.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/room_clocked_actuator.hpp"
 #include "lftrack/watch/operator_token.hpp"
 
@@ -76,6 +77,8 @@ struct LoopSession::Parts {
   // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
   // through its hooks.
   std::unique_ptr<drivers::FrameSource> frames;
+  // A device actuator's lock (actuator_lock.hpp), released after the actuator is closed.
+  std::shared_ptr<const ActuatorLock> actuator_lock;
   const drivers::ReplayFrameSource* replay_frames = nullptr;  // a view of `frames` when replaying
   std::unique_ptr<drivers::Actuator> actuator;                // virtual, recorded, Modbus or CAN
   std::unique_ptr<drivers::Actuator> device_actuator;         // the Modbus or CAN driver (HIL or run)
@@ -218,6 +221,9 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
   if (o.devices == SessionDevices::kScene && actuator_is_device(p.scene)) {
     auto spec = device_actuator_spec(p.scene);
     if (!spec.ok()) return spec.status();
+    auto lock = ActuatorLock::acquire(p.scene);  // before it is opened: one program drives a couch
+    if (!lock.ok()) return lock.status();
+    parts->actuator_lock = std::move(lock).value();
     spdlog::info("the actuator is {}", describe_actuator(p.scene.actuator));
     return Spec(std::move(spec).value());
   }

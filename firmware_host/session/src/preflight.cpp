@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/host/actuator_lock.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_registration.hpp"
@@ -195,6 +196,10 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
   if (actuator_is_virtual(p.scene)) return add(r, what, CheckResult::kPass, "the simulator's couch");
   auto spec = device_actuator_spec(p.scene);
   if (!spec.ok()) return add(r, what, CheckResult::kFail, spec.status().message());
+  // The check opens the couch and tells it to hold: never under another program driving it (a
+  // treatment, a QA), which the lock names.
+  auto lock = ActuatorLock::acquire(p.scene);
+  if (!lock.ok()) return add(r, what, CheckResult::kFail, lock.status().message() + "; not opened");
   auto actuator = drivers::make_actuator(std::move(spec).value());
   if (!actuator.ok()) return add(r, what, CheckResult::kFail, actuator.status().message());
   if (Status s = (*actuator)->open(); !s.ok()) return add(r, what, CheckResult::kFail, s.message());

@@ -25,6 +25,7 @@
 // device detectors and no device actuator is refused: nothing would make the shifts.
 
 #include <Eigen/Core>
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -92,7 +93,15 @@ struct DailyQaOptions {
   host::SessionHooks hooks;
   // Called with a line per step done (a progress display); may be empty.
   std::function<void(const std::string&)> progress;
+  // Set (by the operator's Ctrl-C; null: never) to end the QA early: the run in progress stops
+  // before its next cycle, a room's couch is sent back to where it stood before the shift it was
+  // making (and waited for), and every check not run is reported failed, "interrupted by the
+  // operator". The report is still made: an interrupted morning is a failed one.
+  const std::atomic<bool>* interrupted = nullptr;
 };
+
+// The reason a check or shift gives when the QA was interrupted.
+inline constexpr const char* kInterrupted = "interrupted by the operator";
 
 // The default shifts: 10 mm along each room axis, 1 degree about each, and one of each kind at
 // once (5, -5, 5 mm with 0.5, -0.5, 0.5 degree), where the scene's envelope and its safety gate's
