@@ -1,10 +1,11 @@
 #include "lftrack/host/dicom_rt.hpp"
 
+#include "dicom_rt_common.hpp"
+
 #include <dcmtk/dcmdata/dcdeftag.h>
 #include <dcmtk/dcmdata/dcfilefo.h>
 #include <dcmtk/dcmdata/dcuid.h>
 #include <dcmtk/dcmrt/drtplan.h>
-#include <dcmtk/dcmrt/drtstrct.h>
 #include <dcmtk/oflog/oflog.h>
 
 #include <algorithm>
@@ -16,100 +17,10 @@
 #include <sstream>
 
 namespace lftrack::host {
-namespace {
 namespace rt {  // named: these files compile in unity batches beside other DICOM code
+namespace {
 
 namespace fs = std::filesystem;
-
-// dcmrt logs every attribute of the whole IOD that it finds missing or malformed, most of which
-// these readers never use, and dcmdata logs parse errors: the Status returned carries what matters,
-// with the file's name.
-void quiet_dcmtk() {
-  static std::once_flag once;
-  std::call_once(once, [] {
-    OFLog::getLogger("dcmtk.dcmrt").setLogLevel(OFLogger::OFF_LOG_LEVEL);
-    OFLog::getLogger("dcmtk.dcmdata").setLogLevel(OFLogger::FATAL_LOG_LEVEL);
-  });
-}
-
-std::string trimmed(const OFString& value) {
-  const std::string s = value.c_str();
-  const auto first = s.find_first_not_of(' ');
-  if (first == std::string::npos) return {};
-  return s.substr(first, s.find_last_not_of(' ') - first + 1);
-}
-
-std::string text_of(DcmItem& item, const DcmTagKey& tag) {
-  OFString value;
-  if (item.findAndGetOFStringArray(tag, value).bad()) return {};
-  return trimmed(value);
-}
-
-// One value of a dcmrt getter (`get` is called with an OFString and the position), trimmed.
-template <class Get>
-std::string text_from(Get get) {
-  OFString value;
-  if (get(value).bad()) return {};
-  return trimmed(value);
-}
-
-std::string point_text(const Eigen::Vector3d& p) {
-  std::ostringstream s;
-  s.precision(10);
-  s << '(' << p.x() << ", " << p.y() << ", " << p.z() << ')';
-  return s.str();
-}
-
-// A DS value (decimal numbers separated by '\'): each number whole (no trailing text, no hex) and
-// finite. Returns false otherwise.
-bool parse_decimals(const std::string& text, std::vector<double>* out) {
-  out->clear();
-  if (text.find_first_not_of(' ') == std::string::npos) return true;
-  const char* p = text.data();
-  const char* const end = p + text.size();
-  while (true) {
-    const char* stop = std::find(p, end, '\\');
-    while (p < stop && *p == ' ') ++p;
-    const char* last = stop;
-    while (last > p && last[-1] == ' ') --last;
-    if (p < last && *p == '+') ++p;
-    double v = 0;
-    const auto [ptr, ec] = std::from_chars(p, last, v);
-    if (p == last || ec != std::errc() || ptr != last || !std::isfinite(v)) return false;
-    out->push_back(v);
-    if (stop == end) return true;
-    p = stop + 1;
-  }
-}
-
-Status load(const fs::path& file, DcmFileFormat* format, const DcmTagKey& stop_at = DCM_UndefinedTagKey) {
-  quiet_dcmtk();
-  std::error_code ec;
-  if (!fs::exists(file, ec)) return not_found(file.string() + ": no such file");
-  if (!fs::is_regular_file(file, ec)) return invalid_argument(file.string() + ": not a regular file");
-  if (fs::file_size(file, ec) == 0) return corrupt_data(file.string() + ": an empty file, not DICOM");
-  const OFCondition c = format->loadFileUntilTag(file.c_str(), EXS_Unknown, EGL_noChange, DCM_MaxReadLength,
-                                                 ERM_autoDetect, stop_at);
-  if (c.bad())
-    return corrupt_data(file.string() + ": not a DICOM file, or a damaged one (DCMTK: " + c.text() + ")");
-  // Names and labels as UTF-8 whatever Specific Character Set (0008,0005) the file declares, so
-  // that a name typed on the command line matches and the scene holds valid text.
-  if (const OFCondition u = format->convertToUTF8(); u.bad())
-    return unsupported(file.string() + ": its text cannot be read as UTF-8 from its Specific Character Set (0008,0005) (DCMTK: " +
-                       std::string(u.text()) + ")");
-  return {};
-}
-
-// Whether `ds` is of `sop_class`; a dataset without a SOP Class UID but of `modality` is taken as
-// one, and given the SOP Class UID (dcmrt's read() refuses a dataset without it).
-Status check_kind(DcmDataset& ds, const fs::path& file, const char* sop_class, const char* modality,
-                  const std::string& what) {
-  const std::string sop = text_of(ds, DCM_SOPClassUID), mod = text_of(ds, DCM_Modality);
-  if (sop == sop_class) return {};
-  if (sop.empty() && mod == modality && ds.putAndInsertString(DCM_SOPClassUID, sop_class).good()) return {};
-  return invalid_argument(file.string() + ": not " + what + " (SOP Class UID '" + sop + "', Modality '" +
-                          mod + "')");
-}
 
 // ---- RT Plan ----
 
@@ -230,25 +141,8 @@ Result<TableTopTolerances> tolerances(DRTPlanIOD& plan, DRTBeamSequence::Item& i
                       std::to_string(wanted) + ", which the plan does not have");
 }
 
-// ContourData's text, taken from the dataset's own item rather than from dcmrt: dcmrt's string
-// getter assembles a multi-valued DS value by value, each found from the start (DCMTK 3.6.7:
-// 7 s for 60,000 points), and its number getter reads "3abc" as 3 and "0x10" as 0.
-std::string contour_data_text(DcmDataset& ds, std::size_t roi_contour, std::size_t contour) {
-  DcmItem* roi_item = nullptr;
-  DcmItem* contour_item = nullptr;
-  const char* text = nullptr;
-  Uint32 length = 0;
-  if (ds.findAndGetSequenceItem(DCM_ROIContourSequence, roi_item, static_cast<signed long>(roi_contour))
-          .bad() ||
-      roi_item->findAndGetSequenceItem(DCM_ContourSequence, contour_item, static_cast<signed long>(contour))
-          .bad() ||
-      contour_item->findAndGetString(DCM_ContourData, text, length).bad() || text == nullptr)
-    return {};
-  return std::string(text, length);
-}
-
-}  // namespace rt
 }  // namespace
+}  // namespace rt
 
 Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::string& beam) {
   const std::string where = file.string();
@@ -354,103 +248,6 @@ Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::s
     tightest(&all.patient_support_deg, t->patient_support_deg);
   }
   return setup;
-}
-
-Result<RtStructureSet> read_rt_structure_set(const std::filesystem::path& file) {
-  const std::string where = file.string();
-  DcmFileFormat format;
-  LFTRACK_RETURN_IF_ERROR(rt::load(file, &format));
-  DcmDataset& ds = *format.getDataset();
-  LFTRACK_RETURN_IF_ERROR(
-      rt::check_kind(ds, file, UID_RTStructureSetStorage, "RTSTRUCT", "an RT Structure Set"));
-  DRTStructureSetIOD set;
-  if (const OFCondition c = set.read(ds); c.bad())
-    return corrupt_data(where + ": DCMTK cannot read it as an RT Structure Set: " + c.text());
-
-  RtStructureSet out;
-  out.file = where;
-  out.label = rt::text_from([&](OFString& v) { return set.getStructureSetLabel(v); });
-  out.patient_id = rt::text_from([&](OFString& v) { return set.getPatientID(v); });
-  DRTReferencedFrameOfReferenceSequence& frames = set.getReferencedFrameOfReferenceSequence();
-  for (std::size_t i = 0; i < frames.getNumberOfItems(); ++i) {
-    DRTReferencedFrameOfReferenceSequence::Item& frame = frames.getItem(i);
-    const std::string uid = rt::text_from([&](OFString& v) { return frame.getFrameOfReferenceUID(v); });
-    if (!uid.empty()) out.frame_of_reference_uids.push_back(uid);
-    DRTRTReferencedStudySequence& studies = frame.getRTReferencedStudySequence();
-    for (std::size_t s = 0; s < studies.getNumberOfItems(); ++s) {
-      DRTRTReferencedSeriesSequence& series = studies.getItem(s).getRTReferencedSeriesSequence();
-      for (std::size_t k = 0; k < series.getNumberOfItems(); ++k) {
-        const std::string series_uid =
-            rt::text_from([&](OFString& v) { return series.getItem(k).getSeriesInstanceUID(v); });
-        if (!series_uid.empty()) out.referenced_series_uids.push_back(series_uid);
-      }
-    }
-  }
-
-  std::map<int, std::size_t> by_number;
-  DRTStructureSetROISequence& rois = set.getStructureSetROISequence();
-  for (std::size_t i = 0; i < rois.getNumberOfItems(); ++i) {
-    DRTStructureSetROISequence::Item& roi = rois.getItem(i);
-    RtStructure s;
-    s.name = rt::text_from([&](OFString& v) { return roi.getROIName(v); });
-    Sint32 number = 0;
-    if (roi.getROINumber(number).bad())
-      return corrupt_data(where + ": structure " + std::to_string(i + 1) + " '" + s.name +
-                          "' has no ROI Number");
-    s.roi_number = number;
-    s.frame_of_reference_uid =
-        rt::text_from([&](OFString& v) { return roi.getReferencedFrameOfReferenceUID(v); });
-    if (!by_number.emplace(number, out.structures.size()).second)
-      return corrupt_data(where + ": two structures have ROI Number " + std::to_string(number));
-    out.structures.push_back(std::move(s));
-  }
-
-  std::size_t total_points = 0;
-  DRTROIContourSequence& roi_contours = set.getROIContourSequence();
-  for (std::size_t i = 0; i < roi_contours.getNumberOfItems(); ++i) {
-    DRTROIContourSequence::Item& roi_contour = roi_contours.getItem(i);
-    Sint32 number = 0;
-    if (roi_contour.getReferencedROINumber(number).bad()) continue;
-    const auto found = by_number.find(number);
-    if (found == by_number.end()) continue;
-    RtStructure& s = out.structures[found->second];
-    DRTContourSequence& contours = roi_contour.getContourSequence();
-    for (std::size_t k = 0; k < contours.getNumberOfItems(); ++k) {
-      DRTContourSequence::Item& contour = contours.getItem(k);
-      const std::string about = where + ": structure '" + s.name + "' (ROI " + std::to_string(number) +
-                                "), contour " + std::to_string(k + 1) + ": ";
-      const std::string data = rt::contour_data_text(ds, i, k);
-      const std::size_t values = data.find_first_not_of(' ') == std::string::npos
-                                     ? 0
-                                     : std::count(data.begin(), data.end(), '\\') + 1;
-      if (values % 3 != 0)
-        return corrupt_data(about + "ContourData (3006,0050) holds " + std::to_string(values) +
-                            " numbers, not a multiple of 3");
-      const std::size_t points = values / 3;
-      Sint32 stated = 0;
-      if (contour.getNumberOfContourPoints(stated).good() && (stated < 0 || std::size_t(stated) != points))
-        return corrupt_data(about + "NumberOfContourPoints (3006,0046) is " + std::to_string(stated) +
-                            " but ContourData holds " + std::to_string(points) + " points");
-      if (points > kMaxPointsPerContour)
-        return out_of_range(about + std::to_string(points) + " points; lftrack reads at most " +
-                            std::to_string(kMaxPointsPerContour) + " in one contour");
-      total_points += points;
-      if (total_points > kMaxPointsPerStructureSet)
-        return out_of_range(where + ": more than " + std::to_string(kMaxPointsPerStructureSet) +
-                            " contour points in all; lftrack reads no more");
-      std::vector<double> xyz;
-      if (!rt::parse_decimals(data, &xyz) || xyz.size() != values)
-        return corrupt_data(about +
-                            "ContourData (3006,0050) holds a value that is not a finite decimal number");
-      RtContour c;
-      c.geometric_type = rt::text_from([&](OFString& v) { return contour.getContourGeometricType(v); });
-      c.points_ct_mm.reserve(points);
-      for (std::size_t p = 0; p < points; ++p)
-        c.points_ct_mm.emplace_back(xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]);
-      s.contours.push_back(std::move(c));
-    }
-  }
-  return out;
 }
 
 }  // namespace lftrack::host

@@ -1,0 +1,78 @@
+#pragma once
+// What a LoopSession owns (loop_session.cpp assembles it), and the parts of its assembly kept in
+// files of their own: the devices (session_devices.cpp) and the checks before anything is made
+// (session_checks.cpp). Private to the session library.
+
+#include <memory>
+#include <optional>
+
+#include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/host/actuator_lock.hpp"
+#include "lftrack/host/calibrated_couch.hpp"
+#include "lftrack/host/loop_session.hpp"
+#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/host/scene_verdict.hpp"
+
+namespace lftrack::host {
+
+// The simulated room's truth as the loop reads it (tracking_loop.hpp never sees sim/).
+class RoomTruth final : public SimulatedTruth {
+ public:
+  explicit RoomTruth(const sim::SimulatedRoom* room) : room_(room) {}
+  double residual_mm() const override { return room_->residual_mm(); }
+  tracking::Vector6d target_residual() const override { return room_->target_residual(); }
+
+ private:
+  const sim::SimulatedRoom* room_;
+};
+
+struct LoopSession::Parts {
+  std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
+  std::unique_ptr<tracking::Registration> registration;
+  std::unique_ptr<PlannedRegistration> planned_registration;  // the loop's view of `registration`
+  std::unique_ptr<ViewAgreement> view_agreement;              // the verdict's view check; null: none
+  std::unique_ptr<sim::SimulatedRoom> room;                   // simulated detectors only
+  // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
+  // through its hooks.
+  std::unique_ptr<drivers::FrameSource> frames;
+  // A device actuator's lock (actuator_lock.hpp), released after the actuator is closed.
+  std::shared_ptr<const ActuatorLock> actuator_lock;
+  const drivers::ReplayFrameSource* replay_frames = nullptr;  // a view of `frames` when replaying
+  std::unique_ptr<drivers::Actuator> actuator;                // virtual, recorded, Modbus or CAN
+  std::unique_ptr<drivers::Actuator> device_actuator;         // the Modbus or CAN driver (HIL or run)
+  std::unique_ptr<sim::ModbusCouchServer> couch_server;       // HIL: serves the room's couch
+  std::unique_ptr<sim::VirtualRobot> robot;                   // HIL over CAN: moves the room's couch
+  std::unique_ptr<RoomTruth> truth;                           // simulation only
+  std::unique_ptr<CalibratedCouch> calibrated_couch;          // the couch through its calibration
+  std::unique_ptr<JournalWriter> journal;
+  std::unique_ptr<FrameArchive> archive;
+  // The watchers, in the order they depend on each other (destroyed in reverse: the servers,
+  // then the hub that feeds them, then what the hub reads).
+  std::unique_ptr<CycleFeed> feed;
+  std::unique_ptr<PageOperator> page_operator;
+  std::unique_ptr<CycleHub> hub;
+  std::unique_ptr<MonitorServer> monitor;
+  std::unique_ptr<IgtlServer> igtl;
+  OperatorInputs operators;
+  std::unique_ptr<TrackingLoop> loop;
+};
+
+// The frame source of the session: an archived sequence (replay), the scene's detectors, or the
+// simulated room's (made with the room, into `parts`).
+Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const LoopSessionOptions& o,
+                                                   tracking::ThreadPool* pool, LoopSession::Parts* parts);
+// What moves the patient, if anything (see session_devices.cpp); a device actuator's lock taken
+// into `parts`.
+Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const PreparedScene& p,
+                                                                   const LoopSessionOptions& o,
+                                                                   LoopSession::Parts* parts);
+
+// In the room a HOLD ends only by a person's decision: a session on real devices takes no
+// unattended operator.
+Status check_attended(const PreparedScene& p, const LoopSessionOptions& o);
+// Warnings for the scene's author: a prediction window too short for its order, a couch whose
+// largest allowed move outlasts the beam's allowed wait.
+void warn_if_prediction_window_short(const LoopSettings& s);
+void warn_if_beam_wait_short(const Scene& scene);
+
+}  // namespace lftrack::host
