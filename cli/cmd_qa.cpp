@@ -24,15 +24,18 @@ namespace lftrack::host::cli {
 namespace {
 
 // The operator's Ctrl-C (or SIGTERM) during a daily QA: the QA ends early and safely (its couch
-// sent back, its report written: DailyQaOptions::interrupted); a second one ends the program at
-// once (the handler is reset by the first).
+// sent back, its report written: DailyQaOptions::interrupted). Another Ctrl-C while it ends is
+// not a quit (a nervous double tap would leave the couch displaced and no report): SIGQUIT
+// (Ctrl-\ on a terminal) quits at once.
 std::atomic<bool> g_qa_interrupted{false};
 extern "C" void on_qa_interrupt(int) {
-  g_qa_interrupted.store(true);
-  constexpr char kLine[] =
+  const bool again = g_qa_interrupted.exchange(true);
+  constexpr char kFirst[] =
       "\ninterrupted: the QA ends after this step (a room's couch goes back to where it stood before the "
-      "shift; Ctrl-C again quits at once, leaving it where it is)\n";
-  const ssize_t written = ::write(STDERR_FILENO, kLine, sizeof kLine - 1);
+      "shift; Ctrl-\\ quits at once, leaving it where it is)\n";
+  constexpr char kAgain[] = "\nalready ending: the couch goes back first (Ctrl-\\ quits at once)\n";
+  const ssize_t written = again ? ::write(STDERR_FILENO, kAgain, sizeof kAgain - 1)
+                                : ::write(STDERR_FILENO, kFirst, sizeof kFirst - 1);
   (void)written;
 }
 
@@ -42,7 +45,6 @@ class QaInterruptHandler {
   QaInterruptHandler() {
     struct sigaction action {};
     action.sa_handler = on_qa_interrupt;
-    action.sa_flags = SA_RESETHAND;
     sigaction(SIGINT, &action, &old_int_);
     sigaction(SIGTERM, &action, &old_term_);
   }

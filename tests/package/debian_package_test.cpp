@@ -134,11 +134,16 @@ TEST_F(DebianPackage, TheUnitsVerifyAndCarryTheRealTimeAndHardeningSettings) {
        {"User=lftrack", "CPUSchedulingPolicy=fifo", "LimitRTPRIO=99", "LimitMEMLOCK=infinity", "Restart=no",
         "ProtectSystem=strict", "ReadWritePaths=/var/lib/lftrack/%i", "NoNewPrivileges=yes",
         "DevicePolicy=closed", "DeviceAllow=char-video4linux rw", "AF_CAN", "--scene /etc/lftrack/%i.yaml",
-        "--control /run/lftrack/%i/", "ReadWritePaths=-/run/lock"})
+        "--control /run/lftrack/%i/", "ReadWritePaths=/run/lock"})
     EXPECT_NE(unit.find(setting), std::string::npos) << setting << " missing from lftrack@.service";
-  // The QA's unit sees the loop's couch lock (actuator_lock.hpp): not in its private /tmp.
-  EXPECT_NE(contents(*root_ / "lib/systemd/system/lftrack-qa@.service").find("ReadWritePaths=-/run/lock"),
-            std::string::npos);
+  // The QA's unit sees the loop's couch lock (actuator_lock.hpp), not one in its private /tmp, and
+  // reaches the room's devices as the loop's does (a room whose couch is a device: Modbus TCP,
+  // CAN, serial lines).
+  const std::string qa_unit = contents(*root_ / "lib/systemd/system/lftrack-qa@.service");
+  for (const char* setting :
+       {"ReadWritePaths=/run/lock", "AF_INET AF_INET6", "AF_CAN", "DeviceAllow=char-ttyUSB rw"})
+    EXPECT_NE(qa_unit.find(setting), std::string::npos) << setting << " missing from lftrack-qa@.service";
+  EXPECT_EQ(qa_unit.find("PrivateDevices=yes"), std::string::npos) << "the QA drives the room's devices";
   // systemd-analyze verify reads the units as the service manager would; the program's path is
   // the unpacked root's (verify checks that ExecStart's program exists). It exits 0 on settings
   // it ignores, so any message it prints is a failure too.

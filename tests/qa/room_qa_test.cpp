@@ -232,6 +232,35 @@ TEST(RoomQa, AnInterruptedShiftSendsTheCouchBackToWhereItStood) {
   EXPECT_LT((*end - *after_move).head<3>().norm(), 0.5) << "not left 8 mm off";
 }
 
+// A couch left displaced (a QA killed during a shift, a treatment's last corrections) is brought
+// back by the alignment before the first shift, its set-up move made whole (the loop holds the
+// couch as its one-cycle run ends, before a couch with latency has made the move): each shift is
+// then made from where the plan puts the phantom, not on top of the displacement (an outside
+// probe saw the QA shift a couch displaced by 10 mm to 20 mm from the plan).
+TEST(RoomQa, ADisplacedCouchIsBroughtBackBeforeTheFirstShift) {
+  test::TempDir dir;
+  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
+  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
+  ServedCouch couch(dir.path());
+  ASSERT_GT(couch.port, 0);
+  tracking::ThreadPool pool(2);
+  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+  Vector6d displaced = Vector6d::Zero();
+  displaced << 4, -3, 5, 0, 0, 0;
+  ASSERT_TRUE(move_couch_by(p, displaced, couch_move_timeout_s(p.scene, displaced), nullptr).ok());
+  DailyQaOptions o = room_options(fields);
+  o.tolerance_deg = 1.0;  // the mechanics, as above
+  Vector6d shift = Vector6d::Zero();
+  shift(2) = 8;
+  o.shifts = {shift};
+  auto report = run_daily_qa(p, o, &pool);
+  ASSERT_TRUE(report.ok()) << report.status().message();
+  ASSERT_EQ(report->offsets.size(), 1u);
+  EXPECT_TRUE(report->offsets[0].passed) << report->offsets[0].why;
+  EXPECT_LT(report->offsets[0].registration_error_mm, 0.25)
+      << "the shift found alone, not with the displacement";
+}
+
 // The loop's commands reach the couch at 40 % of their size: it falls short of every correction.
 class ShortCouch final : public drivers::Actuator {
  public:

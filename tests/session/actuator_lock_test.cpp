@@ -126,5 +126,44 @@ TEST_F(ActuatorLockTest, AnExistingLockFileIsReused) {
       << "the holder recorded: " << test::contents(path);
 }
 
+// One couch is one lock however a scene spells it: a Modbus host by its numeric address, a serial
+// line by its path with links followed; the baud rate and the unit are not the couch.
+TEST_F(ActuatorLockTest, OneCouchIsOneLockHoweverItIsSpelled) {
+  Scene a = modbus_couch(1509), b = modbus_couch(1509), c = modbus_couch(1509);
+  b.actuator.modbus.host = "localhost";
+  c.actuator.modbus.host = "127.1";
+  c.actuator.modbus.unit_id = 7;
+  EXPECT_EQ(ActuatorLock::lock_path(a), ActuatorLock::lock_path(b));
+  EXPECT_EQ(ActuatorLock::lock_path(a), ActuatorLock::lock_path(c));
+  test::ActuatorLockHolder other(b);
+  ASSERT_TRUE(other.held());
+  EXPECT_FALSE(ActuatorLock::acquire(c).ok()) << "127.1 is localhost's couch";
+
+  const std::filesystem::path line = dir_.path() / "ttyUSB0", link = dir_.path() / "couch-serial";
+  std::FILE* f = std::fopen(line.c_str(), "w");
+  ASSERT_NE(f, nullptr);
+  std::fclose(f);
+  std::filesystem::create_symlink(line, link);
+  Scene serial_a, serial_b;
+  for (Scene* s : {&serial_a, &serial_b}) {
+    s->actuator.type = "modbus";
+    s->actuator.modbus.transport = drivers::ModbusCouchOptions::Transport::kRtu;
+  }
+  serial_a.actuator.modbus.serial_device = line.string();
+  serial_a.actuator.modbus.baud = 19200;
+  serial_b.actuator.modbus.serial_device = link.string();
+  serial_b.actuator.modbus.baud = 115200;
+  EXPECT_EQ(ActuatorLock::lock_path(serial_a), ActuatorLock::lock_path(serial_b));
+}
+
+// A relative lock folder would be another file in each program's working folder: refused.
+TEST_F(ActuatorLockTest, ARelativeLockFolderIsRefused) {
+  ::setenv("LFTRACK_LOCK_DIR", "locks", 1);
+  auto refused = ActuatorLock::acquire(modbus_couch(1510));
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("not an absolute path"), std::string::npos)
+      << refused.status().message();
+}
+
 }  // namespace
 }  // namespace lftrack::host

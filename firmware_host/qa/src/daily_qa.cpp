@@ -68,6 +68,8 @@ DailyQaReport interrupted_report(DailyQaReport report, const host::PreparedScene
                                   [&](const QaCheck& c) { return c.name == name; });
     if (!made) report.checks.push_back(not_run(name, "not run", kInterrupted));
   }
+  report.interrupted = true;
+  report.standard = false;
   if (o.progress) o.progress(std::string("the QA was ") + kInterrupted + ": the checks not made fail");
   return report;
 }

@@ -166,13 +166,13 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
     return run(standing_still(scene, shift), session_options(scene, options, cycles, true),
                options.interrupted, pool);
   // The phantom first put where the plan puts it by the loop's alignment alone (its ALIGN plan;
-  // the run ends with the set-up move), the couch waited for: the last run's tracking corrections
-  // leave the couch where the tracking registrations' scatter sent it (up to 0.25 degree about a
-  // weak axis on this phantom: issue 57). Then the room's couch makes the shift. The alignment
-  // gets the cycles the gate allows it (a pair skipped as late, or a first frame late, is tried
-  // again with the next: on a loaded host a cold alignment can outlast the frames' age limit).
-  // A phantom the loop cannot align (beyond the envelope: a couch an interrupted QA left
-  // displaced) is not moved further: the shift is not made.
+  // the run ends with the set-up move, which is then made whole), the couch waited for: the last run's
+  // tracking corrections leave the couch where the tracking registrations' scatter sent it (up to 0.25 degree
+  // about a weak axis on this phantom: issue 57). Then the room's couch makes the shift. The alignment gets
+  // the cycles the gate allows it (a pair skipped as late, or a first frame late, is tried again with the
+  // next: on a loaded host a cold alignment can outlast the frames' age limit). A phantom the loop cannot
+  // align (beyond the envelope: a couch an interrupted QA left displaced) is not moved further: the shift is
+  // not made.
   const tracking::Vector6d none = tracking::Vector6d::Zero();
   const int align_cycles = std::max(1, scene.scene.safety.hold_after_failures) + 1;
   auto aligned = run(standing_still(scene, none), session_options(scene, options, align_cycles, false),
@@ -180,11 +180,12 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
   if (!aligned.ok()) return aligned.status().with_context("aligning the phantom before the shift");
   if (options.interrupted != nullptr && options.interrupted->load())
     return failed_precondition(std::string(kInterrupted) + " before the shift: the couch was not moved");
-  const bool tracked =
-      std::any_of(aligned->records.begin(), aligned->records.end(), [](const JournalRecord& c) {
-        return c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
+  const auto setup =
+      std::find_if(aligned->records.begin(), aligned->records.end(), [](const JournalRecord& c) {
+        return c.previous_state == static_cast<std::uint8_t>(host::TrackingState::kAlign) &&
+               c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
       });
-  if (!tracked)
+  if (setup == aligned->records.end())
     return failed_precondition(fmt::format(
         "the loop could not align the phantom before the shift in {} cycles ({}; the gate: {}): the couch "
         "was not moved; is the phantom within the envelope of where the plan puts it?",
@@ -193,8 +194,15 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
         aligned->records.empty()
             ? std::string("no cycle")
             : host::to_string(static_cast<host::GateReason>(aligned->records.back().gate_reason))));
-  auto settled = move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none), options.interrupted);
-  if (!settled.ok()) return settled.status();
+  // The alignment's set-up move made whole: the loop holds the couch as its run ends, one cycle
+  // after it sent the move, before a couch with any latency has made it (a couch an interrupted
+  // QA left displaced stayed there, and each shift was made on top: 20 mm from the plan). The
+  // couch stood at its read-back when the move was sent (the run before held it), and the move
+  // is relative to where it was told to be.
+  const tracking::Vector6d setup_move = Eigen::Map<const tracking::Vector6d>(setup->command);
+  const tracking::Vector6d aligned_at = Eigen::Map<const tracking::Vector6d>(setup->readback) + setup_move;
+  LFTRACK_RETURN_IF_ERROR(move_couch_to(scene, aligned_at, couch_move_timeout_s(scene.scene, setup_move))
+                              .with_context("the alignment's set-up move before the shift"));
   auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift), options.interrupted);
   if (!before.ok()) return before.status();
   auto judged = run(standing_still(scene, none), session_options(scene, options, cycles, true),

@@ -42,6 +42,7 @@ nlohmann::json to_json(const DailyQaReport& r) {
   j["date"] = r.date;
   j["passed"] = r.passed();
   j["standard"] = r.standard;
+  j["interrupted"] = r.interrupted;
   if (r.kind == "e2e")
     j["tolerance"] = {{"mm", r.tolerance_mm}};
   else if (r.kind == "daily")  // the detector QA's tolerances are its checks' own
@@ -192,7 +193,10 @@ std::string to_html(const DailyQaReport& r) {
     << " QA: <span class='" << (r.passed() ? "pass'>PASSED" : "fail'>FAILED") << "</span></h1>";
   h << "<p>" << escaped(r.scene_name) << " (" << escaped(r.scene_source) << "), started "
     << escaped(r.started_local)
-    << (r.kind == "daily" && !r.standard ? " (not the standard QA: looser settings)" : "") << "</p>";
+    << (r.interrupted                      ? " (interrupted by the operator: the checks not made failed)"
+        : r.kind == "daily" && !r.standard ? " (not the standard QA: looser settings)"
+                                           : "")
+    << "</p>";
   h << "<table><tr><th>check</th><th>result</th><th>tolerance</th><th>measured</th></tr>";
   for (const QaCheck& c : r.checks)
     h << "<tr><td>" << escaped(c.name) << "</td>" << result_cell(c.passed, c.why) << "<td>"

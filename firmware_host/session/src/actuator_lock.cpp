@@ -1,16 +1,20 @@
 #include "lftrack/host/actuator_lock.hpp"
 
 #include <fcntl.h>
+#include <netdb.h>
 #include <sys/file.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <fmt/format.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <map>
@@ -70,18 +74,63 @@ std::map<std::string, std::weak_ptr<const ActuatorLock>>& held() {
   return h;
 }
 
+// `host` as a numeric address (an IPv4 one where it has one: "localhost", "127.1" and
+// "127.0.0.1" are one couch); lower-case where it does not resolve.
+std::string numeric_host(const std::string& host) {
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  std::string best;
+  if (::getaddrinfo(host.c_str(), nullptr, &hints, &found) == 0) {
+    for (const addrinfo* a = found; a != nullptr; a = a->ai_next) {
+      char text[NI_MAXHOST] = {};
+      if (::getnameinfo(a->ai_addr, a->ai_addrlen, text, sizeof text, nullptr, 0, NI_NUMERICHOST) != 0)
+        continue;
+      if (best.empty() || a->ai_family == AF_INET) best = text;
+      if (a->ai_family == AF_INET) break;
+    }
+    ::freeaddrinfo(found);
+  }
+  if (!best.empty()) return best;
+  std::string lower = host;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return lower;
+}
+
+// A path as the kernel would reach it (links followed where they exist).
+std::string canonical_path(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::path p = std::filesystem::weakly_canonical(path, ec);
+  return ec ? path : p.string();
+}
+
 }  // namespace
+
+std::string ActuatorLock::couch_identity(const Scene& scene) {
+  const ActuatorSpec& a = scene.actuator;
+  if (a.type == "modbus") {
+    const drivers::ModbusCouchOptions& m = a.modbus;
+    if (m.transport == drivers::ModbusCouchOptions::Transport::kTcp)
+      return fmt::format("modbus tcp {}:{}", numeric_host(m.host), m.port);
+    return "modbus rtu " + canonical_path(m.serial_device);
+  }
+  if (a.type == "can")
+    return a.can.bridge_path.empty() ? "can " + a.can.interface : "can bridge " + canonical_path(a.can.bridge_path);
+  return a.type;
+}
 
 std::string ActuatorLock::lock_dir() {
   if (const char* dir = std::getenv("LFTRACK_LOCK_DIR"); dir != nullptr && *dir != '\0') return dir;
-  if (::access("/run/lock", W_OK | X_OK) == 0) return "/run/lock";
+  std::error_code ec;
+  if (std::filesystem::is_directory("/run/lock", ec)) return "/run/lock";
   return "/tmp";
 }
 
 std::string ActuatorLock::lock_path(const Scene& scene) {
   // Readable (an administrator finds the file by the couch's address) and unique (a hash of the
-  // whole description: two that read alike once cleaned get two files).
-  const std::string couch = describe_actuator(scene.actuator);
+  // whole identity: two that read alike once cleaned get two files).
+  const std::string couch = couch_identity(scene);
   std::string name;
   for (char c : couch) {
     if (name.size() >= 80) break;
@@ -96,6 +145,12 @@ std::string ActuatorLock::lock_path(const Scene& scene) {
 Result<std::shared_ptr<const ActuatorLock>> ActuatorLock::acquire(const Scene& scene) {
   if (!actuator_is_device(scene))
     return invalid_argument("an actuator lock is for a device (modbus, can), not " + scene.actuator.type);
+  const char* env_dir = std::getenv("LFTRACK_LOCK_DIR");
+  if (env_dir != nullptr && *env_dir != '\0' && env_dir[0] != '/')
+    return invalid_argument(fmt::format(
+        "LFTRACK_LOCK_DIR {} is not an absolute path: programs started in other folders would lock another "
+        "file for the same couch",
+        env_dir));
   const std::string couch = describe_actuator(scene.actuator);
   const std::string path = lock_path(scene);
   std::lock_guard<std::mutex> guard(held_mutex());

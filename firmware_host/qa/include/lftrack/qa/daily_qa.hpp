@@ -142,6 +142,7 @@ struct DailyQaReport {
   // detector check's), the latency chain run (at least 50 cycles) within the scene's period. Only
   // a standard daily QA that passed counts for `lftrack run`.
   bool standard = false;
+  bool interrupted = false;  // ended early by the operator (DailyQaOptions::interrupted): never standard
   std::vector<OffsetResult> offsets;
   std::vector<QaCheck> checks;
   // What a daily QA asks for and this one does not check: said in the report, never counted as

@@ -6,11 +6,16 @@
 // same couch is refused before it opens it, with the holder's process id and command line, so a
 // QA never shifts the couch under a treatment, and a treatment never starts under a QA.
 //
-// The lock is an exclusive flock(2) on a file named after the actuator (its kind and where it is
-// reached, as describe_actuator() writes it: two names of one device, "localhost" and
-// "127.0.0.1", are two locks) in the lock folder: $LFTRACK_LOCK_DIR where set, else /run/lock
-// where this user may create files, else /tmp. The service units name /run/lock writable, so the
-// loop's unit and the QA's unit (each with a private /tmp) see one lock. The kernel releases it
+// The lock is an exclusive flock(2) on a file named after the couch's identity (couch_identity():
+// where it is reached, as the kernel reaches it: a Modbus TCP host by its numeric address, so
+// "localhost", "127.1" and "127.0.0.1" are one couch; a serial line or a CAN bridge by its path with
+// links followed; a CAN bus by its interface; the Modbus unit, the CAN node and the baud rate are
+// not part of it) in the lock folder: $LFTRACK_LOCK_DIR where set (an absolute path, or the lock is
+// refused), else /run/lock, else (no such folder) /tmp. A lock folder this user cannot write
+// refuses the couch: it never falls back to a folder another program would not look in. The
+// service units name /run/lock writable, so the loop's unit and the QA's unit (each with a
+// private /tmp) see one lock. Any local user who can write the lock folder can take a lock and
+// so refuse a couch: it fails closed. The kernel releases it
 // when its holder exits, however it ends: a crashed holder leaves no stale lock, only its file
 // (which the next holder reuses). Within one process the lock is shared: a QA that holds it runs
 // loop sessions on the same couch.
@@ -32,8 +37,9 @@ class ActuatorLock {
   // holder, when another process holds it; an io_error when the lock file cannot be made.
   static Result<std::shared_ptr<const ActuatorLock>> acquire(const Scene& scene);
 
-  // The folder the lock files are in (see above), and the file of `scene`'s actuator.
+  // The folder the lock files are in, the couch's identity and its lock file (see above).
   static std::string lock_dir();
+  static std::string couch_identity(const Scene& scene);
   static std::string lock_path(const Scene& scene);
 
   ~ActuatorLock();
