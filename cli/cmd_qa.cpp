@@ -45,6 +45,7 @@ class QaInterruptHandler {
   QaInterruptHandler() {
     struct sigaction action {};
     action.sa_handler = on_qa_interrupt;
+    action.sa_flags = SA_RESTART;  // any thread may take it: its blocking calls go on
     sigaction(SIGINT, &action, &old_int_);
     sigaction(SIGTERM, &action, &old_term_);
   }
@@ -179,7 +180,6 @@ Status run_qa_daily(const QaDailyOptions& o) {
   options.progress = print_line;
   options.interrupted = &g_qa_interrupted;
   LFTRACK_RETURN_IF_ERROR(check_frames_folder("--detector-frames", o.detector_frames));
-  const QaInterruptHandler interrupts;
   return run_and_report(
       o.scene, o.out,
       fmt::format("daily QA of {{}}: tolerance {} mm, {} deg", o.tolerance_mm, o.tolerance_deg),
@@ -187,6 +187,8 @@ Status run_qa_daily(const QaDailyOptions& o) {
         if (!o.detector_frames.empty())
           options.detectors.frames =
               read_detector_frames(p.scene, o.detector_frames, options.detectors.tolerances.min_frames);
+        // Around the QA alone: a Ctrl-C while the scene loads ends the program, with no report.
+        const QaInterruptHandler interrupts;
         return qa::run_daily_qa(p, options, pool);
       });
 }

@@ -14,11 +14,13 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "actuator_lock_holder.hpp"
 #include "child_process.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/sim/room_link.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "qa_phantom_support.hpp"
 #include "room_runs.hpp"
@@ -184,11 +186,35 @@ TEST(RoomQa, AnInterruptedShiftSendsTheCouchBackToWhereItStood) {
   auto start = move_couch_by(p, none, 10, nullptr);  // where the couch stands
   ASSERT_TRUE(start.ok()) << start.status().message();
 
-  // On its way: told the shift, then at once sent back.
+  // Before the move: no new motion is started.
   Vector6d shift = Vector6d::Zero();
   shift << 6, -6, 6, 0, 0, 0;
   std::atomic<bool> stop{true};
+  auto refused = move_couch_by(p, shift, couch_move_timeout_s(p.scene, shift), &stop);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("interrupted before the QA's shift"), std::string::npos)
+      << refused.status().message();
+
+  // On its way: the operator's Ctrl-C once the couch has left (its room link, as the simulated
+  // detectors see it, 1 mm from where it stood); it is sent back the way it came.
+  stop.store(false);
+  auto link = sim::RoomLinkReader::open(dir.path() / "room.link");
+  ASSERT_TRUE(link.ok()) << link.status().message();
+  sim::RoomLinkSample at_start;
+  ASSERT_TRUE((*link)->read(&at_start));
+  std::atomic<bool> watching{true};
+  std::thread operator_hand([&] {
+    sim::RoomLinkSample now;
+    while (watching.load() && !stop.load()) {
+      if ((*link)->read(&now) && (now.couch_position - at_start.couch_position).head<3>().norm() > 1.0)
+        stop.store(true);
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  });
   auto moving = move_couch_by(p, shift, couch_move_timeout_s(p.scene, shift), &stop);
+  watching.store(false);
+  operator_hand.join();
+  ASSERT_TRUE(stop.load()) << "the couch left";
   ASSERT_FALSE(moving.ok());
   EXPECT_NE(moving.status().message().find("interrupted during the QA's shift"), std::string::npos)
       << moving.status().message();

@@ -9,6 +9,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "actuator_lock_holder.hpp"
@@ -21,8 +22,8 @@ namespace {
 // Lock files in a folder of the test's own (the forked holders inherit it).
 class ActuatorLockTest : public ::testing::Test {
  protected:
-  void SetUp() override { ::setenv("LFTRACK_LOCK_DIR", dir_.path().c_str(), 1); }
-  void TearDown() override { ::unsetenv("LFTRACK_LOCK_DIR"); }
+  void SetUp() override { lock_dir_.emplace(kTestLockDirVariable, dir_.path().string()); }
+  void TearDown() override { lock_dir_.reset(); }
 
   static Scene modbus_couch(int port) {
     Scene scene;
@@ -33,6 +34,7 @@ class ActuatorLockTest : public ::testing::Test {
   }
 
   test::TempDir dir_;
+  std::optional<test::ScopedEnvironment> lock_dir_;
 };
 
 TEST_F(ActuatorLockTest, AnotherProcessIsRefusedWithTheHolderNamed) {
@@ -96,7 +98,7 @@ TEST_F(ActuatorLockTest, OnlyADeviceHasOneAndItsFileSaysWhichCouch) {
   EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
 
   const std::string path = ActuatorLock::lock_path(modbus_couch(1506));
-  EXPECT_EQ(std::filesystem::path(path).parent_path(), dir_.path()) << "in LFTRACK_LOCK_DIR";
+  EXPECT_EQ(std::filesystem::path(path).parent_path(), dir_.path()) << "in LFTRACK_TEST_LOCK_DIR";
   const std::string name = std::filesystem::path(path).filename().string();
   EXPECT_NE(name.find("modbus"), std::string::npos) << name;
   EXPECT_NE(name.find("127.0.0.1"), std::string::npos) << name;
@@ -158,7 +160,7 @@ TEST_F(ActuatorLockTest, OneCouchIsOneLockHoweverItIsSpelled) {
 
 // A relative lock folder would be another file in each program's working folder: refused.
 TEST_F(ActuatorLockTest, ARelativeLockFolderIsRefused) {
-  ::setenv("LFTRACK_LOCK_DIR", "locks", 1);
+  test::ScopedEnvironment relative(kTestLockDirVariable, "locks");
   auto refused = ActuatorLock::acquire(modbus_couch(1510));
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.status().message().find("not an absolute path"), std::string::npos)

@@ -125,7 +125,7 @@ namespace {
 // it (a treatment, a QA). Refused by the couch's lock, with the holder named, and not opened.
 TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
   test::TempDir locks;
-  ::setenv("LFTRACK_LOCK_DIR", locks.path().c_str(), 1);
+  test::ScopedEnvironment lock_dir(kTestLockDirVariable, locks.path().string());
   // Nothing listens on port 1: an opened couch fails with the connection's error instead.
   auto p = prepared("sim", "", "type: modbus\n  modbus: {tcp: {host: 127.0.0.1, port: 1}}");
   ASSERT_TRUE(p.ok()) << p.status().message();
@@ -146,7 +146,7 @@ TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
   ASSERT_NE(i, nullptr) << free.checklist();
   EXPECT_EQ(i->detail.find("driven by another lftrack"), std::string::npos)
       << "the lock was let go: " << i->detail;
-  ::unsetenv("LFTRACK_LOCK_DIR");
+  ::unsetenv("LFTRACK_TEST_LOCK_DIR");
 }
 
 }  // namespace

@@ -121,6 +121,11 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
                     o.tolerance_deg <= kStandardToleranceDeg && o.latency_cycles >= kStandardLatencyCycles &&
                     no_looser(o.detectors.tolerances, calib::DetectorQaTolerances{}) &&
                     (o.latency_tolerance_ms <= 0 || o.latency_tolerance_ms <= p.scene.loop.period_ms);
+  // Nothing has been moved yet: an interruption now is a QA not made, with no report (a failed
+  // one would void the day's earlier pass).
+  if (interrupted())
+    return failed_precondition(std::string(kInterrupted) +
+                               " before the QA began: nothing was moved, no report made");
   std::string stopped;  // a room: why the offset test stopped (the couch may not be where it thinks)
   for (const Vector6d& shift : shifts) {
     if (stopped.empty() && interrupted()) stopped = kInterrupted;

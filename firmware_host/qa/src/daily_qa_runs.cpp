@@ -174,18 +174,24 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
   // align (beyond the envelope: a couch an interrupted QA left displaced) is not moved further: the shift is
   // not made.
   const tracking::Vector6d none = tracking::Vector6d::Zero();
+  // The couch first waited for where it was told to be (the alignment's set-up move below is
+  // relative to that: read-back and target then agree within 0.05 mm).
+  auto standing = move_couch_by(scene, none, couch_move_timeout_s(scene.scene, none), options.interrupted);
+  if (!standing.ok()) return standing.status();
   const int align_cycles = std::max(1, scene.scene.safety.hold_after_failures) + 1;
   auto aligned = run(standing_still(scene, none), session_options(scene, options, align_cycles, false),
                      options.interrupted, pool, {}, RunEnd::kAlignmentDecided);
   if (!aligned.ok()) return aligned.status().with_context("aligning the phantom before the shift");
-  if (options.interrupted != nullptr && options.interrupted->load())
-    return failed_precondition(std::string(kInterrupted) + " before the shift: the couch was not moved");
   const auto setup =
       std::find_if(aligned->records.begin(), aligned->records.end(), [](const JournalRecord& c) {
         return c.previous_state == static_cast<std::uint8_t>(host::TrackingState::kAlign) &&
                c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
       });
-  if (setup == aligned->records.end())
+  const bool interrupted = options.interrupted != nullptr && options.interrupted->load();
+  if (setup == aligned->records.end()) {
+    // No set-up move was sent: the couch stands where it stood.
+    if (interrupted)
+      return failed_precondition(std::string(kInterrupted) + " before the shift: the couch was not moved");
     return failed_precondition(fmt::format(
         "the loop could not align the phantom before the shift in {} cycles ({}; the gate: {}): the couch "
         "was not moved; is the phantom within the envelope of where the plan puts it?",
@@ -194,15 +200,19 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
         aligned->records.empty()
             ? std::string("no cycle")
             : host::to_string(static_cast<host::GateReason>(aligned->records.back().gate_reason))));
-  // The alignment's set-up move made whole: the loop holds the couch as its run ends, one cycle
-  // after it sent the move, before a couch with any latency has made it (a couch an interrupted
-  // QA left displaced stayed there, and each shift was made on top: 20 mm from the plan). The
-  // couch stood at its read-back when the move was sent (the run before held it), and the move
-  // is relative to where it was told to be.
+  }
+  // The alignment's set-up move made whole (an interruption too: the couch is not left partway):
+  // the loop holds the couch as its run ends, one cycle after it sent the move, before a couch
+  // with any latency has made it (a couch an interrupted QA left displaced stayed there, and each
+  // shift was made on top: 20 mm from the plan). The move is relative to where the couch was told
+  // to be, where it stood (above).
   const tracking::Vector6d setup_move = Eigen::Map<const tracking::Vector6d>(setup->command);
   const tracking::Vector6d aligned_at = Eigen::Map<const tracking::Vector6d>(setup->readback) + setup_move;
   LFTRACK_RETURN_IF_ERROR(move_couch_to(scene, aligned_at, couch_move_timeout_s(scene.scene, setup_move))
                               .with_context("the alignment's set-up move before the shift"));
+  if (interrupted || (options.interrupted != nullptr && options.interrupted->load()))
+    return failed_precondition(std::string(kInterrupted) +
+                               " before the shift: the alignment's set-up move was made, the shift was not");
   auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift), options.interrupted);
   if (!before.ok()) return before.status();
   auto judged = run(standing_still(scene, none), session_options(scene, options, cycles, true),

@@ -91,6 +91,10 @@ Result<tracking::Vector6d> move_couch(
   if (state.fault) return io_error("the couch reports a fault before " + what);
   const tracking::Vector6d before = state.position;
   const tracking::Vector6d target = target_of(state);
+  // The operator asked to stop before the move began: no new motion is started.
+  if (is_set(interrupted))
+    return failed_precondition(
+        fmt::format("interrupted before {}: the couch was not moved; it stands at {}", what, six(before)));
   got = couch->command(target - state.target, deadline_of_call());
   if (got != DeviceStatus::kOk)
     return io_error(fmt::format("the couch refused {}: {}", what, drivers::to_string(got)));

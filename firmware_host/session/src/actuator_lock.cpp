@@ -11,6 +11,7 @@
 
 #include <cctype>
 #include <cerrno>
+#include <chrono>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -19,6 +20,7 @@
 #include <iterator>
 #include <map>
 #include <mutex>
+#include <thread>
 
 #include "lftrack/host/scene_devices.hpp"
 
@@ -121,7 +123,7 @@ std::string ActuatorLock::couch_identity(const Scene& scene) {
 }
 
 std::string ActuatorLock::lock_dir() {
-  if (const char* dir = std::getenv("LFTRACK_LOCK_DIR"); dir != nullptr && *dir != '\0') return dir;
+  if (const char* dir = std::getenv(kTestLockDirVariable); dir != nullptr && *dir != '\0') return dir;
   std::error_code ec;
   if (std::filesystem::is_directory("/run/lock", ec)) return "/run/lock";
   return "/tmp";
@@ -145,52 +147,62 @@ std::string ActuatorLock::lock_path(const Scene& scene) {
 Result<std::shared_ptr<const ActuatorLock>> ActuatorLock::acquire(const Scene& scene) {
   if (!actuator_is_device(scene))
     return invalid_argument("an actuator lock is for a device (modbus, can), not " + scene.actuator.type);
-  const char* env_dir = std::getenv("LFTRACK_LOCK_DIR");
+  const char* env_dir = std::getenv(kTestLockDirVariable);
   if (env_dir != nullptr && *env_dir != '\0' && env_dir[0] != '/')
     return invalid_argument(fmt::format(
-        "LFTRACK_LOCK_DIR {} is not an absolute path: programs started in other folders would lock another "
-        "file for the same couch",
-        env_dir));
+        "{} {} is not an absolute path: programs started in other folders would lock another file for the "
+        "same couch",
+        kTestLockDirVariable, env_dir));
   const std::string couch = describe_actuator(scene.actuator);
   const std::string path = lock_path(scene);
-  std::lock_guard<std::mutex> guard(held_mutex());
-  // A forked child has the parent's entry and open file, but is another process: it locks anew.
-  if (auto shared = held()[path].lock(); shared && shared->owner_ == ::getpid()) return shared;
-  const int fd = open_lock_file(path);
-  if (fd < 0)
-    return io_error(
-        fmt::format("{}: cannot open the lock of the {} ({}): set LFTRACK_LOCK_DIR to a folder "
-                    "every lftrack user of this room may write",
-                    path, couch, std::strerror(errno)));
-  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+  const std::string me = fmt::format("pid {}:", ::getpid());
+  // This process's own lock, released by another of its threads while this one asks, is still
+  // open until its destructor has closed it: asked again for a while, not refused.
+  for (int attempt = 0;; ++attempt) {
+    std::unique_lock<std::mutex> guard(held_mutex());
+    // A forked child has the parent's entry and open file, but is another process: it locks anew.
+    if (auto shared = held()[path].lock(); shared && shared->owner_ == ::getpid()) return shared;
+    const int fd = open_lock_file(path);
+    if (fd < 0)
+      return io_error(fmt::format(
+          "{}: cannot open the lock of the {} ({}); the couch is not driven without it: every lftrack "
+          "program on this host takes its couch's lock in /run/lock (the service units make it writable)",
+          path, couch, std::strerror(errno)));
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      // Held whether or not the holder is recorded (a refused program then says it is not).
+      const std::string holder = this_holder() + "\n";
+      const bool recorded = ::ftruncate(fd, 0) == 0 && ::pwrite(fd, holder.data(), holder.size(), 0) ==
+                                                           static_cast<ssize_t>(holder.size());
+      (void)recorded;
+      std::shared_ptr<const ActuatorLock> lock(new ActuatorLock(fd, path));
+      held()[path] = lock;
+      return lock;
+    }
     const int error = errno;
     char text[kMaxHolderChars + 64] = {};
     const ssize_t n = ::pread(fd, text, sizeof text - 1, 0);
     ::close(fd);
     if (error != EWOULDBLOCK) return io_error(fmt::format("{}: cannot lock: {}", path, std::strerror(error)));
     const std::string holder = n > 0 ? printable(std::string(text, std::size_t(n)), kMaxHolderChars) : "";
+    if (holder.rfind(me, 0) == 0 && attempt < 100) {
+      guard.unlock();
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      continue;
+    }
     return failed_precondition(fmt::format(
         "the {} is driven by another lftrack now ({}; lock {}): one program at a time drives a couch; "
         "wait for it to end, or stop it",
         couch, holder.empty() ? std::string("which process is not recorded") : holder, path));
   }
-  // Held whether or not the holder is recorded (a refused program then says it is not).
-  const std::string holder = this_holder() + "\n";
-  const bool recorded = ::ftruncate(fd, 0) == 0 &&
-                        ::pwrite(fd, holder.data(), holder.size(), 0) == static_cast<ssize_t>(holder.size());
-  (void)recorded;
-  std::shared_ptr<const ActuatorLock> lock(new ActuatorLock(fd, path));
-  held()[path] = lock;
-  return lock;
 }
 
 ActuatorLock::~ActuatorLock() {
-  // Under the mutex: an acquire of this process waits until the file is closed (else its own
-  // flock would find this one's and refuse this process).
   std::lock_guard<std::mutex> guard(held_mutex());
   auto it = held().find(path_);
   if (it != held().end() && it->second.expired()) held().erase(it);
-  (void)::ftruncate(fd_, 0);  // no holder named once released (still held until the close)
+  // No holder named once released (still held until the close); a forked child's copy leaves the
+  // parent's line alone.
+  if (owner_ == ::getpid()) (void)::ftruncate(fd_, 0);
   ::close(fd_);
 }
 

@@ -23,7 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-using namespace calibration_tiff;
+namespace tiff = calibration_tiff;
 
 constexpr const char* kFormat = "lftrack detector calibration";
 constexpr int kMaxSide = 16384;
@@ -50,7 +50,7 @@ json metadata(const calib::DetectorCalibration& c, const std::string& hash, cons
   defects["masked"] = c.defects;
   return {{"format", kFormat},
           {"version", kDetectorCalibrationVersion},
-          {"pages", {kPageNames[0], kPageNames[1], kPageNames[2], kPageNames[3]}},
+          {"pages", {tiff::kPageNames[0], tiff::kPageNames[1], tiff::kPageNames[2], tiff::kPageNames[3]}},
           {"detector", c.detector},
           {"rows", c.rows},
           {"cols", c.cols},
@@ -163,7 +163,7 @@ Status write_detector_calibration(const fs::path& path, const calib::DetectorCal
   const std::string hash = calib::detector_calibration_hash(c);
   const std::string description = metadata(c, hash, utc_now()).dump();
   const fs::path temporary = path.string() + ".partial-" + std::to_string(::getpid());
-  Status s = write_tiff(temporary, c, description);
+  Status s = tiff::write_tiff(temporary, c, description);
   if (s.ok()) {
     if (overwrite) {
       if (::rename(temporary.c_str(), path.c_str()) != 0)
@@ -209,8 +209,9 @@ Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& pat
   if (version != kDetectorCalibrationVersion)
     return unsupported(where + ": detector calibration version " + std::to_string(version) + " (this build reads version " +
                        std::to_string(kDetectorCalibrationVersion) + "; make it again with lftrack calibrate detector)");
-  if (const json* names = m.find("pages"); names != nullptr &&
-      *names != json::array({kPageNames[0], kPageNames[1], kPageNames[2], kPageNames[3]}))
+  if (const json* names = m.find("pages");
+      names != nullptr && *names != json::array({tiff::kPageNames[0], tiff::kPageNames[1],
+                                                 tiff::kPageNames[2], tiff::kPageNames[3]}))
     m.fail("pages", "is not [\"offset_counts\", \"gain\", \"noise_counts\", \"defects\"]");
   calib::DetectorCalibration c;
   c.detector = m.text("detector");
@@ -271,10 +272,10 @@ Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& pat
 
   // The pages must be there and as large as the metadata says before memory is given to them.
   const tdir_t pages = TIFFNumberOfDirectories(tif);
-  if (pages != kPages)
+  if (pages != tiff::kPages)
     return corrupt_data(where + ": " + std::to_string(pages) + " page(s); a detector calibration has " +
-                        std::to_string(kPages) + " (offset, gain, noise, defects)");
-  const std::uint64_t needed = std::uint64_t(kPages) * std::uint64_t(pixels) * 4;
+                        std::to_string(tiff::kPages) + " (offset, gain, noise, defects)");
+  const std::uint64_t needed = std::uint64_t(tiff::kPages) * std::uint64_t(pixels) * 4;
   if (std::uint64_t(st.st_size) < needed)
     return corrupt_data(where + ": " + std::to_string(st.st_size) + " bytes cannot hold four " + std::to_string(c.cols) +
                         " x " + std::to_string(c.rows) + " float maps (truncated, or the metadata lies)");
@@ -285,8 +286,8 @@ Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& pat
   c.defective = tracking::Image<unsigned char>(c.rows, c.cols);
   tracking::Image<float>* maps[3] = {&c.offset_counts, &c.gain, &c.noise_counts};
   std::int64_t masked = 0;
-  for (int p = 0; p < kPages; ++p) {
-    LFTRACK_RETURN_IF_ERROR(read_page(tif, p, c.rows, c.cols, &page, where));
+  for (int p = 0; p < tiff::kPages; ++p) {
+    LFTRACK_RETURN_IF_ERROR(tiff::read_page(tif, p, c.rows, c.cols, &page, where));
     if (p < 3) {
       std::copy(page.begin(), page.end(), maps[p]->pixels().begin());
       continue;
@@ -305,7 +306,8 @@ Result<calib::DetectorCalibration> load_detector_calibration(const fs::path& pat
   if (masked != c.defects)
     return corrupt_data(where + ": the defect page masks " + std::to_string(masked) + " pixels, the metadata says " +
                         std::to_string(c.defects));
-  if (const std::uint64_t end = last_directory_end(tif, path); end == 0 || end > std::uint64_t(st.st_size))
+  if (const std::uint64_t end = tiff::last_directory_end(tif, path);
+      end == 0 || end > std::uint64_t(st.st_size))
     return corrupt_data(where + ": the last page's directory runs past the end of the file (" +
                         std::to_string(st.st_size) + " bytes): truncated");
   const std::string hash = calib::detector_calibration_hash(c);

@@ -10,12 +10,15 @@
 // where it is reached, as the kernel reaches it: a Modbus TCP host by its numeric address, so
 // "localhost", "127.1" and "127.0.0.1" are one couch; a serial line or a CAN bridge by its path with
 // links followed; a CAN bus by its interface; the Modbus unit, the CAN node and the baud rate are
-// not part of it) in the lock folder: $LFTRACK_LOCK_DIR where set (an absolute path, or the lock is
-// refused), else /run/lock, else (no such folder) /tmp. A lock folder this user cannot write
+// not part of it) in the lock folder: /run/lock, else (no such folder) /tmp. The tests' own
+// folder is $LFTRACK_TEST_LOCK_DIR (an absolute path, or the lock is refused): a variable for
+// tests only, which the service units unset (a room.env or a shell that set it for one program
+// would give that program a lock of its own). A lock folder this user cannot write
 // refuses the couch: it never falls back to a folder another program would not look in. The
 // service units name /run/lock writable, so the loop's unit and the QA's unit (each with a
-// private /tmp) see one lock. Any local user who can write the lock folder can take a lock and
-// so refuse a couch: it fails closed. The kernel releases it
+// private /tmp) see one lock. The lock is this host's: a program on another host that reaches the
+// same couch is not refused. Any local user who can write the lock folder can take a lock and so
+// refuse a couch: it fails closed. The kernel releases it
 // when its holder exits, however it ends: a crashed holder leaves no stale lock, only its file
 // (which the next holder reuses). Within one process the lock is shared: a QA that holds it runs
 // loop sessions on the same couch.
@@ -29,6 +32,9 @@
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::host {
+
+// The environment variable that names the tests' lock folder.
+inline constexpr const char* kTestLockDirVariable = "LFTRACK_TEST_LOCK_DIR";
 
 class ActuatorLock {
  public:
