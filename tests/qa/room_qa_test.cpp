@@ -18,6 +18,7 @@
 
 #include "actuator_lock_holder.hpp"
 #include "child_process.hpp"
+#include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 #include "lftrack/sim/room_link.hpp"
@@ -82,14 +83,26 @@ const QaCheck* room_check(const DailyQaReport& r, const std::string& name) {
   return nullptr;
 }
 
-TEST(RoomQa, TheServedCouchMakesTheShiftsAndTheLoopFindsAndUndoesEach) {
+// The QA phantom's room with its couch served in a process of its own, its light fields built
+// (or found), for each test.
+class RoomQa : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
+    ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
+    couch = std::make_unique<ServedCouch>(dir.path());
+    ASSERT_GT(couch->port, 0);
+    p = served_room(dir.path(), couch->port, &pool);
+  }
+
   test::TempDir dir;
-  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
-  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
-  ServedCouch couch(dir.path());
-  ASSERT_GT(couch.port, 0);
-  tracking::ThreadPool pool(2);
-  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+  fs::path fields;
+  std::unique_ptr<ServedCouch> couch;
+  tracking::ThreadPool pool{2};
+  host::PreparedScene p;
+};
+
+TEST_F(RoomQa, TheServedCouchMakesTheShiftsAndTheLoopFindsAndUndoesEach) {
   DailyQaOptions o = room_options(fields);
   // The room's mechanics are under test here, not the registration's rotation precision. On the
   // real clock the alignment's registration is cut by the cycle's budget and the couch follows
@@ -122,14 +135,7 @@ TEST(RoomQa, TheServedCouchMakesTheShiftsAndTheLoopFindsAndUndoesEach) {
 
 // One program at a time drives a couch: while another process holds its lock (a treatment, a
 // second QA) the QA is refused before it moves anything, and so is a treatment's loop session.
-TEST(RoomQa, NoTwoProgramsDriveTheCouchAtOnce) {
-  test::TempDir dir;
-  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
-  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
-  ServedCouch couch(dir.path());
-  ASSERT_GT(couch.port, 0);
-  tracking::ThreadPool pool(2);
-  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+TEST_F(RoomQa, NoTwoProgramsDriveTheCouchAtOnce) {
   test::ActuatorLockHolder other(p.scene);
   ASSERT_TRUE(other.held());
   const std::string holder = "pid " + std::to_string(other.pid());
@@ -154,34 +160,18 @@ TEST(RoomQa, NoTwoProgramsDriveTheCouchAtOnce) {
 }
 
 // A couch that takes the loop's commands and never moves (the loop's corrections never reach it).
-class DeafCouch final : public drivers::Actuator {
+class DeafCouch final : public drivers::ForwardingActuator {
  public:
-  explicit DeafCouch(drivers::Actuator* inner) : inner_(inner) {}
-  Status open() override { return inner_->open(); }
+  using ForwardingActuator::ForwardingActuator;
   drivers::DeviceStatus command(const Vector6d&, drivers::Deadline) override {
     return drivers::DeviceStatus::kOk;
   }
-  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override {
-    return inner_->readback(state, deadline);
-  }
-  void hold() override { inner_->hold(); }
-  void close() override { inner_->close(); }
-
- private:
-  drivers::Actuator* inner_;
 };
 
 // The operator's Ctrl-C in a room (DailyQaOptions::interrupted): a couch on its way to a shift,
 // or left at the shift by a loop that was stopped before it undid it, is sent back to where it
 // stood before the shift; the QA ends with every check not made failed.
-TEST(RoomQa, AnInterruptedShiftSendsTheCouchBackToWhereItStood) {
-  test::TempDir dir;
-  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
-  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
-  ServedCouch couch(dir.path());
-  ASSERT_GT(couch.port, 0);
-  tracking::ThreadPool pool(2);
-  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+TEST_F(RoomQa, AnInterruptedShiftSendsTheCouchBackToWhereItStood) {
   const Vector6d none = Vector6d::Zero();
   auto start = move_couch_by(p, none, 10, nullptr);  // where the couch stands
   ASSERT_TRUE(start.ok()) << start.status().message();
@@ -263,14 +253,7 @@ TEST(RoomQa, AnInterruptedShiftSendsTheCouchBackToWhereItStood) {
 // couch as its one-cycle run ends, before a couch with latency has made the move): each shift is
 // then made from where the plan puts the phantom, not on top of the displacement (an outside
 // probe saw the QA shift a couch displaced by 10 mm to 20 mm from the plan).
-TEST(RoomQa, ADisplacedCouchIsBroughtBackBeforeTheFirstShift) {
-  test::TempDir dir;
-  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
-  ASSERT_FALSE(fields.empty()) << test::contents(dir.path() / "precompute.txt");
-  ServedCouch couch(dir.path());
-  ASSERT_GT(couch.port, 0);
-  tracking::ThreadPool pool(2);
-  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+TEST_F(RoomQa, ADisplacedCouchIsBroughtBackBeforeTheFirstShift) {
   Vector6d displaced = Vector6d::Zero();
   displaced << 4, -3, 5, 0, 0, 0;
   ASSERT_TRUE(move_couch_by(p, displaced, couch_move_timeout_s(p.scene, displaced), nullptr).ok());
@@ -288,31 +271,15 @@ TEST(RoomQa, ADisplacedCouchIsBroughtBackBeforeTheFirstShift) {
 }
 
 // The loop's commands reach the couch at 40 % of their size: it falls short of every correction.
-class ShortCouch final : public drivers::Actuator {
+class ShortCouch final : public drivers::ForwardingActuator {
  public:
-  explicit ShortCouch(drivers::Actuator* inner) : inner_(inner) {}
-  Status open() override { return inner_->open(); }
+  using ForwardingActuator::ForwardingActuator;
   drivers::DeviceStatus command(const Vector6d& correction, drivers::Deadline deadline) override {
     return inner_->command(0.4 * correction, deadline);
   }
-  drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override {
-    return inner_->readback(state, deadline);
-  }
-  void hold() override { inner_->hold(); }
-  void close() override { inner_->close(); }
-
- private:
-  drivers::Actuator* inner_;
 };
 
-TEST(RoomQa, ACouchThatFallsShortFailsTheOffsetTestWithTheReason) {
-  test::TempDir dir;
-  const fs::path fields = test::qa_phantom_fields(LFTRACK_BIN_PATH, test::qa_phantom_scene(), dir.path());
-  ASSERT_FALSE(fields.empty());
-  ServedCouch couch(dir.path());
-  ASSERT_GT(couch.port, 0);
-  tracking::ThreadPool pool(2);
-  const host::PreparedScene p = served_room(dir.path(), couch.port, &pool);
+TEST_F(RoomQa, ACouchThatFallsShortFailsTheOffsetTestWithTheReason) {
   DailyQaOptions o = room_options(fields);
   Vector6d shift = Vector6d::Zero();
   shift(2) = 8;
