@@ -100,7 +100,7 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
     if (!lock.ok()) return lock.status();
     couch_lock = std::move(lock).value();
   }
-  const auto interrupted = [&] { return o.interrupted != nullptr && o.interrupted->load(); };
+  const auto interrupted = [&] { return qa::interrupted(o); };
   DailyQaReport report = new_report(p, "daily");
   report.tolerance_mm = o.tolerance_mm;
   report.tolerance_deg = o.tolerance_deg;

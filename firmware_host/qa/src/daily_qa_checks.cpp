@@ -41,10 +41,7 @@ std::string shift_text(const Vector6d& v) {
 OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const DailyQaOptions& o) {
   OffsetResult r;
   r.shift = shift;
-  const auto align = std::find_if(run.records.begin(), run.records.end(), [](const JournalRecord& c) {
-    return c.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign) &&
-           c.state == static_cast<std::uint8_t>(TrackingState::kTrack);
-  });
+  const auto align = alignment_record(run.records);
   if (align == run.records.end()) {
     // What the loop did instead: its states' cycles and the gate's last reason.
     std::map<std::string, int> states;

@@ -156,6 +156,13 @@ DailyQaReport new_report(const host::PreparedScene& scene, const std::string& ki
   return report;
 }
 
+std::vector<JournalRecord>::const_iterator alignment_record(const std::vector<JournalRecord>& records) {
+  return std::find_if(records.begin(), records.end(), [](const JournalRecord& c) {
+    return c.previous_state == static_cast<std::uint8_t>(host::TrackingState::kAlign) &&
+           c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
+  });
+}
+
 bool is_room(const host::PreparedScene& scene) {
   return host::actuator_is_device(scene.scene);
 }
@@ -182,15 +189,10 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
   auto aligned = run(standing_still(scene, none), session_options(scene, options, align_cycles, false),
                      options.interrupted, pool, {}, RunEnd::kAlignmentDecided);
   if (!aligned.ok()) return aligned.status().with_context("aligning the phantom before the shift");
-  const auto setup =
-      std::find_if(aligned->records.begin(), aligned->records.end(), [](const JournalRecord& c) {
-        return c.previous_state == static_cast<std::uint8_t>(host::TrackingState::kAlign) &&
-               c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
-      });
-  const bool interrupted = options.interrupted != nullptr && options.interrupted->load();
+  const auto setup = alignment_record(aligned->records);
   if (setup == aligned->records.end()) {
     // No set-up move was sent: the couch stands where it stood.
-    if (interrupted)
+    if (interrupted(options))
       return failed_precondition(std::string(kInterrupted) + " before the shift: the couch was not moved");
     return failed_precondition(fmt::format(
         "the loop could not align the phantom before the shift in {} cycles ({}; the gate: {}): the couch "
@@ -210,7 +212,7 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
   const tracking::Vector6d aligned_at = Eigen::Map<const tracking::Vector6d>(setup->readback) + setup_move;
   LFTRACK_RETURN_IF_ERROR(move_couch_to(scene, aligned_at, couch_move_timeout_s(scene.scene, setup_move))
                               .with_context("the alignment's set-up move before the shift"));
-  if (interrupted || (options.interrupted != nullptr && options.interrupted->load()))
+  if (interrupted(options))
     return failed_precondition(std::string(kInterrupted) +
                                " before the shift: the alignment's set-up move was made, the shift was not");
   auto before = move_couch_by(scene, shift, couch_move_timeout_s(scene.scene, shift), options.interrupted);

@@ -22,6 +22,15 @@ struct RecordedRun {
   std::optional<tracking::Vector6d> couch_before;
 };
 
+// Whether the operator has interrupted the QA (options.interrupted set).
+inline bool interrupted(const DailyQaOptions& options) {
+  return options.interrupted != nullptr && options.interrupted->load();
+}
+// The record of the cycle that ended the alignment with its set-up move (ALIGN to TRACK); end()
+// if the run never aligned.
+std::vector<host::JournalRecord>::const_iterator alignment_record(
+    const std::vector<host::JournalRecord>& records);
+
 // A report of `kind` ("daily", "e2e") for `scene`, started now: the scene, the room's fingerprint,
 // the times.
 DailyQaReport new_report(const host::PreparedScene& scene, const std::string& kind);
