@@ -298,6 +298,9 @@ Status run(const SimOptions& o) {
     if (const std::string caveat = simulated_accuracy_caveat(*prepared->ct); !caveat.empty() && frames_are_simulated(prepared->scene))
       j["accuracy_caveat"] = caveat;
     j["period_ms"] = prepared->scene.loop.period_ms;
+    j["plans"] = {{"align", prepared->scene.loop.align_plan},
+                  {"track", prepared->scene.loop.track_plan},
+                  {"similarity", prepared->scene.registration.similarity}};
     j["simulated_clock"] = o.fast;
     j["realtime"] = report->summary();
     if (!journal.empty()) j["journal"] = journal;

@@ -207,6 +207,11 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.announce_holds = o.announce_holds;
   warn_if_prediction_window_short(settings);
   warn_if_beam_wait_short(p.scene);
+  spdlog::info("registration plans: align {}, track {}{}", p.scene.loop.align_plan, p.scene.loop.track_plan,
+               p.scene.default_plans_because.empty()
+                   ? std::string()
+                   : " (the default for " + p.scene.default_plans_because +
+                         "; a scene names its own in loop.align_plan and loop.track_plan)");
   std::string floors_from;
   auto verdict = scene_verdict_limits(p, p.scene.registration.similarity, &floors_from);
   if (!verdict.ok()) return verdict.status();

@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_default_plans.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/similarity.hpp"
@@ -228,6 +229,7 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
   if (root["motion"]) LFTRACK_RETURN_IF_ERROR(parse_motion(root["motion"], &scene.motion));
   if (!(root["safety"] && root["safety"]["envelope_edge_mm"]))
     scene.verdict_checks.envelope_edge_mm = VerdictChecksSpec::kEnvelopeEdgeFraction * scene.envelope.translation_mm;
+  choose_unnamed_plans(root, &scene);
   return scene;
 }
 
@@ -271,6 +273,23 @@ Status SceneParser::one_of(const YAML::Node& n, const std::string& what,
   std::string list;
   for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
   return error(n, "unknown " + what + " '" + *out + "' (known: " + list + ")");
+}
+
+void SceneParser::choose_unnamed_plans(const YAML::Node& root, Scene* scene) {
+  const auto named = [&](const char* section, const char* key) {
+    return root[section] && root[section].IsMap() && root[section][key];
+  };
+  const DefaultPlans defaults = default_plans(*scene);
+  bool defaulted = false;
+  const auto take = [&](bool is_named, const std::string& value, std::string* plan) {
+    if (is_named) return;
+    *plan = value;
+    defaulted = true;
+  };
+  take(named("tracking", "plan"), defaults.plan, &scene->registration.plan);
+  take(named("loop", "align_plan"), defaults.align_plan, &scene->loop.align_plan);
+  take(named("loop", "track_plan"), defaults.track_plan, &scene->loop.track_plan);
+  if (defaulted) scene->default_plans_because = defaults.because;
 }
 
 Status SceneParser::parse_registration(const YAML::Node& t, RegistrationSpec* r) const {

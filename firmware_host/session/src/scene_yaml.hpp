@@ -172,6 +172,8 @@ class SceneParser {
   Status one_of(const YAML::Node& n, const std::string& what, const std::vector<std::string>& known,
                 std::string* out) const;
   Status parse_registration(const YAML::Node& t, RegistrationSpec* r) const;
+  // The plans the scene does not name, from what its frames are (scene_default_plans.hpp).
+  static void choose_unnamed_plans(const YAML::Node& root, Scene* scene);
   Status parse_fiducials(const YAML::Node& n, FiducialSpec* f) const;
   Result<Scene> parse(const std::string& yaml_text);
   // The scene's `room: FILE` (scene_room.cpp): the room file's sections (detectors, tracking, sim,
