@@ -5,7 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <functional>
 
-#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
@@ -68,7 +68,7 @@ void print_trade_front(const TradeStudy& study);
 void print_realism_table(const RealismReport& report);
 
 // `lftrack sim --chaos SEED` (cmd_chaos.cpp).
-Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json);
+Status run_chaos_command(const SceneOptions& scene, const chaos::ChaosOptions& options, bool json);
 
 Command add_info_command(CLI::App* parent);
 Command add_drr_command(CLI::App* parent);

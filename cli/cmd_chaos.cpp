@@ -11,7 +11,7 @@
 #include <cstdio>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
@@ -25,7 +25,7 @@ extern "C" void on_chaos_interrupt(int) {
   g_interrupt.store(true);
 }
 
-void print_report(const ChaosReport& r) {
+void print_report(const chaos::ChaosReport& r) {
   std::printf("chaos soak, seed %llu: %lld cycles in %lld segments (%lld over Modbus, %lld over CAN), %.0f s%s\n",
               static_cast<unsigned long long>(r.seed), static_cast<long long>(r.cycles),
               static_cast<long long>(r.segments), static_cast<long long>(r.modbus_segments),
@@ -33,8 +33,9 @@ void print_report(const ChaosReport& r) {
   std::int64_t total = 0;
   for (std::int64_t n : r.injected) total += n;
   std::printf("faults injected: %lld\n", static_cast<long long>(total));
-  for (std::size_t k = 0; k < kChaosFaultKinds; ++k)
-    std::printf("  %-24s %lld\n", to_string(static_cast<ChaosFault>(k)), static_cast<long long>(r.injected[k]));
+  for (std::size_t k = 0; k < chaos::kChaosFaultKinds; ++k)
+    std::printf("  %-24s %lld\n", to_string(static_cast<chaos::ChaosFault>(k)),
+                static_cast<long long>(r.injected[k]));
   std::printf("states at cycle end:");
   for (std::size_t s = 0; s < r.states.size(); ++s)
     if (r.states[s] > 0)
@@ -49,19 +50,19 @@ void print_report(const ChaosReport& r) {
               static_cast<long long>(r.cycles_checked), static_cast<long long>(r.journal_records),
               r.journal_dir.string().c_str());
   std::printf("invariant violations: %lld\n", static_cast<long long>(r.violation_count));
-  for (const ChaosViolation& v : r.violations)
+  for (const chaos::ChaosViolation& v : r.violations)
     std::printf("  segment %lld, cycle %lld: %s\n", static_cast<long long>(v.segment),
                 static_cast<long long>(v.cycle), v.what.c_str());
 }
 
 }  // namespace
 
-Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options, bool json) {
-  LFTRACK_RETURN_IF_ERROR(check_chaos_options(options));
+Status run_chaos_command(const SceneOptions& scene, const chaos::ChaosOptions& options, bool json) {
+  LFTRACK_RETURN_IF_ERROR(chaos::check_chaos_options(options));
   tracking::ThreadPool pool(scene.threads);
   auto prepared = load_prepared_scene(scene, &pool);
   if (!prepared.ok()) return prepared.status();
-  ChaosOptions o = options;
+  chaos::ChaosOptions o = options;
   if (!json)
     o.progress = [](std::int64_t done, std::int64_t total) {
       if (total > 0)
@@ -83,7 +84,7 @@ Status run_chaos_command(const SceneOptions& scene, const ChaosOptions& options,
   action.sa_handler = on_chaos_interrupt;
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
-  auto report = run_chaos_soak(*prepared, o, &pool);
+  auto report = chaos::run_chaos_soak(*prepared, o, &pool);
   spdlog::set_level(level);
   if (!report.ok()) return report.status();
   if (json)

@@ -14,7 +14,7 @@
 #include <optional>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/preflight.hpp"
@@ -54,7 +54,7 @@ struct SimOptions {
   bool monitor_token_quiet = false;  // the token in its file only, not on standard output
   std::string igtl;      // --igtl [ADDRESS:]PORT: the OpenIGTLink server
   std::optional<std::uint64_t> chaos_seed;  // `lftrack sim --chaos SEED`: the chaos soak instead
-  ChaosOptions chaos;
+  lftrack::chaos::ChaosOptions chaos;
   enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
 };
 

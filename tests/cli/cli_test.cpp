@@ -519,6 +519,9 @@ TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
     cycles_in_states += j["states"][state].get<int>();
   EXPECT_EQ(cycles_in_states, 20);
   EXPECT_TRUE(j["aligned"].get<bool>());
+  EXPECT_EQ(j["plans"]["align"], "quadratic");  // the built-in scene names its plans
+  EXPECT_EQ(j["plans"]["track"], "warm");
+  EXPECT_EQ(j["plans"]["similarity"], "mi");
   std::string exported;
   ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", journal.string(), "--csv"}, &exported).ok());
   EXPECT_EQ(std::count(exported.begin(), exported.end(), '\n'), 21) << "a header and one line per cycle";

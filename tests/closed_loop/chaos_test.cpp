@@ -8,11 +8,18 @@
 #include <limits>
 #include <memory>
 
-#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
 namespace {
+
+using chaos::ChaosFault;
+using chaos::ChaosOptions;
+using chaos::ChaosReport;
+using chaos::check_chaos_options;
+using chaos::kChaosFaultKinds;
+using chaos::run_chaos_soak;
 
 // The session's couch, except that read-back number `nan_at` reports a NaN position.
 class NanReadback final : public drivers::ForwardingActuator {

@@ -20,6 +20,7 @@
 #include <cstring>
 #include <vector>
 
+#include "filling_disk.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
@@ -465,31 +466,19 @@ TEST_F(ClosedLoop, ARefusedSetUpMoveIsAnAlignmentThatFailedAndTheResumeAlignsAga
 namespace lftrack::host {
 namespace {
 
-std::atomic<long long> g_journal_bytes_left{0};
-ssize_t full_after_budget(int fd, const void* data, std::size_t bytes) {
-  const long long left = g_journal_bytes_left.load();
-  if (left <= 0) {
-    // A disk slow to say it is full: the writer thread learns of it long after the cycle that
-    // queued the record (on the simulated clock, many cycles later unless the loop waits).
-    std::this_thread::sleep_for(std::chrono::milliseconds(700));
-    errno = ENOSPC;
-    return -1;
-  }
-  const std::size_t n = std::min<std::size_t>(bytes, static_cast<std::size_t>(left));
-  g_journal_bytes_left -= static_cast<long long>(n);
-  return ::write(fd, data, n);
-}
-
 // A treatment is not run unrecorded: when the journal's disk fills up, the loop holds, and
 // every record written before the failure is still readable. On the simulated clock the hold
 // comes at the cycle after the record that failed, however slow the disk is to say so and however
 // the writer thread is scheduled (a loaded CI host once let the loop run past its 40th cycle).
 TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
   constexpr std::size_t kFrame = 8 + sizeof(JournalRecord) + 4;
-  g_journal_bytes_left = 32 + 20 * kFrame + 10;  // 20 cycles, then the disk is full
   LoopSessionOptions options;
   options.journal = dir_.path() / "journal.lfj";
-  options.journal_options.write_call = &full_after_budget;
+  // 20 cycles, then the disk is full, and slow to say so: the writer thread learns of it long
+  // after the cycle that queued the record (on the simulated clock, many cycles later unless the
+  // loop waits).
+  options.journal_options.sink =
+      std::make_shared<test::FillingDisk>(32 + 20 * kFrame + 10, std::chrono::milliseconds(700));
   options.journal_options.fsync_interval_ms = 10;
   auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
   ASSERT_TRUE(prepared.ok());

@@ -22,6 +22,7 @@
 #include <random>
 #include <thread>
 
+#include "filling_disk.hpp"
 #include "lftrack/loop/crc32c.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/records/journal_reader.hpp"
@@ -140,26 +141,12 @@ TEST(Journal, TheHeaderKeepsTheScenesFingerprint) {
   }
 }
 
-// A disk that fills up: write(2) takes bytes until a budget is spent (the last write partly),
-// then fails with ENOSPC, as a real file system does.
-std::atomic<long long> g_disk_bytes_left{0};
-ssize_t filling_disk_write(int fd, const void* data, std::size_t bytes) {
-  const long long left = g_disk_bytes_left.load();
-  if (left <= 0) {
-    errno = ENOSPC;
-    return -1;
-  }
-  const std::size_t n = std::min<std::size_t>(bytes, static_cast<std::size_t>(left));
-  g_disk_bytes_left -= static_cast<long long>(n);
-  return ::write(fd, data, n);
-}
-
 TEST(Journal, ADiskThatFillsUpKeepsEveryRecordWrittenBeforeAndSaysSo) {
   test::TempDir dir;
   const auto file = dir.path() / "cycles.journal";
-  g_disk_bytes_left = 32 + 100 * kFrame + kFrame / 2;  // header, 100 records and half of one
   JournalOptions options;
-  options.write_call = &filling_disk_write;
+  options.sink = std::make_shared<test::FillingDisk>(32 + 100 * kFrame +
+                                                     kFrame / 2);  // header, 100 records and half of one
   auto w = JournalWriter::open(file, options);
   ASSERT_TRUE(w.ok()) << w.status().message();
   for (std::uint64_t i = 0; i < 100; ++i) ASSERT_TRUE((*w)->append(record(i)));
@@ -184,23 +171,27 @@ TEST(Journal, ADiskThatFillsUpKeepsEveryRecordWrittenBeforeAndSaysSo) {
 
 // A disk that takes its time: each write waits 300 ms; the header's and
 // the first record's succeed, later ones fail (ENOSPC).
-std::atomic<int> g_slow_writes{0};
-ssize_t slow_then_full_write(int fd, const void* data, std::size_t bytes) {
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  if (++g_slow_writes > 2) {
-    errno = ENOSPC;
-    return -1;
+class SlowThenFullDisk final : public JournalSink {
+ public:
+  ssize_t write(int fd, const void* data, std::size_t bytes) override {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    if (++writes_ > 2) {
+      errno = ENOSPC;
+      return -1;
+    }
+    return ::write(fd, data, bytes);
   }
-  return ::write(fd, data, bytes);
-}
+
+ private:
+  std::atomic<int> writes_{0};
+};
 
 // wait_taken: once it returns true, every record appended before is written or known lost, and
 // failed() tells which; with a short limit it returns false while the writer still works.
 TEST(Journal, WaitTakenReturnsOnceTheWriterHasFinishedWithEveryRecord) {
   test::TempDir dir;
-  g_slow_writes = 0;
   JournalOptions options;
-  options.write_call = &slow_then_full_write;
+  options.sink = std::make_shared<SlowThenFullDisk>();
   auto w = JournalWriter::open(dir.path() / "j", options);
   ASSERT_TRUE(w.ok()) << w.status().message();
   EXPECT_TRUE((*w)->wait_taken(std::chrono::milliseconds(0))) << "nothing appended: nothing to wait for";

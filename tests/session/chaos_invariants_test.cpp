@@ -8,12 +8,17 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/chaos_invariants.hpp"
+#include "lftrack/chaos/chaos_invariants.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
 namespace lftrack::host {
 namespace {
+
+using chaos::ActuatorCalls;
+using chaos::CycleInjection;
+using chaos::InvariantChecker;
+using chaos::OperatorAction;
 
 constexpr double kPeriodS = 0.1;
 

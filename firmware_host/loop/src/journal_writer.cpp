@@ -36,10 +36,10 @@ void encode(const JournalRecord& r, unsigned char* out) {
   std::memcpy(out + 8 + sizeof r, &crc, 4);
 }
 
-bool write_all(ssize_t (*write_call)(int, const void*, std::size_t), int fd, const unsigned char* p,
-               std::size_t n) {
+// Writes all of `p` to the sink (null: the file), retrying short writes and EINTR.
+bool write_all(JournalSink* sink, int fd, const unsigned char* p, std::size_t n) {
   while (n > 0) {
-    const ssize_t w = write_call(fd, p, n);
+    const ssize_t w = sink != nullptr ? sink->write(fd, p, n) : ::write(fd, p, n);
     if (w == 0) return false;
     if (w < 0) {
       if (errno == EINTR) continue;
@@ -122,7 +122,7 @@ Result<std::unique_ptr<JournalWriter>> JournalWriter::open(const std::filesystem
   std::memcpy(header + 12, &record_size, 4);
   static_assert(kHeaderBytes >= 16 + sizeof options.scene_fingerprint);
   std::memcpy(header + 16, options.scene_fingerprint.data(), options.scene_fingerprint.size());
-  if (!write_all(options.write_call, fd, header, kHeaderBytes) || ::fdatasync(fd) != 0) {
+  if (!write_all(options.sink.get(), fd, header, kHeaderBytes) || ::fdatasync(fd) != 0) {
     ::close(fd);
     return io_error(file.string() + ": cannot write the journal header: " + std::strerror(errno));
   }
@@ -169,7 +169,7 @@ void JournalWriter::run() {
     if (n > 0 && write_failed_.load(std::memory_order_relaxed)) {
       lost_ += n;  // after a failure nothing more is written: the file stays readable
     } else if (n > 0) {
-      if (write_all(options_.write_call, fd_, batch.data(), kFrameBytes * n)) {
+      if (write_all(options_.sink.get(), fd_, batch.data(), kFrameBytes * n)) {
         good_bytes_ += static_cast<off_t>(kFrameBytes * n);
         written_ += n;
         dirty = true;

@@ -26,6 +26,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -96,6 +97,16 @@ struct JournalRecord {
 };
 static_assert(std::is_trivially_copyable_v<JournalRecord>);
 
+// Where the writer thread's bytes go. The journal's file itself by default; a disk that fills up
+// or fails (the tests, the chaos soak) is a sink of their own, injected through JournalOptions.
+// Called from the writer thread only, never from the cycle.
+class JournalSink {
+ public:
+  virtual ~JournalSink() = default;
+  // As write(2) on the journal's descriptor: the bytes written, or -1 with errno set.
+  virtual ssize_t write(int fd, const void* data, std::size_t bytes) = 0;
+};
+
 struct JournalOptions {
   std::size_t queue_capacity = 4096;  // records; 6.8 minutes at 10 Hz of a stalled disk
   int fsync_interval_ms = 1000;
@@ -105,9 +116,8 @@ struct JournalOptions {
   // Instead of refusing an existing file, take the next free name: NAME-2.EXT, NAME-3.EXT, ...
   // (for default, time-stamped names).
   bool add_suffix = false;
-  // The write(2) the writer thread calls: the kernel's, or a fault injector in tests (a disk
-  // that fills up, an I/O error).
-  ssize_t (*write_call)(int fd, const void* data, std::size_t bytes) = &::write;
+  // Where the bytes go (null: write(2) to the file); the writer keeps it while it runs.
+  std::shared_ptr<JournalSink> sink = nullptr;
   // What the journal records the cycles of, written into the header's last 16 bytes (zeros:
   // not recorded): the session's scene fingerprint, so that an export can refuse a scene other
   // than the one the run used.

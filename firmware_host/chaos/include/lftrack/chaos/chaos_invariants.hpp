@@ -33,10 +33,26 @@
 #include <vector>
 
 #include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/pose.hpp"
 
-namespace lftrack::host {
+namespace lftrack::chaos {
+
+// The loop's vocabulary, which the soak speaks (the loop's types live in lftrack::host).
+using host::GateDecision;
+using host::GateReason;
+using host::JournalRecord;
+using host::kMinHoldBeforeResumeS;
+using host::OperatorCommand;
+using host::OperatorPoll;
+using host::OperatorRefusal;
+using host::OperatorRequest;
+using host::OperatorView;
+using host::SafetyLimits;
+using host::TrackingEvent;
+using host::TrackingState;
 
 // What the actuator was told in one cycle, as its wrapper saw the calls.
 struct ActuatorCalls {
@@ -48,7 +64,7 @@ struct ActuatorCalls {
   // cycles): where the last accepted command took it, or the aligned target of an alignment with
   // nothing to move.
   tracking::Vector6d target_after = tracking::Vector6d::Zero();
-  bool beam_permit = false;   // the device's beam permit after the cycle
+  bool beam_permit = false;  // the device's beam permit after the cycle
   // The cycle's first read-back, the one at the frames' exposure, as the device answered it:
   // whether there was one, and its target less its position (the travel still to make).
   bool have_readback = false;
@@ -66,8 +82,8 @@ struct CycleInjection {
 
 // What the operator did in one cycle, as the soak's operator knows it.
 struct OperatorAction {
-  bool accepted = false;        // a resume or reset it sent was accepted into the poll
-  std::uint32_t named_id = 0;   // the hold id that command named
+  bool accepted = false;       // a resume or reset it sent was accepted into the poll
+  std::uint32_t named_id = 0;  // the hold id that command named
 };
 
 class InvariantChecker {
@@ -92,4 +108,4 @@ class InvariantChecker {
   bool journal_failed_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::chaos

@@ -12,11 +12,9 @@
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/virtual_robot.hpp"
 
-namespace lftrack::host::chaos {
+namespace lftrack::chaos {
 
 namespace {
-
-std::atomic<bool> g_disk_full{false};
 
 bool is_frame_fault(ChaosFault f) {
   return f >= ChaosFault::kFrameLost && f <= ChaosFault::kFrameThrows;
@@ -45,26 +43,23 @@ double uniform(std::mt19937_64& random, double lo, double hi) {
 
 }  // namespace
 
-ssize_t write_or_disk_full(int fd, const void* data, std::size_t bytes) {
-  if (g_disk_full.load(std::memory_order_acquire)) {
+ssize_t DiskThatFills::write(int fd, const void* data, std::size_t bytes) {
+  if (full_.load(std::memory_order_acquire)) {
     errno = ENOSPC;
     return -1;
   }
   return ::write(fd, data, bytes);
 }
 
-void set_disk_full(bool full) {
-  g_disk_full.store(full, std::memory_order_release);
-}
-
 Injector::Injector(std::uint64_t seed, double fault_rate, double period_s, std::int64_t segment_cycles,
-                   const SafetyLimits& limits)
+                   const SafetyLimits& limits, std::shared_ptr<DiskThatFills> journal_disk)
     : random_(seed),
       side_random_(seed ^ 0x9E3779B97F4A7C15ull),
       fault_rate_(fault_rate),
       period_s_(period_s),
       segment_cycles_(segment_cycles),
-      limits_(limits) {}
+      limits_(limits),
+      journal_disk_(std::move(journal_disk)) {}
 
 void Injector::count(ChaosFault f) {
   if (f == ChaosFault::kDiskFull) disk_full_wall_ = std::chrono::steady_clock::now();
@@ -79,16 +74,19 @@ void Injector::inject_can(ChaosFault f) {
   double undo_after_s = 0;      // heartbeat timeout (0.3 s) runs on the real clock
   switch (f) {
     case ChaosFault::kCanBusOff:
-      fault = RobotFault::kBusOff, undo = int(RobotFault::kControllerRestarted), undo_after = 5, undo_after_s = 0.5;
+      fault = RobotFault::kBusOff, undo = int(RobotFault::kControllerRestarted), undo_after = 5,
+      undo_after_s = 0.5;
       break;
     case ChaosFault::kCanErrorPassive:
-      fault = RobotFault::kErrorPassive, undo = int(RobotFault::kErrorActive), undo_after = 5, undo_after_s = 0.5;
+      fault = RobotFault::kErrorPassive, undo = int(RobotFault::kErrorActive), undo_after = 5,
+      undo_after_s = 0.5;
       break;
     case ChaosFault::kCanRobotRestart:
       fault = RobotFault::kRobotRestart;
       break;
     case ChaosFault::kCanHeartbeatLoss:
-      fault = RobotFault::kStopHeartbeat, undo = int(RobotFault::kResumeHeartbeat), undo_after = 20, undo_after_s = 1.0;
+      fault = RobotFault::kStopHeartbeat, undo = int(RobotFault::kResumeHeartbeat), undo_after = 20,
+      undo_after_s = 1.0;
       break;
     default:
       break;
@@ -97,8 +95,9 @@ void Injector::inject_can(ChaosFault f) {
   if (undo >= 0) {
     can_followup_ = undo;
     can_followup_at_ = cycle_ + undo_after;
-    can_followup_wall_ = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                               std::chrono::duration<double>(undo_after_s));
+    can_followup_wall_ =
+        std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                               std::chrono::duration<double>(undo_after_s));
   }
   if (!can_pending_) can_pending_ = PendingCanFault{f, cycle_, std::chrono::steady_clock::now()};
 }
@@ -152,13 +151,13 @@ void Injector::begin_cycle(std::int64_t cycle) {
     count(f);
   } else if (f == ChaosFault::kDiskFull) {
     disk_full_at_ = cycle;
-    set_disk_full(true);
+    journal_disk_->fill();
     count(f);
   } else if (is_modbus_fault(f)) {
-    const sim::CouchServerFault server_fault = f == ChaosFault::kModbusNoReply ? sim::CouchServerFault::kNoReply
-                                               : f == ChaosFault::kModbusException4
-                                                   ? sim::CouchServerFault::kException4
-                                                   : sim::CouchServerFault::kDropConnection;
+    const sim::CouchServerFault server_fault =
+        f == ChaosFault::kModbusNoReply      ? sim::CouchServerFault::kNoReply
+        : f == ChaosFault::kModbusException4 ? sim::CouchServerFault::kException4
+                                             : sim::CouchServerFault::kDropConnection;
     modbus_server_->inject(server_fault, 1, sim::CouchRequestKind::kAny);
     count(f);
   } else if (is_can_fault(f)) {
@@ -227,7 +226,8 @@ drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, driver
       break;
     }
     case ChaosFault::kFrameSkewed:  // views exposed further apart than a pair may be
-      if (frames.size() > 1) frames[1].timestamp_ns += std::int64_t((2.5 * limits.max_pair_skew_ms + 5) * 1e6);
+      if (frames.size() > 1)
+        frames[1].timestamp_ns += std::int64_t((2.5 * limits.max_pair_skew_ms + 5) * 1e6);
       break;
     case ChaosFault::kFrameBlank:
       for (drivers::Frame& f : frames) std::fill(f.pixels.pixels().begin(), f.pixels.pixels().end(), 0);
@@ -251,7 +251,8 @@ drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, driver
   return drivers::DeviceStatus::kOk;
 }
 
-drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correction, drivers::Deadline deadline) {
+drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correction,
+                                             drivers::Deadline deadline) {
   ActuatorCalls& calls = injector_->calls;
   if (!correction.allFinite()) calls.non_finite = true;
   const ChaosFault fault = injector_->take_command_fault();
@@ -356,14 +357,15 @@ void ChaosOperator::poll(const OperatorView& view, OperatorPoll* out) {
     }
     if (!answered_ && view.hold_age_s >= answer_at_s_) {
       OperatorRequest request;
-      request.command = view.state == TrackingState::kHold ? OperatorCommand::kResume : OperatorCommand::kReset;
+      request.command =
+          view.state == TrackingState::kHold ? OperatorCommand::kResume : OperatorCommand::kReset;
       request.names_hold = true;
       request.hold_id = view.hold_id;
       if (mistake_ && random() % 2 == 0)
         request.hold_id = view.hold_id == 999999 ? 100000 : view.hold_id + 1;  // another HOLD's id
       else if (mistake_)
-        request.command = request.command == OperatorCommand::kResume ? OperatorCommand::kReset
-                                                                      : OperatorCommand::kResume;
+        request.command =
+            request.command == OperatorCommand::kResume ? OperatorCommand::kReset : OperatorCommand::kResume;
       const OperatorRefusal why = judge_operator_request(request, view, /*id_required=*/true);
       if (why == OperatorRefusal::kNone) {
         out->accept(request.command);
@@ -393,4 +395,4 @@ void ChaosOperator::poll(const OperatorView& view, OperatorPoll* out) {
   if (view.hold_id != 0) last_hold_id_ = view.hold_id;
 }
 
-}  // namespace lftrack::host::chaos
+}  // namespace lftrack::chaos

@@ -1,4 +1,4 @@
-#include "lftrack/host/chaos_invariants.hpp"
+#include "lftrack/chaos/chaos_invariants.hpp"
 
 #include <cmath>
 #include <string>
@@ -6,7 +6,7 @@
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
-namespace lftrack::host {
+namespace lftrack::chaos {
 
 namespace {
 
@@ -51,8 +51,9 @@ bool held(std::uint8_t state) {
 
 }  // namespace
 
-void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls, const CycleInjection& injected,
-                             const OperatorAction& action, std::vector<std::string>* out) {
+void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
+                             const CycleInjection& injected, const OperatorAction& action,
+                             std::vector<std::string>* out) {
   const auto fail = [&](const std::string& what) {
     out->push_back(*injected.what != '\0' ? what + " (injected: " + injected.what + ")" : what);
   };
@@ -62,7 +63,8 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   const bool reset = r.operator_command == code(OperatorCommand::kReset);
   // The cycle ran in ALIGN (its cold registration is not judged for overruns): it began there, or
   // a reset took it there (through IDLE), or a resume did, from a HOLD before any alignment.
-  const bool ran_in_align = r.previous_state == code(TrackingState::kAlign) || reset || (resumed && !aligned_);
+  const bool ran_in_align =
+      r.previous_state == code(TrackingState::kAlign) || reset || (resumed && !aligned_);
 
   // 6. An accepted resume or reset answers the HOLD or FAULT shown, after the minimum time.
   if (resumed || reset) {
@@ -73,8 +75,8 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
       fail("an accepted " + std::string(resumed ? "resume" : "reset") + " named hold " +
            std::to_string(action.named_id) + ", the loop was in hold " + std::to_string(hold_id_));
     if (double(r.cycle - hold_since_) * period_s_ < kMinHoldBeforeResumeS - 1e-9)
-      fail(std::string(resumed ? "a resume" : "a reset") + " acted on " + std::to_string(r.cycle - hold_since_) +
-           " cycles into its " + (resumed ? "HOLD" : "FAULT"));
+      fail(std::string(resumed ? "a resume" : "a reset") + " acted on " +
+           std::to_string(r.cycle - hold_since_) + " cycles into its " + (resumed ? "HOLD" : "FAULT"));
     needs_operator_ = false;
     if (resumed) step_approved_ = true;
     if (reset) aligned_ = false;  // the loop aligns again before it moves
@@ -119,10 +121,12 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   }
 
   // 4. The beam only in TRACK after APPLY, and only once the patient is in place.
-  if (beam && !(r.state == code(TrackingState::kTrack) && r.gate_decision == std::uint8_t(GateDecision::kApply)))
+  if (beam &&
+      !(r.state == code(TrackingState::kTrack) && r.gate_decision == std::uint8_t(GateDecision::kApply)))
     fail("beam permit outside TRACK after APPLY");
   if (beam && calls.commands_accepted > 0 && beyond_step_limit(limits_, calls.last_command))
-    fail("beam permit in the cycle of a " + mm_deg(translation_mm(calls.last_command), angle_deg(calls.last_command)) +
+    fail("beam permit in the cycle of a " +
+         mm_deg(translation_mm(calls.last_command), angle_deg(calls.last_command)) +
          " move beyond the step limit");
   if (beam && calls.have_readback && beyond_beam_tolerance(limits_, calls.travel_left))
     fail("beam permit while the actuator was still " +
@@ -133,7 +137,8 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
          " from the planned pose");
 
   // 5. No move and no beam between a HOLD or FAULT and the operator's answer.
-  if (needs_operator_ && (sent || beam)) fail("moved or armed the beam after a HOLD without an operator decision");
+  if (needs_operator_ && (sent || beam))
+    fail("moved or armed the beam after a HOLD without an operator decision");
 
   // 7. Each injected fault in its safe state.
   if (injected.frame_fault && (sent || beam)) fail("a frame fault's cycle sent a command or kept the beam");
@@ -159,4 +164,4 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   }
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::chaos

@@ -1,5 +1,5 @@
 #pragma once
-// The chaos soak's parts (chaos_soak.hpp), private to the session library: the injector that
+// The chaos soak's parts (chaos_soak.hpp), private to the chaos library: the injector that
 // draws each cycle's fault from the seed, the frame-source and actuator wrappers that inject it
 // and log what really passed, the operator who answers HOLDs at random, and the journal's
 // disk-full switch.
@@ -8,10 +8,10 @@
 #include <cstdint>
 #include <random>
 
+#include "lftrack/chaos/chaos_invariants.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/drivers/frame_source.hpp"
-#include "lftrack/host/chaos_invariants.hpp"
-#include "lftrack/host/chaos_soak.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 
@@ -21,13 +21,19 @@
 namespace lftrack::sim {
 class ModbusCouchServer;
 class VirtualRobot;
-}
+}  // namespace lftrack::sim
 
-namespace lftrack::host::chaos {
+namespace lftrack::chaos {
 
-// JournalOptions::write_call for a soak: ::write, or ENOSPC once set_disk_full(true).
-ssize_t write_or_disk_full(int fd, const void* data, std::size_t bytes);
-void set_disk_full(bool full);
+// A segment's journal disk: write(2) until the injector fills it, then ENOSPC.
+class DiskThatFills final : public host::JournalSink {
+ public:
+  ssize_t write(int fd, const void* data, std::size_t bytes) override;
+  void fill() { full_.store(true, std::memory_order_release); }
+
+ private:
+  std::atomic<bool> full_{false};
+};
 
 // Draws one fault (or none) per cycle and keeps what met the loop. The frame wrapper starts each
 // cycle (begin_cycle, from request_exposure); the wrappers take the fault of their kind once.
@@ -36,7 +42,7 @@ class Injector {
   // `segment_cycles`: the cycles the segment will run (none is drawn for a later one); the
   // fault sizes (late, skewed, mismatched) are drawn beyond `limits`.
   Injector(std::uint64_t seed, double fault_rate, double period_s, std::int64_t segment_cycles,
-           const SafetyLimits& limits);
+           const SafetyLimits& limits, std::shared_ptr<DiskThatFills> journal_disk);
   const SafetyLimits& limits() const { return limits_; }
   // No fault is drawn for any later cycle (the segment is being stopped).
   void end_draws() { segment_cycles_ = 0; }
@@ -84,8 +90,8 @@ class Injector {
   sim::ModbusCouchServer* modbus_server_ = nullptr;
   sim::VirtualRobot* can_robot_ = nullptr;
   std::optional<PendingCanFault> can_pending_;
-  int can_followup_ = -1;               // a sim::RobotFault that undoes the last one, or -1
-  std::int64_t can_followup_at_ = -1;   // at this cycle, and not before this wall time
+  int can_followup_ = -1;              // a sim::RobotFault that undoes the last one, or -1
+  std::int64_t can_followup_at_ = -1;  // at this cycle, and not before this wall time
   std::chrono::steady_clock::time_point can_followup_wall_{};
   std::int64_t segment_cycles_;
   SafetyLimits limits_;
@@ -93,6 +99,7 @@ class Injector {
   ChaosFault drawn_ = ChaosFault::kCount;
   int stall_cycles_left_ = 0;
   std::int64_t stall_ns_ = 0;
+  std::shared_ptr<DiskThatFills> journal_disk_;  // the segment journal's (never null)
   std::int64_t disk_full_at_ = -1;
   std::chrono::steady_clock::time_point disk_full_wall_{};
 };
@@ -118,7 +125,8 @@ class ChaosFrameSource final : public drivers::FrameSource {
 // order pass through.
 class ChaosActuator final : public drivers::ForwardingActuator {
  public:
-  ChaosActuator(drivers::Actuator* inner, Injector* injector) : ForwardingActuator(inner), injector_(injector) {}
+  ChaosActuator(drivers::Actuator* inner, Injector* injector)
+      : ForwardingActuator(inner), injector_(injector) {}
   drivers::DeviceStatus command(const tracking::Vector6d& correction, drivers::Deadline deadline) override;
   drivers::DeviceStatus readback(drivers::ActuatorState* state, drivers::Deadline deadline) override;
   void hold() override;
@@ -134,7 +142,7 @@ class ChaosActuator final : public drivers::ForwardingActuator {
 // its id; one time in ten first naming another id or sending the other word), retries 0.5 s
 // after a refusal, and now and then sends a stale resume while tracking. Judges like the control
 // socket (judge_operator_request, ids required).
-class ChaosOperator final : public OperatorInput {
+class ChaosOperator final : public host::OperatorInput {
  public:
   explicit ChaosOperator(Injector* injector) : injector_(injector) {}
   void poll(const OperatorView& view, OperatorPoll* out) override;
@@ -149,4 +157,4 @@ class ChaosOperator final : public OperatorInput {
   std::uint32_t last_hold_id_ = 0;
 };
 
-}  // namespace lftrack::host::chaos
+}  // namespace lftrack::chaos

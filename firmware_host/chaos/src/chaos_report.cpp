@@ -4,10 +4,10 @@
 #include <filesystem>
 #include <string>
 
-#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
-namespace lftrack::host {
+namespace lftrack::chaos {
 
 const char* to_string(ChaosFault fault) {
   switch (fault) {
@@ -134,4 +134,4 @@ nlohmann::json to_json(const ChaosReport& r) {
   return j;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::chaos

@@ -24,10 +24,8 @@
 // frame floods, a robot restart and a lost heartbeat; host stalls (overruns, runs of
 // one to four); a full disk under the journal; sudden patient shifts; and an operator who answers
 // each HOLD or FAULT after a random delay (sometimes too soon, sometimes naming another HOLD) and
-// sends stale resumes while tracking.
-//
-// Only one soak may run in a process at a time (the journal's disk-full seam is a plain
-// function pointer, JournalOptions::write_call, so its switch is process-wide).
+// sends stale resumes while tracking. A full disk is each segment's own journal sink
+// (JournalOptions::sink), so soaks in one process do not share it.
 
 #include <array>
 #include <atomic>
@@ -46,7 +44,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::host {
+namespace lftrack::chaos {
 
 enum class ChaosFault : std::uint8_t {
   kFrameLost,             // the pair never arrives (timeout)
@@ -90,7 +88,7 @@ struct ChaosOptions {
   std::int64_t cycles = 20000;         // simulated cycles in all, over every segment; 0: until interrupted
   std::int64_t segment_cycles = 2000;  // the longest segment (a treatment session), cycles
   double fault_rate = 0.03;            // per cycle: the chance that a fault is injected
-  bool hil_segments = true;  // every third segment over Modbus, every third over CAN (else none)
+  bool hil_segments = true;            // every third segment over Modbus, every third over CAN (else none)
   // The soak's journals go to a folder of its own in here, chaos-SEED-N (the first N free), one
   // segment-NNNNNN.lfj each (required).
   std::filesystem::path journal_dir;
@@ -116,10 +114,10 @@ struct ChaosReport {
   std::int64_t cycles_checked = 0;  // cycles whose record the invariants were checked on
   bool interrupted = false;
   std::filesystem::path journal_dir;  // this soak's folder of journals
-  std::int64_t segments = 0;  // of which over Modbus and over CAN:
+  std::int64_t segments = 0;          // of which over Modbus and over CAN:
   std::int64_t modbus_segments = 0, can_segments = 0;
-  std::array<std::int64_t, kChaosFaultKinds> injected{};  // faults that met the loop, per kind
-  std::array<std::int64_t, 5> states{};                   // cycles ending in each TrackingState
+  std::array<std::int64_t, kChaosFaultKinds> injected{};           // faults that met the loop, per kind
+  std::array<std::int64_t, 5> states{};                            // cycles ending in each TrackingState
   std::int64_t commands = 0, holds = 0, faults = 0, overruns = 0;  // holds, faults: entries into them
   std::int64_t resumes_accepted = 0, resets_accepted = 0, operator_refused = 0;
   std::int64_t journal_records = 0;  // read back from the segments' journals and checked
@@ -132,7 +130,7 @@ nlohmann::json to_json(const ChaosReport& report);
 // Runs the soak on `scene` (a scene with simulated detectors and a virtual couch). Fails only on
 // what stops it from running (a session that cannot be created); invariant violations are the
 // report's, not an error.
-Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOptions& options,
+Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const ChaosOptions& options,
                                    tracking::ThreadPool* pool);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::chaos

@@ -1,11 +1,11 @@
-#include "lftrack/host/chaos_soak.hpp"
+#include "lftrack/chaos/chaos_soak.hpp"
 
 #include <spdlog/spdlog.h>
 
 #include <atomic>
 #include <chrono>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <exception>
 #include <memory>
 #include <random>
@@ -15,27 +15,37 @@
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/records/journal_reader.hpp"
 
-namespace lftrack::host {
+namespace lftrack::chaos {
+
+using host::ActuatorSpec;
+using host::HilProtocol;
+using host::LoopSession;
+using host::LoopSessionOptions;
+using host::PreparedScene;
+using host::read_journal;
 
 namespace {
 
 constexpr std::size_t kViolationsKept = 100;
-constexpr std::int64_t kCyclesAfterDiskFull = 30;  // after the writer failed: the segment's safe state is final
-constexpr std::int64_t kCyclesToHoldOnCan = 50;    // and kWallToHoldOnCan: heartbeats time out on the real clock
+constexpr std::int64_t kCyclesAfterDiskFull =
+    30;  // after the writer failed: the segment's safe state is final
+constexpr std::int64_t kCyclesToHoldOnCan =
+    50;  // and kWallToHoldOnCan: heartbeats time out on the real clock
 constexpr std::chrono::seconds kWallToHoldOnCan{3};
 constexpr std::chrono::seconds kWriterMustFailWithin{10};  // a full disk the journal writer never meets
 
 void add_violation(ChaosReport* report, std::int64_t segment, std::int64_t cycle, std::string what) {
   ++report->violation_count;
-  if (report->violations.size() < kViolationsKept) report->violations.push_back({segment, cycle, std::move(what)});
+  if (report->violations.size() < kViolationsKept)
+    report->violations.push_back({segment, cycle, std::move(what)});
 }
 
 // Watches one segment's cycles: the invariants, the tallies, a CAN fault's HOLD, the end of a
 // segment whose disk is full, and the operator's interrupt.
-class SegmentObserver final : public CycleObserver {
+class SegmentObserver final : public host::CycleObserver {
  public:
-  SegmentObserver(const PreparedScene& scene, chaos::Injector* injector, ChaosReport* report, std::int64_t segment,
-                  const std::atomic<bool>* interrupt)
+  SegmentObserver(const PreparedScene& scene, chaos::Injector* injector, ChaosReport* report,
+                  std::int64_t segment, const std::atomic<bool>* interrupt)
       : checker_(scene.scene.safety, 1e-3 * scene.scene.loop.period_ms),
         injector_(injector),
         report_(report),
@@ -78,7 +88,8 @@ class SegmentObserver final : public CycleObserver {
   void check_can_fault(const JournalRecord& r) {
     const auto& pending = injector_->can_fault_pending();
     if (!pending) return;
-    const bool held = r.state == std::uint8_t(TrackingState::kHold) || r.state == std::uint8_t(TrackingState::kFault);
+    const bool held =
+        r.state == std::uint8_t(TrackingState::kHold) || r.state == std::uint8_t(TrackingState::kFault);
     const bool actuator_reason = r.gate_reason == std::uint8_t(GateReason::kActuatorFault) ||
                                  r.gate_reason == std::uint8_t(GateReason::kCommandRefused);
     if (held && actuator_reason) {
@@ -134,10 +145,12 @@ class SegmentObserver final : public CycleObserver {
 Status check_chaos_scene(const PreparedScene& p) {
   const ActuatorSpec& a = p.scene.actuator;
   if (a.type == "none")
-    return invalid_argument("chaos: the scene has no actuator (actuator.type none); the soak needs a couch or robot");
+    return invalid_argument(
+        "chaos: the scene has no actuator (actuator.type none); the soak needs a couch or robot");
   if (a.mounting || a.calibration)
-    return invalid_argument("chaos: the scene's couch has a mounting or calibration; the soak checks commands in the "
-                            "room's axes and needs a couch on them");
+    return invalid_argument(
+        "chaos: the scene's couch has a mounting or calibration; the soak checks commands in the "
+        "room's axes and needs a couch on them");
   return {};
 }
 
@@ -152,7 +165,8 @@ Result<std::filesystem::path> claim_run_folder(const std::filesystem::path& pare
     if (std::filesystem::create_directory(run, ec)) return run;
     if (ec) return io_error("chaos: cannot create " + run.string() + ": " + ec.message());
   }
-  return io_error("chaos: 9999 soaks of seed " + std::to_string(seed) + " in " + parent.string() + " already");
+  return io_error("chaos: 9999 soaks of seed " + std::to_string(seed) + " in " + parent.string() +
+                  " already");
 }
 
 // Sudden shifts of the patient, drawn for a segment of `cycles`: at any cycle with the chance of
@@ -195,8 +209,8 @@ void check_journal(const std::filesystem::path& path, std::int64_t cycles_seen, 
   if (journal->damaged()) add_violation(report, segment, -1, "journal damaged: " + path.string());
   if (!disk_full && std::int64_t(records.size()) != cycles_seen)
     add_violation(report, segment, -1,
-                  "journal holds " + std::to_string(records.size()) + " records for " + std::to_string(cycles_seen) +
-                      " cycles");
+                  "journal holds " + std::to_string(records.size()) + " records for " +
+                      std::to_string(cycles_seen) + " cycles");
   if (disk_full && std::int64_t(records.size()) > cycles_seen)
     add_violation(report, segment, -1, "journal holds more records than cycles");
   for (std::size_t i = 1; i < records.size(); ++i) {
@@ -209,7 +223,7 @@ void check_journal(const std::filesystem::path& path, std::int64_t cycles_seen, 
 
 }  // namespace
 
-Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOptions& options,
+Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const ChaosOptions& options,
                                    tracking::ThreadPool* pool) {
   LFTRACK_RETURN_IF_ERROR(check_chaos_options(options));
   LFTRACK_RETURN_IF_ERROR(check_chaos_scene(scene));
@@ -223,9 +237,10 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
   report.journal_dir = *run_folder;
   std::int64_t done = 0;
   const auto interrupted = [&] { return options.interrupt != nullptr && options.interrupt->load(); };
-  for (std::int64_t segment = 0; (options.cycles == 0 || done < options.cycles) && !interrupted(); ++segment) {
-    const std::int64_t cycles =
-        options.cycles == 0 ? options.segment_cycles : std::min(options.segment_cycles, options.cycles - done);
+  for (std::int64_t segment = 0; (options.cycles == 0 || done < options.cycles) && !interrupted();
+       ++segment) {
+    const std::int64_t cycles = options.cycles == 0 ? options.segment_cycles
+                                                    : std::min(options.segment_cycles, options.cycles - done);
     const bool modbus = options.hil_segments && segment % 3 == 2;
     const bool can = options.hil_segments && segment % 3 == 1;
     std::mt19937_64 segment_random(options.seed * 1'000'003 + std::uint64_t(segment));
@@ -242,20 +257,22 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
     char name[32];
     std::snprintf(name, sizeof name, "segment-%06lld.lfj", static_cast<long long>(segment));
     so.journal = *run_folder / name;
-    so.journal_options.write_call = &chaos::write_or_disk_full;
+    // The segment's own disk, which the injector may fill; the journal's writer keeps it.
+    const auto journal_disk = std::make_shared<chaos::DiskThatFills>();
+    so.journal_options.sink = journal_disk;
     so.hil = modbus ? HilProtocol::kModbus : can ? HilProtocol::kCan : HilProtocol::kNone;
     // The invariants read the ROI windows, the gate and the journal, never the rest of a
     // detector: frames of the windows alone (the rest of the built-in detectors costs about
     // 4 ms a pair, 80 s of a 20,000-cycle soak).
     so.frames.detectors.whole_detector = false;
-    chaos::set_disk_full(false);
 
     // The wrappers are made when the session asks for them (it builds the devices they wrap);
     // everything here is declared before the session, so it outlives it.
     auto injector = std::make_unique<chaos::Injector>(segment_random(), options.fault_rate, period_s, cycles,
-                                                      scene.scene.safety);
+                                                      scene.scene.safety, journal_disk);
     auto operator_input = std::make_unique<chaos::ChaosOperator>(injector.get());
-    auto observer = std::make_unique<SegmentObserver>(patient, injector.get(), &report, segment, options.interrupt);
+    auto observer =
+        std::make_unique<SegmentObserver>(patient, injector.get(), &report, segment, options.interrupt);
     std::unique_ptr<chaos::ChaosFrameSource> frames;
     std::unique_ptr<chaos::ChaosActuator> actuator;
     so.hooks.wrap_frames = [&](drivers::FrameSource* inner) -> drivers::FrameSource* {
@@ -283,7 +300,8 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
     bool threw = false;
     try {
       auto summary = (*session)->run();
-      if (!summary.ok()) add_violation(&report, segment, -1, "the loop failed: " + summary.status().message());
+      if (!summary.ok())
+        add_violation(&report, segment, -1, "the loop failed: " + summary.status().message());
     } catch (const std::exception& e) {
       threw = true;
       if (!injector->threw)
@@ -299,7 +317,6 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
       if (shifts[i].time_s < double(observer->cycles_seen()) * period_s)
         ++report.injected[std::size_t(ChaosFault::kPatientShift)];
     check_journal(journal, observer->cycles_seen(), injector->disk_full_injected(), segment, &report);
-    chaos::set_disk_full(false);
     // The cycle that threw ran too, up to the throw; it has no record.
     const std::int64_t cycles_run = observer->cycles_seen() + (threw ? 1 : 0);
     report.cycles += cycles_run;
@@ -313,4 +330,4 @@ Result<ChaosReport> run_chaos_soak(const PreparedScene& scene, const ChaosOption
   return report;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::chaos

@@ -1,0 +1,206 @@
+#include "lftrack/loop/correlation_model.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace lftrack::host {
+namespace {
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+// The smallest eigenvalue of the standardised normal equations, per pair, that still makes a fit:
+// below it two terms explain the same thing (the pairs sampled one breath phase only).
+constexpr double kMinEigenvaluePerPair = 1e-6;
+
+bool finite(const SurrogateSample& s) {
+  return std::isfinite(s.amplitude) && std::isfinite(s.rate_per_s);
+}
+
+int terms_of(const CorrelationModelSpec& spec) {
+  return 2 + (spec.order == CorrelationModelSpec::Order::kQuadratic ? 1 : 0) + (spec.hysteresis ? 1 : 0);
+}
+
+}  // namespace
+
+Status check_correlation_model_spec(const CorrelationModelSpec& spec) {
+  if (spec.window < 4 || spec.window > CorrelationModel::kCapacity)
+    return invalid_argument("correlation model: window must be 4.." +
+                            std::to_string(CorrelationModel::kCapacity) + " pairs");
+  if (spec.min_pairs < terms_of(spec) + 2 || spec.min_pairs > spec.window)
+    return invalid_argument("correlation model: min_pairs must be at least the model's terms + 2 (" +
+                            std::to_string(terms_of(spec) + 2) + ") and at most the window (" +
+                            std::to_string(spec.window) + ")");
+  if (!(spec.min_span_s >= 0 && spec.min_span_s <= 600))
+    return invalid_argument("correlation model: min_span_s must be 0..600 s");
+  if (!(spec.tolerance_mm > 0 && spec.tolerance_mm <= 20))
+    return invalid_argument("correlation model: tolerance_mm must be in (0, 20] mm");
+  return {};
+}
+
+bool SurrogateStream::push(std::int64_t t_ns, double amplitude) {
+  if (!std::isfinite(amplitude) || (count_ > 0 && t_ns <= t_ns_[std::size_t(count_ - 1)])) return false;
+  if (count_ == kCapacity) {
+    std::move(t_ns_.begin() + 1, t_ns_.end(), t_ns_.begin());
+    std::move(amplitude_.begin() + 1, amplitude_.end(), amplitude_.begin());
+    --count_;
+  }
+  t_ns_[std::size_t(count_)] = t_ns;
+  amplitude_[std::size_t(count_)] = amplitude;
+  ++count_;
+  return true;
+}
+
+bool SurrogateStream::newest(SurrogateSample* sample) const {
+  if (count_ == 0) return false;
+  const std::int64_t t_last = t_ns_[std::size_t(count_ - 1)];
+  *sample = {t_last, amplitude_[std::size_t(count_ - 1)], 0.0};
+  // The slope about the window's mean time (times relative to the newest: exact in double).
+  double n = 0, sum_t = 0, sum_a = 0;
+  int first = count_ - 1;
+  while (first > 0 && 1e-9 * double(t_last - t_ns_[std::size_t(first - 1)]) <= rate_window_s_) --first;
+  for (int i = first; i < count_; ++i) {
+    n += 1;
+    sum_t += 1e-9 * double(t_ns_[std::size_t(i)] - t_last);
+    sum_a += amplitude_[std::size_t(i)];
+  }
+  if (n < 3) return false;
+  const double mean_t = sum_t / n, mean_a = sum_a / n;
+  double stt = 0, sta = 0;
+  for (int i = first; i < count_; ++i) {
+    const double dt = 1e-9 * double(t_ns_[std::size_t(i)] - t_last) - mean_t;
+    stt += dt * dt;
+    sta += dt * (amplitude_[std::size_t(i)] - mean_a);
+  }
+  if (!(stt > 0)) return false;
+  sample->rate_per_s = sta / stt;
+  return true;
+}
+
+CorrelationModel::CorrelationModel(const CorrelationModelSpec& spec)
+    : spec_(spec), last_check_error_mm_(kNan) {
+  spec_.window = std::clamp(spec_.window, 4, kCapacity);
+}
+
+void CorrelationModel::reset() {
+  count_ = 0;
+  misses_in_a_row_ = 0;
+  ready_ = false;
+  not_ready_ = "no pairs yet";
+  last_check_error_mm_ = kNan;
+}
+
+bool CorrelationModel::add(const SurrogateSample& surrogate, const Eigen::Vector3d& target_room_mm) {
+  if (!finite(surrogate) || !target_room_mm.allFinite()) return false;
+  if (count_ == spec_.window) {
+    std::move(surrogate_.begin() + 1, surrogate_.begin() + count_, surrogate_.begin());
+    std::move(target_.begin() + 1, target_.begin() + count_, target_.begin());
+    --count_;
+  }
+  surrogate_[std::size_t(count_)] = surrogate;
+  target_[std::size_t(count_)] = target_room_mm;
+  ++count_;
+  refit();
+  return true;
+}
+
+CorrelationModel::Check CorrelationModel::check(const SurrogateSample& surrogate,
+                                                const Eigen::Vector3d& target_room_mm) {
+  if (!finite(surrogate) || !target_room_mm.allFinite()) {
+    misses_in_a_row_ = 2;
+    return Check::kMissAgain;
+  }
+  if (!ready_) {
+    add(surrogate, target_room_mm);
+    return Check::kNotReady;
+  }
+  last_check_error_mm_ = (predict(surrogate) - target_room_mm).norm();
+  const bool miss = !(last_check_error_mm_ <= spec_.tolerance_mm);
+  add(surrogate, target_room_mm);
+  if (!miss) {
+    misses_in_a_row_ = 0;
+    return Check::kAgrees;
+  }
+  return ++misses_in_a_row_ >= 2 ? Check::kMissAgain : Check::kMissRefitted;
+}
+
+Eigen::Matrix<double, CorrelationModel::kTerms, 1> CorrelationModel::basis(const SurrogateSample& s) const {
+  const double u = (s.amplitude - mean_s_) / scale_s_;
+  return {1.0, u, spec_.order == CorrelationModelSpec::Order::kQuadratic ? u * u : 0.0,
+          spec_.hysteresis ? s.rate_per_s / scale_r_ : 0.0};
+}
+
+Eigen::Vector3d CorrelationModel::predict(const SurrogateSample& surrogate) const {
+  if (!ready_ || !finite(surrogate)) return Eigen::Vector3d::Constant(kNan);
+  return coefficients_ * basis(surrogate);
+}
+
+void CorrelationModel::refit() {
+  ready_ = false;
+  if (count_ < spec_.min_pairs) {
+    not_ready_ = "fewer pairs than the model needs (min_pairs)";
+    return;
+  }
+  const double span_s = 1e-9 * double(surrogate_[std::size_t(count_ - 1)].t_ns - surrogate_[0].t_ns);
+  if (!(span_s >= spec_.min_span_s)) {
+    not_ready_ = "the pairs span less than a breathing cycle (min_span_s)";
+    return;
+  }
+  bool inhale = false, exhale = false;
+  double sum_s = 0, sum_r2 = 0;
+  for (int i = 0; i < count_; ++i) {
+    const SurrogateSample& s = surrogate_[std::size_t(i)];
+    inhale = inhale || s.rate_per_s > 0;
+    exhale = exhale || s.rate_per_s < 0;
+    sum_s += s.amplitude;
+    sum_r2 += s.rate_per_s * s.rate_per_s;
+  }
+  if (!inhale || !exhale) {
+    not_ready_ = "the pairs hold no inhale or no exhale";
+    return;
+  }
+  mean_s_ = sum_s / count_;
+  double sum_d2 = 0;
+  for (int i = 0; i < count_; ++i) {
+    const double d = surrogate_[std::size_t(i)].amplitude - mean_s_;
+    sum_d2 += d * d;
+  }
+  scale_s_ = std::sqrt(sum_d2 / count_);
+  scale_r_ = std::sqrt(sum_r2 / count_);
+  if (!(scale_s_ > 1e-12 * (1 + std::abs(mean_s_))) || !(scale_r_ > 0) ||
+      !std::isfinite(scale_s_ * scale_r_)) {
+    not_ready_ = "the surrogate did not move";
+    return;
+  }
+  Eigen::Matrix<double, kTerms, kTerms> normal = Eigen::Matrix<double, kTerms, kTerms>::Zero();
+  Eigen::Matrix<double, kTerms, 3> rhs = Eigen::Matrix<double, kTerms, 3>::Zero();
+  for (int i = 0; i < count_; ++i) {
+    const auto b = basis(surrogate_[std::size_t(i)]);
+    normal += b * b.transpose();
+    rhs += b * target_[std::size_t(i)].transpose();
+  }
+  // The terms the spec leaves out (their basis is 0) solve to zero.
+  for (int k = 0; k < kTerms; ++k)
+    if (normal(k, k) == 0) normal(k, k) = count_;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, kTerms, kTerms>> eigen(normal,
+                                                                                   Eigen::EigenvaluesOnly);
+  if (eigen.info() != Eigen::Success || !(eigen.eigenvalues()(0) >= kMinEigenvaluePerPair * count_)) {
+    not_ready_ = "the pairs do not tell the model's terms apart (one phase of the breath)";
+    return;
+  }
+  coefficients_ = normal.ldlt().solve(rhs).transpose();
+  Eigen::Vector3d sum_e2 = Eigen::Vector3d::Zero();
+  for (int i = 0; i < count_; ++i) {
+    const Eigen::Vector3d e = coefficients_ * basis(surrogate_[std::size_t(i)]) - target_[std::size_t(i)];
+    sum_e2 += e.cwiseProduct(e);
+  }
+  fit_rms_mm_ = (sum_e2 / count_).cwiseSqrt();
+  if (!coefficients_.allFinite() || !fit_rms_mm_.allFinite()) {
+    not_ready_ = "the fit is not finite";
+    return;
+  }
+  ready_ = true;
+  not_ready_ = "";
+}
+
+}  // namespace lftrack::host
