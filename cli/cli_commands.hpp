@@ -88,6 +88,7 @@ Command add_study_sensitivity_command(CLI::App* parent);
 Command add_study_trade_command(CLI::App* parent);
 Command add_study_realism_command(CLI::App* parent);
 Command add_study_latency_command(CLI::App* parent);
+Command add_study_surrogate_command(CLI::App* parent);
 Command add_study_merge_command(CLI::App* parent);
 Command add_study_submit_command(CLI::App* parent);
 Command add_study_status_command(CLI::App* parent);

@@ -44,6 +44,7 @@ int main(int argc, char** argv) {
   const Command trade = add_study_trade_command(study);
   const Command realism = add_study_realism_command(study);
   const Command latency = add_study_latency_command(study);
+  const Command surrogate = add_study_surrogate_command(study);
   const Command merge = add_study_merge_command(study);
   const Command submit = add_study_submit_command(study);
   const Command study_status = add_study_status_command(study);
@@ -112,6 +113,8 @@ int main(int argc, char** argv) {
       status = realism();
     else if (study->got_subcommand("latency"))
       status = latency();
+    else if (study->got_subcommand("surrogate"))
+      status = surrogate();
     else if (study->got_subcommand("merge"))
       status = merge();
     else if (study->got_subcommand("submit"))

@@ -43,10 +43,17 @@ CorrelationModelSpec spec_of(CorrelationModelSpec::Order order, bool hysteresis)
   return s;
 }
 
-// Pairs at 1 Hz (off the breath's period, so the phases spread) from t = 0.3 s.
+// The surrogate's readings at 30 Hz over [from_s, to_s), as the loop shows them to the model.
+void observe(CorrelationModel* model, double from_s, double to_s, double lead_s) {
+  for (double t = from_s; t < to_s; t += 1.0 / 30) model->observe(chest_at(t, lead_s));
+}
+
+// Pairs at 1 Hz (off the breath's period, so the phases spread) from t = 0.3 s, with the
+// surrogate's readings between them.
 void feed(CorrelationModel* model, int pairs, double lead_s) {
   for (int i = 0; i < pairs; ++i) {
     const double t = 0.3 + 1.07 * i;
+    observe(model, t - 1.07, t, lead_s);
     model->add(chest_at(t, lead_s), target_at(t));
   }
 }
@@ -74,6 +81,8 @@ TEST(CorrelationModel, ACurvedRelationNeedsTheQuadraticTerm) {
   CorrelationModel quadratic(spec_of(CorrelationModelSpec::Order::kQuadratic, false));
   for (int i = 0; i < 16; ++i) {
     const double t = 0.3 + 1.07 * i;
+    observe(&linear, t - 1.07, t, 0);
+    observe(&quadratic, t - 1.07, t, 0);
     linear.add(chest_at(t), curved(t));
     quadratic.add(chest_at(t), curved(t));
   }
@@ -104,6 +113,7 @@ TEST(CorrelationModel, ItIsNotUsedBeforeItHasSeenABreath) {
   EXPECT_FALSE(model.ready());
   EXPECT_TRUE(std::isnan(model.predict(chest_at(1)).x())) << "no model: nothing the gate could take";
   // Eight pairs within 2 s: enough pairs, not a breathing cycle.
+  observe(&model, 0, 2, 0);
   for (int i = 0; i < 8; ++i) model.add(chest_at(0.25 * i), target_at(0.25 * i));
   EXPECT_FALSE(model.ready());
   EXPECT_NE(std::string(model.not_ready_reason()).find("breathing cycle"), std::string::npos)
@@ -112,6 +122,7 @@ TEST(CorrelationModel, ItIsNotUsedBeforeItHasSeenABreath) {
   CorrelationModel exhale_only(spec_of(CorrelationModelSpec::Order::kLinear, false));
   for (int i = 0; i < 10; ++i) {
     const double t = 2.1 + 4.0 * (i / 2) + 0.3 * (i % 2);  // 2.1-2.4 s into each breath: exhaling
+    observe(&exhale_only, t - 2, t, 0);
     exhale_only.add(chest_at(t), target_at(t));
   }
   EXPECT_FALSE(exhale_only.ready());
@@ -123,6 +134,36 @@ TEST(CorrelationModel, ItIsNotUsedBeforeItHasSeenABreath) {
   EXPECT_FALSE(frozen.ready());
 }
 
+TEST(CorrelationModel, XraysAtTheSamePhasesOfEveryBreathMakeNoModel) {
+  // X-rays every 2 s in a 4 s breath: the surrogate reads the same at every one of them, inhaling
+  // and exhaling in turn. A model fitted there would agree with every later X-ray.
+  CorrelationModel model(spec_of(CorrelationModelSpec::Order::kQuadratic, true));
+  for (int i = 0; i < 20; ++i) {
+    const double t = 1.0 + 2.0 * i;
+    observe(&model, t - 2, t, 0);
+    model.add(chest_at(t), target_at(t) + Eigen::Vector3d(0.01 * (i % 3), 0, 0));  // a registration's scatter
+  }
+  EXPECT_FALSE(model.ready());
+  EXPECT_NE(std::string(model.not_ready_reason()).find("cover"), std::string::npos)
+      << model.not_ready_reason();
+  // Without the surrogate's readings there is no range to judge coverage by: no model either.
+  CorrelationModel blind(spec_of(CorrelationModelSpec::Order::kLinear, false));
+  for (int i = 0; i < 12; ++i) blind.add(chest_at(0.3 + 1.07 * i), target_at(0.3 + 1.07 * i));
+  EXPECT_FALSE(blind.ready());
+}
+
+TEST(CorrelationModel, AReadingBeyondTheFittedBreathsIsNotWithinTheFit) {
+  CorrelationModel model(spec_of(CorrelationModelSpec::Order::kQuadratic, true));
+  feed(&model, 12, 0.0);
+  ASSERT_TRUE(model.ready());
+  EXPECT_TRUE(model.within_fit(chest_at(20.0)));
+  EXPECT_TRUE(model.within_fit(chest_at(22.0)));
+  SurrogateSample cough = chest_at(22.0);
+  cough.amplitude *= 1.5;  // a breath half again as deep
+  EXPECT_FALSE(model.within_fit(cough));
+  EXPECT_FALSE(model.within_fit({0, std::nan(""), 0}));
+}
+
 TEST(CorrelationModel, ARelationThatChangesIsRefittedOnceThenHeld) {
   CorrelationModelSpec spec = spec_of(CorrelationModelSpec::Order::kQuadratic, true);
   spec.tolerance_mm = 1.0;
@@ -130,6 +171,7 @@ TEST(CorrelationModel, ARelationThatChangesIsRefittedOnceThenHeld) {
   feed(&model, 12, 0.0);
   ASSERT_TRUE(model.ready());
   double t = 0.3 + 1.07 * 12;
+  observe(&model, t - 1.07, t + 3, 0);
   EXPECT_EQ(model.check(chest_at(t), target_at(t)), CorrelationModel::Check::kAgrees);
   EXPECT_LT(model.last_check_error_mm(), 1e-6);
   // The target moves 3 mm inferior under the same chest (the patient slid on the couch).
@@ -205,6 +247,7 @@ TEST(CorrelationModel, TheLoopsCallsAllocateNothing) {
   for (int i = 0; i < 200; ++i) {
     const double t = 0.3 + 1.07 * i;
     stream.push(std::int64_t(t * kNsPerS), 10 * breath(t));
+    observe(&model, t - 1.07, t, 0);
     (void)model.check(chest_at(t), target_at(t));
     (void)model.predict(chest_at(t + 0.5));
   }

@@ -84,6 +84,7 @@ CorrelationModel::CorrelationModel(const CorrelationModelSpec& spec)
 
 void CorrelationModel::reset() {
   count_ = 0;
+  observed_ = previous_observed_ = false;
   misses_in_a_row_ = 0;
   ready_ = false;
   not_ready_ = "no pairs yet";
@@ -124,6 +125,28 @@ CorrelationModel::Check CorrelationModel::check(const SurrogateSample& surrogate
   return ++misses_in_a_row_ >= 2 ? Check::kMissAgain : Check::kMissRefitted;
 }
 
+void CorrelationModel::observe(const SurrogateSample& s) {
+  if (!finite(s)) return;
+  const std::int64_t window_ns = std::max<std::int64_t>(1, std::int64_t(spec_.min_span_s * 1e9));
+  if (!observed_ || s.t_ns - window_start_ns_ >= window_ns || s.t_ns < window_start_ns_) {
+    previous_observed_ = observed_ && s.t_ns - window_start_ns_ < 2 * window_ns && s.t_ns >= window_start_ns_;
+    previous_min_ = window_min_;
+    previous_max_ = window_max_;
+    window_start_ns_ = s.t_ns;
+    window_min_ = window_max_ = s.amplitude;
+    observed_ = true;
+    return;
+  }
+  window_min_ = std::min(window_min_, s.amplitude);
+  window_max_ = std::max(window_max_, s.amplitude);
+}
+
+bool CorrelationModel::within_fit(const SurrogateSample& s) const {
+  if (!ready_ || !finite(s)) return false;
+  const double margin = kFitMargin * (fit_max_s_ - fit_min_s_);
+  return s.amplitude >= fit_min_s_ - margin && s.amplitude <= fit_max_s_ + margin;
+}
+
 Eigen::Matrix<double, CorrelationModel::kTerms, 1> CorrelationModel::basis(const SurrogateSample& s) const {
   const double u = (s.amplitude - mean_s_) / scale_s_;
   return {1.0, u, spec_.order == CorrelationModelSpec::Order::kQuadratic ? u * u : 0.0,
@@ -148,16 +171,32 @@ void CorrelationModel::refit() {
   }
   bool inhale = false, exhale = false;
   double sum_s = 0, sum_r2 = 0;
+  fit_min_s_ = fit_max_s_ = surrogate_[0].amplitude;
   for (int i = 0; i < count_; ++i) {
     const SurrogateSample& s = surrogate_[std::size_t(i)];
     inhale = inhale || s.rate_per_s > 0;
     exhale = exhale || s.rate_per_s < 0;
     sum_s += s.amplitude;
     sum_r2 += s.rate_per_s * s.rate_per_s;
+    fit_min_s_ = std::min(fit_min_s_, s.amplitude);
+    fit_max_s_ = std::max(fit_max_s_, s.amplitude);
   }
   if (!inhale || !exhale) {
     not_ready_ = "the pairs hold no inhale or no exhale";
     return;
+  }
+  if (!observed_) {
+    not_ready_ = "no surrogate reading observed (observe())";
+    return;
+  }
+  {
+    const double low = previous_observed_ ? std::min(window_min_, previous_min_) : window_min_;
+    const double high = previous_observed_ ? std::max(window_max_, previous_max_) : window_max_;
+    if (!(fit_max_s_ - fit_min_s_ >= kMinCoverage * (high - low))) {
+      not_ready_ =
+          "the pairs cover too little of the surrogate's range (X-rays at the same phases of each breath)";
+      return;
+    }
   }
   mean_s_ = sum_s / count_;
   double sum_d2 = 0;

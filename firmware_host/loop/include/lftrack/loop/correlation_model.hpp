@@ -10,8 +10,16 @@
 // different paths through (s, p) (Synchrony's two curves; Low's "5D" model's airflow term).
 //
 // When it may be used (ready()): at least `min_pairs` pairs, spread over at least `min_span_s` (a
-// breathing cycle: the scene's period), among them an inhale (r > 0) and an exhale (r < 0), and a
-// fit whose normal equations are well conditioned. A surrogate that never moved fits nothing.
+// breathing cycle: the scene's period), among them an inhale (r > 0) and an exhale (r < 0), whose
+// surrogate amplitudes span at least kMinCoverage of the range the surrogate itself covered over
+// the last breaths (observe()), and a fit whose normal equations are well conditioned. The
+// coverage rule matters: X-rays every half period (2 s in a 4 s breath) see the same two phases
+// every time, where the surrogate reads the same; a model fitted there agrees with every later
+// X-ray and errs by centimetres in between. A surrogate that never moved fits nothing.
+//
+// within_fit() says whether a reading lies within the amplitudes the model was fitted on (with a
+// margin): outside, the model extrapolates (a cough, a deep breath) and the loop should take an
+// X-ray pair early rather than trust it.
 //
 // check() compares the model's prediction at a new pair's surrogate with the registered position:
 // within `tolerance_mm` (3D) it agrees; beyond it is a miss, and the model is refitted with the new
@@ -78,8 +86,16 @@ class CorrelationModel {
 
   explicit CorrelationModel(const CorrelationModelSpec& spec);
 
-  // Forgets every pair (a new set-up, a resumed HOLD).
+  static constexpr double kMinCoverage = 0.6;
+  // The pairs' amplitudes may be exceeded by this fraction of their span before within_fit fails.
+  static constexpr double kFitMargin = 0.1;
+
+  // Forgets every pair (a new set-up, a resumed HOLD) and the surrogate's range.
   void reset();
+  // Every surrogate reading the loop takes: the range the pairs must cover is the surrogate's over
+  // the last one to two min_span_s windows. A non-finite reading is ignored.
+  void observe(const SurrogateSample& surrogate);
+  bool within_fit(const SurrogateSample& surrogate) const;
   // Adds a pair and refits. A pair with a non-finite value is refused (false) and changes nothing.
   bool add(const SurrogateSample& surrogate, const Eigen::Vector3d& target_room_mm);
 
@@ -116,6 +132,12 @@ class CorrelationModel {
   bool ready_ = false;
   const char* not_ready_ = "no pairs yet";
   double mean_s_ = 0, scale_s_ = 1, scale_r_ = 1;
+  double fit_min_s_ = 0, fit_max_s_ = 0;  // the fitted pairs' amplitudes
+  // The surrogate's range in the current window of min_span_s (from window_start_ns_) and the one
+  // before it.
+  std::int64_t window_start_ns_ = 0;
+  bool observed_ = false, previous_observed_ = false;
+  double window_min_ = 0, window_max_ = 0, previous_min_ = 0, previous_max_ = 0;
   Eigen::Matrix<double, 3, kTerms> coefficients_ = Eigen::Matrix<double, 3, kTerms>::Zero();
   Eigen::Vector3d fit_rms_mm_ = Eigen::Vector3d::Zero();
   double last_check_error_mm_;
