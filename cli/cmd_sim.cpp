@@ -18,6 +18,7 @@
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/preflight.hpp"
+#include "lftrack/host/scene_default_plans.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
@@ -252,6 +253,10 @@ Status run(const SimOptions& o) {
   }
 
   tracking::ThreadPool pool(o.scene.threads);
+  // An archive may hold any detector's frames: the plans the scene leaves open are those for
+  // archived frames, whatever its detectors say (scene_default_plans.hpp).
+  if (o.mode == SimOptions::Mode::kReplay && !o.sequence.empty())
+    apply_default_plans(archived_frame_plans(), &*scene);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
   if (o.mode == SimOptions::Mode::kSim || (o.mode == SimOptions::Mode::kRun && frames_are_simulated(prepared->scene)))
@@ -298,9 +303,13 @@ Status run(const SimOptions& o) {
     if (const std::string caveat = simulated_accuracy_caveat(*prepared->ct); !caveat.empty() && frames_are_simulated(prepared->scene))
       j["accuracy_caveat"] = caveat;
     j["period_ms"] = prepared->scene.loop.period_ms;
+    const Scene::DefaultedPlans& defaulted = prepared->scene.defaulted_plans;
     j["plans"] = {{"align", prepared->scene.loop.align_plan},
                   {"track", prepared->scene.loop.track_plan},
-                  {"similarity", prepared->scene.registration.similarity}};
+                  {"similarity", prepared->scene.registration.similarity},
+                  {"align_default", defaulted.align},
+                  {"track_default", defaulted.track}};
+    if (defaulted.align || defaulted.track) j["plans"]["default_because"] = defaulted.because;
     j["simulated_clock"] = o.fast;
     j["realtime"] = report->summary();
     if (!journal.empty()) j["journal"] = journal;

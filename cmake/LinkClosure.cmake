@@ -98,3 +98,19 @@ function(lftrack_require_link_closure target)
     endif()
   endforeach()
 endfunction()
+
+# lftrack_forbid_link(<target> FORBIDDEN <regex>... [WHY <text>]) fails the configure when the
+# target's closure holds a name that matches any of the regular expressions: a dependency that
+# must never run the other way.
+function(lftrack_forbid_link target)
+  cmake_parse_arguments(ARG "" "WHY" "FORBIDDEN" ${ARGN})
+  lftrack_link_closure(${target} closure)
+  foreach(name IN LISTS closure)
+    foreach(pattern IN LISTS ARG_FORBIDDEN)
+      if(name MATCHES "${pattern}")
+        message(FATAL_ERROR "${target} links ${name} (through ${LFTRACK_LINK_VIA_${name}}), which it may not: "
+                            "${ARG_WHY}")
+      endif()
+    endforeach()
+  endforeach()
+endfunction()

@@ -89,7 +89,8 @@ Result<bool> draw_line_plot(const LinePlot& plot, const std::filesystem::path& p
     g << "plot ";
     for (std::size_t s = 0; s < plot.series.size(); ++s) {
       g << (s ? ", \\\n     " : "") << gp_string(dat.filename().string()) << " using 1:" << s + 2
-        << " with linespoints lw 2 pt 7 title " << gp_string(plot.series[s].name);
+        << (plot.series[s].points_only ? " with points pt 7 ps 1.5" : " with linespoints lw 2 pt 7")
+        << " title " << gp_string(plot.series[s].name);
     }
     g << "\n";
     g.flush();

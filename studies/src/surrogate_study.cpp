@@ -8,6 +8,10 @@
 #include <fstream>
 #include <random>
 
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
 #include "lftrack/studies/plot.hpp"
 #include "quantile.hpp"
 
@@ -44,8 +48,11 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
   sim::BreathingSurrogate chest(o.surrogate);
   std::mt19937_64 random(o.seed ^ 0x5851F42D4C957F2Dull);
   std::normal_distribution<double> registration_noise(0.0, o.registration_sd_mm);
-  CorrelationModel model(o.model);
-  SurrogateStream stream;
+  CorrelationModelSpec spec = o.model;
+  spec.window = model_window_at(o.model, xray_hz);
+  CorrelationModel model(spec);
+  SurrogateStream stream(rate_window_at(o.surrogate.sample_rate_hz));
+  bool tracing = trace != nullptr, traced = false;  // the trace: one stretch without a gap
   // Every event on one integer clock: surrogate readings, corrections and X-rays.
   const std::int64_t reading_ns = std::int64_t(std::llround(1e9 / o.surrogate.sample_rate_hz));
   const std::int64_t correction_ns = std::int64_t(std::llround(1e9 / o.correction_hz));
@@ -86,14 +93,17 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
           break;
       }
       if (model.ready() && row.first_ready_s < 0) row.first_ready_s = t_s;
-      if (trace != nullptr && t_s <= 30) {
+      if (tracing && traced) {
         trace->xray_t_s.push_back(t_s);
         trace->xray_si_mm.push_back(registered.z());
       }
     }
     if (t == next_correction) {
       next_correction += correction_ns;
-      if (!have_rate || !model.ready()) continue;
+      if (!have_rate || !model.ready()) {
+        if (traced) tracing = false;  // the trace ends at the model's first gap
+        continue;
+      }
       // A reading beyond the breaths the model was fitted on: an X-ray pair now, not a guess (at
       // most one early pair a second).
       if (!model.within_fit(now) && t - last_early_ns >= kNsPerS) {
@@ -103,7 +113,8 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
       }
       const Eigen::Vector3d predicted = model.predict(now), truth = target_at(o.motion, t_s);
       errors.push_back((predicted - truth).norm());
-      if (trace != nullptr && t_s <= 30) {
+      if (tracing && (!traced || t_s - trace->t_s.front() <= 30)) {
+        traced = true;
         trace->t_s.push_back(t_s);
         trace->true_si_mm.push_back(truth.z());
         trace->predicted_si_mm.push_back(predicted.z());
@@ -119,16 +130,36 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
 
 }  // namespace
 
+int model_window_at(const CorrelationModelSpec& spec, double xray_hz) {
+  const double span_pairs = std::ceil(1.25 * spec.min_span_s * xray_hz) + 1;
+  return int(std::clamp(std::max(double(spec.window), span_pairs), 4.0, double(CorrelationModel::kCapacity)));
+}
+
+double rate_window_at(double sample_rate_hz) {
+  return std::max(0.1, 2.5 / sample_rate_hz);
+}
+
 Status check_surrogate_study_options(const SurrogateStudyOptions& o) {
   LFTRACK_RETURN_IF_ERROR(check_correlation_model_spec(o.model));
+  if (!(o.correction_hz >= 1 && o.correction_hz <= 100))
+    return invalid_argument(fmt::format(
+        "surrogate study: the scene's correction rate, {:g} Hz (1000 / loop.period_ms), must be 1..100 Hz",
+        o.correction_hz));
   if (o.xray_hz.empty()) return invalid_argument("surrogate study: no X-ray rate");
-  for (double hz : o.xray_hz)
+  // The most pairs a model keeps must span a breathing cycle: more X-rays, not no model.
+  const double most_hz = double(CorrelationModel::kCapacity - 1) / std::max(o.model.min_span_s, 1e-9);
+  for (double hz : o.xray_hz) {
     if (!(hz >= 0.05 && hz <= o.correction_hz))
       return invalid_argument(
-          fmt::format("surrogate study: an X-ray rate of {} Hz (0.05 Hz to the correction rate, {} Hz)", hz,
+          fmt::format("surrogate study: an X-ray rate of {} Hz (0.05 Hz to the correction rate, {:g} Hz)", hz,
                       o.correction_hz));
-  if (!(o.correction_hz >= 1 && o.correction_hz <= 100))
-    return invalid_argument("surrogate study: the correction rate must be 1..100 Hz");
+    if (hz > most_hz)
+      return invalid_argument(
+          fmt::format("surrogate study: at {:g} Hz the model's {} pairs span less than a breathing cycle "
+                      "({:g} s): at most "
+                      "{:.3g} Hz",
+                      hz, CorrelationModel::kCapacity, o.model.min_span_s, most_hz));
+  }
   if (!(o.surrogate.sample_rate_hz >= o.correction_hz && o.surrogate.sample_rate_hz <= 1000))
     return invalid_argument("surrogate study: the surrogate's rate must be the correction rate..1000 Hz");
   if (!(o.duration_s >= 10 && o.duration_s <= 24 * 3600))
@@ -146,6 +177,9 @@ Status check_surrogate_study_options(const SurrogateStudyOptions& o) {
     return invalid_argument("surrogate study: the surrogate does not move");
   if (!o.motion.breathing_amplitude.allFinite() || !o.motion.drift_per_s.allFinite())
     return invalid_argument("surrogate study: the target's motion is not finite");
+  if (o.motion.breathing_amplitude.head<3>().cwiseAbs().maxCoeff() > 50)
+    return invalid_argument(
+        "surrogate study: the target's breathing must stay within 50 mm per axis (as a scene's)");
   return {};
 }
 
@@ -174,8 +208,7 @@ Result<SurrogateStudy> run_surrogate_study(const SurrogateStudyOptions& o) {
   return study;
 }
 
-Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudyOptions& o,
-                                   const fs::path& out_dir) {
+Status check_surrogate_study_out(const fs::path& out_dir) {
   std::error_code ec;
   for (const char* name : kOutputs)
     if (fs::exists(out_dir / name, ec) || fs::is_symlink(out_dir / name, ec))
@@ -183,6 +216,13 @@ Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudy
           (out_dir / name).string() +
           " exists (an earlier study's, or another file): give another --out (nothing was "
           "written)");
+  return {};
+}
+
+Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudyOptions& o,
+                                   const fs::path& out_dir) {
+  LFTRACK_RETURN_IF_ERROR(check_surrogate_study_out(out_dir));
+  std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) return io_error(out_dir.string() + ": cannot create: " + ec.message());
   {
@@ -190,11 +230,17 @@ Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudy
     if (!csv)
       return io_error((out_dir / "surrogate.csv").string() + ": cannot write: " + std::strerror(errno));
     csv << "imaging,xray_hz,pairs_per_minute,corrections,rms_mm,p95_mm,max_mm,refits,holds,early_pairs,"
-           "first_ready_s\n";
-    for (const SurrogateStudyRow& r : s.rows)
-      csv << fmt::format("\"{}\",{:g},{:.1f},{},{:.4f},{:.4f},{:.4f},{},{},{},{:.2f}\n", r.imaging, r.xray_hz,
-                         r.pairs_per_minute, r.corrections, r.rms_mm, r.p95_mm, r.max_mm, r.refits, r.holds,
-                         r.early_pairs, r.first_ready_s);
+           "first_ready_s,never_ready_because\n";
+    for (const SurrogateStudyRow& r : s.rows) {
+      // A model never ready has no figures: empty, not zero.
+      const bool used = r.corrections > 0;
+      const auto figure = [used](double v) { return used ? fmt::format("{:.4f}", v) : std::string(); };
+      csv << fmt::format("\"{}\",{:g},{:.1f},{},{},{},{},{},{},{},{},\"{}\"\n", r.imaging, r.xray_hz,
+                         r.pairs_per_minute, r.corrections, figure(r.rms_mm), figure(r.p95_mm),
+                         figure(r.max_mm), r.refits, r.holds, r.early_pairs,
+                         r.first_ready_s >= 0 ? fmt::format("{:.2f}", r.first_ready_s) : std::string(),
+                         r.never_ready_because);
+    }
     csv.flush();
     if (!csv) return io_error((out_dir / "surrogate.csv").string() + ": write failed (disk full?)");
   }
@@ -207,14 +253,19 @@ Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudy
   plot.x = s.trace.t_s;
   plot.series = {{"true target", s.trace.true_si_mm}, {"model's prediction", s.trace.predicted_si_mm}};
   // The X-ray pairs' registrations, at the corrections nearest them (a gap elsewhere).
-  PlotSeries xrays{"X-ray pair (registered)", std::vector<double>(plot.x.size(), std::nan(""))};
+  PlotSeries xrays{"X-ray pair (registered)", std::vector<double>(plot.x.size(), std::nan("")), true};
   for (std::size_t i = 0; i < s.trace.xray_t_s.size(); ++i) {
     const auto it = std::lower_bound(plot.x.begin(), plot.x.end(), s.trace.xray_t_s[i]);
     if (it != plot.x.end()) xrays.y[std::size_t(it - plot.x.begin())] = s.trace.xray_si_mm[i];
   }
   plot.series.push_back(xrays);
   plot.key_position = "top right";
-  return draw_line_plot(plot, out_dir / "surrogate_trace.png");
+  auto drawn = draw_line_plot(plot, out_dir / "surrogate_trace.png");
+  if (!drawn.ok()) {
+    spdlog::warn("no plot: {} (surrogate.csv is written)", drawn.status().message());
+    return false;
+  }
+  return drawn;
 }
 
 }  // namespace lftrack::host

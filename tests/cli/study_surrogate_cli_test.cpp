@@ -38,8 +38,9 @@ std::map<std::string, Row> rows_of(const fs::path& csv) {
     std::vector<std::string> cells;
     while (std::getline(rest, cell, ',')) cells.push_back(cell);
     // xray_hz, pairs_per_minute, corrections, rms_mm, p95_mm, ...
-    rows[line.substr(1, close - 1)] = {std::stod(cells.at(3)), std::stod(cells.at(4)),
-                                       std::stol(cells.at(2))};
+    // A model never ready has empty figures, not zeros.
+    const auto figure = [](const std::string& c) { return c.empty() ? -1.0 : std::stod(c); };
+    rows[line.substr(1, close - 1)] = {figure(cells.at(3)), figure(cells.at(4)), std::stol(cells.at(2))};
   }
   return rows;
 }
@@ -62,6 +63,7 @@ TEST(StudySurrogate, TheModelFollowsAnEightMillimetreBreathFromXraysAtOneHertz) 
   EXPECT_LT(model.p95_mm, 1.0) << "issue 58's target for the closed loop; the model alone must be inside it";
   // X-rays every 2 s of a 4 s breath see two phases only: no model, and the reason is printed.
   EXPECT_EQ(rows.at("model, 0.5 Hz X-rays").corrections, 0);
+  EXPECT_LT(rows.at("model, 0.5 Hz X-rays").rms_mm, 0) << "no model: no figure, not a perfect one";
   EXPECT_NE(text.find("never ready: the pairs cover too little"), std::string::npos) << text;
   EXPECT_TRUE(fs::exists(out / "surrogate_trace.gp"));
 
@@ -82,7 +84,16 @@ TEST(StudySurrogate, TheModelFollowsAnEightMillimetreBreathFromXraysAtOneHertz) 
   EXPECT_GT(rows_of(without / "surrogate.csv").at("model, 1 Hz X-rays").rms_mm,
             2 * rows_of(with / "surrogate.csv").at("model, 1 Hz X-rays").rms_mm);
 
-  // A second run over the first one's folder replaces nothing.
+  // More X-rays are never fewer models: at 8 Hz the model keeps pairs enough to span a breath.
+  const fs::path fast = dir.path() / "fast";
+  ASSERT_TRUE(run_process({lftrack_bin(), "study", "surrogate", "--xray-hz", "8", "--duration-s", "60",
+                           "--out", fast.string()},
+                          &text)
+                  .ok())
+      << text;
+  EXPECT_GT(rows_of(fast / "surrogate.csv").at("model, 8 Hz X-rays").corrections, 400) << text;
+
+  // A second run over the first one's folder replaces nothing, and says so before it runs.
   const auto before = fs::last_write_time(out / "surrogate.csv");
   EXPECT_FALSE(run_process({lftrack_bin(), "study", "surrogate", "--out", out.string()}, &text).ok());
   EXPECT_NE(text.find("exists"), std::string::npos) << text;
@@ -107,7 +118,14 @@ TEST(StudySurrogate, AbsurdOptionsAreRefusedAndNothingIsWritten) {
                                              {"--registration-sd-mm", "nan"},
                                              {"--model", "cubic"},
                                              {"--tolerance-mm", "0"},
-                                             {"--scene", "/nonexistent.yaml"}}) {
+                                             {"--scene", "/nonexistent.yaml"},
+                                             {"--xray-hz", "1,,2"},
+                                             {"--xray-hz", "1,"},
+                                             {"--xray-hz", ""},
+                                             {"--xray-hz", "16"},  // beyond the built-in scene's 10 Hz
+                                             {"--seed", "-1"},
+                                             {"--seed", "18446744073709551616"},
+                                             {"--breathing-mm", "1e12,1,1"}}) {
     std::vector<std::string> args = {lftrack_bin(), "study", "surrogate", "--out", out.string()};
     args.insert(args.end(), bad.begin(), bad.end());
     std::string text;

@@ -51,7 +51,7 @@ TEST(SceneDefaultPlans, IdealSimulatedFramesKeepTheQuadraticMiPlans) {
   const Scene s = parsed("sim");
   EXPECT_TRUE(frames_are_ideal(s));
   expect_plans(s, "papers", "quadratic", "warm");
-  EXPECT_NE(s.default_plans_because.find("ideal"), std::string::npos) << s.default_plans_because;
+  EXPECT_NE(s.defaulted_plans.because.find("ideal"), std::string::npos) << s.defaulted_plans.because;
 }
 
 TEST(SceneDefaultPlans, RealisticSimulatedFramesGetTheRobustPlans) {
@@ -60,7 +60,7 @@ TEST(SceneDefaultPlans, RealisticSimulatedFramesGetTheRobustPlans) {
     const Scene s = parsed("sim", "sim:\n  physics: " + physics + "\n");
     EXPECT_FALSE(frames_are_ideal(s));
     expect_plans(s, "robust", "robust", "warm-robust");
-    EXPECT_NE(s.default_plans_because.find("sim.physics"), std::string::npos) << s.default_plans_because;
+    EXPECT_NE(s.defaulted_plans.because.find("sim.physics"), std::string::npos) << s.defaulted_plans.because;
   }
 }
 
@@ -72,26 +72,39 @@ TEST(SceneDefaultPlans, FramesFromDevicesOrAnArchiveGetTheRobustPlans) {
     const Scene s = parsed(frames, "sim:\n  physics: ideal\n");
     EXPECT_FALSE(frames_are_ideal(s));
     expect_plans(s, "robust", "robust", "warm-robust");
-    EXPECT_FALSE(s.default_plans_because.empty());
+    EXPECT_FALSE(s.defaulted_plans.because.empty());
   }
-  EXPECT_NE(parsed("{type: gige, camera: 127.0.0.#}").default_plans_because.find("gige"), std::string::npos);
-  EXPECT_NE(parsed("{type: replay, sequence: archive}").default_plans_because.find("archived"),
+  EXPECT_NE(parsed("{type: gige, camera: 127.0.0.#}").defaulted_plans.because.find("gige"),
+            std::string::npos);
+  EXPECT_NE(parsed("{type: replay, sequence: archive}").defaulted_plans.because.find("archived"),
             std::string::npos);
 }
 
 TEST(SceneDefaultPlans, ANamedPlanIsKeptAndOnlyTheOthersAreChosen) {
   const Scene some = parsed("{type: gige, camera: 127.0.0.#}", "loop:\n  track_plan: warm\n");
   expect_plans(some, "robust", "robust", "warm");
-  EXPECT_FALSE(some.default_plans_because.empty());
+  EXPECT_FALSE(some.defaulted_plans.because.empty());
+  EXPECT_TRUE(some.defaulted_plans.plan && some.defaulted_plans.align && !some.defaulted_plans.track);
+  // The log line says which plan the scene named and which was chosen, and why.
+  EXPECT_EQ(describe_loop_plans(some),
+            "align robust (the default for frames from gige devices), track warm (the scene's)");
 
   const Scene all =
       parsed("{type: gige, camera: 127.0.0.#}",
              "tracking:\n  plan: quadratic\nloop:\n  align_plan: pyramid\n  track_plan: warm\n");
   expect_plans(all, "quadratic", "pyramid", "warm");
-  EXPECT_TRUE(all.default_plans_because.empty()) << all.default_plans_because;
+  EXPECT_TRUE(all.defaulted_plans.because.empty()) << all.defaulted_plans.because;
 
   const Scene ideal = parsed("sim", "tracking:\n  plan: robust\n");
   expect_plans(ideal, "robust", "quadratic", "warm");
+}
+
+TEST(SceneDefaultPlans, AReplayedArchiveTakesTheRobustPlansForThePlansLeftOpen) {
+  Scene s = parsed("sim", "loop:\n  track_plan: warm\n");
+  expect_plans(s, "papers", "quadratic", "warm");
+  apply_default_plans(archived_frame_plans(), &s);
+  expect_plans(s, "robust", "robust", "warm");
+  EXPECT_NE(s.defaulted_plans.because.find("archived"), std::string::npos);
 }
 
 TEST(SceneDefaultPlans, EveryDefaultIsAPlanTheRegistrationKnows) {

@@ -30,11 +30,6 @@ namespace lftrack::tracking {
 
 #if defined(__x86_64__) && defined(__GNUC__)
 
-bool light_field_avx2_available() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-}
-
 namespace {
 
 // A storage mode's access to the samples, as floats before `finish`:
@@ -272,7 +267,6 @@ int render_fixed16_avx2(const std::uint16_t* codes, float scale, const LightFiel
 
 #else
 
-bool light_field_avx2_available() { return false; }
 int render_float_avx2(const float*, const LightFieldGeometry&, const RayMap&, ImageView<float>, ImageView<unsigned char>,
                       int, int, int, bool) {
   return 0;

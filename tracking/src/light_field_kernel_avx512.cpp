@@ -31,11 +31,6 @@ namespace lftrack::tracking {
 
 #if defined(__x86_64__) && defined(__GNUC__)
 
-bool light_field_avx512_available() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw");
-}
-
 namespace {
 
 #define LFTRACK_AVX512 __attribute__((target("avx512f,avx512bw")))
@@ -359,9 +354,6 @@ int render_vq_avx512(const float* codebook, const std::uint16_t* codes, const Li
 
 #else
 
-bool light_field_avx512_available() {
-  return false;
-}
 int render_float_avx512(const float*, const LightFieldGeometry&, const RayMap&, ImageView<float>,
                         ImageView<unsigned char>, int, int, int) {
   return 0;

@@ -174,15 +174,6 @@ LFTRACK_AVX2 void fixed_rows_avx2(const float* in, const unsigned char* valid, i
 
 }  // namespace
 
-#if defined(__x86_64__) && defined(__GNUC__)
-bool mi_avx2_available() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2");
-}
-#else
-bool mi_avx2_available() { return false; }
-#endif
-
 int mi_moving_range(const MiRow& row, std::uint32_t unusable_row, std::int32_t* lo_key, std::int32_t* hi_key,
                     bool avx2) {
 #if defined(__x86_64__) && defined(__GNUC__)

@@ -23,11 +23,6 @@ namespace lftrack::tracking::detail {
 
 #if defined(__x86_64__) && defined(__GNUC__)
 
-bool siddon_avx2_available() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2");
-}
-
 namespace {
 
 #define LFTRACK_AVX2 __attribute__((target("avx2")))
@@ -116,9 +111,6 @@ LFTRACK_AVX2 void siddon_walk_avx2(const float* mu, const SiddonWalk* walks, dou
 
 #else
 
-bool siddon_avx2_available() {
-  return false;
-}
 void siddon_walk_avx2(const float*, const SiddonWalk*, double*) {}
 
 #endif

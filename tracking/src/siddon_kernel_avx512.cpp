@@ -24,11 +24,6 @@ namespace lftrack::tracking::detail {
 
 #if defined(__x86_64__) && defined(__GNUC__)
 
-bool siddon_avx512_available() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx512f");
-}
-
 namespace {
 
 #define LFTRACK_AVX512 __attribute__((target("avx512f")))
@@ -106,9 +101,6 @@ LFTRACK_AVX512 void siddon_walk_avx512(const float* mu, const SiddonWalk* walks,
 
 #else
 
-bool siddon_avx512_available() {
-  return false;
-}
 void siddon_walk_avx512(const float*, const SiddonWalk*, double*) {}
 
 #endif

@@ -3,6 +3,8 @@
 #include <array>
 #include <cstring>
 
+#include "lftrack/tracking/cpu_features.hpp"
+
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <nmmintrin.h>
 #endif
@@ -35,13 +37,6 @@ __attribute__((target("sse4.2"))) std::uint32_t crc32c_sse42(const unsigned char
   while (n-- > 0) c32 = _mm_crc32_u8(c32, *p++);
   return ~c32;
 }
-bool have_sse42() {
-  static const bool have = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("sse4.2") != 0;
-  }();
-  return have;
-}
 #endif
 
 }  // namespace
@@ -55,7 +50,7 @@ std::uint32_t crc32c_portable(const void* data, std::size_t size, std::uint32_t 
 
 std::uint32_t crc32c(const void* data, std::size_t size, std::uint32_t crc) {
 #if defined(__x86_64__) && defined(__GNUC__)
-  if (have_sse42()) return crc32c_sse42(static_cast<const unsigned char*>(data), size, crc);
+  if (tracking::cpu_features().sse42) return crc32c_sse42(static_cast<const unsigned char*>(data), size, crc);
 #endif
   return crc32c_portable(data, size, crc);
 }

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/host/scene_default_plans.hpp"
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "session_parts.hpp"
@@ -207,11 +208,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.announce_holds = o.announce_holds;
   warn_if_prediction_window_short(settings);
   warn_if_beam_wait_short(p.scene);
-  spdlog::info("registration plans: align {}, track {}{}", p.scene.loop.align_plan, p.scene.loop.track_plan,
-               p.scene.default_plans_because.empty()
-                   ? std::string()
-                   : " (the default for " + p.scene.default_plans_because +
-                         "; a scene names its own in loop.align_plan and loop.track_plan)");
+  spdlog::info("registration plans: {}", describe_loop_plans(p.scene));
   std::string floors_from;
   auto verdict = scene_verdict_limits(p, p.scene.registration.similarity, &floors_from);
   if (!verdict.ok()) return verdict.status();

@@ -18,6 +18,7 @@
 #include <system_error>
 
 #include "lftrack/tracking/checksum.hpp"
+#include "lftrack/tracking/cpu_features.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -250,7 +251,8 @@ const CodeIdentity& code_identity() {
   static const CodeIdentity identity = [] {
     CodeIdentity found;
     dl_iterate_phdr(collect_identity, &found);
-    found.others += std::string("glibc ") + gnu_get_libc_version() + (__builtin_cpu_supports("fma") ? " fma" : "");
+    found.others +=
+        std::string("glibc ") + gnu_get_libc_version() + (tracking::cpu_features().fma ? " fma" : "");
     return found;
   }();
   return identity;

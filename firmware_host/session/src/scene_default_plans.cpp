@@ -18,4 +18,25 @@ DefaultPlans default_plans(const Scene& scene) {
   return {"robust", "robust", "warm-robust", because};
 }
 
+void apply_default_plans(const DefaultPlans& defaults, Scene* scene) {
+  Scene::DefaultedPlans& d = scene->defaulted_plans;
+  if (d.plan) scene->registration.plan = defaults.plan;
+  if (d.align) scene->loop.align_plan = defaults.align_plan;
+  if (d.track) scene->loop.track_plan = defaults.track_plan;
+  d.because = d.plan || d.align || d.track ? defaults.because : std::string();
+}
+
+DefaultPlans archived_frame_plans() {
+  return {"robust", "robust", "warm-robust", "archived frames (lftrack replay --sequence)"};
+}
+
+std::string describe_loop_plans(const Scene& scene) {
+  const Scene::DefaultedPlans& d = scene.defaulted_plans;
+  const auto one = [&](const char* what, const std::string& plan, bool defaulted) {
+    return std::string(what) + " " + plan +
+           (defaulted ? " (the default for " + d.because + ")" : std::string(" (the scene's)"));
+  };
+  return one("align", scene.loop.align_plan, d.align) + ", " + one("track", scene.loop.track_plan, d.track);
+}
+
 }  // namespace lftrack::host

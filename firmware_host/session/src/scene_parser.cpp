@@ -279,17 +279,10 @@ void SceneParser::choose_unnamed_plans(const YAML::Node& root, Scene* scene) {
   const auto named = [&](const char* section, const char* key) {
     return root[section] && root[section].IsMap() && root[section][key];
   };
-  const DefaultPlans defaults = default_plans(*scene);
-  bool defaulted = false;
-  const auto take = [&](bool is_named, const std::string& value, std::string* plan) {
-    if (is_named) return;
-    *plan = value;
-    defaulted = true;
-  };
-  take(named("tracking", "plan"), defaults.plan, &scene->registration.plan);
-  take(named("loop", "align_plan"), defaults.align_plan, &scene->loop.align_plan);
-  take(named("loop", "track_plan"), defaults.track_plan, &scene->loop.track_plan);
-  if (defaulted) scene->default_plans_because = defaults.because;
+  scene->defaulted_plans.plan = !named("tracking", "plan");
+  scene->defaulted_plans.align = !named("loop", "align_plan");
+  scene->defaulted_plans.track = !named("loop", "track_plan");
+  apply_default_plans(default_plans(*scene), scene);
 }
 
 Status SceneParser::parse_registration(const YAML::Node& t, RegistrationSpec* r) const {

@@ -13,7 +13,8 @@ namespace lftrack::host {
 
 struct PlotSeries {
   std::string name;
-  std::vector<double> y;  // one value per x; NaN leaves a gap
+  std::vector<double> y;     // one value per x; NaN: no point there (a line runs on to the next)
+  bool points_only = false;  // points without a line (samples among a line's points)
 };
 
 struct LinePlot {

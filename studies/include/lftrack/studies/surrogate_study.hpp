@@ -36,6 +36,15 @@ struct SurrogateStudyOptions {
 };
 
 Status check_surrogate_study_options(const SurrogateStudyOptions& options);
+// Whether `out_dir` can take the study's files: none of their names there. Checked before the
+// study runs, and again before writing.
+Status check_surrogate_study_out(const std::filesystem::path& out_dir);
+// The pairs a model keeps at `xray_hz`: at least the spec's window, enough to span its min_span_s
+// (a breathing cycle) with a quarter to spare, at most CorrelationModel::kCapacity. A rate whose
+// kCapacity pairs cannot span min_span_s is refused by check_surrogate_study_options.
+int model_window_at(const CorrelationModelSpec& spec, double xray_hz);
+// The surrogate stream's rate window (s): 0.1 s, or what holds three readings at `sample_rate_hz`.
+double rate_window_at(double sample_rate_hz);
 
 struct SurrogateStudyRow {
   std::string imaging;  // "model, 1 Hz X-rays" or "every correction, 30 Hz"
@@ -50,7 +59,7 @@ struct SurrogateStudyRow {
   std::string never_ready_because;  // the model's reason, where it never was
 };
 
-struct SurrogateTrace {  // the first 30 s of one X-ray rate, for the plot
+struct SurrogateTrace {  // up to 30 s of one X-ray rate from its model's first use, without a gap
   std::vector<double> t_s, true_si_mm, predicted_si_mm, surrogate;
   std::vector<double> xray_t_s, xray_si_mm;
 };
@@ -63,8 +72,10 @@ struct SurrogateStudy {
 
 Result<SurrogateStudy> run_surrogate_study(const SurrogateStudyOptions& options);
 
-// `out_dir`/surrogate.csv (the rows), surrogate_trace.png (its .dat and .gp beside it). Refuses
-// to replace files of those names. Returns whether the PNG was drawn.
+// `out_dir`/surrogate.csv (the rows; a model never ready has empty figures and its reason),
+// surrogate_trace.png (its .dat and .gp beside it) where a model was used. Refuses to replace files
+// of those names. Returns whether the PNG was drawn; a plot that fails is a warning (the CSV
+// stands), not an error.
 Result<bool> write_surrogate_study(const SurrogateStudy& study, const SurrogateStudyOptions& options,
                                    const std::filesystem::path& out_dir);
 

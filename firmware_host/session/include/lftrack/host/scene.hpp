@@ -225,10 +225,12 @@ struct Scene {
   double octree_pivot = 0;               // tracking.octree_pivot: the octree renderer's P in [0, 1]
   tracking::LightFieldSpec light_field;  // tracking.light_field: resolution, storage, codebook, margin
   RegistrationSpec registration;         // tracking: similarity, plan, ...
-  // Why the plans the scene does not name are what they are (scene_default_plans.hpp: the robust
-  // plans unless the frames are ideal); empty when the scene names tracking.plan,
-  // loop.align_plan and loop.track_plan.
-  std::string default_plans_because;
+  // Which plans the scene does not name, and why they are what they are (scene_default_plans.hpp:
+  // the robust plans unless the frames are ideal).
+  struct DefaultedPlans {
+    bool plan = false, align = false, track = false;  // tracking.plan, loop.align_plan, loop.track_plan
+    std::string because;                              // empty when the scene names all three
+  } defaulted_plans;
   FiducialSpec fiducials;
   SimFrameSpec sim;
   LoopSpec loop;

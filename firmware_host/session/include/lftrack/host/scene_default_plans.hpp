@@ -23,5 +23,13 @@ struct DefaultPlans {
 // Whether the scene's frames are ideal: every detector simulated, and sim.physics ideal.
 bool frames_are_ideal(const Scene& scene);
 DefaultPlans default_plans(const Scene& scene);
+// Sets the plans the scene did not name (scene.defaulted_plans) to `defaults`.
+void apply_default_plans(const DefaultPlans& defaults, Scene* scene);
+// The plans for frames from an archive (`lftrack replay --sequence` on a scene whose detectors
+// are simulated: the archive may hold any detector's frames).
+DefaultPlans archived_frame_plans();
+// "align robust (the scene's), track warm-robust (the default for ...)": the loop's plans, each
+// said to be named or chosen, for the run's log.
+std::string describe_loop_plans(const Scene& scene);
 
 }  // namespace lftrack::host
