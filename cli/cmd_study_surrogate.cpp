@@ -21,7 +21,7 @@ Command add_study_surrogate_command(CLI::App* parent) {
     std::vector<double> breathing_mm;  // empty: the scene's
     double lead_s = 0.2, drift_mm_per_min = 0.5, noise_mm = 0.1, surrogate_mm = 10, surrogate_hz = 60;
     double registration_sd_mm = 0.1, duration_s = 300, tolerance_mm = 1.5;
-    std::string model = "quadratic";
+    std::string model = "linear";
     bool no_hysteresis = false;
     std::uint64_t seed = 1;
   };

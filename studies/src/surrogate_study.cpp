@@ -53,12 +53,16 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
   CorrelationModel model(spec);
   SurrogateStream stream(rate_window_at(o.surrogate.sample_rate_hz));
   bool tracing = trace != nullptr, traced = false;  // the trace: one stretch without a gap
-  // Every event on one integer clock: surrogate readings, corrections and X-rays.
-  const std::int64_t reading_ns = std::int64_t(std::llround(1e9 / o.surrogate.sample_rate_hz));
-  const std::int64_t correction_ns = std::int64_t(std::llround(1e9 / o.correction_hz));
-  const std::int64_t xray_ns = std::int64_t(std::llround(1e9 / xray_hz));
+  // Every event on one integer clock: surrogate readings, corrections and X-rays. The k-th event of
+  // a stream at f Hz is at floor(k 1e9 / f) ns from its start (not k rounded periods, which drift
+  // apart: a reading then never falls on a correction). X-rays start half a period in; an early
+  // pair moves the schedule on from itself.
+  const auto at = [](std::int64_t k, double hz, std::int64_t from) {
+    return from + std::int64_t(std::floor(double(k) * 1e9 / hz));
+  };
   const std::int64_t end_ns = std::int64_t(o.duration_s * 1e9);
-  std::int64_t next_reading = 0, next_correction = correction_ns, next_xray = xray_ns / 2;
+  std::int64_t k_reading = 0, k_correction = 1, k_xray = 0, xray_from = at(1, 2 * xray_hz, 0);
+  std::int64_t next_reading = 0, next_correction = at(1, o.correction_hz, 0), next_xray = xray_from;
   std::int64_t last_early_ns = -kNsPerS;
   std::vector<double> errors;
   int pairs = 0;
@@ -70,13 +74,13 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
       stream.push(t, chest.sample(t_s));
       SurrogateSample reading;
       if (stream.newest(&reading)) model.observe(reading);
-      next_reading += reading_ns;
+      next_reading = at(++k_reading, o.surrogate.sample_rate_hz, 0);
       continue;  // a reading first: corrections and X-rays at the same time see it
     }
     SurrogateSample now;
     const bool have_rate = stream.newest(&now);
     if (t == next_xray) {
-      next_xray = std::max(next_xray, t) + xray_ns;
+      next_xray = at(++k_xray, xray_hz, xray_from);
       if (!have_rate) continue;
       ++pairs;
       Eigen::Vector3d registered = target_at(o.motion, t_s);
@@ -99,7 +103,7 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
       }
     }
     if (t == next_correction) {
-      next_correction += correction_ns;
+      next_correction = at(++k_correction, o.correction_hz, 0);
       if (!have_rate || !model.ready()) {
         if (traced) tracing = false;  // the trace ends at the model's first gap
         continue;
@@ -109,7 +113,9 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
       if (!model.within_fit(now) && t - last_early_ns >= kNsPerS) {
         ++row.early_pairs;
         last_early_ns = t;
-        next_xray = t + 1;  // the next event: this correction's pair
+        xray_from = t + 1;  // the next event: this correction's pair, and the schedule on from it
+        k_xray = 0;
+        next_xray = xray_from;
       }
       const Eigen::Vector3d predicted = model.predict(now), truth = target_at(o.motion, t_s);
       errors.push_back((predicted - truth).norm());
@@ -136,7 +142,7 @@ int model_window_at(const CorrelationModelSpec& spec, double xray_hz) {
 }
 
 double rate_window_at(double sample_rate_hz) {
-  return std::max(0.1, 2.5 / sample_rate_hz);
+  return std::max(2.5 / sample_rate_hz, std::min(0.1, 30.0 / sample_rate_hz));
 }
 
 Status check_surrogate_study_options(const SurrogateStudyOptions& o) {
@@ -146,8 +152,10 @@ Status check_surrogate_study_options(const SurrogateStudyOptions& o) {
         "surrogate study: the scene's correction rate, {:g} Hz (1000 / loop.period_ms), must be 1..100 Hz",
         o.correction_hz));
   if (o.xray_hz.empty()) return invalid_argument("surrogate study: no X-ray rate");
-  // The most pairs a model keeps must span a breathing cycle: more X-rays, not no model.
-  const double most_hz = double(CorrelationModel::kCapacity - 1) / std::max(o.model.min_span_s, 1e-9);
+  // The most pairs a model keeps must span a breathing cycle with model_window_at's quarter to
+  // spare (early pairs shorten the span): more X-rays, never no model.
+  const double most_hz =
+      double(CorrelationModel::kCapacity - 1) / (1.25 * std::max(o.model.min_span_s, 1e-9));
   for (double hz : o.xray_hz) {
     if (!(hz >= 0.05 && hz <= o.correction_hz))
       return invalid_argument(

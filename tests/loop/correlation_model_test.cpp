@@ -118,7 +118,7 @@ TEST(CorrelationModel, ItIsNotUsedBeforeItHasSeenABreath) {
   EXPECT_FALSE(model.ready());
   EXPECT_NE(std::string(model.not_ready_reason()).find("breathing cycle"), std::string::npos)
       << model.not_ready_reason();
-  // Pairs over 8 s, but all on the exhale: the surrogate's rate never changes sign.
+  // Pairs over 16 s, but all on the exhale: the surrogate's rate never changes sign.
   CorrelationModel exhale_only(spec_of(CorrelationModelSpec::Order::kLinear, false));
   for (int i = 0; i < 10; ++i) {
     const double t = 2.1 + 4.0 * (i / 2) + 0.3 * (i % 2);  // 2.1-2.4 s into each breath: exhaling
@@ -129,9 +129,12 @@ TEST(CorrelationModel, ItIsNotUsedBeforeItHasSeenABreath) {
   EXPECT_NE(std::string(exhale_only.not_ready_reason()).find("inhale"), std::string::npos);
   // A surrogate that never moved fits nothing.
   CorrelationModel frozen(spec_of(CorrelationModelSpec::Order::kLinear, false));
+  for (int i = 0; i < 10; ++i) frozen.observe({std::int64_t(i) * kNsPerS, 3.0, 0.0});
   for (int i = 0; i < 10; ++i)
     frozen.add({std::int64_t(i) * kNsPerS, 3.0, i % 2 ? 1e-3 : -1e-3}, target_at(i));
   EXPECT_FALSE(frozen.ready());
+  EXPECT_NE(std::string(frozen.not_ready_reason()).find("did not move"), std::string::npos)
+      << frozen.not_ready_reason();
 }
 
 TEST(CorrelationModel, XraysAtTheSamePhasesOfEveryBreathMakeNoModel) {
@@ -139,17 +142,37 @@ TEST(CorrelationModel, XraysAtTheSamePhasesOfEveryBreathMakeNoModel) {
   // and exhaling in turn. A model fitted there would agree with every later X-ray.
   CorrelationModel model(spec_of(CorrelationModelSpec::Order::kQuadratic, true));
   for (int i = 0; i < 20; ++i) {
-    const double t = 1.0 + 2.0 * i;
+    const double t = 1.3 + 2.0 * i;  // two heights: 0.73 and 0.29 of the breath
     observe(&model, t - 2, t, 0);
     model.add(chest_at(t), target_at(t) + Eigen::Vector3d(0.01 * (i % 3), 0, 0));  // a registration's scatter
   }
   EXPECT_FALSE(model.ready());
-  EXPECT_NE(std::string(model.not_ready_reason()).find("cover"), std::string::npos)
+  EXPECT_NE(std::string(model.not_ready_reason()).find("same phases"), std::string::npos)
       << model.not_ready_reason();
   // Without the surrogate's readings there is no range to judge coverage by: no model either.
   CorrelationModel blind(spec_of(CorrelationModelSpec::Order::kLinear, false));
   for (int i = 0; i < 12; ++i) blind.add(chest_at(0.3 + 1.07 * i), target_at(0.3 + 1.07 * i));
   EXPECT_FALSE(blind.ready());
+}
+
+TEST(CorrelationModel, TwoPhasesOfEveryBreathMakeNoModelAtAnyPhaseOffset) {
+  // X-rays every 2 s of a 4 s breath, at several offsets into the breath and leads of the chest:
+  // inhale and exhale at the same heights, two levels only. At no offset may that be a model.
+  for (const double lead : {0.0, 0.2, 0.5}) {
+    for (const double offset : {0.1, 0.3, 0.5, 0.7, 1.0}) {
+      SCOPED_TRACE(testing::Message() << "lead " << lead << " s, offset " << offset << " s");
+      for (const auto order :
+           {CorrelationModelSpec::Order::kLinear, CorrelationModelSpec::Order::kQuadratic}) {
+        CorrelationModel model(spec_of(order, true));
+        for (int i = 0; i < 20; ++i) {
+          const double t = offset + 2.0 * i;
+          observe(&model, t - 2, t, lead);
+          model.add(chest_at(t, lead), target_at(t));
+        }
+        EXPECT_FALSE(model.ready()) << "fit rms " << model.fit_rms_mm().transpose();
+      }
+    }
+  }
 }
 
 TEST(CorrelationModel, AReadingBeyondTheFittedBreathsIsNotWithinTheFit) {
@@ -161,6 +184,9 @@ TEST(CorrelationModel, AReadingBeyondTheFittedBreathsIsNotWithinTheFit) {
   SurrogateSample cough = chest_at(22.0);
   cough.amplitude *= 1.5;  // a breath half again as deep
   EXPECT_FALSE(model.within_fit(cough));
+  SurrogateSample gasp = chest_at(22.0);
+  gasp.rate_per_s = 3 * 10 * std::numbers::pi / kPeriodS;  // three times the breath's fastest
+  EXPECT_FALSE(model.within_fit(gasp)) << "the rate term extrapolates as freely as the amplitude's";
   EXPECT_FALSE(model.within_fit({0, std::nan(""), 0}));
 }
 
@@ -211,9 +237,14 @@ TEST(CorrelationModel, SpecsOutsideTheirRangesAreRefused) {
   };
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.window = 3; }));
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.window = CorrelationModel::kCapacity + 1; }));
-  EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.min_pairs = 5; }));   // quadratic + rate: 4 terms + 2
+  EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.min_pairs = 4; }));  // a line and the rate: 3 terms + 2
+  EXPECT_TRUE(refused([](CorrelationModelSpec& s) {
+    s.order = CorrelationModelSpec::Order::kQuadratic;
+    s.min_pairs = 5;  // a parabola and the rate: 4 terms + 2
+  }));
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.min_pairs = 30; }));  // beyond the window
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.min_span_s = -1; }));
+  EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.min_span_s = 0; }));  // no breath: no coverage rule
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.min_span_s = std::nan(""); }));
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.tolerance_mm = 0; }));
   EXPECT_TRUE(refused([](CorrelationModelSpec& s) { s.tolerance_mm = 1e12; }));
@@ -230,7 +261,8 @@ TEST(SurrogateStream, TheRateOfANoisyStreamIsItsSlopeNotItsDifferences) {
     SurrogateSample s;
     if (i >= 6) {
       ASSERT_TRUE(stream.newest(&s));
-      // The slope over 0.1 s lags the true rate by 0.05 s; compare with the rate there.
+      // The slope over the readings of the last 0.1 s lags the true rate by about 0.05 s; compare
+      // with the rate there.
       worst_rate_error = std::max(worst_rate_error, std::abs(s.rate_per_s - 10 * breath_rate(t - 0.05)));
     }
   }
@@ -250,6 +282,9 @@ TEST(CorrelationModel, TheLoopsCallsAllocateNothing) {
     observe(&model, t - 1.07, t, 0);
     (void)model.check(chest_at(t), target_at(t));
     (void)model.predict(chest_at(t + 0.5));
+    SurrogateSample newest;
+    (void)stream.newest(&newest);
+    (void)model.within_fit(newest);
   }
   EXPECT_EQ(process_allocation_count() - before, 0u);
   EXPECT_TRUE(model.ready());

@@ -29,8 +29,9 @@ class FillingDisk final : public host::JournalSink {
       return -1;
     }
     const std::size_t n = std::min<std::size_t>(bytes, static_cast<std::size_t>(left));
-    left_ -= static_cast<long long>(n);
-    return ::write(fd, data, n);
+    const ssize_t written = ::write(fd, data, n);
+    if (written > 0) left_.fetch_sub(written);  // what the file took (one writer per disk)
+    return written;
   }
 
  private:

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <random>
 
 #include "lftrack/chaos/chaos_invariants.hpp"

@@ -9,12 +9,20 @@ namespace lftrack::host {
 namespace {
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
-// The smallest eigenvalue of the standardised normal equations, per pair, that still makes a fit:
-// below it two terms explain the same thing (the pairs sampled one breath phase only).
-constexpr double kMinEigenvaluePerPair = 1e-6;
+// The smallest eigenvalue of the standardised normal equations, per pair, that makes a fit: the
+// coefficients' error along the weakest direction is the registration's error / sqrt(eigenvalue),
+// so below this two terms explain nearly the same thing (pairs from two phases of the breath:
+// 1.6e-3 with the quadratic and rate terms; pairs spread over the breath: 0.16-0.9).
+constexpr double kMinEigenvaluePerPair = 2e-2;
 
 bool finite(const SurrogateSample& s) {
   return std::isfinite(s.amplitude) && std::isfinite(s.rate_per_s);
+}
+
+// The amplitude terms (1, s and s^2 when quadratic): the distinct surrogate levels the pairs must
+// hold are one more.
+int amplitude_terms_of(const CorrelationModelSpec& spec) {
+  return spec.order == CorrelationModelSpec::Order::kQuadratic ? 3 : 2;
 }
 
 int terms_of(const CorrelationModelSpec& spec) {
@@ -31,8 +39,8 @@ Status check_correlation_model_spec(const CorrelationModelSpec& spec) {
     return invalid_argument("correlation model: min_pairs must be at least the model's terms + 2 (" +
                             std::to_string(terms_of(spec) + 2) + ") and at most the window (" +
                             std::to_string(spec.window) + ")");
-  if (!(spec.min_span_s >= 0 && spec.min_span_s <= 600))
-    return invalid_argument("correlation model: min_span_s must be 0..600 s");
+  if (!(spec.min_span_s >= 1 && spec.min_span_s <= 600))
+    return invalid_argument("correlation model: min_span_s must be 1..600 s (a breathing cycle)");
   if (!(spec.tolerance_mm > 0 && spec.tolerance_mm <= 20))
     return invalid_argument("correlation model: tolerance_mm must be in (0, 20] mm");
   return {};
@@ -84,6 +92,8 @@ CorrelationModel::CorrelationModel(const CorrelationModelSpec& spec)
 
 void CorrelationModel::reset() {
   count_ = 0;
+  coefficients_.setZero();
+  fit_rms_mm_.setZero();
   observed_ = previous_observed_ = false;
   misses_in_a_row_ = 0;
   ready_ = false;
@@ -144,7 +154,9 @@ void CorrelationModel::observe(const SurrogateSample& s) {
 bool CorrelationModel::within_fit(const SurrogateSample& s) const {
   if (!ready_ || !finite(s)) return false;
   const double margin = kFitMargin * (fit_max_s_ - fit_min_s_);
-  return s.amplitude >= fit_min_s_ - margin && s.amplitude <= fit_max_s_ + margin;
+  const double rate_margin = kFitMargin * (fit_max_r_ - fit_min_r_);
+  return s.amplitude >= fit_min_s_ - margin && s.amplitude <= fit_max_s_ + margin &&
+         s.rate_per_s >= fit_min_r_ - rate_margin && s.rate_per_s <= fit_max_r_ + rate_margin;
 }
 
 Eigen::Matrix<double, CorrelationModel::kTerms, 1> CorrelationModel::basis(const SurrogateSample& s) const {
@@ -160,6 +172,9 @@ Eigen::Vector3d CorrelationModel::predict(const SurrogateSample& surrogate) cons
 
 void CorrelationModel::refit() {
   ready_ = false;
+  // Nothing of an earlier fit is left for a reader (the journal) while the model is not ready.
+  coefficients_.setZero();
+  fit_rms_mm_.setZero();
   if (count_ < spec_.min_pairs) {
     not_ready_ = "fewer pairs than the model needs (min_pairs)";
     return;
@@ -172,6 +187,7 @@ void CorrelationModel::refit() {
   bool inhale = false, exhale = false;
   double sum_s = 0, sum_r2 = 0;
   fit_min_s_ = fit_max_s_ = surrogate_[0].amplitude;
+  fit_min_r_ = fit_max_r_ = surrogate_[0].rate_per_s;
   for (int i = 0; i < count_; ++i) {
     const SurrogateSample& s = surrogate_[std::size_t(i)];
     inhale = inhale || s.rate_per_s > 0;
@@ -179,10 +195,25 @@ void CorrelationModel::refit() {
     sum_s += s.amplitude;
     sum_r2 += s.rate_per_s * s.rate_per_s;
     fit_min_s_ = std::min(fit_min_s_, s.amplitude);
+    fit_min_r_ = std::min(fit_min_r_, s.rate_per_s);
+    fit_max_r_ = std::max(fit_max_r_, s.rate_per_s);
     fit_max_s_ = std::max(fit_max_s_, s.amplitude);
   }
   if (!inhale || !exhale) {
     not_ready_ = "the pairs hold no inhale or no exhale";
+    return;
+  }
+  mean_s_ = sum_s / count_;
+  double sum_d2 = 0;
+  for (int i = 0; i < count_; ++i) {
+    const double d = surrogate_[std::size_t(i)].amplitude - mean_s_;
+    sum_d2 += d * d;
+  }
+  scale_s_ = std::sqrt(sum_d2 / count_);
+  scale_r_ = std::sqrt(sum_r2 / count_);
+  if (!(scale_s_ > 1e-12 * (1 + std::abs(mean_s_))) || !(scale_r_ > 0) ||
+      !std::isfinite(scale_s_ * scale_r_)) {
+    not_ready_ = "the surrogate did not move";
     return;
   }
   if (!observed_) {
@@ -197,19 +228,30 @@ void CorrelationModel::refit() {
           "the pairs cover too little of the surrogate's range (X-rays at the same phases of each breath)";
       return;
     }
-  }
-  mean_s_ = sum_s / count_;
-  double sum_d2 = 0;
-  for (int i = 0; i < count_; ++i) {
-    const double d = surrogate_[std::size_t(i)].amplitude - mean_s_;
-    sum_d2 += d * d;
-  }
-  scale_s_ = std::sqrt(sum_d2 / count_);
-  scale_r_ = std::sqrt(sum_r2 / count_);
-  if (!(scale_s_ > 1e-12 * (1 + std::abs(mean_s_))) || !(scale_r_ > 0) ||
-      !std::isfinite(scale_s_ * scale_r_)) {
-    not_ready_ = "the surrogate did not move";
-    return;
+    // Distinct levels: X-rays at two phases of every breath read two levels (inhale and exhale at
+    // the same height), which a line through them fits exactly and wrongly where the relation
+    // loops or bends. Counted greedily over the sorted amplitudes, a level kLevelSpacing of the
+    // range above the last; insertion sort of at most kCapacity values, in place of a copy.
+    std::array<double, kCapacity> sorted{};
+    for (int i = 0; i < count_; ++i) {
+      double v = surrogate_[std::size_t(i)].amplitude;
+      int j = i;
+      for (; j > 0 && sorted[std::size_t(j - 1)] > v; --j)
+        sorted[std::size_t(j)] = sorted[std::size_t(j - 1)];
+      sorted[std::size_t(j)] = v;
+    }
+    int levels = 1;
+    double last = sorted[0];
+    for (int i = 1; i < count_; ++i)
+      if (sorted[std::size_t(i)] - last >= kLevelSpacing * (high - low)) {
+        ++levels;
+        last = sorted[std::size_t(i)];
+      }
+    if (levels < amplitude_terms_of(spec_) + 1) {
+      not_ready_ =
+          "the pairs hold too few levels of the surrogate (X-rays at the same phases of each breath)";
+      return;
+    }
   }
   Eigen::Matrix<double, kTerms, kTerms> normal = Eigen::Matrix<double, kTerms, kTerms>::Zero();
   Eigen::Matrix<double, kTerms, 3> rhs = Eigen::Matrix<double, kTerms, 3>::Zero();

@@ -43,7 +43,8 @@ Status check_surrogate_study_out(const std::filesystem::path& out_dir);
 // (a breathing cycle) with a quarter to spare, at most CorrelationModel::kCapacity. A rate whose
 // kCapacity pairs cannot span min_span_s is refused by check_surrogate_study_options.
 int model_window_at(const CorrelationModelSpec& spec, double xray_hz);
-// The surrogate stream's rate window (s): 0.1 s, or what holds three readings at `sample_rate_hz`.
+// The surrogate stream's rate window (s): 0.1 s, widened to hold 2.5 reading intervals below 25 Hz
+// and narrowed to 30 readings (SurrogateStream's capacity) above 300 Hz.
 double rate_window_at(double sample_rate_hz);
 
 struct SurrogateStudyRow {

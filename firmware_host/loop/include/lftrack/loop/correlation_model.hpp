@@ -12,14 +12,17 @@
 // When it may be used (ready()): at least `min_pairs` pairs, spread over at least `min_span_s` (a
 // breathing cycle: the scene's period), among them an inhale (r > 0) and an exhale (r < 0), whose
 // surrogate amplitudes span at least kMinCoverage of the range the surrogate itself covered over
-// the last breaths (observe()), and a fit whose normal equations are well conditioned. The
-// coverage rule matters: X-rays every half period (2 s in a 4 s breath) see the same two phases
-// every time, where the surrogate reads the same; a model fitted there agrees with every later
-// X-ray and errs by centimetres in between. A surrogate that never moved fits nothing.
+// the last breaths (observe()), at least one more distinct level of the surrogate than the model
+// has amplitude terms (3 for a line, 4 for a parabola; levels kLevelSpacing of that range apart),
+// and a fit whose normal equations are well conditioned. These rules matter: X-rays every half
+// period (2 s in a 4 s breath), or at 1 Hz in a 4 s breath at some phases, see two phases of every
+// breath, inhale and exhale at the same heights; a model fitted there agrees with every later
+// X-ray and errs by millimetres, up to centimetres, in between. A surrogate that never moved fits
+// nothing.
 //
-// within_fit() says whether a reading lies within the amplitudes the model was fitted on (with a
-// margin): outside, the model extrapolates (a cough, a deep breath) and the loop should take an
-// X-ray pair early rather than trust it.
+// within_fit() says whether a reading lies within the amplitudes and rates the model was fitted on
+// (with a margin): outside, the model extrapolates (a cough, a gasp, a deep breath) and the loop
+// should take an X-ray pair early rather than trust it.
 //
 // check() compares the model's prediction at a new pair's surrogate with the registered position:
 // within `tolerance_mm` (3D) it agrees; beyond it is a miss, and the model is refitted with the new
@@ -40,7 +43,10 @@ namespace lftrack::host {
 
 struct CorrelationModelSpec {
   enum class Order { kLinear, kQuadratic };
-  Order order = Order::kQuadratic;
+  // A line with the rate term by default: as good as the parabola on the thoracic breath (BENCHMARKS.md)
+  // and needing one level of the surrogate fewer, which X-rays at a steady rate in a steady breath
+  // do not always give (1 Hz in a 4 s breath visits four phases).
+  Order order = Order::kLinear;
   bool hysteresis = true;
   int window = 20;            // the newest pairs fitted, 4..kCapacity
   int min_pairs = 8;          // before ready(), at least the model's coefficients + 2
@@ -87,6 +93,7 @@ class CorrelationModel {
   explicit CorrelationModel(const CorrelationModelSpec& spec);
 
   static constexpr double kMinCoverage = 0.6;
+  static constexpr double kLevelSpacing = 0.125;  // of the surrogate's range, between two levels
   // The pairs' amplitudes may be exceeded by this fraction of their span before within_fit fails.
   static constexpr double kFitMargin = 0.1;
 
@@ -133,6 +140,7 @@ class CorrelationModel {
   const char* not_ready_ = "no pairs yet";
   double mean_s_ = 0, scale_s_ = 1, scale_r_ = 1;
   double fit_min_s_ = 0, fit_max_s_ = 0;  // the fitted pairs' amplitudes
+  double fit_min_r_ = 0, fit_max_r_ = 0;  // and rates
   // The surrogate's range in the current window of min_span_s (from window_start_ns_) and the one
   // before it.
   std::int64_t window_start_ns_ = 0;

@@ -99,7 +99,7 @@ static_assert(std::is_trivially_copyable_v<JournalRecord>);
 
 // Where the writer thread's bytes go. The journal's file itself by default; a disk that fills up
 // or fails (the tests, the chaos soak) is a sink of their own, injected through JournalOptions.
-// Called from the writer thread only, never from the cycle.
+// Called by open() for the header, then from the writer thread only; never from the cycle.
 class JournalSink {
  public:
   virtual ~JournalSink() = default;
