@@ -15,6 +15,7 @@
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
 #include "lftrack/studies/plot.hpp"
+#include "study_outputs.hpp"
 
 namespace lftrack::host {
 namespace {
@@ -168,13 +169,8 @@ Result<bool> write_latency_study(const LatencyStudy& s, const fs::path& out_dir)
   if (s.chains.empty())
     return failed_precondition("no command with a latency chain in the journals: nothing to plot" +
                                (s.notes.empty() ? std::string() : " (" + s.notes.front() + ")"));
+  LFTRACK_RETURN_IF_ERROR(refuse_existing_outputs(out_dir, kOutputs));
   std::error_code ec;
-  for (const char* name : kOutputs)
-    if (fs::exists(out_dir / name, ec) || fs::is_symlink(out_dir / name, ec))
-      return failed_precondition(
-          (out_dir / name).string() +
-          " exists (an earlier study's, or another file): give another --out (nothing was "
-          "written)");
   fs::create_directories(out_dir, ec);
   if (ec) return io_error(out_dir.string() + ": cannot create: " + ec.message());
   {

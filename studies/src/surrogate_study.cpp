@@ -14,14 +14,21 @@
 
 #include "lftrack/studies/plot.hpp"
 #include "quantile.hpp"
+#include "study_outputs.hpp"
 
 namespace lftrack::host {
 namespace {
 
 namespace fs = std::filesystem;
 constexpr std::int64_t kNsPerS = 1'000'000'000;
-constexpr const char* kOutputs[] = {"surrogate.csv", "surrogate_trace.png", "surrogate_trace.dat",
-                                    "surrogate_trace.gp"};
+
+// The registrations' noise: one stream per seed, apart from the surrogate's (seeded by o.seed),
+// the same for every X-ray rate and for imaging every correction.
+std::uint64_t registration_seed(const SurrogateStudyOptions& o) {
+  return o.seed ^ 0x5851F42D4C957F2Dull;
+}
+constexpr const char* kSurrogateOutputs[] = {"surrogate.csv", "surrogate_trace.png", "surrogate_trace.dat",
+                                             "surrogate_trace.gp"};
 
 Eigen::Vector3d target_at(const sim::PatientMotionSpec& motion, double t_s) {
   return sim::patient_offset(motion, t_s).head<3>();
@@ -46,7 +53,7 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
   row.imaging = fmt::format("model, {:g} Hz X-rays", xray_hz);
   row.xray_hz = xray_hz;
   sim::BreathingSurrogate chest(o.surrogate);
-  std::mt19937_64 random(o.seed ^ 0x5851F42D4C957F2Dull);
+  std::mt19937_64 random(registration_seed(o));
   std::normal_distribution<double> registration_noise(0.0, o.registration_sd_mm);
   CorrelationModelSpec spec = o.model;
   spec.window = model_window_at(o.model, xray_hz);
@@ -207,7 +214,7 @@ Result<SurrogateStudy> run_surrogate_study(const SurrogateStudyOptions& o) {
   every.xray_hz = o.correction_hz;
   every.pairs_per_minute = 60 * o.correction_hz;
   every.first_ready_s = 0;
-  std::mt19937_64 random(o.seed ^ 0x5851F42D4C957F2Dull);
+  std::mt19937_64 random(registration_seed(o));
   std::normal_distribution<double> noise(0.0, o.registration_sd_mm);
   std::vector<double> errors(std::size_t(o.duration_s * o.correction_hz));
   for (double& e : errors) e = Eigen::Vector3d(noise(random), noise(random), noise(random)).norm();
@@ -217,14 +224,7 @@ Result<SurrogateStudy> run_surrogate_study(const SurrogateStudyOptions& o) {
 }
 
 Status check_surrogate_study_out(const fs::path& out_dir) {
-  std::error_code ec;
-  for (const char* name : kOutputs)
-    if (fs::exists(out_dir / name, ec) || fs::is_symlink(out_dir / name, ec))
-      return failed_precondition(
-          (out_dir / name).string() +
-          " exists (an earlier study's, or another file): give another --out (nothing was "
-          "written)");
-  return {};
+  return refuse_existing_outputs(out_dir, kSurrogateOutputs);
 }
 
 Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudyOptions& o,

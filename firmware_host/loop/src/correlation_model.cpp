@@ -26,7 +26,7 @@ int amplitude_terms_of(const CorrelationModelSpec& spec) {
 }
 
 int terms_of(const CorrelationModelSpec& spec) {
-  return 2 + (spec.order == CorrelationModelSpec::Order::kQuadratic ? 1 : 0) + (spec.hysteresis ? 1 : 0);
+  return amplitude_terms_of(spec) + (spec.hysteresis ? 1 : 0);
 }
 
 }  // namespace

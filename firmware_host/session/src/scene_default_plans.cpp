@@ -1,11 +1,19 @@
 #include "lftrack/host/scene_default_plans.hpp"
 
-namespace lftrack::host {
+#include "lftrack/host/scene_devices.hpp"
 
+namespace lftrack::host {
+namespace {
+
+DefaultPlans robust_plans(std::string because) {
+  return {"robust", "robust", "warm-robust", std::move(because)};
+}
+
+}  // namespace
+
+// Every detector of a scene takes its frames from one kind (the parser refuses a mix).
 bool frames_are_ideal(const Scene& scene) {
-  for (const auto& d : scene.detectors)
-    if (d.frames.kind != "sim") return false;
-  return scene.sim.physics.ideal();
+  return frames_are_simulated(scene) && scene.sim.physics.ideal();
 }
 
 DefaultPlans default_plans(const Scene& scene) {
@@ -15,7 +23,7 @@ DefaultPlans default_plans(const Scene& scene) {
   const std::string because = kind == "sim" ? "simulated frames with sim.physics " + scene.sim.physics_name
                               : kind == "replay" ? std::string("archived frames")
                                                  : "frames from " + kind + " devices";
-  return {"robust", "robust", "warm-robust", because};
+  return robust_plans(because);
 }
 
 void apply_default_plans(const DefaultPlans& defaults, Scene* scene) {
@@ -27,7 +35,7 @@ void apply_default_plans(const DefaultPlans& defaults, Scene* scene) {
 }
 
 DefaultPlans archived_frame_plans() {
-  return {"robust", "robust", "warm-robust", "archived frames (lftrack replay --sequence)"};
+  return robust_plans("archived frames (lftrack replay --sequence)");
 }
 
 std::string describe_loop_plans(const Scene& scene) {
