@@ -15,8 +15,9 @@
 
 #include <cstdio>
 #include <cstring>
-#include <string>
+#include <iterator>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "cli_commands.hpp"
 #include "lftrack/host/dicom_registration.hpp"
@@ -43,6 +44,29 @@ std::string code_name(std::uint8_t code, int offset = 0) {
   const char* name = to_string(static_cast<Enum>(code - offset));
   return std::strcmp(name, "?") == 0 ? "unknown " + std::to_string(unsigned{code}) : std::string(name);
 }
+// Imaging on demand (format 6; "" in earlier journals): why the cycle took a pair, and its check.
+std::string imaging_name(std::uint8_t code) {
+  return code == 0 ? "" : code_name<ImagingReason>(code, 1);
+}
+std::string model_check_name(std::uint8_t code) {
+  static const char* const kNames[] = {"", "not ready", "agrees", "missed, refitted", "missed again"};
+  return code < std::size(kNames) ? kNames[code] : "unknown " + std::to_string(unsigned{code});
+}
+nlohmann::json imaging_json(const JournalRecord& r) {
+  return {{"imaging", imaging_name(r.imaging)},
+          {"surrogate_fault", code_name<SurrogateFault>(r.surrogate_fault)},
+          {"surrogate_time_ns", r.surrogate_time_ns},
+          {"surrogate", {{"amplitude", r.surrogate[0]}, {"rate_per_s", r.surrogate[1]}}},
+          {"model_ready", (r.model_flags & 1) != 0},
+          {"offset_from_model", (r.model_flags & 2) != 0},
+          {"model_pairs", r.model_pairs},
+          {"model_prediction_mm", r.model_prediction_mm},
+          {"model_check", model_check_name(r.model_check)},
+          {"model_check_error_mm", r.model_check_error_mm},
+          {"model_fit_rms_mm", r.model_fit_rms_mm},
+          {"model_coefficients", r.model_coefficients}};
+}
+
 std::string state_name(std::uint8_t s) {
   return code_name<TrackingState>(s);
 }
@@ -80,7 +104,9 @@ void print_csv(const std::vector<JournalRecord>& records) {
       "operator_first_refusal,operator_refusals,"
       "target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,target_ry_deg,target_rz_deg,command_acked_ns,"
       "frame_time_a_ns,frame_time_b_ns,frames_arrived_ns,preprocessed_ns,registered_ns,gated_ns,command_"
-      "written_ns\n");
+      "written_ns,imaging,surrogate_fault,surrogate_time_ns,surrogate_amplitude,surrogate_rate_per_s,model_"
+      "ready,"
+      "offset_from_model,model_pairs,model_x_mm,model_y_mm,model_z_mm,model_check,model_check_error_mm\n");
   for (const JournalRecord& r : records) {
     std::printf("%llu,%lld,%u,%u,%s,%s,%s,\"%s\"", static_cast<unsigned long long>(r.cycle),
                 static_cast<long long>(r.cycle_start_ns), r.frame_sequence[0], r.frame_sequence[1],
@@ -97,11 +123,17 @@ void print_csv(const std::vector<JournalRecord>& records) {
                 refusal_name(r.operator_refusal).c_str(), code_name<BeamWithheld>(r.beam_withheld).c_str(),
                 refusal_name(r.operator_first_refusal).c_str(), refusals_text(r.operator_refused_by_reason).c_str());
     print_mm_deg(r.true_target_residual);
-    std::printf(",%lld,%lld,%lld,%lld,%lld,%lld,%lld,%lld\n", static_cast<long long>(r.command_acked_ns),
+    std::printf(",%lld,%lld,%lld,%lld,%lld,%lld,%lld,%lld", static_cast<long long>(r.command_acked_ns),
                 static_cast<long long>(r.frame_time_ns[0]), static_cast<long long>(r.frame_time_ns[1]),
                 static_cast<long long>(r.frames_arrived_ns), static_cast<long long>(r.preprocessed_ns),
                 static_cast<long long>(r.registered_ns), static_cast<long long>(r.gated_ns),
                 static_cast<long long>(r.command_written_ns));
+    std::printf(",\"%s\",\"%s\",%lld,%.6g,%.6g,%d,%d,%u,%.4f,%.4f,%.4f,\"%s\",%.4f\n",
+                imaging_name(r.imaging).c_str(), code_name<SurrogateFault>(r.surrogate_fault).c_str(),
+                static_cast<long long>(r.surrogate_time_ns), r.surrogate[0], r.surrogate[1],
+                r.model_flags & 1, (r.model_flags >> 1) & 1, r.model_pairs, r.model_prediction_mm[0],
+                r.model_prediction_mm[1], r.model_prediction_mm[2], model_check_name(r.model_check).c_str(),
+                r.model_check_error_mm);
   }
 }
 
@@ -141,7 +173,8 @@ void print_json_lines(const std::vector<JournalRecord>& records) {
                      {"operator_refusal", refusal_name(r.operator_refusal)},
                      {"operator_first_refusal", refusal_name(r.operator_first_refusal)},
                      {"operator_refusals", refusals_json(r)},
-                     {"beam_withheld", code_name<BeamWithheld>(r.beam_withheld)}};
+                     {"beam_withheld", code_name<BeamWithheld>(r.beam_withheld)},
+                     {"imaging", imaging_json(r)}};
     std::printf("%s\n", j.dump().c_str());
   }
 }

@@ -7,6 +7,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
@@ -54,10 +56,47 @@ struct SimOptions {
   std::string monitor_token_file;
   bool monitor_token_quiet = false;  // the token in its file only, not on standard output
   std::string igtl;      // --igtl [ADDRESS:]PORT: the OpenIGTLink server
+  // `lftrack sim --imaging MODE --xray-hz HZ --period-ms MS`: the scene's tracking.imaging and
+  // loop period, overridden (to compare imaging every cycle with a model on one scene).
+  std::string imaging;
+  std::optional<double> xray_hz, period_ms;
   std::optional<std::uint64_t> chaos_seed;  // `lftrack sim --chaos SEED`: the chaos soak instead
   lftrack::chaos::ChaosOptions chaos;
   enum class Mode { kSim, kRun, kReplay } mode = Mode::kSim;
 };
+
+// --imaging, --xray-hz and --period-ms on the scene, checked as the scene's own values are. A new
+// period keeps the budgets' shares of it and the prediction's span in seconds.
+Status override_imaging(const SimOptions& o, Scene* scene) {
+  // CLI11's ranges let NaN through (every comparison with it is false).
+  if (o.xray_hz && !std::isfinite(*o.xray_hz)) return invalid_argument("--xray-hz must be a finite number");
+  if (o.period_ms && !std::isfinite(*o.period_ms))
+    return invalid_argument("--period-ms must be a finite number");
+  ImagingSpec& imaging = scene->loop.imaging;
+  if (!o.imaging.empty())
+    imaging.mode = o.imaging == "model" ? ImagingSpec::Mode::kModel : ImagingSpec::Mode::kEveryCycle;
+  if (o.xray_hz) imaging.xray_hz = *o.xray_hz;
+  if (o.period_ms) {
+    LoopSpec& loop = scene->loop;
+    const double scale = *o.period_ms / loop.period_ms;
+    loop.registration_budget_ms *= scale;
+    loop.acquire_timeout_ms *= scale;
+    loop.prediction_cycles =
+        std::max(loop.prediction_cycles > 1 ? 2 : 0, int(std::lround(loop.prediction_cycles / scale)));
+    loop.period_ms = *o.period_ms;
+  }
+  if (o.xray_hz && !imaging.model_mode())
+    return invalid_argument("--xray-hz: imaging every cycle takes a pair every period; add --imaging model");
+  if (imaging.model_mode() && scene->surrogate.source.empty())
+    return invalid_argument("--imaging model: the scene " + scene->source +
+                            " has no `surrogate` section to follow");
+  const double loop_hz = 1e3 / scene->loop.period_ms;
+  if (imaging.model_mode() && imaging.xray_hz > loop_hz)
+    return invalid_argument(fmt::format("{} {:g} is above the loop's rate ({:g} Hz{})",
+                                        o.xray_hz ? "--xray-hz" : "the scene's tracking.imaging.xray_hz",
+                                        imaging.xray_hz, loop_hz, o.period_ms ? ", --period-ms" : ""));
+  return {};
+}
 
 std::atomic<LoopSession*> g_session{nullptr};
 
@@ -143,6 +182,21 @@ void print_summary(const LoopSummary& s) {
                 when.c_str(), static_cast<long long>(s.view_checks), static_cast<long long>(s.view_checks_refused),
                 static_cast<long long>(s.view_checks_out_of_time), s.view_check_p50_ms, s.view_check_max_ms);
   }
+  std::printf("imaging %s: X-ray pairs %lld (%.1f per minute, %lld early)", s.imaging.c_str(),
+              static_cast<long long>(s.xray_pairs), s.pairs_per_minute,
+              static_cast<long long>(s.early_pairs));
+  if (s.dose_per_pair_mGy > 0)
+    std::printf(", skin entrance dose %.1f mGy per minute (%.2f mGy per pair, a stated model)",
+                s.dose_mGy_per_minute, s.dose_per_pair_mGy);
+  if (s.imaging == "model") {
+    std::printf("; cycles from the correlation model %lld, checks %lld, missed %lld",
+                static_cast<long long>(s.model_cycles), static_cast<long long>(s.model_checks),
+                static_cast<long long>(s.model_misses));
+    if (s.model_checks > 0) std::printf(", check error p95 %.2f mm", s.model_check_p95_mm);
+    if (!s.model_not_ready.empty())
+      std::printf("; the model was not ready at the end: %s", s.model_not_ready.c_str());
+  }
+  std::printf("\n");
   std::printf("holds %lld, faults %lld, corrections sent %lld", static_cast<long long>(s.holds),
               static_cast<long long>(s.faults), static_cast<long long>(s.commands));
   if (s.allocations_per_cycle)
@@ -223,6 +277,7 @@ Status run(const SimOptions& o) {
 
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
+  LFTRACK_RETURN_IF_ERROR(override_imaging(o, &*scene));
   if (o.mode == SimOptions::Mode::kRun) {
     so.devices = SessionDevices::kScene;
     std::string frames = scene->detectors.empty() ? "none" : describe_frames(scene->detectors[0].frames);
@@ -431,6 +486,18 @@ Command add(CLI::App* parent, const char* name, const char* description, SimOpti
                     "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1 "
                     "(modbus), or a virtual robot on a CAN link (can), commanded through the real driver")
         ->check(CLI::IsMember({"modbus", "can"}));
+  if (mode == SimOptions::Mode::kSim) {
+    app->add_option(
+           "--imaging", o->imaging,
+           "Instead of the scene's tracking.imaging.mode: a pair every cycle, or X-ray pairs at --xray-hz "
+           "and the surrogate's correlation model between them (the scene needs a `surrogate`)")
+        ->check(CLI::IsMember({"every_cycle", "model"}));
+    app->add_option("--xray-hz", o->xray_hz, "Instead of the scene's tracking.imaging.xray_hz")
+        ->check(CLI::Range(0.05, 100.0));
+    app->add_option("--period-ms", o->period_ms,
+                    "Instead of the scene's loop.period_ms (its budgets and prediction scaled with it)")
+        ->check(CLI::Range(5.0, 1000.0));
+  }
   CLI::Option* chaos = nullptr;
   if (mode == SimOptions::Mode::kSim) {
     chaos = app->add_option("--chaos", o->chaos_seed,

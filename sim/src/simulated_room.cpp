@@ -32,6 +32,11 @@ tracking::Vector6d SimulatedRoom::couch_position_locked() const {
   return spec_.couch_link->read(&sample) ? sample.couch_position : tracking::Vector6d::Zero();
 }
 
+std::int64_t SimulatedRoom::epoch_ns() const {
+  std::lock_guard lock(mutex_);
+  return started_ ? epoch_ns_ : -1;
+}
+
 void SimulatedRoom::advance_to_ns(std::int64_t t_ns) {
   std::lock_guard lock(mutex_);
   advance_locked(t_ns);

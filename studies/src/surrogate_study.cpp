@@ -143,15 +143,6 @@ SurrogateStudyRow run_model(const SurrogateStudyOptions& o, double xray_hz, Surr
 
 }  // namespace
 
-int model_window_at(const CorrelationModelSpec& spec, double xray_hz) {
-  const double span_pairs = std::ceil(1.25 * spec.min_span_s * xray_hz) + 1;
-  return int(std::clamp(std::max(double(spec.window), span_pairs), 4.0, double(CorrelationModel::kCapacity)));
-}
-
-double rate_window_at(double sample_rate_hz) {
-  return std::max(2.5 / sample_rate_hz, std::min(0.1, 30.0 / sample_rate_hz));
-}
-
 Status check_surrogate_study_options(const SurrogateStudyOptions& o) {
   LFTRACK_RETURN_IF_ERROR(check_correlation_model_spec(o.model));
   if (!(o.correction_hz >= 1 && o.correction_hz <= 100))

@@ -634,14 +634,14 @@ TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
           ",hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
           "operator_first_refusal,operator_refusals,target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,"
           "target_ry_deg,target_rz_deg,command_acked_ns,frame_time_a_ns,frame_time_b_ns,frames_arrived_ns,"
-          "preprocessed_ns,registered_ns,gated_ns,command_written_ns\n"),
+          "preprocessed_ns,registered_ns,gated_ns,command_written_ns,imaging,"),
       std::string::npos)
       << csv;
   EXPECT_NE(csv.find(",3,\"resume\",0,\"\",\"approved step beyond the step "
-                     "limit\",\"\",\"\",0,0,0,0,0,0,0,0,0,0,0,0,0,0\n"),
+                     "limit\",\"\",\"\",0,0,0,0,0,0,0,0,0,0,0,0,0,0,\""),
             std::string::npos)
       << csv;
-  EXPECT_NE(csv.find(",0,\"\",0,\"\",\"\",\"\",\"\",0,0,0,0,0,0,0,0,0,0,0,0,0,0\n"), std::string::npos)
+  EXPECT_NE(csv.find(",0,\"\",0,\"\",\"\",\"\",\"\",0,0,0,0,0,0,0,0,0,0,0,0,0,0,\""), std::string::npos)
       << "no beam withheld: an empty field" << csv;
   for (int i = 0; i < 20; ++i) {
     const std::string row = std::string("\n") + std::to_string(i) + ",0,0,0,TRACK";

@@ -88,11 +88,14 @@ TEST(JournalExport, RefusalsByReasonAndPosesWithTheirUnits) {
   std::string csv, json;
   ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", file.string(), "--csv"}, &csv).ok()) << csv;
   EXPECT_NE(csv.find("tx_mm,ty_mm,tz_mm,rx_deg,ry_deg,rz_deg,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find(",imaging,surrogate_fault,surrogate_time_ns,"), std::string::npos)
+      << "format 6's columns\n"
+      << csv;
   EXPECT_NE(csv.find(",1.5,0,0,0,0,0.5,"), std::string::npos) << "the pose in mm and degrees\n" << csv;
   EXPECT_NE(csv.find(",0,0,-2,1,0,0,"), std::string::npos) << "the command in mm and degrees\n" << csv;
   EXPECT_NE(
       csv.find(",\"no operator token, or a wrong one\",\"15 no operator token, or a wrong one; 2 replayed or "
-               "stale request\",0,0,0,0,0,0,0,0,0,0,0,0,0,0\n"),
+               "stale request\",0,0,0,0,0,0,0,0,0,0,0,0,0,0,\"\",\"ok\",0,"),
       std::string::npos)
       << csv;
   ASSERT_TRUE(run_process({LFTRACK_BIN_PATH, "-q", "journal", "export", file.string()}, &json).ok()) << json;

@@ -190,10 +190,10 @@ TEST(Gate, ApplyResetsTheFailureCount) {
 
 TEST(Gate, EveryDecisionAndReasonHasAName) {
   for (int d = 0; d <= 3; ++d) EXPECT_STRNE(to_string(static_cast<GateDecision>(d)), "?");
-  constexpr int kLastReason = static_cast<int>(GateReason::kViewsPullApart);
+  constexpr int kLastReason = static_cast<int>(GateReason::kModelNotReady);
   for (int r = 0; r <= kLastReason; ++r) EXPECT_STRNE(to_string(static_cast<GateReason>(r)), "?");
   EXPECT_STREQ(to_string(static_cast<GateReason>(kLastReason + 1)), "?") << "a new reason: extend this test";
-  for (int w = 0; w <= 4; ++w) EXPECT_STRNE(to_string(static_cast<BeamWithheld>(w)), "?");
+  for (int w = 0; w <= 5; ++w) EXPECT_STRNE(to_string(static_cast<BeamWithheld>(w)), "?");
 }
 
 // An APPLY sends its correction; the beam waits while the patient is still being moved into

@@ -60,7 +60,7 @@ void write_journal(const std::filesystem::path& file, std::uint64_t n) {
 
 // A journal's bytes, encoded here as a writer of format `version` would: the header, then one
 // frame per record whose payload (record_bytes long) holds the record's first `copied` bytes.
-std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 5,
+std::vector<unsigned char> journal_bytes(const std::vector<JournalRecord>& records, std::uint32_t version = 6,
                                          std::uint32_t record_bytes = sizeof(JournalRecord),
                                          std::size_t copied = sizeof(JournalRecord)) {
   std::vector<unsigned char> bytes(32, 0);
@@ -466,6 +466,33 @@ TEST(Journal, ReadsAVersionFourJournal) {
     EXPECT_EQ(r.command_acked_ns, 77);
     EXPECT_EQ(r.frames_arrived_ns, 0);
     EXPECT_EQ(r.command_written_ns, 0);
+  }
+}
+
+// Version 5 (before imaging on demand): 392-byte records, read with the surrogate and model zero.
+TEST(Journal, ReadsAVersionFiveJournal) {
+  test::TempDir dir;
+  const auto file = dir.path() / "v5.journal";
+  std::vector<JournalRecord> records;
+  for (std::uint64_t i = 0; i < 20; ++i) {
+    JournalRecord r = record(i);
+    r.command_written_ns = 6;
+    r.imaging = 3;  // not in version 5: must not be read
+    r.surrogate[0] = 1.5;
+    r.model_coefficients[11] = 2.0;
+    records.push_back(r);
+  }
+  write_file(file, journal_bytes(records, 5, 392, 392));
+  auto j = read_journal(file);
+  ASSERT_TRUE(j.ok()) << j.status().message();
+  EXPECT_EQ(j->format_version, 5u);
+  ASSERT_EQ(j->records.size(), 20u);
+  EXPECT_FALSE(j->damaged());
+  for (const JournalRecord& r : j->records) {
+    EXPECT_EQ(r.command_written_ns, 6);
+    EXPECT_EQ(r.imaging, 0);
+    EXPECT_EQ(r.surrogate[0], 0.0);
+    EXPECT_EQ(r.model_coefficients[11], 0.0);
   }
 }
 

@@ -184,10 +184,25 @@ ChaosFault Injector::take_command_fault() {
   return take_if(&is_command_fault);
 }
 
+// Once per cycle: a cycle planned without a pair that takes one after all (imaging on demand) is
+// told no_exposure and then request_exposure for the same time.
+void ChaosFrameSource::begin_cycle_at(std::int64_t time_ns) {
+  if (first_exposure_ns_ < 0) first_exposure_ns_ = time_ns;
+  const std::int64_t cycle = (time_ns - first_exposure_ns_ + period_ns_ / 2) / period_ns_;
+  if (cycle == begun_cycle_) return;
+  begun_cycle_ = cycle;
+  injector_->begin_cycle(cycle);
+}
+
 void ChaosFrameSource::request_exposure(std::int64_t exposure_time_ns) {
-  if (first_exposure_ns_ < 0) first_exposure_ns_ = exposure_time_ns;
-  injector_->begin_cycle((exposure_time_ns - first_exposure_ns_ + period_ns_ / 2) / period_ns_);
+  begin_cycle_at(exposure_time_ns);
   inner_->request_exposure(exposure_time_ns);
+}
+
+// A cycle without a pair (imaging on demand) is a cycle all the same: its faults are drawn.
+void ChaosFrameSource::no_exposure(std::int64_t cycle_time_ns) {
+  begin_cycle_at(cycle_time_ns);
+  inner_->no_exposure(cycle_time_ns);
 }
 
 drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline deadline) {

@@ -111,6 +111,8 @@ class ChaosFrameSource final : public drivers::FrameSource {
       : inner_(inner), injector_(injector), period_ns_(period_ns) {}
   Status open(drivers::FramePair* pair) override { return inner_->open(pair); }
   void request_exposure(std::int64_t exposure_time_ns) override;
+  void no_exposure(std::int64_t cycle_time_ns) override;
+  bool exposes_on_request() const override { return inner_->exposes_on_request(); }
   drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override;
   bool live() const override { return inner_->live(); }
   void close() override { inner_->close(); }
@@ -120,6 +122,8 @@ class ChaosFrameSource final : public drivers::FrameSource {
   Injector* injector_;
   std::int64_t period_ns_;
   std::int64_t first_exposure_ns_ = -1;
+  std::int64_t begun_cycle_ = -1;  // a cycle's faults are drawn once, whether it exposes or not
+  void begin_cycle_at(std::int64_t time_ns);
 };
 
 // The session's actuator with the cycle's actuator fault injected; open, close and the read-back

@@ -121,7 +121,8 @@ CorrelationModel::Check CorrelationModel::check(const SurrogateSample& surrogate
     misses_in_a_row_ = 2;
     return Check::kMissAgain;
   }
-  if (!ready_) {
+  if (!ready_) {  // a model being built anew: no earlier miss counts against it
+    misses_in_a_row_ = 0;
     add(surrogate, target_room_mm);
     return Check::kNotReady;
   }
@@ -151,10 +152,10 @@ void CorrelationModel::observe(const SurrogateSample& s) {
   window_max_ = std::max(window_max_, s.amplitude);
 }
 
-bool CorrelationModel::within_fit(const SurrogateSample& s) const {
+bool CorrelationModel::within(const SurrogateSample& s, double fraction) const {
   if (!ready_ || !finite(s)) return false;
-  const double margin = kFitMargin * (fit_max_s_ - fit_min_s_);
-  const double rate_margin = kFitMargin * (fit_max_r_ - fit_min_r_);
+  const double margin = fraction * (fit_max_s_ - fit_min_s_);
+  const double rate_margin = fraction * (fit_max_r_ - fit_min_r_);
   return s.amplitude >= fit_min_s_ - margin && s.amplitude <= fit_max_s_ + margin &&
          s.rate_per_s >= fit_min_r_ - rate_margin && s.rate_per_s <= fit_max_r_ + rate_margin;
 }
@@ -282,6 +283,15 @@ void CorrelationModel::refit() {
   }
   ready_ = true;
   not_ready_ = "";
+}
+
+int model_window_at(const CorrelationModelSpec& spec, double xray_hz) {
+  const double span_pairs = std::ceil(1.25 * spec.min_span_s * xray_hz) + 1;
+  return int(std::clamp(std::max(double(spec.window), span_pairs), 4.0, double(CorrelationModel::kCapacity)));
+}
+
+double rate_window_at(double sample_rate_hz) {
+  return std::max(2.5 / sample_rate_hz, std::min(0.1, 30.0 / sample_rate_hz));
 }
 
 }  // namespace lftrack::host

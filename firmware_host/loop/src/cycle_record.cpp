@@ -45,7 +45,7 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
     r.evaluations = c.evaluations;
     r.registration_ms = c.registration_ms;
   }
-  if (c.registered) {
+  if (c.registered || c.model_predicted) {  // a model cycle's: the model's offset on the couch
     for (int i = 0; i < 6; ++i) r.pose_delta[i] = c.pose_delta(i);
     for (int v = 0; v < c.gate_input.views && v < 4; ++v) r.similarity[v] = c.gate_input.similarity[std::size_t(v)];
   }
@@ -70,7 +70,37 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
   if (c.gate.apply() && c.state_after == TrackingState::kTrack && !c.beam_permit)
     r.beam_withheld = static_cast<std::uint8_t>(c.aligning ? BeamWithheld::kAlignment : c.gate.beam_withheld);
   r.state = static_cast<std::uint8_t>(c.state_after);
+  record_imaging(c, &r);
   return r;
+}
+
+// Imaging on demand: why the cycle took a pair or did not, and, with a model, the surrogate and the
+// model as the cycle left it.
+void TrackingLoop::Impl::record_imaging(const CycleState& c, JournalRecord* r) const {
+  r->imaging = static_cast<std::uint8_t>(1 + static_cast<int>(c.imaging));
+  if (!settings.loop.imaging.model_mode()) return;
+  r->surrogate_fault = static_cast<std::uint8_t>(c.surrogate_fault);
+  const bool checked_a_ready_model = c.model_checked && c.model_check != CorrelationModel::Check::kNotReady;
+  if (c.model_checked) r->model_check = static_cast<std::uint8_t>(1 + static_cast<int>(c.model_check));
+  if (checked_a_ready_model && std::isfinite(model.last_check_error_mm()))
+    r->model_check_error_mm = model.last_check_error_mm();
+  r->model_flags = static_cast<std::uint8_t>((model.ready() ? 1 : 0) | (c.offset_from_model ? 2 : 0));
+  r->model_pairs = static_cast<std::uint32_t>(model.pairs());
+  if (c.surrogate_read) {
+    r->surrogate_time_ns = c.surrogate.t_ns;
+    r->surrogate[0] = c.surrogate.amplitude;
+    r->surrogate[1] = c.surrogate.rate_per_s;
+    // The prediction the cycle used: in a pair cycle the one its pair checked (before the refit).
+    if (checked_a_ready_model || model.ready()) {
+      const Eigen::Vector3d at =
+          checked_a_ready_model ? c.model_checked_prediction : model.predict(c.surrogate);
+      for (int i = 0; i < 3; ++i) r->model_prediction_mm[i] = at(i);
+    }
+  }
+  for (int i = 0; i < 3; ++i) r->model_fit_rms_mm[i] = model.fit_rms_mm()(i);
+  for (int axis = 0; axis < 3; ++axis)
+    for (int term = 0; term < CorrelationModel::kTerms; ++term)
+      r->model_coefficients[axis * CorrelationModel::kTerms + term] = model.coefficients()(axis, term);
 }
 
 void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleState& c) {
@@ -96,6 +126,17 @@ void TrackingLoop::Impl::gather_statistics(const JournalRecord& r, const CycleSt
     }
   }
   ++summary.decisions[r.gate_decision];
+  // Every exposure requested: a pair that failed to arrive may still have exposed the patient.
+  if (c.imaging != ImagingReason::kNone) ++summary.xray_pairs;
+  if (c.imaging == ImagingReason::kOutsideFit || c.imaging == ImagingReason::kConfirmMiss ||
+      c.imaging == ImagingReason::kModelStale)
+    ++summary.early_pairs;
+  if (c.model_predicted) ++summary.model_cycles;
+  if (c.model_checked && c.model_check != CorrelationModel::Check::kNotReady) {
+    ++summary.model_checks;
+    if (c.model_check != CorrelationModel::Check::kAgrees) ++summary.model_misses;
+    if (std::isfinite(model.last_check_error_mm())) model_check_mm.add(r.model_check_error_mm);
+  }
   if (r.command_sent) ++summary.commands;
   const auto state = static_cast<TrackingState>(r.state);
   if (parts.truth != nullptr && state == TrackingState::kTrack) residual_mm.add(r.true_residual_mm);

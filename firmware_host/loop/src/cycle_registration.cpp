@@ -51,6 +51,12 @@ void TrackingLoop::Impl::register_pair(CycleState& c) {
   if (!c.aligning && have_registration)
     start = tracking::apply_delta(last_registered, PoseDelta::from_vector(couch_position - couch_at_last_registration),
                                   origin_room);
+  // Imaging on demand: a pair a second after the last finds a breathing target elsewhere; the
+  // correlation model's offset at the pair's surrogate, on the couch as it stands, is nearer.
+  tracking::Vector6d model_patient_offset;
+  if (!c.aligning && model_offset(c, &model_patient_offset))
+    start = tracking::apply_delta(Pose::Identity(), PoseDelta::from_vector(couch_position), origin_room) *
+            tracking::apply_delta(nominal, PoseDelta::from_vector(model_patient_offset), origin_room);
   // The budget is wall time, so on the simulated clock, whose runs must repeat bit for bit
   // whatever the host's load, a tracking registration is not cut short either: a search cut at a
   // load-dependent moment made two runs of one seed diverge (ClosedLoop.TwoRunsOfOneSeed...).

@@ -46,12 +46,14 @@ bool TrackingLoop::Impl::take_operator_command(CycleState& c) {
       approve_next_step = true;  // the operator has seen the offset and accepts the move
       consecutive_failures = 0;
       predictor.reset();
+      restart_model();
     }
     if (command == OperatorCommand::kReset && c.state_before == TrackingState::kFault) {
       transition(c, machine.on(TrackingEvent::kOperatorReset), TrackingEvent::kOperatorReset);
       transition(c, machine.on(TrackingEvent::kStart), TrackingEvent::kStart);
       consecutive_failures = 0;
       predictor.reset();
+      restart_model();
     }
   }
   c.state = machine.state();
@@ -180,19 +182,49 @@ void TrackingLoop::Impl::preprocess(CycleState& c) {
 // gate judges.
 void TrackingLoop::Impl::control(CycleState& c) {
   GateInput& in = c.gate_input;
-  in.registration_ok = c.registered;
   c.desired = commanded_total;
+  // The patient's own offset (set-up error and motion, without the couch): a registration's, or
+  // in a cycle without a pair the correlation model's at the surrogate.
+  Vector6d patient_offset = Vector6d::Zero();
   if (c.registered) {
     c.pose_delta = tracking::delta_between(nominal, result.T_room_from_ct, origin_room).as_vector();
-    in.offset_from_plan = c.pose_delta;
     for (int v = 0; v < in.views && v < kMaxGateViews; ++v)
       in.similarity[std::size_t(v)] = result.view_similarity[std::size_t(v)];
     const Pose patient = motion_of(couch_position, origin_room).inverse() * result.T_room_from_ct;
-    const Vector6d patient_offset = tracking::delta_between(nominal, patient, origin_room).as_vector();
+    patient_offset = tracking::delta_between(nominal, patient, origin_room).as_vector();
+    // The frames' age and skew now, so that the model takes only a pair the gate will accept.
+    const std::int64_t checked_ns = now_ns(c.start_ns);
+    in.frame_age_ms = ms_between(c.oldest_frame_ns, checked_ns);
+    in.pair_skew_ms = ms_between(c.oldest_frame_ns, c.newest_frame_ns);
+    in.reference_similarity = reference_similarity;
+    if (!c.aligning && result_quality(settings.limits, in) == GateReason::kOk) check_model(c, patient_offset);
+    // With a ready model the correction follows the model, refitted by the pair: a control that took
+    // the registrations at pairs and the model in between would jump by their difference at every
+    // pair, which the predictor's extrapolation multiplies past the step limit. After a miss the
+    // refitted model is followed with the beam off until a pair agrees with it again (the next
+    // cycle's), or the second miss holds.
+    Vector6d refitted;
+    if (c.model_checked && c.model_check != CorrelationModel::Check::kNotReady &&
+        model_offset(c, &refitted)) {
+      patient_offset = refitted;
+      c.offset_from_model = true;
+    }
+  } else if (in.model_cycle && model_offset(c, &patient_offset)) {
+    c.model_predicted = c.offset_from_model = true;
+    const Pose patient = tracking::apply_delta(nominal, PoseDelta::from_vector(patient_offset), origin_room);
+    c.pose_delta =
+        tracking::delta_between(nominal, motion_of(couch_position, origin_room) * patient, origin_room)
+            .as_vector();
+  }
+  in.registration_ok = c.registered || c.model_predicted;
+  if (in.registration_ok) {
+    in.offset_from_plan = c.pose_delta;
     if (c.aligning) predictor.reset();
     predictor.add(c.newest_frame_ns, patient_offset);
     const Vector6d predicted = predictor.predict();
     c.desired = tracking::delta_between(motion_of(predicted, origin_room), Pose::Identity(), origin_room).as_vector();
+  }
+  if (c.registered) {
     last_registered = result.T_room_from_ct;
     couch_at_last_registration = couch_position;
     have_registration = true;
@@ -202,6 +234,8 @@ void TrackingLoop::Impl::control(CycleState& c) {
     }
   }
   in.reference_similarity = reference_similarity;
+  in.model_unconfirmed =
+      settings.loop.imaging.model_mode() && c.offset_from_model && imaging_state.miss_pending;
   in.step = c.desired - commanded_total;
   in.total = c.desired - aligned_couch;
   in.consecutive_failures = consecutive_failures;
@@ -210,7 +244,7 @@ void TrackingLoop::Impl::control(CycleState& c) {
   // quality of the registration is judged (and counted towards FAULT).
   in.step_approved = c.aligning || approve_next_step || c.state == TrackingState::kHold;
   const std::int64_t decision_ns = now_ns(c.start_ns);
-  in.frame_age_ms = c.registered ? ms_between(c.oldest_frame_ns, decision_ns) : 0.0;
+  in.frame_age_ms = in.registration_ok ? ms_between(c.oldest_frame_ns, decision_ns) : 0.0;
   in.pair_skew_ms = c.registered ? ms_between(c.oldest_frame_ns, c.newest_frame_ns) : 0.0;
 }
 

@@ -14,7 +14,9 @@
 #include <random>
 #include <vector>
 
+#include "lftrack/loop/correlation_model.hpp"
 #include "lftrack/loop/histogram.hpp"
+#include "lftrack/loop/imaging_on_demand.hpp"
 #include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/loop/motion_predictor.hpp"
 #include "lftrack/loop/tracking_accuracy.hpp"
@@ -35,6 +37,12 @@ struct CycleState {
   OperatorRefusals operator_refusals;  // commands refused or discarded this cycle, by reason
   TrackingEvent event{};  // the last transition this cycle
   bool changed_state = false;
+
+  // imaging on demand (imaging_on_demand.hpp): whether this cycle takes a pair, and the surrogate
+  ImagingReason imaging = ImagingReason::kEveryCycle;
+  bool surrogate_read = false;  // a reading with its rate (model imaging)
+  SurrogateSample surrogate;
+  SurrogateFault surrogate_fault = SurrogateFault::kOk;
 
   // acquire (and the actuator's read-back at the frame time)
   bool frames_ok = false;
@@ -63,6 +71,13 @@ struct CycleState {
   double view_check_ms = 0;      // its wall time (also when out of time)
 
   // control
+  bool model_predicted = false;  // the correlation model gave the patient's offset (no pair)
+  bool offset_from_model =
+      false;  // the control took the model's offset (model_predicted, or a pair that refitted it)
+  bool model_checked = false;  // this cycle's pair checked the model (model_check)
+  CorrelationModel::Check model_check = CorrelationModel::Check::kNotReady;
+  Eigen::Vector3d model_checked_prediction =
+      Eigen::Vector3d::Zero();                                 // the model's, before the check refitted it
   tracking::Vector6d pose_delta = tracking::Vector6d::Zero();  // registered pose, from nominal
   tracking::Vector6d desired = tracking::Vector6d::Zero();     // couch target that cancels the prediction
   GateInput gate_input;
@@ -137,12 +152,24 @@ struct TrackingLoop::Impl {
   const char* ended_by_source = nullptr;
   std::int64_t cycle_wall_start_ns = 0;
 
+  // Imaging on demand (imaging_on_demand.hpp; unused with every_cycle): the surrogate's readings
+  // as the source hands them over, its stream and watch, the model, and what decides the next
+  // cycle's pair. The patient's offset at the last registration gives a model cycle its rotation.
+  std::array<SurrogateReading, 64> surrogate_readings{};
+  SurrogateStream surrogate_stream;
+  SurrogateMonitor surrogate_monitor{SurrogateLimits{}};
+  CorrelationModel model{CorrelationModelSpec{}};
+  ImagingState imaging_state;
+  ImagingReason next_imaging_reason = ImagingReason::kEveryCycle;  // of the cycle requested next
+  tracking::Vector6d last_patient_offset = tracking::Vector6d::Zero();
+
   // Statistics.
   Histogram cycle_ms{0.01, 2000}, registration_ms{0.01, 2000}, residual_mm{0.001, 100};
   Histogram acquire_ms{0.01, 2000}, preprocess_ms{0.01, 2000};  // the cycle's other stages
   Histogram readback_ms{0.001, 2000};  // the actuator's read-back (a protocol's round trip)
   Histogram verdict_check_ms{0.001, 2000};  // the verdict's NCC check in tracking cycles
   Histogram view_check_ms{0.001, 5000};     // the verdict's view check, alignments and tracking cycles
+  Histogram model_check_mm{0.001, 1000};    // the correlation model's checks: prediction against registration
   std::int64_t view_checks_refused = 0, view_checks_out_of_time = 0;
   std::int64_t tracking_cycles_since_view_check = 0;
   bool view_check_due = false;  // set by an alignment and every Nth tracking cycle; cleared when one ran
@@ -158,7 +185,9 @@ struct TrackingLoop::Impl {
   // The stages (cycle_stages.cpp; register_pair and check_views in cycle_registration.cpp), each
   // on cycle_state.
   bool take_operator_command(CycleState& c);  // false: stop or quit
+  void read_surrogate(CycleState& c);         // model imaging: the readings since the last cycle
   bool acquire(CycleState& c);                // false: an archived sequence has ended
+  void without_pair(CycleState& c);           // a model cycle's acquire: the read-back alone
   void read_back(CycleState& c);              // the actuator's read-back and the simulated truth
   void preprocess(CycleState& c);
   void register_pair(CycleState& c);
@@ -166,6 +195,20 @@ struct TrackingLoop::Impl {
   // (LoopSettings::view_check_every); rejudges into `verdict`.
   void check_views(CycleState& c, VerdictInput& judged, RegistrationVerdict& verdict);
   void control(CycleState& c);
+  // Model imaging, in control: the pair's patient offset checks the model (TRACK), or the model
+  // gives a cycle without a pair its offset (false: it cannot).
+  void check_model(CycleState& c, const tracking::Vector6d& patient_offset);
+  bool model_offset(const CycleState& c, tracking::Vector6d* patient_offset) const;
+  // After the cycle: whether the next one, at `start_ns`, takes a pair; requests its exposure or
+  // tells the source it takes none.
+  void plan_next_exposure(std::int64_t start_ns);
+  // A cycle planned without a pair needs one after all: the loop is not in TRACK, or the model
+  // cannot say at the cycle's surrogate.
+  bool pair_needed_now(const CycleState& c) const;
+  // A resume or reset: the relation the model held may have changed with whatever held the loop
+  // (a marker that slid, a patient who moved), so the model is fitted anew from the next pairs, and
+  // the surrogate's watch starts again (a jump stays until then).
+  void restart_model();
   void gate(CycleState& c);
   void actuate(CycleState& c);
   drivers::DeviceStatus send_step(CycleState& c);  // the command, if any: what the actuator answered
@@ -174,6 +217,7 @@ struct TrackingLoop::Impl {
   // The journal record of a cycle, from its state alone (cycle_record.cpp), and the statistics
   // gathered from that record.
   JournalRecord record_of(const CycleState& c) const;
+  void record_imaging(const CycleState& c, JournalRecord* r) const;
   void gather_statistics(const JournalRecord& record, const CycleState& c);
 
   // Helpers the stages share.

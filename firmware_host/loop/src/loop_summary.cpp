@@ -41,6 +41,14 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   s.view_checks_out_of_time = view_checks_out_of_time;
   s.view_check_p50_ms = view_check_ms.quantile(0.5);
   s.view_check_max_ms = view_check_ms.max();
+  s.imaging = settings.loop.imaging.model_mode() ? "model" : "every_cycle";
+  if (settings.loop.imaging.model_mode()) s.model_not_ready = model.not_ready_reason();
+  s.model_check_p50_mm = model_check_mm.quantile(0.5);
+  s.model_check_p95_mm = model_check_mm.quantile(0.95);
+  const double minutes = double(s.cycles + s.skipped_periods) * double(period_ns) / 60e9;
+  s.pairs_per_minute = minutes > 0 ? double(s.xray_pairs) / minutes : 0;
+  s.dose_per_pair_mGy = settings.loop.imaging.dose_per_pair_mGy;
+  s.dose_mGy_per_minute = s.pairs_per_minute * s.dose_per_pair_mGy;
   s.evaluations_mean =
       registration_ms.count() > 0 ? evaluations_sum / double(registration_ms.count()) : 0;
   if (parts.allocation_count != nullptr && aligned_at >= 0) {

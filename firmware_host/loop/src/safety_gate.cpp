@@ -53,6 +53,18 @@ const char* to_string(GateReason r) {
       return "registration at the pose envelope's edge";
     case GateReason::kViewsPullApart:
       return "a view registered alone moves the target";
+    case GateReason::kSurrogateStopped:
+      return "surrogate stopped: no reading within surrogate.stale_ms";
+    case GateReason::kSurrogateJumped:
+      return "surrogate jumped: two readings further apart than surrogate.jump_mm";
+    case GateReason::kSurrogateFrozen:
+      return "surrogate frozen: its reading unchanged for surrogate.freeze_s";
+    case GateReason::kSurrogateNotFinite:
+      return "surrogate reading not finite";
+    case GateReason::kModelMissed:
+      return "correlation model missed twice";
+    case GateReason::kModelNotReady:
+      return "no correlation model for this surrogate reading";
     case GateReason::kLowSimilarity:
       return "similarity below threshold";
     case GateReason::kViewsDisagree:
@@ -77,6 +89,8 @@ const char* to_string(BeamWithheld w) {
       return "alignment";
     case BeamWithheld::kOutOfPlace:
       return "patient out of place";
+    case BeamWithheld::kModelUnconfirmed:
+      return "correlation model unconfirmed";
   }
   return "?";
 }
@@ -112,6 +126,24 @@ bool beyond_beam_tolerance(const SafetyLimits& limits, const tracking::Vector6d&
 
 }  // namespace
 
+GateReason result_quality(const SafetyLimits& limits, const GateInput& in) {
+  if (!std::isfinite(in.frame_age_ms) || !std::isfinite(in.pair_skew_ms)) return GateReason::kNonFinite;
+  if (in.frame_age_ms > limits.max_frame_age_ms) return GateReason::kStaleFrame;
+  if (in.pair_skew_ms > limits.max_pair_skew_ms) return GateReason::kUnpairedFrames;
+  double ratio_lo = 1e300, ratio_hi = -1e300;
+  for (int v = 0; v < in.views && v < kMaxGateViews; ++v) {
+    const double s = in.similarity[std::size_t(v)], ref = in.reference_similarity[std::size_t(v)];
+    if (!std::isfinite(s) || !std::isfinite(ref)) return GateReason::kNonFinite;
+    if (s < limits.min_similarity) return GateReason::kLowSimilarity;
+    const double ratio = std::abs(ref) > 1e-12 ? s / ref : 1.0;
+    if (ratio < limits.min_similarity_ratio) return GateReason::kLowSimilarity;
+    ratio_lo = std::min(ratio_lo, ratio);
+    ratio_hi = std::max(ratio_hi, ratio);
+  }
+  if (in.views > 1 && ratio_hi - ratio_lo > limits.max_ratio_disagreement) return GateReason::kViewsDisagree;
+  return GateReason::kOk;
+}
+
 GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   GateOutput out;
   out.consecutive_failures = in.consecutive_failures + 1;
@@ -137,6 +169,21 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   if (in.readback_error_mm > limits.readback_tolerance_mm ||
       in.readback_error_deg > limits.readback_tolerance_deg)
     return hold(GateReason::kReadbackMismatch);
+  if (in.model_missed) return hold(GateReason::kModelMissed);
+  switch (in.surrogate_fault) {
+    case SurrogateFault::kOk:
+      break;
+    case SurrogateFault::kJump:
+      return hold(GateReason::kSurrogateJumped);
+    case SurrogateFault::kFrozen:
+      return hold(GateReason::kSurrogateFrozen);
+    case SurrogateFault::kNotFinite:
+      return hold(GateReason::kSurrogateNotFinite);
+    case SurrogateFault::kNoReadings:
+    case SurrogateFault::kStale:
+    default:
+      return hold(GateReason::kSurrogateStopped);
+  }
   if (in.registration_ok) {
     if (!in.step_approved && beyond_step_limit(limits, in.step)) return hold(GateReason::kStepTooLarge);
     if (in.total.head<3>().cwiseAbs().maxCoeff() > limits.max_total_mm ||
@@ -146,24 +193,20 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   // Quality.
   if (!in.frames_ok) return counted(GateReason::kNoFrames);
   if (!in.image_quality_ok) return counted(GateReason::kImageQuality);
+  if (in.model_cycle && !in.registration_ok) {  // no pair was taken: nothing failed, a pair is next
+    out.consecutive_failures = in.consecutive_failures;
+    out.reason = GateReason::kModelNotReady;
+    out.decision = GateDecision::kSkip;
+    return out;
+  }
   if (!in.registration_ok)
     return counted(in.registration_failure == GateReason::kOk ? GateReason::kNoResult : in.registration_failure);
-  if (in.frame_age_ms > limits.max_frame_age_ms) return counted(GateReason::kStaleFrame);
-  if (in.pair_skew_ms > limits.max_pair_skew_ms) return counted(GateReason::kUnpairedFrames);
-  double ratio_lo = 1e300, ratio_hi = -1e300;
-  for (int v = 0; v < in.views; ++v) {
-    const double s = in.similarity[std::size_t(v)], ref = in.reference_similarity[std::size_t(v)];
-    if (s < limits.min_similarity) return counted(GateReason::kLowSimilarity);
-    const double ratio = std::abs(ref) > 1e-12 ? s / ref : 1.0;
-    if (ratio < limits.min_similarity_ratio) return counted(GateReason::kLowSimilarity);
-    ratio_lo = std::min(ratio_lo, ratio);
-    ratio_hi = std::max(ratio_hi, ratio);
-  }
-  if (in.views > 1 && ratio_hi - ratio_lo > limits.max_ratio_disagreement)
-    return counted(GateReason::kViewsDisagree);
+  if (const GateReason quality = result_quality(limits, in); quality != GateReason::kOk)
+    return counted(quality);
   out.decision = GateDecision::kApply;
   out.reason = GateReason::kOk;
-  out.consecutive_failures = 0;
+  // A model cycle measured nothing: failed pairs before it still count towards HOLD.
+  out.consecutive_failures = in.model_cycle ? in.consecutive_failures : 0;
   // The move goes out; the beam waits until the patient is in place and stays there.
   if (beyond_step_limit(limits, in.step))
     out.beam_withheld = BeamWithheld::kApprovedStep;  // only approved steps get here
@@ -171,6 +214,8 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
     out.beam_withheld = BeamWithheld::kOutOfPlace;
   else if (beyond_beam_tolerance(limits, in.travel_left))
     out.beam_withheld = BeamWithheld::kActuatorTravelling;
+  else if (in.model_unconfirmed)
+    out.beam_withheld = BeamWithheld::kModelUnconfirmed;
   // The move would go out again, and the beam stay off again: after long enough the operator is
   // told (the couch stops; a resume approves the move again and the clock starts anew).
   if (out.beam_withheld != BeamWithheld::kNo && in.beam_off_s >= limits.max_beam_withheld_s) {

@@ -36,6 +36,8 @@ double prediction_lookahead_s(const LoopSettings& s) {
 TrackingLoop::TrackingLoop(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 TrackingLoop::~TrackingLoop() {
   if (impl_ && impl_->parts.frames != nullptr) impl_->parts.frames->close();
+  if (impl_ && impl_->parts.surrogate != nullptr && impl_->settings.loop.imaging.model_mode())
+    impl_->parts.surrogate->close();
 }
 
 Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& parts,
@@ -65,6 +67,29 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   auto track = tracking::registration_plan(settings.loop.track_plan);
   if (!track.ok()) return track.status();
   LFTRACK_RETURN_IF_ERROR(parts.registration->prepare(*align, *track));
+  const ImagingSpec& imaging = settings.loop.imaging;
+  if (imaging.model_mode()) {
+    if (parts.surrogate == nullptr)
+      return invalid_argument(
+          "tracking loop: tracking.imaging model needs a breathing surrogate (the scene's `surrogate`)");
+    if (!(imaging.xray_hz > 0 && imaging.xray_hz <= 1e3 / settings.loop.period_ms))
+      return invalid_argument(
+          "tracking loop: tracking.imaging.xray_hz must be above 0 and at most the loop's rate");
+    if (!(imaging.stale_s > 0 && std::isfinite(imaging.stale_s)))
+      return invalid_argument("tracking loop: tracking.imaging.stale_s must be positive");
+    LFTRACK_RETURN_IF_ERROR(
+        check_correlation_model_spec(imaging.model).with_context("tracking.imaging.model"));
+    if (double(CorrelationModel::kCapacity - 1) < 1.25 * imaging.model.min_span_s * imaging.xray_hz)
+      return invalid_argument(
+          "tracking loop: at tracking.imaging.xray_hz the model's pairs cannot span its min_span_s");
+    if (!(imaging.surrogate.rate_hz > 0 && imaging.surrogate.rate_hz <= 1000))
+      return invalid_argument("tracking loop: the surrogate's rate must be above 0 and at most 1000 Hz");
+    CorrelationModelSpec model = imaging.model;
+    model.window = model_window_at(imaging.model, imaging.xray_hz);
+    impl->model = CorrelationModel(model);
+    impl->surrogate_monitor = SurrogateMonitor(imaging.surrogate);
+    impl->surrogate_stream = SurrogateStream(rate_window_at(imaging.surrogate.rate_hz));
+  }
   impl->predictor = MotionPredictor(settings.loop.prediction_cycles, settings.loop.prediction_order,
                                     prediction_lookahead_s(settings), settings.loop.predict_rotations);
 
@@ -88,6 +113,15 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
     LFTRACK_RETURN_IF_ERROR(parts.feed->allocate(impl->pair, parts.geometry.roi_windows).with_context("cycle feed"));
   impl->result.view_similarity.reserve(views);
   impl->summary.transitions.reserve(256);
+  if (imaging.model_mode()) {
+    if (!parts.frames->exposes_on_request())
+      return failed_precondition(
+          "tracking loop: tracking.imaging model needs detectors that expose only when asked (the "
+          "simulator's); "
+          "these expose on their own, which saves no dose and may hand over a pair queued long before");
+    // Last: nothing after it can fail, so a source with a thread of its own is never left open.
+    LFTRACK_RETURN_IF_ERROR(parts.surrogate->open().with_context("breathing surrogate"));
+  }
   return std::unique_ptr<TrackingLoop>(new TrackingLoop(std::move(impl)));
 }
 
@@ -104,9 +138,23 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
     *record = record_of(c);
     return false;
   }
-  if (!acquire(c)) return false;  // an archived sequence has ended: not a cycle
-  preprocess(c);
-  register_pair(c);
+  read_surrogate(c);
+  c.imaging = next_imaging_reason;
+  if (c.imaging == ImagingReason::kNone && pair_needed_now(c)) {
+    // Planned without a pair, but an operator's command has taken the loop out of TRACK (ALIGN and
+    // HOLD take a pair every cycle), or the newest reading lies where the model cannot say (a cough
+    // begins): a pair now, exposed as late as the cycle's start allows, rather than a skipped cycle
+    // after which the breath has moved on further than a step may go.
+    parts.frames->request_exposure(c.start_ns);
+    c.imaging = c.state != TrackingState::kTrack ? ImagingReason::kEveryCycle : ImagingReason::kOutsideFit;
+  }
+  if (c.imaging != ImagingReason::kNone) {
+    if (!acquire(c)) return false;  // an archived sequence has ended: not a cycle
+    preprocess(c);
+    register_pair(c);
+  } else {
+    without_pair(c);
+  }
   c.registered_ns = monotonic_now_ns();
   control(c);
   gate(c);
@@ -260,7 +308,7 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     if (!go_on) break;
     index = next.index;
     start_ns = next.start_ns;
-    m.parts.frames->request_exposure(start_ns);
+    m.plan_next_exposure(start_ns);
     if (!simulated) sleep_until_ns(start_ns);
   }
   const std::uint64_t allocations_at_end =

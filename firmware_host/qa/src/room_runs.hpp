@@ -49,6 +49,8 @@ class DarkenedFrames final : public drivers::FrameSource, public host::CycleObse
   void request_exposure(std::int64_t exposure_time_ns) override {
     inner_->request_exposure(exposure_time_ns);
   }
+  void no_exposure(std::int64_t cycle_time_ns) override { inner_->no_exposure(cycle_time_ns); }
+  bool exposes_on_request() const override { return inner_->exposes_on_request(); }
   drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override;
   bool exhausted() const override { return inner_->exhausted(); }
   bool live() const override { return inner_->live(); }

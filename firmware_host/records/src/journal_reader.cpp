@@ -37,13 +37,14 @@ constexpr VersionLayout kLayouts[] = {
     {264, offsetof(JournalRecord, operator_refused_by_reason)},  // version 2
     {296, offsetof(JournalRecord, true_target_residual)},        // version 3
     {352, offsetof(JournalRecord, frames_arrived_ns)},           // version 4
-    {sizeof(JournalRecord), sizeof(JournalRecord)},              // version 5
+    {392, offsetof(JournalRecord, imaging)},                     // version 5
+    {sizeof(JournalRecord), sizeof(JournalRecord)},              // version 6
 };
 static_assert(std::size(kLayouts) == kFormatVersion - kFirstFormatVersion + 1, "a layout for every version read");
 static_assert(kLayouts[0].field_bytes == 252 && kLayouts[1].field_bytes == 264 &&
                   kLayouts[2].field_bytes == 296 && kLayouts[3].field_bytes == 352 &&
-                  sizeof(JournalRecord) == 392,
-              "the layouts of versions 1 to 5 are fixed");
+                  kLayouts[4].field_bytes == 392 && sizeof(JournalRecord) == 576,
+              "the layouts of versions 1 to 6 are fixed");
 const VersionLayout& layout_of(std::uint32_t version) { return kLayouts[version - kFirstFormatVersion]; }
 constexpr std::size_t kReadWindowBytes = std::size_t{1} << 20;
 

@@ -55,6 +55,19 @@ nlohmann::json to_json(const LoopSummary& s) {
                      {"p50_ms", s.view_check_p50_ms},
                      {"max_ms", s.view_check_max_ms}};
   j["readback_ms"] = {{"p50", s.readback_p50_ms}, {"p99", s.readback_p99_ms}};
+  j["imaging"] = {{"mode", s.imaging},
+                  {"xray_pairs", s.xray_pairs},
+                  {"early_pairs", s.early_pairs},
+                  {"pairs_per_minute", s.pairs_per_minute},
+                  {"dose_per_pair_mGy", s.dose_per_pair_mGy},
+                  {"dose_mGy_per_minute", s.dose_mGy_per_minute},
+                  {"model_cycles", s.model_cycles},
+                  {"model_checks", s.model_checks},
+                  {"model_misses", s.model_misses},
+                  {"model_check_mm", s.model_checks > 0 ? nlohmann::json{{"p50", s.model_check_p50_mm},
+                                                                         {"p95", s.model_check_p95_mm}}
+                                                        : nlohmann::json(nullptr)},
+                  {"model_not_ready", s.model_not_ready}};
   j["evaluations_mean"] = s.evaluations_mean;
   j["overruns"] = s.overruns;
   j["skipped_periods"] = s.skipped_periods;

@@ -206,6 +206,8 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.simulated_clock = o.simulated_clock;
   settings.status_line = o.status_line;
   settings.announce_holds = o.announce_holds;
+  LFTRACK_RETURN_IF_ERROR(make_session_surrogate(p, o, parts.get(), &settings));
+  lp.surrogate = parts->surrogate.get();
   warn_if_prediction_window_short(settings);
   warn_if_beam_wait_short(p.scene);
   spdlog::info("registration plans: {}", describe_loop_plans(p.scene));

@@ -5,6 +5,7 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <fmt/format.h>
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -13,6 +14,7 @@
 #include <fstream>
 #include <iomanip>
 #include <set>
+
 #include <sstream>
 
 #include "lftrack/host/scene.hpp"
@@ -105,10 +107,10 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
     return error_at(e.mark, "YAML syntax error: " + e.msg);
   }
   if (!root || root.IsNull()) return error_at(YAML::Mark::null_mark(), "the scene is empty");
-  LFTRACK_RETURN_IF_ERROR(
-      check_keys(root, "the scene",
-                 {"version", "name", "room", "ct", "roi", "registration_origin_mm", "nominal_pose", "detectors",
-                  "envelope", "tracking", "fiducials", "sim", "loop", "safety", "actuator", "motion"}));
+  LFTRACK_RETURN_IF_ERROR(check_keys(
+      root, "the scene",
+      {"version", "name", "room", "ct", "roi", "registration_origin_mm", "nominal_pose", "detectors",
+       "envelope", "tracking", "fiducials", "sim", "loop", "safety", "actuator", "motion", "surrogate"}));
   Scene scene;
   scene.source = source_;
   if (root["room"]) LFTRACK_RETURN_IF_ERROR(merge_room(root, &scene));
@@ -170,9 +172,10 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
   }
   if (root["tracking"]) {
     const YAML::Node t = root["tracking"];
-    LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking",
-                                       {"renderer", "octree_pivot", "light_field", "similarity",
-                                        "histogram_bins", "plan", "gamma_per_mm", "tre_box_mm", "single_view"}));
+    LFTRACK_RETURN_IF_ERROR(
+        check_keys(t, "tracking",
+                   {"renderer", "octree_pivot", "light_field", "similarity", "histogram_bins", "plan",
+                    "gamma_per_mm", "tre_box_mm", "single_view", "imaging"}));
     LFTRACK_RETURN_IF_ERROR(parse_registration(t, &scene.registration));
     if (t["light_field"])
       LFTRACK_RETURN_IF_ERROR(
@@ -227,10 +230,54 @@ Result<Scene> SceneParser::parse(const std::string& yaml_text) {
   if (root["actuator"]) LFTRACK_RETURN_IF_ERROR(parse_actuator(root["actuator"], &scene.actuator));
   LFTRACK_RETURN_IF_ERROR(check_devices(root, scene));
   if (root["motion"]) LFTRACK_RETURN_IF_ERROR(parse_motion(root["motion"], &scene.motion));
+  LFTRACK_RETURN_IF_ERROR(parse_imaging_sections(root, &scene));
   if (!(root["safety"] && root["safety"]["envelope_edge_mm"]))
     scene.verdict_checks.envelope_edge_mm = VerdictChecksSpec::kEnvelopeEdgeFraction * scene.envelope.translation_mm;
   choose_unnamed_plans(root, &scene);
   return scene;
+}
+
+// tracking.imaging and surrogate, once loop and motion are known: `model` needs a surrogate, whose
+// simulated marker breathes with the patient, and a model spans a breath unless the scene says.
+Status SceneParser::parse_imaging_sections(const YAML::Node& root, Scene* scene) const {
+  ImagingSpec& imaging = scene->loop.imaging;
+  bool min_span_given = false;
+  const YAML::Node tracking = root["tracking"];
+  // Where an error is reported: tracking.imaging, or the scene (a default YAML::Node is a null node,
+  // which tests true: never a stand-in for "absent").
+  const YAML::Node node = tracking && tracking["imaging"] ? tracking["imaging"] : root;
+  if (tracking && tracking["imaging"])
+    LFTRACK_RETURN_IF_ERROR(parse_imaging(node, &imaging, &scene->technique, &min_span_given));
+  if (root["surrogate"]) {
+    LFTRACK_RETURN_IF_ERROR(parse_surrogate(root["surrogate"], &scene->surrogate, &imaging.surrogate));
+    scene->lines["surrogate"] = where(root["surrogate"]);
+  }
+  const double period_s = scene->motion.motion.breathing_period_s;
+  scene->surrogate.sim.period_s = period_s;
+  scene->surrogate.sim.seed = scene->sim.seed;
+  // A model spans a breath; check_correlation_model_spec needs at least a second.
+  if (!min_span_given) imaging.model.min_span_s = std::max(1.0, period_s);
+  if (!imaging.model_mode()) return {};
+  if (scene->surrogate.source.empty())
+    return error(node, "tracking.imaging.mode model needs a `surrogate` section (source sim or igtl)");
+  const double loop_hz = 1e3 / scene->loop.period_ms;
+  const YAML::Node xray_node = node.IsMap() && node["xray_hz"] ? node["xray_hz"] : node;
+  if (imaging.xray_hz > loop_hz) {
+    std::ostringstream m;
+    m << "tracking.imaging.xray_hz " << imaging.xray_hz << " is above the loop's rate (" << loop_hz
+      << " Hz, loop.period_ms " << scene->loop.period_ms << ")";
+    return error(xray_node, m.str());
+  }
+  if (imaging.stale_s <= 1 / imaging.xray_hz)
+    return error(
+        node,
+        fmt::format("tracking.imaging.stale_s ({:g} s) must exceed the time between pairs (1 / xray_hz = "
+                    "{:g} s); otherwise every pair comes early",
+                    imaging.stale_s, 1 / imaging.xray_hz));
+  if (double(CorrelationModel::kCapacity - 1) < 1.25 * imaging.model.min_span_s * imaging.xray_hz)
+    return error(
+        node, "tracking.imaging: at xray_hz the model's 64 pairs cannot span its min_span_s; lower xray_hz");
+  return {};
 }
 
 Status SceneParser::parse_verdict_checks(const YAML::Node& n, const PoseEnvelope& envelope,

@@ -192,6 +192,13 @@ class SceneParser {
   Status parse_verdict_checks(const YAML::Node& n, const PoseEnvelope& envelope, VerdictChecksSpec* checks) const;
   Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;
   Status parse_motion(const YAML::Node& n, MotionSpec* motion) const;
+  // Imaging on demand (scene_imaging_parser.cpp): tracking.imaging, and the surrogate section.
+  Status number_in(const YAML::Node& n, const std::string& what, double lo, double hi, const std::string& why,
+                   double* out) const;
+  Status parse_imaging(const YAML::Node& n, ImagingSpec* imaging, ImagingTechniqueSpec* technique,
+                       bool* min_span_given) const;
+  Status parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogate, SurrogateLimits* limits) const;
+  Status parse_imaging_sections(const YAML::Node& root, Scene* scene) const;
   Status check_motion(const YAML::Node& n, const std::string& what, const tracking::Vector6d& v, double mm,
                       double deg) const;
   // The devices (scene_device_parser.cpp).

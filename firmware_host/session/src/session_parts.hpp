@@ -43,6 +43,7 @@ struct LoopSession::Parts {
   std::unique_ptr<sim::ModbusCouchServer> couch_server;       // HIL: serves the room's couch
   std::unique_ptr<sim::VirtualRobot> robot;                   // HIL over CAN: moves the room's couch
   std::unique_ptr<RoomTruth> truth;                           // simulation only
+  std::unique_ptr<SurrogateSource> surrogate;                 // tracking.imaging model only
   std::unique_ptr<CalibratedCouch> calibrated_couch;          // the couch through its calibration
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;
@@ -66,6 +67,12 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
 Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const PreparedScene& p,
                                                                    const LoopSessionOptions& o,
                                                                    LoopSession::Parts* parts);
+
+// Imaging on demand (session_surrogate.cpp): the scene's breathing surrogate into `parts` where
+// its imaging is `model`, and the dose per pair into `settings` (every mode: the summary compares).
+// A replay registers every archived pair: its imaging is every_cycle.
+Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts,
+                              LoopSettings* settings);
 
 // In the room a HOLD ends only by a person's decision: a session on real devices takes no
 // unattended operator.

@@ -48,6 +48,13 @@ class FrameSource {
   // simulated clock): a triggered detector arms its trigger, the simulator starts rendering.
   // Free-running sources ignore it. Never blocks.
   virtual void request_exposure(std::int64_t exposure_time_ns) { (void)exposure_time_ns; }
+  // Instead of request_exposure: the cycle at `cycle_time_ns` takes no pair (imaging on demand
+  // corrects it from a surrogate). The simulator moves its room on to that time; a device does
+  // nothing. Never blocks.
+  virtual void no_exposure(std::int64_t cycle_time_ns) { (void)cycle_time_ns; }
+  // Whether a pair is exposed only when request_exposure() asks for one (the simulator's detectors):
+  // imaging on demand needs it, or it saves no dose and may be handed a pair queued long before.
+  virtual bool exposes_on_request() const { return false; }
   // In the cycle: fills `pair` with the next pair, or says why not by `deadline`.
   virtual DeviceStatus acquire(FramePair* pair, Deadline deadline) = 0;
   // True once a finite source (an archived sequence) has delivered its last pair; the loop

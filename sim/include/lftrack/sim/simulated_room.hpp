@@ -49,6 +49,8 @@ class SimulatedRoom {
   // Moves the room to loop time `t_ns` (never backwards; the first call sets t = 0).
   void advance_to_ns(std::int64_t t_ns);
   double time_s() const;
+  // The loop time of t = 0 (the first advance_to_ns), or -1 before it.
+  std::int64_t epoch_ns() const;
   double time_s_at(std::int64_t t_ns) const;
 
   // The anatomy's pose now, and the patient's own offset (set-up error and motion) as one delta.

@@ -39,13 +39,6 @@ Status check_surrogate_study_options(const SurrogateStudyOptions& options);
 // Whether `out_dir` can take the study's files: none of their names there. Checked before the
 // study runs, and again before writing.
 Status check_surrogate_study_out(const std::filesystem::path& out_dir);
-// The pairs a model keeps at `xray_hz`: at least the spec's window, enough to span its min_span_s
-// (a breathing cycle) with a quarter to spare, at most CorrelationModel::kCapacity. A rate whose
-// kCapacity pairs cannot span min_span_s is refused by check_surrogate_study_options.
-int model_window_at(const CorrelationModelSpec& spec, double xray_hz);
-// The surrogate stream's rate window (s): 0.1 s, widened to hold 2.5 reading intervals below 25 Hz
-// and narrowed to 30 readings (SurrogateStream's capacity) above 300 Hz.
-double rate_window_at(double sample_rate_hz);
 
 struct SurrogateStudyRow {
   std::string imaging;  // "model, 1 Hz X-rays" or "every correction, 30 Hz"

@@ -85,6 +85,14 @@ class SurrogateStream {
   int count_ = 0;  // oldest first
 };
 
+// The pairs a model keeps at `xray_hz`: at least the spec's window, enough to span its min_span_s
+// (a breathing cycle) with a quarter to spare, at most CorrelationModel::kCapacity. A rate whose
+// kCapacity pairs cannot span min_span_s is refused (the study's options, the scene).
+int model_window_at(const CorrelationModelSpec& spec, double xray_hz);
+// The surrogate stream's rate window (s): 0.1 s, widened to hold 2.5 reading intervals below 25 Hz
+// and narrowed to 30 readings (SurrogateStream's capacity) above 300 Hz.
+double rate_window_at(double sample_rate_hz);
+
 class CorrelationModel {
  public:
   static constexpr int kCapacity = 64;
@@ -102,7 +110,9 @@ class CorrelationModel {
   // Every surrogate reading the loop takes: the range the pairs must cover is the surrogate's over
   // the last one to two min_span_s windows. A non-finite reading is ignored.
   void observe(const SurrogateSample& surrogate);
-  bool within_fit(const SurrogateSample& surrogate) const;
+  bool within_fit(const SurrogateSample& surrogate) const { return within(surrogate, kFitMargin); }
+  // The same with a margin of `margin` times the fitted span (amplitude and rate).
+  bool within(const SurrogateSample& surrogate, double margin) const;
   // Adds a pair and refits. A pair with a non-finite value is refused (false) and changes nothing.
   bool add(const SurrogateSample& surrogate, const Eigen::Vector3d& target_room_mm);
 

@@ -5,10 +5,11 @@
 // File layout (little-endian): a 32-byte header ("LFTJRNL1", format version, record size, the
 // scene's 16-byte fingerprint or zeros), then
 // one frame per record: u32 magic 0x4A52464C ("LFRJ"), u32 payload size, the payload (a
-// JournalRecord), u32 CRC-32C of the payload. Version 5 (written now) has 392-byte records;
-// version 4 (still read) had 352, the prefix up to `frames_arrived_ns`, version 3 296, the prefix up to
-// `true_target_residual`, version 2 264, the prefix up to `operator_refused_by_reason`, and version 1 256,
-// the prefix up to `hold_id`. Fields a version lacks read as zero.
+// JournalRecord), u32 CRC-32C of the payload. Version 6 (written now) has 576-byte records;
+// version 5 (still read) had 392, the prefix up to `imaging`, version 4 (still read) had 352, the prefix up
+// to `frames_arrived_ns`, version 3 296, the prefix up to `true_target_residual`, version 2 264, the prefix
+// up to `operator_refused_by_reason`, and version 1 256, the prefix up to `hold_id`. Fields a version lacks
+// read as zero.
 //
 // Durability: the writer write()s records within a few milliseconds of the push, so they are
 // in the kernel's page cache and survive the process being killed (kill -9) at any moment; it
@@ -94,6 +95,22 @@ struct JournalRecord {
   std::int64_t registered_ns = 0;       // the registration and its verdict done
   std::int64_t gated_ns = 0;            // the control law and the safety gate decided
   std::int64_t command_written_ns = 0;  // the command handed to the actuator's driver
+  // Format version 6 on: imaging on demand (imaging_on_demand.hpp). Zeros in earlier journals.
+  std::uint8_t imaging = 0;          // 1 + ImagingReason: why this cycle took a pair (1: it did not)
+  std::uint8_t surrogate_fault = 0;  // SurrogateFault at the cycle (model imaging only)
+  std::uint8_t model_check = 0;      // 1 + CorrelationModel::Check of this cycle's pair; 0: none
+  std::uint8_t model_flags = 0;   // bit 0: the model is ready; bit 1: it gave the control this cycle's offset
+  std::uint32_t model_pairs = 0;  // the pairs the model is fitted on
+  // The surrogate at the cycle (model imaging; 0 without a reading): its newest reading's time on
+  // the loop's clock, amplitude and rate (per s).
+  std::int64_t surrogate_time_ns = 0;
+  double surrogate[2] = {};
+  double model_prediction_mm[3] = {};  // the model's target position at that reading (room, mm), when ready
+  double model_check_error_mm = 0;  // this cycle's check: the prediction's 3D distance from the registration
+  double model_fit_rms_mm[3] = {};  // the model's fit, per room axis
+  // Per room axis, the coefficients of 1, s', s'^2 and r' on the standardised surrogate
+  // (CorrelationModel::coefficients): the model as it stands after this cycle.
+  double model_coefficients[12] = {};
 };
 static_assert(std::is_trivially_copyable_v<JournalRecord>);
 

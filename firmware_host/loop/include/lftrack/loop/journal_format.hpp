@@ -12,8 +12,9 @@ namespace lftrack::host::journal_format {
 constexpr char kFileMagic[8] = {'L', 'F', 'T', 'J', 'R', 'N', 'L', '1'};
 // 2: hold id and operator commands (8 bytes more); 3: the cycle's refusals by reason (32 more);
 // 4: the true target residual per axis and the command's acknowledgement time (56 more); 5: the
-// latency chain's links (40 more).
-constexpr std::uint32_t kFormatVersion = 5;
+// latency chain's links (40 more); 6: imaging on demand, the surrogate and the correlation model
+// (184 more).
+constexpr std::uint32_t kFormatVersion = 6;
 constexpr std::uint32_t kFrameMagic = 0x4A52464C;  // "LFRJ"
 constexpr std::size_t kHeaderBytes = 32;
 constexpr std::size_t kFrameBytes = 8 + sizeof(JournalRecord) + 4;

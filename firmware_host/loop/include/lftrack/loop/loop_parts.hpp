@@ -17,8 +17,9 @@
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
-#include "lftrack/loop/view_agreement.hpp"
 #include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/loop/surrogate_source.hpp"
+#include "lftrack/loop/view_agreement.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 #include "lftrack/tracking/frame_quality.hpp"
@@ -90,6 +91,9 @@ struct LoopParts {
   CycleFeed* feed = nullptr;
   // The registration's pool, also for the views' preprocessing; null: one view after the other.
   tracking::ThreadPool* pool = nullptr;
+  // The breathing surrogate (imaging_on_demand.hpp): needed with tracking.imaging model, unused
+  // otherwise.
+  SurrogateSource* surrogate = nullptr;
 };
 
 struct LoopSettings {

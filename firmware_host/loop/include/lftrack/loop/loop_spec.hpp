@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/loop/imaging_on_demand.hpp"
+
 namespace lftrack::host {
 
 // loop: the real-time cycle (DESIGN.md, "One cycle").
@@ -36,6 +38,8 @@ struct LoopSpec {
   // the scene is commissioned: its floors were measured on tracking registrations).
   std::optional<bool> judge_tracking;
   RealtimeSpec realtime;
+  // tracking.imaging: a pair every cycle, or sparse pairs and a surrogate's correlation model.
+  ImagingSpec imaging;
 };
 
 }  // namespace lftrack::host

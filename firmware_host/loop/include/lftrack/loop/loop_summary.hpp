@@ -64,6 +64,16 @@ struct LoopSummary {
   double evaluations_mean = 0;
   std::optional<double> allocations_per_cycle;
   std::int64_t allocation_cycles = 0;  // the steady-state cycles they were counted over
+  // Imaging (imaging_on_demand.hpp): "every_cycle" or "model"; the pairs taken (every cycle that
+  // acquired one, ALIGN and HOLD included), the early ones among them, the cycles corrected from the
+  // correlation model, its checks (a pair against a ready model) and misses, and their error; the
+  // pairs' rate and skin entrance dose over the run's simulated or real time.
+  std::string imaging = "every_cycle";
+  std::int64_t xray_pairs = 0, early_pairs = 0, model_cycles = 0, model_checks = 0, model_misses = 0;
+  double model_check_p50_mm = 0, model_check_p95_mm = 0;
+  double pairs_per_minute = 0;
+  double dose_per_pair_mGy = 0, dose_mGy_per_minute = 0;  // 0: the dose per pair is not known (or a replay)
+  std::string model_not_ready;  // model imaging: why the model was not ready at the end ("" when it was)
   std::vector<LoopTransition> transitions;
   std::string ended;          // why the loop stopped
   std::string journal_error;  // set by LoopSession::run when the journal could not be written

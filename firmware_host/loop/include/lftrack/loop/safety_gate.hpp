@@ -21,6 +21,7 @@
 #include <array>
 #include <cstdint>
 
+#include "lftrack/loop/imaging_on_demand.hpp"
 #include "lftrack/tracking/pose.hpp"
 
 namespace lftrack::host {
@@ -69,16 +70,24 @@ enum class GateReason : std::uint8_t {
   kViewsDisagree,
   kStaleFrame,
   kUnpairedFrames,
-  kNoFrames,       // the frame source gave no complete pair (timeout, device fault, bad file)
-  kActuatorFault,  // no read-back (timeout, exception, disconnected) or the actuator reports a fault
-  kImageQuality,   // a frame is saturated, blank, uniform or has too many dead pixels
-  kJournalFailed,  // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
-  kOverruns,       // hold_after_overruns cycles in a row overran their period
+  kNoFrames,         // the frame source gave no complete pair (timeout, device fault, bad file)
+  kActuatorFault,    // no read-back (timeout, exception, disconnected) or the actuator reports a fault
+  kImageQuality,     // a frame is saturated, blank, uniform or has too many dead pixels
+  kJournalFailed,    // the journal cannot be written (disk full, I/O error): nothing unrecorded moves
+  kOverruns,         // hold_after_overruns cycles in a row overran their period
   kOutsideEnvelope,  // the registered pose left the scene's pose envelope (registration_verdict.hpp)
   kCommandRefused,   // the actuator refused this cycle's command: it knows of a fault, nothing moved
   kNotInPlace,       // the beam was withheld for max_beam_withheld_s: the patient does not come into place
   kEnvelopeEdge,     // the registered pose lies in the envelope's edge band (registration_verdict.hpp)
   kViewsPullApart,   // a view registered alone moves the target beyond the verdict's limit
+  // Imaging on demand (imaging_on_demand.hpp):
+  kSurrogateStopped,    // the surrogate (imaging_on_demand.hpp): no reading within stale_ms: HOLD
+  kSurrogateJumped,     // two neighbouring readings further apart than jump_mm: HOLD
+  kSurrogateFrozen,     // a reading unchanged for freeze_s: HOLD
+  kSurrogateNotFinite,  // a reading that is NaN or infinite: HOLD
+  kModelMissed,         // the correlation model missed a pair's registration twice in a row: HOLD
+  kModelNotReady,       // a cycle without a pair whose model cannot say (not fitted, or the surrogate
+                        // outside its range): SKIP, not counted (a pair is taken next)
 };
 // Why an APPLY kept the beam off; its correction is sent all the same.
 enum class BeamWithheld : std::uint8_t {
@@ -87,6 +96,8 @@ enum class BeamWithheld : std::uint8_t {
   kActuatorTravelling,  // at the read-back, the actuator was further than beam_tolerance_* from its target
   kAlignment,           // the alignment's cycle, which sends the set-up move (set by the loop, not the gate)
   kOutOfPlace,          // the registered patient is further than beam_tolerance_* from the planned pose
+  kModelUnconfirmed,    // imaging on demand: the correlation model missed its last check (a pair confirms it
+                        // next)
 };
 const char* to_string(GateDecision decision);
 const char* to_string(GateReason reason);
@@ -126,6 +137,13 @@ struct GateInput {
   // How long the beam has been off in TRACK up to this cycle's start: from the first cycle after
   // the alignment, or after the last beam-on APPLY, that withheld it or skipped (0: none yet).
   double beam_off_s = 0;
+  // Imaging on demand: this cycle's offset is the correlation model's, not a registration's (no
+  // frames or similarities are judged; frame_age_ms is the surrogate reading's age), the surrogate
+  // failed (SurrogateFault), the model missed twice.
+  bool model_cycle = false;
+  SurrogateFault surrogate_fault = SurrogateFault::kOk;
+  bool model_missed = false;
+  bool model_unconfirmed = false;  // the offset is a model's that missed its last check: no beam
   // The operator approved this move (the set-up move after alignment, the first move after a
   // resume): the per-cycle step limit does not apply; every other check does.
   bool step_approved = false;
@@ -142,5 +160,9 @@ struct GateOutput {
 };
 
 GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& input);
+// The gate's quality checks of a result alone (the frames' age and skew, each view's similarity
+// against its floor and its alignment's, the views' agreement): kOk, or the reason the gate would
+// SKIP. Imaging on demand lets a pair into the correlation model only when its result passes them.
+GateReason result_quality(const SafetyLimits& limits, const GateInput& input);
 
 }  // namespace lftrack::host

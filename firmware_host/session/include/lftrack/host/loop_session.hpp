@@ -24,10 +24,11 @@
 #include "lftrack/drivers/can_robot.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/drivers/replay_frame_source.hpp"
-#include "lftrack/loop/frame_archive.hpp"
-#include "lftrack/loop/operator_input.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/sim_frame_source.hpp"
+#include "lftrack/host/sim_surrogate_source.hpp"
+#include "lftrack/loop/frame_archive.hpp"
+#include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/virtual_robot.hpp"
@@ -72,6 +73,7 @@ struct LoopSessionOptions {
                                           // the session opens a real device (kScene)
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
   SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
+  SimSurrogateFaults surrogate_faults;    // fault injection into the simulated surrogate
   std::filesystem::path archive;          // empty: frames not archived
   // Replay this archived sequence instead of simulating (simulated_clock: as fast as possible;
   // otherwise at the recorded pace).

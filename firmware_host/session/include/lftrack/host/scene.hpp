@@ -19,6 +19,7 @@
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/safety_gate.hpp"
+#include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/patient_motion.hpp"
 #include "lftrack/sim/virtual_couch.hpp"
 #include "lftrack/sim/xray_physics.hpp"
@@ -203,6 +204,30 @@ struct VerdictChecksSpec {
   int view_check_every = 10;
 };
 
+// surrogate: the breathing surrogate that tracking.imaging `model` follows between X-ray pairs
+// (imaging_on_demand.hpp). Its watch's limits (rate_hz, stale_ms, jump_mm, freeze_s) are the loop's
+// (LoopSpec::imaging.surrogate).
+struct SurrogateSpec {
+  // "" (none), "sim" (the simulated patient's chest marker: lftrack sim only) or "igtl" (an optical
+  // tracker's positions over OpenIGTLink).
+  std::string source;
+  // sim: the marker's travel, lead, drift and noise; its period is motion.breathing's, its seed
+  // sim.seed's.
+  sim::BreathingSurrogateSpec sim;
+  // igtl: the tracker's OpenIGTLink server, and the device name whose TRANSFORM or POSITION
+  // messages carry the marker ("" any); the marker's displacement along `axis` (room frame, unit).
+  std::string igtl_host = "127.0.0.1";
+  int igtl_port = 18944;
+  std::string igtl_device;
+  Eigen::Vector3d igtl_axis = Eigen::Vector3d::UnitZ();
+};
+
+// tracking.imaging.technique: each view's exposure per pair, for the imaging dose (scene_imaging_dose.hpp).
+struct ImagingTechniqueSpec {
+  double kvp = 120;
+  double mas = 2.0;
+};
+
 struct Scene {
   std::string source;  // the scene file, or "builtin:phantom"
   // Where sections checked after parsing were written ("ct", "roi"): "FILE:LINE:COLUMN", so an
@@ -247,6 +272,8 @@ struct Scene {
   bool require_daily_qa = false;
   ActuatorSpec actuator;
   MotionSpec motion;
+  SurrogateSpec surrogate;
+  ImagingTechniqueSpec technique;  // tracking.imaging.technique
 };
 
 // Parses a scene from YAML text; `source_name` is used in messages ("file.yaml:12:5: ...") and

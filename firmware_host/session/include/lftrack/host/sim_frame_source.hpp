@@ -57,6 +57,8 @@ class SimFrameSource final : public drivers::FrameSource {
 
   Status open(drivers::FramePair* pair) override;
   void request_exposure(std::int64_t exposure_time_ns) override;
+  void no_exposure(std::int64_t cycle_time_ns) override { room_->advance_to_ns(cycle_time_ns); }
+  bool exposes_on_request() const override { return true; }
   drivers::DeviceStatus acquire(drivers::FramePair* pair, drivers::Deadline deadline) override;
   void close() override;
 

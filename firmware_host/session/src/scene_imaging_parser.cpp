@@ -1,0 +1,162 @@
+// The scene's imaging on demand (imaging_on_demand.hpp): tracking.imaging and the surrogate section.
+
+#include <sstream>
+
+#include "scene_yaml.hpp"
+
+namespace lftrack::host {
+
+// A number in [lo, hi], with what the range means when it is refused.
+Status SceneParser::number_in(const YAML::Node& n, const std::string& what, double lo, double hi,
+                              const std::string& why, double* out) const {
+  LFTRACK_RETURN_IF_ERROR(number(n, what, out));
+  if (*out < lo || *out > hi) {
+    std::ostringstream m;
+    m << what << " must be in " << lo << ".." << hi << " (" << why << "), got " << n.Scalar();
+    return error(n, m.str());
+  }
+  return {};
+}
+
+Status SceneParser::parse_imaging(const YAML::Node& n, ImagingSpec* imaging, ImagingTechniqueSpec* technique,
+                                  bool* min_span_given) const {
+  if (n.IsScalar()) {  // `tracking.imaging: model`, the mode alone
+    std::string mode;
+    LFTRACK_RETURN_IF_ERROR(one_of(n, "tracking.imaging", {"every_cycle", "model"}, &mode));
+    imaging->mode = mode == "model" ? ImagingSpec::Mode::kModel : ImagingSpec::Mode::kEveryCycle;
+    return {};
+  }
+  LFTRACK_RETURN_IF_ERROR(
+      check_keys(n, "tracking.imaging", {"mode", "xray_hz", "stale_s", "model", "technique"}));
+  if (n["mode"]) {
+    std::string mode;
+    LFTRACK_RETURN_IF_ERROR(one_of(n["mode"], "tracking.imaging.mode", {"every_cycle", "model"}, &mode));
+    imaging->mode = mode == "model" ? ImagingSpec::Mode::kModel : ImagingSpec::Mode::kEveryCycle;
+  }
+  if (n["xray_hz"])
+    LFTRACK_RETURN_IF_ERROR(number_in(n["xray_hz"], "tracking.imaging.xray_hz", 0.05, 100,
+                                      "X-ray pairs per second; at most the loop's rate", &imaging->xray_hz));
+  if (n["stale_s"])
+    LFTRACK_RETURN_IF_ERROR(number_in(n["stale_s"], "tracking.imaging.stale_s", 0.1, 600,
+                                      "a model unconfirmed this long takes a pair", &imaging->stale_s));
+  if (const YAML::Node m = n["model"]) {
+    CorrelationModelSpec& model = imaging->model;
+    LFTRACK_RETURN_IF_ERROR(
+        check_keys(m, "tracking.imaging.model",
+                   {"order", "hysteresis", "window", "min_pairs", "min_span_s", "tolerance_mm"}));
+    if (m["order"]) {
+      std::string order;
+      LFTRACK_RETURN_IF_ERROR(
+          one_of(m["order"], "tracking.imaging.model.order", {"linear", "quadratic"}, &order));
+      model.order = order == "quadratic" ? CorrelationModelSpec::Order::kQuadratic
+                                         : CorrelationModelSpec::Order::kLinear;
+    }
+    if (m["hysteresis"])
+      LFTRACK_RETURN_IF_ERROR(
+          boolean(m["hysteresis"], "tracking.imaging.model.hysteresis", &model.hysteresis));
+    long value = 0;
+    if (m["window"]) {
+      LFTRACK_RETURN_IF_ERROR(
+          integer(m["window"], "tracking.imaging.model.window", 4, CorrelationModel::kCapacity, &value));
+      model.window = int(value);
+    }
+    if (m["min_pairs"]) {
+      LFTRACK_RETURN_IF_ERROR(integer(m["min_pairs"], "tracking.imaging.model.min_pairs", 3,
+                                      CorrelationModel::kCapacity, &value));
+      model.min_pairs = int(value);
+    }
+    if (m["min_span_s"]) {
+      LFTRACK_RETURN_IF_ERROR(number_in(m["min_span_s"], "tracking.imaging.model.min_span_s", 1, 60,
+                                        "at least one breathing cycle", &model.min_span_s));
+      *min_span_given = true;
+    }
+    if (m["tolerance_mm"])
+      LFTRACK_RETURN_IF_ERROR(number_in(m["tolerance_mm"], "tracking.imaging.model.tolerance_mm", 0.1, 20,
+                                        "a prediction this far from a pair's registration misses",
+                                        &model.tolerance_mm));
+    const Status checked = check_correlation_model_spec(model);
+    if (!checked.ok()) return error(m, "tracking.imaging.model: " + checked.message());
+  }
+  if (const YAML::Node t = n["technique"]) {
+    LFTRACK_RETURN_IF_ERROR(check_keys(t, "tracking.imaging.technique", {"kvp", "mas"}));
+    if (t["kvp"])
+      LFTRACK_RETURN_IF_ERROR(number_in(t["kvp"], "tracking.imaging.technique.kvp", 40, 150,
+                                        "a diagnostic tube's range", &technique->kvp));
+    if (t["mas"])
+      LFTRACK_RETURN_IF_ERROR(number_in(t["mas"], "tracking.imaging.technique.mas", 0.01, 1000,
+                                        "per view and pair", &technique->mas));
+  }
+  return {};
+}
+
+Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogate,
+                                    SurrogateLimits* limits) const {
+  LFTRACK_RETURN_IF_ERROR(
+      check_keys(n, "surrogate", {"source", "rate_hz", "stale_ms", "jump_mm", "freeze_s", "sim", "igtl"}));
+  YAML::Node source;
+  LFTRACK_RETURN_IF_ERROR(need(n, "source", "surrogate", &source));
+  LFTRACK_RETURN_IF_ERROR(one_of(source, "surrogate.source", {"sim", "igtl"}, &surrogate->source));
+  if (surrogate->source == "igtl")
+    return error(source,
+                 "surrogate.source igtl (an optical tracker over OpenIGTLink) is not built yet; lftrack sim "
+                 "follows the simulated patient's marker with `source: sim`");
+  if (n["rate_hz"])
+    LFTRACK_RETURN_IF_ERROR(
+        number_in(n["rate_hz"], "surrogate.rate_hz", 5, 1000, "an optical tracker's rate", &limits->rate_hz));
+  surrogate->sim.sample_rate_hz = limits->rate_hz;
+  if (n["stale_ms"])
+    LFTRACK_RETURN_IF_ERROR(number_in(n["stale_ms"], "surrogate.stale_ms", 1, 10000,
+                                      "the newest reading older than this stops the model",
+                                      &limits->stale_ms));
+  if (n["jump_mm"])
+    LFTRACK_RETURN_IF_ERROR(
+        number_in(n["jump_mm"], "surrogate.jump_mm", 0.01, 1000, "between two readings", &limits->jump));
+  if (n["freeze_s"])
+    LFTRACK_RETURN_IF_ERROR(number_in(n["freeze_s"], "surrogate.freeze_s", 0.05, 60,
+                                      "a reading unchanged this long is frozen", &limits->freeze_s));
+  if (limits->stale_ms < 2e3 / limits->rate_hz) {
+    std::ostringstream m;
+    m << "surrogate.stale_ms (" << limits->stale_ms
+      << " ms) must allow at least two readings at surrogate.rate_hz (" << limits->rate_hz
+      << " Hz: " << 2e3 / limits->rate_hz << " ms)";
+    return error(n["stale_ms"] ? n["stale_ms"] : n, m.str());
+  }
+  if (const YAML::Node s = n["sim"]) {
+    if (surrogate->source != "sim") return error(s, "surrogate.sim is for surrogate.source sim");
+    LFTRACK_RETURN_IF_ERROR(
+        check_keys(s, "surrogate.sim", {"amplitude_mm", "lead_s", "drift_mm_per_min", "noise_sd_mm"}));
+    sim::BreathingSurrogateSpec& b = surrogate->sim;
+    if (s["amplitude_mm"])
+      LFTRACK_RETURN_IF_ERROR(number_in(s["amplitude_mm"], "surrogate.sim.amplitude_mm", 0.1, 100,
+                                        "a chest marker's travel", &b.amplitude));
+    if (s["lead_s"])
+      LFTRACK_RETURN_IF_ERROR(
+          number_in(s["lead_s"], "surrogate.sim.lead_s", -2, 2, "the chest ahead of the target", &b.lead_s));
+    if (s["drift_mm_per_min"]) {
+      double per_min = 0;
+      LFTRACK_RETURN_IF_ERROR(number_in(s["drift_mm_per_min"], "surrogate.sim.drift_mm_per_min", -60, 60,
+                                        "the relation's slow change", &per_min));
+      b.drift_per_s = per_min / 60;
+    }
+    if (s["noise_sd_mm"])
+      LFTRACK_RETURN_IF_ERROR(number_in(s["noise_sd_mm"], "surrogate.sim.noise_sd_mm", 0, 10,
+                                        "the tracker's noise", &b.noise_sd));
+  }
+  if (const YAML::Node g = n["igtl"]) {
+    if (surrogate->source != "igtl") return error(g, "surrogate.igtl is for surrogate.source igtl");
+    LFTRACK_RETURN_IF_ERROR(check_keys(g, "surrogate.igtl", {"host", "port", "device", "axis"}));
+    if (g["host"]) LFTRACK_RETURN_IF_ERROR(text(g["host"], "surrogate.igtl.host", &surrogate->igtl_host));
+    if (g["port"]) {
+      long port = 0;
+      LFTRACK_RETURN_IF_ERROR(integer(g["port"], "surrogate.igtl.port", 1, 65535, &port));
+      surrogate->igtl_port = int(port);
+    }
+    if (g["device"])
+      LFTRACK_RETURN_IF_ERROR(text(g["device"], "surrogate.igtl.device", &surrogate->igtl_device));
+    if (g["axis"])
+      LFTRACK_RETURN_IF_ERROR(unit_vec3(g["axis"], "surrogate.igtl.axis", &surrogate->igtl_axis));
+  }
+  return {};
+}
+
+}  // namespace lftrack::host

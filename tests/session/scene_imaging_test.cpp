@@ -1,0 +1,168 @@
+// Imaging on demand in a scene (issue 58): tracking.imaging and the surrogate section, refused
+// where they make no sense; the dose model's numbers; the simulated chest marker's readings and
+// faults.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "lftrack/host/scene.hpp"
+#include "lftrack/host/scene_imaging_dose.hpp"
+#include "lftrack/host/sim_surrogate_source.hpp"
+
+namespace lftrack::host {
+namespace {
+
+std::string imaging_scene(const std::string& extra) {
+  return R"(version: 1
+ct: {path: ct_folder}
+roi: {centre_mm: [0, 0, 0]}
+detectors:
+  - name: A
+    rows: 64
+    cols: 64
+    pitch_mm: 0.4
+    isocentric: {source_direction: [0, -1, 0], up: [0, 0, 1], source_to_isocentre_mm: 1000, source_to_detector_mm: 1500}
+motion:
+  breathing: {amplitude_mm: [0, 0, 8], period_s: 5}
+)" + extra;
+}
+
+Result<Scene> parse(const std::string& extra) {
+  return parse_scene(imaging_scene(extra), "s.yaml", "/");
+}
+
+TEST(SceneImaging, EveryCycleByDefault) {
+  auto scene = parse("");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_FALSE(scene->loop.imaging.model_mode());
+  EXPECT_TRUE(scene->surrogate.source.empty());
+  EXPECT_EQ(scene->loop.imaging.model.min_span_s, 5.0) << "a model spans the scene's breath";
+}
+
+TEST(SceneImaging, TheModeAlone) {
+  auto scene = parse("tracking:\n  imaging: model\nsurrogate: {source: sim}\n");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_TRUE(scene->loop.imaging.model_mode());
+}
+
+TEST(SceneImaging, AModelWithASimulatedMarker) {
+  auto scene = parse(R"(tracking:
+  imaging:
+    mode: model
+    xray_hz: 0.5
+    stale_s: 4
+    model: {order: quadratic, hysteresis: false, window: 30, min_pairs: 10, tolerance_mm: 2}
+    technique: {kvp: 100, mas: 5}
+surrogate:
+  source: sim
+  rate_hz: 30
+  stale_ms: 200
+  jump_mm: 4
+  freeze_s: 1
+  sim: {amplitude_mm: 12, lead_s: 0.3, drift_mm_per_min: 0.6, noise_sd_mm: 0.2}
+)");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  const ImagingSpec& i = scene->loop.imaging;
+  EXPECT_TRUE(i.model_mode());
+  EXPECT_EQ(i.xray_hz, 0.5);
+  EXPECT_EQ(i.stale_s, 4);
+  EXPECT_EQ(i.model.order, CorrelationModelSpec::Order::kQuadratic);
+  EXPECT_FALSE(i.model.hysteresis);
+  EXPECT_EQ(i.model.window, 30);
+  EXPECT_EQ(i.model.min_pairs, 10);
+  EXPECT_EQ(i.model.tolerance_mm, 2);
+  EXPECT_EQ(i.surrogate.rate_hz, 30);
+  EXPECT_EQ(i.surrogate.stale_ms, 200);
+  EXPECT_EQ(i.surrogate.jump, 4);
+  EXPECT_EQ(i.surrogate.freeze_s, 1);
+  EXPECT_EQ(scene->technique.kvp, 100);
+  EXPECT_EQ(scene->technique.mas, 5);
+  EXPECT_EQ(scene->surrogate.source, "sim");
+  EXPECT_EQ(scene->surrogate.sim.amplitude, 12);
+  EXPECT_EQ(scene->surrogate.sim.period_s, 5) << "the marker breathes with the patient";
+  EXPECT_EQ(scene->surrogate.sim.sample_rate_hz, 30);
+  EXPECT_NEAR(scene->surrogate.sim.drift_per_s, 0.01, 1e-12);
+}
+
+TEST(SceneImaging, RefusesWhatMakesNoSense) {
+  const struct {
+    const char* text;
+    const char* says;
+  } cases[] = {
+      {"tracking:\n  imaging: {mode: model}\n", "needs a `surrogate` section"},
+      {"tracking:\n  imaging: {mode: sometimes}\n", "tracking.imaging.mode"},
+      {"tracking:\n  imaging: {xray_hz: 0}\n", "tracking.imaging.xray_hz"},
+      {"tracking:\n  imaging: {xray_hz: .nan}\n", "finite"},
+      {"tracking:\n  imaging: {xray_hz: 1e12}\n", "tracking.imaging.xray_hz"},
+      {"tracking:\n  imaging: {mode: model, xray_hz: 20}\nsurrogate: {source: sim}\n",
+       "above the loop's rate"},
+      {"tracking:\n  imaging: {mode: model, xray_hz: 12}\nsurrogate: {source: sim}\nloop: {period_ms: 50, "
+       "registration_budget_ms: 20, acquire_timeout_ms: 20}\n",
+       "cannot span"},
+      {"tracking:\n  imaging: {model: {min_pairs: 2}}\n", "min_pairs"},
+      {"tracking:\n  imaging: {mode: model, xray_hz: 0.25}\nsurrogate: {source: sim}\n", "stale_s"},
+      {"tracking:\n  imaging: sometimes\n", "tracking.imaging"},
+      {"tracking:\n  imaging: {model: {order: cubic}}\n", "order"},
+      {"tracking:\n  imaging: {technique: {kvp: -1}}\n", "kvp"},
+      {"tracking:\n  imaging: {typo: 1}\n", "typo"},
+      {"surrogate: {rate_hz: 60}\n", "needs 'source'"},
+      {"surrogate: {source: radar}\n", "surrogate.source"},
+      {"surrogate: {source: igtl}\n",
+       "not built yet"},  // refused where it is written, not after the CT loads
+      {"surrogate: {source: sim, igtl: {port: 1}}\n", "surrogate.igtl is for"},
+      {"surrogate: {source: sim, rate_hz: 10, stale_ms: 100}\n", "two readings"},
+      {"surrogate: {source: sim, sim: {amplitude_mm: 0}}\n", "amplitude_mm"},
+  };
+  for (const auto& c : cases) {
+    auto scene = parse(c.text);
+    ASSERT_FALSE(scene.ok()) << c.text;
+    EXPECT_NE(scene.status().message().find(c.says), std::string::npos) << c.text << scene.status().message();
+  }
+}
+
+TEST(SceneImaging, TheDoseModelsNumbers) {
+  ImagingTechniqueSpec t;
+  t.kvp = 100;
+  t.mas = 1;
+  EXPECT_NEAR(skin_entrance_dose_mGy(t, 1000), kOutputAt100kV * kBackscatter, 1e-12);
+  EXPECT_NEAR(skin_entrance_dose_mGy(t, 500), 4 * kOutputAt100kV * kBackscatter, 1e-12) << "inverse square";
+  t.kvp = 120;
+  t.mas = 2;
+  EXPECT_NEAR(skin_entrance_dose_mGy(t, 1000), 2 * 1.44 * kOutputAt100kV * kBackscatter, 1e-12)
+      << "kV squared, mAs";
+  EXPECT_TRUE(std::isfinite(skin_entrance_dose_mGy(t, 0)))
+      << "a source at the skin is no geometry, not infinity";
+}
+
+TEST(SimSurrogateSource, ReadingsAtItsRateOnTheRoomsClockWithFaults) {
+  sim::SimulatedRoomSpec room_spec;
+  sim::SimulatedRoom room(room_spec);
+  sim::BreathingSurrogateSpec spec;
+  spec.sample_rate_hz = 50;
+  spec.noise_sd = 0;
+  SimSurrogateFaults faults;
+  faults.freeze_from_s = 1.0;
+  faults.stop_from_s = 2.0;
+  SimSurrogateSource source(spec, &room, faults);
+  SurrogateReading out[8];
+  EXPECT_EQ(source.read(5'000'000'000, out, 8), 0) << "nothing before the room's clock starts";
+  room.advance_to_ns(5'000'000'000);
+  EXPECT_EQ(source.read(5'000'000'000, out, 8), 1);
+  EXPECT_EQ(out[0].t_ns, 5'000'000'000);
+  EXPECT_EQ(source.read(5'100'000'000, out, 8), 5) << "20 ms apart, up to and with 100 ms";
+  EXPECT_EQ(out[4].t_ns, 5'100'000'000);
+  EXPECT_EQ(source.read(5'100'000'000, out, 8), 0) << "each reading is given once";
+  EXPECT_EQ(source.read(5'900'000'000, out, 8), 8) << "the newest eight of forty";
+  EXPECT_EQ(out[7].t_ns, 5'900'000'000);
+  sim::BreathingSurrogate exact(spec);
+  EXPECT_NEAR(out[7].amplitude, exact.exact(0.9), 1e-12);
+  // Frozen from 1 s: every reading the one at 1 s.
+  EXPECT_EQ(source.read(6'500'000'000, out, 8), 8);
+  for (const SurrogateReading& r : out) EXPECT_EQ(r.amplitude, exact.exact(1.0));
+  // Stopped from 2 s: no readings.
+  EXPECT_EQ(source.read(6'980'000'000, out, 8), 8);
+  EXPECT_EQ(source.read(8'000'000'000, out, 8), 0);
+}
+
+}  // namespace
+}  // namespace lftrack::host
