@@ -35,8 +35,10 @@ pages=1
 page_of() {
   local words="$1" name="lftrack-${1// /-}" see="$2"
   local description page upper
-  # The description up to its first full stop or parenthesis, as a man page's NAME line.
-  description=$("$bin" $words --help | head -n 1 | sed -e 's/ (.*//' -e 's/[.;:].*//')
+  # The description up to its first full stop or parenthesis, as a man page's NAME line. sed reads
+  # the whole help (no `head`): a reader that stops early makes a long help's writer die of SIGPIPE,
+  # which pipefail turns into this script's failure (`sim --help` outgrew the pipe's first write).
+  description=$("$bin" $words --help | sed -n -e '1{s/ (.*//' -e 's/[.;:].*//' -e 'p' -e '}')
   page="$out/$name.1"
   printf '[SEE ALSO]\n.BR %s (1)\n' "$see" >"$include"
   help2man --no-info --section 1 --include "$include" --help-option "$words --help" --version-option --version \
