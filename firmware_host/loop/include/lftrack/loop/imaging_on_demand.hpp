@@ -99,7 +99,6 @@ class SurrogateMonitor {
   void on_reading(std::int64_t t_ns, double amplitude);
   // At the cycle's decision, on the loop's clock.
   SurrogateFault fault_at(std::int64_t now_ns) const;
-  std::int64_t readings() const { return readings_; }
 
  private:
   SurrogateLimits limits_;
