@@ -98,6 +98,7 @@ Command add_replay_command(CLI::App* parent);
 Command add_serve_couch_command(CLI::App* parent);
 Command add_serve_robot_command(CLI::App* parent);
 Command add_serve_detectors_command(CLI::App* parent);
+Command add_serve_tracker_command(CLI::App* parent);
 Command add_calibrate_views_command(CLI::App* parent);
 Command add_calibrate_couch_command(CLI::App* parent);
 Command add_calibrate_detector_command(CLI::App* parent);

@@ -26,10 +26,14 @@ extern "C" void on_chaos_interrupt(int) {
 }
 
 void print_report(const chaos::ChaosReport& r) {
-  std::printf("chaos soak, seed %llu: %lld cycles in %lld segments (%lld over Modbus, %lld over CAN), %.0f s%s\n",
-              static_cast<unsigned long long>(r.seed), static_cast<long long>(r.cycles),
-              static_cast<long long>(r.segments), static_cast<long long>(r.modbus_segments),
-              static_cast<long long>(r.can_segments), r.wall_s, r.interrupted ? ", interrupted" : "");
+  std::printf(
+      "chaos soak, seed %llu: %lld cycles in %lld segments (%lld over Modbus, %lld over CAN, %lld imaging on "
+      "demand), "
+      "%.0f s%s\n",
+      static_cast<unsigned long long>(r.seed), static_cast<long long>(r.cycles),
+      static_cast<long long>(r.segments), static_cast<long long>(r.modbus_segments),
+      static_cast<long long>(r.can_segments), static_cast<long long>(r.model_segments), r.wall_s,
+      r.interrupted ? ", interrupted" : "");
   std::int64_t total = 0;
   for (std::int64_t n : r.injected) total += n;
   std::printf("faults injected: %lld\n", static_cast<long long>(total));
@@ -45,6 +49,11 @@ void print_report(const chaos::ChaosReport& r) {
               static_cast<long long>(r.commands), static_cast<long long>(r.holds), static_cast<long long>(r.faults),
               static_cast<long long>(r.overruns), static_cast<long long>(r.resumes_accepted),
               static_cast<long long>(r.resets_accepted), static_cast<long long>(r.operator_refused));
+  if (r.model_segments > 0)
+    std::printf(
+        "imaging on demand: the surrogate found failed (stopped, jumped, frozen or not finite) in %lld "
+        "cycles\n",
+        static_cast<long long>(r.surrogate_fault_cycles));
   std::printf("cycles checked %lld (a cycle that threw has no record); journal records read back and checked "
               "%lld, in %s\n",
               static_cast<long long>(r.cycles_checked), static_cast<long long>(r.journal_records),

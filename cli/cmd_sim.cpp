@@ -284,6 +284,7 @@ Status run(const SimOptions& o) {
     for (std::size_t i = 1; i < scene->detectors.size(); ++i) frames += ", " + describe_frames(scene->detectors[i].frames);
     spdlog::info("{}: detectors {}; actuator {}", scene->name, frames, describe_actuator(scene->actuator));
   }
+  LFTRACK_RETURN_IF_ERROR(check_session_surrogate(*scene, so));  // before the CT and light fields
   RealtimeSpec rt = scene->loop.realtime;
   if (!o.rt.empty()) rt.enforce = o.rt == "enforce";
   // Real-time set-up first, so every thread made afterwards inherits the policy and affinity:

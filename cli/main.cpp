@@ -57,6 +57,7 @@ int main(int argc, char** argv) {
   const Command serve_couch = add_serve_couch_command(serve);
   const Command serve_robot = add_serve_robot_command(serve);
   const Command serve_detectors = add_serve_detectors_command(serve);
+  const Command serve_tracker = add_serve_tracker_command(serve);
   CLI::App* calibrate =
       app.add_subcommand("calibrate", "Calibration: X-ray views from a phantom, the couch's axes, a detector's maps");
   calibrate->require_subcommand(1);
@@ -135,6 +136,8 @@ int main(int argc, char** argv) {
       status = serve_robot();
     else if (serve->got_subcommand("detectors"))
       status = serve_detectors();
+    else if (serve->got_subcommand("tracker"))
+      status = serve_tracker();
     else if (calibrate->got_subcommand("views"))
       status = calibrate_views();
     else if (calibrate->got_subcommand("couch"))

@@ -84,6 +84,8 @@ TEST_F(ClosedLoop, TwentyThousandChaoticCyclesKeepEveryInvariant) {
     EXPECT_GT(r.injected[k], 0) << to_string(static_cast<ChaosFault>(k)) << " never met the loop";
   EXPECT_GT(r.modbus_segments, 0);
   EXPECT_GT(r.can_segments, 0);
+  EXPECT_GT(r.model_segments, 0);
+  EXPECT_GT(r.surrogate_fault_cycles, 0) << "the loop found the injected surrogate faults";
   // It tracked between the faults, and the operator brought it back from HOLD and FAULT (loose
   // bounds: on a loaded host more registrations run out of their wall-clock budget).
   EXPECT_GT(r.states[std::size_t(TrackingState::kTrack)], r.cycles / 5);

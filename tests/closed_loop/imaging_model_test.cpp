@@ -169,5 +169,49 @@ TEST_F(ImagingModel, ACoughTakesAnEarlyPair) {
   EXPECT_EQ(r.summary.model_misses, 0);
 }
 
+// surrogate.source igtl in lftrack sim: the simulated marker served by the tracker's twin and read
+// through the OpenIGTLink client, on the real clock: the model is fitted and followed from the
+// protocol's time-stamped readings, and a tracker that stops sending holds the loop.
+TEST_F(ImagingModel, FollowsTheMarkerOverOpenIgtlinkAndHoldsWhenTheTrackerStops) {
+  real_clock_ = true;
+  std::string over_igtl = kModelBreathingWithMarker;
+  const std::string sim_source = "source: sim";
+  over_igtl.replace(over_igtl.find(sim_source), sim_source.size(), "source: igtl");
+  SimSurrogateFaults faults;
+  faults.stop_from_s = 24;  // room seconds: the twin sends nothing from then on
+  LoopSessionOptions options;
+  options.surrogate_faults = faults;
+  options.allocation_count = &process_allocation_count;
+  const LoopRun r = run_loop(over_igtl, 280, options);
+  const LoopSummary& s = r.summary;
+  SCOPED_TRACE(to_json(s).dump());
+  EXPECT_EQ(s.imaging, "model");
+  EXPECT_GT(s.model_cycles, 40) << "the model corrected between pairs from the tracker's readings";
+  EXPECT_GT(s.model_checks, 5);
+  EXPECT_LE(s.model_misses, 1);
+  EXPECT_TRUE(model_run_held_for(s, to_string(GateReason::kSurrogateStopped))) << "the tracker stopped";
+  ASSERT_TRUE(s.allocations_per_cycle.has_value());
+  EXPECT_EQ(*s.allocations_per_cycle, 0.0)
+      << "the tracker's twin and its client allocate nothing per reading";
+  std::int64_t first_stale = -1, first_hold = -1;
+  double stopped_at_s = -1;
+  for (const JournalRecord& rec : r.journal.records) {
+    if (first_hold < 0 && rec.state == std::uint8_t(TrackingState::kHold))
+      first_hold = std::int64_t(rec.cycle);
+    if (first_stale < 0 && rec.surrogate_fault == std::uint8_t(SurrogateFault::kStale)) {
+      first_stale = std::int64_t(rec.cycle);
+      stopped_at_s = 1e-9 * double(rec.cycle_start_ns - r.journal.records.front().cycle_start_ns);
+    }
+    if (rec.imaging == kModelImagingCycle && (rec.model_flags & 2)) {
+      EXPECT_GT(rec.surrogate_time_ns, 0);
+      // Read when the cycle asks, a few ms after its scheduled start: measured within its period.
+      EXPECT_LE(rec.surrogate_time_ns, rec.cycle_start_ns + 100'000'000) << "a reading the cycle could have";
+      EXPECT_GT(rec.surrogate_time_ns, rec.cycle_start_ns - 100'000'000) << "stale_ms";
+    }
+  }
+  EXPECT_EQ(first_hold, first_stale) << "no HOLD before the tracker stopped; the stop holds at once";
+  EXPECT_GE(stopped_at_s, 23.0);
+}
+
 }  // namespace
 }  // namespace lftrack::host

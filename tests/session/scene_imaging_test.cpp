@@ -107,8 +107,10 @@ TEST(SceneImaging, RefusesWhatMakesNoSense) {
       {"tracking:\n  imaging: {typo: 1}\n", "typo"},
       {"surrogate: {rate_hz: 60}\n", "needs 'source'"},
       {"surrogate: {source: radar}\n", "surrogate.source"},
-      {"surrogate: {source: igtl}\n",
-       "not built yet"},  // refused where it is written, not after the CT loads
+      {"surrogate: {source: igtl, igtl: {port: 0}}\n", "surrogate.igtl.port"},
+      {"surrogate: {source: igtl, igtl: {port: 70000}}\n", "surrogate.igtl.port"},
+      {"surrogate: {source: igtl, igtl: {axis: [0, 0, 0]}}\n", "surrogate.igtl.axis"},
+      {"surrogate: {source: igtl, igtl: {hostname: x}}\n", "hostname"},
       {"surrogate: {source: sim, igtl: {port: 1}}\n", "surrogate.igtl is for"},
       {"surrogate: {source: sim, rate_hz: 10, stale_ms: 100}\n", "two readings"},
       {"surrogate: {source: sim, sim: {amplitude_mm: 0}}\n", "amplitude_mm"},
@@ -118,6 +120,20 @@ TEST(SceneImaging, RefusesWhatMakesNoSense) {
     ASSERT_FALSE(scene.ok()) << c.text;
     EXPECT_NE(scene.status().message().find(c.says), std::string::npos) << c.text << scene.status().message();
   }
+}
+
+TEST(SceneImaging, ReadsTheTrackersAddress) {
+  auto scene = parse(
+      "surrogate:\n  source: igtl\n  igtl: {host: tracker.local, port: 18945, device: ChestMarker, axis: [0, "
+      "1, 0]}\n"
+      "  sim: {amplitude_mm: 6}\n");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->surrogate.source, "igtl");
+  EXPECT_EQ(scene->surrogate.igtl_host, "tracker.local");
+  EXPECT_EQ(scene->surrogate.igtl_port, 18945);
+  EXPECT_EQ(scene->surrogate.igtl_device, "ChestMarker");
+  EXPECT_EQ(scene->surrogate.igtl_axis, Eigen::Vector3d::UnitY());
+  EXPECT_EQ(scene->surrogate.sim.amplitude, 6) << "the marker lftrack sim serves behind the protocol";
 }
 
 TEST(SceneImaging, TheDoseModelsNumbers) {
@@ -144,7 +160,7 @@ TEST(SimSurrogateSource, ReadingsAtItsRateOnTheRoomsClockWithFaults) {
   faults.freeze_from_s = 1.0;
   faults.stop_from_s = 2.0;
   SimSurrogateSource source(spec, &room, faults);
-  SurrogateReading out[8];
+  drivers::SurrogateReading out[8];
   EXPECT_EQ(source.read(5'000'000'000, out, 8), 0) << "nothing before the room's clock starts";
   room.advance_to_ns(5'000'000'000);
   EXPECT_EQ(source.read(5'000'000'000, out, 8), 1);
@@ -158,7 +174,7 @@ TEST(SimSurrogateSource, ReadingsAtItsRateOnTheRoomsClockWithFaults) {
   EXPECT_NEAR(out[7].amplitude, exact.exact(0.9), 1e-12);
   // Frozen from 1 s: every reading the one at 1 s.
   EXPECT_EQ(source.read(6'500'000'000, out, 8), 8);
-  for (const SurrogateReading& r : out) EXPECT_EQ(r.amplitude, exact.exact(1.0));
+  for (const drivers::SurrogateReading& r : out) EXPECT_EQ(r.amplitude, exact.exact(1.0));
   // Stopped from 2 s: no readings.
   EXPECT_EQ(source.read(6'980'000'000, out, 8), 8);
   EXPECT_EQ(source.read(8'000'000'000, out, 8), 0);

@@ -31,6 +31,9 @@ bool is_modbus_fault(ChaosFault f) {
 bool is_can_fault(ChaosFault f) {
   return f >= ChaosFault::kCanBusOff && f <= ChaosFault::kCanHeartbeatLoss;
 }
+bool is_surrogate_fault(ChaosFault f) {
+  return f >= ChaosFault::kSurrogateStop && f <= ChaosFault::kSurrogateCough;
+}
 
 double uniform(std::mt19937_64& random, double lo, double hi) {
   return std::uniform_real_distribution<double>(lo, hi)(random);
@@ -140,6 +143,7 @@ void Injector::begin_cycle(std::int64_t cycle) {
     if (is_modbus_fault(f) && modbus_server_ == nullptr) continue;
     if (is_can_fault(f) && (can_robot_ == nullptr || can_followup_ >= 0)) continue;
     if (f == ChaosFault::kDiskFull && disk_full_at_ >= 0) continue;
+    if (is_surrogate_fault(f) && !surrogate_segment_) continue;
     kinds.push_back(f);
   }
   const ChaosFault f = kinds[std::min(kinds.size() - 1, std::size_t(kind_draw * double(kinds.size())))];
@@ -182,6 +186,45 @@ ChaosFault Injector::take_readback_fault() {
 }
 ChaosFault Injector::take_command_fault() {
   return take_if(&is_command_fault);
+}
+ChaosFault Injector::take_surrogate_fault() {
+  return take_if(&is_surrogate_fault);
+}
+
+int ChaosSurrogate::read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) {
+  int n = inner_->read(now_ns, out, capacity);
+  if (const ChaosFault f = injector_->take_surrogate_fault(); f != ChaosFault::kCount) {
+    injector_->count(f);
+    injector_->injection.what = to_string(f);
+    std::mt19937_64& random = injector_->random();
+    if (f == ChaosFault::kSurrogateStop || f == ChaosFault::kSurrogateFreeze ||
+        f == ChaosFault::kSurrogateCough) {
+      active_ = f;
+      cycles_left_ = f == ChaosFault::kSurrogateStop     ? int(uniform(random, 3, 16))
+                     : f == ChaosFault::kSurrogateFreeze ? int(uniform(random, 8, 21))
+                                                         : 6;
+      cough_cycle_ = 0;
+    } else if (n > 0) {  // one reading, the cycle's newest
+      out[n - 1].amplitude = f == ChaosFault::kSurrogateNonFinite ? std::numeric_limits<double>::quiet_NaN()
+                                                                  : out[n - 1].amplitude + 3 * jump_;
+      injector_->injection.surrogate_reading = true;
+    }
+  }
+  if (cycles_left_ > 0) {
+    --cycles_left_;
+    if (active_ == ChaosFault::kSurrogateStop) {
+      n = 0;
+    } else if (active_ == ChaosFault::kSurrogateFreeze) {
+      for (int i = 0; i < n; ++i) out[i].amplitude = last_given_;
+    } else {  // a cough: sin^2 over its cycles
+      const double bump = std::sin(3.14159265358979 * (cough_cycle_ + 0.5) / 6.0);
+      ++cough_cycle_;
+      for (int i = 0; i < n; ++i) out[i].amplitude += 8.0 * bump * bump;
+    }
+  }
+  if (n > 0 && std::isfinite(out[n - 1].amplitude) && !injector_->injection.surrogate_reading)
+    last_given_ = out[n - 1].amplitude;
+  return n;
 }
 
 // Once per cycle: a cycle planned without a pair that takes one after all (imaging on demand) is

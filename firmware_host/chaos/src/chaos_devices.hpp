@@ -13,6 +13,7 @@
 #include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/drivers/surrogate_source.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 
@@ -53,6 +54,8 @@ class Injector {
   // before the first cycle.
   void set_modbus_server(sim::ModbusCouchServer* server) { modbus_server_ = server; }
   void set_can_robot(sim::VirtualRobot* robot) { can_robot_ = robot; }
+  // A segment that images on demand: the surrogate's faults become kinds to draw.
+  void set_surrogate_segment() { surrogate_segment_ = true; }
   // The CAN fault injected and not yet seen to hold the loop.
   struct PendingCanFault {
     ChaosFault fault;
@@ -67,6 +70,7 @@ class Injector {
   ChaosFault take_frame_fault();
   ChaosFault take_readback_fault();
   ChaosFault take_command_fault();
+  ChaosFault take_surrogate_fault();
   std::int64_t stall_ns() const { return stall_ns_; }
   bool disk_full_injected() const { return disk_full_at_ >= 0; }
   std::int64_t disk_full_at() const { return disk_full_at_; }
@@ -90,6 +94,7 @@ class Injector {
   ChaosFault take_if(bool (*of_kind)(ChaosFault));
   sim::ModbusCouchServer* modbus_server_ = nullptr;
   sim::VirtualRobot* can_robot_ = nullptr;
+  bool surrogate_segment_ = false;
   std::optional<PendingCanFault> can_pending_;
   int can_followup_ = -1;              // a sim::RobotFault that undoes the last one, or -1
   std::int64_t can_followup_at_ = -1;  // at this cycle, and not before this wall time
@@ -141,6 +146,27 @@ class ChaosActuator final : public drivers::ForwardingActuator {
   Injector* injector_;
   tracking::Vector6d known_target_ = tracking::Vector6d::Zero();  // the device's target, as it last told us
   std::int64_t readback_cycle_ = -1;  // the cycle whose first read-back has been taken
+};
+
+// The session's breathing surrogate with the cycle's surrogate fault injected into the readings it
+// gives: a stream that stops or freezes for some cycles, one reading that spikes by three times
+// `jump` or is NaN, a cough the target does not follow. Read once per cycle, after the frame
+// wrapper has begun it.
+class ChaosSurrogate final : public drivers::SurrogateSource {
+ public:
+  ChaosSurrogate(drivers::SurrogateSource* inner, Injector* injector, double jump)
+      : inner_(inner), injector_(injector), jump_(jump) {}
+  Status open() override { return inner_->open(); }
+  void close() override { inner_->close(); }
+  int read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) override;
+
+ private:
+  drivers::SurrogateSource* inner_;
+  Injector* injector_;
+  double jump_;
+  ChaosFault active_ = ChaosFault::kCount;  // a fault that lasts some cycles
+  int cycles_left_ = 0, cough_cycle_ = 0;
+  double last_given_ = 0;
 };
 
 // An operator who answers each HOLD or FAULT after a random 0.2-3 s (a resume or reset naming

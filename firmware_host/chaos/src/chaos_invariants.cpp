@@ -153,6 +153,14 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
   if (r.gate_reason == std::uint8_t(GateReason::kJournalFailed)) journal_failed_ = true;
   if (journal_failed_ && (sent || beam)) fail("sent or armed after the journal failed");
 
+  // 8. A failed surrogate holds the tracking it steers.
+  const bool began_in_track = r.previous_state == code(TrackingState::kTrack);
+  if (began_in_track && r.surrogate_fault != 0 && (sent || beam || r.state != code(TrackingState::kHold)))
+    fail(std::string("a failed surrogate's TRACK cycle ended in ") + to_string(TrackingState(r.state)) +
+         (sent ? " and sent a command" : "") + (beam ? " with the beam on" : ""));
+  if (began_in_track && injected.surrogate_reading && r.surrogate_fault == 0)
+    fail(std::string("an injected ") + injected.what + " reading was not found in its TRACK cycle");
+
   // What the next cycle is judged against.
   overruns_in_a_row_ = r.overrun != 0 && !ran_in_align ? overruns_in_a_row_ + 1 : 0;
   if (held(r.state)) {

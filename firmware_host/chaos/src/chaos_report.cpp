@@ -73,6 +73,16 @@ const char* to_string(ChaosFault fault) {
       return "disk_full";
     case ChaosFault::kPatientShift:
       return "patient_shift";
+    case ChaosFault::kSurrogateStop:
+      return "surrogate_stop";
+    case ChaosFault::kSurrogateFreeze:
+      return "surrogate_freeze";
+    case ChaosFault::kSurrogateSpike:
+      return "surrogate_spike";
+    case ChaosFault::kSurrogateNonFinite:
+      return "surrogate_non_finite";
+    case ChaosFault::kSurrogateCough:
+      return "surrogate_cough";
     case ChaosFault::kCount:
       break;
   }
@@ -105,6 +115,8 @@ nlohmann::json to_json(const ChaosReport& r) {
   j["segments"] = r.segments;
   j["modbus_segments"] = r.modbus_segments;
   j["can_segments"] = r.can_segments;
+  j["model_segments"] = r.model_segments;
+  j["surrogate_fault_cycles"] = r.surrogate_fault_cycles;
   nlohmann::json injected = nlohmann::json::object();
   std::int64_t total = 0;
   for (std::size_t k = 0; k < kChaosFaultKinds; ++k) {

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -77,6 +78,7 @@ class SegmentObserver final : public host::CycleObserver {
     if (r.state != r.previous_state && r.state == std::uint8_t(TrackingState::kHold)) ++report_->holds;
     if (r.state != r.previous_state && r.state == std::uint8_t(TrackingState::kFault)) ++report_->faults;
     report_->overruns += r.overrun;
+    if (r.surrogate_fault != 0) ++report_->surrogate_fault_cycles;
     report_->operator_refused += r.operator_refused;
     if (r.operator_command == 1 + int(OperatorCommand::kResume)) ++report_->resumes_accepted;
     if (r.operator_command == 1 + int(OperatorCommand::kReset)) ++report_->resets_accepted;
@@ -169,6 +171,23 @@ Result<std::filesystem::path> claim_run_folder(const std::filesystem::path& pare
                   " already");
 }
 
+// A segment that images on demand: X-ray pairs at 1 Hz and the correlation model between them,
+// following the simulated chest marker, with the scene's breathing (6 mm if it has less).
+void image_on_demand(host::Scene* scene, std::uint64_t seed) {
+  sim::PatientMotionSpec& motion = scene->motion.motion;
+  if (motion.breathing_amplitude.head<3>().norm() < 6)
+    motion.breathing_amplitude.head<3>() = Eigen::Vector3d(0.5, 1.5, 6);
+  host::ImagingSpec& imaging = scene->loop.imaging;
+  imaging.mode = host::ImagingSpec::Mode::kModel;
+  imaging.xray_hz = 1;
+  imaging.model.min_span_s = std::max(1.0, motion.breathing_period_s);
+  scene->surrogate.source = "sim";
+  sim::BreathingSurrogateSpec& marker = scene->surrogate.sim;
+  marker.period_s = motion.breathing_period_s;
+  marker.sample_rate_hz = imaging.surrogate.rate_hz;
+  marker.seed = seed;
+}
+
 // Sudden shifts of the patient, drawn for a segment of `cycles`: at any cycle with the chance of
 // one fault kind, 1 to 8 mm in a random direction, each undone by a later one (the patient moves
 // back), so that the patient stays near the envelope over a long segment.
@@ -243,6 +262,7 @@ Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const Chaos
                                                     : std::min(options.segment_cycles, options.cycles - done);
     const bool modbus = options.hil_segments && segment % 3 == 2;
     const bool can = options.hil_segments && segment % 3 == 1;
+    const bool model = !modbus && !can && segment % 2 == 1;
     std::mt19937_64 segment_random(options.seed * 1'000'003 + std::uint64_t(segment));
     PreparedScene patient = scene;  // volumes are shared; only the motion differs
     std::vector<sim::MotionStep>& shifts = patient.scene.motion.motion.shifts;
@@ -261,6 +281,7 @@ Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const Chaos
     const auto journal_disk = std::make_shared<chaos::DiskThatFills>();
     so.journal_options.sink = journal_disk;
     so.hil = modbus ? HilProtocol::kModbus : can ? HilProtocol::kCan : HilProtocol::kNone;
+    if (model) image_on_demand(&patient.scene, segment_random());
     // The invariants read the ROI windows, the gate and the journal, never the rest of a
     // detector: frames of the windows alone (the rest of the built-in detectors costs about
     // 4 ms a pair, 80 s of a 20,000-cycle soak).
@@ -275,6 +296,7 @@ Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const Chaos
         std::make_unique<SegmentObserver>(patient, injector.get(), &report, segment, options.interrupt);
     std::unique_ptr<chaos::ChaosFrameSource> frames;
     std::unique_ptr<chaos::ChaosActuator> actuator;
+    std::unique_ptr<chaos::ChaosSurrogate> surrogate;
     so.hooks.wrap_frames = [&](drivers::FrameSource* inner) -> drivers::FrameSource* {
       frames = std::make_unique<chaos::ChaosFrameSource>(inner, injector.get(), period_ns);
       return frames.get();
@@ -283,6 +305,15 @@ Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const Chaos
       actuator = std::make_unique<chaos::ChaosActuator>(inner, injector.get());
       return actuator.get();
     };
+    so.hooks.wrap_surrogate = [&](drivers::SurrogateSource* inner) -> drivers::SurrogateSource* {
+      surrogate = std::make_unique<chaos::ChaosSurrogate>(inner, injector.get(),
+                                                          patient.scene.loop.imaging.surrogate.jump);
+      return surrogate.get();
+    };
+    if (model) {
+      injector->set_surrogate_segment();
+      ++report.model_segments;
+    }
     so.hooks.operator_input = operator_input.get();
     so.hooks.observer = observer.get();
     auto session = LoopSession::create(patient, so, pool);

@@ -17,7 +17,7 @@ void TrackingLoop::Impl::read_surrogate(CycleState& c) {
   const std::int64_t now = now_ns(c.start_ns);
   const int n = parts.surrogate->read(now, surrogate_readings.data(), int(surrogate_readings.size()));
   for (int i = 0; i < n; ++i) {
-    const SurrogateReading& r = surrogate_readings[std::size_t(i)];
+    const drivers::SurrogateReading& r = surrogate_readings[std::size_t(i)];
     surrogate_monitor.on_reading(r.t_ns, r.amplitude);
     (void)surrogate_stream.push(r.t_ns, r.amplitude);
   }

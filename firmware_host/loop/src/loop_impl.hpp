@@ -155,7 +155,7 @@ struct TrackingLoop::Impl {
   // Imaging on demand (imaging_on_demand.hpp; unused with every_cycle): the surrogate's readings
   // as the source hands them over, its stream and watch, the model, and what decides the next
   // cycle's pair. The patient's offset at the last registration gives a model cycle its rotation.
-  std::array<SurrogateReading, 64> surrogate_readings{};
+  std::array<drivers::SurrogateReading, 64> surrogate_readings{};
   SurrogateStream surrogate_stream;
   SurrogateMonitor surrogate_monitor{SurrogateLimits{}};
   CorrelationModel model{CorrelationModelSpec{}};

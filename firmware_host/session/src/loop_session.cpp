@@ -208,6 +208,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   settings.announce_holds = o.announce_holds;
   LFTRACK_RETURN_IF_ERROR(make_session_surrogate(p, o, parts.get(), &settings));
   lp.surrogate = parts->surrogate.get();
+  if (lp.surrogate != nullptr && o.hooks.wrap_surrogate) lp.surrogate = o.hooks.wrap_surrogate(lp.surrogate);
   warn_if_prediction_window_short(settings);
   warn_if_beam_wait_short(p.scene);
   spdlog::info("registration plans: {}", describe_loop_plans(p.scene));

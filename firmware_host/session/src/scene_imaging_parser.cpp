@@ -96,10 +96,6 @@ Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogat
   YAML::Node source;
   LFTRACK_RETURN_IF_ERROR(need(n, "source", "surrogate", &source));
   LFTRACK_RETURN_IF_ERROR(one_of(source, "surrogate.source", {"sim", "igtl"}, &surrogate->source));
-  if (surrogate->source == "igtl")
-    return error(source,
-                 "surrogate.source igtl (an optical tracker over OpenIGTLink) is not built yet; lftrack sim "
-                 "follows the simulated patient's marker with `source: sim`");
   if (n["rate_hz"])
     LFTRACK_RETURN_IF_ERROR(
         number_in(n["rate_hz"], "surrogate.rate_hz", 5, 1000, "an optical tracker's rate", &limits->rate_hz));
@@ -122,7 +118,6 @@ Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogat
     return error(n["stale_ms"] ? n["stale_ms"] : n, m.str());
   }
   if (const YAML::Node s = n["sim"]) {
-    if (surrogate->source != "sim") return error(s, "surrogate.sim is for surrogate.source sim");
     LFTRACK_RETURN_IF_ERROR(
         check_keys(s, "surrogate.sim", {"amplitude_mm", "lead_s", "drift_mm_per_min", "noise_sd_mm"}));
     sim::BreathingSurrogateSpec& b = surrogate->sim;

@@ -12,6 +12,7 @@
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/sim/tracker_twin.hpp"
 
 namespace lftrack::host {
 
@@ -43,7 +44,10 @@ struct LoopSession::Parts {
   std::unique_ptr<sim::ModbusCouchServer> couch_server;       // HIL: serves the room's couch
   std::unique_ptr<sim::VirtualRobot> robot;                   // HIL over CAN: moves the room's couch
   std::unique_ptr<RoomTruth> truth;                           // simulation only
-  std::unique_ptr<SurrogateSource> surrogate;                 // tracking.imaging model only
+  // tracking.imaging model only: the surrogate, and in lftrack sim with surrogate.source igtl the
+  // tracker's twin it reads (destroyed after it).
+  std::unique_ptr<sim::TrackerTwin> tracker_twin;
+  std::unique_ptr<drivers::SurrogateSource> surrogate;
   std::unique_ptr<CalibratedCouch> calibrated_couch;          // the couch through its calibration
   std::unique_ptr<JournalWriter> journal;
   std::unique_ptr<FrameArchive> archive;

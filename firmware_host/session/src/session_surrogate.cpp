@@ -2,10 +2,64 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+
+#include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/host/scene_imaging_dose.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::host {
+
+namespace {
+
+// lftrack sim with surrogate.source igtl: the simulated chest marker (surrogate.sim, faults
+// included) served by the tracker's twin on a loopback port of its own, for the session's
+// OpenIGTLink client to read: the real protocol, its threads and time stamps, in the loop.
+Result<int> serve_simulated_marker(const PreparedScene& p, const LoopSessionOptions& o,
+                                   LoopSession::Parts* parts) {
+  const SurrogateSpec& s = p.scene.surrogate;
+  sim::TrackerTwinOptions twin;
+  twin.device = s.igtl_device.empty() ? "Marker" : s.igtl_device;
+  twin.rate_hz = std::min(1000.0, p.scene.loop.imaging.surrogate.rate_hz);
+  auto marker = std::make_shared<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
+  const sim::SimulatedRoom* room = parts->room.get();
+  const SimSurrogateFaults faults = o.surrogate_faults;
+  const Eigen::Vector3d axis = s.igtl_axis;
+  auto served = sim::TrackerTwin::start(twin, [=](std::int64_t t_ns, Eigen::Vector3d* position) {
+    const std::int64_t epoch = room->epoch_ns();
+    if (epoch < 0 || t_ns < epoch) return false;  // the room starts at its first exposure
+    const double t_s = 1e-9 * double(t_ns - epoch);
+    if (faults.stop_from_s >= 0 && t_s >= faults.stop_from_s) return false;
+    *position = axis * marker->reading_at(t_s);
+    return true;
+  });
+  if (!served.ok()) return served.status().with_context("the tracker's twin");
+  parts->tracker_twin = std::move(served).value();
+  spdlog::info(
+      "surrogate: the simulated chest marker served over OpenIGTLink on 127.0.0.1:{} ({} \"{}\" at {:g} Hz), "
+      "read back by the tracker's client",
+      parts->tracker_twin->port(), "TRANSFORM", twin.device, twin.rate_hz);
+  return parts->tracker_twin->port();
+}
+
+}  // namespace
+
+Status check_session_surrogate(const Scene& scene, const LoopSessionOptions& o) {
+  if (!scene.loop.imaging.model_mode() || !o.replay_sequence.empty()) return {};
+  const std::string& source = scene.surrogate.source;
+  if (source == "sim" && o.devices == SessionDevices::kScene)
+    return failed_precondition(scene.where("surrogate") +
+                               ": surrogate.source sim is the simulated patient's chest marker, for "
+                               "lftrack sim; a treatment room's "
+                               "surrogate is an optical tracker (surrogate.source igtl)");
+  if (source == "igtl" && o.devices == SessionDevices::kSimulated && o.simulated_clock)
+    return failed_precondition(
+        scene.where("surrogate") +
+        ": surrogate.source igtl reads a tracker's time-stamped positions on the real clock; lftrack sim "
+        "--fast runs on a simulated one. Run it without --fast, or follow the simulated marker directly "
+        "(surrogate.source sim)");
+  return {};
+}
 
 Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts,
                               LoopSettings* settings) {
@@ -20,16 +74,27 @@ Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& 
     imaging.mode = ImagingSpec::Mode::kEveryCycle;
     return {};
   }
+  LFTRACK_RETURN_IF_ERROR(check_session_surrogate(p.scene, o));
   const SurrogateSpec& s = p.scene.surrogate;
   if (s.source == "sim") {
-    if (parts->room == nullptr || o.devices == SessionDevices::kScene)
-      return failed_precondition(p.scene.where("surrogate") +
-                                 ": surrogate.source sim is the simulated patient's chest marker, for "
-                                 "lftrack sim; a treatment room's "
-                                 "surrogate is an optical tracker (surrogate.source igtl)");
+    if (parts->room == nullptr) return failed_precondition("surrogate.source sim needs the simulated room");
     parts->surrogate = std::make_unique<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
+  } else if (s.source == "igtl") {
+    drivers::IgtlSurrogateOptions client;
+    client.host = s.igtl_host;
+    client.port = s.igtl_port;
+    client.device = s.igtl_device;
+    client.axis_room = s.igtl_axis;
+    client.stale_ms = imaging.surrogate.stale_ms;
+    if (parts->room != nullptr && o.devices == SessionDevices::kSimulated) {
+      auto port = serve_simulated_marker(p, o, parts);
+      if (!port.ok()) return port.status();
+      client.host = "127.0.0.1";
+      client.port = *port;
+    }
+    parts->surrogate = std::make_unique<drivers::IgtlSurrogateSource>(client);
   } else {
-    return unsupported("surrogate.source " + s.source + " is not built yet");
+    return unsupported("surrogate.source " + s.source);
   }
   spdlog::info("imaging on demand: X-ray pairs at {:g} Hz, the {} correlation model in between; {}",
                imaging.xray_hz,

@@ -27,7 +27,7 @@ double SimSurrogateSource::reading_at(double t_s) {
   return s;
 }
 
-int SimSurrogateSource::read(std::int64_t now_ns, SurrogateReading* out, int capacity) {
+int SimSurrogateSource::read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) {
   const std::int64_t epoch = room_->epoch_ns();
   if (epoch < 0 || now_ns < epoch || capacity <= 0) return 0;
   const double rate = chest_.spec().sample_rate_hz;
@@ -43,7 +43,7 @@ int SimSurrogateSource::read(std::int64_t now_ns, SurrogateReading* out, int cap
       for (int i = 1; i < capacity; ++i) out[i - 1] = out[i];
       --n;
     }
-    out[n++] = SurrogateReading{at_ns(next_), value};
+    out[n++] = drivers::SurrogateReading{at_ns(next_), value};
   }
   return n;
 }

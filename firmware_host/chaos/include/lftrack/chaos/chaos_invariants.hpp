@@ -23,6 +23,9 @@
 //     HOLD or FAULT with nothing sent; a failed command ends its cycle in HOLD or FAULT; a
 //     stalled cycle is recorded as an overrun, and the cycle after three overruns in a row sends
 //     nothing; once the loop reports the journal failed, nothing is sent and the beam stays off.
+//  8. A breathing surrogate found failed (the record's surrogate fault: stopped, jumped, frozen,
+//     not finite) in a cycle that began in TRACK ends it in HOLD, with nothing sent and the beam
+//     off; an injected spike or NaN reading in such a cycle is found in it.
 // The soak (chaos_soak.cpp) adds what needs the wall clock or the segment: half a second after
 // the disk filled nothing is sent (whatever reason the gate gives first); a CAN fault holds
 // within 50 cycles and 2 s; an exception leaves the actuator held and the beam off; each
@@ -77,6 +80,7 @@ struct CycleInjection {
   bool readback_fault = false;  // a read-back fault that was answered to the loop
   bool command_fault = false;   // a command that failed
   bool stalled = false;         // the cycle was made to overrun
+  bool surrogate_reading = false;  // a spiked or NaN surrogate reading was given to the cycle
   const char* what = "";        // the injected fault's name, or the device's own failure, for messages
 };
 

@@ -8,7 +8,9 @@
 // (every third segment drives the couch through the real Modbus driver against the virtual
 // couch server, with the server's faults; every third, from the second on, the virtual robot
 // through the real CAN driver, with the CAN controller's and robot's faults; the others the
-// in-process virtual couch). A segment
+// in-process virtual couch, and every other one of those, from the fourth segment on, images on
+// demand: the patient breathes 6 mm, X-ray pairs come at 1 Hz and the simulated chest marker's
+// correlation model corrects in between, with the surrogate's faults). A segment
 // ends at its cycle count, or early where the catalogue's safe state is final: an exception out
 // of a device (the loop holds the actuator, drops the beam and rethrows), a full disk (the loop
 // holds for good), an operator's reset of a FAULT (the loop goes IDLE and waits for a start).
@@ -22,7 +24,8 @@
 // with the command, carry NaN or throw; commands that time out, disconnect, fail or throw; the
 // Modbus server's no reply, exception 4 and dropped connection; CAN bus-off, error-passive, error
 // frame floods, a robot restart and a lost heartbeat; host stalls (overruns, runs of
-// one to four); a full disk under the journal; sudden patient shifts; and an operator who answers
+// one to four); a full disk under the journal; sudden patient shifts; a breathing surrogate that
+// stops, freezes, spikes, reads NaN or coughs (model segments); and an operator who answers
 // each HOLD or FAULT after a random delay (sometimes too soon, sometimes naming another HOLD) and
 // sends stale resumes while tracking. A full disk is each segment's own journal sink
 // (JournalOptions::sink), so soaks in one process do not share it.
@@ -78,6 +81,11 @@ enum class ChaosFault : std::uint8_t {
   kHostStall,             // the cycle overruns its period (one to four cycles in a row)
   kDiskFull,              // the journal's write() fails with ENOSPC from now on
   kPatientShift,          // a sudden shift of the patient, 1 to 8 mm (drawn into the motion)
+  kSurrogateStop,         // the breathing surrogate's stream stops for 3 to 15 cycles (model segments)
+  kSurrogateFreeze,       // its marker repeats its last reading for 8 to 20 cycles
+  kSurrogateSpike,        // one reading jumps by three times surrogate.jump_mm
+  kSurrogateNonFinite,    // one reading is NaN
+  kSurrogateCough,        // the marker rises 8 mm over 6 cycles, the target does not follow
   kCount
 };
 inline constexpr std::size_t kChaosFaultKinds = static_cast<std::size_t>(ChaosFault::kCount);
@@ -114,8 +122,9 @@ struct ChaosReport {
   std::int64_t cycles_checked = 0;  // cycles whose record the invariants were checked on
   bool interrupted = false;
   std::filesystem::path journal_dir;  // this soak's folder of journals
-  std::int64_t segments = 0;          // of which over Modbus and over CAN:
-  std::int64_t modbus_segments = 0, can_segments = 0;
+  std::int64_t segments = 0;          // of which over Modbus and over CAN, and imaging on demand:
+  std::int64_t modbus_segments = 0, can_segments = 0, model_segments = 0;
+  std::int64_t surrogate_fault_cycles = 0;  // cycles whose record says the surrogate failed (model segments)
   std::array<std::int64_t, kChaosFaultKinds> injected{};           // faults that met the loop, per kind
   std::array<std::int64_t, 5> states{};                            // cycles ending in each TrackingState
   std::int64_t commands = 0, holds = 0, faults = 0, overruns = 0;  // holds, faults: entries into them

@@ -10,6 +10,7 @@
 
 #include "lftrack/drivers/actuator.hpp"
 #include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/drivers/surrogate_source.hpp"
 #include "lftrack/loop/cycle_feed.hpp"
 #include "lftrack/loop/frame_archive.hpp"
 #include "lftrack/loop/journal.hpp"
@@ -18,7 +19,6 @@
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/loop/safety_gate.hpp"
-#include "lftrack/loop/surrogate_source.hpp"
 #include "lftrack/loop/view_agreement.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
@@ -93,7 +93,7 @@ struct LoopParts {
   tracking::ThreadPool* pool = nullptr;
   // The breathing surrogate (imaging_on_demand.hpp): needed with tracking.imaging model, unused
   // otherwise.
-  SurrogateSource* surrogate = nullptr;
+  drivers::SurrogateSource* surrogate = nullptr;
 };
 
 struct LoopSettings {

@@ -49,6 +49,7 @@ enum class HilProtocol { kNone, kModbus, kCan };
 struct SessionHooks {
   std::function<drivers::FrameSource*(drivers::FrameSource*)> wrap_frames;
   std::function<drivers::Actuator*(drivers::Actuator*)> wrap_actuator;
+  std::function<drivers::SurrogateSource*(drivers::SurrogateSource*)> wrap_surrogate;  // model imaging only
   OperatorInput* operator_input = nullptr;  // polled with the session's own operators
   CycleObserver* observer = nullptr;        // LoopParts::observer
 };
@@ -100,6 +101,11 @@ Eigen::Isometry3d couch_mounting(const CouchMountingSpec& mounting, const Prepar
 // paths) without creating or removing anything: `lftrack sim/run/replay` call it before loading
 // the CT, and create() calls it first.
 Status check_session_options(const LoopSessionOptions& options);
+// The scene's surrogate (tracking.imaging model) against the session's devices and clock: the
+// simulated marker only in simulation; an OpenIGTLink tracker, whose readings are time stamped,
+// only on the real clock. Checked again by LoopSession::create; a command checks it before it
+// spends time preparing the scene.
+Status check_session_surrogate(const Scene& scene, const LoopSessionOptions& options);
 
 class LoopSession {
  public:

@@ -212,7 +212,7 @@ struct SurrogateSpec {
   // tracker's positions over OpenIGTLink).
   std::string source;
   // sim: the marker's travel, lead, drift and noise; its period is motion.breathing's, its seed
-  // sim.seed's.
+  // sim.seed's. With igtl in lftrack sim, the marker the tracker's twin serves (sim/tracker_twin.hpp).
   sim::BreathingSurrogateSpec sim;
   // igtl: the tracker's OpenIGTLink server, and the device name whose TRANSFORM or POSITION
   // messages carry the marker ("" any); the marker's displacement along `axis` (room frame, unit).

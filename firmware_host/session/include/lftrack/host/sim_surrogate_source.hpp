@@ -12,7 +12,7 @@
 
 #include <cstdint>
 
-#include "lftrack/loop/surrogate_source.hpp"
+#include "lftrack/drivers/surrogate_source.hpp"
 #include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 
@@ -25,11 +25,11 @@ struct SimSurrogateFaults {
   double slide_from_s = -1, slide_mm_per_s = 0;
 };
 
-class SimSurrogateSource final : public SurrogateSource {
+class SimSurrogateSource final : public drivers::SurrogateSource {
  public:
   SimSurrogateSource(const sim::BreathingSurrogateSpec& spec, const sim::SimulatedRoom* room,
                      const SimSurrogateFaults& faults = {});
-  int read(std::int64_t now_ns, SurrogateReading* out, int capacity) override;
+  int read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) override;
   // The marker's reading at t_s on the room's clock, faults included (the next draw of the noise).
   double reading_at(double t_s);
 

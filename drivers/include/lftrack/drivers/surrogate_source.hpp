@@ -1,6 +1,7 @@
 #pragma once
-// Where the loop's breathing surrogate comes from (imaging_on_demand.hpp): the simulated patient's
-// chest marker, or an optical tracker streaming over OpenIGTLink. The loop asks once per cycle for
+// Where the loop's breathing surrogate comes from (the loop's imaging_on_demand.hpp): the simulated
+// patient's chest marker (host's sim_surrogate_source.hpp), or an optical tracker streaming over
+// OpenIGTLink (igtl_surrogate.hpp). The loop asks once per cycle for
 // the readings taken since it last asked; a source reads its device at its own rate on a thread of
 // its own where it has one, and hands the readings over without allocating and without blocking.
 
@@ -8,10 +9,10 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::drivers {
 
 struct SurrogateReading {
-  std::int64_t t_ns = 0;  // when it was measured, on the loop's clock
+  std::int64_t t_ns = 0;  // when it was measured, on the loop's clock (CLOCK_MONOTONIC in real time)
   double amplitude = 0;   // the marker's displacement along its main axis (mm)
 };
 
@@ -26,4 +27,4 @@ class SurrogateSource {
   virtual int read(std::int64_t now_ns, SurrogateReading* out, int capacity) = 0;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::drivers

@@ -1,0 +1,391 @@
+// The optical tracker's OpenIGTLink client (drivers/igtl_surrogate.hpp) against real peers on
+// loopback: the tracker's twin (sim/tracker_twin.hpp) in process and as a process of its own
+// (`lftrack serve tracker`), and a hand-made peer that sends what a tracker should not: stale,
+// future, repeated and non-finite readings, a bad CRC, an absurd body size, other messages.
+
+#include <gtest/gtest.h>
+
+#include <arpa/inet.h>
+#include <igtlPositionMessage.h>
+#include <igtlStringMessage.h>
+#include <igtlTransformMessage.h>
+#include <igtl_util.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "child_process.hpp"
+#include "lftrack/drivers/igtl_surrogate.hpp"
+#include "lftrack/loop/allocation_counter.hpp"
+#include "lftrack/sim/tracker_twin.hpp"
+
+namespace lftrack {
+namespace {
+
+using namespace std::chrono_literals;
+using drivers::IgtlSurrogateOptions;
+using drivers::IgtlSurrogateSource;
+using drivers::SurrogateReading;
+
+std::int64_t igtl_clock_ns(clockid_t clock) {
+  timespec ts{};
+  clock_gettime(clock, &ts);
+  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+}
+std::int64_t mono_ns() {
+  return igtl_clock_ns(CLOCK_MONOTONIC);
+}
+
+// The client's readings until `enough` have come (or `limit` passed), asking as a loop would.
+std::vector<SurrogateReading> read_until(IgtlSurrogateSource& source, std::size_t enough,
+                                         std::chrono::seconds limit = 20s) {
+  std::vector<SurrogateReading> got;
+  SurrogateReading batch[64];
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (got.size() < enough && std::chrono::steady_clock::now() < deadline) {
+    const int n = source.read(mono_ns(), batch, 64);
+    got.insert(got.end(), batch, batch + n);
+    std::this_thread::sleep_for(5ms);
+  }
+  return got;
+}
+
+// Waits until `condition` holds, or 20 s.
+template <class Condition>
+bool eventually(Condition&& condition) {
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!condition()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(2ms);
+  }
+  return true;
+}
+
+// The bytes of a TRANSFORM (or POSITION) message for `ras`, stamped at `wall_ns`; 0: no time stamp.
+std::string marker_bytes(const Eigen::Vector3d& ras, std::int64_t wall_ns, bool position = false,
+                         const char* device = "Marker") {
+  igtl::MessageBase::Pointer m;
+  float p[3] = {float(ras.x()), float(ras.y()), float(ras.z())};
+  if (position) {
+    igtl::PositionMessage::Pointer pm = igtl::PositionMessage::New();
+    pm->SetPackType(igtl::PositionMessage::ALL);
+    pm->SetPosition(p);
+    m = pm;
+  } else {
+    igtl::TransformMessage::Pointer tm = igtl::TransformMessage::New();
+    tm->SetPosition(p);
+    m = tm;
+  }
+  m->SetDeviceName(device);
+  igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
+  stamp->SetTime(static_cast<igtlUint32>(wall_ns / 1'000'000'000),
+                 static_cast<igtlUint32>(wall_ns % 1'000'000'000));
+  m->SetTimeStamp(stamp);
+  m->Pack();
+  std::string bytes(static_cast<const char*>(m->GetPackPointer()), std::size_t(m->GetPackSize()));
+  if (wall_ns == 0) std::fill(bytes.begin() + 34, bytes.begin() + 42, '\0');  // the header's time stamp
+  return bytes;
+}
+
+// A POSITION without orientation (12 bytes of body), as some trackers send: cut from the library's
+// 28-byte form, with the header's body size and CRC set for what is left.
+std::string short_position_bytes(const Eigen::Vector3d& ras, std::int64_t wall_ns) {
+  std::string bytes = marker_bytes(ras, wall_ns, /*position=*/true);
+  bytes.resize(58 + 12);
+  auto* b = reinterpret_cast<unsigned char*>(bytes.data());
+  const std::uint64_t crc = ::crc64(b + 58, 12, 0);
+  for (int i = 0; i < 8; ++i) {
+    b[42 + i] = static_cast<unsigned char>(std::uint64_t{12} >> (56 - 8 * i));
+    b[50 + i] = static_cast<unsigned char>(crc >> (56 - 8 * i));
+  }
+  return bytes;
+}
+
+std::int64_t wall_ns_ago(double seconds) {
+  return igtl_clock_ns(CLOCK_REALTIME) - std::int64_t(seconds * 1e9);
+}
+
+// A peer that listens on loopback and sends what the test gives it to its newest connection.
+class HandPeer {
+ public:
+  HandPeer() {
+    listen_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in at{};
+    at.sin_family = AF_INET;
+    at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    EXPECT_EQ(::bind(listen_, reinterpret_cast<sockaddr*>(&at), sizeof at), 0);
+    EXPECT_EQ(::listen(listen_, 4), 0);
+    socklen_t length = sizeof at;
+    getsockname(listen_, reinterpret_cast<sockaddr*>(&at), &length);
+    port_ = ntohs(at.sin_port);
+  }
+  ~HandPeer() {
+    for (const int fd : connections_) ::close(fd);
+    ::close(listen_);
+  }
+  int port() const { return port_; }
+  // The next connection within 20 s (the client reconnects every retry_ms).
+  bool accept_next() {
+    pollfd p{listen_, POLLIN, 0};
+    if (::poll(&p, 1, 20000) != 1) return false;
+    connections_.push_back(::accept4(listen_, nullptr, nullptr, SOCK_CLOEXEC));
+    return connections_.back() >= 0;
+  }
+  void send(const std::string& bytes) {
+    ASSERT_EQ(::send(connections_.back(), bytes.data(), bytes.size(), MSG_NOSIGNAL), ssize_t(bytes.size()));
+  }
+
+ private:
+  int listen_ = -1, port_ = 0;
+  std::vector<int> connections_;
+};
+
+IgtlSurrogateOptions client_of(int port) {
+  IgtlSurrogateOptions o;
+  o.port = port;
+  o.retry_ms = 20;
+  return o;
+}
+
+TEST(IgtlSurrogate, ReadsTheTrackersTransformsAtTheTimesTheyWereMeasured) {
+  // The twin's marker says when it was measured: z is the milliseconds since t0 (room frame).
+  const std::int64_t t0 = mono_ns();
+  sim::TrackerTwinOptions twin;
+  twin.rate_hz = 100;
+  auto served = sim::TrackerTwin::start(twin, [t0](std::int64_t t_ns, Eigen::Vector3d* p) {
+    *p = Eigen::Vector3d(3, -2, 1e-6 * double(t_ns - t0));
+    return true;
+  });
+  ASSERT_TRUE(served.ok()) << served.status().message();
+  IgtlSurrogateOptions o = client_of((*served)->port());
+  o.device = "Marker";
+  IgtlSurrogateSource z(o);
+  ASSERT_TRUE(z.open().ok());
+  const std::vector<SurrogateReading> got = read_until(z, 40);
+  ASSERT_GE(got.size(), 40u);
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    if (i > 0) {
+      EXPECT_GT(got[i].t_ns, got[i - 1].t_ns);
+    }
+    // The reading's time is the message's time stamp, not its arrival: what z encodes.
+    EXPECT_NEAR(1e-6 * double(got[i].t_ns - t0), got[i].amplitude, 2.0) << i;
+    EXPECT_LE(got[i].t_ns, mono_ns());
+  }
+  EXPECT_NEAR(double(got.back().t_ns - got.front().t_ns) / double(got.size() - 1), 1e7, 3e6) << "100 Hz";
+  // OpenIGTLink is RAS, the room LPS-like: the twin's x = 3 and y = -2 read back in the room frame.
+  const std::vector<std::pair<Eigen::Vector3d, double>> along_axes = {
+      {Eigen::Vector3d::UnitX(), 3.0},
+      {Eigen::Vector3d::UnitY(), -2.0},
+      {Eigen::Vector3d(0.6, 0.8, 0), 0.6 * 3 - 0.8 * 2}};
+  for (const auto& [axis, expected] : along_axes) {
+    o.axis_room = axis;
+    IgtlSurrogateSource along(o);
+    ASSERT_TRUE(along.open().ok());
+    const std::vector<SurrogateReading> r = read_until(along, 3);
+    ASSERT_FALSE(r.empty());
+    EXPECT_NEAR(r.back().amplitude, expected, 1e-5);
+  }
+  const drivers::IgtlSurrogateCounters c = z.counters();
+  EXPECT_EQ(c.connections, 1);
+  EXPECT_EQ(c.refused_stale + c.refused_future + c.refused_order + c.protocol_errors, 0);
+}
+
+TEST(IgtlSurrogate, ReadsPositionMessagesOfItsDeviceAndSkipsTheRest) {
+  sim::TrackerTwinOptions twin;
+  twin.rate_hz = 200;
+  twin.device = "Probe";
+  twin.position_messages = true;
+  auto served = sim::TrackerTwin::start(twin, [](std::int64_t, Eigen::Vector3d* p) {
+    *p = Eigen::Vector3d(0, 0, 7.5);
+    return true;
+  });
+  ASSERT_TRUE(served.ok());
+  IgtlSurrogateOptions o = client_of((*served)->port());
+  o.device = "Marker";
+  IgtlSurrogateSource other(o);
+  ASSERT_TRUE(other.open().ok());
+  ASSERT_TRUE(eventually([&] { return other.counters().ignored >= 20; }));
+  SurrogateReading r[8];
+  EXPECT_EQ(other.read(mono_ns(), r, 8), 0) << "another device's messages are not the marker's";
+  o.device = "Probe";
+  IgtlSurrogateSource probe(o);
+  ASSERT_TRUE(probe.open().ok());
+  const std::vector<SurrogateReading> got = read_until(probe, 10);
+  ASSERT_GE(got.size(), 10u);
+  for (const SurrogateReading& s : got) EXPECT_EQ(s.amplitude, 7.5);
+  EXPECT_EQ(probe.counters().protocol_errors, 0);
+}
+
+TEST(IgtlSurrogate, HonoursTimeStampsAndRefusesStaleFutureAndRepeatedReadings) {
+  HandPeer peer;
+  IgtlSurrogateOptions o = client_of(peer.port());
+  o.stale_ms = 200;
+  o.future_ms = 50;
+  IgtlSurrogateSource s(o);
+  ASSERT_TRUE(s.open().ok());
+  ASSERT_TRUE(peer.accept_next());
+  // Measured 100 ms before it was sent: its time is then, not its arrival.
+  const std::int64_t sent_mono = mono_ns();
+  const std::int64_t stamp = wall_ns_ago(0.1);
+  peer.send(marker_bytes({0, 0, 1}, stamp));
+  ASSERT_TRUE(eventually([&] { return s.counters().readings == 1; }));
+  SurrogateReading r[8];
+  ASSERT_EQ(s.read(mono_ns(), r, 8), 1);
+  EXPECT_NEAR(double(r[0].t_ns - sent_mono), -1e8, 5e6) << "the time stamp, on this host's monotonic clock";
+  EXPECT_EQ(r[0].amplitude, 1);
+  // A second old, a second ahead, and the same time again: each refused, and counted.
+  peer.send(marker_bytes({0, 0, 2}, wall_ns_ago(1.0)));
+  peer.send(marker_bytes({0, 0, 3}, wall_ns_ago(-1.0)));
+  peer.send(marker_bytes({0, 0, 4}, stamp));
+  ASSERT_TRUE(eventually([&] {
+    const auto c = s.counters();
+    return c.refused_stale == 1 && c.refused_future == 1 && c.refused_order == 1;
+  })) << "stale "
+      << s.counters().refused_stale << ", future " << s.counters().refused_future << ", order "
+      << s.counters().refused_order << ", readings " << s.counters().readings;
+  // A NaN position is passed on: the loop's watch holds on it. No time stamp: measured when it came
+  // (a POSITION without orientation, 12 bytes).
+  peer.send(marker_bytes({0, 0, std::numeric_limits<double>::quiet_NaN()}, wall_ns_ago(0)));
+  const std::int64_t before = mono_ns();
+  peer.send(short_position_bytes({0, 0, 5}, 0));
+  ASSERT_TRUE(eventually([&] { return s.counters().readings == 3; }))
+      << "readings " << s.counters().readings << ", protocol errors " << s.counters().protocol_errors
+      << ", order " << s.counters().refused_order << ", stale " << s.counters().refused_stale;
+  ASSERT_EQ(s.read(mono_ns(), r, 8), 2);
+  EXPECT_TRUE(std::isnan(r[0].amplitude));
+  EXPECT_GE(r[1].t_ns, before);
+  EXPECT_EQ(r[1].amplitude, 5);
+  EXPECT_EQ(s.counters().protocol_errors, 0);
+}
+
+TEST(IgtlSurrogate, GivesTheNewestWhenAskedForFewerAndNothingFromTheFuture) {
+  HandPeer peer;
+  IgtlSurrogateSource s(client_of(peer.port()));
+  ASSERT_TRUE(s.open().ok());
+  ASSERT_TRUE(peer.accept_next());
+  const std::int64_t first = wall_ns_ago(0.05);
+  for (int i = 1; i <= 5; ++i) peer.send(marker_bytes({0, 0, double(i)}, first + i * 1'000'000));
+  ASSERT_TRUE(eventually([&] { return s.counters().readings == 5; }));
+  SurrogateReading r[8];
+  EXPECT_EQ(s.read(mono_ns() - 1'000'000'000, r, 8), 0) << "none measured a second ago: they wait";
+  ASSERT_EQ(s.read(mono_ns(), r, 2), 2);
+  EXPECT_EQ(r[0].amplitude, 4);
+  EXPECT_EQ(r[1].amplitude, 5);
+  EXPECT_EQ(s.read(mono_ns(), r, 8), 0) << "each reading is given once";
+}
+
+// The reader's thread feeds the cycle: once connected, a message read and handed over allocates
+// nothing (the counter is the whole process's; the peer's messages are packed beforehand).
+TEST(IgtlSurrogate, ReadsAndHandsOverWithoutAllocating) {
+  HandPeer peer;
+  IgtlSurrogateSource s(client_of(peer.port()));
+  ASSERT_TRUE(s.open().ok());
+  ASSERT_TRUE(peer.accept_next());
+  std::vector<std::string> messages;
+  const std::int64_t first = wall_ns_ago(0.15);
+  for (int i = 0; i < 200; ++i)
+    messages.push_back(marker_bytes({0, 0, double(i)}, first + i * 500'000, /*position=*/i % 2 == 1));
+  for (int i = 0; i < 10; ++i) peer.send(messages[std::size_t(i)]);
+  ASSERT_TRUE(eventually([&] { return s.counters().readings == 10; }));
+  SurrogateReading r[64];
+  const std::uint64_t before = host::process_allocation_count();
+  for (std::size_t i = 10; i < messages.size(); ++i) peer.send(messages[i]);
+  ASSERT_TRUE(eventually([&] { return s.counters().readings == 200; }));
+  int given = 0;
+  for (int n; (n = s.read(mono_ns(), r, 64)) > 0;) given += n;
+  EXPECT_EQ(host::process_allocation_count() - before, 0u);
+  EXPECT_EQ(given, 64) << "the newest 64 of 200";
+  EXPECT_EQ(r[63].amplitude, 199);
+}
+
+TEST(IgtlSurrogate, DropsAPeerThatIsNotOpenIgtlinkAndReconnects) {
+  HandPeer peer;
+  IgtlSurrogateSource s(client_of(peer.port()));
+  ASSERT_TRUE(s.open().ok());
+  ASSERT_TRUE(peer.accept_next());
+  // A header claiming a body of 2^40 bytes.
+  std::string huge = marker_bytes({0, 0, 1}, wall_ns_ago(0));
+  for (int i = 42; i < 50; ++i) huge[std::size_t(i)] = i == 44 ? '\x01' : '\0';
+  peer.send(huge);
+  ASSERT_TRUE(peer.accept_next()) << "the client reconnects";
+  EXPECT_EQ(s.counters().protocol_errors, 1);
+  // A body that fails its CRC.
+  std::string bad = marker_bytes({0, 0, 1}, wall_ns_ago(0));
+  bad[60] = char(bad[60] ^ 0x5a);
+  peer.send(bad);
+  ASSERT_TRUE(peer.accept_next());
+  EXPECT_EQ(s.counters().protocol_errors, 2);
+  // Another message type is skipped whole; the next marker is read.
+  igtl::StringMessage::Pointer text = igtl::StringMessage::New();
+  text->SetDeviceName("Marker");
+  text->SetString(std::string(10000, 'x').c_str());
+  text->Pack();
+  peer.send(std::string(static_cast<const char*>(text->GetPackPointer()), std::size_t(text->GetPackSize())));
+  peer.send(marker_bytes({0, 0, 6}, wall_ns_ago(0)));
+  const std::vector<SurrogateReading> got = read_until(s, 1);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].amplitude, 6);
+  EXPECT_EQ(s.counters().ignored, 1);
+  EXPECT_EQ(s.counters().connections, 3);
+  EXPECT_EQ(s.counters().readings, 1) << "nothing of the bad messages was taken";
+}
+
+TEST(IgtlSurrogate, RefusesToOpenWithoutATrackerAndSaysWhere) {
+  int port = 0;
+  {
+    HandPeer gone;  // a port that was just free
+    port = gone.port();
+  }
+  IgtlSurrogateSource s(client_of(port));
+  const Status opened = s.open();
+  ASSERT_FALSE(opened.ok());
+  EXPECT_NE(opened.message().find("127.0.0.1:" + std::to_string(port)), std::string::npos)
+      << opened.message();
+  EXPECT_NE(opened.message().find("is it running"), std::string::npos) << opened.message();
+  IgtlSurrogateOptions nowhere = client_of(port);
+  nowhere.host = "no-such-host.invalid";
+  EXPECT_FALSE(IgtlSurrogateSource(nowhere).open().ok());
+  nowhere = client_of(port);
+  nowhere.axis_room = Eigen::Vector3d(std::numeric_limits<double>::quiet_NaN(), 0, 0);
+  EXPECT_FALSE(IgtlSurrogateSource(nowhere).open().ok());
+}
+
+// `lftrack serve tracker` as a process of its own: its breathing marker read by the client.
+TEST(IgtlSurrogate, ReadsTheTrackersTwinAsAProcessOfItsOwn) {
+  test::ChildProcess tracker({LFTRACK_BIN_PATH, "-q", "serve", "tracker", "--listen", "127.0.0.1:0", "--rate",
+                              "50", "--message", "position", "--duration", "60"});
+  const std::optional<std::string> line = tracker.read_line(60s);
+  ASSERT_TRUE(line.has_value()) << "the tracker's twin started";
+  const auto colon = line->find("127.0.0.1:");
+  ASSERT_NE(colon, std::string::npos) << *line;
+  const int port = std::atoi(line->c_str() + colon + 10);
+  ASSERT_GT(port, 0) << *line;
+  IgtlSurrogateSource s(client_of(port));
+  ASSERT_TRUE(s.open().ok());
+  const std::vector<SurrogateReading> got = read_until(s, 100, 60s);
+  ASSERT_GE(got.size(), 100u) << "two seconds at 50 Hz";
+  double low = got[0].amplitude, high = low;
+  for (const SurrogateReading& r : got) {
+    low = std::min(low, r.amplitude);
+    high = std::max(high, r.amplitude);
+  }
+  // The built-in scene's marker: 10 mm of travel over a 4 s breath, 0.1 mm noise.
+  EXPECT_GE(low, -1.0);
+  EXPECT_LE(high, 11.0);
+  EXPECT_GT(high - low, 1.0) << "half a breath moves the marker";
+  EXPECT_EQ(s.counters().refused_stale + s.counters().refused_future + s.counters().protocol_errors, 0);
+  tracker.signal(SIGTERM);
+  EXPECT_EQ(tracker.wait(20s), 0);
+}
+
+}  // namespace
+}  // namespace lftrack
