@@ -52,6 +52,9 @@ Status serve_tracker(const TrackerOptions& o) {
   if (!scene.ok()) return scene.status();
   auto at = parse_listen_address(o.listen);
   if (!at.ok()) return at.status().with_context("--listen");
+  if (!o.device.empty())
+    if (const std::string why = sim::igtl_device_name_problem(o.device); !why.empty())
+      return invalid_argument("--device \"" + o.device + "\": " + why);
   sim::TrackerTwinOptions twin;
   twin.address = at->address;
   twin.port = at->port;
@@ -106,8 +109,12 @@ Status serve_tracker(const TrackerOptions& o) {
                     twin.position_messages ? "POSITION" : "TRANSFORM", twin.device.c_str(), twin.rate_hz);
       }));
   if (o.serve.json) {
-    const nlohmann::json j = {
-        {"device", "tracker"}, {"messages", server->messages_sent()}, {"clients", server->clients_total()}};
+    const nlohmann::json j = {{"device", "tracker"},
+                              {"listen", at->text()},
+                              {"marker_device", twin.device},
+                              {"message", twin.position_messages ? "POSITION" : "TRANSFORM"},
+                              {"messages", server->messages_sent()},
+                              {"clients_total", server->clients_total()}};
     std::printf("%s\n", j.dump().c_str());
   } else {
     std::printf("served: %s\n", describe().c_str());
@@ -132,9 +139,10 @@ Command add_serve_tracker_command(CLI::App* parent) {
   app->add_option("--message", o->message, "TRANSFORM messages (as PLUS sends a tool) or POSITION")
       ->check(CLI::IsMember({"transform", "position"}))
       ->default_val("transform");
-  app->add_option("--rate", o->rate_hz,
-                  "Messages per second, 1 to 1000 (default: the scene's surrogate.rate_hz)")
-      ->check(finite_in(1, 1000));
+  app->add_option(
+         "--rate", o->rate_hz,
+         "Messages per second, 5 to 1000, as surrogate.rate_hz (default: the scene's surrogate.rate_hz)")
+      ->check(finite_in(5, 1000));
   app->add_option(
       "--fault", o->serve.faults,
       "KIND[:COUNT][@SECONDS]: inject a fault SECONDS after start (repeatable); KIND: stop (no messages "

@@ -201,6 +201,7 @@ Status serve_until_stopped(const ServeOptions& o, const std::map<std::string, in
   action.sa_handler = on_stop_signal;
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGHUP, &action, nullptr);  // a closed terminal: stop as cleanly, the control socket removed
   announce();
   std::fflush(stdout);
   const auto start = std::chrono::steady_clock::now();

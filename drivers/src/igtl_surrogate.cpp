@@ -1,14 +1,11 @@
 #include "lftrack/drivers/igtl_surrogate.hpp"
 
 #include <fcntl.h>
-#include <igtlMessageHeader.h>
 #include <igtl_util.h>
 #include <netdb.h>
-#include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <sys/socket.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -18,84 +15,87 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <vector>
+
+#include "lftrack/drivers/wall_clock.hpp"
 
 namespace lftrack::drivers {
 
 namespace {
 
-std::int64_t clock_ns(clockid_t clock) {
-  timespec ts{};
-  clock_gettime(clock, &ts);
-  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+// OpenIGTLink's header, 58 bytes, big-endian: version u16 (1, or 2 for OpenIGTLink 3's extended
+// header), type char[12], device name char[20], time stamp (seconds u32, fraction u32 of 2^-32 s),
+// body size u64, the body's CRC u64.
+constexpr std::size_t kHeaderBytes = 58;
+constexpr std::size_t kMaxMarkerBody = 64 * 1024;        // a marker's message, with any metadata
+constexpr std::uint64_t kMaxSkippedBody = 1ull << 32;    // another type (a PLUS IMAGE) is skipped whole
+constexpr std::int64_t kBodyDeadlineNs = 1'000'000'000;  // a marker's body follows its header within this
+constexpr std::int64_t kSkipDeadlineNs = 30'000'000'000;
 
-// OpenIGTLink's header (58 bytes, big-endian): version 2, type 12, device name 20, time stamp 8,
-// body size 8, CRC 8. The body size is read here as the 64-bit number it is: the library gives it
-// as an int, which a hostile or broken peer's 2^40 would wrap.
-constexpr int kHeaderBytes = 58;
-std::uint64_t big_endian_u64(const unsigned char* at) {
+std::uint64_t be(const unsigned char* at, int bytes) {
   std::uint64_t value = 0;
-  for (int i = 0; i < 8; ++i) value = (value << 8) | at[i];
+  for (int i = 0; i < bytes; ++i) value = (value << 8) | at[i];
   return value;
 }
-std::uint64_t header_body_bytes(const unsigned char* header) {
-  return big_endian_u64(header + 42);
+float be_float(const unsigned char* at) {
+  const auto word = static_cast<std::uint32_t>(be(at, 4));
+  float value = 0;
+  std::memcpy(&value, &word, sizeof value);
+  return value;
 }
-std::uint64_t header_crc(const unsigned char* header) {
-  return big_endian_u64(header + 50);
+// A NUL-padded header field equal to `text`.
+bool field_is(const unsigned char* field, std::size_t size, const char* text) {
+  const std::size_t n = std::strlen(text);
+  return n <= size && std::memcmp(field, text, n) == 0 && (n == size || field[n] == 0);
 }
-
-// The marker's position from a message body whose CRC is `crc`: a TRANSFORM's (48 bytes: the
-// rotation's 9 and then the translation's 3 big-endian float32) or a POSITION's (12, 24 or 28
-// bytes: x, y, z, then 3 or 4 quaternion components). The bodies are read here, their CRC by the
-// library's crc64: the library's message classes allocate on every message (SetMessageHeader,
-// AllocatePack), which the thread that feeds the cycle must not, and its PositionMessage
-// unpacks a 12- or 24-byte body as if it held 28 (reading past it).
-bool body_position(bool transform, const unsigned char* body, std::uint64_t bytes, std::uint64_t crc,
-                   float position[3]) {
-  if (transform ? bytes != 48 : bytes != 12 && bytes != 24 && bytes != 28) return false;
-  if (::crc64(const_cast<unsigned char*>(body), bytes, 0) != crc) return false;
-  const unsigned char* at = transform ? body + 36 : body;
-  for (int i = 0; i < 3; ++i) {
-    std::uint32_t word = 0;
-    for (int b = 0; b < 4; ++b) word = (word << 8) | at[4 * i + b];
-    std::memcpy(&position[i], &word, sizeof word);
-  }
-  return true;
+std::string field_text(const unsigned char* field, std::size_t size) {
+  const auto* begin = reinterpret_cast<const char*>(field);
+  return std::string(begin, strnlen(begin, size));
+}
+// Logs the 1st, 10th, 100th, ... of a repeated event: a peer that errs a thousand times a second
+// must not fill the log.
+bool worth_logging(std::int64_t n) {
+  while (n >= 10 && n % 10 == 0) n /= 10;
+  return n == 1;
 }
 
-// A non-blocking TCP connection to host:port within timeout_ms, or an error naming it.
-Result<int> connect_to(const std::string& host, int port, int timeout_ms) {
+Result<sockaddr_in> resolve(const std::string& host, int port, const std::string& where) {
+  if (port < 1 || port > 65535)
+    return invalid_argument("the tracker's port must be 1 to 65535, not " + where);
   addrinfo hints{};
   hints.ai_family = AF_INET;
   hints.ai_socktype = SOCK_STREAM;
   addrinfo* found = nullptr;
-  const std::string where = host + ":" + std::to_string(port);
   if (const int rc = getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &found); rc != 0)
     return not_found("no address for " + where + ": " + gai_strerror(rc));
-  const int fd = ::socket(found->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (fd < 0) {
-    freeaddrinfo(found);
-    return io_error(std::string("socket: ") + std::strerror(errno));
-  }
-  int rc = ::connect(fd, found->ai_addr, found->ai_addrlen);
+  sockaddr_in address{};
+  std::memcpy(&address, found->ai_addr, std::min<std::size_t>(sizeof address, found->ai_addrlen));
   freeaddrinfo(found);
-  if (rc != 0 && errno == EINPROGRESS) {
-    pollfd p{fd, POLLOUT, 0};
-    rc = ::poll(&p, 1, timeout_ms);
-    if (rc == 0) {
-      ::close(fd);
-      return io_error("no answer from " + where + " within " + std::to_string(timeout_ms) + " ms");
+  return address;
+}
+
+// A non-blocking TCP connection within timeout_ms (given up at once on `stop`), or an error.
+Result<int> connect_to(const sockaddr_in& address, const std::string& where, int timeout_ms,
+                       const std::atomic<bool>& stop) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (fd < 0) return io_error(std::string("socket: ") + std::strerror(errno));
+  int error = 0;
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&address), sizeof address) != 0) {
+    error = errno;
+    const std::int64_t deadline = clock_now_ns(CLOCK_MONOTONIC) + std::int64_t{timeout_ms} * 1'000'000;
+    while (error == EINPROGRESS) {
+      if (stop.load(std::memory_order_acquire) || clock_now_ns(CLOCK_MONOTONIC) > deadline) {
+        ::close(fd);
+        return io_error("no answer from " + where + " within " + std::to_string(timeout_ms) + " ms");
+      }
+      pollfd p{fd, POLLOUT, 0};
+      const int ready = ::poll(&p, 1, 100);
+      if (ready < 0 && errno != EINTR) error = errno;
+      if (ready <= 0) continue;
+      socklen_t length = sizeof error;
+      if (getsockopt(fd, SOL_SOCKET, SO_ERROR, &error, &length) != 0) error = errno;
     }
-    int error = 0;
-    socklen_t length = sizeof error;
-    if (rc < 0 || getsockopt(fd, SOL_SOCKET, SO_ERROR, &error, &length) != 0) error = errno;
-    if (error != 0) errno = error;
-    rc = error == 0 ? 0 : -1;
   }
-  if (rc != 0) {
-    const int error = errno;
+  if (error != 0) {
     ::close(fd);
     return io_error("cannot connect to " + where + ": " + std::strerror(error));
   }
@@ -107,14 +107,14 @@ Result<int> connect_to(const std::string& host, int port, int timeout_ms) {
 enum class Got { kAll, kClosed, kStopped, kTimedOut };
 
 // Reads exactly `length` bytes, looking at `stop` every 100 ms; gives up at `deadline_ns`
-// (CLOCK_MONOTONIC; 0: none).
+// (CLOCK_MONOTONIC).
 Got read_fully(int fd, void* data, std::size_t length, const std::atomic<bool>& stop,
                std::int64_t deadline_ns) {
   auto* at = static_cast<char*>(data);
   std::size_t got = 0;
   while (got < length) {
     if (stop.load(std::memory_order_acquire)) return Got::kStopped;
-    if (deadline_ns > 0 && clock_ns(CLOCK_MONOTONIC) > deadline_ns) return Got::kTimedOut;
+    if (clock_now_ns(CLOCK_MONOTONIC) > deadline_ns) return Got::kTimedOut;
     pollfd p{fd, POLLIN, 0};
     const int ready = ::poll(&p, 1, 100);
     if (ready < 0 && errno != EINTR) return Got::kClosed;
@@ -130,12 +130,20 @@ Got read_fully(int fd, void* data, std::size_t length, const std::atomic<bool>& 
   return Got::kAll;
 }
 
-// The rest of a message, once its header has come, must follow within this.
-constexpr std::int64_t kBodyDeadlineNs = 1'000'000'000;
+// Waits `ms`, or less on `stop`; false when stopped.
+bool wait_unless_stopped(const std::atomic<bool>& stop, int ms) {
+  const std::int64_t until = clock_now_ns(CLOCK_MONOTONIC) + std::int64_t{ms} * 1'000'000;
+  while (!stop.load(std::memory_order_acquire)) {
+    if (clock_now_ns(CLOCK_MONOTONIC) >= until) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return false;
+}
 
 }  // namespace
 
-IgtlSurrogateSource::IgtlSurrogateSource(const IgtlSurrogateOptions& options) : options_(options) {}
+IgtlSurrogateSource::IgtlSurrogateSource(const IgtlSurrogateOptions& options)
+    : options_(options), where_(options.host + ":" + std::to_string(options.port)) {}
 
 IgtlSurrogateSource::~IgtlSurrogateSource() {
   close();
@@ -145,12 +153,16 @@ Status IgtlSurrogateSource::open() {
   if (thread_.joinable()) return failed_precondition("the OpenIGTLink surrogate is already open");
   if (!(options_.axis_room.allFinite() && std::abs(options_.axis_room.norm() - 1) < 1e-6))
     return invalid_argument("the surrogate's axis must be a unit vector");
-  auto fd = connect_to(options_.host, options_.port, options_.connect_timeout_ms);
-  if (!fd.ok())
-    return fd.status().with_context(
-        "surrogate.igtl: the optical tracker's OpenIGTLink server (PLUS listens on 18944); is it running?");
-  first_fd_ = *fd;
+  const std::string context = "surrogate.igtl: the optical tracker's OpenIGTLink server; is it running?";
+  auto address = resolve(options_.host, options_.port, where_);
+  if (!address.ok()) return address.status().with_context(context);
+  address_ = *address;
   stop_.store(false, std::memory_order_release);
+  auto fd = connect_to(address_, where_, options_.connect_timeout_ms, stop_);
+  if (!fd.ok()) return fd.status().with_context(context);
+  first_fd_ = *fd;
+  body_.assign(kMaxMarkerBody, 0);
+  followed_device_.reserve(24);
   thread_ = std::thread([this] { run(); });
   return {};
 }
@@ -161,11 +173,11 @@ void IgtlSurrogateSource::close() {
     thread_.join();
     const IgtlSurrogateCounters c = counters();
     spdlog::info(
-        "surrogate: {} readings from {}:{} over {} connection(s); refused {} stale, {} from the future, {} "
-        "out of "
-        "order; {} other messages skipped, {} protocol errors, {} unread",
-        c.readings, options_.host, options_.port, c.connections, c.refused_stale, c.refused_future,
-        c.refused_order, c.ignored, c.protocol_errors, c.dropped_unread);
+        "surrogate: {} readings from {} over {} connection(s); refused {} stale, {} from the future, {} out "
+        "of "
+        "order; {} other messages skipped, {} protocol errors, {} unread{}",
+        c.readings, where_, c.connections, c.refused_stale, c.refused_future, c.refused_order, c.ignored,
+        c.protocol_errors, c.dropped_unread, c.several_devices ? "; several devices on the stream" : "");
   }
   if (first_fd_ >= 0) ::close(first_fd_);
   first_fd_ = -1;
@@ -175,23 +187,22 @@ void IgtlSurrogateSource::close() {
 void IgtlSurrogateSource::run() {
   int fd = first_fd_;
   first_fd_ = -1;
-  const std::string where = options_.host + ":" + std::to_string(options_.port);
-  bool said_lost = false;
+  std::int64_t ends = 0, failures = 0;
   while (!stop_.load(std::memory_order_acquire)) {
     if (fd < 0) {
-      auto again = connect_to(options_.host, options_.port, options_.connect_timeout_ms);
+      // Always a pause between connections: a server that accepts and closes at once, or one
+      // that sends what is refused, is not asked a thousand times a second.
+      if (!wait_unless_stopped(stop_, options_.retry_ms)) break;
+      auto again = connect_to(address_, where_, options_.connect_timeout_ms, stop_);
       if (!again.ok()) {
-        if (!said_lost)
-          spdlog::warn("surrogate: {} (retrying every {} ms)", again.status().message(), options_.retry_ms);
-        said_lost = true;
-        const std::int64_t until = clock_ns(CLOCK_MONOTONIC) + std::int64_t{options_.retry_ms} * 1'000'000;
-        while (!stop_.load(std::memory_order_acquire) && clock_ns(CLOCK_MONOTONIC) < until)
-          std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        if (worth_logging(++failures))
+          spdlog::warn("surrogate: {} (retrying every {} ms; {} tries)", again.status().message(),
+                       options_.retry_ms, failures);
         continue;
       }
       fd = *again;
-      if (said_lost) spdlog::info("surrogate: connected to {} again", where);
-      said_lost = false;
+      if (failures > 0 || ends > 0) spdlog::info("surrogate: connected to {} again", where_);
+      failures = 0;
     }
     connections_.fetch_add(1, std::memory_order_relaxed);
     connected_.store(true, std::memory_order_release);
@@ -200,98 +211,165 @@ void IgtlSurrogateSource::run() {
     ::close(fd);
     fd = -1;
     if (stopped) break;
-    if (!said_lost) spdlog::warn("surrogate: the connection to {} ended; reconnecting", where);
-    said_lost = true;
+    if (worth_logging(++ends))
+      spdlog::warn(
+          "surrogate: the connection to {} ended, or had nothing for {} ms ({} times); connecting again",
+          where_, options_.idle_ms, ends);
   }
   if (fd >= 0) ::close(fd);
 }
 
+void IgtlSurrogateSource::protocol_error(const char* what, std::uint64_t value) {
+  const std::int64_t n = protocol_errors_.fetch_add(1, std::memory_order_relaxed) + 1;
+  if (worth_logging(n))
+    spdlog::warn(
+        "surrogate: {} {} from {}: not the tracker's OpenIGTLink; dropping the connection ({} so far)", what,
+        value, where_, n);
+}
+
 // One connection's messages, until it ends (false) or close() (true).
 bool IgtlSurrogateSource::serve_connection(int fd) {
-  std::vector<char> skipped(4096);
-  const auto ended = [&](Got got) {
-    if (got == Got::kTimedOut) protocol_errors_.fetch_add(1, std::memory_order_relaxed);
+  unsigned char header[kHeaderBytes];
+  const auto ended = [&](Got got, bool in_message) {
+    if (got == Got::kTimedOut && in_message) protocol_error("a message cut off, bytes", 0);
     return got == Got::kStopped;
   };
-  // Made once per connection and reused: a message read allocates nothing.
-  igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
-  igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
   while (true) {
-    header->InitPack();
-    if (header->GetPackSize() != kHeaderBytes) return false;  // not the library this was written for
-    if (const Got got = read_fully(fd, header->GetPackPointer(), kHeaderBytes, stop_, 0); got != Got::kAll)
-      return ended(got);
-    const std::int64_t arrived_ns = clock_ns(CLOCK_MONOTONIC);
-    const std::int64_t wall_minus_mono_ns = clock_ns(CLOCK_REALTIME) - arrived_ns;
-    // Read before Unpack(), which turns the header's bytes to this host's order in place.
-    const auto* raw_header = static_cast<const unsigned char*>(header->GetPackPointer());
-    const std::uint64_t body_bytes = header_body_bytes(raw_header), body_crc = header_crc(raw_header);
-    if (!(header->Unpack() & igtl::MessageHeader::UNPACK_HEADER) ||
-        body_bytes > std::uint64_t(options_.max_body_bytes)) {
-      protocol_errors_.fetch_add(1, std::memory_order_relaxed);
-      spdlog::warn("surrogate: not an OpenIGTLink message (a body of {} bytes); dropping the connection",
-                   body_bytes);
+    const std::int64_t idle_deadline =
+        clock_now_ns(CLOCK_MONOTONIC) + std::int64_t{options_.idle_ms} * 1'000'000;
+    if (const Got got = read_fully(fd, header, kHeaderBytes, stop_, idle_deadline); got != Got::kAll)
+      return ended(got, false);
+    const std::int64_t arrived_ns = clock_now_ns(CLOCK_MONOTONIC);
+    const std::uint64_t version = be(header, 2), body_bytes = be(header + 42, 8);
+    if (version != 1 && version != 2) {
+      protocol_error("a header of version", version);
       return false;
     }
-    const std::int64_t body_deadline = arrived_ns + kBodyDeadlineNs;
-    const bool is_transform = std::strcmp(header->GetDeviceType(), "TRANSFORM") == 0;
-    const bool wanted = (is_transform || std::strcmp(header->GetDeviceType(), "POSITION") == 0) &&
-                        (options_.device.empty() || options_.device == header->GetDeviceName());
-    const char* type = is_transform ? "TRANSFORM" : "POSITION";
+    const unsigned char* type = header + 2;
+    const unsigned char* name = header + 14;
+    const bool marker_type = field_is(type, 12, "TRANSFORM") || field_is(type, 12, "POSITION");
+    bool wanted = marker_type && !several_devices_.load(std::memory_order_relaxed);
+    if (wanted && !options_.device.empty()) {
+      wanted = field_is(name, 20, options_.device.c_str());
+      if (!wanted && !warned_other_device_)
+        spdlog::info(
+            "surrogate: skipping device \"{}\" on the tracker's stream (following \"{}\", "
+            "surrogate.igtl.device); said once",
+            field_text(name, 20), options_.device);
+      warned_other_device_ = warned_other_device_ || !wanted;
+    } else if (wanted && followed_device_.empty()) {
+      followed_device_ = field_text(name, 20);
+      spdlog::info("surrogate: following device \"{}\" (surrogate.igtl.device names none)", followed_device_);
+    } else if (wanted && !field_is(name, 20, followed_device_.c_str())) {
+      several_devices_.store(true, std::memory_order_relaxed);
+      wanted = false;
+      spdlog::error(
+          "surrogate: the tracker sends device \"{}\" besides \"{}\": name the marker's in "
+          "surrogate.igtl.device. "
+          "No reading is taken until then (the loop holds, surrogate stopped)",
+          field_text(name, 20), followed_device_);
+    }
     if (!wanted) {
+      if (body_bytes > kMaxSkippedBody) {
+        protocol_error("a body of bytes", body_bytes);
+        return false;
+      }
       for (std::uint64_t left = body_bytes; left > 0;) {
-        const std::size_t part = std::size_t(std::min<std::uint64_t>(left, skipped.size()));
-        if (const Got got = read_fully(fd, skipped.data(), part, stop_, body_deadline); got != Got::kAll)
-          return ended(got);
+        const std::size_t part = std::size_t(std::min<std::uint64_t>(left, body_.size()));
+        if (const Got got = read_fully(fd, body_.data(), part, stop_, arrived_ns + kSkipDeadlineNs);
+            got != Got::kAll)
+          return ended(got, true);
         left -= part;
       }
       ignored_.fetch_add(1, std::memory_order_relaxed);
       continue;
     }
-    float position_ras[3] = {0, 0, 0};
-    unsigned char body[48];
-    if (body_bytes > (is_transform ? 48u : 28u)) {
-      protocol_errors_.fetch_add(1, std::memory_order_relaxed);
-      spdlog::warn("surrogate: a {} of {} bytes ({}); dropping the connection", type, body_bytes,
-                   is_transform ? "48 expected" : "12, 24 or 28 expected");
+    if (body_bytes > kMaxMarkerBody) {
+      protocol_error("a marker's message with a body of bytes", body_bytes);
       return false;
     }
-    if (const Got got = read_fully(fd, body, body_bytes, stop_, body_deadline); got != Got::kAll)
-      return ended(got);
-    if (!body_position(is_transform, body, body_bytes, body_crc, position_ras)) {
-      protocol_errors_.fetch_add(1, std::memory_order_relaxed);
-      spdlog::warn("surrogate: a {} message of {} bytes failed its CRC or size; dropping the connection",
-                   type, body_bytes);
-      return false;
-    }
-    const Eigen::Vector3d p_room(-double(position_ras[0]), -double(position_ras[1]), double(position_ras[2]));
-    igtlUint32 seconds = 0, nanoseconds = 0;
-    header->GetTimeStamp(stamp);
-    stamp->GetTimeStamp(&seconds, &nanoseconds);
-    const std::int64_t stamp_wall_ns = std::int64_t{seconds} * 1'000'000'000 + std::int64_t{nanoseconds};
-    const std::int64_t measured_ns = stamp_wall_ns == 0 ? arrived_ns : stamp_wall_ns - wall_minus_mono_ns;
-    take(measured_ns, arrived_ns, stamp_wall_ns, options_.axis_room.dot(p_room));
+    if (const Got got = read_fully(fd, body_.data(), body_bytes, stop_, arrived_ns + kBodyDeadlineNs);
+        got != Got::kAll)
+      return ended(got, true);
+    if (!take_marker(header, body_bytes, arrived_ns)) return false;
   }
+}
+
+// The marker's position from a TRANSFORM (48 bytes: the rotation's 9 big-endian float32, then the
+// translation's 3) or a POSITION (12, 24 or 28 bytes: x, y, z, then 3 or 4 quaternion
+// components), inside OpenIGTLink 3's extended header and metadata for a version 2 header.
+bool IgtlSurrogateSource::take_marker(const unsigned char* header, std::uint64_t body_bytes,
+                                      std::int64_t arrived_ns) {
+  const unsigned char* body = body_.data();
+  if (::crc64(body_.data(), body_bytes, 0) != be(header + 50, 8)) {
+    protocol_error("a body whose CRC fails, bytes", body_bytes);
+    return false;
+  }
+  const unsigned char* content = body;
+  std::uint64_t content_bytes = body_bytes;
+  if (be(header, 2) ==
+      2) {  // extended header: its size u16, metadata header size u16, metadata size u32, id u32
+    const std::uint64_t extended = body_bytes >= 12 ? be(body, 2) : 0;
+    const std::uint64_t around = body_bytes >= 12 ? extended + be(body + 2, 2) + be(body + 4, 4) : 0;
+    if (extended < 12 || around > body_bytes) {
+      protocol_error("an extended header that does not fit its body, bytes", body_bytes);
+      return false;
+    }
+    content = body + extended;
+    content_bytes = body_bytes - around;
+  }
+  const bool transform = field_is(header + 2, 12, "TRANSFORM");
+  if (transform ? content_bytes != 48 : content_bytes != 12 && content_bytes != 24 && content_bytes != 28) {
+    protocol_error(transform ? "a TRANSFORM of bytes" : "a POSITION of bytes", content_bytes);
+    return false;
+  }
+  const unsigned char* p = transform ? content + 36 : content;
+  // RAS to the room's LPS.
+  const Eigen::Vector3d p_room(-double(be_float(p)), -double(be_float(p + 4)), double(be_float(p + 8)));
+  const std::uint64_t seconds = be(header + 34, 4), fraction = be(header + 38, 4);
+  const auto stamp_wall_ns = std::int64_t(seconds * 1'000'000'000 + ((fraction * 1'000'000'000) >> 32));
+  const std::int64_t measured_ns =
+      stamp_wall_ns == 0 ? arrived_ns : stamp_wall_ns - realtime_minus_monotonic_ns();
+  take(measured_ns, arrived_ns, stamp_wall_ns, options_.axis_room.dot(p_room));
+  return true;
 }
 
 void IgtlSurrogateSource::take(std::int64_t measured_ns, std::int64_t arrived_ns, std::int64_t stamp_wall_ns,
                                double amplitude) {
-  if (double(arrived_ns - measured_ns) > options_.stale_ms * 1e6) {
+  const double age_ms = 1e-6 * double(arrived_ns - measured_ns);
+  if (age_ms > options_.stale_ms) {
     refused_stale_.fetch_add(1, std::memory_order_relaxed);
+    if (!warned_stale_)
+      spdlog::warn(
+          "surrogate: a reading {:.0f} ms old at its arrival refused (surrogate.stale_ms {:g}): is the "
+          "tracker's "
+          "clock synchronised with this host's (PTP, NTP)? Said once; the run's last line counts them",
+          age_ms, options_.stale_ms);
+    warned_stale_ = true;
     return;
   }
-  if (double(measured_ns - arrived_ns) > options_.future_ms * 1e6) {
+  if (-age_ms > options_.future_ms) {
     refused_future_.fetch_add(1, std::memory_order_relaxed);
+    if (!warned_future_)
+      spdlog::warn(
+          "surrogate: a reading stamped {:.0f} ms ahead of this host's clock refused: is the tracker's clock "
+          "synchronised with this host's (PTP, NTP)? Said once; the run's last line counts them",
+          -age_ms);
+    warned_future_ = true;
     return;
   }
-  // A repeated time stamp is compared as sent: its conversion to this host's clock moves with the
-  // nanoseconds between reading the two clocks.
-  if (measured_ns <= last_taken_ns_ || (stamp_wall_ns != 0 && stamp_wall_ns <= last_stamp_wall_ns_)) {
+  // Order on the sender's own time stamps where there are some: their conversion to this host's
+  // clock moves with the offset read at each arrival.
+  if (stamp_wall_ns != 0 ? stamp_wall_ns <= last_stamp_wall_ns_ : measured_ns <= last_taken_ns_) {
     refused_order_.fetch_add(1, std::memory_order_relaxed);
+    if (!warned_order_)
+      spdlog::warn("surrogate: a reading not after the last one refused (repeated, or out of order)");
+    warned_order_ = true;
     return;
   }
-  last_taken_ns_ = measured_ns;
   if (stamp_wall_ns != 0) last_stamp_wall_ns_ = stamp_wall_ns;
+  measured_ns = std::max(measured_ns, last_taken_ns_ + 1);  // the ring stays in time order
+  last_taken_ns_ = measured_ns;
   {
     const std::lock_guard<std::mutex> lock(ring_mutex_);
     if (ring_written_ - ring_read_ == kRing) {  // the loop has not asked for a while: its oldest go
@@ -329,6 +407,7 @@ IgtlSurrogateCounters IgtlSurrogateSource::counters() const {
   c.refused_order = refused_order_.load(std::memory_order_relaxed);
   c.protocol_errors = protocol_errors_.load(std::memory_order_relaxed);
   c.dropped_unread = dropped_unread_.load(std::memory_order_relaxed);
+  c.several_devices = several_devices_.load(std::memory_order_relaxed);
   return c;
 }
 

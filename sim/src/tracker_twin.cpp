@@ -15,15 +15,18 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/drivers/wall_clock.hpp"
+
 namespace lftrack::sim {
 
-namespace {
-
-std::int64_t twin_clock_ns(clockid_t clock) {
-  timespec ts{};
-  clock_gettime(clock, &ts);
-  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+std::string igtl_device_name_problem(const std::string& name) {
+  if (name.empty() || name.size() > 20) return "an OpenIGTLink device name has 1 to 20 bytes";
+  for (const char c : name)
+    if (c < 0x21 || c > 0x7e) return "an OpenIGTLink device name is printable ASCII without spaces";
+  return {};
 }
+
+namespace {
 
 void twin_sleep_until_ns(std::int64_t t_ns) {
   timespec ts{};
@@ -82,8 +85,8 @@ Result<std::unique_ptr<TrackerTwin>> TrackerTwin::start(const TrackerTwinOptions
   if (!(options.rate_hz >= 1 && options.rate_hz <= 1000))
     return invalid_argument("the tracker's rate must be 1 to 1000 Hz");
   if (options.port < 0 || options.port > 65535) return invalid_argument("port must be 0 to 65535");
-  if (options.device.empty() || options.device.size() > 20)
-    return invalid_argument("an OpenIGTLink device name has 1 to 20 characters");
+  if (const std::string why = igtl_device_name_problem(options.device); !why.empty())
+    return invalid_argument("device name \"" + options.device + "\": " + why);
   sockaddr_in at{};
   at.sin_family = AF_INET;
   at.sin_port = htons(std::uint16_t(options.port));
@@ -97,9 +100,14 @@ Result<std::unique_ptr<TrackerTwin>> TrackerTwin::start(const TrackerTwinOptions
   const int one = 1;
   setsockopt(twin->listen_fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
   if (::bind(twin->listen_fd_, reinterpret_cast<const sockaddr*>(&at), sizeof at) != 0 ||
-      ::listen(twin->listen_fd_, 8) != 0)
+      ::listen(twin->listen_fd_, 128) != 0)
     return io_error("the tracker's twin cannot listen on " + options.address + ":" +
-                    std::to_string(options.port) + ": " + std::strerror(errno));
+                    std::to_string(options.port) + ": " + std::strerror(errno) +
+                    (errno == EADDRINUSE
+                         ? " (another server is there: stop it, or listen on another port; 0 takes "
+                           "any free one)"
+                     : errno == EADDRNOTAVAIL ? " (not an address of this host)"
+                                              : ""));
   socklen_t length = sizeof at;
   getsockname(twin->listen_fd_, reinterpret_cast<sockaddr*>(&at), &length);
   twin->port_ = ntohs(at.sin_port);
@@ -114,11 +122,12 @@ TrackerTwin::~TrackerTwin() {
 }
 
 void TrackerTwin::run() {
+  if (options_.on_thread_start) options_.on_thread_start();
   std::vector<int> clients;
   clients.reserve(64);
   MarkerMessage message(options_);
   const auto period_ns = std::int64_t(std::llround(1e9 / options_.rate_hz));
-  std::int64_t tick_ns = twin_clock_ns(CLOCK_MONOTONIC);
+  std::int64_t tick_ns = drivers::clock_now_ns(CLOCK_MONOTONIC);
   while (!stop_.load(std::memory_order_acquire)) {
     for (int fd; (fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC)) >= 0;) {
       const int one = 1;
@@ -128,7 +137,7 @@ void TrackerTwin::run() {
     }
     Eigen::Vector3d p = Eigen::Vector3d::Zero();
     if (!clients.empty() && marker_(tick_ns, &p)) {
-      const std::int64_t wall_ns = tick_ns + (twin_clock_ns(CLOCK_REALTIME) - twin_clock_ns(CLOCK_MONOTONIC));
+      const std::int64_t wall_ns = tick_ns + drivers::realtime_minus_monotonic_ns();
       message.pack(p, wall_ns);
       for (std::size_t i = 0; i < clients.size();) {
         const ssize_t n = ::send(clients[i], message.data(), message.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -143,7 +152,7 @@ void TrackerTwin::run() {
     }
     clients_.store(std::int64_t(clients.size()), std::memory_order_relaxed);
     tick_ns += period_ns;
-    const std::int64_t now = twin_clock_ns(CLOCK_MONOTONIC);
+    const std::int64_t now = drivers::clock_now_ns(CLOCK_MONOTONIC);
     if (tick_ns < now) tick_ns = now;  // late: the next tick now, not a burst of old ones
     twin_sleep_until_ns(tick_ns);
   }

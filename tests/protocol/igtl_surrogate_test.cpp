@@ -110,6 +110,26 @@ std::string short_position_bytes(const Eigen::Vector3d& ras, std::int64_t wall_n
   return bytes;
 }
 
+// The same message under OpenIGTLink 3's header version 2: an extended header (12 bytes) and a
+// metadata header before and after the content, the CRC over all of it.
+std::string version2_bytes(const std::string& v1) {
+  std::string body(12, '\0');
+  body[1] = 12;                    // the extended header's size
+  body += v1.substr(58);           // the content
+  body += std::string("\0\0", 2);  // a metadata header of no entries (2 bytes: their count)
+  body[3] = 2;                     // metadata header size
+  std::string bytes = v1.substr(0, 58) + body;
+  auto* b = reinterpret_cast<unsigned char*>(bytes.data());
+  b[0] = 0;
+  b[1] = 2;
+  const std::uint64_t size = body.size(), crc = ::crc64(b + 58, size, 0);
+  for (int i = 0; i < 8; ++i) {
+    b[42 + i] = static_cast<unsigned char>(size >> (56 - 8 * i));
+    b[50 + i] = static_cast<unsigned char>(crc >> (56 - 8 * i));
+  }
+  return bytes;
+}
+
 std::int64_t wall_ns_ago(double seconds) {
   return igtl_clock_ns(CLOCK_REALTIME) - std::int64_t(seconds * 1e9);
 }
@@ -133,6 +153,11 @@ class HandPeer {
     ::close(listen_);
   }
   int port() const { return port_; }
+  // Closes the newest connection (the server went away).
+  void hang_up() {
+    ::close(connections_.back());
+    connections_.back() = -1;
+  }
   // The next connection within 20 s (the client reconnects every retry_ms).
   bool accept_next() {
     pollfd p{listen_, POLLIN, 0};
@@ -149,10 +174,14 @@ class HandPeer {
   std::vector<int> connections_;
 };
 
+// A client that reconnects quickly, and refuses only readings seconds old: on a loaded host a
+// message may wait a while before the test's peer sends it or the client reads it.
 IgtlSurrogateOptions client_of(int port) {
   IgtlSurrogateOptions o;
   o.port = port;
   o.retry_ms = 20;
+  o.stale_ms = 5000;
+  o.future_ms = 500;
   return o;
 }
 
@@ -180,7 +209,7 @@ TEST(IgtlSurrogate, ReadsTheTrackersTransformsAtTheTimesTheyWereMeasured) {
     EXPECT_NEAR(1e-6 * double(got[i].t_ns - t0), got[i].amplitude, 2.0) << i;
     EXPECT_LE(got[i].t_ns, mono_ns());
   }
-  EXPECT_NEAR(double(got.back().t_ns - got.front().t_ns) / double(got.size() - 1), 1e7, 3e6) << "100 Hz";
+  EXPECT_GE(double(got.back().t_ns - got.front().t_ns) / double(got.size() - 1), 9.5e6) << "100 Hz at most";
   // OpenIGTLink is RAS, the room LPS-like: the twin's x = 3 and y = -2 read back in the room frame.
   const std::vector<std::pair<Eigen::Vector3d, double>> along_axes = {
       {Eigen::Vector3d::UnitX(), 3.0},
@@ -227,10 +256,7 @@ TEST(IgtlSurrogate, ReadsPositionMessagesOfItsDeviceAndSkipsTheRest) {
 
 TEST(IgtlSurrogate, HonoursTimeStampsAndRefusesStaleFutureAndRepeatedReadings) {
   HandPeer peer;
-  IgtlSurrogateOptions o = client_of(peer.port());
-  o.stale_ms = 200;
-  o.future_ms = 50;
-  IgtlSurrogateSource s(o);
+  IgtlSurrogateSource s(client_of(peer.port()));
   ASSERT_TRUE(s.open().ok());
   ASSERT_TRUE(peer.accept_next());
   // Measured 100 ms before it was sent: its time is then, not its arrival.
@@ -240,11 +266,11 @@ TEST(IgtlSurrogate, HonoursTimeStampsAndRefusesStaleFutureAndRepeatedReadings) {
   ASSERT_TRUE(eventually([&] { return s.counters().readings == 1; }));
   SurrogateReading r[8];
   ASSERT_EQ(s.read(mono_ns(), r, 8), 1);
-  EXPECT_NEAR(double(r[0].t_ns - sent_mono), -1e8, 5e6) << "the time stamp, on this host's monotonic clock";
+  EXPECT_NEAR(double(r[0].t_ns - sent_mono), -1e8, 5e7) << "the time stamp, on this host's monotonic clock";
   EXPECT_EQ(r[0].amplitude, 1);
-  // A second old, a second ahead, and the same time again: each refused, and counted.
-  peer.send(marker_bytes({0, 0, 2}, wall_ns_ago(1.0)));
-  peer.send(marker_bytes({0, 0, 3}, wall_ns_ago(-1.0)));
+  // Ten seconds old, ten ahead, and the same time again: each refused, and counted.
+  peer.send(marker_bytes({0, 0, 2}, wall_ns_ago(10.0)));
+  peer.send(marker_bytes({0, 0, 3}, wall_ns_ago(-10.0)));
   peer.send(marker_bytes({0, 0, 4}, stamp));
   ASSERT_TRUE(eventually([&] {
     const auto c = s.counters();
@@ -340,11 +366,15 @@ TEST(IgtlSurrogate, DropsAPeerThatIsNotOpenIgtlinkAndReconnects) {
 }
 
 TEST(IgtlSurrogate, RefusesToOpenWithoutATrackerAndSaysWhere) {
-  int port = 0;
-  {
-    HandPeer gone;  // a port that was just free
-    port = gone.port();
-  }
+  // A port bound but not listening: refused, and no other test can take it meanwhile.
+  const int bound = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in at{};
+  at.sin_family = AF_INET;
+  at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(bound, reinterpret_cast<sockaddr*>(&at), sizeof at), 0);
+  socklen_t length = sizeof at;
+  getsockname(bound, reinterpret_cast<sockaddr*>(&at), &length);
+  const int port = ntohs(at.sin_port);
   IgtlSurrogateSource s(client_of(port));
   const Status opened = s.open();
   ASSERT_FALSE(opened.ok());
@@ -357,6 +387,51 @@ TEST(IgtlSurrogate, RefusesToOpenWithoutATrackerAndSaysWhere) {
   nowhere = client_of(port);
   nowhere.axis_room = Eigen::Vector3d(std::numeric_limits<double>::quiet_NaN(), 0, 0);
   EXPECT_FALSE(IgtlSurrogateSource(nowhere).open().ok());
+  ::close(bound);
+}
+
+// OpenIGTLink 3's header version 2 (an extended header and metadata around the content) is read;
+// with no device named, a second device on the stream stops every reading (PLUS sends each tool,
+// the reference among them: following whichever came first could follow the wrong one).
+TEST(IgtlSurrogate, ReadsVersionTwoHeadersAndRefusesAStreamOfSeveralUnnamedDevices) {
+  HandPeer peer;
+  IgtlSurrogateSource s(client_of(peer.port()));
+  ASSERT_TRUE(s.open().ok());
+  ASSERT_TRUE(peer.accept_next());
+  const std::int64_t t = wall_ns_ago(0.01);
+  peer.send(version2_bytes(marker_bytes({0, 0, 4}, t)));
+  peer.send(version2_bytes(marker_bytes({0, 0, 5}, t + 1'000'000, /*position=*/true)));
+  ASSERT_TRUE(eventually([&] { return s.counters().readings == 2; })) << s.counters().protocol_errors;
+  SurrogateReading r[8];
+  ASSERT_EQ(s.read(mono_ns(), r, 8), 2);
+  EXPECT_EQ(r[0].amplitude, 4);
+  EXPECT_EQ(r[1].amplitude, 5);
+  peer.send(marker_bytes({0, 0, 6}, t + 2'000'000, false, "Reference"));
+  peer.send(marker_bytes({0, 0, 7}, t + 3'000'000));
+  ASSERT_TRUE(eventually([&] { return s.counters().ignored == 2; }));
+  EXPECT_TRUE(s.counters().several_devices);
+  EXPECT_EQ(s.read(mono_ns(), r, 8), 0) << "nothing taken once the stream is ambiguous";
+  EXPECT_EQ(s.counters().protocol_errors, 0);
+}
+
+// A server that goes silent, or accepts and hangs up at once, is asked again every retry_ms, not
+// in a tight loop.
+TEST(IgtlSurrogate, ReconnectsAfterSilenceAndPacesAServerThatHangsUp) {
+  HandPeer peer;
+  IgtlSurrogateOptions o = client_of(peer.port());
+  o.idle_ms = 300;
+  o.retry_ms = 100;
+  IgtlSurrogateSource s(o);
+  ASSERT_TRUE(s.open().ok());
+  ASSERT_TRUE(peer.accept_next());
+  ASSERT_TRUE(peer.accept_next()) << "nothing for idle_ms: the client connects again";
+  const auto start = std::chrono::steady_clock::now();
+  for (int i = 0; i < 5; ++i) {
+    peer.hang_up();
+    ASSERT_TRUE(peer.accept_next());
+  }
+  EXPECT_GE(std::chrono::steady_clock::now() - start, 5 * 90ms) << "retry_ms between connections";
+  EXPECT_EQ(s.counters().protocol_errors, 0);
 }
 
 // `lftrack serve tracker` as a process of its own: its breathing marker read by the client.

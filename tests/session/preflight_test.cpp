@@ -12,6 +12,7 @@
 #include "lftrack/host/preflight.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim/tracker_twin.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
@@ -147,6 +148,65 @@ TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
   EXPECT_EQ(i->detail.find("driven by another lftrack"), std::string::npos)
       << "the lock was let go: " << i->detail;
   ::unsetenv("LFTRACK_TEST_LOCK_DIR");
+}
+
+}  // namespace
+}  // namespace lftrack::host
+
+namespace lftrack::host {
+namespace {
+
+const PreflightItem* surrogate_item(const PreflightReport& r) {
+  for (const PreflightItem& i : r.items)
+    if (i.what.rfind("breathing surrogate", 0) == 0) return &i;
+  return nullptr;
+}
+
+// A run that images on demand from an optical tracker (surrogate.source igtl): the checklist
+// connects and waits for readings of the scene's device (issue 58 probe: `run --check` said
+// nothing of the tracker, and a run started without a single reading).
+TEST(Preflight, TheOpticalTrackerIsConnectedAndStreamingItsMarker) {
+  auto p = prepared("sim", "");
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  sim::TrackerTwinOptions twin;
+  twin.rate_hz = 100;
+  auto tracker = sim::TrackerTwin::start(twin, [](std::int64_t, Eigen::Vector3d* position) {
+    *position = Eigen::Vector3d(0, 0, 4.5);
+    return true;
+  });
+  ASSERT_TRUE(tracker.ok()) << tracker.status().message();
+  p->scene.loop.imaging.mode = ImagingSpec::Mode::kModel;
+  p->scene.surrogate.source = "igtl";
+  p->scene.surrogate.igtl_port = (*tracker)->port();
+  p->scene.surrogate.igtl_device = "Marker";
+  p->scene.loop.imaging.surrogate.stale_ms = 5000;  // a loaded host may hold a reading a while
+  LoopSessionOptions o;
+  o.devices = SessionDevices::kScene;
+  const PreflightItem* i = nullptr;
+  {
+    const PreflightReport r = run_preflight(*p, o, RealtimeReport{}, true);
+    i = surrogate_item(r);
+    ASSERT_NE(i, nullptr) << r.checklist();
+    EXPECT_EQ(i->result, CheckResult::kPass) << i->detail;
+    EXPECT_NE(i->detail.find("readings in"), std::string::npos) << i->detail;
+    EXPECT_NE(i->detail.find("4.5 mm"), std::string::npos) << i->detail;
+  }
+  p->scene.surrogate.igtl_device = "Probe";  // the marker is not on the stream
+  {
+    const PreflightReport r = run_preflight(*p, o, RealtimeReport{}, true);
+    i = surrogate_item(r);
+    ASSERT_NE(i, nullptr) << r.checklist();
+    EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
+    EXPECT_NE(i->detail.find("other devices"), std::string::npos) << i->detail;
+  }
+  tracker->reset();  // the tracker's server is gone
+  {
+    const PreflightReport r = run_preflight(*p, o, RealtimeReport{}, true);
+    i = surrogate_item(r);
+    ASSERT_NE(i, nullptr) << r.checklist();
+    EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
+    EXPECT_NE(i->detail.find("is it running"), std::string::npos) << i->detail;
+  }
 }
 
 }  // namespace

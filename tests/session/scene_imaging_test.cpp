@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_imaging_dose.hpp"
 #include "lftrack/host/sim_surrogate_source.hpp"
@@ -134,6 +135,39 @@ TEST(SceneImaging, ReadsTheTrackersAddress) {
   EXPECT_EQ(scene->surrogate.igtl_device, "ChestMarker");
   EXPECT_EQ(scene->surrogate.igtl_axis, Eigen::Vector3d::UnitY());
   EXPECT_EQ(scene->surrogate.sim.amplitude, 6) << "the marker lftrack sim serves behind the protocol";
+}
+
+// What a session checks of the surrogate before it loads anything (check_session_surrogate): a watch
+// no slower than the gate's frame age, the simulated marker only in simulation, an OpenIGTLink
+// tracker only on the real clock.
+TEST(SceneImaging, TheSessionRefusesASurrogateItCannotFollowBeforeLoading) {
+  const std::string model = "tracking:\n  imaging: {mode: model}\n";
+  LoopSessionOptions sim;
+  auto ok = parse(model + "surrogate: {source: sim}\n");
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  EXPECT_TRUE(check_session_surrogate(*ok, sim).ok());
+  auto slow = parse(model + "surrogate: {source: sim, stale_ms: 400}\n");
+  ASSERT_TRUE(slow.ok()) << slow.status().message();
+  const Status slow_watch = check_session_surrogate(*slow, sim);
+  EXPECT_FALSE(slow_watch.ok());
+  EXPECT_NE(slow_watch.message().find("safety.max_frame_age_ms"), std::string::npos) << slow_watch.message();
+  LoopSessionOptions room;
+  room.devices = SessionDevices::kScene;
+  const Status sim_in_room = check_session_surrogate(*ok, room);
+  EXPECT_FALSE(sim_in_room.ok());
+  EXPECT_NE(sim_in_room.message().find("surrogate.source igtl"), std::string::npos) << sim_in_room.message();
+  auto igtl = parse(model + "surrogate: {source: igtl}\n");
+  ASSERT_TRUE(igtl.ok()) << igtl.status().message();
+  EXPECT_TRUE(check_session_surrogate(*igtl, sim).ok()) << "lftrack sim on the real clock serves the twin";
+  EXPECT_TRUE(check_session_surrogate(*igtl, room).ok());
+  LoopSessionOptions fast;
+  fast.simulated_clock = true;
+  const Status igtl_fast = check_session_surrogate(*igtl, fast);
+  EXPECT_FALSE(igtl_fast.ok());
+  EXPECT_NE(igtl_fast.message().find("--fast"), std::string::npos) << igtl_fast.message();
+  LoopSessionOptions replay = fast;
+  replay.replay_sequence = "archive";
+  EXPECT_TRUE(check_session_surrogate(*igtl, replay).ok()) << "a replay registers every archived pair";
 }
 
 TEST(SceneImaging, TheDoseModelsNumbers) {

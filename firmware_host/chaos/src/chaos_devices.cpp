@@ -193,9 +193,9 @@ ChaosFault Injector::take_surrogate_fault() {
 
 int ChaosSurrogate::read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) {
   int n = inner_->read(now_ns, out, capacity);
+  const bool stopped_or_frozen =
+      cycles_left_ > 0 && (active_ == ChaosFault::kSurrogateStop || active_ == ChaosFault::kSurrogateFreeze);
   if (const ChaosFault f = injector_->take_surrogate_fault(); f != ChaosFault::kCount) {
-    injector_->count(f);
-    injector_->injection.what = to_string(f);
     std::mt19937_64& random = injector_->random();
     if (f == ChaosFault::kSurrogateStop || f == ChaosFault::kSurrogateFreeze ||
         f == ChaosFault::kSurrogateCough) {
@@ -204,10 +204,17 @@ int ChaosSurrogate::read(std::int64_t now_ns, drivers::SurrogateReading* out, in
                      : f == ChaosFault::kSurrogateFreeze ? int(uniform(random, 8, 21))
                                                          : 6;
       cough_cycle_ = 0;
-    } else if (n > 0) {  // one reading, the cycle's newest
+      injector_->count(f);
+      injector_->injection.what = to_string(f);
+    } else if (!stopped_or_frozen && n >= (f == ChaosFault::kSurrogateNonFinite ? 1 : 2)) {
+      // One reading, the cycle's newest; a spike beside its neighbour in the same batch (the
+      // watch's jump is between neighbouring readings: the first after a gap has none). Not
+      // while the stream is stopped or frozen, which would hide it; not counted where not given.
       out[n - 1].amplitude = f == ChaosFault::kSurrogateNonFinite ? std::numeric_limits<double>::quiet_NaN()
-                                                                  : out[n - 1].amplitude + 3 * jump_;
+                                                                  : out[n - 2].amplitude + 3 * jump_;
       injector_->injection.surrogate_reading = true;
+      injector_->count(f);
+      injector_->injection.what = to_string(f);
     }
   }
   if (cycles_left_ > 0) {

@@ -155,7 +155,7 @@ void InvariantChecker::check(const JournalRecord& r, const ActuatorCalls& calls,
 
   // 8. A failed surrogate holds the tracking it steers.
   const bool began_in_track = r.previous_state == code(TrackingState::kTrack);
-  if (began_in_track && r.surrogate_fault != 0 && (sent || beam || r.state != code(TrackingState::kHold)))
+  if (began_in_track && r.surrogate_fault != 0 && (sent || beam || !held(r.state)))
     fail(std::string("a failed surrogate's TRACK cycle ended in ") + to_string(TrackingState(r.state)) +
          (sent ? " and sent a command" : "") + (beam ? " with the beam on" : ""));
   if (began_in_track && injected.surrogate_reading && r.surrogate_fault == 0)

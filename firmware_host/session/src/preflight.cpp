@@ -1,7 +1,9 @@
 #include "lftrack/host/preflight.hpp"
 
 #include <chrono>
+#include <cmath>
 #include <sstream>
+#include <thread>
 
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/actuator_lock.hpp"
@@ -9,7 +11,9 @@
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/loop/cycle_schedule.hpp"
 #include "lftrack/sim/room_link.hpp"
+#include "session_parts.hpp"
 
 namespace lftrack::host {
 
@@ -243,6 +247,53 @@ void check_couch_link(const PreparedScene& p, const LoopSessionOptions& o, Prefl
   add(r, what, CheckResult::kPass, p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
 }
 
+// The optical tracker (surrogate.source igtl, a run that images on demand): connected, and
+// streaming readings of the scene's device with time stamps the loop would take.
+void check_surrogate(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  const Scene& scene = p.scene;
+  if (!scene.loop.imaging.model_mode() || scene.surrogate.source != "igtl" ||
+      o.devices != SessionDevices::kScene || !o.replay_sequence.empty())
+    return;
+  const drivers::IgtlSurrogateOptions options = igtl_surrogate_options(scene);
+  const std::string what = "breathing surrogate (OpenIGTLink " + options.host + ":" +
+                           std::to_string(options.port) +
+                           (options.device.empty() ? "" : ", device " + options.device) + ")";
+  drivers::IgtlSurrogateSource tracker(options);
+  if (const Status opened = tracker.open(); !opened.ok())
+    return add(r, what, CheckResult::kFail, opened.message());
+  const auto start = std::chrono::steady_clock::now();
+  constexpr int kEnough = 10;
+  while (tracker.counters().readings < kEnough &&
+         std::chrono::steady_clock::now() - start < std::chrono::seconds(2))
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  drivers::SurrogateReading newest[64];
+  const int n = tracker.read(monotonic_now_ns(), newest, 64);
+  const drivers::IgtlSurrogateCounters c = tracker.counters();
+  tracker.close();
+  std::ostringstream d;
+  d.precision(3);
+  if (c.readings == 0 || n == 0) {
+    d << "no reading in " << seconds << " s: " << c.refused_stale
+      << " too old at arrival (the tracker's clock, "
+      << "PTP/NTP?), " << c.refused_future << " stamped ahead of this host's clock, " << c.refused_order
+      << " out of order, " << c.ignored << " other devices' or types' messages skipped"
+      << (c.several_devices ? " (several devices: name the marker's in surrogate.igtl.device)" : "") << ", "
+      << c.protocol_errors << " protocol errors";
+    return add(r, what, CheckResult::kFail, d.str());
+  }
+  d << c.readings << " readings in " << seconds << " s, the newest " << newest[n - 1].amplitude
+    << " mm along surrogate.igtl.axis, " << 1e-6 * double(monotonic_now_ns() - newest[n - 1].t_ns)
+    << " ms old";
+  const std::int64_t refused = c.refused_stale + c.refused_future + c.refused_order;
+  if (refused > 0 || c.protocol_errors > 0 || !std::isfinite(newest[n - 1].amplitude)) {
+    d << "; " << refused << " refused for their time stamps, " << c.protocol_errors << " protocol errors"
+      << (std::isfinite(newest[n - 1].amplitude) ? "" : "; the newest reading is not finite");
+    return add(r, what, CheckResult::kWarn, d.str());
+  }
+  add(r, what, CheckResult::kPass, d.str());
+}
+
 }  // namespace
 
 bool PreflightReport::passed() const {
@@ -278,6 +329,7 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
   check_detector_calibrations(p, o, twins, &r);
   check_actuator(p, o, &r);
   check_couch_link(p, o, &r);
+  check_surrogate(p, o, &r);
   return r;
 }
 

@@ -2,6 +2,7 @@
 
 #include <sstream>
 
+#include "lftrack/sim/tracker_twin.hpp"
 #include "scene_yaml.hpp"
 
 namespace lftrack::host {
@@ -146,8 +147,11 @@ Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogat
       LFTRACK_RETURN_IF_ERROR(integer(g["port"], "surrogate.igtl.port", 1, 65535, &port));
       surrogate->igtl_port = int(port);
     }
-    if (g["device"])
+    if (g["device"]) {
       LFTRACK_RETURN_IF_ERROR(text(g["device"], "surrogate.igtl.device", &surrogate->igtl_device));
+      if (const std::string why = sim::igtl_device_name_problem(surrogate->igtl_device); !why.empty())
+        return error(g["device"], "surrogate.igtl.device \"" + surrogate->igtl_device + "\": " + why);
+    }
     if (g["axis"])
       LFTRACK_RETURN_IF_ERROR(unit_vec3(g["axis"], "surrogate.igtl.axis", &surrogate->igtl_axis));
   }

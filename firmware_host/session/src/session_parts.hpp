@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "lftrack/drivers/device_factory.hpp"
+#include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/host/actuator_lock.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/loop_session.hpp"
@@ -77,6 +78,9 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
 // A replay registers every archived pair: its imaging is every_cycle.
 Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts,
                               LoopSettings* settings);
+// The OpenIGTLink client's options for the scene's surrogate.igtl (the session's and the start-up
+// checks').
+drivers::IgtlSurrogateOptions igtl_surrogate_options(const Scene& scene);
 
 // In the room a HOLD ends only by a person's decision: a session on real devices takes no
 // unattended operator.

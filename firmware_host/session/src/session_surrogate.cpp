@@ -6,6 +6,7 @@
 
 #include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/host/scene_imaging_dose.hpp"
+#include "lftrack/loop/realtime_setup.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::host {
@@ -21,6 +22,7 @@ Result<int> serve_simulated_marker(const PreparedScene& p, const LoopSessionOpti
   sim::TrackerTwinOptions twin;
   twin.device = s.igtl_device.empty() ? "Marker" : s.igtl_device;
   twin.rate_hz = std::min(1000.0, p.scene.loop.imaging.surrogate.rate_hz);
+  twin.on_thread_start = [] { (void)lower_current_thread_priority(); };
   auto marker = std::make_shared<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
   const sim::SimulatedRoom* room = parts->room.get();
   const SimSurrogateFaults faults = o.surrogate_faults;
@@ -44,8 +46,27 @@ Result<int> serve_simulated_marker(const PreparedScene& p, const LoopSessionOpti
 
 }  // namespace
 
+drivers::IgtlSurrogateOptions igtl_surrogate_options(const Scene& scene) {
+  drivers::IgtlSurrogateOptions client;
+  client.host = scene.surrogate.igtl_host;
+  client.port = scene.surrogate.igtl_port;
+  client.device = scene.surrogate.igtl_device;
+  client.axis_room = scene.surrogate.igtl_axis;
+  client.stale_ms = scene.loop.imaging.surrogate.stale_ms;
+  return client;
+}
+
 Status check_session_surrogate(const Scene& scene, const LoopSessionOptions& o) {
   if (!scene.loop.imaging.model_mode() || !o.replay_sequence.empty()) return {};
+  // A model cycle's reading is its frame: the gate's frame age applies to it, and a watch slower
+  // than the gate would hold a stopped tracker as "stale frame", after counted skips.
+  const double stale_ms = scene.loop.imaging.surrogate.stale_ms, frame_age_ms = scene.safety.max_frame_age_ms;
+  if (stale_ms > frame_age_ms)
+    return invalid_argument(scene.where("surrogate") + ": surrogate.stale_ms (" +
+                            fmt::format("{:g}", stale_ms) + " ms) exceeds safety.max_frame_age_ms (" +
+                            fmt::format("{:g}", frame_age_ms) +
+                            " ms): between X-ray pairs the surrogate's reading is the cycle's frame; keep "
+                            "stale_ms at most the frame age");
   const std::string& source = scene.surrogate.source;
   if (source == "sim" && o.devices == SessionDevices::kScene)
     return failed_precondition(scene.where("surrogate") +
@@ -80,12 +101,7 @@ Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& 
     if (parts->room == nullptr) return failed_precondition("surrogate.source sim needs the simulated room");
     parts->surrogate = std::make_unique<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
   } else if (s.source == "igtl") {
-    drivers::IgtlSurrogateOptions client;
-    client.host = s.igtl_host;
-    client.port = s.igtl_port;
-    client.device = s.igtl_device;
-    client.axis_room = s.igtl_axis;
-    client.stale_ms = imaging.surrogate.stale_ms;
+    drivers::IgtlSurrogateOptions client = igtl_surrogate_options(p.scene);
     if (parts->room != nullptr && o.devices == SessionDevices::kSimulated) {
       auto port = serve_simulated_marker(p, o, parts);
       if (!port.ok()) return port.status();

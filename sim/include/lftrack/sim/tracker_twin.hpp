@@ -29,10 +29,17 @@ struct TrackerTwinOptions {
   std::string device = "Marker";
   bool position_messages = false;  // POSITION instead of TRANSFORM
   double rate_hz = 30;             // 1 to 1000
+  // Called first on the twin's thread (a session lowers it below the cycle's priority, as it does
+  // the simulated detectors': the twin stands for a device outside the host).
+  std::function<void()> on_thread_start;
 };
 
 // The marker at `t_mono_ns` (CLOCK_MONOTONIC), room frame, mm; false: nothing to send this tick.
 using MarkerAt = std::function<bool(std::int64_t t_mono_ns, Eigen::Vector3d* position_room_mm)>;
+
+// Why `name` cannot be an OpenIGTLink device name (its header's 20 bytes; printable ASCII, no
+// spaces, as PLUS names tools), or "" when it can.
+std::string igtl_device_name_problem(const std::string& name);
 
 class TrackerTwin {
  public:

@@ -24,7 +24,7 @@
 //     stalled cycle is recorded as an overrun, and the cycle after three overruns in a row sends
 //     nothing; once the loop reports the journal failed, nothing is sent and the beam stays off.
 //  8. A breathing surrogate found failed (the record's surrogate fault: stopped, jumped, frozen,
-//     not finite) in a cycle that began in TRACK ends it in HOLD, with nothing sent and the beam
+//     not finite) in a cycle that began in TRACK ends it held (HOLD, or FAULT), nothing sent, the beam
 //     off; an injected spike or NaN reading in such a cycle is found in it.
 // The soak (chaos_soak.cpp) adds what needs the wall clock or the segment: half a second after
 // the disk filled nothing is sent (whatever reason the gate gives first); a CAN fault holds

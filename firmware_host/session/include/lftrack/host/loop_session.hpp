@@ -101,7 +101,8 @@ Eigen::Isometry3d couch_mounting(const CouchMountingSpec& mounting, const Prepar
 // paths) without creating or removing anything: `lftrack sim/run/replay` call it before loading
 // the CT, and create() calls it first.
 Status check_session_options(const LoopSessionOptions& options);
-// The scene's surrogate (tracking.imaging model) against the session's devices and clock: the
+// The scene's surrogate (tracking.imaging model) against the session's devices and clock: a
+// watch no slower than the gate's frame age (the reading is a model cycle's frame); the
 // simulated marker only in simulation; an OpenIGTLink tracker, whose readings are time stamped,
 // only on the real clock. Checked again by LoopSession::create; a command checks it before it
 // spends time preparing the scene.
