@@ -187,7 +187,7 @@ void IgtlSurrogateSource::close() {
 void IgtlSurrogateSource::run() {
   int fd = first_fd_;
   first_fd_ = -1;
-  std::int64_t ends = 0, failures = 0;
+  std::int64_t ends = 0, failures = 0, reconnections = 0;
   while (!stop_.load(std::memory_order_acquire)) {
     if (fd < 0) {
       // Always a pause between connections: a server that accepts and closes at once, or one
@@ -201,7 +201,8 @@ void IgtlSurrogateSource::run() {
         continue;
       }
       fd = *again;
-      if (failures > 0 || ends > 0) spdlog::info("surrogate: connected to {} again", where_);
+      if (worth_logging(++reconnections))
+        spdlog::info("surrogate: connected to {} again ({} times)", where_, reconnections);
       failures = 0;
     }
     connections_.fetch_add(1, std::memory_order_relaxed);
@@ -213,8 +214,10 @@ void IgtlSurrogateSource::run() {
     if (stopped) break;
     if (worth_logging(++ends))
       spdlog::warn(
-          "surrogate: the connection to {} ended, or had nothing for {} ms ({} times); connecting again",
-          where_, options_.idle_ms, ends);
+          "surrogate: the connection to {} ended ({} times: the server closed it, sent nothing for {} ms, or "
+          "sent "
+          "what is not OpenIGTLink); connecting again",
+          where_, ends, options_.idle_ms);
   }
   if (fd >= 0) ::close(fd);
 }
@@ -251,18 +254,21 @@ bool IgtlSurrogateSource::serve_connection(int fd) {
     bool wanted = marker_type && !several_devices_.load(std::memory_order_relaxed);
     if (wanted && !options_.device.empty()) {
       wanted = field_is(name, 20, options_.device.c_str());
-      if (!wanted && !warned_other_device_)
-        spdlog::info(
-            "surrogate: skipping device \"{}\" on the tracker's stream (following \"{}\", "
-            "surrogate.igtl.device); said once",
-            field_text(name, 20), options_.device);
-      warned_other_device_ = warned_other_device_ || !wanted;
+      if (!wanted && other_device_.empty()) {
+        other_device_ = field_text(name, 20);
+        spdlog::warn(
+            "surrogate: the tracker streams device \"{}\", which is not surrogate.igtl.device \"{}\": "
+            "skipped (said "
+            "once; the marker's readings are taken when they come)",
+            other_device_, options_.device);
+      }
     } else if (wanted && followed_device_.empty()) {
       followed_device_ = field_text(name, 20);
       spdlog::info("surrogate: following device \"{}\" (surrogate.igtl.device names none)", followed_device_);
     } else if (wanted && !field_is(name, 20, followed_device_.c_str())) {
       several_devices_.store(true, std::memory_order_relaxed);
       wanted = false;
+      other_device_ = field_text(name, 20);
       spdlog::error(
           "surrogate: the tracker sends device \"{}\" besides \"{}\": name the marker's in "
           "surrogate.igtl.device. "

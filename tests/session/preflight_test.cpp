@@ -198,6 +198,7 @@ TEST(Preflight, TheOpticalTrackerIsConnectedAndStreamingItsMarker) {
     ASSERT_NE(i, nullptr) << r.checklist();
     EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
     EXPECT_NE(i->detail.find("other devices"), std::string::npos) << i->detail;
+    EXPECT_NE(i->detail.find("\"Marker\""), std::string::npos) << "names what came instead: " << i->detail;
   }
   tracker->reset();  // the tracker's server is gone
   {

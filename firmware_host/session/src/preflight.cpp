@@ -269,8 +269,8 @@ void check_surrogate(const PreparedScene& p, const LoopSessionOptions& o, Prefli
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   drivers::SurrogateReading newest[64];
   const int n = tracker.read(monotonic_now_ns(), newest, 64);
-  const drivers::IgtlSurrogateCounters c = tracker.counters();
   tracker.close();
+  const drivers::IgtlSurrogateCounters c = tracker.counters();
   std::ostringstream d;
   d.precision(3);
   if (c.readings == 0 || n == 0) {
@@ -278,6 +278,9 @@ void check_surrogate(const PreparedScene& p, const LoopSessionOptions& o, Prefli
       << " too old at arrival (the tracker's clock, "
       << "PTP/NTP?), " << c.refused_future << " stamped ahead of this host's clock, " << c.refused_order
       << " out of order, " << c.ignored << " other devices' or types' messages skipped"
+      << (tracker.other_device_seen().empty()
+              ? ""
+              : " (device \"" + tracker.other_device_seen() + "\" among them)")
       << (c.several_devices ? " (several devices: name the marker's in surrogate.igtl.device)" : "") << ", "
       << c.protocol_errors << " protocol errors";
     return add(r, what, CheckResult::kFail, d.str());

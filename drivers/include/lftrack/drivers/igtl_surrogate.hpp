@@ -81,6 +81,9 @@ class IgtlSurrogateSource final : public SurrogateSource {
   void close() override;
   int read(std::int64_t now_ns, SurrogateReading* out, int capacity) override;
   IgtlSurrogateCounters counters() const;
+  // The first device name skipped on the stream (another than `device`, or a second one with none
+  // named), "" none; read after close().
+  const std::string& other_device_seen() const { return other_device_; }
   bool connected() const { return connected_.load(std::memory_order_acquire); }
 
  private:
@@ -101,7 +104,8 @@ class IgtlSurrogateSource final : public SurrogateSource {
   std::vector<unsigned char> body_;
   std::string followed_device_;
   std::int64_t last_taken_ns_ = 0, last_stamp_wall_ns_ = 0;
-  bool warned_stale_ = false, warned_future_ = false, warned_order_ = false, warned_other_device_ = false;
+  bool warned_stale_ = false, warned_future_ = false, warned_order_ = false;
+  std::string other_device_;  // the first device skipped (not `device`, or a second one with none named)
 
   // Readings between the threads: a ring the reader writes under the lock and read() takes with
   // try_lock. Ordered by time (take() keeps it so).
