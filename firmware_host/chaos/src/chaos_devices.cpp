@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 #include <vector>
 
@@ -224,7 +225,7 @@ int ChaosSurrogate::read(std::int64_t now_ns, drivers::SurrogateReading* out, in
     } else if (active_ == ChaosFault::kSurrogateFreeze) {
       for (int i = 0; i < n; ++i) out[i].amplitude = last_given_;
     } else {  // a cough: sin^2 over its cycles
-      const double bump = std::sin(3.14159265358979 * (cough_cycle_ + 0.5) / 6.0);
+      const double bump = std::sin(std::numbers::pi * (cough_cycle_ + 0.5) / 6.0);
       ++cough_cycle_;
       for (int i = 0; i < n; ++i) out[i].amplitude += 8.0 * bump * bump;
     }

@@ -64,14 +64,14 @@ void TrackingLoop::Impl::check_model(CycleState& c, const Vector6d& patient_offs
   // registration corrects, and the model neither counts a miss nor takes the pair: one pair far out
   // would tilt a fit of twenty.
   constexpr double kWidenMargin = 0.3;
+  const bool was_ready = model.ready();
+  const Eigen::Vector3d predicted = model.predict(c.surrogate);  // NaN when not ready
   if (c.imaging == ImagingReason::kOutsideFit &&
       (!model.within(c.surrogate, kWidenMargin) ||
-       !((model.predict(c.surrogate) - patient_offset.head<3>()).norm() <=
-         settings.loop.imaging.model.tolerance_mm)))
+       !((predicted - patient_offset.head<3>()).norm() <= settings.loop.imaging.model.tolerance_mm)))
     return;
   imaging_state.last_pair_ns = c.newest_frame_ns;
-  const bool was_ready = model.ready();
-  if (was_ready) c.model_checked_prediction = model.predict(c.surrogate);
+  if (was_ready) c.model_checked_prediction = predicted;
   c.model_check = model.check(c.surrogate, patient_offset.head<3>());
   c.model_checked = true;
   const bool agreed = c.model_check == CorrelationModel::Check::kAgrees ||

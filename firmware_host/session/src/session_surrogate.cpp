@@ -25,13 +25,12 @@ Result<int> serve_simulated_marker(const PreparedScene& p, const LoopSessionOpti
   twin.on_thread_start = [] { (void)lower_current_thread_priority(); };
   auto marker = std::make_shared<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
   const sim::SimulatedRoom* room = parts->room.get();
-  const SimSurrogateFaults faults = o.surrogate_faults;
   const Eigen::Vector3d axis = s.igtl_axis;
   auto served = sim::TrackerTwin::start(twin, [=](std::int64_t t_ns, Eigen::Vector3d* position) {
     const std::int64_t epoch = room->epoch_ns();
     if (epoch < 0 || t_ns < epoch) return false;  // the room starts at its first exposure
     const double t_s = 1e-9 * double(t_ns - epoch);
-    if (faults.stop_from_s >= 0 && t_s >= faults.stop_from_s) return false;
+    if (marker->stopped_at(t_s)) return false;
     *position = axis * marker->reading_at(t_s);
     return true;
   });

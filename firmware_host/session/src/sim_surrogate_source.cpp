@@ -38,7 +38,7 @@ int SimSurrogateSource::read(std::int64_t now_ns, drivers::SurrogateReading* out
   for (; at_ns(next_) <= now_ns; ++next_) {
     const double t_s = double(next_) / rate;
     const double value = reading_at(t_s);
-    if (faults_.stop_from_s >= 0 && t_s >= faults_.stop_from_s) continue;
+    if (stopped_at(t_s)) continue;
     if (n == capacity) {
       for (int i = 1; i < capacity; ++i) out[i - 1] = out[i];
       --n;

@@ -32,6 +32,8 @@ class SimSurrogateSource final : public drivers::SurrogateSource {
   int read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) override;
   // The marker's reading at t_s on the room's clock, faults included (the next draw of the noise).
   double reading_at(double t_s);
+  // Whether the stream has stopped by t_s (the stop fault): no reading is given from then on.
+  bool stopped_at(double t_s) const { return faults_.stop_from_s >= 0 && t_s >= faults_.stop_from_s; }
 
  private:
   sim::BreathingSurrogate chest_;
