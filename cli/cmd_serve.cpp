@@ -25,11 +25,11 @@ namespace {
 
 using namespace serve;
 
-Result<sim::VirtualCouchSpec> couch_dynamics(const ServeOptions& o) {
-  if (!o.scene_given) return sim::VirtualCouchSpec{};
+Result<drivers::ActuatorDynamics> couch_dynamics(const ServeOptions& o) {
+  if (!o.scene_given) return drivers::ActuatorDynamics{};
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
-  return scene->actuator.couch;
+  return scene->actuator.dynamics;
 }
 
 std::map<std::string, int> couch_fault_kinds() {
@@ -234,11 +234,13 @@ Command add_serve_couch_command(CLI::App* parent) {
                   "tcp:ADDRESS:PORT to listen on (port 0: any free port), rtu:DEVICE (a serial port; 115200 8E1), or "
                   "rtu:pty (a pseudo-terminal pair: the first line names the client's end)")
       ->default_val("tcp:127.0.0.1:1502");
-  add_common(app, o.get(),
-             {"Scene whose actuator.couch section gives the couch's dynamics (default: the built-in scene's)",
-              "Publish the couch's position in this room link file, for simulated detectors in other processes "
-              "(serve detectors --room)",
-              kind_list(couch_fault_kinds())});
+  add_common(
+      app, o.get(),
+      {"Scene whose actuator section gives the couch's dynamics: latency_s, max_speed_mm_s/deg_s, "
+       "range_mm/deg (default: 0.15 s, 20 mm/s, 10 deg/s, 50 mm, 10 deg)",
+       "Publish the couch's position in this room link file, for simulated detectors in other processes "
+       "(serve detectors --room)",
+       kind_list(couch_fault_kinds())});
   CLI::Option* scene = app->get_option("--scene");
   return [o, scene] {
     o->scene_given = scene->count() > 0;
@@ -250,11 +252,13 @@ Command add_serve_robot_command(CLI::App* parent) {
   auto o = std::make_shared<ServeOptions>();
   CLI::App* app = parent->add_subcommand("robot", "The virtual robot behind a CAN bridge socket, as its own process");
   app->add_option("--socket", o->endpoint, "The bridge's socket path (SOCK_SEQPACKET of struct can_frame)")->required();
-  add_common(app, o.get(),
-             {"Scene whose actuator.couch section gives the robot's dynamics (default: the built-in scene's)",
-              "Publish the robot's position in this room link file, for simulated detectors in other processes "
-              "(serve detectors --room)",
-              kind_list(robot_fault_kinds())});
+  add_common(
+      app, o.get(),
+      {"Scene whose actuator section gives the robot's dynamics: latency_s, max_speed_mm_s/deg_s, "
+       "range_mm/deg (default: 0.15 s, 20 mm/s, 10 deg/s, 50 mm, 10 deg)",
+       "Publish the robot's position in this room link file, for simulated detectors in other processes "
+       "(serve detectors --room)",
+       kind_list(robot_fault_kinds())});
   CLI::Option* scene = app->get_option("--scene");
   return [o, scene] {
     o->scene_given = scene->count() > 0;

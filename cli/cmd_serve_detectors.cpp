@@ -48,7 +48,7 @@ class DetectorRoom {
     room.origin_room_mm = p.registration_origin_room_mm();
     room.setup_error = p.scene.motion.setup_error;
     room.motion = p.scene.motion.motion;
-    room.couch = p.scene.actuator.couch;
+    room.couch = p.scene.actuator.dynamics;
     room.residual_box_mm = p.scene.registration.tre_box_mm;
     if (!o.room.empty()) {
       auto link = sim::RoomLinkReader::open(o.room);

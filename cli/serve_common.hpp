@@ -34,7 +34,7 @@ extern "C" inline void on_stop_signal(int) {
 }
 
 struct ServeOptions {
-  SceneOptions scene;  // couch, robot: the dynamics (actuator.couch; default: builtin); detectors: the room
+  SceneOptions scene;  // couch, robot: the dynamics (the actuator section's); detectors: the room
   bool scene_given = false;
   std::string endpoint;  // couch: tcp:ADDRESS:PORT; robot: the bridge socket path
   std::vector<std::string> addresses;  // detectors: where the GigE cameras listen

@@ -190,7 +190,7 @@ TEST_F(ClosedLoop, ASetUpErrorWithinTheStepLimitOnEachAxisStillWaitsForTheCouch)
 // cycle with nobody told.
 TEST_F(ClosedLoop, ACouchThatNeverArrivesHoldsOnceTheBeamHasWaitedTheLongestItMay) {
   edit_scene_ = [](Scene& scene) {
-    scene.actuator.couch.max_speed_mm_s = 0.05;
+    scene.actuator.dynamics.max_speed_mm_s = 0.05;
     scene.safety.max_beam_withheld_s = 2.0;
   };
   const std::string motion = "motion:\n  setup_error: {translation_mm: [0, 3, 0], rotation_deg: [0, 0, 0]}\n";

@@ -84,7 +84,7 @@ TEST(DailyQa, TheShippedPhantomPassesTheOffsetTestAndTheBeamPermitPath) {
 TEST(DailyQa, ASlowCouchFailsTheOffsetTestWithTheReason) {
   tracking::ThreadPool pool(2);
   host::PreparedScene p = qa_phantom(&pool);
-  p.scene.actuator.couch.max_speed_mm_s = 1;  // 10 mm would take 10 s; the run gives it 2
+  p.scene.actuator.dynamics.max_speed_mm_s = 1;  // 10 mm would take 10 s; the run gives it 2
   DailyQaOptions o = fast_options();
   Vector6d shift = Vector6d::Zero();
   shift(0) = 10;

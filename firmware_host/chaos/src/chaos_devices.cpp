@@ -1,196 +1,16 @@
+// The chaos soak's device wrappers: the surrogate, frame source and actuator that inject the
+// injector's faults, and the operator who answers HOLDs at random (chaos_devices.hpp).
+
 #include "chaos_devices.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <vector>
 
-#include "lftrack/sim/modbus_couch_server.hpp"
-#include "lftrack/sim/virtual_robot.hpp"
-
 namespace lftrack::chaos {
-
-namespace {
-
-bool is_frame_fault(ChaosFault f) {
-  return f >= ChaosFault::kFrameLost && f <= ChaosFault::kFrameThrows;
-}
-bool is_readback_fault(ChaosFault f) {
-  return f >= ChaosFault::kReadbackTimeout && f <= ChaosFault::kReadbackThrows;
-}
-bool is_command_fault(ChaosFault f) {
-  return f >= ChaosFault::kCommandTimeout && f <= ChaosFault::kCommandThrows;
-}
-bool is_modbus_fault(ChaosFault f) {
-  return f >= ChaosFault::kModbusNoReply && f <= ChaosFault::kModbusDropConnection;
-}
-bool is_can_fault(ChaosFault f) {
-  return f >= ChaosFault::kCanBusOff && f <= ChaosFault::kCanHeartbeatLoss;
-}
-bool is_surrogate_fault(ChaosFault f) {
-  return f >= ChaosFault::kSurrogateStop && f <= ChaosFault::kSurrogateCough;
-}
-
-double uniform(std::mt19937_64& random, double lo, double hi) {
-  return std::uniform_real_distribution<double>(lo, hi)(random);
-}
-
-[[noreturn]] void throw_into_loop(Injector* injector, const char* what) {
-  injector->threw = true;
-  throw std::runtime_error(what);
-}
-
-}  // namespace
-
-ssize_t DiskThatFills::write(int fd, const void* data, std::size_t bytes) {
-  if (full_.load(std::memory_order_acquire)) {
-    errno = ENOSPC;
-    return -1;
-  }
-  return ::write(fd, data, bytes);
-}
-
-Injector::Injector(std::uint64_t seed, double fault_rate, double period_s, std::int64_t segment_cycles,
-                   const SafetyLimits& limits, std::shared_ptr<DiskThatFills> journal_disk)
-    : random_(seed),
-      side_random_(seed ^ 0x9E3779B97F4A7C15ull),
-      fault_rate_(fault_rate),
-      period_s_(period_s),
-      segment_cycles_(segment_cycles),
-      limits_(limits),
-      journal_disk_(std::move(journal_disk)) {}
-
-void Injector::count(ChaosFault f) {
-  if (f == ChaosFault::kDiskFull) disk_full_wall_ = std::chrono::steady_clock::now();
-  ++injected[std::size_t(f)];
-}
-
-void Injector::inject_can(ChaosFault f) {
-  using sim::RobotFault;
-  RobotFault fault = RobotFault::kErrorFlood;
-  int undo = -1;
-  std::int64_t undo_after = 0;  // cycles, and at least `undo_after_s` of wall time: the driver's
-  double undo_after_s = 0;      // heartbeat timeout (0.3 s) runs on the real clock
-  switch (f) {
-    case ChaosFault::kCanBusOff:
-      fault = RobotFault::kBusOff, undo = int(RobotFault::kControllerRestarted), undo_after = 5,
-      undo_after_s = 0.5;
-      break;
-    case ChaosFault::kCanErrorPassive:
-      fault = RobotFault::kErrorPassive, undo = int(RobotFault::kErrorActive), undo_after = 5,
-      undo_after_s = 0.5;
-      break;
-    case ChaosFault::kCanRobotRestart:
-      fault = RobotFault::kRobotRestart;
-      break;
-    case ChaosFault::kCanHeartbeatLoss:
-      fault = RobotFault::kStopHeartbeat, undo = int(RobotFault::kResumeHeartbeat), undo_after = 20,
-      undo_after_s = 1.0;
-      break;
-    default:
-      break;
-  }
-  can_robot_->inject(fault);
-  if (undo >= 0) {
-    can_followup_ = undo;
-    can_followup_at_ = cycle_ + undo_after;
-    can_followup_wall_ =
-        std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                               std::chrono::duration<double>(undo_after_s));
-  }
-  if (!can_pending_) can_pending_ = PendingCanFault{f, cycle_, std::chrono::steady_clock::now()};
-}
-
-void Injector::begin_cycle(std::int64_t cycle) {
-  cycle_ = cycle;
-  injection = CycleInjection{};
-  const bool permit = calls.beam_permit;
-  const tracking::Vector6d target = calls.target_after;
-  calls = ActuatorCalls{};
-  calls.beam_permit = permit;  // the device keeps its permit and its target until told otherwise
-  calls.target_after = target;
-  action = OperatorAction{};
-  drawn_ = ChaosFault::kCount;
-  if (can_followup_ >= 0 && cycle >= can_followup_at_ &&
-      std::chrono::steady_clock::now() >= can_followup_wall_) {  // the bus or heartbeat comes back
-    can_robot_->inject(static_cast<sim::RobotFault>(can_followup_));
-    can_followup_ = -1;
-  }
-  // The same three draws every cycle, so that the schedule depends on the seed and the cycle
-  // alone, never on what the loop did.
-  const double fault_draw = uniform(random_, 0, 1);
-  const double kind_draw = uniform(random_, 0, 1);
-  const double parameter = uniform(random_, 0, 1);
-  if (stall_cycles_left_ > 0) {
-    --stall_cycles_left_;
-    injection.stalled = true;
-    return;
-  }
-  stall_ns_ = 0;
-  // The loop asks for the next exposure after its last cycle too: no fault for a cycle that
-  // will not run.
-  if (fault_draw >= fault_rate_ || cycle >= segment_cycles_) return;
-  // Every kind that fits this segment: shifts are drawn into the patient's motion beforehand,
-  // the Modbus server's faults only where there is one, a full disk once.
-  std::vector<ChaosFault> kinds;
-  for (std::size_t k = 0; k < kChaosFaultKinds; ++k) {
-    const auto f = static_cast<ChaosFault>(k);
-    if (f == ChaosFault::kPatientShift) continue;
-    if (is_modbus_fault(f) && modbus_server_ == nullptr) continue;
-    if (is_can_fault(f) && (can_robot_ == nullptr || can_followup_ >= 0)) continue;
-    if (f == ChaosFault::kDiskFull && disk_full_at_ >= 0) continue;
-    if (is_surrogate_fault(f) && !surrogate_segment_) continue;
-    kinds.push_back(f);
-  }
-  const ChaosFault f = kinds[std::min(kinds.size() - 1, std::size_t(kind_draw * double(kinds.size())))];
-  if (f == ChaosFault::kHostStall) {
-    stall_cycles_left_ = int(parameter * 4);  // this cycle and up to three after it
-    stall_ns_ = std::int64_t((0.2 + 2.3 * parameter) * period_s_ * 1e9);
-    injection.stalled = true;
-    injection.what = to_string(f);
-    count(f);
-  } else if (f == ChaosFault::kDiskFull) {
-    disk_full_at_ = cycle;
-    journal_disk_->fill();
-    count(f);
-  } else if (is_modbus_fault(f)) {
-    const sim::CouchServerFault server_fault =
-        f == ChaosFault::kModbusNoReply      ? sim::CouchServerFault::kNoReply
-        : f == ChaosFault::kModbusException4 ? sim::CouchServerFault::kException4
-                                             : sim::CouchServerFault::kDropConnection;
-    modbus_server_->inject(server_fault, 1, sim::CouchRequestKind::kAny);
-    count(f);
-  } else if (is_can_fault(f)) {
-    inject_can(f);
-    count(f);
-  } else {
-    drawn_ = f;  // taken by the wrapper it is for, and counted where it applies it
-  }
-}
-
-ChaosFault Injector::take_if(bool (*of_kind)(ChaosFault)) {
-  if (!of_kind(drawn_)) return ChaosFault::kCount;
-  const ChaosFault f = drawn_;
-  drawn_ = ChaosFault::kCount;
-  return f;
-}
-ChaosFault Injector::take_frame_fault() {
-  return take_if(&is_frame_fault);
-}
-ChaosFault Injector::take_readback_fault() {
-  return take_if(&is_readback_fault);
-}
-ChaosFault Injector::take_command_fault() {
-  return take_if(&is_command_fault);
-}
-ChaosFault Injector::take_surrogate_fault() {
-  return take_if(&is_surrogate_fault);
-}
 
 int ChaosSurrogate::read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) {
   int n = inner_->read(now_ns, out, capacity);
@@ -201,8 +21,8 @@ int ChaosSurrogate::read(std::int64_t now_ns, drivers::SurrogateReading* out, in
     if (f == ChaosFault::kSurrogateStop || f == ChaosFault::kSurrogateFreeze ||
         f == ChaosFault::kSurrogateCough) {
       active_ = f;
-      cycles_left_ = f == ChaosFault::kSurrogateStop     ? int(uniform(random, 3, 16))
-                     : f == ChaosFault::kSurrogateFreeze ? int(uniform(random, 8, 21))
+      cycles_left_ = f == ChaosFault::kSurrogateStop     ? int(draw_uniform(random, 3, 16))
+                     : f == ChaosFault::kSurrogateFreeze ? int(draw_uniform(random, 8, 21))
                                                          : 6;
       cough_cycle_ = 0;
       injector_->count(f);
@@ -260,7 +80,7 @@ drivers::DeviceStatus ChaosFrameSource::acquire(drivers::FramePair* pair, driver
   const ChaosFault fault = injector_->take_frame_fault();
   if (fault == ChaosFault::kFrameThrows) {
     injector_->count(fault);
-    throw_into_loop(injector_, "chaos: the frame source threw");
+    injector_->throw_into_loop("chaos: the frame source threw");
   }
   // The simulator's pair is always collected, so that its renderer stays in step.
   const drivers::DeviceStatus status = inner_->acquire(pair, deadline);
@@ -323,7 +143,7 @@ drivers::DeviceStatus ChaosActuator::command(const tracking::Vector6d& correctio
   if (!correction.allFinite()) calls.non_finite = true;
   const ChaosFault fault = injector_->take_command_fault();
   if (fault != ChaosFault::kCount) injector_->count(fault);
-  if (fault == ChaosFault::kCommandThrows) throw_into_loop(injector_, "chaos: the actuator's command threw");
+  if (fault == ChaosFault::kCommandThrows) injector_->throw_into_loop("chaos: the actuator's command threw");
   if (fault != ChaosFault::kCount) {
     // The device may or may not have taken it before the line failed.
     if (injector_->random()() % 2 == 0) (void)inner_->command(correction, deadline);
@@ -354,7 +174,7 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
   const ChaosFault fault = first ? injector_->take_readback_fault() : ChaosFault::kCount;
   if (fault == ChaosFault::kReadbackThrows) {
     injector_->count(fault);
-    throw_into_loop(injector_, "chaos: the actuator's read-back threw");
+    injector_->throw_into_loop("chaos: the actuator's read-back threw");
   }
   const drivers::DeviceStatus status = inner_->readback(state, deadline);
   if (status == drivers::DeviceStatus::kOk && state->target.allFinite()) {
@@ -385,7 +205,8 @@ drivers::DeviceStatus ChaosActuator::readback(drivers::ActuatorState* state, dri
     case ChaosFault::kReadbackMismatch: {  // along one axis, 2 to 10 times the tolerance
       const int axis = int(random() % 3);
       const double sign = random() % 2 == 0 ? 1.0 : -1.0;
-      const double offset = sign * uniform(random, 2.0, 10.0) * injector_->limits().readback_tolerance_mm;
+      const double offset =
+          sign * draw_uniform(random, 2.0, 10.0) * injector_->limits().readback_tolerance_mm;
       state->position[axis] += offset;
       state->target[axis] += offset;
       break;
@@ -417,8 +238,8 @@ void ChaosOperator::poll(const OperatorView& view, OperatorPoll* out) {
   if (held && view.hold_id != 0) {
     if (view.hold_id != planned_for_) {
       planned_for_ = view.hold_id;
-      answer_at_s_ = uniform(random, 0.2, 3.0);
-      mistake_ = uniform(random, 0, 1) < 0.1;
+      answer_at_s_ = draw_uniform(random, 0.2, 3.0);
+      mistake_ = draw_uniform(random, 0, 1) < 0.1;
       answered_ = false;
     }
     if (!answered_ && view.hold_age_s >= answer_at_s_) {
@@ -444,7 +265,7 @@ void ChaosOperator::poll(const OperatorView& view, OperatorPoll* out) {
         answer_at_s_ = view.hold_age_s + 0.5;
       }
     }
-  } else if (view.state == TrackingState::kTrack && uniform(random, 0, 1) < 0.002) {
+  } else if (view.state == TrackingState::kTrack && draw_uniform(random, 0, 1) < 0.002) {
     OperatorRequest stale;  // a resume sent for a HOLD that is over
     stale.command = OperatorCommand::kResume;
     stale.names_hold = true;

@@ -27,6 +27,11 @@ class VirtualRobot;
 
 namespace lftrack::chaos {
 
+// A number drawn uniformly from [lo, hi).
+inline double draw_uniform(std::mt19937_64& random, double lo, double hi) {
+  return std::uniform_real_distribution<double>(lo, hi)(random);
+}
+
 // A segment's journal disk: write(2) until the injector fills it, then ENOSPC.
 class DiskThatFills final : public host::JournalSink {
  public:
@@ -50,6 +55,9 @@ class Injector {
   void end_draws() { segment_cycles_ = 0; }
   // A fault that met the loop: counted in `injected`.
   void count(ChaosFault fault);
+  // A device wrapper's injected exception: marks `threw` (the invariants then expect the loop to
+  // have caught it) and throws `what` as a std::runtime_error.
+  [[noreturn]] void throw_into_loop(const char* what);
   // A Modbus segment's server or a CAN segment's robot (their faults become kinds to draw); set
   // before the first cycle.
   void set_modbus_server(sim::ModbusCouchServer* server) { modbus_server_ = server; }

@@ -38,7 +38,7 @@ std::string six(const tracking::Vector6d& v) {
 }  // namespace
 
 double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& shift) {
-  const sim::VirtualCouchSpec& c = scene.actuator.couch;
+  const drivers::ActuatorDynamics& c = scene.actuator.dynamics;
   const double travel_s =
       std::max(shift.head<3>().norm() / std::max(c.max_speed_mm_s, 1e-3),
                tracking::rad_to_deg(shift.tail<3>().norm()) / std::max(c.max_speed_deg_s, 1e-3));

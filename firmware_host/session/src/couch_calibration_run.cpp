@@ -41,7 +41,7 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
     return invalid_argument("calibrate couch (simulated) needs a scene with `actuator: {type: virtual}`");
   }
   const std::vector<Vector6d> moves = o.moves.empty() ? default_couch_moves() : o.moves;
-  const sim::VirtualCouchSpec& couch_spec = p.scene.actuator.couch;
+  const drivers::ActuatorDynamics& couch_spec = p.scene.actuator.dynamics;
   for (const Vector6d& q : moves) {
     if (!q.allFinite() || q.head<3>().cwiseAbs().maxCoeff() > couch_spec.range_mm ||
         tracking::rad_to_deg(q.tail<3>().cwiseAbs().maxCoeff()) > couch_spec.range_deg) {

@@ -201,7 +201,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   LoopSettings settings;
   settings.loop = p.scene.loop;
   settings.limits = p.scene.safety;
-  settings.actuator_latency_s = lp.actuator != nullptr ? p.scene.actuator.couch.latency_s : 0.0;
+  settings.actuator_latency_s = lp.actuator != nullptr ? p.scene.actuator.dynamics.latency_s : 0.0;
   settings.cycles = o.cycles;
   settings.simulated_clock = o.simulated_clock;
   settings.status_line = o.status_line;

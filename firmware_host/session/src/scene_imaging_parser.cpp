@@ -1,5 +1,8 @@
 // The scene's imaging on demand (imaging_on_demand.hpp): tracking.imaging and the surrogate section.
 
+#include <fmt/format.h>
+
+#include <algorithm>
 #include <sstream>
 
 #include "lftrack/sim/tracker_twin.hpp"
@@ -155,6 +158,49 @@ Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogat
     if (g["axis"])
       LFTRACK_RETURN_IF_ERROR(unit_vec3(g["axis"], "surrogate.igtl.axis", &surrogate->igtl_axis));
   }
+  return {};
+}
+
+// tracking.imaging and surrogate, once loop and motion are known: `model` needs a surrogate, whose
+// simulated marker breathes with the patient, and a model spans a breath unless the scene says.
+Status SceneParser::parse_imaging_sections(const YAML::Node& root, Scene* scene) const {
+  ImagingSpec& imaging = scene->loop.imaging;
+  bool min_span_given = false;
+  const YAML::Node tracking = root["tracking"];
+  // Where an error is reported: tracking.imaging, or the scene (a default YAML::Node is a null node,
+  // which tests true: never a stand-in for "absent").
+  const YAML::Node node = tracking && tracking["imaging"] ? tracking["imaging"] : root;
+  if (tracking && tracking["imaging"])
+    LFTRACK_RETURN_IF_ERROR(parse_imaging(node, &imaging, &scene->technique, &min_span_given));
+  if (root["surrogate"]) {
+    LFTRACK_RETURN_IF_ERROR(parse_surrogate(root["surrogate"], &scene->surrogate, &imaging.surrogate));
+    scene->lines["surrogate"] = where(root["surrogate"]);
+  }
+  const double period_s = scene->motion.motion.breathing_period_s;
+  scene->surrogate.sim.period_s = period_s;
+  scene->surrogate.sim.seed = scene->sim.seed;
+  // A model spans a breath; check_correlation_model_spec needs at least a second.
+  if (!min_span_given) imaging.model.min_span_s = std::max(1.0, period_s);
+  if (!imaging.model_mode()) return {};
+  if (scene->surrogate.source.empty())
+    return error(node, "tracking.imaging.mode model needs a `surrogate` section (source sim or igtl)");
+  const double loop_hz = 1e3 / scene->loop.period_ms;
+  const YAML::Node xray_node = node.IsMap() && node["xray_hz"] ? node["xray_hz"] : node;
+  if (imaging.xray_hz > loop_hz) {
+    std::ostringstream m;
+    m << "tracking.imaging.xray_hz " << imaging.xray_hz << " is above the loop's rate (" << loop_hz
+      << " Hz, loop.period_ms " << scene->loop.period_ms << ")";
+    return error(xray_node, m.str());
+  }
+  if (imaging.stale_s <= 1 / imaging.xray_hz)
+    return error(
+        node,
+        fmt::format("tracking.imaging.stale_s ({:g} s) must exceed the time between pairs (1 / xray_hz = "
+                    "{:g} s); otherwise every pair comes early",
+                    imaging.stale_s, 1 / imaging.xray_hz));
+  if (double(CorrelationModel::kCapacity - 1) < 1.25 * imaging.model.min_span_s * imaging.xray_hz)
+    return error(
+        node, "tracking.imaging: at xray_hz the model's 64 pairs cannot span its min_span_s; lower xray_hz");
   return {};
 }
 

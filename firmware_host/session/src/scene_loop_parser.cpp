@@ -212,7 +212,7 @@ Status SceneParser::parse_actuator(const YAML::Node& n, ActuatorSpec* a) const {
   } else if (n["can"]) {
     return error(n["can"], "actuator.can is for actuator.type can");
   }
-  sim::VirtualCouchSpec& c = a->couch;
+  drivers::ActuatorDynamics& c = a->dynamics;
   if (n["latency_s"]) {
     LFTRACK_RETURN_IF_ERROR(number(n["latency_s"], "actuator.latency_s", &c.latency_s));
     if (c.latency_s < 0 || c.latency_s > 5)
@@ -316,6 +316,43 @@ Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
       if (step.time_s < 0 || step.time_s > 1e6) return error(time, what + ".time_s must be in 0..1e6 s");
       m->motion.shifts.push_back(step);
     }
+  }
+  return {};
+}
+
+// safety: the registration verdict's checks beyond its floors (envelope edge, view shift).
+Status SceneParser::parse_verdict_checks(const YAML::Node& n, const PoseEnvelope& envelope,
+                                         VerdictChecksSpec* c) const {
+  const auto g = [](double x) {
+    std::ostringstream o;
+    o << x;
+    return o.str();
+  };
+  if (const YAML::Node e = n["envelope_edge_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(number(e, "safety.envelope_edge_mm", &c->envelope_edge_mm));
+    if (!(c->envelope_edge_mm >= 0 && c->envelope_edge_mm < envelope.translation_mm))
+      return error(
+          e, "safety.envelope_edge_mm must be at least 0 and less than the envelope's translation_mm (" +
+                 g(envelope.translation_mm) + "): a band as wide refuses every result");
+  }
+  if (const YAML::Node e = n["envelope_edge_deg"]) {
+    LFTRACK_RETURN_IF_ERROR(number(e, "safety.envelope_edge_deg", &c->envelope_edge_deg));
+    if (!(c->envelope_edge_deg >= 0 && c->envelope_edge_deg < envelope.rotation_deg))
+      return error(e,
+                   "safety.envelope_edge_deg must be at least 0 and less than the envelope's rotation_deg (" +
+                       g(envelope.rotation_deg) + "): a band as wide refuses every result");
+  }
+  if (const YAML::Node m = n["max_view_shift_mm"]) {
+    LFTRACK_RETURN_IF_ERROR(number(m, "safety.max_view_shift_mm", &c->max_view_shift_mm));
+    if (!(c->max_view_shift_mm >= 0 && c->max_view_shift_mm <= 20))
+      return error(m,
+                   "safety.max_view_shift_mm must be in [0, 20] (0: the views are not registered alone); two "
+                   "views 20 mm apart do not see one patient");
+  }
+  if (const YAML::Node e = n["view_check_every"]) {
+    long every = 0;
+    LFTRACK_RETURN_IF_ERROR(integer(e, "safety.view_check_every", 0, 100000, &every));
+    c->view_check_every = static_cast<int>(every);
   }
   return {};
 }

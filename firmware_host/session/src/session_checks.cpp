@@ -75,7 +75,7 @@ void warn_if_prediction_window_short(const LoopSettings& s) {
 // place" before the couch arrives. A real couch's speed is its own, not the scene's.
 void warn_if_beam_wait_short(const Scene& scene) {
   if (scene.actuator.type != "virtual") return;
-  const sim::VirtualCouchSpec& couch = scene.actuator.couch;
+  const drivers::ActuatorDynamics& couch = scene.actuator.dynamics;
   const double largest_move_s = scene.safety.max_total_mm / couch.max_speed_mm_s + couch.latency_s;
   if (largest_move_s < scene.safety.max_beam_withheld_s) return;
   spdlog::warn(

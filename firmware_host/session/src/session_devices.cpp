@@ -22,7 +22,7 @@ Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, co
   room.origin_room_mm = p.registration_origin_room_mm();
   room.setup_error = p.scene.motion.setup_error;
   room.motion = p.scene.motion.motion;
-  room.couch = p.scene.actuator.couch;
+  room.couch = p.scene.actuator.dynamics;
   if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
   room.residual_box_mm = p.scene.registration.tre_box_mm;
   if (o.devices == SessionDevices::kScene && actuator_is_device(p.scene)) {

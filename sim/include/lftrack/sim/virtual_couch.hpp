@@ -11,16 +11,12 @@
 #include <array>
 
 #include "lftrack/drivers/actuator.hpp"
+#include "lftrack/drivers/actuator_dynamics.hpp"
 
 namespace lftrack::sim {
 
-struct VirtualCouchSpec {
-  double latency_s = 0.15;        // command to start of motion
-  double max_speed_mm_s = 20;     // along the straight line to the target
-  double max_speed_deg_s = 10;    // rotation angle rate
-  double range_mm = 50;           // per translation axis, from zero
-  double range_deg = 10;          // per rotation component, from zero
-};
+// The virtual couch moves as the host assumes its actuator moves (the scene's `actuator`).
+using VirtualCouchSpec = drivers::ActuatorDynamics;
 
 // Whether `position` (couch coordinates, mm and rad) is within the couch's travel: each
 // translation within range_mm of zero, each rotation component within range_deg.

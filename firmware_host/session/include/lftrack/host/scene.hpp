@@ -15,13 +15,13 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/drivers/actuator_dynamics.hpp"
 #include "lftrack/drivers/can_robot.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/patient_motion.hpp"
-#include "lftrack/sim/virtual_couch.hpp"
 #include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
@@ -159,7 +159,7 @@ struct CouchMountingSpec {
 };
 
 // actuator: what moves the patient. "none" tracks and reports; "virtual" is the simulator's
-// couch (latency, speed and range limits).
+// couch. Every type has its dynamics (latency, speeds, travel): what the host assumes of it.
 //   mounting:     (sim) how the virtual couch is really mounted; unset: the ideal couch
 //   calibration:  a couch calibration file (`lftrack calibrate couch`); the loop converts its
 //                 corrections through it. Unset: the couch's axes are assumed to be the room's,
@@ -170,7 +170,7 @@ struct CouchMountingSpec {
 //                 such as `lftrack serve robot`; node_id; heartbeat_timeout_ms)
 struct ActuatorSpec {
   std::string type = "none";
-  sim::VirtualCouchSpec couch;        // virtual: the simulator's couch
+  drivers::ActuatorDynamics dynamics;  // every type; virtual: the simulator's couch moves so
   drivers::ModbusCouchOptions modbus;  // modbus
   drivers::CanRobotOptions can;        // can (can.bridge_path set: through a bridge)
   std::optional<CouchMountingSpec> mounting;
