@@ -1,6 +1,6 @@
 // The optical tracker's OpenIGTLink client (drivers/igtl_surrogate.hpp) against real peers on
-// loopback: the tracker's twin (sim/tracker_twin.hpp) in process and as a process of its own
-// (`lftrack serve tracker`), and a hand-made peer that sends what a tracker should not: stale,
+// loopback: the tracker's twin (sim/tracker_twin.hpp) in process (as a process of its own:
+// served_tracker_test.cpp), and a hand-made peer that sends what a tracker should not: stale,
 // future, repeated and non-finite readings, a bad CRC, an absurd body size, other messages.
 
 #include <gtest/gtest.h>
@@ -23,7 +23,7 @@
 #include <thread>
 #include <vector>
 
-#include "child_process.hpp"
+#include "igtl_test_support.hpp"
 #include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/sim/tracker_twin.hpp"
@@ -35,29 +35,10 @@ using namespace std::chrono_literals;
 using drivers::IgtlSurrogateOptions;
 using drivers::IgtlSurrogateSource;
 using drivers::SurrogateReading;
-
-std::int64_t igtl_clock_ns(clockid_t clock) {
-  timespec ts{};
-  clock_gettime(clock, &ts);
-  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
-std::int64_t mono_ns() {
-  return igtl_clock_ns(CLOCK_MONOTONIC);
-}
-
-// The client's readings until `enough` have come (or `limit` passed), asking as a loop would.
-std::vector<SurrogateReading> read_until(IgtlSurrogateSource& source, std::size_t enough,
-                                         std::chrono::seconds limit = 20s) {
-  std::vector<SurrogateReading> got;
-  SurrogateReading batch[64];
-  const auto deadline = std::chrono::steady_clock::now() + limit;
-  while (got.size() < enough && std::chrono::steady_clock::now() < deadline) {
-    const int n = source.read(mono_ns(), batch, 64);
-    got.insert(got.end(), batch, batch + n);
-    std::this_thread::sleep_for(5ms);
-  }
-  return got;
-}
+using test::client_of;
+using test::igtl_clock_ns;
+using test::mono_ns;
+using test::read_until;
 
 // Waits until `condition` holds, or 20 s.
 template <class Condition>
@@ -176,15 +157,6 @@ class HandPeer {
 
 // A client that reconnects quickly, and refuses only readings seconds old: on a loaded host a
 // message may wait a while before the test's peer sends it or the client reads it.
-IgtlSurrogateOptions client_of(int port) {
-  IgtlSurrogateOptions o;
-  o.port = port;
-  o.retry_ms = 20;
-  o.stale_ms = 5000;
-  o.future_ms = 500;
-  return o;
-}
-
 TEST(IgtlSurrogate, ReadsTheTrackersTransformsAtTheTimesTheyWereMeasured) {
   // The twin's marker says when it was measured: z is the milliseconds since t0 (room frame).
   const std::int64_t t0 = mono_ns();
@@ -432,34 +404,6 @@ TEST(IgtlSurrogate, ReconnectsAfterSilenceAndPacesAServerThatHangsUp) {
   }
   EXPECT_GE(std::chrono::steady_clock::now() - start, 5 * 90ms) << "retry_ms between connections";
   EXPECT_EQ(s.counters().protocol_errors, 0);
-}
-
-// `lftrack serve tracker` as a process of its own: its breathing marker read by the client.
-TEST(IgtlSurrogate, ReadsTheTrackersTwinAsAProcessOfItsOwn) {
-  test::ChildProcess tracker({LFTRACK_BIN_PATH, "-q", "serve", "tracker", "--listen", "127.0.0.1:0", "--rate",
-                              "50", "--message", "position", "--duration", "60"});
-  const std::optional<std::string> line = tracker.read_line(60s);
-  ASSERT_TRUE(line.has_value()) << "the tracker's twin started";
-  const auto colon = line->find("127.0.0.1:");
-  ASSERT_NE(colon, std::string::npos) << *line;
-  const int port = std::atoi(line->c_str() + colon + 10);
-  ASSERT_GT(port, 0) << *line;
-  IgtlSurrogateSource s(client_of(port));
-  ASSERT_TRUE(s.open().ok());
-  const std::vector<SurrogateReading> got = read_until(s, 100, 60s);
-  ASSERT_GE(got.size(), 100u) << "two seconds at 50 Hz";
-  double low = got[0].amplitude, high = low;
-  for (const SurrogateReading& r : got) {
-    low = std::min(low, r.amplitude);
-    high = std::max(high, r.amplitude);
-  }
-  // The built-in scene's marker: 10 mm of travel over a 4 s breath, 0.1 mm noise.
-  EXPECT_GE(low, -1.0);
-  EXPECT_LE(high, 11.0);
-  EXPECT_GT(high - low, 1.0) << "half a breath moves the marker";
-  EXPECT_EQ(s.counters().refused_stale + s.counters().refused_future + s.counters().protocol_errors, 0);
-  tracker.signal(SIGTERM);
-  EXPECT_EQ(tracker.wait(20s), 0);
 }
 
 }  // namespace
