@@ -30,7 +30,8 @@ Vector6d translation(double x, double y, double z) { return (Vector6d() << x, y,
 
 // A couch whose position is its target at once: each correction adds to it. It can be told to
 // refuse the commands numbered in `refuse` (DeviceStatus::kRefused: it knows of a fault, nothing
-// moved). Every command it takes is kept.
+// moved), or to leave those in `time_out` unanswered (kTimeout: they may have moved). Every
+// command it takes is kept.
 class InstantCouch final : public drivers::Actuator {
  public:
   Status open() override { return {}; }
@@ -38,6 +39,8 @@ class InstantCouch final : public drivers::Actuator {
     const int n = commands_seen++;
     for (int r : refuse)
       if (r == n) return drivers::DeviceStatus::kRefused;
+    for (int r : time_out)
+      if (r == n) return drivers::DeviceStatus::kTimeout;
     commands.push_back(correction);
     target += correction;
     return drivers::DeviceStatus::kOk;
@@ -54,6 +57,7 @@ class InstantCouch final : public drivers::Actuator {
   Vector6d target = Vector6d::Zero();
   std::vector<Vector6d> commands;  // those taken
   std::vector<int> refuse;         // command numbers (from 0) refused
+  std::vector<int> time_out;       // command numbers (from 0) left unanswered
   int commands_seen = 0, holds = 0;
   bool beam_permit = false;
 };
@@ -321,6 +325,58 @@ TEST(LoopStates, ARefusedSetUpMoveHoldsAndTheResumeAlignsAgain) {
   EXPECT_TRUE(s.aligned);
   ASSERT_EQ(h.couch.commands.size(), 1u);
   EXPECT_LT((h.couch.target + translation(1, 1, 0)).norm(), 1e-9);
+}
+
+// A tracking command the couch refuses (nothing moved) holds in its own cycle, for that reason,
+// with the beam off: the gate judges the refusal as one more input, and the state machine moves
+// once (TRACK to HOLD).
+TEST(LoopStates, ARefusedTrackingCommandHoldsInItsOwnCycleWithTheBeamOff) {
+  Harness h([](int n) { return still_at(translation(1 + 0.1 * n, 0, 0)); });
+  h.couch.refuse = {3};  // the set-up move is command 0; cycles 1, 2 and 3 each send one
+  h.settings.cycles = 6;
+  const LoopSummary s = h.run();
+  ASSERT_EQ(h.records.all.size(), 6u);
+  for (int cycle : {1, 2}) {
+    EXPECT_EQ(h.state(cycle), TrackingState::kTrack) << cycle;
+    EXPECT_EQ(h.records.all[cycle].beam_permit, 1) << cycle;
+    EXPECT_EQ(h.records.all[cycle].command_sent, 1) << cycle;
+  }
+  EXPECT_EQ(h.state(3), TrackingState::kHold);
+  EXPECT_EQ(h.records.all[3].gate_decision, std::uint8_t(GateDecision::kHold));
+  EXPECT_EQ(h.records.all[3].gate_reason, std::uint8_t(GateReason::kCommandRefused));
+  EXPECT_EQ(h.records.all[3].command_sent, 0);
+  EXPECT_EQ(h.records.all[3].beam_permit, 0);
+  EXPECT_EQ(h.state(5), TrackingState::kHold) << "held until the operator resumes";
+  EXPECT_EQ(s.holds, 1);
+  ASSERT_EQ(s.transitions.size(), 3u) << "IDLE to ALIGN, ALIGN to TRACK, TRACK to HOLD";
+  EXPECT_EQ(s.transitions[2].cycle, 3);
+  EXPECT_EQ(s.transitions[2].from, TrackingState::kTrack);
+  EXPECT_EQ(s.transitions[2].to, TrackingState::kHold);
+  EXPECT_EQ(h.couch.commands.size(), 3u) << "the set-up move and two corrections";
+}
+
+// A command left unanswered may have moved the couch: a device fault in its own cycle, the couch
+// held and the beam off there and after.
+TEST(LoopStates, AnUnansweredCommandFaultsInItsOwnCycleWithTheCouchHeldAndTheBeamOff) {
+  Harness h([](int n) { return still_at(translation(1 + 0.1 * n, 0, 0)); });
+  h.couch.time_out = {2};
+  h.settings.cycles = 5;
+  const LoopSummary s = h.run();
+  ASSERT_EQ(h.records.all.size(), 5u);
+  EXPECT_EQ(h.state(1), TrackingState::kTrack);
+  EXPECT_EQ(h.records.all[1].beam_permit, 1);
+  EXPECT_EQ(h.state(2), TrackingState::kFault);
+  EXPECT_EQ(h.records.all[2].beam_permit, 0);
+  for (int cycle : {3, 4}) {
+    EXPECT_EQ(h.state(cycle), TrackingState::kFault) << "only a reset leaves FAULT: " << cycle;
+    EXPECT_EQ(h.records.all[cycle].beam_permit, 0) << cycle;
+    EXPECT_EQ(h.records.all[cycle].command_sent, 0) << cycle;
+  }
+  EXPECT_EQ(s.faults, 1);
+  EXPECT_EQ(h.couch.holds, 2) << "held on entry into FAULT, and again at the run's end";
+  ASSERT_EQ(s.transitions.size(), 3u) << "IDLE to ALIGN, ALIGN to TRACK, TRACK to FAULT";
+  EXPECT_EQ(s.transitions[2].from, TrackingState::kTrack);
+  EXPECT_EQ(s.transitions[2].to, TrackingState::kFault);
 }
 
 TEST(LoopStates, AStopHoldsTheCouchAndEndsTheRun) {

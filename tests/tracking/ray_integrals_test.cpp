@@ -199,12 +199,12 @@ TEST(Siddon, ValuesInsideAShellOfZerosIntegrateAsTheBruteForceSum) {
     to.push_back(p + 100 * d);
   }
   reference_shift.assign(from.size(), Vector3d::Zero());
-  // Along each axis, on the values' lower and upper faces (and on a face inside them). A ray on
+  // Along each axis, on the values' lower and upper faces and on a face between two of them. A ray on
   // a face belongs to the voxel above it: the brute force, whose boxes are closed, counts both
   // sides, so it takes these rays 1e-6 mm above the face.
   for (int ax = 0; ax < 3; ++ax) {
     const int across = (ax + 1) % 3;
-    for (const double at : {first[across] - 0.5, last[across] + 0.5, first[across] + 0.0}) {
+    for (const double at : {first[across] - 0.5, last[across] + 0.5, first[across] + 2.5}) {
       Vector3d p0(12.1, 11.3, 16.2), p1;
       p0[across] = at * s[across];
       p1 = p0;

@@ -1,5 +1,5 @@
 // The cycle's stages (loop_impl.hpp), in the order they run:
-//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> settle.
+//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> advance -> settle.
 // Each writes its part of the CycleState; the record and the statistics come after. The register
 // stage and its verdict are in cycle_registration.cpp.
 
@@ -248,46 +248,55 @@ void TrackingLoop::Impl::control(CycleState& c) {
   in.pair_skew_ms = c.registered ? ms_between(c.oldest_frame_ns, c.newest_frame_ns) : 0.0;
 }
 
-// The pure gate decides; the state machine follows it.
+// The pure gate decides on the cycle's inputs. Nothing moves here, not even the state machine:
+// an APPLY must first be carried out (actuate), and what the actuator answers is part of the
+// cycle's one event (advance).
 void TrackingLoop::Impl::gate(CycleState& c) {
   c.gate = evaluate_gate(settings.limits, c.gate_input);
   consecutive_failures = c.gate.consecutive_failures;
-  if (c.aligning) {
-    // A skipped cycle (no pair yet: a device's first frames are often late; a registration that
-    // failed once) stays in ALIGN, moving nothing; failures count as in TRACK, and the gate's
-    // HOLD after hold_after_failures of them is the alignment's failure. An APPLY is not yet the
-    // alignment: that is done when the actuator has accepted the set-up move (actuate).
-    if (c.gate.decision == GateDecision::kSkip || c.gate.apply()) return;
-    transition(c, machine.on(TrackingEvent::kAlignFailed, c.gate), TrackingEvent::kAlignFailed);
-  } else {
-    transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
-  }
 }
 
-// Only an APPLY in TRACK, or ALIGN's APPLY (the set-up move), moves. ALIGN becomes TRACK only
-// once the set-up move is accepted: a loop that counted itself aligned without it would make the
-// whole set-up move later as a tracking correction, with the beam on (the chaos soak found a
-// refused set-up move doing so after a resume). A command the actuator refuses (it knows of a
-// fault; nothing moved) goes back to the gate as an input, which holds (in ALIGN: the alignment
-// failed, and a resume aligns again); one that may have moved is a device fault.
+// Only an APPLY in TRACK, or ALIGN's APPLY (the set-up move), moves. The state is the one the
+// operator's commands left (the machine has not moved since).
 void TrackingLoop::Impl::actuate(CycleState& c) {
-  const bool move = c.gate.apply() && (c.aligning || machine.state() == TrackingState::kTrack);
-  if (!move) return;
-  const DeviceStatus sent = send_step(c);
-  if (sent == DeviceStatus::kOk) {
-    if (c.aligning) {
-      transition(c, machine.on(TrackingEvent::kAligned), TrackingEvent::kAligned);
-      summary.aligned = true;
-    }
-  } else if (sent == DeviceStatus::kRefused) {
+  c.move_tried = c.gate.apply() && (c.aligning || machine.state() == TrackingState::kTrack);
+  if (c.move_tried) c.move_answer = send_step(c);
+}
+
+// The cycle's one event, from the gate's decision and the actuator's answer:
+// - a move that may have happened and was not acknowledged (time-out, fault): a device fault;
+// - a move the actuator refused (it knows of a fault; nothing moved): the refusal is one more
+//   input the gate judges, as it judges every other, and it holds (in ALIGN: the alignment
+//   failed, and a resume aligns again);
+// - ALIGN: the set-up move accepted is the alignment (ALIGN becomes TRACK only then: a loop that
+//   counted itself aligned without it would make the whole set-up move later as a tracking
+//   correction, with the beam on; the chaos soak found a refused set-up move doing so after a
+//   resume); a skipped cycle (no pair yet: a device's first frames are often late; a registration
+//   that failed once) stays in ALIGN, moving nothing; any other decision (the gate's HOLD after
+//   hold_after_failures failures, counted as in TRACK) is the alignment's failure;
+// - otherwise the gate's decision, which the state machine follows (in TRACK it also sets the
+//   beam permit).
+void TrackingLoop::Impl::advance(CycleState& c) {
+  if (c.move_tried && c.move_answer != DeviceStatus::kOk && c.move_answer != DeviceStatus::kRefused) {
+    transition(c, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault);
+    return;
+  }
+  const bool refused = c.move_tried && c.move_answer == DeviceStatus::kRefused;
+  if (refused) {
     c.gate_input.command_refused = true;
     c.gate = evaluate_gate(settings.limits, c.gate_input);
     consecutive_failures = c.gate.consecutive_failures;
-    const TrackingEvent e = c.aligning ? TrackingEvent::kAlignFailed : TrackingEvent::kGate;
-    transition(c, machine.on(e, c.gate), e);
-  } else {  // it may have moved: stop safely (held in settle, with every other entry into HOLD or FAULT)
-    transition(c, machine.on(TrackingEvent::kDeviceFault), TrackingEvent::kDeviceFault);
   }
+  if (c.aligning) {
+    if (c.move_tried && !refused) {
+      transition(c, machine.on(TrackingEvent::kAligned), TrackingEvent::kAligned);
+      summary.aligned = true;
+    } else if (refused || c.gate.decision != GateDecision::kSkip) {
+      transition(c, machine.on(TrackingEvent::kAlignFailed, c.gate), TrackingEvent::kAlignFailed);
+    }
+    return;
+  }
+  transition(c, machine.on(TrackingEvent::kGate, c.gate), TrackingEvent::kGate);
 }
 
 // This cycle's step to the actuator; kOk without one (track and report) or with nothing to send.

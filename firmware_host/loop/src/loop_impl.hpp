@@ -3,10 +3,14 @@
 // (the parts, the buffers create() sized, the control state, the statistics); CycleState holds one
 // cycle, filled stage by stage in the design's order (DESIGN.md, "One cycle"):
 //
-//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> record
+//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> advance
+//     -> settle -> record
 //
 // Each stage reads what the earlier ones left in the CycleState and writes its own part; none
-// reaches back into an earlier stage. record_of() builds the journal record from the CycleState
+// reaches back into an earlier stage. Within a cycle the state machine moves in two places only
+// (the run's start is IDLE to ALIGN before the first): the operator's commands (inputs, first) and
+// `advance`, which takes the cycle's one event from the gate's
+// decision and what the actuator answered. record_of() builds the journal record from the CycleState
 // alone, and the statistics are gathered from that record after the cycle.
 
 #include <array>
@@ -84,6 +88,10 @@ struct CycleState {
 
   // gate and actuate
   GateOutput gate;
+  // What actuate did: no move (the gate did not APPLY, the loop is not in TRACK or ALIGN, no
+  // actuator, nothing to send), or the actuator's answer to the step.
+  bool move_tried = false;
+  drivers::DeviceStatus move_answer = drivers::DeviceStatus::kOk;
   bool command_sent = false;
   tracking::Vector6d command = tracking::Vector6d::Zero();
   std::int64_t command_acked_ns = 0;  // loop clock (simulated: the command's deadline)
@@ -209,9 +217,10 @@ struct TrackingLoop::Impl {
   // (a marker that slid, a patient who moved), so the model is fitted anew from the next pairs, and
   // the surrogate's watch starts again (a jump stays until then).
   void restart_model();
-  void gate(CycleState& c);
-  void actuate(CycleState& c);
+  void gate(CycleState& c);                        // the decision on the cycle's inputs; moves nothing
+  void actuate(CycleState& c);                     // an APPLY carried out: the step sent, the answer kept
   drivers::DeviceStatus send_step(CycleState& c);  // the command, if any: what the actuator answered
+  void advance(CycleState& c);                     // the cycle's one event for the state machine
   void settle(CycleState& c);  // holds on entry into HOLD/FAULT, the beam permit, the state
 
   // The journal record of a cycle, from its state alone (cycle_record.cpp), and the statistics

@@ -160,6 +160,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
   gate(c);
   c.gated_ns = monotonic_now_ns();
   actuate(c);
+  advance(c);
   settle(c);
   *record = record_of(c);
   gather_statistics(*record, c);

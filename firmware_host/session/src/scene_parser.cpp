@@ -5,7 +5,6 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
-#include <fmt/format.h>
 #include <algorithm>
 #include <cctype>
 #include <cerrno>

@@ -70,11 +70,12 @@ void warn_if_prediction_window_short(const LoopSettings& s) {
       MotionPredictor::kMaxNoiseGain, used, advice);
 }
 
-// The simulator's couch, where its largest allowed move (safety.max_total_mm at its speed, after its
-// latency) takes longer than the beam may wait: such a move would end in a HOLD "patient not in
-// place" before the couch arrives. A real couch's speed is its own, not the scene's.
+// An actuator whose largest allowed move (safety.max_total_mm at the speed the scene gives it,
+// after its latency) takes longer than the beam may wait: such a move would end in a HOLD
+// "patient not in place" before the couch arrives. Every type that moves has these dynamics
+// (drivers::ActuatorDynamics): the virtual couch moves so; a device is assumed to.
 void warn_if_beam_wait_short(const Scene& scene) {
-  if (scene.actuator.type != "virtual") return;
+  if (scene.actuator.type == "none") return;
   const drivers::ActuatorDynamics& couch = scene.actuator.dynamics;
   const double largest_move_s = scene.safety.max_total_mm / couch.max_speed_mm_s + couch.latency_s;
   if (largest_move_s < scene.safety.max_beam_withheld_s) return;

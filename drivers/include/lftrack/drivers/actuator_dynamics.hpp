@@ -1,9 +1,11 @@
 #pragma once
 // What the host assumes of the actuator that moves the patient, whatever its kind: how long a
 // command takes to start the motion, how fast it moves and how far it may travel. The scene's
-// `actuator` section gives them for every actuator type: the motion predictor looks ahead by the
-// latency, the session checks that the largest correction fits the safety limits at these speeds,
-// and the simulator's virtual couch and robot are built to move exactly so.
+// `actuator` section gives them for every type that moves (modbus, can, virtual): the motion
+// predictor's default look-ahead is the loop's period plus the latency (loop.lookahead_s
+// overrides it), the session warns when the largest allowed correction (safety.max_total_mm) at
+// these speeds takes longer than the beam may wait, and the simulator's virtual couch and the
+// served twins move exactly so.
 
 namespace lftrack::drivers {
 

@@ -2,7 +2,9 @@
 // The real-time loop (DESIGN.md, "One cycle"), one implementation for `lftrack sim`, `run` and
 // `replay`: at a fixed period on absolute CLOCK_MONOTONIC deadlines, each cycle runs the stages
 //   operator -> acquire (pair, read-back) -> preprocess -> register (warm, time-boxed) ->
-//   control (prediction, correction) -> gate -> actuate -> record (journal, statistics)
+//   control (prediction, correction) -> gate (the decision) -> actuate (an APPLY sent) ->
+//   advance (the state machine's one event) -> settle (hold, beam permit) -> record (journal,
+//   statistics)
 // in that order, each a function on the cycle's preallocated state (src/loop_impl.hpp,
 // src/cycle_stages.cpp, src/cycle_record.cpp).
 // The first cycle is ALIGN: the cold, wide-range registration whose result is the set-up move

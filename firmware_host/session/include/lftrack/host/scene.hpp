@@ -159,7 +159,8 @@ struct CouchMountingSpec {
 };
 
 // actuator: what moves the patient. "none" tracks and reports; "virtual" is the simulator's
-// couch. Every type has its dynamics (latency, speeds, travel): what the host assumes of it.
+// couch. Every type that moves has its dynamics (latency, speeds, travel): what the host
+// assumes of it (drivers/actuator_dynamics.hpp).
 //   mounting:     (sim) how the virtual couch is really mounted; unset: the ideal couch
 //   calibration:  a couch calibration file (`lftrack calibrate couch`); the loop converts its
 //                 corrections through it. Unset: the couch's axes are assumed to be the room's,
@@ -170,7 +171,7 @@ struct CouchMountingSpec {
 //                 such as `lftrack serve robot`; node_id; heartbeat_timeout_ms)
 struct ActuatorSpec {
   std::string type = "none";
-  drivers::ActuatorDynamics dynamics;  // every type; virtual: the simulator's couch moves so
+  drivers::ActuatorDynamics dynamics;  // modbus, can, virtual (the simulator's couch moves so)
   drivers::ModbusCouchOptions modbus;  // modbus
   drivers::CanRobotOptions can;        // can (can.bridge_path set: through a bridge)
   std::optional<CouchMountingSpec> mounting;
