@@ -5,6 +5,7 @@
 
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -57,6 +58,50 @@ TEST(SimHilCli, TheCanBlockReportsTheLinkAndTheFaultsSeen) {
   }
   EXPECT_EQ(hil.value("faults", ""), "none");
   EXPECT_EQ(hil.value("faults_seen", ""), "none") << hil.dump();
+}
+
+// An actuator whose largest allowed move (safety.max_total_mm at the scene's speed, after its
+// latency) takes longer than the beam may wait is warned of at start, whatever its type: the
+// scene's dynamics are what the host assumes of a Modbus couch or a CAN robot as of the virtual
+// couch (drivers/actuator_dynamics.hpp). At the built-in scene's speed nothing is said.
+TEST(SimHilCli, AnActuatorTooSlowForTheBeamsWaitIsWarnedOfWhateverItsType) {
+  test::TempDir dir;
+  std::string scene = *builtin_scene_text(kBuiltinPhantom);
+  for (const std::string field :
+       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
+    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+  std::ofstream(dir.path() / "quick.yaml") << scene;
+  const std::string speed = "  max_speed_mm_s: 40\n";
+  ASSERT_NE(scene.find(speed), std::string::npos);
+  scene.replace(scene.find(speed), speed.size(), "  max_speed_mm_s: 0.5\n");
+  std::ofstream(dir.path() / "slow.yaml") << scene;
+  const std::string warning = "takes 20.1 s, not less than safety.max_beam_withheld_s (10 s)";
+  for (const char* hil : {"", "modbus", "can"}) {
+    // The quick scene once (the virtual couch's): the warning's absence does not depend on the type.
+    for (const char* file : {"slow.yaml", *hil == '\0' ? "quick.yaml" : nullptr}) {
+      if (file == nullptr) continue;
+      std::vector<std::string> args = {LFTRACK_BIN_PATH,
+                                       "sim",
+                                       "--scene",
+                                       (dir.path() / file).string(),
+                                       "--fast",
+                                       "--cycles",
+                                       "2",
+                                       "--lf-dir",
+                                       (dir.path() / "lf").string(),
+                                       "--journal",
+                                       ""};
+      if (*hil != '\0') args.insert(args.end(), {"--hil", hil});
+      std::string out;
+      const Status s = run_process(args, &out);
+      ASSERT_TRUE(s.ok()) << s.message() << "\n" << out;
+      if (std::string(file) == "slow.yaml")
+        EXPECT_NE(out.find(warning), std::string::npos) << (*hil ? hil : "virtual") << ":\n" << out;
+      else
+        EXPECT_EQ(out.find("max_beam_withheld_s"), std::string::npos) << (*hil ? hil : "virtual") << ":\n"
+                                                                      << out;
+    }
+  }
 }
 
 }  // namespace
