@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_text.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
@@ -36,10 +37,7 @@ TEST(ServeCli, ACouchServerOnEveryInterfaceWarnsThatOtherHostsCanMoveTheCouch) {
 // Modbus block does) and the faults seen during the run beside the faults at its end.
 TEST(SimHilCli, TheCanBlockReportsTheLinkAndTheFaultsSeen) {
   test::TempDir dir;
-  std::string scene = *builtin_scene_text(kBuiltinPhantom);
-  for (const std::string field :
-       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
-    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+  std::string scene = test::tiny_field_phantom_scene_text();
   std::ofstream(dir.path() / "sim.yaml") << scene;
   std::string out;
   const Status s = run_process(
@@ -66,10 +64,7 @@ TEST(SimHilCli, TheCanBlockReportsTheLinkAndTheFaultsSeen) {
 // couch (drivers/actuator_dynamics.hpp). At the built-in scene's speed nothing is said.
 TEST(SimHilCli, AnActuatorTooSlowForTheBeamsWaitIsWarnedOfWhateverItsType) {
   test::TempDir dir;
-  std::string scene = *builtin_scene_text(kBuiltinPhantom);
-  for (const std::string field :
-       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
-    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+  std::string scene = test::tiny_field_phantom_scene_text();
   std::ofstream(dir.path() / "quick.yaml") << scene;
   const std::string speed = "  max_speed_mm_s: 40\n";
   ASSERT_NE(scene.find(speed), std::string::npos);

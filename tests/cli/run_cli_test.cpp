@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_text.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
@@ -32,9 +33,7 @@ class RunCli : public ::testing::Test {
 
   // The built-in scene with tiny light fields, `from` replaced by `to` where given.
   static std::string scene_text(const std::string& from = "", const std::string& to = "") {
-    std::string scene = *builtin_scene_text(kBuiltinPhantom);
-    for (const std::string field : {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
-      scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
+    std::string scene = test::tiny_field_phantom_scene_text();
     if (!from.empty()) {
       for (std::size_t at = scene.find(from); at != std::string::npos; at = scene.find(from, at + to.size()))
         scene.replace(at, from.size(), to);

@@ -1,7 +1,7 @@
 #pragma once
 // Small helpers the command-line tests share: the program's path, a shell-quoted argument, a
-// file's whole text, a finished run's exit code and output, and the built-in scene with a coarse
-// light field.
+// file's whole text, a finished run's exit code and output, and the built-in scene with coarse or
+// tiny light fields.
 
 #include <filesystem>
 #include <fstream>
@@ -17,6 +17,16 @@ inline std::string coarse_phantom_scene_text() {
   std::string scene = *host::builtin_scene_text(host::kBuiltinPhantom);
   const std::string field = "    resolution: [16, 16, 128, 128]\n";
   scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
+  return scene;
+}
+
+// The built-in scene's text with tiny light fields, the registration's and the simulated frames'
+// (6 x 6 x 48 x 64: built in about a second), for command tests that run the loop.
+inline std::string tiny_field_phantom_scene_text() {
+  std::string scene = *host::builtin_scene_text(host::kBuiltinPhantom);
+  for (const std::string field :
+       {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
+    scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");
   return scene;
 }
 
