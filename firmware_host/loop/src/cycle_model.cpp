@@ -14,7 +14,7 @@ using tracking::Vector6d;
 // rate, is the cycle's surrogate. Readings are taken at the cycle's start: the pair's exposure.
 void TrackingLoop::Impl::read_surrogate(CycleState& c) {
   if (!settings.loop.imaging.model_mode() || parts.surrogate == nullptr) return;
-  const std::int64_t now = now_ns(c.start_ns);
+  const std::int64_t now = clock->now_ns(c.start_ns);
   const int n = parts.surrogate->read(now, surrogate_readings.data(), int(surrogate_readings.size()));
   for (int i = 0; i < n; ++i) {
     const drivers::SurrogateReading& r = surrogate_readings[std::size_t(i)];
@@ -34,7 +34,7 @@ void TrackingLoop::Impl::without_pair(CycleState& c) {
   c.acquire_started_ns = monotonic_now_ns();
   read_back(c);
   c.acquired_ns = c.preprocessed_ns = monotonic_now_ns();
-  if (settings.simulated_clock) cycle_wall_start_ns = c.acquired_ns;
+  cycle_wall_start_ns = clock->work_started_ns(cycle_wall_start_ns, c.acquired_ns);
   c.oldest_frame_ns = c.newest_frame_ns = c.surrogate_read ? c.surrogate.t_ns : c.start_ns;
   GateInput& in = c.gate_input;
   in.views = 0;

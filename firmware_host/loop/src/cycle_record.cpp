@@ -56,7 +56,7 @@ JournalRecord TrackingLoop::Impl::record_of(const CycleState& c) const {
     r.command_sent = 1;
     r.command_acked_ns = c.command_acked_ns;
   }
-  if (!settings.simulated_clock && c.frames_ok) {  // the latency chain (latency_chain.hpp)
+  if (clock->measures_latency() && c.frames_ok) {  // the latency chain (latency_chain.hpp)
     r.frames_arrived_ns = c.acquired_ns;
     r.preprocessed_ns = c.preprocessed_ns;
     r.registered_ns = c.registered_ns;

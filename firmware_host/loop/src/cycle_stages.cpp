@@ -1,7 +1,8 @@
 // The cycle's stages (loop_impl.hpp), in the order they run:
-//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> advance -> settle.
+//   operator -> acquire -> preprocess -> register -> judge -> control -> gate -> actuate -> advance
+//     -> settle.
 // Each writes its part of the CycleState; the record and the statistics come after. The register
-// stage and its verdict are in cycle_registration.cpp.
+// stage is in cycle_registration.cpp, the judge stage (the verdict) in cycle_verdict.cpp.
 
 #include <cmath>
 
@@ -119,7 +120,7 @@ bool TrackingLoop::Impl::acquire(CycleState& c) {
   // On the simulated clock a frame arrives at its exposure time: waiting for the simulator's
   // renderer is not the loop's time.
   c.acquired_ns = monotonic_now_ns();
-  if (settings.simulated_clock) cycle_wall_start_ns = c.acquired_ns;
+  cycle_wall_start_ns = clock->work_started_ns(cycle_wall_start_ns, c.acquired_ns);
   c.oldest_frame_ns = c.newest_frame_ns = c.start_ns;
   if (c.frames_ok) {
     c.oldest_frame_ns = c.newest_frame_ns = pair.frames[0].timestamp_ns;
@@ -193,7 +194,7 @@ void TrackingLoop::Impl::control(CycleState& c) {
     const Pose patient = motion_of(couch_position, origin_room).inverse() * result.T_room_from_ct;
     patient_offset = tracking::delta_between(nominal, patient, origin_room).as_vector();
     // The frames' age and skew now, so that the model takes only a pair the gate will accept.
-    const std::int64_t checked_ns = now_ns(c.start_ns);
+    const std::int64_t checked_ns = clock->now_ns(c.start_ns);
     in.frame_age_ms = ms_between(c.oldest_frame_ns, checked_ns);
     in.pair_skew_ms = ms_between(c.oldest_frame_ns, c.newest_frame_ns);
     in.reference_similarity = reference_similarity;
@@ -243,7 +244,7 @@ void TrackingLoop::Impl::control(CycleState& c) {
   // Set-up and resumed moves are approved by the operator; in HOLD nothing moves, so only the
   // quality of the registration is judged (and counted towards FAULT).
   in.step_approved = c.aligning || approve_next_step || c.state == TrackingState::kHold;
-  const std::int64_t decision_ns = now_ns(c.start_ns);
+  const std::int64_t decision_ns = clock->now_ns(c.start_ns);
   in.frame_age_ms = in.registration_ok ? ms_between(c.oldest_frame_ns, decision_ns) : 0.0;
   in.pair_skew_ms = c.registered ? ms_between(c.oldest_frame_ns, c.newest_frame_ns) : 0.0;
 }
@@ -313,11 +314,10 @@ DeviceStatus TrackingLoop::Impl::send_step(CycleState& c) {
     approve_next_step = false;
     return DeviceStatus::kOk;
   }
-  // The command is due by the end of the period; the alignment's cycle (a cold registration that
-  // may run past its period, which is why ALIGN is not counted as an overrun) gets one period
-  // from now for its set-up move.
-  const std::int64_t due_ns =
-      c.aligning && !settings.simulated_clock ? std::max(c.start_ns, monotonic_now_ns()) + period_ns : c.start_ns + period_ns;
+  // The command is due by the end of the period; on the host's clock the alignment's cycle (a cold
+  // registration that may run past its period, which is why ALIGN is not counted as an overrun)
+  // gets one period from now for its set-up move (cycle_clock.hpp).
+  const std::int64_t due_ns = clock->command_due_ns(c.start_ns, period_ns, c.aligning);
   c.command_written_ns = monotonic_now_ns();
   const DeviceStatus sent = parts.actuator->command(step, to_deadline(due_ns));
   if (sent == DeviceStatus::kOk) {
@@ -326,7 +326,7 @@ DeviceStatus TrackingLoop::Impl::send_step(CycleState& c) {
     c.command_sent = parts.actuator->moves_patient();
     if (c.command_sent) {
       c.command = step;
-      c.command_acked_ns = settings.simulated_clock ? due_ns : monotonic_now_ns();
+      c.command_acked_ns = clock->acknowledged_ns(due_ns);
     }
     approve_next_step = false;
   }

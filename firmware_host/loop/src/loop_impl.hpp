@@ -3,11 +3,15 @@
 // (the parts, the buffers create() sized, the control state, the statistics); CycleState holds one
 // cycle, filled stage by stage in the design's order (DESIGN.md, "One cycle"):
 //
-//   operator -> acquire -> preprocess -> register -> control -> gate -> actuate -> advance
-//     -> settle -> record
+//   operator -> acquire -> preprocess -> register -> judge -> control -> gate -> actuate
+//     -> advance -> settle -> record
 //
-// Each stage reads what the earlier ones left in the CycleState and writes its own part; none
-// reaches back into an earlier stage. Within a cycle the state machine moves in two places only
+// Two judgements, in that order: the verdict (judge) says whether the registration is one to act
+// on, before control takes its result; the gate says whether the move is one to make.
+//
+// Each stage reads what the earlier ones left in the CycleState and writes its own part (judge,
+// whose verdict may reject the registration, clears register's `registered`); none reaches back
+// into an earlier stage's work. Within a cycle the state machine moves in two places only
 // (the run's start is IDLE to ALIGN before the first): the operator's commands (inputs, first) and
 // `advance`, which takes the cycle's one event from the gate's
 // decision and what the actuator answered. record_of() builds the journal record from the CycleState
@@ -19,6 +23,7 @@
 #include <vector>
 
 #include "lftrack/loop/correlation_model.hpp"
+#include "lftrack/loop/cycle_clock.hpp"
 #include "lftrack/loop/histogram.hpp"
 #include "lftrack/loop/imaging_on_demand.hpp"
 #include "lftrack/loop/latency_chain.hpp"
@@ -63,11 +68,13 @@ struct CycleState {
   // preprocess
   bool frames_usable = false;  // every frame passed the image-quality gate and was preprocessed
 
-  // register
-  bool registered = false;  // a finite result the verdict (ALIGN) accepted
+  // register (and judge, which clears `registered` when the verdict rejects the result)
+  bool registered = false;  // a finite result, not rejected by the verdict
   std::uint32_t evaluations = 0;
   double registration_ms = 0;
   bool registration_ran = false;
+
+  // judge
   bool verdict_checked = false;  // the NCC check ran (a DRR per view at the result)
   double verdict_check_ms = 0;   // its wall time: render and compare, every view
   bool view_checked = false;     // each view was registered alone from the result, and judged
@@ -108,6 +115,7 @@ struct CycleState {
 struct TrackingLoop::Impl {
   LoopParts parts;
   LoopSettings settings;
+  std::unique_ptr<CycleClock> clock;  // the host's or the simulated one (settings.simulated_clock)
   std::int64_t period_ns = 0;
   Eigen::Vector3d origin_room = Eigen::Vector3d::Zero();
   tracking::Pose nominal = tracking::Pose::Identity();
@@ -190,8 +198,8 @@ struct TrackingLoop::Impl {
   // end of an archived sequence: ended_by_source).
   bool cycle(std::int64_t index, std::int64_t start_ns, JournalRecord* record);
 
-  // The stages (cycle_stages.cpp; register_pair and check_views in cycle_registration.cpp), each
-  // on cycle_state.
+  // The stages (cycle_stages.cpp; register_pair in cycle_registration.cpp, judge and check_views
+  // in cycle_verdict.cpp), each on cycle_state.
   bool take_operator_command(CycleState& c);  // false: stop or quit
   void read_surrogate(CycleState& c);         // model imaging: the readings since the last cycle
   bool acquire(CycleState& c);                // false: an archived sequence has ended
@@ -199,6 +207,9 @@ struct TrackingLoop::Impl {
   void read_back(CycleState& c);              // the actuator's read-back and the simulated truth
   void preprocess(CycleState& c);
   void register_pair(CycleState& c);
+  // The verdict on the registration: a rejected one is no longer `registered`, and is the gate's
+  // registration failure with the verdict's reason.
+  void judge(CycleState& c);
   // The verdict's view check on the accepted result in `judged` when it is due and fits
   // (LoopSettings::view_check_every); rejudges into `verdict`.
   void check_views(CycleState& c, VerdictInput& judged, RegistrationVerdict& verdict);
@@ -239,11 +250,6 @@ struct TrackingLoop::Impl {
   OperatorView operator_view(std::int64_t index) const;
   void entered_hold(CycleState& c);
   bool result_is_finite() const;
-  // Now on the loop's clock: the real one; or, simulated, the cycle's start, whatever time the
-  // host took (the cycle's work takes no simulated time, so that a run repeats bit for bit from
-  // its seed under any load: counting the host's computing time made a loaded run's frames
-  // "stale" where an idle one's were not, and two runs of one seed diverged).
-  std::int64_t now_ns(std::int64_t cycle_start_ns) const;
   // The cycle's record, and its images when due, to the watchers' feed (parts.feed).
   void publish_to_feed(const JournalRecord& record);
   void write_status_line(std::int64_t index, const JournalRecord& r) const;

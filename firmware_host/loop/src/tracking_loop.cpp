@@ -59,6 +59,7 @@ Result<std::unique_ptr<TrackingLoop>> TrackingLoop::create(const LoopParts& part
   auto impl = std::make_unique<Impl>();
   impl->parts = parts;
   impl->settings = settings;
+  impl->clock = settings.simulated_clock ? simulated_cycle_clock(parts.observer) : host_cycle_clock();
   impl->period_ns = loop_period_ns(settings);
   impl->origin_room = parts.geometry.registration_origin_room_mm;
   impl->nominal = parts.geometry.nominal_T_room_from_ct;
@@ -152,6 +153,7 @@ bool TrackingLoop::Impl::cycle(std::int64_t index, std::int64_t start_ns, Journa
     if (!acquire(c)) return false;  // an archived sequence has ended: not a cycle
     preprocess(c);
     register_pair(c);
+    judge(c);
   } else {
     without_pair(c);
   }
@@ -209,10 +211,6 @@ bool TrackingLoop::Impl::result_is_finite() const {
   return result.stop != tracking::OptimizerStop::kNonFinite;
 }
 
-std::int64_t TrackingLoop::Impl::now_ns(std::int64_t cycle_start_ns) const {
-  return settings.simulated_clock ? cycle_start_ns : monotonic_now_ns();
-}
-
 Result<LoopSummary> TrackingLoop::run() {
   Impl& m = *impl_;
   try {
@@ -228,7 +226,7 @@ Result<LoopSummary> TrackingLoop::run() {
 Result<LoopSummary> TrackingLoop::run_cycles() {
 
   Impl& m = *impl_;
-  const bool simulated = m.settings.simulated_clock;
+  const CycleClock& clock = *m.clock;
   const std::int64_t period = m.period_ns;
   const std::int64_t loop_start_ns = monotonic_now_ns();
   (void)m.machine.on(TrackingEvent::kStart);  // IDLE -> ALIGN
@@ -260,7 +258,7 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     // for want of a slot, whatever the writer threads' scheduling. A writer stuck on its disk for
     // 10 s ends the waiting for the rest of the run (the queues then absorb it, as on the real
     // clock), so a stalled disk slows a simulation once, not every cycle.
-    if (simulated && wait_for_writers) {
+    if (clock.back_to_back() && wait_for_writers) {
       constexpr std::chrono::seconds kWriterWait{10};
       wait_for_writers = (m.parts.journal == nullptr || m.parts.journal->wait_taken(kWriterWait)) &&
                          (m.parts.archive == nullptr || m.parts.archive->wait_for_slot(kWriterWait));
@@ -275,7 +273,7 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     if (m.ended_by_source != nullptr) break;  // no pair: not a cycle
     if (aligned_at < 0 && m.summary.aligned) aligned_at = executed;
     const std::int64_t wall_end = monotonic_now_ns();
-    if (simulated) wall_start = m.cycle_wall_start_ns;  // the work after the frames arrived
+    wall_start = m.cycle_wall_start_ns;  // the cycle's own work (CycleClock::work_started_ns)
     // A cycle that ran in ALIGN (a cold registration, which may run past its period), also one
     // that a resume or reset took there from HOLD or FAULT.
     const bool was_align = m.cycle_state.aligning;
@@ -284,20 +282,12 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     m.summary.operator_refused += record.operator_refused;
     for (std::size_t i = 0; i < m.summary.operator_refused_by_reason.size(); ++i)
       m.summary.operator_refused_by_reason[i] += record.operator_refused_by_reason[i];
-    // The next cycle: on the simulated clock always the next period; on the real one the next
-    // period start not yet past (an overrun skips the periods it ran into).
-    NextCycle next;
-    const std::int64_t stall_ns =
-        simulated && m.parts.observer != nullptr ? m.parts.observer->simulated_stall_ns(index) : 0;
-    if (simulated && stall_ns <= 0) {
-      next.index = index + 1;
-      next.start_ns = loop_start_ns + next.index * period;
-    } else {  // the real clock, or an injected stall: the cycle ends a period and the stall after its start
-      next = next_cycle(loop_start_ns, period, index, simulated ? start_ns + period + stall_ns : wall_end);
-      if (next.overrun && !was_align) {
-        ++m.summary.overruns;
-        m.summary.skipped_periods += next.skipped;
-      }
+    // The next cycle: on the simulated clock the next period (unless a stall was injected); on
+    // the host's the next period start not yet past (an overrun skips the periods it ran into).
+    const NextCycle next = clock.next(loop_start_ns, period, index, start_ns, wall_end);
+    if (next.overrun && !was_align) {
+      ++m.summary.overruns;
+      m.summary.skipped_periods += next.skipped;
     }
     m.consecutive_overruns = next.overrun && !was_align ? m.consecutive_overruns + 1 : 0;
     record.overrun = next.overrun ? 1 : 0;
@@ -310,7 +300,7 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     index = next.index;
     start_ns = next.start_ns;
     m.plan_next_exposure(start_ns);
-    if (!simulated) sleep_until_ns(start_ns);
+    clock.wait_until(start_ns);
   }
   const std::uint64_t allocations_at_end =
       m.parts.allocation_count != nullptr ? m.parts.allocation_count() : 0;

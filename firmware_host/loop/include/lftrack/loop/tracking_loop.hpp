@@ -2,11 +2,12 @@
 // The real-time loop (DESIGN.md, "One cycle"), one implementation for `lftrack sim`, `run` and
 // `replay`: at a fixed period on absolute CLOCK_MONOTONIC deadlines, each cycle runs the stages
 //   operator -> acquire (pair, read-back) -> preprocess -> register (warm, time-boxed) ->
-//   control (prediction, correction) -> gate (the decision) -> actuate (an APPLY sent) ->
+//   judge (the verdict on the registration) -> control (prediction, correction) ->
+//   gate (the decision) -> actuate (an APPLY sent) ->
 //   advance (the state machine's one event) -> settle (hold, beam permit) -> record (journal,
 //   statistics)
 // in that order, each a function on the cycle's preallocated state (src/loop_impl.hpp,
-// src/cycle_stages.cpp, src/cycle_record.cpp).
+// src/cycle_stages.cpp, src/cycle_registration.cpp, src/cycle_verdict.cpp, src/cycle_record.cpp).
 // The first cycle is ALIGN: the cold, wide-range registration whose result is the set-up move
 // (operator-approved: no step limit) and the reference similarity the gate compares against.
 // ALIGN becomes TRACK only when the actuator has accepted the set-up move; a refused one is an
@@ -25,6 +26,8 @@
 // the missed periods skipped. With `simulated_clock` the loop does not sleep: cycle k starts at
 // k periods on a virtual clock on which the cycle's work takes no time (tests, studies; a sim
 // run's results are then independent of the host's speed and load, bit for bit from its seed).
+// Everything that differs between the two clocks is asked of the run's CycleClock
+// (cycle_clock.hpp); no stage branches on the choice.
 
 #include <atomic>
 #include <memory>

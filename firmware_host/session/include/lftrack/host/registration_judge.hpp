@@ -1,6 +1,6 @@
 #pragma once
 // One registration judged end to end, as `lftrack register` and `lftrack commission` judge it and
-// as the loop judges its alignment (cycle_registration.cpp): the image-quality gate on each raw frame
+// as the loop judges its alignment (cycle_verdict.cpp): the image-quality gate on each raw frame
 // over its ROI window, preprocessing, the plan from a start pose, each view's check NCC (the
 // frame against the DRR at the result), and the registration verdict (registration_verdict.hpp).
 // Frames the gate refuses are not registered; their verdict says which view and why.
