@@ -35,6 +35,14 @@
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
+
+using records::JournalBadSpan;
+using records::JournalContents;
+using records::JournalCycleGap;
+using records::JournalCycleRepeat;
+using records::pose_delta_json;
+using records::read_journal;
+using records::to_json;
 namespace {
 
 // A code's name, or "unknown N" for a code this build does not know (a newer build's journal, or

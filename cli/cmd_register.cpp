@@ -26,6 +26,8 @@
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
+
+using records::pose_delta_json;
 namespace {
 
 using tracking::Image;

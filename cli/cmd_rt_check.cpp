@@ -26,6 +26,14 @@ namespace lftrack::host::cli {
 namespace {
 
 namespace fs = std::filesystem;
+using rt_check::allowed_cpus;
+using rt_check::KernelPreemption;
+using rt_check::measure_wakeup_latency;
+using rt_check::parse_cpu_list;
+using rt_check::read_kernel_preemption;
+using rt_check::validate_wakeup_latency_options;
+using rt_check::WakeupLatencyOptions;
+using rt_check::WakeupLatencyReport;
 
 // Each number is checked when the options are parsed (a value out of range is a usage error,
 // exit 2); what depends on the host or on two values together (a CPU that is not there, a

@@ -21,6 +21,9 @@
 #include "serve_common.hpp"
 
 namespace lftrack::host::cli {
+
+using watch::ListenAddress;
+using watch::reachable_warning;
 namespace {
 
 using namespace serve;

@@ -17,6 +17,9 @@
 
 namespace lftrack::host::cli {
 
+using watch::parse_listen_address;
+using watch::reachable_warning;
+
 using namespace serve;
 
 namespace {

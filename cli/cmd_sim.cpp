@@ -30,6 +30,15 @@
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
+
+using watch::IgtlCounters;
+using watch::IgtlOptions;
+using watch::IgtlServer;
+using watch::MonitorOptions;
+using watch::MonitorServer;
+using watch::parse_listen_address;
+
+using records::to_json;
 namespace {
 
 struct SimOptions {

@@ -5,9 +5,9 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace lftrack;
-  host::JournalReadLimits limits;
+  records::JournalReadLimits limits;
   limits.max_records = 100000;
-  auto journal = host::read_journal(fuzz::write_input("run.lfj", data, size), limits);
+  auto journal = records::read_journal(fuzz::write_input("run.lfj", data, size), limits);
   if (!journal.ok()) fuzz::expect_reason(journal.status());
   return 0;
 }

@@ -18,6 +18,10 @@
 #include "study_outputs.hpp"
 
 namespace lftrack::host {
+
+using records::JournalCycleRepeat;
+using records::read_journal;
+using records::to_json;
 namespace {
 
 namespace fs = std::filesystem;

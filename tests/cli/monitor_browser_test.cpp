@@ -26,6 +26,11 @@
 #include "igtl_test_client.hpp"
 
 namespace lftrack::host {
+
+using watch::open_listening_socket;
+using watch::ras_from_lps;
+
+using records::read_journal;
 namespace {
 
 namespace fs = std::filesystem;

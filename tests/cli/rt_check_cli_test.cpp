@@ -69,7 +69,7 @@ TEST(RtCheckCli, JsonReportCarriesTheFiguresAndTheScenesSettings) {
   EXPECT_DOUBLE_EQ(j["cycle_period_ms"].get<double>(), 100.0);
   EXPECT_DOUBLE_EQ(j["budget_us"].get<double>(), 10000.0);
   EXPECT_EQ(j["load_note"], "test");
-  EXPECT_EQ(j["cpus"].size(), allowed_cpus().size());
+  EXPECT_EQ(j["cpus"].size(), rt_check::allowed_cpus().size());
   for (const char* key : {"release", "version", "preempt_rt", "model"}) EXPECT_TRUE(j["kernel"].contains(key)) << key;
   for (const auto& c : j["cpus"]) {
     for (const char* key : {"cpu", "samples", "min_us", "mean_us", "p50_us", "p99_us", "p999_us", "max_us",
@@ -88,7 +88,7 @@ TEST(RtCheckCli, JsonReportCarriesTheFiguresAndTheScenesSettings) {
 
 TEST(RtCheckCli, TakesTheScenesPriorityAndCpusAndWritesTheHistogramAndPlot) {
   test::TempDir dir;
-  const int cpu = allowed_cpus().back();
+  const int cpu = rt_check::allowed_cpus().back();
   std::string scene = *builtin_scene_text(kBuiltinPhantom);
   const std::string rt = "    mode: ignore          # a treatment-room host sets enforce and cpus\n";
   ASSERT_NE(scene.find(rt), std::string::npos);

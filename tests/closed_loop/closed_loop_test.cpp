@@ -27,6 +27,9 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using records::read_journal;
+using records::to_json;
 namespace {
 
 TEST_F(ClosedLoop, TracksDriftAndBreathingWithoutAllocatingInThousandCycles) {

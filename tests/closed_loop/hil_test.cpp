@@ -17,6 +17,8 @@
 #include "lftrack/records/loop_json.hpp"
 
 namespace lftrack::host {
+
+using records::to_json;
 namespace {
 
 using sim::CouchServerFault;

@@ -12,6 +12,8 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using records::to_json;
 namespace {
 
 const char* kModelBreathingWithMarker =

@@ -63,7 +63,7 @@ inline Scene small_scene(const std::string& motion_yaml, const std::string& fram
 // A run that should track every cycle: every cycle ends in TRACK, with no HOLD or FAULT; on
 // failure the summary (with the transitions and their reasons) is printed.
 inline void expect_tracks_every_cycle(const LoopSummary& s, std::int64_t cycles) {
-  SCOPED_TRACE(to_json(s).dump());
+  SCOPED_TRACE(records::to_json(s).dump());
   EXPECT_EQ(s.cycles, cycles);
   EXPECT_EQ(s.states[std::size_t(TrackingState::kTrack)], cycles);
   EXPECT_EQ(s.holds, 0);
@@ -94,7 +94,7 @@ inline std::filesystem::path shared_light_field_dir(const PreparedScene& p) {
 
 struct LoopRun {
   LoopSummary summary;
-  JournalContents journal;
+  records::JournalContents journal;
 };
 
 class ClosedLoop : public ::testing::Test {
@@ -128,7 +128,7 @@ class ClosedLoop : public ::testing::Test {
     EXPECT_TRUE(summary.ok()) << summary.status().message();
     if (!summary.ok()) return r;
     r.summary = *summary;
-    auto journal = read_journal(options.journal);
+    auto journal = records::read_journal(options.journal);
     EXPECT_TRUE(journal.ok()) << journal.status().message();
     if (journal.ok()) {  // what `journal export --dicom-sro` checks the scene by
       EXPECT_EQ(journal->scene_fingerprint, scene_fingerprint(scene_->scene));

@@ -18,6 +18,9 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using records::read_journal;
+using records::to_json;
 namespace {
 
 namespace fs = std::filesystem;

@@ -14,6 +14,8 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using records::to_json;
 namespace {
 
 class ArchiveAndReplay : public ClosedLoop {

@@ -34,6 +34,8 @@
 #include "operator_client.hpp"
 
 namespace lftrack::host {
+
+using records::to_json;
 namespace {
 
 using namespace std::chrono_literals;

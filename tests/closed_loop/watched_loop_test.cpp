@@ -18,6 +18,12 @@
 #include "igtl_test_client.hpp"
 
 namespace lftrack::host {
+
+using watch::IgtlOptions;
+using watch::MonitorOptions;
+using watch::ras_from_lps;
+
+using records::to_json;
 namespace {
 
 // A TCP client that connects and never reads (a stalled watcher).

@@ -21,6 +21,8 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using records::read_journal;
 namespace {
 
 using tracking::PixelWindow;

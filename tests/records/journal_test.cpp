@@ -29,6 +29,9 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using records::JournalReadLimits;
+using records::read_journal;
 namespace {
 
 JournalRecord record(std::uint64_t cycle) {

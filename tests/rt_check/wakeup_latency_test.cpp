@@ -17,7 +17,7 @@
 #include <string>
 #include <thread>
 
-namespace lftrack::host {
+namespace lftrack::rt_check {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -339,4 +339,4 @@ TEST(WakeupLatency, KernelPreemptionAgreesWithUname) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::rt_check

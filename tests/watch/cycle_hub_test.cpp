@@ -7,7 +7,10 @@
 
 #include "watch_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::CycleFeed;
+using host::TrackingState;
 namespace {
 
 using test_watch::HubOnFeed;
@@ -108,4 +111,4 @@ TEST(CycleHub, RefusesWhatItCannotWatch) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

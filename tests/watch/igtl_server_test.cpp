@@ -16,7 +16,10 @@
 #include "igtl_test_client.hpp"
 #include "watch_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::FeedRecord;
+using host::TrackingState;
 namespace {
 
 using test_watch::HubOnFeed;
@@ -257,4 +260,4 @@ TEST(IgtlServer, ManyClientsAreBoundedAndADisconnectIsNoticed) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -22,7 +22,18 @@
 #include "test_data.hpp"
 #include "watch_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::BeamWithheld;
+using host::FeedRecord;
+using host::GateDecision;
+using host::GateReason;
+using host::JournalRecord;
+using host::OperatorCommand;
+using host::OperatorPoll;
+using host::OperatorRefusal;
+using host::OperatorView;
+using host::TrackingState;
 namespace {
 
 using test_watch::HubOnFeed;
@@ -522,4 +533,4 @@ TEST(MonitorServer, RefusesBadSettingsAndABusyPort) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -16,7 +16,14 @@
 #include "test_data.hpp"
 #include "watch_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::OperatorCommand;
+using host::OperatorPoll;
+using host::OperatorRefusal;
+using host::OperatorRequest;
+using host::OperatorView;
+using host::TrackingState;
 namespace {
 
 namespace fs = std::filesystem;
@@ -289,4 +296,4 @@ TEST(PageOperator, AFloodIsBoundedAndAnsweredBusy) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

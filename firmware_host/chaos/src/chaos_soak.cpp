@@ -23,7 +23,7 @@ using host::HilProtocol;
 using host::LoopSession;
 using host::LoopSessionOptions;
 using host::PreparedScene;
-using host::read_journal;
+using records::read_journal;
 
 namespace {
 

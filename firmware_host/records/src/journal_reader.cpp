@@ -20,9 +20,11 @@
 #include "lftrack/loop/crc32c.hpp"
 #include "lftrack/loop/journal_format.hpp"
 
-namespace lftrack::host {
+namespace lftrack::records {
 
-using namespace journal_format;  // NOLINT(google-build-using-namespace): the format's constants
+using host::crc32c;
+using host::JournalRecord;
+using namespace host::journal_format;  // NOLINT(google-build-using-namespace): the format's constants
 
 namespace {
 
@@ -338,4 +340,4 @@ Result<JournalContents> read_journal(const std::filesystem::path& file, const Jo
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::records

@@ -6,7 +6,20 @@
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/pose.hpp"
 
-namespace lftrack::host {
+namespace lftrack::records {
+
+using host::CommandLatencyReport;
+using host::GateDecision;
+using host::key_of;
+using host::kLatencyLinks;
+using host::LatencyChainReport;
+using host::LatencyLink;
+using host::LinkLatency;
+using host::LoopSummary;
+using host::LoopTransition;
+using host::OperatorRefusal;
+using host::TargetResidualReport;
+using host::TrackingState;
 
 nlohmann::json pose_delta_json(const double d[6]) {
   using tracking::rad_to_deg;
@@ -118,4 +131,4 @@ nlohmann::json to_json(const CommandLatencyReport& r) {
   return {{"commands", r.commands}, {"p50", r.p50_ms}, {"p95", r.p95_ms}, {"p99", r.p99_ms}, {"max", r.max_ms}};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::records

@@ -13,7 +13,7 @@
 #include "lftrack/rt_check/wakeup_latency.hpp"
 #include "rt_check_text.hpp"
 
-namespace lftrack::host {
+namespace lftrack::rt_check {
 
 namespace {
 constexpr int kMaxCpuNumber = 4095;
@@ -156,4 +156,4 @@ KernelPreemption read_kernel_preemption() {
   return k;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::rt_check

@@ -6,11 +6,11 @@
 #include <string>
 #include <vector>
 
-namespace lftrack::host::rt_check_text {
+namespace lftrack::rt_check::rt_check_text {
 
 std::string number_text(double v);                  // "%g"; NaN, inf, -inf by name
 std::string cpu_list_text(const std::vector<int>& cpus);  // "0,2,3"; "none" when empty
 std::optional<std::string> read_first_line(const char* path);  // of a small file, or nothing
 std::vector<int> online_cpus();  // /sys/devices/system/cpu/online, else 0 .. configured - 1
 
-}  // namespace lftrack::host::rt_check_text
+}  // namespace lftrack::rt_check::rt_check_text

@@ -27,8 +27,12 @@
 #include "lftrack/loop/realtime_setup.hpp"
 #include "rt_check_text.hpp"
 
-namespace lftrack::host {
+namespace lftrack::rt_check {
 
+using host::apply_realtime_setup;
+using host::monotonic_now_ns;
+using host::RealtimeSpec;
+using host::sleep_until_ns;
 using rt_check_text::cpu_list_text;
 using rt_check_text::number_text;
 using rt_check_text::online_cpus;
@@ -345,4 +349,4 @@ Result<WakeupLatencyReport> measure_wakeup_latency(const WakeupLatencyOptions& o
   return report;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::rt_check

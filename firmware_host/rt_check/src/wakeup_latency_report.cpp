@@ -5,7 +5,7 @@
 #include "lftrack/rt_check/wakeup_latency.hpp"
 #include "rt_check_text.hpp"
 
-namespace lftrack::host {
+namespace lftrack::rt_check {
 
 using rt_check_text::cpu_list_text;
 
@@ -113,4 +113,4 @@ nlohmann::json to_json(const WakeupLatencyReport& r) {
   return j;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::rt_check

@@ -16,6 +16,14 @@
 
 namespace lftrack::host {
 
+using watch::CycleHub;
+using watch::HubOptions;
+using watch::IgtlOptions;
+using watch::IgtlServer;
+using watch::MonitorServer;
+using watch::PageOperator;
+using watch::reachable_warning;
+
 namespace {
 
 // An operator input someone else owns (SessionHooks::operator_input) among the session's own.

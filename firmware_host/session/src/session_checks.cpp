@@ -16,6 +16,11 @@
 #include "session_parts.hpp"
 
 namespace lftrack::host {
+
+using watch::check_monitor_origins;
+using watch::ListenAddress;
+using watch::open_listening_socket;
+using watch::TokenFile;
 namespace {
 
 // The journal, the archive and the control socket are three different places: a socket opened

@@ -55,10 +55,10 @@ struct LoopSession::Parts {
   // The watchers, in the order they depend on each other (destroyed in reverse: the servers,
   // then the hub that feeds them, then what the hub reads).
   std::unique_ptr<CycleFeed> feed;
-  std::unique_ptr<PageOperator> page_operator;
-  std::unique_ptr<CycleHub> hub;
-  std::unique_ptr<MonitorServer> monitor;
-  std::unique_ptr<IgtlServer> igtl;
+  std::unique_ptr<watch::PageOperator> page_operator;
+  std::unique_ptr<watch::CycleHub> hub;
+  std::unique_ptr<watch::MonitorServer> monitor;
+  std::unique_ptr<watch::IgtlServer> igtl;
   OperatorInputs operators;
   std::unique_ptr<TrackingLoop> loop;
 };

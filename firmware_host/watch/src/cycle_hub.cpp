@@ -7,7 +7,18 @@
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::CycleFeed;
+using host::exclude_this_thread_from_allocation_count;
+using host::FeedImages;
+using host::FeedRecord;
+using host::GateReason;
+using host::JournalRecord;
+using host::kMaxFeedViews;
+using host::make_current_thread_best_effort;
+using host::TrackingEvent;
+using host::TrackingState;
 
 namespace {
 
@@ -205,4 +216,4 @@ std::shared_ptr<const DisplayImages> CycleHub::images() const {
   return images_;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::watch {
 namespace {
 
 // Block means (NaN where a block has nothing valid) windowed to 0..255 by their percentiles.
@@ -80,4 +80,4 @@ GreyImage raw_thumbnail(const tracking::Image<std::uint16_t>& raw, int max_side,
   return to_grey(means, rows, cols);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -7,7 +7,7 @@
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/watch/cycle_hub.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 // `values` averaged over bin x bin blocks (only pixels marked in `valid`, when it is given) and
 // windowed to 0..255; a block with no valid pixel is 0. Non-finite values count as invalid.
@@ -22,4 +22,4 @@ GreyImage raw_thumbnail(const tracking::Image<std::uint16_t>& raw, int max_side,
 // The bin that brings the longer of rows and cols to at most max_side.
 int bin_for(int rows, int cols, int max_side);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

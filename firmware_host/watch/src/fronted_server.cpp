@@ -19,7 +19,7 @@
 #include <string_view>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::watch {
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -338,4 +338,4 @@ bool FrontedServer::process_and_close_socket(socket_t sock) {
   return ok;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

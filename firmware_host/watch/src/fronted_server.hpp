@@ -28,7 +28,7 @@
 #include <memory>
 #include <string_view>
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 // The workers a FrontedServer hands whole requests to. A request the server's `urgent` test
 // picks (the operator's: it carries the run's token) goes ahead of every request waiting, so
@@ -74,4 +74,4 @@ class FrontedServer final : public httplib::Server {
   std::atomic<std::uint64_t> dropped_{0};
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

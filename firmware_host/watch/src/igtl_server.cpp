@@ -18,7 +18,13 @@
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::exclude_this_thread_from_allocation_count;
+using host::FeedRecord;
+using host::JournalRecord;
+using host::make_current_thread_best_effort;
+using host::TrackingState;
 
 Eigen::Matrix4d ras_from_lps(const Eigen::Matrix4d& T) {
   const Eigen::Matrix4d F = Eigen::Vector4d(-1, -1, 1, 1).asDiagonal();
@@ -245,4 +251,4 @@ void IgtlServer::run() {
   clients_now_ = 0;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

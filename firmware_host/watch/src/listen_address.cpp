@@ -9,7 +9,7 @@
 #include <cerrno>
 #include <cstring>
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 bool ListenAddress::loopback() const { return address.rfind("127.", 0) == 0; }
 bool ListenAddress::wildcard() const { return address == "0.0.0.0"; }
@@ -63,4 +63,4 @@ Result<int> open_listening_socket(const ListenAddress& where, int* port) {
   return fd;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -8,7 +8,22 @@
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/records/loop_json.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::BeamWithheld;
+using host::GateDecision;
+using host::GateReason;
+using host::JournalRecord;
+using host::key_of;
+using host::kLatencyLinks;
+using host::latency_links_ms;
+using host::LatencyLink;
+using host::OperatorRefusal;
+using host::refusals_text;
+using host::total_ms;
+using host::TrackingState;
+
+using records::pose_delta_json;
 namespace {
 
 std::string base64(const std::vector<std::uint8_t>& bytes) {
@@ -130,4 +145,4 @@ nlohmann::json images_json(const DisplayImages& images) {
           {"render_ms", images.render_ms}, {"views", views}};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

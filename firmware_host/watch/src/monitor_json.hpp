@@ -6,7 +6,7 @@
 
 #include "lftrack/watch/cycle_hub.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 // The current snapshot: cycle, state, the gate's last decision and reason, the registered
 // offset and the correction sent, similarity, the correction's latency chain (latency_chain.hpp;
@@ -18,4 +18,4 @@ nlohmann::json trace_json(const std::vector<TracePoint>& points);
 // Display images, pixels as base64 of 8-bit grey rows.
 nlohmann::json images_json(const DisplayImages& images);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

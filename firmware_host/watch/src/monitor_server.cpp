@@ -19,7 +19,13 @@
 #include "monitor_assets.hpp"
 #include "monitor_json.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::exclude_this_thread_from_allocation_count;
+using host::make_current_thread_best_effort;
+using host::OperatorCommand;
+using host::OperatorRefusal;
+using host::OperatorRequest;
 namespace {
 
 constexpr const char* kJson = "application/json";
@@ -363,4 +369,4 @@ void MonitorServer::add_routes() {
   });
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -13,7 +13,7 @@
 #include <iterator>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 Result<std::string> random_hex(std::size_t bytes) {
   std::vector<unsigned char> raw(bytes);
@@ -132,4 +132,4 @@ bool NonceBook::spend(const std::string& nonce, Clock::time_point now) {
   return false;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

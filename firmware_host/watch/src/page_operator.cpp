@@ -2,7 +2,14 @@
 
 #include <algorithm>
 
-namespace lftrack::host {
+namespace lftrack::watch {
+
+using host::judge_operator_request;
+using host::OperatorCommand;
+using host::OperatorPoll;
+using host::OperatorRefusal;
+using host::OperatorRequest;
+using host::OperatorView;
 
 int PageOperator::refusal_index(OperatorRefusal why) {
   switch (why) {
@@ -83,4 +90,4 @@ void PageOperator::on_hold(const OperatorView& view, OperatorPoll* out) {
   hold_epoch_.fetch_add(1, std::memory_order_acq_rel);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -15,7 +15,7 @@
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::records {
 
 // Bytes between frames that are not a valid frame, from `offset` (bytes from the start of the
 // file) for `bytes`.
@@ -56,7 +56,7 @@ struct JournalReadLimits {
 struct JournalContents {
   std::uint32_t format_version = 0;
   std::array<std::uint8_t, 16> scene_fingerprint{};  // zeros: the writer recorded none
-  std::vector<JournalRecord> records;     // every valid frame, in file order (repeats included)
+  std::vector<host::JournalRecord> records;          // every valid frame, in file order (repeats included)
   std::vector<JournalBadSpan> bad_spans;  // in file order; a torn tail is the last one
   std::vector<JournalCycleGap> gaps;
   std::vector<JournalCycleRepeat> repeats;
@@ -85,4 +85,4 @@ struct JournalContents {
 // up to twice that (about 2 GB at the default record limit).
 Result<JournalContents> read_journal(const std::filesystem::path& file, const JournalReadLimits& limits = {});
 
-}  // namespace lftrack::host
+}  // namespace lftrack::records

@@ -28,7 +28,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::rt_check {
 
 struct WakeupLatencyOptions {
   double interval_us = 1000;  // 50 us .. 1 s
@@ -125,4 +125,4 @@ struct KernelPreemption {
 };
 KernelPreemption read_kernel_preemption();
 
-}  // namespace lftrack::host
+}  // namespace lftrack::rt_check

@@ -85,8 +85,8 @@ struct LoopSessionOptions {
   SessionHooks hooks;
   // Watchers of the loop (watch/), fed through a CycleFeed the loop never waits for: the
   // operator's monitor page (its actions join the operator inputs) and the OpenIGTLink server.
-  std::optional<MonitorOptions> monitor;
-  std::optional<IgtlOptions> igtl;
+  std::optional<watch::MonitorOptions> monitor;
+  std::optional<watch::IgtlOptions> igtl;
 };
 
 // The room's geometry as the loop sees it: the scene's detectors, ROI windows, nominal pose and
@@ -129,9 +129,9 @@ class LoopSession {
   sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
   const drivers::CanRobot* can_robot() const;        // the CAN robot driver (HIL or run); null otherwise
   sim::VirtualRobot* virtual_robot();                // HIL: for fault injection
-  const MonitorServer* monitor() const;              // null without --monitor
-  const IgtlServer* igtl() const;                    // null without --igtl
-  const CycleHub* hub() const;                       // null without watchers
+  const watch::MonitorServer* monitor() const;       // null without --monitor
+  const watch::IgtlServer* igtl() const;             // null without --igtl
+  const watch::CycleHub* hub() const;                // null without watchers
 
   struct Parts;  // defined in loop_session.cpp
 

@@ -31,7 +31,7 @@
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 struct HubOptions {
   std::string scene;
@@ -64,7 +64,7 @@ struct TracePoint {
 
 struct HubTransition {
   std::int64_t cycle = 0;
-  TrackingState from = TrackingState::kIdle, to = TrackingState::kIdle;
+  host::TrackingState from = host::TrackingState::kIdle, to = host::TrackingState::kIdle;
   std::string reason;
   std::uint32_t hold_id = 0;
 };
@@ -78,7 +78,7 @@ struct HubCounts {
 struct HubStatus {
   bool started = false;  // a record has arrived
   std::uint64_t seq = 0;  // records absorbed so far (the newest record's number)
-  FeedRecord last;
+  host::FeedRecord last;
   HubCounts counts;
   std::vector<HubTransition> transitions;  // oldest first
   std::uint64_t images_seq = 0;            // changes when new display images are ready
@@ -111,7 +111,7 @@ class CycleHub {
  public:
   // Starts the hub's thread on `feed` (which must outlive the hub). The thread drops from the
   // cycle's real-time priority to best effort: it never competes with the loop.
-  static Result<std::unique_ptr<CycleHub>> start(CycleFeed* feed, HubOptions options);
+  static Result<std::unique_ptr<CycleHub>> start(host::CycleFeed* feed, HubOptions options);
   ~CycleHub();
   void stop();
 
@@ -128,28 +128,28 @@ class CycleHub {
   std::vector<TracePoint> trace_after(std::int64_t after_cycle, std::size_t max) const;
   // Records numbered after `after_seq`, oldest first (at most `max`); *skipped counts those
   // already forgotten (a watcher more than record_history behind).
-  std::vector<FeedRecord> records_after(std::uint64_t after_seq, std::size_t max, std::uint64_t* first_seq,
-                                        std::uint64_t* skipped) const;
+  std::vector<host::FeedRecord> records_after(std::uint64_t after_seq, std::size_t max,
+                                              std::uint64_t* first_seq, std::uint64_t* skipped) const;
   std::shared_ptr<const DisplayImages> images() const;
   bool stopped() const { return stop_.load(); }
 
  private:
-  explicit CycleHub(CycleFeed* feed, HubOptions options);
+  explicit CycleHub(host::CycleFeed* feed, HubOptions options);
   void run();
-  void absorb(const FeedRecord& r);
-  void make_display(const FeedImages& images);
+  void absorb(const host::FeedRecord& r);
+  void make_display(const host::FeedImages& images);
 
-  CycleFeed* feed_;
+  host::CycleFeed* feed_;
   HubOptions options_;
   mutable std::mutex mutex_;
   mutable std::condition_variable news_;
   HubStatus status_;
   std::deque<TracePoint> trace_;
-  std::deque<FeedRecord> history_;  // numbered status_.seq - size + 1 ... status_.seq
+  std::deque<host::FeedRecord> history_;  // numbered status_.seq - size + 1 ... status_.seq
   std::shared_ptr<const DisplayImages> images_;
   std::chrono::steady_clock::time_point next_render_{};
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -26,7 +26,7 @@
 #include "lftrack/watch/cycle_hub.hpp"
 #include "lftrack/watch/listen_address.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 struct IgtlOptions {
   ListenAddress listen;
@@ -79,4 +79,4 @@ class IgtlServer {
   std::atomic<std::uint64_t> written_through_seq_{0};  // every client's socket took the cycles up to it
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

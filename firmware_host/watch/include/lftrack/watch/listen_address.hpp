@@ -9,7 +9,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 struct ListenAddress {
   std::string address = "127.0.0.1";  // dotted IPv4
@@ -31,4 +31,4 @@ std::string reachable_warning(const ListenAddress& at, const std::string& server
 // which port it took (`where.port` 0: the kernel's choice). The caller closes the descriptor.
 Result<int> open_listening_socket(const ListenAddress& where, int* port);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -37,7 +37,7 @@ class Server;
 struct Request;
 }
 
-namespace lftrack::host {
+namespace lftrack::watch {
 class FrontedServer;
 
 struct MonitorOptions {
@@ -102,4 +102,4 @@ class MonitorServer {
   std::atomic<bool> stopping_{false};
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

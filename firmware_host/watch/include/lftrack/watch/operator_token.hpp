@@ -17,7 +17,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
 // Random bytes from OpenSSL's generator as lower-case hexadecimal (2 digits a byte).
 Result<std::string> random_hex(std::size_t bytes);
@@ -70,4 +70,4 @@ class NonceBook {
   int next_ = 0;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch

@@ -23,41 +23,41 @@
 
 #include "lftrack/loop/operator_input.hpp"
 
-namespace lftrack::host {
+namespace lftrack::watch {
 
-class PageOperator final : public OperatorInput {
+class PageOperator final : public host::OperatorInput {
  public:
   static constexpr int kSlots = 16;
 
   struct Verdict {
     enum class Outcome { kAccepted, kRefused, kBusy, kNoAnswer } outcome = Outcome::kNoAnswer;
-    OperatorRefusal refusal = OperatorRefusal::kNone;  // when refused
+    host::OperatorRefusal refusal = host::OperatorRefusal::kNone;  // when refused
   };
 
   // The server's threads. Queues `request` for the loop and waits up to `wait` for its verdict;
   // kBusy when kSlots requests are already waiting, kNoAnswer when the loop did not poll in time
   // (the request is then withdrawn: it never acts later).
-  Verdict submit(const OperatorRequest& request, std::chrono::milliseconds wait);
+  Verdict submit(const host::OperatorRequest& request, std::chrono::milliseconds wait);
   // A request the page's checks refused (kBadToken, kReplayed, kOrigin, kMalformed): journaled at
   // the next poll.
-  void refused_before_loop(OperatorRefusal why);
+  void refused_before_loop(host::OperatorRefusal why);
   // Any thread: requests queued and not yet decided by the loop.
   int waiting() const;
 
   // The loop's thread.
-  void poll(const OperatorView& view, OperatorPoll* out) override;
-  void on_hold(const OperatorView& view, OperatorPoll* out) override;
+  void poll(const host::OperatorView& view, host::OperatorPoll* out) override;
+  void on_hold(const host::OperatorView& view, host::OperatorPoll* out) override;
 
  private:
   enum class SlotState : std::uint8_t { kFree, kWaiting, kDecided };
   struct Slot {
     SlotState state = SlotState::kFree;
-    OperatorRequest request;
+    host::OperatorRequest request;
     std::uint64_t epoch = 0;  // hold_epoch_ when submitted
     Verdict verdict;
   };
   static constexpr int kRefusalKinds = 4;
-  static int refusal_index(OperatorRefusal why);
+  static int refusal_index(host::OperatorRefusal why);
 
   mutable std::mutex mutex_;
   std::condition_variable decided_;
@@ -66,4 +66,4 @@ class PageOperator final : public OperatorInput {
   std::array<std::atomic<std::uint32_t>, kRefusalKinds> refused_{};
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::watch
