@@ -17,6 +17,8 @@
 
 namespace lftrack::host::cli {
 
+using loop::TrackingState;
+
 namespace {
 
 std::atomic<bool> g_interrupt{false};

@@ -28,6 +28,10 @@
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::host::cli {
+
+using loop::judge_registration;
+using loop::judges_view_shift;
+using loop::VerdictLimits;
 namespace {
 
 namespace fs = std::filesystem;

@@ -36,6 +36,20 @@
 
 namespace lftrack::host::cli {
 
+using loop::BeamWithheld;
+using loop::GateDecision;
+using loop::GateReason;
+using loop::ImagingReason;
+using loop::JournalRecord;
+using loop::LatencyChain;
+using loop::OperatorCommand;
+using loop::OperatorRefusal;
+using loop::refusals_text;
+using loop::SurrogateFault;
+using loop::TrackingAccuracy;
+using loop::TrackingEvent;
+using loop::TrackingState;
+
 using records::JournalBadSpan;
 using records::JournalContents;
 using records::JournalCycleGap;

@@ -27,6 +27,11 @@
 
 namespace lftrack::host::cli {
 
+using loop::RegistrationVerdict;
+using loop::verdict_text;
+using loop::VerdictInput;
+using loop::VerdictReason;
+
 using records::pose_delta_json;
 namespace {
 

@@ -23,6 +23,8 @@
 
 namespace lftrack::host::cli {
 
+using loop::LoopSpec;
+
 namespace {
 
 namespace fs = std::filesystem;

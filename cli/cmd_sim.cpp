@@ -31,6 +31,23 @@
 
 namespace lftrack::host::cli {
 
+using loop::apply_realtime_setup;
+using loop::check_auto_resume_s;
+using loop::check_realtime_setup;
+using loop::FrameArchive;
+using loop::ImagingSpec;
+using loop::kLatencyLinks;
+using loop::LatencyLink;
+using loop::LoopSpec;
+using loop::LoopSummary;
+using loop::LoopTransition;
+using loop::process_allocation_count;
+using loop::realtime_not_applied;
+using loop::RealtimeReport;
+using loop::RealtimeSpec;
+using loop::refusals_text;
+using loop::TrackingState;
+
 using watch::IgtlCounters;
 using watch::IgtlOptions;
 using watch::IgtlServer;

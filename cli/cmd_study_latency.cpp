@@ -10,6 +10,11 @@
 
 namespace lftrack::host::cli {
 
+using loop::kLatencyLinks;
+using loop::LatencyChainReport;
+using loop::LatencyLink;
+using loop::LinkLatency;
+
 Command add_study_latency_command(CLI::App* parent) {
   struct Options {
     std::vector<std::string> journals;

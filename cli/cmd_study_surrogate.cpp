@@ -13,6 +13,8 @@
 
 namespace lftrack::host::cli {
 
+using loop::CorrelationModelSpec;
+
 Command add_study_surrogate_command(CLI::App* parent) {
   struct Options {
     std::string scene = "builtin:phantom";

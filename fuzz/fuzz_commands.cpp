@@ -12,9 +12,9 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace lftrack;
-  host::OperatorRequest request;
-  if (host::parse_operator_request(reinterpret_cast<const char*>(data), size, &request) &&
-      request.command == host::OperatorCommand::kNone)
+  loop::OperatorRequest request;
+  if (loop::parse_operator_request(reinterpret_cast<const char*>(data), size, &request) &&
+      request.command == loop::OperatorCommand::kNone)
     std::abort();  // accepted, yet no command
   if (size >= 2 * sizeof(can_frame)) {
     can_frame a{}, b{};

@@ -21,6 +21,11 @@
 
 namespace lftrack::host {
 
+using loop::judge_registration;
+using loop::RegistrationVerdict;
+using loop::VerdictLimits;
+using loop::VerdictReason;
+
 using tracking::Pose;
 using tracking::PoseDelta;
 

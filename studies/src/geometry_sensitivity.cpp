@@ -17,6 +17,9 @@
 
 namespace lftrack::host {
 
+using loop::judge_registration;
+using loop::RegistrationVerdict;
+
 using tracking::Pose;
 using tracking::XrayView;
 

@@ -19,6 +19,14 @@
 
 namespace lftrack::host {
 
+using loop::JournalRecord;
+using loop::kLatencyLinks;
+using loop::latency_links_ms;
+using loop::LatencyLink;
+using loop::LinkLatency;
+using loop::NoChain;
+using loop::total_ms;
+
 using records::JournalCycleRepeat;
 using records::read_journal;
 using records::to_json;
@@ -96,7 +104,7 @@ LinePlot histogram_plot(const LatencyStudy& s) {
 }  // namespace
 
 double CommandChain::total_ms() const {
-  return host::total_ms(links_ms);
+  return loop::total_ms(links_ms);
 }
 
 Result<LatencyStudy> run_latency_study(const std::vector<fs::path>& journals) {

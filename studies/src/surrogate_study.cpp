@@ -17,6 +17,14 @@
 #include "study_outputs.hpp"
 
 namespace lftrack::host {
+
+using loop::check_correlation_model_spec;
+using loop::CorrelationModel;
+using loop::CorrelationModelSpec;
+using loop::model_window_at;
+using loop::rate_window_at;
+using loop::SurrogateSample;
+using loop::SurrogateStream;
 namespace {
 
 namespace fs = std::filesystem;

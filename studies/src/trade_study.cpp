@@ -28,6 +28,10 @@
 #include "quantile.hpp"
 
 namespace lftrack::host {
+
+using loop::judge_registration;
+using loop::RegistrationVerdict;
+using loop::VerdictReason;
 namespace {
 
 using Clock = std::chrono::steady_clock;

@@ -12,6 +12,11 @@
 #include "quantile.hpp"
 
 namespace lftrack::host {
+
+using loop::judge_registration;
+using loop::judges_view_shift;
+using loop::VerdictInput;
+using loop::VerdictLimits;
 namespace {
 
 using tracking::Image;

@@ -9,14 +9,21 @@
 
 #include <nlohmann/json.hpp>
 
-#include "lftrack/studies/plastimatch_peer.hpp"
+#include "cli_text.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/loop/journal.hpp"
+#include "lftrack/loop/operator_input.hpp"
+#include "lftrack/studies/plastimatch_peer.hpp"
 #include "lftrack/studies/trade_study.hpp"
 #include "lftrack/tracking/image_io.hpp"
-#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::BeamWithheld;
+using loop::JournalRecord;
+using loop::JournalWriter;
+using loop::OperatorCommand;
 namespace {
 
 using test::lftrack_bin;

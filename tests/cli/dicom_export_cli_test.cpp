@@ -25,6 +25,12 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::GateDecision;
+using loop::JournalOptions;
+using loop::JournalRecord;
+using loop::JournalWriter;
+using loop::TrackingState;
 namespace {
 
 namespace fs = std::filesystem;

@@ -15,6 +15,12 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::JournalWriter;
+using loop::OperatorRefusal;
 namespace {
 
 TEST(JournalExport, CodesThisBuildDoesNotKnowAreNamedByNumber) {

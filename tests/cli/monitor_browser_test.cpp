@@ -27,6 +27,10 @@
 
 namespace lftrack::host {
 
+using loop::JournalRecord;
+using loop::OperatorCommand;
+using loop::OperatorRefusal;
+
 using watch::open_listening_socket;
 using watch::ras_from_lps;
 

@@ -19,6 +19,7 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
 namespace {
 
 using test::lftrack_bin;

@@ -17,6 +17,7 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
 namespace {
 
 namespace fs = std::filesystem;

@@ -12,6 +12,10 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::TrackingState;
 namespace {
 
 using chaos::ChaosFault;

@@ -28,6 +28,18 @@
 
 namespace lftrack::host {
 
+using loop::BeamWithheld;
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::LoopSummary;
+using loop::LoopTransition;
+using loop::OperatorCommand;
+using loop::OperatorRefusal;
+using loop::process_allocation_count;
+using loop::TrackingEvent;
+using loop::TrackingState;
+
 using records::read_journal;
 using records::to_json;
 namespace {

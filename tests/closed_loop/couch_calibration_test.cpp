@@ -11,6 +11,8 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using loop::LoopSummary;
 namespace {
 
 CouchMountingSpec misaligned() {

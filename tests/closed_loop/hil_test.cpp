@@ -18,6 +18,12 @@
 
 namespace lftrack::host {
 
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::LoopSummary;
+using loop::TrackingEvent;
+using loop::TrackingState;
+
 using records::to_json;
 namespace {
 

@@ -13,6 +13,17 @@
 
 namespace lftrack::host {
 
+using loop::CorrelationModel;
+using loop::GateReason;
+using loop::ImagingReason;
+using loop::ImagingSpec;
+using loop::JournalRecord;
+using loop::LoopSummary;
+using loop::LoopTransition;
+using loop::process_allocation_count;
+using loop::SurrogateFault;
+using loop::TrackingState;
+
 using records::to_json;
 namespace {
 

@@ -62,10 +62,10 @@ inline Scene small_scene(const std::string& motion_yaml, const std::string& fram
 
 // A run that should track every cycle: every cycle ends in TRACK, with no HOLD or FAULT; on
 // failure the summary (with the transitions and their reasons) is printed.
-inline void expect_tracks_every_cycle(const LoopSummary& s, std::int64_t cycles) {
+inline void expect_tracks_every_cycle(const loop::LoopSummary& s, std::int64_t cycles) {
   SCOPED_TRACE(records::to_json(s).dump());
   EXPECT_EQ(s.cycles, cycles);
-  EXPECT_EQ(s.states[std::size_t(TrackingState::kTrack)], cycles);
+  EXPECT_EQ(s.states[std::size_t(loop::TrackingState::kTrack)], cycles);
   EXPECT_EQ(s.holds, 0);
   EXPECT_EQ(s.faults, 0);
 }
@@ -93,7 +93,7 @@ inline std::filesystem::path shared_light_field_dir(const PreparedScene& p) {
 }
 
 struct LoopRun {
-  LoopSummary summary;
+  loop::LoopSummary summary;
   records::JournalContents journal;
 };
 

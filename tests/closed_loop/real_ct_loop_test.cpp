@@ -19,6 +19,10 @@
 
 namespace lftrack::host {
 
+using loop::JournalRecord;
+using loop::process_allocation_count;
+using loop::TrackingState;
+
 using records::read_journal;
 using records::to_json;
 namespace {

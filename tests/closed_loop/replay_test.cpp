@@ -15,6 +15,13 @@
 
 namespace lftrack::host {
 
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::LoopSummary;
+using loop::process_allocation_count;
+using loop::TrackingState;
+
 using records::to_json;
 namespace {
 

@@ -9,6 +9,8 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using loop::ScriptedOperator;
 namespace {
 
 class RoomSession : public ClosedLoop {

@@ -35,6 +35,10 @@
 
 namespace lftrack::host {
 
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::TrackingState;
+
 using records::to_json;
 namespace {
 

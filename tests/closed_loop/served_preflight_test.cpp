@@ -18,6 +18,8 @@
 #include "loop_fixture.hpp"
 
 namespace lftrack::host {
+
+using loop::RealtimeReport;
 namespace {
 
 using namespace std::chrono_literals;

@@ -19,6 +19,11 @@
 
 namespace lftrack::host {
 
+using loop::exclude_this_thread_from_allocation_count;
+using loop::JournalRecord;
+using loop::LoopSummary;
+using loop::process_allocation_count;
+
 using watch::IgtlOptions;
 using watch::MonitorOptions;
 using watch::ras_from_lps;

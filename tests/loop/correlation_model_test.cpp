@@ -11,7 +11,7 @@
 
 #include "lftrack/loop/allocation_counter.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr double kPeriodS = 4.0;
@@ -292,4 +292,4 @@ TEST(CorrelationModel, TheLoopsCallsAllocateNothing) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

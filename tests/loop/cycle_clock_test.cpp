@@ -4,7 +4,7 @@
 
 #include "lftrack/loop/loop_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr std::int64_t kClockMs = 1'000'000;
@@ -88,4 +88,4 @@ TEST(CycleClock, TheHostsClockSkipsThePeriodsAnOverrunRanIntoAndSleepsUntilTheNe
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -9,7 +9,7 @@
 #include <atomic>
 #include <thread>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 drivers::FramePair pair_of(int rows, int cols, std::uint16_t value) {
@@ -117,4 +117,4 @@ TEST(CycleFeed, AReaderNeverSeesATornOrOlderSet) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

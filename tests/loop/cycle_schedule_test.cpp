@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
@@ -36,4 +36,4 @@ TEST(CycleSchedule, SleepsUntilAnAbsoluteTime) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

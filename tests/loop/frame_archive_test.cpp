@@ -11,7 +11,7 @@
 #include "lftrack/drivers/frame_sequence.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 drivers::FramePair make_pair(int rows, int cols, int seed) {
@@ -112,4 +112,4 @@ TEST(FrameArchive, BadSetUpsAreRefused) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -9,7 +9,7 @@
 
 #include "lftrack/loop/safety_gate.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
@@ -166,4 +166,4 @@ TEST(ImagingOnDemand, TheGateAppliesAModelCycleAndHoldsOnTheSurrogateOrTwoMisses
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -8,7 +8,7 @@
 #include <cmath>
 #include <limits>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr std::int64_t kNsPerMs = 1'000'000;
@@ -113,4 +113,4 @@ TEST(LatencyChain, EveryLinkHasAName) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

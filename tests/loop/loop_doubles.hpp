@@ -24,8 +24,8 @@ inline void open_pattern_pair(drivers::FramePair* pair) {
 
 // Two isocentric views, A and B at +-45 degrees, of the pattern's size, their full windows and
 // no detector corrections; nothing else of the parts is set.
-inline host::LoopParts pattern_loop_parts() {
-  host::LoopParts parts;
+inline loop::LoopParts pattern_loop_parts() {
+  loop::LoopParts parts;
   for (const char* name : {"A", "B"}) {
     const double s = name[0] == 'A' ? 1.0 : -1.0;
     auto view = tracking::XrayView::isocentric(name, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.7071, s * 0.7071, 0),

@@ -20,7 +20,7 @@
 #include "lftrack/loop/realtime_setup.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 using tracking::Vector6d;
@@ -251,4 +251,4 @@ TEST(RealtimeSetup, ACheckAppliesNothing) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

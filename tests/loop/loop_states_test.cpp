@@ -17,7 +17,7 @@
 #include "lftrack/loop/tracking_loop.hpp"
 #include "loop_doubles.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 using tracking::Pose;
@@ -436,4 +436,4 @@ TEST(LoopStates, ALoopWhosePlansCannotBeReadiedIsRefused) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -23,7 +23,7 @@
 #include "lftrack/loop/operator_input.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 OperatorRequest parsed(const std::string& text) {
@@ -380,4 +380,4 @@ TEST(ControlSocket, IsRemovedOnClose) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -8,7 +8,7 @@
 #include <functional>
 #include <limits>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 GateInput good_input() {
@@ -397,4 +397,4 @@ TEST(Gate, TheBeamToleranceIsNotTheStepLimit) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -7,7 +7,7 @@
 
 #include "lftrack/loop/tracking_states.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 JournalRecord tracked(double x_mm, double y_mm, double z_mm, double rz_rad) {
@@ -95,4 +95,4 @@ TEST(TrackingAccuracy, OldJournalsAndNonFiniteResidualsReportNothingFalse) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

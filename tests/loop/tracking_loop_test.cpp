@@ -20,7 +20,7 @@
 #include "loop_doubles.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 using records::read_journal;
 namespace {
@@ -388,4 +388,4 @@ TEST(TrackingLoop, ArchivedFramesCannotDriveAnActuatorThatMovesAPatient) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 GateOutput gate(GateDecision d, GateReason r = GateReason::kOk) {
@@ -121,4 +121,4 @@ TEST(TrackingStates, OperatorStopReturnsToIdle) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

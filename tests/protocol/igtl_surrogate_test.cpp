@@ -295,12 +295,12 @@ TEST(IgtlSurrogate, ReadsAndHandsOverWithoutAllocating) {
   for (int i = 0; i < 10; ++i) peer.send(messages[std::size_t(i)]);
   ASSERT_TRUE(eventually([&] { return s.counters().readings == 10; }));
   SurrogateReading r[64];
-  const std::uint64_t before = host::process_allocation_count();
+  const std::uint64_t before = loop::process_allocation_count();
   for (std::size_t i = 10; i < messages.size(); ++i) peer.send(messages[i]);
   ASSERT_TRUE(eventually([&] { return s.counters().readings == 200; }));
   int given = 0;
   for (int n; (n = s.read(mono_ns(), r, 64)) > 0;) given += n;
-  EXPECT_EQ(host::process_allocation_count() - before, 0u);
+  EXPECT_EQ(loop::process_allocation_count() - before, 0u);
   EXPECT_EQ(given, 64) << "the newest 64 of 200";
   EXPECT_EQ(r[63].amplitude, 199);
 }

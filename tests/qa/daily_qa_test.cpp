@@ -251,10 +251,10 @@ TEST(DailyQa, RefusesARoomWithNothingToMakeTheShiftsAndAbsurdTolerances) {
 }
 
 // Sets the QA's interruption at cycle `at` of the run in progress (as the operator's Ctrl-C would).
-class InterruptAtCycle final : public host::CycleObserver {
+class InterruptAtCycle final : public loop::CycleObserver {
  public:
   InterruptAtCycle(std::atomic<bool>* flag, std::uint64_t at) : flag_(flag), at_(at) {}
-  void on_cycle(const host::JournalRecord& record) override {
+  void on_cycle(const loop::JournalRecord& record) override {
     if (record.cycle >= at_) flag_->store(true);
   }
 

@@ -30,6 +30,15 @@
 
 namespace lftrack::host {
 
+using loop::check_journal_path;
+using loop::crc32c;
+using loop::crc32c_portable;
+using loop::JournalOptions;
+using loop::JournalRecord;
+using loop::JournalSink;
+using loop::JournalWriter;
+using loop::OperatorRefusal;
+
 using records::JournalReadLimits;
 using records::read_journal;
 namespace {

@@ -13,6 +13,14 @@
 #include "lftrack/loop/tracking_states.hpp"
 
 namespace lftrack::host {
+
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::OperatorCommand;
+using loop::SafetyLimits;
+using loop::TrackingEvent;
+using loop::TrackingState;
 namespace {
 
 using chaos::ActuatorCalls;

@@ -17,6 +17,9 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::ImagingSpec;
+using loop::RealtimeReport;
 namespace {
 
 // The built-in scene with both detectors' `frames: sim` replaced by `frames` (a '#' in it by the

@@ -13,6 +13,16 @@
 #include "lftrack/tracking/similarity.hpp"
 
 namespace lftrack::host {
+
+using loop::judge_registration;
+using loop::judges_view_shift;
+using loop::masked_ncc;
+using loop::RegistrationVerdict;
+using loop::similarity_expectation;
+using loop::verdict_text;
+using loop::VerdictInput;
+using loop::VerdictLimits;
+using loop::VerdictReason;
 namespace {
 
 const double kNan = std::numeric_limits<double>::quiet_NaN();

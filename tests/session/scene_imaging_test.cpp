@@ -11,6 +11,9 @@
 #include "lftrack/host/sim_surrogate_source.hpp"
 
 namespace lftrack::host {
+
+using loop::CorrelationModelSpec;
+using loop::ImagingSpec;
 namespace {
 
 std::string imaging_scene(const std::string& extra) {

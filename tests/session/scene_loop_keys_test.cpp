@@ -7,6 +7,8 @@
 #include "lftrack/host/scene_verdict.hpp"
 
 namespace lftrack::host {
+
+using loop::judges_view_shift;
 namespace {
 
 TEST(SceneLoopKeys, ParseAndRejectWithLocation) {

@@ -17,6 +17,14 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::judge_registration;
+using loop::RegistrationVerdict;
+using loop::shift_across_ray_mm;
+using loop::verdict_text;
+using loop::VerdictLimits;
+using loop::VerdictReason;
+using loop::ViewAgreement;
 namespace {
 
 using Eigen::Vector3d;

@@ -20,6 +20,8 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::VerdictReason;
 namespace {
 
 std::string file_text(const std::filesystem::path& file) {

@@ -23,6 +23,8 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::VerdictReason;
 namespace {
 
 namespace fs = std::filesystem;

@@ -19,6 +19,8 @@
 #include "test_data.hpp"
 
 namespace lftrack::host {
+
+using loop::VerdictReason;
 namespace {
 
 TradeResult result(const std::string& id, double ms, double tre, double memory_mb, double success = 1.0) {

@@ -11,6 +11,9 @@
 #include "lftrack/studies/verdict_commissioning.hpp"
 
 namespace lftrack::host {
+
+using loop::judge_registration;
+using loop::VerdictLimits;
 namespace {
 
 // A registered two-view case whose lowest view scores `s` (the measure) and `c` (check NCC).

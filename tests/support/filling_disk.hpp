@@ -16,7 +16,7 @@
 
 namespace lftrack::test {
 
-class FillingDisk final : public host::JournalSink {
+class FillingDisk final : public loop::JournalSink {
  public:
   explicit FillingDisk(long long bytes_left,
                        std::chrono::milliseconds slow_to_tell = std::chrono::milliseconds(0))

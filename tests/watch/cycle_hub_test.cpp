@@ -9,8 +9,8 @@
 
 namespace lftrack::watch {
 
-using host::CycleFeed;
-using host::TrackingState;
+using loop::CycleFeed;
+using loop::TrackingState;
 namespace {
 
 using test_watch::HubOnFeed;

@@ -18,8 +18,8 @@
 
 namespace lftrack::watch {
 
-using host::FeedRecord;
-using host::TrackingState;
+using loop::FeedRecord;
+using loop::TrackingState;
 namespace {
 
 using test_watch::HubOnFeed;

@@ -24,16 +24,16 @@
 
 namespace lftrack::watch {
 
-using host::BeamWithheld;
-using host::FeedRecord;
-using host::GateDecision;
-using host::GateReason;
-using host::JournalRecord;
-using host::OperatorCommand;
-using host::OperatorPoll;
-using host::OperatorRefusal;
-using host::OperatorView;
-using host::TrackingState;
+using loop::BeamWithheld;
+using loop::FeedRecord;
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::OperatorCommand;
+using loop::OperatorPoll;
+using loop::OperatorRefusal;
+using loop::OperatorView;
+using loop::TrackingState;
 namespace {
 
 using test_watch::HubOnFeed;

@@ -18,12 +18,12 @@
 
 namespace lftrack::watch {
 
-using host::OperatorCommand;
-using host::OperatorPoll;
-using host::OperatorRefusal;
-using host::OperatorRequest;
-using host::OperatorView;
-using host::TrackingState;
+using loop::OperatorCommand;
+using loop::OperatorPoll;
+using loop::OperatorRefusal;
+using loop::OperatorRequest;
+using loop::OperatorView;
+using loop::TrackingState;
 namespace {
 
 namespace fs = std::filesystem;

@@ -19,18 +19,18 @@ namespace lftrack::watch::test_watch {
 
 // One cycle's record: state `to` after `from`, a registered offset of `tx` mm (and 0.5 degree
 // about z), a correction sent when `command`.
-inline host::FeedRecord record(std::uint64_t cycle, host::TrackingState from, host::TrackingState to,
+inline loop::FeedRecord record(std::uint64_t cycle, loop::TrackingState from, loop::TrackingState to,
                                double tx, bool command, std::uint32_t hold_id = 0) {
-  host::FeedRecord f;
-  host::JournalRecord& r = f.record;
+  loop::FeedRecord f;
+  loop::JournalRecord& r = f.record;
   r.cycle = cycle;
   r.cycle_start_ns = std::int64_t(cycle) * 100'000'000;
   r.frame_time_ns[0] = r.frame_time_ns[1] = r.cycle_start_ns;
   r.previous_state = static_cast<std::uint8_t>(from);
   r.state = static_cast<std::uint8_t>(to);
-  if (to != from) r.event = 1 + static_cast<std::uint8_t>(host::TrackingEvent::kGate);
+  if (to != from) r.event = 1 + static_cast<std::uint8_t>(loop::TrackingEvent::kGate);
   r.gate_reason =
-      to == host::TrackingState::kHold ? static_cast<std::uint8_t>(host::GateReason::kStepTooLarge) : 0;
+      to == loop::TrackingState::kHold ? static_cast<std::uint8_t>(loop::GateReason::kStepTooLarge) : 0;
   r.hold_id = hold_id;
   r.pose_delta[0] = tx;
   r.pose_delta[5] = 0.5 * 3.14159265358979 / 180;
@@ -47,7 +47,7 @@ inline host::FeedRecord record(std::uint64_t cycle, host::TrackingState from, ho
 }
 
 struct HubOnFeed {
-  host::CycleFeed feed{4096, 0};
+  loop::CycleFeed feed{4096, 0};
   std::unique_ptr<CycleHub> hub;
   tracking::XrayView view = test::fixture_view();
   std::vector<tracking::PixelWindow> windows{{4, 6, 24, 30}, {0, 0, 40, 48}};
@@ -70,7 +70,7 @@ struct HubOnFeed {
     hub = std::move(started).value();
   }
   // Publishes and waits until the hub has absorbed it (at most 2 s).
-  void publish(const host::FeedRecord& f) {
+  void publish(const loop::FeedRecord& f) {
     feed.publish_record(f.record, f.registered);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2);
     while (hub->status().last.record.cycle != f.record.cycle || !hub->status().started) {
@@ -106,17 +106,17 @@ struct HubOnFeed {
 // A loop polling every millisecond on its own thread, as the real one polls every cycle.
 struct PollingLoop {
   PageOperator* page;
-  host::OperatorView view;
+  loop::OperatorView view;
   std::atomic<bool> stop{false};
-  std::vector<host::OperatorPoll> polls;
+  std::vector<loop::OperatorPoll> polls;
   std::mutex mutex;
   std::thread thread;
-  explicit PollingLoop(PageOperator* p, host::OperatorView v) : page(p), view(v) {
+  explicit PollingLoop(PageOperator* p, loop::OperatorView v) : page(p), view(v) {
     thread = std::thread([this] {
       while (!stop) {
-        host::OperatorPoll poll;
+        loop::OperatorPoll poll;
         page->poll(view, &poll);
-        if (poll.command != host::OperatorCommand::kNone || poll.refused > 0) {
+        if (poll.command != loop::OperatorCommand::kNone || poll.refused > 0) {
           std::lock_guard<std::mutex> lock(mutex);
           polls.push_back(poll);
         }
@@ -125,12 +125,12 @@ struct PollingLoop {
     });
   }
   // Whether a poll journaled this refusal (as its last one) within `wait`.
-  bool saw(host::OperatorRefusal why, std::chrono::milliseconds wait = std::chrono::milliseconds(2000)) {
+  bool saw(loop::OperatorRefusal why, std::chrono::milliseconds wait = std::chrono::milliseconds(2000)) {
     const auto deadline = std::chrono::steady_clock::now() + wait;
     do {
       {
         std::lock_guard<std::mutex> lock(mutex);
-        for (const host::OperatorPoll& p : polls)
+        for (const loop::OperatorPoll& p : polls)
           if (p.last_refusal == why) return true;
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(2));

@@ -33,7 +33,7 @@ inline double draw_uniform(std::mt19937_64& random, double lo, double hi) {
 }
 
 // A segment's journal disk: write(2) until the injector fills it, then ENOSPC.
-class DiskThatFills final : public host::JournalSink {
+class DiskThatFills final : public loop::JournalSink {
  public:
   ssize_t write(int fd, const void* data, std::size_t bytes) override;
   void fill() { full_.store(true, std::memory_order_release); }
@@ -181,7 +181,7 @@ class ChaosSurrogate final : public drivers::SurrogateSource {
 // its id; one time in ten first naming another id or sending the other word), retries 0.5 s
 // after a refusal, and now and then sends a stale resume while tracking. Judges like the control
 // socket (judge_operator_request, ids required).
-class ChaosOperator final : public host::OperatorInput {
+class ChaosOperator final : public loop::OperatorInput {
  public:
   explicit ChaosOperator(Injector* injector) : injector_(injector) {}
   void poll(const OperatorView& view, OperatorPoll* out) override;

@@ -43,7 +43,7 @@ void add_violation(ChaosReport* report, std::int64_t segment, std::int64_t cycle
 
 // Watches one segment's cycles: the invariants, the tallies, a CAN fault's HOLD, the end of a
 // segment whose disk is full, and the operator's interrupt.
-class SegmentObserver final : public host::CycleObserver {
+class SegmentObserver final : public loop::CycleObserver {
  public:
   SegmentObserver(const PreparedScene& scene, chaos::Injector* injector, ChaosReport* report,
                   std::int64_t segment, const std::atomic<bool>* interrupt)
@@ -177,8 +177,8 @@ void image_on_demand(host::Scene* scene, std::uint64_t seed) {
   sim::PatientMotionSpec& motion = scene->motion.motion;
   if (motion.breathing_amplitude.head<3>().norm() < 6)
     motion.breathing_amplitude.head<3>() = Eigen::Vector3d(0.5, 1.5, 6);
-  host::ImagingSpec& imaging = scene->loop.imaging;
-  imaging.mode = host::ImagingSpec::Mode::kModel;
+  loop::ImagingSpec& imaging = scene->loop.imaging;
+  imaging.mode = loop::ImagingSpec::Mode::kModel;
   imaging.xray_hz = 1;
   imaging.model.min_span_s = std::max(1.0, motion.breathing_period_s);
   scene->surrogate.source = "sim";

@@ -9,7 +9,7 @@ namespace {
 std::atomic<std::uint64_t> g_allocations{0};
 
 void* counted_allocation(std::size_t n, std::size_t alignment) {
-  if (lftrack::host::this_thread_allocations_counted()) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (lftrack::loop::this_thread_allocations_counted()) g_allocations.fetch_add(1, std::memory_order_relaxed);
   if (n == 0) n = 1;
   void* p = nullptr;
   if (alignment <= alignof(std::max_align_t)) {
@@ -21,11 +21,11 @@ void* counted_allocation(std::size_t n, std::size_t alignment) {
 }
 }  // namespace
 
-namespace lftrack::host {
+namespace lftrack::loop {
 std::uint64_t process_allocation_count() {
   return g_allocations.load(std::memory_order_relaxed);
 }
-}  // namespace lftrack::host
+}  // namespace lftrack::loop
 
 void* operator new(std::size_t n) {
   if (void* p = counted_allocation(n, 0)) return p;

@@ -3,7 +3,7 @@
 
 #include "lftrack/loop/allocation_counter.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 thread_local bool t_excluded = false;
 }  // namespace
@@ -11,4 +11,4 @@ thread_local bool t_excluded = false;
 void exclude_this_thread_from_allocation_count() { t_excluded = true; }
 bool this_thread_allocations_counted() { return !t_excluded; }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

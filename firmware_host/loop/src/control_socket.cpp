@@ -13,7 +13,7 @@
 
 #include "lftrack/loop/operator_input.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 namespace {
 
@@ -178,4 +178,4 @@ void ControlSocket::take_waiting(const OperatorView& view, OperatorPoll* out, bo
   }
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <limits>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
@@ -294,4 +294,4 @@ double rate_window_at(double sample_rate_hz) {
   return std::max(2.5 / sample_rate_hz, std::min(0.1, 30.0 / sample_rate_hz));
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

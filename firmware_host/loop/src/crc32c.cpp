@@ -9,7 +9,7 @@
 #include <nmmintrin.h>
 #endif
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 constexpr std::array<std::uint32_t, 256> make_table() {
@@ -55,4 +55,4 @@ std::uint32_t crc32c(const void* data, std::size_t size, std::uint32_t crc) {
   return crc32c_portable(data, size, crc);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -6,7 +6,7 @@
 
 #include "lftrack/loop/loop_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 namespace {
 
@@ -70,4 +70,4 @@ std::unique_ptr<CycleClock> simulated_cycle_clock(CycleObserver* observer) {
   return std::make_unique<SimulatedCycleClock>(observer);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

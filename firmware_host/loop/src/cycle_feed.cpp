@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 CycleFeed::CycleFeed(std::size_t record_capacity, std::int64_t image_period_ns)
     : records_(record_capacity), image_period_ns_(image_period_ns) {}
@@ -79,4 +79,4 @@ const FeedImages* CycleFeed::newest_images() {
   return &slots_[std::size_t(front_)];
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

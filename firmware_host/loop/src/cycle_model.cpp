@@ -4,7 +4,7 @@
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 using tracking::Pose;
 using tracking::PoseDelta;
@@ -119,4 +119,4 @@ void TrackingLoop::Impl::plan_next_exposure(std::int64_t start_ns) {
     parts.frames->request_exposure(start_ns);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -11,7 +11,7 @@
 
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 static_assert(std::size(JournalRecord{}.operator_refused_by_reason) == kOperatorRefusalCodes,
               "the journal keeps a count for every refusal code");
@@ -219,4 +219,4 @@ void TrackingLoop::Impl::write_status_line(std::int64_t index, const JournalReco
   if (n > 0) (void)!::write(STDERR_FILENO, line, std::min<std::size_t>(std::size_t(n), sizeof line - 1));
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -3,7 +3,7 @@
 
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 using tracking::Pose;
 using tracking::PoseDelta;
@@ -35,4 +35,4 @@ void TrackingLoop::Impl::register_pair(CycleState& c) {
   c.registration_ms = result.elapsed_ms;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -4,7 +4,7 @@
 
 #include <cerrno>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 NextCycle next_cycle(std::int64_t start_ns, std::int64_t period_ns, std::int64_t index, std::int64_t now_ns) {
   NextCycle n;
@@ -35,4 +35,4 @@ void sleep_until_ns(std::int64_t deadline_ns) {
   }
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -9,7 +9,7 @@
 #include "lftrack/loop/cycle_schedule.hpp"
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 using drivers::DeviceStatus;
 using tracking::Pose;
@@ -360,4 +360,4 @@ void TrackingLoop::Impl::settle(CycleState& c) {
   c.state_after = now;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -6,7 +6,7 @@
 
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 namespace {
 
@@ -123,4 +123,4 @@ void TrackingLoop::Impl::check_views(CycleState& c, VerdictInput& judged, Regist
   c.view_check_ms = ms_between(started_ns, monotonic_now_ns());
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -7,7 +7,7 @@
 #include "lftrack/drivers/frame_files.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 FrameArchive::FrameArchive(const std::filesystem::path& directory,
                            const std::vector<drivers::DetectorShape>& detectors, const FrameArchiveOptions& o)
@@ -185,4 +185,4 @@ Status FrameArchive::close() {
   return index_closed;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

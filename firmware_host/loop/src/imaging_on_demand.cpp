@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 const char* to_string(ImagingReason reason) {
   switch (reason) {
@@ -95,4 +95,4 @@ SurrogateFault SurrogateMonitor::fault_at(std::int64_t now_ns) const {
   return SurrogateFault::kOk;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -21,7 +21,7 @@
 #include "lftrack/loop/crc32c.hpp"
 #include "lftrack/loop/journal_format.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 using namespace journal_format;  // NOLINT(google-build-using-namespace): the format's constants
 
@@ -212,4 +212,4 @@ Status JournalWriter::close() {
 
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 namespace {
 // Each link's name (tables, plots) and key (JSON, CSV), in LatencyLink's order.
@@ -99,4 +99,4 @@ std::optional<LatencyChainReport> LatencyChain::report() const {
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -31,7 +31,7 @@
 #include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // One cycle. Every field starts at its default; a stage that does not run leaves its fields so.
 struct CycleState {
@@ -261,4 +261,4 @@ struct TrackingLoop::Impl {
 drivers::Deadline to_deadline(std::int64_t ns);
 double ms_between(std::int64_t a_ns, std::int64_t b_ns);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -2,7 +2,7 @@
 
 #include <utility>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 Status PlannedRegistration::prepare(const tracking::RegistrationPlan& align, const tracking::RegistrationPlan& track) {
   auto align_prepared = registration_->prepare_plan(align);
@@ -25,4 +25,4 @@ Status PlannedRegistration::run(const tracking::Pose& start_T_room_from_ct, Regi
                             result);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

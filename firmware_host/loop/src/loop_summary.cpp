@@ -3,7 +3,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t allocations_at_warmup,
                                         std::uint64_t allocations_at_end) {
@@ -60,4 +60,4 @@ void TrackingLoop::Impl::finish_summary(std::int64_t aligned_at, std::uint64_t a
   }
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -6,7 +6,7 @@
 
 #include "lftrack/loop/time_interval.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 // The normal equations of a fit of `order` (1 or 2) from the parabola's: a line's are their
@@ -116,4 +116,4 @@ MotionPredictor::FullWindow MotionPredictor::full_window(int window, int order, 
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

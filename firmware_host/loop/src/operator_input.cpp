@@ -14,7 +14,7 @@
 #include <cstdio>
 #include <cstring>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 static_assert(sizeof(termios) <= 64, "TerminalOperator keeps a termios in 64 bytes");
 
@@ -286,4 +286,4 @@ bool OperatorInputs::unattended() const {
   return false;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 std::string RealtimeReport::summary() const {
   if (checked)
@@ -219,4 +219,4 @@ bool make_current_thread_best_effort() {
   return ::sched_setscheduler(0, SCHED_OTHER | (policy & SCHED_RESET_ON_FORK), &param) == 0;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <cstdio>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 namespace {
 
 // Per-measure floors, measured with `lftrack register` (10000 photons per pixel, 12 bits) on
@@ -232,4 +232,4 @@ std::string verdict_text(const RegistrationVerdict& v, const std::vector<std::st
   return text + detail;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 const char* to_string(GateDecision d) {
   switch (d) {
@@ -225,4 +225,4 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& in) {
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

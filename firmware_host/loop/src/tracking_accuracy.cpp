@@ -9,7 +9,7 @@
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/pose.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 void TrackingAccuracy::add(const JournalRecord& r) {
   if (r.command_sent != 0 && r.command_acked_ns > 0) {
@@ -70,4 +70,4 @@ std::optional<CommandLatencyReport> TrackingAccuracy::latency() const {
                               latency_ms_.quantile(0.99), latency_ms_.max()};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

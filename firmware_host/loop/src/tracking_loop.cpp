@@ -14,7 +14,7 @@
 #include "lftrack/loop/time_interval.hpp"
 #include "loop_impl.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 using drivers::DeviceStatus;
 
@@ -315,4 +315,4 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
   return m.summary;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

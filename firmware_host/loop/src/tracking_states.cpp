@@ -1,6 +1,6 @@
 #include "lftrack/loop/tracking_states.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 const char* to_string(TrackingState s) {
   switch (s) {
@@ -108,4 +108,4 @@ StateTransition TrackingStateMachine::on(TrackingEvent event, const GateOutput& 
   return t;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -5,7 +5,7 @@
 #include <limits>
 #include <utility>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 double shift_across_ray_mm(const Eigen::Vector3d& at_room_mm, const Eigen::Vector3d& moved_room_mm,
                            const Eigen::Vector3d& ray_room) {
@@ -83,4 +83,4 @@ Status ViewAgreement::measure(const tracking::Pose& joint, double max_ms, std::a
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

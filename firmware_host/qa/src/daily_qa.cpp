@@ -202,8 +202,8 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
     // As the room runs: the scene's real-time set-up applied first (enforce), then a pool made
     // after it, whose workers inherit the cycle's policy as the service's do. The QA's own thread
     // keeps it to the end (the reports are written after).
-    Result<host::RealtimeReport> rt = host::realtime_not_applied("loop.realtime.mode: ignore");
-    if (p.scene.loop.realtime.enforce) rt = host::apply_realtime_setup(p.scene.loop.realtime);
+    Result<loop::RealtimeReport> rt = loop::realtime_not_applied("loop.realtime.mode: ignore");
+    if (p.scene.loop.realtime.enforce) rt = loop::apply_realtime_setup(p.scene.loop.realtime);
     if (!rt.ok()) {
       QaCheck c;
       c.name = "latency";

@@ -11,8 +11,8 @@
 namespace lftrack::qa {
 namespace {
 
-using host::JournalRecord;
-using host::TrackingState;
+using loop::JournalRecord;
+using loop::TrackingState;
 using tracking::rad_to_deg;
 using tracking::Vector6d;
 
@@ -45,7 +45,7 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
   if (align == run.records.end()) {
     // What the loop did instead: its states' cycles and the gate's last reason.
     std::map<std::string, int> states;
-    for (const JournalRecord& c : run.records) ++states[host::to_string(static_cast<TrackingState>(c.state))];
+    for (const JournalRecord& c : run.records) ++states[loop::to_string(static_cast<TrackingState>(c.state))];
     std::string seen;
     for (const auto& [state, cycles] : states)
       seen += fmt::format("{}{} {}", seen.empty() ? "" : ", ", state, cycles);
@@ -53,7 +53,7 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
     std::map<std::string, int> reasons;
     for (const JournalRecord& c : run.records)
       if (c.previous_state == static_cast<std::uint8_t>(TrackingState::kAlign))
-        ++reasons[host::to_string(static_cast<host::GateReason>(c.gate_reason))];
+        ++reasons[loop::to_string(static_cast<loop::GateReason>(c.gate_reason))];
     std::string align_gates;
     for (const auto& [reason, cycles] : reasons)
       align_gates += fmt::format("{}{} x{}", align_gates.empty() ? "" : ", ", reason, cycles);
@@ -62,7 +62,7 @@ OffsetResult judge_offset(const Vector6d& shift, const RecordedRun& run, const D
         run.records.size(), seen, run.summary.ended.empty() ? std::string("no TRACK") : run.summary.ended,
         align_gates.empty() ? std::string("none") : align_gates,
         run.records.empty() ? "none"
-                            : host::to_string(static_cast<host::GateReason>(run.records.back().gate_reason)));
+                            : loop::to_string(static_cast<loop::GateReason>(run.records.back().gate_reason)));
     return r;
   }
   r.aligned = true;

@@ -23,15 +23,15 @@
 namespace lftrack::qa {
 namespace {
 
-using host::JournalRecord;
+using loop::JournalRecord;
 
 // Keeps every cycle's record (room reserved up front: the cycle allocates nothing), and passes it
 // on to an observer the caller's hooks named.
-class Recorder final : public host::CycleObserver {
+class Recorder final : public loop::CycleObserver {
  public:
   // Room for `cycles` records (the QA's runs are at most 100,000 cycles: 40 MB). The run ends
   // early when `*interrupted` is set (null: never).
-  Recorder(std::size_t cycles, host::CycleObserver* next, const std::atomic<bool>* interrupted)
+  Recorder(std::size_t cycles, loop::CycleObserver* next, const std::atomic<bool>* interrupted)
       : next_(next), interrupted_(interrupted) {
     records_.reserve(std::min<std::size_t>(cycles, 100000) + 8);
   }
@@ -39,7 +39,7 @@ class Recorder final : public host::CycleObserver {
     if (records_.size() < records_.capacity()) records_.push_back(record);
     state_.store(record.state, std::memory_order_release);
     const bool aligned =
-        stop_when_aligned_ && record.state != static_cast<std::uint8_t>(host::TrackingState::kAlign);
+        stop_when_aligned_ && record.state != static_cast<std::uint8_t>(loop::TrackingState::kAlign);
     if (session_ != nullptr && (aligned || (interrupted_ != nullptr && interrupted_->load())))
       session_->request_stop();
     if (next_ != nullptr) next_->on_cycle(record);
@@ -55,7 +55,7 @@ class Recorder final : public host::CycleObserver {
   std::uint8_t state() const { return state_.load(std::memory_order_acquire); }
 
  private:
-  host::CycleObserver* next_;
+  loop::CycleObserver* next_;
   const std::atomic<bool>* interrupted_;
   host::LoopSession* session_ = nullptr;
   bool stop_when_aligned_ = false;
@@ -158,8 +158,8 @@ DailyQaReport new_report(const host::PreparedScene& scene, const std::string& ki
 
 std::vector<JournalRecord>::const_iterator alignment_record(const std::vector<JournalRecord>& records) {
   return std::find_if(records.begin(), records.end(), [](const JournalRecord& c) {
-    return c.previous_state == static_cast<std::uint8_t>(host::TrackingState::kAlign) &&
-           c.state == static_cast<std::uint8_t>(host::TrackingState::kTrack);
+    return c.previous_state == static_cast<std::uint8_t>(loop::TrackingState::kAlign) &&
+           c.state == static_cast<std::uint8_t>(loop::TrackingState::kTrack);
   });
 }
 
@@ -201,7 +201,7 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
         aligned->summary.ended.empty() ? std::string("no TRACK") : aligned->summary.ended,
         aligned->records.empty()
             ? std::string("no cycle")
-            : host::to_string(static_cast<host::GateReason>(aligned->records.back().gate_reason))));
+            : loop::to_string(static_cast<loop::GateReason>(aligned->records.back().gate_reason))));
   }
   // The alignment's set-up move made whole (an interruption too: the couch is not left partway):
   // the loop holds the couch as its run ends, one cycle after it sent the move, before a couch
@@ -271,7 +271,7 @@ Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
     const auto give_up =
         std::chrono::steady_clock::now() +
         std::chrono::milliseconds(static_cast<std::int64_t>(cycles * scene.scene.loop.period_ms));
-    while (recorder.state() != static_cast<std::uint8_t>(host::TrackingState::kTrack) &&
+    while (recorder.state() != static_cast<std::uint8_t>(loop::TrackingState::kTrack) &&
            std::chrono::steady_clock::now() < give_up)
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     reply = ask_control_socket(so.control_socket, dir / "console", "status");

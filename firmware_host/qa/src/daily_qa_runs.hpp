@@ -14,8 +14,8 @@
 namespace lftrack::qa {
 
 struct RecordedRun {
-  host::LoopSummary summary;
-  std::vector<host::JournalRecord> records;  // every cycle, in order
+  loop::LoopSummary summary;
+  std::vector<loop::JournalRecord> records;  // every cycle, in order
   std::string control_reply;                 // the latency run: the control socket's answer
   // A room: where the couch stood (its travel) before it made the shift, to send it back there
   // when the shift fails.
@@ -28,8 +28,8 @@ inline bool interrupted(const DailyQaOptions& options) {
 }
 // The record of the cycle that ended the alignment with its set-up move (ALIGN to TRACK); end()
 // if the run never aligned.
-std::vector<host::JournalRecord>::const_iterator alignment_record(
-    const std::vector<host::JournalRecord>& records);
+std::vector<loop::JournalRecord>::const_iterator alignment_record(
+    const std::vector<loop::JournalRecord>& records);
 
 // A report of `kind` ("daily", "e2e") for `scene`, started now: the scene, the room's fingerprint,
 // the times.

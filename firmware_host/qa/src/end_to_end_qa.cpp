@@ -16,7 +16,7 @@ namespace {
 // Where the hidden marker is, relative to where the plan puts it (mm), from the target's true
 // residual at the registration origin: the anatomy's offset t and rotation vector w move a point
 // `offset` from the origin by R(w) offset + t - offset.
-double marker_error_mm(const host::JournalRecord& r, const Eigen::Vector3d& offset) {
+double marker_error_mm(const loop::JournalRecord& r, const Eigen::Vector3d& offset) {
   const Eigen::Vector3d t(r.true_target_residual[0], r.true_target_residual[1], r.true_target_residual[2]);
   const Eigen::Vector3d w(r.true_target_residual[3], r.true_target_residual[4], r.true_target_residual[5]);
   return (tracking::rotation_exp(w) * offset + t - offset).norm();
@@ -53,7 +53,7 @@ Result<DailyQaReport> run_end_to_end_qa(const host::PreparedScene& p, const EndT
   run_options.hooks = o.hooks;
   auto run = run_tracking(p, o.cycles, run_options, pool);
   if (!run.ok()) return run.status().with_context("end-to-end test");
-  for (const host::JournalRecord& r : run->records)
+  for (const loop::JournalRecord& r : run->records)
     if (r.beam_permit && r.true_residual_mm >= 0)
       report.marker_error_mm.push_back(marker_error_mm(r, o.marker_offset_room_mm));
   QaCheck c;

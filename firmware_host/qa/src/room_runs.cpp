@@ -171,7 +171,7 @@ drivers::DeviceStatus DarkenedFrames::acquire(drivers::FramePair* pair, drivers:
   return got;
 }
 
-void DarkenedFrames::on_cycle(const host::JournalRecord& record) {
+void DarkenedFrames::on_cycle(const loop::JournalRecord& record) {
   cycle_.store(static_cast<std::int64_t>(record.cycle) + 1, std::memory_order_release);
   if (next_ != nullptr) next_->on_cycle(record);
 }

@@ -37,9 +37,9 @@ double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& 
 // unlike the simulator's own drop option. It learns the cycle as the loop's observer (set it as
 // the session's hooks.observer; it passes each record on to `next`), and is given its source by
 // the session's wrap_frames hook (wrap()).
-class DarkenedFrames final : public drivers::FrameSource, public host::CycleObserver {
+class DarkenedFrames final : public drivers::FrameSource, public loop::CycleObserver {
  public:
-  DarkenedFrames(std::int64_t dark_from, std::int64_t dark_to, host::CycleObserver* next)
+  DarkenedFrames(std::int64_t dark_from, std::int64_t dark_to, loop::CycleObserver* next)
       : dark_from_(dark_from), dark_to_(dark_to), next_(next) {}
   drivers::FrameSource* wrap(drivers::FrameSource* inner) {
     inner_ = inner;
@@ -58,7 +58,7 @@ class DarkenedFrames final : public drivers::FrameSource, public host::CycleObse
     return inner_->identity(detector);
   }
   void close() override { inner_->close(); }
-  void on_cycle(const host::JournalRecord& record) override;
+  void on_cycle(const loop::JournalRecord& record) override;
   std::int64_t simulated_stall_ns(std::int64_t cycle) override {
     return next_ != nullptr ? next_->simulated_stall_ns(cycle) : 0;
   }
@@ -66,7 +66,7 @@ class DarkenedFrames final : public drivers::FrameSource, public host::CycleObse
  private:
   drivers::FrameSource* inner_ = nullptr;
   std::int64_t dark_from_, dark_to_;
-  host::CycleObserver* next_;
+  loop::CycleObserver* next_;
   std::atomic<std::int64_t> cycle_{0};  // the cycle now running: the last record's + 1
 };
 

@@ -22,9 +22,9 @@
 
 namespace lftrack::records {
 
-using host::crc32c;
-using host::JournalRecord;
-using namespace host::journal_format;  // NOLINT(google-build-using-namespace): the format's constants
+using loop::crc32c;
+using loop::JournalRecord;
+using namespace loop::journal_format;  // NOLINT(google-build-using-namespace): the format's constants
 
 namespace {
 

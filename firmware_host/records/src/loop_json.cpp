@@ -8,18 +8,18 @@
 
 namespace lftrack::records {
 
-using host::CommandLatencyReport;
-using host::GateDecision;
-using host::key_of;
-using host::kLatencyLinks;
-using host::LatencyChainReport;
-using host::LatencyLink;
-using host::LinkLatency;
-using host::LoopSummary;
-using host::LoopTransition;
-using host::OperatorRefusal;
-using host::TargetResidualReport;
-using host::TrackingState;
+using loop::CommandLatencyReport;
+using loop::GateDecision;
+using loop::key_of;
+using loop::kLatencyLinks;
+using loop::LatencyChainReport;
+using loop::LatencyLink;
+using loop::LinkLatency;
+using loop::LoopSummary;
+using loop::LoopTransition;
+using loop::OperatorRefusal;
+using loop::TargetResidualReport;
+using loop::TrackingState;
 
 nlohmann::json pose_delta_json(const double d[6]) {
   using tracking::rad_to_deg;

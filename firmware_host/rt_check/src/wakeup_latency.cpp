@@ -29,10 +29,10 @@
 
 namespace lftrack::rt_check {
 
-using host::apply_realtime_setup;
-using host::monotonic_now_ns;
-using host::RealtimeSpec;
-using host::sleep_until_ns;
+using loop::apply_realtime_setup;
+using loop::monotonic_now_ns;
+using loop::RealtimeSpec;
+using loop::sleep_until_ns;
 using rt_check_text::cpu_list_text;
 using rt_check_text::number_text;
 using rt_check_text::online_cpus;

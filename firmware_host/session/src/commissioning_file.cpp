@@ -20,6 +20,9 @@
 #include "scene_yaml.hpp"
 
 namespace lftrack::host {
+
+using loop::similarity_expectation;
+using loop::VerdictLimits;
 namespace fs = std::filesystem;
 
 namespace {

@@ -16,6 +16,25 @@
 
 namespace lftrack::host {
 
+using loop::ControlSocket;
+using loop::CycleFeed;
+using loop::FrameArchive;
+using loop::FrameArchiveOptions;
+using loop::JournalOptions;
+using loop::JournalWriter;
+using loop::judges_view_shift;
+using loop::LoopGeometry;
+using loop::LoopParts;
+using loop::LoopSettings;
+using loop::LoopSummary;
+using loop::OperatorInput;
+using loop::OperatorPoll;
+using loop::OperatorView;
+using loop::PlannedRegistration;
+using loop::ScriptedOperator;
+using loop::TerminalOperator;
+using loop::TrackingLoop;
+
 using watch::CycleHub;
 using watch::HubOptions;
 using watch::IgtlOptions;

@@ -17,6 +17,9 @@
 
 namespace lftrack::host {
 
+using loop::monotonic_now_ns;
+using loop::RealtimeReport;
+
 namespace {
 
 using drivers::DeviceStatus;

@@ -4,6 +4,13 @@
 
 namespace lftrack::host {
 
+using loop::judge_registration;
+using loop::judges_view_shift;
+using loop::kMaxVerdictViews;
+using loop::masked_ncc;
+using loop::VerdictInput;
+using loop::VerdictLimits;
+
 using tracking::Image;
 
 Result<VerdictInput> verdict_input_of(const PreparedScene& p, const tracking::DrrRenderer& renderer,

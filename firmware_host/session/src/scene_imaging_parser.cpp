@@ -10,6 +10,12 @@
 
 namespace lftrack::host {
 
+using loop::check_correlation_model_spec;
+using loop::CorrelationModel;
+using loop::CorrelationModelSpec;
+using loop::ImagingSpec;
+using loop::SurrogateLimits;
+
 // A number in [lo, hi], with what the range means when it is refused.
 Status SceneParser::number_in(const YAML::Node& n, const std::string& what, double lo, double hi,
                               const std::string& why, double* out) const {

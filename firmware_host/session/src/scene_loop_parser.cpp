@@ -8,6 +8,9 @@
 
 namespace lftrack::host {
 
+using loop::LoopSpec;
+using loop::SafetyLimits;
+
 Status SceneParser::vec6(const YAML::Node& n, const std::string& what, const char* translation_key,
                          const char* rotation_key, tracking::Vector6d* out) const {
   LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {translation_key, rotation_key}));

@@ -25,6 +25,8 @@
 
 namespace lftrack::host {
 
+using loop::similarity_expectation;
+
 Status SceneParser::parse_ct(const YAML::Node& n, CtSpec* ct) const {
   LFTRACK_RETURN_IF_ERROR(check_keys(n, "ct", {"path", "seed", "mu_water_per_mm"}));
   YAML::Node path;

@@ -14,6 +14,8 @@
 
 namespace lftrack::host {
 
+using loop::ViewAgreement;
+
 using tracking::Image;
 using tracking::ImageView;
 using tracking::Pose;

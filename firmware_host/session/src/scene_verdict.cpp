@@ -8,6 +8,10 @@
 
 namespace lftrack::host {
 
+using loop::judges_view_shift;
+using loop::similarity_expectation;
+using loop::VerdictLimits;
+
 Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& measure) {
   auto e = similarity_expectation(measure);
   if (!e.ok()) return e.status();

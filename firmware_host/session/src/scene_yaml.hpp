@@ -186,8 +186,8 @@ class SceneParser {
   // The host-loop sections (scene_loop_parser.cpp).
   Status parse_sim(const YAML::Node& n, SimFrameSpec* sim) const;
   Status parse_physics(const YAML::Node& n, SimFrameSpec* sim) const;
-  Status parse_loop(const YAML::Node& n, LoopSpec* loop) const;
-  Status parse_safety(const YAML::Node& n, SafetyLimits* limits) const;
+  Status parse_loop(const YAML::Node& n, loop::LoopSpec* loop) const;
+  Status parse_safety(const YAML::Node& n, loop::SafetyLimits* limits) const;
   // safety's keys for the verdict's own checks, within the scene's envelope (parsed before).
   Status parse_verdict_checks(const YAML::Node& n, const PoseEnvelope& envelope, VerdictChecksSpec* checks) const;
   Status parse_actuator(const YAML::Node& n, ActuatorSpec* actuator) const;
@@ -195,9 +195,9 @@ class SceneParser {
   // Imaging on demand (scene_imaging_parser.cpp): tracking.imaging, and the surrogate section.
   Status number_in(const YAML::Node& n, const std::string& what, double lo, double hi, const std::string& why,
                    double* out) const;
-  Status parse_imaging(const YAML::Node& n, ImagingSpec* imaging, ImagingTechniqueSpec* technique,
+  Status parse_imaging(const YAML::Node& n, loop::ImagingSpec* imaging, ImagingTechniqueSpec* technique,
                        bool* min_span_given) const;
-  Status parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogate, SurrogateLimits* limits) const;
+  Status parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogate, loop::SurrogateLimits* limits) const;
   Status parse_imaging_sections(const YAML::Node& root, Scene* scene) const;
   Status check_motion(const YAML::Node& n, const std::string& what, const tracking::Vector6d& v, double mm,
                       double deg) const;

@@ -17,6 +17,16 @@
 
 namespace lftrack::host {
 
+using loop::check_archive_directory;
+using loop::check_auto_resume_s;
+using loop::check_journal_path;
+using loop::ControlSocket;
+using loop::loop_period_ns;
+using loop::LoopSettings;
+using loop::LoopSpec;
+using loop::MotionPredictor;
+using loop::prediction_lookahead_s;
+
 using watch::check_monitor_origins;
 using watch::ListenAddress;
 using watch::open_listening_socket;

@@ -18,7 +18,7 @@
 namespace lftrack::host {
 
 // The simulated room's truth as the loop reads it (tracking_loop.hpp never sees sim/).
-class RoomTruth final : public SimulatedTruth {
+class RoomTruth final : public loop::SimulatedTruth {
  public:
   explicit RoomTruth(const sim::SimulatedRoom* room) : room_(room) {}
   double residual_mm() const override { return room_->residual_mm(); }
@@ -31,8 +31,8 @@ class RoomTruth final : public SimulatedTruth {
 struct LoopSession::Parts {
   std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
   std::unique_ptr<tracking::Registration> registration;
-  std::unique_ptr<PlannedRegistration> planned_registration;  // the loop's view of `registration`
-  std::unique_ptr<ViewAgreement> view_agreement;              // the verdict's view check; null: none
+  std::unique_ptr<loop::PlannedRegistration> planned_registration;  // the loop's view of `registration`
+  std::unique_ptr<loop::ViewAgreement> view_agreement;              // the verdict's view check; null: none
   std::unique_ptr<sim::SimulatedRoom> room;                   // simulated detectors only
   // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
   // through its hooks.
@@ -50,17 +50,17 @@ struct LoopSession::Parts {
   std::unique_ptr<sim::TrackerTwin> tracker_twin;
   std::unique_ptr<drivers::SurrogateSource> surrogate;
   std::unique_ptr<CalibratedCouch> calibrated_couch;          // the couch through its calibration
-  std::unique_ptr<JournalWriter> journal;
-  std::unique_ptr<FrameArchive> archive;
+  std::unique_ptr<loop::JournalWriter> journal;
+  std::unique_ptr<loop::FrameArchive> archive;
   // The watchers, in the order they depend on each other (destroyed in reverse: the servers,
   // then the hub that feeds them, then what the hub reads).
-  std::unique_ptr<CycleFeed> feed;
+  std::unique_ptr<loop::CycleFeed> feed;
   std::unique_ptr<watch::PageOperator> page_operator;
   std::unique_ptr<watch::CycleHub> hub;
   std::unique_ptr<watch::MonitorServer> monitor;
   std::unique_ptr<watch::IgtlServer> igtl;
-  OperatorInputs operators;
-  std::unique_ptr<TrackingLoop> loop;
+  loop::OperatorInputs operators;
+  std::unique_ptr<loop::TrackingLoop> loop;
 };
 
 // The frame source of the session: an archived sequence (replay), the scene's detectors, or the
@@ -77,7 +77,7 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
 // its imaging is `model`, and the dose per pair into `settings` (every mode: the summary compares).
 // A replay registers every archived pair: its imaging is every_cycle.
 Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& o, LoopSession::Parts* parts,
-                              LoopSettings* settings);
+                              loop::LoopSettings* settings);
 // The OpenIGTLink client's options for the scene's surrogate.igtl (the session's and the start-up
 // checks').
 drivers::IgtlSurrogateOptions igtl_surrogate_options(const Scene& scene);
@@ -87,7 +87,7 @@ drivers::IgtlSurrogateOptions igtl_surrogate_options(const Scene& scene);
 Status check_attended(const PreparedScene& p, const LoopSessionOptions& o);
 // Warnings for the scene's author: a prediction window too short for its order, a couch whose
 // largest allowed move outlasts the beam's allowed wait.
-void warn_if_prediction_window_short(const LoopSettings& s);
+void warn_if_prediction_window_short(const loop::LoopSettings& s);
 void warn_if_beam_wait_short(const Scene& scene);
 
 }  // namespace lftrack::host

@@ -11,6 +11,11 @@
 
 namespace lftrack::host {
 
+using loop::CorrelationModelSpec;
+using loop::ImagingSpec;
+using loop::LoopSettings;
+using loop::lower_current_thread_priority;
+
 namespace {
 
 // lftrack sim with surrogate.source igtl: the simulated chest marker (surrogate.sim, faults

@@ -15,6 +15,8 @@
 
 namespace lftrack::host {
 
+using loop::lower_current_thread_priority;
+
 using drivers::DeviceStatus;
 
 SimFrameSource::SimFrameSource(const PreparedScene& scene,

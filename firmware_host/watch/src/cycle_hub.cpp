@@ -9,16 +9,16 @@
 
 namespace lftrack::watch {
 
-using host::CycleFeed;
-using host::exclude_this_thread_from_allocation_count;
-using host::FeedImages;
-using host::FeedRecord;
-using host::GateReason;
-using host::JournalRecord;
-using host::kMaxFeedViews;
-using host::make_current_thread_best_effort;
-using host::TrackingEvent;
-using host::TrackingState;
+using loop::CycleFeed;
+using loop::exclude_this_thread_from_allocation_count;
+using loop::FeedImages;
+using loop::FeedRecord;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::kMaxFeedViews;
+using loop::make_current_thread_best_effort;
+using loop::TrackingEvent;
+using loop::TrackingState;
 
 namespace {
 

@@ -20,11 +20,11 @@
 
 namespace lftrack::watch {
 
-using host::exclude_this_thread_from_allocation_count;
-using host::FeedRecord;
-using host::JournalRecord;
-using host::make_current_thread_best_effort;
-using host::TrackingState;
+using loop::exclude_this_thread_from_allocation_count;
+using loop::FeedRecord;
+using loop::JournalRecord;
+using loop::make_current_thread_best_effort;
+using loop::TrackingState;
 
 Eigen::Matrix4d ras_from_lps(const Eigen::Matrix4d& T) {
   const Eigen::Matrix4d F = Eigen::Vector4d(-1, -1, 1, 1).asDiagonal();

@@ -10,18 +10,18 @@
 
 namespace lftrack::watch {
 
-using host::BeamWithheld;
-using host::GateDecision;
-using host::GateReason;
-using host::JournalRecord;
-using host::key_of;
-using host::kLatencyLinks;
-using host::latency_links_ms;
-using host::LatencyLink;
-using host::OperatorRefusal;
-using host::refusals_text;
-using host::total_ms;
-using host::TrackingState;
+using loop::BeamWithheld;
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::key_of;
+using loop::kLatencyLinks;
+using loop::latency_links_ms;
+using loop::LatencyLink;
+using loop::OperatorRefusal;
+using loop::refusals_text;
+using loop::total_ms;
+using loop::TrackingState;
 
 using records::pose_delta_json;
 namespace {

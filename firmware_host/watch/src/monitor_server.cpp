@@ -21,11 +21,11 @@
 
 namespace lftrack::watch {
 
-using host::exclude_this_thread_from_allocation_count;
-using host::make_current_thread_best_effort;
-using host::OperatorCommand;
-using host::OperatorRefusal;
-using host::OperatorRequest;
+using loop::exclude_this_thread_from_allocation_count;
+using loop::make_current_thread_best_effort;
+using loop::OperatorCommand;
+using loop::OperatorRefusal;
+using loop::OperatorRequest;
 namespace {
 
 constexpr const char* kJson = "application/json";

@@ -4,12 +4,12 @@
 
 namespace lftrack::watch {
 
-using host::judge_operator_request;
-using host::OperatorCommand;
-using host::OperatorPoll;
-using host::OperatorRefusal;
-using host::OperatorRequest;
-using host::OperatorView;
+using loop::judge_operator_request;
+using loop::OperatorCommand;
+using loop::OperatorPoll;
+using loop::OperatorRefusal;
+using loop::OperatorRequest;
+using loop::OperatorView;
 
 int PageOperator::refusal_index(OperatorRefusal why) {
   switch (why) {

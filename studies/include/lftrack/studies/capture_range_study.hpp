@@ -71,7 +71,7 @@ struct CaptureRangeRun {
   bool success = false;        // tre_mean < success_mm
   bool success_loose = false;  // tre_mean < success_loose_mm
   bool accepted = false;       // the registration verdict accepted it
-  int verdict_reason = 0;      // VerdictReason's value (0: accepted)
+  int verdict_reason = 0;      // loop::VerdictReason's value (0: accepted)
   int evaluations = 0;
   double ms = 0;
 };

@@ -18,7 +18,7 @@ namespace lftrack::host {
 struct CommandChain {
   int journal = 0;          // index into LatencyStudy::journals
   std::uint64_t cycle = 0;  // the journal's cycle counter
-  std::array<double, kLatencyLinks> links_ms{};
+  std::array<double, loop::kLatencyLinks> links_ms{};
   double total_ms() const;
 };
 
@@ -29,7 +29,7 @@ struct LatencyStudy {
   std::vector<CommandChain> chains;  // in file order
   // Quantiles by nearest rank (the smallest value with at least q of the commands at or below
   // it), as the loop's summary takes them from its 0.01 ms bins: the two agree within a bin.
-  LatencyChainReport report;
+  loop::LatencyChainReport report;
   std::vector<std::string> notes;  // damage, repeated cycles, commands without a whole chain
 };
 

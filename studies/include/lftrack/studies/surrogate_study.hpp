@@ -27,7 +27,7 @@ namespace lftrack::host {
 struct SurrogateStudyOptions {
   sim::PatientMotionSpec motion;  // the target's: translations (mm) of the registration origin
   sim::BreathingSurrogateSpec surrogate;
-  CorrelationModelSpec model;
+  loop::CorrelationModelSpec model;
   std::vector<double> xray_hz{0.5, 1, 2};
   double correction_hz = 30;
   double duration_s = 300;

@@ -58,7 +58,7 @@ struct CommissionCaseResult {
   CommissionCase kind = CommissionCase::kAlign;
   tracking::Vector6d gold_delta = tracking::Vector6d::Zero();  // the patient, from the nominal pose: mm, rad
   bool registered = false;  // false: the image-quality gate refused the frames
-  VerdictInput input;       // what the verdict judges (re-judged with any floors)
+  loop::VerdictInput input;  // what the verdict judges (re-judged with any floors)
   double tre_mean_mm = 0;   // against the gold pose; NaN where there is none (no registration, another CT)
   double ms = 0;            // the registration's time
   double view_check_ms = 0;  // the view check's (each view registered alone), when the scene has one
@@ -74,9 +74,8 @@ struct CommissionTally {
   int rejected_right = 0, rejected_wrong = 0;  // rejected_right: the false rejects
 };
 // Per kind (index: the enum's value) and, last, all kinds together; each case judged with `limits`.
-std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(const std::vector<CommissionCaseResult>& cases,
-                                                                       const VerdictLimits& limits,
-                                                                       double tolerance_mm);
+std::array<CommissionTally, kCommissionCaseKinds + 1> tally_commission(
+    const std::vector<CommissionCaseResult>& cases, const loop::VerdictLimits& limits, double tolerance_mm);
 
 // The floors chosen from `cases`: every wrong result the other checks accept is refused by one of
 // them, and as many right ones as can be are kept; each floor sits halfway between the values it
@@ -99,14 +98,15 @@ struct FloorMargins {
   double similarity = 0;  // the measure's units
   double check_ncc = 0;
 };
-FloorMargins floor_margins(const VerdictLimits& defaults, double min_margin_fraction);
+FloorMargins floor_margins(const loop::VerdictLimits& defaults, double min_margin_fraction);
 inline constexpr double kDefaultFloorMarginFraction = 0.005;
-ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
-                           double tolerance_mm, double min_margin_fraction = kDefaultFloorMarginFraction);
+ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases,
+                           const loop::VerdictLimits& defaults, double tolerance_mm,
+                           double min_margin_fraction = kDefaultFloorMarginFraction);
 
 // The largest of the views' shifts when each is registered alone (view_agreement.hpp); NaN where
 // the check did not run.
-double largest_view_shift_mm(const VerdictInput& input);
+double largest_view_shift_mm(const loop::VerdictInput& input);
 
 // The view check's limit for the scene (defaults.max_view_shift_mm where it has one): twice the
 // largest shift of the right results (each view registered alone from a right result moves the
@@ -115,8 +115,8 @@ double largest_view_shift_mm(const VerdictInput& input);
 // results alone: the floors refuse every wrong result without it (without_floors), so it can
 // cost right results, never let a wrong one by.
 inline constexpr double kMinViewShiftLimitMm = 0.25;
-double choose_view_shift_limit(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
-                               double tolerance_mm);
+double choose_view_shift_limit(const std::vector<CommissionCaseResult>& cases,
+                               const loop::VerdictLimits& defaults, double tolerance_mm);
 
 // A right result: a good case registered to within the tolerance (mean TRE). Every other case is
 // wrong, whatever it scores: a bad case must be refused.
@@ -126,7 +126,7 @@ bool is_right_result(const CommissionCaseResult& c, double tolerance_mm);
 // agreement, the envelope and its edge let by, which is what the floors decide. The view check
 // (each view registered alone) is not among them: tracking cycles run it only every Nth cycle,
 // so the floors must refuse every wrong result without it; it is a second line behind them.
-VerdictLimits without_floors(VerdictLimits limits);
+loop::VerdictLimits without_floors(loop::VerdictLimits limits);
 
 // What the verdict's checks beyond the floors (the envelope's edge band, each view registered
 // alone) do at the measure's default floors, the floors an uncommissioned scene judges with: the
@@ -142,12 +142,12 @@ struct OtherChecks {
   bool view_check = false;
 };
 
-OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const VerdictLimits& defaults,
+OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const loop::VerdictLimits& defaults,
                          double tolerance_mm);
 
 // The lowest view's similarity and check NCC of a judged case (the check: NaN where it did not
 // run; a case the quality gate refused holds no similarity: look at `registered` first).
-double lowest_view_similarity(const VerdictInput& input);
-double lowest_view_check_ncc(const VerdictInput& input);
+double lowest_view_similarity(const loop::VerdictInput& input);
+double lowest_view_check_ncc(const loop::VerdictInput& input);
 
 }  // namespace lftrack::host

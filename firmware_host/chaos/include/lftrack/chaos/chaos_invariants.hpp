@@ -43,19 +43,19 @@
 
 namespace lftrack::chaos {
 
-// The loop's vocabulary, which the soak speaks (the loop's types live in lftrack::host).
-using host::GateDecision;
-using host::GateReason;
-using host::JournalRecord;
-using host::kMinHoldBeforeResumeS;
-using host::OperatorCommand;
-using host::OperatorPoll;
-using host::OperatorRefusal;
-using host::OperatorRequest;
-using host::OperatorView;
-using host::SafetyLimits;
-using host::TrackingEvent;
-using host::TrackingState;
+// The loop's vocabulary, which the soak speaks (the loop's types live in lftrack::loop).
+using loop::GateDecision;
+using loop::GateReason;
+using loop::JournalRecord;
+using loop::kMinHoldBeforeResumeS;
+using loop::OperatorCommand;
+using loop::OperatorPoll;
+using loop::OperatorRefusal;
+using loop::OperatorRequest;
+using loop::OperatorView;
+using loop::SafetyLimits;
+using loop::TrackingEvent;
+using loop::TrackingState;
 
 // What the actuator was told in one cycle, as its wrapper saw the calls.
 struct ActuatorCalls {

@@ -7,7 +7,7 @@
 
 #include <cstdint>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // Allocations since the process started, on every thread but those excluded below.
 std::uint64_t process_allocation_count();
@@ -20,4 +20,4 @@ std::uint64_t process_allocation_count();
 void exclude_this_thread_from_allocation_count();
 bool this_thread_allocations_counted();
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -39,7 +39,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct CorrelationModelSpec {
   enum class Order { kLinear, kQuadratic };
@@ -161,4 +161,4 @@ class CorrelationModel {
   double last_check_error_mm_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

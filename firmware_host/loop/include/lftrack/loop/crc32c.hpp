@@ -7,11 +7,11 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // CRC of `size` bytes continuing from `crc` (0 to start).
 std::uint32_t crc32c(const void* data, std::size_t size, std::uint32_t crc = 0);
 // The portable table implementation (the tests compare the two).
 std::uint32_t crc32c_portable(const void* data, std::size_t size, std::uint32_t crc = 0);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

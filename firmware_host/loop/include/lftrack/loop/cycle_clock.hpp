@@ -17,7 +17,7 @@
 
 #include "lftrack/loop/cycle_schedule.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 class CycleObserver;
 
@@ -66,4 +66,4 @@ std::unique_ptr<CycleClock> host_cycle_clock();
 // stall, and overruns and skips periods exactly as on the host's clock.
 std::unique_ptr<CycleClock> simulated_cycle_clock(CycleObserver* observer);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -25,7 +25,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 inline constexpr int kMaxFeedViews = 2;
 
@@ -97,4 +97,4 @@ class CycleFeed {
   bool allocated_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

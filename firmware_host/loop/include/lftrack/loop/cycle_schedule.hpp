@@ -5,7 +5,7 @@
 
 #include <cstdint>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct NextCycle {
   std::int64_t index = 0;     // cycle index to run next
@@ -22,4 +22,4 @@ NextCycle next_cycle(std::int64_t start_ns, std::int64_t period_ns, std::int64_t
 void sleep_until_ns(std::int64_t deadline_ns);
 std::int64_t monotonic_now_ns();
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

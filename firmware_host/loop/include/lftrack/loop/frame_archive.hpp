@@ -24,7 +24,7 @@
 #include "lftrack/loop/spsc_queue.hpp"
 #include "lftrack/tracking/pose.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct FrameArchiveOptions {
   int slots = 16;              // pairs that may wait for the disk (1.6 s at 10 Hz)
@@ -90,4 +90,4 @@ class FrameArchive {
   bool closed_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

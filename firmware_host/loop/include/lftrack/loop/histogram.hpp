@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 class Histogram {
  public:
@@ -45,4 +45,4 @@ class Histogram {
   double max_ = 0;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -31,7 +31,7 @@
 
 #include "lftrack/loop/correlation_model.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct SurrogateLimits {
   double rate_hz = 60;    // the source's reading rate (its rate is taken over a window of readings)
@@ -108,4 +108,4 @@ class SurrogateMonitor {
   bool jumped_ = false, not_finite_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

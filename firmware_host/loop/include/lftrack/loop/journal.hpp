@@ -35,7 +35,7 @@
 #include "lftrack/loop/spsc_queue.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // One cycle. Plain data; times are CLOCK_MONOTONIC nanoseconds.
 struct JournalRecord {
@@ -198,4 +198,4 @@ class JournalWriter {
   bool closed_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

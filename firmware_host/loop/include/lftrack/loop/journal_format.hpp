@@ -7,7 +7,7 @@
 
 #include "lftrack/loop/journal.hpp"
 
-namespace lftrack::host::journal_format {
+namespace lftrack::loop::journal_format {
 
 constexpr char kFileMagic[8] = {'L', 'F', 'T', 'J', 'R', 'N', 'L', '1'};
 // 2: hold id and operator commands (8 bytes more); 3: the cycle's refusals by reason (32 more);
@@ -26,4 +26,4 @@ struct Frame {
   std::uint32_t crc = 0;
 };
 
-}  // namespace lftrack::host::journal_format
+}  // namespace lftrack::loop::journal_format

@@ -25,7 +25,7 @@
 #include "lftrack/loop/histogram.hpp"
 #include "lftrack/loop/journal.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 enum class LatencyLink : int { kArrive, kPreprocess, kRegister, kGate, kWrite, kAcknowledge };
 constexpr int kLatencyLinks = 6;
@@ -79,4 +79,4 @@ class LatencyChain {
   Histogram total_{0.01, 250};
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

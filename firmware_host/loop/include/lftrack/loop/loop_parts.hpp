@@ -28,7 +28,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // The room's geometry as the loop needs it, per detector in the frame source's order.
 struct LoopGeometry {
@@ -125,4 +125,4 @@ struct LoopSettings {
 std::int64_t loop_period_ns(const LoopSettings& s);
 double prediction_lookahead_s(const LoopSettings& s);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

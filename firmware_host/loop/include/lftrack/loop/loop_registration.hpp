@@ -13,7 +13,7 @@
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // Which of the loop's two plans a run uses: the cold, wide one of ALIGN, or tracking's warm one.
 enum class RegistrationStage : std::uint8_t { kAlign, kTrack };
@@ -50,4 +50,4 @@ class PlannedRegistration final : public LoopRegistration {
   tracking::PreparedPlan align_, track_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -9,7 +9,7 @@
 
 #include "lftrack/loop/imaging_on_demand.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // loop: the real-time cycle (DESIGN.md, "One cycle").
 struct RealtimeSpec {
@@ -42,4 +42,4 @@ struct LoopSpec {
   ImagingSpec imaging;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

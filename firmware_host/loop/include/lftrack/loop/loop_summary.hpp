@@ -15,7 +15,7 @@
 #include "lftrack/loop/tracking_accuracy.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct LoopTransition {
   std::int64_t cycle = 0;
@@ -95,4 +95,4 @@ std::string refusals_text(const Counts& by_reason) {
   return text;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

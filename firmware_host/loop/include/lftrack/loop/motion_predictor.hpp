@@ -38,7 +38,7 @@
 
 #include "lftrack/tracking/pose.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 class MotionPredictor {
  public:
@@ -78,4 +78,4 @@ class MotionPredictor {
   int count_ = 0;  // newest last
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -33,7 +33,7 @@
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // When several arrive in one cycle, a quit or stop wins over a resume or reset (OperatorPoll).
 enum class OperatorCommand : std::uint8_t { kNone, kResume, kStop, kReset, kQuit, kStatus };
@@ -231,4 +231,4 @@ inline constexpr double kMaxAutoResumeS = 3600.0;
 // Checks an --auto-resume value: finite, at least 0, at most kMaxAutoResumeS.
 Status check_auto_resume_s(double seconds);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -11,7 +11,7 @@
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct RealtimeReport {
   bool memory_locked = false;  // check_realtime_setup: could be
@@ -48,4 +48,4 @@ bool lower_current_thread_priority(int below = 1);
 // SCHED_OTHER, sharing the CPU with ordinary processes.
 bool make_current_thread_best_effort();
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -48,7 +48,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 inline constexpr int kMaxVerdictViews = 4;
 
@@ -147,4 +147,4 @@ Result<SimilarityExpectation> similarity_expectation(const std::string& measure)
 // expected)". Allocates; not for the cycle.
 std::string verdict_text(const RegistrationVerdict& verdict, const std::vector<std::string>& view_names);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

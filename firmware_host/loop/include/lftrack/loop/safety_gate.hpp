@@ -24,7 +24,7 @@
 #include "lftrack/loop/imaging_on_demand.hpp"
 #include "lftrack/tracking/pose.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct SafetyLimits {
   double max_step_mm = 2.0;    // per-cycle correction, each translation component
@@ -165,4 +165,4 @@ GateOutput evaluate_gate(const SafetyLimits& limits, const GateInput& input);
 // SKIP. Imaging on demand lets a pair into the correlation model only when its result passes them.
 GateReason result_quality(const SafetyLimits& limits, const GateInput& input);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -9,7 +9,7 @@
 #include <type_traits>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 template <class T>
 class SpscQueue {
@@ -52,4 +52,4 @@ class SpscQueue {
   alignas(64) std::atomic<std::size_t> tail_{0};
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

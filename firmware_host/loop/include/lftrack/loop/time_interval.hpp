@@ -6,11 +6,11 @@
 
 #include <cstdint>
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 inline double ns_between(std::int64_t from_ns, std::int64_t to_ns) {
   std::int64_t d = 0;
   return __builtin_sub_overflow(to_ns, from_ns, &d) ? double(to_ns) - double(from_ns) : double(d);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -25,7 +25,7 @@
 #include "lftrack/loop/histogram.hpp"
 #include "lftrack/loop/journal.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 struct TargetResidualReport {
   std::int64_t cycles = 0;                   // TRACK cycles with a truth
@@ -66,4 +66,4 @@ class TrackingAccuracy {
 
 // Their JSON forms: lftrack/records/loop_json.hpp.
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -36,7 +36,7 @@
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 class TrackingLoop {
  public:
@@ -59,4 +59,4 @@ class TrackingLoop {
   std::atomic<bool> stop_{false};
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -11,7 +11,7 @@
 
 #include "lftrack/loop/safety_gate.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 enum class TrackingState : std::uint8_t { kIdle = 0, kAlign = 1, kTrack = 2, kHold = 3, kFault = 4 };
 const char* to_string(TrackingState state);
@@ -51,4 +51,4 @@ class TrackingStateMachine {
   bool beam_permit_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

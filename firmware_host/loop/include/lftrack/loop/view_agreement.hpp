@@ -25,7 +25,7 @@
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::loop {
 
 // The displacement of the target, `moved - at`, less its component along the unit ray
 // `ray_room`: what a view along that ray sees of it. Pure.
@@ -72,4 +72,4 @@ class ViewAgreement {
   std::vector<tracking::ImageView<const unsigned char>> one_mask_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::loop

@@ -56,7 +56,7 @@ struct JournalReadLimits {
 struct JournalContents {
   std::uint32_t format_version = 0;
   std::array<std::uint8_t, 16> scene_fingerprint{};  // zeros: the writer recorded none
-  std::vector<host::JournalRecord> records;          // every valid frame, in file order (repeats included)
+  std::vector<loop::JournalRecord> records;          // every valid frame, in file order (repeats included)
   std::vector<JournalBadSpan> bad_spans;  // in file order; a torn tail is the last one
   std::vector<JournalCycleGap> gaps;
   std::vector<JournalCycleRepeat> repeats;

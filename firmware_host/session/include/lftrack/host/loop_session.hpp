@@ -50,8 +50,8 @@ struct SessionHooks {
   std::function<drivers::FrameSource*(drivers::FrameSource*)> wrap_frames;
   std::function<drivers::Actuator*(drivers::Actuator*)> wrap_actuator;
   std::function<drivers::SurrogateSource*(drivers::SurrogateSource*)> wrap_surrogate;  // model imaging only
-  OperatorInput* operator_input = nullptr;  // polled with the session's own operators
-  CycleObserver* observer = nullptr;        // LoopParts::observer
+  loop::OperatorInput* operator_input = nullptr;  // polled with the session's own operators
+  loop::CycleObserver* observer = nullptr;        // loop::LoopParts::observer
 };
 
 // kSimulated: every device is its simulated twin (lftrack sim). kScene: the scene's devices
@@ -64,7 +64,7 @@ struct LoopSessionOptions {
   bool status_line = false;
   bool announce_holds = false;  // without a status line: a line on stderr per HOLD/FAULT with its id
   std::filesystem::path journal;  // empty: no journal; an existing file is refused unless
-  JournalOptions journal_options;  // journal_options.overwrite
+  loop::JournalOptions journal_options;  // journal_options.overwrite
   bool overwrite_archive = false;  // an earlier archive in `archive` is replaced, not refused
   std::filesystem::path control_socket;   // empty: none
   bool terminal_operator = false;         // keys on a terminal's standard input
@@ -91,7 +91,7 @@ struct LoopSessionOptions {
 
 // The room's geometry as the loop sees it: the scene's detectors, ROI windows, nominal pose and
 // registration origin.
-LoopGeometry loop_geometry(const PreparedScene& scene);
+loop::LoopGeometry loop_geometry(const PreparedScene& scene);
 
 // X = T_room_from_couch of a mounting or calibration (its centre defaults to the registration
 // origin).
@@ -118,11 +118,11 @@ class LoopSession {
                                                      tracking::ThreadPool* pool);
   // Runs the loop; closes the journal and the archive. A journal that failed during the run is
   // reported in the summary's journal_error (the loop held when it failed).
-  Result<LoopSummary> run();
+  Result<loop::LoopSummary> run();
   void request_stop();
   const sim::SimulatedRoom* room() const;            // null when replaying
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
-  const FrameArchive* archive() const;               // null without one
+  const loop::FrameArchive* archive() const;         // null without one
   std::filesystem::path journal_path() const;        // the journal written (empty: none)
   bool journal_failed() const;                       // the journal's writer failed (disk full, I/O error)
   const drivers::ModbusCouch* modbus_couch() const;  // the Modbus couch driver (HIL or run); null otherwise

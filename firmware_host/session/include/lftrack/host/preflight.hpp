@@ -44,6 +44,6 @@ struct PreflightReport {
 // `realtime`: the outcome of apply_realtime_setup (its status, and its report when it
 // succeeded); `rt_waived`: the operator gave --rt ignore.
 PreflightReport run_preflight(const PreparedScene& scene, const LoopSessionOptions& options,
-                              const Result<RealtimeReport>& realtime, bool rt_waived);
+                              const Result<loop::RealtimeReport>& realtime, bool rt_waived);
 
 }  // namespace lftrack::host

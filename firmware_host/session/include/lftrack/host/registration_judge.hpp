@@ -19,9 +19,9 @@ namespace lftrack::host {
 
 struct JudgedRegistration {
   bool registered = false;  // false: a frame failed the image-quality gate; nothing was registered
-  VerdictInput input;       // what the verdict judged
+  loop::VerdictInput input;  // what the verdict judged
   double view_check_ms = 0;  // the view check's wall time (both views registered alone), when it ran
-  RegistrationVerdict verdict;
+  loop::RegistrationVerdict verdict;
   std::vector<tracking::FrameQualityStats> quality;  // per view
   tracking::RegistrationResult result;               // when registered
 };
@@ -30,10 +30,10 @@ struct JudgedRegistration {
 // preprocessing (`quality` per view): the stop, finiteness, each view's similarity, the delta from
 // the nominal pose, and each view's check NCC against `renderer`'s DRR at the result (when the
 // pose is finite). The studies judge their registrations with it; RegistrationJudge does too.
-Result<VerdictInput> verdict_input_of(const PreparedScene& scene, const tracking::DrrRenderer& renderer,
-                                      const SceneFrames& frames,
-                                      const std::vector<tracking::FrameQualityIssue>& quality,
-                                      const tracking::RegistrationResult& result);
+Result<loop::VerdictInput> verdict_input_of(const PreparedScene& scene, const tracking::DrrRenderer& renderer,
+                                            const SceneFrames& frames,
+                                            const std::vector<tracking::FrameQualityIssue>& quality,
+                                            const tracking::RegistrationResult& result);
 
 class RegistrationJudge {
  public:
@@ -50,18 +50,17 @@ class RegistrationJudge {
   // detector, as scene_detector_corrections() gives them. The scene outlives the judge. With a
   // view check (judges_view_shift(limits)) each view's registration alone is made here, with the
   // scene's tracking plan.
-  static Result<std::unique_ptr<RegistrationJudge>> create(const PreparedScene& scene,
-                                                           std::shared_ptr<const tracking::DrrRenderer> renderer,
-                                                           const RegistrationSpec& spec,
-                                                           std::vector<tracking::DetectorCorrection> corrections,
-                                                           const VerdictLimits& limits, tracking::ThreadPool* pool,
-                                                           ViewCheck view_check = ViewCheck::kWhenOthersAccept);
+  static Result<std::unique_ptr<RegistrationJudge>> create(
+      const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
+      const RegistrationSpec& spec, std::vector<tracking::DetectorCorrection> corrections,
+      const loop::VerdictLimits& limits, tracking::ThreadPool* pool,
+      ViewCheck view_check = ViewCheck::kWhenOthersAccept);
 
   // Registers `raw` (whole-detector frames, one per view) from `start` with `plan` and judges it.
   Result<JudgedRegistration> judge(const std::vector<tracking::Image<std::uint16_t>>& raw, const tracking::Pose& start,
                                    const tracking::RegistrationPlan& plan, const BeforeRun& before_run = {});
 
-  const VerdictLimits& limits() const { return limits_; }
+  const loop::VerdictLimits& limits() const { return limits_; }
   const std::vector<tracking::DetectorCorrection>& corrections() const { return corrections_; }
 
  private:
@@ -69,10 +68,10 @@ class RegistrationJudge {
   const PreparedScene* scene_ = nullptr;
   std::shared_ptr<const tracking::DrrRenderer> renderer_;
   std::unique_ptr<tracking::Registration> registration_;
-  std::unique_ptr<ViewAgreement> agreement_;  // null: the scene does not check its views alone
+  std::unique_ptr<loop::ViewAgreement> agreement_;  // null: the scene does not check its views alone
   ViewCheck view_check_ = ViewCheck::kWhenOthersAccept;
   std::vector<tracking::DetectorCorrection> corrections_;
-  VerdictLimits limits_;
+  loop::VerdictLimits limits_;
 };
 
 }  // namespace lftrack::host

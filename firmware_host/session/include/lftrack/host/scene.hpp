@@ -259,8 +259,8 @@ struct Scene {
   } defaulted_plans;
   FiducialSpec fiducials;
   SimFrameSpec sim;
-  LoopSpec loop;
-  SafetyLimits safety;
+  loop::LoopSpec loop;
+  loop::SafetyLimits safety;
   // Whether the scene names safety.min_similarity (in its tracking.similarity's units); without
   // it the registration verdict takes the measure's default floor (registration_verdict.hpp).
   bool min_similarity_given = false;

@@ -41,11 +41,9 @@ Result<std::unique_ptr<tracking::Registration>> make_scene_registration(
 
 // The verdict's view check for the scene (view_agreement.hpp): each view's registration alone, as
 // make_scene_registration() sets it up, with `plan` (the scene's tracking plan).
-Result<std::unique_ptr<ViewAgreement>> make_scene_view_agreement(const PreparedScene& scene,
-                                                                 std::shared_ptr<const tracking::DrrRenderer> renderer,
-                                                                 const RegistrationSpec& spec,
-                                                                 const tracking::RegistrationPlan& plan,
-                                                                 tracking::ThreadPool* pool);
+Result<std::unique_ptr<loop::ViewAgreement>> make_scene_view_agreement(
+    const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
+    const RegistrationSpec& spec, const tracking::RegistrationPlan& plan, tracking::ThreadPool* pool);
 
 // One frame per detector, preprocessed to the ROI windows.
 struct SceneFrames {

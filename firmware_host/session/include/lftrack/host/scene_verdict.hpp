@@ -16,7 +16,7 @@ namespace lftrack::host {
 // The scene's limits for registrations with `measure`: the floor is safety.min_similarity when
 // the scene names it and `measure` is the scene's own tracking.similarity (the floor is in that
 // measure's units), else the measure's default; the envelope is the scene's.
-Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& measure);
+Result<loop::VerdictLimits> verdict_limits(const Scene& scene, const std::string& measure);
 
 // The limits the loop and `lftrack register` judge with: verdict_limits(), and where the scene
 // names a commissioning file (safety.commissioning) its floors: min_check_ncc always, and
@@ -24,8 +24,8 @@ Result<VerdictLimits> verdict_limits(const Scene& scene, const std::string& meas
 // or measured on another CT, room, registration or imaging (commissioning_file.hpp) is an error
 // that says how to commission the scene again. `floors_from` (when given) receives where the
 // floors came from, for people: the file, or "the measure's defaults (not commissioned)".
-Result<VerdictLimits> scene_verdict_limits(const PreparedScene& scene, const std::string& measure,
-                                           std::string* floors_from = nullptr);
+Result<loop::VerdictLimits> scene_verdict_limits(const PreparedScene& scene, const std::string& measure,
+                                                 std::string* floors_from = nullptr);
 
 // Depth along a view's central ray is unobservable from that view alone. The unit vector of
 // detector `index`'s central ray (from the source to the detector's centre), room frame.

@@ -64,7 +64,7 @@ struct TracePoint {
 
 struct HubTransition {
   std::int64_t cycle = 0;
-  host::TrackingState from = host::TrackingState::kIdle, to = host::TrackingState::kIdle;
+  loop::TrackingState from = loop::TrackingState::kIdle, to = loop::TrackingState::kIdle;
   std::string reason;
   std::uint32_t hold_id = 0;
 };
@@ -78,7 +78,7 @@ struct HubCounts {
 struct HubStatus {
   bool started = false;  // a record has arrived
   std::uint64_t seq = 0;  // records absorbed so far (the newest record's number)
-  host::FeedRecord last;
+  loop::FeedRecord last;
   HubCounts counts;
   std::vector<HubTransition> transitions;  // oldest first
   std::uint64_t images_seq = 0;            // changes when new display images are ready
@@ -111,7 +111,7 @@ class CycleHub {
  public:
   // Starts the hub's thread on `feed` (which must outlive the hub). The thread drops from the
   // cycle's real-time priority to best effort: it never competes with the loop.
-  static Result<std::unique_ptr<CycleHub>> start(host::CycleFeed* feed, HubOptions options);
+  static Result<std::unique_ptr<CycleHub>> start(loop::CycleFeed* feed, HubOptions options);
   ~CycleHub();
   void stop();
 
@@ -128,24 +128,24 @@ class CycleHub {
   std::vector<TracePoint> trace_after(std::int64_t after_cycle, std::size_t max) const;
   // Records numbered after `after_seq`, oldest first (at most `max`); *skipped counts those
   // already forgotten (a watcher more than record_history behind).
-  std::vector<host::FeedRecord> records_after(std::uint64_t after_seq, std::size_t max,
+  std::vector<loop::FeedRecord> records_after(std::uint64_t after_seq, std::size_t max,
                                               std::uint64_t* first_seq, std::uint64_t* skipped) const;
   std::shared_ptr<const DisplayImages> images() const;
   bool stopped() const { return stop_.load(); }
 
  private:
-  explicit CycleHub(host::CycleFeed* feed, HubOptions options);
+  explicit CycleHub(loop::CycleFeed* feed, HubOptions options);
   void run();
-  void absorb(const host::FeedRecord& r);
-  void make_display(const host::FeedImages& images);
+  void absorb(const loop::FeedRecord& r);
+  void make_display(const loop::FeedImages& images);
 
-  host::CycleFeed* feed_;
+  loop::CycleFeed* feed_;
   HubOptions options_;
   mutable std::mutex mutex_;
   mutable std::condition_variable news_;
   HubStatus status_;
   std::deque<TracePoint> trace_;
-  std::deque<host::FeedRecord> history_;  // numbered status_.seq - size + 1 ... status_.seq
+  std::deque<loop::FeedRecord> history_;  // numbered status_.seq - size + 1 ... status_.seq
   std::shared_ptr<const DisplayImages> images_;
   std::chrono::steady_clock::time_point next_render_{};
   std::atomic<bool> stop_{false};

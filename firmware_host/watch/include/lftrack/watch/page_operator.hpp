@@ -25,39 +25,39 @@
 
 namespace lftrack::watch {
 
-class PageOperator final : public host::OperatorInput {
+class PageOperator final : public loop::OperatorInput {
  public:
   static constexpr int kSlots = 16;
 
   struct Verdict {
     enum class Outcome { kAccepted, kRefused, kBusy, kNoAnswer } outcome = Outcome::kNoAnswer;
-    host::OperatorRefusal refusal = host::OperatorRefusal::kNone;  // when refused
+    loop::OperatorRefusal refusal = loop::OperatorRefusal::kNone;  // when refused
   };
 
   // The server's threads. Queues `request` for the loop and waits up to `wait` for its verdict;
   // kBusy when kSlots requests are already waiting, kNoAnswer when the loop did not poll in time
   // (the request is then withdrawn: it never acts later).
-  Verdict submit(const host::OperatorRequest& request, std::chrono::milliseconds wait);
+  Verdict submit(const loop::OperatorRequest& request, std::chrono::milliseconds wait);
   // A request the page's checks refused (kBadToken, kReplayed, kOrigin, kMalformed): journaled at
   // the next poll.
-  void refused_before_loop(host::OperatorRefusal why);
+  void refused_before_loop(loop::OperatorRefusal why);
   // Any thread: requests queued and not yet decided by the loop.
   int waiting() const;
 
   // The loop's thread.
-  void poll(const host::OperatorView& view, host::OperatorPoll* out) override;
-  void on_hold(const host::OperatorView& view, host::OperatorPoll* out) override;
+  void poll(const loop::OperatorView& view, loop::OperatorPoll* out) override;
+  void on_hold(const loop::OperatorView& view, loop::OperatorPoll* out) override;
 
  private:
   enum class SlotState : std::uint8_t { kFree, kWaiting, kDecided };
   struct Slot {
     SlotState state = SlotState::kFree;
-    host::OperatorRequest request;
+    loop::OperatorRequest request;
     std::uint64_t epoch = 0;  // hold_epoch_ when submitted
     Verdict verdict;
   };
   static constexpr int kRefusalKinds = 4;
-  static int refusal_index(host::OperatorRefusal why);
+  static int refusal_index(loop::OperatorRefusal why);
 
   mutable std::mutex mutex_;
   std::condition_variable decided_;
