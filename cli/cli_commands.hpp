@@ -9,12 +9,12 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 struct TradeStudy;
 struct RealismReport;
-}  // namespace lftrack::host
+}  // namespace lftrack::studies
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
 
 using Command = std::function<Status()>;
 
@@ -37,7 +37,7 @@ struct SceneOptions {
 };
 void add_scene_options(CLI::App* app, SceneOptions* options);
 // Loads the scene named in `options` and prepares it (CT read, ROI resolved) on `pool`.
-Result<PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool);
+Result<session::PreparedScene> load_prepared_scene(const SceneOptions& options, tracking::ThreadPool* pool);
 // "--shard k/n" of a sharded study: (k, n) with 1 <= k <= n.
 Result<std::pair<int, int>> parse_shard(const std::string& text);
 // "--physics ideal|clinical|scene" of a study: the physics its frames carry and its name. `scene`
@@ -46,26 +46,28 @@ struct StudyPhysics {
   sim::XrayPhysicsSpec physics;
   std::string name = "ideal";
 };
-Result<StudyPhysics> study_physics(const std::string& option, const PreparedScene* scene);
+Result<StudyPhysics> study_physics(const std::string& option, const session::PreparedScene* scene);
 
 // A sharded study's light fields (capture-range and realism): `build` (a job array's field job)
 // loads or builds them into `lf_dir` and says so; `prebuilt` (a shard task) refuses to build
 // them, naming the field job's command. True when the command's work is done (the field job).
 // Renderers other than the light field need no fields: nothing to do.
-Result<bool> study_light_fields(const PreparedScene& scene, const std::string& study, const std::string& renderer,
-                                const std::string& lf_dir, bool build, bool prebuilt, tracking::ThreadPool* pool);
+Result<bool> study_light_fields(const session::PreparedScene& scene, const std::string& study,
+                                const std::string& renderer, const std::string& lf_dir, bool build,
+                                bool prebuilt, tracking::ThreadPool* pool);
 
 // Loads or builds the scene's light fields into `out_dir` ("": its default folder), saying which
 // were built and which were up to date (`lftrack precompute`, `lftrack scene new --precompute`).
-Status precompute_light_fields(const PreparedScene& scene, const std::string& out_dir, tracking::ThreadPool* pool);
+Status precompute_light_fields(const session::PreparedScene& scene, const std::string& out_dir,
+                               tracking::ThreadPool* pool);
 // The simulator's frame fields (<out_dir>/sim-frames) where the scene's frames are simulated from
 // light fields; nothing otherwise.
-Status precompute_sim_frame_fields(const PreparedScene& scene, const std::string& out_dir,
+Status precompute_sim_frame_fields(const session::PreparedScene& scene, const std::string& out_dir,
                                    tracking::ThreadPool* pool);
 
 // The tables a study prints when it is whole (its own command, or `study merge`).
-void print_trade_front(const TradeStudy& study);
-void print_realism_table(const RealismReport& report);
+void print_trade_front(const studies::TradeStudy& study);
+void print_realism_table(const studies::RealismReport& report);
 
 // `lftrack sim --chaos SEED` (cmd_chaos.cpp).
 Status run_chaos_command(const SceneOptions& scene, const chaos::ChaosOptions& options, bool json);
@@ -106,4 +108,4 @@ Command add_rt_check_command(CLI::App* parent);
 // `lftrack commission` records its own command line in the file it writes.
 Command add_commission_command(CLI::App* parent, int argc, char** argv);
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -8,7 +8,10 @@
 #include "lftrack/studies/drr_benchmark.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using studies::DrrBenchOptions;
+using studies::run_drr_benchmark;
 namespace {
 
 struct BenchDrrOptions {
@@ -96,4 +99,4 @@ Command add_bench_drr_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

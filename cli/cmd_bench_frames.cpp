@@ -6,7 +6,10 @@
 #include "lftrack/studies/frame_benchmark.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using studies::FrameBenchOptions;
+using studies::run_frame_benchmark;
 
 Command add_bench_frames_command(CLI::App* parent) {
   auto* app = parent->add_subcommand(
@@ -54,4 +57,4 @@ Command add_bench_frames_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -8,7 +8,12 @@
 #include "lftrack/tracking/volume_io.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::ProgressBar;
+
+using studies::OctreeBenchOptions;
+using studies::run_octree_benchmark;
 namespace {
 
 struct BenchOctreeOptions {
@@ -76,4 +81,4 @@ Command add_bench_octree_command(CLI::App* parent) {
   return [o]() { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

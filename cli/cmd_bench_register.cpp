@@ -8,7 +8,11 @@
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using studies::RegistrationBenchOptions;
+using studies::run_registration_benchmark;
+using studies::TimedRegistrations;
 
 Command add_bench_register_command(CLI::App* parent) {
   auto* app = parent->add_subcommand("register", "Cold and warm registration time and TRE on synthetic frames");
@@ -72,4 +76,4 @@ Command add_bench_register_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -18,7 +18,11 @@
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/random_draws.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::calibrated_detectors_yaml;
+using session::load_calibration_phantom;
+using session::load_scene;
 namespace {
 
 using tracking::Image;
@@ -238,4 +242,4 @@ Command add_calibrate_views_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

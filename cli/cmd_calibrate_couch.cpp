@@ -12,7 +12,14 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::couch_calibration_yaml;
+using session::CouchCalibrationRunOptions;
+using session::load_calibration_phantom;
+using session::ProgressBar;
+using session::read_couch_moves;
+using session::run_simulated_couch_calibration;
 namespace {
 
 struct CouchOptions {
@@ -101,4 +108,4 @@ Command add_calibrate_couch_command(CLI::App* parent) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -18,7 +18,11 @@
 #include "frame_folders.hpp"
 #include "lftrack/host/detector_calibration_file.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::is_detector_name;
+using session::load_detector_calibration;
+using session::write_detector_calibration;
 namespace {
 
 namespace fs = std::filesystem;
@@ -189,4 +193,4 @@ Command add_calibrate_detector_command(CLI::App* parent) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

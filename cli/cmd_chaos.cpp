@@ -15,7 +15,7 @@
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
 
 using loop::TrackingState;
 
@@ -108,4 +108,4 @@ Status run_chaos_command(const SceneOptions& scene, const chaos::ChaosOptions& o
   return {};
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

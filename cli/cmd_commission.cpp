@@ -27,7 +27,41 @@
 #include "lftrack/studies/verdict_commissioning.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::commissioning_fingerprint;
+using session::CommissioningRecord;
+using session::PreparedScene;
+using session::ProgressBar;
+using session::scene_verdict_limits;
+using session::utc_now;
+using session::verdict_limits;
+using session::write_commissioning_file;
+
+using studies::choose_floors;
+using studies::choose_view_shift_limit;
+using studies::ChosenFloors;
+using studies::CommissionCase;
+using studies::CommissionCaseResult;
+using studies::CommissionOptions;
+using studies::CommissionTally;
+using studies::draw_grouped_scatter;
+using studies::floor_margins;
+using studies::FloorMargins;
+using studies::GroupedScatterPlot;
+using studies::is_right_result;
+using studies::kCommissionCaseKinds;
+using studies::kDefaultFloorMarginFraction;
+using studies::kMinViewShiftLimitMm;
+using studies::largest_view_shift_mm;
+using studies::lowest_view_check_ncc;
+using studies::lowest_view_similarity;
+using studies::must_refuse;
+using studies::other_checks;
+using studies::OtherChecks;
+using studies::PointGroup;
+using studies::run_commission_cases;
+using studies::without_floors;
 
 using loop::judge_registration;
 using loop::judges_view_shift;
@@ -518,4 +552,4 @@ Command add_commission_command(CLI::App* parent, int argc, char** argv) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -8,7 +8,13 @@
 #include "cli_commands.hpp"
 #include "lftrack/host/scene_registration.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::load_light_fields;
+using session::load_scene;
+using session::make_scene_renderer;
+using session::prepare_scene;
+using session::PreparedScene;
 
 CLI::Validator not_empty() {
   return CLI::Validator(
@@ -104,4 +110,4 @@ Result<bool> study_light_fields(const PreparedScene& scene, const std::string& s
   return false;
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -12,7 +12,14 @@
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::default_light_field_dir;
+using session::DetectorSpec;
+using session::load_light_fields;
+using session::load_scene;
+using session::prepare_scene;
+using session::PreparedScene;
 namespace {
 
 struct DrrOptions {
@@ -162,4 +169,4 @@ Command add_drr_command(CLI::App* parent) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

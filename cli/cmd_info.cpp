@@ -8,7 +8,11 @@
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::describe_frames;
+using session::PreparedScene;
+using session::printable;
 
 Command add_info_command(CLI::App* parent) {
   auto* app = parent->add_subcommand(
@@ -81,4 +85,4 @@ Command add_info_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

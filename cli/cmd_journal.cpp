@@ -34,7 +34,16 @@
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::check_registration_path;
+using session::load_scene;
+using session::room_frame_of_reference_uid;
+using session::scene_ct_dicom_identity;
+using session::scene_fingerprint;
+using session::SpatialRegistration;
+using session::to_hex;
+using session::write_spatial_registration;
 
 using loop::BeamWithheld;
 using loop::GateDecision;
@@ -393,4 +402,4 @@ Command add_journal_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

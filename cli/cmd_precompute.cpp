@@ -17,7 +17,16 @@
 #include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::default_light_field_dir;
+using session::frames_are_simulated;
+using session::LightFieldCacheReport;
+using session::load_or_build_light_fields;
+using session::make_scene_patient;
+using session::make_sim_frame_renderer;
+using session::PreparedScene;
+using session::sim_frame_fields_dir;
 namespace {
 
 struct PrecomputeOptions {
@@ -115,4 +124,4 @@ Command add_precompute_command(CLI::App* parent) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

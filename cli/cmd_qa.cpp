@@ -20,7 +20,11 @@
 #include "lftrack/qa/qa_report.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::DetectorSpec;
+using session::PreparedScene;
+using session::Scene;
 namespace {
 
 // The operator's Ctrl-C (or SIGTERM) during a daily QA: the QA ends early and safely (its couch
@@ -340,4 +344,4 @@ Command add_qa_daily_command(CLI::App* parent) {
   return [o] { return run_qa_daily(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -25,7 +25,32 @@
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::check_registration_path;
+using session::check_views_observable;
+using session::CtDicomIdentity;
+using session::describe_exposure;
+using session::DetectorSpec;
+using session::locate_fiducial;
+using session::LocatedFiducial;
+using session::make_scene_renderer;
+using session::make_scene_sim_detectors;
+using session::nominal_delta_of;
+using session::pose_from_nominal_delta;
+using session::PreparedScene;
+using session::RegistrationJudge;
+using session::RegistrationSpec;
+using session::room_frame_of_reference_uid;
+using session::scene_ct_dicom_identity;
+using session::scene_detector_corrections;
+using session::scene_tre;
+using session::scene_verdict_limits;
+using session::SceneFrames;
+using session::simulated_accuracy_caveat;
+using session::SpatialRegistration;
+using session::unobservable_direction_room;
+using session::write_spatial_registration;
 
 using loop::RegistrationVerdict;
 using loop::verdict_text;
@@ -378,4 +403,4 @@ Command add_register_command(CLI::App* parent) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

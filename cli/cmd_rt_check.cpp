@@ -21,7 +21,10 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/rt_check/wakeup_latency.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::load_scene;
+using session::ProgressBar;
 
 using loop::LoopSpec;
 
@@ -423,4 +426,4 @@ Command add_rt_check_command(CLI::App* parent) {
   return [o] { return run_rt_check(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

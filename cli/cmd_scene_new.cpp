@@ -24,7 +24,20 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::compose_new_scene;
+using session::make_scene_registration;
+using session::NewSceneCt;
+using session::NewSceneRequest;
+using session::parse_scene;
+using session::prepare_scene;
+using session::printable;
+using session::read_ct_dicom_identity;
+using session::read_rt_structure_set;
+using session::setup_picture;
+using session::SetupMarks;
+using session::structure_list;
 namespace {
 
 namespace fs = std::filesystem;
@@ -281,4 +294,4 @@ Command add_scene_new_command(CLI::App* parent, int argc, char** argv) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

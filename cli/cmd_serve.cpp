@@ -20,7 +20,9 @@
 #include "lftrack/watch/listen_address.hpp"
 #include "serve_common.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::load_scene;
 
 using watch::ListenAddress;
 using watch::reachable_warning;
@@ -269,4 +271,4 @@ Command add_serve_robot_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

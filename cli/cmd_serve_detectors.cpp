@@ -25,7 +25,19 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "serve_common.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::SimFrameSource;
+
+using session::load_scene;
+using session::make_scene_patient;
+using session::make_sim_frame_renderer;
+using session::prepare_scene;
+using session::PreparedScene;
+using session::Scene;
+using session::served_twin_id;
+using session::sim_frame_margin_px;
+using session::SimFrameSourceOptions;
 namespace {
 
 using namespace serve;
@@ -322,4 +334,4 @@ Command add_serve_detectors_command(CLI::App* parent) {
   return [o] { return serve_detectors(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

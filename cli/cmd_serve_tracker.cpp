@@ -15,7 +15,9 @@
 #include "lftrack/watch/listen_address.hpp"
 #include "serve_common.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::load_scene;
 
 using watch::parse_listen_address;
 using watch::reachable_warning;
@@ -159,4 +161,4 @@ Command add_serve_tracker_command(CLI::App* parent) {
   return [o] { return serve_tracker(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

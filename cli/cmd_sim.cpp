@@ -29,7 +29,26 @@
 #include "lftrack/records/loop_json.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::apply_default_plans;
+using session::archived_frame_plans;
+using session::check_session_options;
+using session::check_session_surrogate;
+using session::describe_actuator;
+using session::describe_exposure;
+using session::describe_frames;
+using session::frames_are_simulated;
+using session::HilProtocol;
+using session::load_scene;
+using session::LoopSession;
+using session::LoopSessionOptions;
+using session::PreflightReport;
+using session::prepare_scene;
+using session::run_preflight;
+using session::Scene;
+using session::SessionDevices;
+using session::simulated_accuracy_caveat;
 
 using loop::apply_realtime_setup;
 using loop::check_auto_resume_s;
@@ -629,4 +648,4 @@ Command add_replay_command(CLI::App* parent) {
              SimOptions::Mode::kReplay);
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

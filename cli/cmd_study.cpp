@@ -15,7 +15,23 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::ProgressBar;
+
+using studies::CaptureRangeOptions;
+using studies::CaptureRangeReport;
+using studies::check_capture_range_shard_complete;
+using studies::parse_registration_method;
+using studies::run_capture_range_study;
+using studies::run_geometry_sensitivity;
+using studies::run_shard_task;
+using studies::SensitivityCase;
+using studies::SensitivityOptions;
+using studies::study_scene_fingerprint;
+using studies::write_capture_range_outputs;
+using studies::write_capture_range_shard;
+using studies::write_sensitivity_outputs;
 namespace {
 
 struct CaptureRangeCliOptions {
@@ -218,4 +234,4 @@ Command add_study_sensitivity_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -8,7 +8,10 @@
 #include "cli_commands.hpp"
 #include "lftrack/studies/latency_study.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using studies::run_latency_study;
+using studies::write_latency_study;
 
 using loop::kLatencyLinks;
 using loop::LatencyChainReport;
@@ -63,4 +66,4 @@ Command add_study_latency_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -14,7 +14,24 @@
 #include "lftrack/studies/slurm_job_array.hpp"
 #include "lftrack/studies/trade_study.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using studies::CaptureRangeReport;
+using studies::folder_safe_name;
+using studies::merge_capture_range_shards;
+using studies::merge_realism_shards;
+using studies::merge_trade_shards;
+using studies::pool_capture_range_reports;
+using studies::pool_realism_reports;
+using studies::pool_trade_studies;
+using studies::read_capture_range_shard;
+using studies::read_realism_shard;
+using studies::read_trade_shard;
+using studies::RealismReport;
+using studies::TradeStudy;
+using studies::write_capture_range_outputs;
+using studies::write_realism_outputs;
+using studies::write_trade_outputs;
 namespace {
 
 struct MergeCliOptions {
@@ -208,4 +225,4 @@ Command add_study_merge_command(CLI::App* parent) {
   return [o]() { return run_merge(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

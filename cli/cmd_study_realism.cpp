@@ -11,7 +11,18 @@
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::ProgressBar;
+
+using studies::check_realism_shard_complete;
+using studies::expected_realism_shard;
+using studies::RealismFactorSummary;
+using studies::RealismOptions;
+using studies::RealismReport;
+using studies::run_realism_study;
+using studies::run_shard_task;
+using studies::write_realism_outputs;
 namespace {
 
 struct RealismCliOptions {
@@ -142,4 +153,4 @@ Command add_study_realism_command(CLI::App* parent) {
   return [o] { return run(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

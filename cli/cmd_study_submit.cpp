@@ -20,7 +20,26 @@
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/studies/trade_study.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::load_scene;
+using session::printable;
+
+using studies::check_job_array_spec;
+using studies::folder_safe_name;
+using studies::job_array_scripts;
+using studies::JobArraySpec;
+using studies::JobScript;
+using studies::read_capture_range_shard;
+using studies::read_realism_shard;
+using studies::read_shard_task;
+using studies::read_trade_shard;
+using studies::run_process;
+using studies::shard_dir;
+using studies::ShardPhase;
+using studies::ShardTask;
+using studies::shell_quote;
+using studies::submit_job_array;
 namespace {
 
 namespace fs = std::filesystem;
@@ -236,4 +255,4 @@ Command add_study_status_command(CLI::App* parent) {
   return [o]() { return run_status(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

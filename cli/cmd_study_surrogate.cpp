@@ -11,7 +11,15 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/surrogate_study.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::load_scene;
+
+using studies::check_surrogate_study_out;
+using studies::run_surrogate_study;
+using studies::SurrogateStudyOptions;
+using studies::SurrogateStudyRow;
+using studies::write_surrogate_study;
 
 using loop::CorrelationModelSpec;
 
@@ -148,4 +156,4 @@ Command add_study_surrogate_command(CLI::App* parent) {
   };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -19,7 +19,26 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
+
+using session::PreparedScene;
+using session::ProgressBar;
+
+using studies::build_trade_fields;
+using studies::check_trade_shard_complete;
+using studies::pareto_front;
+using studies::run_shard_task;
+using studies::run_trade_study;
+using studies::study_scene_fingerprint;
+using studies::trade_points;
+using studies::trade_problem_count;
+using studies::trade_shard_points;
+using studies::TradeOptions;
+using studies::TradePoint;
+using studies::TradeResult;
+using studies::TradeStudy;
+using studies::write_trade_outputs;
+using studies::write_trade_shard;
 namespace {
 
 struct TradeCliOptions {
@@ -188,4 +207,4 @@ Command add_study_trade_command(CLI::App* parent) {
   return [o]() { return run_trade(*o); };
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -7,7 +7,7 @@
 
 #include "lftrack/drivers/frame_files.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
 
 namespace fs = std::filesystem;
 
@@ -96,4 +96,4 @@ Result<std::vector<tracking::Image<std::uint16_t>>> read_frame_files(const std::
   return frames;
 }
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -13,7 +13,7 @@
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host::cli {
+namespace lftrack::cli {
 
 // The frame files of `dir` in name order; a folder that is missing, empty of frames or holds
 // anything else is refused. `what` names the folder in errors ("dark", "flood").
@@ -29,4 +29,4 @@ struct FrameSize {
 Result<std::vector<tracking::Image<std::uint16_t>>> read_frame_files(
     const std::vector<std::filesystem::path>& files, const char* what, FrameSize* size);
 
-}  // namespace lftrack::host::cli
+}  // namespace lftrack::cli

@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
   app.add_flag("-v,--verbose", verbose, "More log output");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
 
-  using namespace lftrack::host::cli;
+  using namespace lftrack::cli;
   const Command info = add_info_command(&app);
   const Command drr = add_drr_command(&app);
   const Command precompute = add_precompute_command(&app);

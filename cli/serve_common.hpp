@@ -26,7 +26,7 @@
 
 #include "cli_commands.hpp"
 
-namespace lftrack::host::cli::serve {
+namespace lftrack::cli::serve {
 
 inline std::atomic<bool> g_stop{false};
 extern "C" inline void on_stop_signal(int) {
@@ -245,4 +245,4 @@ void add_common(CLI::App* app, ServeOptions* o, const ServeOptionTexts& texts);
 // The kinds of `kinds`, comma-separated.
 std::string kind_list(const std::map<std::string, int>& kinds);
 
-}  // namespace lftrack::host::cli::serve
+}  // namespace lftrack::cli::serve

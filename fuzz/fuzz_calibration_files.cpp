@@ -11,22 +11,23 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (size < 1) return 0;
   switch (data[0] % 4) {
     case 0: {
-      auto c = host::read_couch_calibration(fuzz::write_input("couch.yaml", data + 1, size - 1).string());
+      auto c = session::read_couch_calibration(fuzz::write_input("couch.yaml", data + 1, size - 1).string());
       if (!c.ok()) fuzz::expect_reason(c.status());
       break;
     }
     case 1: {
-      auto c = host::load_detector_calibration(fuzz::write_input("detector.tif", data + 1, size - 1));
+      auto c = session::load_detector_calibration(fuzz::write_input("detector.tif", data + 1, size - 1));
       if (!c.ok()) fuzz::expect_reason(c.status());
       break;
     }
     case 2: {
-      auto c = host::load_calibration_phantom(fuzz::write_input("phantom.yaml", data + 1, size - 1).string());
+      auto c =
+          session::load_calibration_phantom(fuzz::write_input("phantom.yaml", data + 1, size - 1).string());
       if (!c.ok()) fuzz::expect_reason(c.status());
       break;
     }
     default: {
-      auto c = host::read_commissioning_file(fuzz::write_input("commissioning.yaml", data + 1, size - 1));
+      auto c = session::read_commissioning_file(fuzz::write_input("commissioning.yaml", data + 1, size - 1));
       if (!c.ok()) fuzz::expect_reason(c.status());
       break;
     }

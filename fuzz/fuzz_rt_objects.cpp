@@ -7,11 +7,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   using namespace lftrack;
   if (size < 1) return 0;
   if (data[0] % 2 == 0) {
-    auto plan = host::read_rt_plan(fuzz::write_input("plan.dcm", data + 1, size - 1), "");
+    auto plan = session::read_rt_plan(fuzz::write_input("plan.dcm", data + 1, size - 1), "");
     if (!plan.ok()) fuzz::expect_reason(plan.status());
     return 0;
   }
-  auto set = host::read_rt_structure_set(fuzz::write_input("structures.dcm", data + 1, size - 1));
+  auto set = session::read_rt_structure_set(fuzz::write_input("structures.dcm", data + 1, size - 1));
   if (!set.ok()) fuzz::expect_reason(set.status());
   return 0;
 }

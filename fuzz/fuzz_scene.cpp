@@ -5,7 +5,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
-  auto scene = lftrack::host::parse_scene(text, "fuzz.yaml", lftrack::fuzz::scratch());
+  auto scene = lftrack::session::parse_scene(text, "fuzz.yaml", lftrack::fuzz::scratch());
   if (!scene.ok()) lftrack::fuzz::expect_reason(scene.status());
   return 0;
 }

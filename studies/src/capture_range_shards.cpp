@@ -14,7 +14,7 @@
 #include "lftrack/studies/study_shard.hpp"
 #include "csv_cells.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 namespace {
 
 const char* const kCaptureRunsHeader =
@@ -277,4 +277,4 @@ Result<CaptureRangeReport> pool_capture_range_reports(const std::vector<CaptureR
   return pooled;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

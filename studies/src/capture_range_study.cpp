@@ -19,7 +19,21 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::locate_fiducial;
+using session::make_scene_registration;
+using session::make_scene_renderer;
+using session::make_simulated_patient;
+using session::pose_at_tre;
+using session::PreparedScene;
+using session::preprocess_scene_frames;
+using session::RegistrationSpec;
+using session::scene_tre;
+using session::scene_verdict_limits;
+using session::SceneImager;
+using session::SimulatedPatient;
+using session::verdict_input_of;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;
@@ -321,4 +335,4 @@ Status write_capture_range_outputs(const CaptureRangeReport& report, const std::
   return write_capture_range_description(report, dir);  // last: the folder is now a complete result
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

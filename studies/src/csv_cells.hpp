@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 // 9 significant digits (a double's value to the digit a float keeps); "nan", "inf", "-inf".
 inline std::string csv_number(double v) {
@@ -29,4 +29,4 @@ inline std::vector<std::string> split_csv_line(const std::string& line) {
   return cells;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -12,7 +12,11 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::build_light_fields;
+using session::load_light_fields;
+using session::PreparedScene;
 namespace {
 
 namespace fs = std::filesystem;
@@ -348,4 +352,4 @@ nlohmann::json to_json(const DrrBenchReport& r) {
   return j;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -16,7 +16,16 @@
 #include "lftrack/tracking/image_metrics.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::make_scene_patient;
+using session::make_sim_frame_renderer;
+using session::PreparedScene;
+using session::scene_detector_model;
+using session::sim_frame_margin_px;
+using session::SimDetectors;
+using session::SimDetectorsOptions;
+using session::SimulatedPatient;
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -182,4 +191,4 @@ nlohmann::json to_json(const FrameBenchReport& r) {
           {"views", r.views}, {"renderers", renderers}, {"threads", 1}};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

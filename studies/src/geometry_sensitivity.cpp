@@ -15,7 +15,19 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::DetectorSpec;
+using session::make_scene_registration;
+using session::pose_at_tre;
+using session::PreparedScene;
+using session::preprocess_scene_frames;
+using session::ProgressBar;
+using session::scene_detector_model;
+using session::scene_tre;
+using session::scene_verdict_limits;
+using session::synthesize_scene_frames;
+using session::verdict_input_of;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;
@@ -217,4 +229,4 @@ Status write_sensitivity_outputs(const SensitivityReport& r, const std::filesyst
   return write_file_atomically(dir / "summary.json", to_json(r).dump(2) + "\n");  // last: the folder is complete
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -17,7 +17,7 @@
 #include "lftrack/studies/plot.hpp"
 #include "study_outputs.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 using loop::JournalRecord;
 using loop::kLatencyLinks;
@@ -222,4 +222,4 @@ Result<bool> write_latency_study(const LatencyStudy& s, const fs::path& out_dir)
   return draw_line_plot(histogram_plot(s), out_dir / "latency_chain.png");
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -9,7 +9,7 @@
 #include "lftrack/tracking/octree_volume.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -174,4 +174,4 @@ nlohmann::json to_json(const OctreeBenchReport& r) {
   return j;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -15,7 +15,7 @@
 
 extern char** environ;
 
-namespace lftrack::host {
+namespace lftrack::studies {
 namespace {
 
 namespace fs = std::filesystem;
@@ -164,4 +164,4 @@ Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct, const fs:
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -7,7 +7,7 @@
 #include <fstream>
 #include <sstream>
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 namespace {
 std::string quoted(const std::string& s) {
@@ -240,4 +240,4 @@ Result<bool> draw_grouped_bars(const GroupedBarChart& chart, const std::filesyst
   return run_gnuplot(gp);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

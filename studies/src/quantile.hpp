@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 // q in [0, 1]; 0 for an empty sample.
 inline double quantile(std::vector<double> values, double q) {
@@ -16,4 +16,4 @@ inline double quantile(std::vector<double> values, double q) {
   return i + 1 < values.size() ? values[i] + (pos - double(i)) * (values[i + 1] - values[i]) : values[i];
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

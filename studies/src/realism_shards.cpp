@@ -13,7 +13,7 @@
 #include "lftrack/studies/slurm_job_array.hpp"  // folder_safe_name
 #include "lftrack/studies/study_shard.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 namespace {
 
 std::vector<std::string> set_names(const RealismReport& r) {
@@ -185,4 +185,4 @@ Result<RealismReport> pool_realism_reports(const std::vector<RealismReport>& sce
   return pooled;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -11,7 +11,9 @@
 #include "lftrack/studies/study_shard.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::PreparedScene;
 
 RealismOptions RealismOptions::quick() {
   RealismOptions o;
@@ -279,4 +281,4 @@ Status write_realism_outputs(const RealismReport& report, const std::filesystem:
   return write_file_atomically(dir / "summary.json", j.dump(2) + "\n");  // last: the folder is complete
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -10,7 +10,18 @@
 #include "lftrack/host/progress_bar.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::make_scene_registration;
+using session::make_scene_renderer;
+using session::pose_at_tre;
+using session::PreparedScene;
+using session::preprocess_scene_frames;
+using session::ProgressBar;
+using session::scene_detector_model;
+using session::scene_tre;
+using session::SceneFrames;
+using session::synthesize_scene_frames;
 
 using tracking::Pose;
 using tracking::PoseDelta;
@@ -211,4 +222,4 @@ nlohmann::json to_json(const RegistrationBenchReport& r) {
   return j;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -13,7 +13,7 @@
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/studies/study_shard.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 namespace {
 
 // Options every task sets itself; a user's copy would contradict the job's layout.
@@ -280,4 +280,4 @@ Result<SubmittedJobs> submit_job_array(const JobArraySpec& spec) {
   return ids;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

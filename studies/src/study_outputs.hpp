@@ -6,7 +6,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 // Refuses, naming the first, any of `names` already in `out_dir` (a file, a folder or a link,
 // dangling or not); nothing is written either way.
@@ -22,4 +22,4 @@ Status refuse_existing_outputs(const std::filesystem::path& out_dir, const char*
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -16,7 +16,11 @@
 
 #include "lftrack/tracking/light_field.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::PreparedScene;
+using session::RegistrationSpec;
+using session::VerdictChecksSpec;
 namespace {
 
 constexpr const char* kTaskFile = "task.json";
@@ -235,4 +239,4 @@ Status check_shard_position(std::int64_t shard, std::int64_t shards, const std::
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -16,7 +16,7 @@
 #include "quantile.hpp"
 #include "study_outputs.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 using loop::check_correlation_model_spec;
 using loop::CorrelationModel;
@@ -275,4 +275,4 @@ Result<bool> write_surrogate_study(const SurrogateStudy& s, const SurrogateStudy
   return drawn;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

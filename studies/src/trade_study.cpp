@@ -27,7 +27,24 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::light_field_files;
+using session::load_light_fields;
+using session::make_scene_registration;
+using session::make_simulated_patient;
+using session::pose_at_tre;
+using session::PreparedScene;
+using session::preprocess_scene_frames;
+using session::RegistrationSpec;
+using session::scene_detector_model;
+using session::scene_tre;
+using session::scene_verdict_limits;
+using session::SceneFrames;
+using session::SceneImager;
+using session::SimulatedPatient;
+using session::synthesize_scene_frames;
+using session::verdict_input_of;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;
@@ -531,4 +548,4 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
   return study;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -19,7 +19,7 @@
 #include "lftrack/studies/verdict_outcomes.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 namespace {
 
 // runs.csv: before the verdict was recorded, and since (accepted and verdict_reason as
@@ -709,4 +709,4 @@ Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path&
   return write_trade_description(study, dir);  // last: the folder is now a complete result
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

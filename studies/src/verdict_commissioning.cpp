@@ -11,7 +11,16 @@
 #include "lftrack/host/sim_detectors.hpp"
 #include "quantile.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
+
+using session::make_scene_renderer;
+using session::make_scene_sim_detectors;
+using session::PreparedScene;
+using session::RegistrationJudge;
+using session::scene_detector_corrections;
+using session::scene_tre;
+using session::SceneSimDetectors;
+using session::verdict_limits;
 
 using loop::judge_registration;
 using loop::judges_view_shift;
@@ -417,4 +426,4 @@ ChosenFloors choose_floors(const std::vector<CommissionCaseResult>& cases, const
   return chosen;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -2,7 +2,7 @@
 
 #include <iterator>
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 nlohmann::json verdict_outcomes_json(const VerdictOutcomes& v) {
   return {{"accepted_right", v.accepted_right},
@@ -37,4 +37,4 @@ GroupedBarChart verdict_outcome_chart(const std::string& title, const std::vecto
   return chart;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -15,7 +15,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -103,4 +105,4 @@ TEST(BenchFramesCli, IdealFramesUseTheWorldAnatomysFieldAndAbsurdOptionsAreRefus
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,9 @@
 #include "cli_text.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 using test::lftrack_bin;
@@ -131,4 +133,4 @@ TEST(Cli, CalibrateCouchRecoversAMisalignedCouchAndASceneUsesTheFile) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

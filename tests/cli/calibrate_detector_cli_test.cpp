@@ -17,7 +17,7 @@
 #include "cli_text.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 using test::quoted;
@@ -302,4 +302,4 @@ TEST(CalibrateDetectorCli, RefusesCopiedFramesAndFramesTooSmall) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

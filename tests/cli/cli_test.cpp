@@ -18,7 +18,11 @@
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::read_trade_shard;
+using studies::run_process;
+using studies::TradeResult;
 
 using loop::BeamWithheld;
 using loop::JournalRecord;
@@ -293,9 +297,9 @@ TEST(Cli, BenchDrrJsonHasTheDocumentedFields) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // The built-in scene with a coarse light field (built in a moment) for command tests.
@@ -459,11 +463,11 @@ TEST(Cli, TradeStudyShardsMergeIntoPlotsAndASummary) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
 #include "lftrack/loop/journal.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
@@ -495,9 +499,9 @@ TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
@@ -598,11 +602,11 @@ TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
 #include "lftrack/loop/operator_input.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // A flipped bit in the middle: every other record is exported, each problem is warned about, and
@@ -663,4 +667,4 @@ TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -20,7 +20,9 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -161,4 +163,4 @@ TEST_F(CommissionCli, ReplaceReplacesOnlyACommissioningFile) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

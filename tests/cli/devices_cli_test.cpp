@@ -14,7 +14,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 // A couch server other hosts can reach gives the warning the monitor page gives (listen_address.hpp:
@@ -100,4 +102,4 @@ TEST(SimHilCli, AnActuatorTooSlowForTheBeamsWaitIsWarnedOfWhateverItsType) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -24,7 +24,9 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 
 using loop::GateDecision;
 using loop::JournalOptions;
@@ -276,4 +278,4 @@ TEST_F(DicomExportCli, JournalExportWritesAnAppliedCyclesRegistration) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

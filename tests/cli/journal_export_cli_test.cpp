@@ -14,7 +14,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 
 using loop::GateDecision;
 using loop::GateReason;
@@ -117,4 +119,4 @@ TEST(JournalExport, RefusalsByReasonAndPosesWithTheirUnits) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -12,7 +12,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -131,4 +133,4 @@ TEST(Cli, PrecomputeBuildsTheSimulatorsFrameFieldsWhereTheSceneDrawsFramesFromTh
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -25,7 +25,7 @@
 
 #include "igtl_test_client.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::JournalRecord;
 using loop::OperatorCommand;
@@ -330,4 +330,4 @@ TEST(IgtlAcrossProcesses, TheClientsPosesAreTheJournals) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

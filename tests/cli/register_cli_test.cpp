@@ -22,7 +22,9 @@
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -267,4 +269,4 @@ TEST_F(RegisterCli, OneDetectorIsRefusedUnlessTheSceneSaysSoAndThenTheBlindDirec
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -17,7 +17,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -98,4 +100,4 @@ INSTANTIATE_TEST_SUITE_P(
                          [](const ::testing::TestParamInfo<ShippedScene>& p) { return test::scene_test_name(p.param.file); });
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

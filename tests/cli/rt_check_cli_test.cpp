@@ -19,7 +19,7 @@
 #include "cli_text.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 using test::CliRun;
@@ -205,4 +205,4 @@ TEST(RtCheckCli, AReportStandardOutputCannotTakeIsAFailure) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

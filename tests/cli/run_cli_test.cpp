@@ -18,7 +18,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -165,4 +167,4 @@ TEST_F(RunCli, InfoSaysWhenTheRoiAndOriginAreTheVolumeCentre) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -18,7 +18,9 @@
 #include "rt_writer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -260,4 +262,4 @@ TEST(SceneNewNifti, TheExampleCtWithAGivenIsocentreTracks) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

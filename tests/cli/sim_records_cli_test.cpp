@@ -15,7 +15,9 @@
 #include "lftrack/host/scene.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -231,4 +233,4 @@ TEST_F(SimRecords, TheChaosSoakRefusesAbsurdValuesAndNeverOverwritesAnEarlierSoa
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

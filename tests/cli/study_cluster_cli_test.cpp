@@ -18,7 +18,9 @@
 #include "cli_text.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 
 namespace {
 
@@ -476,4 +478,4 @@ TEST(Cli, RealismShardsMergeIntoTheUnshardedStudy) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 
 namespace {
 
@@ -163,4 +165,4 @@ TEST(StudyLatency, ASimulatedClockJournalHasNoChainAndTheStudySaysWhy) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

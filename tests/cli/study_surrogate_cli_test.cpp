@@ -15,7 +15,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 namespace fs = std::filesystem;
@@ -137,4 +139,4 @@ TEST(StudySurrogate, AbsurdOptionsAreRefusedAndNothingIsWritten) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

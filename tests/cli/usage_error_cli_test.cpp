@@ -16,7 +16,7 @@
 #include "cli_text.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 using test::quoted;
@@ -169,4 +169,4 @@ TEST(StudySensitivityOut, AFolderThatIsNotNewOrEmptyIsRefusedBeforeAnyWork) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

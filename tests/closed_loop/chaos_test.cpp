@@ -11,7 +11,7 @@
 #include "lftrack/chaos/chaos_soak.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::GateReason;
 using loop::JournalRecord;
@@ -124,4 +124,4 @@ TEST(ChaosOptions, AbsurdValuesAreRefusedBeforeAnythingRuns) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

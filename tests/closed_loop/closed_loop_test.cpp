@@ -26,7 +26,7 @@
 #include "lftrack/records/loop_json.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::BeamWithheld;
 using loop::GateDecision;
@@ -476,9 +476,9 @@ TEST_F(ClosedLoop, ARefusedSetUpMoveIsAnAlignmentThatFailedAndTheResumeAlignsAga
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // A treatment is not run unrecorded: when the journal's disk fills up, the loop holds, and
@@ -564,4 +564,4 @@ TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -8,9 +8,14 @@
 #include <cstdio>
 
 #include "lftrack/host/couch_calibration_run.hpp"
+#include "lftrack/studies/geometry_sensitivity.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_geometry_sensitivity;
+using studies::SensitivityCase;
+using studies::SensitivityOptions;
 
 using loop::LoopSummary;
 namespace {
@@ -70,11 +75,11 @@ TEST_F(ClosedLoop, AMisalignedCouchIsRecoveredAndTracksAsWithItsTrueMounting) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
 #include "lftrack/studies/geometry_sensitivity.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // The sensitivity study on the small scene, one registration per case: the error-free case adds
@@ -104,4 +109,4 @@ TEST_F(ClosedLoop, SensitivityStudyMeasuresWhatEachCalibrationErrorCosts) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

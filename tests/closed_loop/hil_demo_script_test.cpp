@@ -22,7 +22,9 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_process;
 namespace {
 
 // A socket bound to 127.0.0.1 or 127.0.0.2 at `port` (TCP listening, or UDP), as another
@@ -152,4 +154,4 @@ TEST_F(HilDemoScript, StopsWaitingAsSoonAsTheDetectorServerExits) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,7 @@
 
 #include "lftrack/records/loop_json.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::GateReason;
 using loop::JournalRecord;
@@ -242,4 +242,4 @@ INSTANTIATE_TEST_SUITE_P(
     [](const ::testing::TestParamInfo<CanFaultCase>& param) { return std::string(param.param.name); });
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -11,7 +11,7 @@
 #include "lftrack/records/loop_json.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::CorrelationModel;
 using loop::GateReason;
@@ -234,4 +234,4 @@ TEST_F(ImagingModel, FollowsTheMarkerOverOpenIgtlinkAndHoldsWhenTheTrackerStops)
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -20,7 +20,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 inline const char* kLightFieldFrames =
     "sim:\n  renderer: lightfield\n  light_field:\n    resolution: [16, 16, 96, 144]\n";
@@ -152,4 +152,4 @@ class ClosedLoop : public ::testing::Test {
   std::unique_ptr<PreparedScene> scene_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

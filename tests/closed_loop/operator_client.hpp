@@ -14,7 +14,7 @@
 #include <string>
 #include <thread>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 class OperatorClient {
  public:
@@ -107,4 +107,4 @@ class OperatorClient {
   int fd_ = -1;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -17,7 +17,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::JournalRecord;
 using loop::process_allocation_count;
@@ -124,4 +124,4 @@ INSTANTIATE_TEST_SUITE_P(ShippedScenes, RealCtLoop,
                          });
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

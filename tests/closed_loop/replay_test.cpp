@@ -13,7 +13,7 @@
 #include "lftrack/records/loop_json.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::GateDecision;
 using loop::GateReason;
@@ -220,4 +220,4 @@ TEST_F(ArchiveAndReplay, AMissingOrBrokenSequenceIsRefusedAtStart) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

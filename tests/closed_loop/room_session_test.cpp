@@ -8,7 +8,7 @@
 
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::ScriptedOperator;
 namespace {
@@ -108,4 +108,4 @@ TEST_F(RoomSession, AnUnattendedOperatorStaysAllowedWhereNothingIsReal) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -33,7 +33,7 @@
 #include "loop_fixture.hpp"
 #include "operator_client.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::GateReason;
 using loop::JournalRecord;
@@ -564,4 +564,4 @@ TEST_F(ServedDeviceFaults, FramesThroughV4l2LoopbackAreTracked) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

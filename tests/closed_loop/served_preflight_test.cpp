@@ -17,7 +17,7 @@
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "loop_fixture.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::RealtimeReport;
 namespace {
@@ -89,4 +89,4 @@ TEST_F(ServedPreflight, EachDetectorMustAnswerAsItselfSoSwappedAddressesFail) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

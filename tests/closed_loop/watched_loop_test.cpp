@@ -17,7 +17,7 @@
 
 #include "igtl_test_client.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::exclude_this_thread_from_allocation_count;
 using loop::JournalRecord;
@@ -149,4 +149,4 @@ TEST_F(ClosedLoop, APageWithTenClientsAndOpenIgtlinkChangeNothingInTheCycle) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -24,10 +24,10 @@ using tracking::Vector6d;
 
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
-host::PreparedScene qa_phantom(tracking::ThreadPool* pool) {
-  auto scene = host::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml").string());
+session::PreparedScene qa_phantom(tracking::ThreadPool* pool) {
+  auto scene = session::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml").string());
   EXPECT_TRUE(scene.ok()) << scene.status().message();
-  auto p = host::prepare_scene(*scene, "", pool);
+  auto p = session::prepare_scene(*scene, "", pool);
   EXPECT_TRUE(p.ok()) << p.status().message();
   return std::move(p).value();
 }
@@ -49,7 +49,7 @@ const QaCheck* check(const DailyQaReport& r, const std::string& name) {
 
 TEST(DailyQa, TheShippedPhantomPassesTheOffsetTestAndTheBeamPermitPath) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = qa_phantom(&pool);
+  const session::PreparedScene p = qa_phantom(&pool);
   auto report = run_daily_qa(p, fast_options(), &pool);
   ASSERT_TRUE(report.ok()) << report.status().message();
   ASSERT_EQ(report->offsets.size(), 7u)
@@ -83,7 +83,7 @@ TEST(DailyQa, TheShippedPhantomPassesTheOffsetTestAndTheBeamPermitPath) {
 
 TEST(DailyQa, ASlowCouchFailsTheOffsetTestWithTheReason) {
   tracking::ThreadPool pool(2);
-  host::PreparedScene p = qa_phantom(&pool);
+  session::PreparedScene p = qa_phantom(&pool);
   p.scene.actuator.dynamics.max_speed_mm_s = 1;  // 10 mm would take 10 s; the run gives it 2
   DailyQaOptions o = fast_options();
   Vector6d shift = Vector6d::Zero();
@@ -124,7 +124,7 @@ class ShiftedDetector final : public drivers::FrameSource {
 
 TEST(DailyQa, AShiftedDetectorFailsTheOffsetTestWithTheReason) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = qa_phantom(&pool);
+  const session::PreparedScene p = qa_phantom(&pool);
   DailyQaOptions o = fast_options();
   Vector6d shift = Vector6d::Zero();
   shift(2) = 10;
@@ -182,7 +182,7 @@ class HidesADarkDetector final : public drivers::FrameSource {
 
 TEST(DailyQa, ADetectorPathThatHidesADarkDetectorFailsTheBeamCheck) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = qa_phantom(&pool);
+  const session::PreparedScene p = qa_phantom(&pool);
   DailyQaOptions o = fast_options();
   o.shifts = {Vector6d::Zero()};
   std::unique_ptr<HidesADarkDetector> hiding;
@@ -204,7 +204,7 @@ TEST(DailyQa, ADetectorPathThatHidesADarkDetectorFailsTheBeamCheck) {
 // the whole chain is off and the test says so.
 TEST(EndToEndQa, TheHiddenMarkerStaysWithinAMillimetreAndAShiftedDetectorFailsIt) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = qa_phantom(&pool);
+  const session::PreparedScene p = qa_phantom(&pool);
   EndToEndOptions o;
   o.light_field_dir = test::test_cache_dir() / "qa-phantom-fields";
   auto good = run_end_to_end_qa(p, o, &pool);
@@ -229,7 +229,7 @@ TEST(EndToEndQa, TheHiddenMarkerStaysWithinAMillimetreAndAShiftedDetectorFailsIt
 
 TEST(DailyQa, RefusesARoomWithNothingToMakeTheShiftsAndAbsurdTolerances) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene qa = qa_phantom(&pool);
+  const session::PreparedScene qa = qa_phantom(&pool);
   DailyQaOptions o = fast_options();
   for (double bad : {0.0, -1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
     o.tolerance_mm = bad;
@@ -237,10 +237,10 @@ TEST(DailyQa, RefusesARoomWithNothingToMakeTheShiftsAndAbsurdTolerances) {
     EXPECT_FALSE(r.ok()) << bad;
   }
   auto room =
-      host::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "room" / "gige-modbus.yaml").string());
+      session::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "room" / "gige-modbus.yaml").string());
   ASSERT_TRUE(room.ok()) << room.status().message();
   room->actuator.type = "none";  // detectors that are devices, and nothing to make the shifts
-  auto p = host::prepare_scene(*room, "", &pool);
+  auto p = session::prepare_scene(*room, "", &pool);
   ASSERT_TRUE(p.ok()) << p.status().message();
   auto r = run_daily_qa(*p, fast_options(), &pool);
   ASSERT_FALSE(r.ok());
@@ -267,7 +267,7 @@ class InterruptAtCycle final : public loop::CycleObserver {
 // and every check not made fails with the reason; the report is still made.
 TEST(DailyQa, AnInterruptedQaStopsAndFailsEveryCheckItDidNotMake) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = qa_phantom(&pool);
+  const session::PreparedScene p = qa_phantom(&pool);
   const auto expect_the_rest_interrupted = [&](const DailyQaReport& r, std::size_t from_shift) {
     ASSERT_EQ(r.offsets.size(), 7u) << "every shift reported";
     for (std::size_t i = from_shift; i < r.offsets.size(); ++i)

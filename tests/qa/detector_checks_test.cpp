@@ -23,10 +23,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-host::PreparedScene prepared(const fs::path& file, tracking::ThreadPool* pool) {
-  auto scene = host::load_scene(file.string());
+session::PreparedScene prepared(const fs::path& file, tracking::ThreadPool* pool) {
+  auto scene = session::load_scene(file.string());
   EXPECT_TRUE(scene.ok()) << scene.status().message();
-  auto p = host::prepare_scene(*scene, "", pool);
+  auto p = session::prepare_scene(*scene, "", pool);
   EXPECT_TRUE(p.ok()) << p.status().message();
   return std::move(p).value();
 }
@@ -39,7 +39,7 @@ void dead_column(DetectorFrames* f, int column) {
 
 TEST(DetectorChecks, TheShippedRoomPassesAndADeadColumnFailsItsDetector) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
+  const session::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
   auto report = run_detector_qa(p, {}, nullptr);
   ASSERT_TRUE(report.ok()) << report.status().message();
   EXPECT_EQ(report->kind, "detector");
@@ -65,7 +65,7 @@ TEST(DetectorChecks, TheShippedRoomPassesAndADeadColumnFailsItsDetector) {
 
 TEST(DetectorChecks, APanelWithTheClinicalDetectorPatternPassesAndNewHotPixelsFail) {
   tracking::ThreadPool pool(2);
-  host::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
+  session::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
   p.scene.sim.physics.detector = sim::clinical_detector();  // gain, stuck pixels, 2 lines, heel
   auto report = run_detector_qa(p, {}, nullptr);
   ASSERT_TRUE(report.ok()) << report.status().message();
@@ -93,7 +93,7 @@ TEST(DetectorChecks, APanelWithTheClinicalDetectorPatternPassesAndNewHotPixelsFa
 TEST(DetectorChecks, ACalibrationMadeForAnotherDetectorFails) {
   test::TempDir dir;
   tracking::ThreadPool pool(2);
-  host::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
+  session::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
   sim::PanelSpec panel;
   panel.rows = panel.cols = 512;
   auto dark = sim::simulate_panel_frames(panel, false, 8, 1);
@@ -103,7 +103,7 @@ TEST(DetectorChecks, ACalibrationMadeForAnotherDetectorFails) {
   ASSERT_TRUE(made.ok()) << made.status().message();
   made->detector = "B";
   const fs::path file = dir.path() / "detector-B.tif";
-  ASSERT_TRUE(host::write_detector_calibration(file, *made, false).ok());
+  ASSERT_TRUE(session::write_detector_calibration(file, *made, false).ok());
   p.scene.detectors[0].calibration_file = file.string();  // detector A names B's calibration
   auto report = run_detector_qa(p, {}, nullptr);
   ASSERT_TRUE(report.ok()) << report.status().message();
@@ -115,7 +115,7 @@ TEST(DetectorChecks, ACalibrationMadeForAnotherDetectorFails) {
 
 TEST(DetectorChecks, ARoomOfDevicesNeedsTodaysFramesAndACalibrationAndSaysSo) {
   tracking::ThreadPool pool(2);
-  const host::PreparedScene room =
+  const session::PreparedScene room =
       prepared(fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "room" / "gige-modbus.yaml", &pool);
   auto r = run_detector_qa(room, {}, nullptr);
   ASSERT_TRUE(r.ok()) << r.status().message();

@@ -117,31 +117,31 @@ TEST(QaReport, RunCountsTheNewestStandardReportOfItsRoomFromToday) {
 // another room, not an error.
 TEST(RoomFingerprint, FollowsTheCalibrationsContentsNotThePatient) {
   test::TempDir dir;
-  auto scene = host::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml").string());
+  auto scene = session::load_scene((fs::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml").string());
   ASSERT_TRUE(scene.ok()) << scene.status().message();
-  const auto plain = host::room_fingerprint(*scene);
-  host::Scene moved = *scene;
+  const auto plain = session::room_fingerprint(*scene);
+  session::Scene moved = *scene;
   moved.motion.setup_error(0) = 9;
-  EXPECT_EQ(host::room_fingerprint(moved), plain) << "another patient's set-up, the same room";
+  EXPECT_EQ(session::room_fingerprint(moved), plain) << "another patient's set-up, the same room";
 
   const fs::path file = dir.path() / "detector-A.tif";
   auto write = [&](const std::string& bytes) {
     std::ofstream(file, std::ios::binary | std::ios::trunc) << bytes;
   };
   write("calibration of Monday");
-  host::Scene calibrated = *scene;
+  session::Scene calibrated = *scene;
   calibrated.detectors[0].calibration_file = file.string();
-  const auto monday = host::room_fingerprint(calibrated);
+  const auto monday = session::room_fingerprint(calibrated);
   EXPECT_NE(monday, plain);
-  EXPECT_EQ(host::room_fingerprint(calibrated), monday) << "the same file, the same room";
+  EXPECT_EQ(session::room_fingerprint(calibrated), monday) << "the same file, the same room";
   write("calibration of Tuesday");
-  const auto tuesday = host::room_fingerprint(calibrated);
+  const auto tuesday = session::room_fingerprint(calibrated);
   EXPECT_NE(tuesday, monday) << "the same name, other contents: recalibrated";
   write("calibration of Monday");
-  EXPECT_EQ(host::room_fingerprint(calibrated), monday);
+  EXPECT_EQ(session::room_fingerprint(calibrated), monday);
 
   fs::remove(file);
-  const auto missing = host::room_fingerprint(calibrated);
+  const auto missing = session::room_fingerprint(calibrated);
   EXPECT_NE(missing, monday);
   EXPECT_NE(missing, (std::array<std::uint8_t, 16>{}));
 }

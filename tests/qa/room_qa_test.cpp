@@ -50,8 +50,8 @@ struct ServedCouch {
 
 // The QA phantom's room with its couch served: the scene's actuator the Modbus couch, its
 // simulated detectors reading the couch's room link.
-host::PreparedScene served_room(const fs::path& dir, int port, tracking::ThreadPool* pool) {
-  auto scene = host::load_scene(test::qa_phantom_scene().string());
+session::PreparedScene served_room(const fs::path& dir, int port, tracking::ThreadPool* pool) {
+  auto scene = session::load_scene(test::qa_phantom_scene().string());
   EXPECT_TRUE(scene.ok()) << scene.status().message();
   scene->actuator.type = "modbus";
   scene->actuator.modbus.host = "127.0.0.1";
@@ -65,7 +65,7 @@ host::PreparedScene served_room(const fs::path& dir, int port, tracking::ThreadP
   // times in a row ("the gate in ALIGN: stale frame, stale frame, stale frame"), and the loop held
   // as it must. The frame-age rule has tests of its own (tracking_loop_test.cpp).
   scene->safety.max_frame_age_ms = 1000;
-  auto p = host::prepare_scene(*scene, "", pool);
+  auto p = session::prepare_scene(*scene, "", pool);
   EXPECT_TRUE(p.ok()) << p.status().message();
   return std::move(p).value();
 }
@@ -99,7 +99,7 @@ class RoomQa : public ::testing::Test {
   fs::path fields;
   std::unique_ptr<ServedCouch> couch;
   tracking::ThreadPool pool{2};
-  host::PreparedScene p;
+  session::PreparedScene p;
 };
 
 TEST_F(RoomQa, TheServedCouchMakesTheShiftsAndTheLoopFindsAndUndoesEach) {
@@ -146,16 +146,16 @@ TEST_F(RoomQa, NoTwoProgramsDriveTheCouchAtOnce) {
       << qa.status().message();
   EXPECT_NE(qa.status().message().find(holder), std::string::npos) << qa.status().message();
 
-  host::LoopSessionOptions treatment;
-  treatment.devices = host::SessionDevices::kScene;
+  session::LoopSessionOptions treatment;
+  treatment.devices = session::SessionDevices::kScene;
   treatment.light_field_dir = fields;
   treatment.cycles = 5;
-  auto session = host::LoopSession::create(p, treatment, &pool);
+  auto session = session::LoopSession::create(p, treatment, &pool);
   ASSERT_FALSE(session.ok());
   EXPECT_NE(session.status().message().find(holder), std::string::npos) << session.status().message();
 
   other.end();
-  auto free = host::LoopSession::create(p, treatment, &pool);
+  auto free = session::LoopSession::create(p, treatment, &pool);
   EXPECT_TRUE(free.ok()) << free.status().message();
 }
 

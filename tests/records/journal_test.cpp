@@ -28,7 +28,7 @@
 #include "lftrack/records/journal_reader.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::check_journal_path;
 using loop::crc32c;
@@ -780,4 +780,4 @@ TEST(Journal, SurvivesKillNineAtAnyMoment) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,7 @@
 #include "cli_text.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // Lock files in a folder of the test's own (the forked holders inherit it).
@@ -168,4 +168,4 @@ TEST_F(ActuatorLockTest, ARelativeLockFolderIsRefused) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -13,7 +13,7 @@
 #include "lftrack/host/calibration_files.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 TEST(CalibratedCouch, TheIdealCalibrationPassesCorrectionsThroughUnchanged) {
@@ -167,4 +167,4 @@ TEST(CalibrationFiles, AComplexKeyIsRefusedNotThrown) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -12,7 +12,7 @@
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::GateDecision;
 using loop::GateReason;
@@ -327,4 +327,4 @@ TEST(ChaosInvariants, AfterTheJournalFailedNothingIsSent) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

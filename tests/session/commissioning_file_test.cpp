@@ -14,7 +14,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -270,4 +270,4 @@ TEST_F(CommissioningFile, TheSceneNamesItBesideItselfAndNotWithAFloorOfItsOwn) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -13,7 +13,7 @@
 
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -358,4 +358,4 @@ TEST(DetectorCalibrationFile, SurvivesRandomDamage) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -17,7 +17,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -171,4 +171,4 @@ TEST(DicomRegistration, TheRoomsFrameOfReferenceFollowsItsGeometry) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

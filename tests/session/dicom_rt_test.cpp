@@ -18,7 +18,7 @@
 #include "rt_writer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -353,4 +353,4 @@ TEST(DicomRtForeign, PydicomsDoseIsNeither) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -13,7 +13,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -142,4 +142,4 @@ TEST_F(LightFieldCache, AFieldOfTheEarlierNameIsUsedWhenItIsTheFieldAskedFor) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,7 @@
 #include "rt_writer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -354,4 +354,4 @@ TEST_F(PatientSetup, WhatAUserOrAFileWritesNeverBecomesAKeyOfTheScene) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -18,7 +18,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -242,4 +242,4 @@ TEST_F(PhantomCache, NoFolderIsNoCacheAndBadOptionsFailAsWithout) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::ImagingSpec;
 using loop::RealtimeReport;
@@ -120,9 +120,9 @@ TEST(Preflight, TheWaterAndBoneFieldsOfRealisticFramesAreCheckedNotBuilt) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // The actuator check opens the couch and tells it to hold: never under another program driving
@@ -154,9 +154,9 @@ TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 const PreflightItem* surrogate_item(const PreflightReport& r) {
@@ -214,4 +214,4 @@ TEST(Preflight, TheOpticalTrackerIsConnectedAndStreamingItsMarker) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -11,7 +11,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 TEST(PreparedScene, BuiltinPhantomPutsTheTargetOnTheIsocentre) {
@@ -203,4 +203,4 @@ INSTANTIATE_TEST_SUITE_P(PreparedScene, ShippedScenes,
                          [](const ::testing::TestParamInfo<ShippedScene>& param) { return test::scene_test_name(param.param.file); });
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

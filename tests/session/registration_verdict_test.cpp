@@ -12,7 +12,7 @@
 
 #include "lftrack/tracking/similarity.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::judge_registration;
 using loop::judges_view_shift;
@@ -374,4 +374,4 @@ TEST(SingleView, TheKeyIsABoolean) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -19,7 +19,7 @@
 #include "rt_writer.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -164,4 +164,4 @@ TEST_F(RoiMask, AMaskThatDoesNotBelongIsRefusedAtLoad) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

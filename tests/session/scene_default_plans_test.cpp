@@ -6,7 +6,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_default_plans.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // `frames` is each detector's frames setting, a '#' in it standing for the detector's number (two
@@ -121,4 +121,4 @@ TEST(SceneDefaultPlans, EveryDefaultIsAPlanTheRegistrationKnows) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -12,7 +12,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_devices.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // The built-in scene with both detectors' `frames: sim` replaced by `frames`, and its actuator
@@ -236,4 +236,4 @@ TEST(SceneDevices, ArchivedFramesWithARealCouchOrRobotAreRefused) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

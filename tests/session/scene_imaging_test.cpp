@@ -10,7 +10,7 @@
 #include "lftrack/host/scene_imaging_dose.hpp"
 #include "lftrack/host/sim_surrogate_source.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::CorrelationModelSpec;
 using loop::ImagingSpec;
@@ -218,4 +218,4 @@ TEST(SimSurrogateSource, ReadingsAtItsRateOnTheRoomsClockWithFaults) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

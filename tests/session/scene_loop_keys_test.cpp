@@ -6,7 +6,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::judges_view_shift;
 namespace {
@@ -129,4 +129,4 @@ TEST(SceneLoopKeys, TheVerdictsEdgeBandAndViewCheck) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -4,7 +4,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 const std::string kScene = R"(version: 1
@@ -94,4 +94,4 @@ TEST(ScenePhysics, BadValuesAreRefusedAtTheirLine) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

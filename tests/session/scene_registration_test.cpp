@@ -7,7 +7,7 @@
 
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 using tracking::Pose;
@@ -81,4 +81,4 @@ TEST(SceneRegistration, NominalDeltaRoundTrips) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -10,7 +10,7 @@
 #include "lftrack/host/scene.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -221,4 +221,4 @@ TEST(SceneRoomShipped, EveryRoomFileLoadsWithAPatientAndTheShippedScenesUseThem)
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -10,7 +10,7 @@
 #include "lftrack/host/scene.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 TEST(Scene, BuiltinPhantomParses) {
@@ -396,4 +396,4 @@ TEST(Scene, EveryShippedSceneFileLoads) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

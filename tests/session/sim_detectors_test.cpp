@@ -13,7 +13,7 @@
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 TEST(SimDetectors, TheRestOfTheDetectorIsTheExactFrameCoarserAndTheWindowIsUnchanged) {
@@ -120,4 +120,4 @@ TEST(SimDetectors, ClinicalFramesKeepTheirWindowAndRefuseAPatientWithoutTheRest)
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -110,4 +110,4 @@ TEST(SimulatedPatient, IdealPhysicsHasNoPatientWhateverTheRenderer) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

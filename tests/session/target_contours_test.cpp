@@ -6,7 +6,7 @@
 
 #include <cmath>
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 using Eigen::Vector3d;
@@ -91,4 +91,4 @@ TEST(TargetContours, AContourAcrossTheSlicesIsRefused) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

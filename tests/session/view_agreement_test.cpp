@@ -16,7 +16,7 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;
@@ -108,4 +108,4 @@ TEST_F(ViewCheck, AWrongAgreementIsRefusedAtCreation) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -5,7 +5,12 @@
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::DrrBenchOptions;
+using studies::plastimatch_available;
+using studies::run_drr_benchmark;
+using studies::sample_envelope_poses;
 namespace {
 
 TEST(DrrBenchmark, SmallRunReportsEveryRendererAndThePeer) {
@@ -67,4 +72,4 @@ TEST(DrrBenchmark, EnvelopePosesStayInsideTheEnvelope) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

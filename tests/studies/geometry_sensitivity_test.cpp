@@ -19,7 +19,12 @@
 #include "small_phantom.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::run_geometry_sensitivity;
+using studies::SensitivityCase;
+using studies::SensitivityOptions;
+using studies::write_sensitivity_outputs;
 
 using loop::VerdictReason;
 namespace {
@@ -82,4 +87,4 @@ TEST(SensitivityStudy, EveryResultIsJudgedByTheScenesVerdict) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

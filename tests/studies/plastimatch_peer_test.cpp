@@ -14,7 +14,10 @@
 #include "lftrack/tracking/volume_io.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::plastimatch_drr_arguments;
+using studies::run_plastimatch_drr;
 namespace {
 
 using Eigen::Vector3d;
@@ -174,4 +177,4 @@ TEST(PlastimatchPeer, MirroredViewsAreRefused) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -27,9 +27,9 @@ TEST(DicomReaderRealData, AgreesWithPlastimatchConvert) {
   TempDir dir;
   const fs::path mha = dir.path() / "peer.mha";
   std::string log;
-  ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", test::pancreas_dicom().string(),
-                                 "--output-img", mha.string(), "--output-type", "float"},
-                                &log)
+  ASSERT_TRUE(studies::run_process({"plastimatch", "convert", "--input", test::pancreas_dicom().string(),
+                                    "--output-img", mha.string(), "--output-type", "float"},
+                                   &log)
                   .ok())
       << log;
   auto ours = read_dicom_series(test::pancreas_dicom());
@@ -59,9 +59,9 @@ TEST_P(NiftiRealData, AgreesWithPlastimatchConvert) {
   TempDir dir;
   const fs::path mha = dir.path() / "peer.mha";
   std::string log;
-  ASSERT_TRUE(host::run_process({"plastimatch", "convert", "--input", file.string(), "--output-img",
-                                 mha.string(), "--output-type", "float"},
-                                &log)
+  ASSERT_TRUE(studies::run_process({"plastimatch", "convert", "--input", file.string(), "--output-img",
+                                    mha.string(), "--output-type", "float"},
+                                   &log)
                   .ok())
       << log;
   auto peer = test::read_metaimage_for_test(mha);

@@ -11,8 +11,8 @@
 namespace lftrack::test {
 
 // `floor` > 0: the scene says safety.min_similarity: floor (in its measure's units, mi).
-inline Result<host::PreparedScene> small_phantom(tracking::ThreadPool* pool, double floor = 0) {
-  std::string text = *host::builtin_scene_text("builtin:phantom");
+inline Result<session::PreparedScene> small_phantom(tracking::ThreadPool* pool, double floor = 0) {
+  std::string text = *session::builtin_scene_text("builtin:phantom");
   const auto swap_all = [&](const std::string& from, const std::string& to) {
     for (auto at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
       text.replace(at, from.size(), to);
@@ -22,9 +22,9 @@ inline Result<host::PreparedScene> small_phantom(tracking::ThreadPool* pool, dou
   swap_all("    pitch_mm: 0.4\n", "    pitch_mm: 1.6\n");
   swap_all("    resolution: [16, 16, 128, 128]\n", "    resolution: [4, 4, 48, 48]\n");
   if (floor > 0) swap_all("safety:\n", "safety:\n  min_similarity: " + std::to_string(floor) + "\n");
-  auto scene = host::parse_scene(text, "small-phantom.yaml", ".");
+  auto scene = session::parse_scene(text, "small-phantom.yaml", ".");
   if (!scene.ok()) return scene.status();
-  return host::prepare_scene(*scene, "", pool);
+  return session::prepare_scene(*scene, "", pool);
 }
 
 }  // namespace lftrack::test

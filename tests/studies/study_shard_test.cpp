@@ -22,7 +22,42 @@
 #include "lftrack/studies/trade_study.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::capture_range_shard_samples;
+using studies::CaptureRangeOptions;
+using studies::CaptureRangeReport;
+using studies::CaptureRangeRun;
+using studies::check_capture_range_shard_complete;
+using studies::check_job_array_spec;
+using studies::check_trade_shard_complete;
+using studies::folder_safe_name;
+using studies::job_array_scripts;
+using studies::JobArraySpec;
+using studies::JobScript;
+using studies::merge_capture_range_shards;
+using studies::merge_trade_shards;
+using studies::parse_registration_method;
+using studies::pool_capture_range_reports;
+using studies::pool_trade_studies;
+using studies::read_capture_range_shard;
+using studies::read_shard_task;
+using studies::read_trade_shard;
+using studies::record_shard_task;
+using studies::run_process;
+using studies::run_shard_task;
+using studies::shard_dir;
+using studies::ShardPhase;
+using studies::ShardTask;
+using studies::study_scene_fingerprint;
+using studies::submit_job_array;
+using studies::tally_trade_verdict;
+using studies::TradeResult;
+using studies::TradeStudy;
+using studies::write_capture_range_outputs;
+using studies::write_capture_range_shard;
+using studies::write_file_atomically;
+using studies::write_trade_shard;
 
 using loop::VerdictReason;
 namespace {
@@ -493,4 +528,4 @@ TEST(StudyShard, TheVerdictsSettingsArePartOfTheStudysIdentity) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -18,7 +18,23 @@
 #include "small_phantom.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::check_trade_shard_complete;
+using studies::merge_trade_shards;
+using studies::pareto_front;
+using studies::pool_trade_studies;
+using studies::read_trade_shard;
+using studies::recommend;
+using studies::run_trade_study;
+using studies::tally_trade_verdict;
+using studies::TradeOptions;
+using studies::TradeRecommendations;
+using studies::TradeResult;
+using studies::TradeStudy;
+using studies::VerdictOutcomes;
+using studies::write_trade_outputs;
+using studies::write_trade_shard;
 
 using loop::VerdictReason;
 namespace {
@@ -392,4 +408,4 @@ TEST(TradeStudyRun, EveryResultIsJudgedByTheScenesVerdict) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -10,7 +10,19 @@
 
 #include "lftrack/studies/verdict_commissioning.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
+
+using studies::choose_floors;
+using studies::ChosenFloors;
+using studies::CommissionCase;
+using studies::CommissionCaseResult;
+using studies::CommissionTally;
+using studies::floor_margins;
+using studies::FloorMargins;
+using studies::kCommissionCaseKinds;
+using studies::kDefaultFloorMarginFraction;
+using studies::largest_view_shift_mm;
+using studies::must_refuse;
 
 using loop::judge_registration;
 using loop::VerdictLimits;
@@ -174,4 +186,4 @@ TEST(VerdictCommissioning, OnlyTheGoodKindsMayBeAccepted) {
 }
 
 }  // namespace
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -39,14 +39,14 @@ class ScopedEnvironment {
 
 class ActuatorLockHolder {
  public:
-  explicit ActuatorLockHolder(const host::Scene& scene) {
+  explicit ActuatorLockHolder(const session::Scene& scene) {
     int ready[2], release[2];
     if (::pipe(ready) != 0 || ::pipe(release) != 0) return;
     pid_ = ::fork();
     if (pid_ == 0) {
       ::close(ready[0]);
       ::close(release[1]);
-      auto lock = host::ActuatorLock::acquire(scene);
+      auto lock = session::ActuatorLock::acquire(scene);
       const char got = lock.ok() ? 'y' : 'n';
       (void)!::write(ready[1], &got, 1);
       char ignored;

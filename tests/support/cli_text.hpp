@@ -14,7 +14,7 @@ namespace lftrack::test {
 
 // The built-in scene's text with a coarse light field (built in a few seconds), for command tests.
 inline std::string coarse_phantom_scene_text() {
-  std::string scene = *host::builtin_scene_text(host::kBuiltinPhantom);
+  std::string scene = *session::builtin_scene_text(session::kBuiltinPhantom);
   const std::string field = "    resolution: [16, 16, 128, 128]\n";
   scene.replace(scene.find(field), field.size(), "    resolution: [8, 8, 96, 96]\n");
   return scene;
@@ -23,7 +23,7 @@ inline std::string coarse_phantom_scene_text() {
 // The built-in scene's text with tiny light fields, the registration's and the simulated frames'
 // (6 x 6 x 48 x 64: built in about a second), for command tests that run the loop.
 inline std::string tiny_field_phantom_scene_text() {
-  std::string scene = *host::builtin_scene_text(host::kBuiltinPhantom);
+  std::string scene = *session::builtin_scene_text(session::kBuiltinPhantom);
   for (const std::string field :
        {"    resolution: [16, 16, 128, 128]\n", "    resolution: [24, 24, 192, 192]\n"})
     scene.replace(scene.find(field), field.size(), "    resolution: [6, 6, 48, 64]\n");

@@ -89,7 +89,7 @@ class TempDir {
 
 #define LFTRACK_REQUIRE_PLASTIMATCH()                                                 \
   do {                                                                                \
-    if (!::lftrack::host::plastimatch_available()) {                                  \
+    if (!::lftrack::studies::plastimatch_available()) {                               \
       if (::lftrack::test::data_required()) FAIL() << "plastimatch is not installed"; \
       GTEST_SKIP() << "plastimatch is not installed (scripts/setup.sh installs it)";  \
     }                                                                                 \

@@ -18,12 +18,12 @@
 
 namespace lftrack::chaos {
 
-using host::ActuatorSpec;
-using host::HilProtocol;
-using host::LoopSession;
-using host::LoopSessionOptions;
-using host::PreparedScene;
 using records::read_journal;
+using session::ActuatorSpec;
+using session::HilProtocol;
+using session::LoopSession;
+using session::LoopSessionOptions;
+using session::PreparedScene;
 
 namespace {
 
@@ -173,7 +173,7 @@ Result<std::filesystem::path> claim_run_folder(const std::filesystem::path& pare
 
 // A segment that images on demand: X-ray pairs at 1 Hz and the correlation model between them,
 // following the simulated chest marker, with the scene's breathing (6 mm if it has less).
-void image_on_demand(host::Scene* scene, std::uint64_t seed) {
+void image_on_demand(session::Scene* scene, std::uint64_t seed) {
   sim::PatientMotionSpec& motion = scene->motion.motion;
   if (motion.breathing_amplitude.head<3>().norm() < 6)
     motion.breathing_amplitude.head<3>() = Eigen::Vector3d(0.5, 1.5, 6);
@@ -242,7 +242,7 @@ void check_journal(const std::filesystem::path& path, std::int64_t cycles_seen, 
 
 }  // namespace
 
-Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const ChaosOptions& options,
+Result<ChaosReport> run_chaos_soak(const session::PreparedScene& scene, const ChaosOptions& options,
                                    tracking::ThreadPool* pool) {
   LFTRACK_RETURN_IF_ERROR(check_chaos_options(options));
   LFTRACK_RETURN_IF_ERROR(check_chaos_scene(scene));

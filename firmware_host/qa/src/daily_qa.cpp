@@ -33,7 +33,7 @@ bool DailyQaReport::passed() const {
          std::all_of(checks.begin(), checks.end(), [](const QaCheck& c) { return c.passed; });
 }
 
-std::vector<Vector6d> default_offset_shifts(const host::Scene& scene) {
+std::vector<Vector6d> default_offset_shifts(const session::Scene& scene) {
   // Within 90 % of the envelope and of the safety gate's total correction (safety.max_total_mm,
   // _deg): a shift at the limit is refused by the gate whenever the registration reads it a hair
   // long (a room's 10 mm shift under a 10 mm total: "the loop never aligned").
@@ -57,10 +57,10 @@ namespace {
 
 // An interrupted QA's report: every check it has not made yet reported failed, "interrupted by
 // the operator" (the offset test's shifts are already in it).
-DailyQaReport interrupted_report(DailyQaReport report, const host::PreparedScene& p,
+DailyQaReport interrupted_report(DailyQaReport report, const session::PreparedScene& p,
                                  const DailyQaOptions& o) {
   std::vector<std::string> names;
-  for (const host::DetectorSpec& d : p.scene.detectors) names.push_back("detector " + d.view.name);
+  for (const session::DetectorSpec& d : p.scene.detectors) names.push_back("detector " + d.view.name);
   names.push_back("beam");
   names.push_back("latency");
   for (const std::string& name : names) {
@@ -76,16 +76,17 @@ DailyQaReport interrupted_report(DailyQaReport report, const host::PreparedScene
 
 }  // namespace
 
-Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOptions& o,
+Result<DailyQaReport> run_daily_qa(const session::PreparedScene& p, const DailyQaOptions& o,
                                    tracking::ThreadPool* pool) {
-  if (!is_room(p) && !(host::frames_are_simulated(p.scene) && host::actuator_is_virtual(p.scene)))
+  if (!is_room(p) && !(session::frames_are_simulated(p.scene) && session::actuator_is_virtual(p.scene)))
     return failed_precondition(fmt::format(
         "lftrack qa daily runs in a simulated room (detectors `frames: sim`, actuator `virtual`) or in a "
         "room "
         "whose couch or robot is a device (actuator modbus or can) that makes the known shifts: {} has "
         "actuator "
         "{} and {} detectors, so nothing would make the shifts",
-        p.scene.source, p.scene.actuator.type, host::frames_are_simulated(p.scene) ? "simulated" : "device"));
+        p.scene.source, p.scene.actuator.type,
+        session::frames_are_simulated(p.scene) ? "simulated" : "device"));
   if (!(o.tolerance_mm > 0 && std::isfinite(o.tolerance_mm) && o.tolerance_deg > 0 &&
         std::isfinite(o.tolerance_deg)))
     return invalid_argument("the QA's tolerances must be positive and finite");
@@ -94,9 +95,9 @@ Result<DailyQaReport> run_daily_qa(const host::PreparedScene& p, const DailyQaOp
   LFTRACK_RETURN_IF_ERROR(check_detector_qa_options(p, o.detectors));
   // A room: no other program drives its couch while the QA runs (a second QA, a treatment), and
   // the QA's own runs share the lock.
-  std::shared_ptr<const host::ActuatorLock> couch_lock;
+  std::shared_ptr<const session::ActuatorLock> couch_lock;
   if (is_room(p)) {
-    auto lock = host::ActuatorLock::acquire(p.scene);
+    auto lock = session::ActuatorLock::acquire(p.scene);
     if (!lock.ok()) return lock.status();
     couch_lock = std::move(lock).value();
   }

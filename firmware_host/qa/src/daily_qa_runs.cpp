@@ -45,7 +45,7 @@ class Recorder final : public loop::CycleObserver {
     if (next_ != nullptr) next_->on_cycle(record);
   }
   // The session the recorder stops (a flag the loop reads before its next cycle).
-  void stops(host::LoopSession* session) { session_ = session; }
+  void stops(session::LoopSession* session) { session_ = session; }
   // The run ends with the first cycle that leaves ALIGN: aligned (TRACK), or not (HOLD, FAULT).
   void stop_when_aligned() { stop_when_aligned_ = true; }
   std::int64_t simulated_stall_ns(std::int64_t cycle) override {
@@ -57,28 +57,28 @@ class Recorder final : public loop::CycleObserver {
  private:
   loop::CycleObserver* next_;
   const std::atomic<bool>* interrupted_;
-  host::LoopSession* session_ = nullptr;
+  session::LoopSession* session_ = nullptr;
   bool stop_when_aligned_ = false;
   std::vector<JournalRecord> records_;
   std::atomic<std::uint8_t> state_{0};
 };
 
-host::PreparedScene standing_still(const host::PreparedScene& scene, const tracking::Vector6d& setup) {
-  host::PreparedScene still = scene;
-  still.scene.motion = host::MotionSpec{};
+session::PreparedScene standing_still(const session::PreparedScene& scene, const tracking::Vector6d& setup) {
+  session::PreparedScene still = scene;
+  still.scene.motion = session::MotionSpec{};
   still.scene.motion.setup_error = setup;
   return still;
 }
 
 // A simulated room runs its twins, on the simulated clock where asked; a room whose actuator is a
 // device runs the scene's devices on the real clock.
-host::LoopSessionOptions session_options(const host::PreparedScene& scene, const DailyQaOptions& o,
-                                         int cycles, bool simulated_clock) {
+session::LoopSessionOptions session_options(const session::PreparedScene& scene, const DailyQaOptions& o,
+                                            int cycles, bool simulated_clock) {
   const bool room = is_room(scene);
-  host::LoopSessionOptions so;
+  session::LoopSessionOptions so;
   so.cycles = cycles;
   so.simulated_clock = simulated_clock && !room;
-  so.devices = room ? host::SessionDevices::kScene : host::SessionDevices::kSimulated;
+  so.devices = room ? session::SessionDevices::kScene : session::SessionDevices::kSimulated;
   so.light_field_dir = o.light_field_dir;
   so.hooks = o.hooks;
   return so;
@@ -87,12 +87,12 @@ host::LoopSessionOptions session_options(const host::PreparedScene& scene, const
 enum class RunEnd { kCycleCount, kAlignmentDecided };
 
 // `interrupted`: DailyQaOptions::interrupted, which ends the run before its next cycle.
-Result<RecordedRun> run(const host::PreparedScene& scene, host::LoopSessionOptions so,
+Result<RecordedRun> run(const session::PreparedScene& scene, session::LoopSessionOptions so,
                         const std::atomic<bool>* interrupted, tracking::ThreadPool* pool,
                         const std::function<void(Recorder&)>& beside = {}, RunEnd end = RunEnd::kCycleCount) {
   Recorder recorder(static_cast<std::size_t>(so.cycles), so.hooks.observer, interrupted);
   so.hooks.observer = &recorder;
-  auto session = host::LoopSession::create(scene, so, pool);
+  auto session = session::LoopSession::create(scene, so, pool);
   if (!session.ok()) return session.status();
   recorder.stops(session->get());
   if (end == RunEnd::kAlignmentDecided) recorder.stop_when_aligned();
@@ -143,12 +143,12 @@ std::string ask_control_socket(const std::filesystem::path& path, const std::fil
 
 }  // namespace
 
-DailyQaReport new_report(const host::PreparedScene& scene, const std::string& kind) {
+DailyQaReport new_report(const session::PreparedScene& scene, const std::string& kind) {
   DailyQaReport report;
   report.kind = kind;
   report.scene_name = scene.scene.name;
   report.scene_source = scene.scene.source;
-  report.room_fingerprint = host::to_hex(host::room_fingerprint(scene.scene));
+  report.room_fingerprint = session::to_hex(session::room_fingerprint(scene.scene));
   const QaTime now = qa_now();
   report.started_utc = now.utc_iso;
   report.started_local = now.local_iso;
@@ -163,12 +163,12 @@ std::vector<JournalRecord>::const_iterator alignment_record(const std::vector<Jo
   });
 }
 
-bool is_room(const host::PreparedScene& scene) {
-  return host::actuator_is_device(scene.scene);
+bool is_room(const session::PreparedScene& scene) {
+  return session::actuator_is_device(scene.scene);
 }
 
-Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
-                               const DailyQaOptions& options, tracking::ThreadPool* pool) {
+Result<RecordedRun> run_offset(const session::PreparedScene& scene, const tracking::Vector6d& shift,
+                               int cycles, const DailyQaOptions& options, tracking::ThreadPool* pool) {
   if (!is_room(scene))
     return run(standing_still(scene, shift), session_options(scene, options, cycles, true),
                options.interrupted, pool);
@@ -230,10 +230,10 @@ Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking:
                                         : "; the couch could not be sent back: " + back.message()));
 }
 
-Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,
+Result<RecordedRun> run_dark_detectors(const session::PreparedScene& scene, int cycles, int dark_from,
                                        int dark_to, const DailyQaOptions& options,
                                        tracking::ThreadPool* pool) {
-  host::LoopSessionOptions so = session_options(scene, options, cycles, true);
+  session::LoopSessionOptions so = session_options(scene, options, cycles, true);
   if (!is_room(scene)) {
     so.frames.drop_from = dark_from;
     so.frames.drop_to = dark_to;
@@ -247,12 +247,12 @@ Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cyc
   return run(standing_still(scene, tracking::Vector6d::Zero()), so, options.interrupted, pool);
 }
 
-Result<RecordedRun> run_tracking(const host::PreparedScene& scene, int cycles, const DailyQaOptions& options,
-                                 tracking::ThreadPool* pool) {
+Result<RecordedRun> run_tracking(const session::PreparedScene& scene, int cycles,
+                                 const DailyQaOptions& options, tracking::ThreadPool* pool) {
   return run(scene, session_options(scene, options, cycles, true), options.interrupted, pool);
 }
 
-Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
+Result<RecordedRun> run_real_clock(const session::PreparedScene& scene, int cycles,
                                    const DailyQaOptions& options, tracking::ThreadPool* pool) {
   std::error_code ec;
   std::filesystem::path dir = options.work_dir;
@@ -263,7 +263,7 @@ Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
     dir = name;
   }
   std::filesystem::create_directories(dir, ec);
-  host::LoopSessionOptions so = session_options(scene, options, cycles, false);
+  session::LoopSessionOptions so = session_options(scene, options, cycles, false);
   so.control_socket = dir / "control";
   std::string reply;
   // Once the loop tracks (or the run is over), the operator's console asks for the state.

@@ -33,36 +33,36 @@ std::vector<loop::JournalRecord>::const_iterator alignment_record(
 
 // A report of `kind` ("daily", "e2e") for `scene`, started now: the scene, the room's fingerprint,
 // the times.
-DailyQaReport new_report(const host::PreparedScene& scene, const std::string& kind);
+DailyQaReport new_report(const session::PreparedScene& scene, const std::string& kind);
 
 // The detector options judged against `scene` (detector_checks.cpp): tolerances in range, frames
 // for every detector or none.
-Status check_detector_qa_options(const host::PreparedScene& scene, const DetectorQaOptions& options);
+Status check_detector_qa_options(const session::PreparedScene& scene, const DetectorQaOptions& options);
 // What the detector checks cannot judge in `scene`: simulated detectors without a calibration file
 // are judged against their panel's calibration made as the QA starts (no history, no drift).
-std::optional<std::string> simulated_detector_note(const host::PreparedScene& scene,
+std::optional<std::string> simulated_detector_note(const session::PreparedScene& scene,
                                                    const DetectorQaOptions& options);
 
 // Whether `scene` is a room whose actuator is a device (modbus, can): its couch makes the shifts
 // and every run is on the real clock with the scene's devices (room_runs.hpp). Otherwise a
 // simulated room: the simulated patient's set-up error is the shift, and the runs that can be are
 // on the simulated clock.
-bool is_room(const host::PreparedScene& scene);
+bool is_room(const session::PreparedScene& scene);
 
 // `scene` with the phantom `shift` off (no drift or breathing), `cycles` on the simulated
 // clock; in a room, the couch moved by `shift` first (an error when it does not get there) and
 // the real clock.
-Result<RecordedRun> run_offset(const host::PreparedScene& scene, const tracking::Vector6d& shift, int cycles,
-                               const DailyQaOptions& options, tracking::ThreadPool* pool);
+Result<RecordedRun> run_offset(const session::PreparedScene& scene, const tracking::Vector6d& shift,
+                               int cycles, const DailyQaOptions& options, tracking::ThreadPool* pool);
 // `scene` standing still, `cycles` on the simulated clock, exposures [dark_from, dark_to) lost.
-Result<RecordedRun> run_dark_detectors(const host::PreparedScene& scene, int cycles, int dark_from,
+Result<RecordedRun> run_dark_detectors(const session::PreparedScene& scene, int cycles, int dark_from,
                                        int dark_to, const DailyQaOptions& options,
                                        tracking::ThreadPool* pool);
 // `scene` as it is (its own set-up error and motion), `cycles` on the simulated clock.
-Result<RecordedRun> run_tracking(const host::PreparedScene& scene, int cycles, const DailyQaOptions& options,
-                                 tracking::ThreadPool* pool);
+Result<RecordedRun> run_tracking(const session::PreparedScene& scene, int cycles,
+                                 const DailyQaOptions& options, tracking::ThreadPool* pool);
 // `scene` standing still on the real clock with a control socket, asked `status` once it tracks.
-Result<RecordedRun> run_real_clock(const host::PreparedScene& scene, int cycles,
+Result<RecordedRun> run_real_clock(const session::PreparedScene& scene, int cycles,
                                    const DailyQaOptions& options, tracking::ThreadPool* pool);
 
 }  // namespace lftrack::qa

@@ -27,14 +27,15 @@ int frames_today(const DetectorQaOptions& o) {
 }
 
 // Detector `i`'s panel as the simulator models it (sim/panel_frames.hpp).
-sim::PanelSpec panel_of(const host::PreparedScene& p, std::size_t i) {
-  const host::DetectorSpec& d = p.scene.detectors[i];
+sim::PanelSpec panel_of(const session::PreparedScene& p, std::size_t i) {
+  const session::DetectorSpec& d = p.scene.detectors[i];
   sim::PanelSpec s;
   s.rows = d.view.rows;
   s.cols = d.view.cols;
   s.bits = d.bits;
   s.open_field_fraction = kFloodOfFullScale;
-  s.photons_per_pixel = p.scene.sim.photons_per_pixel * kFloodOfFullScale / host::kReferenceOpenFieldFraction;
+  s.photons_per_pixel =
+      p.scene.sim.photons_per_pixel * kFloodOfFullScale / session::kReferenceOpenFieldFraction;
   // The same fixed pattern as the loop's frames of this detector (sim_detectors.cpp: seed i + 1).
   if (p.scene.sim.physics.detector)
     s.effects = sim::effects_of_detector(*p.scene.sim.physics.detector, i + 1);
@@ -53,12 +54,12 @@ Result<DetectorFrames> panel_frames(const sim::PanelSpec& panel, int count, std:
 }
 
 // What detector `i` is judged against: its file, or its simulated panel's calibration.
-Result<calib::DetectorCalibration> baseline_of(const host::PreparedScene& p, std::size_t i, bool simulated,
+Result<calib::DetectorCalibration> baseline_of(const session::PreparedScene& p, std::size_t i, bool simulated,
                                                int today_frames, std::string* source) {
-  const host::DetectorSpec& d = p.scene.detectors[i];
+  const session::DetectorSpec& d = p.scene.detectors[i];
   if (!d.calibration_file.empty()) {
     *source = "calibration " + d.calibration_file;
-    auto loaded = host::load_detector_calibration(d.calibration_file);
+    auto loaded = session::load_detector_calibration(d.calibration_file);
     if (loaded.ok() && !loaded->detector.empty() && loaded->detector != d.view.name)
       return failed_precondition(fmt::format("{} was made for detector '{}', not '{}'", d.calibration_file,
                                              loaded->detector, d.view.name));
@@ -80,7 +81,7 @@ Result<calib::DetectorCalibration> baseline_of(const host::PreparedScene& p, std
   return made;
 }
 
-Result<DetectorFrames> today_of(const host::PreparedScene& p, std::size_t i, bool simulated,
+Result<DetectorFrames> today_of(const session::PreparedScene& p, std::size_t i, bool simulated,
                                 const DetectorQaOptions& o, std::string* source) {
   if (!o.frames.empty()) {
     *source = "the frames given";
@@ -106,9 +107,9 @@ std::string tolerance_text(const calib::DetectorQaTolerances& t) {
 
 }  // namespace
 
-std::vector<QaCheck> detector_checks(const host::PreparedScene& p, const DetectorQaOptions& o,
+std::vector<QaCheck> detector_checks(const session::PreparedScene& p, const DetectorQaOptions& o,
                                      const std::function<void(const std::string&)>& progress) {
-  const bool simulated = host::frames_are_simulated(p.scene);
+  const bool simulated = session::frames_are_simulated(p.scene);
   std::vector<QaCheck> checks;
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
     QaCheck c;
@@ -137,16 +138,17 @@ std::vector<QaCheck> detector_checks(const host::PreparedScene& p, const Detecto
   return checks;
 }
 
-std::optional<std::string> simulated_detector_note(const host::PreparedScene& p, const DetectorQaOptions& o) {
-  if (!host::frames_are_simulated(p.scene) || !o.frames.empty()) return std::nullopt;
-  for (const host::DetectorSpec& d : p.scene.detectors)
+std::optional<std::string> simulated_detector_note(const session::PreparedScene& p,
+                                                   const DetectorQaOptions& o) {
+  if (!session::frames_are_simulated(p.scene) || !o.frames.empty()) return std::nullopt;
+  for (const session::DetectorSpec& d : p.scene.detectors)
     if (d.calibration_file.empty())
       return "a drift of the detectors: a simulated panel has no history, so each is judged against its own "
              "calibration made as the QA starts; that runs the check (its faults are tested), not a detector";
   return std::nullopt;
 }
 
-Status check_detector_qa_options(const host::PreparedScene& p, const DetectorQaOptions& o) {
+Status check_detector_qa_options(const session::PreparedScene& p, const DetectorQaOptions& o) {
   LFTRACK_RETURN_IF_ERROR(calib::check_detector_qa_tolerances(o.tolerances));
   if (!o.frames.empty() && o.frames.size() != p.scene.detectors.size())
     return invalid_argument(fmt::format("frames were given for {} detectors; the scene has {}",
@@ -154,7 +156,7 @@ Status check_detector_qa_options(const host::PreparedScene& p, const DetectorQaO
   return {};
 }
 
-Result<DailyQaReport> run_detector_qa(const host::PreparedScene& p, const DetectorQaOptions& o,
+Result<DailyQaReport> run_detector_qa(const session::PreparedScene& p, const DetectorQaOptions& o,
                                       const std::function<void(const std::string&)>& progress) {
   LFTRACK_RETURN_IF_ERROR(check_detector_qa_options(p, o));
   DailyQaReport report = new_report(p, "detector");

@@ -31,9 +31,9 @@ double quantile(std::vector<double> v, double q) {
 
 }  // namespace
 
-Result<DailyQaReport> run_end_to_end_qa(const host::PreparedScene& p, const EndToEndOptions& o,
+Result<DailyQaReport> run_end_to_end_qa(const session::PreparedScene& p, const EndToEndOptions& o,
                                         tracking::ThreadPool* pool) {
-  if (!host::frames_are_simulated(p.scene) || !host::actuator_is_virtual(p.scene))
+  if (!session::frames_are_simulated(p.scene) || !session::actuator_is_virtual(p.scene))
     return failed_precondition(
         "lftrack qa e2e runs in a simulated room (detectors `frames: sim`, actuator "
         "`virtual`), where the simulator knows where the hidden marker is: " +

@@ -345,13 +345,13 @@ DailyQaStatus daily_qa_status(const fs::path& folder, const std::string& room, c
   return status;
 }
 
-host::PreflightItem daily_qa_item(const host::Scene& scene, const fs::path& folder) {
+session::PreflightItem daily_qa_item(const session::Scene& scene, const fs::path& folder) {
   const DailyQaStatus s =
-      daily_qa_status(folder, host::to_hex(host::room_fingerprint(scene)), qa_now().local_date);
+      daily_qa_status(folder, session::to_hex(session::room_fingerprint(scene)), qa_now().local_date);
   return {"daily QA",
-          s.passed                 ? host::CheckResult::kPass
-          : scene.require_daily_qa ? host::CheckResult::kFail
-                                   : host::CheckResult::kWarn,
+          s.passed                 ? session::CheckResult::kPass
+          : scene.require_daily_qa ? session::CheckResult::kFail
+                                   : session::CheckResult::kWarn,
           s.detail};
 }
 

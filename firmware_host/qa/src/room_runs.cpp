@@ -37,7 +37,7 @@ std::string six(const tracking::Vector6d& v) {
 
 }  // namespace
 
-double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& shift) {
+double couch_move_timeout_s(const session::Scene& scene, const tracking::Vector6d& shift) {
   const drivers::ActuatorDynamics& c = scene.actuator.dynamics;
   const double travel_s =
       std::max(shift.head<3>().norm() / std::max(c.max_speed_mm_s, 1e-3),
@@ -56,21 +56,21 @@ bool is_set(const std::atomic<bool>* flag) {
 // `target_of(its state)` and waits for it there. Returns the position it stood at before. An
 // interruption (`*interrupted` set) sends it back to that position and waits for it there.
 Result<tracking::Vector6d> move_couch(
-    const host::PreparedScene& p,
+    const session::PreparedScene& p,
     const std::function<tracking::Vector6d(const drivers::ActuatorState&)>& target_of,
     const std::string& what, double timeout_s, const std::atomic<bool>* interrupted) {
-  auto lock = host::ActuatorLock::acquire(p.scene);  // shared with the QA that holds it
+  auto lock = session::ActuatorLock::acquire(p.scene);  // shared with the QA that holds it
   if (!lock.ok()) return lock.status();
-  auto spec = host::device_actuator_spec(p.scene);
+  auto spec = session::device_actuator_spec(p.scene);
   if (!spec.ok()) return spec.status();
   auto made = drivers::make_actuator(std::move(spec).value());
   if (!made.ok()) return made.status();
   std::unique_ptr<drivers::Actuator> device = std::move(made).value();
-  std::unique_ptr<host::CalibratedCouch> calibrated;
+  std::unique_ptr<session::CalibratedCouch> calibrated;
   drivers::Actuator* couch = device.get();
   if (p.scene.actuator.calibration) {
-    calibrated = std::make_unique<host::CalibratedCouch>(
-        device.get(), host::couch_mounting(*p.scene.actuator.calibration, p),
+    calibrated = std::make_unique<session::CalibratedCouch>(
+        device.get(), session::couch_mounting(*p.scene.actuator.calibration, p),
         p.registration_origin_room_mm());
     couch = calibrated.get();
   }
@@ -150,14 +150,14 @@ Result<tracking::Vector6d> move_couch(
 
 }  // namespace
 
-Result<tracking::Vector6d> move_couch_by(const host::PreparedScene& p, const tracking::Vector6d& shift,
+Result<tracking::Vector6d> move_couch_by(const session::PreparedScene& p, const tracking::Vector6d& shift,
                                          double timeout_s, const std::atomic<bool>* interrupted) {
   return move_couch(
       p, [&](const drivers::ActuatorState& s) { return tracking::Vector6d(s.target + shift); },
       "the QA's shift " + six(shift), timeout_s, interrupted);
 }
 
-Status move_couch_to(const host::PreparedScene& p, const tracking::Vector6d& position, double timeout_s) {
+Status move_couch_to(const session::PreparedScene& p, const tracking::Vector6d& position, double timeout_s) {
   auto moved = move_couch(
       p, [&](const drivers::ActuatorState&) { return position; },
       "the return to " + six(position) + " of its travel", timeout_s, nullptr);

@@ -21,15 +21,16 @@ namespace lftrack::qa {
 // (its travel, as the read-back gives it) it stood at before. The couch's lock (actuator_lock.hpp)
 // is held while it is open. When `*interrupted` is set (the operator's Ctrl-C) before it arrives,
 // the couch is sent back to where it stood and waited for there, and the move fails saying so.
-Result<tracking::Vector6d> move_couch_by(const host::PreparedScene& scene, const tracking::Vector6d& shift,
+Result<tracking::Vector6d> move_couch_by(const session::PreparedScene& scene, const tracking::Vector6d& shift,
                                          double timeout_s, const std::atomic<bool>* interrupted);
 // The couch sent back to `position` of its travel (as move_couch_by returned it), and waited for
 // (an interruption does not stop it: this is where an interrupted QA leaves the couch).
-Status move_couch_to(const host::PreparedScene& scene, const tracking::Vector6d& position, double timeout_s);
+Status move_couch_to(const session::PreparedScene& scene, const tracking::Vector6d& position,
+                     double timeout_s);
 
 // The time the couch is given for a shift: its travel at the scene's speeds, three times over,
 // plus its latency and 5 s.
-double couch_move_timeout_s(const host::Scene& scene, const tracking::Vector6d& shift);
+double couch_move_timeout_s(const session::Scene& scene, const tracking::Vector6d& shift);
 
 // The frames of cycles [dark_from, dark_to) (the loop's cycle index, as its records count it) are
 // taken from the wrapped source and thrown away: the loop sees no frame, as if the detectors went

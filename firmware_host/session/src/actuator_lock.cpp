@@ -24,7 +24,7 @@
 
 #include "lftrack/host/scene_devices.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 constexpr std::size_t kMaxHolderChars = 300;
@@ -206,4 +206,4 @@ ActuatorLock::~ActuatorLock() {
   ::close(fd_);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -10,7 +10,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 std::string phantom_scene_text();
@@ -113,4 +113,4 @@ motion:
 }
 }  // namespace
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -2,7 +2,7 @@
 
 #include "lftrack/calib/couch_calibration.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using tracking::Vector6d;
 
@@ -46,4 +46,4 @@ drivers::DeviceStatus CalibratedCouch::readback(drivers::ActuatorState* state, d
   return s;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -7,7 +7,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -232,4 +232,4 @@ std::string couch_calibration_yaml(const calib::CouchCalibration& c, std::size_t
   return y.str();
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -19,7 +19,7 @@
 #include "lftrack/tracking/light_field.hpp"
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::similarity_expectation;
 using loop::VerdictLimits;
@@ -268,4 +268,4 @@ Status check_commissioning_current(const PreparedScene& p, const CommissioningRe
                              "lftrack commission --scene " + p.scene.source + " --replace");
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

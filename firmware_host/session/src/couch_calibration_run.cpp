@@ -9,7 +9,7 @@
 #include "lftrack/sim/phantom_images.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using tracking::Vector6d;
 
@@ -128,4 +128,4 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
   return run;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -9,7 +9,7 @@
 
 #include "lftrack/host/patient_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using Eigen::Vector3d;
 
@@ -106,4 +106,4 @@ std::string simulated_accuracy_caveat(const tracking::CtVolume& ct) {
   return m.str();
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

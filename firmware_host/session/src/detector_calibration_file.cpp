@@ -17,7 +17,7 @@
 #include "detector_calibration_tiff.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -326,4 +326,4 @@ std::string utc_now() {
   return text;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

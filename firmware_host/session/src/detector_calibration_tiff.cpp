@@ -8,7 +8,7 @@
 #include <cstring>
 #include <fstream>
 
-namespace lftrack::host::calibration_tiff {
+namespace lftrack::session::calibration_tiff {
 
 namespace fs = std::filesystem;
 
@@ -120,4 +120,4 @@ std::uint64_t last_directory_end(TIFF* tif, const fs::path& path) {
   return end;
 }
 
-}  // namespace lftrack::host::calibration_tiff
+}  // namespace lftrack::session::calibration_tiff

@@ -12,7 +12,7 @@
 #include "lftrack/calib/detector_calibration.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host::calibration_tiff {
+namespace lftrack::session::calibration_tiff {
 
 inline constexpr int kPages = 4;
 inline constexpr const char* kPageNames[kPages] = {"offset_counts", "gain", "noise_counts", "defects"};
@@ -28,4 +28,4 @@ Status read_page(TIFF* tif, int page, int rows, int cols, std::vector<float>* ou
 // but it is not what was written. 0 when the directory cannot be read.
 std::uint64_t last_directory_end(TIFF* tif, const std::filesystem::path& path);
 
-}  // namespace lftrack::host::calibration_tiff
+}  // namespace lftrack::session::calibration_tiff

@@ -19,7 +19,7 @@
 #include <sstream>
 #include <vector>
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -267,4 +267,4 @@ Status check_registration_path(const fs::path& file) {
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,7 @@
 #include <set>
 #include <sstream>
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace rt {  // named: these files compile in unity batches beside other DICOM code
 namespace {
 
@@ -250,4 +250,4 @@ Result<RtPlanSetup> read_rt_plan(const std::filesystem::path& file, const std::s
   return setup;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -9,7 +9,7 @@
 #include <mutex>
 #include <sstream>
 
-namespace lftrack::host::rt {
+namespace lftrack::session::rt {
 
 namespace fs = std::filesystem;
 
@@ -90,4 +90,4 @@ Status check_kind(DcmDataset& ds, const fs::path& file, const char* sop_class, c
                           mod + "')");
 }
 
-}  // namespace lftrack::host::rt
+}  // namespace lftrack::session::rt

@@ -13,7 +13,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host::rt {  // named: these files compile in unity batches beside other DICOM code
+namespace lftrack::session::rt {  // named: these files compile in unity batches beside other DICOM code
 
 // dcmrt logs every attribute of the whole IOD that it finds missing or malformed, most of which
 // these readers never use, and dcmdata logs parse errors: the Status returned carries what
@@ -40,4 +40,4 @@ Status load(const std::filesystem::path& file, DcmFileFormat* format,
 Status check_kind(DcmDataset& ds, const std::filesystem::path& file, const char* sop_class,
                   const char* modality, const std::string& what);
 
-}  // namespace lftrack::host::rt
+}  // namespace lftrack::session::rt

@@ -13,7 +13,7 @@
 #include "dicom_rt_common.hpp"
 #include "lftrack/host/dicom_rt.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace rt {
 namespace {
 
@@ -134,4 +134,4 @@ Result<RtStructureSet> read_rt_structure_set(const std::filesystem::path& file) 
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -11,7 +11,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/light_field.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -229,4 +229,4 @@ Result<Fields> load_or_build_light_fields(const PreparedScene& p, const tracking
   return fields;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -14,7 +14,7 @@
 #include "lftrack/loop/registration_verdict.hpp"
 #include "session_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::ControlSocket;
 using loop::CycleFeed;
@@ -328,4 +328,4 @@ const CycleHub* LoopSession::hub() const {
   return parts_->hub.get();
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

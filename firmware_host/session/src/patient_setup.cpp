@@ -10,7 +10,7 @@
 #include <sstream>
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace fs = std::filesystem;
 using Eigen::Matrix3d;
@@ -357,4 +357,4 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& r, const NewSceneCt& c
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

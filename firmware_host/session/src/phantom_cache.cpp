@@ -20,7 +20,7 @@
 #include "lftrack/tracking/checksum.hpp"
 #include "lftrack/tracking/cpu_features.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 namespace fs = std::filesystem;
@@ -322,4 +322,4 @@ Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& o
   return made;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -9,7 +9,7 @@
 
 #include "lftrack/host/patient_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace fs = std::filesystem;
 using Eigen::Matrix3d;
@@ -114,4 +114,4 @@ Result<Matrix3d> room_from_patient_rotation(const std::string& position) {
                           "' is none of HFS, FFS, HFP, FFP, HFDL, HFDR, FFDL, FFDR (DICOM (0018,5100))");
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,7 @@
 #include "lftrack/sim/room_link.hpp"
 #include "session_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::monotonic_now_ns;
 using loop::RealtimeReport;
@@ -339,4 +339,4 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
   return r;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -12,7 +12,7 @@
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 using Eigen::Vector3d;
@@ -175,4 +175,4 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

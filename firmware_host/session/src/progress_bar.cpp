@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cstdio>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 ProgressBar::ProgressBar(std::string label)
     : label_(std::move(label)),
@@ -40,4 +40,4 @@ double ProgressBar::finish() {
   return elapsed;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -2,7 +2,7 @@
 
 #include <chrono>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::judge_registration;
 using loop::judges_view_shift;
@@ -123,4 +123,4 @@ Result<JudgedRegistration> RegistrationJudge::judge(const std::vector<Image<std:
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -9,7 +9,7 @@
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/patient_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -138,4 +138,4 @@ Result<std::vector<tracking::Image<unsigned char>>> project_roi_mask(const Prepa
   return masks;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -2,7 +2,7 @@
 
 #include "lftrack/host/scene_devices.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 DefaultPlans robust_plans(std::string because) {
@@ -47,4 +47,4 @@ std::string describe_loop_plans(const Scene& scene) {
   return one("align", scene.loop.align_plan, d.align) + ", " + one("track", scene.loop.track_plan, d.track);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -14,7 +14,7 @@
 #include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& what,
                                       tracking::LightFieldSpec* spec) const {
@@ -176,4 +176,4 @@ Status SceneParser::parse_detector(const YAML::Node& n, int index, DetectorSpec*
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -6,7 +6,7 @@
 
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -210,4 +210,4 @@ Status SceneParser::check_devices(const YAML::Node& root, const Scene& scene) co
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <sstream>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 std::string describe_frames(const DetectorFramesSpec& f) {
   if (f.kind == "v4l2" || f.kind == "gige") return f.kind + " " + f.device;
@@ -126,4 +126,4 @@ Result<drivers::ActuatorSpec> device_actuator_spec(const Scene& scene) {
   return invalid_argument(scene.name + ": actuator '" + scene.actuator.type + "' is not a device the drivers' factory makes");
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -8,7 +8,7 @@
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -68,4 +68,4 @@ std::string describe_exposure(const PreparedScene& p) {
                      e.photons_per_pixel, e.photons_per_pixel / p.scene.sim.photons_per_pixel, means);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

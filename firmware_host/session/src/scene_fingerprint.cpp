@@ -11,7 +11,7 @@
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/tracking/version.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 std::array<std::uint8_t, 16> first_16_of_sha256(const std::string& text) {
@@ -102,4 +102,4 @@ std::string to_hex(const std::array<std::uint8_t, 16>& fingerprint) {
   return hex;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

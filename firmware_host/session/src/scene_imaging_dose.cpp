@@ -4,7 +4,7 @@
 
 #include <algorithm>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 double skin_entrance_dose_mGy(const ImagingTechniqueSpec& technique, double source_to_skin_mm) {
   const double output = kOutputAt100kV * (technique.kvp / 100) * (technique.kvp / 100);
@@ -29,4 +29,4 @@ std::string describe_imaging_dose(const PreparedScene& scene) {
       scene.scene.technique.kvp, scene.scene.technique.mas, imaging_dose_per_pair_mGy(scene));
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -8,7 +8,7 @@
 #include "lftrack/sim/tracker_twin.hpp"
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::check_correlation_model_spec;
 using loop::CorrelationModel;
@@ -210,4 +210,4 @@ Status SceneParser::parse_imaging_sections(const YAML::Node& root, Scene* scene)
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

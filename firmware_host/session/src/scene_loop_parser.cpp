@@ -6,7 +6,7 @@
 #include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::LoopSpec;
 using loop::SafetyLimits;
@@ -360,4 +360,4 @@ Status SceneParser::parse_verdict_checks(const YAML::Node& n, const PoseEnvelope
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -23,7 +23,7 @@
 #include "lftrack/tracking/similarity.hpp"
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::similarity_expectation;
 
@@ -362,4 +362,4 @@ Result<Scene> load_scene(const std::string& file_or_builtin) {
   return parse_scene(*text, file_or_builtin, base);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,7 @@
 
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -144,4 +144,4 @@ Status SceneParser::parse_physics(const YAML::Node& n, SimFrameSpec* sim) const 
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

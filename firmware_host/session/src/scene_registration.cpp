@@ -12,7 +12,7 @@
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::ViewAgreement;
 
@@ -286,4 +286,4 @@ tracking::Tre scene_tre(const PreparedScene& p, const Pose& T, const Pose& gold)
   return tracking::target_registration_error(T, gold, p.ct->geometry, box);
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

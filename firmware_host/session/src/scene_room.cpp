@@ -5,7 +5,7 @@
 
 #include "scene_yaml.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -125,4 +125,4 @@ Status SceneParser::merge_room(YAML::Node& root, Scene* scene) {
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -6,7 +6,7 @@
 
 #include <cstdio>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::judges_view_shift;
 using loop::similarity_expectation;
@@ -86,4 +86,4 @@ Status check_views_observable(const Scene& scene) {
                              " (room frame); say `tracking: {single_view: true}` in the scene to register anyway");
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

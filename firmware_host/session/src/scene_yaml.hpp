@@ -15,7 +15,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace fs = std::filesystem;
 using Eigen::Vector3d;
@@ -221,4 +221,4 @@ class SceneParser {
   std::vector<YAML::Node> room_nodes_;  // the room file's sections, as merged
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,7 @@
 #include "lftrack/watch/operator_token.hpp"
 #include "session_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::check_archive_directory;
 using loop::check_auto_resume_s;
@@ -174,4 +174,4 @@ Status check_attended(const PreparedScene& p, const LoopSessionOptions& o) {
       "the monitor page)");
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

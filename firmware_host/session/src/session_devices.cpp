@@ -11,7 +11,7 @@
 #include "lftrack/sim/room_clocked_actuator.hpp"
 #include "session_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 namespace {
 
 // The simulated room of a scene: its patient, set-up error and couch; with `couch_link`, the
@@ -171,4 +171,4 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
   return Spec(std::move(simulated));
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,7 @@
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/sim/tracker_twin.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The simulated room's truth as the loop reads it (tracking_loop.hpp never sees sim/).
 class RoomTruth final : public loop::SimulatedTruth {
@@ -90,4 +90,4 @@ Status check_attended(const PreparedScene& p, const LoopSessionOptions& o);
 void warn_if_prediction_window_short(const loop::LoopSettings& s);
 void warn_if_beam_wait_short(const Scene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -9,7 +9,7 @@
 #include "lftrack/loop/realtime_setup.hpp"
 #include "session_parts.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::CorrelationModelSpec;
 using loop::ImagingSpec;
@@ -123,4 +123,4 @@ Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& 
   return {};
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

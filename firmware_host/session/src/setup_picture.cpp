@@ -8,7 +8,7 @@
 
 #include "lftrack/tracking/drr_renderer.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -219,4 +219,4 @@ std::int64_t count_colour(const tracking::RgbImage& picture, std::uint8_t red, s
   return n;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -2,7 +2,7 @@
 
 #include "lftrack/host/scene_registration.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 Result<SimDetectors> SimDetectors::create(const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> ideal,
                                           std::shared_ptr<const SimulatedPatient> patient,
@@ -112,4 +112,4 @@ Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& p, track
   return out;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -13,7 +13,7 @@
 
 #include "lftrack/host/scene_registration.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 using loop::lower_current_thread_priority;
 
@@ -148,4 +148,4 @@ DeviceStatus SimFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline
   return DeviceStatus::kOk;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

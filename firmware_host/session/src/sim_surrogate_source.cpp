@@ -3,7 +3,7 @@
 #include <cmath>
 #include <numbers>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 SimSurrogateSource::SimSurrogateSource(const sim::BreathingSurrogateSpec& spec,
                                        const sim::SimulatedRoom* room, const SimSurrogateFaults& faults)
@@ -48,4 +48,4 @@ int SimSurrogateSource::read(std::int64_t now_ns, drivers::SurrogateReading* out
   return n;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

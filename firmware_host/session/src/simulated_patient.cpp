@@ -6,7 +6,7 @@
 #include "lftrack/sim/sphere_markers.hpp"
 #include "lftrack/sim/surround_frames.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 sim::PatientRenderers SimulatedPatient::renderers() const {
   sim::PatientRenderers r;
@@ -169,4 +169,4 @@ void SceneImager::forget_previous_frames() {
 
 tracking::DetectorCorrection SceneImager::correction() const { return sim::detector_correction(model_); }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -11,7 +11,7 @@
 #include <set>
 #include <sstream>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 namespace {
 
@@ -244,4 +244,4 @@ Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons, 
   return mask;
 }
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -49,7 +49,7 @@ Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& options,
 
 // The phantom without its voxels: the CT's geometry (ct.values empty), the vertebral body
 // centres and the target, exactly as make_spine_phantom gives them for the same options, for a
-// fraction of a millisecond. What a cache of the voxels needs around them (host::phantom_cache).
+// fraction of a millisecond. What a cache of the voxels needs around them (session::phantom_cache).
 // Fails as make_spine_phantom does.
 Result<SpinePhantom> spine_phantom_layout(const SpinePhantomOptions& options);
 

@@ -24,7 +24,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/sim/xray_physics.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 // "PLAN:MEASURE[+fiducial]", e.g. papers:mi, cmaes:mi, papers:mi+fiducial.
 struct RegistrationMethod {
@@ -99,7 +99,8 @@ struct CaptureRangeReport {
 };
 
 // Runs every method on every start. `progress` gets the fraction done.
-Result<CaptureRangeReport> run_capture_range_study(const PreparedScene& scene, const CaptureRangeOptions& options,
+Result<CaptureRangeReport> run_capture_range_study(const session::PreparedScene& scene,
+                                                   const CaptureRangeOptions& options,
                                                    tracking::ThreadPool* pool,
                                                    const std::function<void(double)>& progress = {});
 // Summaries of a report's runs (also filled in by run_capture_range_study).
@@ -125,4 +126,4 @@ Result<CaptureRangeReport> merge_capture_range_shards(const std::vector<CaptureR
 // other), summarised again. Refuses scenes given twice or studied with other options.
 Result<CaptureRangeReport> pool_capture_range_reports(const std::vector<CaptureRangeReport>& scenes);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

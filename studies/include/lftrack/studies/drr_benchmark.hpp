@@ -13,7 +13,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct DrrBenchOptions {
   int size = 256;            // DRR rows = cols; each detector's ROI window resampled to this
@@ -80,14 +80,15 @@ struct DrrBenchReport {
 // `count` poses T_room_from_ct = apply_delta(nominal, delta) with delta uniform in the
 // envelope (each translation component in +-translation_mm, each rotation-vector component in
 // +-rotation_deg), about the registration origin. The first pose is the nominal one.
-std::vector<tracking::Pose> sample_envelope_poses(const PreparedScene& scene, int count, std::uint64_t seed);
+std::vector<tracking::Pose> sample_envelope_poses(const session::PreparedScene& scene, int count,
+                                                  std::uint64_t seed);
 
 // Each detector's ROI window resampled to size x size pixels (room frame).
-std::vector<tracking::XrayView> roi_views(const PreparedScene& scene, int size);
+std::vector<tracking::XrayView> roi_views(const session::PreparedScene& scene, int size);
 
-Result<DrrBenchReport> run_drr_benchmark(const PreparedScene& scene, const DrrBenchOptions& options,
+Result<DrrBenchReport> run_drr_benchmark(const session::PreparedScene& scene, const DrrBenchOptions& options,
                                          tracking::ThreadPool* pool);
 
 nlohmann::json to_json(const DrrBenchReport& report);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

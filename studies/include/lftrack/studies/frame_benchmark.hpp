@@ -17,7 +17,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct FrameBenchOptions {
   int pairs = 20;           // timed pairs per renderer, at poses drawn across the envelope
@@ -59,9 +59,9 @@ struct FrameBenchReport {
 
 // Siddon first, then light fields (built into the light-field folder if missing, before any
 // timing). The scene's own sim.renderer does not matter: both are measured.
-Result<FrameBenchReport> run_frame_benchmark(const PreparedScene& scene, const FrameBenchOptions& options,
-                                             tracking::ThreadPool* pool);
+Result<FrameBenchReport> run_frame_benchmark(const session::PreparedScene& scene,
+                                             const FrameBenchOptions& options, tracking::ThreadPool* pool);
 
 nlohmann::json to_json(const FrameBenchReport& report);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -25,7 +25,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct SensitivityOptions {
   int runs = 6;             // registrations per case
@@ -55,7 +55,7 @@ struct SensitivityReport {
   std::vector<SensitivityCase> cases;  // first: no error
 };
 
-Result<SensitivityReport> run_geometry_sensitivity(const PreparedScene& scene,
+Result<SensitivityReport> run_geometry_sensitivity(const session::PreparedScene& scene,
                                                    const SensitivityOptions& options,
                                                    tracking::ThreadPool* pool);
 nlohmann::json to_json(const SensitivityReport& report);
@@ -64,4 +64,4 @@ nlohmann::json to_json(const SensitivityReport& report);
 // + .dat, .gp) in `dir`.
 Status write_sensitivity_outputs(const SensitivityReport& report, const std::filesystem::path& dir);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -12,7 +12,7 @@
 #include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 // One command's chain and where it came from.
 struct CommandChain {
@@ -46,4 +46,4 @@ Result<LatencyStudy> run_latency_study(const std::vector<std::filesystem::path>&
 // missing: the data and script are written, the PNG not).
 Result<bool> write_latency_study(const LatencyStudy& study, const std::filesystem::path& out_dir);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -19,7 +19,7 @@
 #include "lftrack/tracking/volume.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct OctreeBenchOptions {
   std::vector<double> pivots{0, 0.001, 0.01, 0.02, 0.07, 0.2, 0.7};  // the paper's
@@ -63,4 +63,4 @@ Result<OctreeBenchReport> run_octree_benchmark(const tracking::MuVolume& volume,
                                                const std::function<void(double)>& progress = {});
 nlohmann::json to_json(const OctreeBenchReport& report);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -30,7 +30,7 @@
 #include "lftrack/tracking/status.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 // True if `plastimatch` is on PATH and runs.
 bool plastimatch_available();
@@ -58,4 +58,4 @@ Result<PeerDrr> run_plastimatch_drr(const tracking::XrayView& view_ct,
 Status run_process(const std::vector<std::string>& argv, std::string* output,
                    const std::vector<std::string>& extra_env = {});
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -9,7 +9,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct PlotSeries {
   std::string name;
@@ -92,4 +92,4 @@ struct GroupedScatterPlot {
 // Writes <png stem>.dat (one block per group) and <png stem>.gp and runs gnuplot.
 Result<bool> draw_grouped_scatter(const GroupedScatterPlot& plot, const std::filesystem::path& png);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

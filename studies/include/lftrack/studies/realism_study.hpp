@@ -17,14 +17,14 @@
 
 #include "lftrack/studies/capture_range_study.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct RealismFactor {
   std::string name;
   sim::XrayPhysicsSpec physics;
 };
 // The factor sets of `scene`, in report order.
-std::vector<RealismFactor> realism_factors(const PreparedScene& scene);
+std::vector<RealismFactor> realism_factors(const session::PreparedScene& scene);
 
 struct RealismOptions {
   int per_bin = 20;       // gold poses (each with one start per 2 mm bin)
@@ -66,15 +66,17 @@ struct RealismReport {
 };
 
 // The capture-range options of factor set `factor`.
-CaptureRangeOptions realism_capture_range_options(const PreparedScene& scene, const RealismOptions& options,
-                                                  const RealismFactor& factor);
+CaptureRangeOptions realism_capture_range_options(const session::PreparedScene& scene,
+                                                  const RealismOptions& options, const RealismFactor& factor);
 
 // The factor sets `options.only` selects (all when empty), in report order; names that are not a
 // set of this scene are refused, with the scene's sets.
-Result<std::vector<RealismFactor>> selected_realism_factors(const PreparedScene& scene, const RealismOptions& options);
+Result<std::vector<RealismFactor>> selected_realism_factors(const session::PreparedScene& scene,
+                                                            const RealismOptions& options);
 
-Result<RealismReport> run_realism_study(const PreparedScene& scene, const RealismOptions& options,
-                                        tracking::ThreadPool* pool, const std::function<void(double)>& progress = {});
+Result<RealismReport> run_realism_study(const session::PreparedScene& scene, const RealismOptions& options,
+                                        tracking::ThreadPool* pool,
+                                        const std::function<void(double)>& progress = {});
 RealismFactorSummary summarize_realism_factor(const RealismOptions& options, const CaptureRangeReport& study,
                                               const std::string& image_method, const std::string& hybrid_method);
 // DIR/<set>/ (each set's capture-range outputs, or its shard), and for a whole study
@@ -93,7 +95,8 @@ Status write_realism_description(const RealismReport& report, const std::filesys
 Result<RealismReport> read_realism_shard(const std::filesystem::path& dir);
 // What shard `options.shard` of `scene`'s study holds when complete: the description and each
 // set's capture-range options, without runs.
-Result<RealismReport> expected_realism_shard(const PreparedScene& scene, const RealismOptions& options);
+Result<RealismReport> expected_realism_shard(const session::PreparedScene& scene,
+                                             const RealismOptions& options);
 // OK when `dir` holds the complete shard `expected` describes (every set with every run);
 // kFailedPrecondition when it holds another study's; otherwise why not.
 Status check_realism_shard_complete(const std::filesystem::path& dir, const RealismReport& expected);
@@ -104,4 +107,4 @@ Result<RealismReport> merge_realism_shards(const std::vector<RealismReport>& sha
 // capture-range study pools them). Refuses scenes with other options, methods or sets.
 Result<RealismReport> pool_realism_reports(const std::vector<RealismReport>& scenes);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -14,7 +14,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct RegistrationBenchOptions {
   // The cold plan (empty: the scene's tracking.plan) and the warm plan (a registration_plan name).
@@ -50,9 +50,9 @@ struct RegistrationBenchReport {
   TimedRegistrations lightfield_inside, siddon_inside;  // same starts and frames
 };
 
-Result<RegistrationBenchReport> run_registration_benchmark(const PreparedScene& scene,
+Result<RegistrationBenchReport> run_registration_benchmark(const session::PreparedScene& scene,
                                                            const RegistrationBenchOptions& options,
                                                            tracking::ThreadPool* pool);
 nlohmann::json to_json(const RegistrationBenchReport& report);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -18,7 +18,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct JobArraySpec {
   std::string study;                        // "trade" or "capture-range"
@@ -70,4 +70,4 @@ std::string folder_safe_name(const std::string& scene_name);
 // Single-quotes `word` for bash.
 std::string shell_quote(const std::string& word);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -17,7 +17,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 enum class ShardPhase { kPending, kRunning, kDone, kFailed };
 const char* to_string(ShardPhase phase);
@@ -59,7 +59,7 @@ Status run_shard_task(const std::filesystem::path& dir, const std::function<Stat
 // simulated patient's volume), each view's geometry with the ROI and envelope, the registration's
 // measure and plan, and the simulated frames' renderer and noise. Shards with different
 // fingerprints are different studies even when their scenes share a name.
-std::string study_scene_fingerprint(const PreparedScene& scene);
+std::string study_scene_fingerprint(const session::PreparedScene& scene);
 
 // Writes `text` to `file` through a temporary file in the same folder and a rename: readers see
 // the old file or the whole new one, never part of it.
@@ -69,4 +69,4 @@ Status write_file_atomically(const std::filesystem::path& file, const std::strin
 // (kCorruptData naming `file` otherwise). The numbers as a description's JSON holds them.
 Status check_shard_position(std::int64_t shard, std::int64_t shards, const std::filesystem::path& file);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -22,7 +22,7 @@
 #include "lftrack/sim/patient_motion.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct SurrogateStudyOptions {
   sim::PatientMotionSpec motion;  // the target's: translations (mm) of the registration origin
@@ -73,4 +73,4 @@ Result<SurrogateStudy> run_surrogate_study(const SurrogateStudyOptions& options)
 Result<bool> write_surrogate_study(const SurrogateStudy& study, const SurrogateStudyOptions& options,
                                    const std::filesystem::path& out_dir);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -38,7 +38,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/verdict_outcomes.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct TradePoint {
   std::string id;                       // unique, stable (also the label on plots)
@@ -120,24 +120,25 @@ struct TradeStudy {
 VerdictOutcomes tally_trade_verdict(const TradeResult& result, double tolerance_mm);
 
 // The operating points of the study on `scene`, in a stable order.
-std::vector<TradePoint> trade_points(const PreparedScene& scene, bool quick);
+std::vector<TradePoint> trade_points(const session::PreparedScene& scene, bool quick);
 
 // The problems each point registers: options.problems, or 6 quick and 24 full.
 int trade_problem_count(const TradeOptions& options);
 
 // The points shard `options.shard` of `options.shards` runs (after `options.only`), and in
 // `points_total` the number in the whole study.
-Result<std::vector<TradePoint>> trade_shard_points(const PreparedScene& scene, const TradeOptions& options,
-                                                   int* points_total = nullptr);
+Result<std::vector<TradePoint>> trade_shard_points(const session::PreparedScene& scene,
+                                                   const TradeOptions& options, int* points_total = nullptr);
 
 // Builds and saves into `options.field_dir` every float field set the points of the whole study
 // (after `options.only`, every shard) need, skipping sets already there and valid. `progress`
 // gets a line per set.
-Status build_trade_fields(const PreparedScene& scene, const TradeOptions& options, tracking::ThreadPool* pool,
+Status build_trade_fields(const session::PreparedScene& scene, const TradeOptions& options,
+                          tracking::ThreadPool* pool,
                           const std::function<void(const std::string&)>& progress = {});
 
 // Runs this shard's points. `progress` gets the fraction done and the point being run.
-Result<TradeStudy> run_trade_study(const PreparedScene& scene, const TradeOptions& options,
+Result<TradeStudy> run_trade_study(const session::PreparedScene& scene, const TradeOptions& options,
                                    tracking::ThreadPool* pool,
                                    const std::function<void(double, const std::string&)>& progress = {});
 
@@ -180,4 +181,4 @@ Result<TradeStudy> pool_trade_studies(const std::vector<TradeStudy>& scenes,
 // summary.md in `dir`.
 Status write_trade_outputs(const TradeStudy& study, const std::filesystem::path& dir);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -24,7 +24,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 enum class CommissionCase : std::uint8_t {
   kAlign,           // good: cold, from the nominal pose, the patient anywhere in the envelope
@@ -47,7 +47,7 @@ struct CommissionOptions {
   std::uint64_t seed = 1;
   double tolerance_mm = 0;  // 0: the scene's safety.beam_tolerance_mm
   double level_mm = 30;     // one vertebral level (lumbar about 35 mm, thoracic about 25 mm)
-  const PreparedScene* other_patient = nullptr;  // null: no other-patient cases
+  const session::PreparedScene* other_patient = nullptr;  // null: no other-patient cases
   std::string renderer = "lightfield";
   std::string light_field_dir;  // empty: the scene's default folder
   tracking::ThreadPool* pool = nullptr;
@@ -65,7 +65,7 @@ struct CommissionCaseResult {
 };
 
 // The cases, in a fixed order drawn from options.seed; the same options give the same cases.
-Result<std::vector<CommissionCaseResult>> run_commission_cases(const PreparedScene& scene,
+Result<std::vector<CommissionCaseResult>> run_commission_cases(const session::PreparedScene& scene,
                                                                const CommissionOptions& options);
 
 struct CommissionTally {
@@ -150,4 +150,4 @@ OtherChecks other_checks(const std::vector<CommissionCaseResult>& cases, const l
 double lowest_view_similarity(const loop::VerdictInput& input);
 double lowest_view_check_ncc(const loop::VerdictInput& input);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

@@ -12,7 +12,7 @@
 
 #include "lftrack/studies/plot.hpp"
 
-namespace lftrack::host {
+namespace lftrack::studies {
 
 struct VerdictOutcomes {
   int accepted_right = 0;  // accepted and right
@@ -48,4 +48,4 @@ struct VerdictGroup {
 // in its name. Draw it with draw_grouped_bars.
 GroupedBarChart verdict_outcome_chart(const std::string& title, const std::vector<VerdictGroup>& groups);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::studies

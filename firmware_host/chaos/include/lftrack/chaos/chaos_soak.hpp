@@ -139,7 +139,7 @@ nlohmann::json to_json(const ChaosReport& report);
 // Runs the soak on `scene` (a scene with simulated detectors and a virtual couch). Fails only on
 // what stops it from running (a session that cannot be created); invariant violations are the
 // report's, not an error.
-Result<ChaosReport> run_chaos_soak(const host::PreparedScene& scene, const ChaosOptions& options,
+Result<ChaosReport> run_chaos_soak(const session::PreparedScene& scene, const ChaosOptions& options,
                                    tracking::ThreadPool* pool);
 
 }  // namespace lftrack::chaos

@@ -90,7 +90,7 @@ struct DailyQaOptions {
   std::filesystem::path work_dir;         // the control socket; empty: a folder in /tmp
   DetectorQaOptions detectors;
   // Fault injection (tests): wraps the devices of every run, as the chaos soak does.
-  host::SessionHooks hooks;
+  session::SessionHooks hooks;
   // Called with a line per step done (a progress display); may be empty.
   std::function<void(const std::string&)> progress;
   // Set (by the operator's Ctrl-C; null: never) to end the QA early: the run in progress stops
@@ -107,7 +107,7 @@ inline constexpr const char* kInterrupted = "interrupted by the operator";
 // once (5, -5, 5 mm with 0.5, -0.5, 0.5 degree), where the scene's envelope and its safety gate's
 // total correction (safety.max_total_mm, _deg) allow them: a shift beyond 90 % of either is scaled
 // to 90 % (the verdict refuses results at the envelope's edge, the gate a total a hair over).
-std::vector<tracking::Vector6d> default_offset_shifts(const host::Scene& scene);
+std::vector<tracking::Vector6d> default_offset_shifts(const session::Scene& scene);
 
 struct OffsetResult {
   tracking::Vector6d shift = tracking::Vector6d::Zero();        // known (mm, rad)
@@ -132,7 +132,7 @@ struct QaCheck {
 struct DailyQaReport {
   std::string kind = "daily";  // "daily" (run_daily_qa), "e2e" (run_end_to_end_qa), "detector"
   std::string scene_name, scene_source;
-  std::string room_fingerprint;  // host::room_fingerprint, hex: whose room this QA was of
+  std::string room_fingerprint;  // session::room_fingerprint, hex: whose room this QA was of
   std::string started_utc;       // ISO 8601
   std::string started_local;     // ISO 8601 with the host's UTC offset
   std::string date;              // YYYY-MM-DD, the host's local date: the clinic's day it counts for
@@ -158,16 +158,16 @@ struct DailyQaReport {
 // Runs the checks on `scene` (prepared, with its light fields built). Fails only when a run
 // cannot be made at all (a room with nothing to make the shifts, light fields missing); a check
 // that fails is in the report, and so is a shift the room's couch could not make.
-Result<DailyQaReport> run_daily_qa(const host::PreparedScene& scene, const DailyQaOptions& options,
+Result<DailyQaReport> run_daily_qa(const session::PreparedScene& scene, const DailyQaOptions& options,
                                    tracking::ThreadPool* pool);
 
 // The detector checks alone, on any room (real devices too): a report of kind "detector". It is
 // not a daily QA (`lftrack run` does not count it); a real room runs it each morning with its
 // detectors' frames until its daily QA can move the room's own couch. Fails only for options out
 // of range; a detector that cannot be judged fails its check.
-std::vector<QaCheck> detector_checks(const host::PreparedScene& scene, const DetectorQaOptions& options,
+std::vector<QaCheck> detector_checks(const session::PreparedScene& scene, const DetectorQaOptions& options,
                                      const std::function<void(const std::string&)>& progress);
-Result<DailyQaReport> run_detector_qa(const host::PreparedScene& scene, const DetectorQaOptions& options,
+Result<DailyQaReport> run_detector_qa(const session::PreparedScene& scene, const DetectorQaOptions& options,
                                       const std::function<void(const std::string&)>& progress);
 
 // The hidden-target end-to-end test (AAPM TG-135's yearly E2E, MPPG 9.a: within 1.0 mm): the
@@ -181,10 +181,10 @@ struct EndToEndOptions {
   Eigen::Vector3d marker_offset_room_mm{0, 0, 20};
   double tolerance_mm = 1.0;
   std::filesystem::path light_field_dir;
-  host::SessionHooks hooks;
+  session::SessionHooks hooks;
   std::function<void(const std::string&)> progress;
 };
-Result<DailyQaReport> run_end_to_end_qa(const host::PreparedScene& scene, const EndToEndOptions& options,
+Result<DailyQaReport> run_end_to_end_qa(const session::PreparedScene& scene, const EndToEndOptions& options,
                                         tracking::ThreadPool* pool);
 
 }  // namespace lftrack::qa

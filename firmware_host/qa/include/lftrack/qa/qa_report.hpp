@@ -29,7 +29,7 @@ Status check_report_folder(const std::filesystem::path& folder);
 Result<WrittenReport> write_daily_qa_report(const DailyQaReport& report, const std::filesystem::path& folder);
 
 // Today's daily QA of a room as `lftrack run` judges it: the newest daily report in `folder` for
-// the room (host::room_fingerprint, hex) dated `date` (the host's local date) decides; it counts
+// the room (session::room_fingerprint, hex) dated `date` (the host's local date) decides; it counts
 // only if it passed and was the standard QA. Reports that do not parse, symbolic links and files
 // of the wrong types are skipped.
 struct DailyQaStatus {
@@ -42,7 +42,7 @@ DailyQaStatus daily_qa_status(const std::filesystem::path& folder, const std::st
 
 // `lftrack run`'s start-up check "daily QA" for `scene`'s room, today: ok when passed, else a
 // warning, or a failure where the scene sets safety.require_daily_qa.
-host::PreflightItem daily_qa_item(const host::Scene& scene,
-                                  const std::filesystem::path& folder = kDefaultQaFolder);
+session::PreflightItem daily_qa_item(const session::Scene& scene,
+                                     const std::filesystem::path& folder = kDefaultQaFolder);
 
 }  // namespace lftrack::qa

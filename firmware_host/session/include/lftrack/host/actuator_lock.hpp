@@ -31,7 +31,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The environment variable that names the tests' lock folder.
 inline constexpr const char* kTestLockDirVariable = "LFTRACK_TEST_LOCK_DIR";
@@ -61,4 +61,4 @@ class ActuatorLock {
   std::string path_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

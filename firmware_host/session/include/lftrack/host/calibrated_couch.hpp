@@ -16,7 +16,7 @@
 
 #include "lftrack/drivers/actuator.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 class CalibratedCouch final : public drivers::Actuator {
  public:
@@ -43,4 +43,4 @@ class CalibratedCouch final : public drivers::Actuator {
   tracking::Vector6d couch_target_ = tracking::Vector6d::Zero();  // couch axes: last read-back plus moves since
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

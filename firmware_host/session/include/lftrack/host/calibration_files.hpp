@@ -22,7 +22,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // "builtin" gives calib::builtin_calibration_phantom(); anything else is a phantom file.
 Result<calib::CalibrationPhantom> load_calibration_phantom(const std::string& file_or_builtin);
@@ -51,4 +51,4 @@ std::string couch_calibration_yaml(const calib::CouchCalibration& calibration, s
 //     - {translation_mm: [0, 5, 0], rotation_deg: [1, 0, 0]}
 Result<std::vector<tracking::Vector6d>> read_couch_moves(const std::string& file);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

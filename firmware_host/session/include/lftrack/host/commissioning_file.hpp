@@ -13,7 +13,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // What the floors depend on, each part a 16-hex-digit digest (SHA-256), so a stale file says
 // which part changed.
@@ -54,4 +54,4 @@ Status write_commissioning_file(const std::filesystem::path& file, const Commiss
 Status check_commissioning_current(const PreparedScene& scene, const CommissioningRecord& record,
                                    const std::filesystem::path& file);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

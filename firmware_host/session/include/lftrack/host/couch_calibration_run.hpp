@@ -14,7 +14,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct CouchCalibrationRunOptions {
   calib::CalibrationPhantom phantom = calib::builtin_calibration_phantom();
@@ -38,4 +38,4 @@ std::vector<tracking::Vector6d> default_couch_moves();
 Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene& scene,
                                                             const CouchCalibrationRunOptions& options);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

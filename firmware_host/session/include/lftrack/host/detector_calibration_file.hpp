@@ -31,7 +31,7 @@
 #include "lftrack/calib/detector_calibration.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 inline constexpr int kDetectorCalibrationVersion = 2;
 
@@ -43,4 +43,4 @@ Result<calib::DetectorCalibration> load_detector_calibration(const std::filesyst
 // The time a file of record is stamped with: UTC, ISO 8601 to the second ("2026-11-30T12:00:00Z").
 std::string utc_now();
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

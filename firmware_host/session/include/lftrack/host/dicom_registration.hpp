@@ -26,7 +26,7 @@
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The planning CT's identity as DICOM names it, read from the series' headers (pixel data is
 // not read).
@@ -66,4 +66,4 @@ Status check_registration_path(const std::filesystem::path& file);
 Status write_spatial_registration(const std::filesystem::path& file, const CtDicomIdentity& ct,
                                   const SpatialRegistration& registration);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -15,7 +15,7 @@
 
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // Each the same in every slice (refused otherwise, naming both files and both values).
 // Of the tolerance table the chosen beam references (300A,00A0), where it references one; a
@@ -102,4 +102,4 @@ inline constexpr std::size_t kMaxPointsPerStructureSet = 10'000'000;
 // reference no structure are ignored.
 Result<RtStructureSet> read_rt_structure_set(const std::filesystem::path& file);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -39,7 +39,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 enum class HilProtocol { kNone, kModbus, kCan };
 
@@ -140,4 +140,4 @@ class LoopSession {
   std::unique_ptr<Parts> parts_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -17,7 +17,7 @@
 #include "lftrack/tracking/status.hpp"
 #include "lftrack/tracking/volume.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct NewSceneRequest {
   std::filesystem::path ct;      // a DICOM CT folder or a NIfTI file
@@ -99,4 +99,4 @@ std::string printable(const std::string& text);
 // The structures of a structure set, one line each: number, name, contours, points.
 std::string structure_list(const RtStructureSet& set);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -32,7 +32,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The environment variable naming the program's cache folder (unset or empty: no cache). The
 // test suite sets it for every test (tests/CMakeLists.txt), so its processes share one phantom.
@@ -59,4 +59,4 @@ Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& o
 // The folder LFTRACK_CACHE_DIR names, or an empty path.
 std::filesystem::path cache_dir_from_environment();
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -24,7 +24,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 enum class CheckResult { kPass, kWarn, kFail };
 
@@ -46,4 +46,4 @@ struct PreflightReport {
 PreflightReport run_preflight(const PreparedScene& scene, const LoopSessionOptions& options,
                               const Result<loop::RealtimeReport>& realtime, bool rt_waived);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

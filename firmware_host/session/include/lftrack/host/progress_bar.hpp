@@ -7,7 +7,7 @@
 #include <mutex>
 #include <string>
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 class ProgressBar {
  public:
@@ -24,4 +24,4 @@ class ProgressBar {
   std::mutex mutex_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

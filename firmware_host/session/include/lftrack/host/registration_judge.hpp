@@ -15,7 +15,7 @@
 #include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/registration.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct JudgedRegistration {
   bool registered = false;  // false: a frame failed the image-quality gate; nothing was registered
@@ -74,4 +74,4 @@ class RegistrationJudge {
   loop::VerdictLimits limits_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -13,7 +13,7 @@
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // One mask per detector, each its ROI window's size (1: look). Refused: no roi.mask in the
 // scene, a CT that is not a DICOM series, a structure set or target that does not belong to it
@@ -23,4 +23,4 @@ namespace lftrack::host {
 inline constexpr std::int64_t kMinRoiMaskPixels = 256;
 Result<std::vector<tracking::Image<unsigned char>>> project_roi_mask(const PreparedScene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

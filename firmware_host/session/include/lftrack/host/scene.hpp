@@ -35,7 +35,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 inline constexpr const char* kBuiltinPhantom = "builtin:phantom";
 inline constexpr const char* kBuiltinPhantomClinical = "builtin:phantom-clinical";
@@ -377,4 +377,4 @@ Result<std::vector<std::shared_ptr<const tracking::LightField>>> load_or_build_l
 Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_override,
                                     tracking::ThreadPool* pool);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -11,7 +11,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct DefaultPlans {
   std::string plan;        // tracking.plan (`lftrack register`)
@@ -32,4 +32,4 @@ DefaultPlans archived_frame_plans();
 // said to be named or chosen, for the run's log.
 std::string describe_loop_plans(const Scene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

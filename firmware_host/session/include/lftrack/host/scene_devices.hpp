@@ -8,7 +8,7 @@
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // "v4l2 /dev/v4l/by-path/...", "gige 127.0.0.1", "replay DIR", "sim".
 std::string describe_frames(const DetectorFramesSpec& frames);
@@ -36,4 +36,4 @@ Result<drivers::FrameSourceSpec> device_frame_source_spec(const Scene& scene);
 // The actuator of a scene with a modbus or can actuator. Fails for none and virtual.
 Result<drivers::ActuatorSpec> device_actuator_spec(const Scene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

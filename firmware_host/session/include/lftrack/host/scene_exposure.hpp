@@ -19,7 +19,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The open field's level at the detector's reference exposure (sim.photons_per_pixel photons per
 // pixel read this fraction of the full scale).
@@ -32,4 +32,4 @@ Result<SimExposure> scene_exposure(const PreparedScene& scene);
 // reference); ROI means 10.0 % (A), 14.2 % (B) of full scale", or the fixed dose.
 std::string describe_exposure(const PreparedScene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -8,7 +8,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The room's geometry as text: every detector's view (name, size, pitch, source, pixel (0,0),
 // axes) at full precision, in the scene's order. Room frame, mm.
@@ -30,4 +30,4 @@ std::array<std::uint8_t, 16> room_fingerprint(const Scene& scene);
 
 std::string to_hex(const std::array<std::uint8_t, 16>& fingerprint);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

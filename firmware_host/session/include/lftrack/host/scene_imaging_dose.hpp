@@ -15,7 +15,7 @@
 
 #include "lftrack/host/scene.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 inline constexpr double kOutputAt100kV = 0.1;          // mGy/mAs at 1 m
 inline constexpr double kSkinBeforeIsocentreMm = 150;  // mm
@@ -28,4 +28,4 @@ double imaging_dose_per_pair_mGy(const PreparedScene& scene);
 // "120 kV, 2 mAs per view: 0.19 mGy skin entrance per pair (a stated model: docs/scenes.md)".
 std::string describe_imaging_dose(const PreparedScene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

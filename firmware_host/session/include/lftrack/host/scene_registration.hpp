@@ -18,7 +18,7 @@
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/target_error.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The renderer `name` for the scene ("lightfield": the fields in `light_field_dir` (empty: the
 // scene's default folder); a missing or stale file is rebuilt, saved, and said so).
@@ -117,4 +117,4 @@ tracking::Pose pose_at_tre(const PreparedScene& scene, const tracking::Pose& gol
 tracking::Tre scene_tre(const PreparedScene& scene, const tracking::Pose& T_room_from_ct,
                         const tracking::Pose& gold_T_room_from_ct);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

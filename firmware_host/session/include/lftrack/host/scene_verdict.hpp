@@ -11,7 +11,7 @@
 #include "lftrack/loop/registration_verdict.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 // The scene's limits for registrations with `measure`: the floor is safety.min_similarity when
 // the scene names it and `measure` is the scene's own tracking.similarity (the floor is in that
@@ -37,4 +37,4 @@ std::optional<Eigen::Vector3d> unobservable_direction_room(const Scene& scene);
 // `tracking.single_view: true`; then (and with two or more detectors) OK.
 Status check_views_observable(const Scene& scene);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

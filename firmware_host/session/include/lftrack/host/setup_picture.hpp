@@ -18,7 +18,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct SetupMarks {
   Eigen::Vector3d isocentre_ct_mm = Eigen::Vector3d::Zero();
@@ -36,4 +36,4 @@ Result<tracking::RgbImage> setup_picture(const PreparedScene& scene, const Setup
 // Counts the pixels of `colour` in `picture` (tests: that a mark was drawn where it should be).
 std::int64_t count_colour(const tracking::RgbImage& picture, std::uint8_t red, std::uint8_t green, std::uint8_t blue);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

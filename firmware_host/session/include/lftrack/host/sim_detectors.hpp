@@ -16,7 +16,7 @@
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct SimDetectorsOptions {
   int margin_px = 16;  // exposed border around each ROI window (sim_frame_margin_px)
@@ -64,4 +64,4 @@ struct SceneSimDetectors {
 };
 Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& scene, tracking::ThreadPool* pool);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -28,7 +28,7 @@
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct SimFrameSourceOptions {
   // Wait for each frame however long it takes (a loop on a simulated clock, whose deadlines say
@@ -95,4 +95,4 @@ class SimFrameSource final : public drivers::FrameSource {
   std::int64_t next_index_ = 0;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -16,7 +16,7 @@
 #include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct SimSurrogateFaults {
   double freeze_from_s = -1;
@@ -44,4 +44,4 @@ class SimSurrogateSource final : public drivers::SurrogateSource {
   bool have_frozen_ = false;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

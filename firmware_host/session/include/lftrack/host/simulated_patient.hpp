@@ -14,7 +14,7 @@
 #include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct SimulatedPatient {
   // Set: attenuation (mono-energetic frames), or water and bone (a spectrum).
@@ -78,4 +78,4 @@ class SceneImager {
   std::vector<std::shared_ptr<sim::FrameSynthesizer>> synthesizers_;
 };
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session

@@ -11,7 +11,7 @@
 #include "lftrack/tracking/status.hpp"
 #include "lftrack/tracking/volume.hpp"
 
-namespace lftrack::host {
+namespace lftrack::session {
 
 struct TargetPolygon {
   std::vector<Eigen::Vector3d> points_ct_mm;  // in order, closed (the last joins the first)
@@ -53,4 +53,4 @@ struct TargetMask {
 Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons,
                                               const tracking::VolumeGeometry& grid, const std::string& name);
 
-}  // namespace lftrack::host
+}  // namespace lftrack::session
