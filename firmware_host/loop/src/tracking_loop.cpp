@@ -263,8 +263,8 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
       wait_for_writers = (m.parts.journal == nullptr || m.parts.journal->wait_taken(kWriterWait)) &&
                          (m.parts.archive == nullptr || m.parts.archive->wait_for_slot(kWriterWait));
     }
-    std::int64_t wall_start = monotonic_now_ns();
-    m.cycle_wall_start_ns = wall_start;
+    // The cycle's own work starts now; acquire may move it (CycleClock::work_started_ns).
+    m.cycle_wall_start_ns = monotonic_now_ns();
     if (aligned_at >= 0 && executed == aligned_at + m.settings.warmup_cycles &&
         m.parts.allocation_count != nullptr)
       allocations_at_warmup = m.parts.allocation_count();
@@ -273,11 +273,10 @@ Result<LoopSummary> TrackingLoop::run_cycles() {
     if (m.ended_by_source != nullptr) break;  // no pair: not a cycle
     if (aligned_at < 0 && m.summary.aligned) aligned_at = executed;
     const std::int64_t wall_end = monotonic_now_ns();
-    wall_start = m.cycle_wall_start_ns;  // the cycle's own work (CycleClock::work_started_ns)
     // A cycle that ran in ALIGN (a cold registration, which may run past its period), also one
     // that a resume or reset took there from HOLD or FAULT.
     const bool was_align = m.cycle_state.aligning;
-    if (!was_align) m.cycle_ms.add(ms_between(wall_start, wall_end));
+    if (!was_align) m.cycle_ms.add(ms_between(m.cycle_wall_start_ns, wall_end));
     ++m.summary.cycles;
     m.summary.operator_refused += record.operator_refused;
     for (std::size_t i = 0; i < m.summary.operator_refused_by_reason.size(); ++i)
