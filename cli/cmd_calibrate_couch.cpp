@@ -8,18 +8,18 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/host/calibration_files.hpp"
-#include "lftrack/host/couch_calibration_run.hpp"
-#include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/host/progress_bar.hpp"
+#include "lftrack/sim_devices/couch_calibration_run.hpp"
+#include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::cli {
 
 using session::couch_calibration_yaml;
-using session::CouchCalibrationRunOptions;
 using session::load_calibration_phantom;
 using session::ProgressBar;
 using session::read_couch_moves;
-using session::run_simulated_couch_calibration;
+using sim_devices::CouchCalibrationRunOptions;
+using sim_devices::run_simulated_couch_calibration;
 namespace {
 
 struct CouchOptions {

@@ -14,7 +14,8 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::cli {
@@ -23,10 +24,10 @@ using session::default_light_field_dir;
 using session::frames_are_simulated;
 using session::LightFieldCacheReport;
 using session::load_or_build_light_fields;
-using session::make_scene_patient;
-using session::make_sim_frame_renderer;
 using session::PreparedScene;
-using session::sim_frame_fields_dir;
+using sim_devices::make_scene_patient;
+using sim_devices::make_sim_frame_renderer;
+using sim_devices::sim_frame_fields_dir;
 namespace {
 
 struct PrecomputeOptions {

@@ -10,17 +10,17 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/host/patient_setup.hpp"
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_exposure.hpp"
-#include "lftrack/host/sim_detectors.hpp"
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/sim_detectors.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -35,7 +35,6 @@ using session::DetectorSpec;
 using session::locate_fiducial;
 using session::LocatedFiducial;
 using session::make_scene_renderer;
-using session::make_scene_sim_detectors;
 using session::nominal_delta_of;
 using session::pose_from_nominal_delta;
 using session::PreparedScene;
@@ -51,6 +50,7 @@ using session::simulated_accuracy_caveat;
 using session::SpatialRegistration;
 using session::unobservable_direction_room;
 using session::write_spatial_registration;
+using sim_devices::make_scene_sim_detectors;
 
 using loop::RegistrationVerdict;
 using loop::verdict_text;

@@ -17,27 +17,28 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
-#include "lftrack/host/sim_frame_source.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "lftrack/sim/v4l2_loopback_writer.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
+#include "lftrack/sim_devices/sim_frame_source.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "serve_common.hpp"
 
 namespace lftrack::cli {
 
-using session::SimFrameSource;
+using sim_devices::SimFrameSource;
 
 using session::load_scene;
-using session::make_scene_patient;
-using session::make_sim_frame_renderer;
 using session::prepare_scene;
 using session::PreparedScene;
 using session::Scene;
 using session::served_twin_id;
-using session::sim_frame_margin_px;
 using session::SimFrameSourceOptions;
+using sim_devices::make_scene_patient;
+using sim_devices::make_sim_frame_renderer;
+using sim_devices::sim_frame_margin_px;
 namespace {
 
 using namespace serve;

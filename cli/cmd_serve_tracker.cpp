@@ -10,6 +10,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/tracker_twin.hpp"
 #include "lftrack/watch/listen_address.hpp"
@@ -58,7 +59,7 @@ Status serve_tracker(const TrackerOptions& o) {
   auto at = parse_listen_address(o.listen);
   if (!at.ok()) return at.status().with_context("--listen");
   if (!o.device.empty())
-    if (const std::string why = sim::igtl_device_name_problem(o.device); !why.empty())
+    if (const std::string why = drivers::igtl_device_name_problem(o.device); !why.empty())
       return invalid_argument("--device \"" + o.device + "\": " + why);
   sim::TrackerTwinOptions twin;
   twin.address = at->address;

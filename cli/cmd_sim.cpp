@@ -27,6 +27,7 @@
 #include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/qa/qa_report.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::cli {
@@ -298,6 +299,9 @@ Status run(const SimOptions& o) {
   so.light_field_dir = o.lf_dir;
   so.archive = o.archive;
   so.replay_sequence = o.sequence;
+  // The simulator makes the simulated room: every device in `sim`, and in `run` a room scene's
+  // simulated detectors beside its served couch (sim.couch_link). A replay needs none.
+  if (o.sequence.empty()) so.simulator = sim_devices::room_simulator();
   if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
   if (o.hil == "can") so.hil = HilProtocol::kCan;
   so.allocation_count = &process_allocation_count;

@@ -20,6 +20,13 @@
 
 namespace lftrack::drivers {
 
+std::string igtl_device_name_problem(const std::string& name) {
+  if (name.empty() || name.size() > 20) return "an OpenIGTLink device name has 1 to 20 bytes";
+  for (const char c : name)
+    if (c < 0x21 || c > 0x7e) return "an OpenIGTLink device name is printable ASCII without spaces";
+  return {};
+}
+
 namespace {
 
 // OpenIGTLink's header, 58 bytes, big-endian: version u16 (1, or 2 for OpenIGTLink 3's extended

@@ -11,11 +11,7 @@ namespace lftrack::sim {
 using namespace lftrack::tracking;
 
 DetectorCorrection detector_correction(const DetectorModel& model) {
-  DetectorCorrection c;
-  const double full_scale = std::ldexp(1.0, std::clamp(model.bits, 8, 16)) - 1;
-  c.open_field_counts = model.open_field_fraction * full_scale;
-  c.saturation_counts = static_cast<int>(full_scale);
-  return c;
+  return tracking::nominal_detector_correction(model.bits, model.open_field_fraction);
 }
 
 namespace {

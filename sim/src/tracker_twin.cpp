@@ -15,16 +15,10 @@
 #include <string>
 #include <vector>
 
+#include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/drivers/wall_clock.hpp"
 
 namespace lftrack::sim {
-
-std::string igtl_device_name_problem(const std::string& name) {
-  if (name.empty() || name.size() > 20) return "an OpenIGTLink device name has 1 to 20 bytes";
-  for (const char c : name)
-    if (c < 0x21 || c > 0x7e) return "an OpenIGTLink device name is printable ASCII without spaces";
-  return {};
-}
 
 namespace {
 
@@ -85,7 +79,7 @@ Result<std::unique_ptr<TrackerTwin>> TrackerTwin::start(const TrackerTwinOptions
   if (!(options.rate_hz >= 1 && options.rate_hz <= 1000))
     return invalid_argument("the tracker's rate must be 1 to 1000 Hz");
   if (options.port < 0 || options.port > 65535) return invalid_argument("port must be 0 to 65535");
-  if (const std::string why = igtl_device_name_problem(options.device); !why.empty())
+  if (const std::string why = drivers::igtl_device_name_problem(options.device); !why.empty())
     return invalid_argument("device name \"" + options.device + "\": " + why);
   sockaddr_in at{};
   at.sin_family = AF_INET;

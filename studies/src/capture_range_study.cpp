@@ -8,13 +8,13 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "lftrack/studies/plot.hpp"
-#include "lftrack/studies/study_shard.hpp"
-#include "lftrack/studies/verdict_outcomes.hpp"
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
+#include "lftrack/studies/plot.hpp"
+#include "lftrack/studies/study_shard.hpp"
+#include "lftrack/studies/verdict_outcomes.hpp"
 #include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "quantile.hpp"
@@ -24,16 +24,16 @@ namespace lftrack::studies {
 using session::locate_fiducial;
 using session::make_scene_registration;
 using session::make_scene_renderer;
-using session::make_simulated_patient;
 using session::pose_at_tre;
 using session::PreparedScene;
 using session::preprocess_scene_frames;
 using session::RegistrationSpec;
 using session::scene_tre;
 using session::scene_verdict_limits;
-using session::SceneImager;
-using session::SimulatedPatient;
 using session::verdict_input_of;
+using sim_devices::make_simulated_patient;
+using sim_devices::SceneImager;
+using sim_devices::SimulatedPatient;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;

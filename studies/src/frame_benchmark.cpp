@@ -1,4 +1,5 @@
 #include "lftrack/studies/frame_benchmark.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -9,23 +10,23 @@
 #include <optional>
 
 #include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/sim_detectors.hpp"
-#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/sim_devices/sim_detectors.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/studies/drr_benchmark.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "quantile.hpp"
 
 namespace lftrack::studies {
 
-using session::make_scene_patient;
-using session::make_sim_frame_renderer;
 using session::PreparedScene;
-using session::scene_detector_model;
-using session::sim_frame_margin_px;
-using session::SimDetectors;
 using session::SimDetectorsOptions;
-using session::SimulatedPatient;
+using sim_devices::make_scene_patient;
+using sim_devices::make_sim_frame_renderer;
+using sim_devices::scene_detector_model;
+using sim_devices::sim_frame_margin_px;
+using sim_devices::SimDetectors;
+using sim_devices::SimulatedPatient;
 namespace {
 
 using Clock = std::chrono::steady_clock;

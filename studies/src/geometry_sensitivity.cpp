@@ -1,4 +1,5 @@
 #include "lftrack/studies/geometry_sensitivity.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -23,11 +24,11 @@ using session::pose_at_tre;
 using session::PreparedScene;
 using session::preprocess_scene_frames;
 using session::ProgressBar;
-using session::scene_detector_model;
 using session::scene_tre;
 using session::scene_verdict_limits;
-using session::synthesize_scene_frames;
 using session::verdict_input_of;
+using sim_devices::scene_detector_model;
+using sim_devices::synthesize_scene_frames;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;

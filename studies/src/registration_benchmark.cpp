@@ -1,4 +1,5 @@
 #include "lftrack/studies/registration_benchmark.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -18,10 +19,10 @@ using session::pose_at_tre;
 using session::PreparedScene;
 using session::preprocess_scene_frames;
 using session::ProgressBar;
-using session::scene_detector_model;
 using session::scene_tre;
 using session::SceneFrames;
-using session::synthesize_scene_frames;
+using sim_devices::scene_detector_model;
+using sim_devices::synthesize_scene_frames;
 
 using tracking::Pose;
 using tracking::PoseDelta;

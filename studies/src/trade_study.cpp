@@ -2,6 +2,7 @@
 // trade_study_report.cpp.
 
 #include "lftrack/studies/trade_study.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -20,7 +21,7 @@
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/octree_volume.hpp"
@@ -32,19 +33,19 @@ namespace lftrack::studies {
 using session::light_field_files;
 using session::load_light_fields;
 using session::make_scene_registration;
-using session::make_simulated_patient;
 using session::pose_at_tre;
 using session::PreparedScene;
 using session::preprocess_scene_frames;
 using session::RegistrationSpec;
-using session::scene_detector_model;
 using session::scene_tre;
 using session::scene_verdict_limits;
 using session::SceneFrames;
-using session::SceneImager;
-using session::SimulatedPatient;
-using session::synthesize_scene_frames;
 using session::verdict_input_of;
+using sim_devices::make_simulated_patient;
+using sim_devices::scene_detector_model;
+using sim_devices::SceneImager;
+using sim_devices::SimulatedPatient;
+using sim_devices::synthesize_scene_frames;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;

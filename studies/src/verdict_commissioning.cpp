@@ -8,19 +8,19 @@
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
-#include "lftrack/host/sim_detectors.hpp"
+#include "lftrack/sim_devices/sim_detectors.hpp"
 #include "quantile.hpp"
 
 namespace lftrack::studies {
 
 using session::make_scene_renderer;
-using session::make_scene_sim_detectors;
 using session::PreparedScene;
 using session::RegistrationJudge;
 using session::scene_detector_corrections;
 using session::scene_tre;
-using session::SceneSimDetectors;
 using session::verdict_limits;
+using sim_devices::make_scene_sim_detectors;
+using sim_devices::SceneSimDetectors;
 
 using loop::judge_registration;
 using loop::judges_view_shift;

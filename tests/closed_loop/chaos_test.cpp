@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "lftrack/chaos/chaos_soak.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::session {
@@ -46,6 +47,7 @@ TEST_F(ClosedLoop, AReadbackCarryingNanHoldsAsAnActuatorFault) {
   // cycle ended in TRACK.
   std::unique_ptr<NanReadback> wrapper;
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.hooks.wrap_actuator = [&](drivers::Actuator* inner) -> drivers::Actuator* {
     wrapper = std::make_unique<NanReadback>(inner, 31);  // the initial read-back, then one per cycle
     return wrapper.get();

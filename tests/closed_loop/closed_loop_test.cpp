@@ -24,6 +24,7 @@
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::session {
@@ -46,6 +47,7 @@ namespace {
 
 TEST_F(ClosedLoop, TracksDriftAndBreathingWithoutAllocatingInThousandCycles) {
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.allocation_count = &process_allocation_count;
   const LoopRun r = run_loop(kBreathing, 1010, options);
   const LoopSummary& s = r.summary;
@@ -129,6 +131,7 @@ TEST_F(ClosedLoop, SuddenShiftHoldsInOneCycleAndRecoversAfterResume) {
       "motion:\n  breathing: {amplitude_mm: [0, 1, 2], period_s: 4}\n"
       "  shifts: [{time_s: 3.0, translation_mm: [0, 8, 0]}]\n";
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.auto_resume_s = 1.0;  // the operator looks, then resumes
   const LoopRun r = run_loop(motion, 80, options, kRayCastFrames);
   const auto& records = r.journal.records;
@@ -245,6 +248,7 @@ TEST_F(ClosedLoop, ResumesSentWhileTrackingNeverApproveALaterHold) {
       "motion:\n  breathing: {amplitude_mm: [0, 1, 2], period_s: 4}\n"
       "  shifts: [{time_s: 3.0, translation_mm: [0, 8, 0]}]\n";
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.control_socket = dir_.path() / "control.sock";
   const auto me = dir_.path() / "operator.sock";
   std::vector<std::string> replies;  // what the socket answered, in order
@@ -400,6 +404,7 @@ TEST_F(ClosedLoop, TheViewCheckRunsAtTheAlignmentAndEveryNthTrackingCycle) {
 
 TEST_F(ClosedLoop, LostFramesSkipThenHoldThenFaultWithoutMoving) {
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.frames.drop_from = 10;  // exposures 10.. never arrive
   options.frames.drop_to = 1000;
   const LoopRun r = run_loop(kBreathing, 30, options);
@@ -443,6 +448,7 @@ class RefusingCouch final : public drivers::ForwardingActuator {
 TEST_F(ClosedLoop, ARefusedSetUpMoveIsAnAlignmentThatFailedAndTheResumeAlignsAgain) {
   std::unique_ptr<RefusingCouch> couch;
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.auto_resume_s = 1.0;
   options.hooks.wrap_actuator = [&](drivers::Actuator* inner) -> drivers::Actuator* {
     couch = std::make_unique<RefusingCouch>(inner, 1);
@@ -488,6 +494,7 @@ namespace {
 TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
   constexpr std::size_t kFrame = 8 + sizeof(JournalRecord) + 4;
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.journal = dir_.path() / "journal.lfj";
   // 20 cycles, then the disk is full, and slow to say so: the writer thread learns of it long
   // after the cycle that queued the record (on the simulated clock, many cycles later unless the
@@ -529,6 +536,7 @@ TEST_F(ClosedLoop, AJournalDiskThatFillsUpHoldsTheLoopAndKeepsWhatWasWritten) {
 // On the real clock: one overrun is counted and its period skipped; several in a row hold.
 TEST_F(ClosedLoop, OneOverrunIsCountedAndSeveralInARowHold) {
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.journal = dir_.path() / "journal.lfj";
   options.frames.stall_ms = 150;  // the period is 100 ms
   options.frames.stall_from = 20;

@@ -7,11 +7,13 @@
 
 #include <cstdio>
 
-#include "lftrack/host/couch_calibration_run.hpp"
+#include "lftrack/sim_devices/couch_calibration_run.hpp"
 #include "lftrack/studies/geometry_sensitivity.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::run_simulated_couch_calibration;
 
 using studies::run_geometry_sensitivity;
 using studies::SensitivityCase;

@@ -15,6 +15,7 @@
 #include "loop_fixture.hpp"
 
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 
 namespace lftrack::session {
 
@@ -69,6 +70,7 @@ void expect_safe_from(const std::vector<JournalRecord>& records, std::size_t fro
 TEST_F(ClosedLoop, HardwareInTheLoopTracksAsTheInProcessSimulation) {
   const LoopRun in_process = run_loop(kBreathing, 120);
   LoopSessionOptions hil;
+  hil.simulator = sim_devices::room_simulator();
   hil.hil = HilProtocol::kModbus;
   const LoopRun over_modbus = run_loop(kBreathing, 120, hil);
   // The protocol rounds targets to 1 um and 1 urad.
@@ -104,10 +106,11 @@ class HilModbusFault : public ClosedLoop, public ::testing::WithParamInterface<M
 TEST_P(HilModbusFault, HoldsTheCouchDropsTheBeamAndJournalsTheReason) {
   const ModbusFaultCase& c = GetParam();
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.hil = HilProtocol::kModbus;
   constexpr std::int64_t kFaultAtRequest = 40;  // about cycle 20: readback and command each cycle
   const LoopRun r = run_loop(kBreathing, 45, options, kLightFieldFrames, [&](LoopSession& session) {
-    sim::ModbusCouchServer* server = session.modbus_couch_server();
+    sim::ModbusCouchServer* server = sim_devices::modbus_couch_server(session);
     return std::thread([server, c] {
       const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
       while (server->requests() < kFaultAtRequest && std::chrono::steady_clock::now() < until)
@@ -167,6 +170,7 @@ using sim::RobotFault;
 TEST_F(ClosedLoop, HardwareInTheLoopOverCanTracksAsTheInProcessSimulation) {
   const LoopRun in_process = run_loop(kBreathing, 120);
   LoopSessionOptions hil;
+  hil.simulator = sim_devices::room_simulator();
   hil.hil = HilProtocol::kCan;
   const LoopRun over_can = run_loop(kBreathing, 120, hil);
   // Corrections cross the link in 1 um and 10 urad steps.
@@ -192,10 +196,11 @@ class HilCanFault : public ClosedLoop, public ::testing::WithParamInterface<CanF
 TEST_P(HilCanFault, HoldsDropsTheBeamOnTheRobotAndNothingResumesSilently) {
   const CanFaultCase& c = GetParam();
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.hil = HilProtocol::kCan;
   bool beam_before = false, beam_after = true;
   const LoopRun r = run_loop(kBreathing, 0, options, kLightFieldFrames, [&](LoopSession& session) {
-    sim::VirtualRobot* robot = session.virtual_robot();
+    sim::VirtualRobot* robot = sim_devices::virtual_robot(session);
     return std::thread([&session, robot, &c, &beam_before, &beam_after] {
       using std::chrono::steady_clock;
       const auto until = steady_clock::now() + std::chrono::seconds(60);

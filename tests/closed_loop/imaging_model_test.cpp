@@ -9,6 +9,7 @@
 
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::session {
@@ -45,6 +46,7 @@ class ImagingModel : public ClosedLoop {
   }
   LoopRun run_model(std::int64_t cycles, const SimSurrogateFaults& faults = {}) {
     LoopSessionOptions options;
+    options.simulator = sim_devices::room_simulator();
     options.surrogate_faults = faults;
     options.allocation_count = &process_allocation_count;
     return run_loop(kModelBreathingWithMarker, cycles, options);
@@ -200,6 +202,7 @@ TEST_F(ImagingModel, FollowsTheMarkerOverOpenIgtlinkAndHoldsWhenTheTrackerStops)
   SimSurrogateFaults faults;
   faults.stop_from_s = 24;  // room seconds: the twin sends nothing from then on
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.surrogate_faults = faults;
   options.allocation_count = &process_allocation_count;
   const LoopRun r = run_loop(over_igtl, 280, options);

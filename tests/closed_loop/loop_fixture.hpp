@@ -16,6 +16,7 @@
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
@@ -113,6 +114,7 @@ class ClosedLoop : public ::testing::Test {
     EXPECT_TRUE(prepared.ok()) << prepared.status().message();
     scene_ = std::make_unique<PreparedScene>(std::move(prepared).value());
     options.cycles = cycles;
+    if (options.simulator == nullptr) options.simulator = sim_devices::room_simulator();
     options.simulated_clock = !real_clock_;
     options.light_field_dir = shared_light_field_dir(*scene_);
     // A journal of its own per run (journals are never overwritten).

@@ -14,6 +14,7 @@
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
@@ -63,6 +64,7 @@ TEST_P(RealCtLoop, AlignsThenTracksEveryCycleWithTheBeamOnTheTarget) {
   ASSERT_TRUE(prepared.ok()) << prepared.status().message();
   test::TempDir dir;
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.cycles = kCycles;
   options.simulated_clock = true;
   options.light_field_dir = test::test_cache_dir() / "real-ct-light-fields";

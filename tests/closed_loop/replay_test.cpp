@@ -11,6 +11,7 @@
 
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::session {
@@ -30,6 +31,7 @@ class ArchiveAndReplay : public ClosedLoop {
   // A 40-cycle run under breathing, archived.
   LoopRun record() {
     LoopSessionOptions options;
+    options.simulator = sim_devices::room_simulator();
     options.archive = dir_.path() / "sequence";
     options.journal = dir_.path() / "recorded.lfj";
     options.allocation_count = &process_allocation_count;
@@ -37,6 +39,7 @@ class ArchiveAndReplay : public ClosedLoop {
   }
   LoopRun replay() {
     LoopSessionOptions options;
+    options.simulator = sim_devices::room_simulator();
     options.replay_sequence = dir_.path() / "sequence";
     options.journal = dir_.path() / "replayed.lfj";
     options.allocation_count = &process_allocation_count;
@@ -110,6 +113,7 @@ TEST_F(ArchiveAndReplay, AReplaySendsNothingAndPermitsNoBeam) {
 TEST_F(ArchiveAndReplay, AReplayWithoutRecordedReadbacksPermitsNoBeam) {
   edit_scene_ = [](Scene& s) { s.actuator.type = "none"; };
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.archive = dir_.path() / "sequence";
   options.journal = dir_.path() / "recorded.lfj";
   // No set-up error: the patient stays within the beam's tolerance with nothing to move them.
@@ -203,6 +207,7 @@ TEST_F(ArchiveAndReplay, SaturatedBlankUniformAndDeadPixelFramesAreSkippedByTheI
 
 TEST_F(ArchiveAndReplay, AMissingOrBrokenSequenceIsRefusedAtStart) {
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.replay_sequence = dir_.path() / "nothing-here";
   auto prepared = prepare_scene(small_scene(kBreathing, kLightFieldFrames), "", pool_);
   ASSERT_TRUE(prepared.ok());

@@ -6,6 +6,7 @@
 
 #include <string>
 
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "loop_fixture.hpp"
 
 namespace lftrack::session {
@@ -64,6 +65,7 @@ class RoomSession : public ClosedLoop {
 TEST_F(RoomSession, AutoResumeOnARealCouchIsRefused) {
   use_modbus_couch();
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.devices = SessionDevices::kScene;
   options.auto_resume_s = 1.0;
   expect_refused_as_unattended(create(options));
@@ -71,7 +73,7 @@ TEST_F(RoomSession, AutoResumeOnARealCouchIsRefused) {
 
 TEST_F(RoomSession, AutoResumeOnRealDetectorsIsRefused) {
   use_gige_detectors();
-  LoopSessionOptions options;
+  LoopSessionOptions options;  // the room's own devices: no simulator
   options.devices = SessionDevices::kScene;
   options.auto_resume_s = 0.0;
   expect_refused_as_unattended(create(options));
@@ -81,6 +83,7 @@ TEST_F(RoomSession, AScriptedOperatorHookOnARealCouchIsRefused) {
   use_modbus_couch();
   ScriptedOperator unattended(10);
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.devices = SessionDevices::kScene;
   options.hooks.operator_input = &unattended;
   expect_refused_as_unattended(create(options));
@@ -91,6 +94,7 @@ TEST_F(RoomSession, AScriptedOperatorHookOnARealCouchIsRefused) {
 TEST_F(RoomSession, AnUnattendedOperatorStaysAllowedWhereNothingIsReal) {
   use_modbus_couch();
   LoopSessionOptions simulated;
+  simulated.simulator = sim_devices::room_simulator();
   simulated.auto_resume_s = 1.0;
   {
     auto twins = create(simulated);
@@ -100,11 +104,49 @@ TEST_F(RoomSession, AnUnattendedOperatorStaysAllowedWhereNothingIsReal) {
   edit_scene_ = {};
   ScriptedOperator unattended(10);
   LoopSessionOptions scene;
+  scene.simulator = sim_devices::room_simulator();
   scene.devices = SessionDevices::kScene;
   scene.auto_resume_s = 1.0;
   scene.hooks.operator_input = &unattended;
   auto virtual_couch = create(scene);
   EXPECT_TRUE(virtual_couch.ok()) << virtual_couch.status().message();
+}
+
+// The session holds no simulator code (issue 55): the simulated room is made by the
+// RoomSimulator the options name. Without one, whatever needs that room is refused in create(),
+// naming what is missing, before a light field is built or a record made.
+TEST_F(RoomSession, WithoutASimulatorASimulationIsRefused) {
+  LoopSessionOptions options;  // devices: kSimulated, and no simulator
+  auto session = create(options);
+  ASSERT_FALSE(session.ok()) << "a simulation without the simulator";
+  const std::string& m = session.status().message();
+  EXPECT_NE(m.find("simulator"), std::string::npos) << m;
+  EXPECT_FALSE(std::filesystem::exists(journal())) << "refused before any record was made";
+}
+
+TEST_F(RoomSession, WithoutASimulatorTheScenesSimulatedDetectorsAreRefused) {
+  use_modbus_couch();  // simulated detectors beside a served couch (sim.couch_link)
+  LoopSessionOptions options;
+  options.devices = SessionDevices::kScene;
+  auto session = create(options);
+  ASSERT_FALSE(session.ok()) << "lftrack run on simulated detectors without the simulator";
+  const std::string& m = session.status().message();
+  EXPECT_NE(m.find("detectors are simulated"), std::string::npos) << m;
+  EXPECT_NE(m.find("lftrack sim"), std::string::npos) << "says what to run instead: " << m;
+  EXPECT_FALSE(std::filesystem::exists(journal())) << "refused before any record was made";
+}
+
+// With the simulator, the session's simulated room is the simulator's (sim_devices' accessors
+// reach it); a replay has none.
+TEST_F(RoomSession, TheSimulatedRoomIsTheSimulators) {
+  LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
+  auto session = create(options);
+  ASSERT_TRUE(session.ok()) << session.status().message();
+  EXPECT_NE((*session)->simulation(), nullptr);
+  EXPECT_NE(sim_devices::simulated_room(**session), nullptr);
+  EXPECT_EQ(sim_devices::modbus_couch_server(**session), nullptr) << "no hardware in the loop asked for";
+  EXPECT_EQ(sim_devices::virtual_robot(**session), nullptr);
 }
 
 }  // namespace

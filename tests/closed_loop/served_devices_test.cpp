@@ -30,6 +30,7 @@
 #include "gvcp_probe.hpp"
 #include "lftrack/records/loop_json.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "loop_fixture.hpp"
 #include "operator_client.hpp"
 
@@ -169,6 +170,7 @@ class EveryActuatorKind : public ClosedLoop, public ::testing::WithParamInterfac
     const std::string kind = GetParam();
     real_clock_ = true;
     LoopSessionOptions options;
+    options.simulator = sim_devices::room_simulator();
     options.devices = SessionDevices::kScene;
     ServedDevice device;
     if (kind != "virtual") {
@@ -247,6 +249,7 @@ class ServedDeviceFaults : public ClosedLoop {
     device_ = serve(kind, sockets_.path());
     edit_scene_ = [&](Scene& s) { use_served(s, kind, sockets_.path(), device_.port); };
     LoopSessionOptions options;
+    options.simulator = sim_devices::room_simulator();
     options.devices = SessionDevices::kScene;
     options.control_socket = sockets_.path() / "control.sock";
     return run_loop(kBreathing, 0, options, kLightFieldFrames, [&, options](LoopSession& session) {

@@ -16,6 +16,7 @@
 #include <httplib.h>
 
 #include "igtl_test_client.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 
 namespace lftrack::session {
 
@@ -70,6 +71,7 @@ struct IgtlReader {
 
 TEST_F(ClosedLoop, APageWithTenClientsAndOpenIgtlinkChangeNothingInTheCycle) {
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.allocation_count = &process_allocation_count;
   MonitorOptions monitor;
   monitor.listen = {"127.0.0.1", 0};

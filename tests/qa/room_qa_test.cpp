@@ -22,6 +22,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 #include "lftrack/sim/room_link.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "qa_phantom_support.hpp"
 #include "room_runs.hpp"
@@ -147,6 +148,7 @@ TEST_F(RoomQa, NoTwoProgramsDriveTheCouchAtOnce) {
   EXPECT_NE(qa.status().message().find(holder), std::string::npos) << qa.status().message();
 
   session::LoopSessionOptions treatment;
+  treatment.simulator = sim_devices::room_simulator();
   treatment.devices = session::SessionDevices::kScene;
   treatment.light_field_dir = fields;
   treatment.cycles = 5;

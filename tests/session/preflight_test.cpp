@@ -11,12 +11,15 @@
 #include "actuator_lock_holder.hpp"
 #include "lftrack/host/preflight.hpp"
 #include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/tracker_twin.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::make_scene_patient;
 
 using loop::ImagingSpec;
 using loop::RealtimeReport;
@@ -46,6 +49,13 @@ Result<PreparedScene> prepared(const std::string& frames, const std::string& cal
   return prepare_scene(*scene, "", &pool);
 }
 
+// `lftrack run`'s options: the simulator given, for a room scene's simulated detectors.
+LoopSessionOptions simulating() {
+  LoopSessionOptions o;
+  o.simulator = sim_devices::room_simulator();
+  return o;
+}
+
 const PreflightItem* item(const PreflightReport& r, const std::string& what) {
   for (const PreflightItem& i : r.items)
     if (i.what == what) return &i;
@@ -57,7 +67,7 @@ const PreflightItem* item(const PreflightReport& r, const std::string& what) {
 TEST(Preflight, TheSimulatorsCalibrationOnADeviceDetectorFails) {
   auto p = prepared("{type: v4l2, device: /dev/v4l/by-path/lftrack-test-absent-#}", "    calibration: simulator\n");
   ASSERT_TRUE(p.ok()) << p.status().message();
-  const PreflightReport r = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+  const PreflightReport r = run_preflight(*p, simulating(), RealtimeReport{}, true);
   for (const char* what : {"detector calibration of A", "detector calibration of B"}) {
     const PreflightItem* i = item(r, what);
     ASSERT_NE(i, nullptr) << r.checklist();
@@ -72,10 +82,33 @@ TEST(Preflight, TheSimulatorsCalibrationOnADeviceDetectorFails) {
 TEST(Preflight, TheSimulatorsCalibrationOnSimulatedFramesWarns) {
   auto p = prepared("sim", "    calibration: simulator\n");
   ASSERT_TRUE(p.ok()) << p.status().message();
-  const PreflightReport r = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+  const PreflightReport r = run_preflight(*p, simulating(), RealtimeReport{}, true);
   const PreflightItem* i = item(r, "detector calibration of A");
   ASSERT_NE(i, nullptr) << r.checklist();
   EXPECT_EQ(i->result, CheckResult::kWarn) << i->detail;
+}
+
+// Without the simulator (a program that gives none), simulated detectors fail the checks, saying
+// so, and the simulator's own checks (its frames' light fields) are not run (issue 55).
+TEST(Preflight, SimulatedDetectorsWithoutTheSimulatorFail) {
+  auto p = prepared("sim", "");
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  p->scene.sim.renderer = "lightfield";
+  const PreflightReport r = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+  const PreflightItem* i = item(r, "simulated detectors");
+  ASSERT_NE(i, nullptr) << r.checklist();
+  EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
+  EXPECT_NE(i->detail.find("no"), std::string::npos) << i->detail;
+  EXPECT_FALSE(r.passed());
+  for (const PreflightItem& each : r.items)
+    EXPECT_EQ(each.what.find("simulated frames"), std::string::npos)
+        << "the simulator's check ran: " << each.what;
+  const PreflightReport with = run_preflight(*p, simulating(), RealtimeReport{}, true);
+  EXPECT_EQ(item(with, "simulated detectors"), nullptr) << with.checklist();
+  bool frame_fields_checked = false;
+  for (const PreflightItem& each : with.items)
+    frame_fields_checked |= each.what.find("simulated frames") != std::string::npos;
+  EXPECT_TRUE(frame_fields_checked) << "the simulator checks its frames' light fields: " << with.checklist();
 }
 
 // Simulated frames of the clinical preset from light fields (issue 51): preflight checks the fields
@@ -93,6 +126,7 @@ TEST(Preflight, TheWaterAndBoneFieldsOfRealisticFramesAreCheckedNotBuilt) {
   ASSERT_TRUE(p.ok()) << p.status().message();
   test::TempDir dir;
   LoopSessionOptions options;
+  options.simulator = sim_devices::room_simulator();
   options.light_field_dir = dir.path();
   const auto sim_frames = dir.path() / "sim-frames";
   const PreflightReport before = run_preflight(*p, options, RealtimeReport{}, true);
@@ -137,7 +171,7 @@ TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
   {
     test::ActuatorLockHolder treatment(p->scene);
     ASSERT_TRUE(treatment.held());
-    const PreflightReport r = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+    const PreflightReport r = run_preflight(*p, simulating(), RealtimeReport{}, true);
     const PreflightItem* i = item(r, what);
     ASSERT_NE(i, nullptr) << r.checklist();
     EXPECT_EQ(i->result, CheckResult::kFail) << i->detail;
@@ -145,7 +179,7 @@ TEST(Preflight, TheActuatorCheckNeverOpensACouchAnotherProgramDrives) {
     EXPECT_NE(i->detail.find("pid " + std::to_string(treatment.pid())), std::string::npos) << i->detail;
     EXPECT_NE(i->detail.find("not opened"), std::string::npos) << i->detail;
   }
-  const PreflightReport free = run_preflight(*p, LoopSessionOptions{}, RealtimeReport{}, true);
+  const PreflightReport free = run_preflight(*p, simulating(), RealtimeReport{}, true);
   const PreflightItem* i = item(free, what);
   ASSERT_NE(i, nullptr) << free.checklist();
   EXPECT_EQ(i->detail.find("driven by another lftrack"), std::string::npos)
@@ -184,6 +218,7 @@ TEST(Preflight, TheOpticalTrackerIsConnectedAndStreamingItsMarker) {
   p->scene.surrogate.igtl_device = "Marker";
   p->scene.loop.imaging.surrogate.stale_ms = 5000;  // a loaded host may hold a reading a while
   LoopSessionOptions o;
+  o.simulator = sim_devices::room_simulator();
   o.devices = SessionDevices::kScene;
   const PreflightItem* i = nullptr;
   {

@@ -6,12 +6,19 @@
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::scene_detector_model;
+using sim_devices::synthesize_scene_frames;
+
+using sim_devices::make_simulated_patient;
+using sim_devices::SceneImager;
 namespace {
 
 TEST(PreparedScene, BuiltinPhantomPutsTheTargetOnTheIsocentre) {

@@ -15,11 +15,15 @@
 #include "lftrack/host/commissioning_file.hpp"
 #include "lftrack/host/dicom_registration.hpp"
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "rt_writer.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::scene_detector_model;
+using sim_devices::synthesize_scene_frames;
 namespace {
 
 namespace fs = std::filesystem;

@@ -8,9 +8,12 @@
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_imaging_dose.hpp"
-#include "lftrack/host/sim_surrogate_source.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
+#include "lftrack/sim_devices/sim_surrogate_source.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::SimSurrogateSource;
 
 using loop::CorrelationModelSpec;
 using loop::ImagingSpec;
@@ -146,6 +149,7 @@ TEST(SceneImaging, ReadsTheTrackersAddress) {
 TEST(SceneImaging, TheSessionRefusesASurrogateItCannotFollowBeforeLoading) {
   const std::string model = "tracking:\n  imaging: {mode: model}\n";
   LoopSessionOptions sim;
+  sim.simulator = sim_devices::room_simulator();
   auto ok = parse(model + "surrogate: {source: sim}\n");
   ASSERT_TRUE(ok.ok()) << ok.status().message();
   EXPECT_TRUE(check_session_surrogate(*ok, sim).ok());
@@ -155,6 +159,7 @@ TEST(SceneImaging, TheSessionRefusesASurrogateItCannotFollowBeforeLoading) {
   EXPECT_FALSE(slow_watch.ok());
   EXPECT_NE(slow_watch.message().find("safety.max_frame_age_ms"), std::string::npos) << slow_watch.message();
   LoopSessionOptions room;
+  room.simulator = sim_devices::room_simulator();
   room.devices = SessionDevices::kScene;
   const Status sim_in_room = check_session_surrogate(*ok, room);
   EXPECT_FALSE(sim_in_room.ok());
@@ -164,6 +169,7 @@ TEST(SceneImaging, TheSessionRefusesASurrogateItCannotFollowBeforeLoading) {
   EXPECT_TRUE(check_session_surrogate(*igtl, sim).ok()) << "lftrack sim on the real clock serves the twin";
   EXPECT_TRUE(check_session_surrogate(*igtl, room).ok());
   LoopSessionOptions fast;
+  fast.simulator = sim_devices::room_simulator();
   fast.simulated_clock = true;
   const Status igtl_fast = check_session_surrogate(*igtl, fast);
   EXPECT_FALSE(igtl_fast.ok());

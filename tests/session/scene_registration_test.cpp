@@ -5,9 +5,13 @@
 
 #include <gtest/gtest.h>
 
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::scene_detector_model;
+using sim_devices::synthesize_scene_frames;
 namespace {
 
 using tracking::Pose;

@@ -13,10 +13,14 @@
 #include "lftrack/host/registration_judge.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {
+
+using sim_devices::scene_detector_model;
+using sim_devices::synthesize_scene_frames;
 
 using loop::judge_registration;
 using loop::RegistrationVerdict;

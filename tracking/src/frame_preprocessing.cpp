@@ -7,6 +7,14 @@
 
 namespace lftrack::tracking {
 
+DetectorCorrection nominal_detector_correction(int bits, double open_field_fraction) {
+  DetectorCorrection c;
+  const double full_scale = std::ldexp(1.0, std::clamp(bits, 8, 16)) - 1;
+  c.open_field_counts = open_field_fraction * full_scale;
+  c.saturation_counts = static_cast<int>(full_scale);
+  return c;
+}
+
 Status preprocess_frame(const ImageView<const std::uint16_t>& raw, const DetectorCorrection& correction,
                         const PixelWindow& window, ImageView<float> line_integral,
                         ImageView<unsigned char> valid) {

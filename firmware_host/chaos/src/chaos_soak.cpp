@@ -15,6 +15,7 @@
 #include "chaos_devices.hpp"
 #include "lftrack/host/loop_session.hpp"
 #include "lftrack/records/journal_reader.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 
 namespace lftrack::chaos {
 
@@ -271,6 +272,7 @@ Result<ChaosReport> run_chaos_soak(const session::PreparedScene& scene, const Ch
       shifts.push_back(s);
 
     LoopSessionOptions so;
+    so.simulator = sim_devices::room_simulator();
     so.cycles = cycles;
     so.simulated_clock = true;
     so.light_field_dir = options.light_field_dir;
@@ -319,11 +321,11 @@ Result<ChaosReport> run_chaos_soak(const session::PreparedScene& scene, const Ch
     auto session = LoopSession::create(patient, so, pool);
     if (!session.ok()) return session.status().with_context("chaos segment " + std::to_string(segment));
     if (modbus) {
-      injector->set_modbus_server((*session)->modbus_couch_server());
+      injector->set_modbus_server(sim_devices::modbus_couch_server(**session));
       ++report.modbus_segments;
     }
     if (can) {
-      injector->set_can_robot((*session)->virtual_robot());
+      injector->set_can_robot(sim_devices::virtual_robot(**session));
       ++report.can_segments;
     }
     observer->set_session(session->get());

@@ -18,6 +18,7 @@
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/qa/qa_time.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "room_runs.hpp"
 
 namespace lftrack::qa {
@@ -79,6 +80,7 @@ session::LoopSessionOptions session_options(const session::PreparedScene& scene,
   so.cycles = cycles;
   so.simulated_clock = simulated_clock && !room;
   so.devices = room ? session::SessionDevices::kScene : session::SessionDevices::kSimulated;
+  so.simulator = sim_devices::room_simulator();  // a room scene's detectors may be simulated too
   so.light_field_dir = o.light_field_dir;
   so.hooks = o.hooks;
   return so;

@@ -12,6 +12,7 @@
 #include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 #include "lftrack/sim/panel_frames.hpp"
+#include "lftrack/sim/synthetic_frames.hpp"
 
 namespace lftrack::qa {
 namespace {

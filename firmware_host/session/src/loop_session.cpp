@@ -114,6 +114,16 @@ Eigen::Isometry3d couch_mounting(const CouchMountingSpec& m, const PreparedScene
   return x;
 }
 
+namespace {
+
+// The Modbus or CAN driver: the scene's (lftrack run), or the room's behind its protocol (HIL).
+const drivers::Actuator* device_driver(const LoopSession::Parts& parts) {
+  if (parts.room != nullptr && parts.room->protocol_driver() != nullptr) return parts.room->protocol_driver();
+  return parts.actuator.get();
+}
+
+}  // namespace
+
 LoopSession::LoopSession(std::unique_ptr<Parts> parts) : parts_(std::move(parts)) {}
 LoopSession::~LoopSession() = default;
 
@@ -125,6 +135,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   LFTRACK_RETURN_IF_ERROR(check_attended(p, o));
   // One view cannot see depth along its central ray: tracked only when the scene says so.
   LFTRACK_RETURN_IF_ERROR(check_views_observable(p.scene));
+  LFTRACK_RETURN_IF_ERROR(check_simulator(p, o));  // before minutes of light-field building
   if (const auto blind = unobservable_direction_room(p.scene))
     spdlog::warn("one view: a registration cannot see motion along ({:.3f}, {:.3f}, {:.3f}) in the room; "
                  "corrections along it are not measured",
@@ -219,8 +230,7 @@ Result<std::unique_ptr<LoopSession>> LoopSession::create(const PreparedScene& p,
   }
   lp.journal = parts->journal.get();
   lp.operator_input = parts->operators.empty() ? nullptr : &parts->operators;
-  if (parts->room) parts->truth = std::make_unique<RoomTruth>(parts->room.get());
-  lp.truth = parts->truth.get();  // null when replaying
+  lp.truth = parts->room ? parts->room->truth() : nullptr;  // null when replaying
   lp.allocation_count = o.allocation_count;
   lp.observer = o.hooks.observer;
   lp.feed = parts->feed.get();
@@ -289,7 +299,10 @@ Result<LoopSummary> LoopSession::run() {
 void LoopSession::request_stop() {
   parts_->loop->request_stop();
 }
-const sim::SimulatedRoom* LoopSession::room() const {
+RoomSimulation* LoopSession::simulation() {
+  return parts_->room.get();
+}
+const RoomSimulation* LoopSession::simulation() const {
   return parts_->room.get();
 }
 const drivers::ReplayFrameSource* LoopSession::replay() const {
@@ -299,11 +312,8 @@ const FrameArchive* LoopSession::archive() const {
   return parts_->archive.get();
 }
 const drivers::ModbusCouch* LoopSession::modbus_couch() const {
-  const drivers::Actuator* a = parts_->device_actuator ? parts_->device_actuator.get() : parts_->actuator.get();
+  const drivers::Actuator* a = device_driver(*parts_);
   return dynamic_cast<const drivers::ModbusCouch*>(a);
-}
-sim::ModbusCouchServer* LoopSession::modbus_couch_server() {
-  return parts_->couch_server.get();
 }
 std::filesystem::path LoopSession::journal_path() const {
   return parts_->journal ? parts_->journal->path() : std::filesystem::path();
@@ -312,11 +322,8 @@ bool LoopSession::journal_failed() const {
   return parts_->journal != nullptr && parts_->journal->failed();
 }
 const drivers::CanRobot* LoopSession::can_robot() const {
-  const drivers::Actuator* a = parts_->device_actuator ? parts_->device_actuator.get() : parts_->actuator.get();
+  const drivers::Actuator* a = device_driver(*parts_);
   return dynamic_cast<const drivers::CanRobot*>(a);
-}
-sim::VirtualRobot* LoopSession::virtual_robot() {
-  return parts_->robot.get();
 }
 const MonitorServer* LoopSession::monitor() const {
   return parts_->monitor.get();

@@ -10,9 +10,7 @@
 #include "lftrack/host/detector_calibration_file.hpp"
 #include "lftrack/host/scene_devices.hpp"
 #include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/loop/cycle_schedule.hpp"
-#include "lftrack/sim/room_link.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {
@@ -47,36 +45,6 @@ void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, Pre
         fields.ok() ? "fresh for this CT and geometry"
                     : fields.status().message() + "; build them first: lftrack precompute --scene " + p.scene.source +
                           " -o " + dir.string());
-  }
-  const bool simulated_frames = o.replay_sequence.empty() && frames_are_simulated(p.scene);
-  if (simulated_frames && p.scene.sim.renderer == "lightfield" && !p.scene.sim.physics.ideal()) {
-    // Fields of the day's volumes (water and bone, or attenuation): those volumes are made again
-    // from the CT (the anatomy draw; seconds), and their fields loaded, not built.
-    const std::filesystem::path sim_dir = sim_frame_fields_dir(p, o.light_field_dir);
-    auto patient = simulated_patient_volumes(p, p.scene.sim.physics, scene_anatomy_seed(p), nullptr);
-    if (!patient.ok()) {
-      add(r, "light fields (simulated frames) in " + sim_dir.string(), CheckResult::kFail,
-          patient.status().message());
-      return;
-    }
-    for (const auto& [name, volume] : {std::pair{"attenuation", patient->attenuation},
-                                       std::pair{"water", patient->water}, std::pair{"bone", patient->bone}}) {
-      if (!volume) continue;
-      auto fields = load_light_fields(p, sim_dir / name, volume.get(), &p.scene.sim.light_field);
-      add(r, "light fields (simulated frames, " + std::string(name) + ") in " + (sim_dir / name).string(),
-          fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-          fields.ok() ? "fresh"
-                      : fields.status().message() + "; build them first: lftrack precompute --scene " +
-                            p.scene.source + " -o " + dir.string());
-    }
-  } else if (simulated_frames && p.scene.sim.renderer == "lightfield") {
-    const std::filesystem::path sim_dir = sim_frame_fields_dir(p, o.light_field_dir);
-    auto fields = load_light_fields(p, sim_dir, p.world_mu.get(), &p.scene.sim.light_field);
-    add(r, "light fields (simulated frames) in " + sim_dir.string(),
-        fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-        fields.ok() ? "fresh"
-                    : fields.status().message() + "; build them first: lftrack precompute --scene " +
-                          p.scene.source + " -o " + dir.string());
   }
 }
 
@@ -232,22 +200,16 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
         "none named (actuator.calibration): corrections assume the couch's axes are the room's (lftrack calibrate couch)");
 }
 
-// Simulated detectors with a served couch: the patient moves only through the couch's room link.
-void check_couch_link(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
-  const bool simulated_frames = o.replay_sequence.empty() && frames_are_simulated(p.scene);
-  const bool device_actuator = actuator_is_device(p.scene);
-  if (!simulated_frames || !device_actuator) return;
-  const std::string what = "the served couch's room link (sim.couch_link)";
-  if (p.scene.sim.couch_link.empty())
-    return add(r, what, CheckResult::kFail,
-               "none named: simulated detectors would never see the patient move with the " + p.scene.actuator.type +
-                   " actuator (lftrack serve couch|robot --room FILE)");
-  auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
-  if (!link.ok()) return add(r, what, CheckResult::kFail, link.status().message());
-  sim::RoomLinkSample sample;
-  if (!(*link)->read(&sample))
-    return add(r, what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
-  add(r, what, CheckResult::kPass, p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
+// A simulated room's own checks (its frames' light fields, a served couch's room link), by the
+// simulator that would make it (room_simulator.hpp).
+void check_simulated_room(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  if (!o.replay_sequence.empty() || !frames_are_simulated(p.scene)) return;
+  if (o.simulator == nullptr)
+    return add(
+        r, "simulated detectors", CheckResult::kFail,
+        "the scene's detectors are the simulator's, and this program has none (lftrack sim and lftrack "
+        "run give it)");
+  o.simulator->preflight(p, o, r);
 }
 
 // The optical tracker (surrogate.source igtl, a run that images on demand): connected, and
@@ -330,11 +292,11 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
   add(&r, "view geometry", CheckResult::kPass,
       "from the scene file " + p.scene.source + " (lftrack calibrate views writes it there)");
   check_light_fields(p, o, &r);
+  check_simulated_room(p, o, &r);  // the simulated frames' light fields, the served couch's room link
   std::vector<bool> twins;
   check_detectors(p, o, &r, &twins);
   check_detector_calibrations(p, o, twins, &r);
   check_actuator(p, o, &r);
-  check_couch_link(p, o, &r);
   check_surrogate(p, o, &r);
   return r;
 }

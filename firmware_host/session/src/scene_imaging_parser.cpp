@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <sstream>
 
-#include "lftrack/sim/tracker_twin.hpp"
+#include "lftrack/drivers/igtl_surrogate.hpp"
 #include "scene_yaml.hpp"
 
 namespace lftrack::session {
@@ -158,7 +158,7 @@ Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogat
     }
     if (g["device"]) {
       LFTRACK_RETURN_IF_ERROR(text(g["device"], "surrogate.igtl.device", &surrogate->igtl_device));
-      if (const std::string why = sim::igtl_device_name_problem(surrogate->igtl_device); !why.empty())
+      if (const std::string why = drivers::igtl_device_name_problem(surrogate->igtl_device); !why.empty())
         return error(g["device"], "surrogate.igtl.device \"" + surrogate->igtl_device + "\": " + why);
     }
     if (g["axis"])

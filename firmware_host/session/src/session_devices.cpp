@@ -1,92 +1,30 @@
 // The devices of a loop session (session_parts.hpp): its frame source and what moves the patient,
-// from the scene's devices through the drivers' factory, or the simulator's (the simulated room's
-// detectors and couch, in process or behind its protocol for hardware in the loop).
+// from the scene's devices through the drivers' factory, or the simulated room's, made by the
+// session's simulator (room_simulator.hpp: its detectors and couch, in process or behind its
+// protocol for hardware in the loop).
 
 #include <spdlog/spdlog.h>
 
 #include "lftrack/drivers/device_factory.hpp"
-#include "lftrack/drivers/forwarding_actuator.hpp"
 #include "lftrack/host/actuator_lock.hpp"
 #include "lftrack/host/scene_devices.hpp"
-#include "lftrack/sim/room_clocked_actuator.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {
-namespace {
-
-// The simulated room of a scene: its patient, set-up error and couch; with `couch_link`, the
-// couch is another process's.
-Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, const LoopSessionOptions& o) {
-  sim::SimulatedRoomSpec room;
-  room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
-  room.origin_room_mm = p.registration_origin_room_mm();
-  room.setup_error = p.scene.motion.setup_error;
-  room.motion = p.scene.motion.motion;
-  room.couch = p.scene.actuator.dynamics;
-  if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
-  room.residual_box_mm = p.scene.registration.tre_box_mm;
-  if (o.devices == SessionDevices::kScene && actuator_is_device(p.scene)) {
-    // Simulated detectors and a real protocol's couch: the patient must move with that couch.
-    if (p.scene.sim.couch_link.empty())
-      return failed_precondition(
-          "simulated detectors with a " + p.scene.actuator.type +
-          " actuator: the simulated patient would never move with it; name the served couch's room link as "
-          "sim.couch_link (lftrack serve couch|robot --room FILE), or use real detectors");
-    auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
-    if (!link.ok()) return link.status().with_context("sim.couch_link");
-    room.couch_link = std::move(link).value();
-  }
-  return std::make_unique<sim::SimulatedRoom>(room);
+bool needs_simulated_room(const PreparedScene& p, const LoopSessionOptions& o) {
+  return o.replay_sequence.empty() &&
+         (o.devices == SessionDevices::kSimulated || frames_are_simulated(p.scene));
 }
 
-// The simulator's side of a hardware-in-the-loop protocol (the couch's Modbus server, or the
-// robot on a CAN link) and the driver the factory makes for it, clocked by the room.
-Result<drivers::ActuatorSpec> hil_actuator_spec(const PreparedScene& p, const LoopSessionOptions& o,
-                                                LoopSession::Parts* parts) {
-  drivers::ActuatorSpec driver_spec;
-  std::string endpoint;
-  if (o.hil == HilProtocol::kModbus) {
-    auto server = sim::ModbusCouchServer::start(&parts->room->couch_device());
-    if (!server.ok()) return server.status();
-    parts->couch_server = std::move(server).value();
-    drivers::ModbusActuatorSpec couch;
-    couch.options.port = parts->couch_server->port();
-    // On the real clock a reply must come within the cycle; on the simulated clock the cycle has
-    // no wall-clock length, and the budget only has to outlast a loaded host's scheduling (a
-    // server thread preempted past 20 ms made a simulated run hold).
-    couch.options.response_timeout_s =
-        o.simulated_clock ? 0.25 : std::min(0.02, 0.5e-3 * p.scene.loop.period_ms);
-    driver_spec = couch;
-  } else {
-    auto link = sim::can_socket_pair();
-    if (!link.ok()) return link.status();
-    auto robot = sim::VirtualRobot::start(&parts->room->couch_device(), (*link)[1]);
-    if (!robot.ok()) return robot.status();
-    parts->robot = std::move(robot).value();
-    drivers::CanRobotOptions can_options;
-    // As the Modbus reply's budget above: on the simulated clock the heartbeat's wall-clock
-    // timeout only has to outlast a loaded host's scheduling of the robot's thread (0.3 s, six
-    // heartbeats, is the real clock's).
-    if (o.simulated_clock) can_options.heartbeat_timeout_s = 1.0;
-    driver_spec = drivers::CanActuatorSpec{can_options, (*link)[0]};
-    endpoint = "CAN node 1 over a socket pair";
-  }
-  auto driver = drivers::make_actuator(std::move(driver_spec));
-  if (!driver.ok()) return driver.status();
-  parts->device_actuator = std::move(driver).value();
-  if (const auto* modbus = dynamic_cast<const drivers::ModbusCouch*>(parts->device_actuator.get()))
-    endpoint = modbus->endpoint();
-  spdlog::info("hardware in the loop: the couch is {}", endpoint);
-  drivers::VirtualActuatorSpec clocked;
-  clocked.make = [parts,
-                  simulated_clock = o.simulated_clock]() -> Result<std::unique_ptr<drivers::Actuator>> {
-    return std::unique_ptr<drivers::Actuator>(
-        new sim::RoomClockedActuator(parts->room.get(), parts->device_actuator.get(), simulated_clock));
-  };
-  return drivers::ActuatorSpec(std::move(clocked));
+Status check_simulator(const PreparedScene& p, const LoopSessionOptions& o) {
+  if (o.simulator != nullptr || !needs_simulated_room(p, o)) return {};
+  return failed_precondition(o.devices == SessionDevices::kSimulated
+                                 ? std::string("a simulation needs the simulator, and this program has none")
+                                 : p.scene.where("detectors") +
+                                       ": the scene's detectors are simulated, and this program has no "
+                                       "simulator (lftrack sim and lftrack "
+                                       "run give it)");
 }
-
-}  // namespace
 
 Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const LoopSessionOptions& o,
                                                    tracking::ThreadPool* pool, LoopSession::Parts* parts) {
@@ -101,23 +39,14 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
   }
   if (o.devices == SessionDevices::kScene && !frames_are_simulated(p.scene))
     return device_frame_source_spec(p.scene);
+  LFTRACK_RETURN_IF_ERROR(check_simulator(p, o));  // LoopSession::create checked it first
   drivers::SimulatedSourceSpec simulated;
   simulated.make = [&p, &o, pool, parts]() -> Result<std::unique_ptr<drivers::FrameSource>> {
-    auto patient = make_scene_patient(p, o.light_field_dir, pool);  // realistic physics (null: ideal frames)
-    if (!patient.ok()) return patient.status();
-    if (!*patient) {
-      auto frame_renderer = make_sim_frame_renderer(p, o.light_field_dir, pool);
-      if (!frame_renderer.ok()) return frame_renderer.status();
-      parts->frame_renderer = *frame_renderer;
-    }
-    auto room = make_room(p, o);
+    auto room = o.simulator->make_room(p, o, pool);
     if (!room.ok()) return room.status();
+    if (*room == nullptr) return internal_error("the simulator made no room");
     parts->room = std::move(room).value();
-    SimFrameSourceOptions frame_options = o.frames;
-    frame_options.wait_for_frames = o.simulated_clock;
-    frame_options.detectors.margin_px = sim_frame_margin_px(p);
-    return std::unique_ptr<drivers::FrameSource>(
-        new SimFrameSource(p, parts->frame_renderer, parts->room.get(), frame_options, *patient));
+    return parts->room->make_detectors();
   };
   return drivers::FrameSourceSpec(std::move(simulated));
 }
@@ -155,20 +84,9 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
   }
   if (parts->room == nullptr)
     return failed_precondition("the virtual couch moves a simulated patient: it needs simulated detectors");
-  if (o.hil != HilProtocol::kNone) {
-    auto spec = hil_actuator_spec(p, o, parts);
-    if (!spec.ok()) return spec.status();
-    return Spec(std::move(spec).value());
-  }
-  if (actuator_is_device(p.scene))
-    spdlog::info("the scene's {} is simulated by its twin, the virtual couch",
-                 describe_actuator(p.scene.actuator));
-  drivers::VirtualActuatorSpec simulated;
-  simulated.make = [room = parts->room.get()]() -> Result<std::unique_ptr<drivers::Actuator>> {
-    // The room owns its couch; the session borrows it.
-    return std::unique_ptr<drivers::Actuator>(new drivers::ForwardingActuator(&room->couch_actuator()));
-  };
-  return Spec(std::move(simulated));
+  auto spec = parts->room->couch_actuator();  // the virtual couch, or with --hil behind its protocol
+  if (!spec.ok()) return spec.status();
+  return Spec(std::move(spec).value());
 }
 
 }  // namespace lftrack::session

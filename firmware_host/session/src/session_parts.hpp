@@ -11,43 +11,28 @@
 #include "lftrack/host/actuator_lock.hpp"
 #include "lftrack/host/calibrated_couch.hpp"
 #include "lftrack/host/loop_session.hpp"
+#include "lftrack/host/room_simulator.hpp"
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/host/scene_verdict.hpp"
-#include "lftrack/sim/tracker_twin.hpp"
 
 namespace lftrack::session {
 
-// The simulated room's truth as the loop reads it (tracking_loop.hpp never sees sim/).
-class RoomTruth final : public loop::SimulatedTruth {
- public:
-  explicit RoomTruth(const sim::SimulatedRoom* room) : room_(room) {}
-  double residual_mm() const override { return room_->residual_mm(); }
-  tracking::Vector6d target_residual() const override { return room_->target_residual(); }
-
- private:
-  const sim::SimulatedRoom* room_;
-};
-
 struct LoopSession::Parts {
-  std::shared_ptr<const tracking::DrrRenderer> registration_renderer, frame_renderer;
+  std::shared_ptr<const tracking::DrrRenderer> registration_renderer;
   std::unique_ptr<tracking::Registration> registration;
   std::unique_ptr<loop::PlannedRegistration> planned_registration;  // the loop's view of `registration`
   std::unique_ptr<loop::ViewAgreement> view_agreement;              // the verdict's view check; null: none
-  std::unique_ptr<sim::SimulatedRoom> room;                   // simulated detectors only
-  // Every device comes from the drivers' factory (device_factory.hpp); the simulator's are made
-  // through its hooks.
+  // The simulated room (simulated detectors only), made by LoopSessionOptions::simulator;
+  // destroyed after every device made from it. Every device comes from the drivers' factory
+  // (device_factory.hpp); the simulator's are made through its hooks.
+  std::unique_ptr<RoomSimulation> room;
   std::unique_ptr<drivers::FrameSource> frames;
   // A device actuator's lock (actuator_lock.hpp), released after the actuator is closed.
   std::shared_ptr<const ActuatorLock> actuator_lock;
   const drivers::ReplayFrameSource* replay_frames = nullptr;  // a view of `frames` when replaying
   std::unique_ptr<drivers::Actuator> actuator;                // virtual, recorded, Modbus or CAN
-  std::unique_ptr<drivers::Actuator> device_actuator;         // the Modbus or CAN driver (HIL or run)
-  std::unique_ptr<sim::ModbusCouchServer> couch_server;       // HIL: serves the room's couch
-  std::unique_ptr<sim::VirtualRobot> robot;                   // HIL over CAN: moves the room's couch
-  std::unique_ptr<RoomTruth> truth;                           // simulation only
-  // tracking.imaging model only: the surrogate, and in lftrack sim with surrogate.source igtl the
-  // tracker's twin it reads (destroyed after it).
-  std::unique_ptr<sim::TrackerTwin> tracker_twin;
+  // tracking.imaging model only: the surrogate (in lftrack sim with surrogate.source igtl, the
+  // client of the room's tracker twin).
   std::unique_ptr<drivers::SurrogateSource> surrogate;
   std::unique_ptr<CalibratedCouch> calibrated_couch;          // the couch through its calibration
   std::unique_ptr<loop::JournalWriter> journal;
@@ -63,6 +48,10 @@ struct LoopSession::Parts {
   std::unique_ptr<loop::TrackingLoop> loop;
 };
 
+// Whether the session's devices need the simulated room (a simulation, or the scene's simulated
+// detectors), and a refusal where they do and the options give no simulator.
+bool needs_simulated_room(const PreparedScene& p, const LoopSessionOptions& o);
+Status check_simulator(const PreparedScene& p, const LoopSessionOptions& o);
 // The frame source of the session: an archived sequence (replay), the scene's detectors, or the
 // simulated room's (made with the room, into `parts`).
 Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const LoopSessionOptions& o,

@@ -6,7 +6,6 @@
 
 #include "lftrack/drivers/igtl_surrogate.hpp"
 #include "lftrack/host/scene_imaging_dose.hpp"
-#include "lftrack/loop/realtime_setup.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {
@@ -14,41 +13,6 @@ namespace lftrack::session {
 using loop::CorrelationModelSpec;
 using loop::ImagingSpec;
 using loop::LoopSettings;
-using loop::lower_current_thread_priority;
-
-namespace {
-
-// lftrack sim with surrogate.source igtl: the simulated chest marker (surrogate.sim, faults
-// included) served by the tracker's twin on a loopback port of its own, for the session's
-// OpenIGTLink client to read: the real protocol, its threads and time stamps, in the loop.
-Result<int> serve_simulated_marker(const PreparedScene& p, const LoopSessionOptions& o,
-                                   LoopSession::Parts* parts) {
-  const SurrogateSpec& s = p.scene.surrogate;
-  sim::TrackerTwinOptions twin;
-  twin.device = s.igtl_device.empty() ? "Marker" : s.igtl_device;
-  twin.rate_hz = std::min(1000.0, p.scene.loop.imaging.surrogate.rate_hz);
-  twin.on_thread_start = [] { (void)lower_current_thread_priority(); };
-  auto marker = std::make_shared<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
-  const sim::SimulatedRoom* room = parts->room.get();
-  const Eigen::Vector3d axis = s.igtl_axis;
-  auto served = sim::TrackerTwin::start(twin, [=](std::int64_t t_ns, Eigen::Vector3d* position) {
-    const std::int64_t epoch = room->epoch_ns();
-    if (epoch < 0 || t_ns < epoch) return false;  // the room starts at its first exposure
-    const double t_s = 1e-9 * double(t_ns - epoch);
-    if (marker->stopped_at(t_s)) return false;
-    *position = axis * marker->reading_at(t_s);
-    return true;
-  });
-  if (!served.ok()) return served.status().with_context("the tracker's twin");
-  parts->tracker_twin = std::move(served).value();
-  spdlog::info(
-      "surrogate: the simulated chest marker served over OpenIGTLink on 127.0.0.1:{} ({} \"{}\" at {:g} Hz), "
-      "read back by the tracker's client",
-      parts->tracker_twin->port(), "TRANSFORM", twin.device, twin.rate_hz);
-  return parts->tracker_twin->port();
-}
-
-}  // namespace
 
 drivers::IgtlSurrogateOptions igtl_surrogate_options(const Scene& scene) {
   drivers::IgtlSurrogateOptions client;
@@ -103,11 +67,11 @@ Status make_session_surrogate(const PreparedScene& p, const LoopSessionOptions& 
   const SurrogateSpec& s = p.scene.surrogate;
   if (s.source == "sim") {
     if (parts->room == nullptr) return failed_precondition("surrogate.source sim needs the simulated room");
-    parts->surrogate = std::make_unique<SimSurrogateSource>(s.sim, parts->room.get(), o.surrogate_faults);
+    parts->surrogate = parts->room->chest_marker();
   } else if (s.source == "igtl") {
     drivers::IgtlSurrogateOptions client = igtl_surrogate_options(p.scene);
     if (parts->room != nullptr && o.devices == SessionDevices::kSimulated) {
-      auto port = serve_simulated_marker(p, o, parts);
+      auto port = parts->room->serve_chest_marker();
       if (!port.ok()) return port.status();
       client.host = "127.0.0.1";
       client.port = *port;

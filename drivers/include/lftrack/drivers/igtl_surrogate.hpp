@@ -46,6 +46,10 @@
 
 namespace lftrack::drivers {
 
+// Why `name` cannot be an OpenIGTLink device name (its header's 20 bytes; printable ASCII, no
+// spaces, as PLUS names tools), or "" when it can.
+std::string igtl_device_name_problem(const std::string& name);
+
 struct IgtlSurrogateOptions {
   std::string host = "127.0.0.1";  // the tracker's server: a name or dotted IPv4 (resolved at open())
   int port = 18944;

@@ -37,10 +37,6 @@ struct TrackerTwinOptions {
 // The marker at `t_mono_ns` (CLOCK_MONOTONIC), room frame, mm; false: nothing to send this tick.
 using MarkerAt = std::function<bool(std::int64_t t_mono_ns, Eigen::Vector3d* position_room_mm)>;
 
-// Why `name` cannot be an OpenIGTLink device name (its header's 20 bytes; printable ASCII, no
-// spaces, as PLUS names tools), or "" when it can.
-std::string igtl_device_name_problem(const std::string& name);
-
 class TrackerTwin {
  public:
   static Result<std::unique_ptr<TrackerTwin>> start(const TrackerTwinOptions& options, MarkerAt marker);

@@ -25,6 +25,11 @@ struct DetectorCorrection {
 inline constexpr double kMinOpenFieldCounts = 1e-20;
 inline constexpr double kMaxOpenFieldCounts = 1e30;
 
+// The levels of a detector read out with `bits` (clamped to 8 to 16) whose open field reads
+// `open_field_fraction` of full scale, with no dark or gain image: how frames of a detector with
+// no calibration of its own are corrected (the simulator's detectors, and its served twins).
+DetectorCorrection nominal_detector_correction(int bits, double open_field_fraction);
+
 // Fills `line_integral` (window-sized) with p = ln(I0 / I), I = (raw - dark) / gain, for the
 // pixels of `window`, and `valid` with 1 where p is usable: 0 for saturated raw values, dead
 // pixels (gain <= 0) and photon-starved ones (I <= 0); masked pixels get p = 0. Fails, leaving

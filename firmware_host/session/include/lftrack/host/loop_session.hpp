@@ -14,6 +14,8 @@
 // the virtual couch server (a libmodbus TCP server on 127.0.0.1), or moved by the virtual robot
 // on a CAN link (a socket pair carrying struct can_frame), and the loop commands it through the
 // real Modbus or CAN driver, so every command and read-back crosses the protocol.
+// Whatever is simulated is made by the simulator the options name (room_simulator.hpp); the
+// session itself holds no simulator code.
 
 #include <cstdint>
 #include <filesystem>
@@ -24,14 +26,11 @@
 #include "lftrack/drivers/can_robot.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/drivers/replay_frame_source.hpp"
+#include "lftrack/host/room_simulator.hpp"
 #include "lftrack/host/scene.hpp"
-#include "lftrack/host/sim_frame_source.hpp"
-#include "lftrack/host/sim_surrogate_source.hpp"
 #include "lftrack/loop/frame_archive.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
-#include "lftrack/sim/modbus_couch_server.hpp"
-#include "lftrack/sim/virtual_robot.hpp"
 #include "lftrack/watch/igtl_server.hpp"
 #include "lftrack/watch/monitor_server.hpp"
 
@@ -73,6 +72,9 @@ struct LoopSessionOptions {
                                           // refused, as is an unattended hooks.operator_input, where
                                           // the session opens a real device (kScene)
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
+  // The simulator that makes the simulated room (sim_devices::room_simulator()); null: none, and
+  // a simulation, or a scene with simulated detectors, is refused.
+  const RoomSimulator* simulator = nullptr;
   SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
   SimSurrogateFaults surrogate_faults;    // fault injection into the simulated surrogate
   std::filesystem::path archive;          // empty: frames not archived
@@ -120,15 +122,14 @@ class LoopSession {
   // reported in the summary's journal_error (the loop held when it failed).
   Result<loop::LoopSummary> run();
   void request_stop();
-  const sim::SimulatedRoom* room() const;            // null when replaying
+  RoomSimulation* simulation();  // the simulated room; null without one
+  const RoomSimulation* simulation() const;
   const drivers::ReplayFrameSource* replay() const;  // null when simulating
   const loop::FrameArchive* archive() const;         // null without one
   std::filesystem::path journal_path() const;        // the journal written (empty: none)
   bool journal_failed() const;                       // the journal's writer failed (disk full, I/O error)
   const drivers::ModbusCouch* modbus_couch() const;  // the Modbus couch driver (HIL or run); null otherwise
-  sim::ModbusCouchServer* modbus_couch_server();     // HIL: for fault injection
   const drivers::CanRobot* can_robot() const;        // the CAN robot driver (HIL or run); null otherwise
-  sim::VirtualRobot* virtual_robot();                // HIL: for fault injection
   const watch::MonitorServer* monitor() const;       // null without --monitor
   const watch::IgtlServer* igtl() const;             // null without --igtl
   const watch::CycleHub* hub() const;                // null without watchers

@@ -1,7 +1,8 @@
 #pragma once
 // Registration of a prepared scene's frames: the scene's renderer (light fields loaded, or built
-// and cached when missing), the registration set-up from its views and ROI windows, synthetic
-// frames at a gold pose, preprocessing, the fiducial term, and TRE in the scene's box.
+// and cached when missing), the registration set-up from its views and ROI windows,
+// preprocessing, the fiducial term, and TRE in the scene's box. (Synthetic frames of a scene:
+// lftrack/sim_devices/scene_sim_frames.hpp.)
 
 #include <cstdint>
 #include <filesystem>
@@ -13,7 +14,6 @@
 #include "lftrack/calib/triangulation.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/loop/view_agreement.hpp"
-#include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/target_error.hpp"
@@ -25,12 +25,6 @@ namespace lftrack::session {
 Result<std::shared_ptr<const tracking::DrrRenderer>> make_scene_renderer(
     const PreparedScene& scene, const std::string& name, const std::filesystem::path& light_field_dir,
     tracking::ThreadPool* pool);
-
-// What renders the simulated loop's frames (sim.renderer): Siddon through the world anatomy
-// (markers included), or a separate light field of sim.light_field's resolution built from it and
-// cached in <light_field_dir>/sim-frames.
-Result<std::shared_ptr<const tracking::DrrRenderer>> make_sim_frame_renderer(
-    const PreparedScene& scene, const std::filesystem::path& light_field_dir, tracking::ThreadPool* pool);
 
 // A Registration over the scene's ROI windows with the scene's (or the given) measure. With
 // `detector_binning` b > 1 every image level, the originals included, is also offered binned b
@@ -69,27 +63,6 @@ Result<SceneFrames> preprocess_scene_frames(const PreparedScene& scene,
 // calibration are refused.
 Result<std::vector<tracking::DetectorCorrection>> scene_detector_corrections(const PreparedScene& scene,
                                                                              bool simulated);
-
-// The detector model of the scene's sim section.
-sim::DetectorModel scene_detector_model(const PreparedScene& scene);
-
-// The pixels the simulator exposes on detector `detector`: its ROI window grown by `margin_px`
-// (clipped to the detector).
-tracking::PixelWindow sim_frame_window(const PreparedScene& scene, int detector, int margin_px);
-
-// The margin the simulated detectors expose around each ROI window: none for light-field frames
-// (a field covers the ROI only), 16 pixels for Siddon's.
-int sim_frame_margin_px(const PreparedScene& scene);
-
-// The folder of the simulator's frame fields: <light_field_dir>/sim-frames (`light_field_dir`
-// empty: the scene's default folder).
-std::filesystem::path sim_frame_fields_dir(const PreparedScene& scene, const std::filesystem::path& light_field_dir);
-
-// Synthetic raw frames at `gold`, rendered exactly (Siddon on the scene's world anatomy, markers
-// included) over each ROI window grown by a margin; the rest of each detector is unexposed.
-Result<std::vector<tracking::Image<std::uint16_t>>> synthesize_scene_frames(
-    const PreparedScene& scene, const tracking::DrrRenderer& exact, const tracking::Pose& gold_T_room_from_ct,
-    std::uint64_t seed);
 
 // Finds the scene's first fiducial in every frame near where `start` projects it, triangulates
 // the first two views, and returns the hybrid term (paper 2) with its triangulation gap.

@@ -3,7 +3,7 @@
 // of their own, built once into <light-field folder>/sim-frames/{water,bone} and loaded after,
 // and their line integrals are those Siddon gives through the same volumes.
 
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 
 #include <gtest/gtest.h>
 
@@ -15,7 +15,12 @@
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
+
+using session::load_scene;
+using session::prepare_scene;
+using session::PreparedScene;
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -77,7 +82,8 @@ TEST(SimulatedPatient, RealisticPhysicsRendersWaterAndBoneFromLightFieldsBuiltOn
   // window agree, at the nominal pose and 3 mm / 2 degrees off it.
   tracking::Pose moved = fields->nominal_T_room_from_ct;
   moved.translation() += Eigen::Vector3d(3, -2, 1);
-  moved.linear() = (Eigen::AngleAxisd(tracking::deg_to_rad(2), Eigen::Vector3d::UnitZ()) * moved.linear()).eval();
+  moved.linear() =
+      (Eigen::AngleAxisd(tracking::deg_to_rad(2), Eigen::Vector3d::UnitZ()) * moved.linear()).eval();
   for (const tracking::Pose& pose : {fields->nominal_T_room_from_ct, moved}) {
     for (std::size_t v = 0; v < fields->scene.detectors.size(); ++v) {
       const auto& view = fields->scene.detectors[v].view;
@@ -110,4 +116,4 @@ TEST(SimulatedPatient, IdealPhysicsHasNoPatientWhateverTheRenderer) {
 }
 
 }  // namespace
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

@@ -13,22 +13,16 @@
 #include <cstdint>
 
 #include "lftrack/drivers/surrogate_source.hpp"
+#include "lftrack/host/room_simulator.hpp"
 #include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 
-namespace lftrack::session {
-
-struct SimSurrogateFaults {
-  double freeze_from_s = -1;
-  double stop_from_s = -1;
-  double cough_at_s = -1, cough_s = 0.6, cough_mm = 8;
-  double slide_from_s = -1, slide_mm_per_s = 0;
-};
+namespace lftrack::sim_devices {
 
 class SimSurrogateSource final : public drivers::SurrogateSource {
  public:
   SimSurrogateSource(const sim::BreathingSurrogateSpec& spec, const sim::SimulatedRoom* room,
-                     const SimSurrogateFaults& faults = {});
+                     const session::SimSurrogateFaults& faults = {});
   int read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) override;
   // The marker's reading at t_s on the room's clock, faults included (the next draw of the noise).
   double reading_at(double t_s);
@@ -38,10 +32,10 @@ class SimSurrogateSource final : public drivers::SurrogateSource {
  private:
   sim::BreathingSurrogate chest_;
   const sim::SimulatedRoom* room_;
-  SimSurrogateFaults faults_;
+  session::SimSurrogateFaults faults_;
   std::int64_t next_ = 0;  // the next reading's index
   double frozen_ = 0;
   bool have_frozen_ = false;
 };
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

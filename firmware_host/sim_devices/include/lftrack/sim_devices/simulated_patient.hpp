@@ -14,7 +14,7 @@
 #include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
 
 struct SimulatedPatient {
   // Set: attenuation (mono-energetic frames), or water and bone (a spectrum).
@@ -31,7 +31,8 @@ struct SimulatedPatient {
 // The patient's volumes for `physics` with anatomy draw `anatomy_seed` (attenuation, or with a
 // spectrum water and bone), built on `pool`, without renderers. Ideal physics reuses the scene's
 // attenuation volume without a copy.
-Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
+Result<SimulatedPatient> simulated_patient_volumes(const session::PreparedScene& scene,
+                                                   const sim::XrayPhysicsSpec& physics,
                                                    std::uint64_t anatomy_seed, tracking::ThreadPool* pool);
 
 // The patient's volumes (above) with their renderers, the scene's markers added to them as exact
@@ -39,29 +40,30 @@ Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& scene, c
 // `frame_fields_dir` light fields of the scene's sim.light_field, one per view and volume in
 // <frame_fields_dir>/<volume> (attenuation, water, bone), loaded where up to date and built (and
 // saved) where not. `with_surround`: the surround renderers too, for whole-detector frames.
-Result<SimulatedPatient> make_simulated_patient(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
+Result<SimulatedPatient> make_simulated_patient(const session::PreparedScene& scene,
+                                                const sim::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool = nullptr,
                                                 const std::filesystem::path* frame_fields_dir = nullptr,
                                                 bool with_surround = false);
 
 // The scene's own patient's anatomy draw: sim.physics.anatomy.seed (1 without anatomy).
-std::uint64_t scene_anatomy_seed(const PreparedScene& scene);
+std::uint64_t scene_anatomy_seed(const session::PreparedScene& scene);
 
 // The patient of the scene's own sim.physics for the simulated loop, or null where the physics is
 // ideal (the loop's frame renderer then renders the world anatomy). Rendered as sim.renderer
 // says: Siddon, or with `lightfield` from light fields of the day's volumes in
 // sim_frame_fields_dir()/{attenuation,water,bone}, built before the first frame where missing.
-Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& scene,
-                                                                   const std::filesystem::path& light_field_dir,
-                                                                   tracking::ThreadPool* pool);
+Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(
+    const session::PreparedScene& scene, const std::filesystem::path& light_field_dir,
+    tracking::ThreadPool* pool);
 
 // The scene's detectors with `physics`: one frame synthesizer per detector over its ROI window
 // grown by `margin_px`, each detector with its own fixed pattern. Keeps each detector's previous
 // frame for lag.
 class SceneImager {
  public:
-  static Result<SceneImager> create(const PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
+  static Result<SceneImager> create(const session::PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
                                     int margin_px = 16);
   // Raw whole-detector frames at `gold`; the same seed and history give the same frames.
   Result<std::vector<tracking::Image<std::uint16_t>>> expose(const SimulatedPatient& patient,
@@ -73,9 +75,9 @@ class SceneImager {
   tracking::DetectorCorrection correction() const;
 
  private:
-  const PreparedScene* scene_ = nullptr;
+  const session::PreparedScene* scene_ = nullptr;
   sim::DetectorModel model_;
   std::vector<std::shared_ptr<sim::FrameSynthesizer>> synthesizers_;
 };
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

@@ -1,10 +1,15 @@
-#include "lftrack/host/sim_detectors.hpp"
+#include "lftrack/sim_devices/sim_detectors.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include "lftrack/host/scene_registration.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
 
-Result<SimDetectors> SimDetectors::create(const PreparedScene& p, std::shared_ptr<const tracking::DrrRenderer> ideal,
+using session::PreparedScene;
+using session::SimDetectorsOptions;
+
+Result<SimDetectors> SimDetectors::create(const PreparedScene& p,
+                                          std::shared_ptr<const tracking::DrrRenderer> ideal,
                                           std::shared_ptr<const SimulatedPatient> patient,
                                           const sim::DetectorModel& model, const SimDetectorsOptions& o) {
   if (!ideal && !patient) return invalid_argument("sim detectors: no renderer and no patient");
@@ -15,9 +20,10 @@ Result<SimDetectors> SimDetectors::create(const PreparedScene& p, std::shared_pt
   // Ideal frames' surround: Siddon over a coarse copy of the anatomy the frame renderer renders
   // (a light field made for the ROI covers nothing outside it).
   if (o.whole_detector && !d.patient_) {
-    if (!p.world_mu) return invalid_argument("sim detectors: the scene has no anatomy to render outside the ROI");
-    auto siddon =
-        tracking::make_renderer("siddon", std::make_shared<const tracking::MuVolume>(sim::surround_volume(*p.world_mu)));
+    if (!p.world_mu)
+      return invalid_argument("sim detectors: the scene has no anatomy to render outside the ROI");
+    auto siddon = tracking::make_renderer(
+        "siddon", std::make_shared<const tracking::MuVolume>(sim::surround_volume(*p.world_mu)));
     if (!siddon.ok()) return siddon.status().with_context("sim detectors, outside the ROI");
     d.surround_ideal_ = std::move(siddon).value();
   }
@@ -39,8 +45,10 @@ Result<SimDetectors> SimDetectors::create(const PreparedScene& p, std::shared_pt
       d.synthesizers_.push_back(std::make_unique<sim::FrameSynthesizer>(window, model));
     }
     if (o.whole_detector) {
-      auto s = sim::SurroundSynthesizer::create(window, model, physics, view.rows, view.cols, pitch_mm, i + 1);
-      if (!s.ok()) return s.status().with_context("sim detectors, detector " + view.name + " outside the ROI");
+      auto s =
+          sim::SurroundSynthesizer::create(window, model, physics, view.rows, view.cols, pitch_mm, i + 1);
+      if (!s.ok())
+        return s.status().with_context("sim detectors, detector " + view.name + " outside the ROI");
       d.surrounds_.push_back(std::move(s).value());
     }
   }
@@ -60,8 +68,9 @@ Status SimDetectors::expose(const tracking::Pose& pose, std::uint64_t seed,
     const tracking::XrayView& view = scene_->scene.detectors[v].view;
     tracking::ImageView<std::uint16_t> frame = (*frames)[v].view();
     const std::uint64_t view_seed = seed + v;
-    LFTRACK_RETURN_IF_ERROR(patient_ ? synthesizers_[v]->synthesize(patient_->renderers(), pose, view, view_seed, frame)
-                                     : synthesizers_[v]->synthesize(*ideal_, pose, view, view_seed, frame));
+    LFTRACK_RETURN_IF_ERROR(
+        patient_ ? synthesizers_[v]->synthesize(patient_->renderers(), pose, view, view_seed, frame)
+                 : synthesizers_[v]->synthesize(*ideal_, pose, view, view_seed, frame));
     if (v < surrounds_.size())
       LFTRACK_RETURN_IF_ERROR(
           surrounds_[v]->synthesize(surround, pose, view, view_seed ^ 0x5a5a5a5a5a5a5a5aull, frame));
@@ -112,4 +121,4 @@ Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& p, track
   return out;
 }
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

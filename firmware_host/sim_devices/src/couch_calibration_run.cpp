@@ -1,4 +1,4 @@
-#include "lftrack/host/couch_calibration_run.hpp"
+#include "lftrack/sim_devices/couch_calibration_run.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -9,7 +9,10 @@
 #include "lftrack/sim/phantom_images.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
+
+using session::couch_mounting;
+using session::PreparedScene;
 
 using tracking::Vector6d;
 
@@ -128,4 +131,4 @@ Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene&
   return run;
 }
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

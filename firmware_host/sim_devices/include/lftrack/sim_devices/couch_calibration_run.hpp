@@ -14,7 +14,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
 
 struct CouchCalibrationRunOptions {
   calib::CalibrationPhantom phantom = calib::builtin_calibration_phantom();
@@ -35,7 +35,7 @@ struct CouchCalibrationRun {
 // Twelve moves: +-10 mm along each couch axis, +-2 degrees about each (issue 8's "known moves").
 std::vector<tracking::Vector6d> default_couch_moves();
 
-Result<CouchCalibrationRun> run_simulated_couch_calibration(const PreparedScene& scene,
+Result<CouchCalibrationRun> run_simulated_couch_calibration(const session::PreparedScene& scene,
                                                             const CouchCalibrationRunOptions& options);
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

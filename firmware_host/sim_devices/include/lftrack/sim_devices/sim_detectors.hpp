@@ -9,29 +9,25 @@
 #include <optional>
 #include <vector>
 
+#include "lftrack/host/room_simulator.hpp"
 #include "lftrack/host/scene.hpp"
-#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/surround_frames.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
 
-namespace lftrack::session {
-
-struct SimDetectorsOptions {
-  int margin_px = 16;  // exposed border around each ROI window (sim_frame_margin_px)
-  // The rest of each detector too, coarser, as a real panel reads out every pixel; false leaves
-  // it at 0 (unexposed).
-  bool whole_detector = true;
-};
+namespace lftrack::sim_devices {
 
 class SimDetectors {
  public:
   // Frames of `patient` (realistic physics), or of `ideal` (the scene's world anatomy, ideal
   // frames) when `patient` is null. `model` is scene_detector_model(scene) or a variant of it.
-  static Result<SimDetectors> create(const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> ideal,
-                                     std::shared_ptr<const SimulatedPatient> patient, const sim::DetectorModel& model,
-                                     const SimDetectorsOptions& options = {});
+  static Result<SimDetectors> create(const session::PreparedScene& scene,
+                                     std::shared_ptr<const tracking::DrrRenderer> ideal,
+                                     std::shared_ptr<const SimulatedPatient> patient,
+                                     const sim::DetectorModel& model,
+                                     const session::SimDetectorsOptions& options = {});
   // Every view at `pose` into frames[v] (whole detectors, sized by the scene); view v draws its
   // noise from seed + v. Pixels neither the window nor the surround writes are left as they are.
   Status expose(const tracking::Pose& gold_T_room_from_ct, std::uint64_t seed,
@@ -45,7 +41,7 @@ class SimDetectors {
   void forget_previous_frames();
 
  private:
-  const PreparedScene* scene_ = nullptr;
+  const session::PreparedScene* scene_ = nullptr;
   std::shared_ptr<const tracking::DrrRenderer> ideal_;
   std::shared_ptr<const SimulatedPatient> patient_;
   std::shared_ptr<const tracking::DrrRenderer> surround_ideal_;  // Siddon, coarse world anatomy
@@ -62,6 +58,7 @@ struct SceneSimDetectors {
   SimDetectors detectors;
   std::optional<tracking::DetectorCorrection> correction;
 };
-Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& scene, tracking::ThreadPool* pool);
+Result<SceneSimDetectors> make_scene_sim_detectors(const session::PreparedScene& scene,
+                                                   tracking::ThreadPool* pool);
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

@@ -2,7 +2,8 @@
 // as before and the rest of the detector coarser, against the exact frame over the whole
 // detector (Siddon, every pixel).
 
-#include "lftrack/host/sim_detectors.hpp"
+#include "lftrack/sim_devices/sim_detectors.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include <gtest/gtest.h>
 
@@ -13,7 +14,12 @@
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
+
+using session::load_scene;
+using session::prepare_scene;
+using session::SimDetectorsOptions;
+
 namespace {
 
 TEST(SimDetectors, TheRestOfTheDetectorIsTheExactFrameCoarserAndTheWindowIsUnchanged) {
@@ -62,9 +68,11 @@ TEST(SimDetectors, TheRestOfTheDetectorIsTheExactFrameCoarserAndTheWindowIsUncha
         theirs_sum += theirs.back();
       }
     const tracking::ImageView<const float> ov(ours.data(), 1, int(ours.size()), std::ptrdiff_t(ours.size()));
-    const tracking::ImageView<const float> tv(theirs.data(), 1, int(theirs.size()), std::ptrdiff_t(theirs.size()));
+    const tracking::ImageView<const float> tv(theirs.data(), 1, int(theirs.size()),
+                                              std::ptrdiff_t(theirs.size()));
     const double ncc = tracking::normalized_cross_correlation(ov, tv);
-    std::printf("view %s: surround mean / exact mean %.4f, NCC %.4f\n", view.name.c_str(), ours_sum / theirs_sum, ncc);
+    std::printf("view %s: surround mean / exact mean %.4f, NCC %.4f\n", view.name.c_str(),
+                ours_sum / theirs_sum, ncc);
     EXPECT_NEAR(ours_sum / theirs_sum, 1.0, 0.02) << "the same level, view " << view.name;
     EXPECT_GT(ncc, 0.95) << "the same anatomy, coarser, view " << view.name;
   }
@@ -114,10 +122,11 @@ TEST(SimDetectors, ClinicalFramesKeepTheirWindowAndRefuseAPatientWithoutTheRest)
   }
   auto bare = make_simulated_patient(*p, p->scene.sim.physics, 1, &pool);
   ASSERT_TRUE(bare.ok());
-  auto refused = SimDetectors::create(*p, nullptr, std::make_shared<const SimulatedPatient>(std::move(bare).value()), model);
+  auto refused = SimDetectors::create(
+      *p, nullptr, std::make_shared<const SimulatedPatient>(std::move(bare).value()), model);
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.status().message().find("surround"), std::string::npos) << refused.status().message();
 }
 
 }  // namespace
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

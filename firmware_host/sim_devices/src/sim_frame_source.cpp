@@ -1,9 +1,10 @@
-#include "lftrack/host/sim_frame_source.hpp"
+#include "lftrack/sim_devices/sim_frame_source.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include "lftrack/loop/realtime_setup.hpp"
 
-#include <algorithm>
 #include <time.h>
+#include <algorithm>
 
 #include <cerrno>
 #include <chrono>
@@ -13,7 +14,10 @@
 
 #include "lftrack/host/scene_registration.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
+
+using session::PreparedScene;
+using session::SimFrameSourceOptions;
 
 using loop::lower_current_thread_priority;
 
@@ -35,7 +39,8 @@ SimFrameSource::~SimFrameSource() {
 }
 
 Status SimFrameSource::open(drivers::FramePair* pair) {
-  if ((!renderer_ && !patient_) || room_ == nullptr) return invalid_argument("sim frames: no renderer or room");
+  if ((!renderer_ && !patient_) || room_ == nullptr)
+    return invalid_argument("sim frames: no renderer or room");
   if (thread_.joinable()) return failed_precondition("sim frames: already open");
   const std::size_t views = scene_.scene.detectors.size();
   pair->frames.assign(views, {});
@@ -101,8 +106,8 @@ void SimFrameSource::render_loop() {
       // loop's read-back at the cycle's start saw it before the move.
       job.pose = room_->true_T_room_from_ct_at_exposure(job.exposure_ns);
     }
-    Status status =
-        detectors_->expose(job.pose, scene_.scene.sim.seed * 1000003ull + std::uint64_t(job.index) * 7919ull, &rendered_);
+    Status status = detectors_->expose(
+        job.pose, scene_.scene.sim.seed * 1000003ull + std::uint64_t(job.index) * 7919ull, &rendered_);
     {
       std::lock_guard lock(mutex_);
       rendering_ = false;
@@ -135,9 +140,9 @@ DeviceStatus SimFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline
   if (!render_status_.ok()) return DeviceStatus::kFault;
   for (std::size_t v = 0; v < rendered_.size(); ++v) {
     drivers::Frame& frame = pair->frames[v];
-    const tracking::PixelWindow w = detectors_->whole_detector()
-                                        ? tracking::PixelWindow::full(frame.pixels.rows(), frame.pixels.cols())
-                                        : detectors_->window(v);
+    const tracking::PixelWindow w =
+        detectors_->whole_detector() ? tracking::PixelWindow::full(frame.pixels.rows(), frame.pixels.cols())
+                                     : detectors_->window(v);
     for (int r = w.row0; r < w.row0 + w.rows; ++r)
       std::memcpy(&frame.pixels.at(r, w.col0), &rendered_[v].at(r, w.col0),
                   sizeof(std::uint16_t) * std::size_t(w.cols));
@@ -148,4 +153,4 @@ DeviceStatus SimFrameSource::acquire(drivers::FramePair* pair, drivers::Deadline
   return DeviceStatus::kOk;
 }
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

@@ -1,4 +1,5 @@
-#include "lftrack/host/simulated_patient.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/anatomy_deformation.hpp"
@@ -6,7 +7,10 @@
 #include "lftrack/sim/sphere_markers.hpp"
 #include "lftrack/sim/surround_frames.hpp"
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
+
+using session::load_or_build_light_fields;
+using session::PreparedScene;
 
 sim::PatientRenderers SimulatedPatient::renderers() const {
   sim::PatientRenderers r;
@@ -24,7 +28,8 @@ sim::PatientRenderers SimulatedPatient::surround_renderers() const {
   return r;
 }
 
-Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
+Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p,
+                                                   const sim::XrayPhysicsSpec& physics,
                                                    std::uint64_t anatomy_seed, tracking::ThreadPool* pool) {
   LFTRACK_RETURN_IF_ERROR(sim::check_physics(physics));
   SimulatedPatient patient;
@@ -55,7 +60,8 @@ Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p, const
 Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool,
-                                                const std::filesystem::path* frame_fields_dir, bool with_surround) {
+                                                const std::filesystem::path* frame_fields_dir,
+                                                bool with_surround) {
   auto made = simulated_patient_volumes(p, physics, anatomy_seed, pool);
   if (!made.ok()) return made.status();
   SimulatedPatient patient = std::move(made).value();
@@ -69,8 +75,10 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
     options.pool = render_pool;
     if (from_fields) {
       options.light_field_mips = false;  // whole-detector frames: no coarse pixels to average
-      auto fields = load_or_build_light_fields(p, *v, p.scene.sim.light_field, *frame_fields_dir / name, pool);
-      if (!fields.ok()) return fields.status().with_context(std::string("the simulated patient's ") + name + " fields");
+      auto fields =
+          load_or_build_light_fields(p, *v, p.scene.sim.light_field, *frame_fields_dir / name, pool);
+      if (!fields.ok())
+        return fields.status().with_context(std::string("the simulated patient's ") + name + " fields");
       options.light_fields = *fields;
     }
     auto r = tracking::make_renderer(from_fields ? "lightfield" : "siddon", std::move(v), options);
@@ -87,7 +95,8 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
                        : double(sim::kSteelMuPerMm);
   std::vector<sim::SphereMarker> markers;
   if (f.insert)
-    for (const Eigen::Vector3d& c : f.positions_ct_mm) markers.push_back({c, f.radius_mm, marker_value_per_mm});
+    for (const Eigen::Vector3d& c : f.positions_ct_mm)
+      markers.push_back({c, f.radius_mm, marker_value_per_mm});
   // The frames' renderers (fields: from light fields), the marked volume's with the markers.
   auto set = [&](bool fields, std::shared_ptr<const tracking::DrrRenderer>* attenuation,
                  std::shared_ptr<const tracking::DrrRenderer>* water,
@@ -110,11 +119,12 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
     *bone = *with;
     return {};
   };
-  LFTRACK_RETURN_IF_ERROR(
-      set(frame_fields_dir != nullptr, &patient.attenuation_renderer, &patient.water_renderer, &patient.bone_renderer));
+  LFTRACK_RETURN_IF_ERROR(set(frame_fields_dir != nullptr, &patient.attenuation_renderer,
+                              &patient.water_renderer, &patient.bone_renderer));
   if (with_surround) {
     surround = true;
-    LFTRACK_RETURN_IF_ERROR(set(false, &patient.surround_attenuation, &patient.surround_water, &patient.surround_bone));
+    LFTRACK_RETURN_IF_ERROR(
+        set(false, &patient.surround_attenuation, &patient.surround_water, &patient.surround_bone));
   }
   return patient;
 }
@@ -123,9 +133,8 @@ std::uint64_t scene_anatomy_seed(const PreparedScene& p) {
   return p.scene.sim.physics.anatomy ? p.scene.sim.physics.anatomy->seed : 1;
 }
 
-Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const PreparedScene& p,
-                                                                   const std::filesystem::path& light_field_dir,
-                                                                   tracking::ThreadPool* pool) {
+Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(
+    const PreparedScene& p, const std::filesystem::path& light_field_dir, tracking::ThreadPool* pool) {
   const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
   if (physics.ideal()) return std::shared_ptr<const SimulatedPatient>();
   const std::filesystem::path fields = sim_frame_fields_dir(p, light_field_dir);
@@ -135,14 +144,16 @@ Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(const Prepare
   return std::make_shared<const SimulatedPatient>(std::move(patient).value());
 }
 
-Result<SceneImager> SceneImager::create(const PreparedScene& p, const sim::XrayPhysicsSpec& physics, int margin_px) {
+Result<SceneImager> SceneImager::create(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
+                                        int margin_px) {
   SceneImager imager;
   imager.scene_ = &p;
   imager.model_ = scene_detector_model(p);
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
     const auto& view = p.scene.detectors[i].view;
-    auto s = sim::FrameSynthesizer::create(sim_frame_window(p, int(i), margin_px), imager.model_, physics, view.rows,
-                                           view.cols, 0.5 * (view.pitch_col_mm + view.pitch_row_mm), i + 1);
+    auto s = sim::FrameSynthesizer::create(sim_frame_window(p, int(i), margin_px), imager.model_, physics,
+                                           view.rows, view.cols,
+                                           0.5 * (view.pitch_col_mm + view.pitch_row_mm), i + 1);
     if (!s.ok()) return s.status().with_context("detector " + view.name);
     imager.synthesizers_.push_back(std::shared_ptr<sim::FrameSynthesizer>(std::move(s).value()));
   }
@@ -150,15 +161,16 @@ Result<SceneImager> SceneImager::create(const PreparedScene& p, const sim::XrayP
 }
 
 Result<std::vector<tracking::Image<std::uint16_t>>> SceneImager::expose(const SimulatedPatient& patient,
-                                                                         const tracking::Pose& gold,
-                                                                         std::uint64_t seed) {
+                                                                        const tracking::Pose& gold,
+                                                                        std::uint64_t seed) {
   std::vector<tracking::Image<std::uint16_t>> frames;
   for (std::size_t i = 0; i < synthesizers_.size(); ++i) {
     const auto& view = scene_->scene.detectors[i].view;
     frames.emplace_back(view.rows, view.cols, 0);
-    LFTRACK_RETURN_IF_ERROR(synthesizers_[i]
-                                ->synthesize(patient.renderers(), gold, view, seed * 7919 + i, frames.back().view())
-                                .with_context("view " + view.name));
+    LFTRACK_RETURN_IF_ERROR(
+        synthesizers_[i]
+            ->synthesize(patient.renderers(), gold, view, seed * 7919 + i, frames.back().view())
+            .with_context("view " + view.name));
   }
   return frames;
 }
@@ -167,6 +179,8 @@ void SceneImager::forget_previous_frames() {
   for (auto& s : synthesizers_) s->forget_previous_frame();
 }
 
-tracking::DetectorCorrection SceneImager::correction() const { return sim::detector_correction(model_); }
+tracking::DetectorCorrection SceneImager::correction() const {
+  return sim::detector_correction(model_);
+}
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

@@ -1,9 +1,11 @@
-#include "lftrack/host/sim_surrogate_source.hpp"
+#include "lftrack/sim_devices/sim_surrogate_source.hpp"
 
 #include <cmath>
 #include <numbers>
 
-namespace lftrack::session {
+namespace lftrack::sim_devices {
+
+using session::SimSurrogateFaults;
 
 SimSurrogateSource::SimSurrogateSource(const sim::BreathingSurrogateSpec& spec,
                                        const sim::SimulatedRoom* room, const SimSurrogateFaults& faults)
@@ -48,4 +50,4 @@ int SimSurrogateSource::read(std::int64_t now_ns, drivers::SurrogateReading* out
   return n;
 }
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

@@ -22,36 +22,21 @@
 #include <vector>
 
 #include "lftrack/drivers/frame_source.hpp"
+#include "lftrack/host/room_simulator.hpp"
 #include "lftrack/host/scene.hpp"
-#include "lftrack/host/sim_detectors.hpp"
-#include "lftrack/host/simulated_patient.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/sim_devices/sim_detectors.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
 
-namespace lftrack::session {
-
-struct SimFrameSourceOptions {
-  // Wait for each frame however long it takes (a loop on a simulated clock, whose deadlines say
-  // nothing about the wall clock); otherwise acquire() gives up at its deadline.
-  bool wait_for_frames = false;
-  // The ROI windows' margin (0 for light-field frames) and whether the rest of each detector is
-  // exposed too.
-  SimDetectorsOptions detectors;
-  // Fault injection: exposures whose index is in [drop_from, drop_to) never arrive (kTimeout).
-  std::int64_t drop_from = -1, drop_to = -1;
-  double skew_ms = 0;  // added to the second view's timestamp
-  // A host that stalls: acquiring exposures in [stall_from, stall_to) takes stall_ms longer
-  // than the frame does (real clock only), so those cycles overrun their period.
-  std::int64_t stall_from = -1, stall_to = -1;
-  double stall_ms = 0;
-};
+namespace lftrack::sim_devices {
 
 class SimFrameSource final : public drivers::FrameSource {
  public:
   // `patient`: the scene's realistic patient (make_scene_patient), or null for ideal frames from
   // `renderer`.
-  SimFrameSource(const PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
-                 sim::SimulatedRoom* room, const SimFrameSourceOptions& options = {},
+  SimFrameSource(const session::PreparedScene& scene, std::shared_ptr<const tracking::DrrRenderer> renderer,
+                 sim::SimulatedRoom* room, const session::SimFrameSourceOptions& options = {},
                  std::shared_ptr<const SimulatedPatient> patient = nullptr);
   ~SimFrameSource() override;
 
@@ -73,11 +58,11 @@ class SimFrameSource final : public drivers::FrameSource {
   };
   void render_loop();
 
-  const PreparedScene& scene_;
+  const session::PreparedScene& scene_;
   std::shared_ptr<const tracking::DrrRenderer> renderer_;
   std::shared_ptr<const SimulatedPatient> patient_;
   sim::SimulatedRoom* room_;
-  SimFrameSourceOptions options_;
+  session::SimFrameSourceOptions options_;
   sim::DetectorModel model_;
   std::optional<SimDetectors> detectors_;
   std::vector<tracking::Image<std::uint16_t>> rendered_;  // per view, whole detector
@@ -95,4 +80,4 @@ class SimFrameSource final : public drivers::FrameSource {
   std::int64_t next_index_ = 0;
 };
 
-}  // namespace lftrack::session
+}  // namespace lftrack::sim_devices

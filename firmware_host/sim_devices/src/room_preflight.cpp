@@ -1,0 +1,88 @@
+// The simulated room's checks before a run (RoomSimulator::preflight, preflight.hpp): the light
+// fields its frames are rendered from, and the served couch's room link that simulated
+// detectors see the patient move through.
+
+#include <filesystem>
+#include <string>
+#include <utility>
+
+#include "lftrack/host/preflight.hpp"
+#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/sim/room_link.hpp"
+#include "lftrack/sim_devices/scene_sim_frames.hpp"
+#include "lftrack/sim_devices/simulated_patient.hpp"
+#include "room_parts.hpp"
+
+namespace lftrack::sim_devices {
+
+using session::actuator_is_device;
+using session::CheckResult;
+using session::default_light_field_dir;
+using session::load_light_fields;
+using session::LoopSessionOptions;
+using session::PreflightReport;
+using session::PreparedScene;
+
+namespace {
+
+void add(PreflightReport* r, std::string what, CheckResult result, std::string detail) {
+  r->items.push_back({std::move(what), result, std::move(detail)});
+}
+
+// The simulated frames' light fields (sim.renderer lightfield): fresh for the day's volumes.
+void check_frame_light_fields(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  if (p.scene.sim.renderer != "lightfield") return;
+  const std::filesystem::path dir =
+      o.light_field_dir.empty() ? default_light_field_dir(p.scene) : o.light_field_dir;
+  const std::filesystem::path sim_dir = sim_frame_fields_dir(p, o.light_field_dir);
+  const std::string build =
+      "; build them first: lftrack precompute --scene " + p.scene.source + " -o " + dir.string();
+  if (p.scene.sim.physics.ideal()) {
+    auto fields = load_light_fields(p, sim_dir, p.world_mu.get(), &p.scene.sim.light_field);
+    add(r, "light fields (simulated frames) in " + sim_dir.string(),
+        fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+        fields.ok() ? "fresh" : fields.status().message() + build);
+    return;
+  }
+  // Fields of the day's volumes (water and bone, or attenuation): those volumes are made again
+  // from the CT (the anatomy draw; seconds), and their fields loaded, not built.
+  auto patient = simulated_patient_volumes(p, p.scene.sim.physics, scene_anatomy_seed(p), nullptr);
+  if (!patient.ok())
+    return add(r, "light fields (simulated frames) in " + sim_dir.string(), CheckResult::kFail,
+               patient.status().message());
+  for (const auto& [name, volume] : {std::pair{"attenuation", patient->attenuation},
+                                     std::pair{"water", patient->water}, std::pair{"bone", patient->bone}}) {
+    if (!volume) continue;
+    auto fields = load_light_fields(p, sim_dir / name, volume.get(), &p.scene.sim.light_field);
+    add(r, "light fields (simulated frames, " + std::string(name) + ") in " + (sim_dir / name).string(),
+        fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+        fields.ok() ? "fresh" : fields.status().message() + build);
+  }
+}
+
+// Simulated detectors with a served couch: the patient moves only through the couch's room link.
+void check_couch_link(const PreparedScene& p, PreflightReport* r) {
+  if (!actuator_is_device(p.scene)) return;
+  const std::string what = "the served couch's room link (sim.couch_link)";
+  if (p.scene.sim.couch_link.empty())
+    return add(r, what, CheckResult::kFail,
+               "none named: simulated detectors would never see the patient move with the " +
+                   p.scene.actuator.type + " actuator (lftrack serve couch|robot --room FILE)");
+  auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
+  if (!link.ok()) return add(r, what, CheckResult::kFail, link.status().message());
+  sim::RoomLinkSample sample;
+  if (!(*link)->read(&sample))
+    return add(r, what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
+  add(r, what, CheckResult::kPass,
+      p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
+}
+
+}  // namespace
+
+void room_preflight(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
+  check_frame_light_fields(p, o, r);
+  check_couch_link(p, r);
+}
+
+}  // namespace lftrack::sim_devices
