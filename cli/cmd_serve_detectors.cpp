@@ -21,6 +21,7 @@
 #include "lftrack/host/scene_registration.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "lftrack/sim/v4l2_loopback_writer.hpp"
+#include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/sim_devices/sim_frame_source.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -38,6 +39,7 @@ using session::served_twin_id;
 using session::SimFrameSourceOptions;
 using sim_devices::make_scene_patient;
 using sim_devices::make_sim_frame_renderer;
+using sim_devices::scene_room_spec;
 using sim_devices::sim_frame_margin_px;
 namespace {
 
@@ -56,13 +58,7 @@ class DetectorRoom {
       if (!renderer.ok()) return renderer.status();
       r->renderer_ = *renderer;
     }
-    sim::SimulatedRoomSpec room;
-    room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
-    room.origin_room_mm = p.registration_origin_room_mm();
-    room.setup_error = p.scene.motion.setup_error;
-    room.motion = p.scene.motion.motion;
-    room.couch = p.scene.actuator.dynamics;
-    room.residual_box_mm = p.scene.registration.tre_box_mm;
+    sim::SimulatedRoomSpec room = scene_room_spec(p);  // the couch mounted as the scene says
     if (!o.room.empty()) {
       auto link = sim::RoomLinkReader::open(o.room);
       if (!link.ok()) return link.status();

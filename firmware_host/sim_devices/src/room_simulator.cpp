@@ -37,11 +37,7 @@ using session::SessionDevices;
 using session::SimFrameSourceOptions;
 using session::SurrogateSpec;
 
-namespace {
-
-// The simulated room of a scene: its patient, set-up error and couch; with `couch_link`, the
-// couch is another process's.
-Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, const LoopSessionOptions& o) {
+sim::SimulatedRoomSpec scene_room_spec(const PreparedScene& p) {
   sim::SimulatedRoomSpec room;
   room.nominal_T_room_from_ct = p.nominal_T_room_from_ct;
   room.origin_room_mm = p.registration_origin_room_mm();
@@ -50,6 +46,15 @@ Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, co
   room.couch = p.scene.actuator.dynamics;
   if (p.scene.actuator.mounting) room.couch_T_room_from_couch = couch_mounting(*p.scene.actuator.mounting, p);
   room.residual_box_mm = p.scene.registration.tre_box_mm;
+  return room;
+}
+
+namespace {
+
+// The simulated room of a scene (scene_room_spec); with `couch_link`, the couch is another
+// process's.
+Result<std::unique_ptr<sim::SimulatedRoom>> make_room(const PreparedScene& p, const LoopSessionOptions& o) {
+  sim::SimulatedRoomSpec room = scene_room_spec(p);
   if (o.devices == SessionDevices::kScene && actuator_is_device(p.scene)) {
     // Simulated detectors and a real protocol's couch: the patient must move with that couch.
     if (p.scene.sim.couch_link.empty())

@@ -21,6 +21,12 @@ namespace lftrack::sim_devices {
 // The simulator (stateless; one for the program).
 const session::RoomSimulator* room_simulator();
 
+// The simulated room of a scene: its planned pose and registration origin, the patient's set-up
+// error and motion, the couch's dynamics and mounting (actuator.mounting; ideal: about the
+// registration origin), the residual's box; no couch link. The session's room and the served
+// detectors' (`lftrack serve detectors`) are both made from it.
+sim::SimulatedRoomSpec scene_room_spec(const session::PreparedScene& scene);
+
 // A session's simulated room; null where it has none (a replay, or the room's real devices).
 const sim::SimulatedRoom* simulated_room(const session::LoopSession& session);
 // Hardware in the loop: the room couch's Modbus server, or the virtual robot on its CAN link, for
