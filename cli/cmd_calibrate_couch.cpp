@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -17,6 +18,7 @@ namespace lftrack::cli {
 using session::couch_calibration_yaml;
 using session::load_calibration_phantom;
 using session::ProgressBar;
+using session::read_couch_calibration;
 using session::read_couch_moves;
 using sim_devices::CouchCalibrationRunOptions;
 using sim_devices::run_simulated_couch_calibration;
@@ -27,12 +29,37 @@ struct CouchOptions {
   std::string moves = "builtin";
   std::string phantom = "builtin";
   std::string out;
+  bool overwrite = false;
   double photons = 1e6;
   std::uint64_t seed = 1;
   bool json = false;
 };
 
+// --out: refused where it exists, unless --overwrite, and then only an earlier couch calibration
+// (never a scene or another file an --out typo names). Checked before the run.
+Status check_out(const CouchOptions& o) {
+  if (o.out.empty()) return {};
+  namespace fs = std::filesystem;
+  const fs::path out(o.out);
+  std::error_code ec;
+  if (!out.has_filename())
+    return invalid_argument("--out " + o.out + " names a folder (it ends in '/'); name the calibration file");
+  const fs::file_status existing = fs::symlink_status(out, ec);
+  if (!fs::exists(existing)) return {};
+  if (fs::is_directory(existing))
+    return invalid_argument("--out " + o.out + " is a directory; name the calibration file");
+  if (!o.overwrite) return failed_precondition(o.out + " exists; give --overwrite to replace it");
+  if (!fs::is_regular_file(existing))
+    return failed_precondition(o.out + " is not a regular file (a link?); not replaced");
+  if (auto earlier = read_couch_calibration(o.out); !earlier.ok())
+    return failed_precondition(
+        o.out + " is not a couch calibration (" + earlier.status().message() +
+        "); --overwrite replaces only a couch calibration; remove it yourself if it is yours");
+  return {};
+}
+
 Status run(const CouchOptions& o) {
+  LFTRACK_RETURN_IF_ERROR(check_out(o));
   auto phantom = load_calibration_phantom(o.phantom);
   if (!phantom.ok()) return phantom.status();
   CouchCalibrationRunOptions options;
@@ -100,6 +127,8 @@ Command add_calibrate_couch_command(CLI::App* parent) {
       ->capture_default_str();
   app->add_option("--out", o->out,
                   "Write the couch calibration (YAML) here; a scene names it as actuator.calibration");
+  app->add_flag("--overwrite", o->overwrite,
+                "Replace an existing --out file (an earlier couch calibration only)");
   app->add_option("--photons", o->photons, "Open-field quanta per pixel of the phantom images, 0 (no noise) to 1e9")
       ->check(finite_in(0, 1e9))
       ->capture_default_str();

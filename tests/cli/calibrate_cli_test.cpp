@@ -9,10 +9,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_text.hpp"
+#include "lftrack/host/calibration_files.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/tracking/image_io.hpp"
-#include "cli_text.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {
@@ -130,6 +131,41 @@ TEST(Cli, CalibrateCouchRecoversAMisalignedCouchAndASceneUsesTheFile) {
                   &out)
           .ok());
   EXPECT_NE(out.find("range"), std::string::npos) << out;
+}
+
+// --out never replaces a file unasked, and with --overwrite only an earlier couch calibration:
+// each refusal comes before the couch is moved, and leaves the file as it was.
+TEST(Cli, CalibrateCouchNeverReplacesAFileUnasked) {
+  test::TempDir dir;
+  const auto calibration = dir.path() / "couch.yaml";
+  std::string out;
+  ASSERT_TRUE(
+      run_process({lftrack_bin(), "-q", "calibrate", "couch", "--out", calibration.string(), "--seed", "1"},
+                  &out)
+          .ok())
+      << out;
+  const std::string earlier = test::contents(calibration);
+  ASSERT_FALSE(earlier.empty());
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "-q", "calibrate", "couch", "--out", calibration.string()}, &out).ok());
+  EXPECT_NE(out.find("--overwrite"), std::string::npos) << "says how to replace it: " << out;
+  EXPECT_EQ(test::contents(calibration), earlier) << "the earlier file is as it was";
+  const auto scene = dir.path() / "scene.yaml";
+  std::ofstream(scene) << builtin_with_actuator_lines("");
+  const std::string scene_text = test::contents(scene);
+  EXPECT_FALSE(
+      run_process({lftrack_bin(), "-q", "calibrate", "couch", "--out", scene.string(), "--overwrite"}, &out)
+          .ok());
+  EXPECT_NE(out.find("not a couch calibration"), std::string::npos) << out;
+  EXPECT_EQ(test::contents(scene), scene_text) << "a scene named by an --out typo is never replaced";
+  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "calibrate", "couch", "--out", calibration.string(),
+                           "--overwrite", "--seed", "2"},
+                          &out)
+                  .ok())
+      << out;
+  EXPECT_NE(test::contents(calibration), earlier)
+      << "replaced with --overwrite (another seed, other figures)";
+  EXPECT_TRUE(read_couch_calibration(calibration.string()).ok());
 }
 
 }  // namespace

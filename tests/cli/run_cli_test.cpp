@@ -74,6 +74,22 @@ class RunCli : public ::testing::Test {
   test::TempDir dir_;
 };
 
+// --hil on a scene with no couch is refused from the scene alone, naming its line, before the CT
+// is read (here one that does not exist) or a light field built.
+TEST_F(RunCli, HilWithoutACouchIsRefusedBeforeTheCtIsRead) {
+  const fs::path none = dir_.path() / "no-couch.yaml";
+  std::ofstream(none) << scene_text("type: virtual", "type: none");
+  std::string out;
+  const Status s = lftrack("sim", none,
+                           {"--hil", "modbus", "--fast", "--cycles", "5", "--journal", "", "--ct",
+                            (dir_.path() / "absent.nii").string()},
+                           &out);
+  ASSERT_FALSE(s.ok()) << out;
+  EXPECT_NE(out.find("hardware in the loop needs a scene with a couch"), std::string::npos) << out;
+  EXPECT_NE(out.find("no-couch.yaml:"), std::string::npos) << "names the scene's line: " << out;
+  EXPECT_EQ(out.find("absent.nii"), std::string::npos) << "the CT was never read: " << out;
+}
+
 // Only a person ends a HOLD in the room: `run` has no unattended operator to offer (a usage
 // error, before anything is loaded); `sim` and `replay` keep it.
 TEST_F(RunCli, AutoResumeIsNoOptionOfRun) {

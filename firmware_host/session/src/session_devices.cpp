@@ -11,6 +11,17 @@
 #include "session_parts.hpp"
 
 namespace lftrack::session {
+Status check_session_hil(const Scene& scene, const LoopSessionOptions& o) {
+  if (o.hil == HilProtocol::kNone) return {};
+  if (o.devices != SessionDevices::kSimulated || !o.replay_sequence.empty())
+    return invalid_argument("hardware in the loop (--hil) is a simulation: it needs `lftrack sim`");
+  if (!actuator_moves(scene))
+    return invalid_argument(
+        scene.where("actuator") +
+        ": hardware in the loop needs a scene with a couch (actuator.type other than none)");
+  return {};
+}
+
 bool needs_simulated_room(const PreparedScene& p, const LoopSessionOptions& o) {
   return o.replay_sequence.empty() &&
          (o.devices == SessionDevices::kSimulated || frames_are_simulated(p.scene));
@@ -58,8 +69,7 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
                                                                    const LoopSessionOptions& o,
                                                                    LoopSession::Parts* parts) {
   using Spec = std::optional<drivers::ActuatorSpec>;
-  if (o.hil != HilProtocol::kNone && (o.devices != SessionDevices::kSimulated || !o.replay_sequence.empty()))
-    return invalid_argument("hardware in the loop (--hil) is a simulation: it needs `lftrack sim`");
+  LFTRACK_RETURN_IF_ERROR(check_session_hil(p.scene, o));
   if (parts->replay_frames != nullptr) {
     if (!parts->replay_frames->sequence().has_actuator) return Spec();
     return Spec(drivers::RecordedActuatorSpec{parts->replay_frames});
@@ -76,12 +86,7 @@ Result<std::optional<drivers::ActuatorSpec>> session_actuator_spec(const Prepare
   // Simulated: a scene's couch or robot is simulated by the room's couch (its twin).
   const bool couch =
       o.devices == SessionDevices::kSimulated ? actuator_moves(p.scene) : actuator_is_virtual(p.scene);
-  if (!couch) {
-    if (o.hil != HilProtocol::kNone)
-      return invalid_argument(
-          "hardware in the loop needs a scene with a couch (actuator.type other than none)");
-    return Spec();
-  }
+  if (!couch) return Spec();  // with --hil, refused above
   if (parts->room == nullptr)
     return failed_precondition("the virtual couch moves a simulated patient: it needs simulated detectors");
   auto spec = parts->room->couch_actuator();  // the virtual couch, or with --hil behind its protocol

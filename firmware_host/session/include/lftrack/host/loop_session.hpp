@@ -109,6 +109,10 @@ Status check_session_options(const LoopSessionOptions& options);
 // only on the real clock. Checked again by LoopSession::create; a command checks it before it
 // spends time preparing the scene.
 Status check_session_surrogate(const Scene& scene, const LoopSessionOptions& options);
+// Hardware in the loop (options.hil) against the scene and the session's devices: a simulation
+// (neither the room's devices nor a replay) of a scene with a couch. Checked again by
+// LoopSession::create; a command checks it before it spends time preparing the scene.
+Status check_session_hil(const Scene& scene, const LoopSessionOptions& options);
 
 class LoopSession {
  public:
