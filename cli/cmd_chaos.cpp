@@ -75,27 +75,25 @@ Status run_chaos_command(const SceneOptions& scene, const chaos::ChaosOptions& o
   auto prepared = load_prepared_scene(scene, &pool);
   if (!prepared.ok()) return prepared.status();
   chaos::ChaosOptions o = options;
-  if (!json && ::isatty(STDERR_FILENO) != 1) {
-    // A log, not a terminal: a line at every tenth of the run (every 1,000 cycles without an end).
-    o.progress = [last = std::int64_t(-1)](std::int64_t done, std::int64_t total) mutable {
-      const std::int64_t step = total > 0 ? done * 10 / total : done / 1000;
-      if (step == last) return;
-      last = step;
+  if (!json)
+    // On a terminal one line rewritten in place; in a log a line at every tenth of the run
+    // (every 1,000 cycles without an end).
+    o.progress = [terminal = ::isatty(STDERR_FILENO) == 1, last = std::int64_t(-1)](
+                     std::int64_t done, std::int64_t total) mutable {
+      if (!terminal) {
+        const std::int64_t step = total > 0 ? done * 10 / total : done / 1000;
+        if (step == last) return;
+        last = step;
+      }
+      const char* start = terminal ? "\r" : "";
+      const char* end = terminal && !(total > 0 && done >= total) ? "" : "\n";
       if (total > 0)
-        std::fprintf(stderr, "chaos: %lld of %lld cycles\n", static_cast<long long>(done),
-                     static_cast<long long>(total));
+        std::fprintf(stderr, "%schaos: %lld of %lld cycles%s", start, static_cast<long long>(done),
+                     static_cast<long long>(total), end);
       else
-        std::fprintf(stderr, "chaos: %lld cycles (Ctrl-C ends the soak)\n", static_cast<long long>(done));
+        std::fprintf(stderr, "%schaos: %lld cycles (Ctrl-C ends the soak)%s", start,
+                     static_cast<long long>(done), end);
     };
-  } else if (!json) {
-    o.progress = [](std::int64_t done, std::int64_t total) {
-      if (total > 0)
-        std::fprintf(stderr, "\rchaos: %lld of %lld cycles", static_cast<long long>(done), static_cast<long long>(total));
-      else
-        std::fprintf(stderr, "\rchaos: %lld cycles (Ctrl-C ends the soak)", static_cast<long long>(done));
-      if (total > 0 && done >= total) std::fprintf(stderr, "\n");
-    };
-  }
   spdlog::info("chaos soak on {}: {} cycles, seed {}, fault rate {} per cycle, journals in {}",
                prepared->scene.name, o.cycles, o.seed, o.fault_rate, o.journal_dir.string());
   // Each segment's session would say how it was assembled (hundreds of times in a long soak):

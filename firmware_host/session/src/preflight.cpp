@@ -22,29 +22,27 @@ namespace {
 
 using drivers::DeviceStatus;
 
-void add(PreflightReport* r, std::string what, CheckResult result, std::string detail) {
-  r->items.push_back({std::move(what), result, std::move(detail)});
-}
-
 void check_realtime(const PreparedScene& p, const Result<RealtimeReport>& rt, bool waived, PreflightReport* r) {
   const std::string what = "real-time set-up";
-  if (!rt.ok()) return add(r, what, CheckResult::kFail, rt.status().message());
-  if (waived) return add(r, what, CheckResult::kWarn, "waived by --rt ignore: " + rt->summary());
+  if (!rt.ok()) return r->add(what, CheckResult::kFail, rt.status().message());
+  if (waived) return r->add(what, CheckResult::kWarn, "waived by --rt ignore: " + rt->summary());
   if (!p.scene.loop.realtime.enforce)
-    return add(r, what, CheckResult::kFail,
-               "the scene's loop.realtime.mode is ignore: a treatment needs enforce (priority and cpus), or "
-               "--rt ignore to waive it knowingly");
-  add(r, what, CheckResult::kPass, rt->summary());
+    return r->add(
+        what, CheckResult::kFail,
+        "the scene's loop.realtime.mode is ignore: a treatment needs enforce (priority and cpus), or "
+        "--rt ignore to waive it knowingly");
+  r->add(what, CheckResult::kPass, rt->summary());
 }
 
 void check_light_fields(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   const std::filesystem::path dir = o.light_field_dir.empty() ? default_light_field_dir(p.scene) : o.light_field_dir;
   if (p.scene.renderer == "lightfield") {
     auto fields = load_light_fields(p, dir);
-    add(r, "light fields (tracking) in " + dir.string(), fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-        fields.ok() ? "fresh for this CT and geometry"
-                    : fields.status().message() + "; build them first: lftrack precompute --scene " + p.scene.source +
-                          " -o " + dir.string());
+    r->add("light fields (tracking) in " + dir.string(),
+           fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+           fields.ok() ? "fresh for this CT and geometry"
+                       : fields.status().message() + "; build them first: lftrack precompute --scene " +
+                             p.scene.source + " -o " + dir.string());
   }
 }
 
@@ -63,7 +61,8 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
   twins->assign(p.scene.detectors.size(), false);
   std::string what = "detectors";
   for (const DetectorSpec& d : p.scene.detectors) what += " " + d.view.name;
-  if (o.replay_sequence.empty() && frames_are_simulated(p.scene)) return add(r, what, CheckResult::kPass, "simulated (no device to open)");
+  if (o.replay_sequence.empty() && frames_are_simulated(p.scene))
+    return r->add(what, CheckResult::kPass, "simulated (no device to open)");
   Result<drivers::FrameSourceSpec> spec = invalid_argument("no spec");
   if (!o.replay_sequence.empty()) {
     drivers::ReplaySourceSpec replay;
@@ -74,16 +73,16 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
     spec = device_frame_source_spec(p.scene);
   }
   what += " (" + describe_frames(p.scene.detectors[0].frames) + (p.scene.detectors.size() > 1 ? ", ..." : "") + ")";
-  if (!spec.ok()) return add(r, what, CheckResult::kFail, spec.status().message());
+  if (!spec.ok()) return r->add(what, CheckResult::kFail, spec.status().message());
   auto source = drivers::make_frame_source(std::move(spec).value());
-  if (!source.ok()) return add(r, what, CheckResult::kFail, source.status().message());
+  if (!source.ok()) return r->add(what, CheckResult::kFail, source.status().message());
   drivers::FramePair pair;
   const Status opened = (*source)->open(&pair);
   std::vector<drivers::DetectorIdentity> who(p.scene.detectors.size());
   if (opened.ok())
     for (std::size_t i = 0; i < who.size(); ++i) who[i] = (*source)->identity(i);
   (*source)->close();
-  if (!opened.ok()) return add(r, what, CheckResult::kFail, opened.message());
+  if (!opened.ok()) return r->add(what, CheckResult::kFail, opened.message());
   CheckResult result = CheckResult::kPass;
   std::ostringstream found;
   for (std::size_t i = 0; i < pair.frames.size(); ++i) {
@@ -102,12 +101,12 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
     (*twins)[i] = !expected.empty() && who[i].id == expected && expected == served_twin_id(d.view.name);
     found << ", " << pair.frames[i].pixels.rows() << " x " << pair.frames[i].pixels.cols();
   }
-  add(r, what, result,
-      "opened and closed: " + found.str() +
-          (result == CheckResult::kFail
-               ? ": each detector must answer as itself (cables or addresses swapped? frames.camera says where each "
-                 "is reached, frames.id what it must answer)"
-               : ""));
+  r->add(what, result,
+         "opened and closed: " + found.str() +
+             (result == CheckResult::kFail ? ": each detector must answer as itself (cables or addresses "
+                                             "swapped? frames.camera says where each "
+                                             "is reached, frames.id what it must answer)"
+                                           : ""));
 }
 
 void check_detector_calibrations(const PreparedScene& p, const LoopSessionOptions& o, const std::vector<bool>& twins,
@@ -117,67 +116,78 @@ void check_detector_calibrations(const PreparedScene& p, const LoopSessionOption
     const std::string what = "detector calibration of " + d.view.name;
     const bool device = o.replay_sequence.empty() && frames_from_device(d.frames);
     if (d.simulator_calibration && device && !twins[i]) {
-      add(r, what, CheckResult::kFail,
-          "calibration: simulator on a device detector (" + describe_frames(d.frames) +
-              ") that did not answer as the simulator's served twin of " + d.view.name + " (" +
-              served_twin_id(d.view.name) +
-              ", lftrack serve detectors): the simulator's detector model would correct a real panel's frames; name "
-              "its detector calibration as detectors[].calibration (lftrack calibrate detector --dark DIR --flood DIR)");
+      r->add(what, CheckResult::kFail,
+             "calibration: simulator on a device detector (" + describe_frames(d.frames) +
+                 ") that did not answer as the simulator's served twin of " + d.view.name + " (" +
+                 served_twin_id(d.view.name) +
+                 ", lftrack serve detectors): the simulator's detector model would correct a real panel's "
+                 "frames; name "
+                 "its detector calibration as detectors[].calibration (lftrack calibrate detector --dark DIR "
+                 "--flood DIR)");
       continue;
     }
     if (d.simulator_calibration) {
-      add(r, what, CheckResult::kWarn,
-          device ? "calibration: simulator: " + d.view.name + " answered as " + served_twin_id(d.view.name) +
-                       ", the simulator's served twin (lftrack serve detectors), whose frames its detector model "
+      r->add(what, CheckResult::kWarn,
+             device
+                 ? "calibration: simulator: " + d.view.name + " answered as " + served_twin_id(d.view.name) +
+                       ", the simulator's served twin (lftrack serve detectors), whose frames its detector "
+                       "model "
                        "corrects"
-                 : "calibration: simulator: the simulator's detector model corrects these frames (right only for "
+                 : "calibration: simulator: the simulator's detector model corrects these frames (right only "
+                   "for "
                    "frames the simulator made)");
       continue;
     }
     if (d.calibration_file.empty()) {
       if (device)
-        add(r, what, CheckResult::kFail,
-            "none named (detectors[].calibration): make one with lftrack calibrate detector --dark DIR --flood DIR");
+        r->add(what, CheckResult::kFail,
+               "none named (detectors[].calibration): make one with lftrack calibrate detector --dark DIR "
+               "--flood DIR");
       else
-        add(r, what, CheckResult::kWarn,
-            "none named: the simulator's detector model corrects these frames (right only for frames it made)");
+        r->add(what, CheckResult::kWarn,
+               "none named: the simulator's detector model corrects these frames (right only for frames it "
+               "made)");
       continue;
     }
     auto calibration = load_detector_calibration(d.calibration_file);
     if (!calibration.ok()) {
-      add(r, what, CheckResult::kFail, calibration.status().message());
+      r->add(what, CheckResult::kFail, calibration.status().message());
       continue;
     }
     if (calibration->rows != d.view.rows || calibration->cols != d.view.cols) {
-      add(r, what, CheckResult::kFail,
-          d.calibration_file + " is for " + std::to_string(calibration->rows) + " x " + std::to_string(calibration->cols) +
-              " pixels; " + d.view.name + " has " + std::to_string(d.view.rows) + " x " + std::to_string(d.view.cols));
+      r->add(what, CheckResult::kFail,
+             d.calibration_file + " is for " + std::to_string(calibration->rows) + " x " +
+                 std::to_string(calibration->cols) + " pixels; " + d.view.name + " has " +
+                 std::to_string(d.view.rows) + " x " + std::to_string(d.view.cols));
       continue;
     }
     if (!calibration->detector.empty() && calibration->detector != d.view.name) {
-      add(r, what, CheckResult::kFail,
-          d.calibration_file + " was made for detector '" + calibration->detector + "', not '" + d.view.name + "'");
+      r->add(what, CheckResult::kFail,
+             d.calibration_file + " was made for detector '" + calibration->detector + "', not '" +
+                 d.view.name + "'");
       continue;
     }
-    add(r, what, CheckResult::kPass, d.calibration_file + " (hash " + calibration->content_hash + ")");
+    r->add(what, CheckResult::kPass, d.calibration_file + " (hash " + calibration->content_hash + ")");
   }
 }
 
 void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   const ActuatorSpec& a = p.scene.actuator;
   const std::string what = "actuator (" + describe_actuator(a) + ")";
-  if (!o.replay_sequence.empty()) return add(r, what, CheckResult::kPass, "replay: the recorded read-backs, if any");
-  if (!actuator_moves(p.scene)) return add(r, what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
-  if (actuator_is_virtual(p.scene)) return add(r, what, CheckResult::kPass, "the simulator's couch");
+  if (!o.replay_sequence.empty())
+    return r->add(what, CheckResult::kPass, "replay: the recorded read-backs, if any");
+  if (!actuator_moves(p.scene))
+    return r->add(what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
+  if (actuator_is_virtual(p.scene)) return r->add(what, CheckResult::kPass, "the simulator's couch");
   auto spec = device_actuator_spec(p.scene);
-  if (!spec.ok()) return add(r, what, CheckResult::kFail, spec.status().message());
+  if (!spec.ok()) return r->add(what, CheckResult::kFail, spec.status().message());
   // The check opens the couch and tells it to hold: never under another program driving it (a
   // treatment, a QA), which the lock names.
   auto lock = ActuatorLock::acquire(p.scene);
-  if (!lock.ok()) return add(r, what, CheckResult::kFail, lock.status().message() + "; not opened");
+  if (!lock.ok()) return r->add(what, CheckResult::kFail, lock.status().message() + "; not opened");
   auto actuator = drivers::make_actuator(std::move(spec).value());
-  if (!actuator.ok()) return add(r, what, CheckResult::kFail, actuator.status().message());
-  if (Status s = (*actuator)->open(); !s.ok()) return add(r, what, CheckResult::kFail, s.message());
+  if (!actuator.ok()) return r->add(what, CheckResult::kFail, actuator.status().message());
+  if (Status s = (*actuator)->open(); !s.ok()) return r->add(what, CheckResult::kFail, s.message());
   drivers::ActuatorState state;
   DeviceStatus got = DeviceStatus::kTimeout;
   // A driver that has just connected may answer its first read-back late; a second try.
@@ -187,17 +197,19 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
   (*actuator)->hold();
   (*actuator)->close();
   if (got != DeviceStatus::kOk)
-    return add(r, what, CheckResult::kFail, std::string("opened, but the read-back failed: ") + to_string(got));
+    return r->add(what, CheckResult::kFail,
+                  std::string("opened, but the read-back failed: ") + to_string(got));
   std::ostringstream s;
   s.precision(3);
   s << std::fixed << "answered: position (" << state.position[0] << ", " << state.position[1] << ", "
     << state.position[2] << ") mm" << (state.moving ? ", moving" : "") << (state.fault ? ", FAULT" : "");
-  add(r, what, state.fault ? CheckResult::kFail : CheckResult::kPass, s.str());
+  r->add(what, state.fault ? CheckResult::kFail : CheckResult::kPass, s.str());
   if (a.calibration)
-    add(r, "couch calibration", CheckResult::kPass, a.calibration_file);
+    r->add("couch calibration", CheckResult::kPass, a.calibration_file);
   else
-    add(r, "couch calibration", CheckResult::kWarn,
-        "none named (actuator.calibration): corrections assume the couch's axes are the room's (lftrack calibrate couch)");
+    r->add("couch calibration", CheckResult::kWarn,
+           "none named (actuator.calibration): corrections assume the couch's axes are the room's (lftrack "
+           "calibrate couch)");
 }
 
 // A simulated room's own checks (its frames' light fields, a served couch's room link), by the
@@ -205,8 +217,8 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
 void check_simulated_room(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   if (!o.replay_sequence.empty() || !frames_are_simulated(p.scene)) return;
   if (o.simulator == nullptr)
-    return add(
-        r, "simulated detectors", CheckResult::kFail,
+    return r->add(
+        "simulated detectors", CheckResult::kFail,
         "the scene's detectors are the simulator's, and this program has none (lftrack sim and lftrack "
         "run give it)");
   o.simulator->preflight(p, o, r);
@@ -225,7 +237,7 @@ void check_surrogate(const PreparedScene& p, const LoopSessionOptions& o, Prefli
                            (options.device.empty() ? "" : ", device " + options.device) + ")";
   drivers::IgtlSurrogateSource tracker(options);
   if (const Status opened = tracker.open(); !opened.ok())
-    return add(r, what, CheckResult::kFail, opened.message());
+    return r->add(what, CheckResult::kFail, opened.message());
   const auto start = std::chrono::steady_clock::now();
   constexpr int kEnough = 10;
   while (tracker.counters().readings < kEnough &&
@@ -248,7 +260,7 @@ void check_surrogate(const PreparedScene& p, const LoopSessionOptions& o, Prefli
               : " (device \"" + tracker.other_device_seen() + "\" among them)")
       << (c.several_devices ? " (several devices: name the marker's in surrogate.igtl.device)" : "") << ", "
       << c.protocol_errors << " protocol errors";
-    return add(r, what, CheckResult::kFail, d.str());
+    return r->add(what, CheckResult::kFail, d.str());
   }
   d << c.readings << " readings in " << seconds << " s, the newest " << newest[n - 1].amplitude
     << " mm along surrogate.igtl.axis, " << 1e-6 * double(monotonic_now_ns() - newest[n - 1].t_ns)
@@ -257,12 +269,16 @@ void check_surrogate(const PreparedScene& p, const LoopSessionOptions& o, Prefli
   if (refused > 0 || c.protocol_errors > 0 || !std::isfinite(newest[n - 1].amplitude)) {
     d << "; " << refused << " refused for their time stamps, " << c.protocol_errors << " protocol errors"
       << (std::isfinite(newest[n - 1].amplitude) ? "" : "; the newest reading is not finite");
-    return add(r, what, CheckResult::kWarn, d.str());
+    return r->add(what, CheckResult::kWarn, d.str());
   }
-  add(r, what, CheckResult::kPass, d.str());
+  r->add(what, CheckResult::kPass, d.str());
 }
 
 }  // namespace
+
+void PreflightReport::add(std::string what, CheckResult result, std::string detail) {
+  items.push_back({std::move(what), result, std::move(detail)});
+}
 
 bool PreflightReport::passed() const {
   for (const PreflightItem& i : items)
@@ -289,8 +305,8 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
                               bool rt_waived) {
   PreflightReport r;
   check_realtime(p, realtime, rt_waived, &r);
-  add(&r, "view geometry", CheckResult::kPass,
-      "from the scene file " + p.scene.source + " (lftrack calibrate views writes it there)");
+  r.add("view geometry", CheckResult::kPass,
+        "from the scene file " + p.scene.source + " (lftrack calibrate views writes it there)");
   check_light_fields(p, o, &r);
   check_simulated_room(p, o, &r);  // the simulated frames' light fields, the served couch's room link
   std::vector<bool> twins;

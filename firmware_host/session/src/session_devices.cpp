@@ -50,7 +50,7 @@ Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const
   }
   if (o.devices == SessionDevices::kScene && !frames_are_simulated(p.scene))
     return device_frame_source_spec(p.scene);
-  LFTRACK_RETURN_IF_ERROR(check_simulator(p, o));  // LoopSession::create checked it first
+  // A simulator is given: LoopSession::create checked it (check_simulator) before anything was built.
   drivers::SimulatedSourceSpec simulated;
   simulated.make = [&p, &o, pool, parts]() -> Result<std::unique_ptr<drivers::FrameSource>> {
     auto room = o.simulator->make_room(p, o, pool);

@@ -26,10 +26,6 @@ using session::PreparedScene;
 
 namespace {
 
-void add(PreflightReport* r, std::string what, CheckResult result, std::string detail) {
-  r->items.push_back({std::move(what), result, std::move(detail)});
-}
-
 // The simulated frames' light fields (sim.renderer lightfield): fresh for the day's volumes.
 void check_frame_light_fields(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
   if (p.scene.sim.renderer != "lightfield") return;
@@ -40,24 +36,24 @@ void check_frame_light_fields(const PreparedScene& p, const LoopSessionOptions& 
       "; build them first: lftrack precompute --scene " + p.scene.source + " -o " + dir.string();
   if (p.scene.sim.physics.ideal()) {
     auto fields = load_light_fields(p, sim_dir, p.world_mu.get(), &p.scene.sim.light_field);
-    add(r, "light fields (simulated frames) in " + sim_dir.string(),
-        fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-        fields.ok() ? "fresh" : fields.status().message() + build);
+    r->add("light fields (simulated frames) in " + sim_dir.string(),
+           fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+           fields.ok() ? "fresh" : fields.status().message() + build);
     return;
   }
   // Fields of the day's volumes (water and bone, or attenuation): those volumes are made again
   // from the CT (the anatomy draw; seconds), and their fields loaded, not built.
   auto patient = simulated_patient_volumes(p, p.scene.sim.physics, scene_anatomy_seed(p), nullptr);
   if (!patient.ok())
-    return add(r, "light fields (simulated frames) in " + sim_dir.string(), CheckResult::kFail,
-               patient.status().message());
+    return r->add("light fields (simulated frames) in " + sim_dir.string(), CheckResult::kFail,
+                  patient.status().message());
   for (const auto& [name, volume] : {std::pair{"attenuation", patient->attenuation},
                                      std::pair{"water", patient->water}, std::pair{"bone", patient->bone}}) {
     if (!volume) continue;
     auto fields = load_light_fields(p, sim_dir / name, volume.get(), &p.scene.sim.light_field);
-    add(r, "light fields (simulated frames, " + std::string(name) + ") in " + (sim_dir / name).string(),
-        fields.ok() ? CheckResult::kPass : CheckResult::kFail,
-        fields.ok() ? "fresh" : fields.status().message() + build);
+    r->add("light fields (simulated frames, " + std::string(name) + ") in " + (sim_dir / name).string(),
+           fields.ok() ? CheckResult::kPass : CheckResult::kFail,
+           fields.ok() ? "fresh" : fields.status().message() + build);
   }
 }
 
@@ -66,16 +62,16 @@ void check_couch_link(const PreparedScene& p, PreflightReport* r) {
   if (!actuator_is_device(p.scene)) return;
   const std::string what = "the served couch's room link (sim.couch_link)";
   if (p.scene.sim.couch_link.empty())
-    return add(r, what, CheckResult::kFail,
-               "none named: simulated detectors would never see the patient move with the " +
-                   p.scene.actuator.type + " actuator (lftrack serve couch|robot --room FILE)");
+    return r->add(what, CheckResult::kFail,
+                  "none named: simulated detectors would never see the patient move with the " +
+                      p.scene.actuator.type + " actuator (lftrack serve couch|robot --room FILE)");
   auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
-  if (!link.ok()) return add(r, what, CheckResult::kFail, link.status().message());
+  if (!link.ok()) return r->add(what, CheckResult::kFail, link.status().message());
   sim::RoomLinkSample sample;
   if (!(*link)->read(&sample))
-    return add(r, what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
-  add(r, what, CheckResult::kPass,
-      p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
+    return r->add(what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
+  r->add(what, CheckResult::kPass,
+         p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
 }
 
 }  // namespace

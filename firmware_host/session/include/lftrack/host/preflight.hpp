@@ -36,6 +36,7 @@ struct PreflightItem {
 
 struct PreflightReport {
   std::vector<PreflightItem> items;
+  void add(std::string what, CheckResult result, std::string detail);  // one item, in order
   bool passed() const;       // no kFail
   std::string checklist() const;  // one line per item: [ ok ] / [warn] / [FAIL]
   std::string failures() const;   // every failing item's reason, one per line
