@@ -11,7 +11,7 @@
 #include <memory>
 #include <vector>
 
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -29,8 +29,8 @@ struct Setup {
 
 const Setup& setup() {
   static const Setup s = [] {
-    sim::SpinePhantomOptions o;
-    auto phantom = sim::make_spine_phantom(o);
+    phantom::SpinePhantomOptions o;
+    auto phantom = phantom::make_spine_phantom(o);
     const tracking::MuVolume mu = tracking::to_attenuation(phantom->ct);
     Setup out;
     out.view = *tracking::XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(1, -1, 0),

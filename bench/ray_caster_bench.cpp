@@ -8,7 +8,7 @@
 #include <memory>
 #include <vector>
 
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/ray_integrals.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -19,8 +19,8 @@ using namespace lftrack;
 
 std::shared_ptr<const tracking::MuVolume> phantom() {
   static const auto volume = [] {
-    sim::SpinePhantomOptions o;  // the default scene's grid
-    auto p = sim::make_spine_phantom(o);
+    phantom::SpinePhantomOptions o;  // the default scene's grid
+    auto p = phantom::make_spine_phantom(o);
     return std::make_shared<const tracking::MuVolume>(tracking::to_attenuation(p->ct));
   }();
   return volume;

@@ -43,7 +43,7 @@ Result<std::pair<int, int>> parse_shard(const std::string& text);
 // "--physics ideal|clinical|scene" of a study: the physics its frames carry and its name. `scene`
 // takes the scene's sim.physics; pass null to only check the name (before the scene is read).
 struct StudyPhysics {
-  sim::XrayPhysicsSpec physics;
+  sim_spec::XrayPhysicsSpec physics;
   std::string name = "ideal";
 };
 Result<StudyPhysics> study_physics(const std::string& option, const session::PreparedScene* scene);

@@ -72,7 +72,7 @@ Result<StudyPhysics> study_physics(const std::string& option, const PreparedScen
     }
     return out;
   }
-  auto preset = sim::physics_preset(option);
+  auto preset = sim_spec::physics_preset(option);
   if (!preset.ok()) return invalid_argument("--physics: ideal, clinical or scene (the scene's sim.physics)");
   out.physics = *preset;
   out.name = option;

@@ -208,7 +208,8 @@ Status run(const RegisterOptions& o) {
     LFTRACK_RETURN_IF_ERROR(simulated->detectors.expose(*gold, o.seed * 7919, &raw));  // view i: seed * 7919 + i, as before
     if (simulated->correction) {
       use_where_uncalibrated(*simulated->correction);
-      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name, sim::describe(p.scene.sim.physics));
+      spdlog::info("synthetic frames with {} physics: {}", p.scene.sim.physics_name,
+                   sim_spec::describe(p.scene.sim.physics));
     }
   } else {
     if (o.frames.size() != p.scene.detectors.size())

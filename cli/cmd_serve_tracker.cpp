@@ -69,7 +69,7 @@ Status serve_tracker(const TrackerOptions& o) {
                                                         : "Marker";
   twin.position_messages = o.message == "position";
   twin.rate_hz = o.rate_hz > 0 ? o.rate_hz : std::min(1000.0, scene->loop.imaging.surrogate.rate_hz);
-  sim::BreathingSurrogateSpec chest = scene->surrogate.sim;
+  sim_spec::BreathingSurrogateSpec chest = scene->surrogate.sim;
   chest.sample_rate_hz = twin.rate_hz;
   auto marker = std::make_shared<sim::BreathingSurrogate>(chest);
   auto faults = std::make_shared<MarkerFaults>();

@@ -137,7 +137,7 @@ Status run_trade(const TradeCliOptions& o) {
   expected.shards = options.shards;
   expected.points_total = points_total;
   expected.physics = options.physics_name;
-  expected.physics_description = sim::describe(options.physics);
+  expected.physics_description = sim_spec::describe(options.physics);
   expected.verdict_tolerance_mm = prepared->scene.safety.beam_tolerance_mm;
   std::vector<std::string> ids;
   for (const TradePoint& t : *mine) ids.push_back(t.id);

@@ -9,6 +9,8 @@
 
 namespace lftrack::sim {
 
+using sim_spec::AnatomySpec;
+
 using Eigen::Vector3d;
 
 namespace {
@@ -20,20 +22,6 @@ double smoothstep(double t) {
 }
 
 }  // namespace
-
-Status check_anatomy_spec(const AnatomySpec& s) {
-  auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
-  if (!in(s.soft_tissue_mm, 0, 30)) return out_of_range("anatomy: soft_tissue_mm must be in [0, 30]");
-  if (!in(s.soft_tissue_scale_mm, 10, 1000)) return out_of_range("anatomy: soft_tissue_scale_mm must be in [10, 1000]");
-  if (!in(s.ramp_mm, 1, 500)) return out_of_range("anatomy: ramp_mm must be in [1, 500]");
-  if (!in(s.adjacent_translation_mm, 0, 10)) return out_of_range("anatomy: adjacent_translation_mm must be in [0, 10]");
-  if (!in(s.adjacent_rotation_deg, 0, 10)) return out_of_range("anatomy: adjacent_rotation_deg must be in [0, 10]");
-  if (!in(s.disc_mm, 1, 100)) return out_of_range("anatomy: disc_mm must be in [1, 100]");
-  if (!in(s.breathing_mm, 0, 40)) return out_of_range("anatomy: breathing_mm must be in [0, 40]");
-  for (int a = 0; a < 3; ++a)
-    if (!in(s.target_size_mm[a], 1, 1000)) return out_of_range("anatomy: target_size_mm must be in [1, 1000] per axis");
-  return {};
-}
 
 AnatomyDeformation::AnatomyDeformation(const AnatomySpec& spec, const Vector3d& centre, std::uint64_t seed)
     : spec_(spec), centre_(centre), half_(0.5 * spec.target_size_mm) {

@@ -5,6 +5,8 @@
 
 namespace lftrack::sim {
 
+using sim_spec::BreathingSurrogateSpec;
+
 BreathingSurrogate::BreathingSurrogate(const BreathingSurrogateSpec& spec)
     : spec_(spec), random_(spec.seed), noise_(0.0, 1.0) {}
 

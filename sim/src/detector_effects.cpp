@@ -5,6 +5,8 @@
 
 namespace lftrack::sim {
 
+using sim_spec::DetectorEffectsSpec;
+
 namespace {
 
 std::uint64_t splitmix(std::uint64_t x) {
@@ -25,20 +27,6 @@ double normal(std::uint64_t seed, std::uint64_t a, std::uint64_t b, std::uint64_
 }
 
 }  // namespace
-
-Status check_detector_effects(const DetectorEffectsSpec& s) {
-  auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
-  if (!in(s.glare_fraction, 0, 0.5)) return out_of_range("detector: glare_fraction must be in [0, 0.5]");
-  if (!in(s.glare_sigma_mm, 0.01, 100)) return out_of_range("detector: glare_sigma_mm must be in [0.01, 100]");
-  if (!in(s.lag_fraction, 0, 0.5)) return out_of_range("detector: lag_fraction must be in [0, 0.5]");
-  if (!in(s.gain_smooth_rms, 0, 0.2) || !in(s.gain_pixel_rms, 0, 0.2))
-    return out_of_range("detector: gain_smooth_rms and gain_pixel_rms must be in [0, 0.2]");
-  if (!in(s.defective_pixel_fraction, 0, 0.1))
-    return out_of_range("detector: defective_pixel_fraction must be in [0, 0.1]");
-  if (s.defective_lines < 0 || s.defective_lines > 8) return out_of_range("detector: defective_lines must be 0-8");
-  if (!in(s.heel_gradient, -0.5, 0.5)) return out_of_range("detector: heel_gradient must be in [-0.5, 0.5]");
-  return {};
-}
 
 DetectorPattern::DetectorPattern(const DetectorEffectsSpec& spec, int rows, int cols)
     : spec_(spec), rows_(std::max(1, rows)), cols_(std::max(1, cols)) {

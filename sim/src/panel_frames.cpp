@@ -8,6 +8,8 @@
 #include "lftrack/sim/poisson_sampler.hpp"
 
 namespace lftrack::sim {
+
+using sim_spec::check_detector_effects;
 namespace {
 
 bool in(double v, double lo, double hi) {

@@ -4,6 +4,9 @@
 
 namespace lftrack::sim {
 
+using sim_spec::MotionStep;
+using sim_spec::PatientMotionSpec;
+
 tracking::Vector6d patient_offset(const PatientMotionSpec& spec, double t_s) {
   const double t = t_s > 0 ? t_s : 0.0;
   tracking::Vector6d offset = spec.drift_per_s * t;

@@ -5,17 +5,9 @@
 
 namespace lftrack::sim {
 
-using tracking::ImageView;
+using sim_spec::ScatterSpec;
 
-Status check_scatter_spec(const ScatterSpec& s) {
-  if (!(s.spr_per_cm >= 0 && s.spr_per_cm <= 1)) return out_of_range("scatter: spr_per_cm must be in [0, 1]");
-  if (!(s.kernel_sigma_mm > 0 && s.kernel_sigma_mm <= 500))
-    return out_of_range("scatter: kernel_sigma_mm must be in (0, 500]");
-  if (!(s.grid_primary_transmission > 0 && s.grid_primary_transmission <= 1) ||
-      !(s.grid_scatter_transmission >= 0 && s.grid_scatter_transmission <= s.grid_primary_transmission))
-    return out_of_range("scatter: grid transmissions must satisfy 0 <= scatter <= primary <= 1, primary > 0");
-  return {};
-}
+using tracking::ImageView;
 
 namespace {
 int coarse_factor(double sigma_px) { return std::clamp(int(sigma_px / 4), 1, 64); }

@@ -8,6 +8,10 @@
 
 namespace lftrack::sim {
 
+using sim_spec::check_physics;
+using sim_spec::kMaxPhotonsPerPixel;
+using sim_spec::XrayPhysicsSpec;
+
 using namespace lftrack::tracking;
 
 namespace {

@@ -6,6 +6,9 @@
 
 namespace lftrack::sim {
 
+using sim_spec::check_spectrum_spec;
+using sim_spec::SpectrumSpec;
+
 namespace {
 
 // NIST X-ray mass attenuation coefficients, mu/rho in cm^2/g (J. H. Hubbell and S. M. Seltzer,
@@ -57,11 +60,7 @@ double XraySpectrum::mean_energy_kev() const {
 }
 
 Result<XraySpectrum> make_spectrum(const SpectrumSpec& spec) {
-  if (!(spec.kvp >= 40 && spec.kvp <= 150))
-    return out_of_range("spectrum: kvp must be in [40, 150] (the attenuation tables end at 150 keV)");
-  if (!(spec.filtration_mm_al >= 0 && spec.filtration_mm_al <= 20))
-    return out_of_range("spectrum: filtration_mm_al must be in [0, 20]");
-  if (!(spec.bin_kev > 0 && spec.bin_kev <= 10)) return out_of_range("spectrum: bin_kev must be in (0, 10]");
+  LFTRACK_RETURN_IF_ERROR(check_spectrum_spec(spec));
   XraySpectrum s;
   const double e_min = 10;
   const int bins = std::max(1, int(std::ceil((spec.kvp - e_min) / spec.bin_kev)));

@@ -36,7 +36,8 @@ nlohmann::json options_json(const CaptureRangeOptions& o) {
           {"seed", o.seed},
           {"renderer", o.renderer},
           {"physics", o.physics_name},
-          {"physics_description", o.physics_description.empty() ? sim::describe(o.physics) : o.physics_description},
+          {"physics_description",
+           o.physics_description.empty() ? sim_spec::describe(o.physics) : o.physics_description},
           {"anatomy_draws", o.anatomy_draws}};
 }
 
@@ -163,7 +164,8 @@ Result<CaptureRangeReport> read_capture_range_shard(const std::filesystem::path&
       o.renderer = opt.at("renderer").get<std::string>();
       // Studies from before issue 21 had ideal frames.
       o.physics_name = opt.value("physics", std::string("ideal"));
-      o.physics_description = opt.value("physics_description", sim::describe(sim::XrayPhysicsSpec{}));
+      o.physics_description =
+          opt.value("physics_description", sim_spec::describe(sim_spec::XrayPhysicsSpec{}));
       o.anatomy_draws = opt.value("anatomy_draws", 1);
       if (o.anatomy_draws < 1 || o.anatomy_draws > 100000) return corrupt_data(file.string() + ": anatomy_draws out of range");
     } catch (const std::exception& e) {

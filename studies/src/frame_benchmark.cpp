@@ -109,7 +109,7 @@ Result<FrameBenchReport> run_frame_benchmark(const PreparedScene& scene, const F
   if (o.pairs < 1 || o.pairs > 1000000) return out_of_range("bench frames: --pairs must be in [1, 1000000]");
   FrameBenchReport report;
   report.scene = scene.scene.name;
-  report.physics = sim::describe(scene.scene.sim.physics);
+  report.physics = sim_spec::describe(scene.scene.sim.physics);
   report.pairs = o.pairs;
   for (const auto& d : scene.scene.detectors) report.views.push_back(d.view.name);
   const auto poses = sample_envelope_poses(scene, o.pairs, o.seed);

@@ -23,7 +23,8 @@ RealismOptions RealismOptions::quick() {
 }
 
 std::vector<RealismFactor> realism_factors(const PreparedScene& p) {
-  const sim::XrayPhysicsSpec all = p.scene.sim.physics.ideal() ? sim::clinical_physics() : p.scene.sim.physics;
+  const sim_spec::XrayPhysicsSpec all =
+      p.scene.sim.physics.ideal() ? sim_spec::clinical_physics() : p.scene.sim.physics;
   std::vector<RealismFactor> out;
   auto add = [&](const std::string& name, auto set_part) {
     RealismFactor f;
@@ -31,29 +32,29 @@ std::vector<RealismFactor> realism_factors(const PreparedScene& p) {
     set_part(f.physics);
     out.push_back(std::move(f));
   };
-  add("ideal", [](sim::XrayPhysicsSpec&) {});
-  if (all.spectrum) add("spectrum", [&](sim::XrayPhysicsSpec& s) { s.spectrum = all.spectrum; });
-  if (all.scatter) add("scatter", [&](sim::XrayPhysicsSpec& s) { s.scatter = all.scatter; });
-  if (all.detector) add("detector", [&](sim::XrayPhysicsSpec& s) { s.detector = all.detector; });
+  add("ideal", [](sim_spec::XrayPhysicsSpec&) {});
+  if (all.spectrum) add("spectrum", [&](sim_spec::XrayPhysicsSpec& s) { s.spectrum = all.spectrum; });
+  if (all.scatter) add("scatter", [&](sim_spec::XrayPhysicsSpec& s) { s.scatter = all.scatter; });
+  if (all.detector) add("detector", [&](sim_spec::XrayPhysicsSpec& s) { s.detector = all.detector; });
   if (all.anatomy) {
-    const sim::AnatomySpec a = *all.anatomy;
+    const sim_spec::AnatomySpec a = *all.anatomy;
     if (a.soft_tissue_mm > 0)
-      add("soft_tissue", [&](sim::XrayPhysicsSpec& s) {
+      add("soft_tissue", [&](sim_spec::XrayPhysicsSpec& s) {
         s.anatomy = a;
         s.anatomy->adjacent_translation_mm = s.anatomy->adjacent_rotation_deg = s.anatomy->breathing_mm = 0;
       });
     if (a.adjacent_translation_mm > 0 || a.adjacent_rotation_deg > 0)
-      add("adjacent_vertebrae", [&](sim::XrayPhysicsSpec& s) {
+      add("adjacent_vertebrae", [&](sim_spec::XrayPhysicsSpec& s) {
         s.anatomy = a;
         s.anatomy->soft_tissue_mm = s.anatomy->breathing_mm = 0;
       });
     if (a.breathing_mm > 0)
-      add("breathing", [&](sim::XrayPhysicsSpec& s) {
+      add("breathing", [&](sim_spec::XrayPhysicsSpec& s) {
         s.anatomy = a;
         s.anatomy->soft_tissue_mm = s.anatomy->adjacent_translation_mm = s.anatomy->adjacent_rotation_deg = 0;
       });
   }
-  add("clinical", [&](sim::XrayPhysicsSpec& s) { s = all; });
+  add("clinical", [&](sim_spec::XrayPhysicsSpec& s) { s = all; });
   return out;
 }
 
@@ -86,7 +87,7 @@ RealismFactorSummary summarize_realism_factor(const RealismOptions& o, const Cap
                                               const std::string& image_method, const std::string& hybrid_method) {
   RealismFactorSummary s;
   s.name = study.options.physics_name;
-  s.physics = study.options.physics_description.empty() ? sim::describe(study.options.physics)
+  s.physics = study.options.physics_description.empty() ? sim_spec::describe(study.options.physics)
                                                         : study.options.physics_description;
   std::vector<double> tre, ms;
   int image_runs = 0, image_ok = 0, hybrid_runs = 0, hybrid_ok = 0;
@@ -161,7 +162,7 @@ Result<RealismReport> run_realism_study(const PreparedScene& p, const RealismOpt
   if (!factors.ok()) return factors.status();
   for (std::size_t i = 0; i < factors->size(); ++i) {
     const RealismFactor& factor = (*factors)[i];
-    spdlog::info("realism: {} ({})", factor.name, sim::describe(factor.physics));
+    spdlog::info("realism: {} ({})", factor.name, sim_spec::describe(factor.physics));
     auto study = run_capture_range_study(p, realism_capture_range_options(p, o, factor), pool, [&](double f) {
       if (progress) progress((double(i) + f) / double(factors->size()));
     });

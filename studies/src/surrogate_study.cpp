@@ -38,7 +38,7 @@ std::uint64_t registration_seed(const SurrogateStudyOptions& o) {
 constexpr const char* kSurrogateOutputs[] = {"surrogate.csv", "surrogate_trace.png", "surrogate_trace.dat",
                                              "surrogate_trace.gp"};
 
-Eigen::Vector3d target_at(const sim::PatientMotionSpec& motion, double t_s) {
+Eigen::Vector3d target_at(const sim_spec::PatientMotionSpec& motion, double t_s) {
   return sim::patient_offset(motion, t_s).head<3>();
 }
 

@@ -87,7 +87,8 @@ struct Problem {
 constexpr int kAnatomyDraws = 4;
 
 Result<std::vector<Problem>> make_problems(const PreparedScene& p, int count, std::uint64_t seed,
-                                           const sim::XrayPhysicsSpec& physics, tracking::ThreadPool* pool) {
+                                           const sim_spec::XrayPhysicsSpec& physics,
+                                           tracking::ThreadPool* pool) {
   tracking::RendererOptions options;
   options.pool = pool;
   auto world = tracking::make_renderer("siddon", p.world_mu, options);
@@ -458,7 +459,7 @@ Result<TradeStudy> run_trade_study(const PreparedScene& p, const TradeOptions& o
   study.shards = o.shards;
   study.points_total = points_total;
   study.physics = o.physics_name;
-  study.physics_description = sim::describe(o.physics);
+  study.physics_description = sim_spec::describe(o.physics);
   study.verdict_tolerance_mm = p.scene.safety.beam_tolerance_mm;
   if (progress) progress(0, "making the problems");
   auto problems = make_problems(p, problem_count, o.seed, o.physics, pool);

@@ -27,7 +27,7 @@ sim::PanelSpec panel() {
   s.cols = 128;
   s.open_field_fraction = 0.5;
   s.photons_per_pixel = 6000;
-  sim::DetectorEffectsSpec e;
+  sim_spec::DetectorEffectsSpec e;
   e.gain_smooth_rms = 0.005;
   e.gain_pixel_rms = 0.003;
   e.defective_pixel_fraction = 0.001;

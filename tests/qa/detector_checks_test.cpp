@@ -14,7 +14,7 @@
 #include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
 #include "lftrack/sim/panel_frames.hpp"
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "qa_phantom_support.hpp"
 
@@ -66,7 +66,7 @@ TEST(DetectorChecks, TheShippedRoomPassesAndADeadColumnFailsItsDetector) {
 TEST(DetectorChecks, APanelWithTheClinicalDetectorPatternPassesAndNewHotPixelsFail) {
   tracking::ThreadPool pool(2);
   session::PreparedScene p = prepared(test::qa_phantom_scene(), &pool);
-  p.scene.sim.physics.detector = sim::clinical_detector();  // gain, stuck pixels, 2 lines, heel
+  p.scene.sim.physics.detector = sim_spec::clinical_detector();  // gain, stuck pixels, 2 lines, heel
   auto report = run_detector_qa(p, {}, nullptr);
   ASSERT_TRUE(report.ok()) << report.status().message();
   // Its stuck pixels and lines are in the baseline's map; a pixel near the defect rule's

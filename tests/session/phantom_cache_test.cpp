@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "lftrack/host/scene.hpp"
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 
@@ -23,8 +23,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-sim::SpinePhantomOptions small() {
-  sim::SpinePhantomOptions o;
+phantom::SpinePhantomOptions small() {
+  phantom::SpinePhantomOptions o;
   o.size = {128, 128, 40};
   o.spacing_mm = {2.0, 2.0, 2.0};
   o.centre_mm = {0, 20, -350};
@@ -34,14 +34,14 @@ sim::SpinePhantomOptions small() {
 class PhantomCache : public ::testing::Test {
  protected:
   // The phantom from the cache folder, with which path the call took.
-  sim::SpinePhantom cached(const sim::SpinePhantomOptions& o, PhantomCacheUse expected_use) {
+  phantom::SpinePhantom cached(const phantom::SpinePhantomOptions& o, PhantomCacheUse expected_use) {
     PhantomCacheUse use = PhantomCacheUse::kOff;
     auto p = cached_spine_phantom(o, dir_.path() / "cache", &pool_, &use);
     EXPECT_TRUE(p.ok()) << p.status().message();
     EXPECT_EQ(use, expected_use);
-    return p.ok() ? *std::move(p) : sim::SpinePhantom{};
+    return p.ok() ? *std::move(p) : phantom::SpinePhantom{};
   }
-  void expect_same(const sim::SpinePhantom& a, const sim::SpinePhantom& b) {
+  void expect_same(const phantom::SpinePhantom& a, const phantom::SpinePhantom& b) {
     EXPECT_TRUE(a.ct.values == b.ct.values) << "the voxels differ";
     EXPECT_EQ(a.ct.geometry.size, b.ct.geometry.size);
     EXPECT_EQ(a.ct.geometry.origin_mm, b.ct.geometry.origin_mm);
@@ -75,36 +75,36 @@ TEST(ProgramBuildId, TheTestProgramHasOne) {
 }
 
 TEST(SpinePhantomLayout, IsTheGeneratedPhantomWithoutItsVoxels) {
-  auto layout = sim::spine_phantom_layout(small());
-  auto made = sim::make_spine_phantom(small());
+  auto layout = phantom::spine_phantom_layout(small());
+  auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(layout.ok() && made.ok());
   EXPECT_TRUE(layout->ct.values.empty());
   EXPECT_EQ(layout->ct.geometry.origin_mm, made->ct.geometry.origin_mm);
   EXPECT_EQ(layout->vertebral_body_centres_mm, made->vertebral_body_centres_mm);
   EXPECT_EQ(layout->target_vertebra, made->target_vertebra);
-  sim::SpinePhantomOptions tiny = small();
+  phantom::SpinePhantomOptions tiny = small();
   tiny.size = {10, 10, 10};
-  EXPECT_FALSE(sim::spine_phantom_layout(tiny).ok());
+  EXPECT_FALSE(phantom::spine_phantom_layout(tiny).ok());
 }
 
 TEST_F(PhantomCache, TheSecondCallReadsBackTheFirstCallsPhantomBitForBit) {
-  const auto made = sim::make_spine_phantom(small());
+  const auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
-  const sim::SpinePhantom first = cached(small(), PhantomCacheUse::kGenerated);
-  const sim::SpinePhantom second = cached(small(), PhantomCacheUse::kLoaded);
+  const phantom::SpinePhantom first = cached(small(), PhantomCacheUse::kGenerated);
+  const phantom::SpinePhantom second = cached(small(), PhantomCacheUse::kLoaded);
   expect_same(first, *made);
   expect_same(second, *made);
   // Other options are another phantom and another file, never this one's voxels.
-  sim::SpinePhantomOptions other = small();
+  phantom::SpinePhantomOptions other = small();
   other.seed = 2;
-  const sim::SpinePhantom reseeded = cached(other, PhantomCacheUse::kGenerated);
+  const phantom::SpinePhantom reseeded = cached(other, PhantomCacheUse::kGenerated);
   EXPECT_FALSE(reseeded.ct.values == made->ct.values);
   other.noise_hu = 12.000000000000002;  // the options are named to the last bit
   cached(other, PhantomCacheUse::kGenerated);
 }
 
 TEST_F(PhantomCache, ADamagedCopyIsMadeAnewAndReplaced) {
-  const auto made = sim::make_spine_phantom(small());
+  const auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
   cached(small(), PhantomCacheUse::kGenerated);
   const fs::path file = the_file();
@@ -123,7 +123,7 @@ TEST_F(PhantomCache, ADamagedCopyIsMadeAnewAndReplaced) {
 }
 
 TEST_F(PhantomCache, ACopyWhoseHeaderNamesAnotherBuildIsNotUsed) {
-  const auto made = sim::make_spine_phantom(small());
+  const auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
   cached(small(), PhantomCacheUse::kGenerated);
   const fs::path file = the_file();
@@ -137,7 +137,7 @@ TEST_F(PhantomCache, ACopyWhoseHeaderNamesAnotherBuildIsNotUsed) {
 }
 
 TEST_F(PhantomCache, AFolderThatCannotBeWrittenStillGivesThePhantom) {
-  const auto made = sim::make_spine_phantom(small());
+  const auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
   { std::ofstream(dir_.path() / "cache") << "a file, not a folder"; }
   expect_same(cached(small(), PhantomCacheUse::kUnwritten), *made);
@@ -145,7 +145,7 @@ TEST_F(PhantomCache, AFolderThatCannotBeWrittenStillGivesThePhantom) {
 }
 
 TEST_F(PhantomCache, AFifoLinkOrFolderInTheCopysPlaceIsNeverRead) {
-  const auto made = sim::make_spine_phantom(small());
+  const auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
   cached(small(), PhantomCacheUse::kGenerated);
   const fs::path file = the_file();
@@ -171,9 +171,9 @@ TEST_F(PhantomCache, AFifoLinkOrFolderInTheCopysPlaceIsNeverRead) {
 }
 
 TEST_F(PhantomCache, TheFileNamesThisBuildAndFourWritersAtOnceLeaveOneWholeCopy) {
-  const auto made = sim::make_spine_phantom(small());
+  const auto made = phantom::make_spine_phantom(small());
   ASSERT_TRUE(made.ok());
-  std::vector<sim::SpinePhantom> got(4);
+  std::vector<phantom::SpinePhantom> got(4);
   std::vector<std::thread> writers;
   for (auto& g : got)
     writers.emplace_back([&g, this] { g = *cached_spine_phantom(small(), dir_.path() / "cache", nullptr); });
@@ -233,11 +233,11 @@ TEST_F(PhantomCache, NoFolderIsNoCacheAndBadOptionsFailAsWithout) {
   auto p = cached_spine_phantom(small(), fs::path(), &pool_, &use);
   ASSERT_TRUE(p.ok());
   EXPECT_EQ(use, PhantomCacheUse::kOff);
-  sim::SpinePhantomOptions bad = small();
+  phantom::SpinePhantomOptions bad = small();
   bad.spacing_mm.x() = -1;
   auto refused = cached_spine_phantom(bad, dir_.path() / "cache", &pool_, &use);
   ASSERT_FALSE(refused.ok());
-  EXPECT_EQ(refused.status().message(), sim::make_spine_phantom(bad).status().message());
+  EXPECT_EQ(refused.status().message(), phantom::make_spine_phantom(bad).status().message());
   EXPECT_FALSE(fs::exists(dir_.path() / "cache")) << "nothing written for options that make no phantom";
 }
 

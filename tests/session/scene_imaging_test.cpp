@@ -196,7 +196,7 @@ TEST(SceneImaging, TheDoseModelsNumbers) {
 TEST(SimSurrogateSource, ReadingsAtItsRateOnTheRoomsClockWithFaults) {
   sim::SimulatedRoomSpec room_spec;
   sim::SimulatedRoom room(room_spec);
-  sim::BreathingSurrogateSpec spec;
+  sim_spec::BreathingSurrogateSpec spec;
   spec.sample_rate_hz = 50;
   spec.noise_sd = 0;
   SimSurrogateFaults faults;

@@ -6,6 +6,8 @@
 #include <cmath>
 
 namespace lftrack::sim {
+
+using sim_spec::BreathingSurrogateSpec;
 namespace {
 
 TEST(BreathingSurrogate, RestsAtExhaleAndPeaksHalfAPeriodLater) {

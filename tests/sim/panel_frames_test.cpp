@@ -10,6 +10,8 @@
 #include <limits>
 
 namespace lftrack::sim {
+
+using sim_spec::DetectorEffectsSpec;
 namespace {
 
 struct Moments {

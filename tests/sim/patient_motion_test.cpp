@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 namespace lftrack::sim {
+
+using sim_spec::PatientMotionSpec;
 namespace {
 
 using tracking::Vector6d;

@@ -1,10 +1,14 @@
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 
 #include <gtest/gtest.h>
 
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::sim {
+
+using phantom::make_spine_phantom;
+using phantom::SpinePhantom;
+using phantom::SpinePhantomOptions;
 namespace {
 
 SpinePhantomOptions small() {

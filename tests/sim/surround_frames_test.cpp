@@ -7,11 +7,14 @@
 
 #include <cmath>
 
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
 namespace lftrack::sim {
+
+using sim_spec::clinical_physics;
+using sim_spec::XrayPhysicsSpec;
 namespace {
 
 using namespace lftrack::tracking;

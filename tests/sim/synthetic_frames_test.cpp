@@ -4,10 +4,13 @@
 
 #include <cmath>
 
+#include "lftrack/phantom/implanted_markers.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
 namespace lftrack::sim {
+
+using phantom::insert_markers;
 namespace {
 
 using namespace lftrack::tracking;

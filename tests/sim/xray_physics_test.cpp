@@ -10,12 +10,24 @@
 #include "lftrack/sim/material_decomposition.hpp"
 #include "lftrack/sim/scatter_model.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
-#include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/sim/xray_spectrum.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
 namespace lftrack::sim {
+
+using sim_spec::AnatomySpec;
+using sim_spec::check_anatomy_spec;
+using sim_spec::check_detector_effects;
+using sim_spec::check_scatter_spec;
+using sim_spec::clinical_anatomy;
+using sim_spec::clinical_detector;
+using sim_spec::DetectorEffectsSpec;
+using sim_spec::physics_preset;
+using sim_spec::ScatterSpec;
+using sim_spec::SpectrumSpec;
+using sim_spec::XrayPhysicsSpec;
 namespace {
 
 using namespace lftrack::tracking;

@@ -10,7 +10,7 @@
 #include <cmath>
 
 #include "lftrack/host/scene_registration.hpp"
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
@@ -85,7 +85,7 @@ TEST(SimDetectors, ClinicalFramesKeepTheirWindowAndRefuseAPatientWithoutTheRest)
   tracking::ThreadPool pool(2);
   auto scene = load_scene("builtin:phantom");
   ASSERT_TRUE(scene.ok());
-  auto physics = sim::physics_preset("clinical");
+  auto physics = sim_spec::physics_preset("clinical");
   ASSERT_TRUE(physics.ok());
   scene->sim.physics = *physics;
   scene->sim.renderer = "siddon";

@@ -10,7 +10,7 @@
 #include <filesystem>
 #include <map>
 
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
@@ -37,7 +37,7 @@ std::map<std::string, fs::file_time_type> files_of(const fs::path& dir) {
 Result<PreparedScene> clinical_phantom(const std::string& sim_renderer, tracking::ThreadPool* pool) {
   auto scene = load_scene("builtin:phantom");
   if (!scene.ok()) return scene.status();
-  auto physics = sim::physics_preset("clinical");
+  auto physics = sim_spec::physics_preset("clinical");
   if (!physics.ok()) return physics.status();
   scene->sim.physics = *physics;
   scene->sim.physics_name = "clinical";

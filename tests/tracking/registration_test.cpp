@@ -11,7 +11,7 @@
 #include <cmath>
 #include <thread>
 
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/target_error.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
@@ -31,10 +31,10 @@ struct Phantom {
 };
 const Phantom& phantom() {
   static const Phantom p = [] {
-    sim::SpinePhantomOptions o;
+    phantom::SpinePhantomOptions o;
     o.size = {96, 96, 64};
     o.spacing_mm = {2.0, 2.0, 2.0};
-    auto ph = sim::make_spine_phantom(o);
+    auto ph = phantom::make_spine_phantom(o);
     EXPECT_TRUE(ph.ok());
     Phantom out;
     out.mu = std::make_shared<const MuVolume>(to_attenuation(ph->ct));

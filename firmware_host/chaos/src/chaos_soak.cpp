@@ -175,7 +175,7 @@ Result<std::filesystem::path> claim_run_folder(const std::filesystem::path& pare
 // A segment that images on demand: X-ray pairs at 1 Hz and the correlation model between them,
 // following the simulated chest marker, with the scene's breathing (6 mm if it has less).
 void image_on_demand(session::Scene* scene, std::uint64_t seed) {
-  sim::PatientMotionSpec& motion = scene->motion.motion;
+  sim_spec::PatientMotionSpec& motion = scene->motion.motion;
   if (motion.breathing_amplitude.head<3>().norm() < 6)
     motion.breathing_amplitude.head<3>() = Eigen::Vector3d(0.5, 1.5, 6);
   loop::ImagingSpec& imaging = scene->loop.imaging;
@@ -183,7 +183,7 @@ void image_on_demand(session::Scene* scene, std::uint64_t seed) {
   imaging.xray_hz = 1;
   imaging.model.min_span_s = std::max(1.0, motion.breathing_period_s);
   scene->surrogate.source = "sim";
-  sim::BreathingSurrogateSpec& marker = scene->surrogate.sim;
+  sim_spec::BreathingSurrogateSpec& marker = scene->surrogate.sim;
   marker.period_s = motion.breathing_period_s;
   marker.sample_rate_hz = imaging.surrogate.rate_hz;
   marker.seed = seed;
@@ -192,15 +192,15 @@ void image_on_demand(session::Scene* scene, std::uint64_t seed) {
 // Sudden shifts of the patient, drawn for a segment of `cycles`: at any cycle with the chance of
 // one fault kind, 1 to 8 mm in a random direction, each undone by a later one (the patient moves
 // back), so that the patient stays near the envelope over a long segment.
-std::vector<sim::MotionStep> draw_shifts(std::mt19937_64& random, std::int64_t cycles, double period_s,
-                                         double fault_rate) {
-  std::vector<sim::MotionStep> shifts;
+std::vector<sim_spec::MotionStep> draw_shifts(std::mt19937_64& random, std::int64_t cycles, double period_s,
+                                              double fault_rate) {
+  std::vector<sim_spec::MotionStep> shifts;
   std::uniform_real_distribution<double> unit(0, 1), signed_unit(-1, 1);
   const double chance = fault_rate / double(kChaosFaultKinds);
   Eigen::Vector3d displaced = Eigen::Vector3d::Zero();
   for (std::int64_t k = 1; k < cycles; ++k) {
     if (unit(random) >= chance) continue;
-    sim::MotionStep step;
+    sim_spec::MotionStep step;
     step.time_s = double(k) * period_s;
     if (displaced.isZero()) {
       Eigen::Vector3d d(signed_unit(random), signed_unit(random), signed_unit(random));
@@ -266,9 +266,9 @@ Result<ChaosReport> run_chaos_soak(const session::PreparedScene& scene, const Ch
     const bool model = !modbus && !can && segment % 2 == 1;
     std::mt19937_64 segment_random(options.seed * 1'000'003 + std::uint64_t(segment));
     PreparedScene patient = scene;  // volumes are shared; only the motion differs
-    std::vector<sim::MotionStep>& shifts = patient.scene.motion.motion.shifts;
+    std::vector<sim_spec::MotionStep>& shifts = patient.scene.motion.motion.shifts;
     const std::size_t scene_shifts = shifts.size();  // the scene's own, before the soak's
-    for (const sim::MotionStep& s : draw_shifts(segment_random, cycles, period_s, options.fault_rate))
+    for (const sim_spec::MotionStep& s : draw_shifts(segment_random, cycles, period_s, options.fault_rate))
       shifts.push_back(s);
 
     LoopSessionOptions so;

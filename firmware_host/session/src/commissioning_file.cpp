@@ -15,7 +15,7 @@
 
 #include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "scene_yaml.hpp"
 
@@ -130,8 +130,8 @@ CommissioningFingerprint commissioning_fingerprint(const PreparedScene& p) {
     imaging << '\n';
   }
   imaging << "photons " << s.sim.photons_per_pixel << " exposure " << p.exposure.photons_per_pixel << ' '
-          << p.exposure.open_field_fraction << " blur " << s.sim.detector_blur_px << " physics " << s.sim.physics_name
-          << ": " << sim::describe(s.sim.physics);
+          << p.exposure.open_field_fraction << " blur " << s.sim.detector_blur_px << " physics "
+          << s.sim.physics_name << ": " << sim_spec::describe(s.sim.physics);
   return {digest(ct.str()), digest(geometry.str()), digest(registration.str()), digest(imaging.str())};
 }
 

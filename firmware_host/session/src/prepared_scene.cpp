@@ -5,11 +5,11 @@
 #include <sstream>
 
 #include "lftrack/host/phantom_cache.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/host/roi_mask.hpp"
+#include "lftrack/host/scene.hpp"
 #include "lftrack/host/scene_exposure.hpp"
-#include "lftrack/sim/spine_phantom.hpp"
-#include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/phantom/implanted_markers.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 
 namespace lftrack::session {
@@ -104,7 +104,7 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   const auto t0 = std::chrono::steady_clock::now();
   std::optional<Vector3d> phantom_target;
   if (out.scene.ct.is_builtin_phantom()) {
-    sim::SpinePhantomOptions options;
+    phantom::SpinePhantomOptions options;
     options.seed = out.scene.ct.phantom_seed;
     auto phantom = cached_spine_phantom(options, cache_dir_from_environment(), pool);
     if (!phantom.ok()) return phantom.status();
@@ -122,7 +122,8 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   const FiducialSpec& fiducials = out.scene.fiducials;
   if (fiducials.insert) {
     auto with_markers = std::make_shared<tracking::CtVolume>(*out.ct);
-    sim::insert_markers(with_markers.get(), fiducials.positions_ct_mm, fiducials.radius_mm, sim::kMarkerHu);
+    phantom::insert_markers(with_markers.get(), fiducials.positions_ct_mm, fiducials.radius_mm,
+                            phantom::kMarkerHu);
     out.ct = std::move(with_markers);
   }
   out.mu = std::make_shared<const tracking::MuVolume>(
@@ -130,7 +131,8 @@ Result<PreparedScene> prepare_scene(const Scene& scene, const std::string& ct_ov
   out.world_mu = out.mu;
   if (fiducials.insert) {
     auto world = std::make_shared<tracking::MuVolume>(*out.mu);
-    sim::insert_markers(world.get(), fiducials.positions_ct_mm, fiducials.radius_mm, sim::kSteelMuPerMm);
+    phantom::insert_markers(world.get(), fiducials.positions_ct_mm, fiducials.radius_mm,
+                            phantom::kSteelMuPerMm);
     out.world_mu = std::move(world);
   }
 

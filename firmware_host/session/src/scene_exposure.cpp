@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "lftrack/sim/synthetic_frames.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 
 namespace lftrack::session {
@@ -47,7 +47,7 @@ Result<SimExposure> scene_exposure(const PreparedScene& p) {
   // The open field's level (as a fraction of full scale) at which the darkest ROI reads aec_level,
   // within the synthesizers' photon ceiling (a ROI that nothing reaches then reads less: the
   // description says how much).
-  const double ceiling = kReferenceOpenFieldFraction * sim::kMaxPhotonsPerPixel / sim.photons_per_pixel;
+  const double ceiling = kReferenceOpenFieldFraction * sim_spec::kMaxPhotonsPerPixel / sim.photons_per_pixel;
   const double open_field = darkest > 0 ? sim.aec_level / darkest : ceiling;
   e.open_field_fraction = std::clamp(open_field, 1e-3, ceiling);
   e.photons_per_pixel = sim.photons_per_pixel * e.open_field_fraction / kReferenceOpenFieldFraction;

@@ -130,7 +130,7 @@ Status SceneParser::parse_surrogate(const YAML::Node& n, SurrogateSpec* surrogat
   if (const YAML::Node s = n["sim"]) {
     LFTRACK_RETURN_IF_ERROR(
         check_keys(s, "surrogate.sim", {"amplitude_mm", "lead_s", "drift_mm_per_min", "noise_sd_mm"}));
-    sim::BreathingSurrogateSpec& b = surrogate->sim;
+    sim_spec::BreathingSurrogateSpec& b = surrogate->sim;
     if (s["amplitude_mm"])
       LFTRACK_RETURN_IF_ERROR(number_in(s["amplitude_mm"], "surrogate.sim.amplitude_mm", 0.1, 100,
                                         "a chest marker's travel", &b.amplitude));

@@ -305,7 +305,7 @@ Status SceneParser::parse_motion(const YAML::Node& n, MotionSpec* m) const {
       const YAML::Node s = shifts[i];
       const std::string what = "motion.shifts[" + std::to_string(i) + "]";
       LFTRACK_RETURN_IF_ERROR(check_keys(s, what, {"time_s", "translation_mm", "rotation_deg"}));
-      sim::MotionStep step;
+      sim_spec::MotionStep step;
       YAML::Node time;
       LFTRACK_RETURN_IF_ERROR(need(s, "time_s", what, &time));
       LFTRACK_RETURN_IF_ERROR(number(time, what + ".time_s", &step.time_s));

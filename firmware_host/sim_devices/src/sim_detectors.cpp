@@ -32,7 +32,7 @@ Result<SimDetectors> SimDetectors::create(const PreparedScene& p,
     if (surround.attenuation == nullptr && surround.water == nullptr)
       return invalid_argument("sim detectors: the patient was made without its surround renderers");
   }
-  const sim::XrayPhysicsSpec physics = d.patient_ ? p.scene.sim.physics : sim::XrayPhysicsSpec{};
+  const sim_spec::XrayPhysicsSpec physics = d.patient_ ? p.scene.sim.physics : sim_spec::XrayPhysicsSpec{};
   for (std::size_t i = 0; i < p.scene.detectors.size(); ++i) {
     const auto& view = p.scene.detectors[i].view;
     const tracking::PixelWindow window = sim_frame_window(p, int(i), o.margin_px);
@@ -99,7 +99,7 @@ void SimDetectors::forget_previous_frames() {
 }
 
 Result<SceneSimDetectors> make_scene_sim_detectors(const PreparedScene& p, tracking::ThreadPool* pool) {
-  const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
+  const sim_spec::XrayPhysicsSpec& physics = p.scene.sim.physics;
   std::shared_ptr<const SimulatedPatient> patient;
   std::shared_ptr<const tracking::DrrRenderer> exact;
   if (!physics.ideal()) {

@@ -7,7 +7,7 @@ namespace lftrack::sim_devices {
 
 using session::SimSurrogateFaults;
 
-SimSurrogateSource::SimSurrogateSource(const sim::BreathingSurrogateSpec& spec,
+SimSurrogateSource::SimSurrogateSource(const sim_spec::BreathingSurrogateSpec& spec,
                                        const sim::SimulatedRoom* room, const SimSurrogateFaults& faults)
     : chest_(spec), room_(room), faults_(faults) {}
 

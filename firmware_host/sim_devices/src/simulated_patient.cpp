@@ -2,6 +2,7 @@
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 
 #include "lftrack/host/scene_registration.hpp"
+#include "lftrack/phantom/implanted_markers.hpp"
 #include "lftrack/sim/anatomy_deformation.hpp"
 #include "lftrack/sim/material_decomposition.hpp"
 #include "lftrack/sim/sphere_markers.hpp"
@@ -29,9 +30,9 @@ sim::PatientRenderers SimulatedPatient::surround_renderers() const {
 }
 
 Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p,
-                                                   const sim::XrayPhysicsSpec& physics,
+                                                   const sim_spec::XrayPhysicsSpec& physics,
                                                    std::uint64_t anatomy_seed, tracking::ThreadPool* pool) {
-  LFTRACK_RETURN_IF_ERROR(sim::check_physics(physics));
+  LFTRACK_RETURN_IF_ERROR(sim_spec::check_physics(physics));
   SimulatedPatient patient;
   if (!physics.anatomy && !physics.spectrum) {
     patient.attenuation = p.mu;
@@ -57,7 +58,8 @@ Result<SimulatedPatient> simulated_patient_volumes(const PreparedScene& p,
   return patient;
 }
 
-Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
+Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p,
+                                                const sim_spec::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool,
                                                 const std::filesystem::path* frame_fields_dir,
@@ -91,8 +93,8 @@ Result<SimulatedPatient> make_simulated_patient(const PreparedScene& p, const si
   // the attenuation volume; with a spectrum, its bone equivalent in the bone volume.
   const auto& f = p.scene.fiducials;
   const double marker_value_per_mm =
-      physics.spectrum ? sim::bone_equivalent_of(sim::kSteelMuPerMm, physics.spectrum->ct_effective_kev)
-                       : double(sim::kSteelMuPerMm);
+      physics.spectrum ? sim::bone_equivalent_of(phantom::kSteelMuPerMm, physics.spectrum->ct_effective_kev)
+                       : double(phantom::kSteelMuPerMm);
   std::vector<sim::SphereMarker> markers;
   if (f.insert)
     for (const Eigen::Vector3d& c : f.positions_ct_mm)
@@ -135,7 +137,7 @@ std::uint64_t scene_anatomy_seed(const PreparedScene& p) {
 
 Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(
     const PreparedScene& p, const std::filesystem::path& light_field_dir, tracking::ThreadPool* pool) {
-  const sim::XrayPhysicsSpec& physics = p.scene.sim.physics;
+  const sim_spec::XrayPhysicsSpec& physics = p.scene.sim.physics;
   if (physics.ideal()) return std::shared_ptr<const SimulatedPatient>();
   const std::filesystem::path fields = sim_frame_fields_dir(p, light_field_dir);
   auto patient = make_simulated_patient(p, physics, scene_anatomy_seed(p), pool, nullptr,
@@ -144,7 +146,7 @@ Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(
   return std::make_shared<const SimulatedPatient>(std::move(patient).value());
 }
 
-Result<SceneImager> SceneImager::create(const PreparedScene& p, const sim::XrayPhysicsSpec& physics,
+Result<SceneImager> SceneImager::create(const PreparedScene& p, const sim_spec::XrayPhysicsSpec& physics,
                                         int margin_px) {
   SceneImager imager;
   imager.scene_ = &p;

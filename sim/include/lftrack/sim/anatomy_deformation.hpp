@@ -29,6 +29,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 #include "lftrack/tracking/volume.hpp"
@@ -39,31 +40,18 @@ class ThreadPool;
 
 namespace lftrack::sim {
 
-struct AnatomySpec {
-  double soft_tissue_mm = 0;
-  double soft_tissue_scale_mm = 80;
-  double ramp_mm = 40;
-  double adjacent_translation_mm = 0;  // each segment: per axis uniform in +-this
-  double adjacent_rotation_deg = 0;    // each segment: per axis uniform in +-this
-  double disc_mm = 8;
-  double breathing_mm = 0;
-  Eigen::Vector3d target_size_mm{60, 60, 30};
-  std::uint64_t seed = 1;  // the draw a scene's simulated patient takes (studies draw their own)
-};
-
-Status check_anatomy_spec(const AnatomySpec& spec);
-
 // One draw of the deformation.
 class AnatomyDeformation {
  public:
-  AnatomyDeformation(const AnatomySpec& spec, const Eigen::Vector3d& target_centre_ct_mm, std::uint64_t seed);
+  AnatomyDeformation(const sim_spec::AnatomySpec& spec, const Eigen::Vector3d& target_centre_ct_mm,
+                     std::uint64_t seed);
   Eigen::Vector3d displacement_mm(const Eigen::Vector3d& x_ct_mm) const;
   // Inside the target's box (where the displacement is zero).
   bool in_target(const Eigen::Vector3d& x_ct_mm) const;
   double breathing_phase() const { return breathing_phase_; }
 
  private:
-  AnatomySpec spec_;
+  sim_spec::AnatomySpec spec_;
   Eigen::Vector3d centre_, half_;
   tracking::Pose above_, below_;  // CT from CT: the adjacent segments' rigid motions
   Eigen::Vector3d wave_k_[3][4], wave_amplitude_;

@@ -13,31 +13,22 @@
 
 #include <cstdint>
 #include <random>
+#include "lftrack/sim_spec/breathing_surrogate_spec.hpp"
 
 namespace lftrack::sim {
 
-struct BreathingSurrogateSpec {
-  double amplitude = 10;       // the marker's travel from exhale to inhale (mm)
-  double period_s = 4.0;       // the patient's breathing period (the scene's motion)
-  double lead_s = 0.2;         // the chest ahead of the target
-  double drift_per_s = 0.0;    // mm/s
-  double noise_sd = 0.1;       // mm
-  double sample_rate_hz = 60;  // the tracker's stream
-  std::uint64_t seed = 1;
-};
-
 class BreathingSurrogate {
  public:
-  explicit BreathingSurrogate(const BreathingSurrogateSpec& spec);
+  explicit BreathingSurrogate(const sim_spec::BreathingSurrogateSpec& spec);
   // The marker's reading at t_s, with a fresh draw of the noise.
   double sample(double t_s);
   // The same without noise, and its exact rate (per second): what the model should recover.
   double exact(double t_s) const;
   double exact_rate_per_s(double t_s) const;
-  const BreathingSurrogateSpec& spec() const { return spec_; }
+  const sim_spec::BreathingSurrogateSpec& spec() const { return spec_; }
 
  private:
-  BreathingSurrogateSpec spec_;
+  sim_spec::BreathingSurrogateSpec spec_;
   std::mt19937_64 random_;
   std::normal_distribution<double> noise_;
 };

@@ -18,28 +18,15 @@
 
 #include <cstdint>
 
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::sim {
 
-struct DetectorEffectsSpec {
-  double glare_fraction = 0;  // share of the signal spread by the glare kernel
-  double glare_sigma_mm = 3;
-  double lag_fraction = 0;  // share of the previous frame's signal in this one
-  double gain_smooth_rms = 0;  // relative gain error, smooth over the detector
-  double gain_pixel_rms = 0;   // relative gain error, independent per pixel
-  double defective_pixel_fraction = 0;  // pixels stuck at a fixed level
-  int defective_lines = 0;              // rows or columns with a wrong gain
-  double heel_gradient = 0;  // relative intensity change from the detector's top row to its bottom
-  std::uint64_t pattern_seed = 1;
-};
-
-Status check_detector_effects(const DetectorEffectsSpec& spec);
-
 // The detector's fixed pattern, evaluated per absolute pixel of a rows x cols detector.
 class DetectorPattern {
  public:
-  DetectorPattern(const DetectorEffectsSpec& spec, int detector_rows, int detector_cols);
+  DetectorPattern(const sim_spec::DetectorEffectsSpec& spec, int detector_rows, int detector_cols);
   // Intensity of the beam at the pixel relative to the detector's centre (the heel effect).
   double heel(int row) const;
   // Residual gain of the pixel (smooth x pixel x line), about 1.
@@ -49,7 +36,7 @@ class DetectorPattern {
   double stuck_level(int row, int col) const;
 
  private:
-  DetectorEffectsSpec spec_;
+  sim_spec::DetectorEffectsSpec spec_;
   int rows_, cols_;
   // The smooth gain: three plane waves over the detector.
   double wave_amplitude_ = 0;

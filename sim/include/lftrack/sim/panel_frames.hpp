@@ -35,7 +35,7 @@ struct PanelSpec {
   double open_field_fraction = 0.85;           // the open field's counts / full scale, (0, 1]
   double dark_fraction = 0.01;                 // the dark level / full scale, [0, 0.5]
   double read_noise_counts = 2;                // (0, 1000]
-  std::optional<DetectorEffectsSpec> effects;  // the fixed pattern (effects_of_detector)
+  std::optional<sim_spec::DetectorEffectsSpec> effects;  // the fixed pattern (effects_of_detector)
 };
 
 Status check_panel_spec(const PanelSpec& spec);

@@ -9,23 +9,12 @@
 
 #include <vector>
 
+#include "lftrack/sim_spec/patient_motion_spec.hpp"
 #include "lftrack/tracking/pose.hpp"
 
 namespace lftrack::sim {
 
-struct MotionStep {
-  double time_s = 0;
-  tracking::Vector6d delta = tracking::Vector6d::Zero();  // mm, rad
-};
-
-struct PatientMotionSpec {
-  tracking::Vector6d drift_per_s = tracking::Vector6d::Zero();          // mm/s, rad/s
-  tracking::Vector6d breathing_amplitude = tracking::Vector6d::Zero();  // mm, rad
-  double breathing_period_s = 4.0;
-  std::vector<MotionStep> shifts;
-};
-
 // The offset at time t (s); t < 0 is treated as 0.
-tracking::Vector6d patient_offset(const PatientMotionSpec& spec, double t_s);
+tracking::Vector6d patient_offset(const sim_spec::PatientMotionSpec& spec, double t_s);
 
 }  // namespace lftrack::sim

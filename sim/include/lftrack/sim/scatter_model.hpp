@@ -19,26 +19,18 @@
 
 #include <vector>
 
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::sim {
 
-struct ScatterSpec {
-  double spr_per_cm = 0.05;      // SPR per cm of water-equivalent thickness, without a grid
-  double kernel_sigma_mm = 40;   // at the detector
-  bool grid = false;
-  double grid_primary_transmission = 0.70;
-  double grid_scatter_transmission = 0.15;
-};
-
-Status check_scatter_spec(const ScatterSpec& spec);
-
 class ScatterModel {
  public:
-  // Sized for `rows` x `cols` images of pixels `pitch_mm` wide. The spec must pass check_scatter_spec.
-  ScatterModel(int rows, int cols, double pitch_mm, const ScatterSpec& spec);
+  // Sized for `rows` x `cols` images of pixels `pitch_mm` wide. The spec must pass
+  // sim_spec::check_scatter_spec.
+  ScatterModel(int rows, int cols, double pitch_mm, const sim_spec::ScatterSpec& spec);
 
   // The SPR measured behind `thickness_cm` of water-equivalent material, after the grid.
   double measured_spr(double thickness_cm) const;
@@ -51,7 +43,7 @@ class ScatterModel {
                      const tracking::ImageView<const float>& thickness_cm, tracking::ImageView<float> out);
 
  private:
-  ScatterSpec spec_;
+  sim_spec::ScatterSpec spec_;
   int rows_, cols_, factor_;  // the scatter is spread on a grid `factor_` times coarser
   int coarse_rows_, coarse_cols_;
   tracking::Image<float> coarse_amplitude_, coarse_weight_, coarse_scatter_;

@@ -30,7 +30,7 @@ struct SimulatedRoomSpec {
   tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
   Eigen::Vector3d origin_room_mm = Eigen::Vector3d::Zero();
   tracking::Vector6d setup_error = tracking::Vector6d::Zero();  // mm, rad
-  PatientMotionSpec motion;
+  sim_spec::PatientMotionSpec motion;
   VirtualCouchSpec couch;
   // Where the couch is mounted: its rotation centre and translation axes in the room. Unset:
   // the ideal couch, axes along the room's, rotating about the registration origin.

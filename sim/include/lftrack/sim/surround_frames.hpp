@@ -23,8 +23,8 @@
 #include "lftrack/sim/detector_effects.hpp"
 #include "lftrack/sim/scatter_model.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
-#include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/sim/xray_spectrum.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
@@ -50,9 +50,9 @@ class SurroundSynthesizer {
   // it; `cells` (2..1024) coarse pixels along the longer side, each at most 100 mm.
   static Result<std::unique_ptr<SurroundSynthesizer>> create(const tracking::PixelWindow& window,
                                                              const DetectorModel& model,
-                                                             const XrayPhysicsSpec& physics, int detector_rows,
-                                                             int detector_cols, double pitch_mm,
-                                                             std::uint64_t pattern_seed,
+                                                             const sim_spec::XrayPhysicsSpec& physics,
+                                                             int detector_rows, int detector_cols,
+                                                             double pitch_mm, std::uint64_t pattern_seed,
                                                              int cells = kSurroundCells);
   // Writes every pixel of `frame` (the whole detector of `view`) outside the window. `exact`
   // renders what the window's renderers render (attenuation, or water and bone with a spectrum)

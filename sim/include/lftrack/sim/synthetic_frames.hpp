@@ -4,7 +4,7 @@
 // detector blur and quantisation to the detector's bit depth. Frames are made from a ray caster,
 // never from the light field that will register them.
 //
-// With imaging physics (xray_physics.hpp) a frame is, per pixel of the window:
+// With imaging physics (sim_spec/xray_physics_spec.hpp) a frame is, per pixel of the window:
 //   primary    exp(-p) for the attenuation line integral p, or with a spectrum the
 //              polyenergetic transmission behind the ray's water and bone mass thicknesses;
 //   + scatter  scatter_model.hpp, from the primary and the ray's water-equivalent thickness;
@@ -25,8 +25,8 @@
 
 #include "lftrack/sim/detector_effects.hpp"
 #include "lftrack/sim/scatter_model.hpp"
-#include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/sim/xray_spectrum.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 #include "lftrack/tracking/image.hpp"
@@ -34,11 +34,6 @@
 #include "lftrack/tracking/volume.hpp"
 
 namespace lftrack::sim {
-
-// More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it);
-// std::poisson_distribution, which drew the noise before, spun without end on means near 1e25
-// (an outside probe's `photons_per_pixel: 1e40` ignored SIGTERM).
-inline constexpr double kMaxPhotonsPerPixel = 1e9;
 
 struct DetectorModel {
   double photons_per_pixel = 10000;  // open field, per pixel and frame (the dose)
@@ -57,10 +52,11 @@ tracking::DetectorCorrection detector_correction(const DetectorModel& model);
 Status check_detector_model(const DetectorModel& model);
 
 // The effects of detector number `detector_seed` (each its own fixed pattern) from the scene's.
-DetectorEffectsSpec effects_of_detector(const DetectorEffectsSpec& effects, std::uint64_t detector_seed);
+sim_spec::DetectorEffectsSpec effects_of_detector(const sim_spec::DetectorEffectsSpec& effects,
+                                                  std::uint64_t detector_seed);
 
 // The attenuation table of `beam`'s spectrum (make_spectrum, PolyenergeticTable::create).
-Result<PolyenergeticTable> beam_attenuation_table(const BeamSpec& beam);
+Result<PolyenergeticTable> beam_attenuation_table(const sim_spec::BeamSpec& beam);
 
 struct PatientRenderers;
 class ScatterModel;
@@ -109,9 +105,9 @@ class FrameSynthesizer {
   // `pattern_seed` (each detector its own).
   static Result<std::unique_ptr<FrameSynthesizer>> create(const tracking::PixelWindow& window,
                                                           const DetectorModel& model,
-                                                          const XrayPhysicsSpec& physics, int detector_rows,
-                                                          int detector_cols, double pitch_mm,
-                                                          std::uint64_t pattern_seed);
+                                                          const sim_spec::XrayPhysicsSpec& physics,
+                                                          int detector_rows, int detector_cols,
+                                                          double pitch_mm, std::uint64_t pattern_seed);
   const tracking::PixelWindow& window() const { return window_; }
   // Whether frames need the water and bone renderers (a spectrum) or the attenuation one.
   bool needs_materials() const { return table_.has_value(); }
@@ -132,22 +128,11 @@ class FrameSynthesizer {
   // Physics (absent: ideal).
   std::optional<PolyenergeticTable> table_;
   std::unique_ptr<ScatterModel> scatter_;
-  std::optional<DetectorEffectsSpec> effects_;
+  std::optional<sim_spec::DetectorEffectsSpec> effects_;
   std::unique_ptr<tracking::GaussianBlur> glare_;
   tracking::Image<float> bone_integral_, primary_, thickness_cm_, total_, glared_, previous_;
   tracking::Image<float> gain_, stuck_, heel_;  // the fixed pattern over the window
   bool has_previous_ = false;
 };
-
-// Steel markers (spheres, partial volume from 4^3 sub-samples per voxel) written into a volume:
-// value_at_centre replaces the voxel's value in proportion to the sphere's share of it.
-template <class Unit>
-void insert_markers(tracking::ScalarVolume<Unit>* volume, const std::vector<Eigen::Vector3d>& centres_ct_mm,
-                    double radius_mm, float marker_value);
-
-// Attenuation of stainless steel at about 70 keV (1/mm); a CT shows the same marker clipped at
-// its top HU value (kMarkerHu).
-inline constexpr float kSteelMuPerMm = 0.7f;
-inline constexpr float kMarkerHu = 3071.f;
 
 }  // namespace lftrack::sim

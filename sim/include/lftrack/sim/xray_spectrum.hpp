@@ -9,6 +9,7 @@
 
 #include <vector>
 
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::sim {
@@ -25,16 +26,6 @@ double material_density_g_per_cm3(Material material);
 // are clamped to the table's ends. No absorption edge lies in 10-150 keV for these materials.
 double mass_attenuation_cm2_per_g(Material material, double energy_kev);
 
-// The beam: a tungsten anode's bremsstrahlung at `kvp` (Kramers' law: photons per keV
-// proportional to (kVp - E) / E), through `filtration_mm_al` of aluminium (inherent plus added),
-// in bins of `bin_kev` from 10 keV to the kVp. Characteristic lines (W K-alpha 59 keV, K-beta
-// 67 keV) are left out: at 100-120 kVp they carry a few per cent of the fluence.
-struct SpectrumSpec {
-  double kvp = 120;
-  double filtration_mm_al = 2.5;
-  double bin_kev = 1;
-};
-
 struct XraySpectrum {
   std::vector<double> energy_kev;  // bin centres
   // Detector signal per bin, normalised to sum 1: the fluence times the energy (an
@@ -43,8 +34,12 @@ struct XraySpectrum {
   double mean_energy_kev() const;  // signal-weighted
 };
 
-// Fails on a kVp outside [40, 150], filtration outside [0, 20] mm Al or a bin outside (0, 10] keV.
-Result<XraySpectrum> make_spectrum(const SpectrumSpec& spec);
+// The beam of `spec` (sim_spec::SpectrumSpec): a tungsten anode's bremsstrahlung at the kVp
+// (Kramers' law: photons per keV proportional to (kVp - E) / E), through the aluminium filtration
+// (inherent plus added), in bins from 10 keV to the kVp. Characteristic lines (W K-alpha 59 keV,
+// K-beta 67 keV) are left out: at 100-120 kVp they carry a few per cent of the fluence. Fails
+// where sim_spec::check_spectrum_spec does.
+Result<XraySpectrum> make_spectrum(const sim_spec::SpectrumSpec& spec);
 
 // -ln(signal / open-field signal) behind `water_g_cm2` of water and `bone_g_cm2` of cortical
 // bone: the polyenergetic line integral, which grows slower than linearly with thickness (the

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "lftrack/host/scene.hpp"
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 
 namespace lftrack::studies {
 
@@ -52,9 +52,9 @@ struct CaptureRangeOptions {
   // What the frames carry (issue 21): ideal DRRs of the planning CT, or realistic physics. With an
   // anatomy part, sample k images anatomy draw k % anatomy_draws (each draw a deformed patient);
   // with detector lag, each sample's frames follow an exposure at a pose 1 mm / 0.5 degrees away.
-  sim::XrayPhysicsSpec physics;
+  sim_spec::XrayPhysicsSpec physics;
   std::string physics_name = "ideal";  // recorded with the study (and compared between shards)
-  std::string physics_description;     // empty: sim::describe(physics); a study read back has only this
+  std::string physics_description;     // empty: sim_spec::describe(physics); a study read back has only this
   int anatomy_draws = 1;
 };
 

@@ -21,7 +21,7 @@ namespace lftrack::studies {
 
 struct RealismFactor {
   std::string name;
-  sim::XrayPhysicsSpec physics;
+  sim_spec::XrayPhysicsSpec physics;
 };
 // The factor sets of `scene`, in report order.
 std::vector<RealismFactor> realism_factors(const session::PreparedScene& scene);

@@ -25,8 +25,8 @@
 namespace lftrack::studies {
 
 struct SurrogateStudyOptions {
-  sim::PatientMotionSpec motion;  // the target's: translations (mm) of the registration origin
-  sim::BreathingSurrogateSpec surrogate;
+  sim_spec::PatientMotionSpec motion;  // the target's: translations (mm) of the registration origin
+  sim_spec::BreathingSurrogateSpec surrogate;
   loop::CorrelationModelSpec model;
   std::vector<double> xray_hz{0.5, 1, 2};
   double correction_hz = 30;

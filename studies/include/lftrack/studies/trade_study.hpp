@@ -34,8 +34,8 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/sim/xray_physics.hpp"
 #include "lftrack/host/scene.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/studies/verdict_outcomes.hpp"
 
 namespace lftrack::studies {
@@ -65,7 +65,7 @@ struct TradeOptions {
   bool fields_prebuilt = false;     // with field_dir: refuse to build a missing field set
   // What the problems' frames carry (issue 21): ideal (DRRs of the planning CT with noise) or
   // realistic physics, rendered from the simulated patient (4 anatomy draws, shared in turn).
-  sim::XrayPhysicsSpec physics;
+  sim_spec::XrayPhysicsSpec physics;
   std::string physics_name = "ideal";
 };
 

@@ -1,7 +1,7 @@
 #pragma once
 // The built-in phantom's CT, generated once per program build and kept in a cache folder.
 //
-// The phantom (sim::make_spine_phantom) is 26 million voxels of analytic anatomy and noise: about
+// The phantom (phantom::make_spine_phantom) is 26 million voxels of analytic anatomy and noise: about
 // 3 s of CPU, the largest part of every short `lftrack sim` and of every closed-loop test. It is
 // a pure function of its options and of the code that draws it, so a copy made by the same build
 // of the same program can stand for it. A cached copy is used only when
@@ -16,16 +16,16 @@
 // copy plus 1 GB free) falls back to generating the phantom, which is always correct; the cache
 // never fails a run and never blocks on what it opens. The log says where a copy was read or
 // kept (info), and why one was not used or could not be written (warning). A new copy is written
-// to a temporary file of its own and renamed into place, so processes sharing the folder see a whole file or none. Each time a copy
-// is read or written, the same program's copies from other builds of the same phantom are deleted
-// (one copy per program and phantom, about 100 MB), and temporary files an hour old (a writer
+// to a temporary file of its own and renamed into place, so processes sharing the folder see a whole file or
+// none. Each time a copy is read or written, the same program's copies from other builds of the same phantom
+// are deleted (one copy per program and phantom, about 100 MB), and temporary files an hour old (a writer
 // killed mid-copy). Delete the folder at any time.
 
 #include <filesystem>
 #include <optional>
 #include <string>
 
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::tracking {
@@ -51,10 +51,11 @@ enum class PhantomCacheUse {
 
 // The phantom for `options`: from `dir` when it holds this build's copy, else generated (with
 // `pool`) and written there. An empty `dir` turns the cache off. Fails only as
-// sim::make_spine_phantom fails (invalid options). `use`, if given, says which path was taken.
-Result<sim::SpinePhantom> cached_spine_phantom(const sim::SpinePhantomOptions& options,
-                                               const std::filesystem::path& dir, tracking::ThreadPool* pool,
-                                               PhantomCacheUse* use = nullptr);
+// phantom::make_spine_phantom fails (invalid options). `use`, if given, says which path was taken.
+Result<phantom::SpinePhantom> cached_spine_phantom(const phantom::SpinePhantomOptions& options,
+                                                   const std::filesystem::path& dir,
+                                                   tracking::ThreadPool* pool,
+                                                   PhantomCacheUse* use = nullptr);
 
 // The folder LFTRACK_CACHE_DIR names, or an empty path.
 std::filesystem::path cache_dir_from_environment();

@@ -20,9 +20,9 @@
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/loop/loop_spec.hpp"
 #include "lftrack/loop/safety_gate.hpp"
-#include "lftrack/sim/breathing_surrogate.hpp"
-#include "lftrack/sim/patient_motion.hpp"
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/breathing_surrogate_spec.hpp"
+#include "lftrack/sim_spec/patient_motion_spec.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/light_field.hpp"
@@ -143,7 +143,7 @@ struct SimFrameSpec {
   std::uint64_t seed = 1;  // noise of the simulated loop's frames
   // sim.physics: what the frames carry beyond the planning CT's ideal DRR (a preset name, or a
   // mapping: `preset` and per-part overrides; docs/scenes.md "Imaging physics").
-  sim::XrayPhysicsSpec physics;
+  sim_spec::XrayPhysicsSpec physics;
   std::string physics_name = "ideal";  // the preset the physics started from ("custom" once changed)
   // sim.couch_link: a served couch's room link (`lftrack serve couch|robot --room FILE`; absolute
   // or empty). Simulated frames then show the patient where that couch has moved them, so
@@ -183,7 +183,7 @@ struct ActuatorSpec {
 // the nominal pose) and how they move from there.
 struct MotionSpec {
   tracking::Vector6d setup_error = tracking::Vector6d::Zero();  // mm, rad
-  sim::PatientMotionSpec motion;
+  sim_spec::PatientMotionSpec motion;
 };
 
 // The registration verdict's checks beyond its floors (registration_verdict.hpp), from safety's
@@ -214,7 +214,7 @@ struct SurrogateSpec {
   std::string source;
   // sim: the marker's travel, lead, drift and noise; its period is motion.breathing's, its seed
   // sim.seed's. With igtl in lftrack sim, the marker the tracker's twin serves (sim/tracker_twin.hpp).
-  sim::BreathingSurrogateSpec sim;
+  sim_spec::BreathingSurrogateSpec sim;
   // igtl: the tracker's OpenIGTLink server, and the device name whose TRANSFORM or POSITION
   // messages carry the marker ("" any); the marker's displacement along `axis` (room frame, unit).
   std::string igtl_host = "127.0.0.1";

@@ -21,7 +21,7 @@ namespace lftrack::sim_devices {
 
 class SimSurrogateSource final : public drivers::SurrogateSource {
  public:
-  SimSurrogateSource(const sim::BreathingSurrogateSpec& spec, const sim::SimulatedRoom* room,
+  SimSurrogateSource(const sim_spec::BreathingSurrogateSpec& spec, const sim::SimulatedRoom* room,
                      const session::SimSurrogateFaults& faults = {});
   int read(std::int64_t now_ns, drivers::SurrogateReading* out, int capacity) override;
   // The marker's reading at t_s on the room's clock, faults included (the next draw of the noise).

@@ -11,7 +11,7 @@
 
 #include "lftrack/host/scene.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
-#include "lftrack/sim/xray_physics.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 
 namespace lftrack::sim_devices {
@@ -32,7 +32,7 @@ struct SimulatedPatient {
 // spectrum water and bone), built on `pool`, without renderers. Ideal physics reuses the scene's
 // attenuation volume without a copy.
 Result<SimulatedPatient> simulated_patient_volumes(const session::PreparedScene& scene,
-                                                   const sim::XrayPhysicsSpec& physics,
+                                                   const sim_spec::XrayPhysicsSpec& physics,
                                                    std::uint64_t anatomy_seed, tracking::ThreadPool* pool);
 
 // The patient's volumes (above) with their renderers, the scene's markers added to them as exact
@@ -41,7 +41,7 @@ Result<SimulatedPatient> simulated_patient_volumes(const session::PreparedScene&
 // <frame_fields_dir>/<volume> (attenuation, water, bone), loaded where up to date and built (and
 // saved) where not. `with_surround`: the surround renderers too, for whole-detector frames.
 Result<SimulatedPatient> make_simulated_patient(const session::PreparedScene& scene,
-                                                const sim::XrayPhysicsSpec& physics,
+                                                const sim_spec::XrayPhysicsSpec& physics,
                                                 std::uint64_t anatomy_seed, tracking::ThreadPool* pool,
                                                 tracking::ThreadPool* render_pool = nullptr,
                                                 const std::filesystem::path* frame_fields_dir = nullptr,
@@ -63,8 +63,8 @@ Result<std::shared_ptr<const SimulatedPatient>> make_scene_patient(
 // frame for lag.
 class SceneImager {
  public:
-  static Result<SceneImager> create(const session::PreparedScene& scene, const sim::XrayPhysicsSpec& physics,
-                                    int margin_px = 16);
+  static Result<SceneImager> create(const session::PreparedScene& scene,
+                                    const sim_spec::XrayPhysicsSpec& physics, int margin_px = 16);
   // Raw whole-detector frames at `gold`; the same seed and history give the same frames.
   Result<std::vector<tracking::Image<std::uint16_t>>> expose(const SimulatedPatient& patient,
                                                              const tracking::Pose& gold_T_room_from_ct,

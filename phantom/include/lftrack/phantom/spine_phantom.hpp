@@ -24,7 +24,7 @@ namespace lftrack::tracking {
 class ThreadPool;
 }
 
-namespace lftrack::sim {
+namespace lftrack::phantom {
 
 struct SpinePhantomOptions {
   std::uint64_t seed = 1;
@@ -53,4 +53,4 @@ Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& options,
 // Fails as make_spine_phantom does.
 Result<SpinePhantom> spine_phantom_layout(const SpinePhantomOptions& options);
 
-}  // namespace lftrack::sim
+}  // namespace lftrack::phantom

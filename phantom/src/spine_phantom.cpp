@@ -1,4 +1,4 @@
-#include "lftrack/sim/spine_phantom.hpp"
+#include "lftrack/phantom/spine_phantom.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 #include "lftrack/tracking/random_draws.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::sim {
+namespace lftrack::phantom {
 namespace {
 
 using Eigen::Vector3d;
@@ -308,4 +308,4 @@ Result<SpinePhantom> make_spine_phantom(const SpinePhantomOptions& o, tracking::
   return phantom;
 }
 
-}  // namespace lftrack::sim
+}  // namespace lftrack::phantom
