@@ -5,10 +5,12 @@
 #include <CLI/CLI.hpp>
 #include <functional>
 
-#include "lftrack/chaos/chaos_soak.hpp"
 #include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
+namespace lftrack::chaos {
+struct ChaosOptions;
+}  // namespace lftrack::chaos
 namespace lftrack::studies {
 struct TradeStudy;
 struct RealismReport;

@@ -12,6 +12,8 @@
 
 #include <algorithm>
 
+#include "lftrack/sim/breathing_surrogate.hpp"
+#include "lftrack/sim/patient_motion.hpp"
 #include "lftrack/studies/plot.hpp"
 #include "quantile.hpp"
 #include "study_outputs.hpp"

@@ -4,13 +4,11 @@
 
 #include <cmath>
 
-#include "lftrack/phantom/implanted_markers.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/xray_view.hpp"
 
 namespace lftrack::sim {
 
-using phantom::insert_markers;
 namespace {
 
 using namespace lftrack::tracking;
@@ -89,23 +87,6 @@ TEST(SyntheticFrame, RefusesNonsenseModels) {
   model = {};
   model.bits = 20;
   EXPECT_FALSE(synthesize_frame(*exact, Pose::Identity(), view(), {0, 0, 4, 4}, model, 1).ok());
-}
-
-TEST(InsertMarkers, ASphereOfTheRightVolumeAtTheRightPlace) {
-  MuVolume v = *slab();
-  for (float& x : v.values) x = 0.f;
-  const Eigen::Vector3d centre(3.3, -2.2, 1.6);
-  insert_markers(&v, {centre}, 2.0, 1.0f);
-  double total = 0;
-  Eigen::Vector3d weighted = Eigen::Vector3d::Zero();
-  for (int k = 0; k < 40; ++k)
-    for (int j = 0; j < 40; ++j)
-      for (int i = 0; i < 40; ++i) {
-        total += v.at(i, j, k);
-        weighted += v.at(i, j, k) * (v.geometry.ct_from_index() * Eigen::Vector3d(i, j, k));
-      }
-  EXPECT_NEAR(total, 4.0 / 3.0 * M_PI * 8.0, 0.6);  // mm^3 at 1 mm voxels
-  EXPECT_LT((weighted / total - centre).norm(), 0.05);
 }
 
 }  // namespace

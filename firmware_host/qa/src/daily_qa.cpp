@@ -28,11 +28,6 @@ bool no_looser(const calib::DetectorQaTolerances& t, const calib::DetectorQaTole
 
 }  // namespace
 
-bool DailyQaReport::passed() const {
-  return !checks.empty() &&
-         std::all_of(checks.begin(), checks.end(), [](const QaCheck& c) { return c.passed; });
-}
-
 std::vector<Vector6d> default_offset_shifts(const session::Scene& scene) {
   // Within 90 % of the envelope and of the safety gate's total correction (safety.max_total_mm,
   // _deg): a shift at the limit is refused by the gate whenever the registration reads it a hair

@@ -21,6 +21,11 @@
 #include "lftrack/tracking/cpu_features.hpp"
 
 namespace lftrack::session {
+
+using phantom::make_spine_phantom;
+using phantom::spine_phantom_layout;
+using phantom::SpinePhantom;
+using phantom::SpinePhantomOptions;
 namespace {
 
 namespace fs = std::filesystem;
@@ -38,8 +43,8 @@ std::uint32_t payload_crc(const std::vector<float>& values) {
 // The options, every double to the last bit (%.17g), as the header and the file name hold them.
 // Every field of SpinePhantomOptions must be here, or two phantoms would share a file: a field
 // added to the struct changes its size and stops the build until it is added below.
-static_assert(sizeof(phantom::SpinePhantomOptions) == 80, "a new phantom option: add it to options_text");
-std::string options_text(const phantom::SpinePhantomOptions& o) {
+static_assert(sizeof(SpinePhantomOptions) == 80, "a new phantom option: add it to options_text");
+std::string options_text(const SpinePhantomOptions& o) {
   char text[512];
   std::snprintf(text, sizeof text, "seed=%llu size=%dx%dx%d spacing_mm=%.17g,%.17g,%.17g centre_mm=%.17g,%.17g,%.17g noise_hu=%.17g",
                 static_cast<unsigned long long>(o.seed), o.size.x(), o.size.y(), o.size.z(), o.spacing_mm.x(),
@@ -55,7 +60,7 @@ std::string crc_hex(const std::string& text) {
 
 // Files of one phantom made by one program (wherever it was built) share this prefix; the code
 // key follows it. Other builds' copies under the same prefix are pruned.
-std::string file_prefix(const phantom::SpinePhantomOptions& o) {
+std::string file_prefix(const SpinePhantomOptions& o) {
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   return "spine-phantom-" + crc_hex(options_text(o)) + "-" + crc_hex(ec ? std::string("?") : exe.string()) + "-";
@@ -99,7 +104,7 @@ struct OpenFile {
 };
 
 // The voxels of `file` into `phantom` (whose geometry is set), or why not.
-Status read_voxels(const fs::path& file, const std::string& header, phantom::SpinePhantom* phantom) {
+Status read_voxels(const fs::path& file, const std::string& header, SpinePhantom* phantom) {
   std::error_code ec;
   if (!fs::exists(fs::symlink_status(file, ec))) return not_found("no cached copy");
   // Opened without blocking (a FIFO would block the open until someone wrote to it), then judged
@@ -130,7 +135,7 @@ Status read_voxels(const fs::path& file, const std::string& header, phantom::Spi
   return {};
 }
 
-Status read_cached(const fs::path& file, const std::string& header, phantom::SpinePhantom* phantom) {
+Status read_cached(const fs::path& file, const std::string& header, SpinePhantom* phantom) {
   Status read = read_voxels(file, header, phantom);
   if (!read.ok()) std::vector<float>().swap(phantom->ct.values);  // not held while the phantom is made
   return read;
@@ -138,7 +143,7 @@ Status read_cached(const fs::path& file, const std::string& header, phantom::Spi
 
 // Writes `phantom` to `file` through a temporary file in the same folder (mkstemp: a name of its
 // own, created exclusively), renamed into place.
-Status write_cached(const fs::path& file, const std::string& header, const phantom::SpinePhantom& phantom) {
+Status write_cached(const fs::path& file, const std::string& header, const SpinePhantom& phantom) {
   std::error_code ec;
   fs::create_directories(file.parent_path(), ec);
   if (ec) return io_error("cannot make " + file.parent_path().string() + ": " + ec.message());
@@ -273,25 +278,24 @@ fs::path cache_dir_from_environment() {
   return dir != nullptr ? fs::path(dir) : fs::path();
 }
 
-Result<phantom::SpinePhantom> cached_spine_phantom(const phantom::SpinePhantomOptions& options,
-                                                   const fs::path& dir, tracking::ThreadPool* pool,
-                                                   PhantomCacheUse* use) {
+Result<SpinePhantom> cached_spine_phantom(const SpinePhantomOptions& options, const fs::path& dir,
+                                          tracking::ThreadPool* pool, PhantomCacheUse* use) {
   PhantomCacheUse ignored;
   if (use == nullptr) use = &ignored;
   *use = PhantomCacheUse::kOff;
-  if (dir.empty()) return phantom::make_spine_phantom(options, pool);
+  if (dir.empty()) return make_spine_phantom(options, pool);
   if (!program_build_id()) {
     static std::once_flag said;
     std::call_once(said, [&] {
       spdlog::info("phantom cache {}: this program has no build ID, so no copy can be told apart; not used",
                    dir.string());
     });
-    return phantom::make_spine_phantom(options, pool);
+    return make_spine_phantom(options, pool);
   }
 
-  auto layout = phantom::spine_phantom_layout(options);
+  auto layout = spine_phantom_layout(options);
   if (!layout.ok()) return layout.status();
-  phantom::SpinePhantom phantom = std::move(layout).value();
+  SpinePhantom phantom = std::move(layout).value();
   const std::string prefix = file_prefix(options);
   const std::string key = code_key();
   const fs::path file = dir / (prefix + key + ".ct");
@@ -310,7 +314,7 @@ Result<phantom::SpinePhantom> cached_spine_phantom(const phantom::SpinePhantomOp
   if (read.code() != StatusCode::kNotFound)
     spdlog::warn("cached phantom {} not used ({}); making it anew", shown.string(), read.message());
 
-  auto made = phantom::make_spine_phantom(options, pool);
+  auto made = make_spine_phantom(options, pool);
   if (!made.ok()) return made.status();
   const Status written = write_cached(file, header, *made);
   *use = written.ok() ? PhantomCacheUse::kGenerated : PhantomCacheUse::kUnwritten;

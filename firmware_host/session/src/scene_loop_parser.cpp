@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "lftrack/host/calibration_files.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"
 
@@ -37,9 +38,9 @@ Status SceneParser::parse_sim(const YAML::Node& n, SimFrameSpec* sim) const {
   }
   if (n["physics"]) LFTRACK_RETURN_IF_ERROR(parse_physics(n["physics"], sim));
   if (n["photons_per_pixel"])
-    LFTRACK_RETURN_IF_ERROR(positive_at_most(n["photons_per_pixel"], "sim.photons_per_pixel", 1e9,
-                                             "no detector counts more; a 16-bit panel saturates far below",
-                                             &sim->photons_per_pixel));
+    LFTRACK_RETURN_IF_ERROR(positive_at_most(
+        n["photons_per_pixel"], "sim.photons_per_pixel", sim_spec::kMaxPhotonsPerPixel,
+        "no detector counts more; a 16-bit panel saturates far below", &sim->photons_per_pixel));
   if (n["detector_blur_px"]) {
     LFTRACK_RETURN_IF_ERROR(number(n["detector_blur_px"], "sim.detector_blur_px", &sim->detector_blur_px));
     if (sim->detector_blur_px < 0 || sim->detector_blur_px > 20)

@@ -10,7 +10,7 @@
 //     anatomy: {soft_tissue_mm, soft_tissue_scale_mm, ramp_mm, adjacent_translation_mm,
 //               adjacent_rotation_deg, disc_mm, breathing_mm, target_size_mm, seed} | off
 // A part named as a mapping starts from the clinical preset's values of that part. The ranges
-// are the sim library's own checks (sim_spec::check_physics), reported at the part's line.
+// are the spec's own range checks (sim_spec::check_physics), reported at the part's line.
 #include <type_traits>
 
 #include "scene_yaml.hpp"

@@ -5,6 +5,15 @@
 
 namespace lftrack::sim_spec {
 
+namespace {
+
+// Whether v is a finite number in [lo, hi] (NaN and infinities are not).
+bool in(double v, double lo, double hi) {
+  return std::isfinite(v) && v >= lo && v <= hi;
+}
+
+}  // namespace
+
 BeamSpec clinical_beam() {
   BeamSpec b;
   b.spectrum.kvp = 120;
@@ -108,7 +117,10 @@ Status check_spectrum_spec(const SpectrumSpec& spec) {
     return out_of_range("spectrum: kvp must be in [40, 150] (the attenuation tables end at 150 keV)");
   if (!(spec.filtration_mm_al >= 0 && spec.filtration_mm_al <= 20))
     return out_of_range("spectrum: filtration_mm_al must be in [0, 20]");
-  if (!(spec.bin_kev > 0 && spec.bin_kev <= 10)) return out_of_range("spectrum: bin_kev must be in (0, 10]");
+  // Below 0.01 keV the bins (over 10-150 keV, 14,000 of them) tell nothing more, and far below it
+  // their count overflows.
+  if (!(spec.bin_kev >= 0.01 && spec.bin_kev <= 10))
+    return out_of_range("spectrum: bin_kev must be in [0.01, 10]");
   return {};
 }
 
@@ -123,7 +135,6 @@ Status check_scatter_spec(const ScatterSpec& s) {
 }
 
 Status check_detector_effects(const DetectorEffectsSpec& s) {
-  auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
   if (!in(s.glare_fraction, 0, 0.5)) return out_of_range("detector: glare_fraction must be in [0, 0.5]");
   if (!in(s.glare_sigma_mm, 0.01, 100))
     return out_of_range("detector: glare_sigma_mm must be in [0.01, 100]");
@@ -139,7 +150,6 @@ Status check_detector_effects(const DetectorEffectsSpec& s) {
 }
 
 Status check_anatomy_spec(const AnatomySpec& s) {
-  auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
   if (!in(s.soft_tissue_mm, 0, 30)) return out_of_range("anatomy: soft_tissue_mm must be in [0, 30]");
   if (!in(s.soft_tissue_scale_mm, 10, 1000))
     return out_of_range("anatomy: soft_tissue_scale_mm must be in [10, 1000]");

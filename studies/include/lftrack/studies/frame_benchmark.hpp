@@ -51,7 +51,7 @@ struct FrameRendererFigures {
 
 struct FrameBenchReport {
   std::string scene;
-  std::string physics;  // the scene's sim.physics, one line per part that is on (sim::describe)
+  std::string physics;  // the scene's sim.physics, one line per part that is on (sim_spec::describe)
   int pairs = 0;
   std::vector<std::string> views;
   std::vector<FrameRendererFigures> renderers;

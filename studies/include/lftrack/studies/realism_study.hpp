@@ -42,7 +42,7 @@ struct RealismOptions {
 
 struct RealismFactorSummary {
   std::string name;
-  std::string physics;    // sim::describe
+  std::string physics;      // sim_spec::describe
   double mean_tre_mm = 0;   // image-only successes, starts <= image_max_mm
   double success_rate = 0;  // image-only, starts <= image_max_mm
   double median_ms = 0;     // image-only

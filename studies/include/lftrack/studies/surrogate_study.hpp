@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "lftrack/loop/correlation_model.hpp"
-#include "lftrack/sim/breathing_surrogate.hpp"
-#include "lftrack/sim/patient_motion.hpp"
+#include "lftrack/sim_spec/breathing_surrogate_spec.hpp"
+#include "lftrack/sim_spec/patient_motion_spec.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::studies {

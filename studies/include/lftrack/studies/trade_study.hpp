@@ -108,7 +108,7 @@ struct TradeStudy {
   int shard = 1, shards = 1;
   int points_total = 0;  // in the whole study, over every shard
   std::string physics = "ideal";    // the frames' physics (TradeOptions::physics_name)
-  std::string physics_description;  // sim::describe of it
+  std::string physics_description;  // sim_spec::describe of it
   // Right for the verdict's tally: final mean TRE under this (the scene's
   // safety.beam_tolerance_mm). Pooled over scenes of different tolerances: 0, each scene's own.
   double verdict_tolerance_mm = 2.0;

@@ -10,7 +10,7 @@
 #include <string>
 
 #include "lftrack/host/preflight.hpp"
-#include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/qa/daily_qa_report.hpp"
 
 namespace lftrack::qa {
 

@@ -2,7 +2,7 @@
 // Patient motion for the simulated closed loop (scene section `motion`): what the scene asks
 // for, nothing more. The offset of the anatomy from where it lay at time 0, as the pose 6-vector
 // about the registration origin (t [mm], omega [rad]), at a time in seconds:
-//   drift      a constant velocity (mm/s, deg/s),
+//   drift      a constant velocity (mm/s, rad/s; the scene gives deg/s),
 //   breathing  a periodic motion, amplitude * sin^2(pi t / period) (a breathing-like cycle that
 //              rests at exhale),
 //   shifts     sudden steps at given times (the patient coughs, moves an arm).

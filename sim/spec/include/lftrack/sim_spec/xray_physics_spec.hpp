@@ -16,9 +16,9 @@
 
 namespace lftrack::sim_spec {
 
-// More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it);
-// std::poisson_distribution, which drew the noise before, spun without end on means near 1e25
-// (an outside probe's `photons_per_pixel: 1e40` ignored SIGTERM).
+// More photons per pixel than this is no X-ray detector (a 16-bit panel saturates far below it):
+// the most a scene's `sim.photons_per_pixel` and the simulator's detector model may ask
+// (sim::check_detector_model). Here, beside the physics, because the scene parser checks it.
 inline constexpr double kMaxPhotonsPerPixel = 1e9;
 
 // The beam: a tungsten anode's bremsstrahlung at `kvp` through `filtration_mm_al` of aluminium
@@ -32,7 +32,7 @@ struct SpectrumSpec {
 struct BeamSpec {
   SpectrumSpec spectrum;
   // The planning CT's effective energy: its HU are read as attenuation at this energy when the
-  // CT is split into water and bone (material_decomposition.hpp). A 120 kVp CT with a bow-tie
+  // CT is split into water and bone (lftrack/sim/material_decomposition.hpp). A 120 kVp CT with a bow-tie
   // filter has an effective energy of about 65-75 keV.
   double ct_effective_kev = 70;
 };
@@ -89,7 +89,7 @@ std::vector<std::string> physics_preset_names();
 // The clinical preset's parts (what `physics_preset("clinical")` holds): 120 kVp with 2.5 mm Al
 // (the clinical preset images at the same kVp as the planning CT, whose effective energy differs
 // from the imaging beam's through the filtration); scatter 0.05 per cm, a 40 mm kernel, a 10:1
-// grid; the detector values of detector_effects.hpp; anatomy 3 mm soft tissue, 1 mm / 1 degree
+// grid; the detector values of lftrack/sim/detector_effects.hpp; anatomy 3 mm soft tissue, 1 mm / 1 degree
 // adjacent vertebrae, no breathing (a thoracic scene sets breathing_mm).
 XrayPhysicsSpec clinical_physics();
 BeamSpec clinical_beam();
@@ -98,7 +98,7 @@ DetectorEffectsSpec clinical_detector();
 AnatomySpec clinical_anatomy();
 
 // The ranges each part's model is defined on. check_spectrum_spec: kVp in [40, 150] (the
-// attenuation tables end at 150 keV), filtration in [0, 20] mm Al, bins in (0, 10] keV.
+// attenuation tables end at 150 keV), filtration in [0, 20] mm Al, bins in [0.01, 10] keV.
 Status check_spectrum_spec(const SpectrumSpec& spec);
 Status check_scatter_spec(const ScatterSpec& spec);
 Status check_detector_effects(const DetectorEffectsSpec& spec);

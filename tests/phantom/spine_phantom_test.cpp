@@ -4,11 +4,7 @@
 
 #include "lftrack/tracking/thread_pool.hpp"
 
-namespace lftrack::sim {
-
-using phantom::make_spine_phantom;
-using phantom::SpinePhantom;
-using phantom::SpinePhantomOptions;
+namespace lftrack::phantom {
 namespace {
 
 SpinePhantomOptions small() {
@@ -69,4 +65,4 @@ TEST(SpinePhantom, RejectsGridsTooSmallForAVertebra) {
 }
 
 }  // namespace
-}  // namespace lftrack::sim
+}  // namespace lftrack::phantom

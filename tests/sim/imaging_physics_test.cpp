@@ -110,9 +110,9 @@ TEST(MaterialDecomposition, ReproducesThePlanningCtsAttenuationAtItsEnergy) {
     EXPECT_GE(split->water.values[std::size_t(i)], 0);
     EXPECT_GE(split->bone.values[std::size_t(i)], 0);
   }
-  EXPECT_EQ(split->bone.values[2], 0.f);    // water is water
-  EXPECT_EQ(split->water.values[6], 0.f);   // dense bone has no water
-  EXPECT_EQ(split->water.values[7], 0.f);   // NaN reads as air
+  EXPECT_EQ(split->bone.values[2], 0.f);   // water is water
+  EXPECT_EQ(split->water.values[6], 0.f);  // dense bone has no water
+  EXPECT_EQ(split->water.values[7], 0.f);  // NaN reads as air
   EXPECT_FALSE(decompose_ct(ct, 10).ok());
   EXPECT_FALSE(decompose_ct(ct, NAN).ok());
 }
@@ -168,8 +168,8 @@ DetectorModel exact_detector() {
 }
 
 XrayView small_view() {
-  return *XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(0, -1, 0), Eigen::Vector3d(0, 0, 1), 500,
-                               700, 32, 32, 1.0);
+  return *XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(0, -1, 0),
+                               Eigen::Vector3d(0, 0, 1), 500, 700, 32, 32, 1.0);
 }
 
 TEST(PhysicsFrames, ScatterRaisesTheCountsBehindAThickObjectByTheStatedRatio) {
@@ -276,7 +276,8 @@ TEST(AnatomyDeformation, TargetStaysRigidNeighboursMoveSoftTissueDeforms) {
   AnatomyDeformation d(spec, centre, 3);
   // Inside the target's box: nothing moves.
   for (double x : {-29.0, 0.0, 29.0})
-    for (double z : {-14.9, 0.0, 14.9}) EXPECT_EQ(d.displacement_mm(centre + Eigen::Vector3d(x, 10, z)).norm(), 0);
+    for (double z : {-14.9, 0.0, 14.9})
+      EXPECT_EQ(d.displacement_mm(centre + Eigen::Vector3d(x, 10, z)).norm(), 0);
   // Just above the box moves little; a vertebra above (past the disc) moves rigidly.
   const double near = d.displacement_mm(centre + Eigen::Vector3d(0, 0, 15.5)).norm();
   const double above = d.displacement_mm(centre + Eigen::Vector3d(0, 0, 35)).norm();
@@ -288,7 +289,8 @@ TEST(AnatomyDeformation, TargetStaysRigidNeighboursMoveSoftTissueDeforms) {
   for (double x = -200; x <= 200; x += 23)
     for (double y = -200; y <= 200; y += 23)
       for (double z = 200; z <= 400; z += 23) {
-        sum2 += d.displacement_mm(centre + Eigen::Vector3d(x, y, z) + Eigen::Vector3d(0, 0, 100)).squaredNorm();
+        sum2 +=
+            d.displacement_mm(centre + Eigen::Vector3d(x, y, z) + Eigen::Vector3d(0, 0, 100)).squaredNorm();
         ++n;
       }
   EXPECT_GT(std::sqrt(sum2 / n), 0.5 * spec.soft_tissue_mm);
@@ -309,7 +311,8 @@ TEST(AnatomyDeformation, DeformedCtKeepsTheTargetsVoxelsAndMovesTheRest) {
   ct.values.resize(std::size_t(ct.geometry.voxel_count()));
   for (int k = 0; k < 60; ++k)
     for (int j = 0; j < 60; ++j)
-      for (int i = 0; i < 60; ++i) ct.at(i, j, k) = float(100 * std::sin(i * 0.3) + 50 * std::cos(j * 0.2 + k * 0.25));
+      for (int i = 0; i < 60; ++i)
+        ct.at(i, j, k) = float(100 * std::sin(i * 0.3) + 50 * std::cos(j * 0.2 + k * 0.25));
   AnatomySpec spec;
   spec.soft_tissue_mm = 4;
   spec.ramp_mm = 10;
