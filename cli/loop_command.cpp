@@ -8,10 +8,12 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <optional>
 
@@ -324,7 +326,8 @@ LoopCommand add_options(CLI::App* parent, const char* name, const char* descript
   add_scene_options(app, &o->scene);
   if (mode == LoopMode::kReplay)
     app->add_option("--sequence", o->sequence, "Archived frame sequence (a directory with index.csv)")
-        ->required();
+        ->required()
+        ->check(not_empty());
   app->add_option("--cycles", o->cycles,
                   mode == LoopMode::kReplay ? "Cycles to run (0: to the end of the sequence)"
                                             : "Cycles to run (0: until quit)")

@@ -3,7 +3,9 @@
 // own (lftrack_cli_loop) that links the session and the QA's report and never the simulator: the
 // top-level CMakeLists refuses the configure if it does (issue 55). The simulator reaches it only
 // as the RoomSimulator passed to LoopCommand::run. `replay` is made here and runs with none, so a
-// simulated device is refused there before anything is built; the program (cmd_sim.cpp) makes
+// simulated device is refused there before any light field is built or record made; the program
+// that links this library links lftrack_allocation_counter too (the global operator new whose
+// count the summary reports: a program's choice, not a library's). The program (cmd_sim.cpp) makes
 // `sim` (with the chaos soak's options) and `run`, and gives both sim_devices::room_simulator().
 //   sim     the simulated closed loop on a scene (the main job; `make demo` runs it on the
 //           built-in scene)

@@ -46,9 +46,8 @@ TEST(InsertMarkers, ReplacesTheVoxelsValueByItsShareAndLeavesTheRest) {
   insert_markers(&ct, {Eigen::Vector3d(0.5, 0.5, 0.5)}, 3.0, kMarkerHu);
   EXPECT_FLOAT_EQ(ct.at(20, 20, 20), kMarkerHu) << "the voxel at the centre is wholly steel";
   EXPECT_FLOAT_EQ(ct.at(5, 5, 5), 40.f) << "far from the marker";
-  const float edge = ct.at(23, 20, 20);  // 2.5-3.5 mm from the centre: partly inside
-  EXPECT_GT(edge, 40.f);
-  EXPECT_LT(edge, kMarkerHu);
+  // 2.5-3.5 mm from the centre along x, 1 mm wide: 32 of its 4^3 sub-samples lie inside 3 mm.
+  EXPECT_FLOAT_EQ(ct.at(23, 20, 20), 0.5f * 40.f + 0.5f * kMarkerHu) << "blended by its share, not added";
 }
 
 // A marker partly or wholly outside the volume writes what is inside and nothing else.
@@ -57,8 +56,9 @@ TEST(InsertMarkers, AMarkerOutsideTheVolumeWritesOnlyWhatIsInside) {
   insert_markers(&v, {Eigen::Vector3d(100, 0, 0), Eigen::Vector3d(20.5, 0, 0)}, 2.0, kSteelMuPerMm);
   double total = 0;
   for (float x : v.values) total += x;
-  EXPECT_GT(total, 0) << "the half inside the cube is written";
-  EXPECT_LT(total, 0.5 * 4.0 / 3.0 * M_PI * 8.0 * kSteelMuPerMm + 0.6 * kSteelMuPerMm);
+  // The cube ends at x = 20 mm: of the sphere at 20.5 mm only a cap 1.5 mm high is inside,
+  // pi h^2 (3 r - h) / 3 = 10.6 mm^3 (1 mm voxels); the one at 100 mm writes nothing.
+  EXPECT_NEAR(total, M_PI * 1.5 * 1.5 * (3 * 2.0 - 1.5) / 3 * kSteelMuPerMm, 0.6 * kSteelMuPerMm);
 }
 
 }  // namespace

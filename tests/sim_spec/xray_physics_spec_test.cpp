@@ -44,11 +44,19 @@ TEST(PhysicsChecks, TheSpectrumsRangesAtTheirEdgesAndBeyond) {
     EXPECT_NE(st.message().find("kvp must be in [40, 150]"), std::string::npos) << st.message();
   }
   s = SpectrumSpec{};
+  for (double mm : {0.0, 20.0}) {
+    s.filtration_mm_al = mm;
+    EXPECT_TRUE(check_spectrum_spec(s).ok()) << mm;
+  }
   for (double mm : {-0.1, 20.1, kNan}) {
     s.filtration_mm_al = mm;
     EXPECT_FALSE(check_spectrum_spec(s).ok()) << mm;
   }
   s = SpectrumSpec{};
+  for (double bin : {0.01, 10.0}) {
+    s.bin_kev = bin;
+    EXPECT_TRUE(check_spectrum_spec(s).ok()) << bin;
+  }
   for (double bin : {0.0, 1e-12, 0.0099, -1.0, 10.1, kNan}) {
     s.bin_kev = bin;
     EXPECT_FALSE(check_spectrum_spec(s).ok()) << bin;
@@ -70,7 +78,6 @@ TEST(PhysicsChecks, EachPartThatIsOnIsCheckedAndNamed) {
   p.anatomy->target_size_mm.z() = kInf;
   EXPECT_NE(check_physics(p).message().find("anatomy: target_size_mm"), std::string::npos);
   p.anatomy.reset();  // a part that is off is not checked
-  p.scatter->spr_per_cm = 0.05;
   EXPECT_TRUE(check_physics(p).ok()) << check_physics(p).message();
 }
 
