@@ -70,6 +70,7 @@ using watch::MonitorServer;
 using watch::parse_listen_address;
 
 using records::to_json;
+
 namespace {
 
 // --imaging, --xray-hz and --period-ms on the scene, checked as the scene's own values are. A new
@@ -179,7 +180,7 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   so.replay_sequence = o.sequence;
   // The simulator, where the program gives one, makes the simulated room: every device in `sim`,
   // and in `run` a room scene's simulated detectors beside its served couch (sim.couch_link).
-  // `replay` has none: the session refuses a simulated device there, before anything is built.
+  // `replay` has none: the session refuses a simulated device there, before any light field is built.
   so.simulator = simulator;
   if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
   if (o.hil == "can") so.hil = HilProtocol::kCan;
@@ -316,7 +317,9 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   return {};
 }
 
-LoopCommand add_options(CLI::App* parent, const char* name, const char* description, LoopMode mode) {
+}  // namespace
+
+LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* description, LoopMode mode) {
   auto o = std::make_shared<LoopCommandOptions>();
   o->mode = mode;
   if (mode != LoopMode::kSim) o->cycles = 0;
@@ -416,11 +419,6 @@ LoopCommand add_options(CLI::App* parent, const char* name, const char* descript
   return command;
 }
 
-}  // namespace
-
-LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* description, LoopMode mode) {
-  return add_options(parent, name, description, mode);
-}
 
 Command add_replay_command(CLI::App* parent) {
   LoopCommand replay = add_loop_command(
