@@ -30,13 +30,13 @@ struct Setup {
 const Setup& setup() {
   static const Setup s = [] {
     phantom::SpinePhantomOptions o;
-    auto phantom = phantom::make_spine_phantom(o);
-    const tracking::MuVolume mu = tracking::to_attenuation(phantom->ct);
+    auto spine = phantom::make_spine_phantom(o);
+    const tracking::MuVolume mu = tracking::to_attenuation(spine->ct);
     Setup out;
     out.view = *tracking::XrayView::isocentric("A", Eigen::Vector3d::Zero(), Eigen::Vector3d(1, -1, 0),
                                                Eigen::Vector3d(0, 0, 1), 1500, 2100, 512, 512, 0.4);
     out.window = {184, 98, 144, 316};
-    out.pose.translation() = -phantom->vertebral_body_centres_mm[std::size_t(phantom->target_vertebra)];
+    out.pose.translation() = -spine->vertebral_body_centres_mm[std::size_t(spine->target_vertebra)];
     tracking::LightFieldPlanInput in;
     in.view_room = out.view;
     in.roi_window = out.window;

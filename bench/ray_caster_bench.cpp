@@ -17,7 +17,7 @@ namespace {
 
 using namespace lftrack;
 
-std::shared_ptr<const tracking::MuVolume> phantom() {
+std::shared_ptr<const tracking::MuVolume> spine_mu() {
   static const auto volume = [] {
     phantom::SpinePhantomOptions o;  // the default scene's grid
     auto p = phantom::make_spine_phantom(o);
@@ -35,7 +35,7 @@ tracking::XrayView view256() {
 
 tracking::Pose centred_pose() {
   tracking::Pose pose = tracking::Pose::Identity();
-  pose.translation() = -phantom()->geometry.centre_mm();
+  pose.translation() = -spine_mu()->geometry.centre_mm();
   return pose;
 }
 
@@ -43,7 +43,7 @@ void BM_Drr256(benchmark::State& state, const char* renderer_name) {
   tracking::ThreadPool pool(static_cast<int>(state.range(0)));
   tracking::RendererOptions options;
   options.pool = &pool;
-  auto renderer = tracking::make_renderer(renderer_name, phantom(), options);
+  auto renderer = tracking::make_renderer(renderer_name, spine_mu(), options);
   const tracking::XrayView view = view256();
   tracking::Image<float> out(256, 256);
   const tracking::Pose pose = centred_pose();
@@ -63,8 +63,8 @@ BENCHMARK_CAPTURE(BM_Drr256, trilinear, "trilinear")
     ->UseRealTime();
 
 void BM_SiddonRay(benchmark::State& state) {
-  const tracking::GridRayCaster caster(*phantom());
-  const auto& g = phantom()->geometry;
+  const tracking::GridRayCaster caster(*spine_mu());
+  const auto& g = spine_mu()->geometry;
   const Eigen::Vector3d a(-500, 0.4 * g.extent_mm().y(), 0.5 * g.extent_mm().z());
   const Eigen::Vector3d b(g.extent_mm().x() + 500, 0.6 * g.extent_mm().y(), 0.45 * g.extent_mm().z());
   for (auto _ : state) benchmark::DoNotOptimize(caster.siddon(a, b));
@@ -81,8 +81,8 @@ void BM_SiddonBatch(benchmark::State& state) {
     state.SkipWithError("no such vector lanes on this CPU");
     return;
   }
-  const tracking::GridRayCaster caster(*phantom());
-  const Eigen::Vector3d extent = phantom()->geometry.extent_mm();
+  const tracking::GridRayCaster caster(*spine_mu());
+  const Eigen::Vector3d extent = spine_mu()->geometry.extent_mm();
   const Eigen::Vector3d source(-1500, 0.5 * extent.y() - 300, 0.5 * extent.z());
   std::vector<Eigen::Vector3d> from(256, source), to(256);
   for (int i = 0; i < 256; ++i) {

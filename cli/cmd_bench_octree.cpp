@@ -3,10 +3,10 @@
 #include <cstdio>
 
 #include "cli_commands.hpp"
+#include "lftrack/session/progress_bar.hpp"
 #include "lftrack/studies/octree_benchmark.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
-#include "lftrack/host/progress_bar.hpp"
 
 namespace lftrack::cli {
 

@@ -12,7 +12,7 @@
 
 #include "cli_commands.hpp"
 #include "lftrack/calib/two_view_calibration.hpp"
-#include "lftrack/host/calibration_files.hpp"
+#include "lftrack/session/calibration_files.hpp"
 #include "lftrack/sim/phantom_images.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/pose.hpp"

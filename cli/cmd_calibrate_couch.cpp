@@ -8,8 +8,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/calibration_files.hpp"
-#include "lftrack/host/progress_bar.hpp"
+#include "lftrack/session/calibration_files.hpp"
+#include "lftrack/session/progress_bar.hpp"
 #include "lftrack/sim_devices/couch_calibration_run.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 

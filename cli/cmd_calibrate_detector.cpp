@@ -16,7 +16,7 @@
 
 #include "cli_commands.hpp"
 #include "frame_folders.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
 
 namespace lftrack::cli {
 

@@ -19,10 +19,10 @@
 #include <unistd.h>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/commissioning_file.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
-#include "lftrack/host/progress_bar.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/commissioning_file.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
+#include "lftrack/session/progress_bar.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/studies/verdict_commissioning.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -6,7 +6,7 @@
 #include <sstream>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 
 namespace lftrack::cli {
 

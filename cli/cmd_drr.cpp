@@ -8,7 +8,7 @@
 #include <filesystem>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 

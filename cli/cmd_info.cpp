@@ -3,9 +3,9 @@
 #include <cstdio>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/patient_setup.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/patient_setup.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::cli {

@@ -20,8 +20,6 @@
 #include <string>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/dicom_registration.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/latency_chain.hpp"
 #include "lftrack/loop/loop_summary.hpp"
@@ -31,6 +29,8 @@
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/session/dicom_registration.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 

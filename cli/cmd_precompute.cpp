@@ -11,9 +11,9 @@
 #include <set>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -17,9 +17,9 @@
 #include <sstream>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/progress_bar.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/rt_check/wakeup_latency.hpp"
+#include "lftrack/session/progress_bar.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::cli {
 

@@ -16,11 +16,11 @@
 #include <memory>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/patient_setup.hpp"
-#include "lftrack/host/setup_picture.hpp"
-#include "lftrack/tracking/registration.hpp"
+#include "lftrack/session/patient_setup.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/setup_picture.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 

@@ -17,8 +17,8 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "lftrack/sim/v4l2_loopback_writer.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"

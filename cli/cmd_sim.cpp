@@ -1,6 +1,7 @@
-// `lftrack sim` and `lftrack run` (loop_command.hpp), run with the program's simulator
+// `lftrack sim` (loop_command.hpp), run with the program's simulator
 // (sim_devices::room_simulator()), and the chaos soak (`sim --chaos SEED`, cmd_chaos.cpp) in the
-// loop's place when asked. The loop command itself links no simulator; this file gives it one.
+// loop's place when asked. The loop command itself links no simulator; this file gives `sim` one.
+// `run` has none (loop_command.cpp).
 
 #include <cstdint>
 #include <memory>
@@ -65,7 +66,7 @@ Command add_sim_command(CLI::App* parent) {
       ->needs(chaos);
   // The soak makes its own devices, operator and journals.
   for (const char* other : {"--hil", "--archive", "--journal", "--overwrite", "--control", "--auto-resume",
-                            "--rt", "--monitor", "--igtl"})
+                            "--rt", "--monitor", "--igtl", "--room"})
     chaos->excludes(sim.app->get_option(other));
   CLI::Option* cycles = sim.app->get_option("--cycles");
   return [sim, c, chaos, cycles] {
@@ -79,13 +80,6 @@ Command add_sim_command(CLI::App* parent) {
     }
     return sim.run(sim_devices::room_simulator());
   };
-}
-
-Command add_run_command(CLI::App* parent) {
-  LoopCommand run = add_loop_command(
-      parent, "run", "The loop on the scene's devices (real-time set-up as the scene says)", LoopMode::kRun);
-  // A room scene's simulated detectors beside a served couch are the simulator's (issue 55: to go).
-  return [run] { return run.run(sim_devices::room_simulator()); };
 }
 
 }  // namespace lftrack::cli

@@ -9,11 +9,11 @@
 #include <unistd.h>
 
 #include "cli_commands.hpp"
+#include "lftrack/session/progress_bar.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/geometry_sensitivity.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
-#include "lftrack/host/progress_bar.hpp"
 
 namespace lftrack::cli {
 

@@ -6,7 +6,7 @@
 #include <filesystem>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/progress_bar.hpp"
+#include "lftrack/session/progress_bar.hpp"
 #include "lftrack/studies/realism_study.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

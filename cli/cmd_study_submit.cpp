@@ -12,7 +12,7 @@
 #include <fstream>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/studies/realism_study.hpp"

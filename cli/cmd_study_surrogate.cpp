@@ -8,7 +8,7 @@
 #include <memory>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/surrogate_study.hpp"
 
 namespace lftrack::cli {

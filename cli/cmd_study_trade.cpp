@@ -12,12 +12,12 @@
 #include <set>
 
 #include "cli_commands.hpp"
+#include "lftrack/session/progress_bar.hpp"
 #include "lftrack/studies/capture_range_study.hpp"
 #include "lftrack/studies/slurm_job_array.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/studies/trade_study.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
-#include "lftrack/host/progress_bar.hpp"
 
 namespace lftrack::cli {
 

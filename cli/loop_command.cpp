@@ -1,6 +1,6 @@
 // `lftrack sim`, `run` and `replay`: one loop command in three modes (loop_command.hpp). No
-// simulator here: `replay` runs with none, and the program (cmd_sim.cpp) passes its own to
-// `sim`'s and `run`'s LoopCommand::run.
+// simulator here: `run` and `replay` are made here and run with none; the program (cmd_sim.cpp)
+// passes its own to `sim`'s LoopCommand::run.
 
 #include <signal.h>
 #include <unistd.h>
@@ -17,16 +17,16 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/patient_setup.hpp"
-#include "lftrack/host/preflight.hpp"
-#include "lftrack/host/scene_default_plans.hpp"
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
 #include "lftrack/qa/qa_report.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/patient_setup.hpp"
+#include "lftrack/session/preflight.hpp"
+#include "lftrack/session/scene_default_plans.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_exposure.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "loop_command.hpp"
 #include "run_summary.hpp"
@@ -157,6 +157,9 @@ void announce_watchers(const LoopSession& session, bool json, bool token_quiet) 
 }
 
 Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator) {
+  // The scene's own devices, driven as in the room: `run`, or `sim --room` (a room scene whose
+  // detectors are the simulator's). Start-up checks, the real clock, no unattended operator.
+  const bool room = o.mode == LoopMode::kRun || o.room;
   // The options that need no scene first: a bad path or value is refused before the CT is
   // loaded and the light fields are built (minutes), and before anything is created.
   LoopSessionOptions so;
@@ -178,9 +181,10 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   so.light_field_dir = o.lf_dir;
   so.archive = o.archive;
   so.replay_sequence = o.sequence;
-  // The simulator, where the program gives one, makes the simulated room: every device in `sim`,
-  // and in `run` a room scene's simulated detectors beside its served couch (sim.couch_link).
-  // `replay` has none: the session refuses a simulated device there, before any light field is built.
+  // The simulator, where the program gives one (`sim`), makes the simulated room: every device,
+  // or with --room a room scene's simulated detectors beside its served couch (sim.couch_link).
+  // `run` and `replay` have none: the session refuses a simulated device there, before any light
+  // field is built.
   so.simulator = simulator;
   if (o.hil == "modbus") so.hil = HilProtocol::kModbus;
   if (o.hil == "can") so.hil = HilProtocol::kCan;
@@ -207,7 +211,7 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   auto scene = load_scene(o.scene.scene);
   if (!scene.ok()) return scene.status();
   LFTRACK_RETURN_IF_ERROR(override_imaging(o, &*scene));
-  if (o.mode == LoopMode::kRun) {
+  if (room) {
     so.devices = SessionDevices::kScene;
     std::string frames = scene->detectors.empty() ? "none" : describe_frames(scene->detectors[0].frames);
     for (std::size_t i = 1; i < scene->detectors.size(); ++i)
@@ -224,7 +228,7 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   // for runs on the real clock in enforce mode: an offline run (--fast) on SCHED_FIFO would spin
   // every core at real-time priority and starve the host, for no timing it needs; ignore means
   // none of it; and `run --check` applies nothing, it says whether the set-up could be applied.
-  const bool real_clock = o.mode == LoopMode::kRun || !o.fast;
+  const bool real_clock = room || !o.fast;
   Result<RealtimeReport> report = realtime_not_applied("offline run on a simulated clock");
   if (real_clock && !rt.enforce)
     report = realtime_not_applied(o.rt == "ignore" ? "--rt ignore" : "loop.realtime.mode: ignore");
@@ -233,7 +237,7 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   else if (real_clock)
     report = apply_realtime_setup(rt);
   // `run` lists a failed set-up among its start-up checks; the others stop here.
-  if (!report.ok() && o.mode != LoopMode::kRun) return report.status();
+  if (!report.ok() && !room) return report.status();
   if (report.ok()) {
     for (const std::string& w : report->warnings) spdlog::warn("real-time set-up (ignored): {}", w);
     spdlog::info("real-time set-up: {}", report->summary());
@@ -246,9 +250,9 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
     apply_default_plans(archived_frame_plans(), &*scene);
   auto prepared = prepare_scene(*scene, o.scene.ct, &pool);
   if (!prepared.ok()) return prepared.status();
-  if (o.mode == LoopMode::kSim || (o.mode == LoopMode::kRun && frames_are_simulated(prepared->scene)))
+  if ((o.mode == LoopMode::kSim && !room) || (room && frames_are_simulated(prepared->scene)))
     spdlog::info("{}: simulated detectors, {}", prepared->scene.name, describe_exposure(*prepared));
-  if (o.mode == LoopMode::kRun) {
+  if (room) {
     // The start-up checks before the first beam: every reason at once, nothing built or moved.
     PreflightReport checks = run_preflight(*prepared, so, report, o.rt == "ignore");
     checks.items.push_back(qa::daily_qa_item(prepared->scene));  // today's QA of the room (issue 59)
@@ -256,8 +260,9 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
       std::printf("pre-treatment checklist, %s:\n%s", prepared->scene.name.c_str(),
                   checks.checklist().c_str());
     if (!checks.passed())
-      return failed_precondition("lftrack run refuses to start; the start-up checks failed:\n" +
-                                 checks.failures());
+      return failed_precondition(
+          std::string(o.mode == LoopMode::kRun ? "lftrack run" : "lftrack sim --room") +
+          " refuses to start; the start-up checks failed:\n" + checks.failures());
     if (o.check) return {};
   }
   if (!so.journal.empty()) {
@@ -331,11 +336,13 @@ LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* des
     app->add_option("--sequence", o->sequence, "Archived frame sequence (a directory with index.csv)")
         ->required()
         ->check(not_empty());
-  app->add_option("--cycles", o->cycles,
-                  mode == LoopMode::kReplay ? "Cycles to run (0: to the end of the sequence)"
-                                            : "Cycles to run (0: until quit)")
-      ->capture_default_str()
-      ->check(CLI::Range(std::int64_t(0), std::int64_t(1000000000)));
+  CLI::Option* cycles =
+      app->add_option("--cycles", o->cycles,
+                      mode == LoopMode::kReplay ? "Cycles to run (0: to the end of the sequence)"
+                      : mode == LoopMode::kSim  ? "Cycles to run (0: until quit; with --room, 0 by default)"
+                                                : "Cycles to run (0: until quit)")
+          ->capture_default_str()
+          ->check(CLI::Range(std::int64_t(0), std::int64_t(1000000000)));
   app->add_flag("--json", o->json, "Print the summary as JSON");
   if (mode == LoopMode::kSim)
     app->add_flag("--fast", o->fast,
@@ -343,11 +350,20 @@ LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* des
                   "seed gives the same run whatever the host's load (no real-time set-up)");
   if (mode == LoopMode::kReplay)
     app->add_flag("--fast", o->fast, "As fast as possible on a simulated clock (default: the recorded pace)");
-  if (mode == LoopMode::kRun)
-    app->add_flag(
+  CLI::Option* room = nullptr;
+  if (mode == LoopMode::kSim)
+    room =
+        app->add_flag("--room", o->room,
+                      "The scene's own devices as `lftrack run` drives them (start-up checks, real clock), "
+                      "its detectors with `frames: sim` and the patient made by the simulator: a room of "
+                      "served twins (scenes/room/), or the QA phantom's room");
+  if (mode != LoopMode::kReplay) {
+    CLI::Option* check = app->add_flag(
         "--check", o->check,
         "Only the start-up checks: devices, calibrations, light fields, real-time set-up; print the "
         "pre-treatment checklist (exit 1 if any fails)");
+    if (room != nullptr) check->needs(room);
+  }
   if (mode == LoopMode::kSim)
     app->add_option("--hil", o->hil,
                     "Hardware in the loop: the virtual couch behind a Modbus TCP server on 127.0.0.1 "
@@ -408,17 +424,29 @@ LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* des
                   "Serve the registered pose over OpenIGTLink on [ADDRESS:]PORT (3D Slicer's OpenIGTLinkIF "
                   "connects as a client)")
       ->check(not_empty());
+  // The room's devices and its operator: no simulated clock, no simulated couch in their place.
+  if (room != nullptr)
+    for (const char* other : {"--fast", "--hil", "--auto-resume"}) room->excludes(app->get_option(other));
   CLI::Option* journal = app->get_option("--journal");
   LoopCommand command;
   command.app = app;
   command.options = o;
-  command.run = [o, journal](const session::RoomSimulator* simulator) {
+  command.run = [o, journal, cycles](const session::RoomSimulator* simulator) {
     o->journal_named = journal->count() > 0;
+    if (o->room && cycles->count() == 0) o->cycles = 0;  // a room runs until stopped, as `run` does
     return run(*o, simulator);
   };
   return command;
 }
 
+// `run` drives a room's devices and is given no simulator: a scene whose detectors are simulated
+// is refused (`lftrack sim --room` runs it). With lftrack_cli_loop's guard (it links no simulator
+// target), this is how `run`'s code path is kept free of simulator code (issue 55).
+Command add_run_command(CLI::App* parent) {
+  LoopCommand run = add_loop_command(
+      parent, "run", "The loop on the scene's devices (real-time set-up as the scene says)", LoopMode::kRun);
+  return [run] { return run.run(nullptr); };
+}
 
 Command add_replay_command(CLI::App* parent) {
   LoopCommand replay = add_loop_command(

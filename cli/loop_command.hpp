@@ -5,12 +5,13 @@
 // as the RoomSimulator passed to LoopCommand::run. `replay` is made here and runs with none, so a
 // simulated device is refused there before any light field is built or record made; the program
 // that links this library links lftrack_allocation_counter too (the global operator new whose
-// count the summary reports: a program's choice, not a library's). The program (cmd_sim.cpp) makes
-// `sim` (with the chaos soak's options) and `run`, and gives both sim_devices::room_simulator().
+// count the summary reports: a program's choice, not a library's). `run` is made here too and runs
+// with none: its code path reaches no simulator code. The program (cmd_sim.cpp) makes `sim` (with
+// the chaos soak's options) and gives it sim_devices::room_simulator().
 //   sim     the simulated closed loop on a scene (the main job; `make demo` runs it on the
-//           built-in scene)
-//   run     the same loop on the scene's own devices, after the start-up checks (a room scene's
-//           simulated detectors beside a served couch are still the simulator's: issue 55)
+//           built-in scene); `sim --room`: the scene's own devices as `run` drives them, its
+//           simulated detectors the simulator's (a room of served twins, the QA phantom's room)
+//   run     the same loop on the scene's own devices, after the start-up checks; no simulator
 //   replay  the same loop on an archived frame sequence (no actuator: track and report)
 
 #include <cstdint>
@@ -21,7 +22,7 @@
 #include <vector>
 
 #include "cli_commands.hpp"
-#include "lftrack/host/room_simulator.hpp"
+#include "lftrack/session/room_simulator.hpp"
 
 namespace lftrack::cli {
 
@@ -45,7 +46,8 @@ struct LoopCommandOptions {
   std::string archive;   // frames archived here
   std::string sequence;  // `lftrack replay`: the archived sequence
   std::string hil;       // `lftrack sim --hil modbus`: actuators through their real drivers
-  bool check = false;    // `lftrack run --check`: the start-up checks only
+  bool check = false;    // `lftrack run --check`, `sim --room --check`: the start-up checks only
+  bool room = false;     // `lftrack sim --room`: the scene's devices, as `run` drives them
   std::string monitor;   // --monitor [ADDRESS:]PORT: the operator's page
   std::vector<std::string> monitor_origins;
   std::string monitor_token_file;

@@ -7,8 +7,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "lftrack/host/loop_session.hpp"
 #include "lftrack/loop/loop_summary.hpp"
+#include "lftrack/session/loop_session.hpp"
 
 namespace lftrack::cli {
 

@@ -2,9 +2,9 @@
 // (four-page float TIFF with JSON), a calibration phantom (YAML) and a commissioning file (YAML).
 // The first input byte picks the reader.
 #include "fuzz_input.hpp"
-#include "lftrack/host/calibration_files.hpp"
-#include "lftrack/host/commissioning_file.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/session/calibration_files.hpp"
+#include "lftrack/session/commissioning_file.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace lftrack;

@@ -1,7 +1,7 @@
 // DICOM RT objects a new patient is set up from (host/dicom_rt.hpp): an RT Plan (first byte even)
 // or an RT Structure Set (first byte odd), read as `lftrack scene new` reads them.
 #include "fuzz_input.hpp"
-#include "lftrack/host/dicom_rt.hpp"
+#include "lftrack/session/dicom_rt.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace lftrack;

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "lftrack/sim/poisson_sampler.hpp"
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 
 namespace lftrack::sim {
 
@@ -22,7 +23,7 @@ Status check_panel_spec(const PanelSpec& s) {
   if (s.rows < 1 || s.cols < 1 || s.rows > 16384 || s.cols > 16384)
     return invalid_argument("simulated panel: 1 to 16384 rows and columns");
   if (s.bits < 8 || s.bits > 16) return invalid_argument("simulated panel: 8 to 16 bits");
-  if (!in(s.photons_per_pixel, 1e-9, 1e9) || !in(s.open_field_fraction, 1e-9, 1) ||
+  if (!in(s.photons_per_pixel, 1e-9, sim_spec::kMaxPhotonsPerPixel) || !in(s.open_field_fraction, 1e-9, 1) ||
       !in(s.dark_fraction, 0, 0.5) || !in(s.read_noise_counts, 1e-9, 1000))
     return invalid_argument(
         "simulated panel: photons in (0, 1e9], open field in (0, 1] of full scale, dark level in [0, 0.5], "
@@ -59,7 +60,8 @@ Result<std::vector<tracking::Image<std::uint16_t>>> simulate_panel_frames(const 
           v = dark + read(rng);
           if (flood) {
             const double gain = pattern ? pattern->gain(r, c) : 1.0;
-            v += double(poisson_draw(std::min(1e9, s.photons_per_pixel * heel * gain), rng)) *
+            v += double(poisson_draw(
+                     std::min(sim_spec::kMaxPhotonsPerPixel, s.photons_per_pixel * heel * gain), rng)) *
                  counts_per_photon;
           }
         }

@@ -4,6 +4,7 @@
 #include <random>
 #include <vector>
 
+#include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 
 namespace lftrack::sim {
@@ -34,7 +35,8 @@ Result<tracking::Image<float>> render_phantom_image(const calib::CalibrationPhan
                                                     const PhantomImageSpec& spec) {
   LFTRACK_RETURN_IF_ERROR(phantom.validate());
   LFTRACK_RETURN_IF_ERROR(view.validate());
-  if (spec.supersample < 1 || spec.supersample > 16 || !(spec.photons_per_pixel >= 0 && spec.photons_per_pixel <= 1e9) ||
+  if (spec.supersample < 1 || spec.supersample > 16 ||
+      !(spec.photons_per_pixel >= 0 && spec.photons_per_pixel <= sim_spec::kMaxPhotonsPerPixel) ||
       !(spec.blur_px >= 0)) {
     return invalid_argument("phantom image: supersample 1..16, photons 0..1e9, blur >= 0");
   }

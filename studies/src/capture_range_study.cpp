@@ -8,9 +8,9 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "lftrack/host/registration_judge.hpp"
-#include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/registration_judge.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/studies/plot.hpp"
 #include "lftrack/studies/study_shard.hpp"

@@ -9,7 +9,7 @@
 #include <memory>
 #include <optional>
 
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/sim_devices/sim_detectors.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"

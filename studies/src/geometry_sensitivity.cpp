@@ -9,12 +9,12 @@
 #include <random>
 #include <sstream>
 
-#include "lftrack/host/registration_judge.hpp"
-#include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/progress_bar.hpp"
+#include "lftrack/session/registration_judge.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
-#include "lftrack/host/progress_bar.hpp"
 
 namespace lftrack::studies {
 

@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <random>
 
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/progress_bar.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
-#include "lftrack/host/progress_bar.hpp"
 #include "quantile.hpp"
 
 namespace lftrack::studies {

@@ -18,9 +18,9 @@
 #include <random>
 #include <set>
 
-#include "lftrack/host/registration_judge.hpp"
-#include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/registration_judge.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/studies/study_shard.hpp"
 #include "lftrack/tracking/image_metrics.hpp"

@@ -5,9 +5,9 @@
 #include <limits>
 #include <random>
 
-#include "lftrack/host/registration_judge.hpp"
-#include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/registration_judge.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/sim_devices/sim_detectors.hpp"
 #include "quantile.hpp"
 

@@ -10,8 +10,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
-#include "lftrack/host/calibration_files.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/calibration_files.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"

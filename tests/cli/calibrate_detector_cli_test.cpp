@@ -12,9 +12,9 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "lftrack/drivers/frame_files.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
 #include "cli_text.hpp"
+#include "lftrack/drivers/frame_files.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {

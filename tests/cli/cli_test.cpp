@@ -10,9 +10,9 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/operator_input.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "lftrack/studies/trade_study.hpp"
 #include "lftrack/tracking/image_io.hpp"

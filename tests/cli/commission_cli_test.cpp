@@ -14,8 +14,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
-#include "lftrack/host/commissioning_file.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/commissioning_file.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"

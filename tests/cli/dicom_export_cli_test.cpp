@@ -15,11 +15,11 @@
 #include <sstream>
 
 #include "dicom_writer.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_states.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"

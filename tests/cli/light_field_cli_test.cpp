@@ -8,7 +8,7 @@
 #include <iterator>
 #include <map>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "test_data.hpp"
 
@@ -91,8 +91,8 @@ TEST(Cli, ScenesSharingALightFieldFolderKeepTheirFieldsAndPrecomputeSkipsThoseUp
 }
 
 // A scene whose simulated frames come from light fields: `precompute` builds the simulator's
-// fields too (in <folder>/sim-frames), so that `run` finds every field it checks for, and a
-// second precompute writes nothing.
+// fields too (in <folder>/sim-frames), so that the room's loop (`sim --room`) finds every field it checks
+// for, and a second precompute writes nothing.
 TEST(Cli, PrecomputeBuildsTheSimulatorsFrameFieldsWhereTheSceneDrawsFramesFromThem) {
   test::TempDir dir;
   const fs::path lf = dir.path() / "lf";
@@ -100,8 +100,8 @@ TEST(Cli, PrecomputeBuildsTheSimulatorsFrameFieldsWhereTheSceneDrawsFramesFromTh
   std::string out;
   auto check = [&] {
     std::string checklist;
-    (void)run_process({LFTRACK_BIN_PATH, "run", "--check", "--rt", "ignore", "--scene", scene.string(),
-                       "--lf-dir", lf.string()},
+    (void)run_process({LFTRACK_BIN_PATH, "sim", "--room", "--check", "--rt", "ignore", "--scene",
+                       scene.string(), "--lf-dir", lf.string()},
                       &checklist);
     return checklist;
   };

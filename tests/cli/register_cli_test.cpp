@@ -16,9 +16,9 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "test_data.hpp"
 

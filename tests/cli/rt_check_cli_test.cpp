@@ -14,9 +14,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/rt_check/wakeup_latency.hpp"
 #include "cli_text.hpp"
+#include "lftrack/rt_check/wakeup_latency.hpp"
+#include "lftrack/session/scene.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {

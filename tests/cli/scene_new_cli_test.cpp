@@ -12,8 +12,8 @@
 #include <string>
 
 #include "cli_text.hpp"
-#include "lftrack/host/dicom_registration.hpp"
-#include "lftrack/host/dicom_rt.hpp"
+#include "lftrack/session/dicom_registration.hpp"
+#include "lftrack/session/dicom_rt.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "rt_writer.hpp"
 #include "test_data.hpp"

@@ -11,8 +11,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
-#include "lftrack/host/scene.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {

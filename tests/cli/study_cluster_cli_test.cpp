@@ -13,9 +13,9 @@
 #include <sstream>
 #include <thread>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "cli_text.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/studies/plastimatch_peer.hpp"  // run_process
 #include "test_data.hpp"
 
 namespace lftrack::session {

@@ -12,10 +12,10 @@
 #include <thread>
 
 #include "lftrack/drivers/forwarding_actuator.hpp"
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -10,10 +10,10 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/loop_session.hpp"
 #include "lftrack/loop/allocation_counter.hpp"
 #include "lftrack/records/journal_reader.hpp"
 #include "lftrack/records/loop_json.hpp"
+#include "lftrack/session/loop_session.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"

@@ -13,7 +13,7 @@
 
 #include "child_process.hpp"
 #include "gige_host_lock.hpp"
-#include "lftrack/host/preflight.hpp"
+#include "lftrack/session/preflight.hpp"
 #include "lftrack/sim/gige_fake_detector.hpp"
 #include "loop_fixture.hpp"
 

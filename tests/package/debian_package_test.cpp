@@ -1,8 +1,9 @@
 // `make deb` as CI makes it (issue 59): scripts/make-deb.sh packages this build's program with
 // debhelper, lintian passes it, and the package, unpacked into a temporary root (dpkg -x), holds
 // the program, its scenes, its man pages, its units, its user and its configuration; the program
-// from there says its version and passes `run --check` on the room it ships as configuration; the
-// units pass `systemd-analyze verify`.
+// from there says its version and passes the start-up checks (`--check`) of the loop command its
+// unit runs on the room it ships as configuration (`sim --room`: the room is simulated, and `run`
+// has no simulator); the units pass `systemd-analyze verify`.
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -116,13 +117,15 @@ TEST_F(DebianPackage, HoldsTheProgramScenesManPagesUnitsUserAndConfiguration) {
         "usr/share/man/man1/lftrack-rt-check.1.gz", "usr/share/man/man1/lftrack-qa-daily.1.gz",
         "usr/share/doc/lftrack/copyright", "lib/systemd/system/lftrack@.service",
         "lib/systemd/system/lftrack-precompute@.service", "lib/systemd/system/lftrack-qa@.service",
-        "usr/lib/sysusers.d/lftrack.conf", "usr/lib/tmpfiles.d/lftrack.conf", "etc/lftrack/qa-phantom.yaml"})
+        "usr/lib/sysusers.d/lftrack.conf", "usr/lib/tmpfiles.d/lftrack.conf", "etc/lftrack/qa-phantom.yaml",
+        "etc/lftrack/qa-phantom.env"})
     EXPECT_TRUE(fs::exists(*root_ / file)) << file << " is not in the package";
   // The configuration is a conffile (an upgrade keeps the physicist's edits).
   const CliRun conffiles =
       shell("dpkg-deb --ctrl-tarfile " + quoted(deb_->string()) + " | tar -xO ./conffiles", dir_->path(),
             "conffiles.txt");
   EXPECT_NE(conffiles.out.find("/etc/lftrack/qa-phantom.yaml"), std::string::npos) << conffiles.out;
+  EXPECT_NE(conffiles.out.find("/etc/lftrack/qa-phantom.env"), std::string::npos) << conffiles.out;
   const std::string sysusers = contents(*root_ / "usr/lib/sysusers.d/lftrack.conf");
   EXPECT_NE(sysusers.find("u lftrack - "), std::string::npos) << sysusers;
   EXPECT_NE(sysusers.find("/var/lib/lftrack"), std::string::npos) << sysusers;
@@ -133,7 +136,8 @@ TEST_F(DebianPackage, TheUnitsVerifyAndCarryTheRealTimeAndHardeningSettings) {
   for (const char* setting :
        {"User=lftrack", "CPUSchedulingPolicy=fifo", "LimitRTPRIO=99", "LimitMEMLOCK=infinity", "Restart=no",
         "ProtectSystem=strict", "ReadWritePaths=/var/lib/lftrack/%i", "NoNewPrivileges=yes",
-        "DevicePolicy=closed", "DeviceAllow=char-video4linux rw", "AF_CAN", "--scene /etc/lftrack/%i.yaml",
+        "DevicePolicy=closed", "DeviceAllow=char-video4linux rw", "AF_CAN", "LFTRACK_LOOP=run",
+        "/usr/bin/lftrack $LFTRACK_LOOP --scene /etc/lftrack/%i.yaml", "EnvironmentFile=-/etc/lftrack/%i.env",
         "--control /run/lftrack/%i/", "ReadWritePaths=/run/lock"})
     EXPECT_NE(unit.find(setting), std::string::npos) << setting << " missing from lftrack@.service";
   // The QA's unit sees the loop's couch lock (actuator_lock.hpp), not one in its private /tmp, and
@@ -166,15 +170,19 @@ TEST_F(DebianPackage, TheInstalledProgramChecksTheRoomItShipsAsConfiguration) {
   EXPECT_EQ(version.exit_code, 0);
   EXPECT_EQ(version.out, "lftrack " + program_version(dir_->path()) + "\n");
   // The room the unit's instance qa-phantom runs, with the light fields the installed program
-  // builds (its precompute unit's command), checked as `lftrack run` does before a treatment.
+  // builds (its precompute unit's command), checked as the unit's loop command (the installed
+  // qa-phantom.env's LFTRACK_LOOP) checks it before a treatment. The room is simulated: `run`,
+  // which has no simulator, refuses it by name.
   const fs::path scene = *root_ / "etc/lftrack/qa-phantom.yaml";
+  const std::string loop = qa_phantom_loop(*root_ / "etc/lftrack/qa-phantom.env");
+  ASSERT_EQ(loop.rfind("sim --room", 0), 0u) << "LFTRACK_LOOP=" << loop;
   const fs::path fields = qa_phantom_fields(program.string(), scene, dir_->path());
   ASSERT_FALSE(fields.empty()) << contents(dir_->path() / "precompute.txt");
   // As root (CI) the real-time set-up is checked too; another user has no grants here and
   // waives it, which the limits test covers.
   const std::string waive = ::geteuid() == 0 ? "" : " --rt ignore";
-  const CliRun check = shell(quoted(program.string()) + " -q run --check --scene " + quoted(scene.string()) +
-                                 " --lf-dir " + quoted(fields.string()) + waive,
+  const CliRun check = shell(quoted(program.string()) + " -q " + loop + " --check --scene " +
+                                 quoted(scene.string()) + " --lf-dir " + quoted(fields.string()) + waive,
                              dir_->path(), "check.txt");
   EXPECT_EQ(check.exit_code, 0) << check.out;
   EXPECT_NE(check.out.find("pre-treatment checklist, QA phantom"), std::string::npos) << check.out;
@@ -182,6 +190,12 @@ TEST_F(DebianPackage, TheInstalledProgramChecksTheRoomItShipsAsConfiguration) {
   if (::geteuid() == 0) {
     EXPECT_NE(check.out.find("[ ok ] real-time set-up"), std::string::npos) << check.out;
   }
+  const CliRun run = shell(quoted(program.string()) + " -q run --check --scene " + quoted(scene.string()) +
+                               " --lf-dir " + quoted(fields.string()) + waive,
+                           dir_->path(), "run-check.txt");
+  EXPECT_EQ(run.exit_code, 1) << run.out;
+  EXPECT_NE(run.out.find("[FAIL] simulated detectors"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("lftrack sim --room"), std::string::npos) << run.out;
 }
 
 }  // namespace

@@ -1,4 +1,5 @@
-// `lftrack run` as the service runs it (issue 59): an unprivileged user whose only grants are the
+// The loop as the service runs it (issue 59; on the shipped QA room, whose qa-phantom.env makes
+// it `lftrack sim --room`, the real-time set-up `run`'s own): an unprivileged user whose only grants are the
 // real-time ones lftrack@.service gives. Without them the start is refused, naming each missing
 // limit and the unit setting that grants it, never a bare "permission denied"; with them the loop
 // locks its memory, takes SCHED_FIFO on its CPU and tracks.
@@ -41,10 +42,11 @@ TEST(ServiceLimits, AStartWithoutTheUnitsLimitsNamesEachMissingOne) {
   ASSERT_FALSE(fields.empty()) << contents(dir.path() / "precompute.txt");
   // Limits as a login without /etc/security/limits.conf entries has them (lowering needs no
   // privilege): 64 KiB of locked memory, no real-time priority.
-  const CliRun r = shell("prlimit --memlock=65536:65536 --rtprio=0:0 " + unprivileged() +
-                             quoted(LFTRACK_BIN_PATH) + " run --cycles 1 --journal '' --scene " +
-                             quoted(qa_phantom_scene().string()) + " --lf-dir " + quoted(fields.string()),
-                         dir.path());
+  const CliRun r =
+      shell("prlimit --memlock=65536:65536 --rtprio=0:0 " + unprivileged() + quoted(LFTRACK_BIN_PATH) + " " +
+                qa_phantom_loop() + " --cycles 1 --journal '' --scene " +
+                quoted(qa_phantom_scene().string()) + " --lf-dir " + quoted(fields.string()),
+            dir.path());
   EXPECT_NE(r.exit_code, 0) << r.out;
   for (const char* named : {"RLIMIT_MEMLOCK is 65536 bytes", "RLIMIT_RTPRIO is 0", "LimitMEMLOCK=infinity",
                             "LimitRTPRIO=80", "/etc/security/limits.conf"})
@@ -58,9 +60,9 @@ TEST(ServiceLimits, AStartWithoutTheUnitsLimitsNamesEachMissingOne) {
   ASSERT_NE(scene.find(cpus), std::string::npos);
   scene.replace(scene.find(cpus), cpus.size(), "    cpus: [1023]");
   std::ofstream(dir.path() / "far-cpu.yaml") << scene;
-  const CliRun far = shell(
-      quoted(LFTRACK_BIN_PATH) + " run --check --scene far-cpu.yaml --lf-dir " + quoted(fields.string()),
-      dir.path(), "far.txt");
+  const CliRun far = shell(quoted(LFTRACK_BIN_PATH) + " " + qa_phantom_loop() +
+                               " --check --scene far-cpu.yaml --lf-dir " + quoted(fields.string()),
+                           dir.path(), "far.txt");
   EXPECT_EQ(far.exit_code, 1) << far.out;
   EXPECT_NE(far.out.find("CPU 1023 not among this process's CPUs"), std::string::npos) << far.out;
   EXPECT_NE(far.out.find("CPUAffinity="), std::string::npos) << far.out;
@@ -84,10 +86,10 @@ TEST(ServiceLimits, WithTheGrantsTheLoopRunsAsAnUnprivilegedUser) {
                             "chrt --fifo --reset-on-fork 1 ";
   std::cout << "granted as "
             << (limits ? "limits (LimitMEMLOCK, LimitRTPRIO)" : "capabilities (IPC_LOCK, SYS_NICE)") << "\n";
-  const CliRun r =
-      shell(grant + quoted(LFTRACK_BIN_PATH) + " run --cycles 20 --journal journal.lfj --scene " +
-                quoted(qa_phantom_scene().string()) + " --lf-dir " + quoted(fields.string()),
-            dir.path());
+  const CliRun r = shell(grant + quoted(LFTRACK_BIN_PATH) + " " + qa_phantom_loop() +
+                             " --cycles 20 --journal journal.lfj --scene " +
+                             quoted(qa_phantom_scene().string()) + " --lf-dir " + quoted(fields.string()),
+                         dir.path());
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("real-time set-up: memory locked, SCHED_FIFO, pinned"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("cycles 20 (cycle count reached)"), std::string::npos) << r.out;

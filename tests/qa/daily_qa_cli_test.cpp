@@ -1,7 +1,7 @@
 // `lftrack qa daily` as a physicist runs it (issue 59): on the shipped QA phantom it passes, the
 // latency chain and the control socket included (the real clock), writes its dated report, and
-// `lftrack run` then finds today's QA of the room; absurd values are refused before anything
-// is loaded.
+// the room's loop (`sim --room` on the simulated QA room, as `run` on a real one) then finds
+// today's QA of the room; absurd values are refused before anything is loaded.
 
 #include <gtest/gtest.h>
 
@@ -47,8 +47,9 @@ TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
   ASSERT_FALSE(fields.empty()) << contents(dir.path() / "precompute.txt");
   const std::string scene = quoted(qa_phantom_scene().string());
   const std::string lf = " --lf-dir " + quoted(fields.string());
-  const CliRun before = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
-                              dir.path(), "before.txt");
+  const CliRun before = shell(
+      quoted(LFTRACK_BIN_PATH) + " -q " + qa_phantom_loop() + " --check --rt ignore --scene " + scene + lf,
+      dir.path(), "before.txt");
   EXPECT_NE(before.out.find("[warn] daily QA: none of this room today"), std::string::npos) << before.out;
 
   // The latency chain runs on the real clock with the scene's real-time set-up (enforce): root
@@ -79,13 +80,14 @@ TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
   EXPECT_GE(reports, 2);
 
   // The room's start-up checks now see it (any scene of the same detectors and actuator would).
-  const CliRun after = shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene " + scene + lf,
-                             dir.path(), "after.txt");
+  const CliRun after = shell(
+      quoted(LFTRACK_BIN_PATH) + " -q " + qa_phantom_loop() + " --check --rt ignore --scene " + scene + lf,
+      dir.path(), "after.txt");
   EXPECT_NE(after.out.find("[ ok ] daily QA: passed today: out/qa/qa-daily-"), std::string::npos)
       << after.out;
 }
 
-// safety.require_daily_qa: without today's QA of the room, `run` refuses to start, saying why.
+// safety.require_daily_qa: without today's QA of the room, the loop refuses to start, saying why.
 TEST(DailyQaCli, ASceneThatRequiresTheDailyQaIsRefusedWithoutIt) {
   TempDir dir;
   const fs::path fields = qa_phantom_fields(LFTRACK_BIN_PATH, qa_phantom_scene(), dir.path());
@@ -95,10 +97,9 @@ TEST(DailyQaCli, ASceneThatRequiresTheDailyQaIsRefusedWithoutIt) {
   ASSERT_NE(text.find(safety), std::string::npos);
   text.replace(text.find(safety), safety.size(), "safety:\n  require_daily_qa: true\n");
   std::ofstream(dir.path() / "strict.yaml") << text;
-  const CliRun r =
-      shell(quoted(LFTRACK_BIN_PATH) + " -q run --check --rt ignore --scene strict.yaml --lf-dir " +
-                quoted(fields.string()),
-            dir.path());
+  const CliRun r = shell(quoted(LFTRACK_BIN_PATH) + " -q " + qa_phantom_loop() +
+                             " --check --rt ignore --scene strict.yaml --lf-dir " + quoted(fields.string()),
+                         dir.path());
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("[FAIL] daily QA: none of this room today"), std::string::npos) << r.out;
   std::string bad = text;

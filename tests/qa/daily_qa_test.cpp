@@ -11,8 +11,8 @@
 #include <string>
 
 #include "lftrack/drivers/frame_source.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 

@@ -10,9 +10,9 @@
 #include <string>
 
 #include "lftrack/drivers/frame_files.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/sim/panel_frames.hpp"
 #include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -7,8 +7,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/qa/qa_report.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::qa {

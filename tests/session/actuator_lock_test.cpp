@@ -2,7 +2,7 @@
 // one with the holder named; within a process the lock is shared; a holder that crashes leaves no
 // stale lock.
 
-#include "lftrack/host/actuator_lock.hpp"
+#include "lftrack/session/actuator_lock.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

@@ -9,8 +9,8 @@
 #include <limits>
 
 #include "lftrack/calib/couch_calibration.hpp"
-#include "lftrack/host/calibrated_couch.hpp"
-#include "lftrack/host/calibration_files.hpp"
+#include "lftrack/session/calibrated_couch.hpp"
+#include "lftrack/session/calibration_files.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {

@@ -2,7 +2,7 @@
 // (scene_verdict_limits): read back as written, never replaced unasked, refused with its name when
 // malformed, and refused for a scene whose CT, room, registration or imaging it was not measured on.
 
-#include "lftrack/host/commissioning_file.hpp"
+#include "lftrack/session/commissioning_file.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 #include <memory>
 #include <sstream>
 
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 

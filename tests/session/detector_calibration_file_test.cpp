@@ -2,7 +2,7 @@
 // back whole; a damaged, truncated, edited or lying file is refused with the reason and never
 // crashes the loader; nothing is overwritten without being asked.
 
-#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
 
 #include <gtest/gtest.h>
 #include <tiffio.h>

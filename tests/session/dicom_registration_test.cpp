@@ -2,7 +2,7 @@
 // DCMTK: the matrix, the Frames of Reference, the CT's series and slices, the patient and study;
 // validated by dicom3tools' dciodvfy where it is installed; and what is refused.
 
-#include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/session/dicom_registration.hpp"
 
 #include <dcmtk/dcmdata/dcdeftag.h>
 #include <dcmtk/dcmdata/dcfilefo.h>

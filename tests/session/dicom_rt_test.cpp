@@ -3,7 +3,7 @@
 // pydicom's RT test files (Debian's python3-pydicom) as foreign input; and what is refused, each
 // refusal naming the file.
 
-#include "lftrack/host/dicom_rt.hpp"
+#include "lftrack/session/dicom_rt.hpp"
 
 #include <gtest/gtest.h>
 
@@ -14,7 +14,7 @@
 #include <sstream>
 
 #include "dicom_writer.hpp"
-#include "lftrack/host/dicom_registration.hpp"
+#include "lftrack/session/dicom_registration.hpp"
 #include "rt_writer.hpp"
 #include "test_data.hpp"
 

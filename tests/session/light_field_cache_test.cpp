@@ -8,7 +8,7 @@
 #include <iterator>
 #include <map>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"

@@ -1,7 +1,7 @@
 // A new patient's scene from an RT Plan and Structure Set written for the shipped DICOM CT
 // (patient_setup.cpp, setup_picture.cpp): the set-up, every refusal, and the picture's marks.
 
-#include "lftrack/host/patient_setup.hpp"
+#include "lftrack/session/patient_setup.hpp"
 
 #include <gtest/gtest.h>
 
@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <memory>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/setup_picture.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/setup_picture.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 #include "rt_writer.hpp"

@@ -2,7 +2,7 @@
 // build's copy of the same phantom, bit for bit; anything else is made anew, and the cache never
 // fails a run.
 
-#include "lftrack/host/phantom_cache.hpp"
+#include "lftrack/session/phantom_cache.hpp"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
@@ -13,8 +13,8 @@
 #include <thread>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
 #include "lftrack/phantom/spine_phantom.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"
 

@@ -9,8 +9,8 @@
 #include <string>
 
 #include "actuator_lock_holder.hpp"
-#include "lftrack/host/preflight.hpp"
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/preflight.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/sim/tracker_twin.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"

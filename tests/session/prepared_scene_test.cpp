@@ -4,8 +4,8 @@
 #include <fstream>
 #include <sstream>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/tracking/frame_quality.hpp"

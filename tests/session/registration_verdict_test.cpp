@@ -1,8 +1,8 @@
 // The registration verdict, table-tested: every reason, its boundary, the per-measure limits and
 // the single-view rule.
 
-#include "lftrack/host/scene_verdict.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 
 #include <gtest/gtest.h>
 

@@ -2,7 +2,7 @@
 // registration that looks only there: what lies outside it, however bright, does not move the
 // result. On the shipped DICOM CT with a structure set written here.
 
-#include "lftrack/host/roi_mask.hpp"
+#include "lftrack/session/roi_mask.hpp"
 
 #include <gtest/gtest.h>
 
@@ -12,9 +12,9 @@
 #include <sstream>
 #include <tuple>
 
-#include "lftrack/host/commissioning_file.hpp"
-#include "lftrack/host/dicom_registration.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/commissioning_file.hpp"
+#include "lftrack/session/dicom_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "rt_writer.hpp"

@@ -3,8 +3,8 @@
 // plan always kept.
 #include <gtest/gtest.h>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_default_plans.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_default_plans.hpp"
 
 namespace lftrack::session {
 namespace {

@@ -8,9 +8,9 @@
 #include <fstream>
 #include <variant>
 
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "test_data.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_devices.hpp"
 
 namespace lftrack::session {
 namespace {

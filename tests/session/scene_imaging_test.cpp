@@ -5,9 +5,9 @@
 
 #include <cmath>
 
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_imaging_dose.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_imaging_dose.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"
 #include "lftrack/sim_devices/sim_surrogate_source.hpp"
 

@@ -3,8 +3,8 @@
 
 #include <gtest/gtest.h>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 
 namespace lftrack::session {
 

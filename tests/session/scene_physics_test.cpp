@@ -2,7 +2,7 @@
 // the scene's line.
 #include <gtest/gtest.h>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::session {
 namespace {

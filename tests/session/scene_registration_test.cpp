@@ -1,7 +1,7 @@
 // The scene-level registration helpers on the built-in phantom: markers inserted by the
 // simulator, found in synthetic frames and triangulated; preprocessing of whole-detector frames.
 
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 
 #include <gtest/gtest.h>
 

@@ -7,7 +7,7 @@
 #include <fstream>
 #include <string>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {

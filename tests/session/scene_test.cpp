@@ -6,8 +6,8 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/commissioning_file.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/commissioning_file.hpp"
+#include "lftrack/session/scene.hpp"
 #include "test_data.hpp"
 
 namespace lftrack::session {

@@ -1,6 +1,6 @@
 // A target's contours (target_contours.cpp): checked, boxed and filled on a CT's grid.
 
-#include "lftrack/host/target_contours.hpp"
+#include "lftrack/session/target_contours.hpp"
 
 #include <gtest/gtest.h>
 

@@ -10,9 +10,9 @@
 
 #include <memory>
 
-#include "lftrack/host/registration_judge.hpp"
-#include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/registration_judge.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "test_data.hpp"

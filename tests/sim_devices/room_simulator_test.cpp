@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "lftrack/host/loop_session.hpp"
+#include "lftrack/session/loop_session.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::sim_devices {

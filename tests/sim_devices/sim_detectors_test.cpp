@@ -9,7 +9,7 @@
 
 #include <cmath>
 
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

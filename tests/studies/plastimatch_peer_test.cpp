@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/drr_benchmark.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image_metrics.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -4,8 +4,8 @@
 
 #include <string>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 
 namespace lftrack::test {

@@ -1,5 +1,5 @@
 #pragma once
-// Another process that holds a scene's actuator lock (lftrack/host/actuator_lock.hpp), as a
+// Another process that holds a scene's actuator lock (lftrack/session/actuator_lock.hpp), as a
 // second lftrack driving the same couch would: a forked child takes the lock and keeps it until
 // the object is destroyed (or kill() ends it as a crash would). A lock is shared within one
 // process, so only another process can be refused by it.
@@ -12,7 +12,7 @@
 #include <optional>
 #include <string>
 
-#include "lftrack/host/actuator_lock.hpp"
+#include "lftrack/session/actuator_lock.hpp"
 
 namespace lftrack::test {
 

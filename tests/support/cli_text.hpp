@@ -8,7 +8,7 @@
 #include <iterator>
 #include <string>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::test {
 

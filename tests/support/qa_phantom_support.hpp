@@ -31,6 +31,20 @@ inline std::filesystem::path qa_phantom_scene() {
   return std::filesystem::path(LFTRACK_SOURCE_DIR) / "scenes" / "qa-phantom.yaml";
 }
 
+// The loop command the QA phantom's service runs (LFTRACK_LOOP in `env_file`, by default the
+// package's debian/qa-phantom.env: `sim --room`), its words joined by spaces; empty if
+// the file or the line is missing.
+inline std::string qa_phantom_loop(
+    const std::filesystem::path& env_file = std::filesystem::path(LFTRACK_SOURCE_DIR) / "debian" /
+                                            "qa-phantom.env") {
+  const std::string text = contents(env_file);
+  const std::string key = "\nLFTRACK_LOOP=";
+  const std::size_t at = ("\n" + text).find(key);
+  if (at == std::string::npos) return {};
+  const std::size_t start = at + key.size() - 1;  // in `text`
+  return text.substr(start, text.find('\n', start) - start);
+}
+
 // The QA phantom's light fields (tracking and the simulator's), built by `program` where missing
 // or stale; a field is saved by rename, so two tests building at once never see half a file.
 inline std::filesystem::path qa_phantom_fields(const std::string& program, const std::filesystem::path& scene,

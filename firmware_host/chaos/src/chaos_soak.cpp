@@ -13,8 +13,8 @@
 #include <system_error>
 
 #include "chaos_devices.hpp"
-#include "lftrack/host/loop_session.hpp"
 #include "lftrack/records/journal_reader.hpp"
+#include "lftrack/session/loop_session.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"
 
 namespace lftrack::chaos {

@@ -8,9 +8,9 @@
 
 #include "daily_qa_checks.hpp"
 #include "daily_qa_runs.hpp"
-#include "lftrack/host/actuator_lock.hpp"
-#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "lftrack/session/actuator_lock.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 #include "room_runs.hpp"
 

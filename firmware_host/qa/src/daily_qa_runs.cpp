@@ -13,11 +13,11 @@
 #include <memory>
 #include <thread>
 
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/safety_gate.hpp"
 #include "lftrack/loop/tracking_states.hpp"
 #include "lftrack/qa/qa_time.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "lftrack/sim_devices/room_simulator.hpp"
 #include "room_runs.hpp"
 

@@ -6,10 +6,10 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/loop_session.hpp"
 #include "lftrack/loop/journal.hpp"
 #include "lftrack/loop/loop_summary.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/session/loop_session.hpp"
 
 namespace lftrack::qa {
 

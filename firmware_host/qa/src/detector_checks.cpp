@@ -7,10 +7,10 @@
 #include <optional>
 
 #include "daily_qa_runs.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_exposure.hpp"
 #include "lftrack/sim/panel_frames.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 

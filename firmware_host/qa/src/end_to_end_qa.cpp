@@ -6,8 +6,8 @@
 #include <cmath>
 
 #include "daily_qa_runs.hpp"
-#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/qa/daily_qa.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/tracking/pose.hpp"
 
 namespace lftrack::qa {

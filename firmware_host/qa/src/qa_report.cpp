@@ -1,7 +1,7 @@
 #include "lftrack/qa/qa_report.hpp"
 
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/qa/qa_time.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 
 #include <fcntl.h>
 #include <unistd.h>

@@ -16,9 +16,9 @@
 #include <memory>
 #include <thread>
 
-#include "lftrack/host/actuator_lock.hpp"
-#include "lftrack/host/calibrated_couch.hpp"
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/actuator_lock.hpp"
+#include "lftrack/session/calibrated_couch.hpp"
+#include "lftrack/session/scene_devices.hpp"
 
 namespace lftrack::qa {
 namespace {

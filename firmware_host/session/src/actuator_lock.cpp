@@ -1,4 +1,4 @@
-#include "lftrack/host/actuator_lock.hpp"
+#include "lftrack/session/actuator_lock.hpp"
 
 #include <fcntl.h>
 #include <netdb.h>
@@ -22,7 +22,7 @@
 #include <mutex>
 #include <thread>
 
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/scene_devices.hpp"
 
 namespace lftrack::session {
 namespace {

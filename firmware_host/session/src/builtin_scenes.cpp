@@ -8,7 +8,7 @@
 // a virtual couch with 100 ms latency, tracked at 10 Hz. Its light fields are small enough to
 // build in about a minute on two cores the first time (cached in out/lightfields/builtin-phantom).
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::session {
 

@@ -1,4 +1,4 @@
-#include "lftrack/host/calibrated_couch.hpp"
+#include "lftrack/session/calibrated_couch.hpp"
 
 #include "lftrack/calib/couch_calibration.hpp"
 

@@ -1,5 +1,5 @@
-#include "lftrack/host/calibration_files.hpp"
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/calibration_files.hpp"
+#include "lftrack/session/scene_devices.hpp"
 
 #include <fstream>
 #include <sstream>

@@ -1,4 +1,4 @@
-#include "lftrack/host/commissioning_file.hpp"
+#include "lftrack/session/commissioning_file.hpp"
 
 #include <openssl/sha.h>
 #include <unistd.h>
@@ -13,8 +13,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "scene_yaml.hpp"

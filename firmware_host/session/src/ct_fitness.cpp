@@ -7,7 +7,7 @@
 #include <iomanip>
 #include <sstream>
 
-#include "lftrack/host/patient_setup.hpp"
+#include "lftrack/session/patient_setup.hpp"
 
 namespace lftrack::session {
 

@@ -1,4 +1,4 @@
-#include "lftrack/host/detector_calibration_file.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>

@@ -1,5 +1,5 @@
-#include "lftrack/host/dicom_registration.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/session/dicom_registration.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 
 #include <dcmtk/dcmdata/dcdeftag.h>
 #include <dcmtk/dcmdata/dcfilefo.h>

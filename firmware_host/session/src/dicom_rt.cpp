@@ -1,4 +1,4 @@
-#include "lftrack/host/dicom_rt.hpp"
+#include "lftrack/session/dicom_rt.hpp"
 
 #include "dicom_rt_common.hpp"
 

@@ -11,7 +11,7 @@
 #include <sstream>
 
 #include "dicom_rt_common.hpp"
-#include "lftrack/host/dicom_rt.hpp"
+#include "lftrack/session/dicom_rt.hpp"
 
 namespace lftrack::session {
 namespace rt {

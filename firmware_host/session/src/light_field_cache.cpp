@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <system_error>
 
-#include "lftrack/host/progress_bar.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/progress_bar.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/light_field.hpp"
 
 namespace lftrack::session {

@@ -1,4 +1,4 @@
-#include "lftrack/host/loop_session.hpp"
+#include "lftrack/session/loop_session.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -9,9 +9,9 @@
 #include <string>
 
 #include "lftrack/drivers/device_factory.hpp"
-#include "lftrack/host/scene_default_plans.hpp"
-#include "lftrack/host/scene_fingerprint.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene_default_plans.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {

@@ -1,6 +1,6 @@
 // A new patient's scene from the treatment plan (issue 53): see patient_setup.hpp.
 
-#include "lftrack/host/patient_setup.hpp"
+#include "lftrack/session/patient_setup.hpp"
 
 #include <algorithm>
 #include <charconv>

@@ -1,4 +1,4 @@
-#include "lftrack/host/phantom_cache.hpp"
+#include "lftrack/session/phantom_cache.hpp"
 
 #include <elf.h>
 #include <fcntl.h>

@@ -7,7 +7,7 @@
 #include <map>
 #include <sstream>
 
-#include "lftrack/host/patient_setup.hpp"
+#include "lftrack/session/patient_setup.hpp"
 
 namespace lftrack::session {
 

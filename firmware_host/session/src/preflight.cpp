@@ -1,4 +1,4 @@
-#include "lftrack/host/preflight.hpp"
+#include "lftrack/session/preflight.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -6,11 +6,11 @@
 #include <thread>
 
 #include "lftrack/drivers/device_factory.hpp"
-#include "lftrack/host/actuator_lock.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/loop/cycle_schedule.hpp"
+#include "lftrack/session/actuator_lock.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {
@@ -219,8 +219,8 @@ void check_simulated_room(const PreparedScene& p, const LoopSessionOptions& o, P
   if (o.simulator == nullptr)
     return r->add(
         "simulated detectors", CheckResult::kFail,
-        "the scene's detectors are the simulator's, and this program has none (lftrack sim and lftrack "
-        "run give it)");
+        "the scene's detectors are the simulator's, and this program has none (lftrack run drives a "
+        "room's own devices; lftrack sim --room runs a room with simulated detectors)");
   o.simulator->preflight(p, o, r);
 }
 

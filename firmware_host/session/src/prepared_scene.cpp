@@ -4,12 +4,12 @@
 #include <cmath>
 #include <sstream>
 
-#include "lftrack/host/phantom_cache.hpp"
-#include "lftrack/host/roi_mask.hpp"
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_exposure.hpp"
 #include "lftrack/phantom/implanted_markers.hpp"
 #include "lftrack/phantom/spine_phantom.hpp"
+#include "lftrack/session/phantom_cache.hpp"
+#include "lftrack/session/roi_mask.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_exposure.hpp"
 #include "lftrack/tracking/volume_io.hpp"
 
 namespace lftrack::session {

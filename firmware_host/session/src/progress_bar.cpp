@@ -1,4 +1,4 @@
-#include "lftrack/host/progress_bar.hpp"
+#include "lftrack/session/progress_bar.hpp"
 
 #include <unistd.h>
 

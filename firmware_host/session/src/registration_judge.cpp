@@ -1,4 +1,4 @@
-#include "lftrack/host/registration_judge.hpp"
+#include "lftrack/session/registration_judge.hpp"
 
 #include <chrono>
 

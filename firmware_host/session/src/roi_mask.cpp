@@ -1,13 +1,13 @@
 // roi.mask: the target's neighbourhood in each view (roi_mask.hpp).
 
-#include "lftrack/host/roi_mask.hpp"
+#include "lftrack/session/roi_mask.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 
-#include "lftrack/host/dicom_registration.hpp"
-#include "lftrack/host/patient_setup.hpp"
+#include "lftrack/session/dicom_registration.hpp"
+#include "lftrack/session/patient_setup.hpp"
 
 namespace lftrack::session {
 

@@ -1,6 +1,6 @@
-#include "lftrack/host/scene_default_plans.hpp"
+#include "lftrack/session/scene_default_plans.hpp"
 
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/scene_devices.hpp"
 
 namespace lftrack::session {
 namespace {

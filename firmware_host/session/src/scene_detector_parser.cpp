@@ -10,7 +10,7 @@
 #include <set>
 #include <sstream>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"
 

@@ -1,4 +1,4 @@
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/scene_devices.hpp"
 
 #include <cstdint>
 #include <cstdio>

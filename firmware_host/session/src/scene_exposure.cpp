@@ -1,4 +1,4 @@
-#include "lftrack/host/scene_exposure.hpp"
+#include "lftrack/session/scene_exposure.hpp"
 
 #include <fmt/format.h>
 

@@ -1,4 +1,4 @@
-#include "lftrack/host/scene_fingerprint.hpp"
+#include "lftrack/session/scene_fingerprint.hpp"
 
 #include <openssl/evp.h>
 #include <openssl/sha.h>
@@ -8,7 +8,7 @@
 #include <memory>
 #include <sstream>
 
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/tracking/version.hpp"
 
 namespace lftrack::session {

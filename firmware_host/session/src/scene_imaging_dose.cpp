@@ -1,4 +1,4 @@
-#include "lftrack/host/scene_imaging_dose.hpp"
+#include "lftrack/session/scene_imaging_dose.hpp"
 
 #include <fmt/format.h>
 

@@ -2,7 +2,7 @@
 
 #include <sstream>
 
-#include "lftrack/host/calibration_files.hpp"
+#include "lftrack/session/calibration_files.hpp"
 #include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "scene_yaml.hpp"

@@ -16,9 +16,9 @@
 
 #include <sstream>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_default_plans.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_default_plans.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/similarity.hpp"
 #include "scene_yaml.hpp"

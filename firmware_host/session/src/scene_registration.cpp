@@ -1,4 +1,4 @@
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -6,8 +6,8 @@
 #include <cmath>
 
 #include "lftrack/calib/marker_detection.hpp"
-#include "lftrack/host/detector_calibration_file.hpp"
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/detector_calibration_file.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/tracking/frame_preprocessing.hpp"
 #include "lftrack/tracking/light_field.hpp"
 #include "lftrack/tracking/thread_pool.hpp"

@@ -1,6 +1,6 @@
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 
-#include "lftrack/host/commissioning_file.hpp"
+#include "lftrack/session/commissioning_file.hpp"
 
 #include <algorithm>
 

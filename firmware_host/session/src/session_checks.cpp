@@ -10,8 +10,8 @@
 #include <filesystem>
 #include <string>
 
-#include "lftrack/host/scene_devices.hpp"
 #include "lftrack/loop/motion_predictor.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "lftrack/watch/operator_token.hpp"
 #include "session_parts.hpp"
 

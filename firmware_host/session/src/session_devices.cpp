@@ -6,8 +6,8 @@
 #include <spdlog/spdlog.h>
 
 #include "lftrack/drivers/device_factory.hpp"
-#include "lftrack/host/actuator_lock.hpp"
-#include "lftrack/host/scene_devices.hpp"
+#include "lftrack/session/actuator_lock.hpp"
+#include "lftrack/session/scene_devices.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {
@@ -33,8 +33,8 @@ Status check_simulator(const PreparedScene& p, const LoopSessionOptions& o) {
                                  ? std::string("a simulation needs the simulator, and this program has none")
                                  : p.scene.where("detectors") +
                                        ": the scene's detectors are simulated, and this program has no "
-                                       "simulator (lftrack sim and lftrack "
-                                       "run give it)");
+                                       "simulator (lftrack run drives a room's own devices; lftrack sim "
+                                       "--room runs a room with simulated detectors)");
 }
 
 Result<drivers::FrameSourceSpec> frame_source_spec(const PreparedScene& p, const LoopSessionOptions& o,

@@ -8,12 +8,12 @@
 
 #include "lftrack/drivers/device_factory.hpp"
 #include "lftrack/drivers/igtl_surrogate.hpp"
-#include "lftrack/host/actuator_lock.hpp"
-#include "lftrack/host/calibrated_couch.hpp"
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/room_simulator.hpp"
-#include "lftrack/host/scene_registration.hpp"
-#include "lftrack/host/scene_verdict.hpp"
+#include "lftrack/session/actuator_lock.hpp"
+#include "lftrack/session/calibrated_couch.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/room_simulator.hpp"
+#include "lftrack/session/scene_registration.hpp"
+#include "lftrack/session/scene_verdict.hpp"
 
 namespace lftrack::session {
 

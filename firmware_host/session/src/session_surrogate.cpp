@@ -5,7 +5,7 @@
 #include <algorithm>
 
 #include "lftrack/drivers/igtl_surrogate.hpp"
-#include "lftrack/host/scene_imaging_dose.hpp"
+#include "lftrack/session/scene_imaging_dose.hpp"
 #include "session_parts.hpp"
 
 namespace lftrack::session {

@@ -1,6 +1,6 @@
 // The set-up picture of a new patient's scene (issue 53): see setup_picture.hpp.
 
-#include "lftrack/host/setup_picture.hpp"
+#include "lftrack/session/setup_picture.hpp"
 
 #include <algorithm>
 #include <array>

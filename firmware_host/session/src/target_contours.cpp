@@ -1,6 +1,6 @@
 // A structure set's target: contours checked, boxed and filled on the CT's grid (issue 53).
 
-#include "lftrack/host/target_contours.hpp"
+#include "lftrack/session/target_contours.hpp"
 
 #include <Eigen/Eigenvalues>
 

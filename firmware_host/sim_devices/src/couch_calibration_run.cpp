@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "lftrack/calib/phantom_pose.hpp"
-#include "lftrack/host/loop_session.hpp"
+#include "lftrack/session/loop_session.hpp"
 #include "lftrack/sim/phantom_images.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 

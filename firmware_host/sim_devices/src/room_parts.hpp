@@ -5,9 +5,9 @@
 #include <memory>
 
 #include "lftrack/drivers/actuator.hpp"
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/preflight.hpp"
-#include "lftrack/host/room_simulator.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/preflight.hpp"
+#include "lftrack/session/room_simulator.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/tracker_twin.hpp"

@@ -6,9 +6,9 @@
 #include <string>
 #include <utility>
 
-#include "lftrack/host/preflight.hpp"
-#include "lftrack/host/scene_devices.hpp"
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/preflight.hpp"
+#include "lftrack/session/scene_devices.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim/room_link.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"

@@ -1,7 +1,7 @@
 #include "lftrack/sim_devices/sim_detectors.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 
 namespace lftrack::sim_devices {
 

@@ -12,7 +12,7 @@
 #include <cstring>
 #include <thread>
 
-#include "lftrack/host/scene_registration.hpp"
+#include "lftrack/session/scene_registration.hpp"
 
 namespace lftrack::sim_devices {
 

@@ -1,8 +1,8 @@
 #include "lftrack/sim_devices/simulated_patient.hpp"
 #include "lftrack/sim_devices/scene_sim_frames.hpp"
 
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/phantom/implanted_markers.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/sim/anatomy_deformation.hpp"
 #include "lftrack/sim/material_decomposition.hpp"
 #include "lftrack/sim/sphere_markers.hpp"

@@ -15,7 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::studies {
 

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/studies/verdict_outcomes.hpp"
 
 namespace lftrack::tracking {

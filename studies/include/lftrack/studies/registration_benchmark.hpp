@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::studies {
 

@@ -14,7 +14,7 @@
 #include <functional>
 #include <string>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::studies {

@@ -34,7 +34,7 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/studies/verdict_outcomes.hpp"
 

@@ -19,8 +19,8 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
 

@@ -40,7 +40,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::tracking {

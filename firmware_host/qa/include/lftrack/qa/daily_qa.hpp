@@ -33,9 +33,9 @@
 #include <vector>
 
 #include "lftrack/calib/detector_qa.hpp"
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/qa/daily_qa_report.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 

@@ -9,8 +9,8 @@
 #include <optional>
 #include <string>
 
-#include "lftrack/host/preflight.hpp"
 #include "lftrack/qa/daily_qa_report.hpp"
+#include "lftrack/session/preflight.hpp"
 
 namespace lftrack::qa {
 

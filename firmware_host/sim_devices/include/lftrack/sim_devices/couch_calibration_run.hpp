@@ -11,7 +11,7 @@
 
 #include "lftrack/calib/calibration_phantom.hpp"
 #include "lftrack/calib/couch_calibration.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::sim_devices {

@@ -1,5 +1,5 @@
 #pragma once
-// The simulator's devices as the session's RoomSimulator (lftrack/host/room_simulator.hpp): the
+// The simulator's devices as the session's RoomSimulator (lftrack/session/room_simulator.hpp): the
 // simulated room of a scene (its patient, set-up error, motion and couch), its detectors
 // (SimFrameSource), the virtual couch in process or behind its protocol for hardware in the loop
 // (the Modbus server, or the robot on a CAN link), and the patient's chest marker, in process or
@@ -10,8 +10,8 @@
 // couch); `replay` gives none. The accessors below reach into a session's simulated room, for
 // tests and the chaos soak's fault injection.
 
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/room_simulator.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/room_simulator.hpp"
 #include "lftrack/sim/modbus_couch_server.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/virtual_robot.hpp"

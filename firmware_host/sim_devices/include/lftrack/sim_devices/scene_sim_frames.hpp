@@ -8,7 +8,7 @@
 #include <memory>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/image.hpp"

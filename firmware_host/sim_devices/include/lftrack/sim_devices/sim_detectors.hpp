@@ -9,8 +9,8 @@
 #include <optional>
 #include <vector>
 
-#include "lftrack/host/room_simulator.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/room_simulator.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/sim/surround_frames.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/sim_devices/simulated_patient.hpp"

@@ -22,8 +22,8 @@
 #include <vector>
 
 #include "lftrack/drivers/frame_source.hpp"
-#include "lftrack/host/room_simulator.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/room_simulator.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/sim_devices/sim_detectors.hpp"

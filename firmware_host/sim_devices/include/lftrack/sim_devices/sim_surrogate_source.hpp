@@ -13,7 +13,7 @@
 #include <cstdint>
 
 #include "lftrack/drivers/surrogate_source.hpp"
-#include "lftrack/host/room_simulator.hpp"
+#include "lftrack/session/room_simulator.hpp"
 #include "lftrack/sim/breathing_surrogate.hpp"
 #include "lftrack/sim/simulated_room.hpp"
 

@@ -9,7 +9,7 @@
 #include <memory>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/sim/synthetic_frames.hpp"
 #include "lftrack/sim_spec/xray_physics_spec.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <string>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::session {
 

@@ -2,8 +2,9 @@
 // DICOM RT objects a patient's set-up comes from: the plan's isocentre, the structure set's
 // contours (the CT series' identity, which they must match, is read_ct_dicom_identity's in
 // dicom_registration.hpp). Read with DCMTK (dcmrt's DRTPlanIOD and DRTStructureSetIOD);
-// coordinates are DICOM's patient frame (LPS), in mm, as the objects store them. Every error names the file (or folder) it is about.
-// Not real-time safe: these read files and allocate; they are called while a run is prepared.
+// coordinates are DICOM's patient frame (LPS), in mm, as the objects store them. Every error names the file
+// (or folder) it is about. Not real-time safe: these read files and allocate; they are called while a run is
+// prepared.
 
 #include <Eigen/Core>
 
@@ -23,8 +24,9 @@ namespace lftrack::session {
 struct TableTopTolerances {
   std::optional<double> lateral_mm, longitudinal_mm, vertical_mm;  // (300A,0053) (300A,0052) (300A,0051)
   std::optional<double> pitch_deg, roll_deg, patient_support_deg;  // (300A,004F) (300A,0050) (300A,004C)
-  int table_number = 0;            // 0: the beam references none; else the first table taken
-  std::vector<int> table_numbers;  // every table taken (the chosen beams'), each tolerance the tightest of them
+  int table_number = 0;  // 0: the beam references none; else the first table taken
+  std::vector<int>
+      table_numbers;  // every table taken (the chosen beams'), each tolerance the tightest of them
 };
 
 struct RtPlanBeam {

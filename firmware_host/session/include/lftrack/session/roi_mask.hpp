@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/image.hpp"
 #include "lftrack/tracking/status.hpp"
 

@@ -9,16 +9,16 @@
 #include <memory>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/scene_registration.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/scene_registration.hpp"
 #include "lftrack/tracking/frame_quality.hpp"
 #include "lftrack/tracking/registration.hpp"
 
 namespace lftrack::session {
 
 struct JudgedRegistration {
-  bool registered = false;  // false: a frame failed the image-quality gate; nothing was registered
+  bool registered = false;   // false: a frame failed the image-quality gate; nothing was registered
   loop::VerdictInput input;  // what the verdict judged
   double view_check_ms = 0;  // the view check's wall time (both views registered alone), when it ran
   loop::RegistrationVerdict verdict;
@@ -57,8 +57,9 @@ class RegistrationJudge {
       ViewCheck view_check = ViewCheck::kWhenOthersAccept);
 
   // Registers `raw` (whole-detector frames, one per view) from `start` with `plan` and judges it.
-  Result<JudgedRegistration> judge(const std::vector<tracking::Image<std::uint16_t>>& raw, const tracking::Pose& start,
-                                   const tracking::RegistrationPlan& plan, const BeforeRun& before_run = {});
+  Result<JudgedRegistration> judge(const std::vector<tracking::Image<std::uint16_t>>& raw,
+                                   const tracking::Pose& start, const tracking::RegistrationPlan& plan,
+                                   const BeforeRun& before_run = {});
 
   const loop::VerdictLimits& limits() const { return limits_; }
   const std::vector<tracking::DetectorCorrection>& corrections() const { return corrections_; }

@@ -294,7 +294,7 @@ std::optional<std::string> builtin_scene_text(const std::string& name);
 // The simulated detectors' exposure, the same for every frame of a scene and for every detector
 // (an AEC sets one technique for the pair, through the view that attenuates most).
 struct SimExposure {
-  double photons_per_pixel = 10000;  // in the open field, per pixel and frame
+  double photons_per_pixel = 10000;   // in the open field, per pixel and frame
   double open_field_fraction = 0.85;  // the open field's counts / full scale; above 1 it saturates
   // What the AEC measured: each view's ROI mean at the nominal pose (the primary, without noise)
   // as a fraction of full scale at this exposure; empty under `fixed`.
@@ -344,7 +344,8 @@ struct PreparedScene {
 std::filesystem::path default_light_field_dir(const Scene& scene);
 // The file of each view's field of `spec` (null: the scene's tracking.light_field) over `mu`
 // (null: the scene's CT) in `dir`, in the scene's order of detectors.
-std::vector<std::filesystem::path> light_field_files(const PreparedScene& scene, const std::filesystem::path& dir,
+std::vector<std::filesystem::path> light_field_files(const PreparedScene& scene,
+                                                     const std::filesystem::path& dir,
                                                      const tracking::MuVolume* mu = nullptr,
                                                      const tracking::LightFieldSpec* spec = nullptr);
 // Builds every view's field as `spec` says, on `pool`, with a progress bar per view on stderr,

@@ -20,16 +20,16 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/loop_session.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/loop/realtime_setup.hpp"
+#include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::session {
 
 enum class CheckResult { kPass, kWarn, kFail };
 
 struct PreflightItem {
-  std::string what;    // "detector A (v4l2 /dev/v4l/by-path/...)"
+  std::string what;  // "detector A (v4l2 /dev/v4l/by-path/...)"
   CheckResult result = CheckResult::kPass;
   std::string detail;  // what was found, or why it fails and what to do
 };
@@ -37,7 +37,7 @@ struct PreflightItem {
 struct PreflightReport {
   std::vector<PreflightItem> items;
   void add(std::string what, CheckResult result, std::string detail);  // one item, in order
-  bool passed() const;       // no kFail
+  bool passed() const;                                                 // no kFail
   std::string checklist() const;  // one line per item: [ ok ] / [warn] / [FAIL]
   std::string failures() const;   // every failing item's reason, one per line
 };

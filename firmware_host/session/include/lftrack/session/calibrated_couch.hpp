@@ -40,7 +40,8 @@ class CalibratedCouch final : public drivers::Actuator {
   drivers::Actuator* couch_;
   Eigen::Isometry3d T_room_from_couch_;
   Eigen::Vector3d origin_room_mm_;
-  tracking::Vector6d couch_target_ = tracking::Vector6d::Zero();  // couch axes: last read-back plus moves since
+  tracking::Vector6d couch_target_ =
+      tracking::Vector6d::Zero();  // couch axes: last read-back plus moves since
 };
 
 }  // namespace lftrack::session

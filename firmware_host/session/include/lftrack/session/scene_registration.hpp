@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "lftrack/calib/triangulation.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/loop/view_agreement.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/drr_renderer.hpp"
 #include "lftrack/tracking/registration.hpp"
 #include "lftrack/tracking/target_error.hpp"

@@ -46,11 +46,11 @@ struct TargetMask {
   // The index box of the voxels inside (lo > hi on an axis when none is).
   Eigen::Vector3i lo_index = Eigen::Vector3i::Constant(1 << 30);
   Eigen::Vector3i hi_index = Eigen::Vector3i::Constant(-1);
-  int contours_beyond_scan = 0;    // contours whose plane lies beyond the first or last slice
-  double most_off_slice_mm = 0;    // the farthest a contour's plane lies from its slice's centre
+  int contours_beyond_scan = 0;  // contours whose plane lies beyond the first or last slice
+  double most_off_slice_mm = 0;  // the farthest a contour's plane lies from its slice's centre
   double volume_cc() const;
 };
 Result<TargetMask> rasterise_target(const std::vector<TargetPolygon>& polygons,
-                                              const tracking::VolumeGeometry& grid, const std::string& name);
+                                    const tracking::VolumeGeometry& grid, const std::string& name);
 
 }  // namespace lftrack::session

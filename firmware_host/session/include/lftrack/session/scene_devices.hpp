@@ -6,7 +6,7 @@
 #include <string>
 
 #include "lftrack/drivers/device_factory.hpp"
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::session {
 
@@ -25,11 +25,11 @@ std::string served_twin_id(const std::string& detector_name);
 
 // What kind of device a scene names, asked by the session and the start-up checks, so that
 // device names are spelled here and in the parser only.
-bool frames_are_simulated(const Scene& scene);               // detectors' frames: sim
-bool frames_from_device(const DetectorFramesSpec& frames);   // v4l2 or gige: a detector of its own
-bool actuator_is_device(const Scene& scene);                 // modbus or can
-bool actuator_is_virtual(const Scene& scene);                // the simulator's couch
-bool actuator_moves(const Scene& scene);                     // anything but none
+bool frames_are_simulated(const Scene& scene);              // detectors' frames: sim
+bool frames_from_device(const DetectorFramesSpec& frames);  // v4l2 or gige: a detector of its own
+bool actuator_is_device(const Scene& scene);                // modbus or can
+bool actuator_is_virtual(const Scene& scene);               // the simulator's couch
+bool actuator_moves(const Scene& scene);                    // anything but none
 
 // The frame source of a scene whose detectors are devices (v4l2, gige, replay). Fails for sim.
 Result<drivers::FrameSourceSpec> device_frame_source_spec(const Scene& scene);

@@ -22,7 +22,7 @@
 #include <utility>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 

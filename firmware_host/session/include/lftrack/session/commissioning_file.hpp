@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::session {
@@ -35,9 +35,9 @@ struct CommissioningRecord {
   // registered alone may move the target at most this across it. At most the scene's
   // safety.max_view_shift_mm (which the fingerprint holds).
   double max_view_shift_mm = 0;
-  std::string scene;          // the scene file it was measured on, as given
-  std::string made_utc;       // ISO 8601
-  std::string command;        // the command line that measured it
+  std::string scene;     // the scene file it was measured on, as given
+  std::string made_utc;  // ISO 8601
+  std::string command;   // the command line that measured it
 };
 
 // Reads a commissioning file; a clear error naming the file for anything missing or malformed.

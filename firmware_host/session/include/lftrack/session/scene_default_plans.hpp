@@ -9,7 +9,7 @@
 
 #include <string>
 
-#include "lftrack/host/scene.hpp"
+#include "lftrack/session/scene.hpp"
 
 namespace lftrack::session {
 

@@ -26,11 +26,11 @@
 #include "lftrack/drivers/can_robot.hpp"
 #include "lftrack/drivers/modbus_couch.hpp"
 #include "lftrack/drivers/replay_frame_source.hpp"
-#include "lftrack/host/room_simulator.hpp"
-#include "lftrack/host/scene.hpp"
 #include "lftrack/loop/frame_archive.hpp"
 #include "lftrack/loop/operator_input.hpp"
 #include "lftrack/loop/tracking_loop.hpp"
+#include "lftrack/session/room_simulator.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/watch/igtl_server.hpp"
 #include "lftrack/watch/monitor_server.hpp"
 
@@ -61,23 +61,23 @@ struct LoopSessionOptions {
   std::int64_t cycles = 300;
   bool simulated_clock = false;  // true: as fast as possible, deterministic (see tracking_loop.hpp)
   bool status_line = false;
-  bool announce_holds = false;  // without a status line: a line on stderr per HOLD/FAULT with its id
-  std::filesystem::path journal;  // empty: no journal; an existing file is refused unless
+  bool announce_holds = false;           // without a status line: a line on stderr per HOLD/FAULT with its id
+  std::filesystem::path journal;         // empty: no journal; an existing file is refused unless
   loop::JournalOptions journal_options;  // journal_options.overwrite
-  bool overwrite_archive = false;  // an earlier archive in `archive` is replaced, not refused
-  std::filesystem::path control_socket;   // empty: none
-  bool terminal_operator = false;         // keys on a terminal's standard input
-  std::optional<double> auto_resume_s;    // an unattended operator resumes this long into each HOLD
-                                          // (check_auto_resume_s: finite, 0 to kMaxAutoResumeS);
-                                          // refused, as is an unattended hooks.operator_input, where
-                                          // the session opens a real device (kScene)
+  bool overwrite_archive = false;        // an earlier archive in `archive` is replaced, not refused
+  std::filesystem::path control_socket;  // empty: none
+  bool terminal_operator = false;        // keys on a terminal's standard input
+  std::optional<double> auto_resume_s;   // an unattended operator resumes this long into each HOLD
+                                         // (check_auto_resume_s: finite, 0 to kMaxAutoResumeS);
+                                         // refused, as is an unattended hooks.operator_input, where
+                                         // the session opens a real device (kScene)
   std::filesystem::path light_field_dir;  // empty: the scene's default folder
   // The simulator that makes the simulated room (sim_devices::room_simulator()); null: none, and
   // a simulation, or a scene with simulated detectors, is refused.
   const RoomSimulator* simulator = nullptr;
-  SimFrameSourceOptions frames;           // fault injection; wait_for_frames follows simulated_clock
-  SimSurrogateFaults surrogate_faults;    // fault injection into the simulated surrogate
-  std::filesystem::path archive;          // empty: frames not archived
+  SimFrameSourceOptions frames;         // fault injection; wait_for_frames follows simulated_clock
+  SimSurrogateFaults surrogate_faults;  // fault injection into the simulated surrogate
+  std::filesystem::path archive;        // empty: frames not archived
   // Replay this archived sequence instead of simulating (simulated_clock: as fast as possible;
   // otherwise at the recorded pace).
   std::filesystem::path replay_sequence;

@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "lftrack/host/dicom_registration.hpp"
-#include "lftrack/host/dicom_rt.hpp"
-#include "lftrack/host/target_contours.hpp"
+#include "lftrack/session/dicom_registration.hpp"
+#include "lftrack/session/dicom_rt.hpp"
+#include "lftrack/session/target_contours.hpp"
 #include "lftrack/tracking/pose.hpp"
 #include "lftrack/tracking/status.hpp"
 #include "lftrack/tracking/volume.hpp"
@@ -26,10 +26,10 @@ struct NewSceneRequest {
   std::filesystem::path rtplan;  // "": no plan
   std::string beam;              // the plan's beam (number or name); "": every beam, one isocentre
   std::filesystem::path rtstruct;
-  std::string target;                                // a structure's name in rtstruct
-  std::optional<Eigen::Vector3d> isocentre_ct_mm;    // given instead of a plan (a NIfTI CT)
-  double roi_margin_mm = 10;                         // around the target's box, each side
-  std::optional<double> roi_mask_margin_mm;          // set: roi.mask (the target's neighbourhood only), this margin
+  std::string target;                              // a structure's name in rtstruct
+  std::optional<Eigen::Vector3d> isocentre_ct_mm;  // given instead of a plan (a NIfTI CT)
+  double roi_margin_mm = 10;                       // around the target's box, each side
+  std::optional<double> roi_mask_margin_mm;  // set: roi.mask (the target's neighbourhood only), this margin
   Eigen::Vector3d roi_size_without_target_mm{64, 64, 40};
   std::string name;          // the scene's name ("": from the output's file name)
   std::string command_line;  // for the scene's header comment
@@ -44,15 +44,15 @@ struct NewSceneCt {
 struct NewScene {
   std::string yaml;  // the scene, commented
   Eigen::Vector3d isocentre_ct_mm = Eigen::Vector3d::Zero();
-  std::string isocentre_from;                      // "plan P, beam 1 'AP' (300A,012C)", "--isocentre", ...
+  std::string isocentre_from;  // "plan P, beam 1 'AP' (300A,012C)", "--isocentre", ...
   Eigen::Vector3d roi_centre_ct_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d roi_size_mm = Eigen::Vector3d::Zero();
   std::string patient_position = "HFS";
   tracking::Pose nominal_T_room_from_ct = tracking::Pose::Identity();
-  std::string target_name;                          // "" without a structure set
-  std::vector<TargetPolygon> target_polygons;       // CT frame
-  std::optional<TargetMask> target;                 // on the CT's grid
-  std::vector<std::string> warnings;                // fitness for tracking, each with its figure
+  std::string target_name;                     // "" without a structure set
+  std::vector<TargetPolygon> target_polygons;  // CT frame
+  std::optional<TargetMask> target;            // on the CT's grid
+  std::vector<std::string> warnings;           // fitness for tracking, each with its figure
 };
 
 // A target of a structure set, checked against the CT it must belong to: the set's Frame of
@@ -64,11 +64,12 @@ struct TargetContours {
   std::vector<TargetPolygon> polygons;  // CT frame
   TargetMask mask;                      // on the CT's grid
   TargetBox box;
-  std::vector<std::string> warnings;    // e.g. contours off the CT's slices, with the figure
-  std::string patient_id;               // the structure set's Patient ID (0010,0020)
+  std::vector<std::string> warnings;  // e.g. contours off the CT's slices, with the figure
+  std::string patient_id;             // the structure set's Patient ID (0010,0020)
 };
-Result<TargetContours> target_from_structure_set(const std::filesystem::path& rtstruct, const std::string& name,
-                                                 const CtDicomIdentity& ct, const tracking::VolumeGeometry& grid);
+Result<TargetContours> target_from_structure_set(const std::filesystem::path& rtstruct,
+                                                 const std::string& name, const CtDicomIdentity& ct,
+                                                 const tracking::VolumeGeometry& grid);
 
 // The room's axes from the patient's (the CT frame, LPS), for a DICOM Patient Position
 // (0018,5100). The room frame is the CT frame of a head-first supine patient (DESIGN.md, "Frames"):
@@ -84,8 +85,10 @@ Result<NewScene> compose_new_scene(const NewSceneRequest& request, const NewScen
 // Whether the CT is fit for tracking at this isocentre and ROI: slice thickness, pixel size, the
 // ROI's distance from the volume's edges, metal near the target. One line per concern, with its
 // figure; empty when none.
-std::vector<std::string> ct_fitness_warnings(const tracking::CtVolume& ct, const Eigen::Vector3d& isocentre_ct_mm,
-                                             const Eigen::Vector3d& roi_centre_ct_mm, const Eigen::Vector3d& roi_size_mm);
+std::vector<std::string> ct_fitness_warnings(const tracking::CtVolume& ct,
+                                             const Eigen::Vector3d& isocentre_ct_mm,
+                                             const Eigen::Vector3d& roi_centre_ct_mm,
+                                             const Eigen::Vector3d& roi_size_mm);
 
 // Said beside a simulation's accuracy (sim, register --sim) when the CT is coarser than
 // radiosurgery plans on (slices over 2 mm apart or pixels over 1.2 mm): the simulator draws its

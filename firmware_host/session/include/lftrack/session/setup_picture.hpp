@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <vector>
 
-#include "lftrack/host/scene.hpp"
-#include "lftrack/host/target_contours.hpp"
+#include "lftrack/session/scene.hpp"
+#include "lftrack/session/target_contours.hpp"
 #include "lftrack/tracking/image_io.hpp"
 #include "lftrack/tracking/status.hpp"
 
@@ -31,9 +31,10 @@ struct SetupMarks {
 // The panels, each at most `panel_px` a side: one DRR per view (ray cast, Siddon), then the three
 // slices (0.5 mm a pixel, 160 mm across, HU window -400..1200). Colours: see the file comment.
 Result<tracking::RgbImage> setup_picture(const PreparedScene& scene, const SetupMarks& marks,
-                                                   tracking::ThreadPool* pool, int panel_px = 320);
+                                         tracking::ThreadPool* pool, int panel_px = 320);
 
 // Counts the pixels of `colour` in `picture` (tests: that a mark was drawn where it should be).
-std::int64_t count_colour(const tracking::RgbImage& picture, std::uint8_t red, std::uint8_t green, std::uint8_t blue);
+std::int64_t count_colour(const tracking::RgbImage& picture, std::uint8_t red, std::uint8_t green,
+                          std::uint8_t blue);
 
 }  // namespace lftrack::session

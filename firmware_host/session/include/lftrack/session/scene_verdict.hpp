@@ -7,8 +7,8 @@
 #include <optional>
 #include <string>
 
-#include "lftrack/host/scene.hpp"
 #include "lftrack/loop/registration_verdict.hpp"
+#include "lftrack/session/scene.hpp"
 #include "lftrack/tracking/status.hpp"
 
 namespace lftrack::session {

@@ -36,8 +36,8 @@ namespace lftrack::session {
 inline constexpr int kDetectorCalibrationVersion = 2;
 
 // `calibration.created` is ignored: the time of writing is stored.
-Status write_detector_calibration(const std::filesystem::path& path, const calib::DetectorCalibration& calibration,
-                                  bool overwrite);
+Status write_detector_calibration(const std::filesystem::path& path,
+                                  const calib::DetectorCalibration& calibration, bool overwrite);
 Result<calib::DetectorCalibration> load_detector_calibration(const std::filesystem::path& path);
 
 // The time a file of record is stamped with: UTC, ISO 8601 to the second ("2026-11-30T12:00:00Z").
