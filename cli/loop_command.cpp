@@ -356,12 +356,14 @@ LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* des
         app->add_flag("--room", o->room,
                       "The scene's own devices as `lftrack run` drives them (start-up checks, real clock), "
                       "its detectors with `frames: sim` and the patient made by the simulator: a room of "
-                      "served twins (scenes/room/), or the QA phantom's room");
+                      "served twins (scenes/room/), or the QA phantom's room")
+            ->disable_flag_override();  // `--room=0` would be given (for --check's needs), yet be off
   if (mode != LoopMode::kReplay) {
     CLI::Option* check = app->add_flag(
         "--check", o->check,
         "Only the start-up checks: devices, calibrations, light fields, real-time set-up; print the "
         "pre-treatment checklist (exit 1 if any fails)");
+    check->disable_flag_override();  // `--check=0` would be given, yet not ask for the checks
     if (room != nullptr) check->needs(room);
   }
   if (mode == LoopMode::kSim)
@@ -424,9 +426,11 @@ LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* des
                   "Serve the registered pose over OpenIGTLink on [ADDRESS:]PORT (3D Slicer's OpenIGTLinkIF "
                   "connects as a client)")
       ->check(not_empty());
-  // The room's devices and its operator: no simulated clock, no simulated couch in their place.
+  // The room's devices, its operator and its scene as `run` takes them: no simulated clock, no
+  // simulated couch in their place, no imaging or period but the scene's.
   if (room != nullptr)
-    for (const char* other : {"--fast", "--hil", "--auto-resume"}) room->excludes(app->get_option(other));
+    for (const char* other : {"--fast", "--hil", "--auto-resume", "--imaging", "--xray-hz", "--period-ms"})
+      room->excludes(app->get_option(other));
   CLI::Option* journal = app->get_option("--journal");
   LoopCommand command;
   command.app = app;

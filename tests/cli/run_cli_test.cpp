@@ -177,15 +177,21 @@ TEST_F(RunCli, RunHasNoSimulatorAndSimRoomRunsTheRoom) {
       << out;
   const auto j = nlohmann::json::parse(out.substr(out.find('{')));
   EXPECT_EQ(j["cycles"].get<int>(), 3);
-  EXPECT_FALSE(j["simulated_clock"].get<bool>()) << "a room runs on the real clock";
+  // The real clock's path (an offline run says "not applied (offline run ...)").
+  EXPECT_EQ(j["realtime"].get<std::string>().rfind("not applied (--rt ignore)", 0), 0u) << j["realtime"];
 
   // A room's loop is the room's: no simulated clock, no couch behind a driver of the simulator's
-  // making, no unattended operator; --check belongs to a room. Usage errors, before anything loads.
+  // making, no unattended operator, no imaging or period but the scene's; --check belongs to a
+  // room, and neither flag takes a value that turns it off. Usage errors, before anything loads.
   for (const std::vector<std::string>& args :
        std::vector<std::vector<std::string>>{{"--room", "--fast"},
                                              {"--room", "--hil", "modbus"},
                                              {"--room", "--auto-resume", "5"},
-                                             {"--check"}}) {
+                                             {"--room", "--period-ms", "50"},
+                                             {"--room", "--imaging", "every_cycle"},
+                                             {"--check"},
+                                             {"--room=0", "--check"},
+                                             {"--room", "--check=0"}}) {
     const Status usage = lftrack("sim", scene(), args, &out);
     EXPECT_NE(usage.message().find("(status 512)"), std::string::npos)
         << args[0] << " " << args.back() << ": " << out;

@@ -41,7 +41,7 @@ TEST(DailyQaCli, RefusesAbsurdValuesBeforeLoadingAnything) {
   EXPECT_EQ(missing.exit_code, 1) << missing.out;
 }
 
-TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndRunFindsIt) {
+TEST(DailyQaCli, PassesOnTheShippedRoomWritesItsReportAndTheLoopFindsIt) {
   TempDir dir;
   const fs::path fields = qa_phantom_fields(LFTRACK_BIN_PATH, qa_phantom_scene(), dir.path());
   ASSERT_FALSE(fields.empty()) << contents(dir.path() / "precompute.txt");

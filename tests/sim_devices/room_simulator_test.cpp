@@ -6,8 +6,14 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <string>
+
 #include "lftrack/session/loop_session.hpp"
+#include "lftrack/session/preflight.hpp"
+#include "lftrack/sim/room_link.hpp"
 #include "lftrack/tracking/thread_pool.hpp"
+#include "test_data.hpp"
 
 namespace lftrack::sim_devices {
 
@@ -40,6 +46,59 @@ TEST(SceneRoomSpec, CarriesTheScenesPoseMotionAndTheCouchsMounting) {
   ASSERT_TRUE(spec.couch_T_room_from_couch) << "the mounting reaches the simulated room";
   EXPECT_TRUE(spec.couch_T_room_from_couch->isApprox(couch_mounting(mounting, *mounted)));
   EXPECT_FALSE(spec.couch_T_room_from_couch->linear().isApprox(Eigen::Matrix3d::Identity()));
+}
+
+// The room link's item among the start-up checks (room_preflight.cpp), if there is one.
+const session::PreflightItem* couch_link_item(const session::PreflightReport& r) {
+  for (const session::PreflightItem& item : r.items)
+    if (item.what.find("room link") != std::string::npos) return &item;
+  return nullptr;
+}
+
+// A served couch's room link is checked before a run with simulated detectors beside it: there,
+// written, and written lately. A link whose server has stopped (killed, or stalled) would show
+// the detectors a patient who never moves with the couch the loop commands.
+TEST(RoomPreflight, TheServedCouchsRoomLinkMustBeWrittenLately) {
+  tracking::ThreadPool pool(2);
+  test::TempDir dir;
+  auto scene = load_scene("builtin:phantom");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  scene->actuator.type = "modbus";  // a couch nobody serves: only the link is looked at here
+  scene->actuator.modbus.host = "127.0.0.1";
+  scene->actuator.modbus.port = 1;
+  auto p = prepare_scene(*scene, "", &pool);
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  const session::LoopSessionOptions options;
+  auto check = [&](const std::filesystem::path& link) {
+    p->scene.sim.couch_link = link.string();
+    session::PreflightReport r;
+    room_simulator()->preflight(*p, options, &r);
+    const session::PreflightItem* item = couch_link_item(r);
+    return item != nullptr ? *item : session::PreflightItem{"none", session::CheckResult::kPass, "no item"};
+  };
+
+  session::PreflightItem missing = check(dir.path() / "absent.link");
+  EXPECT_EQ(missing.result, session::CheckResult::kFail) << missing.detail;
+
+  auto fresh = sim::RoomLinkWriter::create(dir.path() / "fresh.link");
+  ASSERT_TRUE(fresh.ok()) << fresh.status().message();
+  session::PreflightItem unwritten = check(dir.path() / "fresh.link");
+  EXPECT_EQ(unwritten.result, session::CheckResult::kFail) << unwritten.detail;
+  EXPECT_NE(unwritten.detail.find("nothing written yet"), std::string::npos) << unwritten.detail;
+  (*fresh)->publish(tracking::Vector6d::Zero());
+  session::PreflightItem written = check(dir.path() / "fresh.link");
+  EXPECT_EQ(written.result, session::CheckResult::kPass) << written.detail;
+  EXPECT_NE(written.detail.find("written by process"), std::string::npos) << written.detail;
+
+  auto stale = sim::RoomLinkWriter::create(dir.path() / "stale.link");
+  ASSERT_TRUE(stale.ok()) << stale.status().message();
+  const std::int64_t now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                  std::chrono::steady_clock::now().time_since_epoch())
+                                  .count();
+  (*stale)->publish(tracking::Vector6d::Zero(), now_ns - 5'000'000'000);  // 5 s ago: its server stopped
+  session::PreflightItem stopped = check(dir.path() / "stale.link");
+  EXPECT_EQ(stopped.result, session::CheckResult::kFail) << stopped.detail;
+  EXPECT_NE(stopped.detail.find("its server has stopped"), std::string::npos) << stopped.detail;
 }
 
 }  // namespace

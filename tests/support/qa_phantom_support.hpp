@@ -32,8 +32,9 @@ inline std::filesystem::path qa_phantom_scene() {
 }
 
 // The loop command the QA phantom's service runs (LFTRACK_LOOP in `env_file`, by default the
-// package's debian/qa-phantom.env: `sim --room`), its words joined by spaces; empty if
-// the file or the line is missing.
+// package's debian/qa-phantom.env: `sim --room`), its words joined by spaces; empty if the file
+// or the line is missing. Reads the plain `KEY=word word` form that file uses (one pair of
+// enclosing double quotes and trailing blanks dropped), not every form systemd accepts.
 inline std::string qa_phantom_loop(
     const std::filesystem::path& env_file = std::filesystem::path(LFTRACK_SOURCE_DIR) / "debian" /
                                             "qa-phantom.env") {
@@ -42,7 +43,12 @@ inline std::string qa_phantom_loop(
   const std::size_t at = ("\n" + text).find(key);
   if (at == std::string::npos) return {};
   const std::size_t start = at + key.size() - 1;  // in `text`
-  return text.substr(start, text.find('\n', start) - start);
+  std::string value = text.substr(start, text.find('\n', start) - start);
+  while (!value.empty() && (value.back() == ' ' || value.back() == '\t' || value.back() == '\r'))
+    value.pop_back();
+  if (value.size() >= 2 && value.front() == '"' && value.back() == '"')
+    value = value.substr(1, value.size() - 2);
+  return value;
 }
 
 // The QA phantom's light fields (tracking and the simulator's), built by `program` where missing

@@ -39,7 +39,7 @@ Status check_session_surrogate(const Scene& scene, const LoopSessionOptions& o) 
   if (source == "sim" && o.devices == SessionDevices::kScene)
     return failed_precondition(scene.where("surrogate") +
                                ": surrogate.source sim is the simulated patient's chest marker, for "
-                               "lftrack sim; a treatment room's "
+                               "lftrack sim without --room; a treatment room's "
                                "surrogate is an optical tracker (surrogate.source igtl)");
   if (source == "igtl" && o.devices == SessionDevices::kSimulated && o.simulated_clock)
     return failed_precondition(

@@ -1,7 +1,10 @@
 // The simulated room's checks before a run (RoomSimulator::preflight, preflight.hpp): the light
 // fields its frames are rendered from, and the served couch's room link that simulated
-// detectors see the patient move through.
+// detectors see the patient move through (written, and lately: its server running).
 
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -25,6 +28,22 @@ using session::PreflightReport;
 using session::PreparedScene;
 
 namespace {
+
+// How old the newest sample of a served couch's room link may be at the start-up checks: a
+// thousand of its periods.
+constexpr double kMaxCouchLinkAgeS = 1.0;
+
+std::int64_t steady_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string format_seconds(double s) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3f s", s);
+  return text;
+}
 
 // The simulated frames' light fields (sim.renderer lightfield): fresh for the day's volumes.
 void check_frame_light_fields(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
@@ -70,8 +89,20 @@ void check_couch_link(const PreparedScene& p, PreflightReport* r) {
   sim::RoomLinkSample sample;
   if (!(*link)->read(&sample))
     return r->add(what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
+  // A running server writes where its couch stands every millisecond: a link older than that by
+  // far is one whose server has stopped (killed, or stalled), and simulated detectors reading it
+  // would show a patient who never moves with the couch the loop commands.
+  const double age_s = double(steady_now_ns() - sample.written_ns) * 1e-9;
+  if (age_s > kMaxCouchLinkAgeS)
+    return r->add(
+        what, CheckResult::kFail,
+        p.scene.sim.couch_link + ": last written " + format_seconds(age_s) + " ago by process " +
+            std::to_string(sample.writer_pid) +
+            ", which writes every millisecond while it runs: its server has stopped (start it again: "
+            "lftrack serve couch|robot --room FILE)");
   r->add(what, CheckResult::kPass,
-         p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ")");
+         p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ", " +
+             format_seconds(age_s) + " ago)");
 }
 
 }  // namespace
