@@ -286,6 +286,7 @@ Status run(const LoopCommandOptions& o, const session::RoomSimulator* simulator)
   action.sa_handler = on_interrupt;
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGHUP, &action, nullptr);  // a closed terminal ends the run as Ctrl-C does, summary and all
   auto summary = (*session)->run();
   g_session.store(nullptr);
   if (!summary.ok()) return summary.status();
@@ -364,6 +365,7 @@ LoopCommand add_loop_command(CLI::App* parent, const char* name, const char* des
         "Only the start-up checks: devices, calibrations, light fields, real-time set-up; print the "
         "pre-treatment checklist (exit 1 if any fails)");
     check->disable_flag_override();  // `--check=0` would be given, yet not ask for the checks
+    check->excludes(app->get_option("--json"));  // the checklist is text (no summary to print)
     if (room != nullptr) check->needs(room);
   }
   if (mode == LoopMode::kSim)

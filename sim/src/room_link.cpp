@@ -193,15 +193,30 @@ void RoomLinkWriter::publish(const tracking::Vector6d& couch_position, std::int6
 }
 
 Result<std::unique_ptr<RoomLinkReader>> RoomLinkReader::open(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(std::filesystem::symlink_status(path, ec)))
+    return not_found(
+        "room link " + path.string() +
+        ": missing (start the served couch or robot with `lftrack serve couch|robot ... --room " +
+        path.string() + "`)");
   if (!is_room_link(path))
-    return not_found("room link " + path.string() + ": missing or not a room link" + older_link_advice(path) +
-                     " (start the couch with `lftrack serve couch --room " + path.string() + "`)");
+    return failed_precondition("room link " + path.string() + ": a file that is not a room link is there" +
+                               older_link_advice(path) +
+                               " (no server will replace it: remove it, or name another sim.couch_link)");
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return io_error("room link " + path.string() + ": " + std::strerror(errno));
   void* map = ::mmap(nullptr, sizeof(LinkFile), PROT_READ, MAP_SHARED, fd, 0);
   ::close(fd);
   if (map == MAP_FAILED) return io_error("room link " + path.string() + ": mmap: " + std::strerror(errno));
   return std::unique_ptr<RoomLinkReader>(new RoomLinkReader(map));
+}
+
+bool RoomLinkReader::writer_running(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
+  if (fd < 0) return false;
+  const bool held = ::flock(fd, LOCK_SH | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  ::close(fd);  // releases the probe's shared lock, if it took one
+  return held;
 }
 
 RoomLinkReader::~RoomLinkReader() {

@@ -191,7 +191,8 @@ TEST_F(RunCli, RunHasNoSimulatorAndSimRoomRunsTheRoom) {
                                              {"--room", "--imaging", "every_cycle"},
                                              {"--check"},
                                              {"--room=0", "--check"},
-                                             {"--room", "--check=0"}}) {
+                                             {"--room", "--check=0"},
+                                             {"--room", "--check", "--json"}}) {
     const Status usage = lftrack("sim", scene(), args, &out);
     EXPECT_NE(usage.message().find("(status 512)"), std::string::npos)
         << args[0] << " " << args.back() << ": " << out;

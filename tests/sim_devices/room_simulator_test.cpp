@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <fstream>
+#include <optional>
 #include <string>
 
 #include "lftrack/session/loop_session.hpp"
@@ -69,36 +71,69 @@ TEST(RoomPreflight, TheServedCouchsRoomLinkMustBeWrittenLately) {
   auto p = prepare_scene(*scene, "", &pool);
   ASSERT_TRUE(p.ok()) << p.status().message();
   const session::LoopSessionOptions options;
-  auto check = [&](const std::filesystem::path& link) {
+  // `read_back`: where the scene's actuator answered it stands, as its own check reports it.
+  auto check = [&](const std::filesystem::path& link,
+                   std::optional<tracking::Vector6d> read_back = tracking::Vector6d::Zero()) {
     p->scene.sim.couch_link = link.string();
     session::PreflightReport r;
+    r.actuator_position = read_back;
     room_simulator()->preflight(*p, options, &r);
     const session::PreflightItem* item = couch_link_item(r);
     return item != nullptr ? *item : session::PreflightItem{"none", session::CheckResult::kPass, "no item"};
   };
+  const std::int64_t now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                  std::chrono::steady_clock::now().time_since_epoch())
+                                  .count();
 
   session::PreflightItem missing = check(dir.path() / "absent.link");
   EXPECT_EQ(missing.result, session::CheckResult::kFail) << missing.detail;
+  EXPECT_NE(missing.detail.find("lftrack serve couch|robot"), std::string::npos) << missing.detail;
+  std::ofstream(dir.path() / "garbage.link") << "not a room link";
+  session::PreflightItem garbage = check(dir.path() / "garbage.link");
+  EXPECT_EQ(garbage.result, session::CheckResult::kFail) << garbage.detail;
+  EXPECT_NE(garbage.detail.find("remove it"), std::string::npos)
+      << "no server would replace it: " << garbage.detail;
 
   auto fresh = sim::RoomLinkWriter::create(dir.path() / "fresh.link");
   ASSERT_TRUE(fresh.ok()) << fresh.status().message();
   session::PreflightItem unwritten = check(dir.path() / "fresh.link");
   EXPECT_EQ(unwritten.result, session::CheckResult::kFail) << unwritten.detail;
   EXPECT_NE(unwritten.detail.find("nothing written yet"), std::string::npos) << unwritten.detail;
-  (*fresh)->publish(tracking::Vector6d::Zero());
-  session::PreflightItem written = check(dir.path() / "fresh.link");
+  tracking::Vector6d at = tracking::Vector6d::Zero();
+  at << 1.5, -2.0, 0.5, 0.01, 0.0, -0.02;
+  (*fresh)->publish(at);
+  session::PreflightItem written = check(dir.path() / "fresh.link", at);
   EXPECT_EQ(written.result, session::CheckResult::kPass) << written.detail;
   EXPECT_NE(written.detail.find("written by process"), std::string::npos) << written.detail;
+  // Another couch's link: its couch stands elsewhere than the scene's actuator answered.
+  session::PreflightItem other = check(dir.path() / "fresh.link", tracking::Vector6d::Zero());
+  EXPECT_EQ(other.result, session::CheckResult::kFail) << other.detail;
+  EXPECT_NE(other.detail.find("another couch's link"), std::string::npos) << other.detail;
 
   auto stale = sim::RoomLinkWriter::create(dir.path() / "stale.link");
   ASSERT_TRUE(stale.ok()) << stale.status().message();
-  const std::int64_t now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                  std::chrono::steady_clock::now().time_since_epoch())
-                                  .count();
-  (*stale)->publish(tracking::Vector6d::Zero(), now_ns - 5'000'000'000);  // 5 s ago: its server stopped
-  session::PreflightItem stopped = check(dir.path() / "stale.link");
-  EXPECT_EQ(stopped.result, session::CheckResult::kFail) << stopped.detail;
-  EXPECT_NE(stopped.detail.find("its server has stopped"), std::string::npos) << stopped.detail;
+  (*stale)->publish(tracking::Vector6d::Zero(), now_ns - 5'000'000'000);  // 5 s ago: its server stalled
+  session::PreflightItem stalled = check(dir.path() / "stale.link");
+  EXPECT_EQ(stalled.result, session::CheckResult::kFail) << stalled.detail;
+  EXPECT_NE(stalled.detail.find("its server is stalled"), std::string::npos) << stalled.detail;
+
+  // Stamped ahead of this host's clock (a link left from before a reboot): refused, whoever holds it.
+  auto ahead = sim::RoomLinkWriter::create(dir.path() / "ahead.link");
+  ASSERT_TRUE(ahead.ok()) << ahead.status().message();
+  (*ahead)->publish(tracking::Vector6d::Zero(), now_ns + 1000'000'000'000);
+  session::PreflightItem future = check(dir.path() / "ahead.link");
+  EXPECT_EQ(future.result, session::CheckResult::kFail) << future.detail;
+  EXPECT_NE(future.detail.find("ahead of this host's clock"), std::string::npos) << future.detail;
+
+  // A server that ended, leaving its link (as a killed one does): fresh samples, no writer.
+  (*fresh)->publish(at);
+  (*fresh)->leave_file();
+  fresh->reset();
+  EXPECT_FALSE(sim::RoomLinkReader::writer_running(dir.path() / "fresh.link"));
+  EXPECT_TRUE(sim::RoomLinkReader::writer_running(dir.path() / "stale.link")) << "its writer still holds it";
+  session::PreflightItem ended = check(dir.path() / "fresh.link", at);
+  EXPECT_EQ(ended.result, session::CheckResult::kFail) << ended.detail;
+  EXPECT_NE(ended.detail.find("no process writes it now"), std::string::npos) << ended.detail;
 }
 
 }  // namespace

@@ -61,8 +61,11 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
   twins->assign(p.scene.detectors.size(), false);
   std::string what = "detectors";
   for (const DetectorSpec& d : p.scene.detectors) what += " " + d.view.name;
-  if (o.replay_sequence.empty() && frames_are_simulated(p.scene))
-    return r->add(what, CheckResult::kPass, "simulated (no device to open)");
+  if (o.replay_sequence.empty() && frames_are_simulated(p.scene)) {
+    // Without a simulator the item "simulated detectors" has failed already (check_simulated_room).
+    if (o.simulator != nullptr) r->add(what, CheckResult::kPass, "simulated (no device to open)");
+    return;
+  }
   Result<drivers::FrameSourceSpec> spec = invalid_argument("no spec");
   if (!o.replay_sequence.empty()) {
     drivers::ReplaySourceSpec replay;
@@ -178,7 +181,11 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
     return r->add(what, CheckResult::kPass, "replay: the recorded read-backs, if any");
   if (!actuator_moves(p.scene))
     return r->add(what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
-  if (actuator_is_virtual(p.scene)) return r->add(what, CheckResult::kPass, "the simulator's couch");
+  if (actuator_is_virtual(p.scene))
+    return r->add(what, o.simulator != nullptr ? CheckResult::kPass : CheckResult::kFail,
+                  o.simulator != nullptr
+                      ? "the simulator's couch"
+                      : "the simulator's couch, and this program has none (lftrack sim --room)");
   auto spec = device_actuator_spec(p.scene);
   if (!spec.ok()) return r->add(what, CheckResult::kFail, spec.status().message());
   // The check opens the couch and tells it to hold: never under another program driving it (a
@@ -204,6 +211,7 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
   s << std::fixed << "answered: position (" << state.position[0] << ", " << state.position[1] << ", "
     << state.position[2] << ") mm" << (state.moving ? ", moving" : "") << (state.fault ? ", FAULT" : "");
   r->add(what, state.fault ? CheckResult::kFail : CheckResult::kPass, s.str());
+  r->actuator_position = state.position;
   if (a.calibration)
     r->add("couch calibration", CheckResult::kPass, a.calibration_file);
   else
@@ -308,11 +316,12 @@ PreflightReport run_preflight(const PreparedScene& p, const LoopSessionOptions& 
   r.add("view geometry", CheckResult::kPass,
         "from the scene file " + p.scene.source + " (lftrack calibrate views writes it there)");
   check_light_fields(p, o, &r);
-  check_simulated_room(p, o, &r);  // the simulated frames' light fields, the served couch's room link
   std::vector<bool> twins;
   check_detectors(p, o, &r, &twins);
   check_detector_calibrations(p, o, twins, &r);
   check_actuator(p, o, &r);
+  // After the actuator: a served couch's room link is compared with the couch's read-back.
+  check_simulated_room(p, o, &r);  // the simulated frames' light fields, the served couch's room link
   check_surrogate(p, o, &r);
   return r;
 }

@@ -32,6 +32,10 @@ namespace {
 // How old the newest sample of a served couch's room link may be at the start-up checks: a
 // thousand of its periods.
 constexpr double kMaxCouchLinkAgeS = 1.0;
+// How far the link's couch may stand from the actuator's read-back at the checks (the couch is
+// held; its read-back carries micrometres and microradians, over Modbus and CAN alike).
+constexpr double kMaxCouchLinkOffsetMm = 0.1;
+constexpr double kMaxCouchLinkOffsetDeg = 0.1;
 
 std::int64_t steady_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -77,32 +81,64 @@ void check_frame_light_fields(const PreparedScene& p, const LoopSessionOptions& 
 }
 
 // Simulated detectors with a served couch: the patient moves only through the couch's room link.
+// The command that serves the scene's actuator with a room link.
+std::string serve_command(const PreparedScene& p) {
+  return p.scene.actuator.type == "can" ? "lftrack serve robot --socket ... --room " + p.scene.sim.couch_link
+                                        : "lftrack serve couch --modbus ... --room " + p.scene.sim.couch_link;
+}
+
+// The served couch's room link (sim.couch_link): there, written by a server that runs now, lately
+// (it writes every millisecond), and showing the couch where the scene's actuator, read back just
+// before (PreflightReport::actuator_position), says it stands: a link of another couch, or of
+// none, would show the detectors a patient who never moves with the couch the loop commands.
 void check_couch_link(const PreparedScene& p, PreflightReport* r) {
   if (!actuator_is_device(p.scene)) return;
   const std::string what = "the served couch's room link (sim.couch_link)";
-  if (p.scene.sim.couch_link.empty())
+  const std::string& path = p.scene.sim.couch_link;
+  if (path.empty())
     return r->add(what, CheckResult::kFail,
                   "none named: simulated detectors would never see the patient move with the " +
                       p.scene.actuator.type + " actuator (lftrack serve couch|robot --room FILE)");
-  auto link = sim::RoomLinkReader::open(p.scene.sim.couch_link);
+  auto link = sim::RoomLinkReader::open(path);
   if (!link.ok()) return r->add(what, CheckResult::kFail, link.status().message());
   sim::RoomLinkSample sample;
   if (!(*link)->read(&sample))
-    return r->add(what, CheckResult::kFail, p.scene.sim.couch_link + ": nothing written yet");
-  // A running server writes where its couch stands every millisecond: a link older than that by
-  // far is one whose server has stopped (killed, or stalled), and simulated detectors reading it
-  // would show a patient who never moves with the couch the loop commands.
+    return r->add(what, CheckResult::kFail, path + ": nothing written yet (" + serve_command(p) + ")");
+  const std::string writer = "process " + std::to_string(sample.writer_pid);
+  if (!sim::RoomLinkReader::writer_running(path))
+    return r->add(what, CheckResult::kFail,
+                  path + ": no process writes it now (last " + writer +
+                      "): its server has ended (start it again: " + serve_command(p) + ")");
   const double age_s = double(steady_now_ns() - sample.written_ns) * 1e-9;
+  if (age_s < -kMaxCouchLinkAgeS)
+    return r->add(what, CheckResult::kFail,
+                  path + ": its newest sample is stamped " + format_seconds(-age_s) +
+                      " ahead of this host's clock (" + writer +
+                      "): not a link written on this boot by a server that runs now");
   if (age_s > kMaxCouchLinkAgeS)
-    return r->add(
-        what, CheckResult::kFail,
-        p.scene.sim.couch_link + ": last written " + format_seconds(age_s) + " ago by process " +
-            std::to_string(sample.writer_pid) +
-            ", which writes every millisecond while it runs: its server has stopped (start it again: "
-            "lftrack serve couch|robot --room FILE)");
+    return r->add(what, CheckResult::kFail,
+                  path + ": last written " + format_seconds(age_s) + " ago by " + writer +
+                      ", which writes every millisecond while it runs: its server is stalled (stopped or "
+                      "starved); end it and start it again (" +
+                      serve_command(p) + ")");
+  if (r->actuator_position) {
+    const tracking::Vector6d off = sample.couch_position - *r->actuator_position;
+    const double off_mm = off.head<3>().norm(), off_deg = off.tail<3>().norm() * 180.0 / M_PI;
+    if (!(off_mm <= kMaxCouchLinkOffsetMm && off_deg <= kMaxCouchLinkOffsetDeg)) {
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "the link's couch stands %.3f mm and %.3f deg from where the %s actuator", off_mm,
+                    off_deg, p.scene.actuator.type.c_str());
+      return r->add(
+          what, CheckResult::kFail,
+          path + " (" + writer + "): " + text +
+              " answered it stands: it is another couch's link, and the detectors would not see this "
+              "couch move the patient");
+    }
+  }
   r->add(what, CheckResult::kPass,
-         p.scene.sim.couch_link + " (written by process " + std::to_string(sample.writer_pid) + ", " +
-             format_seconds(age_s) + " ago)");
+         path + " (written by " + writer + ", " + format_seconds(age_s) + " ago" +
+             (r->actuator_position ? ", where the actuator answered it stands)" : ")"));
 }
 
 }  // namespace

@@ -67,6 +67,10 @@ class RoomLinkReader {
  public:
   // Opens an existing link; fails with a message if the file is missing or not a room link.
   static Result<std::unique_ptr<RoomLinkReader>> open(const std::filesystem::path& path);
+  // Whether a writer holds the link now (its flock, RoomLinkWriter::create): false for a link
+  // whose server has ended or was killed, whatever its samples' time stamps say. Probes with a
+  // shared lock held for the probe only.
+  static bool writer_running(const std::filesystem::path& path);
   ~RoomLinkReader();
   RoomLinkReader(const RoomLinkReader&) = delete;
   RoomLinkReader& operator=(const RoomLinkReader&) = delete;

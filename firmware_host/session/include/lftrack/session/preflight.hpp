@@ -17,6 +17,7 @@
 //     assume the couch's axes are the room's.
 // Nothing here moves the patient or switches the beam on.
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,9 @@ struct PreflightItem {
 
 struct PreflightReport {
   std::vector<PreflightItem> items;
+  // The couch's or robot's read-back at the checks (total travel, mm and rad), where it answered:
+  // what a simulated room's checks compare its served couch's room link with.
+  std::optional<tracking::Vector6d> actuator_position;
   void add(std::string what, CheckResult result, std::string detail);  // one item, in order
   bool passed() const;                                                 // no kFail
   std::string checklist() const;  // one line per item: [ ok ] / [warn] / [FAIL]
