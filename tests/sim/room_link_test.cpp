@@ -129,10 +129,14 @@ TEST(RoomLink, RefusesWhatIsNotALinkAndALiveWriter) {
   std::string kept;
   in >> kept;
   EXPECT_EQ(kept, "precious") << "left untouched";
-  EXPECT_FALSE(RoomLinkReader::open(file).ok());
+  auto foreign = RoomLinkReader::open(file);
+  ASSERT_FALSE(foreign.ok());
+  EXPECT_NE(foreign.status().message().find("remove it"), std::string::npos)
+      << "no server would replace it: " << foreign.status().message();
   auto missing = RoomLinkReader::open(dir.path() / "none.link");
   ASSERT_FALSE(missing.ok());
-  EXPECT_NE(missing.status().message().find("lftrack serve couch --room"), std::string::npos);
+  EXPECT_NE(missing.status().message().find("lftrack serve couch|robot ... --room"), std::string::npos)
+      << missing.status().message();
   auto first = RoomLinkWriter::create(dir.path() / "room.link");
   ASSERT_TRUE(first.ok());
   auto second = RoomLinkWriter::create(dir.path() / "room.link");
