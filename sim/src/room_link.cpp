@@ -60,11 +60,6 @@ bool read_slot(const LinkFile& file, std::uint64_t n, RoomLinkSample* out) {
 
 bool finite(const RoomLinkSample& s) { return s.couch_position.allFinite(); }
 
-std::int64_t monotonic_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
 // The pid of the process that wrote an existing link (0 if none can be read).
 std::uint64_t link_writer(const std::filesystem::path& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
@@ -177,7 +172,9 @@ RoomLinkWriter::~RoomLinkWriter() {
   ::close(lock_fd_);  // after the removal: no second writer takes over a file about to go
 }
 
-void RoomLinkWriter::publish(const tracking::Vector6d& couch_position) { publish(couch_position, monotonic_ns()); }
+void RoomLinkWriter::publish(const tracking::Vector6d& couch_position) {
+  publish(couch_position, room_link_now_ns());
+}
 
 void RoomLinkWriter::publish(const tracking::Vector6d& couch_position, std::int64_t at_ns) {
   auto* file = static_cast<LinkFile*>(map_);
@@ -209,6 +206,12 @@ Result<std::unique_ptr<RoomLinkReader>> RoomLinkReader::open(const std::filesyst
   ::close(fd);
   if (map == MAP_FAILED) return io_error("room link " + path.string() + ": mmap: " + std::strerror(errno));
   return std::unique_ptr<RoomLinkReader>(new RoomLinkReader(map));
+}
+
+std::int64_t room_link_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 
 bool RoomLinkReader::writer_running(const std::filesystem::path& path) {

@@ -10,8 +10,6 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_text.hpp"
-#include "lftrack/loop/journal.hpp"
-#include "lftrack/loop/operator_input.hpp"
 #include "lftrack/session/scene.hpp"
 #include "lftrack/studies/plastimatch_peer.hpp"
 #include "lftrack/studies/trade_study.hpp"
@@ -24,10 +22,6 @@ using studies::read_trade_shard;
 using studies::run_process;
 using studies::TradeResult;
 
-using loop::BeamWithheld;
-using loop::JournalRecord;
-using loop::JournalWriter;
-using loop::OperatorCommand;
 namespace {
 
 using test::lftrack_bin;
@@ -465,42 +459,6 @@ TEST(Cli, TradeStudyShardsMergeIntoPlotsAndASummary) {
 }  // namespace
 }  // namespace lftrack::session
 
-#include "lftrack/loop/journal.hpp"
-
-namespace lftrack::session {
-namespace {
-
-TEST(Cli, JournalExportPrintsEveryRecordAndWarnsOfATornTail) {
-  test::TempDir dir;
-  const auto file = dir.path() / "cycles.journal";
-  {
-    auto w = JournalWriter::open(file);
-    ASSERT_TRUE(w.ok());
-    for (std::uint64_t i = 0; i < 5; ++i) {
-      JournalRecord r;
-      r.cycle = i;
-      r.state = 2;
-      (*w)->append(r);
-    }
-  }
-  std::filesystem::resize_file(file, std::filesystem::file_size(file) - 3);
-  std::string csv, json;
-  ASSERT_TRUE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok()) << csv;
-  EXPECT_NE(csv.find("torn tail"), std::string::npos) << csv;
-  EXPECT_NE(csv.find("\n3,0,0,0,TRACK,IDLE,APPLY"), std::string::npos) << csv;
-  EXPECT_EQ(csv.find("\n4,"), std::string::npos) << "the torn record is not printed";
-  ASSERT_TRUE(run_process({lftrack_bin(), "-q", "journal", "export", file.string()}, &json).ok()) << json;
-  int objects = 0;
-  for (std::size_t pos = json.find("{\"beam_permit\""); pos != std::string::npos;
-       pos = json.find("{\"beam_permit\"", pos + 1))
-    ++objects;
-  EXPECT_EQ(objects, 4) << json;
-  EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", (dir.path() / "none").string()}, &json).ok());
-}
-
-}  // namespace
-}  // namespace lftrack::session
-
 namespace lftrack::session {
 namespace {
 
@@ -599,71 +557,6 @@ TEST(Cli, SimPrintsTheJsonSummaryWritesTheJournalAndArchivesForReplay) {
   std::ofstream(dir.path() / "v4l2-short.yaml") << short_form;
   EXPECT_FALSE(run_process({lftrack_bin(), "run", "--scene", (dir.path() / "v4l2-short.yaml").string()}, &out).ok());
   EXPECT_NE(out.find("v4l2 needs its device"), std::string::npos) << out;
-}
-
-}  // namespace
-}  // namespace lftrack::session
-
-#include "lftrack/loop/operator_input.hpp"
-
-namespace lftrack::session {
-namespace {
-
-// A flipped bit in the middle: every other record is exported, each problem is warned about, and
-// the exit status says the journal is damaged.
-TEST(Cli, JournalExportRecoversPastDamageWarnsOfEachProblemAndFails) {
-  test::TempDir dir;
-  const auto file = dir.path() / "cycles.journal";
-  {
-    auto w = JournalWriter::open(file);
-    ASSERT_TRUE(w.ok());
-    for (std::uint64_t i = 0; i < 20; ++i) {
-      JournalRecord r;
-      r.cycle = i;
-      r.state = 2;
-      r.hold_id = i == 7 ? 3 : 0;
-      r.operator_command = i == 7 ? 1 + static_cast<std::uint8_t>(OperatorCommand::kResume) : 0;
-      r.beam_withheld = i == 7 ? static_cast<std::uint8_t>(BeamWithheld::kApprovedStep) : 0;
-      (*w)->append(r);
-    }
-  }
-  const std::size_t frame = 8 + sizeof(JournalRecord) + 4;
-  const std::size_t damaged_at = 32 + 10 * frame;
-  {
-    std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
-    f.seekp(static_cast<std::streamoff>(damaged_at + 30));
-    f.put('\x5a');
-  }
-  std::string csv;
-  EXPECT_FALSE(run_process({lftrack_bin(), "journal", "export", file.string(), "--csv"}, &csv).ok())
-      << "damage is an error, for scripts";
-  EXPECT_NE(
-      csv.find(
-          ",hold_id,operator_command,operator_refused,operator_refusal,beam_withheld,"
-          "operator_first_refusal,operator_refusals,target_tx_mm,target_ty_mm,target_tz_mm,target_rx_deg,"
-          "target_ry_deg,target_rz_deg,command_acked_ns,frame_time_a_ns,frame_time_b_ns,frames_arrived_ns,"
-          "preprocessed_ns,registered_ns,gated_ns,command_written_ns,imaging,"),
-      std::string::npos)
-      << csv;
-  EXPECT_NE(csv.find(",3,\"resume\",0,\"\",\"approved step beyond the step "
-                     "limit\",\"\",\"\",0,0,0,0,0,0,0,0,0,0,0,0,0,0,\""),
-            std::string::npos)
-      << csv;
-  EXPECT_NE(csv.find(",0,\"\",0,\"\",\"\",\"\",\"\",0,0,0,0,0,0,0,0,0,0,0,0,0,0,\""), std::string::npos)
-      << "no beam withheld: an empty field" << csv;
-  for (int i = 0; i < 20; ++i) {
-    const std::string row = std::string("\n") + std::to_string(i) + ",0,0,0,TRACK";
-    EXPECT_EQ(csv.find(row) == std::string::npos, i == 10) << i << csv;
-  }
-  const std::string frame_bytes = std::to_string(frame);
-  const std::string span = std::string("bad span at byte ") + std::to_string(damaged_at) + ", " +
-                           frame_bytes + " bytes: checksum mismatch";
-  EXPECT_NE(csv.find(span), std::string::npos) << csv;
-  EXPECT_NE(csv.find("gap: cycle 11 (record 10) follows cycle 9, 1 cycles missing"), std::string::npos)
-      << csv;
-  const std::string summary = std::string("journal damaged: 1 bad spans (") + frame_bytes +
-                              " bytes), 1 gaps (1 cycles missing), 0 repeated cycles; 19 records recovered";
-  EXPECT_NE(csv.find(summary), std::string::npos) << csv;
 }
 
 }  // namespace

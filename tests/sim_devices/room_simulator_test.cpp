@@ -6,7 +6,6 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <fstream>
 #include <optional>
 #include <string>
@@ -81,9 +80,7 @@ TEST(RoomPreflight, TheServedCouchsRoomLinkMustBeWrittenLately) {
     const session::PreflightItem* item = couch_link_item(r);
     return item != nullptr ? *item : session::PreflightItem{"none", session::CheckResult::kPass, "no item"};
   };
-  const std::int64_t now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                  std::chrono::steady_clock::now().time_since_epoch())
-                                  .count();
+  const std::int64_t now_ns = sim::room_link_now_ns();
 
   session::PreflightItem missing = check(dir.path() / "absent.link");
   EXPECT_EQ(missing.result, session::CheckResult::kFail) << missing.detail;

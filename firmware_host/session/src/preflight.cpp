@@ -181,11 +181,10 @@ void check_actuator(const PreparedScene& p, const LoopSessionOptions& o, Preflig
     return r->add(what, CheckResult::kPass, "replay: the recorded read-backs, if any");
   if (!actuator_moves(p.scene))
     return r->add(what, CheckResult::kWarn, "none: the loop tracks and reports, nothing moves");
-  if (actuator_is_virtual(p.scene))
-    return r->add(what, o.simulator != nullptr ? CheckResult::kPass : CheckResult::kFail,
-                  o.simulator != nullptr
-                      ? "the simulator's couch"
-                      : "the simulator's couch, and this program has none (lftrack sim --room)");
+  if (actuator_is_virtual(p.scene) && o.simulator == nullptr)
+    return r->add(what, CheckResult::kFail,
+                  "the simulator's couch, and this program has none (lftrack sim --room)");
+  if (actuator_is_virtual(p.scene)) return r->add(what, CheckResult::kPass, "the simulator's couch");
   auto spec = device_actuator_spec(p.scene);
   if (!spec.ok()) return r->add(what, CheckResult::kFail, spec.status().message());
   // The check opens the couch and tells it to hold: never under another program driving it (a

@@ -2,9 +2,8 @@
 // fields its frames are rendered from, and the served couch's room link that simulated
 // detectors see the patient move through (written, and lately: its server running).
 
-#include <chrono>
-#include <cstdint>
-#include <cstdio>
+#include <spdlog/spdlog.h>  // fmt
+
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -36,18 +35,6 @@ constexpr double kMaxCouchLinkAgeS = 1.0;
 // held; its read-back carries micrometres and microradians, over Modbus and CAN alike).
 constexpr double kMaxCouchLinkOffsetMm = 0.1;
 constexpr double kMaxCouchLinkOffsetDeg = 0.1;
-
-std::int64_t steady_now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
-std::string format_seconds(double s) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.3f s", s);
-  return text;
-}
 
 // The simulated frames' light fields (sim.renderer lightfield): fresh for the day's volumes.
 void check_frame_light_fields(const PreparedScene& p, const LoopSessionOptions& o, PreflightReport* r) {
@@ -109,35 +96,30 @@ void check_couch_link(const PreparedScene& p, PreflightReport* r) {
     return r->add(what, CheckResult::kFail,
                   path + ": no process writes it now (last " + writer +
                       "): its server has ended (start it again: " + serve_command(p) + ")");
-  const double age_s = double(steady_now_ns() - sample.written_ns) * 1e-9;
+  const double age_s = double(sim::room_link_now_ns() - sample.written_ns) * 1e-9;
   if (age_s < -kMaxCouchLinkAgeS)
     return r->add(what, CheckResult::kFail,
-                  path + ": its newest sample is stamped " + format_seconds(-age_s) +
+                  path + ": its newest sample is stamped " + fmt::format("{:.3f} s", -age_s) +
                       " ahead of this host's clock (" + writer +
                       "): not a link written on this boot by a server that runs now");
   if (age_s > kMaxCouchLinkAgeS)
     return r->add(what, CheckResult::kFail,
-                  path + ": last written " + format_seconds(age_s) + " ago by " + writer +
+                  path + ": last written " + fmt::format("{:.3f} s", age_s) + " ago by " + writer +
                       ", which writes every millisecond while it runs: its server is stalled (stopped or "
                       "starved); end it and start it again (" +
                       serve_command(p) + ")");
   if (r->actuator_position) {
     const tracking::Vector6d off = sample.couch_position - *r->actuator_position;
-    const double off_mm = off.head<3>().norm(), off_deg = off.tail<3>().norm() * 180.0 / M_PI;
-    if (!(off_mm <= kMaxCouchLinkOffsetMm && off_deg <= kMaxCouchLinkOffsetDeg)) {
-      char text[160];
-      std::snprintf(text, sizeof text,
-                    "the link's couch stands %.3f mm and %.3f deg from where the %s actuator", off_mm,
-                    off_deg, p.scene.actuator.type.c_str());
-      return r->add(
-          what, CheckResult::kFail,
-          path + " (" + writer + "): " + text +
-              " answered it stands: it is another couch's link, and the detectors would not see this "
-              "couch move the patient");
-    }
+    const double off_mm = off.head<3>().norm(), off_deg = tracking::rad_to_deg(off.tail<3>().norm());
+    if (!(off_mm <= kMaxCouchLinkOffsetMm && off_deg <= kMaxCouchLinkOffsetDeg))
+      return r->add(what, CheckResult::kFail,
+                    fmt::format("{} ({}): the link's couch stands {:.3f} mm and {:.3f} deg from where the {} "
+                                "actuator answered it stands: it is another couch's link, and the detectors "
+                                "would not see this couch move the patient",
+                                path, writer, off_mm, off_deg, p.scene.actuator.type));
   }
   r->add(what, CheckResult::kPass,
-         path + " (written by " + writer + ", " + format_seconds(age_s) + " ago" +
+         path + " (written by " + writer + ", " + fmt::format("{:.3f} s", age_s) + " ago" +
              (r->actuator_position ? ", where the actuator answered it stands)" : ")"));
 }
 

@@ -28,6 +28,9 @@ struct RoomLinkSample {
 
 class RoomLinkReader;
 
+// Now, on the clock a link's samples are stamped with (RoomLinkSample::written_ns).
+std::int64_t room_link_now_ns();
+
 class RoomLinkWriter {
  public:
   // Creates the link file (mode 0600). An existing room link whose writer has gone (a couch
