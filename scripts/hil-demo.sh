@@ -104,7 +104,8 @@ taskset -c 0 "$lftrack" -q serve detectors --scene "$scene" --room "$room" --add
     --lf-dir "$lf" --json > "$out/detectors.out" &
 detectors=$!
 pids+=("$detectors")
-wait_for_server "$out/detectors.out" "$detectors" detector 600
+# The first time, the server builds the simulator's frame fields (a minute or more on two cores).
+wait_for_server "$out/detectors.out" "$detectors" detector 3000
 echo "hil-demo: $(head -1 "$out/couch.out"); $(head -1 "$out/detectors.out")" >&2
 set +e
 "$lftrack" -q run --scene "$scene" --lf-dir "$lf" --cycles "$cycles" --rt ignore --json \

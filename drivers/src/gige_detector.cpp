@@ -15,6 +15,7 @@
 #include <cstring>
 #include <fstream>
 #include <semaphore>
+#include <shared_mutex>
 #include <thread>
 
 namespace lftrack::drivers {
@@ -102,7 +103,7 @@ struct GigeDetector::Arv {
   gulong control_lost_handler = 0;
   guint underruns_info = G_MAXUINT;       // the stream's "n_underruns" statistic, by index
   std::atomic<bool> control_lost{false};  // set by Aravis's heartbeat thread
-  bool gone = false;                      // marked by capture() (the cycle's thread)
+  std::atomic<bool> gone{false};          // marked by capture() (the cycle's thread); read by the clock's
   // The software trigger's thread.
   std::thread trigger_thread;
   std::counting_semaphore<> trigger_wake{0};
@@ -317,6 +318,8 @@ Status GigeDetector::open() {
       arv_->underruns_info = i;
   underruns_at_open_ = counters_.underruns;
 
+  start_device_clock();
+
   arv_camera_start_acquisition(arv_->camera, &error);
   if (error != nullptr) return fail("cannot start acquisition: " + take_message(error, ""));
   have_id_ = false;
@@ -357,6 +360,102 @@ void GigeDetector::stop_trigger_thread() {
   arv_->trigger_thread.join();
   while (arv_->trigger_wake.try_acquire()) {
   }
+}
+
+// GigE Vision's bootstrap registers for the camera's clock (GigE Vision 2.0, table 28-1): write
+// kLatch to the control register, then read the latched 64-bit value, high word first.
+constexpr guint64 kTimestampControl = 0x0944, kTimestampValueHigh = 0x0948;
+constexpr guint32 kLatch = 2;
+
+// How far a camera's clock may run from the host's between latch rounds (a crystal's tens of
+// ppm, with room to spare), and how old a mapping may grow (rounds failing: every latch slower
+// than DeviceClockMap::kMaxRoundTripNs) before the frames are timed by their arrival instead.
+constexpr std::int64_t kDriftPartsPerMillion = 100;
+constexpr std::int64_t kMaxMappingAgeNs = 5'000'000'000;
+// A mapped exposure more than this before its frame's arrival is not believed (no panel reads
+// out that slowly; a camera clock that stepped back is).
+constexpr std::int64_t kMaxReadOutNs = 500'000'000;
+
+void GigeDetector::start_device_clock() {
+  clock_ = std::make_unique<DeviceClockMap>();
+  tick_hz_ = 0;
+  clock_problem_.clear();
+  if (options_.exposure_clock != ExposureClock::kDevice) return;
+  GError* error = nullptr;
+  tick_hz_ = arv_gv_device_get_timestamp_tick_frequency(ARV_GV_DEVICE(arv_->device), &error);
+  if (error != nullptr || tick_hz_ == 0) {
+    clock_problem_ = "it gives no timestamp tick frequency (" + take_message(error, "0 Hz") + ")";
+    tick_hz_ = 0;
+    return;
+  }
+  std::string why;
+  if (!latch_round(8, &why)) clock_problem_ = "its timestamp latch gave no usable time (" + why + ")";
+}
+
+bool GigeDetector::sync_clock(int latches) {
+  return latch_round(latches, nullptr);
+}
+
+bool GigeDetector::latch_round(int latches, std::string* why) {
+  if (tick_hz_ == 0 || arv_->device == nullptr || arv_->gone || clock_ == nullptr) return false;
+  ArvDevice* device = arv_->device;
+  clock_->begin_round();
+  const std::int64_t refused_before = clock_->refused();
+  for (int i = 0; i < latches; ++i) {
+    GError* error = nullptr;
+    ClockLatch latch;
+    latch.host_before_ns = clock_ns(CLOCK_MONOTONIC);
+    const gboolean latched = arv_device_write_register(device, kTimestampControl, kLatch, &error);
+    latch.host_after_ns = clock_ns(CLOCK_MONOTONIC);
+    std::uint8_t value[8] = {};  // the latched 64 bits, big-endian (GigE Vision), high word first
+    if (!latched || !arv_device_read_memory(device, kTimestampValueHigh, sizeof value, value, &error)) {
+      // A camera that does not answer: one timeout per round, not one per latch.
+      if (why != nullptr) *why = take_message(error, "no answer");
+      g_clear_error(&error);
+      break;
+    }
+    std::uint64_t ticks = 0;
+    for (std::uint8_t byte : value) ticks = (ticks << 8) | byte;
+    // As Aravis converts the leader's timestamp (arv_gvsp_timestamp_to_ns): no overflow.
+    const std::uint64_t ns =
+        (ticks / tick_hz_) * 1'000'000'000ull + ((ticks % tick_hz_) * 1'000'000'000ull) / tick_hz_;
+    latch.device_ns = ns > std::uint64_t(INT64_MAX) ? 0 : std::int64_t(ns);
+    clock_->add(latch);
+  }
+  const bool renewed = clock_->end_round();
+  if (!renewed && why != nullptr && why->empty() && clock_->refused() > refused_before)
+    *why = "it latched 0, or every latch's round trip was over " +
+           std::to_string(DeviceClockMap::kMaxRoundTripNs / 1'000'000) + " ms";
+  return renewed;
+}
+
+bool GigeDetector::usable_mapping(std::int64_t now_ns, DeviceClockMap::Mapping* m) const {
+  if (options_.exposure_clock != ExposureClock::kDevice || clock_ == nullptr) return false;
+  *m = clock_->mapping();
+  const std::int64_t age = now_ns - m->at_host_ns;
+  if (m->at_host_ns == 0 || age > kMaxMappingAgeNs) return false;
+  m->uncertainty_ns += std::max<std::int64_t>(age, 0) / (1'000'000 / kDriftPartsPerMillion);
+  return true;
+}
+
+std::string GigeDetector::clock_source() const {
+  if (options_.exposure_clock == ExposureClock::kArrival) return "arrival (exposure_clock: arrival)";
+  if (device_clock_mapped())
+    return "device clock (+-" + std::to_string((timestamp_uncertainty_ns() + 999) / 1000) + " us)";
+  return "arrival: the device clock cannot be used: " +
+         (clock_problem_.empty()
+              ? std::string("no latch round has mapped it for 5 s, or the camera is not open")
+              : clock_problem_);
+}
+
+bool GigeDetector::device_clock_mapped() const {
+  DeviceClockMap::Mapping m;
+  return usable_mapping(clock_ns(CLOCK_MONOTONIC), &m);
+}
+
+std::int64_t GigeDetector::timestamp_uncertainty_ns() const {
+  DeviceClockMap::Mapping m;
+  return usable_mapping(clock_ns(CLOCK_MONOTONIC), &m) ? m.uncertainty_ns : 0;
 }
 
 void GigeDetector::trigger(std::int64_t at_monotonic_ns) {
@@ -509,11 +608,28 @@ DeviceStatus GigeDetector::capture(Frame* frame, Deadline deadline) {
   have_id_ = true;
   last_id_ = id;
   frame->sequence = sequence_;
-  // The leader's arrival (host CLOCK_REALTIME) on CLOCK_MONOTONIC, back to mid-exposure.
+  // The leader's arrival (host CLOCK_REALTIME) on CLOCK_MONOTONIC; the exposure by the camera's
+  // clock where it is mapped and believable, else the arrival back to mid-exposure.
   const std::int64_t realtime_minus_monotonic = clock_ns(CLOCK_REALTIME) - clock_ns(CLOCK_MONOTONIC);
-  frame->timestamp_ns = std::int64_t(arv_buffer_get_system_timestamp(newest)) - realtime_minus_monotonic -
-                        std::int64_t(options_.leader_latency_ms * 1e6);
+  const std::int64_t arrival_ns =
+      std::int64_t(arv_buffer_get_system_timestamp(newest)) - realtime_minus_monotonic;
   last_device_timestamp_ns_ = std::int64_t(arv_buffer_get_timestamp(newest));
+  last_arrival_timestamp_ns_ = arrival_ns - std::int64_t(options_.leader_latency_ms * 1e6);
+  frame->timestamp_ns = last_arrival_timestamp_ns_;
+  last_timed_by_device_ = false;
+  last_uncertainty_ns_ = 0;
+  if (options_.exposure_clock == ExposureClock::kDevice) {
+    DeviceClockMap::Mapping m;
+    const bool mapped = usable_mapping(clock_ns(CLOCK_MONOTONIC), &m) && last_device_timestamp_ns_ > 0;
+    const std::int64_t exposure_ns = last_device_timestamp_ns_ + m.offset_ns;
+    if (mapped && exposure_ns <= arrival_ns + m.uncertainty_ns && exposure_ns >= arrival_ns - kMaxReadOutNs) {
+      frame->timestamp_ns = exposure_ns;
+      last_timed_by_device_ = true;
+      last_uncertainty_ns_ = m.uncertainty_ns;
+    } else {
+      ++counters_.clock_fallbacks;
+    }
+  }
   arv_stream_push_buffer(a.stream, newest);
   ++counters_.frames;
   return DeviceStatus::kOk;
@@ -529,9 +645,18 @@ GigeFrameSource::~GigeFrameSource() {
 }
 
 void GigeFrameSource::reopen_loop() {
+  std::int64_t synced_ns = clock_ns(CLOCK_MONOTONIC);
   while (!stop_.load()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    if (!gone_.load()) continue;
+    if (!gone_.load()) {
+      // A round of clock latches a second: the cycle's acquire() shares the lock meanwhile.
+      if (clock_ns(CLOCK_MONOTONIC) - synced_ns < 1'000'000'000) continue;
+      synced_ns = clock_ns(CLOCK_MONOTONIC);
+      std::shared_lock lock(devices_);
+      for (auto& d : detectors_)
+        if (d->is_open()) d->sync_clock();
+      continue;
+    }
     std::lock_guard lock(devices_);  // the cycle gets kDisconnected meanwhile
     if (stop_.load()) break;
     if (reopen_disconnected_locked().ok()) {
@@ -575,17 +700,32 @@ void GigeFrameSource::request_exposure(std::int64_t exposure_time_ns) {
 }
 
 DeviceStatus GigeFrameSource::acquire(FramePair* pair, Deadline deadline) {
-  std::unique_lock lock(devices_, std::try_to_lock);
+  std::shared_lock lock(devices_, std::try_to_lock);
   if (!lock.owns_lock()) return DeviceStatus::kDisconnected;  // being reopened
   for (std::size_t i = 0; i < detectors_.size(); ++i) {
-    DeviceStatus s = detectors_[i]->capture(&pair->frames[i], deadline);
-    // A frame that arrived before this exposure was asked for is an earlier one's, late.
-    while (s == DeviceStatus::kOk && exposure_ns_ > 0 && pair->frames[i].timestamp_ns < exposure_ns_) {
+    GigeDetector& d = *detectors_[i];
+    DeviceStatus s = d.capture(&pair->frames[i], deadline);
+    // A frame exposed before this exposure was asked for is an earlier one's, late (give or take
+    // how far the camera's clock mapping can be off).
+    while (s == DeviceStatus::kOk && exposure_ns_ > 0 &&
+           pair->frames[i].timestamp_ns < exposure_ns_ - d.last_timestamp_uncertainty_ns()) {
       ++stale_frames_;
       s = detectors_[i]->capture(&pair->frames[i], deadline);
     }
     if (s == DeviceStatus::kDisconnected) gone_.store(true);
     if (s != DeviceStatus::kOk) return s;
+  }
+  // One clock for the pair: where any frame could not be timed by its camera's clock, every frame
+  // is timed by its arrival, so that the skew check never compares an exposure with an arrival.
+  bool by_device = true, by_arrival = true;
+  for (const auto& d : detectors_) {
+    by_device = by_device && d->last_frame_timed_by_device();
+    by_arrival = by_arrival && !d->last_frame_timed_by_device();
+  }
+  if (!by_device && !by_arrival) {
+    ++pairs_timed_by_arrival_;
+    for (std::size_t i = 0; i < detectors_.size(); ++i)
+      pair->frames[i].timestamp_ns = detectors_[i]->last_arrival_timestamp_ns();
   }
   std::int64_t first = pair->frames[0].timestamp_ns, last = first;
   for (const Frame& f : pair->frames) {
@@ -601,7 +741,10 @@ DeviceStatus GigeFrameSource::acquire(FramePair* pair, Deadline deadline) {
 
 DetectorIdentity GigeFrameSource::identity(std::size_t detector) const {
   if (detector >= detectors_.size()) return {};
-  return {detectors_[detector]->camera(), detectors_[detector]->device_id()};
+  std::shared_lock lock(devices_);  // not while the source's thread reopens it
+  const GigeDetector& d = *detectors_[detector];
+  const bool fell_back = d.options().exposure_clock == ExposureClock::kDevice && !d.device_clock_mapped();
+  return {d.camera(), d.device_id(), d.clock_source(), fell_back};
 }
 
 void GigeFrameSource::close() {

@@ -32,6 +32,10 @@ constexpr std::uint32_t kHeartbeatTimeoutMs = 0x0938;
 constexpr std::uint32_t kStreamPort = 0x0D00;
 constexpr std::uint32_t kStreamPacketSize = 0x0D04;
 constexpr std::uint32_t kStreamAddress = 0x0D18;
+// The camera's clock: tick frequency (read-only), control (bit 1 latches, bit 0 resets to 0) and
+// the latched value, high word first.
+constexpr std::uint32_t kTimestampControl = 0x0944;
+constexpr std::uint32_t kTimestampValueHigh = 0x0948, kTimestampValueLow = 0x094C;
 
 struct InterfaceUp {
   std::string name, address, broadcast;  // broadcast: empty where the interface has none
@@ -131,6 +135,7 @@ struct GigeFakeDetector::Server {
   bool have_controller = false;
   sockaddr_in controller{};
   std::int64_t controller_heard_us = 0;
+  std::int64_t clock_zero_ns = 0;  // CLOCK_REALTIME (ns) at the last reset of the camera's clock
   std::size_t image_bytes = 0;  // the stream's frame buffer
 
   ~Server() {
@@ -184,14 +189,16 @@ struct GigeFakeDetector::Server {
       {ARV_FAKE_CAMERA_REGISTER_BINNING_VERTICAL, 1, 1},
   };
   // The bootstrap registers a camera only reads out (GigE Vision: version, device mode, MAC and
-  // IP, names, serial, the GenICam URLs, capabilities), [begin, end) in bytes; the user-defined
+  // IP, names, serial, the GenICam URLs, capabilities, the timestamp's tick frequency and latched
+  // value), [begin, end) in bytes; the user-defined
   // name (0x00E8), Aravis's fake-camera registers (0x0100-0x01FF and its trigger at 0x0300), the
   // heartbeat, control, message and stream channel registers stay writable (issue 50 probe: one
   // write of the first URL left every client unable to read the camera's description).
   struct Range {
     std::uint32_t begin, end;
   };
-  static constexpr Range kReadOnly[] = {{0x0000, 0x00E8}, {0x0200, 0x0300}, {0x0400, 0x0900}, {0x0900, 0x0938}};
+  static constexpr Range kReadOnly[] = {{0x0000, 0x00E8}, {0x0200, 0x0300}, {0x0400, 0x0900},
+                                        {0x0900, 0x0938}, {0x093C, 0x0944}, {0x0948, 0x0950}};
   static bool overlaps(std::uint32_t address, std::uint32_t count, std::uint32_t begin, std::uint32_t end) {
     return std::uint64_t(address) < end && begin < std::uint64_t(address) + count;
   }
@@ -234,6 +241,18 @@ struct GigeFakeDetector::Server {
     for (const Bounded& b : kBounded)
       if (overlaps(address, count, b.address, b.address + 4)) return true;
     return overlaps(address, count, ARV_FAKE_CAMERA_REGISTER_WIDTH, ARV_FAKE_CAMERA_REGISTER_Y_OFFSET + 4);
+  }
+
+  // The camera's clock in ns (1 GHz ticks): Aravis's register model stamps each frame with the
+  // host's CLOCK_REALTIME (g_get_real_time, whole us) as it fills it; a reset moves the zero.
+  std::int64_t clock_now_ns() const { return std::int64_t(g_get_real_time()) * 1000 - clock_zero_ns; }
+  void control_clock(std::uint32_t value) {
+    if (value & 1u) clock_zero_ns = std::int64_t(g_get_real_time()) * 1000;
+    if (value & 2u) {
+      const auto latched = std::uint64_t(clock_now_ns());
+      arv_fake_camera_write_register(camera, kTimestampValueHigh, std::uint32_t(latched >> 32));
+      arv_fake_camera_write_register(camera, kTimestampValueLow, std::uint32_t(latched));
+    }
   }
 
   void expire_controller(std::int64_t now) {
@@ -287,9 +306,14 @@ struct GigeFakeDetector::Server {
             status = check_register_write(gvcp::read_be32(c.payload + i), gvcp::read_be32(c.payload + i + 4));
           std::uint32_t written = 0;
           if (status == gvcp::Status::kSuccess) {
-            for (std::size_t i = 0; i < c.length; i += 8, ++written)
-              arv_fake_camera_write_register(camera, gvcp::read_be32(c.payload + i),
-                                             gvcp::read_be32(c.payload + i + 4));
+            for (std::size_t i = 0; i < c.length; i += 8, ++written) {
+              const std::uint32_t address = gvcp::read_be32(c.payload + i),
+                                  value = gvcp::read_be32(c.payload + i + 4);
+              if (address == kTimestampControl)
+                control_clock(value);
+              else
+                arv_fake_camera_write_register(camera, address, value);
+            }
           } else {
             owner->malformed_.fetch_add(1, std::memory_order_relaxed);
           }
@@ -351,7 +375,7 @@ struct GigeFakeDetector::Server {
   void send_frame(ArvBuffer* image, const sockaddr_in& to, std::uint32_t packet_size, std::uint8_t* packet) {
     if (arv_buffer_get_status(image) != ARV_BUFFER_STATUS_SUCCESS) return;
     gvcp::ImageLeader leader;
-    leader.timestamp_ns = arv_buffer_get_timestamp(image);
+    leader.timestamp_ns = arv_buffer_get_timestamp(image) - std::uint64_t(clock_zero_ns);
     leader.pixel_format = std::uint32_t(arv_buffer_get_image_pixel_format(image));
     leader.width = std::uint32_t(arv_buffer_get_image_width(image));
     leader.height = std::uint32_t(arv_buffer_get_image_height(image));

@@ -235,5 +235,65 @@ TEST(GigeFakeCamera, RefusesAbsurdRegisterValuesAndKeepsItsSchedule) {
   EXPECT_TRUE(camera.running());
 }
 
+// The camera's clock as GigE Vision's bootstrap registers give it: a tick frequency, a latch at
+// 0x0944 (2 latches, 1 resets) and the latched 64 bits at 0x0948 / 0x094C, both read-only.
+TEST(GigeFakeCamera, LatchesItsClockAsGigeVisionSays) {
+  test::GigeHostLock lock;
+  if (!sim::gvcp_port_free("127.0.0.1"))
+    GTEST_SKIP() << "another program holds UDP port 3956 (GVCP) on 127.0.0.1";
+  sim::GigeFakeDetectorOptions o;
+  o.serial = "LFGV-LATCH";
+  o.rows = 16;
+  o.cols = 16;
+  sim::GigeFakeDetector camera(o, [](std::uint64_t, std::uint16_t*, int, int) {});
+  ASSERT_TRUE(camera.start().ok());
+  test::GvcpClient client("127.0.0.1");
+  std::uint16_t id = 0x0700;
+  const auto write = [&](std::uint32_t address, std::uint32_t value) {
+    ++id;
+    std::vector<std::uint8_t> datagram = gvcp_datagram(0x0082, 8, {address, value});
+    datagram[6] = std::uint8_t(id >> 8);
+    datagram[7] = std::uint8_t(id & 0xFF);
+    if (!client.send(datagram)) return -1;
+    for (auto ack = client.receive(2000ms); ack; ack = client.receive(2000ms))
+      if (ack->size() >= 8 && (*ack)[6] == std::uint8_t(id >> 8) && (*ack)[7] == std::uint8_t(id & 0xFF))
+        return ((*ack)[0] << 8) | (*ack)[1];
+    return -1;
+  };
+  const auto latched_ns = [&](std::uint16_t read_id) {
+    const std::uint64_t high = client.read_register(0x0948, read_id, 2000ms).value_or(0);
+    const std::uint64_t low = client.read_register(0x094C, std::uint16_t(read_id + 1), 2000ms).value_or(0);
+    return std::int64_t((high << 32) | low);
+  };
+  EXPECT_EQ(client.read_register(0x093C, 1, 2000ms).value_or(7), 0u);
+  EXPECT_EQ(client.read_register(0x0940, 2, 2000ms).value_or(0), 1'000'000'000u) << "1 GHz ticks";
+  EXPECT_EQ(latched_ns(3), 0) << "nothing latched yet";
+  const auto realtime_ns = [] {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  };
+  const std::int64_t before = realtime_ns();
+  ASSERT_EQ(write(0x0944, 2), 0x0000);
+  const std::int64_t after = realtime_ns();
+  const std::int64_t first = latched_ns(5);
+  EXPECT_GE(first, before - 1'000) << "the clock is the host's CLOCK_REALTIME, in whole us";
+  EXPECT_LE(first, after);
+  EXPECT_EQ(latched_ns(7), first) << "the value holds until the next latch";
+  ASSERT_EQ(write(0x0944, 2), 0x0000);
+  EXPECT_GE(latched_ns(9), first);
+  // A reset moves the clock's zero: a latch just after reads a few ms at most.
+  ASSERT_EQ(write(0x0944, 1), 0x0000);
+  ASSERT_EQ(write(0x0944, 2), 0x0000);
+  const std::int64_t since_reset = latched_ns(11);
+  EXPECT_GE(since_reset, 0);
+  EXPECT_LT(since_reset, 2'000'000'000) << "within the 2 s the acknowledgements may take";
+  // Read-only: the tick frequency and the latched value.
+  EXPECT_EQ(write(0x0940, 1), 0x8004);
+  EXPECT_EQ(write(0x094C, 1), 0x8004);
+  EXPECT_EQ(latched_ns(13), since_reset);
+  EXPECT_TRUE(camera.running());
+}
+
 }  // namespace
 }  // namespace lftrack

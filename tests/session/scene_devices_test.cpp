@@ -77,6 +77,23 @@ TEST(SceneDevices, ReplayAndGigeResolveTheirSettings) {
   EXPECT_EQ(g->detectors[0].frames.device, "10.0.0.5");
   EXPECT_EQ(g->detectors[1].frames.device, "10.0.0.6");
   EXPECT_DOUBLE_EQ(g->detectors[0].frames.packet_timeout_ms, 40);
+  EXPECT_FALSE(g->detectors[0].frames.exposure_by_arrival) << "the camera's clock by default";
+  auto gige_spec = device_frame_source_spec(*g);
+  ASSERT_TRUE(gige_spec.ok());
+  EXPECT_EQ(std::get<drivers::GigeSourceSpec>(*gige_spec).detectors[0].exposure_clock,
+            drivers::ExposureClock::kDevice);
+  // exposure_clock: arrival reaches the driver, and is written back.
+  std::string by_arrival = scene_with("{type: gige, camera: 10.0.0.5, exposure_clock: arrival}");
+  by_arrival.replace(by_arrival.find("10.0.0.5", by_arrival.find("10.0.0.5") + 1), 8, "10.0.0.6");
+  auto a = parse(by_arrival);
+  ASSERT_TRUE(a.ok()) << a.status().message();
+  EXPECT_TRUE(a->detectors[1].frames.exposure_by_arrival);
+  auto arrival_spec = device_frame_source_spec(*a);
+  ASSERT_TRUE(arrival_spec.ok());
+  EXPECT_EQ(std::get<drivers::GigeSourceSpec>(*arrival_spec).detectors[1].exposure_clock,
+            drivers::ExposureClock::kArrival);
+  EXPECT_EQ(frames_yaml(a->detectors[0].frames),
+            "{type: gige, camera: \"10.0.0.5\", buffers: 4, packet_timeout_ms: 20, exposure_clock: arrival}");
 }
 
 // The device id a GigE camera must answer with (the start-up checks compare it); written back.
@@ -109,6 +126,8 @@ TEST(SceneDevices, BadFrameSourcesAreRefusedWithTheLine) {
   expect_scene_refused(scene_with("{type: v4l2, device: /dev/video0, speed: 3}"), "unknown key 'speed'");
   expect_scene_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: .nan}"), "must be finite");
   expect_scene_refused(scene_with("{type: gige, camera: x, packet_timeout_ms: -1}"), "must be positive");
+  expect_scene_refused(scene_with("{type: gige, camera: x, exposure_clock: ptp}"), "exposure_clock");
+  expect_scene_refused(scene_with("{type: gige, camera: x, exposure_clock: [device]}"), "exposure_clock");
   expect_scene_refused(scene_with("{type: replay}"), "needs 'sequence'");
   expect_scene_refused(scene_with("{type: firewire}"), "firewire");
   expect_scene_refused(scene_with("[sim]"), "a kind (sim, replay) or a mapping");

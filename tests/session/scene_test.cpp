@@ -222,7 +222,8 @@ TEST(Scene, LightFieldSettings) {
   std::string text = kValidScene;
   text +=
       "tracking:\n  renderer: lightfield\n  light_field:\n    resolution: [8, 8, 64, 32]\n    storage: vq\n"
-      "    codebook: 1024\n    margin: 0.1\n    integration: slices\n    slice_step_mm: 0.5\n";
+      "    codebook: 1024\n    margin: 0.1\n    integration: slices\n    slice_step_mm: 0.5\n"
+      "    skip_air_below_hu: -900\n";
   auto scene = parse_scene(text, "lf.yaml", "/");
   ASSERT_TRUE(scene.ok()) << scene.status().message();
   EXPECT_EQ(scene->renderer, "lightfield");
@@ -232,15 +233,19 @@ TEST(Scene, LightFieldSettings) {
   EXPECT_DOUBLE_EQ(scene->light_field.margin_fraction, 0.1);
   EXPECT_EQ(scene->light_field.integration, tracking::LightFieldIntegration::kSlices);
   EXPECT_DOUBLE_EQ(scene->light_field.slice_step_mm, 0.5);
+  EXPECT_DOUBLE_EQ(scene->light_field.skip_air_below_hu, -900);
   auto plain = parse_scene(std::string(kValidScene), "lf.yaml", "/");
   ASSERT_TRUE(plain.ok());
   EXPECT_EQ(plain->light_field.integration, tracking::LightFieldIntegration::kSiddon);
   EXPECT_EQ(plain->light_field.slice_step_mm, 0.0);
+  EXPECT_EQ(plain->light_field.skip_air_below_hu, -1000.0) << "the whole grid by default";
   for (const char* bad :
        {"    storage: jpeg\n", "    resolution: [8, 8, 64]\n", "    resolution: [8, 8, 64, 1]\n",
         "    codebook: 70000\n", "    margin: 2\n", "    colour: red\n", "    integration: joseph\n",
-        "    integration: [slices]\n", "    slice_step_mm: 0\n", "    slice_step_mm: -1\n", "    slice_step_mm: .nan\n",
-        "    slice_step_mm: .inf\n", "    slice_step_mm: 1e12\n", "    slice_step_mm: fine\n"}) {
+        "    integration: [slices]\n", "    slice_step_mm: 0\n", "    slice_step_mm: -1\n",
+        "    slice_step_mm: .nan\n", "    slice_step_mm: .inf\n", "    slice_step_mm: 1e12\n",
+        "    slice_step_mm: fine\n", "    skip_air_below_hu: -1001\n", "    skip_air_below_hu: 0\n",
+        "    skip_air_below_hu: .nan\n", "    skip_air_below_hu: -1e12\n"}) {
     const std::string t = std::string(kValidScene) + "tracking:\n  light_field:\n" + bad;
     auto s2 = parse_scene(t, "lf.yaml", "/");
     ASSERT_FALSE(s2.ok()) << bad;

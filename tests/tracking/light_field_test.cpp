@@ -188,6 +188,70 @@ TEST(LightFieldBuild, AVolumeReachingTowardsTheSourceIsWalkedExactly) {
   EXPECT_GT((*walked)->sample(2, 2, 8, 8), 0.5);  // about 800 mm of 0.001 / mm
 }
 
+// The walk skips the air around the body where asked (skip_air_below_hu -900): a body in a
+// volume whose air is exactly 0 gives the whole grid's samples (to the rounding of a walk that
+// starts elsewhere); with noise in the air, below the floor, each sample loses at most what the
+// air along its ray holds, and some lose something. -1000 (the default) walks the whole grid,
+// and the two fields are told apart by their plan's hash; a volume all below the floor is air
+// alone: every sample 0.
+TEST(LightFieldBuild, SkipsTheAirAroundTheBodyAndLosesOnlyWhatTheAirHolds) {
+  constexpr float kBody = 0.02f, kAirNoise = 0.0015f;  // the floor is 0.00193 / mm (-900 HU)
+  const auto volume = [&](bool noisy_air) {
+    MuVolume v = test::uniform_box({64, 64, 48}, {1.0, 1.0, 1.0}, 0.0f);
+    v.geometry.origin_mm = {-31.5, -31.5, -23.5};
+    std::mt19937 draw(3);
+    std::uniform_real_distribution<float> noise(0.0f, kAirNoise);
+    for (int k = 0; k < 48; ++k)
+      for (int j = 0; j < 64; ++j)
+        for (int i = 0; i < 64; ++i) {
+          const bool body = std::hypot(i - 31.5, j - 31.5) < 14 && std::abs(k - 23.5) < 16;
+          v.at(i, j, k) = body ? kBody : (noisy_air ? noise(draw) : 0.0f);
+        }
+    return v;
+  };
+  LightFieldSpec spec;
+  spec.resolution = {6, 6, 32, 32};
+  const auto build = [&](const MuVolume& v, double skip_hu) {
+    spec.skip_air_below_hu = skip_hu;
+    auto field = LightField::build(v, fixture_plan(), spec, nullptr);
+    EXPECT_TRUE(field.ok()) << field.status().to_string();
+    return field.ok() ? *field : nullptr;
+  };
+  const MuVolume clean = volume(false), noisy = volume(true);
+  const auto clean_whole = build(clean, -1000), clean_skipped = build(clean, -900);
+  const auto noisy_whole = build(noisy, -1000), noisy_skipped = build(noisy, -900);
+  ASSERT_TRUE(clean_whole && clean_skipped && noisy_whole && noisy_skipped);
+  EXPECT_NE(clean_whole->header().plan_hash, clean_skipped->header().plan_hash);
+  const double diagonal_mm = Vector3d(64, 64, 48).norm();
+  const auto& n = clean_whole->geometry().size;
+  double clean_worst = 0, noisy_worst = 0, noisy_loss_sum = 0, peak = 0;
+  std::int64_t samples = 0;
+  for (int iu = 0; iu < n[0]; ++iu)
+    for (int iv = 0; iv < n[1]; ++iv)
+      for (int is = 0; is < n[2]; ++is)
+        for (int it = 0; it < n[3]; ++it) {
+          const double w = clean_whole->sample(iu, iv, is, it);
+          peak = std::max(peak, w);
+          clean_worst = std::max(clean_worst, std::abs(clean_skipped->sample(iu, iv, is, it) - w));
+          const double loss = noisy_whole->sample(iu, iv, is, it) - noisy_skipped->sample(iu, iv, is, it);
+          EXPECT_GE(loss, -1e-5) << "skipping adds nothing";
+          noisy_worst = std::max(noisy_worst, loss);
+          noisy_loss_sum += loss;
+          ++samples;
+        }
+  EXPECT_GT(peak, 0.3);  // the body is crossed: 28 mm of 0.02 / mm at least
+  EXPECT_LT(clean_worst, 1e-5 * peak) << "air of 0 skipped is no loss";
+  EXPECT_LE(noisy_worst, kAirNoise * diagonal_mm) << "at most the air's most along the grid's diagonal";
+  EXPECT_GT(noisy_loss_sum / double(samples), 0.0) << "the noise outside the body's blocks is left out";
+  EXPECT_EQ(LightFieldSpec().skip_air_below_hu, -1000.0);
+  spec.skip_air_below_hu = -1000;
+  EXPECT_EQ(clean_whole->header().plan_hash, plan_hash(fixture_plan(), spec))
+      << "the default's hash as before";
+  const auto thin = build(test::uniform_box({64, 64, 48}, {1.0, 1.0, 1.0}, kAirNoise), -900);
+  ASSERT_TRUE(thin);
+  EXPECT_EQ(thin->sample(3, 3, 16, 16), 0.0f);
+}
+
 TEST(LightFieldBuild, SamplesAreWholeLineIntegrals) {
   const auto field = fixture_field_by(LightFieldIntegration::kSiddon);
   ASSERT_TRUE(field);

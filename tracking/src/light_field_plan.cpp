@@ -221,6 +221,8 @@ std::uint64_t plan_hash(const LightFieldPlanInput& in, const LightFieldSpec& spe
   feed(&rest, in.envelope.rotation_deg);
   for (int a = 0; a < 4; ++a) feed(&rest, spec.resolution[a]);
   feed(&rest, spec.margin_fraction);
+  // (Slices fall back to the walk where they cannot be used, so whatever the integration.)
+  if (spec.skip_air_below_hu > -1000) feed(&rest, spec.skip_air_below_hu);
   if (spec.integration != LightFieldIntegration::kSiddon) {
     feed(&rest, spec.integration);
     feed(&rest, spec.slice_step_mm > 0 && std::isfinite(spec.slice_step_mm) ? spec.slice_step_mm : 0.0);

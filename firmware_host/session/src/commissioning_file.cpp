@@ -111,6 +111,8 @@ CommissioningFingerprint commissioning_fingerprint(const PreparedScene& p) {
   registration << " margin " << lf.margin_fraction << " integration " << int(lf.integration) << " step "
                << lf.slice_step_mm << " storage " << int(lf.storage) << " codebook " << lf.vq_codebook_size << ' '
                << lf.vq_training_tiles << ' ' << lf.vq_seed;
+  if (lf.skip_air_below_hu > -1000)
+    registration << " skip air " << lf.skip_air_below_hu;  // records before it stay valid
   // The verdict's other checks decide which wrong results the floors must refuse.
   const VerdictChecksSpec& checks = s.verdict_checks;
   registration << " edge " << checks.envelope_edge_mm << ' ' << checks.envelope_edge_deg << " view shift "

@@ -101,6 +101,12 @@ void check_detectors(const PreparedScene& p, const LoopSessionOptions& o, Prefli
       found << " (unchecked: the scene names no frames.id)";
       if (result == CheckResult::kPass) result = CheckResult::kWarn;
     }
+    if (!who[i].clock.empty()) found << ", timed by " << who[i].clock;
+    if (who[i].clock_fell_back) {
+      found << " (its pairs are timed by arrival: the latency chain's first link then lacks the panel's "
+               "read-out)";
+      if (result == CheckResult::kPass) result = CheckResult::kWarn;
+    }
     (*twins)[i] = !expected.empty() && who[i].id == expected && expected == served_twin_id(d.view.name);
     found << ", " << pair.frames[i].pixels.rows() << " x " << pair.frames[i].pixels.cols();
   }

@@ -18,8 +18,9 @@ namespace lftrack::session {
 
 Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& what,
                                       tracking::LightFieldSpec* spec) const {
-  LFTRACK_RETURN_IF_ERROR(
-      check_keys(n, what, {"resolution", "storage", "codebook", "margin", "integration", "slice_step_mm"}));
+  LFTRACK_RETURN_IF_ERROR(check_keys(
+      n, what,
+      {"resolution", "storage", "codebook", "margin", "integration", "slice_step_mm", "skip_air_below_hu"}));
   if (const YAML::Node r = n["resolution"]) {
     if (!r.IsSequence() || r.size() != 4) return error(r, what + ".resolution must be [u, v, s, t]");
     for (std::size_t a = 0; a < 4; ++a) {
@@ -71,6 +72,13 @@ Status SceneParser::parse_light_field(const YAML::Node& n, const std::string& wh
     LFTRACK_RETURN_IF_ERROR(number(step, what + ".slice_step_mm", &spec->slice_step_mm));
     if (!(spec->slice_step_mm >= 0.01 && spec->slice_step_mm <= 10))
       return error(step, what + ".slice_step_mm is the depth between slices, in [0.01, 10] mm");
+  }
+  if (const YAML::Node air = n["skip_air_below_hu"]) {
+    LFTRACK_RETURN_IF_ERROR(number(air, what + ".skip_air_below_hu", &spec->skip_air_below_hu));
+    if (!(spec->skip_air_below_hu >= -1000 && spec->skip_air_below_hu <= -500))
+      return error(air, what +
+                            ".skip_air_below_hu is the CT number below which the air around the body is left "
+                            "out of the walk, in [-1000, -500] HU (-1000: walk the whole grid)");
   }
   if (const YAML::Node m = n["margin"]) {
     LFTRACK_RETURN_IF_ERROR(number(m, what + ".margin", &spec->margin_fraction));

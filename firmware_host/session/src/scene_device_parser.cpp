@@ -59,7 +59,8 @@ Status SceneParser::parse_frames(const YAML::Node& n, const std::string& what, D
       f->trigger_value = static_cast<std::int32_t>(value);
     }
   } else {  // gige
-    LFTRACK_RETURN_IF_ERROR(check_keys(n, what, {"type", "camera", "buffers", "packet_timeout_ms", "id"}));
+    LFTRACK_RETURN_IF_ERROR(
+        check_keys(n, what, {"type", "camera", "buffers", "packet_timeout_ms", "id", "exposure_clock"}));
     LFTRACK_RETURN_IF_ERROR(need(n, "camera", what, &node));
     LFTRACK_RETURN_IF_ERROR(text(node, what + ".camera", &f->device));
     if (n["id"]) LFTRACK_RETURN_IF_ERROR(text(n["id"], what + ".id", &f->id));
@@ -67,6 +68,12 @@ Status SceneParser::parse_frames(const YAML::Node& n, const std::string& what, D
     if (n["packet_timeout_ms"]) {
       LFTRACK_RETURN_IF_ERROR(positive(n["packet_timeout_ms"], what + ".packet_timeout_ms", &f->packet_timeout_ms));
       if (f->packet_timeout_ms > 1000) return error(n["packet_timeout_ms"], what + ".packet_timeout_ms: at most 1000");
+    }
+    if (n["exposure_clock"]) {
+      std::string clock;
+      LFTRACK_RETURN_IF_ERROR(
+          one_of(n["exposure_clock"], what + ".exposure_clock", {"device", "arrival"}, &clock));
+      f->exposure_by_arrival = clock == "arrival";
     }
   }
   f->buffers = static_cast<int>(buffers);

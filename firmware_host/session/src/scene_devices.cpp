@@ -23,6 +23,7 @@ std::string frames_yaml(const DetectorFramesSpec& f) {
     y << "{type: gige, camera: \"" << f.device << "\", buffers: " << f.buffers
       << ", packet_timeout_ms: " << f.packet_timeout_ms;
     if (!f.id.empty()) y << ", id: \"" << f.id << "\"";
+    if (f.exposure_by_arrival) y << ", exposure_clock: arrival";
     y << "}";
   } else if (f.kind == "replay" && !f.sequence.empty()) {
     y << "{type: replay, sequence: \"" << f.sequence << "\"}";
@@ -112,6 +113,8 @@ Result<drivers::FrameSourceSpec> device_frame_source_spec(const Scene& scene) {
       o.buffers = d.frames.buffers;
       o.trigger = drivers::GigeTrigger::kSoftware;  // the loop exposes at each cycle's start
       o.packet_timeout_ms = d.frames.packet_timeout_ms;
+      o.exposure_clock =
+          d.frames.exposure_by_arrival ? drivers::ExposureClock::kArrival : drivers::ExposureClock::kDevice;
       spec.detectors.push_back(o);
     }
     return drivers::FrameSourceSpec(std::move(spec));

@@ -37,6 +37,9 @@ struct FramePair {
 struct DetectorIdentity {
   std::string address;
   std::string id;
+  // What times its frames, where the source says (GigeDetector::clock_source()); empty otherwise.
+  std::string clock;
+  bool clock_fell_back = false;  // the device clock was asked for and cannot be used
 };
 
 class FrameSource {

@@ -47,13 +47,25 @@
 // two frames by default, and open() refuses where net.core.rmem_max caps it below that: one
 // frame is a burst of back-to-back packets, and a buffer that cannot hold it loses packets.
 //
-// Timestamps: Frame::timestamp_ns is when the frame's leader packet reached this host (Aravis's
-// system timestamp, CLOCK_REALTIME), moved to CLOCK_MONOTONIC at capture and less
-// `leader_latency_ms` (the camera's delay from the middle of the exposure to its leader
-// packet, from the camera's documentation or a measurement; 0 by default). The camera's own
-// timestamp (its clock, in ns by its tick frequency; not synchronised to the host unless PTP
-// runs) is kept as last_device_timestamp_ns(). Both detectors of a pair are thus timed on the
-// same host clock, which is what the pair's skew check needs.
+// Timestamps: Frame::timestamp_ns is the exposure on the host's CLOCK_MONOTONIC. With
+// `exposure_clock` kDevice (the default) it is the camera's own timestamp from the frame's leader
+// (GigE Vision: the camera's clock at the frame's start, in ticks of its tick frequency), mapped
+// onto the host's clock by timestamp latches (device_clock.hpp): a round of 8 at open(), and one
+// of 3 each time sync_clock() is called (GigeFrameSource: every second, from its own thread; each
+// latch is two GVCP transactions, which wait on Aravis's per-device GVCP lock as the software
+// trigger and Aravis's heartbeat do). A camera that does not latch (no tick frequency, a latched
+// 0, no answer) is timed as with kArrival, and open() says so in clock_source(); so is one whose
+// mapping is more than 5 s old (its rounds failing). A frame whose mapped timestamp lies after
+// its leader's arrival (beyond the mapping's uncertainty, which grows by 100 ppm of its age), or
+// more than 0.5 s before it, is not believed: it is timed by its arrival and counted
+// (clock_fallbacks). GigeFrameSource times a pair by one clock: where any of its frames was timed
+// by arrival, all are. With kArrival the timestamp is when the frame's leader packet
+// reached this host (Aravis's system timestamp, CLOCK_REALTIME, moved to CLOCK_MONOTONIC) less
+// `leader_latency_ms` (the camera's delay from the middle of the exposure to its leader packet,
+// from its documentation or a measurement; 0 by default): the time the panel's read-out takes is
+// then not in the latency chain's first link. The camera's raw timestamp is kept as
+// last_device_timestamp_ns(). Both detectors of a pair are timed on the host's clock, which is
+// what the pair's skew check needs.
 //
 // Allocation and locking: capture() itself allocates nothing. Aravis's part: handing a buffer
 // back (arv_stream_push_buffer -> g_async_queue_push) takes one GList node from GLib's slice
@@ -67,13 +79,20 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
-#include <thread>
+#include <shared_mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "lftrack/drivers/device_clock.hpp"
 #include "lftrack/drivers/frame_source.hpp"
 
 namespace lftrack::drivers {
+
+enum class ExposureClock {
+  kDevice,   // the camera's timestamp, mapped onto the host's clock by timestamp latches
+  kArrival,  // the leader's arrival on the host, less leader_latency_ms
+};
 
 enum class GigeTrigger {
   kFreeRun,   // the camera exposes at its frame rate (or frame_rate_hz)
@@ -97,7 +116,8 @@ struct GigeDetectorOptions {
   bool packet_resend = false;       // ask the camera to resend lost packets (costs latency)
   int socket_buffer_bytes = -1;     // stream receive buffer: -1 two frames, 0 the OS default
   bool packet_socket = false;       // Aravis's PF_PACKET ring (needs CAP_NET_RAW); false: UDP socket
-  double leader_latency_ms = 0;     // mid-exposure to leader packet, subtracted from timestamps
+  double leader_latency_ms = 0;     // kArrival: mid-exposure to leader packet, subtracted from timestamps
+  ExposureClock exposure_clock = ExposureClock::kDevice;
 };
 
 // Checks that need no camera (sizes, counts, times), with messages that name the camera.
@@ -116,6 +136,7 @@ struct GigeCounters {
   std::int64_t disconnects = 0;       // control of the camera lost
   std::int64_t reopens = 0;           // successful reopen()s
   std::int64_t trigger_failures = 0;  // software triggers the camera did not acknowledge
+  std::int64_t clock_fallbacks = 0;   // frames timed by their arrival although the device clock was asked for
 };
 
 class GigeDetector {
@@ -134,6 +155,10 @@ class GigeDetector {
   // request made before the previous one has left replaces it. Otherwise nothing.
   void trigger(std::int64_t at_monotonic_ns = 0);
   void close();
+  // One round of `latches` timestamp latches (exposure_clock kDevice, a camera that latches): the
+  // mapping of the camera's clock onto the host's follows the tightest. Safe beside capture() on
+  // another thread (never beside open(), reopen() or close()). True where the mapping was renewed.
+  bool sync_clock(int latches = 3);
 
   // Open and not marked gone.
   bool is_open() const;
@@ -146,6 +171,20 @@ class GigeDetector {
   const std::string& pixel_format_name() const { return pixel_format_name_; }
   const std::string& device_id() const { return device_id_; }  // as the camera names itself
   std::int64_t last_device_timestamp_ns() const { return last_device_timestamp_ns_; }
+  // What times this camera's frames: "device clock (+-N us)" or "arrival (...)", with the reason
+  // where the device clock was asked for and could not be used.
+  std::string clock_source() const;
+  // The device clock was asked for and is mapped (a latch round has succeeded since open()).
+  bool device_clock_mapped() const;
+  // How far the device clock mapping can be off now: its latch's half round trip and 100 ppm of
+  // drift since (0 when frames are timed by arrival).
+  std::int64_t timestamp_uncertainty_ns() const;
+  // The last frame captured: timed by the camera's clock (else by its arrival), how far its
+  // timestamp can be off (a frame stamped this much before an exposure was asked for may still
+  // be that exposure's), and its arrival less leader_latency_ms.
+  bool last_frame_timed_by_device() const { return last_timed_by_device_; }
+  std::int64_t last_timestamp_uncertainty_ns() const { return last_uncertainty_ns_; }
+  std::int64_t last_arrival_timestamp_ns() const { return last_arrival_timestamp_ns_; }
   const GigeCounters& counters() const { return counters_; }
 
  private:
@@ -153,6 +192,10 @@ class GigeDetector {
   Status fail(const std::string& what);  // releases the camera, and names it
   void release();
   void start_trigger_thread();
+  void start_device_clock();                        // open(): the tick frequency and a first round of latches
+  bool latch_round(int latches, std::string* why);  // why: set where the round maps nothing
+  // The mapping, if it is there and under 5 s old, its uncertainty grown by the drift since.
+  bool usable_mapping(std::int64_t now_ns, DeviceClockMap::Mapping* m) const;
   void stop_trigger_thread();
   bool copy_out(const void* data, std::size_t size, std::size_t stride, Frame* frame) const;
 
@@ -166,6 +209,11 @@ class GigeDetector {
   std::uint64_t last_id_ = 0;
   std::uint32_t sequence_ = 0;
   std::int64_t last_device_timestamp_ns_ = 0;
+  std::unique_ptr<DeviceClockMap> clock_;  // made by open(); valid() once a round has ended
+  bool last_timed_by_device_ = false;
+  std::int64_t last_uncertainty_ns_ = 0, last_arrival_timestamp_ns_ = 0;
+  std::uint64_t tick_hz_ = 0;           // the camera's timestamp tick frequency; 0: none
+  std::string clock_problem_;           // why the device clock is not used, if it is not
   std::int64_t underruns_at_open_ = 0;  // Aravis counts per stream; ours run across reopens
   GigeCounters counters_;
 };
@@ -201,6 +249,8 @@ class GigeFrameSource final : public FrameSource {
   const GigeDetector& detector(std::size_t i) const { return *detectors_[i]; }
   std::int64_t skewed_pairs() const { return skewed_pairs_; }
   std::int64_t stale_frames() const { return stale_frames_; }
+  // Pairs whose frames were all timed by arrival because one could not be timed by its camera's clock.
+  std::int64_t pairs_timed_by_arrival() const { return pairs_timed_by_arrival_; }
   std::int64_t reopens() const { return reopens_.load(); }
 
  private:
@@ -209,9 +259,11 @@ class GigeFrameSource final : public FrameSource {
 
   std::vector<std::unique_ptr<GigeDetector>> detectors_;
   double max_skew_ms_;
-  std::int64_t skewed_pairs_ = 0, stale_frames_ = 0;
+  std::int64_t skewed_pairs_ = 0, stale_frames_ = 0, pairs_timed_by_arrival_ = 0;
   std::int64_t exposure_ns_ = 0;  // the exposure asked for (software trigger); 0: any frame
-  std::mutex devices_;             // the cycle only tries it; the reopen thread holds it
+  // The cycle only tries it, shared; the reopen thread holds it alone to reopen, shared to latch
+  // the cameras' clocks.
+  mutable std::shared_mutex devices_;
   std::atomic<bool> gone_{false}, stop_{false};
   std::atomic<std::int64_t> reopens_{0};
   std::thread reopener_;

@@ -27,8 +27,12 @@
 // - One controller at a time (the control channel privilege); another client's writes are
 //   refused (access denied). A controller silent for the heartbeat timeout (3 s unless it
 //   writes another) loses control, and the stream stops.
-// - The GVSP timestamp is the host's CLOCK_REALTIME in ns at the start of the frame (tick
-//   frequency 1 GHz). It does not resend packets (GVCP PACKETRESEND is dropped).
+// - Its clock: the GVSP leader's timestamp is the host's CLOCK_REALTIME in ns (whole us) as the
+//   frame is started, before it is rendered: the exposure, in the simulated room (tick frequency
+//   1 GHz). The timestamp latch works as GigE Vision's: writing 2 to 0x0944 latches the clock
+//   into 0x0948 (high word) and 0x094C, writing 1 sets it to 0 (the leader's timestamps follow).
+//   The tick frequency and latched value are read-only. It does not resend packets (GVCP
+//   PACKETRESEND is dropped).
 // - It has no "off" of its own: stop() closes its sockets (a client hears nothing); start()
 //   again is a power cycle: registers back to their defaults, no controller, frame ids from
 //   65401. A client's heartbeat then finds it no longer holds control.

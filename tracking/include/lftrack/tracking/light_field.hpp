@@ -89,6 +89,15 @@ struct LightFieldSpec {
   double margin_fraction = 0.02;  // each axis' extent grows by this fraction on both sides
   LightFieldIntegration integration = LightFieldIntegration::kSiddon;
   double slice_step_mm = 0;  // kSlices: the depth step; 0 takes the CT's finest voxel spacing
+  // kSiddon: above -1000, each ray is walked only between the first and the last block of 8^3
+  // voxels it meets that holds a voxel at or above this CT number (HU, on mu =
+  // kDefaultMuWaterPerMm (1 + HU / 1000) whatever water the volume was made with: a few tens of
+  // HU either way): the air around the body is left out. -900 builds
+  // the lumbar CT's fields in 0.8 of the time; the DRRs then lack the CT noise of that air (a
+  // near-constant few hundredths of each line integral), which costs 0.002-0.004 mm of mean TRE
+  // on frames rendered from the whole CT (BENCHMARKS.md, issue 56). -1000 (the default) walks
+  // the whole grid.
+  double skip_air_below_hu = -1000;
   LightFieldStorage storage = LightFieldStorage::kFloat32;
   int vq_codebook_size = 4096;    // 2 .. 65536
   int vq_training_tiles = 65536;  // tiles sampled to train the codebook

@@ -69,7 +69,9 @@ struct RoiSpec {
 //   v4l2    a Video4Linux2 device: `device` (best a /dev/v4l/by-path or by-id link), `buffers`,
 //           an external trigger as a control id and value (0: free-running)
 //   gige    a GigE Vision camera through Aravis: `camera` (device id, serial or IP address),
-//           `buffers`, `packet_timeout_ms`, `id` (the device id it must answer with)
+//           `buffers`, `packet_timeout_ms`, `id` (the device id it must answer with),
+//           `exposure_clock` (device: the camera's timestamp, mapped by latches; arrival: the
+//           frame's arrival on the host)
 //   replay  an archived sequence folder (`sequence`; the same for every detector), which `run`
 //           tracks and reports (nothing sent, no beam; a modbus or can actuator is refused at
 //           load: archived frames cannot move a patient); `lftrack replay --sequence` needs none
@@ -80,6 +82,7 @@ struct DetectorFramesSpec {
   std::uint32_t trigger_control_id = 0;  // v4l2
   std::int32_t trigger_value = 1;        // v4l2
   double packet_timeout_ms = 20;         // gige
+  bool exposure_by_arrival = false;      // gige `exposure_clock: arrival` (default device)
   std::string sequence;                  // replay (absolute, or empty)
   // gige `id`: the device id (serial number) the camera must answer with; the start-up checks
   // refuse another. Empty: a served twin must answer as served_twin_id(name), another camera
