@@ -110,6 +110,17 @@ TEST(Gvcp, AnswersWhatLiesInsideTheMemoryMap) {
   EXPECT_EQ(check(padded).verdict, gvcp::Verdict::kAnswer);
 }
 
+// The acknowledgement's status of `datagram` sent with the id `id`, or -1 without one.
+int acknowledged_status(test::GvcpClient& client, std::vector<std::uint8_t> datagram, std::uint16_t id) {
+  datagram[6] = std::uint8_t(id >> 8);
+  datagram[7] = std::uint8_t(id & 0xFF);
+  if (!client.send(datagram)) return -1;
+  for (auto ack = client.receive(2000ms); ack; ack = client.receive(2000ms))
+    if (ack->size() >= 8 && (*ack)[6] == std::uint8_t(id >> 8) && (*ack)[7] == std::uint8_t(id & 0xFF))
+      return ((*ack)[0] << 8) | (*ack)[1];
+  return -1;
+}
+
 // The fake camera on 127.0.0.1, fed every malformed shape: none crashes or wedges it; the
 // well-formed read that follows is answered; the driver opens it and takes a frame.
 TEST(GigeFakeCamera, SurvivesMalformedDatagramsAndStillServesAClient) {
@@ -195,16 +206,8 @@ TEST(GigeFakeCamera, RefusesAbsurdRegisterValuesAndKeepsItsSchedule) {
   const std::uint32_t heartbeat = client.read_register(kHeartbeatMs, 1, 2000ms).value_or(0);
   ASSERT_EQ(client.read_register(kFramePeriodUs, 2, 2000ms).value_or(0), 10'000u);
   std::uint16_t id = 0x0500;
-  // The acknowledgement's status of `datagram` (sent with a fresh id), or -1 without one.
   const auto status_of = [&](std::vector<std::uint8_t> datagram) {
-    ++id;
-    datagram[6] = std::uint8_t(id >> 8);
-    datagram[7] = std::uint8_t(id & 0xFF);
-    if (!client.send(datagram)) return -1;
-    for (auto ack = client.receive(2000ms); ack; ack = client.receive(2000ms))
-      if (ack->size() >= 8 && (*ack)[6] == std::uint8_t(id >> 8) && (*ack)[7] == std::uint8_t(id & 0xFF))
-        return ((*ack)[0] << 8) | (*ack)[1];
-    return -1;
+    return acknowledged_status(client, datagram, ++id);
   };
   EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kFramePeriodUs, 0})), 0x8002) << "frame period 0";
   EXPECT_EQ(status_of(gvcp_datagram(0x0082, 8, {kFramePeriodUs, 1})), 0x8002) << "1 us";
@@ -250,15 +253,7 @@ TEST(GigeFakeCamera, LatchesItsClockAsGigeVisionSays) {
   test::GvcpClient client("127.0.0.1");
   std::uint16_t id = 0x0700;
   const auto write = [&](std::uint32_t address, std::uint32_t value) {
-    ++id;
-    std::vector<std::uint8_t> datagram = gvcp_datagram(0x0082, 8, {address, value});
-    datagram[6] = std::uint8_t(id >> 8);
-    datagram[7] = std::uint8_t(id & 0xFF);
-    if (!client.send(datagram)) return -1;
-    for (auto ack = client.receive(2000ms); ack; ack = client.receive(2000ms))
-      if (ack->size() >= 8 && (*ack)[6] == std::uint8_t(id >> 8) && (*ack)[7] == std::uint8_t(id & 0xFF))
-        return ((*ack)[0] << 8) | (*ack)[1];
-    return -1;
+    return acknowledged_status(client, gvcp_datagram(0x0082, 8, {address, value}), ++id);
   };
   const auto latched_ns = [&](std::uint16_t read_id) {
     const std::uint64_t high = client.read_register(0x0948, read_id, 2000ms).value_or(0);
